@@ -1,0 +1,77 @@
+"""Input preparation shared by `simulate` and `measure`: dtype, batching, validity.
+
+Library functions handle one configuration; this module flattens the batch
+shape, applies one `vmap`, and restores the shape.
+"""
+
+import math
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._actuation import AbstractWaveform, Sinusoid
+from ._params import DEFAULTS, PARAM_NAMES, Params
+
+
+def prepare(params: Params, waveform: AbstractWaveform | None, dtype: Any):
+    """Cast, broadcast and flatten; returns `(flat_params, flat_wave, wave_axes, shape)`.
+
+    A waveform whose `omega` carries the params' batch shape is batched with
+    them; otherwise it is shared by every configuration.
+    """
+    if not isinstance(params, Params):
+        raise TypeError(f"params must be a locomotion_jax.Params, got {type(params).__name__}.")
+    if dtype is not None:
+        params = params.astype(dtype)
+    params = params.broadcast()
+    shape = params.batch_shape
+    size = math.prod(shape)
+    if size == 0:
+        raise ValueError("params has an empty batch (a zero-length axis).")
+    flat = jax.tree_util.tree_map(lambda x: x.reshape((size,)), params)
+    dt = params.dtype
+    if waveform is None:
+        wave, axes = Sinusoid.from_params(flat), 0
+    else:
+        if not isinstance(waveform, AbstractWaveform):
+            raise TypeError(f"waveform must be an AbstractWaveform, got {type(waveform).__name__}.")
+        waveform = jax.tree_util.tree_map(lambda x: jnp.asarray(x, dt), waveform)
+        if shape and jnp.shape(waveform.omega) == shape:
+            nb = len(shape)
+            wave = jax.tree_util.tree_map(lambda x: x.reshape((size,) + x.shape[nb:]), waveform)
+            axes = 0
+        else:
+            wave, axes = waveform, None
+    return flat, wave, axes, shape
+
+
+def safe_params(params: Params) -> tuple[Params, jax.Array]:
+    """Replace an invalid configuration by the defaults (so nothing becomes NaN) and
+    return the validity flag; the caller marks it `Status.INVALID` and skips it."""
+    valid = params.is_valid()
+    values = {
+        n: jnp.where(valid, getattr(params, n), jnp.asarray(DEFAULTS[n], params.dtype)) for n in PARAM_NAMES
+    }
+    return Params(**values, check=False), valid
+
+
+def unflatten(tree: Any, shape: tuple[int, ...]) -> Any:
+    """Restore the batch shape on the leading axis of every array leaf."""
+    return jax.tree_util.tree_map(lambda x: x.reshape(shape + x.shape[1:]), tree)
+
+
+def horizon_bound(params: Params, t_extra: float) -> float:
+    """Host-side bound on the simulated time, for the default step cap."""
+    try:
+        ts = np.asarray(params.t_start)
+        tmax = float(np.nanmax(np.where(np.isfinite(ts), ts, 0.0)))
+    except jax.errors.ConcretizationTypeError:
+        tmax = 80 * 2 * math.pi / 5.0
+    return tmax + t_extra
+
+
+def default_max_steps(t_total: float, dt: float) -> int:
+    """Room for the nominal steps plus the event searches (a hard cap, not a cost)."""
+    return int(3 * t_total / dt) + 20_000

@@ -1,0 +1,161 @@
+"""`simulate`: trajectories saved at requested times (memory grows with the saves only)."""
+
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import _exact as exact, _model as model
+from ._actuation import AbstractWaveform
+from ._batch import default_max_steps, prepare, safe_params, unflatten
+from ._custom_types import Array, ArrayLike, Contact, Start
+from ._dynamics import AbstractDynamics, Exact, Smoothed
+from ._params import Params
+from ._results import Trajectory
+from ._status import Status
+
+
+def mode_code(stuck1: Array, stuck2: Array) -> Array:
+    """Sect. 2.2 modes: 0 both stick, 1 both slip, 2 m1 slips, 3 m2 slips."""
+    return jnp.where(stuck1, jnp.where(stuck2, 0, 3), jnp.where(stuck2, 2, 1)).astype(jnp.int32)
+
+
+def derived_fields(params: Params, wave: AbstractWaveform, contact: Contact, t, y, stuck, sdir) -> dict:
+    """Energy (eq. 10), normal forces (eq. 5) and $F_{ex}$ (eq. 17) at saved states."""
+    f = model.forces(params, wave, t, y[0], y[2], contact)
+    r = exact.rates(params, f, y, stuck, sdir)
+    return {
+        "e": model.total_energy(params, f.l0, y[0], y[1], y[2], y[3]),
+        "l0": f.l0,
+        "N1": f.N1,
+        "N2": f.N2,
+        "f_ex": params.m1 * r[1] + params.m2 * r[3],
+        "X": model.centre_of_mass(params, y[0], y[2]),
+    }
+
+
+def _exact_one(params, wave, save_at, contact, start, dt, max_steps):
+    params, valid = safe_params(params)
+    dtype = params.dtype
+    gap = model.initial_gap(params, start)
+    st = exact.init(params, wave, contact, jnp.zeros((), dtype), gap)
+    st = eqx.tree_at(lambda s: s.status, st, jnp.where(valid, st.status, Status.INVALID).astype(jnp.int32))
+    n = save_at.shape[0]
+    t_end = save_at[-1]
+    rows = jnp.zeros((n, 10), dtype)
+
+    def row(s):
+        return jnp.concatenate([s.y, s.stuck.astype(dtype), s.sdir])
+
+    def cond(c):
+        s, idx, _, steps = c
+        return (idx < n) & (s.status == Status.OK) & (steps < max_steps)
+
+    def body(c):
+        s, idx, rows, steps = c
+        target = save_at[jnp.minimum(idx, n - 1)]
+        record = target <= s.t
+        new_s, _ = exact.step(params, wave, contact, dt, s, target)
+        rows = jnp.where(record, rows.at[idx].set(row(s)), rows)
+        s = jax.tree_util.tree_map(lambda a, b: jnp.where(record, a, b), s, new_s)
+        return s, idx + record.astype(jnp.int32), rows, steps + 1
+
+    s, idx, rows, steps = jax.lax.while_loop(cond, body, (st, jnp.zeros((), jnp.int32), rows, jnp.zeros((), jnp.int32)))
+    valid_rows = jnp.arange(n) < idx
+    rows = jnp.where(valid_rows[:, None], rows, row(s)[None, :])
+    status = jnp.where((s.status == Status.OK) & (idx < n), Status.MAX_STEPS, s.status).astype(jnp.int32)
+    del t_end
+    return rows, valid_rows, status, s.t_liftoff, s.n_switch
+
+
+@eqx.filter_jit
+def _exact_batch(params, wave, wave_axes, save_at, contact, start, dt, max_steps):
+    fn = lambda p, w: _exact_one(p, w, save_at, contact, start, dt, max_steps)
+    return jax.vmap(fn, in_axes=(0, wave_axes))(params, wave)
+
+
+def _trajectory(params, wave, wave_axes, contact, start, save_at, rows, valid, status, t_lift, n_switch):
+    y = jnp.moveaxis(rows[..., :6], -1, 0)  # (6, B, n)
+    stuck = jnp.moveaxis(rows[..., 6:8] > 0.5, -1, 0)
+    sdir = jnp.moveaxis(rows[..., 8:10], -1, 0)
+    t = jnp.broadcast_to(save_at, rows.shape[:-1])
+
+    def one(p, w, t, y, stuck, sdir):
+        return jax.vmap(lambda t, y, s, d: derived_fields(p, w, contact, t, y, s, d), in_axes=(0, 1, 1, 1))(
+            t, y, stuck, sdir
+        )
+
+    der = jax.vmap(one, in_axes=(0, wave_axes, 0, 1, 1, 1))(params, wave, t, y, stuck, sdir)
+    return dict(
+        t=t, x1=y[0], v1=y[1], x2=y[2], v2=y[3], e_d=y[4], w=y[5], mode=mode_code(stuck[0], stuck[1]),
+        valid=valid, status=status, liftoff=jnp.isfinite(t_lift), t_liftoff=t_lift, n_switch=n_switch, **der,
+    )
+
+
+def simulate(
+    params: Params,
+    t_end: float,
+    save_at: ArrayLike | None = None,
+    *,
+    dynamics: AbstractDynamics | None = None,
+    waveform: AbstractWaveform | None = None,
+    contact: Contact = "strict",
+    start: Start = "paper",
+    dtype: Any = None,
+) -> Trajectory:
+    """Integrate the two-mass model from $t = 0$ to `t_end`, saving at `save_at`.
+
+    **Arguments:**
+
+    - `params`: one configuration or a batch ([`Params`][]).
+    - `t_end`: final time (> 0).
+    - `save_at`: increasing times in `[0, t_end]`; default 1001 equally spaced
+      times. Memory grows with `len(save_at)`, not with the number of steps.
+    - `dynamics`: [`Exact`][] (default) or [`Smoothed`][].
+    - `waveform`: actuation $\\ell_0(t)$; default the sinusoid of eq. (13) from `params`.
+    - `contact`: `"strict"` (default: stop at lift-off) or `"paper"` ($n_i = |N_i|$,
+      flagged). `start`: `"paper"` (eq. 14, default) or `"relaxed"`.
+    - `dtype`: cast parameters to this floating dtype (default: theirs).
+
+    **Returns:** a [`Trajectory`][] with batch shape `params.batch_shape`.
+
+    **Raises:** `ValueError` for invalid arguments (before any computation).
+
+    !!! Example
+
+        ```python
+        traj = simulate(Params(omega=2.0), t_end=20.0)
+        traj.X[-1], traj.mode[:10]
+        ```
+    """
+    dynamics = Exact() if dynamics is None else dynamics
+    model.check_contact(contact)
+    model.initial_gap(Params(), start)  # validates `start`
+    if not np.isfinite(t_end) or t_end <= 0:
+        raise ValueError(f"t_end must be a finite number > 0, got {t_end!r}.")
+    flat, wave, axes, shape = prepare(params, waveform, dtype)
+    dt_type = flat.dtype
+    if save_at is None:
+        save_at = np.linspace(0.0, float(t_end), 1001)
+    save_np = np.asarray(save_at, dtype=float)
+    if save_np.ndim != 1 or save_np.size == 0:
+        raise ValueError(f"save_at must be a non-empty 1-D array, got shape {save_np.shape}.")
+    if np.any(np.diff(save_np) < 0) or save_np[0] < 0 or save_np[-1] > t_end or not np.all(np.isfinite(save_np)):
+        raise ValueError("save_at must be finite, non-decreasing and inside [0, t_end].")
+    save = jnp.asarray(save_np, dt_type)
+    if isinstance(dynamics, Exact):
+        max_steps = dynamics.max_steps or default_max_steps(float(t_end), dynamics.dt) + 4 * save_np.size
+        rows, valid, status, t_lift, n_switch = _exact_batch(
+            flat, wave, axes, save, contact, start, dynamics.dt, max_steps
+        )
+        out = _trajectory(flat, wave, axes, contact, start, save, rows, valid, status, t_lift, n_switch)
+    elif isinstance(dynamics, Smoothed):
+        from ._smooth import simulate_smoothed
+
+        out = simulate_smoothed(flat, wave, axes, save, contact, start, dynamics)
+    else:
+        raise TypeError(f"dynamics must be Exact or Smoothed, got {type(dynamics).__name__}.")
+    out = unflatten(out, shape)
+    return Trajectory(**out, start=start, contact=contact)

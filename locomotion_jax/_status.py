@@ -1,0 +1,52 @@
+"""Per-configuration status codes and the locomotion regime.
+
+Failures of one configuration are recorded here, never raised, so that one bad
+configuration in a batch cannot poison the others (compare diffrax `RESULTS`).
+Plain integer codes are used instead of `eqx.Enumeration` because results are
+exported as labelled arrays (xarray/NetCDF), where integers travel unchanged.
+"""
+
+import enum
+
+
+class Status(enum.IntEnum):
+    """Outcome of one simulated configuration.
+
+    - `OK`: integrated to the requested end.
+    - `LIFTOFF`: a normal force reached zero (eq. 5) under the strict contact
+      reading; the run stopped at the located lift-off time.
+    - `MAX_STEPS`: the hard cap on integrator iterations was hit (the horizon was
+      not reached); results cover the part that was integrated.
+    - `INVALID`: the parameters are outside the model's valid range; nothing
+      was integrated and every measurement holds its sentinel.
+    - `SOLVER_FAILED`: the smoothed (diffrax) solver reported a failure.
+    """
+
+    OK = 0
+    LIFTOFF = 1
+    MAX_STEPS = 2
+    INVALID = 3
+    SOLVER_FAILED = 4
+
+
+class Regime(enum.IntEnum):
+    """Locomotion regime by the paper's window rule (Sect. 3).
+
+    `SSL` (stick-slip locomotion): a mass is stuck for an interval of positive
+    length inside the window $[t_\\text{start}, t_\\text{start} + \\Delta\\tau]$;
+    `SL` (slip locomotion) otherwise; `UNDETERMINED` when the run stopped
+    (lift-off, step cap, invalid input) before the window ended.
+    """
+
+    UNDETERMINED = -1
+    SL = 0
+    SSL = 1
+
+
+class Mode(enum.IntEnum):
+    """The paper's four contact modes (Sect. 2.2)."""
+
+    BOTH_STICK = 0
+    BOTH_SLIP = 1
+    M1_SLIPS = 2
+    M2_SLIPS = 3
