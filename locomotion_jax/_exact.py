@@ -59,6 +59,7 @@ class Hybrid(eqx.Module):
     stuck: Bool[Array, "2"]
     sdir: Float[Array, "2"]
     k1: Float[Array, "6"]
+    comp: Float[Array, "6"]
     g0: FloatScalar
     search: Array
     hi: FloatScalar
@@ -164,14 +165,14 @@ def init(params: Params, wave: AbstractWaveform, contact: Contact, x1: Array, x2
         t_lift = jnp.where((f.N1 <= 0) | (f.N2 <= 0), t, jnp.inf)
     zi = jnp.zeros((), jnp.int32)
     return Hybrid(
-        t=t, y=y, stuck=stuck, sdir=sdir, k1=k1, g0=jnp.maximum(g0, 0).astype(dtype),
+        t=t, y=y, stuck=stuck, sdir=sdir, k1=k1, comp=jnp.zeros_like(y), g0=jnp.maximum(g0, 0).astype(dtype),
         search=jnp.asarray(False), hi=jnp.zeros((), dtype), ghi=jnp.zeros((), dtype),
         side=zi, n_search=zi, status=status, t_liftoff=t_lift.astype(dtype), n_switch=zi,
     )
 
 
 def _rk4(params, wave, contact, t, y, k1, stuck, sdir, h):
-    """Classical RK4 in a fixed mode; returns the end state and the end forces."""
+    """Classical RK4 in a fixed mode; returns the increment of the state."""
     # k2 and k3 share t + h/2: evaluate the actuation there once.
     l0m, dl0m = wave(t + 0.5 * h)
     y2 = y + 0.5 * h * k1
@@ -180,7 +181,13 @@ def _rk4(params, wave, contact, t, y, k1, stuck, sdir, h):
     k3 = rates(params, model.spring_forces(params, l0m, dl0m, y3[0], y3[2], contact), y3, stuck, sdir)
     y4 = y + h * k3
     k4 = rates(params, _forces_at(params, wave, contact, t + h, y4), y4, stuck, sdir)
-    return y + (h / 6) * (k1 + 2 * k2 + 2 * k3 + k4)
+    return (h / 6) * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+def _kahan_add(y: Array, comp: Array, incr: Array) -> tuple[Array, Array]:
+    corrected = incr - comp
+    total = y + corrected
+    return total, (total - y) - corrected
 
 
 def step(
@@ -202,9 +209,15 @@ def step(
     secant = jnp.where(jnp.isfinite(secant) & (secant > 0) & (secant < st.hi), secant, 0.5 * st.hi)
     trial = jnp.where(st.hi <= tol, st.hi, secant)
     h = jnp.where(st.search, trial, h_nom)
-
-    y1 = _rk4(params, wave, contact, st.t, st.y, st.k1, st.stuck, st.sdir, h)
     t1 = jnp.where(~st.search & lands, t_stop, st.t + h)
+    # Step by the representable difference so that time and state stay consistent
+    # (in float32 at t ~ 1e3, t + h rounds h by up to 1e-3 relative).
+    h = t1 - st.t
+
+    incr = _rk4(params, wave, contact, st.t, st.y, st.k1, st.stuck, st.sdir, h)
+    # Compensated (Kahan) update: positions and energies grow to O(10-100) while
+    # increments are O(1e-4); plain float32 sums would lose ~1e-3 over 1e5 steps.
+    y1, comp1 = _kahan_add(st.y, st.comp, incr)
     f_end = _forces_at(params, wave, contact, t1, y1)
     k_end = rates(params, f_end, y1, st.stuck, st.sdir)
     g_end = event_values(params, f_end, y1, st.stuck, st.sdir, contact)
@@ -251,6 +264,8 @@ def step(
         stuck=jnp.where(commit, stuck_new, st.stuck),
         sdir=jnp.where(commit, sdir_new, st.sdir),
         k1=jnp.where(commit, k_new, st.k1),
+        # A switch sets velocities exactly (to 0): drop their pending compensation.
+        comp=jnp.where(commit, jnp.where(switch & (y_new != y1), 0, comp1), st.comp),
         g0=g0_new.astype(dtype),
         search=search_new,
         hi=hi_new.astype(dtype),

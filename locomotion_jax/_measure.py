@@ -16,7 +16,6 @@ import numpy as np
 from . import _exact as exact, _model as model
 from ._actuation import AbstractWaveform
 from ._batch import default_max_steps, horizon_bound, prepare, safe_params, unflatten
-from ._custom_types import Contact, Start
 from ._dynamics import AbstractDynamics, Exact, Smoothed
 from ._params import Params
 from ._results import Measurement
@@ -164,8 +163,8 @@ def measure(
     window: float = 25.0,
     dynamics: AbstractDynamics | None = None,
     waveform: AbstractWaveform | None = None,
-    contact: Contact = "strict",
-    start: Start = "paper",
+    contact: str = "strict",
+    start: str = "paper",
     dtype: Any = None,
 ) -> Measurement:
     """Measure $\\tau_z$, $e_z$, the regime and more (Sects. 3-5; SPEC §5).
@@ -204,7 +203,7 @@ def measure(
         max_steps = dynamics.max_steps or default_max_steps(total, dynamics.dt)
         out = _exact_batch(
             flat, wave, axes, *(jnp.asarray(v, flat.dtype) for v in (z, horizon, window)),
-            contact, start, dynamics.dt, max_steps,
+            contact, start, dynamics.dt, jnp.asarray(max_steps, jnp.int32),
         )
     elif isinstance(dynamics, Smoothed):
         from ._smooth import measure_smoothed

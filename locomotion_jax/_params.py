@@ -264,7 +264,9 @@ class Params(eqx.Module):
         shape = self.batch_shape
         host = {n: np.broadcast_to(np.asarray(getattr(self, n)), shape) for n in PARAM_NAMES}
         masks = _validity(host, np)
-        for name in PARAM_NAMES:
+        # lbar and mu_k first: the ranges of d, a and mu_s are stated relative to them.
+        order = ("k", "c", "lbar", "d", "a", "omega", "mu_k", "mu_s", "mhat")
+        for name in order:
             bad = ~np.broadcast_to(masks[name], shape)
             if bad.any():
                 idx = tuple(int(i) for i in np.argwhere(bad)[0]) if shape else ()

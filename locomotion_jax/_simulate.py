@@ -10,7 +10,7 @@ import numpy as np
 from . import _exact as exact, _model as model
 from ._actuation import AbstractWaveform
 from ._batch import default_max_steps, prepare, safe_params, unflatten
-from ._custom_types import Array, ArrayLike, Contact, Start
+from ._custom_types import Array, ArrayLike, Contact
 from ._dynamics import AbstractDynamics, Exact, Smoothed
 from ._params import Params
 from ._results import Trajectory
@@ -101,8 +101,8 @@ def simulate(
     *,
     dynamics: AbstractDynamics | None = None,
     waveform: AbstractWaveform | None = None,
-    contact: Contact = "strict",
-    start: Start = "paper",
+    contact: str = "strict",
+    start: str = "paper",
     dtype: Any = None,
 ) -> Trajectory:
     """Integrate the two-mass model from $t = 0$ to `t_end`, saving at `save_at`.
@@ -148,7 +148,7 @@ def simulate(
     if isinstance(dynamics, Exact):
         max_steps = dynamics.max_steps or default_max_steps(float(t_end), dynamics.dt) + 4 * save_np.size
         rows, valid, status, t_lift, n_switch = _exact_batch(
-            flat, wave, axes, save, contact, start, dynamics.dt, max_steps
+            flat, wave, axes, save, contact, start, dynamics.dt, jnp.asarray(max_steps, jnp.int32)
         )
         out = _trajectory(flat, wave, axes, contact, start, save, rows, valid, status, t_lift, n_switch)
     elif isinstance(dynamics, Smoothed):

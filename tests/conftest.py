@@ -10,3 +10,9 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")
+
+import sys
+from pathlib import Path
+
+# `reference.py` (the independent scipy solver) is imported by several tests.
+sys.path.insert(0, str(Path(__file__).parent))

@@ -20,7 +20,11 @@ After every event *both* masses are re-checked from the state (with a tiny toler
 so that simultaneous switches, e.g. the symmetric ``d = 0, m1 = m2`` case, are taken
 together.  Event functions that are zero at the start of a segment are never re-detected
 there: every event has a direction that points away from the side the segment starts on,
-and the state is set exactly onto the switching surface (``v_i = 0``) at each switch.
+the state is set exactly onto the switching surface (``v_i = 0``) at each switch, and a
+function that starts at zero (``v_i`` after a switch, ``N_i`` after a paper-mode crossing)
+is divided by ``t - t0`` so that a quick return across zero is still located.
+scipy tests events only at step ends, so after each segment the dense output is also
+sampled inside every step (``_HybridSolver._audit``) to catch grazing double crossings.
 The number of segments is capped, and a run of zero-length segments raises
 ``RuntimeError`` (Zeno / chattering guard), so no run can loop forever.
 
@@ -35,6 +39,8 @@ import math
 
 import numpy as np
 from scipy.integrate import solve_ivp
+from scipy.optimize import brentq
+
 
 __all__ = ["DEFAULTS", "reference_simulate", "reference_measure"]
 
@@ -114,14 +120,14 @@ class _Model:
         Returns ``(fx, N1, N2, T, l0, dl0/dt, l)``.
         """
         dx = x2 - x1
-        l = math.sqrt(dx * dx + self.d * self.d)
+        ell = math.sqrt(dx * dx + self.d * self.d)
         wt = self.omega * t
         l0 = self.a * math.sin(wt) + self.lbar
         l0dot = self.a * self.omega * math.cos(wt)
-        T = self.k * (l - l0)
-        fx = T * dx / l
-        fy = T * self.d / l
-        return fx, self.m1 - fy, self.m2 + fy, T, l0, l0dot, l
+        T = self.k * (ell - l0)
+        fx = T * dx / ell
+        fy = T * self.d / ell
+        return fx, self.m1 - fy, self.m2 + fy, T, l0, l0dot, ell
 
     def normal(self, N: float) -> float:
         """Normal force used by friction: ``n = N`` (strict) or ``n = |N|`` (paper's reading, SPEC section 1)."""
@@ -130,9 +136,9 @@ class _Model:
     def energy(self, t, x1, v1, x2, v2):
         """Total energy, eq. (10): ``e = m1 v1^2/2 + m2 v2^2/2 + k (l - l0)^2/2`` (numpy-vectorised)."""
         t, x1, v1, x2, v2 = (np.asarray(u, dtype=float) for u in (t, x1, v1, x2, v2))
-        l = np.sqrt((x2 - x1) ** 2 + self.d**2)
+        ell = np.sqrt((x2 - x1) ** 2 + self.d**2)
         l0 = self.a * np.sin(self.omega * t) + self.lbar
-        return 0.5 * self.m1 * v1**2 + 0.5 * self.m2 * v2**2 + 0.5 * self.k * (l - l0) ** 2
+        return 0.5 * self.m1 * v1**2 + 0.5 * self.m2 * v2**2 + 0.5 * self.k * (ell - l0) ** 2
 
     def initial_state(self, start: str) -> np.ndarray:
         """Initial condition: eq. (14) (``start='paper'``) or the relaxed spring (SPEC section 1).
@@ -337,9 +343,9 @@ class _HybridSolver:
         ``T' = k (l' - dl0/dt)``; ``dN1/dt = -dfy/dt``, ``dN2/dt = +dfy/dt``.
         """
         m, y = self.m, self.y
-        fx, N1, N2, T, l0, l0dot, l = m.forces(self.t, y[0], y[2])
-        ldot = (y[2] - y[0]) * (y[3] - y[1]) / l
-        fydot = m.d * (m.k * (ldot - l0dot) * l - T * ldot) / (l * l)
+        fx, N1, N2, T, l0, l0dot, ell = m.forces(self.t, y[0], y[2])
+        ldot = (y[2] - y[0]) * (y[3] - y[1]) / ell
+        fydot = m.d * (m.k * (ldot - l0dot) * ell - T * ldot) / (ell * ell)
         return -fydot if i == 0 else fydot
 
     def _switching_values(self, t, Y, X_ref, z):
@@ -352,10 +358,10 @@ class _HybridSolver:
         m = self.m
         x1, v1, x2, v2 = Y[0], Y[1], Y[2], Y[3]
         dx = x2 - x1
-        l = np.sqrt(dx * dx + m.d * m.d)
-        T = m.k * (l - (m.a * np.sin(m.omega * t) + m.lbar))
-        fx = T * dx / l
-        fy = T * m.d / l
+        ell = np.sqrt(dx * dx + m.d * m.d)
+        T = m.k * (ell - (m.a * np.sin(m.omega * t) + m.lbar))
+        fx = T * dx / ell
+        fy = T * m.d / ell
         N = (m.m1 - fy, m.m2 + fy)
         F = (fx, -fx)
         out = []
@@ -380,8 +386,6 @@ class _HybridSolver:
         its dense output; if any switching function is below ``-tol`` before ``t1``,
         locate the first crossing with brentq and return ``(t_event, tag)``.
         """
-        from scipy.optimize import brentq
-
         ts = np.asarray(sol.ts)
         ts = ts[ts <= t1]
         if ts.size < 2 or t1 <= t0:
@@ -408,7 +412,13 @@ class _HybridSolver:
                 if tg == tag:
                     return float(val[0])
 
-        if qfun(ta) <= 0.0 or ta == t0 and not ok.size:
+        if qfun(ta) <= 0.0 and ta == t0:
+            # The function starts on its switching surface (e.g. v_i = 0 after a switch):
+            # look for the first positive value before tb on a finer grid.
+            fine = t0 + (tb - t0) * np.arange(1, 257) / 256
+            pos = [t for t in fine if qfun(t) > 0.0]
+            ta = pos[0] if pos else t0
+        if qfun(ta) <= 0.0:
             t_ev = ta
         else:
             t_ev = brentq(qfun, ta, tb, xtol=4 * np.finfo(float).eps, rtol=4 * np.finfo(float).eps)
@@ -591,7 +601,9 @@ def reference_simulate(params: dict, t_end: float, save_at=None, *, contact="str
         lift-off stop the samples repeat the last valid state.
     """
     model = _Model(params, contact)
-    ts = np.linspace(0.0, t_end, 1001) if save_at is None else np.asarray(save_at, dtype=float)
+    ts = np.linspace(0.0, t_end, 1001) if save_at is None else np.atleast_1d(np.asarray(save_at, dtype=float))
+    if ts.ndim != 1 or np.any(ts < 0.0) or np.any(ts > t_end):
+        raise ValueError(f"save_at must be a 1-D array of times in [0, t_end={t_end}]")
     solver = _HybridSolver(model, start, rtol, atol)
     solver.advance(float(t_end))
     valid_until = solver.t if solver.stopped else float(t_end)
@@ -642,8 +654,10 @@ def reference_measure(params: dict, z=5.0, *, horizon=2000.0, window=25.0, conta
             out.update(tau_z=tau, e_z=float(solver.y[4]) - ed_s, reached=True,
                        mean_speed=float((solver.X - X_s) / tau))
             solver.advance(t_window)  # the regime window may extend beyond tau_z
-        elif solver.t > t_start:
-            out.update(mean_speed=float((solver.X - X_s) / (solver.t - t_start)))
+        else:
+            if solver.t > t_start:
+                out.update(mean_speed=float((solver.X - X_s) / (solver.t - t_start)))
+            solver.advance(t_window)  # only matters if horizon < window
         if not solver.stopped or solver.t >= t_window:
             s1, s2 = solver.stuck_time(t_start, t_window)
             out.update(regime=int(max(s1, s2) > 1e-6), stick_fraction1=s1 / window, stick_fraction2=s2 / window)

@@ -13,11 +13,12 @@ import sys
 import numpy as np
 import pytest
 
+
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from reference import DEFAULTS, reference_measure, reference_simulate  # noqa: E402
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _measure(omega, rtol=1e-11, contact="paper"):
     return reference_measure(dict(omega=omega), z=5.0, contact=contact, start="paper", rtol=rtol)
 

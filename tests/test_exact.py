@@ -1,0 +1,207 @@
+"""Properties of the exact hybrid engine: energy balance (eq. 16), the paper's
+qualitative facts (Figs. 4b, 5), mirror symmetry, batching, dtypes, no retracing."""
+
+import math
+
+import jax.numpy as jnp
+import locomotion_jax as lj
+import numpy as np
+import pytest
+from locomotion_jax import _measure
+
+
+def test_energy_balance_along_trajectory():
+    # eq. (16): w = e_d + e(t) - e(0), with w integrated from the actuator power.
+    for omega in (2.0, 6.0, 23.0):
+        tr = lj.simulate(lj.Params(omega=omega), 40.0, save_at=jnp.linspace(0, 40, 81), contact="paper")
+        residual = tr.w - tr.e_d - (tr.e - tr.e[0])
+        assert bool(jnp.all(tr.valid))
+        # dt = 0.01: the residual is the RK4 error (measured 2e-8 at omega = 2, 1e-5 at 23).
+        np.testing.assert_allclose(residual, 0, atol=3e-5)
+
+
+def test_energy_balance_in_measurement():
+    p = lj.Params.grid(omega=jnp.array([2.0, 6.0, 16.0, 23.0]))
+    m = lj.measure(p, z=1.0, horizon=200.0, contact="paper")
+    assert bool(jnp.all(m.reached))
+    np.testing.assert_allclose(m.balance, 0, atol=1e-5 * float(jnp.max(m.e_d)))
+
+
+@pytest.mark.parametrize("omega", [math.pi])
+def test_fig4b_direction_follows_d(omega):
+    # Fig. 4b: l0 = 0.05 sin(pi t) + 3; forward for d > 0, backward for d < 0, none at d = 0.
+    ds = jnp.array([-0.5, -0.25, 0.0, 0.25, 0.5])
+    tr = lj.simulate(lj.Params.grid(d=ds, omega=omega), 20.0, save_at=jnp.array([0.0, 20.0]), contact="paper")
+    dX = np.asarray(tr.X[:, -1] - tr.X[:, 0])
+    assert dX[0] < -0.05 and dX[1] < -0.01
+    assert dX[3] > 0.01 and dX[4] > 0.05
+    assert abs(dX[2]) < 1e-10  # d = 0, m1 = m2: simultaneous switches keep the symmetry
+
+
+def test_d0_equal_masses_switch_together():
+    tr = lj.simulate(lj.Params(d=0.0, omega=math.pi), 20.0, save_at=jnp.linspace(0, 20, 2001))
+    modes = np.asarray(tr.mode)
+    # Only "both stick" or "both slip" can occur by symmetry.
+    assert set(np.unique(modes)) <= {int(lj.Mode.BOTH_STICK), int(lj.Mode.BOTH_SLIP)}
+    np.testing.assert_allclose(tr.v1, -tr.v2, atol=1e-12)
+
+
+def test_mirror_symmetry():
+    # With m1 = m2, d -> -d mirrors the motion: the CoM displacement changes sign.
+    p = lj.Params.grid(d=jnp.array([0.5, -0.5]), omega=jnp.array([2.0, 16.0]))
+    tr = lj.simulate(p, 30.0, save_at=jnp.array([0.0, 30.0]), contact="paper")
+    dX = np.asarray(tr.X[..., -1] - tr.X[..., 0])
+    np.testing.assert_allclose(dX[0], -dX[1], rtol=1e-8, atol=1e-10)
+    assert np.all(np.abs(dX[0]) > 1e-2)
+
+
+def test_fig5_regimes():
+    # Fig. 5: SSL at omega = 0.2 wn1, SL at omega = 2.3 wn1 (wn1 = 10 for the defaults).
+    p = lj.Params.grid(omega=jnp.array([2.0, 23.0]))
+    m = lj.measure(p, z=1.0, horizon=200.0, contact="paper")
+    assert [int(r) for r in m.regime] == [lj.Regime.SSL, lj.Regime.SL]
+    assert float(m.stick_fraction1[0]) > 0.1 and float(m.stick_fraction1[1]) == 0.0
+    tr = lj.simulate(lj.Params(omega=2.0), 100.0, save_at=jnp.linspace(80, 100, 2001), contact="paper")
+    stuck = np.asarray(tr.mode) != lj.Mode.BOTH_SLIP
+    assert stuck.mean() > 0.2
+    assert np.all(np.asarray(tr.v1)[np.isin(np.asarray(tr.mode), [0, 3])] == 0.0)  # stuck means v = 0 exactly
+
+
+def test_natural_frequencies_and_t_start():
+    p = lj.Params()
+    assert float(p.wn1) == pytest.approx(10.0)
+    assert float(p.wn2) == pytest.approx(math.sqrt(50.0))
+    assert float(p.t_start) == pytest.approx(80 * 2 * math.pi / math.sqrt(50.0))
+    q = lj.Params(mhat=0.05)
+    assert float(q.m1 + q.m2) == pytest.approx(2.0)
+    assert float(q.wn1**2) == pytest.approx(float(q.wn2**2 + q.wn3**2))
+
+
+def test_batch_equals_single_runs_and_isolates_failures():
+    # One invalid configuration (mhat = 1.2), one that lifts off under the strict
+    # reading (omega = 10, near resonance), one that never reaches z (omega = 0.5):
+    # the others are unchanged and each failure is flagged in its own result.
+    omegas = jnp.array([2.0, 10.0, 0.5, 23.0, 16.0])
+    mhat = jnp.array([0.5, 0.5, 0.5, 0.5, 1.2])
+    batch = lj.Params(omega=omegas, mhat=mhat, check=False)
+    kw = dict(z=0.5, horizon=60.0)
+    m = lj.measure(batch, **kw)
+    st = [int(s) for s in m.status]
+    assert st[0] == lj.Status.OK and st[3] == lj.Status.OK
+    assert st[1] == lj.Status.LIFTOFF and bool(m.liftoff[1])
+    assert st[4] == lj.Status.INVALID
+    assert not bool(m.reached[2]) and math.isinf(float(m.tau_z[2])) and math.isinf(float(m.e_z[2]))
+    for i in (0, 2, 3):
+        single = lj.measure(lj.Params(omega=float(omegas[i])), **kw)
+        np.testing.assert_allclose(m.tau_z[i], single.tau_z, rtol=1e-12)
+        np.testing.assert_allclose(m.e_d[i], single.e_d, rtol=1e-12)
+    for name, value in m.to_numpy().items():  # no NaN except where documented
+        if name in ("mean_speed", "e_d", "work", "delta_e", "balance", "X_start", "stick_fraction1", "stick_fraction2"):
+            assert not np.any(np.isnan(value[[0, 2, 3]])), name
+        else:
+            assert not np.any(np.isnan(value)), name
+
+
+def test_liftoff_is_located_and_stops_the_run():
+    tr = lj.simulate(lj.Params(omega=23.0, a=0.1), 5.0, save_at=jnp.linspace(0, 5, 501))
+    assert int(tr.status) == lj.Status.LIFTOFF and bool(tr.liftoff)
+    tl = float(tr.t_liftoff)
+    assert 0 < tl < 5
+    assert not bool(jnp.all(tr.valid))
+    ok = np.asarray(tr.valid)
+    assert np.all(np.asarray(tr.t)[ok] <= tl)
+    assert np.all(np.minimum(np.asarray(tr.N1), np.asarray(tr.N2))[ok] > -1e-9)
+    assert not np.any(np.isnan(np.asarray(tr.X)))
+    # The paper's reading continues through it and flags it.
+    tp = lj.simulate(lj.Params(omega=23.0, a=0.1), 5.0, save_at=jnp.linspace(0, 5, 501), contact="paper")
+    assert int(tp.status) == lj.Status.OK and bool(tp.liftoff) and bool(jnp.all(tp.valid))
+
+
+def test_relaxed_start_avoids_initial_kick():
+    p = lj.Params(omega=23.0, a=0.07)
+    tr_paper = lj.simulate(p, 3.0, save_at=jnp.linspace(0, 3, 31))
+    tr_relax = lj.simulate(p, 3.0, save_at=jnp.linspace(0, 3, 31), start="relaxed")
+    assert float(tr_relax.x2[0] - tr_relax.x1[0]) == pytest.approx(math.sqrt(9 - 0.25))
+    assert int(tr_relax.status) == lj.Status.OK
+    assert int(tr_paper.status) == lj.Status.LIFTOFF
+
+
+@pytest.mark.parametrize(
+    "kwargs, name",
+    [
+        (dict(mu_s=0.4), "mu_s"),
+        (dict(k=0.0), "k"),
+        (dict(k=-1.0), "k"),
+        (dict(c=-0.1), "c"),
+        (dict(mhat=1.0), "mhat"),
+        (dict(mhat=0.0), "mhat"),
+        (dict(a=3.0), "a"),
+        (dict(mu_k=-0.1, mu_s=0.0), "mu_k"),
+        (dict(omega=float("nan")), "omega"),
+        (dict(d=float("inf")), "d"),
+        (dict(lbar=-1.0), "lbar"),
+    ],
+)
+def test_invalid_parameters_are_refused(kwargs, name):
+    with pytest.raises(ValueError, match=f"'{name}'") as info:
+        lj.Params(**kwargs)
+    assert "valid range" in str(info.value)
+
+
+def test_invalid_parameter_in_batch_names_index():
+    with pytest.raises(ValueError, match=r"'mu_s' at batch index \(2,\)"):
+        lj.Params(mu_s=jnp.array([0.7, 0.6, 0.3, 0.2]))
+    with pytest.raises(ValueError, match="Unknown parameter"):
+        lj.Params.grid(omegaa=jnp.array([1.0]))
+
+
+def test_invalid_call_arguments():
+    p = lj.Params()
+    with pytest.raises(ValueError, match="z"):
+        lj.measure(p, z=0.0)
+    with pytest.raises(ValueError, match="horizon"):
+        lj.measure(p, horizon=-1.0)
+    with pytest.raises(ValueError, match="contact"):
+        lj.measure(p, contact="sticky")
+    with pytest.raises(ValueError, match="start"):
+        lj.simulate(p, 1.0, start="nowhere")
+    with pytest.raises(ValueError, match="t_end"):
+        lj.simulate(p, 0.0)
+    with pytest.raises(ValueError, match="save_at"):
+        lj.simulate(p, 1.0, save_at=jnp.array([0.5, 0.2]))
+    with pytest.raises(ValueError, match="dt"):
+        lj.Exact(dt=0.0)
+    with pytest.raises(ValueError, match="eps"):
+        lj.Smoothed(eps=0.0)
+
+
+def test_float32_runs_and_preserves_dtype():
+    p32 = lj.Params.grid(omega=jnp.array([2.0, 23.0])).astype(jnp.float32)
+    m32 = lj.measure(p32, z=1.0, horizon=200.0, contact="paper")
+    m64 = lj.measure(lj.Params.grid(omega=jnp.array([2.0, 23.0])), z=1.0, horizon=200.0, contact="paper")
+    assert m32.tau_z.dtype == jnp.float32 and m64.tau_z.dtype == jnp.float64
+    assert [int(r) for r in m32.regime] == [int(r) for r in m64.regime]
+    # float32 round-off in the time and positions limits it to ~1e-3 (README).
+    np.testing.assert_allclose(m32.tau_z, m64.tau_z, rtol=3e-3)
+    np.testing.assert_allclose(m32.e_z, m64.e_z, rtol=3e-3)
+
+
+def test_one_compilation_for_new_values():
+    f = _measure._exact_batch
+    p1 = lj.Params.grid(omega=jnp.array([2.0, 3.0]))
+    p2 = lj.Params.grid(omega=jnp.array([5.0, 7.0]), a=0.06, d=0.4)
+    lj.measure(p1, z=0.2, horizon=20.0)
+    before = f._cached._cache_size()
+    lj.measure(p2, z=0.3, horizon=25.0, window=20.0)
+    assert f._cached._cache_size() == before
+
+
+def test_fourier_waveform_matches_sinusoid():
+    p = lj.Params(omega=6.0)
+    wave = lj.Fourier.from_sinusoid(0.05, 6.0, 3.0, harmonics=3)
+    a = lj.simulate(p, 10.0, save_at=jnp.linspace(0, 10, 11))
+    b = lj.simulate(p, 10.0, save_at=jnp.linspace(0, 10, 11), waveform=wave)
+    np.testing.assert_allclose(a.X, b.X, rtol=1e-12, atol=1e-12)
+    l0, dl0 = wave(jnp.asarray(0.3))
+    assert float(l0) == pytest.approx(3 + 0.05 * math.sin(1.8))
+    assert float(dl0) == pytest.approx(0.05 * 6 * math.cos(1.8))
