@@ -205,3 +205,24 @@ def test_fourier_waveform_matches_sinusoid():
     l0, dl0 = wave(jnp.asarray(0.3))
     assert float(l0) == pytest.approx(3 + 0.05 * math.sin(1.8))
     assert float(dl0) == pytest.approx(0.05 * 6 * math.cos(1.8))
+
+
+@pytest.mark.parametrize("contact", ["strict", "paper"])
+def test_random_configurations_never_stall_or_nan(contact):
+    # Wild random parameters: every run ends on its own (no Zeno stall: the step cap
+    # is never hit), nothing is NaN, and the energy balance holds.
+    rng = np.random.default_rng(1)
+    B = 32
+    mu_k = rng.uniform(0.1, 0.8, B)
+    p = lj.Params(omega=rng.uniform(0.5, 30, B), a=rng.uniform(0.0, 0.3, B), d=rng.uniform(-1, 1, B),
+                  mhat=rng.uniform(0.05, 0.95, B), mu_k=mu_k, mu_s=mu_k + rng.uniform(0, 0.5, B),
+                  c=rng.uniform(0, 0.1, B), k=rng.uniform(20, 100, B))
+    m = lj.measure(p, z=0.5, horizon=20.0, contact=contact)
+    status = np.asarray(m.status)
+    assert not np.any(status == lj.Status.MAX_STEPS)
+    if contact == "paper":
+        assert np.all(status == lj.Status.OK)
+    assert not np.any(np.isnan(np.asarray(m.tau_z)))
+    ok = status == lj.Status.OK
+    bal = np.abs(np.asarray(m.balance)[ok]) / np.maximum(1, np.abs(np.asarray(m.e_d)[ok]))
+    assert np.all(bal < 2e-3)
