@@ -10,13 +10,26 @@ from importlib.metadata import PackageNotFoundError, version as _version
 from ._actuation import AbstractWaveform as AbstractWaveform, Fourier as Fourier, Sinusoid as Sinusoid
 from ._dynamics import AbstractDynamics as AbstractDynamics, Exact as Exact, Smoothed as Smoothed
 from ._measure import measure as measure
-from ._params import DEFAULTS as DEFAULTS, PARAM_NAMES as PARAM_NAMES, VALID_RANGES as VALID_RANGES, Params as Params
+from ._optimise import optimise as optimise
+from ._optimum import OptimiseSettings as OptimiseSettings, Optimum as Optimum
+from ._params import DEFAULTS as DEFAULTS, PARAM_NAMES as PARAM_NAMES, Params as Params, VALID_RANGES as VALID_RANGES
+from ._pareto import best_sinusoid as best_sinusoid, pareto_front as pareto_front, sinusoid_sweep as sinusoid_sweep
 from ._results import Measurement as Measurement, Trajectory as Trajectory
 from ._simulate import simulate as simulate
 from ._status import Mode as Mode, Regime as Regime, Status as Status
+from ._sweep import sweep as sweep
 
 
 try:
     __version__ = _version("locomotion_jax")
 except PackageNotFoundError:  # running from a source tree
     __version__ = "0.0.0+local"
+
+
+def __getattr__(name: str):
+    # `animate` and `save_gif` load matplotlib's animation machinery (~0.7 s): only on first use.
+    if name in ("animate", "save_gif"):
+        from . import _animation
+
+        return getattr(_animation, name)
+    raise AttributeError(f"module 'locomotion_jax' has no attribute {name!r}")

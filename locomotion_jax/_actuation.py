@@ -24,6 +24,14 @@ class AbstractWaveform(eqx.Module):
         """Return $(\\ell_0(t), \\dot\\ell_0(t))$."""
 
     @abc.abstractmethod
+    def at_phase(self, cos: ArrayLike, sin: ArrayLike) -> tuple[Array, Array, Array]:
+        """$(\\ell_0, \\dot\\ell_0, \\ddot\\ell_0)$ given $(\\cos\\omega t, \\sin\\omega t)$.
+
+        The exact engine carries the phase and rotates it step by step, because
+        XLA's CPU `sin` costs more than a whole force evaluation (benchmarks/NOTES.md).
+        """
+
+    @abc.abstractmethod
     def stroke(self) -> Array:
         """An upper bound of $\\max_t |\\ell_0(t) - \\bar\\ell|$ (sum of harmonic amplitudes)."""
 
@@ -46,7 +54,11 @@ class Sinusoid(AbstractWaveform):
 
     def __call__(self, t: ArrayLike) -> tuple[Array, Array]:
         phase = self.omega * t
-        return self.a * jnp.sin(phase) + self.lbar, self.a * self.omega * jnp.cos(phase)
+        return self.at_phase(jnp.cos(phase), jnp.sin(phase))[:2]
+
+    def at_phase(self, cos: ArrayLike, sin: ArrayLike) -> tuple[Array, Array, Array]:
+        As = self.a * sin
+        return As + self.lbar, self.a * self.omega * cos, -(self.omega * self.omega) * As
 
     def stroke(self) -> Array:
         return jnp.abs(self.a)
@@ -95,15 +107,19 @@ class Fourier(AbstractWaveform):
         return self.cos.shape[-1]
 
     def __call__(self, t: ArrayLike) -> tuple[Array, Array]:
-        c1, s1 = jnp.cos(self.omega * t), jnp.sin(self.omega * t)
-        l0, dl0 = self.lbar, jnp.zeros_like(c1)
+        return self.at_phase(jnp.cos(self.omega * t), jnp.sin(self.omega * t))[:2]
+
+    def at_phase(self, cos: ArrayLike, sin: ArrayLike) -> tuple[Array, Array, Array]:
+        c1, s1 = jnp.asarray(cos), jnp.asarray(sin)
+        l0, dl0, ddl0 = self.lbar, jnp.zeros_like(c1), jnp.zeros_like(c1)
         cn, sn = c1, s1
         for n in range(self.harmonics):  # static N: a short unrolled recurrence
             A, B = self.cos[..., n], self.sin[..., n]
             l0 = l0 + A * cn + B * sn
             dl0 = dl0 + (n + 1) * self.omega * (B * cn - A * sn)
+            ddl0 = ddl0 - ((n + 1) * self.omega) ** 2 * (A * cn + B * sn)
             cn, sn = cn * c1 - sn * s1, sn * c1 + cn * s1
-        return l0, dl0
+        return l0, dl0, ddl0
 
     def stroke(self) -> Array:
         return jnp.sum(jnp.sqrt(self.cos**2 + self.sin**2), axis=-1)

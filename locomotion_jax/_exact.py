@@ -4,96 +4,419 @@ One configuration, one iteration at a time: callers run [`step`][] inside a
 `lax.while_loop` and batch with `vmap`.
 
 **Scheme.** Inside a mode the dynamics is a smooth ODE, integrated with classical
-RK4 at a nominal step `dt`. Mode switches are events, located by treating the
-step length itself as the unknown: a trial step that ends past an event (an event
-function changed sign) is not committed; the next iteration retries with the
-Illinois (modified regula falsi) estimate of the crossing, committing every trial
-that stays before it. A switch is applied once the bracket is narrower than a few
-ulps of `t`. The switching state is therefore an RK4 state, not an interpolant,
-and the results converge at fourth order in `dt` (tests/test_convergence.py).
-Every iteration costs the same (under `vmap` there is no cheap branch), so the
-search adds iterations only where there are events.
+RK4 at a nominal step `dt`. Every iteration commits one step; nothing is retried.
+At both ends of the step the engine has the state, its rate and its second time
+derivative (forces and their time derivatives are analytic), so the quintic
+Hermite interpolant of the state over the step is accurate to $O(h^5)$, like the
+RK4 step itself. If an event function changed sign over the step, its crossing
+is located on its own quintic Hermite interpolant (value, first and second
+derivative at both ends; safeguarded Newton), the step is cut there and the
+interpolated state is committed. The mode switch is applied at the start of the
+next iteration, where the forces at that state are computed anyway. An event
+thus costs one extra iteration, and the results converge at fourth order in `dt`
+(tests/test_against_reference.py).
 
 **Events** (each fires when its function goes from $\\ge 0$ to $< 0$):
 
 - a slipping mass $i$ with slip direction $\\sigma_i$: $\\sigma_i v_i$ (velocity zero);
 - a stuck mass $i$: $\\mu_s n_i - |F_i|$ (static friction exceeded, eq. 7);
-- strict contact only: $N_1$, $N_2$ (lift-off, eq. 5), which stops the run.
+- strict contact only: $\\min(N_1, N_2)$ (lift-off, eq. 5), which stops the run;
+- optionally a caller's target (`measure`: $|X - X_0| = z$).
 
-After any switch both masses are re-checked at the switching state (SPEC §2):
-the forces depend only on positions and time, never on the other mass's mode, so
-each mass's stick condition can be decided on its own, and exactly simultaneous
-events (by symmetry when $d = 0$, $m_1 = m_2$) fire together.
+When several events cross in one step, the earliest by the secant of each
+function is located. At the start of every iteration both masses are re-checked
+(SPEC §2): the located one switches, and so does any mass whose event function is
+negative there (simultaneous events, e.g. by symmetry when $d = 0$, $m_1 = m_2$).
+The forces depend only on positions and time, never on the other mass's mode, so
+each mass's stick condition is decided on its own.
+
+**Speed** (benchmarks/NOTES.md). XLA on the CPU duplicates shared cheap
+subexpressions into every kernel that uses them (one kernel per carried scalar),
+and its float64 `sin` costs more than a force evaluation. So the state is a flat
+set of scalars, shared intermediates are pinned with [`_keep`][], and the
+actuation phase $(\\cos\\omega t, \\sin\\omega t)$ is carried and rotated with a
+short polynomial [`sincos`][] of the step angle.
 
 Limitation: a sign change that starts and ends inside one step (a grazing
 excursion shorter than `dt`) is not seen; only grazing contacts are affected.
 """
 
+import math
 from typing import NamedTuple
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
+import numpy as np
 
 from . import _model as model
 from ._actuation import AbstractWaveform
-from ._custom_types import Array, Bool, Contact, Float, FloatScalar, IntScalar
+from ._custom_types import Array, Contact
 from ._params import Params
 from ._status import Status
 
 
-MAX_SEARCH = 60
-"""Hard cap on Illinois iterations for one event (guards against any Zeno stall)."""
+NEWTON_ITERS = 4
+"""Newton iterations on the event quintic, from its secant root (it is nearly linear)."""
+
+PREDICT_MARGIN = 1.2
+"""A step predicted to contain an event ends this factor past the predicted crossing."""
+
+
+class Consts(NamedTuple):
+    """Per-configuration constants, computed once outside the time loop."""
+
+    k: Array
+    c: Array
+    d: Array
+    dd: Array
+    m1: Array
+    m2: Array
+    im1: Array
+    im2: Array
+    mhat: Array
+    mu_s: Array
+    mu_k: Array
+    one: Array  # 1.0, but a runtime value: see `_keep`
+
+
+def consts(params: Params, wave: AbstractWaveform) -> Consts:
+    """Per-configuration constants; the phase rotates at the *waveform's* base frequency."""
+    return Consts(
+        k=params.k, c=params.c, d=params.d, dd=params.d * params.d, m1=params.m1, m2=params.m2,
+        im1=1 / params.m1, im2=1 / params.m2, mhat=params.mhat, mu_s=params.mu_s, mu_k=params.mu_k,
+        one=params.k / params.k,
+    )
+
+
+def _keep(P: Consts, x: Array) -> Array:
+    """Materialise `x` once per iteration.
+
+    XLA on the CPU fuses cheap elementwise producers into *every* consumer
+    kernel, so a value feeding many carried outputs (the commit decision, the
+    RK4 end state) is recomputed in each of them (measured: 7,400 flops per
+    iteration instead of ~1,400). XLA treats a division as expensive and never
+    duplicates it: dividing by a runtime 1.0 pins the value to one buffer.
+    """
+    if x.dtype == jnp.bool_:
+        return (x.astype(P.one.dtype) / P.one) > 0.5
+    return x / P.one
+
+
+class State(NamedTuple):
+    """The integrated quantities: positions, velocities, $e_d$ (eq. 15) and $w$ (eq. 16)."""
+
+    x1: Array
+    v1: Array
+    x2: Array
+    v2: Array
+    ed: Array
+    w: Array
+
+    def map(self, fn, *others) -> "State":
+        return State(*(fn(*xs) for xs in zip(self, *others)))
 
 
 class Hybrid(eqx.Module):
-    """Integrator state of one configuration (a pytree of arrays).
+    """Integrator state of one configuration: a flat pytree of scalars.
 
-    `y = (x1, v1, x2, v2, e_d, w)`. `k1` caches the rates at `(t, y)` in the
-    current mode (first same as last). `search`/`hi`/`g0`/`ghi`/`side` hold the
-    event bracket `[t, t + hi]` while an event is being located.
+    `y` is the [`State`][] and `comp` its Kahan compensation (float32 only, else
+    `None`); `cph, sph` are $\\cos\\omega t, \\sin\\omega t$ (carried, see the module
+    docstring); `stuck*`/`s*` the mode and slip direction of each mass; `pend*`
+    flags a mass whose event was located at `t` (it switches at the start of the
+    next iteration).
     """
 
-    t: FloatScalar
-    y: Float[Array, "6"]
-    stuck: Bool[Array, "2"]
-    sdir: Float[Array, "2"]
-    k1: Float[Array, "6"]
-    comp: Float[Array, "6"]
-    g0: FloatScalar
-    search: Array
-    hi: FloatScalar
-    ghi: FloatScalar
-    side: IntScalar
-    n_search: IntScalar
-    status: IntScalar
-    t_liftoff: FloatScalar
-    n_switch: IntScalar
+    t: Array
+    y: State
+    comp: State | None
+    cph: Array
+    sph: Array
+    stuck1: Array
+    stuck2: Array
+    s1: Array
+    s2: Array
+    pend1: Array
+    pend2: Array
+    status: Array
+    t_liftoff: Array
+    n_switch: Array
 
 
 class StepInfo(NamedTuple):
-    """What one iteration did, for measurements: the committed interval
-    `[t0, t1]` with the end states and rates needed for cubic Hermite dense output
-    (before any switch at `t1`)."""
+    """What one iteration did, for measurements.
+
+    - `commit`: False only when the run stopped at the start (lift-off found there).
+    - `t0`, `y0`, `tension0`: the start, after its switches (tension for eq. 10).
+    - `t1`, `y1`: the committed end (before the switches pending there).
+    - `stuck1`, `stuck2`: the mode during `[t0, t1]`.
+    - `target_fired`, `t_target`, `y_target`: the caller's target event, if it fired.
+    """
 
     commit: Array
-    switch: Array
     t0: Array
+    y0: State
+    tension0: Array
     t1: Array
-    y0: Array
-    f0: Array
-    y1: Array
-    f1: Array
-    stuck0: Array
+    y1: State
+    stuck1: Array
+    stuck2: Array
+    target_fired: Array
+    t_target: Array
+    y_target: State
+
+
+class Target(NamedTuple):
+    """A caller's event $g = z - |X - X_0|$ (fires when $|X - X_0|$ reaches $z$); `active` gates it."""
+
+    active: Array
+    X0: Array
+    z: Array
+
+
+# -- actuation phase ---------------------------------------------------------------
+
+
+def sincos(x: Array) -> tuple[Array, Array]:
+    """$(\\sin x, \\cos x)$ by quadrant reduction and Taylor polynomials on $[-\\pi/4, \\pi/4]$.
+
+    A few ulps in float64 for moderate $|x|$ (the engine passes step angles
+    $\\omega h$); about 40 flops, where XLA's CPU float64 `sin` costs several times more.
+    """
+    dtype = x.dtype
+    p1 = np.asarray(math.pi / 2, dtype)
+    p2 = np.asarray(math.pi / 2 - float(p1), dtype)
+    q = jnp.round(x * np.asarray(2 / math.pi, dtype))
+    r = (x - q * p1) - q * p2
+    r2 = r * r
+    s = np.asarray(1 / math.factorial(17), dtype)
+    for n in (15, 13, 11, 9, 7, 5, 3):
+        s = s * r2 + np.asarray((-1) ** ((n - 1) // 2) / math.factorial(n), dtype)
+    s = r + r * r2 * s
+    c = np.asarray(-1 / math.factorial(18), dtype)
+    for n in (16, 14, 12, 10, 8, 6, 4, 2):
+        c = c * r2 + np.asarray((-1) ** (n // 2) / math.factorial(n), dtype)
+    c = 1 + r2 * c
+    quad = jnp.mod(q, 4)
+    swap = (quad == 1) | (quad == 3)
+    sin = jnp.where(swap, c, s)
+    cos = jnp.where(swap, s, c)
+    sin = jnp.where(quad >= 2, -sin, sin)
+    cos = jnp.where((quad == 1) | (quad == 2), -cos, cos)
+    return sin, cos
+
+
+def _rotate(c, s, ca, sa):
+    return c * ca - s * sa, s * ca + c * sa
+
+
+# -- forces, rates, events -----------------------------------------------------------
+
+
+class _F(NamedTuple):
+    fx: Array
+    fy: Array
+    tension: Array
+    N1: Array
+    N2: Array
+    n1: Array
+    n2: Array
+
+
+class _D(NamedTuple):
+    """First and second time derivatives along the motion of what the events need."""
+
+    fx: Array
+    fy: Array
+    tension: Array
+    fx2: Array
+    fy2: Array
+
+
+def _forces(P: Consts, contact: Contact, l0, x1, x2) -> tuple[_F, tuple]:
+    """Spring and normal forces (eqs. 2, 5, 8), as in `_model.spring_forces`; also
+    returns the geometry `(u, il, pl)` reused by [`_derivs`][]."""
+    u = x2 - x1
+    length = jnp.sqrt(u * u + P.dd)
+    il = 1 / length
+    tension = P.k * (length - l0)
+    pl = tension * il
+    fx = pl * u
+    fy = pl * P.d
+    N1 = P.m1 - fy
+    N2 = P.m2 + fy
+    n1, n2 = (jnp.abs(N1), jnp.abs(N2)) if contact == "paper" else (N1, N2)
+    return _F(fx, fy, tension, N1, N2, n1, n2), (u, il, pl)
+
+
+def _derivs(P: Consts, geo, y: "State", a1, a2, dl0, ddl0) -> _D:
+    """Time derivatives of $f_x$, $f_y$, $T$ (first) and $f_x$, $f_y$ (second) along the
+    motion, from eqs. (2, 8): $u = x_2 - x_1$, $\\ell = \\sqrt{u^2 + d^2}$, $T = k(\\ell - \\ell_0)$,
+    $f_x = (T/\\ell) u$, $f_y = (T/\\ell) d$."""
+    u, il, pl = geo
+    u1 = y.v2 - y.v1
+    u2 = a2 - a1
+    l1 = u * u1 * il
+    l2 = (u1 * u1 + u * u2 - l1 * l1) * il
+    T1 = P.k * (l1 - dl0)
+    T2 = P.k * (l2 - ddl0)
+    pl1 = (T1 - pl * l1) * il
+    pl2 = (T2 - 2 * pl1 * l1 - pl * l2) * il
+    return _D(
+        fx=pl1 * u + pl * u1, fy=pl1 * P.d, tension=T1,
+        fx2=pl2 * u + 2 * pl1 * u1 + pl * u2, fy2=pl2 * P.d,
+    )
+
+
+def _accel(P: Consts, f: _F, y: State, st1, st2, s1, s2):
+    """Accelerations in a fixed mode: eq. (9) corrected per SPEC §2,
+    $m_i \\dot v_i = F_i - c v_i - \\mu_k n_i \\sigma_i$, $F_1 = f_x = -F_2$; zero when stuck."""
+    zero = jnp.zeros_like(y.v1)
+    a1 = jnp.where(st1, zero, (f.fx - P.c * y.v1 - P.mu_k * f.n1 * s1) * P.im1)
+    a2 = jnp.where(st2, zero, (-f.fx - P.c * y.v2 - P.mu_k * f.n2 * s2) * P.im2)
+    return a1, a2
+
+
+def _rates(P: Consts, f: _F, y: State, a1, a2, s1, s2, dl0) -> State:
+    """The rate of every state entry: $\\dot x_i = v_i$ (a stuck mass has $v_i = 0$
+    exactly), $\\dot v_i = a_i$, and the integrands of $e_d$ (eq. 15; $|v_i| = \\sigma_i v_i$
+    in a slip segment) and of $w$ (eq. 16, $-T\\dot\\ell_0$)."""
+    pd = P.mu_k * (f.n1 * s1 * y.v1 + f.n2 * s2 * y.v2) + P.c * (y.v1 * y.v1 + y.v2 * y.v2)
+    return State(y.v1, a1, y.v2, a2, pd, -f.tension * dl0)
+
+
+def _normal_rates(contact, f: _F, D: _D):
+    """$\\dot n_i$, $\\ddot n_i$ from $N_1 = m_1 - f_y$, $N_2 = m_2 + f_y$ (eq. 5)."""
+    n1d, n2d, n1dd, n2dd = -D.fy, D.fy, -D.fy2, D.fy2
+    if contact == "paper":  # n = |N|
+        p1, p2 = f.N1 >= 0, f.N2 >= 0
+        n1d, n1dd = jnp.where(p1, n1d, -n1d), jnp.where(p1, n1dd, -n1dd)
+        n2d, n2dd = jnp.where(p2, n2d, -n2d), jnp.where(p2, n2dd, -n2dd)
+    return n1d, n2d, n1dd, n2dd
+
+
+def _second(P: Consts, contact, f: _F, D: _D, y: State, a1, a2, st1, st2, s1, s2, dl0, ddl0) -> State:
+    """Second time derivative of every state entry in a fixed mode (for the quintic
+    dense output): $\\ddot x_i = a_i$, $\\ddot v_i = \\dot a_i$, and the rates of the integrands."""
+    n1d, n2d, _, _ = _normal_rates(contact, f, D)
+    zero = jnp.zeros_like(a1)
+    j1 = jnp.where(st1, zero, (D.fx - P.c * a1 - P.mu_k * n1d * s1) * P.im1)
+    j2 = jnp.where(st2, zero, (-D.fx - P.c * a2 - P.mu_k * n2d * s2) * P.im2)
+    pd = P.mu_k * (n1d * s1 * y.v1 + f.n1 * s1 * a1 + n2d * s2 * y.v2 + f.n2 * s2 * a2) + 2 * P.c * (
+        y.v1 * a1 + y.v2 * a2
+    )
+    pw = -(D.tension * dl0 + f.tension * ddl0)
+    return State(a1, j1, a2, j2, pd, pw)
+
+
+def _mass_events(P: Consts, f: _F, y: State, st1, st2, s1, s2) -> tuple[Array, Array]:
+    """The two mass events' values (module docstring)."""
+    absF = jnp.abs(f.fx)
+    g1 = jnp.where(st1, P.mu_s * f.n1 - absF, s1 * y.v1)
+    g2 = jnp.where(st2, P.mu_s * f.n2 - absF, s2 * y.v2)
+    return g1, g2
+
+
+def _events(P, contact, f: _F, D: _D, y: State, r: State, j: State, st1, st2, s1, s2, target):
+    """Values, first and second time derivatives of all events (lists)."""
+    n1d, n2d, n1dd, n2dd = _normal_rates(contact, f, D)
+    sg = jnp.where(f.fx >= 0, 1.0, -1.0).astype(f.fx.dtype)  # |F_i| = |fx|: d|F|/dt = sgn(fx) dfx/dt
+    g1, g2 = _mass_events(P, f, y, st1, st2, s1, s2)
+    gs = [g1, g2]
+    ds = [
+        jnp.where(st1, P.mu_s * n1d - sg * D.fx, s1 * r.v1),
+        jnp.where(st2, P.mu_s * n2d - sg * D.fx, s2 * r.v2),
+    ]
+    es = [
+        jnp.where(st1, P.mu_s * n1dd - sg * D.fx2, s1 * j.v1),
+        jnp.where(st2, P.mu_s * n2dd - sg * D.fx2, s2 * j.v2),
+    ]
+    if contact == "strict":
+        low1 = f.N1 <= f.N2
+        gs.append(jnp.minimum(f.N1, f.N2))
+        ds.append(jnp.where(low1, -D.fy, D.fy))
+        es.append(jnp.where(low1, -D.fy2, D.fy2))
+    if target is not None:
+        active, X0, z = target
+        rel = P.mhat * y.x1 + (1 - P.mhat) * y.x2 - X0
+        sr = jnp.where(rel >= 0, 1.0, -1.0).astype(rel.dtype)
+        zero = jnp.zeros_like(rel)
+        gs.append(jnp.where(active, z - jnp.abs(rel), jnp.asarray(jnp.inf, rel.dtype)))
+        ds.append(jnp.where(active, -sr * (P.mhat * r.x1 + (1 - P.mhat) * r.x2), zero))
+        es.append(jnp.where(active, -sr * (P.mhat * j.x1 + (1 - P.mhat) * j.x2), zero))
+    return gs, ds, es
+
+
+def _quintic(g0, D0, E0, g1, D1, E1):
+    """Monomial coefficients of the quintic Hermite interpolant on $\\theta \\in [0, 1]$
+    with values $g$, scaled slopes $D = h\\dot g$ and curvatures $E = h^2\\ddot g$ at both ends."""
+    dg = g1 - g0
+    c3 = 10 * dg - 6 * D0 - 4 * D1 - 1.5 * E0 + 0.5 * E1
+    c4 = -15 * dg + 8 * D0 + 7 * D1 + 1.5 * E0 - E1
+    c5 = 6 * dg - 3 * D0 - 3 * D1 - 0.5 * E0 + 0.5 * E1
+    return g0, D0, 0.5 * E0, c3, c4, c5
+
+
+def _root(coef, g1):
+    """First root in $[0, 1]$ of the event quintic ($p(0) \\ge 0 > p(1) = g_1$) by
+    safeguarded Newton from the secant root. When $p(0) = 0$ (the event function of
+    a mass that has just switched) $p(\\theta)/\\theta$ is solved, so the start is skipped."""
+    c0, c1, c2, c3, c4, c5 = coef
+    defl = c0 == 0
+    a = [jnp.where(defl, hi, lo) for lo, hi in zip((c0, c1, c2, c3, c4), (c1, c2, c3, c4, c5))]
+    a.append(jnp.where(defl, 0, c5))
+    den = a[0] - g1
+    th = jnp.clip(jnp.where(den > 0, a[0] / jnp.where(den > 0, den, 1), 0.5), 0, 1)
+    lo, hi = jnp.zeros_like(th), jnp.ones_like(th)
+    for _ in range(NEWTON_ITERS):
+        p = a[5]
+        dp = jnp.zeros_like(th)
+        for ak in reversed(a[:5]):
+            dp = dp * th + p
+            p = p * th + ak
+        pos = p >= 0
+        lo = jnp.where(pos, th, lo)
+        hi = jnp.where(pos, hi, th)
+        ok = dp != 0
+        nt = th - p / jnp.where(ok, dp, 1)
+        # Inclusive: a converged Newton step lands on the bracket end it came from.
+        th = jnp.where(ok & (nt >= lo) & (nt <= hi), nt, 0.5 * (lo + hi))
+    return th
+
+
+def _predict(g, d, e):
+    r"""Time to the root of the Taylor quadratic $g + \dot g s + \ddot g s^2/2$ of an event
+    function that is approaching zero (linear estimate plus one Newton step); `inf` if none."""
+    ok = (g > 0) & (d < 0)
+    s1 = g / jnp.where(ok, -d, 1)
+    slope = d + e * s1
+    ok = ok & (slope < 0)
+    s2 = s1 - 0.5 * e * s1 * s1 / jnp.where(ok, slope, -1)
+    return jnp.where(ok & (s2 > 0), s2, jnp.inf)
+
+
+def _hermite_basis(th):
+    """Quintic Hermite basis $(H_1, H_2, H_3, H_4, H_5)$ ($H_0 = 1 - H_3$)."""
+    t2 = th * th
+    t3 = t2 * th
+    t4 = t3 * th
+    t5 = t4 * th
+    H1 = th - 6 * t3 + 8 * t4 - 3 * t5
+    H2 = 0.5 * t2 - 1.5 * t3 + 1.5 * t4 - 0.5 * t5
+    H3 = 10 * t3 - 15 * t4 + 6 * t5
+    H4 = -4 * t3 + 7 * t4 - 3 * t5
+    H5 = 0.5 * t3 - t4 + 0.5 * t5
+    return H1, H2, H3, H4, H5
+
+
+# -- public pieces ------------------------------------------------------------------
 
 
 def rates(params: Params, f: model.Forces, y: Array, stuck: Array, sdir: Array) -> Array:
-    """Right-hand side in a fixed mode: eq. (9) corrected per SPEC §2.
+    """Right-hand side in a fixed mode (eq. 9 corrected per SPEC §2) as a stacked
+    `(6,)` vector: $\\dot x_i, \\dot v_i$ and the integrands of $e_d$ (eq. 15) and $w$ (eq. 16).
 
     Slipping: $m_i \\dot v_i = F_i - c v_i - \\mu_k n_i \\sigma_i$ with $F_1 = f_x$,
-    $F_2 = -f_x$. Stuck: $\\dot x_i = \\dot v_i = 0$. The last two entries are the
-    integrands of $e_d$ (eq. 15; $|v_i| = \\sigma_i v_i$ inside a slip segment, which
-    keeps the integrand smooth there) and of $w$ (eq. 16).
+    $F_2 = -f_x$. Stuck: $\\dot x_i = \\dot v_i = 0$. For saved states (not the hot loop).
     """
     v1, v2 = y[1], y[3]
     a1 = (f.fx - params.c * v1 - params.mu_k * f.n1 * sdir[0]) / params.m1
@@ -104,208 +427,237 @@ def rates(params: Params, f: model.Forces, y: Array, stuck: Array, sdir: Array) 
     a1 = jnp.where(stuck[0], zero, a1)
     a2 = jnp.where(stuck[1], zero, a2)
     p_d = params.mu_k * (f.n1 * sdir[0] * dx1 + f.n2 * sdir[1] * dx2) + params.c * (dx1 * dx1 + dx2 * dx2)
-    p_w = model.actuator_power(f)
-    return jnp.stack([dx1, a1, dx2, a2, p_d, p_w])
-
-
-def event_values(params: Params, f: model.Forces, y: Array, stuck: Array, sdir: Array, contact: Contact) -> Array:
-    """The four event functions (module docstring); an event fires below zero."""
-    F = jnp.stack([f.fx, -f.fx])
-    n = jnp.stack([f.n1, f.n2])
-    v = jnp.stack([y[1], y[3]])
-    g_mass = jnp.where(stuck, params.mu_s * n - jnp.abs(F), sdir * v)
-    if contact == "strict":
-        g_lift = jnp.stack([f.N1, f.N2])
-    else:  # the paper's reading integrates through lift-off; flagged, not located
-        g_lift = jnp.full((2,), jnp.inf, dtype=v.dtype)
-    return jnp.concatenate([g_mass, g_lift])
-
-
-def _forces_at(params, wave, contact, t, y):
-    return model.forces(params, wave, t, y[0], y[2], contact)
-
-
-def resolve_modes(params: Params, f: model.Forces, y: Array, stuck: Array, sdir: Array, fired: Array):
-    """Apply the switches of the fired events at one state (SPEC §2).
-
-    A fired stuck mass starts to slip in the direction of $F_i$. A fired slipping
-    mass has reached $v_i = 0$: it sticks if $|F_i| \\le \\mu_s n_i$ (eq. 7), otherwise
-    the friction reverses ($\\sigma_i = \\operatorname{sgn} F_i$).
-    """
-    F = jnp.stack([f.fx, -f.fx])
-    n = jnp.stack([f.n1, f.n2])
-    can_stick = jnp.abs(F) <= params.mu_s * n
-    to_dir = jnp.where(F >= 0, 1.0, -1.0).astype(sdir.dtype)
-    vel_fired = fired[:2] & ~stuck
-    stat_fired = fired[:2] & stuck
-    new_stuck = jnp.where(vel_fired, can_stick, jnp.where(stat_fired, False, stuck))
-    new_sdir = jnp.where(vel_fired | stat_fired, to_dir, sdir)
-    zero = jnp.zeros_like(y[1])
-    y = y.at[1].set(jnp.where(vel_fired[0], zero, y[1]))
-    y = y.at[3].set(jnp.where(vel_fired[1], zero, y[3]))
-    return y, new_stuck, new_sdir
+    return jnp.stack([dx1, a1, dx2, a2, p_d, model.actuator_power(f)])
 
 
 def init(params: Params, wave: AbstractWaveform, contact: Contact, x1: Array, x2: Array) -> Hybrid:
     """State at $t = 0$ with both masses at rest; each mass sticks if eq. (7) allows."""
     dtype = params.dtype
-    t = jnp.zeros((), dtype)
-    y = jnp.stack([x1, 0 * x1, x2, 0 * x2, 0 * x1, 0 * x1]).astype(dtype)
-    f = _forces_at(params, wave, contact, t, y)
-    F = jnp.stack([f.fx, -f.fx])
-    n = jnp.stack([f.n1, f.n2])
-    stuck = jnp.abs(F) <= params.mu_s * n
-    sdir = jnp.where(F >= 0, 1.0, -1.0).astype(dtype)
-    k1 = rates(params, f, y, stuck, sdir)
-    g0 = jnp.min(event_values(params, f, y, stuck, sdir, contact))
-    lifted = (f.N1 <= 0) | (f.N2 <= 0) if contact == "strict" else jnp.asarray(False)
-    status = jnp.where(lifted, Status.LIFTOFF, Status.OK).astype(jnp.int32)
-    t_lift = jnp.where(lifted, t, jnp.inf)
-    if contact == "paper":
-        t_lift = jnp.where((f.N1 <= 0) | (f.N2 <= 0), t, jnp.inf)
-    zi = jnp.zeros((), jnp.int32)
+    P = consts(params, wave)
+    zero = jnp.zeros((), dtype)
+    x1 = jnp.asarray(x1, dtype)
+    x2 = jnp.asarray(x2, dtype)
+    y = State(x1, 0 * x1, x2, 0 * x2, zero, zero)
+    cph, sph = jnp.ones((), dtype), zero
+    l0, _, _ = wave.at_phase(cph, sph)
+    f, _ = _forces(P, contact, l0, x1, x2)
+    absF = jnp.abs(f.fx)
+    s1 = jnp.where(f.fx >= 0, 1.0, -1.0).astype(dtype)
+    lifted = (f.N1 <= 0) | (f.N2 <= 0)
+    status = jnp.where(lifted & (contact == "strict"), Status.LIFTOFF, Status.OK).astype(jnp.int32)
+    no = jnp.asarray(False)
+    f32 = jnp.finfo(dtype).bits < 64
     return Hybrid(
-        t=t, y=y, stuck=stuck, sdir=sdir, k1=k1, comp=jnp.zeros_like(y), g0=jnp.maximum(g0, 0).astype(dtype),
-        search=jnp.asarray(False), hi=jnp.zeros((), dtype), ghi=jnp.zeros((), dtype),
-        side=zi, n_search=zi, status=status, t_liftoff=t_lift.astype(dtype), n_switch=zi,
+        t=zero, y=y, comp=State(*(zero,) * 6) if f32 else None, cph=cph, sph=sph,
+        stuck1=absF <= P.mu_s * f.n1, stuck2=absF <= P.mu_s * f.n2, s1=s1, s2=-s1, pend1=no, pend2=no,
+        status=status, t_liftoff=jnp.where(lifted, zero, jnp.inf).astype(dtype), n_switch=jnp.zeros((), jnp.int32),
     )
-
-
-def _rk4(params, wave, contact, t, y, k1, stuck, sdir, h):
-    """Classical RK4 in a fixed mode; returns the increment of the state."""
-    # k2 and k3 share t + h/2: evaluate the actuation there once.
-    l0m, dl0m = wave(t + 0.5 * h)
-    y2 = y + 0.5 * h * k1
-    k2 = rates(params, model.spring_forces(params, l0m, dl0m, y2[0], y2[2], contact), y2, stuck, sdir)
-    y3 = y + 0.5 * h * k2
-    k3 = rates(params, model.spring_forces(params, l0m, dl0m, y3[0], y3[2], contact), y3, stuck, sdir)
-    y4 = y + h * k3
-    k4 = rates(params, _forces_at(params, wave, contact, t + h, y4), y4, stuck, sdir)
-    return (h / 6) * (k1 + 2 * k2 + 2 * k3 + k4)
-
-
-def _kahan_add(y: Array, comp: Array, incr: Array) -> tuple[Array, Array]:
-    corrected = incr - comp
-    total = y + corrected
-    return total, (total - y) - corrected
 
 
 def step(
-    params: Params, wave: AbstractWaveform, contact: Contact, dt: float, st: Hybrid, t_stop: Array
+    params: Params,
+    wave: AbstractWaveform,
+    contact: Contact,
+    dt: float,
+    st: Hybrid,
+    t_stop: Array,
+    target: Target | None = None,
+    P: Consts | None = None,
 ) -> tuple[Hybrid, StepInfo]:
-    """One iteration: a trial RK4 step, committed unless it passes an event.
+    """One iteration: switch what is pending, then one RK4 step, cut at the first event.
 
-    The step never passes `t_stop` (a measurement boundary or save time) and
-    lands on it exactly.
+    The step never passes `t_stop` (a measurement boundary or save time) and lands
+    on it exactly unless an event comes first. `target` adds the caller's event
+    (`StepInfo.target_fired`). `P` are the constants of `params` (pass them to
+    hoist them out of a loop).
     """
-    dtype = st.y.dtype
-    eps = jnp.finfo(dtype).eps
-    tol = 4 * eps * jnp.maximum(jnp.abs(st.t), 1)
-    span = t_stop - st.t
-    lands = span <= dt
+    P = consts(params, wave) if P is None else P
+    keep = lambda x: _keep(P, x)
+    dtype = st.t.dtype
+    t0 = st.t
+    yA = st.y
+    zero = jnp.zeros_like(t0)
+
+    # -- start: forces, then the switches (SPEC §2). A mass located at t (pend) or
+    # whose event function is negative here switches: a stuck one slips in the
+    # direction of F_i; a slipping one (v_i = 0) sticks if |F_i| <= mu_s n_i (eq. 7),
+    # else its friction reverses.
+    l00, dl00, ddl00 = wave.at_phase(st.cph, st.sph)
+    f0, geo0 = _forces(P, contact, l00, yA.x1, yA.x2)
+    f0 = f0._replace(fx=keep(f0.fx), fy=keep(f0.fy), tension=keep(f0.tension))
+    f0 = f0._replace(N1=P.m1 - f0.fy, N2=P.m2 + f0.fy)
+    f0 = f0._replace(n1=jnp.abs(f0.N1), n2=jnp.abs(f0.N2)) if contact == "paper" else f0._replace(n1=f0.N1, n2=f0.N2)
+    gA1, gA2 = _mass_events(P, f0, yA, st.stuck1, st.stuck2, st.s1, st.s2)
+    fire1 = keep(st.pend1 | (gA1 < 0))
+    fire2 = keep(st.pend2 | (gA2 < 0))
+    absF = jnp.abs(f0.fx)
+    to1 = jnp.where(f0.fx >= 0, 1.0, -1.0).astype(dtype)
+    vel1, vel2 = fire1 & ~st.stuck1, fire2 & ~st.stuck2
+    st1 = jnp.where(fire1, vel1 & (absF <= P.mu_s * f0.n1), st.stuck1)
+    st2 = jnp.where(fire2, vel2 & (absF <= P.mu_s * f0.n2), st.stuck2)
+    s1 = jnp.where(fire1, to1, st.s1)
+    s2 = jnp.where(fire2, -to1, st.s2)
+    y0 = yA._replace(v1=jnp.where(vel1, zero, yA.v1), v2=jnp.where(vel2, zero, yA.v2))
+    comp = st.comp
+    if comp is not None:  # a switch sets velocities exactly (to 0): drop their compensation
+        comp = comp._replace(v1=jnp.where(vel1, zero, comp.v1), v2=jnp.where(vel2, zero, comp.v2))
+    n_switch = st.n_switch + (fire1 | fire2).astype(jnp.int32)
+
+    # Lift-off or the target found negative here (a crossing located after another
+    # one in the same step) count at t.
+    lifted0 = (f0.N1 < 0) | (f0.N2 < 0)
+    stop0 = lifted0 if contact == "strict" else jnp.asarray(False)
+    t_lift = st.t_liftoff
+    t_lift = jnp.where(lifted0 & ~jnp.isfinite(t_lift), t0, t_lift)  # flagged (paper) or stopping (strict)
+    if target is not None:
+        X_A = P.mhat * yA.x1 + (1 - P.mhat) * yA.x2
+        target_now = target.active & (jnp.abs(X_A - target.X0) >= target.z)
+        target = target._replace(active=target.active & ~target_now)
+    else:
+        target_now = jnp.asarray(False)
+
+    # -- rates and events at the start, in the (new) mode.
+    a01, a02 = (keep(x) for x in _accel(P, f0, y0, st1, st2, s1, s2))
+    k1 = _rates(P, f0, y0, a01, a02, s1, s2, dl00)
+    D0 = _derivs(P, geo0, y0, a01, a02, dl00, ddl00)
+    D0 = D0._replace(fx=keep(D0.fx), fy=keep(D0.fy))
+    j0 = _second(P, contact, f0, D0, y0, a01, a02, st1, st2, s1, s2, dl00, ddl00)
+    g0s, d0s, e0s = _events(P, contact, f0, D0, y0, k1, j0, st1, st2, s1, s2, target)
+
+    # -- step length: dt, or less to land on t_stop, or less to end just past the
+    # earliest event predicted by the Taylor quadratic of each event function. A
+    # crossing is then cut late in a short step, so the dense output there is as
+    # accurate as a step of that length (an interpolant inherits the error of the
+    # step's end state: cutting early in a full step would cost ~10x in accuracy).
+    span = t_stop - t0
     h_nom = jnp.minimum(jnp.asarray(dt, dtype), span)
-    # Illinois estimate of the crossing inside the bracket [0, hi] (g0 >= 0 > ghi).
-    secant = st.hi * st.g0 / (st.g0 - st.ghi)
-    secant = jnp.where(jnp.isfinite(secant) & (secant > 0) & (secant < st.hi), secant, 0.5 * st.hi)
-    trial = jnp.where(st.hi <= tol, st.hi, secant)
-    h = jnp.where(st.search, trial, h_nom)
-    t1 = jnp.where(~st.search & lands, t_stop, st.t + h)
+    s_pred = jnp.asarray(jnp.inf, dtype)
+    for g, d, e in zip(g0s, d0s, e0s):
+        s_pred = jnp.minimum(s_pred, _predict(g, d, e))
+    # Never shorter than a few ulps of t, or float32 time would stop advancing.
+    h_pred = jnp.maximum(PREDICT_MARGIN * s_pred, 64 * jnp.finfo(dtype).eps * jnp.maximum(jnp.abs(t0), 1))
+    short = h_pred < h_nom
+    lands = (span <= dt) & ~short
+    h = jnp.where(short, h_pred, h_nom)
+    t1 = jnp.where(lands, t_stop, t0 + h)
     # Step by the representable difference so that time and state stay consistent
     # (in float32 at t ~ 1e3, t + h rounds h by up to 1e-3 relative).
-    h = t1 - st.t
+    h = keep(t1 - t0)
+    sa, ca = (keep(x) for x in sincos(wave.omega * (0.5 * h)))
+    cm, sm = _rotate(st.cph, st.sph, ca, sa)
+    ce, se = (keep(x) for x in _rotate(cm, sm, ca, sa))
+    l0m, dl0m, _ = wave.at_phase(cm, sm)
+    l0e, dl0e, ddl0e = wave.at_phase(ce, se)
 
-    incr = _rk4(params, wave, contact, st.t, st.y, st.k1, st.stuck, st.sdir, h)
-    # Compensated (Kahan) update: positions and energies grow to O(10-100) while
-    # increments are O(1e-4); plain float32 sums would lose ~1e-3 over 1e5 steps.
-    y1, comp1 = _kahan_add(st.y, st.comp, incr)
-    f_end = _forces_at(params, wave, contact, t1, y1)
-    k_end = rates(params, f_end, y1, st.stuck, st.sdir)
-    g_end = event_values(params, f_end, y1, st.stuck, st.sdir, contact)
-    G1 = jnp.min(g_end)
-    crossed = G1 < 0
-    converged = (h <= tol) | (st.n_search >= MAX_SEARCH)
-    commit = ~crossed | converged
-    switch = crossed & converged
+    # -- one RK4 step of length h.
+    def stage(l0, dl0, y):
+        f, _ = _forces(P, contact, l0, y.x1, y.x2)
+        a1, a2 = _accel(P, f, y, st1, st2, s1, s2)
+        return _rates(P, f, y, keep(a1), keep(a2), s1, s2, dl0)
 
-    # Switch (if any) at the committed end state.
-    fired = g_end < 0
-    y_sw, stuck_sw, sdir_sw = resolve_modes(params, f_end, y1, st.stuck, st.sdir, fired)
-    lift = switch & (fired[2] | fired[3])
-    k_sw = rates(params, f_end, y_sw, stuck_sw, sdir_sw)
-    g_sw = jnp.maximum(jnp.min(event_values(params, f_end, y_sw, stuck_sw, sdir_sw, contact)), 0)
+    k2 = stage(l0m, dl0m, y0.map(lambda a, b: a + (0.5 * h) * b, k1))
+    k3 = stage(l0m, dl0m, y0.map(lambda a, b: a + (0.5 * h) * b, k2))
+    k4 = stage(l0e, dl0e, y0.map(lambda a, b: a + h * b, k3))
+    incr = k1.map(lambda a, b, c, d: keep((h / 6) * (a + 2 * (b + c) + d)), k2, k3, k4)
+    y1 = y0.map(lambda a, b: keep(a + b), incr)
 
-    y_new = jnp.where(switch, y_sw, y1)
-    stuck_new = jnp.where(switch, stuck_sw, st.stuck)
-    sdir_new = jnp.where(switch, sdir_sw, st.sdir)
-    k_new = jnp.where(switch, k_sw, k_end)
-    # Bracket bookkeeping (Illinois: halve the stale end's value on a repeated side).
-    remaining = st.hi - h
-    keep_search = st.search & ~crossed & (remaining > 0)
-    start_or_shrink = crossed & ~converged
-    g0_commit = jnp.where(switch, g_sw, jnp.maximum(G1, 0))
-    g0_new = jnp.where(commit, g0_commit, jnp.where(st.side == -1, 0.5 * st.g0, st.g0))
-    ghi_new = jnp.where(
-        start_or_shrink, G1, jnp.where(keep_search & (st.side == 1), 0.5 * st.ghi, st.ghi)
-    )
-    hi_new = jnp.where(start_or_shrink, h, jnp.where(keep_search, remaining, 0))
-    side_new = jnp.where(start_or_shrink, -1, jnp.where(keep_search, 1, 0)).astype(jnp.int32)
-    search_new = start_or_shrink | keep_search
-    n_search_new = jnp.where(search_new, st.n_search + 1, 0).astype(jnp.int32)
+    f1, geo1 = _forces(P, contact, l0e, y1.x1, y1.x2)
+    a11, a12 = (keep(x) for x in _accel(P, f1, y1, st1, st2, s1, s2))
+    r1 = _rates(P, f1, y1, a11, a12, s1, s2, dl0e)
+    D1 = _derivs(P, geo1, y1, a11, a12, dl0e, ddl0e)
+    D1 = D1._replace(fx=keep(D1.fx), fy=keep(D1.fy))
+    j1 = _second(P, contact, f1, D1, y1, a11, a12, st1, st2, s1, s2, dl0e, ddl0e)
+    g1s, d1s, e1s = _events(P, contact, f1, D1, y1, r1, j1, st1, st2, s1, s2, target)
+    g1s = [keep(g) for g in g1s]
+    n_ev = len(g1s)
 
+    # -- events: the earliest crossing by the secant of each crossed function.
+    h2 = h * h
+    crossed = [g < 0 for g in g1s]
+    cut = _any(crossed)
+    inf = jnp.asarray(jnp.inf, dtype)
+    thl = []
+    for c, g0, d0, g1 in zip(crossed, g0s, d0s, g1s):
+        a0 = jnp.where(g0 == 0, h * d0, g0)  # deflated when starting on the surface
+        den = a0 - g1
+        thl.append(jnp.where(c, a0 / jnp.where(den > 0, den, 1), inf))
+    th_min = thl[0]
+    for x in thl[1:]:
+        th_min = jnp.minimum(th_min, x)
+    first = [keep(c & (x <= th_min)) for c, x in zip(crossed, thl)]
+    pick = [g0s[-1], d0s[-1], e0s[-1], g1s[-1], d1s[-1], e1s[-1]]
+    for i in reversed(range(n_ev - 1)):
+        vals = (g0s[i], d0s[i], e0s[i], g1s[i], d1s[i], e1s[i])
+        pick = [jnp.where(first[i], v, p) for v, p in zip(vals, pick)]
+    cg0, cd0, ce0, cg1, cd1, ce1 = pick
+    coef = _quintic(jnp.maximum(cg0, 0), h * cd0, h2 * ce0, jnp.minimum(cg1, 0), h * cd1, h2 * ce1)
+    theta = keep(jnp.where(cut, _root(coef, jnp.minimum(cg1, 0)), 1))
+
+    # -- commit: the full step, or the quintic dense output at the crossing.
+    H1, H2, H3, H4, H5 = (keep(x) for x in _hermite_basis(theta))
+    hH1, hH4, h2H2, h2H5 = h * H1, h * H4, h2 * H2, h2 * H5
+    part = incr.map(lambda i, a, b, c, d: H3 * i + hH1 * a + hH4 * b + h2H2 * c + h2H5 * d, k1, r1, j0, j1)
+    delta = incr.map(lambda i, p: jnp.where(cut, p, i), part)
+    tc = jnp.where(cut, t0 + theta * h, t1)
+    sc, cc = sincos(wave.omega * (tc - t0))
+    cph, sph = _rotate(st.cph, st.sph, cc, sc)
+    cph = jnp.where(cut, cph, ce)
+    sph = jnp.where(cut, sph, se)
+    # Renormalise the carried phase (rounding would otherwise let its radius drift).
+    norm = 1.5 - 0.5 * (cph * cph + sph * sph)
+    cph, sph = cph * norm, sph * norm
+    if comp is None:
+        yc = y0.map(lambda a, b: a + b, delta)
+        comp_new = None
+    else:
+        # Compensated (Kahan) update: positions and energies grow to O(10-100) while
+        # increments are O(1e-4); plain float32 sums would lose ~1e-3 over 1e5 steps.
+        corr = delta.map(lambda a, b: a - b, comp)
+        yc = y0.map(lambda a, b: a + b, corr)
+        comp_new = yc.map(lambda tot, a, b: (tot - a) - b, y0, corr)
+
+    lift = stop0
+    if contact == "strict":
+        lift_cut = first[2]
+        lift = lift | lift_cut
+        t_lift = jnp.where(lift_cut & ~jnp.isfinite(t_lift), tc, t_lift)
+    commit = ~stop0
+    target_cut = first[-1] if target is not None else jnp.asarray(False)
     status = jnp.where(lift, Status.LIFTOFF, st.status).astype(jnp.int32)
-    t_lift = jnp.where(lift & ~jnp.isfinite(st.t_liftoff), t1, st.t_liftoff)
-    if contact == "paper":  # flagged only (at committed step ends), never stops
-        touched = commit & ((f_end.N1 <= 0) | (f_end.N2 <= 0))
-        t_lift = jnp.where(touched & ~jnp.isfinite(st.t_liftoff), t1, t_lift)
 
+    keepc = lambda new, old: jnp.where(commit, new, old)
     new = Hybrid(
-        t=jnp.where(commit, t1, st.t),
-        y=jnp.where(commit, y_new, st.y),
-        stuck=jnp.where(commit, stuck_new, st.stuck),
-        sdir=jnp.where(commit, sdir_new, st.sdir),
-        k1=jnp.where(commit, k_new, st.k1),
-        # A switch sets velocities exactly (to 0): drop their pending compensation.
-        comp=jnp.where(commit, jnp.where(switch & (y_new != y1), 0, comp1), st.comp),
-        g0=g0_new.astype(dtype),
-        search=search_new,
-        hi=hi_new.astype(dtype),
-        ghi=ghi_new.astype(dtype),
-        side=side_new,
-        n_search=n_search_new,
+        t=keepc(tc, t0),
+        y=yc.map(keepc, yA),
+        comp=None if comp_new is None else comp_new.map(keepc, st.comp),
+        cph=keepc(cph, st.cph),
+        sph=keepc(sph, st.sph),
+        stuck1=keepc(st1, st.stuck1),
+        stuck2=keepc(st2, st.stuck2),
+        s1=keepc(s1, st.s1),
+        s2=keepc(s2, st.s2),
+        pend1=commit & first[0],
+        pend2=commit & first[1],
         status=status,
         t_liftoff=t_lift.astype(dtype),
-        n_switch=st.n_switch + switch.astype(jnp.int32),
+        n_switch=n_switch,
     )
-    info = StepInfo(commit, switch, st.t, t1, st.y, st.k1, y1, k_end, st.stuck)
+    t_target = jnp.where(target_now, t0, tc)
+    y_target = yc.map(lambda a, b: jnp.where(target_now, b, a), yA)
+    info = StepInfo(
+        commit=commit, t0=t0, y0=y0, tension0=f0.tension, t1=tc, y1=yc, stuck1=st1, stuck2=st2,
+        target_fired=target_now | (commit & target_cut), t_target=t_target, y_target=y_target,
+    )
     return new, info
 
 
-def hermite(info: StepInfo, theta: Array) -> Array:
-    """Cubic Hermite dense output on the committed interval, $\\theta \\in [0, 1]$."""
-    h = info.t1 - info.t0
-    t2 = theta * theta
-    t3 = t2 * theta
-    h00 = 2 * t3 - 3 * t2 + 1
-    h10 = t3 - 2 * t2 + theta
-    h01 = -2 * t3 + 3 * t2
-    h11 = t3 - t2
-    return h00 * info.y0 + (h10 * h) * info.f0 + h01 * info.y1 + (h11 * h) * info.f1
+def _any(flags: list) -> Array:
+    out = flags[0]
+    for f in flags[1:]:
+        out = out | f
+    return out
 
 
-def illinois(fn, lo: Array, hi: Array, flo: Array, fhi: Array, iters: int) -> tuple[Array, Array]:
-    """Bracketed root of a scalar function with `flo >= 0 > fhi`; returns `(lo, hi)`."""
-
-    def body(_, carry):
-        lo, hi, flo, fhi, side = carry
-        m = (lo * fhi - hi * flo) / (fhi - flo)
-        m = jnp.where(jnp.isfinite(m) & (m > lo) & (m < hi), m, 0.5 * (lo + hi))
-        fm = fn(m)
-        left = fm >= 0
-        new_lo, new_flo = jnp.where(left, m, lo), jnp.where(left, fm, flo)
-        new_hi, new_fhi = jnp.where(left, hi, m), jnp.where(left, fhi, fm)
-        new_fhi = jnp.where(left & (side == 1), 0.5 * new_fhi, new_fhi)
-        new_flo = jnp.where(~left & (side == -1), 0.5 * new_flo, new_flo)
-        return new_lo, new_hi, new_flo, new_fhi, jnp.where(left, 1, -1).astype(jnp.int32)
-
-    lo, hi, *_ = jax.lax.fori_loop(0, iters, body, (lo, hi, flo, fhi, jnp.zeros((), jnp.int32)))
-    return lo, hi
+def energy(P: Consts, y: State, tension: Array) -> Array:
+    """Eq. (10) from the tension $T = k(\\ell - \\ell_0)$: $\\tfrac12(m_1 v_1^2 + m_2 v_2^2 + T^2/k)$."""
+    return 0.5 * (P.m1 * y.v1 * y.v1 + P.m2 * y.v2 * y.v2 + tension * tension / P.k)

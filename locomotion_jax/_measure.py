@@ -2,8 +2,8 @@
 
 Nothing is saved per step: the carry holds running sums (stick times in the
 window, energies at the measurement start), so memory is independent of the
-number of steps. `tau_z` and `e_z` are located inside the step by cubic Hermite
-dense output and an Illinois root search, so they share the integrator's order.
+number of steps. $|X - X_0| = z$ is an event of the integrator (`_exact.Target`),
+located like a mode switch, so `tau_z` and `e_z` share the integrator's order.
 """
 
 from typing import Any
@@ -15,7 +15,7 @@ import numpy as np
 
 from . import _exact as exact, _model as model
 from ._actuation import AbstractWaveform
-from ._batch import default_max_steps, horizon_bound, prepare, safe_params, unflatten
+from ._batch import default_max_steps, horizon_bound, map_batched, prepare, safe_params, unflatten
 from ._dynamics import AbstractDynamics, Exact, Smoothed
 from ._params import Params
 from ._results import Measurement
@@ -25,12 +25,11 @@ from ._status import Regime, Status
 STICK_TOL = 1e-6
 """A mass counts as stuck in the window (SSL) only for a total stuck time above this."""
 
-TAU_ITERS = 40  # Illinois iterations on the cubic dense output (cheap: no forces)
 
 
 def _energy(params, wave, t, y):
     l0, _ = wave(t)
-    return model.total_energy(params, l0, y[0], y[1], y[2], y[3])
+    return model.total_energy(params, l0, y.x1, y.v1, y.x2, y.v2)
 
 
 class _Acc(eqx.Module):
@@ -40,15 +39,17 @@ class _Acc(eqx.Module):
     w0: jax.Array
     e0: jax.Array
     reached: jax.Array
-    tau: jax.Array
-    y_z: jax.Array
-    stuck_time: jax.Array
+    t_z: jax.Array
+    y_z: exact.State
+    stuck1: jax.Array
+    stuck2: jax.Array
     steps: jax.Array
 
 
 def _exact_one(params, wave, z, horizon, window, contact, start, dt, max_steps):
     params, valid = safe_params(params)
     dtype = params.dtype
+    P = exact.consts(params, wave)
     z = jnp.asarray(z, dtype)
     st = exact.init(params, wave, contact, jnp.zeros((), dtype), model.initial_gap(params, start))
     st = eqx.tree_at(lambda s: s.status, st, jnp.where(valid, st.status, Status.INVALID).astype(jnp.int32))
@@ -56,12 +57,12 @@ def _exact_one(params, wave, z, horizon, window, contact, start, dt, max_steps):
     we = ws + window
     te = ws + horizon
     zero = jnp.zeros((), dtype)
+    no = jnp.asarray(False)
     acc = _Acc(
-        started=jnp.asarray(False), X0=zero, ed0=zero, w0=zero, e0=zero, reached=jnp.asarray(False),
-        tau=jnp.asarray(jnp.inf, dtype), y_z=jnp.zeros(6, dtype), stuck_time=jnp.zeros(2, dtype),
-        steps=jnp.zeros((), jnp.int32),
+        started=no, X0=zero, ed0=zero, w0=zero, e0=zero, reached=no, t_z=jnp.asarray(jnp.inf, dtype),
+        y_z=exact.State(*(zero,) * 6), stuck1=zero, stuck2=zero, steps=jnp.zeros((), jnp.int32),
     )
-    com = lambda y: model.centre_of_mass(params, y[0], y[2])
+    com = lambda y: P.mhat * y.x1 + (1 - P.mhat) * y.x2
 
     def finished(s, a):
         return (s.t >= te) | (a.reached & (s.t >= we))
@@ -73,30 +74,28 @@ def _exact_one(params, wave, z, horizon, window, contact, start, dt, max_steps):
     def body(c):
         s, a = c
         t_stop = jnp.where(s.t < ws, ws, jnp.where(s.t < we, we, te))
-        s_new, info = exact.step(params, wave, contact, dt, s, t_stop)
-        commit = info.commit
-        # Measurement start: the step that lands on t_start.
-        begin = commit & ~a.started & (info.t1 >= ws)
-        X0 = jnp.where(begin, com(info.y1), a.X0)
-        ed0 = jnp.where(begin, info.y1[4], a.ed0)
-        w0 = jnp.where(begin, info.y1[5], a.w0)
-        e0 = jnp.where(begin, _energy(params, wave, info.t1, info.y1), a.e0)
+        # Measurement start: the iteration that starts on t_start (a step lands there).
+        begin = ~a.started & (s.t >= ws)
+        started = a.started | begin
+        X0 = jnp.where(begin, com(s.y), a.X0)
+        target = exact.Target(active=started & ~a.reached, X0=X0, z=z)
+        s_new, info = exact.step(params, wave, contact, dt, s, t_stop, target, P)
         # Stick time inside the window (steps never straddle ws or we).
-        inside = commit & a.started & (info.t1 <= we)
-        stuck_time = a.stuck_time + jnp.where(inside, info.t1 - info.t0, 0) * info.stuck0.astype(dtype)
-        # First passage |X - X0| = z, located on the dense output.
-        dist = lambda y: jnp.abs(com(y) - a.X0) - z
-        cross = commit & a.started & ~a.reached & (dist(info.y1) >= 0)
-        lo, hi = exact.illinois(
-            lambda th: -dist(exact.hermite(info, th)), zero, jnp.ones((), dtype),
-            -dist(info.y0), -dist(info.y1), TAU_ITERS,
-        )
-        theta = jnp.where(cross, hi, 1)
-        y_z = exact.hermite(info, theta)
-        t_z = info.t0 + theta * (info.t1 - info.t0)
+        inside = info.commit & started & (info.t1 <= we)
+        dur = jnp.where(inside, info.t1 - info.t0, 0)
+        # First passage |X - X0| = z: an event of the integrator (located like a switch).
+        hit = info.target_fired
         a_new = _Acc(
-            started=a.started | begin, X0=X0, ed0=ed0, w0=w0, e0=e0, reached=a.reached | cross,
-            tau=jnp.where(cross, t_z - ws, a.tau), y_z=jnp.where(cross, y_z, a.y_z), stuck_time=stuck_time,
+            started=started,
+            X0=X0,
+            ed0=jnp.where(begin, info.y0.ed, a.ed0),
+            w0=jnp.where(begin, info.y0.w, a.w0),
+            e0=jnp.where(begin, exact.energy(P, info.y0, info.tension0), a.e0),
+            reached=a.reached | hit,
+            t_z=jnp.where(hit, info.t_target, a.t_z),
+            y_z=info.y_target.map(lambda n, o: jnp.where(hit, n, o), a.y_z),
+            stuck1=a.stuck1 + jnp.where(info.stuck1, dur, 0),
+            stuck2=a.stuck2 + jnp.where(info.stuck2, dur, 0),
             steps=a.steps + 1,
         )
         return s_new, a_new
@@ -105,23 +104,24 @@ def _exact_one(params, wave, z, horizon, window, contact, start, dt, max_steps):
     status = jnp.where((s.status == Status.OK) & ~finished(s, a), Status.MAX_STEPS, s.status).astype(jnp.int32)
     nan = jnp.asarray(jnp.nan, dtype)
     window_done = s.t >= we
-    ssl = jnp.max(a.stuck_time) > STICK_TOL
+    stuck_time = jnp.stack([a.stuck1, a.stuck2])
+    ssl = jnp.max(stuck_time) > STICK_TOL
     regime = jnp.where(window_done, jnp.where(ssl, Regime.SSL, Regime.SL), Regime.UNDETERMINED)
     # End of the measured interval: the crossing if reached, else where the run is.
-    t_end = jnp.where(a.reached, ws + a.tau, s.t)
-    y_end = jnp.where(a.reached, a.y_z, s.y)
+    t_end = jnp.where(a.reached, a.t_z, s.t)
+    y_end = a.y_z.map(lambda zv, sv: jnp.where(a.reached, zv, sv), s.y)
     elapsed = t_end - ws
     measured = a.started & (elapsed > 0)
     mean_speed = jnp.where(measured, (com(y_end) - a.X0) / jnp.where(measured, elapsed, 1), nan)
-    e_d = jnp.where(a.started, y_end[4] - a.ed0, nan)
-    work = jnp.where(a.started, y_end[5] - a.w0, nan)
+    e_d = jnp.where(a.started, y_end.ed - a.ed0, nan)
+    work = jnp.where(a.started, y_end.w - a.w0, nan)
     delta_e = jnp.where(a.started, _energy(params, wave, t_end, y_end) - a.e0, nan)
     inf = jnp.asarray(jnp.inf, dtype)
-    e_z = jnp.where(a.reached, y_end[4] - a.ed0, inf)
+    e_z = jnp.where(a.reached, y_end.ed - a.ed0, inf)
     covered = jnp.clip(jnp.minimum(s.t, we) - ws, 0, None)
-    frac = jnp.where(covered > 0, a.stuck_time / jnp.where(covered > 0, covered, 1), nan)
+    frac = jnp.where(covered > 0, stuck_time / jnp.where(covered > 0, covered, 1), nan)
     return dict(
-        tau_z=jnp.where(a.reached, a.tau, inf),
+        tau_z=jnp.where(a.reached, a.t_z - ws, inf),
         e_z=e_z,
         reached=a.reached,
         regime=regime.astype(jnp.int32),
@@ -146,7 +146,7 @@ def _exact_one(params, wave, z, horizon, window, contact, start, dt, max_steps):
 @eqx.filter_jit
 def _exact_batch(params, wave, wave_axes, z, horizon, window, contact, start, dt, max_steps):
     fn = lambda p, w: _exact_one(p, w, z, horizon, window, contact, start, dt, max_steps)
-    return jax.vmap(fn, in_axes=(0, wave_axes))(params, wave)
+    return map_batched(fn, params, wave, wave_axes)
 
 
 def check_measure_args(z: float, horizon: float, window: float) -> None:

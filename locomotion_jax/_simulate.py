@@ -9,7 +9,7 @@ import numpy as np
 
 from . import _exact as exact, _model as model
 from ._actuation import AbstractWaveform
-from ._batch import default_max_steps, prepare, safe_params, unflatten
+from ._batch import MICRO_BATCH_CPU, default_max_steps, prepare, safe_params, unflatten
 from ._custom_types import Array, ArrayLike, Contact
 from ._dynamics import AbstractDynamics, Exact, Smoothed
 from ._params import Params
@@ -36,44 +36,76 @@ def derived_fields(params: Params, wave: AbstractWaveform, contact: Contact, t, 
     }
 
 
-def _exact_one(params, wave, save_at, contact, start, dt, max_steps):
+def _row(s: exact.Hybrid, dtype) -> Array:
+    return jnp.stack([*s.y, s.stuck1.astype(dtype), s.stuck2.astype(dtype), s.s1, s.s2])
+
+
+def _init_one(params, wave, save_at, contact, start):
     params, valid = safe_params(params)
     dtype = params.dtype
-    gap = model.initial_gap(params, start)
-    st = exact.init(params, wave, contact, jnp.zeros((), dtype), gap)
+    st = exact.init(params, wave, contact, jnp.zeros((), dtype), model.initial_gap(params, start))
     st = eqx.tree_at(lambda s: s.status, st, jnp.where(valid, st.status, Status.INVALID).astype(jnp.int32))
+    rows = jnp.zeros((save_at.shape[0], 10), dtype)
+    zi = jnp.zeros((), jnp.int32)
+    return params, (st, zi, rows, zi)
+
+
+def _active(c, n, max_steps):
+    s, idx, _, steps = c
+    return (idx < n) & (s.status == Status.OK) & (steps < max_steps)
+
+
+def _body_one(params, wave, c, save_at, contact, dt, max_steps):
     n = save_at.shape[0]
-    t_end = save_at[-1]
-    rows = jnp.zeros((n, 10), dtype)
+    s, idx, rows, steps = c
+    active = _active(c, n, max_steps)
+    at = jnp.minimum(idx, n - 1)
+    target = save_at[at]
+    record = active & (target <= s.t)
+    new_s, _ = exact.step(params, wave, contact, dt, s, target, None, exact.consts(params, wave))
+    # One row written in place: under `vmap` a while loop would select every carried
+    # array, all rows included, on every iteration; this loop masks by hand instead.
+    rows = rows.at[at].set(jnp.where(record, _row(s, s.t.dtype), rows[at]))
+    advance = active & ~record
+    s = jax.tree_util.tree_map(lambda a, b: jnp.where(advance, a, b), new_s, s)
+    return s, idx + record.astype(jnp.int32), rows, steps + active.astype(jnp.int32)
 
-    def row(s):
-        return jnp.concatenate([s.y, s.stuck.astype(dtype), s.sdir])
 
-    def cond(c):
-        s, idx, _, steps = c
-        return (idx < n) & (s.status == Status.OK) & (steps < max_steps)
-
-    def body(c):
-        s, idx, rows, steps = c
-        target = save_at[jnp.minimum(idx, n - 1)]
-        record = target <= s.t
-        new_s, _ = exact.step(params, wave, contact, dt, s, target)
-        rows = jnp.where(record, rows.at[idx].set(row(s)), rows)
-        s = jax.tree_util.tree_map(lambda a, b: jnp.where(record, a, b), s, new_s)
-        return s, idx + record.astype(jnp.int32), rows, steps + 1
-
-    s, idx, rows, steps = jax.lax.while_loop(cond, body, (st, jnp.zeros((), jnp.int32), rows, jnp.zeros((), jnp.int32)))
-    valid_rows = jnp.arange(n) < idx
-    rows = jnp.where(valid_rows[:, None], rows, row(s)[None, :])
+def _run(params, wave, wave_axes, save_at, contact, start, dt, max_steps):
+    n = save_at.shape[0]
+    params, c = jax.vmap(lambda p, w: _init_one(p, w, save_at, contact, start), in_axes=(0, wave_axes))(params, wave)
+    body_one = lambda p, w, c: _body_one(p, w, c, save_at, contact, dt, max_steps)
+    c = jax.lax.while_loop(
+        lambda c: jnp.any(jax.vmap(lambda c: _active(c, n, max_steps))(c)),
+        lambda c: jax.vmap(body_one, in_axes=(0, wave_axes, 0))(params, wave, c),
+        c,
+    )
+    s, idx, rows, _ = c
+    valid_rows = jnp.arange(n)[None, :] < idx[:, None]
+    last = jax.vmap(lambda s: _row(s, s.t.dtype))(s)
+    rows = jnp.where(valid_rows[..., None], rows, last[:, None, :])
     status = jnp.where((s.status == Status.OK) & (idx < n), Status.MAX_STEPS, s.status).astype(jnp.int32)
-    del t_end
     return rows, valid_rows, status, s.t_liftoff, s.n_switch
 
 
 @eqx.filter_jit
 def _exact_batch(params, wave, wave_axes, save_at, contact, start, dt, max_steps):
-    fn = lambda p, w: _exact_one(p, w, save_at, contact, start, dt, max_steps)
-    return jax.vmap(fn, in_axes=(0, wave_axes))(params, wave)
+    n = params.omega.shape[0]
+    mb = MICRO_BATCH_CPU if jax.default_backend() == "cpu" else None
+    run = lambda p, w: _run(p, w, wave_axes, save_at, contact, start, dt, max_steps)
+    if not mb or n <= mb:
+        return run(params, wave)
+    # Sub-batches in sequence (`_batch.map_batched`): each loop stops with its own
+    # slowest configuration and its state stays in cache.
+    k = -(-n // mb)
+    pad = k * mb - n
+    grow = lambda x: jnp.concatenate([x, jnp.repeat(x[-1:], pad, axis=0)]).reshape((k, mb) + x.shape[1:])
+    params_k = jax.tree_util.tree_map(grow, params)
+    if wave_axes is None:
+        out = jax.lax.map(lambda p: run(p, wave), params_k)
+    else:
+        out = jax.lax.map(lambda a: run(*a), (params_k, jax.tree_util.tree_map(grow, wave)))
+    return jax.tree_util.tree_map(lambda x: x.reshape((k * mb,) + x.shape[2:])[:n], out)
 
 
 def _trajectory(params, wave, wave_axes, contact, start, save_at, rows, valid, status, t_lift, n_switch):

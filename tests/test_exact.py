@@ -226,3 +226,14 @@ def test_random_configurations_never_stall_or_nan(contact):
     ok = status == lj.Status.OK
     bal = np.abs(np.asarray(m.balance)[ok]) / np.maximum(1, np.abs(np.asarray(m.e_d)[ok]))
     assert np.all(bal < 2e-3)
+
+
+def test_waveform_frequency_is_the_waveforms_own():
+    # A waveform carries its own base frequency: params.omega must not leak into it.
+    wave = lj.Fourier(jnp.zeros(1), jnp.array([0.05]), 6.0, 3.0)
+    a = lj.simulate(lj.Params(omega=2.0), 10.0, save_at=jnp.linspace(0, 10, 11), waveform=wave)
+    b = lj.simulate(lj.Params(omega=6.0), 10.0, save_at=jnp.linspace(0, 10, 11))
+    np.testing.assert_allclose(a.X, b.X, rtol=1e-12, atol=1e-12)
+    ma = lj.measure(lj.Params(omega=2.0), z=0.3, horizon=30.0, waveform=wave)
+    mb = lj.measure(lj.Params(omega=6.0), z=0.3, horizon=30.0)
+    np.testing.assert_allclose(ma.tau_z, mb.tau_z, rtol=1e-12)

@@ -1,0 +1,693 @@
+"""Benchmark of locomotion_jax against an event-driven scipy baseline (issue 5).
+
+One run times, on the same machine and in separate processes (so that peak memory
+and compile time are per case):
+
+- the exact engine (`measure`, vmapped) for batches 1, 64, 1024, 8192 in float64
+  and float32, on the paper's parameters with `omega` ~ U[1, 25] and `a` ~ U[0.01, 0.1]
+  (the Fig. 6 range), `contact="paper"` (no lift-off stops) and a fixed horizon;
+- the same batch split over two forced host devices through the sweep engine's
+  `shard_map` (`_sharding.dispatch_chunk`), with each device's completion time;
+- the smoothed engine (diffrax, `Smoothed(eps=1e-3)`) on a smaller batch;
+- the scipy baseline (`tests/reference.py`, `solve_ivp` DOP853 per mode, rtol 1e-9)
+  on a few of the same configurations;
+- the accuracy of every engine against a tight scipy reference (rtol 1e-11) on
+  those configurations: `tau_5` and `X` at the horizon;
+- a Fig. 8 style sweep in natural, random and cost-sorted order (`_schedule`).
+
+Timings are medians of several runs after a warm-up (`block_until_ready`).
+Throughput is configurations x simulated time units per second ("cfg-tu/s"), by
+wall clock and per CPU-second of the process (robust to other load on the machine).
+Results are printed and written to `benchmarks/RESULTS.md`.
+
+    python benchmarks/run.py            # full run (~20 min on 2 cores)
+    python benchmarks/run.py --quick    # smoke run (~3 min)
+
+On a GPU: install `jax[cuda12]` and run the same command; every case then runs on
+the GPU (the scipy baseline stays on the CPU), `--devices N` sets how many devices
+the sharded case uses (default: all), and the forced-host-device flag is not set.
+"""
+
+import argparse
+import json
+import math
+import os
+import platform
+import resource
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(ROOT / "tests"))  # the independent scipy reference
+
+SEED = 0
+OMEGA = (1.0, 25.0)
+AMPL = (0.01, 0.1)
+
+
+def configs(n: int, seed: int = SEED):
+    """The benchmark's configurations: the first `n` of one seeded list (so every
+    batch is a prefix of the largest one)."""
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    om = rng.uniform(*OMEGA, 8192 if n <= 8192 else n)
+    a = rng.uniform(*AMPL, om.size)
+    return om[:n], a[:n]
+
+
+# -- helpers that run inside a case process ---------------------------------------------------------
+
+
+class CompileClock:
+    """Sums JAX's own compile-phase durations (tracing, lowering, backend compile)."""
+
+    def __init__(self):
+        import jax.monitoring
+
+        self.total = 0.0
+        jax.monitoring.register_event_duration_secs_listener(self._on)
+
+    def _on(self, event, duration, **kwargs):
+        if event.startswith("/jax/core/compile/"):
+            self.total += duration
+
+
+def thread_cpu() -> dict:
+    """CPU seconds used so far by each thread of this process (Linux `/proc`; empty elsewhere)."""
+    out = {}
+    try:
+        tick = os.sysconf("SC_CLK_TCK")
+        for tid in os.listdir("/proc/self/task"):
+            with open(f"/proc/self/task/{tid}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+            out[tid] = (int(fields[11]) + int(fields[12])) / tick
+    except OSError:
+        pass
+    return out
+
+
+def timed(fn, repeats: int):
+    """First call (compile + run), then `repeats` timed runs: (first, [wall], [cpu], [busiest-thread cpu]).
+
+    The busiest thread's CPU time is what one device's loop cost (each device runs
+    on its own thread): the wall time the run would take with a free core per device.
+    """
+    import jax
+
+    t0 = time.perf_counter()
+    jax.block_until_ready(fn())
+    first = time.perf_counter() - t0
+    walls, cpus, busy = [], [], []
+    for _ in range(repeats):
+        th0 = thread_cpu()
+        c0, t0 = time.process_time(), time.perf_counter()
+        jax.block_until_ready(fn())
+        walls.append(time.perf_counter() - t0)
+        cpus.append(time.process_time() - c0)
+        th1 = thread_cpu()
+        busy.append(max([th1[k] - th0.get(k, 0.0) for k in th1], default=math.nan))
+    return first, walls, cpus, busy
+
+
+def maxrss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def setup_jax():
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    return jax
+
+
+def case_exact(spec: dict) -> dict:
+    jax = setup_jax()
+    import jax.numpy as jnp
+    import numpy as np
+
+    import locomotion_jax as lj
+
+    rss0 = maxrss_mb()
+    clock = CompileClock()
+    om, a = configs(spec["B"])
+    dtype = jnp.float32 if spec["dtype"] == "float32" else jnp.float64
+    p = lj.Params(omega=om, a=a).astype(dtype)
+    dyn = lj.Exact(dt=spec["dt"])
+
+    def run():
+        m = lj.measure(p, z=1e30, horizon=spec["horizon"], window=min(25.0, spec["horizon"]), dynamics=dyn,
+                       contact="paper")
+        return m
+
+    first, walls, cpus, busy = timed(lambda: run().e_d, spec["repeats"])
+    m = run()
+    t_sim = float(np.mean(np.asarray(m.t_start))) + spec["horizon"]
+    steps = np.asarray(m.n_steps)
+    return dict(spec, first=first, compile=clock.total, wall=statistics.median(walls), cpu=statistics.median(cpus),
+                busy=statistics.median(busy), t_sim=t_sim, steps_mean=float(steps.mean()), steps_max=int(steps.max()),
+                switches_mean=float(np.asarray(m.n_switch).mean()), rss0=rss0, rss=maxrss_mb(),
+                devices=1, platform=jax.devices()[0].platform)
+
+
+def _chunk_runner(vals, n_dev, H, dyn, max_steps, micro, z=1e30):
+    """The sweep engine's chunk computation (`_sharding._run_chunk`, `shard_map` over a
+    1-D mesh), compiled ahead of time and called without blocking, so that each
+    device's output can be seen becoming ready on its own (`dispatch_chunk` goes
+    through `equinox.filter_jit`, which blocks until the whole call is done)."""
+    import inspect
+
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+    from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
+
+    from locomotion_jax import _sharding
+    from locomotion_jax._params import PARAM_NAMES, Params
+
+    mesh = Mesh(np.asarray(jax.devices()[:n_dev]), (_sharding.BATCH_AXIS,))
+    sharding = NamedSharding(mesh, P(_sharding.BATCH_AXIS))
+    flat = Params(**{n: _sharding._global_array(np.asarray(vals[n], np.float64), sharding) for n in PARAM_NAMES},
+                  check=False)
+    zhw = jnp.asarray(np.asarray([z, H, min(25.0, H)], np.float64))
+    args = [flat, zhw, dyn, "paper", "paper", max_steps, mesh]
+    if "micro_batch" in inspect.signature(_sharding._run_chunk).parameters:
+        args.append(micro)
+    exe = _sharding._run_chunk.lower(*args).compile()
+    return lambda: exe(*args)
+
+
+def case_sharded(spec: dict) -> dict:
+    jax = setup_jax()
+    import numpy as np
+
+    import locomotion_jax as lj
+    from locomotion_jax._batch import MICRO_BATCH_CPU, default_max_steps
+    from locomotion_jax._params import DEFAULTS, PARAM_NAMES
+
+    clock = CompileClock()
+    B, H, dt = spec["B"], spec["horizon"], spec["dt"]
+    om, a = configs(B)
+    n_dev = spec.get("devices") or len(jax.devices())
+    micro = MICRO_BATCH_CPU if jax.devices()[0].platform == "cpu" else None
+    t_start = float(lj.Params().t_start)
+    max_steps = default_max_steps(t_start + max(H, spec["tau_horizon"]), dt)
+    dyn = lj.Exact(dt=dt)
+    # Sorted by omega (as `measure` does inside a device): neighbours switch modes at similar rates.
+    order = np.argsort(om)
+    vals = {k: np.full(B, DEFAULTS[k]) for k in PARAM_NAMES}
+    vals["omega"], vals["a"] = om[order], a[order]
+    out = {}
+    for label, nd in (("1 device", 1), (f"{n_dev} devices", n_dev)):
+        c0 = clock.total
+        t0 = time.perf_counter()
+        go = _chunk_runner(vals, nd, H, dyn, max_steps, micro)
+        compile_wall = time.perf_counter() - t0
+        first, walls, cpus, busy = timed(go, spec["repeats"])
+        out[label] = dict(first=first + compile_wall, compile=clock.total - c0, wall=statistics.median(walls),
+                          cpu=statistics.median(cpus), busy=statistics.median(busy))
+
+    # Each device's loop ends on its own. Measure tau_5 (z = 5) on the same
+    # configurations, ordered by expected cost (`_schedule.cost_order`): device 0
+    # gets the cheaper half; record when each device's shard of the output is ready.
+    from locomotion_jax import _schedule
+
+    H_tau = spec["tau_horizon"]
+    order = _schedule.cost_order(vals, z=5.0, horizon=H_tau, window=25.0, dt=dt, contact="paper")
+    vals_c = {k: v[order] for k, v in vals.items()}
+    go = _chunk_runner(vals_c, n_dev, H_tau, dyn, max_steps, micro, z=5.0)
+    jax.block_until_ready(go())
+    t0 = time.perf_counter()
+    res = go()
+    shards = res["n_steps"].addressable_shards
+    ready = [None] * len(shards)
+    while any(r is None for r in ready):
+        for i, s in enumerate(shards):
+            if ready[i] is None and s.data.is_ready():
+                ready[i] = time.perf_counter() - t0
+        time.sleep(0.001)
+    per_dev = []
+    for s, r in zip(shards, ready):
+        steps = np.asarray(s.data)
+        lo, hi = s.index[0].start or 0, s.index[0].stop or B
+        tau = np.asarray(res["tau_z"])[lo:hi]
+        per_dev.append(dict(device=str(s.device), ready=r, steps_max=int(steps.max()), steps_mean=float(steps.mean()),
+                            steps_sum=float(steps.sum()), tau_median=float(np.median(tau))))
+    return dict(spec, runs=out, per_device=per_dev, n_devices=n_dev, micro_batch=micro, t_sim=t_start + H,
+                rss=maxrss_mb(), platform=jax.devices()[0].platform)
+
+
+def case_smoothed(spec: dict) -> dict:
+    setup_jax()
+    import numpy as np
+
+    import locomotion_jax as lj
+
+    clock = CompileClock()
+    om, a = configs(spec["B"])
+    p = lj.Params(omega=om, a=a)
+    T = spec["T"]
+    dyn = lj.Smoothed(eps=1e-3)
+    run = lambda: lj.simulate(p, T, save_at=np.asarray([0.0, T]), dynamics=dyn, contact="paper")
+    first, walls, cpus, busy = timed(lambda: run().X, spec["repeats"])
+    tr = run()
+    return dict(spec, first=first, compile=clock.total, wall=statistics.median(walls), cpu=statistics.median(cpus),
+                t_sim=T, X=np.asarray(tr.X[:, -1]).tolist(), status=np.asarray(tr.status).tolist(), rss=maxrss_mb())
+
+
+def _scipy_one(args):
+    from reference import reference_simulate
+
+    omega, a, T, rtol = args
+    c0, t0 = time.process_time(), time.perf_counter()
+    r = reference_simulate(dict(omega=omega, a=a), T, save_at=[0.0, T], contact="paper", rtol=rtol, atol=rtol * 1e-3)
+    return dict(omega=omega, a=a, wall=time.perf_counter() - t0, cpu=time.process_time() - c0, X=float(r["X"][-1]),
+                segments=r["n_segments"])
+
+
+def _ref_tau(args):
+    from reference import reference_measure
+
+    omega, a, horizon, rtol = args
+    t0 = time.perf_counter()
+    r = reference_measure(dict(omega=omega, a=a), z=5.0, horizon=horizon, contact="paper", rtol=rtol,
+                          atol=rtol * 1e-2)
+    return dict(omega=omega, a=a, tau=r["tau_z"], e=r["e_z"], wall=time.perf_counter() - t0)
+
+
+def case_scipy(spec: dict) -> dict:
+    """The baseline, timed one configuration at a time in this (single-threaded) process."""
+    om, a = configs(spec["n"])
+    rows = [_scipy_one((float(o), float(x), spec["T"], 1e-9)) for o, x in zip(om, a)]
+    return dict(spec, rows=rows, rss=maxrss_mb())
+
+
+def case_accuracy(spec: dict) -> dict:
+    """Tight references (rtol 1e-11) in two worker processes, then every engine on the same configurations."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    jax = setup_jax()
+    import jax.numpy as jnp
+    import numpy as np
+
+    import locomotion_jax as lj
+
+    n, T, H = spec["n"], spec["T"], spec["tau_horizon"]
+    om, a = configs(n)
+    with ProcessPoolExecutor(max_workers=2) as pool:
+        ref_X = list(pool.map(_scipy_one, [(float(o), float(x), T, 1e-11) for o, x in zip(om, a)]))
+        base_X = list(pool.map(_scipy_one, [(float(o), float(x), T, 1e-9) for o, x in zip(om, a)]))
+        ref_tau = list(pool.map(_ref_tau, [(float(o), float(x), H, 1e-10) for o, x in zip(om, a)]))
+        base_tau = list(pool.map(_ref_tau, [(float(o), float(x), H, 1e-9) for o, x in zip(om, a)]))
+    p = lj.Params(omega=om, a=a)
+    engines = {}
+    for dt in spec["dts"]:
+        for dtype in ("float64", "float32"):
+            q = p.astype(jnp.float32 if dtype == "float32" else jnp.float64)
+            tr = lj.simulate(q, T, save_at=np.asarray([0.0, T]), dynamics=lj.Exact(dt=dt), contact="paper")
+            m = lj.measure(q, z=5.0, horizon=H, dynamics=lj.Exact(dt=dt), contact="paper")
+            engines[f"exact {dtype} dt={dt:g}"] = dict(X=np.asarray(tr.X[:, -1], np.float64).tolist(),
+                                                        tau=np.asarray(m.tau_z, np.float64).tolist())
+    ns = spec["n_smooth"]
+    tr = lj.simulate(p[:ns], T, save_at=np.asarray([0.0, T]), dynamics=lj.Smoothed(eps=1e-3), contact="paper")
+    engines["smoothed eps=1e-3"] = dict(X=np.asarray(tr.X[:, -1]).tolist() + [math.nan] * (n - ns),
+                                        tau=[math.nan] * n)
+    engines["scipy rtol=1e-9"] = dict(X=[r["X"] for r in base_X], tau=[r["tau"] for r in base_tau])
+    del jax
+    return dict(spec, omega=om.tolist(), a=a.tolist(), ref_X=[r["X"] for r in ref_X],
+                ref_tau=[r["tau"] for r in ref_tau], engines=engines)
+
+
+def case_schedule(spec: dict) -> dict:
+    """Fig. 8 sweep (omega/wn1 in [0.05, 2.5], a = 0.05, z = 5, paper contact) in three orders."""
+    jax = setup_jax()
+    import numpy as np
+
+    import locomotion_jax as lj
+    from locomotion_jax import _schedule, _sharding
+    from locomotion_jax._batch import MICRO_BATCH_CPU
+    from locomotion_jax._params import DEFAULTS, PARAM_NAMES
+
+    N, chunk, dt, H = spec["N"], spec["chunk"], spec["dt"], spec["horizon"]
+    micro = MICRO_BATCH_CPU if jax.devices()[0].platform == "cpu" else None
+    if hasattr(_sharding, "MICRO_BATCH"):
+        _sharding.MICRO_BATCH = micro  # the sweep engine's knob: 64-wide loops per device
+    ratio = np.linspace(0.05, 2.5, N)
+    dyn = lj.Exact(dt=dt)
+    kw = dict(z=5.0, horizon=H, dynamics=dyn, contact="paper", chunk_size=chunk, progress=False, dtype="float64")
+    values = {k: np.full(N, DEFAULTS[k]) for k in PARAM_NAMES}
+    values["omega"] = ratio * 10.0  # wn1 = 10 for the defaults
+    ndev = len(jax.devices())
+
+    def run(order):
+        th0 = thread_cpu()
+        t0 = time.perf_counter()
+        ds = lj.sweep({"omega_over_wn1": ratio[order]}, mode="list", **kw)
+        wall = time.perf_counter() - t0
+        th1 = thread_cpu()
+        wall = dict(wall=wall, busy=max(th1[k] - th0.get(k, 0.0) for k in th1))
+        inv = np.empty_like(order)
+        inv[order] = np.arange(N)
+        steps = np.asarray(ds.n_steps.values)  # in the order run
+        # Lane-iterations actually spent: each loop (a device's shard of a chunk, or a
+        # micro-batch of it) runs to its own slowest configuration.
+        spent = 0
+        for lo in range(0, N, chunk):
+            block = steps[lo:lo + chunk]
+            shard = -(-len(block) // ndev)
+            for d in range(0, len(block), shard):
+                part = block[d:d + shard]
+                width = min(micro or len(part), len(part))
+                for g in range(0, len(part), width):
+                    spent += part[g:g + width].max() * width
+        return wall, float(steps.sum()), float(spent), np.asarray(ds.tau_z.values)[inv]
+
+    run(np.arange(N))  # warm-up: compile once
+    out = {}
+    w, need, spent, tau_nat = run(np.arange(N))
+    out["natural"] = dict(w, useful=need, spent=spent)
+    rng = np.random.default_rng(1)
+    w, need, spent, _ = run(rng.permutation(N))
+    out["random"] = dict(w, useful=need, spent=spent)
+    t0 = time.perf_counter()
+    order = _schedule.cost_order(values, z=5.0, horizon=H, window=25.0, dt=dt, contact="paper")
+    pilot_wall = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    order = _schedule.cost_order(values, z=5.0, horizon=H, window=25.0, dt=dt, contact="paper")
+    pilot_warm = time.perf_counter() - t0
+    w, need, spent, tau_sorted = run(order)
+    out["cost-sorted"] = dict(w, useful=need, spent=spent, pilot=pilot_warm, pilot_first=pilot_wall)
+    same = bool(np.array_equal(np.isfinite(tau_nat), np.isfinite(tau_sorted))
+                and np.allclose(tau_nat[np.isfinite(tau_nat)], tau_sorted[np.isfinite(tau_sorted)], rtol=1e-12))
+    return dict(spec, orders=out, n_devices=ndev, micro_batch=micro, same_results=same,
+                reached=int(np.isfinite(tau_nat).sum()), tau_range=[float(np.nanmin(np.where(np.isfinite(tau_nat),
+                                                                                          tau_nat, np.nan))),
+                                                                   float(np.nanmax(np.where(np.isfinite(tau_nat),
+                                                                                          tau_nat, np.nan)))])
+
+
+CASES = dict(exact=case_exact, sharded=case_sharded, smoothed=case_smoothed, scipy=case_scipy,
+             accuracy=case_accuracy, schedule=case_schedule)
+
+
+# -- orchestration ---------------------------------------------------------------------------------------
+
+
+def spawn(spec: dict, devices: int | None = None, timeout: float = 3600) -> dict:
+    env = dict(os.environ)
+    env.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
+    flags = [f for f in env.get("XLA_FLAGS", "").split() if "force_host_platform_device_count" not in f]
+    if devices:
+        flags.append(f"--xla_force_host_platform_device_count={devices}")
+    env["XLA_FLAGS"] = " ".join(flags)
+    proc = subprocess.run([sys.executable, __file__, "--case", json.dumps(spec)], env=env, capture_output=True,
+                          text=True, timeout=timeout, cwd=ROOT)
+    if proc.returncode != 0:
+        return dict(spec, error=proc.stderr[-2000:])
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def machine() -> dict:
+    import importlib.metadata as md
+
+    info = dict(python=platform.python_version(), platform=platform.platform())
+    try:
+        cpu = [ln.split(":", 1)[1].strip() for ln in open("/proc/cpuinfo") if ln.startswith("model name")]
+        info["cpu"] = f"{cpu[0]} x {len(cpu)}" if cpu else platform.processor()
+    except OSError:
+        info["cpu"] = platform.processor()
+    info["cores"] = os.cpu_count()
+    try:
+        mem = [ln for ln in open("/proc/meminfo") if ln.startswith("MemTotal")][0].split()[1]
+        info["memory"] = f"{int(mem) / 2**20:.1f} GiB"
+    except (OSError, IndexError):
+        pass
+    for pkg in ("jax", "jaxlib", "numpy", "scipy", "diffrax", "equinox", "locomotion_jax"):
+        try:
+            info[pkg] = md.version(pkg)
+        except md.PackageNotFoundError:
+            info[pkg] = "-"
+    try:
+        info["commit"] = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
+                                        text=True).stdout.strip() + " (+ working tree)"
+    except OSError:
+        pass
+    return info
+
+
+def fmt(x, digits=3):
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "-"
+    if isinstance(x, int) or (isinstance(x, float) and abs(x) >= 100):
+        return f"{x:,.0f}"
+    return f"{x:.{digits}g}"
+
+
+def rel(x, ref):
+    if not (math.isfinite(x) and math.isfinite(ref)) or ref == 0:
+        return math.nan
+    return abs(x / ref - 1)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--case", help=argparse.SUPPRESS)
+    ap.add_argument("--quick", action="store_true", help="small smoke run")
+    ap.add_argument("--dt", type=float, default=0.02, help="exact engine step for the throughput table")
+    ap.add_argument("--devices", type=int, default=2, help="devices for the sharded case (forced host devices on CPU)")
+    ap.add_argument("--out", default=str(HERE / "RESULTS.md"))
+    ap.add_argument("--skip", default="", help="comma-separated case kinds to skip")
+    args = ap.parse_args()
+    if args.case:
+        spec = json.loads(args.case)
+        print(json.dumps(CASES[spec["kind"]](spec)))
+        return
+
+    q = args.quick
+    dt = args.dt
+    H = 20.0 if q else 100.0
+    skip = set(args.skip.split(",")) - {""}
+    load0 = os.getloadavg()
+    t_begin = time.perf_counter()
+    results: dict[str, list] = {k: [] for k in CASES}
+
+    def log(msg):
+        print(msg, flush=True)
+
+    import jax
+
+    cpu_platform = jax.devices()[0].platform == "cpu"
+    del jax
+    sizes = (1, 64) if q else (1, 64, 1024, 8192)
+    if "exact" not in skip:
+        for dtype in ("float64", "float32"):
+            for B in sizes:
+                spec = dict(kind="exact", B=B, dtype=dtype, dt=dt, horizon=H, repeats=3 if B < 8192 else 2)
+                r = spawn(spec)
+                results["exact"].append(r)
+                log(f"exact {dtype} B={B}: " + (r.get("error") or f"{r['B'] * r['t_sim'] / r['wall']:,.0f} cfg-tu/s"))
+        if not q:  # the library default step, for reference
+            for B in (1024, 8192):
+                r = spawn(dict(kind="exact", B=B, dtype="float64", dt=0.01, horizon=H, repeats=2))
+                results["exact"].append(r)
+                log(f"exact float64 dt=0.01 B={B}: " + (r.get("error") or
+                                                      f"{r['B'] * r['t_sim'] / r['wall']:,.0f} cfg-tu/s"))
+            r = spawn(dict(kind="exact", B=1024, dtype="float64", dt=dt, horizon=10 * H, repeats=1))
+            results["exact"].append(r)
+            log("exact float64 B=1024, 10x horizon (memory check): " + (r.get("error") or f"{r['rss']:.0f} MB"))
+    if "sharded" not in skip:
+        spec = dict(kind="sharded", B=512 if q else 8192, dt=dt, horizon=H, repeats=2, devices=args.devices,
+                    tau_horizon=300.0 if q else 1000.0)
+        r = spawn(spec, devices=args.devices if cpu_platform else None)
+        results["sharded"].append(r)
+        log("sharded: " + (r.get("error") or json.dumps(r["runs"])))
+    if "smoothed" not in skip:
+        spec = dict(kind="smoothed", B=4 if q else 16, T=5.0 if q else 20.0, repeats=2)
+        r = spawn(spec)
+        results["smoothed"].append(r)
+        log("smoothed: " + (r.get("error") or f"{r['B'] * r['t_sim'] / r['wall']:,.1f} cfg-tu/s"))
+    if "scipy" not in skip:
+        r = spawn(dict(kind="scipy", n=2 if q else 4, T=20.0 if q else 100.0))
+        results["scipy"].append(r)
+        log("scipy: " + (r.get("error") or ", ".join(f"{x['wall']:.2f}s" for x in r["rows"])))
+    if "accuracy" not in skip:
+        spec = dict(kind="accuracy", n=2 if q else 8, T=20.0 if q else 100.0, tau_horizon=300.0 if q else 1000.0,
+                    dts=[dt] if q else sorted({0.01, dt, 0.04}), n_smooth=1 if q else 4)
+        r = spawn(spec)
+        results["accuracy"].append(r)
+        log("accuracy: " + (r.get("error") or "done"))
+    if "schedule" not in skip:
+        spec = dict(kind="schedule", N=64 if q else 512, chunk=16 if q else 128, dt=dt, horizon=300.0 if q else 2000.0)
+        r = spawn(spec, devices=args.devices if cpu_platform else None)
+        results["schedule"].append(r)
+        log("schedule: " + (r.get("error") or json.dumps(r["orders"])))
+
+    text = report(results, dict(machine=machine(), load=(load0, os.getloadavg()), quick=q, dt=dt, horizon=H,
+                                command=" ".join([Path(sys.executable).name, *sys.argv]),
+                                elapsed=time.perf_counter() - t_begin))
+    Path(args.out).write_text(text)
+    print(text)
+
+
+def report(res: dict, meta: dict) -> str:
+    L = []
+    m = meta["machine"]
+    L.append("# Benchmark results" + (" (quick smoke run)" if meta["quick"] else ""))
+    L.append("")
+    L.append("Generated by `benchmarks/run.py`; do not edit by hand. How to read it: benchmarks/NOTES.md.")
+    L.append("")
+    L.append(f"- Command: `{meta['command']}` ({meta['elapsed'] / 60:.1f} min)")
+    L.append(f"- Machine: {m.get('cpu')}, {m.get('cores')} cores, {m.get('memory', '?')}; {m['platform']}")
+    L.append(f"- Versions: Python {m['python']}, jax {m['jax']}, jaxlib {m['jaxlib']}, numpy {m['numpy']}, "
+             f"scipy {m['scipy']}, diffrax {m['diffrax']}, equinox {m['equinox']}, locomotion_jax "
+             f"{m['locomotion_jax']} at {m.get('commit', '?')}")
+    l0, l1 = meta["load"]
+    L.append(f"- Load average (1/5/15 min) at start {l0[0]:.1f}/{l0[1]:.1f}/{l0[2]:.1f}, at end "
+             f"{l1[0]:.1f}/{l1[1]:.1f}/{l1[2]:.1f}: other jobs share the cores, so wall-clock rates are lower "
+             "bounds; the per-CPU-second rates are not affected by waiting for a core.")
+    L.append(f"- Workload: `measure(..., z=1e30, horizon={meta['horizon']:g}, contact=\"paper\")`, i.e. "
+             f"t_start (71.1) + {meta['horizon']:g} time units per configuration; omega ~ U{OMEGA}, a ~ U{AMPL} "
+             f"(seed {SEED}); exact engine at dt = {meta['dt']:g} unless stated.")
+    L.append("")
+
+    sc = res["scipy"][0] if res["scipy"] and "error" not in res["scipy"][0] else None
+    base = None
+    if sc:
+        base_wall = sum(r["wall"] for r in sc["rows"])
+        base_cpu = sum(r["cpu"] for r in sc["rows"])
+        base = dict(wall=len(sc["rows"]) * sc["T"] / base_wall, cpu=len(sc["rows"]) * sc["T"] / base_cpu)
+
+    L.append("## Throughput")
+    L.append("")
+    L.append("cfg-tu/s = configurations x simulated time units per second. *per CPU-s*: work / CPU time of the "
+             "process (insensitive to waiting for a core). *free cores*: work / CPU time of the busiest thread; "
+             "each device runs its loop on its own thread, so this is the wall time with one free core per device. "
+             "Ratios are against the scipy baseline's rate per CPU-second (one configuration per core); the last "
+             "ratio compares the engine on 2 cores with scipy on the same 2 cores (two processes).")
+    L.append("")
+    L.append("| engine | dtype | dt | devices | batch | compile s | run s wall | cfg-tu/s wall | cfg-tu/s per CPU-s "
+             "| cfg-tu/s free cores | x scipy per core | x scipy on 2 cores | peak RSS MB | iterations mean / max |")
+    L.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+
+    def row(name, dtype, dt, ndev, batch, x, work, rss, iters=""):
+        w, c, b = work / x["wall"], work / x["cpu"], work / x["busy"] if x.get("busy") else math.nan
+        per_core = fmt(c / ndev / base["cpu"]) if base else "-"
+        two = fmt(b / (2 * base["cpu"])) if base and math.isfinite(b) else "-"
+        L.append(f"| {name} | {dtype} | {dt} | {ndev} | {batch} | {x['compile']:.1f} | {x['wall']:.3g} | {fmt(w)} | "
+                 f"{fmt(c)} | {fmt(b)} | {per_core} | {two} | {rss:.0f} | {iters} |")
+
+    for r in res["exact"]:
+        if "error" in r:
+            L.append(f"| exact | {r['dtype']} | {r['dt']} | 1 | {r['B']} | error | | | | | | | | |")
+            continue
+        hz = "" if r["horizon"] == meta["horizon"] else f" (horizon {r['horizon']:g})"
+        row(f"exact, `measure`{hz}", r["dtype"], f"{r['dt']:g}", 1, r["B"], r, r["B"] * r["t_sim"], r["rss"],
+            f"{r['steps_mean']:,.0f} / {r['steps_max']:,}")
+    for r in res["sharded"]:
+        if "error" in r:
+            L.append(f"| exact, shard_map | float64 | {r['dt']} | 2 | {r['B']} | error | | | | | | | | |")
+            continue
+        for label, x in r["runs"].items():
+            row("exact, sweep engine `shard_map`", "float64", f"{r['dt']:g}", int(label.split()[0]), r["B"], x,
+                r["B"] * r["t_sim"], r["rss"])
+    for r in res["smoothed"]:
+        if "error" in r:
+            L.append("| smoothed | float64 | adaptive | 1 | error | | | | | | | | | |")
+            continue
+        row(f"smoothed, diffrax Tsit5, eps=1e-3, t=0..{r['T']:g}", "float64", "adaptive (rtol 1e-7)", 1, r["B"], r,
+            r["B"] * r["t_sim"], r["rss"])
+    if sc:
+        L.append(f"| scipy `solve_ivp` DOP853 per mode, rtol 1e-9, t=0..{sc['T']:g} | float64 | adaptive | 1 | "
+                 f"{len(sc['rows'])}, one at a time | - | {base_wall:.3g} | {fmt(base['wall'])} | {fmt(base['cpu'])} | "
+                 f"{fmt(base['cpu'])} | 1 | 1 | {sc['rss']:.0f} | |")
+    L.append("")
+
+    for r in res["sharded"]:
+        if "error" in r:
+            L.append(f"Sharded case failed: `{r['error'][-300:]}`")
+            continue
+        nd = r["n_devices"]
+        one, many = r["runs"]["1 device"], r["runs"][f"{nd} devices"]
+        L.append(f"## Sharding over {nd} devices (the sweep engine's `_sharding._run_chunk`, `shard_map`)")
+        L.append("")
+        L.append(f"Batch {r['B']}, float64, {r['micro_batch'] or 'no'} configurations per loop on a device: "
+                 f"{one['wall']:.3g} s wall on 1 device, {many['wall']:.3g} s on {nd} "
+                 f"({one['wall'] / many['wall']:.2f}x); busiest thread {one['busy']:.3g} s vs {many['busy']:.3g} s "
+                 f"({one['busy'] / many['busy']:.2f}x: the speed-up with a free core per device). The batch is "
+                 "sorted by omega (as `measure` does). Each device's loop ends on its own: measuring tau_5 "
+                 f"(z = 5, horizon {r['tau_horizon']:g}) on the same configurations ordered by expected cost "
+                 "(`_schedule.cost_order`), device 0 holds the cheaper half, and its output is ready first:")
+        L.append("")
+        L.append("| device | median tau_5 | iterations: sum / max / mean | output ready after s |")
+        L.append("|---|---|---|---|")
+        for d in r["per_device"]:
+            L.append(f"| {d['device']} | {fmt(d['tau_median'])} | {d['steps_sum']:,.0f} / {d['steps_max']:,} / "
+                     f"{d['steps_mean']:,.0f} | {d['ready']:.3g} |")
+        L.append("")
+
+    acc = res["accuracy"][0] if res["accuracy"] and "error" not in res["accuracy"][0] else None
+    if acc:
+        L.append("## Accuracy against a tight scipy reference (rtol 1e-11 for X, 1e-10 for tau_5)")
+        L.append("")
+        L.append(f"Relative error of X at t = {acc['T']:g} and of tau_5 (z = 5 after t_start, horizon "
+                 f"{acc['tau_horizon']:g}) on the first {len(acc['omega'])} benchmark configurations "
+                 "(median / max over them; `-`: not computed or not reached).")
+        L.append("")
+        L.append("| engine | X: median | X: max | tau_5: median | tau_5: max |")
+        L.append("|---|---|---|---|---|")
+        for name, e in acc["engines"].items():
+            ex = [rel(x, r) for x, r in zip(e["X"], acc["ref_X"])]
+            et = [rel(x, r) for x, r in zip(e["tau"], acc["ref_tau"])]
+            ex = [x for x in ex if math.isfinite(x)]
+            et = [x for x in et if math.isfinite(x)]
+            cell = lambda v, f: f"{f(v):.1e}" if v else "-"
+            L.append(f"| {name} | {cell(ex, statistics.median)} | {cell(ex, max)} | {cell(et, statistics.median)} | "
+                     f"{cell(et, max)} |")
+        L.append("")
+        L.append("| omega | a | X ref | tau_5 ref |")
+        L.append("|---|---|---|---|")
+        for o, a, x, t in zip(acc["omega"], acc["a"], acc["ref_X"], acc["ref_tau"]):
+            L.append(f"| {o:.3f} | {a:.4f} | {x:.6g} | {fmt(t, 6)} |")
+        L.append("")
+    elif res["accuracy"]:
+        L.append(f"Accuracy case failed: `{res['accuracy'][0]['error'][-500:]}`")
+
+    s = res["schedule"][0] if res["schedule"] and "error" not in res["schedule"][0] else None
+    if s:
+        L.append("## Long sweeps: cost-ordered chunks (Fig. 8 sweep)")
+        L.append("")
+        L.append(f"`sweep` over omega/wn1 in [0.05, 2.5] ({s['N']} points), a = 0.05, z = 5, horizon {s['horizon']:g}, "
+                 f"paper contact, chunks of {s['chunk']} on {s['n_devices']} devices; {s['reached']} configurations "
+                 f"reach z (tau_5 from {s['tau_range'][0]:.3g} to {s['tau_range'][1]:.3g}). Lane efficiency = "
+                 "iterations the configurations need / iterations their loops ran (each loop, a device's "
+                 f"shard of a chunk in sub-batches of {s.get('micro_batch') or 'all'}, runs to its slowest "
+                 "configuration); it does not depend on the load of the machine. Results identical in every order: "
+                 f"{s['same_results']}.")
+        L.append("")
+        L.append("| order | wall s | busiest thread CPU s | lane efficiency |")
+        L.append("|---|---|---|---|")
+        for k, v in s["orders"].items():
+            extra = f" + pilot {v['pilot']:.3g}" if "pilot" in v else ""
+            L.append(f"| {k} | {v['wall']:.3g}{extra} | {v['busy']:.3g} | {v['useful'] / v['spent']:.2f} |")
+        L.append("")
+    elif res["schedule"]:
+        L.append(f"Schedule case failed: `{res['schedule'][0]['error'][-500:]}`")
+    if base:
+        L.append("## Baseline detail")
+        L.append("")
+        L.append("| omega | a | scipy wall s | cfg-tu/s | mode segments |")
+        L.append("|---|---|---|---|---|")
+        for r in sc["rows"]:
+            L.append(f"| {r['omega']:.3f} | {r['a']:.4f} | {r['wall']:.3g} | {sc['T'] / r['wall']:.3g} | "
+                     f"{r['segments']:,} |")
+        L.append("")
+    return "\n".join(L) + "\n"
+
+
+if __name__ == "__main__":
+    main()

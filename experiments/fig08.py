@@ -1,0 +1,16 @@
+"""Fig. 8: tau_5 and e_5 vs omega/wn1.
+
+Zhou, Majidi, O'Reilly (2014); SPEC §6. Writes output/fig08.png, output/fig08.nc and
+the reproduction report. Usage: python experiments/fig08.py [--quick] [--out DIR]
+"""
+
+import jax
+
+
+jax.config.update("jax_enable_x64", True)  # start-up choice of the script, like the CLI's --x64
+
+from locomotion_jax._figures import script_main
+
+
+if __name__ == "__main__":
+    raise SystemExit(script_main("8"))

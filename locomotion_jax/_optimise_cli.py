@@ -1,0 +1,94 @@
+"""`locomotion-jax optimize`: the actuation optimiser from the command line (SPEC §7).
+
+`register(app)` adds the subcommand to a `typer.Typer` app (the main CLI in
+`_cli.py` calls it; the global `--x64` flag is handled there, before any JAX
+array exists). Progress goes to stderr, so that `--json` prints exactly one
+JSON object on stdout.
+"""
+
+import sys
+from pathlib import Path
+
+import typer
+
+from ._params import DEFAULTS
+
+
+def _eps_schedule(text: str) -> tuple[float, ...]:
+    try:
+        values = tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        values = ()
+    if not values or any(not (v > 0) for v in values):
+        raise typer.BadParameter(f"--eps must be a comma-separated list of positive numbers, got {text!r}.")
+    return values
+
+
+def register(app: typer.Typer) -> None:
+    """Add the `optimize` subcommand to `app`."""
+
+    @app.command("optimize")
+    def optimize(
+        v_min: float = typer.Option(..., "--v-min", help="Required mean speed (> 0) in --direction."),
+        a_max: float = typer.Option(..., "--a-max", help="Stroke bound: max |l0(t) - lbar| <= a_max."),
+        direction: int | None = typer.Option(None, "--direction", help="+1 forward (default) or -1 backward."),
+        omega: float | None = typer.Option(None, "--omega", help="Fix the base frequency (default: optimised)."),
+        harmonics: int = typer.Option(3, "--harmonics", help="Number of Fourier harmonics N >= 1."),
+        k: float = typer.Option(DEFAULTS["k"], "--k", help="Spring stiffness."),
+        c: float = typer.Option(DEFAULTS["c"], "--c", help="Linear damping."),
+        d: float = typer.Option(DEFAULTS["d"], "--d", help="Vertical offset of the spring."),
+        lbar: float = typer.Option(DEFAULTS["lbar"], "--lbar", help="Mean rest length."),
+        mu_s: float = typer.Option(DEFAULTS["mu_s"], "--mu-s", help="Static friction coefficient."),
+        mu_k: float = typer.Option(DEFAULTS["mu_k"], "--mu-k", help="Kinetic friction coefficient."),
+        mhat: float = typer.Option(DEFAULTS["mhat"], "--mhat", help="Mass ratio m1 / (m1 + m2)."),
+        margin: float = typer.Option(0.05, "--margin", help="Normal-force margin on the smoothed model."),
+        starts: int = typer.Option(8, "--starts", help="Starts optimised in parallel."),
+        outer: int = typer.Option(3, "--outer", help="Augmented-Lagrangian blocks per smoothing stage."),
+        inner: int = typer.Option(30, "--inner", help="Adam steps per block."),
+        eps: str = typer.Option("1e-2,3e-3,1e-3", "--eps", help="Continuation in the smoothing scale."),
+        transient: float = typer.Option(12.0, "--transient", help="Smoothed rollout: transient (time units)."),
+        measured: float = typer.Option(6.0, "--measured", help="Smoothed rollout: measured time (time units)."),
+        corrections: int = typer.Option(1, "--corrections", help="Exact-feedback correction rounds."),
+        horizon: float = typer.Option(60.0, "--horizon", help="Exact verification time after the transient."),
+        sweep_omegas: int = typer.Option(32, "--sweep-omegas", help="Frequencies in the sinusoid sweep."),
+        sweep_amplitudes: int = typer.Option(6, "--sweep-amplitudes", help="Amplitudes in the sinusoid sweep."),
+        seed: int = typer.Option(0, "--seed"),
+        json_out: bool = typer.Option(False, "--json", help="Print one JSON object instead of the report."),
+        out: Path | None = typer.Option(None, "--out", help="Directory for the plots."),
+        verbose: bool = typer.Option(False, "--verbose", help="Progress per block (stderr)."),
+    ) -> None:
+        """Optimise the actuation waveform for least cost of transport at a required speed,
+        verify it on the exact model and compare it with the best sinusoid."""
+        from . import _optimise, _pareto
+        from ._optimum import Settings
+        from ._params import Params
+
+        try:
+            params = Params(k=k, c=c, d=d, lbar=lbar, mu_s=mu_s, mu_k=mu_k, mhat=mhat)
+            settings = Settings(starts=starts, outer=outer, inner=inner, eps_schedule=_eps_schedule(eps),
+                                margin=margin, verify_horizon=horizon, seed=seed, verbose=verbose,
+                                transient=transient, measured=measured, corrections=corrections)
+            # Validate before the (long) sinusoid sweep.
+            from ._constraints import check_inputs
+
+            check_inputs(params, v_min, a_max, direction, harmonics, omega, margin)
+            log = (lambda msg: print(msg, file=sys.stderr, flush=True)) if verbose or not json_out else (lambda m: None)
+            log(f"sweeping {sweep_amplitudes} x {sweep_omegas} sinusoids on the exact model ...")
+            sweep = _pareto.sinusoid_sweep(params, a_max, omegas=_pareto.default_omegas(params, sweep_omegas),
+                                           amplitudes=sweep_amplitudes, horizon=horizon)
+            log("optimising ...")
+            result = _optimise.optimise(params, v_min, a_max, direction=direction, omega=omega,
+                                        harmonics=harmonics, settings=settings, sweep=sweep)
+        except ValueError as err:
+            typer.echo(f"Error: {err}", err=True)
+            raise typer.Exit(code=2) from None
+        if out is not None:
+            from ._optimise_plots import save_all
+
+            paths = save_all(result, params, sweep, Path(out), horizon)
+            if not json_out:
+                typer.echo("plots: " + ", ".join(str(p) for p in paths), err=True)
+        if json_out:
+            typer.echo(result.to_json())
+        else:
+            typer.echo(result.summary())

@@ -1,0 +1,189 @@
+"""Settings and result of the actuation optimiser (SPEC §7)."""
+
+import dataclasses
+import json
+import math
+from typing import Any
+
+import equinox as eqx
+import numpy as np
+
+from ._actuation import Fourier
+
+
+class Settings(eqx.Module):
+    """Static settings of [`optimise`][] (Python numbers; changing them recompiles).
+
+    - `starts`: number of starts optimised together under `vmap`.
+    - `start_frequencies`: base frequencies the starts are spread over when
+      `omega` is free (the cheapest feasible sinusoids' frequencies, at least
+      20 % apart and within a factor `omega_range` of the best).
+    - `eps_schedule`: continuation in the smoothing scale $\\varepsilon$.
+    - `outer`, `inner`: augmented-Lagrangian blocks per stage and Adam steps per block.
+    - `learning_rate`: Adam's step (decision variables are O(1): coefficients
+      in units of $a_\\max$, $\\log\\omega$); `lr_decay`: its factor per stage.
+    - `rho0`, `rho_growth`, `rho_max`: penalty parameter schedule.
+    - `speed_slack`: the smoothed model targets $v_\\min (1 + \\text{slack})$.
+    - `phase1_threshold`: a start whose speed falls short by more than this
+      fraction of the target optimises feasibility alone (cost weight 0) until it is closer.
+    - `margin`: required normal-force margin (in units of weight; $m_1 + m_2 = 2$).
+    - `margin_step`: added to a start's margin when it lifts off on the exact model.
+    - `temperature`: of the soft minimum of the normal forces.
+    - `transient`, `measured`: smoothed rollout lengths (time units; whole periods).
+    - `backprop`: differentiate only this many time units at the end of the
+      transient (truncated backpropagation, approximate); `None`: all.
+    - `omega_range`: a free $\\omega$ stays within this factor of its starts.
+    - `corrections`, `correction_outer`: exact-feedback rounds and their blocks.
+    - `verify_horizon`, `verify_dt`: exact verification (after the paper's transient).
+    - `refine_baseline`: refine the best sinusoid of the sweep on a local grid
+      (`_pareto.refine_sinusoid`), so the optimum is compared with a well-resolved sinusoid.
+    - `seed`: for the random starts. `verbose`: print progress per block.
+    """
+
+    starts: int = 8
+    start_frequencies: int = 2
+    eps_schedule: tuple[float, ...] = (1e-2, 3e-3, 1e-3)
+    outer: int = 3
+    inner: int = 30
+    learning_rate: float = 0.03
+    lr_decay: float = 0.6
+    rho0: float = 10.0
+    rho_growth: float = 4.0
+    rho_max: float = 1e4
+    speed_slack: float = 0.02
+    phase1_threshold: float = 0.5
+    margin: float = 0.05
+    margin_step: float = 0.05
+    temperature: float = 0.005
+    transient: float = 12.0
+    measured: float = 6.0
+    backprop: float | None = None
+    omega_range: float = 1.3
+    corrections: int = 1
+    correction_outer: int = 2
+    verify_horizon: float = 60.0
+    verify_dt: float = 0.01
+    refine_baseline: bool = True
+    seed: int = 0
+    verbose: bool = False
+
+    def __check_init__(self):
+        if self.starts < 1 or self.outer < 1 or self.inner < 1:
+            raise ValueError("Settings: starts, outer and inner must be >= 1.")
+        if not self.eps_schedule or any(not (e > 0) for e in self.eps_schedule):
+            raise ValueError(f"Settings.eps_schedule must be non-empty and positive, got {self.eps_schedule!r}.")
+
+
+@dataclasses.dataclass(frozen=True)
+class Optimum:
+    """Result of [`optimise`][]; every figure called `*_exact` is from the exact hybrid model.
+
+    - `cos`, `sin`, `omega`, `lbar`: the waveform ([`Fourier`][], `waveform`).
+    - `mean_speed_exact`, `cost_of_transport_exact`: signed mean speed and
+      $e_d / |\\Delta X|$ after the paper's transient, from the relaxed spring.
+    - `constraints_exact`: `{"speed", "stroke", "no_liftoff"}` each True when it
+      holds on the exact model; `feasible_exact`: all three.
+    - `stroke_exact`: $\\max_t |\\ell_0 - \\bar\\ell|$ (located exactly).
+    - `mean_speed_smoothed`, `cost_of_transport_smoothed`, `min_normal_smoothed`:
+      the smoothed model at the last $\\varepsilon$ (`eps`).
+    - `sinusoid`: the best sinusoid for the same requirement (exact model) or
+      `None`; `sinusoid_cost_of_transport`; `improvement_vs_sinusoid`
+      $= 1 - \\text{cost}/\\text{cost}_\\text{sin}$ (negative when the sinusoid is
+      better; `nan` when either is infeasible).
+    - `initial_cost_of_transport_exact`: exact cost of the best feasible initial guess.
+    - `source`: which candidate won; `candidates`: every candidate's figures.
+    - `history`: per block costs and constraint values; `runtime_s`.
+    """
+
+    v_min: float
+    direction: int
+    a_max: float
+    margin: float
+    harmonics: int
+    free_omega: bool
+    cos: np.ndarray
+    sin: np.ndarray
+    omega: float
+    lbar: float
+    mean_speed_exact: float
+    cost_of_transport_exact: float
+    stroke_exact: float
+    liftoff_exact: bool
+    constraints_exact: dict
+    feasible_exact: bool
+    mean_speed_smoothed: float
+    cost_of_transport_smoothed: float
+    min_normal_smoothed: float
+    eps: float
+    sinusoid: dict | None
+    sinusoid_cost_of_transport: float
+    improvement_vs_sinusoid: float
+    initial_cost_of_transport_exact: float
+    source: str
+    candidates: list
+    history: list
+    runtime_s: float
+
+    @property
+    def waveform(self) -> Fourier:
+        return Fourier(self.cos, self.sin, self.omega, self.lbar)
+
+    def to_dict(self, full: bool = False) -> dict[str, Any]:
+        """JSON-ready dict (`nan` and `inf` become `None`); `full` adds candidates and history."""
+        skip = () if full else ("candidates", "history")
+        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in skip}
+        return _jsonable(out)
+
+    def to_json(self, full: bool = False, **kwargs) -> str:
+        return json.dumps(self.to_dict(full), **kwargs)
+
+    def summary(self) -> str:
+        """Human-readable report."""
+        fmt = lambda v: "n/a" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.4g}"
+        lines = [
+            f"requirement: mean speed >= {self.v_min:g} in direction {self.direction:+d}, stroke <= {self.a_max:g}, "
+            f"normal forces >= {self.margin:g} (smoothed), no lift-off (exact)",
+            f"base frequency omega = {self.omega:.6g} ({'optimised' if self.free_omega else 'fixed'}), "
+            f"lbar = {self.lbar:g}, {self.harmonics} harmonics",
+            "cos coefficients: " + " ".join(f"{c:+.6f}" for c in self.cos),
+            "sin coefficients: " + " ".join(f"{s:+.6f}" for s in self.sin),
+            f"mean speed:        exact {fmt(self.mean_speed_exact)}   smoothed {fmt(self.mean_speed_smoothed)}",
+            f"cost of transport: exact {fmt(self.cost_of_transport_exact)}   smoothed "
+            f"{fmt(self.cost_of_transport_smoothed)} (eps = {self.eps:g})",
+            f"stroke {fmt(self.stroke_exact)} (limit {self.a_max:g}); min normal force (smoothed) "
+            f"{fmt(self.min_normal_smoothed)}; lift-off on the exact model: {self.liftoff_exact}",
+            "constraints on the exact model: " + ", ".join(
+                f"{k} {'holds' if v else 'VIOLATED'}" for k, v in self.constraints_exact.items()
+            ) + f" -> {'FEASIBLE' if self.feasible_exact else 'INFEASIBLE'}",
+        ]
+        if self.sinusoid is None:
+            lines.append("best sinusoid: none meets the requirement on the exact model")
+        else:
+            s = self.sinusoid
+            lines.append(
+                f"best sinusoid: a = {s['a']:.4g}, omega = {s['omega']:.4g}: mean speed {s['mean_speed']:.4g}, "
+                f"cost of transport {s['cost_of_transport']:.4g}"
+            )
+        lines.append(f"improvement vs sinusoid: {fmt(100 * self.improvement_vs_sinusoid)} %  "
+                     f"(winner: {self.source}; {self.runtime_s:.0f} s)")
+        return "\n".join(lines)
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    if isinstance(x, (np.bool_, bool)):
+        return bool(x)
+    if isinstance(x, (np.integer, int)):
+        return int(x)
+    if isinstance(x, (np.floating, float)):
+        return float(x) if math.isfinite(float(x)) else None
+    return x
+
+
+OptimiseSettings = Settings
+"""Public name of [`Settings`][] (exported as `locomotion_jax.OptimiseSettings`)."""

@@ -1,0 +1,188 @@
+"""Exact-model figures of merit, the sinusoid baseline and Pareto fronts (SPEC §7).
+
+Everything here runs the **exact** hybrid engine ([`measure`][] with
+`dynamics=Exact()`, `contact="strict"`) from the relaxed spring, so optimised
+waveforms and sinusoids are judged by the same yardstick: after the paper's
+transient ($t_\\text{start}$, SPEC §5) the run continues for `horizon` time units
+and
+
+- mean speed $\\bar v = \\Delta X / \\text{horizon}$ (eq. 4),
+- cost of transport $e_d / |\\Delta X|$ (eq. 15 over the same interval),
+- lift-off (eq. 5) anywhere in the run makes the configuration infeasible.
+"""
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._actuation import AbstractWaveform
+from ._dynamics import Exact
+from ._measure import measure
+from ._params import Params
+from ._status import Status
+
+
+class ExactFigures(NamedTuple):
+    """Per-configuration exact figures (numpy arrays of the batch shape).
+
+    `speed` is the signed mean speed, `cost` the cost of transport (`nan` when
+    the run did not finish: lift-off or step cap), `ok` is True when the run
+    finished without lift-off, `status` the engine's `Status` code.
+    """
+
+    speed: np.ndarray
+    cost: np.ndarray
+    ok: np.ndarray
+    status: np.ndarray
+    liftoff: np.ndarray
+
+
+def exact_figures(
+    params: Params, waveform: AbstractWaveform | None, horizon: float, dt: float = 0.01
+) -> ExactFigures:
+    """Mean speed and cost of transport on the exact dynamics (module docstring).
+
+    `params` may be batched; a `waveform` whose `omega` has the batch shape is
+    batched with it (as in [`measure`][]); `None` means the sinusoid of eq. (13).
+    """
+    params = with_waveform_frequency(params, waveform)
+    m = measure(
+        params, z=1e30, horizon=horizon, window=min(25.0, horizon), dynamics=Exact(dt=dt),
+        waveform=waveform, contact="strict", start="relaxed",
+    )
+    status = np.asarray(m.status)
+    ok = (status == int(Status.OK)) & ~np.asarray(m.liftoff)
+    speed = np.asarray(m.mean_speed, dtype=float)
+    e_d = np.asarray(m.e_d, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cost = np.where(ok, e_d / np.abs(speed * horizon), np.nan)
+    return ExactFigures(speed=np.where(ok, speed, np.nan), cost=cost, ok=ok, status=status,
+                        liftoff=np.asarray(m.liftoff))
+
+
+def with_waveform_frequency(params: Params, waveform: AbstractWaveform | None) -> Params:
+    """`params` with `omega` set to the waveform's base frequency (and broadcast to it).
+
+    The waveform alone defines the actuation, but the exact engine (since the
+    phase-rotation rewrite of `_exact.step`) advances the phase at `params.omega`;
+    keeping the two equal makes every exact run here correct either way.
+    """
+    if waveform is None:
+        return params
+    omega = jnp.asarray(waveform.omega, params.dtype)
+    shape = np.broadcast_shapes(params.batch_shape, omega.shape)
+    values = {k: jnp.broadcast_to(v, shape) for k, v in params.broadcast().as_dict().items()}
+    values["omega"] = jnp.broadcast_to(omega, shape)
+    return Params(**values, check=False)
+
+
+class SinusoidSweep(NamedTuple):
+    """Exact figures of the sinusoids $a\\sin(\\omega t) + \\bar\\ell$ on a grid (flattened)."""
+
+    a: np.ndarray
+    omega: np.ndarray
+    speed: np.ndarray
+    cost: np.ndarray
+    ok: np.ndarray
+
+
+def default_omegas(params: Params, n: int = 32) -> np.ndarray:
+    """Log-spaced frequencies from $0.07\\,\\omega_{n,\\min}$ to $2.5\\,\\omega_{n1}$ (0.5 to 25 for the defaults)."""
+    wmin = float(jnp.minimum(jnp.minimum(params.wn1, params.wn2), params.wn3))
+    return np.geomspace(0.07 * wmin, 2.5 * float(params.wn1), n)
+
+
+def sinusoid_sweep(
+    params: Params,
+    a_max: float,
+    *,
+    omegas: np.ndarray | None = None,
+    amplitudes: int | np.ndarray = 6,
+    horizon: float = 60.0,
+    dt: float = 0.01,
+) -> SinusoidSweep:
+    """Batched exact sweep over $(a \\le a_\\max, \\omega)$ in one compiled call.
+
+    `amplitudes`: a count (equally spaced in $(0, a_\\max]$) or the values.
+    """
+    omegas = default_omegas(params) if omegas is None else np.asarray(omegas, float)
+    if np.ndim(amplitudes) == 0:
+        amps = a_max * np.arange(1, int(amplitudes) + 1) / int(amplitudes)
+    else:
+        amps = np.asarray(amplitudes, float)
+    values = {k: v for k, v in params.as_dict().items() if k not in ("a", "omega")}
+    grid = Params.grid(a=jnp.asarray(amps, params.dtype), omega=jnp.asarray(omegas, params.dtype), **values)
+    fig = exact_figures(grid, None, horizon, dt)
+    a, w = np.meshgrid(amps, omegas, indexing="ij")
+    return SinusoidSweep(a=a.ravel(), omega=w.ravel(), speed=fig.speed.ravel(), cost=fig.cost.ravel(),
+                         ok=fig.ok.ravel())
+
+
+def best_sinusoid(sweep: SinusoidSweep, v_min: float, direction: int) -> dict | None:
+    """The feasible sinusoid (no lift-off, $\\sigma\\bar v \\ge v_\\min$) of least cost; `None` if none."""
+    feasible = sweep.ok & (direction * np.nan_to_num(sweep.speed, nan=-np.inf) >= v_min)
+    if not feasible.any():
+        return None
+    i = int(np.argmin(np.where(feasible, sweep.cost, np.inf)))
+    return {"a": float(sweep.a[i]), "omega": float(sweep.omega[i]), "mean_speed": float(sweep.speed[i]),
+            "cost_of_transport": float(sweep.cost[i])}
+
+
+def refine_sinusoid(
+    params: Params,
+    a_max: float,
+    v_min: float,
+    direction: int,
+    sweep: SinusoidSweep,
+    *,
+    top: int = 3,
+    points: int = 7,
+    horizon: float = 60.0,
+    dt: float = 0.01,
+) -> dict | None:
+    """A fairer baseline: refine the best sinusoid of a coarse sweep on a local grid.
+
+    Around each of the `top` cheapest feasible sinusoids of `sweep`, a
+    `points` x `points` exact sweep over $\\omega \\in [0.85, 1.15]\\,\\omega^*$ and
+    $a \\in [0.6\\,a^*, \\min(a_\\max, 1.4\\,a^*)]$ (one compiled call for all), then
+    the cheapest feasible sinusoid of the coarse and fine grids together.
+    """
+    coarse = best_sinusoid(sweep, v_min, direction)
+    if coarse is None:
+        return None
+    feasible = sweep.ok & (direction * np.nan_to_num(sweep.speed, nan=-np.inf) >= v_min)
+    order = np.argsort(np.where(feasible, sweep.cost, np.inf))[: min(top, int(feasible.sum()))]
+    a, w = [], []
+    for i in order:
+        aa = np.linspace(0.6 * sweep.a[i], min(a_max, 1.4 * sweep.a[i]), points)
+        ww = sweep.omega[i] * np.linspace(0.85, 1.15, points)
+        ga, gw = np.meshgrid(aa, ww, indexing="ij")
+        a.append(ga.ravel())
+        w.append(gw.ravel())
+    a, w = np.concatenate(a), np.concatenate(w)
+    values = {k: v for k, v in params.as_dict().items() if k not in ("a", "omega")}
+    batch = Params(a=jnp.asarray(a, params.dtype), omega=jnp.asarray(w, params.dtype), **values)
+    fig = exact_figures(batch, None, horizon, dt)
+    fine = SinusoidSweep(a=a, omega=w, speed=fig.speed, cost=fig.cost, ok=fig.ok)
+    best = best_sinusoid(fine, v_min, direction)
+    return coarse if best is None or best["cost_of_transport"] >= coarse["cost_of_transport"] else best
+
+
+def pareto_front(speed: np.ndarray, cost: np.ndarray, ok: np.ndarray, direction: int = 1) -> np.ndarray:
+    """Indices of the non-dominated points (faster *and* cheaper is better), by increasing speed."""
+    v = direction * np.asarray(speed, float)
+    good = np.flatnonzero(np.asarray(ok) & np.isfinite(v) & np.isfinite(cost) & (v > 0))
+    order = good[np.argsort(-v[good])]
+    front, best = [], np.inf
+    for i in order:  # from the fastest down: keep a point if it is cheaper than every faster one
+        if cost[i] < best:
+            front.append(i)
+            best = cost[i]
+    return np.asarray(front[::-1], dtype=int)
+
+
+def stack_waveforms(waves: list) -> AbstractWaveform:
+    """Stack waveforms of one type along a new leading axis (for batched exact runs)."""
+    return jax.tree_util.tree_map(lambda *xs: jnp.stack([jnp.asarray(x) for x in xs]), *waves)

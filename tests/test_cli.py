@@ -1,0 +1,147 @@
+"""The `locomotion-jax` command line (typer's CliRunner; short horizons to stay fast)."""
+
+import json
+import os
+import sys
+import types
+from pathlib import Path
+
+import jax
+import locomotion_jax as lj
+import numpy as np
+import pytest
+import typer
+import xarray as xr
+from locomotion_jax import _cli, _sweep
+from typer.testing import CliRunner
+
+
+FAST = ["--z", "0.3", "--horizon", "30", "--window", "5", "--dt", "0.02"]
+runner = CliRunner()
+
+
+@pytest.fixture(autouse=True)
+def _isolate_xla_flags(monkeypatch):
+    # The CLI sets XLA_FLAGS (--cpu-devices) for its own process. Start JAX's backend
+    # first, so that this test process keeps its devices, and undo the variable after.
+    jax.devices()
+    monkeypatch.setenv("XLA_FLAGS", os.environ.get("XLA_FLAGS", ""))
+
+
+def invoke(*args: str):
+    return runner.invoke(_cli.app, list(args))
+
+
+def test_simulate_json_matches_measure_and_plots(tmp_path):
+    res = invoke("simulate", "--omega", "2", "--a", "0.05", "--t-end", "5", "--out", str(tmp_path), "--json", *FAST)
+    assert res.exit_code == 0, res.output
+    record = json.loads(res.stdout)  # stdout is exactly one JSON object
+    m = lj.measure(lj.Params(omega=2.0, a=0.05), 0.3, horizon=30.0, window=5.0, dynamics=lj.Exact(dt=0.02))
+    assert record["tau_z"] == pytest.approx(float(m.tau_z), rel=1e-12)
+    assert record["status_name"] == "OK" and record["regime_name"] == lj.Regime(int(m.regime)).name
+    assert record["t_liftoff"] == "inf"  # +inf is encoded as a string, NaN as null
+    assert record["params"]["omega"] == 2.0 and record["contact"] == "strict"
+    png = tmp_path / record["plot"].split("/")[-1]
+    assert png.exists() and png.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_simulate_text_and_not_reached_encoding():
+    # omega = 0.1: far too slow to travel z in the horizon -> tau_z is inf.
+    res = invoke("simulate", "--omega", "0.1", "--no-plot", *FAST)
+    assert res.exit_code == 0, res.output
+    assert "tau_z" in res.stdout and "inf" in res.stdout and "regime_name" in res.stdout
+    res = invoke("simulate", "--omega", "0.1", "--no-plot", "--json", *FAST)
+    assert json.loads(res.stdout)["tau_z"] == "inf" and json.loads(res.stdout)["reached"] is False
+
+
+def test_sweep_writes_and_reads_back(tmp_path):
+    out = tmp_path / "maps" / "s.nc"
+    args = ["sweep", "--omega", "2,6", "--a", "0.02:0.05:2", "--d", "0.5", "--chunk-size", "4", "--out", str(out),
+            "--no-progress", *FAST]
+    res = invoke(*args)
+    assert res.exit_code == 0, res.output
+    assert "omega[2] x a[2]" in res.stdout
+    ds = xr.load_dataset(out, engine="h5netcdf")
+    np.testing.assert_allclose(ds.a, [0.02, 0.05])
+    assert ds.attrs["fixed_d"] == 0.5 and ds.attrs["dynamics_dt"] == 0.02
+    before = dict(_sweep.STATS)
+    res = invoke(*args)  # a rerun reads the finished file back
+    assert res.exit_code == 0, res.output
+    assert dict(_sweep.STATS) == before
+
+
+@pytest.mark.parametrize(
+    "args, mentions",
+    [
+        (["sweep", "--omega", "1:25:0", "--out", "{tmp}/x.nc"], "--omega"),
+        (["sweep", "--a", "0.01:5:3", "--out", "{tmp}/x.nc"], "'a'"),
+        (["sweep", "--omega", "1:x:3", "--out", "{tmp}/x.nc"], "--omega"),
+        (["sweep", "--foo", "1", "--out", "{tmp}/x.nc"], "--foo"),
+        (["sweep", "--a", "0.05", "--out", "{tmp}/x.nc"], "nothing to sweep"),
+        (["sweep", "--omega", "1:2:2", "--out", "{tmp}/blocker/x.nc"], "Cannot write"),
+        (["simulate", "--mu-s", "0.3", "--no-plot"], "mu_s"),
+        (["simulate", "--omega", "abc"], "--omega"),
+        (["figures", "11"], "unknown figure '11'"),
+    ],
+)
+def test_argument_errors(tmp_path, args, mentions):
+    (tmp_path / "blocker").write_text("a file where a directory is needed")
+    before = dict(_sweep.STATS)
+    res = invoke(*(a.replace("{tmp}", str(tmp_path)) for a in args))
+    assert res.exit_code == 2, res.output
+    assert mentions in res.output
+    assert "Traceback" not in res.output
+    assert res.exception is None or isinstance(res.exception, SystemExit)
+    assert dict(_sweep.STATS) == before
+
+
+def test_main_prints_error_and_exits_2(capsys):
+    with pytest.raises(SystemExit) as exc:
+        _cli.main(["simulate", "--a", "-1", "--no-plot"])
+    assert exc.value.code == 2
+    assert "Error: Invalid parameter 'a'" in capsys.readouterr().err
+
+
+def test_global_options_set_jax_config():
+    try:
+        res = invoke("--no-x64", "--cpu-devices", "3", "figures", "bad")
+        assert res.exit_code == 2
+        assert jax.config.read("jax_enable_x64") is False
+        assert "--xla_force_host_platform_device_count=3" in os.environ["XLA_FLAGS"]
+    finally:
+        jax.config.update("jax_enable_x64", True)
+    assert invoke("--cpu-devices", "-1", "figures").exit_code == 2
+
+
+def test_figure_names():
+    assert _cli.figure_names(None) == list(_cli.FIGURES)
+    assert _cli.figure_names(["fig6", "4B", "figure12", "fig08", "04b"]) == ["6", "4b", "12", "8", "4b"]
+
+
+def test_optimize_registered_when_module_exists(monkeypatch):
+    fake = types.ModuleType("locomotion_jax._optimise_cli")
+
+    def register(app: typer.Typer) -> None:
+        @app.command()
+        def optimize() -> None:
+            typer.echo("optimising")
+
+    fake.register = register
+    monkeypatch.setitem(sys.modules, "locomotion_jax._optimise_cli", fake)
+    app = typer.Typer()
+
+    @app.command()
+    def other() -> None:
+        pass
+
+    _cli._register_optional(app, ("locomotion_jax._optimise_cli", "locomotion_jax._no_such_plugin"))
+    res = runner.invoke(app, ["optimize"])
+    assert res.exit_code == 0 and "optimising" in res.output
+
+
+def test_installed_plugins_are_registered():
+    commands = {c.name or c.callback.__name__ for c in _cli.app.registered_commands}
+    assert {"simulate", "sweep", "figures"} <= commands
+    for module, command in (("_optimise_cli", "optimize"), ("_animate_cli", "animate")):
+        if (Path(_cli.__file__).parent / f"{module}.py").exists():
+            assert command in commands

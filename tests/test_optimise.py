@@ -1,0 +1,166 @@
+"""The actuation optimiser (SPEC §7): gradients, constraint handling, verification, inputs, CLI.
+
+Problems are tiny (few harmonics, one coarse smoothing stage, a few Adam steps,
+short exact verification) so the file stays well under the test budget; the
+real runs are in `experiments/optimal_actuation.py`.
+"""
+
+import json
+import math
+
+import jax
+import jax.numpy as jnp
+import locomotion_jax as lj
+import numpy as np
+import pytest
+import typer
+from locomotion_jax import _constraints, _objective, _optimise, _pareto
+from locomotion_jax._optimise_cli import register
+from locomotion_jax._optimum import Settings
+from typer.testing import CliRunner
+
+
+TINY = Settings(starts=2, eps_schedule=(1e-2,), outer=1, inner=4, corrections=0, verify_horizon=10.0,
+                transient=4.0, measured=3.0, refine_baseline=False)
+
+
+@pytest.fixture(scope="module")
+def tiny_sweep():
+    # Two amplitudes x three frequencies around omega = 4, exact model, short horizon.
+    return _pareto.sinusoid_sweep(lj.Params(), 0.05, omegas=np.array([2.0, 4.0, 6.0]), amplitudes=2,
+                                  horizon=TINY.verify_horizon)
+
+
+def _problem(eps, free_omega=True, detach=None):
+    p = lj.Params()
+    plan = _objective.make_plan(p, 4.0, 4.0, eps, 3.0, 3.0, detach)
+    return _optimise._Problem(p, jnp.asarray(0.05), jnp.asarray(1.0), jnp.asarray(math.log(2.0)),
+                              jnp.asarray(math.log(8.0)), plan, 0.005, free_omega)
+
+
+def test_gradient_matches_finite_differences():
+    # Reverse mode through the checkpointed RK4 rollout vs central differences (float64),
+    # for the cost of transport and both constraints, along a random direction.
+    prob = _problem(1e-2)
+    theta = {"cos": jnp.array([0.1, -0.2]), "sin": jnp.array([0.8, 0.15]), "log_omega": jnp.asarray(math.log(4.0))}
+    eps, v_t, margin = jnp.asarray(1e-2), jnp.asarray(0.03), jnp.asarray(0.05)
+    rng = np.random.default_rng(1)
+    direction = jax.tree_util.tree_map(lambda x: jnp.asarray(rng.normal(size=x.shape)), theta)
+
+    @jax.jit
+    def f(th):  # cost, speed constraint, normal-force constraint
+        cost, g, _ = _optimise.terms(th, prob, eps, v_t, margin)
+        return jnp.concatenate([cost[None], g])
+
+    jac = jax.jit(jax.jacrev(f))(theta)
+    ad = sum(jnp.tensordot(jac[k], direction[k], axes=direction[k].ndim) for k in theta)
+    h = 1e-5
+    plus = jax.tree_util.tree_map(lambda x, d: x + h * d, theta, direction)
+    minus = jax.tree_util.tree_map(lambda x, d: x - h * d, theta, direction)
+    fd = (f(plus) - f(minus)) / (2 * h)
+    np.testing.assert_allclose(ad, fd, rtol=1e-5, atol=1e-8)
+    assert np.all(np.abs(np.asarray(ad)) > 1e-3)  # a real check: no vanishing derivative
+
+
+def test_stroke_is_exact_and_projection_lands_on_the_limit():
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        cos, sin = rng.normal(size=4), rng.normal(size=4)
+        t = np.linspace(0, 2 * np.pi, 100_001)
+        dense = np.max(np.abs(np.asarray(lj.Fourier(cos, sin, 1.0, 0.0)(t)[0])))
+        exact = float(_constraints.stroke(jnp.asarray(cos), jnp.asarray(sin)))
+        assert dense <= exact <= dense * (1 + 1e-8)
+        c2, s2 = _constraints.project_stroke(jnp.asarray(cos), jnp.asarray(sin), 0.05)
+        assert float(_constraints.stroke(c2, s2)) == pytest.approx(0.05, rel=1e-12)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(v_min=-0.02, a_max=0.05), "v_min"),
+        (dict(v_min=-0.02, a_max=0.05, direction=1), "v_min"),
+        (dict(v_min=0.02, a_max=0.13), "a_max"),  # 1 - k a |d| / lbar < 0 at a = 0.13
+        (dict(v_min=0.02, a_max=0.05, harmonics=0), "harmonics"),
+        (dict(v_min=0.02, a_max=0.05, direction=2), "direction"),
+        (dict(v_min=0.0, a_max=0.05), "v_min"),
+    ],
+)
+def test_bad_inputs(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        _optimise.optimise(lj.Params(), **kwargs)
+
+
+def test_d0_equal_masses_cannot_move():
+    # With d = 0 and m1 = m2 the model is symmetric under x -> -x with the masses swapped,
+    # so no waveform moves the centre of mass; use a time-asymmetric, even-harmonic one.
+    p = lj.Params(d=0.0, mhat=0.5)
+    wave = lj.Fourier(np.array([0.01, -0.012, 0.004]), np.array([0.03, 0.015, -0.006]), 3.0, 3.0)
+    fig = _pareto.exact_figures(p, wave, TINY.verify_horizon)  # shapes shared with other tests: one compile
+    assert bool(fig.ok) and abs(float(fig.speed)) < 1e-10
+    tr = lj.simulate(_pareto.with_waveform_frequency(p, wave), 30.0, np.linspace(0, 30, 61), waveform=wave,
+                     start="relaxed")
+    np.testing.assert_allclose(tr.X, tr.X[0], atol=1e-10)
+    # The smoothed rollout of the optimiser keeps the symmetry too.
+    plan = _objective.make_plan(p, 3.0, 3.0, 1e-2, 4.0, 4.0)
+    r = _objective.rollout(p, wave, jnp.asarray(1e-2), plan, 0.005)
+    assert abs(float(r.distance)) < 1e-10 and float(r.dissipated) > 0
+
+
+@pytest.fixture(scope="module")
+def tiny_optimum(tiny_sweep):
+    return _optimise.optimise(lj.Params(), 0.01, 0.05, omega=4.0, harmonics=2, settings=TINY, sweep=tiny_sweep)
+
+
+def test_optimum_verified_and_no_worse_than_initial_guess(tiny_optimum):
+    opt = tiny_optimum
+    assert opt.feasible_exact and all(opt.constraints_exact.values())
+    assert opt.mean_speed_exact >= 0.01 and opt.stroke_exact <= 0.05 * (1 + 1e-12)
+    assert math.isfinite(opt.initial_cost_of_transport_exact)
+    assert opt.cost_of_transport_exact <= opt.initial_cost_of_transport_exact + 1e-12
+    # The reported figures are the exact model's: re-measure the returned waveform.
+    fig = _pareto.exact_figures(lj.Params(), opt.waveform, TINY.verify_horizon)
+    assert float(fig.cost) == pytest.approx(opt.cost_of_transport_exact, rel=1e-6)
+    assert not opt.liftoff_exact
+    names = {c["candidate"].split()[0] for c in opt.candidates}
+    assert names == {"initial", "optimised"}
+    d = opt.to_dict()
+    json.dumps(d)
+    expected = 1 - opt.cost_of_transport_exact / opt.sinusoid_cost_of_transport
+    assert d["improvement_vs_sinusoid"] == pytest.approx(expected)
+
+
+def _app():
+    app = typer.Typer()
+    register(app)
+
+    @app.command("noop")  # a second command keeps typer in multi-command mode, as in _cli.py
+    def noop() -> None:
+        pass
+
+    return app
+
+
+def test_cli_infeasible_requirement_is_reported_infeasible():
+    # Nothing reaches a mean speed of 0.5 with a stroke of 0.03: the result must say so.
+    # Same shapes and static settings as TINY, so the compiled functions are reused.
+    args = ["optimize", "--v-min", "0.5", "--a-max", "0.03", "--omega", "4", "--harmonics", "2", "--json",
+            "--starts", "2", "--outer", "1", "--inner", "4", "--eps", "1e-2", "--horizon", "10",
+            "--transient", "4", "--measured", "3", "--corrections", "0",
+            "--sweep-omegas", "3", "--sweep-amplitudes", "2"]
+    res = CliRunner().invoke(_app(), args)
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.stdout)
+    for key in ("mean_speed_exact", "cost_of_transport_exact", "feasible_exact", "sinusoid_cost_of_transport",
+                "improvement_vs_sinusoid"):
+        assert key in out
+    assert out["feasible_exact"] is False
+    assert out["constraints_exact"]["speed"] is False
+    assert out["sinusoid"] is None and out["improvement_vs_sinusoid"] is None
+
+
+def test_cli_bad_input_names_the_parameter():
+    res = CliRunner().invoke(_app(), ["optimize", "--v-min", "-0.02", "--a-max", "0.05"])
+    assert res.exit_code == 2
+    assert "v_min" in res.output and "direction" in res.output
+    res = CliRunner().invoke(_app(), ["optimize", "--v-min", "0.02", "--a-max", "0.2"])
+    assert res.exit_code == 2 and "a_max" in res.output

@@ -1,0 +1,220 @@
+"""The sweep engine: equality with `measure`, chunking, persistence, sharding, bad input.
+
+Kept fast: short horizons, tiny grids, `Exact(dt=0.02)`, and chunk shapes shared
+between tests so that few compilations are needed.
+"""
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import jax
+import locomotion_jax as lj
+import numpy as np
+import pytest
+import xarray as xr
+from locomotion_jax import _sharding, _store, _sweep
+
+
+FAST = dict(z=0.3, horizon=30.0, window=5.0, dynamics=lj.Exact(dt=0.02), progress=False)
+AXES = {"omega": [2.0, 6.0, 9.5, 16.0, 23.0], "a": [0.02, 0.05]}  # 10 configurations
+EXACT_FIELDS = ("reached", "regime", "status", "liftoff")
+# Iteration counts: measure() itself gives 5993 vs 6009 steps for one configuration in a
+# batch of 1 vs 2 (round-off decides some trial steps); the physics agrees to 1e-14.
+COUNT_FIELDS = ("n_steps", "n_switch")
+
+
+def assert_same(actual, expected, rtol=1e-7):
+    """Dataset variables (or arrays by name) equal up to round-off.
+
+    The batch width changes XLA's vectorisation and so the round-off; located event
+    times then move by ~1e-9 (relative), which is what `rtol` allows for.
+    """
+    for name in _sweep.MEASURE_FIELDS:
+        a, b = np.asarray(actual[name]), np.asarray(expected[name])
+        if name in EXACT_FIELDS:
+            np.testing.assert_array_equal(a, b, err_msg=name)
+        elif name in COUNT_FIELDS:
+            np.testing.assert_allclose(a, b, rtol=0.01, atol=2, err_msg=name)
+        else:
+            np.testing.assert_allclose(a, b, rtol=rtol, atol=1e-12, equal_nan=True, err_msg=name)
+
+
+@pytest.fixture(scope="module")
+def two_devices(tmp_path_factory):
+    """The reference sweep in a subprocess with 2 forced host devices, started early so
+    that it runs while the other tests do (XLA_FLAGS must be set before JAX starts)."""
+    path = tmp_path_factory.mktemp("two") / "two.nc"
+    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2", "JAX_PLATFORMS": "cpu"}
+    proc = subprocess.Popen([sys.executable, "-c", HELPER, json.dumps(AXES), str(path)], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    yield proc, path
+    if proc.poll() is None:
+        proc.kill()
+        proc.communicate()
+
+
+@pytest.fixture(scope="module")
+def reference(two_devices):
+    """The 10-configuration sweep in memory (chunks of 4: the last one is padded)."""
+    before = _sweep.STATS["chunks_computed"]
+    ds = lj.sweep(AXES, fixed={"d": 0.5}, chunk_size=4, **FAST)
+    assert _sweep.STATS["chunks_computed"] - before == 3
+    return ds
+
+
+def test_sweep_matches_measure(reference):
+    ds = reference
+    assert ds.sizes == {"omega": 5, "a": 2}
+    np.testing.assert_array_equal(ds.omega, AXES["omega"])
+    for name in _sweep.MEASURE_FIELDS:
+        assert ds[name].dims == ("omega", "a")
+    assert ds.attrs["version"] == lj.__version__
+    assert ds.attrs["dynamics"] == "exact" and ds.attrs["dynamics_dt"] == 0.02
+    assert ds.attrs["fixed_d"] == 0.5 and ds.attrs["fixed_mu_s"] == lj.DEFAULTS["mu_s"]
+    assert (ds.attrs["dtype"], ds.attrs["contact"], ds.attrs["start"]) == ("float64", "strict", "paper")
+    assert ds.attrs["z"] == 0.3 and ds.attrs["horizon"] == 30.0 and ds.attrs["window"] == 5.0
+    assert ds.tau_z.dtype == np.float64
+    # The grid covers stick-slip, slip and lift-off, so all paths are compared.
+    assert {int(s) for s in np.unique(ds.status)} >= {lj.Status.OK, lj.Status.LIFTOFF}
+    kw = {k: v for k, v in FAST.items() if k not in ("progress", "z")}
+    # Each configuration on its own (a batch of one, which XLA compiles differently).
+    for i, omega in enumerate(AXES["omega"]):
+        for j, a in enumerate(AXES["a"]):
+            m = lj.measure(lj.Params(omega=omega, a=a, d=0.5), FAST["z"], **kw).to_numpy()
+            assert_same(ds.isel(omega=i, a=j), m)
+
+
+def test_resume_after_interruption_and_read_back(tmp_path, monkeypatch, reference):
+    path = tmp_path / "map.nc"
+    traces = _sharding.TRACES["run_chunk"]
+    real_save = _store.ChunkStore.save
+    calls = []
+
+    def interrupted_save(self, index, arrays):
+        calls.append(index)
+        if len(calls) == 2:
+            raise KeyboardInterrupt("simulated interruption after the first chunk")
+        real_save(self, index, arrays)
+
+    # Sub-batches of one configuration per device: covers the optional lax.map path.
+    monkeypatch.setattr(_sharding, "MICRO_BATCH", 1)
+    monkeypatch.setattr(_store.ChunkStore, "save", interrupted_save)
+    with pytest.raises(KeyboardInterrupt):
+        lj.sweep(AXES, chunk_size=2, path=path, **FAST)
+    monkeypatch.setattr(_store.ChunkStore, "save", real_save)
+    parts = tmp_path / "map.nc.parts"
+    assert sorted(p.name for p in parts.iterdir()) == ["chunk_000000.npz", "manifest.json"]
+    assert not path.exists()
+    assert json.loads((parts / "manifest.json").read_text())["spec"]["axes"]["omega"]["n"] == 5
+
+    before = dict(_sweep.STATS)
+    resumed = lj.sweep(AXES, chunk_size=2, path=path, **FAST)
+    assert _sweep.STATS["chunks_computed"] - before.get("chunks_computed", 0) == 4  # chunks 1..4 only
+    assert _sweep.STATS["chunks_loaded"] - before.get("chunks_loaded", 0) == 1
+    # Five chunks of the same padded shape, interrupted and resumed: one trace.
+    assert _sharding.TRACES["run_chunk"] - traces == 1
+    assert path.exists() and not parts.exists()
+    uninterrupted = lj.sweep(AXES, chunk_size=2, **FAST)
+    xr.testing.assert_identical(resumed, uninterrupted)
+    assert_same(resumed, reference)
+
+    # A finished sweep is read back, not recomputed (and a different chunk size is irrelevant).
+    before = dict(_sweep.STATS)
+    again = lj.sweep(AXES, chunk_size=64, path=path, **FAST)
+    assert dict(_sweep.STATS) == before
+    xr.testing.assert_identical(again, resumed)
+
+    # A different specification at the same path is refused before computing.
+    with pytest.raises(ValueError, match="different specification(?s:.*)horizon"):
+        lj.sweep(AXES, chunk_size=2, path=path, **{**FAST, "horizon": 31.0})
+    with pytest.raises(ValueError, match="different specification(?s:.*)axes"):
+        lj.sweep({**AXES, "a": [0.02, 0.06]}, chunk_size=2, path=path, **FAST)
+    assert dict(_sweep.STATS) == before
+
+
+def test_overwrite_replaces_foreign_file(tmp_path, monkeypatch):
+    monkeypatch.setattr(_sharding, "MICRO_BATCH", 1)  # shares the compilation of the test above
+    path = tmp_path / "x.nc"
+    path.write_text("not a sweep")
+    with pytest.raises(ValueError, match="not a locomotion_jax sweep"):
+        lj.sweep({"omega": [2.0, 6.0]}, chunk_size=2, path=path, **FAST)
+    ds = lj.sweep({"omega": [2.0, 6.0]}, chunk_size=2, path=path, overwrite=True, **FAST)
+    xr.testing.assert_identical(xr.load_dataset(path, engine="h5netcdf"), ds)
+
+
+def test_list_mode_flags_invalid_configurations(reference):
+    # mu_s < mu_k is outside the model: flagged per configuration, others unaffected.
+    axes = {"omega": [2.0, 2.0, 6.0, 6.0], "mu_s": [0.7, 0.4, 0.7, 0.4]}
+    ds = lj.sweep(axes, mode="list", fixed={"a": 0.05}, chunk_size=4, on_invalid="flag", **FAST)
+    assert ds.sizes == {"config": 4} and ds.mu_s.dims == ("config",)
+    np.testing.assert_array_equal(ds.status, [0, lj.Status.INVALID, 0, lj.Status.INVALID])
+    assert_same(ds.isel(config=[0, 2]), reference.sel(a=0.05, omega=[2.0, 6.0]).rename(omega="config"))
+    with pytest.raises(ValueError, match=r"2 of 4 .*mu_s\[1\]=0.4.*Invalid parameter 'mu_s'"):
+        lj.sweep(axes, mode="list", chunk_size=4, **FAST)
+
+
+def test_omega_over_wn1_axis(reference):
+    ds = lj.sweep({"omega_over_wn1": [0.2, 0.6], "a": AXES["a"]}, chunk_size=4, **FAST)
+    np.testing.assert_allclose(ds.omega.isel(a=0), [2.0, 6.0])  # wn1 = 10 at the defaults
+    assert_same(ds, reference.sel(omega=[2.0, 6.0]).rename(omega="omega_over_wn1"))
+
+
+HELPER = textwrap.dedent(
+    """
+    import json, sys
+    import jax
+    jax.config.update("jax_enable_x64", True)
+    import locomotion_jax as lj
+    from locomotion_jax import _sharding
+    axes, path = json.loads(sys.argv[1]), sys.argv[2]
+    lj.sweep(axes, chunk_size=4, path=path, z=0.3, horizon=30.0, window=5.0,
+             dynamics=lj.Exact(dt=0.02), progress=False)
+    print(json.dumps({"devices": jax.device_count(), "traces": _sharding.TRACES["run_chunk"]}))
+    """
+)
+
+
+def test_two_forced_host_devices_equal_one(two_devices, reference):
+    proc, path = two_devices
+    stdout, stderr = proc.communicate(timeout=300)
+    assert proc.returncode == 0, stderr
+    info = json.loads(stdout.strip().splitlines()[-1])
+    assert info == {"devices": 2, "traces": 1}
+    two = xr.load_dataset(path, engine="h5netcdf")
+    assert two.attrs["n_devices"] == 2 and reference.attrs["n_devices"] == jax.device_count() == 1
+    assert_same(two, reference)
+
+
+@pytest.mark.parametrize(
+    "axes, kwargs, message",
+    [
+        ({"omega": []}, {}, "Axis 'omega' is empty"),
+        ({"omgea": [1.0]}, {}, "Unknown parameter 'omgea'"),
+        ({"a": [0.05, 4.0]}, {}, r"a\[1\]=4.0: Invalid parameter 'a'.*0 <= a < lbar"),
+        ({"omega": [1.0, 2.0], "a": [0.1]}, {"mode": "list"}, "equal length"),
+        ({"omega": [1.0]}, {"fixed": {"omega": 2.0}}, "both as an axis and as a fixed"),
+        ({"omega": [1.0]}, {"z": 0.0}, "z must be"),
+        ({"omega": [1.0]}, {"chunk_size": 0}, "chunk_size"),
+        ({"omega": [1.0]}, {"dtype": "int32"}, "floating dtype"),
+        ({"omega": np.ones((2, 2))}, {}, "1-D"),
+    ],
+)
+def test_bad_input_fails_before_computing(axes, kwargs, message):
+    before, traces = dict(_sweep.STATS), dict(_sharding.TRACES)
+    with pytest.raises(ValueError, match=message):
+        lj.sweep(axes, **{**FAST, **kwargs})
+    assert dict(_sweep.STATS) == before and dict(_sharding.TRACES) == traces
+
+
+def test_unwritable_path_fails_before_computing(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    before = dict(_sweep.STATS)
+    with pytest.raises(ValueError, match="Cannot write the sweep output"):
+        lj.sweep({"omega": [1.0]}, path=blocker / "sub" / "out.nc", **FAST)
+    with pytest.raises(ValueError, match="is a directory"):
+        lj.sweep({"omega": [1.0]}, path=tmp_path, **FAST)
+    assert dict(_sweep.STATS) == before
