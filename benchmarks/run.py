@@ -129,9 +129,8 @@ def setup_jax():
 def case_exact(spec: dict) -> dict:
     jax = setup_jax()
     import jax.numpy as jnp
-    import numpy as np
-
     import locomotion_jax as lj
+    import numpy as np
 
     rss0 = maxrss_mb()
     clock = CompileClock()
@@ -166,7 +165,6 @@ def _chunk_runner(vals, n_dev, H, dyn, max_steps, micro, z=1e30):
     import jax.numpy as jnp
     import numpy as np
     from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
-
     from locomotion_jax import _sharding
     from locomotion_jax._params import PARAM_NAMES, Params
 
@@ -184,10 +182,9 @@ def _chunk_runner(vals, n_dev, H, dyn, max_steps, micro, z=1e30):
 
 def case_sharded(spec: dict) -> dict:
     jax = setup_jax()
-    import numpy as np
-
     import locomotion_jax as lj
-    from locomotion_jax._batch import MICRO_BATCH_CPU, default_max_steps
+    import numpy as np
+    from locomotion_jax._batch import default_max_steps, MICRO_BATCH_CPU
     from locomotion_jax._params import DEFAULTS, PARAM_NAMES
 
     clock = CompileClock()
@@ -244,9 +241,8 @@ def case_sharded(spec: dict) -> dict:
 
 def case_smoothed(spec: dict) -> dict:
     setup_jax()
-    import numpy as np
-
     import locomotion_jax as lj
+    import numpy as np
 
     clock = CompileClock()
     om, a = configs(spec["B"])
@@ -293,9 +289,8 @@ def case_accuracy(spec: dict) -> dict:
 
     jax = setup_jax()
     import jax.numpy as jnp
-    import numpy as np
-
     import locomotion_jax as lj
+    import numpy as np
 
     n, T, H = spec["n"], spec["T"], spec["tau_horizon"]
     om, a = configs(n)
@@ -326,9 +321,8 @@ def case_accuracy(spec: dict) -> dict:
 def case_schedule(spec: dict) -> dict:
     """Fig. 8 sweep (omega/wn1 in [0.05, 2.5], a = 0.05, z = 5, paper contact) in three orders."""
     jax = setup_jax()
-    import numpy as np
-
     import locomotion_jax as lj
+    import numpy as np
     from locomotion_jax import _schedule, _sharding
     from locomotion_jax._batch import MICRO_BATCH_CPU
     from locomotion_jax._params import DEFAULTS, PARAM_NAMES
@@ -576,7 +570,7 @@ def report(res: dict, meta: dict) -> str:
 
     def row(name, dtype, dt, ndev, batch, x, work, rss, iters=""):
         w, c, b = work / x["wall"], work / x["cpu"], work / x["busy"] if x.get("busy") else math.nan
-        per_core = fmt(c / ndev / base["cpu"]) if base else "-"
+        per_core = fmt(c / base["cpu"]) if base else "-"
         two = fmt(b / (2 * base["cpu"])) if base and math.isfinite(b) else "-"
         L.append(f"| {name} | {dtype} | {dt} | {ndev} | {batch} | {x['compile']:.1f} | {x['wall']:.3g} | {fmt(w)} | "
                  f"{fmt(c)} | {fmt(b)} | {per_core} | {two} | {rss:.0f} | {iters} |")

@@ -9,7 +9,7 @@ import numpy as np
 
 from . import _exact as exact, _model as model
 from ._actuation import AbstractWaveform
-from ._batch import MICRO_BATCH_CPU, default_max_steps, prepare, safe_params, unflatten
+from ._batch import default_max_steps, MICRO_BATCH_CPU, prepare, safe_params, unflatten
 from ._custom_types import Array, ArrayLike, Contact
 from ._dynamics import AbstractDynamics, Exact, Smoothed
 from ._params import Params
