@@ -16,6 +16,7 @@ import numpy as np
 from . import _exact as exact, _model as model
 from ._actuation import AbstractWaveform
 from ._batch import default_max_steps, horizon_bound, map_batched, prepare, safe_params, unflatten
+from ._compile import engine_jit
 from ._dynamics import AbstractDynamics, Exact, Smoothed
 from ._params import Params
 from ._results import Measurement
@@ -143,10 +144,12 @@ def _exact_one(params, wave, z, horizon, window, contact, start, dt, max_steps):
     )
 
 
-@eqx.filter_jit
 def _exact_batch(params, wave, wave_axes, z, horizon, window, contact, start, dt, max_steps):
     fn = lambda p, w: _exact_one(p, w, z, horizon, window, contact, start, dt, max_steps)
     return map_batched(fn, params, wave, wave_axes)
+
+
+_exact_batch = engine_jit(_exact_batch, ("wave_axes", "contact", "start", "dt"))
 
 
 def check_measure_args(z: float, horizon: float, window: float) -> None:

@@ -26,6 +26,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 
 from ._actuation import Sinusoid
+from ._compile import engine_jit
 from ._dynamics import AbstractDynamics, Exact, Smoothed
 from ._measure import _exact_one
 from ._params import PARAM_NAMES, Params
@@ -60,7 +61,6 @@ def device_count(mesh: Mesh) -> int:
     return int(mesh.devices.size)
 
 
-@eqx.filter_jit
 def _run_chunk(flat: Params, zhw: jax.Array, dynamics: AbstractDynamics, contact: str, start: str,
                max_steps: int, mesh: Mesh, micro_batch: int | None) -> dict[str, jax.Array]:
     # Runs only while tracing: counts compilations, not calls.
@@ -92,6 +92,9 @@ def _run_chunk(flat: Params, zhw: jax.Array, dynamics: AbstractDynamics, contact
         local, mesh=mesh, in_specs=(P(BATCH_AXIS), P(), P()), out_specs=P(BATCH_AXIS), check_vma=False
     )
     return sharded(flat, zhw, dynamics)
+
+
+_run_chunk = engine_jit(_run_chunk, ("contact", "start", "max_steps", "mesh", "micro_batch"))
 
 
 def _global_array(host: np.ndarray, sharding: NamedSharding) -> jax.Array:

@@ -10,6 +10,7 @@ import numpy as np
 from . import _exact as exact, _model as model
 from ._actuation import AbstractWaveform
 from ._batch import default_max_steps, MICRO_BATCH_CPU, prepare, safe_params, unflatten
+from ._compile import engine_jit
 from ._custom_types import Array, ArrayLike, Contact
 from ._dynamics import AbstractDynamics, Exact, Smoothed
 from ._params import Params
@@ -88,7 +89,6 @@ def _run(params, wave, wave_axes, save_at, contact, start, dt, max_steps):
     return rows, valid_rows, status, s.t_liftoff, s.n_switch
 
 
-@eqx.filter_jit
 def _exact_batch(params, wave, wave_axes, save_at, contact, start, dt, max_steps):
     n = params.omega.shape[0]
     mb = MICRO_BATCH_CPU if jax.default_backend() == "cpu" else None
@@ -106,6 +106,9 @@ def _exact_batch(params, wave, wave_axes, save_at, contact, start, dt, max_steps
     else:
         out = jax.lax.map(lambda a: run(*a), (params_k, jax.tree_util.tree_map(grow, wave)))
     return jax.tree_util.tree_map(lambda x: x.reshape((k * mb,) + x.shape[2:])[:n], out)
+
+
+_exact_batch = engine_jit(_exact_batch, ("wave_axes", "contact", "start", "dt"))
 
 
 def _trajectory(params, wave, wave_axes, contact, start, save_at, rows, valid, status, t_lift, n_switch):

@@ -1,0 +1,25 @@
+"""How the exact engine's batched loops are compiled.
+
+`jax.jit` with static arguments named, plus XLA options for the host CPU.
+`jax.jit` (unlike `equinox.filter_jit`) returns as soon as the work is
+dispatched, so a caller can prepare the next chunk while a device computes.
+"""
+
+from collections.abc import Callable, Sequence
+
+import jax
+
+
+COMPILER_OPTIONS: dict[str, str] = {"xla_cpu_prefer_vector_width": "512"}
+"""XLA options of the engine's compilations.
+
+XLA's CPU backend asks LLVM for 256-bit vectors by default; on a CPU with AVX-512
+the loop body's elementwise kernels (64 lanes each) then run in half as many
+instructions at 512 bits: 1.15x on the exact engine, same results (benchmarks/NOTES.md).
+It is a preference: LLVM keeps to the vector width the CPU has, and backends
+other than the CPU do not read `xla_cpu_*` options."""
+
+
+def engine_jit(fn: Callable, static_argnames: Sequence[str]) -> Callable:
+    """`jax.jit(fn)` with [`COMPILER_OPTIONS`][] and the given static arguments."""
+    return jax.jit(fn, static_argnames=tuple(static_argnames), compiler_options=COMPILER_OPTIONS)
