@@ -39,6 +39,7 @@ Method:
 import math
 import sys
 import time
+from collections import Counter
 from typing import Any
 
 import equinox as eqx
@@ -146,6 +147,12 @@ def _optimizer() -> optax.GradientTransformation:
     return optax.chain(optax.clip_by_global_norm(1.0), optax.scale_by_adam())
 
 
+TRACES: Counter = Counter()
+"""Python-level traces of the jitted blocks (keys `"block"`, `"evaluate"`): a test
+checks that a whole optimisation (every start, smoothing stage and outer
+iteration) compiles each once."""
+
+
 class _Best(eqx.Module):
     theta: dict
     cost: jax.Array
@@ -154,6 +161,7 @@ class _Best(eqx.Module):
 @eqx.filter_jit
 def _block(theta, opt_state, best, prob, eps, v_target, margin, lam, rho, weight, lr, steps: int):
     """`steps` Adam steps of size `lr` on the augmented Lagrangian for every start (vmapped)."""
+    TRACES["block"] += 1  # runs only while tracing
     opt = _optimizer()
     grad_fn = jax.value_and_grad(_lagrangian, has_aux=True)
 
@@ -179,6 +187,7 @@ def _block(theta, opt_state, best, prob, eps, v_target, margin, lam, rho, weight
 
 @eqx.filter_jit
 def _evaluate(theta, prob, eps, v_target, margin):
+    TRACES["evaluate"] += 1
     fn = lambda th, v, m: terms(th, prob, eps, v, m)
     return jax.vmap(fn)(theta, v_target, margin)
 

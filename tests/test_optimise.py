@@ -8,6 +8,7 @@ real runs are in `experiments/optimal_actuation.py`.
 import json
 import math
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import locomotion_jax as lj
@@ -109,6 +110,24 @@ def test_d0_equal_masses_cannot_move():
 @pytest.fixture(scope="module")
 def tiny_optimum(tiny_sweep):
     return _optimise.optimise(lj.Params(), 0.01, 0.05, omega=4.0, harmonics=2, settings=TINY, sweep=tiny_sweep)
+
+
+def test_compilations_per_optimisation(tiny_sweep):
+    # The smoothed RK4's step count is a compiled shape set by eps (stability), so
+    # the Adam block is traced once per smoothing stage: never per outer iteration,
+    # start or call. `_evaluate` also runs once on all candidates (another batch).
+    settings = eqx.tree_at(lambda s: (s.eps_schedule, s.outer), TINY, ((1e-2, 5e-3), 2))
+    jax.clear_caches()
+    run = lambda v: _optimise.optimise(lj.Params(), v, 0.05, omega=4.0, harmonics=2, settings=settings,
+                                       sweep=tiny_sweep)
+    before = dict(_optimise.TRACES)
+    run(0.01)
+    grew = {k: _optimise.TRACES[k] - before.get(k, 0) for k in ("block", "evaluate")}
+    assert grew == {"block": 2, "evaluate": 3}
+    # Another requirement of the same problem size: nothing is traced again.
+    before = dict(_optimise.TRACES)
+    run(0.012)
+    assert dict(_optimise.TRACES) == before
 
 
 def test_optimum_verified_and_no_worse_than_initial_guess(tiny_optimum):
