@@ -9,25 +9,17 @@ from pathlib import Path
 
 import typer
 
-from ._params import DEFAULTS
+from ._cli_options import expand, model_options, run_options, to_params, Values
 
 
 def register(app: typer.Typer) -> None:
     """Add the `animate` subcommand to `app`."""
 
     @app.command("animate")
+    @expand(model=model_options(), run=run_options(("contact", "start", "dt")))
     def animate(
-        omega: float = typer.Option(DEFAULTS["omega"], "--omega", help="Actuation frequency (eq. 13)."),
-        omega_over_wn1: float | None = typer.Option(None, "--omega-over-wn1",
-                                                    help="Give omega as a multiple of wn1 instead."),
-        a: float = typer.Option(DEFAULTS["a"], "--a", help="Actuation amplitude (eq. 13)."),
-        d: float = typer.Option(DEFAULTS["d"], "--d", help="Vertical offset of the spring."),
-        mhat: float = typer.Option(DEFAULTS["mhat"], "--mhat", help="Mass ratio m1 / (m1 + m2)."),
-        mu_s: float = typer.Option(DEFAULTS["mu_s"], "--mu-s", help="Static friction coefficient."),
-        mu_k: float = typer.Option(DEFAULTS["mu_k"], "--mu-k", help="Kinetic friction coefficient."),
-        k: float = typer.Option(DEFAULTS["k"], "--k", help="Spring stiffness."),
-        c: float = typer.Option(DEFAULTS["c"], "--c", help="Linear damping."),
-        lbar: float = typer.Option(DEFAULTS["lbar"], "--lbar", help="Mean rest length (eq. 13)."),
+        *,
+        model: Values,
         t_from: float | None = typer.Option(
             None, "--t-from", help="First animated time (default: two actuation periods before --t-end)."),
         t_end: float = typer.Option(40.0, "--t-end", help="Last animated time (the simulation runs from t = 0)."),
@@ -35,10 +27,7 @@ def register(app: typer.Typer) -> None:
         fps: float = typer.Option(12.0, "--fps", help="Frames per second of the GIF."),
         dpi: float = typer.Option(60.0, "--dpi", help="Resolution of the GIF."),
         trace: bool = typer.Option(True, "--trace/--no-trace", help="Add the panel of displacements vs time."),
-        contact: str = typer.Option("strict", "--contact",
-                                    help="'strict' (stop at lift-off) or 'paper' (n_i = |N_i|, flagged)."),
-        start: str = typer.Option("paper", "--start", help="'paper' (eq. 14) or 'relaxed' (spring at rest)."),
-        dt: float = typer.Option(0.01, "--dt", help="RK4 step of the exact hybrid integrator."),
+        run: Values,
         out: Path = typer.Option(Path("animation.gif"), "--out", help="Output GIF file."),
     ) -> None:
         """Simulate one configuration on the exact model and write an animated GIF of it.
@@ -51,13 +40,10 @@ def register(app: typer.Typer) -> None:
 
         from ._animation import animate as animate_fn, save_gif, stuck_masks
         from ._dynamics import Exact
-        from ._params import Params
         from ._simulate import simulate
 
         try:
-            params = Params(k=k, c=c, d=d, lbar=lbar, a=a, omega=omega, mu_s=mu_s, mu_k=mu_k, mhat=mhat)
-            if omega_over_wn1 is not None:
-                params = params.replace(omega=omega_over_wn1 * float(params.wn1))
+            params = to_params(model)
             w = float(params.omega)
             if not (math.isfinite(t_end) and t_end > 0):
                 raise ValueError(f"--t-end must be a finite number > 0, got {t_end!r}.")
@@ -71,14 +57,15 @@ def register(app: typer.Typer) -> None:
                 raise ValueError(f"--fps and --dpi must be > 0, got {fps!r} and {dpi!r}.")
             if out.suffix.lower() != ".gif":
                 raise ValueError(f"--out must name a .gif file, got {str(out)!r}.")
-            traj = simulate(params, t_end, np.linspace(t_from, t_end, frames), dynamics=Exact(dt=dt),
-                            contact=contact, start=start)
+            traj = simulate(params, t_end, np.linspace(t_from, t_end, frames), dynamics=Exact(dt=run["dt"]),
+                            contact=run["contact"], start=run["start"])
             if not np.asarray(traj.valid).any():
                 raise ValueError(
                     f"lift-off at t = {float(np.asarray(traj.t_liftoff)):.4g}, before the animated span "
                     f"({t_from:.4g}..{t_end:.4g}): the model stops applying there (a normal force reached zero). "
                     "Animate an earlier span (--t-from, --t-end), or use --contact paper to integrate through it."
                 )
+            a, d, mhat = model["a"], model["d"], model["mhat"]
             title = f"omega = {w:.4g} ({w / float(params.wn1):.3g} wn1), a = {a:g}, d = {d:g}, mhat = {mhat:g}"
             anim = animate_fn(traj, params, max_frames=frames, interval=1000.0 / fps, trace=trace, title=title)
             path = save_gif(anim, out, fps=fps, dpi=dpi)

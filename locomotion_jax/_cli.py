@@ -18,6 +18,8 @@ from typing import Annotated, Any
 import numpy as np
 import typer
 
+from ._cli_options import axis_options, expand, MODEL_NAMES, model_options, run_options, to_params, Values
+
 
 FIGURES: tuple[str, ...] = ("4b", "5", "6", "7", "8", "9", "10", "12")
 """Figure names accepted by `figures` (the paper's numbering, SPEC §6)."""
@@ -74,16 +76,6 @@ def _global(
     jax.config.update("jax_enable_x64", x64)
 
 
-# -- shared options -----------------------------------------------------------------
-
-Contact = Annotated[str, typer.Option(help="'strict' (stop at lift-off) or 'paper' (n_i = |N_i|, flagged).")]
-Start = Annotated[str, typer.Option(help="'paper' (eq. 14) or 'relaxed' (spring at rest length).")]
-Dt = Annotated[float, typer.Option(help="RK4 step of the exact hybrid integrator.")]
-Z = Annotated[float, typer.Option(help="Distance to travel for tau_z, e_z (paper: 5).")]
-Horizon = Annotated[float, typer.Option(help="Time allowed after t_start.")]
-Window = Annotated[float, typer.Option(help="Regime window Delta tau (paper: 25).")]
-
-
 def _json_value(x: Any) -> Any:
     """JSON has no NaN/inf: NaN -> null (not computable), +-inf -> "inf"/"-inf" (e.g. never reached)."""
     x = np.asarray(x).item()
@@ -125,24 +117,12 @@ def _plot(traj, path: Path, title: str) -> None:
 
 @app.command()
 @_friendly
+@expand(model=model_options(), run=run_options())
 def simulate(
-    omega: Annotated[float, typer.Option(help="Actuation frequency (eq. 13).")] = 2.0,
-    omega_over_wn1: Annotated[float | None, typer.Option(help="Give omega as a multiple of wn1 instead.")] = None,
-    a: Annotated[float, typer.Option(help="Actuation amplitude (eq. 13).")] = 0.05,
-    d: Annotated[float, typer.Option(help="Vertical offset of the spring.")] = 0.5,
-    mhat: Annotated[float, typer.Option(help="Mass ratio m1 / (m1 + m2).")] = 0.5,
-    mu_s: Annotated[float, typer.Option(help="Static friction coefficient.")] = 0.7,
-    mu_k: Annotated[float, typer.Option(help="Kinetic friction coefficient.")] = 0.5,
-    k: Annotated[float, typer.Option(help="Spring stiffness.")] = 50.0,
-    c: Annotated[float, typer.Option(help="Linear damping.")] = 0.01,
-    lbar: Annotated[float, typer.Option(help="Mean rest length (eq. 13).")] = 3.0,
+    *,
+    model: Values,
     t_end: Annotated[float, typer.Option(help="End time of the plotted trajectory.")] = 20.0,
-    contact: Contact = "strict",
-    start: Start = "paper",
-    dt: Dt = 0.01,
-    z: Z = 5.0,
-    horizon: Horizon = 2000.0,
-    window: Window = 25.0,
+    run: Values,
     out: Annotated[Path, typer.Option(help="Directory for the PNG plot.")] = Path("."),
     plot: Annotated[bool, typer.Option(help="Save the plot of x1, x2, v1, v2 and the mode.")] = True,
     as_json: Annotated[bool, typer.Option("--json", help="Print the measurements as one JSON object.")] = False,
@@ -154,14 +134,14 @@ def simulate(
     NaN (not computable) is encoded as null, +inf/-inf (e.g. tau_z never reached) as
     the strings "inf"/"-inf".
     """
-    from . import Exact, measure, Params, Regime, simulate as simulate_fn, Status
+    from . import Exact, measure, PARAM_NAMES, Regime, simulate as simulate_fn, Status
 
-    values = dict(k=k, c=c, d=d, lbar=lbar, a=a, omega=omega, mu_s=mu_s, mu_k=mu_k, mhat=mhat)
-    params = Params(**values)
-    if omega_over_wn1 is not None:
-        params = params.replace(omega=omega_over_wn1 * float(params.wn1))
+    params = to_params(model)
+    values = {n: model[n] for n in PARAM_NAMES}  # as given, but omega as computed from --omega-over-wn1
+    if model["omega_over_wn1"] is not None:
         values["omega"] = float(params.omega)
-    dynamics = Exact(dt=dt)
+    omega, a, d, mhat = values["omega"], values["a"], values["d"], values["mhat"]
+    exact = dict(dynamics=Exact(dt=run["dt"]), contact=run["contact"], start=run["start"])
     if plot and t_end <= 0:
         raise ValueError(f"--t-end must be > 0, got {t_end!r}.")
     png = None
@@ -170,16 +150,15 @@ def simulate(
             out.mkdir(parents=True, exist_ok=True)
         except OSError as err:
             raise ValueError(f"--out {out}: cannot create the directory ({err.strerror or err}).") from None
-    m = measure(params, z, horizon=horizon, window=window, dynamics=dynamics, contact=contact, start=start)
+    m = measure(params, run["z"], horizon=run["horizon"], window=run["window"], **exact)
     if plot:
-        traj = simulate_fn(params, t_end, np.linspace(0.0, t_end, 2001), dynamics=dynamics, contact=contact,
-                           start=start)
-        png = out / f"simulate_omega{values['omega']:.4g}_a{a:.4g}_d{d:.4g}.png"
-        _plot(traj, png, f"omega = {values['omega']:.4g}, a = {a:.4g}, d = {d:.4g}, mhat = {mhat:.4g}")
+        traj = simulate_fn(params, t_end, np.linspace(0.0, t_end, 2001), **exact)
+        png = out / f"simulate_omega{omega:.4g}_a{a:.4g}_d{d:.4g}.png"
+        _plot(traj, png, f"omega = {omega:.4g}, a = {a:.4g}, d = {d:.4g}, mhat = {mhat:.4g}")
     fields = {name: _json_value(v) for name, v in m.to_numpy().items()}
     fields["regime_name"] = Regime(int(m.regime)).name
     fields["status_name"] = Status(int(m.status)).name
-    settings = {"z": z, "horizon": horizon, "window": window, "contact": contact, "start": start, "dt": dt}
+    settings = {n: run[n] for n in ("z", "horizon", "window", "contact", "start", "dt")}  # in the order printed
     if as_json:
         record = {**fields, "params": values, **settings, "plot": None if png is None else str(png)}
         typer.echo(json.dumps(record))
@@ -194,7 +173,7 @@ def simulate(
 
 # -- sweep ----------------------------------------------------------------------------
 
-SWEEP_NAMES: tuple[str, ...] = ("omega", "omega_over_wn1", "a", "d", "mhat", "mu_s", "mu_k", "k", "c", "lbar")
+SWEEP_NAMES: tuple[str, ...] = MODEL_NAMES
 """Sweep options, in the order their axes become dimensions of the dataset."""
 
 
@@ -221,33 +200,16 @@ def parse_axis(name: str, text: str) -> float | np.ndarray:
         raise ValueError(str(err) if str(err).startswith(opt) else f"{opt}: cannot read {text!r}; {form}.") from None
 
 
-def _axis_option(name: str):
-    option = typer.Option(f"--{name.replace('_', '-')}", help=f"{name}: start:stop:count, v1,v2,... or a value.")
-    return Annotated[str | None, option]
-
-
 @app.command()
 @_friendly
+@expand(given=axis_options(SWEEP_NAMES), run=run_options())
 def sweep(
+    *,
     out: Annotated[Path, typer.Option(help="Output NetCDF file (resumable: rerun with the same path).")],
-    omega: _axis_option("omega") = None,
-    omega_over_wn1: _axis_option("omega_over_wn1") = None,
-    a: _axis_option("a") = None,
-    d: _axis_option("d") = None,
-    mhat: _axis_option("mhat") = None,
-    mu_s: _axis_option("mu_s") = None,
-    mu_k: _axis_option("mu_k") = None,
-    k: _axis_option("k") = None,
-    c: _axis_option("c") = None,
-    lbar: _axis_option("lbar") = None,
+    given: Values,
     mode: Annotated[str, typer.Option(help="'grid' (outer product) or 'list' (zip axes of equal length).")] = "grid",
     chunk_size: Annotated[int, typer.Option(help="Configurations per compiled chunk.")] = 4096,
-    contact: Contact = "strict",
-    start: Start = "paper",
-    dt: Dt = 0.01,
-    z: Z = 5.0,
-    horizon: Horizon = 2000.0,
-    window: Window = 25.0,
+    run: Values,
     overwrite: Annotated[bool, typer.Option(help="Discard what is stored at --out and recompute.")] = False,
     on_invalid: Annotated[str, typer.Option(
         help="'raise': reject invalid configurations; 'flag': record them as Status.INVALID.")] = "raise",
@@ -263,16 +225,14 @@ def sweep(
     from . import Exact
     from ._sweep import sweep as sweep_fn
 
-    given = dict(omega=omega, omega_over_wn1=omega_over_wn1, a=a, d=d, mhat=mhat, mu_s=mu_s, mu_k=mu_k, k=k, c=c,
-                 lbar=lbar)
-    parsed = {n: parse_axis(n, t) for n in SWEEP_NAMES if (t := given[n]) is not None}
+    parsed = {n: parse_axis(n, text) for n, text in given.items() if text is not None}  # in SWEEP_NAMES order
     axes = {n: v for n, v in parsed.items() if isinstance(v, np.ndarray)}
     fixed = {n: v for n, v in parsed.items() if not isinstance(v, np.ndarray)}
     if not axes:
         raise ValueError("nothing to sweep: give at least one range, e.g. --omega 1:25:256.")
-    ds = sweep_fn(axes, fixed=fixed, mode=mode, z=z, horizon=horizon, window=window, dynamics=Exact(dt=dt),
-                  contact=contact, start=start, chunk_size=chunk_size, path=out, overwrite=overwrite,
-                  progress=progress, on_invalid=on_invalid)
+    measurement = {n: run[n] for n in ("z", "horizon", "window", "contact", "start")}
+    ds = sweep_fn(axes, fixed=fixed, mode=mode, **measurement, dynamics=Exact(dt=run["dt"]), chunk_size=chunk_size,
+                  path=out, overwrite=overwrite, progress=progress, on_invalid=on_invalid)
     from ._status import Regime, Status
 
     typer.echo(f"wrote {out}: " + " x ".join(f"{n}[{s}]" for n, s in ds.sizes.items()))

@@ -1,8 +1,9 @@
-"""Geometry, forces and energy of the two-mass model (eqs. 2, 4, 5, 8, 10, 15, 16).
+"""Geometry, forces and energy of the two-mass model (eqs. 2, 4, 5, 8, 10, 15, 16); eq. 9 with smooth friction.
 
 Pure functions of one configuration; batching is done by the callers with `vmap`.
 """
 
+from collections.abc import Callable
 from typing import NamedTuple
 
 import jax.numpy as jnp
@@ -83,6 +84,23 @@ def total_energy(params: Params, l0: ArrayLike, x1, v1, x2, v2) -> Array:
 def dissipation_power(params: Params, f: Forces, v1: ArrayLike, v2: ArrayLike) -> Array:
     """Integrand of eq. (15): $\\mu_k n_1 |v_1| + \\mu_k n_2 |v_2| + c v_1^2 + c v_2^2$."""
     return params.mu_k * (f.n1 * jnp.abs(v1) + f.n2 * jnp.abs(v2)) + params.c * (v1 * v1 + v2 * v2)
+
+
+def smoothed_rates(
+    params: Params, f: Forces, v1: Array, v2: Array, mu: Callable[[Array], Array]
+) -> tuple[Array, Array, Array]:
+    """Eq. (9) with a smooth friction law $\\mu(v)$ (odd in $v$) in place of stick and slip.
+
+    Returns the accelerations $a_1$, $a_2$ and the dissipated power
+    $\\mu(v_1) n_1 v_1 + \\mu(v_2) n_2 v_2 + c (v_1^2 + v_2^2)$ (integrand of eq. 15).
+    The smoothed engine and the optimiser's objective share it with different laws.
+    """
+    fr1 = f.n1 * mu(v1)
+    fr2 = f.n2 * mu(v2)
+    a1 = (f.fx - params.c * v1 - fr1) / params.m1
+    a2 = (-f.fx - params.c * v2 - fr2) / params.m2
+    p_d = fr1 * v1 + fr2 * v2 + params.c * (v1 * v1 + v2 * v2)
+    return a1, a2, p_d
 
 
 def actuator_power(f: Forces) -> Array:

@@ -58,17 +58,12 @@ def rates(params: Params, wave: Fourier, eps: Array, t: Array, y: Array) -> tupl
 
     Forces, eqs. (2, 5, 8) via `_model.forces` with the paper's $n_i = |N_i|$
     (so that an infeasible iterate that lifts off stays bounded; the signed
-    $N_i$ enter the no-lift-off constraint). Eq. (9) with smoothed friction;
+    $N_i$ enter the no-lift-off constraint). Eq. (9) with smoothed friction (`_model.smoothed_rates`);
     the last rate is the integrand of eq. (15).
     """
     f = model.forces(params, wave, t, y[0], y[2], "paper")
-    v1, v2 = y[1], y[3]
-    fr1 = f.n1 * friction_coefficient(v1, params, eps)
-    fr2 = f.n2 * friction_coefficient(v2, params, eps)
-    a1 = (f.fx - params.c * v1 - fr1) / params.m1
-    a2 = (-f.fx - params.c * v2 - fr2) / params.m2
-    p_d = fr1 * v1 + fr2 * v2 + params.c * (v1 * v1 + v2 * v2)
-    return jnp.stack([v1, a1, v2, a2, p_d]), jnp.minimum(f.N1, f.N2)
+    a1, a2, p_d = model.smoothed_rates(params, f, y[1], y[3], lambda v: friction_coefficient(v, params, eps))
+    return jnp.stack([y[1], a1, y[3], a2, p_d]), jnp.minimum(f.N1, f.N2)
 
 
 class Plan(eqx.Module):

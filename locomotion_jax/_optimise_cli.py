@@ -11,7 +11,7 @@ from pathlib import Path
 
 import typer
 
-from ._params import DEFAULTS
+from ._cli_options import expand, model_options, to_params, Values
 
 
 def _eps_schedule(text: str) -> tuple[float, ...]:
@@ -28,19 +28,15 @@ def register(app: typer.Typer) -> None:
     """Add the `optimize` subcommand to `app`."""
 
     @app.command("optimize")
+    @expand(model=model_options(("k", "c", "d", "lbar", "mu_s", "mu_k", "mhat")))  # no a, omega: the waveform's
     def optimize(
+        *,
         v_min: float = typer.Option(..., "--v-min", help="Required mean speed (> 0) in --direction."),
         a_max: float = typer.Option(..., "--a-max", help="Stroke bound: max |l0(t) - lbar| <= a_max."),
         direction: int | None = typer.Option(None, "--direction", help="+1 forward (default) or -1 backward."),
         omega: float | None = typer.Option(None, "--omega", help="Fix the base frequency (default: optimised)."),
         harmonics: int = typer.Option(3, "--harmonics", help="Number of Fourier harmonics N >= 1."),
-        k: float = typer.Option(DEFAULTS["k"], "--k", help="Spring stiffness."),
-        c: float = typer.Option(DEFAULTS["c"], "--c", help="Linear damping."),
-        d: float = typer.Option(DEFAULTS["d"], "--d", help="Vertical offset of the spring."),
-        lbar: float = typer.Option(DEFAULTS["lbar"], "--lbar", help="Mean rest length."),
-        mu_s: float = typer.Option(DEFAULTS["mu_s"], "--mu-s", help="Static friction coefficient."),
-        mu_k: float = typer.Option(DEFAULTS["mu_k"], "--mu-k", help="Kinetic friction coefficient."),
-        mhat: float = typer.Option(DEFAULTS["mhat"], "--mhat", help="Mass ratio m1 / (m1 + m2)."),
+        model: Values,
         margin: float = typer.Option(0.05, "--margin", help="Normal-force margin on the smoothed model."),
         starts: int = typer.Option(8, "--starts", help="Starts optimised in parallel."),
         outer: int = typer.Option(3, "--outer", help="Augmented-Lagrangian blocks per smoothing stage."),
@@ -61,10 +57,9 @@ def register(app: typer.Typer) -> None:
         verify it on the exact model and compare it with the best sinusoid."""
         from . import _optimise, _pareto
         from ._optimum import Settings
-        from ._params import Params
 
         try:
-            params = Params(k=k, c=c, d=d, lbar=lbar, mu_s=mu_s, mu_k=mu_k, mhat=mhat)
+            params = to_params(model)
             settings = Settings(starts=starts, outer=outer, inner=inner, eps_schedule=_eps_schedule(eps),
                                 margin=margin, verify_horizon=horizon, seed=seed, verbose=verbose,
                                 transient=transient, measured=measured, corrections=corrections)

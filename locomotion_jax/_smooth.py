@@ -41,13 +41,8 @@ def friction_coefficient(v: Array, params: Params, eps: Array) -> Array:
 def smooth_rates(params: Params, wave: AbstractWaveform, contact: Contact, eps: Array, t, y) -> Array:
     """Right-hand side of the smoothed model; state `(x1, v1, x2, v2, e_d, w)`."""
     f = model.forces(params, wave, t, y[0], y[2], contact)
-    v1, v2 = y[1], y[3]
-    fr1 = f.n1 * friction_coefficient(v1, params, eps)
-    fr2 = f.n2 * friction_coefficient(v2, params, eps)
-    a1 = (f.fx - params.c * v1 - fr1) / params.m1
-    a2 = (-f.fx - params.c * v2 - fr2) / params.m2
-    p_d = fr1 * v1 + fr2 * v2 + params.c * (v1 * v1 + v2 * v2)
-    return jnp.stack([v1, a1, v2, a2, p_d, model.actuator_power(f)])
+    a1, a2, p_d = model.smoothed_rates(params, f, y[1], y[3], lambda v: friction_coefficient(v, params, eps))
+    return jnp.stack([y[1], a1, y[3], a2, p_d, model.actuator_power(f)])
 
 
 def _solver(dyn: Smoothed):

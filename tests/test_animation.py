@@ -12,12 +12,12 @@ import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
-import typer
 from locomotion_jax._animate_cli import register
 from locomotion_jax._animation import SLIP_COLOR, STUCK_COLOR, stuck_masks
 from matplotlib.animation import AbstractMovieWriter
 from matplotlib.colors import to_rgb, to_rgba
 from PIL import Image
+from plugin_app import plugin_app
 from typer.testing import CliRunner
 
 
@@ -111,17 +111,6 @@ def test_animate_rejects_bad_input(ssl, tmp_path):
     np.testing.assert_allclose([f["x2"] for f in rec.frames], np.asarray(traj.x2) + 1.0, atol=1e-12)
 
 
-def _app():
-    app = typer.Typer()
-    register(app)
-
-    @app.command("noop")  # a second command keeps typer in multi-command mode, as in _cli.py
-    def noop() -> None:
-        pass
-
-    return app
-
-
 def _blocks(frame: np.ndarray, color: str, top: int) -> list[tuple[float, float]]:
     """Column spans of the blocks of `color` in the scene (rows above `top`): (left, right) pixels.
 
@@ -146,7 +135,7 @@ def test_cli_writes_gif_and_stuck_mass_stands_still_in_it(ssl, tmp_path):
     out = tmp_path / "gifs" / "ssl.gif"
     args = ["animate", "--omega", str(OMEGA), "--t-end", str(T_END), "--frames", str(FRAMES), "--dpi", "50",
             "--out", str(out)]
-    res = CliRunner().invoke(_app(), args)
+    res = CliRunner().invoke(plugin_app(register), args)
     assert res.exit_code == 0, res.output
     assert out.exists() and out.stat().st_size > 0
     assert "m1 stuck in" in res.output
@@ -179,7 +168,7 @@ def test_cli_writes_gif_and_stuck_mass_stands_still_in_it(ssl, tmp_path):
 
 
 def test_cli_errors_are_reported(tmp_path):
-    app = _app()
+    app = plugin_app(register)
     res = CliRunner().invoke(app, ["animate", "--out", str(tmp_path / "x.png")])
     assert res.exit_code == 2 and "Error: --out must name a .gif" in res.output
     res = CliRunner().invoke(app, ["animate", "--t-from", "5", "--t-end", "4", "--out", str(tmp_path / "x.gif")])
@@ -191,7 +180,7 @@ def test_cli_errors_are_reported(tmp_path):
 
 def test_cli_liftoff(tmp_path):
     # omega = 23, a = 0.1 lifts mass 1 off at t = 0.167 (strict contact: the run stops there).
-    app = _app()
+    app = plugin_app(register)
     out = tmp_path / "lift.gif"
     # As many frames as the fixture: the same compiled simulation serves.
     common = ["animate", "--omega", "23", "--a", "0.1", "--frames", str(FRAMES), "--dpi", "30", "--no-trace",

@@ -14,10 +14,10 @@ import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
-import typer
 from locomotion_jax import _constraints, _objective, _optimise, _pareto
 from locomotion_jax._optimise_cli import register
 from locomotion_jax._optimum import Settings
+from plugin_app import plugin_app
 from typer.testing import CliRunner
 
 
@@ -148,17 +148,6 @@ def test_optimum_verified_and_no_worse_than_initial_guess(tiny_optimum):
     assert d["improvement_vs_sinusoid"] == pytest.approx(expected)
 
 
-def _app():
-    app = typer.Typer()
-    register(app)
-
-    @app.command("noop")  # a second command keeps typer in multi-command mode, as in _cli.py
-    def noop() -> None:
-        pass
-
-    return app
-
-
 def test_cli_infeasible_requirement_is_reported_infeasible():
     # Nothing reaches a mean speed of 0.5 with a stroke of 0.03: the result must say so.
     # Same shapes and static settings as TINY, so the compiled functions are reused.
@@ -166,7 +155,7 @@ def test_cli_infeasible_requirement_is_reported_infeasible():
             "--starts", "2", "--outer", "1", "--inner", "4", "--eps", "1e-2", "--horizon", "10",
             "--transient", "4", "--measured", "3", "--corrections", "0",
             "--sweep-omegas", "3", "--sweep-amplitudes", "2"]
-    res = CliRunner().invoke(_app(), args)
+    res = CliRunner().invoke(plugin_app(register), args)
     assert res.exit_code == 0, res.output
     out = json.loads(res.stdout)
     for key in ("mean_speed_exact", "cost_of_transport_exact", "feasible_exact", "sinusoid_cost_of_transport",
@@ -178,8 +167,8 @@ def test_cli_infeasible_requirement_is_reported_infeasible():
 
 
 def test_cli_bad_input_names_the_parameter():
-    res = CliRunner().invoke(_app(), ["optimize", "--v-min", "-0.02", "--a-max", "0.05"])
+    res = CliRunner().invoke(plugin_app(register), ["optimize", "--v-min", "-0.02", "--a-max", "0.05"])
     assert res.exit_code == 2
     assert "v_min" in res.output and "direction" in res.output
-    res = CliRunner().invoke(_app(), ["optimize", "--v-min", "0.02", "--a-max", "0.2"])
+    res = CliRunner().invoke(plugin_app(register), ["optimize", "--v-min", "0.02", "--a-max", "0.2"])
     assert res.exit_code == 2 and "a_max" in res.output
