@@ -161,9 +161,8 @@ def case_exact(spec: dict) -> dict:
 
 def _chunk_runner(vals, n_dev, H, dyn, max_steps, micro, z=1e30):
     """The sweep engine's chunk computation (`_sharding._run_chunk`, `shard_map` over a
-    1-D mesh), compiled ahead of time and called without blocking, so that each
-    device's output can be seen becoming ready on its own (`dispatch_chunk` goes
-    through `equinox.filter_jit`, which blocks until the whole call is done)."""
+    1-D mesh), compiled ahead of time (to time the compilation alone) and called
+    without blocking, so that each device's output can be seen becoming ready on its own."""
     import inspect
 
     import jax
@@ -182,7 +181,7 @@ def _chunk_runner(vals, n_dev, H, dyn, max_steps, micro, z=1e30):
     if "micro_batch" in inspect.signature(_sharding._run_chunk).parameters:
         args.append(micro)
     exe = _sharding._run_chunk.lower(*args).compile()
-    return lambda: exe(*args)
+    return lambda: exe(flat, zhw, dyn)  # the static arguments are compiled in
 
 
 def case_sharded(spec: dict) -> dict:
@@ -474,6 +473,8 @@ def main():
         text = report(saved["results"], saved["meta"])
         Path(args.out).write_text(text)
         print(text)
+        if not saved["meta"]["quick"] and Path(args.out) == HERE / "RESULTS.md":
+            quote_in_readme(saved["results"], saved["meta"])
         return
 
     q = args.quick
@@ -541,6 +542,32 @@ def main():
     text = report(results, meta)
     Path(args.out).write_text(text)
     print(text)
+    if not q and Path(args.out) == HERE / "RESULTS.md":
+        quote_in_readme(results, meta)
+
+
+README_MARKS = ("<!-- benchmark-targets: start (written by benchmarks/run.py) -->", "<!-- benchmark-targets: end -->")
+
+
+def quote_in_readme(res: dict, meta: dict, readme: Path = ROOT / "README.md") -> None:
+    """Put this run's targets table between the README's markers, so the README quotes
+    `RESULTS.md` instead of hand-typed numbers."""
+    text = readme.read_text()
+    start, end = README_MARKS
+    if start not in text or end not in text:
+        print(f"README markers not found; {readme} left unchanged", file=sys.stderr)
+        return
+    sc = res["scipy"][0] if res["scipy"] and "error" not in res["scipy"][0] else None
+    base = None
+    if sc:
+        base = dict(cpu=len(sc["rows"]) * sc["T"] / sum(r["cpu"] for r in sc["rows"]))
+    table = targets(res, meta, base)[2:]  # without the heading
+    m = meta["machine"]
+    src = (f"From `benchmarks/RESULTS.md` (`{meta['command']}`, {meta['elapsed'] / 60:.0f} min on {m.get('cpu')}, "
+           f"{m.get('cores')} cores; locomotion_jax at {m.get('commit', '?')}):")
+    head, rest = text.split(start, 1)
+    tail = rest.split(end, 1)[1]
+    readme.write_text(head + start + "\n" + src + "\n\n" + "\n".join(table).rstrip() + "\n" + end + tail)
 
 
 def targets(res: dict, meta: dict, base: dict | None) -> list[str]:

@@ -6,7 +6,7 @@ number of steps. $|X - X_0| = z$ is an event of the integrator (`_exact.Target`)
 located like a mode switch, so `tau_z` and `e_z` share the integrator's order.
 """
 
-from typing import Any
+from typing import Any, NamedTuple
 
 import equinox as eqx
 import jax
@@ -15,10 +15,11 @@ import numpy as np
 
 from . import _exact as exact, _model as model
 from ._actuation import AbstractWaveform
-from ._batch import default_max_steps, horizon_bound, map_batched, prepare, safe_params, unflatten
+from ._batch import default_max_steps, horizon_bound, MICRO_BATCH_CPU, prepare, safe_params, unflatten
 from ._compile import engine_jit
 from ._dynamics import AbstractDynamics, Exact, Smoothed
 from ._params import Params
+from ._queue import run_queue
 from ._results import Measurement
 from ._status import Regime, Status
 
@@ -47,62 +48,87 @@ class _Acc(eqx.Module):
     steps: jax.Array
 
 
-def _exact_one(params, wave, z, horizon, window, contact, start, dt, max_steps):
+class _Fixed(NamedTuple):
+    """What stays constant during one configuration's run."""
+
+    params: Params
+    wave: AbstractWaveform
+    P: exact.Consts
+    ws: jax.Array  # measurement start (t_start)
+    we: jax.Array  # end of the regime window
+    te: jax.Array  # horizon
+    z: jax.Array
+
+
+def _setup(params, wave, z, horizon, window, contact, start):
+    """`(fixed, dyn)` of one configuration: its constants, and the loop state `(Hybrid, _Acc)`."""
     params, valid = safe_params(params)
     dtype = params.dtype
     P = exact.consts(params, wave)
-    z = jnp.asarray(z, dtype)
     st = exact.init(params, wave, contact, jnp.zeros((), dtype), model.initial_gap(params, start))
     st = eqx.tree_at(lambda s: s.status, st, jnp.where(valid, st.status, Status.INVALID).astype(jnp.int32))
     ws = params.t_start.astype(dtype)
-    we = ws + window
-    te = ws + horizon
     zero = jnp.zeros((), dtype)
     no = jnp.asarray(False)
     acc = _Acc(
         started=no, X0=zero, ed0=zero, w0=zero, e0=zero, reached=no, t_z=jnp.asarray(jnp.inf, dtype),
         y_z=exact.State(*(zero,) * 6), stuck1=zero, stuck2=zero, steps=jnp.zeros((), jnp.int32),
     )
-    com = lambda y: P.mhat * y.x1 + (1 - P.mhat) * y.x2
+    fixed = _Fixed(params, wave, P, ws, ws + window, ws + horizon, jnp.asarray(z, dtype))
+    return fixed, (st, acc)
 
-    def finished(s, a):
-        return (s.t >= te) | (a.reached & (s.t >= we))
 
-    def cond(c):
-        s, a = c
-        return (s.status == Status.OK) & ~finished(s, a) & (a.steps < max_steps)
+def _com(P, y):
+    return P.mhat * y.x1 + (1 - P.mhat) * y.x2
 
-    def body(c):
-        s, a = c
-        t_stop = jnp.where(s.t < ws, ws, jnp.where(s.t < we, we, te))
-        # Measurement start: the iteration that starts on t_start (a step lands there).
-        begin = ~a.started & (s.t >= ws)
-        started = a.started | begin
-        X0 = jnp.where(begin, com(s.y), a.X0)
-        target = exact.Target(active=started & ~a.reached, X0=X0, z=z)
-        s_new, info = exact.step(params, wave, contact, dt, s, t_stop, target, P)
-        # Stick time inside the window (steps never straddle ws or we).
-        inside = info.commit & started & (info.t1 <= we)
-        dur = jnp.where(inside, info.t1 - info.t0, 0)
-        # First passage |X - X0| = z: an event of the integrator (located like a switch).
-        hit = info.target_fired
-        a_new = _Acc(
-            started=started,
-            X0=X0,
-            ed0=jnp.where(begin, info.y0.ed, a.ed0),
-            w0=jnp.where(begin, info.y0.w, a.w0),
-            e0=jnp.where(begin, exact.energy(P, info.y0, info.tension0), a.e0),
-            reached=a.reached | hit,
-            t_z=jnp.where(hit, info.t_target, a.t_z),
-            y_z=info.y_target.map(lambda n, o: jnp.where(hit, n, o), a.y_z),
-            stuck1=a.stuck1 + jnp.where(info.stuck1, dur, 0),
-            stuck2=a.stuck2 + jnp.where(info.stuck2, dur, 0),
-            steps=a.steps + 1,
-        )
-        return s_new, a_new
 
-    s, a = jax.lax.while_loop(cond, body, (st, acc))
-    status = jnp.where((s.status == Status.OK) & ~finished(s, a), Status.MAX_STEPS, s.status).astype(jnp.int32)
+def _finished(f: _Fixed, s, a):
+    return (s.t >= f.te) | (a.reached & (s.t >= f.we))
+
+
+def _running(f: _Fixed, dyn, max_steps):
+    s, a = dyn
+    return (s.status == Status.OK) & ~_finished(f, s, a) & (a.steps < max_steps)
+
+
+def _advance(f: _Fixed, dyn, contact, dt):
+    """One integrator iteration, with the measurement's running sums."""
+    s, a = dyn
+    ws, we = f.ws, f.we
+    t_stop = jnp.where(s.t < ws, ws, jnp.where(s.t < we, we, f.te))
+    # Measurement start: the iteration that starts on t_start (a step lands there).
+    begin = ~a.started & (s.t >= ws)
+    started = a.started | begin
+    X0 = jnp.where(begin, _com(f.P, s.y), a.X0)
+    target = exact.Target(active=started & ~a.reached, X0=X0, z=f.z)
+    s_new, info = exact.step(f.params, f.wave, contact, dt, s, t_stop, target, f.P)
+    # Stick time inside the window (steps never straddle ws or we).
+    inside = info.commit & started & (info.t1 <= we)
+    dur = jnp.where(inside, info.t1 - info.t0, 0)
+    # First passage |X - X0| = z: an event of the integrator (located like a switch).
+    hit = info.target_fired
+    a_new = _Acc(
+        started=started,
+        X0=X0,
+        ed0=jnp.where(begin, info.y0.ed, a.ed0),
+        w0=jnp.where(begin, info.y0.w, a.w0),
+        e0=jnp.where(begin, exact.energy(f.P, info.y0, info.tension0), a.e0),
+        reached=a.reached | hit,
+        t_z=jnp.where(hit, info.t_target, a.t_z),
+        y_z=info.y_target.map(lambda n, o: jnp.where(hit, n, o), a.y_z),
+        stuck1=a.stuck1 + jnp.where(info.stuck1, dur, 0),
+        stuck2=a.stuck2 + jnp.where(info.stuck2, dur, 0),
+        steps=a.steps + 1,
+    )
+    return s_new, a_new
+
+
+def _results(f: _Fixed, dyn) -> dict:
+    """The `Measurement` fields of one finished run (SPEC §5)."""
+    s, a = dyn
+    params, wave, ws, we, z = f.params, f.wave, f.ws, f.we, f.z
+    dtype = ws.dtype
+    status = jnp.where((s.status == Status.OK) & ~_finished(f, s, a), Status.MAX_STEPS, s.status).astype(jnp.int32)
     nan = jnp.asarray(jnp.nan, dtype)
     window_done = s.t >= we
     stuck_time = jnp.stack([a.stuck1, a.stuck2])
@@ -113,7 +139,7 @@ def _exact_one(params, wave, z, horizon, window, contact, start, dt, max_steps):
     y_end = a.y_z.map(lambda zv, sv: jnp.where(a.reached, zv, sv), s.y)
     elapsed = t_end - ws
     measured = a.started & (elapsed > 0)
-    mean_speed = jnp.where(measured, (com(y_end) - a.X0) / jnp.where(measured, elapsed, 1), nan)
+    mean_speed = jnp.where(measured, (_com(f.P, y_end) - a.X0) / jnp.where(measured, elapsed, 1), nan)
     e_d = jnp.where(a.started, y_end.ed - a.ed0, nan)
     work = jnp.where(a.started, y_end.w - a.w0, nan)
     delta_e = jnp.where(a.started, _energy(params, wave, t_end, y_end) - a.e0, nan)
@@ -144,12 +170,38 @@ def _exact_one(params, wave, z, horizon, window, contact, start, dt, max_steps):
     )
 
 
-def _exact_batch(params, wave, wave_axes, z, horizon, window, contact, start, dt, max_steps):
-    fn = lambda p, w: _exact_one(p, w, z, horizon, window, contact, start, dt, max_steps)
-    return map_batched(fn, params, wave, wave_axes)
+def _exact_one(params, wave, z, horizon, window, contact, start, dt, max_steps):
+    """One configuration, in its own loop (under `vmap`: a loop of lanes that idle once done)."""
+    fixed, dyn = _setup(params, wave, z, horizon, window, contact, start)
+    dyn = jax.lax.while_loop(lambda d: _running(fixed, d, max_steps), lambda d: _advance(fixed, d, contact, dt), dyn)
+    return _results(fixed, dyn)
 
 
-_exact_batch = engine_jit(_exact_batch, ("wave_axes", "contact", "start", "dt"))
+def exact_batch(params, wave, wave_axes, z, horizon, window, contact, start, dt, max_steps,
+                lanes: int | None = None) -> dict[str, jax.Array]:
+    """`measure` on a flat batch (not jitted): a work queue over `lanes` lanes ([`_queue.run_queue`][]).
+
+    `lanes=None` takes `_batch.MICRO_BATCH_CPU` on a CPU (wider kernels are split over
+    threads and run slower, benchmarks/NOTES.md), else the whole batch in one `vmap`.
+    The queue takes the highest frequencies (most mode switches per time unit) first,
+    so that the last configurations, run while lanes run out of work, are short.
+    """
+    n = params.omega.shape[0]
+    if lanes is None:
+        lanes = MICRO_BATCH_CPU if jax.default_backend() == "cpu" else n
+    if lanes >= n:
+        fn = lambda p, w: _exact_one(p, w, z, horizon, window, contact, start, dt, max_steps)
+        return jax.vmap(fn, in_axes=(0, wave_axes))(params, wave)
+    take = lambda i: jax.tree_util.tree_map(lambda x: x[i], params)
+    pick_wave = (lambda i: wave) if wave_axes is None else (lambda i: jax.tree_util.tree_map(lambda x: x[i], wave))
+    setup = lambda i: _setup(take(i), pick_wave(i), z, horizon, window, contact, start)
+    running = lambda f, d: _running(f, d, max_steps)
+    advance = lambda f, d: _advance(f, d, contact, dt)
+    order = jnp.argsort(-jnp.where(jnp.isfinite(params.omega), params.omega, -jnp.inf))
+    return run_queue(setup, running, advance, _results, n, lanes, order)
+
+
+_exact_batch = engine_jit(exact_batch, ("wave_axes", "contact", "start", "dt", "lanes"))
 
 
 def check_measure_args(z: float, horizon: float, window: float) -> None:

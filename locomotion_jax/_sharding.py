@@ -28,7 +28,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 from ._actuation import Sinusoid
 from ._compile import engine_jit
 from ._dynamics import AbstractDynamics, Exact, Smoothed
-from ._measure import _exact_one
+from ._measure import exact_batch
 from ._params import PARAM_NAMES, Params
 
 
@@ -44,12 +44,10 @@ one compilation.
 
 
 MICRO_BATCH: int | None = None
-"""If set, a device's shard of a chunk runs as a sequence of sub-batches of this many
-configurations (`lax.map`), each `vmap`ped, so a sub-batch's `while_loop` stops with its
-own slowest configuration. Off by default: on this 2-core CPU (float64, min of 3) one
-8192-wide `vmap` took 3.8 s against 4.5 s in sub-batches of 2048 and 5.8 s in 4096, and
-2048-wide 0.56 s against 0.74 s (1024) and 0.84 s (512). A knob for engines or devices
-where a narrower batch pays off."""
+"""Lanes per device. Exact model: the width of each device's work queue (`None`:
+`_batch.MICRO_BATCH_CPU` on a CPU, where wider kernels are split over threads and
+run slower, benchmarks/NOTES.md; the whole shard elsewhere). Smoothed model: if
+set, a shard runs as sub-batches of this many configurations (`lax.map`)."""
 
 
 def batch_mesh() -> Mesh:
@@ -70,11 +68,12 @@ def _run_chunk(flat: Params, zhw: jax.Array, dynamics: AbstractDynamics, contact
         z, horizon, window = zhw[0], zhw[1], zhw[2]
         wave = Sinusoid.from_params(p)
         if isinstance(dyn, Exact):
-            one = lambda q, w: _exact_one(q, w, z, horizon, window, contact, start, dyn.dt, max_steps)
-        else:
-            from ._smooth import measure_one
+            # A work queue over `micro_batch` lanes (`_queue`): a lane whose
+            # configuration is done takes the next one.
+            return exact_batch(p, wave, 0, z, horizon, window, contact, start, dyn.dt, max_steps, lanes=micro_batch)
+        from ._smooth import measure_one
 
-            one = lambda q, w: measure_one(q, w, z, horizon, window, contact, start, dyn)
+        one = lambda q, w: measure_one(q, w, z, horizon, window, contact, start, dyn)
         if not micro_batch or micro_batch >= p.omega.shape[0]:
             return jax.vmap(one)(p, wave)
         # Sub-batches in sequence, each vmapped: a sub-batch's while_loop stops with

@@ -1,0 +1,96 @@
+"""A work queue: many configurations through a fixed number of vmapped lanes.
+
+Under `vmap`, a `while_loop` runs until its slowest lane is done: a lane whose
+configuration finished early idles (its updates are selected away) while the
+others continue. Here a lane takes the next configuration of the queue as soon
+as its own is done (compaction), so every lane works until the queue is empty
+and a batch costs about the *mean* duration of its configurations times the
+batch size over the lanes, not the maximum duration of every group of lanes.
+
+Two nested loops: the inner one advances every lane until one of them finishes
+(it carries only the lanes' changing state, so an iteration costs what the step
+costs); the outer one then stores the finished lanes' results and gives them the
+next configurations. Configurations finish in a small fraction of the iterations,
+so the outer loop's work is a small part of the whole.
+
+Results are written to the configuration's own index, so they do not depend on
+the lane a configuration ran in nor on the order of the queue.
+"""
+
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+
+
+def _select(flags: jax.Array, new: Any, old: Any) -> Any:
+    """Per-lane `where` over two pytrees with a leading lane axis."""
+
+    def pick(a, b):
+        return jnp.where(flags.reshape(flags.shape + (1,) * (a.ndim - 1)), a, b)
+
+    return jax.tree_util.tree_map(pick, new, old)
+
+
+def run_queue(
+    setup: Callable[[jax.Array], tuple[Any, Any]],
+    running: Callable[[Any, Any], jax.Array],
+    advance: Callable[[Any, Any], Any],
+    results: Callable[[Any, Any], dict[str, jax.Array]],
+    n: int,
+    lanes: int,
+    order: jax.Array | None = None,
+) -> dict[str, jax.Array]:
+    """Run `n` configurations to completion on `lanes` lanes.
+
+    **Arguments** (functions of *one* configuration; they are vmapped here):
+
+    - `setup(i)`: the loop state of configuration `i` (a traced int32), as a pair
+      `(fixed, dyn)`: what stays constant during its run, and what the loop updates.
+    - `running(fixed, dyn)`: whether it needs another iteration.
+    - `advance(fixed, dyn)`: one iteration; returns the new `dyn`.
+    - `results(fixed, dyn)`: its outputs once done (a dict of scalars or arrays).
+    - `n`, `lanes`: number of configurations, and of lanes (static).
+    - `order`: the queue's order (a permutation of `range(n)`; default: as given).
+      Longest first shortens the tail, where lanes run out of work.
+
+    **Returns:** the dict of `results`, each with a leading axis of length `n`.
+    """
+    lanes = max(1, min(lanes, n))
+    order = jnp.arange(n, dtype=jnp.int32) if order is None else order.astype(jnp.int32)
+    config = lambda pos: order[jnp.minimum(pos, n - 1)]
+    setup_all = jax.vmap(setup)
+    running_all = jax.vmap(running)
+    results_all = jax.vmap(results)
+
+    advance_all = jax.vmap(advance)
+
+    pos = jnp.arange(lanes, dtype=jnp.int32)  # position in the queue of each lane's configuration
+    fixed, dyn = setup_all(config(pos))
+    shapes = jax.eval_shape(results_all, fixed, dyn)
+    out = jax.tree_util.tree_map(lambda s: jnp.zeros((n,) + s.shape[1:], s.dtype), shapes)
+
+    def until_one_finishes(pos, fixed, dyn):
+        # The hot loop carries only `dyn`: `fixed` and the lanes' positions are
+        # loop-invariant here, and no output buffer passes through it.
+        active = pos < n
+        # Every active lane is running inside the loop: the select needs only `active`.
+        cond = lambda d: jnp.all(running_all(fixed, d) | ~active) & jnp.any(active)
+        return jax.lax.while_loop(cond, lambda d: _select(active, advance_all(fixed, d), d), dyn)
+
+    def refill(carry):
+        pos, nxt, fixed, dyn, out = carry
+        dyn = until_one_finishes(pos, fixed, dyn)
+        done = (pos < n) & ~running_all(fixed, dyn)
+        at = jnp.where(done, config(pos), n)  # n: out of bounds, dropped
+        out = jax.tree_util.tree_map(lambda o, r: o.at[at].set(r, mode="drop"), out, results_all(fixed, dyn))
+        # Finished lanes take the next positions, in lane order; past the end they idle.
+        pos = jnp.where(done, nxt + jnp.cumsum(done, dtype=jnp.int32) - 1, pos)
+        nxt = nxt + jnp.sum(done, dtype=jnp.int32)
+        new_fixed, new_dyn = setup_all(config(pos))
+        return pos, nxt, _select(done, new_fixed, fixed), _select(done, new_dyn, dyn), out
+
+    carry = (pos, jnp.asarray(lanes, jnp.int32), fixed, dyn, out)
+    *_, out = jax.lax.while_loop(lambda c: jnp.any(c[0] < n), refill, carry)
+    return out
