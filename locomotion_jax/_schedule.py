@@ -11,8 +11,9 @@ The expected cost comes from a cheap pilot run of the exact engine: a coarse ste
 a short horizon, no measurement window ([`pilot`][]). It gives each configuration's
 mean speed (hence its expected $\\tau_z$) and its rate of mode switches (hence its
 iterations per time unit); [`expected_cost`][] turns them into integrator
-iterations and [`cost_order`][] into a permutation. benchmarks/NOTES.md measures
-the effect on the Fig. 8 sweep.
+iterations and [`cost_order`][] into a permutation, which `sweep(order="cost")`
+cuts its chunks from. benchmarks/NOTES.md measures the effect on the Fig. 8 sweep
+and on an omega x a map.
 """
 
 import math
