@@ -54,10 +54,11 @@ where a narrower batch pays off."""
 
 VECTOR_BYTES = 64
 """Each device's shard of a chunk is padded to whole vectors of this many bytes (512 bits,
-the widest SIMD registers of a CPU). A shard width that leaves a remainder let XLA's CPU code
-compute that lane differently: shards of 5 and 9 float64 lanes gave results 1 ulp off for
-whichever configuration sat in the remainder lane, so a result depended on its position in
-the chunk (and a cost-ordered sweep would not reproduce a natural-order one bit for bit)."""
+the widest SIMD registers of a CPU). XLA's CPU code computes a lane left over after the
+whole vectors (or a shard of one lane) differently: with 9 float64 lanes (8 + 1) `tau_z`,
+`e_d` and others came out 1 ulp off for whichever configuration sat in the ninth lane, so
+a result depended on its place in the chunk, and a cost-ordered sweep did not reproduce a
+natural-order one bit for bit (tests/test_sweep.py checks it with chunks of 9)."""
 
 
 def padded_size(n: int, n_devices: int, dtype: np.dtype) -> int:
