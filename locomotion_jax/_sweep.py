@@ -60,10 +60,10 @@ ORDERS: tuple[str, ...] = ("auto", "natural", "cost")
 
 AUTO_MIN_CONFIGS = 4096
 """Smallest sweep that `order="auto"` sorts by cost. The pilot costs one compilation
-(4.2 s on this 2-core CPU) plus ~0.45 ms per configuration on one core. Measured
+(3 s on this 2-core CPU) plus ~0.3 ms per configuration on one core. Measured
 (benchmarks/NOTES.md, 2 devices, dt = 0.02): a 64 x 64 omega x a map, lane efficiency
-0.37 -> 0.93 and 30 -> 18 s, pilot run included; the 512-point Fig. 8 line, already
-well grouped in natural order, 0.73 -> 0.785 and ~0.1 s saved, less than the compilation."""
+0.37 -> 0.93 and 21 -> 11 s, pilot run included; the 512-point Fig. 8 line, already
+well grouped in natural order, 0.73 -> 0.785 and no time saved."""
 
 _DESCRIPTIONS = {
     "tau_z": "time to travel z after t_start (inf: not reached)",
