@@ -13,7 +13,8 @@ and compile time are per case):
   on a few of the same configurations;
 - the accuracy of every engine against a tight scipy reference (rtol 1e-11) on
   those configurations: `tau_5` and `X` at the horizon;
-- a Fig. 8 style sweep in natural, random and cost-sorted order (`_schedule`).
+- a Fig. 8 style sweep in natural, random and cost order (`sweep(order=...)`, `_schedule`);
+  `--case '{"kind": "schedule", "grid": "map", ...}'` runs an omega x a map instead.
 
 Timings are medians of several runs after a warm-up (`block_until_ready`).
 Throughput is configurations x simulated time units per second ("cfg-tu/s"), by
@@ -323,71 +324,92 @@ def case_accuracy(spec: dict) -> dict:
                 ref_tau=[r["tau"] for r in ref_tau], engines=engines, liftoff=lifts)
 
 
+def _schedule_axes(spec: dict):
+    """The schedule case's configurations: the Fig. 8 line (`grid="fig8"`, N points of
+    omega/wn1 in [0.05, 2.5], a = 0.05) or an omega x a map (`grid="map"`, N x N over the
+    Fig. 6 ranges), as (axes for a list sweep, their length)."""
+    import numpy as np
+
+    if spec.get("grid", "fig8") == "fig8":
+        return {"omega_over_wn1": np.linspace(0.05, 2.5, spec["N"])}, spec["N"]
+    om, a = np.meshgrid(np.linspace(*OMEGA, spec["N"]), np.linspace(*AMPL, spec["N"]), indexing="ij")
+    return {"omega": om.ravel(), "a": a.ravel()}, om.size
+
+
+def _lane_use(steps, chunk: int, padded: int, ndev: int, micro) -> float:
+    """Lane-iterations the loops ran for `steps` (iterations per configuration, in the order run).
+
+    Each loop (a device's shard of a chunk, or a sub-batch of it) runs to its own slowest configuration.
+    """
+    spent, shard = 0, padded // ndev
+    for lo in range(0, len(steps), chunk):
+        block = steps[lo:lo + chunk]
+        for d in range(0, len(block), shard):
+            part = block[d:d + shard]
+            width = min(micro or len(part), len(part))
+            spent += sum(part[g:g + width].max() * width for g in range(0, len(part), width))
+    return float(spent)
+
+
 def case_schedule(spec: dict) -> dict:
-    """Fig. 8 sweep (omega/wn1 in [0.05, 2.5], a = 0.05, z = 5, paper contact) in three orders."""
+    """A long sweep (z = 5, paper contact) in natural, random and cost order (`sweep(order="cost")`)."""
     jax = setup_jax()
     import locomotion_jax as lj
     import numpy as np
-    from locomotion_jax import _schedule, _sharding
+    from locomotion_jax import _sharding, _sweep
     from locomotion_jax._batch import MICRO_BATCH_CPU
-    from locomotion_jax._params import DEFAULTS, PARAM_NAMES
 
-    N, chunk, dt, H = spec["N"], spec["chunk"], spec["dt"], spec["horizon"]
+    chunk, dt, H = spec["chunk"], spec["dt"], spec["horizon"]
     micro = MICRO_BATCH_CPU if jax.devices()[0].platform == "cpu" else None
-    if hasattr(_sharding, "MICRO_BATCH"):
-        _sharding.MICRO_BATCH = micro  # the sweep engine's knob: 64-wide loops per device
-    ratio = np.linspace(0.05, 2.5, N)
-    dyn = lj.Exact(dt=dt)
-    kw = dict(z=5.0, horizon=H, dynamics=dyn, contact="paper", chunk_size=chunk, progress=False, dtype="float64")
-    values = {k: np.full(N, DEFAULTS[k]) for k in PARAM_NAMES}
-    values["omega"] = ratio * 10.0  # wn1 = 10 for the defaults
+    _sharding.MICRO_BATCH = micro  # the sweep engine's knob: 64-wide loops per device
+    axes, N = _schedule_axes(spec)
+    kw = dict(mode="list", z=5.0, horizon=H, dynamics=lj.Exact(dt=dt), contact="paper", chunk_size=chunk,
+              progress=False, dtype="float64")
     ndev = len(jax.devices())
+    per_chunk = -(-min(chunk, N) // ndev) * ndev  # as `sweep` cuts them
+    padded = _sharding.padded_size(per_chunk, ndev, np.float64)
+    real_pilot, pilot = _sweep._cost_permutation, {}
 
-    def run(order):
+    def timed_pilot(*args):  # the sweep's own pilot: its permutation (the order run) and wall time
+        t0 = time.perf_counter()
+        pilot["perm"] = real_pilot(*args)
+        pilot["wall"] = time.perf_counter() - t0
+        return pilot["perm"]
+
+    _sweep._cost_permutation = timed_pilot
+
+    def run(listed, order: str):
+        """Sweep the configurations `listed` (indices into `axes`) in `order`: timings, lane use, grid-order data."""
+        pilot.clear()
         th0 = thread_cpu()
         t0 = time.perf_counter()
-        ds = lj.sweep({"omega_over_wn1": ratio[order]}, mode="list", **kw)
+        ds = lj.sweep({k: v[listed] for k, v in axes.items()}, order=order, **kw)
         wall = time.perf_counter() - t0
         th1 = thread_cpu()
-        wall = dict(wall=wall, busy=max(th1[k] - th0.get(k, 0.0) for k in th1))
-        inv = np.empty_like(order)
-        inv[order] = np.arange(N)
-        steps = np.asarray(ds.n_steps.values)  # in the order run
-        # Lane-iterations actually spent: each loop (a device's shard of a chunk, or a
-        # micro-batch of it) runs to its own slowest configuration.
-        spent = 0
-        for lo in range(0, N, chunk):
-            block = steps[lo:lo + chunk]
-            shard = -(-len(block) // ndev)
-            for d in range(0, len(block), shard):
-                part = block[d:d + shard]
-                width = min(micro or len(part), len(part))
-                for g in range(0, len(part), width):
-                    spent += part[g:g + width].max() * width
-        return wall, float(steps.sum()), float(spent), np.asarray(ds.tau_z.values)[inv]
+        ran = pilot.get("perm", np.arange(N))  # rows of `ds` in the order they were run
+        steps = np.asarray(ds.n_steps.values)[ran]
+        inv = np.argsort(listed)
+        data = {k: np.asarray(v.values)[inv] for k, v in ds.data_vars.items()}
+        out = dict(wall=wall, busy=max(th1[k] - th0.get(k, 0.0) for k in th1), useful=float(steps.sum()),
+                   spent=_lane_use(steps, per_chunk, padded, ndev, micro))
+        if "wall" in pilot:
+            out["pilot"] = pilot["wall"]
+        return out, data, ds.attrs["order"]
 
-    run(np.arange(N))  # warm-up: compile once
-    out = {}
-    w, need, spent, tau_nat = run(np.arange(N))
-    out["natural"] = dict(w, useful=need, spent=spent)
-    rng = np.random.default_rng(1)
-    w, need, spent, _ = run(rng.permutation(N))
-    out["random"] = dict(w, useful=need, spent=spent)
     t0 = time.perf_counter()
-    order = _schedule.cost_order(values, z=5.0, horizon=H, window=25.0, dt=dt, contact="paper")
-    pilot_wall = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    order = _schedule.cost_order(values, z=5.0, horizon=H, window=25.0, dt=dt, contact="paper")
-    pilot_warm = time.perf_counter() - t0
-    w, need, spent, tau_sorted = run(order)
-    out["cost-sorted"] = dict(w, useful=need, spent=spent, pilot=pilot_warm, pilot_first=pilot_wall)
-    same = bool(np.array_equal(np.isfinite(tau_nat), np.isfinite(tau_sorted))
-                and np.allclose(tau_nat[np.isfinite(tau_nat)], tau_sorted[np.isfinite(tau_sorted)], rtol=1e-12))
-    return dict(spec, orders=out, n_devices=ndev, micro_batch=micro, same_results=same,
-                reached=int(np.isfinite(tau_nat).sum()), tau_range=[float(np.nanmin(np.where(np.isfinite(tau_nat),
-                                                                                          tau_nat, np.nan))),
-                                                                   float(np.nanmax(np.where(np.isfinite(tau_nat),
-                                                                                          tau_nat, np.nan)))])
+    run(np.arange(N), "cost")  # warm-up: compiles the chunk function and the pilot
+    first = time.perf_counter() - t0
+    out, data = {}, {}
+    out["natural"], data["natural"], _ = run(np.arange(N), "natural")
+    out["random"], data["random"], _ = run(np.random.default_rng(1).permutation(N), "natural")
+    out["cost"], data["cost"], recorded = run(np.arange(N), "cost")
+    same = all(np.array_equal(data[o][k], data["natural"][k], equal_nan=data[o][k].dtype.kind == "f")
+               for o in data for k in data[o])
+    tau = data["natural"]["tau_z"]
+    reached = np.isfinite(tau)
+    return dict(spec, orders=out, n_devices=ndev, micro_batch=micro, same_results=same, recorded_order=recorded,
+                first_call=first, n_configs=N, reached=int(reached.sum()),
+                tau_range=[float(tau[reached].min()), float(tau[reached].max())] if reached.any() else None)
 
 
 CASES = dict(exact=case_exact, sharded=case_sharded, smoothed=case_smoothed, scipy=case_scipy,
@@ -531,7 +553,8 @@ def main():
         results["accuracy"].append(r)
         log("accuracy: " + (r.get("error") or "done"))
     if "schedule" not in skip:
-        spec = dict(kind="schedule", N=64 if q else 512, chunk=16 if q else 128, dt=dt, horizon=300.0 if q else 2000.0)
+        spec = dict(kind="schedule", grid="fig8", N=64 if q else 512, chunk=16 if q else 128, dt=dt,
+                    horizon=300.0 if q else 2000.0)
         r = spawn(spec, devices=args.devices if cpu_platform else None)
         results["schedule"].append(r)
         log("schedule: " + (r.get("error") or json.dumps(r["orders"])))
@@ -770,20 +793,26 @@ def report(res: dict, meta: dict) -> str:
 
     s = res["schedule"][0] if res["schedule"] and "error" not in res["schedule"][0] else None
     if s:
-        L.append("## Long sweeps: cost-ordered chunks (Fig. 8 sweep)")
+        fig8 = s.get("grid", "fig8") == "fig8"
+        what = (f"omega/wn1 in [0.05, 2.5] ({s['N']} points), a = 0.05" if fig8 else
+                f"an omega x a map ({s['N']} x {s['N']} over omega {OMEGA}, a {AMPL}, as a list)")
+        tau = s["tau_range"] or [math.nan, math.nan]
+        L.append(f"## Long sweeps: cost-ordered chunks ({'Fig. 8 sweep' if fig8 else 'omega x a map'})")
         L.append("")
-        L.append(f"`sweep` over omega/wn1 in [0.05, 2.5] ({s['N']} points), a = 0.05, z = 5, horizon {s['horizon']:g}, "
-                 f"paper contact, chunks of {s['chunk']} on {s['n_devices']} devices; {s['reached']} configurations "
-                 f"reach z (tau_5 from {s['tau_range'][0]:.3g} to {s['tau_range'][1]:.3g}). Lane efficiency = "
+        L.append(f"`sweep` over {what}, z = 5, horizon {s['horizon']:g}, dt = {s['dt']:g}, paper contact, chunks "
+                 f"of {s['chunk']} on {s['n_devices']} devices; {s['reached']} of {s['n_configs']} configurations "
+                 f"reach z (tau_5 from {tau[0]:.3g} to {tau[1]:.3g}). Lane efficiency = "
                  "iterations the configurations need / iterations their loops ran (each loop, a device's "
                  f"shard of a chunk in sub-batches of {s.get('micro_batch') or 'all'}, runs to its slowest "
-                 "configuration); it does not depend on the load of the machine. Results identical in every order: "
+                 "configuration); it does not depend on the load of the machine. `natural` and `cost` are "
+                 "`sweep(order=...)`; `random` is a shuffled list in natural order. The cost order's wall time "
+                 "includes its pilot run (compiled beforehand). Results bit-for-bit identical in every order: "
                  f"{s['same_results']}.")
         L.append("")
         L.append("| order | wall s | busiest thread CPU s | lane efficiency |")
         L.append("|---|---|---|---|")
         for k, v in s["orders"].items():
-            extra = f" + pilot {v['pilot']:.3g}" if "pilot" in v else ""
+            extra = f" (pilot {v['pilot']:.3g})" if "pilot" in v else ""
             L.append(f"| {k} | {v['wall']:.3g}{extra} | {v['busy']:.3g} | {v['useful'] / v['spent']:.2f} |")
         L.append("")
     elif res["schedule"]:

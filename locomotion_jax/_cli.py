@@ -13,7 +13,7 @@ import math
 import os
 import sys
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
 import typer
@@ -214,6 +214,9 @@ def sweep(
     on_invalid: Annotated[str, typer.Option(
         help="'raise': reject invalid configurations; 'flag': record them as Status.INVALID.")] = "raise",
     progress: Annotated[bool, typer.Option(help="Show a progress bar.")] = True,
+    order: Annotated[Literal["auto", "natural", "cost"], typer.Option(
+        help="Chunk order: 'natural' (grid order), 'cost' (sorted by a short pilot run's expected cost, so "
+             "slow configurations share chunks) or 'auto' (cost for large exact sweeps). Same results.")] = "auto",
 ) -> None:
     """Map the measurements over a grid of parameters and write an xarray/NetCDF file.
 
@@ -232,7 +235,7 @@ def sweep(
         raise ValueError("nothing to sweep: give at least one range, e.g. --omega 1:25:256.")
     measurement = {n: run[n] for n in ("z", "horizon", "window", "contact", "start")}
     ds = sweep_fn(axes, fixed=fixed, mode=mode, **measurement, dynamics=Exact(dt=run["dt"]), chunk_size=chunk_size,
-                  path=out, overwrite=overwrite, progress=progress, on_invalid=on_invalid)
+                  path=out, overwrite=overwrite, progress=progress, on_invalid=on_invalid, order=order)
     from ._status import Regime, Status
 
     typer.echo(f"wrote {out}: " + " x ".join(f"{n}[{s}]" for n, s in ds.sizes.items()))

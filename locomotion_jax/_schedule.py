@@ -11,8 +11,9 @@ The expected cost comes from a cheap pilot run of the exact engine: a coarse ste
 a short horizon, no measurement window ([`pilot`][]). It gives each configuration's
 mean speed (hence its expected $\\tau_z$) and its rate of mode switches (hence its
 iterations per time unit); [`expected_cost`][] turns them into integrator
-iterations and [`cost_order`][] into a permutation. benchmarks/NOTES.md measures
-the effect on the Fig. 8 sweep.
+iterations and [`cost_order`][] into a permutation, which `sweep(order="cost")`
+cuts its chunks from. benchmarks/NOTES.md measures the effect on the Fig. 8 sweep
+and on an omega x a map.
 """
 
 import math
@@ -23,6 +24,7 @@ import numpy as np
 
 from ._dynamics import Exact
 from ._params import PARAM_NAMES, Params
+from ._status import Status
 
 
 PILOT_DT = 0.05
@@ -36,12 +38,14 @@ ITERS_PER_SWITCH = 0.5
 
 
 def pilot(values: Mapping[str, Any], *, contact: str = "strict", start: str = "paper", dtype: Any = None,
-          t_pilot: float = PILOT_T, dt: float = PILOT_DT) -> dict[str, np.ndarray]:
+          t_pilot: float = PILOT_T, dt: float = PILOT_DT, chunk_size: int = 1 << 16) -> dict[str, np.ndarray]:
     """Run the exact engine briefly on every configuration.
 
     **Arguments:** `values`, one 1-D array per name of `PARAM_NAMES` (missing names
     take the defaults; NaN marks padding or invalid entries); `contact`, `start`,
-    `dtype` as in [`simulate`][]; `t_pilot`, `dt` the pilot's length and step.
+    `dtype` as in [`simulate`][]; `t_pilot`, `dt` the pilot's length and step;
+    `chunk_size` configurations per call: every call has this shape (the last
+    one NaN-padded), so the pilot compiles once and its memory is bounded.
 
     **Returns:** `speed` ($|\\Delta X|/\\Delta t$ over $[t_\\text{pilot}/2, t_\\text{pilot}]$),
     `switch_rate` (mode switches per time unit), `t_liftoff` (`inf` if none) and
@@ -54,14 +58,24 @@ def pilot(values: Mapping[str, Any], *, contact: str = "strict", start: str = "p
     valid = np.ones(n, bool)
     for v in fields.values():
         valid &= np.isfinite(v)
-    params = Params(**{k: np.where(valid, v, np.nan) for k, v in fields.items()}, check=False)
-    tr = simulate(params, t_pilot, save_at=np.asarray([0.5 * t_pilot, t_pilot]), dynamics=Exact(dt=dt),
-                  contact=contact, start=start, dtype=dtype)
-    X = np.asarray(tr.X, np.float64)
-    speed = np.abs(X[:, 1] - X[:, 0]) / (0.5 * t_pilot)
-    ok = valid & (np.asarray(tr.status) != 3)
-    return dict(speed=np.where(ok, speed, 0.0), switch_rate=np.asarray(tr.n_switch) / t_pilot,
-                t_liftoff=np.asarray(tr.t_liftoff, np.float64), valid=ok)
+    if chunk_size < 1:
+        raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}.")
+    speed, rate, t_lift, ok = (np.zeros(n), np.zeros(n), np.full(n, np.inf), np.zeros(n, bool))
+    size = min(n, chunk_size)
+    for lo in range(0, n, size):  # equal chunks: one compilation, memory bounded by the chunk
+        idx = np.arange(lo, lo + size)
+        take = np.minimum(idx, n - 1)
+        live = (idx < n) & valid[take]  # NaN padding is flagged invalid and costs no steps
+        params = Params(**{k: np.where(live, v[take], np.nan) for k, v in fields.items()}, check=False)
+        tr = simulate(params, t_pilot, save_at=np.asarray([0.5 * t_pilot, t_pilot]), dynamics=Exact(dt=dt),
+                      contact=contact, start=start, dtype=dtype)
+        m = min(size, n - lo)
+        X = np.asarray(tr.X, np.float64)[:m]
+        speed[lo:lo + m] = np.abs(X[:, 1] - X[:, 0]) / (0.5 * t_pilot)
+        rate[lo:lo + m] = np.asarray(tr.n_switch)[:m] / t_pilot
+        t_lift[lo:lo + m] = np.asarray(tr.t_liftoff, np.float64)[:m]
+        ok[lo:lo + m] = live[:m] & (np.asarray(tr.status)[:m] != int(Status.INVALID))
+    return dict(speed=np.where(ok, speed, 0.0), switch_rate=rate, t_liftoff=t_lift, valid=ok)
 
 
 def expected_cost(values: Mapping[str, Any], *, z: float, horizon: float, window: float, dt: float,

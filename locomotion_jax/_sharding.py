@@ -50,6 +50,21 @@ run slower, benchmarks/NOTES.md; the whole shard elsewhere). Smoothed model: if
 set, a shard runs as sub-batches of this many configurations (`lax.map`)."""
 
 
+VECTOR_BYTES = 64
+"""Each device's shard of a chunk is padded to whole vectors of this many bytes (512 bits,
+the widest SIMD registers of a CPU). XLA's CPU code computes a lane left over after the
+whole vectors (or a shard of one lane) differently: with 9 float64 lanes (8 + 1) `tau_z`,
+`e_d` and others came out 1 ulp off for whichever configuration sat in the ninth lane, so
+a result depended on its place in the chunk, and a cost-ordered sweep did not reproduce a
+natural-order one bit for bit (tests/test_sweep.py checks it with chunks of 9)."""
+
+
+def padded_size(n: int, n_devices: int, dtype: np.dtype) -> int:
+    """Shape of a chunk of `n` configurations: a whole number of SIMD vectors per device."""
+    lanes = max(1, VECTOR_BYTES // np.dtype(dtype).itemsize)
+    return -(-n // (n_devices * lanes)) * n_devices * lanes
+
+
 def batch_mesh() -> Mesh:
     """A 1-D mesh over all devices, with the single axis `"batch"`."""
     return Mesh(np.asarray(jax.devices()), (BATCH_AXIS,))

@@ -5,6 +5,9 @@ Layout for `path = "maps/fig6.nc"`:
 - `maps/fig6.nc.parts/manifest.json`: the sweep's full specification (axes values,
   fixed parameters, dynamics, dtype, ...) and its chunking;
 - `maps/fig6.nc.parts/chunk_000012.npz`: the measurements of chunk 12, unpadded;
+- `maps/fig6.nc.parts/order.npy`: for a sweep not run in grid order (`order="cost"`),
+  the permutation of the configurations its chunks were cut from (the manifest
+  holds its digest), so a resumed sweep cuts the same chunks;
 - `maps/fig6.nc`: the final `xarray.Dataset` (NetCDF4 through h5netcdf), written when
   every chunk is done; the parts directory is then removed. Its attribute
   `sweep_spec` holds the same specification, so a rerun can recognise it.
@@ -16,10 +19,11 @@ or store-level locking is needed. A chunk is only ever written whole, which is
 exactly what npz offers; Zarr's partial-region writes would buy nothing here.
 """
 
+import hashlib
 import json
 import os
 import shutil
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +31,12 @@ import numpy as np
 
 
 MANIFEST = "manifest.json"
+ORDER = "order.npy"
+
+
+def digest(values: np.ndarray, dtype: str) -> str:
+    """Short SHA-256 of an array's values, cast to a fixed little-endian `dtype` (e.g. `"<f8"`)."""
+    return hashlib.sha256(np.ascontiguousarray(values, dtype).tobytes()).hexdigest()[:16]
 
 
 def canonical(spec: Mapping[str, Any]) -> str:
@@ -105,13 +115,21 @@ class ChunkStore:
     - `n_configs`: total number of configurations.
     - `overwrite`: discard any stored chunks (recompute everything).
     - `write`: False on the non-zero processes of a multi-host run (only process 0 writes).
+    - `order`, `permutation`: for a new store, the name of the order the chunks are
+      cut in and a function returning its permutation of the configurations (`None`:
+      grid order). It is called only for a new store: a resumed store keeps the order
+      it was started with, read back from disk (the result does not depend on it).
 
-    **Raises:** `ValueError` if the directory cannot be created or written, or
-    holds a sweep with a different specification and `overwrite` is False.
+    **Attributes:** `chunk_size`, `order` and `permutation` (`None` for grid order) in use.
+
+    **Raises:** `ValueError` if the directory cannot be created or written, holds
+    a sweep with a different specification and `overwrite` is False, or its stored
+    permutation is missing or damaged.
     """
 
     def __init__(self, path: Path, spec: Mapping[str, Any], chunk_size: int, n_configs: int,
-                 overwrite: bool = False, write: bool = True):
+                 overwrite: bool = False, write: bool = True, order: str = "natural",
+                 permutation: Callable[[], np.ndarray] | None = None):
         self.path = path
         self.parts = path.with_name(path.name + ".parts")
         self.write = write
@@ -129,15 +147,33 @@ class ChunkStore:
             if stored is not None and canonical(stored["spec"]) != canonical(spec):
                 raise _mismatch(self.parts, stored["spec"], spec)
             if stored is None:
-                self.chunk_size = int(chunk_size)
-                record = {"spec": spec, "chunk_size": self.chunk_size, "n_configs": int(n_configs)}
+                self.chunk_size, self.order = int(chunk_size), order
+                self.permutation = None if permutation is None else np.asarray(permutation(), np.int64)
+                record = {"spec": spec, "chunk_size": self.chunk_size, "n_configs": int(n_configs), "order": order}
+                if self.permutation is not None:
+                    record["permutation_sha256"] = digest(self.permutation, "<i8")
                 if write:
                     self.parts.mkdir(parents=True, exist_ok=True)
+                    if self.permutation is not None:  # before the manifest, which marks the store as started
+                        _atomic_write(self.parts / ORDER, lambda f: np.save(f, self.permutation))
                     _atomic_write(manifest, lambda f: f.write(json.dumps(record, indent=1).encode()))
             else:
                 self.chunk_size = int(stored["chunk_size"])
+                self.order = stored.get("order", "natural")  # stores written before orders existed
+                self.permutation = self._stored_permutation(stored)
         except OSError as err:
             raise ValueError(f"Cannot write the sweep output at {path}: {err.strerror or err}.") from None
+
+    def _stored_permutation(self, stored: Mapping[str, Any]) -> np.ndarray | None:
+        """The permutation a resumed store was started with, checked against the manifest's digest."""
+        if "permutation_sha256" not in stored:
+            return None
+        file = self.parts / ORDER
+        perm = np.load(file) if file.is_file() else np.zeros(0, np.int64)
+        if perm.shape != (int(stored["n_configs"]),) or digest(perm, "<i8") != stored["permutation_sha256"]:
+            raise ValueError(f"{file} is missing or damaged: the stored chunks cannot be placed. "
+                             "Pass overwrite=True (CLI: --overwrite) to recompute the sweep.")
+        return perm
 
     def _file(self, index: int) -> Path:
         return self.parts / f"chunk_{index:06d}.npz"

@@ -5,13 +5,21 @@ compilation serves every chunk and memory is bounded by the chunk size, not the
 grid. Each chunk is split over all devices (`_sharding`), written to disk as soon
 as it is done (`_store`), and counted on a progress bar from the host.
 
+With `order="cost"` the configurations are first sorted by expected cost (a short
+pilot run of each, `_schedule`), so each chunk, and each device's share of it,
+holds configurations of similar duration: a loop runs until its slowest
+configuration is done, and one reaching $z$ late no longer keeps a chunk of fast
+ones busy. The results are put back in grid order, identical to a natural-order
+sweep; the permutation is stored with the chunks, so a resumed sweep cuts the
+same chunks.
+
 Under `jax.distributed` every process runs the same chunks (process 0's view of
 the finished ones is broadcast), each supplies and computes its own devices'
 shards, and process 0 alone writes; `path` must then be on a file system all
 processes see. (Written for multi-host, tested on one host with forced devices.)
 """
 
-import hashlib
+import functools
 import math
 import os
 from collections import Counter
@@ -31,7 +39,7 @@ from ._measure import check_measure_args
 from ._params import _validity, DEFAULTS, PARAM_NAMES, Params, VALID_RANGES
 from ._results import Measurement
 from ._status import Regime, Status
-from ._store import ChunkStore, read_finished
+from ._store import ChunkStore, digest, read_finished
 
 
 RATIO = "omega_over_wn1"
@@ -43,8 +51,19 @@ MEASURE_FIELDS: tuple[str, ...] = tuple(
 """The dataset's variables: every array field of [`Measurement`][]."""
 
 STATS: Counter = Counter()
-"""Host-side counters: `"chunks_computed"` (chunks sent to the devices) and
-`"chunks_loaded"` (chunks read back from a partial store). Used by the tests."""
+"""Host-side counters: `"chunks_computed"` (chunks sent to the devices),
+`"chunks_loaded"` (chunks read back from a partial store) and `"pilots"` (pilot
+runs for `order="cost"`). Used by the tests."""
+
+ORDERS: tuple[str, ...] = ("auto", "natural", "cost")
+"""Values of `sweep(order=...)`: see [`resolve_order`][]."""
+
+AUTO_MIN_CONFIGS = 4096
+"""Smallest sweep that `order="auto"` sorts by cost. The pilot costs one compilation
+(3 s on this 2-core CPU) plus ~0.3 ms per configuration on one core. Measured
+(benchmarks/NOTES.md, 2 devices, dt = 0.02): a 64 x 64 omega x a map, lane efficiency
+0.37 -> 0.93 and 21 -> 11 s, pilot run included; the 512-point Fig. 8 line, already
+well grouped in natural order, 0.73 -> 0.785 and no time saved."""
 
 _DESCRIPTIONS = {
     "tau_z": "time to travel z after t_start (inf: not reached)",
@@ -141,7 +160,7 @@ class _Grid:
         # summary): the coordinates themselves are in the dataset, and a list sweep of
         # a million configurations should not become a 20 MB attribute.
         axes = {n: {"n": int(v.size), "first": float(v[0]), "last": float(v[-1]),
-                    "sha256": hashlib.sha256(np.ascontiguousarray(v, "<f8").tobytes()).hexdigest()[:16]}
+                    "sha256": digest(v, "<f8")}
                 for n, v in self.values.items()}
         return {"mode": self.mode, "axes": axes, "fixed": dict(sorted(self.fixed.items()))}
 
@@ -202,7 +221,53 @@ def _max_steps(grid: _Grid, dynamics: AbstractDynamics, horizon: float) -> int:
     return default_max_steps(horizon_bound(Params(k=k, mhat=mh, check=False), horizon), dynamics.dt)
 
 
-def _attrs(grid: _Grid, spec: dict, dynamics: AbstractDynamics, max_steps: int, n_devices: int) -> dict:
+def resolve_order(order: str, dynamics: AbstractDynamics, horizon: float, window: float, n_configs: int,
+                  loops_per_device: int) -> str:
+    """The order a sweep's chunks are cut in: `"natural"` (grid order) or `"cost"`.
+
+    `"auto"` picks `"cost"` where sorting can pay for its pilot run: the exact
+    engine (whose cost the pilot models), durations that can differ (`horizon >
+    window`: the run ends at $\\tau_z$ somewhere in between), several loops in
+    sequence on each device (chunks, or sub-batches of `_sharding.MICRO_BATCH`:
+    with a single loop per device the slowest configuration sets the time in any
+    order), and at least [`AUTO_MIN_CONFIGS`][] configurations.
+
+    **Raises:** `ValueError` for an unknown `order`.
+    """
+    if order not in ORDERS:
+        raise ValueError(f"order must be one of {', '.join(map(repr, ORDERS))}, got {order!r}.")
+    if order != "auto":
+        return order
+    pays = (isinstance(dynamics, Exact) and horizon > window and loops_per_device > 1
+            and n_configs >= AUTO_MIN_CONFIGS)
+    return "cost" if pays else "natural"
+
+
+def _loops_per_device(n_chunks: int, shard: int, micro_batch: int | None) -> int:
+    """Integration loops each device runs one after another: chunks x sub-batches of its shard."""
+    return n_chunks * (-(-shard // micro_batch) if micro_batch else 1)
+
+
+def _cost_permutation(grid: _Grid, z: float, horizon: float, window: float, dynamics: AbstractDynamics,
+                      contact: str, start: str, dtype: np.dtype) -> np.ndarray:
+    """The flat configuration numbers by increasing expected cost (`_schedule.cost_order`, a pilot run)."""
+    from ._schedule import cost_order
+
+    STATS["pilots"] += 1
+    # The pilot runs the exact engine; for the smoothed one only the durations it predicts matter.
+    dt = dynamics.dt if isinstance(dynamics, Exact) else Exact().dt
+    return cost_order(grid.config_values(np.arange(grid.size)), z=z, horizon=horizon, window=window, dt=dt,
+                      contact=contact, start=start, dtype=dtype)
+
+
+def _in_grid_order(run: np.ndarray, perm: np.ndarray) -> np.ndarray:
+    """Results listed in the order they were run (`perm[j]` is the j-th configuration run) -> grid order."""
+    out = np.empty_like(run)
+    out[perm] = run
+    return out
+
+
+def _attrs(grid: _Grid, spec: dict, dynamics: AbstractDynamics, max_steps: int, n_devices: int, order: str) -> dict:
     from . import __version__
     from ._store import canonical
 
@@ -212,7 +277,7 @@ def _attrs(grid: _Grid, spec: dict, dynamics: AbstractDynamics, max_steps: int, 
     attrs.update({f"dynamics_{k}" if k != "dynamics" else "dynamics": v for k, v in dynamics.describe().items()})
     attrs.update(max_steps=max_steps, dtype=spec["dtype"], contact=spec["contact"], start=spec["start"],
                  z=spec["z"], horizon=spec["horizon"], window=spec["window"], on_invalid=spec["on_invalid"],
-                 version=__version__, jax_version=jax.__version__, n_devices=n_devices,
+                 order=order, version=__version__, jax_version=jax.__version__, n_devices=n_devices,
                  status_codes=", ".join(f"{int(s)}={s.name}" for s in Status),
                  regime_codes=", ".join(f"{int(r)}={r.name}" for r in Regime),
                  sweep_spec=canonical(spec))
@@ -245,12 +310,15 @@ def sweep(
     overwrite: bool = False,
     progress: bool = True,
     on_invalid: Literal["raise", "flag"] = "raise",
+    order: Literal["auto", "natural", "cost"] = "auto",
 ):
     """Evaluate [`measure`][] over a grid (or list) of parameters, in chunks, on all devices.
 
-    The configurations are flattened (C order) and cut into chunks of
-    `chunk_size`, padded so every chunk has the same shape: one compilation
-    serves the whole sweep and memory is bounded by the chunk size. Each chunk is
+    The configurations are flattened (C order; sorted by expected cost with
+    `order="cost"`) and cut into chunks of `chunk_size`, padded so every chunk has
+    the same shape (each device's share a whole number of SIMD vectors, so a
+    configuration's result does not depend on its place in the chunk): one
+    compilation serves the whole sweep and memory is bounded by the chunk size. Each chunk is
     split over all devices JAX sees (a 1-D mesh; `shard_map`, so each device's
     integration loop ends on its own), and the same code runs on several GPUs
     or hosts. Progress (configurations/s) is reported from the host once per chunk.
@@ -277,11 +345,16 @@ def sweep(
     - `progress`: show a tqdm progress bar.
     - `on_invalid`: `"raise"` (default) rejects invalid configurations before any
       computation; `"flag"` runs them as `Status.INVALID` (e.g. a `mu_s` x `mu_k` map).
+    - `order`: `"natural"` cuts the chunks in grid order; `"cost"` first sorts the
+      configurations by expected cost (a pilot run of each, `_schedule.cost_order`),
+      so that a chunk's loops do not wait for one slow configuration; `"auto"`
+      (default) chooses (see [`resolve_order`][]). The results are identical; a
+      resumed sweep keeps the order it was started in. Recorded in the attribute `order`.
 
     **Returns:** an `xarray.Dataset`: one dimension and coordinate per swept axis, one
     variable per [`Measurement`][] field (plus `omega` when `omega_over_wn1` is swept),
     and attributes recording the fixed parameters, dynamics, dtype, contact, start,
-    z, horizon, window, step cap, package version and the specification (`sweep_spec`, JSON).
+    z, horizon, window, order, step cap, package version and the specification (`sweep_spec`, JSON).
 
     **Raises:** `ValueError`, before any computation, for an unknown parameter, an
     empty or non-1-D axis, an invalid configuration (naming the parameter, its valid
@@ -317,15 +390,27 @@ def sweep(
     mesh = sharding.batch_mesh()
     ndev = sharding.device_count(mesh)
     chunk = -(-min(int(chunk_size), grid.size) // ndev) * ndev
+    loops = _loops_per_device(-(-grid.size // chunk), sharding.padded_size(chunk, ndev, dt) // ndev,
+                              sharding.MICRO_BATCH)
+    order = resolve_order(order, dynamics, horizon, window, grid.size, loops)
+    permutation = None
+    if order == "cost":  # called only when needed: not for a finished or resumed sweep
+        permutation = functools.partial(_cost_permutation, grid, z, horizon, window, dynamics, contact, start, dt)
     store = None
     if path is not None:
         path = Path(path).expanduser()
         finished = read_finished(path, spec, overwrite)
         if finished is not None:
             return finished
-        store = ChunkStore(path, spec, chunk, grid.size, overwrite, write=jax.process_index() == 0)
-        chunk = store.chunk_size  # a resumed sweep keeps its chunking
-    padded = -(-chunk // ndev) * ndev
+        store = ChunkStore(path, spec, chunk, grid.size, overwrite, write=jax.process_index() == 0,
+                           order=order, permutation=permutation)
+        # A resumed sweep keeps its chunking and its order.
+        chunk, order, perm = store.chunk_size, store.order, store.permutation
+    else:
+        perm = None if permutation is None else permutation()
+    # perm[j] is the j-th configuration run; all processes must cut the same chunks.
+    perm = np.arange(grid.size) if perm is None else _from_process0(perm)
+    padded = sharding.padded_size(chunk, ndev, dt)
     n_chunks = -(-grid.size // chunk)
     max_steps = _max_steps(grid, dynamics, horizon)
     done = _agree(store.completed() if store is not None else set(), n_chunks)
@@ -349,7 +434,7 @@ def sweep(
         pending = None
         for i in todo:
             flat = np.arange(i * chunk, i * chunk + padded)
-            vals = grid.config_values(np.minimum(flat, grid.size - 1))
+            vals = grid.config_values(perm[np.minimum(flat, grid.size - 1)])
             pad = flat >= min((i + 1) * chunk, grid.size)
             # NaN padding is invalid: flagged, skipped by the integrator, and dropped.
             vals = {n: np.where(pad, np.nan, v) for n, v in vals.items()}
@@ -368,22 +453,29 @@ def sweep(
     for i in sorted(done):
         results[i] = store.load(i)
         STATS["chunks_loaded"] += 1
-    flat_res = {k: np.concatenate([results[i][k] for i in range(n_chunks)]) for k in MEASURE_FIELDS}
+    flat_res = {k: _in_grid_order(np.concatenate([results[i][k] for i in range(n_chunks)]), perm)
+                for k in MEASURE_FIELDS}
     if RATIO in grid.values or RATIO in grid.fixed:
         flat_res["omega"] = grid.config_values(np.arange(grid.size))["omega"]
-    ds = _dataset(grid, flat_res, _attrs(grid, spec, dynamics, max_steps, ndev))
+    ds = _dataset(grid, flat_res, _attrs(grid, spec, dynamics, max_steps, ndev, order))
     if store is not None:
         store.finalize(ds)
     return ds
+
+
+def _from_process0(x: np.ndarray) -> np.ndarray:
+    """Process 0's copy of a host array (under `jax.distributed`; unchanged on one process)."""
+    if jax.process_count() == 1:
+        return x
+    from jax.experimental import multihost_utils
+
+    return np.asarray(multihost_utils.broadcast_one_to_all(x))
 
 
 def _agree(done: set[int], n_chunks: int) -> set[int]:
     """Under `jax.distributed`, all processes must run the same chunks: take process 0's view."""
     if jax.process_count() == 1:
         return done
-    from jax.experimental import multihost_utils
-
     mask = np.zeros(n_chunks, np.int32)
     mask[sorted(done)] = 1
-    mask = np.asarray(multihost_utils.broadcast_one_to_all(mask))
-    return {int(i) for i in np.flatnonzero(mask)}
+    return {int(i) for i in np.flatnonzero(_from_process0(mask))}

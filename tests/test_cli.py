@@ -57,13 +57,13 @@ def test_simulate_text_and_not_reached_encoding():
 def test_sweep_writes_and_reads_back(tmp_path):
     out = tmp_path / "maps" / "s.nc"
     args = ["sweep", "--omega", "2,6", "--a", "0.02:0.05:2", "--d", "0.5", "--chunk-size", "4", "--out", str(out),
-            "--no-progress", *FAST]
+            "--no-progress", "--order", "cost", *FAST]
     res = invoke(*args)
     assert res.exit_code == 0, res.output
     assert "omega[2] x a[2]" in res.stdout
     ds = xr.load_dataset(out, engine="h5netcdf")
     np.testing.assert_allclose(ds.a, [0.02, 0.05])
-    assert ds.attrs["fixed_d"] == 0.5 and ds.attrs["dynamics_dt"] == 0.02
+    assert ds.attrs["fixed_d"] == 0.5 and ds.attrs["dynamics_dt"] == 0.02 and ds.attrs["order"] == "cost"
     before = dict(_sweep.STATS)
     res = invoke(*args)  # a rerun reads the finished file back
     assert res.exit_code == 0, res.output
@@ -79,6 +79,7 @@ def test_sweep_writes_and_reads_back(tmp_path):
         (["sweep", "--foo", "1", "--out", "{tmp}/x.nc"], "--foo"),
         (["sweep", "--a", "0.05", "--out", "{tmp}/x.nc"], "nothing to sweep"),
         (["sweep", "--omega", "1:2:2", "--out", "{tmp}/blocker/x.nc"], "Cannot write"),
+        (["sweep", "--omega", "1:2:2", "--order", "fastest", "--out", "{tmp}/x.nc"], "'fastest' is not one of"),
         (["simulate", "--mu-s", "0.3", "--no-plot"], "mu_s"),
         (["simulate", "--omega", "abc"], "--omega"),
         (["figures", "11"], "unknown figure '11'"),

@@ -4,18 +4,20 @@ Kept fast: short horizons, tiny grids, `Exact(dt=0.02)`, and chunk shapes shared
 between tests so that few compilations are needed.
 """
 
+import importlib
 import json
 import os
 import subprocess
 import sys
 import textwrap
+from types import SimpleNamespace
 
 import jax
 import locomotion_jax as lj
 import numpy as np
 import pytest
 import xarray as xr
-from locomotion_jax import _sharding, _store, _sweep
+from locomotion_jax import _schedule, _sharding, _store, _sweep
 
 
 FAST = dict(z=0.3, horizon=30.0, window=5.0, dynamics=lj.Exact(dt=0.02), progress=False)
@@ -160,6 +162,103 @@ def test_omega_over_wn1_axis(reference):
     ds = lj.sweep({"omega_over_wn1": [0.2, 0.6], "a": AXES["a"]}, chunk_size=4, **FAST)
     np.testing.assert_allclose(ds.omega.isel(a=0), [2.0, 6.0])  # wn1 = 10 at the defaults
     assert_same(ds, reference.sel(omega=[2.0, 6.0]).rename(omega="omega_over_wn1"))
+
+
+def test_cost_order_gives_identical_results_and_compiles_once(monkeypatch):
+    # mu_s = 0.4 < mu_k is invalid: flagged per configuration (and predicted to cost nothing).
+    axes = {"omega": AXES["omega"], "mu_s": [0.7, 0.4]}
+    # Chunks of 9 (two chunks, a shape of this test's own): without `_sharding.padded_size`
+    # the ninth lane is a SIMD remainder, computed 1 ulp differently from the others.
+    kw = dict(fixed={"a": 0.05}, chunk_size=9, on_invalid="flag", **FAST)
+    real, perms = _sweep._cost_permutation, []
+
+    def spy(*args):
+        perms.append(real(*args))
+        return perms[-1]
+
+    monkeypatch.setattr(_sweep, "_cost_permutation", spy)
+    traces = _sharding.TRACES["run_chunk"]
+    cost = lj.sweep(axes, order="cost", **kw)
+    natural = lj.sweep(axes, order="natural", **kw)
+    # Two chunks in either order: one trace (the pilot is a separate, `simulate`, function).
+    assert _sharding.TRACES["run_chunk"] - traces == 1
+    (perm,) = perms
+    assert sorted(perm[:5]) == [1, 3, 5, 7, 9]  # the invalid ones first: the order differs from the grid's
+    assert (cost.attrs.pop("order"), natural.attrs.pop("order")) == ("cost", "natural")
+    xr.testing.assert_identical(cost, natural)  # bit for bit, configuration by configuration
+    np.testing.assert_array_equal(cost.status.sel(mu_s=0.4), lj.Status.INVALID)
+    assert (cost.status.sel(mu_s=0.7) != lj.Status.INVALID).all()
+
+
+def test_cost_order_resumes_with_its_stored_permutation(tmp_path, monkeypatch):
+    path = tmp_path / "cost.nc"
+    real_save = _store.ChunkStore.save
+
+    def interrupted_save(self, index, arrays):
+        if index != 0:
+            raise KeyboardInterrupt("simulated interruption after the first chunk")
+        real_save(self, index, arrays)
+
+    monkeypatch.setattr(_store.ChunkStore, "save", interrupted_save)
+    with pytest.raises(KeyboardInterrupt):
+        lj.sweep(AXES, chunk_size=3, path=path, order="cost", **FAST)
+    monkeypatch.setattr(_store.ChunkStore, "save", real_save)
+    parts = tmp_path / "cost.nc.parts"
+    assert sorted(p.name for p in parts.iterdir()) == ["chunk_000000.npz", "manifest.json", "order.npy"]
+    assert json.loads((parts / "manifest.json").read_text())["order"] == "cost"
+    perm = np.load(parts / "order.npy")
+    assert sorted(perm) == list(range(10)) and list(perm) != list(range(10))
+
+    # A damaged permutation is refused before computing (the stored chunks could not be placed).
+    np.save(parts / "order.npy", perm[::-1])
+    before = dict(_sweep.STATS)
+    with pytest.raises(ValueError, match="order.npy is missing or damaged"):
+        lj.sweep(AXES, chunk_size=3, path=path, order="cost", **FAST)
+    np.save(parts / "order.npy", perm)
+
+    # Resumed in the stored order, whatever is asked: no new pilot, the remaining three chunks.
+    resumed = lj.sweep(AXES, chunk_size=3, path=path, order="natural", **FAST)
+    assert _sweep.STATS["pilots"] == before.get("pilots", 0)
+    assert _sweep.STATS["chunks_computed"] - before.get("chunks_computed", 0) == 3
+    assert _sweep.STATS["chunks_loaded"] - before.get("chunks_loaded", 0) == 1
+    assert resumed.attrs.pop("order") == "cost" and not parts.exists()
+    natural = lj.sweep(AXES, chunk_size=3, order="natural", **FAST)
+    assert natural.attrs.pop("order") == "natural"
+    xr.testing.assert_identical(resumed, natural)
+
+
+def test_auto_order_sorts_only_where_it_can_pay():
+    ex, big = lj.Exact(dt=0.02), _sweep.AUTO_MIN_CONFIGS
+    assert _sweep.resolve_order("auto", ex, 600.0, 25.0, big, 8) == "cost"
+    assert _sweep.resolve_order("auto", ex, 600.0, 25.0, big - 1, 8) == "natural"  # the pilot would not pay
+    assert _sweep.resolve_order("auto", ex, 25.0, 25.0, big, 8) == "natural"  # every run lasts t_start + window
+    assert _sweep.resolve_order("auto", ex, 600.0, 25.0, big, 1) == "natural"  # one loop: the slowest sets the time
+    assert _sweep.resolve_order("auto", lj.Smoothed(eps=1e-3), 600.0, 25.0, big, 8) == "natural"
+    assert _sweep.resolve_order("cost", ex, 25.0, 25.0, 1, 1) == "cost"
+    with pytest.raises(ValueError, match="order must be one of 'auto', 'natural', 'cost', got 'fastest'"):
+        _sweep.resolve_order("fastest", ex, 600.0, 25.0, big, 8)
+    assert _sweep._loops_per_device(n_chunks=3, shard=128, micro_batch=64) == 6
+    assert _sweep._loops_per_device(n_chunks=3, shard=128, micro_batch=None) == 3
+
+
+def test_pilot_runs_in_equal_chunks(monkeypatch):
+    shapes = []
+
+    def fake_simulate(params, t_end, save_at, **kwargs):  # speed omega, 10 omega switches per time unit
+        om = np.asarray(params.omega)
+        shapes.append(om.shape)
+        X = np.stack([0 * om, om * (save_at[1] - save_at[0])], -1)
+        status = np.where(np.isfinite(om), lj.Status.OK, lj.Status.INVALID)
+        return SimpleNamespace(X=X, status=status, n_switch=np.nan_to_num(10 * om * t_end), t_liftoff=np.inf * om)
+
+    monkeypatch.setattr(importlib.import_module("locomotion_jax._simulate"), "simulate", fake_simulate)
+    omega = np.asarray([1.0, 2.0, np.nan, 4.0, 5.0, 6.0, 7.0])
+    out = _schedule.pilot({"omega": omega, "a": np.full(7, 0.05)}, chunk_size=3)
+    assert shapes == [(3,)] * 3  # the last chunk padded: one compilation
+    np.testing.assert_allclose(out["speed"], np.nan_to_num(omega), rtol=1e-15)
+    np.testing.assert_allclose(out["switch_rate"], 10 * np.nan_to_num(omega), rtol=1e-15)
+    np.testing.assert_array_equal(out["valid"], np.isfinite(omega))
+    assert out["t_liftoff"][0] == np.inf
 
 
 HELPER = textwrap.dedent(
