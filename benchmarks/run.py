@@ -336,18 +336,27 @@ def _schedule_axes(spec: dict):
     return {"omega": om.ravel(), "a": a.ravel()}, om.size
 
 
-def _lane_use(steps, chunk: int, padded: int, ndev: int, micro) -> float:
+def _lane_use(steps, omega, chunk: int, padded: int, ndev: int, micro) -> float:
     """Lane-iterations the loops ran for `steps` (iterations per configuration, in the order run).
 
-    Each loop (a device's shard of a chunk, or a sub-batch of it) runs to its own slowest configuration.
+    Each device's shard of a chunk goes through the work queue (`_queue.run_queue`) on
+    `micro` lanes: highest `omega` first, a lane taking the next configuration as soon as
+    its own is done; the loop runs until the last lane is done (list scheduling).
     """
+    import heapq
+
+    import numpy as np
+
     spent, shard = 0, padded // ndev
     for lo in range(0, len(steps), chunk):
-        block = steps[lo:lo + chunk]
+        block, om = steps[lo:lo + chunk], omega[lo:lo + chunk]
         for d in range(0, len(block), shard):
-            part = block[d:d + shard]
-            width = min(micro or len(part), len(part))
-            spent += sum(part[g:g + width].max() * width for g in range(0, len(part), width))
+            part, w = block[d:d + shard], om[d:d + shard]
+            lanes = min(micro or len(part), len(part))
+            free = [0] * lanes
+            for k in np.argsort(-np.where(np.isfinite(w), w, -np.inf), kind="stable"):
+                heapq.heappush(free, heapq.heappop(free) + int(part[k]))
+            spent += max(free) * lanes
     return float(spent)
 
 
@@ -361,8 +370,9 @@ def case_schedule(spec: dict) -> dict:
 
     chunk, dt, H = spec["chunk"], spec["dt"], spec["horizon"]
     micro = MICRO_BATCH_CPU if jax.devices()[0].platform == "cpu" else None
-    _sharding.MICRO_BATCH = micro  # the sweep engine's knob: 64-wide loops per device
+    _sharding.MICRO_BATCH = micro  # the sweep engine's knob (64 lanes per device on a CPU, its default)
     axes, N = _schedule_axes(spec)
+    freq = np.asarray(axes["omega"] if "omega" in axes else axes["omega_over_wn1"])  # the queue's order
     kw = dict(mode="list", z=5.0, horizon=H, dynamics=lj.Exact(dt=dt), contact="paper", chunk_size=chunk,
               progress=False, dtype="float64")
     ndev = len(jax.devices())
@@ -391,7 +401,7 @@ def case_schedule(spec: dict) -> dict:
         inv = np.argsort(listed)
         data = {k: np.asarray(v.values)[inv] for k, v in ds.data_vars.items()}
         out = dict(wall=wall, busy=max(th1[k] - th0.get(k, 0.0) for k in th1), useful=float(steps.sum()),
-                   spent=_lane_use(steps, per_chunk, padded, ndev, micro))
+                   spent=_lane_use(steps, freq[listed][ran], per_chunk, padded, ndev, micro))
         if "wall" in pilot:
             out["pilot"] = pilot["wall"]
         return out, data, ds.attrs["order"]

@@ -73,36 +73,10 @@ def horizon_bound(params: Params, t_extra: float) -> float:
 
 
 MICRO_BATCH_CPU = 64
-"""Configurations per `while_loop` on a CPU (see [`map_batched`][])."""
-
-
-def map_batched(fn, params: Params, wave: AbstractWaveform, wave_axes, size: int | None = None):
-    """`vmap(fn)(params, wave)`, run on a CPU as a sequence of 64-wide sub-batches (`lax.map`).
-
-    Each sub-batch's integration loop stops with its own slowest configuration, and
-    its state (a few hundred arrays of 64 scalars) stays in the core's cache: on the
-    CPU this runs the exact engine 2x faster than one wide `vmap` (benchmarks/NOTES.md).
-    Other backends (GPU) take the whole batch at once. `size` overrides the width.
-    Configurations are grouped by `omega` (similar rates of mode switches) and the
-    batch is padded to a whole number of sub-batches, so the loop body is compiled once.
-    """
-    n = params.omega.shape[0]
-    mb = size if size is not None else (MICRO_BATCH_CPU if jax.default_backend() == "cpu" else None)
-    if not mb or n <= mb:
-        return jax.vmap(fn, in_axes=(0, wave_axes))(params, wave)
-    # Neighbours in frequency switch modes at similar rates: sorting by omega groups
-    # similar costs into the same sub-batch (a gather; results are put back in order).
-    order = jnp.argsort(jnp.where(jnp.isfinite(params.omega), params.omega, jnp.inf))
-    k = -(-n // mb)
-    idx = jnp.concatenate([order, jnp.repeat(order[-1:], k * mb - n)]).reshape(k, mb)
-    take = lambda x: x[idx]
-    sub = lambda p, w: jax.vmap(fn, in_axes=(0, wave_axes))(p, w)
-    if wave_axes is None:
-        out = jax.lax.map(lambda p: sub(p, wave), jax.tree_util.tree_map(take, params))
-    else:
-        out = jax.lax.map(lambda a: sub(*a), jax.tree_util.tree_map(take, (params, wave)))
-    inv = jnp.zeros(n, order.dtype).at[order].set(jnp.arange(n, dtype=order.dtype))
-    return jax.tree_util.tree_map(lambda x: x.reshape((k * mb,) + x.shape[2:])[inv], out)
+"""Lanes of the exact engine's loops on a CPU (`measure`'s work queue, `simulate`'s
+sub-batches). Above 64 elements per kernel XLA's CPU runtime splits every kernel
+over its thread pool, which costs more than it gains for kernels this small
+(benchmarks/NOTES.md, cost model 3)."""
 
 
 def default_max_steps(t_total: float, dt: float) -> int:

@@ -95,7 +95,7 @@ def _exact_batch(params, wave, wave_axes, save_at, contact, start, dt, max_steps
     run = lambda p, w: _run(p, w, wave_axes, save_at, contact, start, dt, max_steps)
     if not mb or n <= mb:
         return run(params, wave)
-    # Sub-batches in sequence (`_batch.map_batched`): each loop stops with its own
+    # Sub-batches in sequence (`_batch.MICRO_BATCH_CPU` wide): each loop stops with its own
     # slowest configuration and its state stays in cache.
     k = -(-n // mb)
     pad = k * mb - n
