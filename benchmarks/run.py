@@ -812,9 +812,10 @@ def report(res: dict, meta: dict) -> str:
         L.append(f"`sweep` over {what}, z = 5, horizon {s['horizon']:g}, dt = {s['dt']:g}, paper contact, chunks "
                  f"of {s['chunk']} on {s['n_devices']} devices; {s['reached']} of {s['n_configs']} configurations "
                  f"reach z (tau_5 from {tau[0]:.3g} to {tau[1]:.3g}). Lane efficiency = "
-                 "iterations the configurations need / iterations their loops ran (each loop, a device's "
-                 f"shard of a chunk in sub-batches of {s.get('micro_batch') or 'all'}, runs to its slowest "
-                 "configuration); it does not depend on the load of the machine. `natural` and `cost` are "
+                 "iterations the configurations need / lane-iterations their loops ran (a device's shard of "
+                 f"a chunk runs through the work queue on {s.get('micro_batch') or 'all'} lanes until its last "
+                 "lane is done; counted by replaying the queue's list scheduling on the iterations each "
+                 "configuration took); it does not depend on the load of the machine. `natural` and `cost` are "
                  "`sweep(order=...)`; `random` is a shuffled list in natural order. The cost order's wall time "
                  "includes its pilot run (compiled beforehand). Results bit-for-bit identical in every order: "
                  f"{s['same_results']}.")
