@@ -464,8 +464,9 @@ def machine() -> dict:
         except md.PackageNotFoundError:
             info[pkg] = "-"
     try:
-        info["commit"] = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
-                                        text=True).stdout.strip() + " (+ working tree)"
+        git = lambda *a: subprocess.run(["git", *a], cwd=ROOT, capture_output=True, text=True).stdout
+        changed = [ln for ln in git("status", "--porcelain").splitlines() if "benchmarks/RESULTS" not in ln]
+        info["commit"] = git("rev-parse", "--short", "HEAD").strip() + (" (+ working tree)" if changed else "")
     except OSError:
         pass
     return info
