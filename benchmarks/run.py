@@ -663,8 +663,8 @@ def targets(res: dict, meta: dict, base: dict | None) -> list[str]:
     out += [f"| {a} | {b} | {c} | {d} |" for a, b, c, d in rows]
     out += ["", "Compilations are counted in tests: one per sweep whatever its number of chunks "
             "(`tests/test_sweep.py`), none for new parameter values (`tests/test_exact.py`), and in the "
-            "optimiser one per smoothing stage, whose eps sets the compiled step count, none per iteration, start "
-            "or call (`tests/test_optimise.py`).", ""]
+            "optimiser one per optimisation, every smoothing stage sharing the finest stage's compiled loop, none per "
+            "stage, iteration, start or call (`tests/test_optimise.py`).", ""]
     return out
 
 

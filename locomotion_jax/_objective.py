@@ -67,16 +67,20 @@ def rates(params: Params, wave: Fourier, eps: Array, t: Array, y: Array) -> tupl
 
 
 class Plan(eqx.Module):
-    """Static step counts of one rollout (they set the compiled shapes).
+    """Step counts of one rollout.
 
-    - `steps_per_period`: RK4 steps per actuation period.
+    - `steps_per_period`: RK4 steps per actuation period (a traced integer, so that
+      the stages of an $\\varepsilon$ continuation share one compilation).
+    - `max_steps_per_period`: the compiled length of a period's loop; steps past
+      `steps_per_period` are skipped by a `lax.cond`.
     - `transient_periods`: periods discarded before measuring.
     - `measured_periods`: periods over which speed and cost are measured.
     - `detached_periods`: leading transient periods integrated without gradient
       (truncated backpropagation, see [`rollout`][]); 0 differentiates everything.
     """
 
-    steps_per_period: int = eqx.field(static=True)
+    steps_per_period: Array
+    max_steps_per_period: int = eqx.field(static=True)
     transient_periods: int = eqx.field(static=True)
     measured_periods: int = eqx.field(static=True)
     detached_periods: int = eqx.field(static=True, default=0)
@@ -94,6 +98,7 @@ def make_plan(
     transient: float,
     measured: float,
     backprop: float | None = None,
+    eps_min: float | None = None,
 ) -> Plan:
     """Step counts for base frequencies in `[omega_lo, omega_hi]`.
 
@@ -101,16 +106,26 @@ def make_plan(
     the slowest frequency; the transient must last `transient` time units and the
     measurement `measured` time units (and at least two periods) at the fastest.
     `backprop`: time units of the transient's end that are differentiated
-    (`None`: all of it).
+    (`None`: all of it). `eps_min`: the finest $\\varepsilon$ the compiled loop must
+    serve (default `eps`); plans made for any `eps >= eps_min` have the same static
+    shape, and differ only in the traced step count.
     """
+    eps_min = eps if eps_min is None else eps_min
+    if not eps_min <= eps:
+        raise ValueError(f"eps_min must be <= eps, got eps_min={eps_min} and eps={eps}")
     m1, m2 = float(params.m1), float(params.m2)
-    # Stability: lambda = mu_s n / (m eps), n up to about twice the heavier weight.
-    dt_max = STABILITY * eps * min(m1, m2) / max(m1, m2)
     period_lo, period_hi = 2 * math.pi / omega_hi, 2 * math.pi / omega_lo
+
+    def steps(e: float) -> int:
+        # Stability: lambda = mu_s n / (m eps), n up to about twice the heavier weight.
+        dt_max = STABILITY * e * min(m1, m2) / max(m1, m2)
+        return max(16, math.ceil(period_hi / dt_max))
+
     transient_periods = max(1, math.ceil(transient / period_lo))
     kept = transient_periods if backprop is None else min(transient_periods, max(1, math.ceil(backprop / period_lo)))
     return Plan(
-        steps_per_period=max(16, math.ceil(period_hi / dt_max)),
+        steps_per_period=jnp.asarray(steps(eps), jnp.int32),
+        max_steps_per_period=steps(eps_min),
         transient_periods=transient_periods,
         measured_periods=max(2, math.ceil(measured / period_lo)),
         detached_periods=transient_periods - kept,
@@ -143,6 +158,9 @@ def rollout(params: Params, wave: Fourier, eps: Array, plan: Plan, temperature: 
     "relaxed"), at rest. Classical RK4 with $\\Delta t = (2\\pi/\\omega)/s$ in a
     `lax.scan`; every period is a `jax.checkpoint`ed inner scan, so reverse mode
     stores one state per period and recomputes the steps of one period at a time.
+    The inner scan has `plan.max_steps_per_period` iterations and runs the first
+    `plan.steps_per_period` of them, so one compiled rollout serves every
+    $\\varepsilon$ of a continuation (see [`make_plan`][]).
     With `plan.detached_periods > 0` the first transient periods run without
     gradient (truncated backpropagation; off by default). It is only an
     approximation: with the light damping c = 0.01 the memory of the state is
@@ -163,9 +181,9 @@ def rollout(params: Params, wave: Fourier, eps: Array, plan: Plan, temperature: 
     y0 = jnp.stack([zero, zero, gap, zero, zero]).astype(dtype)
 
     def make_step(params, wave):
-        dt = 2 * jnp.pi / wave.omega / s
+        dt = 2 * jnp.pi / wave.omega / s.astype(dtype)
 
-        def step(carry, _):
+        def rk4(carry):
             t, y, m, acc = carry
             k1, n_min = rates(params, wave, eps, t, y)
             k2, _ = rates(params, wave, eps, t + 0.5 * dt, y + (0.5 * dt) * k1)
@@ -174,7 +192,12 @@ def rollout(params: Params, wave: Fourier, eps: Array, plan: Plan, temperature: 
             y = y + (dt / 6) * (k1 + 2 * k2 + 2 * k3 + k4)
             m_new = jnp.minimum(m, n_min)
             acc = acc * jnp.exp((m_new - m) / temperature) + jnp.exp((m_new - n_min) / temperature)
-            return (t + dt, y, m_new, acc), None
+            return t + dt, y, m_new, acc
+
+        def step(carry, i):
+            # The loop has the finest stage's length; a coarser stage skips the rest. The
+            # predicate is the same for every start, so under vmap this stays a branch.
+            return jax.lax.cond(i < s, rk4, lambda c: c, carry), None
 
         return step
 
@@ -185,7 +208,7 @@ def rollout(params: Params, wave: Fourier, eps: Array, plan: Plan, temperature: 
         step = jax.checkpoint(step) if checkpoint else step
 
         def one_period(carry, _):
-            carry, _ = jax.lax.scan(step, carry, None, length=s)
+            carry, _ = jax.lax.scan(step, carry, jnp.arange(plan.max_steps_per_period))
             y = carry[1]
             return carry, jnp.stack([model.centre_of_mass(params, y[0], y[2]), y[4]])
 

@@ -14,7 +14,9 @@ Method:
 
 - **Objective and gradients** on the smoothed model by reverse mode through a
   checkpointed fixed-step rollout (`_objective.rollout`), with a continuation
-  in $\\varepsilon$ (default $10^{-2} \\to 3\\cdot10^{-3} \\to 10^{-3}$).
+  in $\\varepsilon$ (default $10^{-2} \\to 3\\cdot10^{-3} \\to 10^{-3}$). The step
+  count, set by $\\varepsilon$, is traced, so every stage runs the same compiled
+  block (one compilation per optimisation; coarse stages skip the surplus steps).
 - **Constraints.** The stroke is convex in $(A, B)$ and cheap: iterates are kept
   inside it by radial rescaling (`_constraints.project_stroke`), so it holds
   exactly at every iterate. Speed and no-lift-off depend on the dynamics and are
@@ -150,7 +152,7 @@ def _optimizer() -> optax.GradientTransformation:
 TRACES: Counter = Counter()
 """Python-level traces of the jitted blocks (keys `"block"`, `"evaluate"`): a test
 checks that a whole optimisation (every start, smoothing stage and outer
-iteration) compiles each once."""
+iteration) traces the Adam block once."""
 
 
 class _Best(eqx.Module):
@@ -314,7 +316,9 @@ def optimise(
         # Stability needs the step at the slowest admissible frequency; the transient and the
         # measurement are sized at the starts' centre (a drift to the range's end shortens
         # them by a factor of at most `omega_range` squared).
-        plan = make_plan(params, lo, centre, eps, settings.transient, settings.measured, settings.backprop)
+        # Every stage shares the finest stage's compiled loop (one compilation per optimisation).
+        plan = make_plan(params, lo, centre, eps, settings.transient, settings.measured, settings.backprop,
+                         eps_min=min(settings.eps_schedule))
         return _Problem(params, jnp.asarray(a_max, dtype), jnp.asarray(direction, dtype),
                         jnp.asarray(math.log(lo), dtype), jnp.asarray(math.log(hi), dtype), plan,
                         settings.temperature, free)

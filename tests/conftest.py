@@ -3,6 +3,7 @@ floats freely), rank promotion raises (catches silent broadcasting bugs)."""
 
 import os
 
+
 os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
 
 import jax
@@ -13,6 +14,7 @@ jax.config.update("jax_numpy_rank_promotion", "raise")
 
 import sys
 from pathlib import Path
+
 
 # `reference.py` (the independent scipy solver) is imported by several tests.
 sys.path.insert(0, str(Path(__file__).parent))

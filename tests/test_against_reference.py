@@ -5,12 +5,11 @@ import math
 from concurrent.futures import ProcessPoolExecutor
 
 import jax.numpy as jnp
+import locomotion_jax as lj
 import numpy as np
 import pytest
 from reference import reference_measure, reference_simulate
 from scipy.stats import linregress
-
-import locomotion_jax as lj
 
 
 # 24 configurations over the SSL and SL regimes (none lifts off under the strict

@@ -2,11 +2,14 @@
 
 `LOCOMOTION_NB_SMALL=1` shrinks every grid, horizon and animation (see each
 notebook's first code cell). A cell that raises fails its test with the cell and the
-traceback (`nbclient.exceptions.CellExecutionError`).
+traceback (nbclient's `CellExecutionError`, from the client process's stderr).
 
 The kernels are separate processes and JAX compiles on one thread, so the notebooks
 run two at a time (the CI machine has two cores): about half the wall time of
-running them in turn. `LOCOMOTION_NB_WORKERS` changes that.
+running them in turn. `LOCOMOTION_NB_WORKERS` changes that. Each notebook's client
+runs in a process of its own: with two clients in threads of one process (sharing
+zmq and asyncio state) the suite twice stalled for about 10 minutes, client waiting
+and kernel idle, before it went on.
 
 The committed `.ipynb` files carry no outputs, and each is paired with a jupytext
 percent-format `.py` (the reviewed source; see notebooks/README.md): the test checks
@@ -14,19 +17,20 @@ that the two hold the same cells.
 """
 
 import os
-import time
+import subprocess
+import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import jupytext
 import nbformat
 import pytest
-from nbclient import NotebookClient
 
 
 NOTEBOOKS = Path(__file__).resolve().parents[1] / "notebooks"
 NAMES = ("01_model_tour", "02_parameter_maps", "03_optimal_actuation")
 CELL_TIMEOUT = 600  # seconds per cell: a hung kernel fails instead of blocking CI
+NOTEBOOK_TIMEOUT = 900  # seconds per notebook, client start included
 
 
 def test_every_notebook_is_tested():
@@ -48,17 +52,36 @@ def test_committed_notebook_is_stripped_and_paired(name):
     )
 
 
-def _execute(name: str) -> tuple[nbformat.NotebookNode, float]:
-    nb = nbformat.read(NOTEBOOKS / f"{name}.ipynb", as_version=4)
-    client = NotebookClient(nb, timeout=CELL_TIMEOUT, kernel_name="python3",
-                            resources={"metadata": {"path": str(NOTEBOOKS)}})
-    t0 = time.perf_counter()
+_RUNNER = """
+import sys, time
+import nbformat
+from nbclient import NotebookClient
+src, out, path, timeout = sys.argv[1:]
+nb = nbformat.read(src, as_version=4)
+client = NotebookClient(nb, timeout=int(timeout), kernel_name="python3", resources={"metadata": {"path": path}})
+t0 = time.perf_counter()
+try:
     client.execute()
-    return nb, time.perf_counter() - t0
+finally:
+    nb.metadata["execution_seconds"] = time.perf_counter() - t0
+    nbformat.write(nb, out)
+"""
+
+
+def _execute(name: str, out_dir: Path) -> tuple[nbformat.NotebookNode, float]:
+    """Run one notebook in a fresh client process; raise with the kernel's traceback if a cell fails."""
+    out = out_dir / f"{name}.ipynb"
+    args = [sys.executable, "-c", _RUNNER, str(NOTEBOOKS / f"{name}.ipynb"), str(out), str(NOTEBOOKS),
+            str(CELL_TIMEOUT)]
+    proc = subprocess.run(args, capture_output=True, text=True, timeout=NOTEBOOK_TIMEOUT)
+    if proc.returncode:
+        raise RuntimeError(f"{name} failed (exit {proc.returncode}):\n{proc.stderr[-6000:]}")
+    nb = nbformat.read(out, as_version=4)
+    return nb, nb.metadata["execution_seconds"]
 
 
 @pytest.fixture(scope="module")
-def executions(request):
+def executions(request, tmp_path_factory):
     """Start every selected notebook at once (two kernels at a time); each test waits for its own."""
     selected = [item.callspec.params["name"] for item in request.session.items
                 if getattr(item, "originalname", None) == "test_notebook_runs"]
@@ -68,7 +91,8 @@ def executions(request):
     os.environ.pop("LOCOMOTION_NB_IMAGES", None)  # never write docs/images from a test
     pool = ThreadPoolExecutor(max_workers=int(os.environ.get("LOCOMOTION_NB_WORKERS", "2")))
     # The slowest first, so that the two workers finish together.
-    futures = {name: pool.submit(_execute, name) for name in sorted(selected, reverse=True)}
+    out_dir = tmp_path_factory.mktemp("notebooks")
+    futures = {name: pool.submit(_execute, name, out_dir) for name in sorted(selected, reverse=True)}
     try:
         yield futures
     finally:
@@ -83,7 +107,7 @@ def executions(request):
 @pytest.mark.slow
 @pytest.mark.parametrize("name", NAMES)
 def test_notebook_runs(name, executions):
-    nb, seconds = executions[name].result()  # re-raises CellExecutionError from the kernel
+    nb, seconds = executions[name].result()  # re-raises a failed cell's error, with its traceback
     errors = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs if o.output_type == "error"]
     assert not errors, f"{name}: {errors[0].ename}: {errors[0].evalue}"
     print(f"{name}: {seconds:.0f} s")

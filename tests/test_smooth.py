@@ -4,11 +4,10 @@ energy balance, lift-off, and differentiability."""
 import diffrax
 import jax
 import jax.numpy as jnp
-import numpy as np
-from scipy.stats import linregress
-
 import locomotion_jax as lj
+import numpy as np
 from locomotion_jax import _smooth
+from scipy.stats import linregress
 
 
 T = 20.0
