@@ -52,6 +52,8 @@ AMPL = (0.01, 0.1)
 DT = 0.03
 """The throughput table's step: the largest of 0.01, 0.02, 0.03, 0.04 whose tau_5 error stays under the
 target 1e-3 on every accuracy configuration that keeps contact (the accuracy table shows it)."""
+MAP_HORIZON = 25.0
+"""The map case's `sweep(horizon=...)`, as in the README's example (runs end at tau_5 or this horizon)."""
 TARGETS = dict(rate=1e5, ratio=1000.0, accuracy=1e-3, compile=10.0)
 """Issue 5: float64 cfg-tu/s (wall, batches >= 1024), x scipy, tau_5 relative error, compile seconds."""
 
@@ -422,8 +424,28 @@ def case_schedule(spec: dict) -> dict:
                 tau_range=[float(tau[reached].min()), float(tau[reached].max())] if reached.any() else None)
 
 
+def case_map(spec: dict) -> dict:
+    """An N x N (omega, a) map with the public `sweep` (all devices): wall time, peak memory, data kept."""
+    jax = setup_jax()
+    import locomotion_jax as lj
+    import numpy as np
+
+    n, H, dt = spec["N"], spec["horizon"], spec["dt"]
+    grid = {"omega": np.linspace(*OMEGA, n), "a": np.linspace(*AMPL, n)}
+    kw = dict(horizon=H, dynamics=lj.Exact(dt=dt), contact="paper", progress=False, dtype="float64")
+    th0 = thread_cpu()
+    t0 = time.perf_counter()
+    ds = lj.sweep(grid, **kw)
+    wall = time.perf_counter() - t0
+    th1 = thread_cpu()
+    valid = np.asarray(ds.status.values) == int(lj.Status.OK)
+    return dict(spec, wall=wall, cpu=sum(th1[k] - th0.get(k, 0.0) for k in th1), rss=maxrss_mb(),
+                n_configs=int(ds.omega.size * ds.a.size), data_mb=ds.nbytes / 2**20, n_devices=len(jax.devices()),
+                n_ok=int(valid.sum()), steps_mean=float(np.asarray(ds.n_steps.values).mean()))
+
+
 CASES = dict(exact=case_exact, sharded=case_sharded, smoothed=case_smoothed, scipy=case_scipy,
-             accuracy=case_accuracy, schedule=case_schedule)
+             accuracy=case_accuracy, schedule=case_schedule, map=case_map)
 
 
 # -- orchestration ---------------------------------------------------------------------------------------
@@ -570,6 +592,12 @@ def main():
         results["schedule"].append(r)
         log("schedule: " + (r.get("error") or json.dumps(r["orders"])))
 
+    if "map" not in skip:
+        for n in (32, 64) if q else (64, 512):
+            r = spawn(dict(kind="map", N=n, horizon=MAP_HORIZON, dt=dt), devices=args.devices if cpu_platform else None)
+            results["map"].append(r)
+            log(f"map {n} x {n}: " + (r.get("error") or f"{r['wall']:.1f} s, {r['rss']:.0f} MB"))
+
     meta = dict(machine=machine(), load=(load0, os.getloadavg()), quick=q, dt=dt, horizon=H,
                 command=" ".join([Path(sys.executable).name, *sys.argv]), elapsed=time.perf_counter() - t_begin)
     Path(args.out).with_suffix(".json").write_text(json.dumps(dict(results=results, meta=meta), indent=1))
@@ -657,6 +685,14 @@ def targets(res: dict, meta: dict, base: dict | None) -> list[str]:
                          f"({r['steps_mean'] / short[r['B']]['steps_mean']:.1f}x the steps)", "independent of steps",
                          f"{r['rss']:.0f} MB vs {short[r['B']]['rss']:.0f} MB",
                          ok(r["rss"] <= 1.1 * short[r["B"]]["rss"])))
+    maps = [r for r in res.get("map", []) if "error" not in r]
+    if maps:
+        r = max(maps, key=lambda r: r["N"])
+        small = min(maps, key=lambda r: r["N"])
+        rows.append((f"{r['N']} x {r['N']} map (`sweep`, {r['n_configs']:,} configurations, {r['n_devices']} "
+                     f"devices): peak RSS; {small['N']} x {small['N']} for scale", "fits in memory",
+                     f"{r['rss']:.0f} MB ({r['data_mb']:.1f} MB of results, {r['wall']:.0f} s); "
+                     f"{small['rss']:.0f} MB", ok(r["n_configs"] == r["N"] ** 2)))
     if not rows:
         return []
     out = ["## Targets (issue 5)", "", "| what | target | measured | |", "|---|---|---|---|"]
@@ -829,6 +865,25 @@ def report(res: dict, meta: dict) -> str:
         L.append("")
     elif res["schedule"]:
         L.append(f"Schedule case failed: `{res['schedule'][0]['error'][-500:]}`")
+    maps = res.get("map", [])
+    if maps:
+        L.append("## Maps: memory")
+        L.append("")
+        L.append(f"`sweep` over an N x N grid, omega in {OMEGA}, a in {AMPL}, z = 5, horizon {MAP_HORIZON:g} "
+                 f"(the README's example), dt = {meta['dt']:g}, float64, paper contact, default chunks, all devices, "
+                 "results kept in memory (no `path`). Peak RSS is the whole process (Python, JAX, XLA's "
+                 "compiled code); what the sweep adds grows with the results kept, not with the steps.")
+        L.append("")
+        L.append("| N x N | configurations | devices | wall s (compile included) | mean steps | results MB "
+                 "| peak RSS MB | valid |")
+        L.append("|---|---|---|---|---|---|---|---|")
+        for r in maps:
+            if "error" in r:
+                L.append(f"| {r['N']} x {r['N']} | error: `{r['error'][-200:]}` | | | | | | |")
+                continue
+            L.append(f"| {r['N']} x {r['N']} | {r['n_configs']:,} | {r['n_devices']} | {r['wall']:.3g} | "
+                     f"{r['steps_mean']:,.0f} | {r['data_mb']:.1f} | {r['rss']:.0f} | {r['n_ok']:,} |")
+        L.append("")
     if base:
         L.append("## Baseline detail")
         L.append("")
