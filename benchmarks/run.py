@@ -14,14 +14,16 @@ and compile time are per case):
 - the accuracy of every engine against a tight scipy reference (rtol 1e-11) on
   those configurations: `tau_5` and `X` at the horizon;
 - a Fig. 8 style sweep in natural, random and cost order (`sweep(order=...)`, `_schedule`);
-  `--case '{"kind": "schedule", "grid": "map", ...}'` runs an omega x a map instead.
+  `--case '{"kind": "schedule", "grid": "map", ...}'` runs an omega x a map instead;
+- 64 x 64 and 512 x 512 (omega, a) maps with the public `sweep` on all devices: wall
+  time, peak memory and the size of the results.
 
 Timings are medians of several runs after a warm-up (`block_until_ready`).
 Throughput is configurations x simulated time units per second ("cfg-tu/s"), by
 wall clock and per CPU-second of the process (robust to other load on the machine).
 Results are printed and written to `benchmarks/RESULTS.md`.
 
-    python benchmarks/run.py            # full run (~20 min on 2 cores)
+    python benchmarks/run.py            # full run (~9 min on 2 cores)
     python benchmarks/run.py --quick    # smoke run (~3 min)
 
 On a GPU: install `jax[cuda12]` and run the same command; every case then runs on
