@@ -10,12 +10,13 @@ asyncio state is shared); `pytest -n 2` spreads the three over both cores. A
 module fixture used to start every notebook in every xdist worker (each worker
 sees the whole collection), so they all ran twice, four kernels at once.
 
-The test extra pins `ipykernel < 7`: with ipykernel 7.4 (a new shell-channel
-thread) the kernel three times in three fresh-clone CI runs took the request of
-the cell after the `ipywidgets` panel of `01_model_tour` exactly one cell timeout
-(600 s) late, the kernel idle meanwhile (nbclient's recorded `execute_input`
-times; the same symptom as jupyter/nbclient#312). The suite then passed, 9
-minutes late.
+The client splits every wait for a kernel message into polls of at most a second.
+In fresh-clone CI runs (ipykernel 7.4 and 6.31 alike) the client sometimes missed
+the wake-up for the reply to the cell with the `ipywidgets` panel of
+`01_model_tour`: the reply was sent at once (its header's time), the request of
+the next cell reached the kernel exactly one cell timeout (600 s) later, and the
+suite passed 10 minutes late (the symptom of jupyter/nbclient#312). A poll that
+times out checks the socket again, so a missed wake-up now costs under a second.
 
 The committed `.ipynb` files carry no outputs, and each is paired with a jupytext
 percent-format `.py` (the reviewed source; see notebooks/README.md): the test checks
@@ -58,11 +59,40 @@ def test_committed_notebook_is_stripped_and_paired(name):
 
 _RUNNER = """
 import sys, time
+from queue import Empty
 import nbformat
 from nbclient import NotebookClient
+
+POLL = 1.0  # longest single wait on a channel, seconds
+
+
+def short_polls(channel):
+    # A poll that times out re-checks the socket: a missed zmq wake-up then costs one
+    # poll, not the whole timeout. Same contract as get_msg: Empty once `timeout` is up.
+    get = channel.get_msg
+
+    async def get_msg(timeout=None):
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            left = POLL if deadline is None else min(POLL, max(0.0, deadline - time.monotonic()))
+            try:
+                return await get(timeout=left)
+            except Empty:
+                if deadline is not None and time.monotonic() >= deadline:
+                    raise
+
+    channel.get_msg = get_msg
+
+
+def on_start(notebook):
+    short_polls(client.kc.shell_channel)
+    short_polls(client.kc.iopub_channel)
+
+
 src, out, path, timeout = sys.argv[1:]
 nb = nbformat.read(src, as_version=4)
-client = NotebookClient(nb, timeout=int(timeout), kernel_name="python3", resources={"metadata": {"path": path}})
+client = NotebookClient(nb, timeout=int(timeout), kernel_name="python3", resources={"metadata": {"path": path}},
+                        on_notebook_start=on_start)
 t0 = time.perf_counter()
 try:
     client.execute()
