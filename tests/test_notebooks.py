@@ -11,11 +11,11 @@ module fixture used to start every notebook in every xdist worker (each worker
 sees the whole collection), so they all ran twice, four kernels at once.
 
 The client splits every wait for a kernel message into polls of at most a second.
-In fresh-clone CI runs (ipykernel 7.4 and 6.31 alike) the client sometimes missed
-the wake-up for the reply to the cell with the `ipywidgets` panel of
-`01_model_tour`: the reply was sent at once (its header's time), the request of
-the next cell reached the kernel exactly one cell timeout (600 s) later, and the
-suite passed 10 minutes late (the symptom of jupyter/nbclient#312). A poll that
+In 4 of 6 fresh-clone CI runs the client missed the wake-up for the reply to the
+cell with the `ipywidgets` panel of `01_model_tour` (ipykernel 7.4; once with 6.31,
+kernel idle and client waiting): the reply was sent at once (its header's time),
+the request of the next cell reached the kernel exactly one cell timeout (600 s)
+later, and the suite passed 10 minutes late (the symptom of jupyter/nbclient#312). A poll that
 times out checks the socket again, so a missed wake-up now costs under a second.
 
 The committed `.ipynb` files carry no outputs, and each is paired with a jupytext
