@@ -435,13 +435,11 @@ def case_map(spec: dict) -> dict:
     n, H, dt = spec["N"], spec["horizon"], spec["dt"]
     grid = {"omega": np.linspace(*OMEGA, n), "a": np.linspace(*AMPL, n)}
     kw = dict(horizon=H, dynamics=lj.Exact(dt=dt), contact="paper", progress=False, dtype="float64")
-    th0 = thread_cpu()
     t0 = time.perf_counter()
     ds = lj.sweep(grid, **kw)
     wall = time.perf_counter() - t0
-    th1 = thread_cpu()
     valid = np.asarray(ds.status.values) == int(lj.Status.OK)
-    return dict(spec, wall=wall, cpu=sum(th1[k] - th0.get(k, 0.0) for k in th1), rss=maxrss_mb(),
+    return dict(spec, wall=wall, rss=maxrss_mb(),
                 n_configs=int(ds.omega.size * ds.a.size), data_mb=ds.nbytes / 2**20, n_devices=len(jax.devices()),
                 n_ok=int(valid.sum()), steps_mean=float(np.asarray(ds.n_steps.values).mean()))
 
@@ -634,6 +632,12 @@ def quote_in_readme(res: dict, meta: dict, readme: Path = ROOT / "README.md") ->
     readme.write_text(head + start + "\n" + src + "\n\n" + "\n".join(table).rstrip() + "\n" + end + tail)
 
 
+def _memory_mb(meta: dict) -> float:
+    """The machine's memory as `machine()` recorded it ("23.5 GiB"); NaN (no verdict) if unknown."""
+    text = meta["machine"].get("memory")
+    return float(text.split()[0]) * 1024 if text else math.nan
+
+
 def targets(res: dict, meta: dict, base: dict | None) -> list[str]:
     """The issue's targets against what this run measured (a table with a verdict per line)."""
     dt, H, T = meta["dt"], meta["horizon"], TARGETS
@@ -692,9 +696,9 @@ def targets(res: dict, meta: dict, base: dict | None) -> list[str]:
         r = max(maps, key=lambda r: r["N"])
         small = min(maps, key=lambda r: r["N"])
         rows.append((f"{r['N']} x {r['N']} map (`sweep`, {r['n_configs']:,} configurations, {r['n_devices']} "
-                     f"devices): peak RSS; {small['N']} x {small['N']} for scale", "fits in memory",
+                     f"devices): peak RSS; {small['N']} x {small['N']} for scale", "< the machine's memory",
                      f"{r['rss']:.0f} MB ({r['data_mb']:.1f} MB of results, {r['wall']:.0f} s); "
-                     f"{small['rss']:.0f} MB", ok(r["n_configs"] == r["N"] ** 2)))
+                     f"{small['rss']:.0f} MB", ok(r["rss"] < _memory_mb(meta))))
     if not rows:
         return []
     out = ["## Targets (issue 5)", "", "| what | target | measured | |", "|---|---|---|---|"]

@@ -5,18 +5,14 @@ notebook's first code cell). A cell that raises fails its test with the cell and
 traceback (nbclient's `CellExecutionError`, from the client process's stderr).
 
 Each test runs its notebook in a client process of its own (nbclient in a
-subprocess, so that a stuck client is killed by `NOTEBOOK_TIMEOUT` and no zmq or
-asyncio state is shared); `pytest -n 2` spreads the three over both cores. A
-module fixture used to start every notebook in every xdist worker (each worker
-sees the whole collection), so they all ran twice, four kernels at once.
+subprocess: a stuck client is killed by `NOTEBOOK_TIMEOUT`, and no zmq or asyncio
+state is shared); `pytest -n 2` spreads the three over both cores.
 
-The client splits every wait for a kernel message into polls of at most a second.
-In 4 of 6 fresh-clone CI runs the client missed the wake-up for the reply to the
-cell with the `ipywidgets` panel of `01_model_tour` (ipykernel 7.4; once with 6.31,
-kernel idle and client waiting): the reply was sent at once (its header's time),
-the request of the next cell reached the kernel exactly one cell timeout (600 s)
-later, and the suite passed 10 minutes late (the symptom of jupyter/nbclient#312). A poll that
-times out checks the socket again, so a missed wake-up now costs under a second.
+The client waits for kernel messages in polls of at most a second. In CI runs it
+sometimes missed the zmq wake-up for a reply (after the `ipywidgets` panel of
+`01_model_tour`; jupyter/nbclient#312) and found it only when its 600 s wait ran
+out; a poll that times out checks the socket again, so a missed wake-up costs
+under a second.
 
 The committed `.ipynb` files carry no outputs, and each is paired with a jupytext
 percent-format `.py` (the reviewed source; see notebooks/README.md): the test checks
