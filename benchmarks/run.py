@@ -150,18 +150,31 @@ def case_exact(spec: dict) -> dict:
     dyn = lj.Exact(dt=spec["dt"])
 
     def run():
-        m = lj.measure(p, z=1e30, horizon=spec["horizon"], window=min(25.0, spec["horizon"]), dynamics=dyn,
-                       contact="paper")
+        m = lj.measure(
+            p, z=1e30, horizon=spec["horizon"], window=min(25.0, spec["horizon"]), dynamics=dyn, contact="paper"
+        )
         return m
 
     first, walls, cpus, busy = timed(lambda: run().e_d, spec["repeats"])
     m = run()
     t_sim = float(np.mean(np.asarray(m.t_start))) + spec["horizon"]
     steps = np.asarray(m.n_steps)
-    return dict(spec, first=first, compile=clock.total, wall=statistics.median(walls), cpu=statistics.median(cpus),
-                busy=statistics.median(busy), t_sim=t_sim, steps_mean=float(steps.mean()), steps_max=int(steps.max()),
-                switches_mean=float(np.asarray(m.n_switch).mean()), rss0=rss0, rss=maxrss_mb(),
-                devices=1, platform=jax.devices()[0].platform)
+    return dict(
+        spec,
+        first=first,
+        compile=clock.total,
+        wall=statistics.median(walls),
+        cpu=statistics.median(cpus),
+        busy=statistics.median(busy),
+        t_sim=t_sim,
+        steps_mean=float(steps.mean()),
+        steps_max=int(steps.max()),
+        switches_mean=float(np.asarray(m.n_switch).mean()),
+        rss0=rss0,
+        rss=maxrss_mb(),
+        devices=1,
+        platform=jax.devices()[0].platform,
+    )
 
 
 def _chunk_runner(vals, n_dev, H, dyn, max_steps, micro, z=1e30):
@@ -179,8 +192,9 @@ def _chunk_runner(vals, n_dev, H, dyn, max_steps, micro, z=1e30):
 
     mesh = Mesh(np.asarray(jax.devices()[:n_dev]), (_sharding.BATCH_AXIS,))
     sharding = NamedSharding(mesh, P(_sharding.BATCH_AXIS))
-    flat = Params(**{n: _sharding._global_array(np.asarray(vals[n], np.float64), sharding) for n in PARAM_NAMES},
-                  check=False)
+    flat = Params(
+        **{n: _sharding._global_array(np.asarray(vals[n], np.float64), sharding) for n in PARAM_NAMES}, check=False
+    )
     zhw = jnp.asarray(np.asarray([z, H, min(25.0, H)], np.float64))
     args = [flat, zhw, dyn, "paper", "paper", max_steps, mesh]
     if "micro_batch" in inspect.signature(_sharding._run_chunk).parameters:
@@ -215,8 +229,13 @@ def case_sharded(spec: dict) -> dict:
         go = _chunk_runner(vals, nd, H, dyn, max_steps, micro)
         compile_wall = time.perf_counter() - t0
         first, walls, cpus, busy = timed(go, spec["repeats"])
-        out[label] = dict(first=first + compile_wall, compile=clock.total - c0, wall=statistics.median(walls),
-                          cpu=statistics.median(cpus), busy=statistics.median(busy))
+        out[label] = dict(
+            first=first + compile_wall,
+            compile=clock.total - c0,
+            wall=statistics.median(walls),
+            cpu=statistics.median(cpus),
+            busy=statistics.median(busy),
+        )
 
     # Each device's loop ends on its own. Measure tau_5 (z = 5) on the same
     # configurations, ordered by expected cost (`_schedule.cost_order`): device 0
@@ -242,10 +261,26 @@ def case_sharded(spec: dict) -> dict:
         steps = np.asarray(s.data)
         lo, hi = s.index[0].start or 0, s.index[0].stop or B
         tau = np.asarray(res["tau_z"])[lo:hi]
-        per_dev.append(dict(device=str(s.device), ready=r, steps_max=int(steps.max()), steps_mean=float(steps.mean()),
-                            steps_sum=float(steps.sum()), tau_median=float(np.median(tau))))
-    return dict(spec, runs=out, per_device=per_dev, n_devices=n_dev, micro_batch=micro, t_sim=t_start + H,
-                rss=maxrss_mb(), platform=jax.devices()[0].platform)
+        per_dev.append(
+            dict(
+                device=str(s.device),
+                ready=r,
+                steps_max=int(steps.max()),
+                steps_mean=float(steps.mean()),
+                steps_sum=float(steps.sum()),
+                tau_median=float(np.median(tau)),
+            )
+        )
+    return dict(
+        spec,
+        runs=out,
+        per_device=per_dev,
+        n_devices=n_dev,
+        micro_batch=micro,
+        t_sim=t_start + H,
+        rss=maxrss_mb(),
+        platform=jax.devices()[0].platform,
+    )
 
 
 def case_smoothed(spec: dict) -> dict:
@@ -261,8 +296,17 @@ def case_smoothed(spec: dict) -> dict:
     run = lambda: lj.simulate(p, T, save_at=np.asarray([0.0, T]), dynamics=dyn, contact="paper")
     first, walls, cpus, busy = timed(lambda: run().X, spec["repeats"])
     tr = run()
-    return dict(spec, first=first, compile=clock.total, wall=statistics.median(walls), cpu=statistics.median(cpus),
-                t_sim=T, X=np.asarray(tr.X[:, -1]).tolist(), status=np.asarray(tr.status).tolist(), rss=maxrss_mb())
+    return dict(
+        spec,
+        first=first,
+        compile=clock.total,
+        wall=statistics.median(walls),
+        cpu=statistics.median(cpus),
+        t_sim=T,
+        X=np.asarray(tr.X[:, -1]).tolist(),
+        status=np.asarray(tr.status).tolist(),
+        rss=maxrss_mb(),
+    )
 
 
 def _scipy_one(args):
@@ -271,8 +315,14 @@ def _scipy_one(args):
     omega, a, T, rtol = args
     c0, t0 = time.process_time(), time.perf_counter()
     r = reference_simulate(dict(omega=omega, a=a), T, save_at=[0.0, T], contact="paper", rtol=rtol, atol=rtol * 1e-3)
-    return dict(omega=omega, a=a, wall=time.perf_counter() - t0, cpu=time.process_time() - c0, X=float(r["X"][-1]),
-                segments=r["n_segments"])
+    return dict(
+        omega=omega,
+        a=a,
+        wall=time.perf_counter() - t0,
+        cpu=time.process_time() - c0,
+        X=float(r["X"][-1]),
+        segments=r["n_segments"],
+    )
 
 
 def _ref_tau(args):
@@ -280,8 +330,7 @@ def _ref_tau(args):
 
     omega, a, horizon, rtol = args
     t0 = time.perf_counter()
-    r = reference_measure(dict(omega=omega, a=a), z=5.0, horizon=horizon, contact="paper", rtol=rtol,
-                          atol=rtol * 1e-2)
+    r = reference_measure(dict(omega=omega, a=a), z=5.0, horizon=horizon, contact="paper", rtol=rtol, atol=rtol * 1e-2)
     return dict(omega=omega, a=a, tau=r["tau_z"], e=r["e_z"], wall=time.perf_counter() - t0)
 
 
@@ -315,17 +364,24 @@ def case_accuracy(spec: dict) -> dict:
             q = p.astype(jnp.float32 if dtype == "float32" else jnp.float64)
             tr = lj.simulate(q, T, save_at=np.asarray([0.0, T]), dynamics=lj.Exact(dt=dt), contact="paper")
             m = lj.measure(q, z=5.0, horizon=H, dynamics=lj.Exact(dt=dt), contact="paper")
-            engines[f"exact {dtype} dt={dt:g}"] = dict(X=np.asarray(tr.X[:, -1], np.float64).tolist(),
-                                                        tau=np.asarray(m.tau_z, np.float64).tolist())
+            engines[f"exact {dtype} dt={dt:g}"] = dict(
+                X=np.asarray(tr.X[:, -1], np.float64).tolist(), tau=np.asarray(m.tau_z, np.float64).tolist()
+            )
             lifts = np.asarray(m.liftoff).tolist()
     ns = spec["n_smooth"]
     tr = lj.simulate(p[:ns], T, save_at=np.asarray([0.0, T]), dynamics=lj.Smoothed(eps=1e-3), contact="paper")
-    engines["smoothed eps=1e-3"] = dict(X=np.asarray(tr.X[:, -1]).tolist() + [math.nan] * (n - ns),
-                                        tau=[math.nan] * n)
+    engines["smoothed eps=1e-3"] = dict(X=np.asarray(tr.X[:, -1]).tolist() + [math.nan] * (n - ns), tau=[math.nan] * n)
     engines["scipy rtol=1e-9"] = dict(X=[r["X"] for r in base_X], tau=[r["tau"] for r in base_tau])
     del jax
-    return dict(spec, omega=om.tolist(), a=a.tolist(), ref_X=[r["X"] for r in ref_X],
-                ref_tau=[r["tau"] for r in ref_tau], engines=engines, liftoff=lifts)
+    return dict(
+        spec,
+        omega=om.tolist(),
+        a=a.tolist(),
+        ref_X=[r["X"] for r in ref_X],
+        ref_tau=[r["tau"] for r in ref_tau],
+        engines=engines,
+        liftoff=lifts,
+    )
 
 
 def _schedule_axes(spec: dict):
@@ -353,9 +409,9 @@ def _lane_use(steps, omega, chunk: int, padded: int, ndev: int, micro) -> float:
 
     spent, shard = 0, padded // ndev
     for lo in range(0, len(steps), chunk):
-        block, om = steps[lo:lo + chunk], omega[lo:lo + chunk]
+        block, om = steps[lo : lo + chunk], omega[lo : lo + chunk]
         for d in range(0, len(block), shard):
-            part, w = block[d:d + shard], om[d:d + shard]
+            part, w = block[d : d + shard], om[d : d + shard]
             lanes = min(micro or len(part), len(part))
             free = [0] * lanes
             for k in np.argsort(-np.where(np.isfinite(w), w, -np.inf), kind="stable"):
@@ -377,8 +433,16 @@ def case_schedule(spec: dict) -> dict:
     _sharding.MICRO_BATCH = micro  # the sweep engine's knob (64 lanes per device on a CPU, its default)
     axes, N = _schedule_axes(spec)
     freq = np.asarray(axes["omega"] if "omega" in axes else axes["omega_over_wn1"])  # the queue's order
-    kw = dict(mode="list", z=5.0, horizon=H, dynamics=lj.Exact(dt=dt), contact="paper", chunk_size=chunk,
-              progress=False, dtype="float64")
+    kw = dict(
+        mode="list",
+        z=5.0,
+        horizon=H,
+        dynamics=lj.Exact(dt=dt),
+        contact="paper",
+        chunk_size=chunk,
+        progress=False,
+        dtype="float64",
+    )
     ndev = len(jax.devices())
     per_chunk = -(-min(chunk, N) // ndev) * ndev  # as `sweep` cuts them
     padded = _sharding.padded_size(per_chunk, ndev, np.float64)
@@ -404,8 +468,12 @@ def case_schedule(spec: dict) -> dict:
         steps = np.asarray(ds.n_steps.values)[ran]
         inv = np.argsort(listed)
         data = {k: np.asarray(v.values)[inv] for k, v in ds.data_vars.items()}
-        out = dict(wall=wall, busy=max(th1[k] - th0.get(k, 0.0) for k in th1), useful=float(steps.sum()),
-                   spent=_lane_use(steps, freq[listed][ran], per_chunk, padded, ndev, micro))
+        out = dict(
+            wall=wall,
+            busy=max(th1[k] - th0.get(k, 0.0) for k in th1),
+            useful=float(steps.sum()),
+            spent=_lane_use(steps, freq[listed][ran], per_chunk, padded, ndev, micro),
+        )
         if "wall" in pilot:
             out["pilot"] = pilot["wall"]
         return out, data, ds.attrs["order"]
@@ -417,13 +485,25 @@ def case_schedule(spec: dict) -> dict:
     out["natural"], data["natural"], _ = run(np.arange(N), "natural")
     out["random"], data["random"], _ = run(np.random.default_rng(1).permutation(N), "natural")
     out["cost"], data["cost"], recorded = run(np.arange(N), "cost")
-    same = all(np.array_equal(data[o][k], data["natural"][k], equal_nan=data[o][k].dtype.kind == "f")
-               for o in data for k in data[o])
+    same = all(
+        np.array_equal(data[o][k], data["natural"][k], equal_nan=data[o][k].dtype.kind == "f")
+        for o in data
+        for k in data[o]
+    )
     tau = data["natural"]["tau_z"]
     reached = np.isfinite(tau)
-    return dict(spec, orders=out, n_devices=ndev, micro_batch=micro, same_results=same, recorded_order=recorded,
-                first_call=first, n_configs=N, reached=int(reached.sum()),
-                tau_range=[float(tau[reached].min()), float(tau[reached].max())] if reached.any() else None)
+    return dict(
+        spec,
+        orders=out,
+        n_devices=ndev,
+        micro_batch=micro,
+        same_results=same,
+        recorded_order=recorded,
+        first_call=first,
+        n_configs=N,
+        reached=int(reached.sum()),
+        tau_range=[float(tau[reached].min()), float(tau[reached].max())] if reached.any() else None,
+    )
 
 
 def case_map(spec: dict) -> dict:
@@ -439,13 +519,27 @@ def case_map(spec: dict) -> dict:
     ds = lj.sweep(grid, **kw)
     wall = time.perf_counter() - t0
     valid = np.asarray(ds.status.values) == int(lj.Status.OK)
-    return dict(spec, wall=wall, rss=maxrss_mb(),
-                n_configs=int(ds.omega.size * ds.a.size), data_mb=ds.nbytes / 2**20, n_devices=len(jax.devices()),
-                n_ok=int(valid.sum()), steps_mean=float(np.asarray(ds.n_steps.values).mean()))
+    return dict(
+        spec,
+        wall=wall,
+        rss=maxrss_mb(),
+        n_configs=int(ds.omega.size * ds.a.size),
+        data_mb=ds.nbytes / 2**20,
+        n_devices=len(jax.devices()),
+        n_ok=int(valid.sum()),
+        steps_mean=float(np.asarray(ds.n_steps.values).mean()),
+    )
 
 
-CASES = dict(exact=case_exact, sharded=case_sharded, smoothed=case_smoothed, scipy=case_scipy,
-             accuracy=case_accuracy, schedule=case_schedule, map=case_map)
+CASES = dict(
+    exact=case_exact,
+    sharded=case_sharded,
+    smoothed=case_smoothed,
+    scipy=case_scipy,
+    accuracy=case_accuracy,
+    schedule=case_schedule,
+    map=case_map,
+)
 
 
 # -- orchestration ---------------------------------------------------------------------------------------
@@ -458,8 +552,14 @@ def spawn(spec: dict, devices: int | None = None, timeout: float = 3600) -> dict
     if devices:
         flags.append(f"--xla_force_host_platform_device_count={devices}")
     env["XLA_FLAGS"] = " ".join(flags)
-    proc = subprocess.run([sys.executable, __file__, "--case", json.dumps(spec)], env=env, capture_output=True,
-                          text=True, timeout=timeout, cwd=ROOT)
+    proc = subprocess.run(
+        [sys.executable, __file__, "--case", json.dumps(spec)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=ROOT,
+    )
     if proc.returncode != 0:
         return dict(spec, error=proc.stderr[-2000:])
     return json.loads(proc.stdout.strip().splitlines()[-1])
@@ -559,14 +659,23 @@ def main():
             for B in (1024, 8192):
                 r = spawn(dict(kind="exact", B=B, dtype="float64", dt=0.01, horizon=H, repeats=2))
                 results["exact"].append(r)
-                log(f"exact float64 dt=0.01 B={B}: " + (r.get("error") or
-                                                      f"{r['B'] * r['t_sim'] / r['wall']:,.0f} cfg-tu/s"))
+                log(
+                    f"exact float64 dt=0.01 B={B}: "
+                    + (r.get("error") or f"{r['B'] * r['t_sim'] / r['wall']:,.0f} cfg-tu/s")
+                )
             r = spawn(dict(kind="exact", B=1024, dtype="float64", dt=dt, horizon=10 * H, repeats=1))
             results["exact"].append(r)
             log("exact float64 B=1024, 10x horizon (memory check): " + (r.get("error") or f"{r['rss']:.0f} MB"))
     if "sharded" not in skip:
-        spec = dict(kind="sharded", B=512 if q else 8192, dt=dt, horizon=H, repeats=2, devices=args.devices,
-                    tau_horizon=300.0 if q else 1000.0)
+        spec = dict(
+            kind="sharded",
+            B=512 if q else 8192,
+            dt=dt,
+            horizon=H,
+            repeats=2,
+            devices=args.devices,
+            tau_horizon=300.0 if q else 1000.0,
+        )
         r = spawn(spec, devices=args.devices if cpu_platform else None)
         results["sharded"].append(r)
         log("sharded: " + (r.get("error") or json.dumps(r["runs"])))
@@ -580,14 +689,26 @@ def main():
         results["scipy"].append(r)
         log("scipy: " + (r.get("error") or ", ".join(f"{x['wall']:.2f}s" for x in r["rows"])))
     if "accuracy" not in skip:
-        spec = dict(kind="accuracy", n=2 if q else 16, T=20.0 if q else 100.0, tau_horizon=300.0 if q else 1000.0,
-                    dts=[dt] if q else sorted({0.01, 0.02, 0.03, 0.04, dt}), n_smooth=1 if q else 4)
+        spec = dict(
+            kind="accuracy",
+            n=2 if q else 16,
+            T=20.0 if q else 100.0,
+            tau_horizon=300.0 if q else 1000.0,
+            dts=[dt] if q else sorted({0.01, 0.02, 0.03, 0.04, dt}),
+            n_smooth=1 if q else 4,
+        )
         r = spawn(spec)
         results["accuracy"].append(r)
         log("accuracy: " + (r.get("error") or "done"))
     if "schedule" not in skip:
-        spec = dict(kind="schedule", grid="fig8", N=64 if q else 512, chunk=16 if q else 128, dt=dt,
-                    horizon=300.0 if q else 2000.0)
+        spec = dict(
+            kind="schedule",
+            grid="fig8",
+            N=64 if q else 512,
+            chunk=16 if q else 128,
+            dt=dt,
+            horizon=300.0 if q else 2000.0,
+        )
         r = spawn(spec, devices=args.devices if cpu_platform else None)
         results["schedule"].append(r)
         log("schedule: " + (r.get("error") or json.dumps(r["orders"])))
@@ -598,8 +719,15 @@ def main():
             results["map"].append(r)
             log(f"map {n} x {n}: " + (r.get("error") or f"{r['wall']:.1f} s, {r['rss']:.0f} MB"))
 
-    meta = dict(machine=machine(), load=(load0, os.getloadavg()), quick=q, dt=dt, horizon=H,
-                command=" ".join([Path(sys.executable).name, *sys.argv]), elapsed=time.perf_counter() - t_begin)
+    meta = dict(
+        machine=machine(),
+        load=(load0, os.getloadavg()),
+        quick=q,
+        dt=dt,
+        horizon=H,
+        command=" ".join([Path(sys.executable).name, *sys.argv]),
+        elapsed=time.perf_counter() - t_begin,
+    )
     Path(args.out).with_suffix(".json").write_text(json.dumps(dict(results=results, meta=meta), indent=1))
     text = report(results, meta)
     Path(args.out).write_text(text)
@@ -625,8 +753,10 @@ def quote_in_readme(res: dict, meta: dict, readme: Path = ROOT / "README.md") ->
         base = dict(cpu=len(sc["rows"]) * sc["T"] / sum(r["cpu"] for r in sc["rows"]))
     table = targets(res, meta, base)[2:]  # without the heading
     m = meta["machine"]
-    src = (f"From `benchmarks/RESULTS.md` (`{meta['command']}`, {meta['elapsed'] / 60:.0f} min on {m.get('cpu')}, "
-           f"{m.get('cores')} cores; locomotion_jax at {m.get('commit', '?')}):")
+    src = (
+        f"From `benchmarks/RESULTS.md` (`{meta['command']}`, {meta['elapsed'] / 60:.0f} min on {m.get('cpu')}, "
+        f"{m.get('cores')} cores; locomotion_jax at {m.get('commit', '?')}):"
+    )
     head, rest = text.split(start, 1)
     tail = rest.split(end, 1)[1]
     readme.write_text(head + start + "\n" + src + "\n\n" + "\n".join(table).rstrip() + "\n" + end + tail)
@@ -643,27 +773,50 @@ def targets(res: dict, meta: dict, base: dict | None) -> list[str]:
     dt, H, T = meta["dt"], meta["horizon"], TARGETS
     ok = lambda good: "**met**" if good else "not met"
     rows = []
-    big = [r for r in res["exact"] if "error" not in r and r["dtype"] == "float64" and r["dt"] == dt
-           and r["horizon"] == H and r["B"] >= 1024]
+    big = [
+        r
+        for r in res["exact"]
+        if "error" not in r and r["dtype"] == "float64" and r["dt"] == dt and r["horizon"] == H and r["B"] >= 1024
+    ]
     if big:
         w = min(r["B"] * r["t_sim"] / r["wall"] for r in big)
-        rows.append((f"exact, float64, dt = {dt:g}, 1 device, batches {', '.join(str(r['B']) for r in big)}: "
-                     "cfg-tu/s, wall (lowest)", f">= {T['rate']:,.0f}", fmt(w), ok(w >= T["rate"])))
+        rows.append(
+            (
+                f"exact, float64, dt = {dt:g}, 1 device, batches {', '.join(str(r['B']) for r in big)}: "
+                "cfg-tu/s, wall (lowest)",
+                f">= {T['rate']:,.0f}",
+                fmt(w),
+                ok(w >= T["rate"]),
+            )
+        )
         if base:
             c = min(r["B"] * r["t_sim"] / r["cpu"] / base["cpu"] for r in big)
-            rows.append(("the same, x scipy per core (CPU-seconds; lowest)", f">= {T['ratio']:g}", fmt(c),
-                         ok(c >= T["ratio"])))
+            rows.append(
+                ("the same, x scipy per core (CPU-seconds; lowest)", f">= {T['ratio']:g}", fmt(c), ok(c >= T["ratio"]))
+            )
     for r in res["sharded"]:
         if "error" in r or r["dt"] != dt:
             continue
         nd = r["n_devices"]
         x = r["runs"][f"{nd} devices"]
         w = r["B"] * r["t_sim"] / x["wall"]
-        rows.append((f"exact, float64, dt = {dt:g}, {nd} devices (`shard_map`), batch {r['B']}: cfg-tu/s, wall",
-                     f">= {T['rate']:,.0f}", fmt(w), ok(w >= T["rate"])))
+        rows.append(
+            (
+                f"exact, float64, dt = {dt:g}, {nd} devices (`shard_map`), batch {r['B']}: cfg-tu/s, wall",
+                f">= {T['rate']:,.0f}",
+                fmt(w),
+                ok(w >= T["rate"]),
+            )
+        )
         if base:
-            rows.append((f"the same, x scipy on the same {nd} cores (wall)", f">= {T['ratio']:g}",
-                         fmt(w / (nd * base["cpu"])), ok(w / (nd * base["cpu"]) >= T["ratio"])))
+            rows.append(
+                (
+                    f"the same, x scipy on the same {nd} cores (wall)",
+                    f">= {T['ratio']:g}",
+                    fmt(w / (nd * base["cpu"])),
+                    ok(w / (nd * base["cpu"]) >= T["ratio"]),
+                )
+            )
     acc = res["accuracy"][0] if res["accuracy"] and "error" not in res["accuracy"][0] else None
     key = f"exact float64 dt={dt:g}"
     if acc and key in acc["engines"]:
@@ -672,41 +825,73 @@ def targets(res: dict, meta: dict, base: dict | None) -> list[str]:
         kept = [e for e, lo in zip(errs, lift) if not lo and math.isfinite(e)]
         lifted = [e for e, lo in zip(errs, lift) if lo and math.isfinite(e)]
         if kept:
-            rows.append((f"tau_5 relative error at dt = {dt:g}, float64: max over the {len(kept)} accuracy "
-                         "configurations that keep contact", f"<= {T['accuracy']:g}", f"{max(kept):.1e}",
-                         ok(max(kept) <= T["accuracy"])))
+            rows.append(
+                (
+                    f"tau_5 relative error at dt = {dt:g}, float64: max over the {len(kept)} accuracy "
+                    "configurations that keep contact",
+                    f"<= {T['accuracy']:g}",
+                    f"{max(kept):.1e}",
+                    ok(max(kept) <= T["accuracy"]),
+                )
+            )
         if lifted:
-            rows.append((f"the same on the {len(lifted)} that lift off (outside the model's validity; flagged)",
-                         "-", f"{max(lifted):.1e}", "reported"))
+            rows.append(
+                (
+                    f"the same on the {len(lifted)} that lift off (outside the model's validity; flagged)",
+                    "-",
+                    f"{max(lifted):.1e}",
+                    "reported",
+                )
+            )
     comp = [r["compile"] for r in res["exact"] if "error" not in r]
     comp += [x["compile"] for r in res["sharded"] if "error" not in r for x in r["runs"].values()]
     if comp:
-        rows.append(("compile time, every exact-engine case (highest)", f"< {T['compile']:g} s", f"{max(comp):.1f} s",
-                     ok(max(comp) < T["compile"])))
+        rows.append(
+            (
+                "compile time, every exact-engine case (highest)",
+                f"< {T['compile']:g} s",
+                f"{max(comp):.1f} s",
+                ok(max(comp) < T["compile"]),
+            )
+        )
     long = [r for r in res["exact"] if "error" not in r and r["horizon"] > H and r["dt"] == dt]
     short = {r["B"]: r for r in big}
     for r in long:
         if r["B"] in short:
-            rows.append((f"peak RSS, batch {r['B']}: horizon {r['horizon']:g} vs {H:g} "
-                         f"({r['steps_mean'] / short[r['B']]['steps_mean']:.1f}x the steps)", "independent of steps",
-                         f"{r['rss']:.0f} MB vs {short[r['B']]['rss']:.0f} MB",
-                         ok(r["rss"] <= 1.1 * short[r["B"]]["rss"])))
+            rows.append(
+                (
+                    f"peak RSS, batch {r['B']}: horizon {r['horizon']:g} vs {H:g} "
+                    f"({r['steps_mean'] / short[r['B']]['steps_mean']:.1f}x the steps)",
+                    "independent of steps",
+                    f"{r['rss']:.0f} MB vs {short[r['B']]['rss']:.0f} MB",
+                    ok(r["rss"] <= 1.1 * short[r["B"]]["rss"]),
+                )
+            )
     maps = [r for r in res.get("map", []) if "error" not in r]
     if maps:
         r = max(maps, key=lambda r: r["N"])
         small = min(maps, key=lambda r: r["N"])
-        rows.append((f"{r['N']} x {r['N']} map (`sweep`, {r['n_configs']:,} configurations, {r['n_devices']} "
-                     f"devices): peak RSS; {small['N']} x {small['N']} for scale", "< the machine's memory",
-                     f"{r['rss']:.0f} MB ({r['data_mb']:.1f} MB of results, {r['wall']:.0f} s); "
-                     f"{small['rss']:.0f} MB", ok(r["rss"] < _memory_mb(meta))))
+        rows.append(
+            (
+                f"{r['N']} x {r['N']} map (`sweep`, {r['n_configs']:,} configurations, {r['n_devices']} "
+                f"devices): peak RSS; {small['N']} x {small['N']} for scale",
+                "< the machine's memory",
+                f"{r['rss']:.0f} MB ({r['data_mb']:.1f} MB of results, {r['wall']:.0f} s); {small['rss']:.0f} MB",
+                ok(r["rss"] < _memory_mb(meta)),
+            )
+        )
     if not rows:
         return []
     out = ["## Targets (issue 5)", "", "| what | target | measured | |", "|---|---|---|---|"]
     out += [f"| {a} | {b} | {c} | {d} |" for a, b, c, d in rows]
-    out += ["", "Compilations are counted in tests: one per sweep whatever its number of chunks "
-            "(`tests/test_sweep.py`), none for new parameter values (`tests/test_exact.py`), and in the "
-            "optimiser one per optimisation, every smoothing stage sharing the finest stage's compiled loop, none per "
-            "stage, iteration, start or call (`tests/test_optimise.py`).", ""]
+    out += [
+        "",
+        "Compilations are counted in tests: one per sweep whatever its number of chunks "
+        "(`tests/test_sweep.py`), none for new parameter values (`tests/test_exact.py`), and in the "
+        "optimiser one per optimisation, every smoothing stage sharing the finest stage's compiled loop, none per "
+        "stage, iteration, start or call (`tests/test_optimise.py`).",
+        "",
+    ]
     return out
 
 
@@ -719,16 +904,22 @@ def report(res: dict, meta: dict) -> str:
     L.append("")
     L.append(f"- Command: `{meta['command']}` ({meta['elapsed'] / 60:.1f} min)")
     L.append(f"- Machine: {m.get('cpu')}, {m.get('cores')} cores, {m.get('memory', '?')}; {m['platform']}")
-    L.append(f"- Versions: Python {m['python']}, jax {m['jax']}, jaxlib {m['jaxlib']}, numpy {m['numpy']}, "
-             f"scipy {m['scipy']}, diffrax {m['diffrax']}, equinox {m['equinox']}, locomotion_jax "
-             f"{m['locomotion_jax']} at {m.get('commit', '?')}")
+    L.append(
+        f"- Versions: Python {m['python']}, jax {m['jax']}, jaxlib {m['jaxlib']}, numpy {m['numpy']}, "
+        f"scipy {m['scipy']}, diffrax {m['diffrax']}, equinox {m['equinox']}, locomotion_jax "
+        f"{m['locomotion_jax']} at {m.get('commit', '?')}"
+    )
     l0, l1 = meta["load"]
-    L.append(f"- Load average (1/5/15 min) at start {l0[0]:.1f}/{l0[1]:.1f}/{l0[2]:.1f}, at end "
-             f"{l1[0]:.1f}/{l1[1]:.1f}/{l1[2]:.1f}: other jobs share the cores, so wall-clock rates are lower "
-             "bounds; the per-CPU-second rates are not affected by waiting for a core.")
-    L.append(f"- Workload: `measure(..., z=1e30, horizon={meta['horizon']:g}, contact=\"paper\")`, i.e. "
-             f"t_start (71.1) + {meta['horizon']:g} time units per configuration; omega ~ U{OMEGA}, a ~ U{AMPL} "
-             f"(seed {SEED}); exact engine at dt = {meta['dt']:g} unless stated.")
+    L.append(
+        f"- Load average (1/5/15 min) at start {l0[0]:.1f}/{l0[1]:.1f}/{l0[2]:.1f}, at end "
+        f"{l1[0]:.1f}/{l1[1]:.1f}/{l1[2]:.1f}: other jobs share the cores, so wall-clock rates are lower "
+        "bounds; the per-CPU-second rates are not affected by waiting for a core."
+    )
+    L.append(
+        f'- Workload: `measure(..., z=1e30, horizon={meta["horizon"]:g}, contact="paper")`, i.e. '
+        f"t_start (71.1) + {meta['horizon']:g} time units per configuration; omega ~ U{OMEGA}, a ~ U{AMPL} "
+        f"(seed {SEED}); exact engine at dt = {meta['dt']:g} unless stated."
+    )
     L.append("")
 
     sc = res["scipy"][0] if res["scipy"] and "error" not in res["scipy"][0] else None
@@ -742,47 +933,80 @@ def report(res: dict, meta: dict) -> str:
 
     L.append("## Throughput")
     L.append("")
-    L.append("cfg-tu/s = configurations x simulated time units per second. *per CPU-s*: work / CPU time of the "
-             "process (what a core does while it runs; insensitive to waiting for a core). Ratios are against the "
-             "scipy baseline's rate per CPU-second (one configuration per core): *per core* compares CPU "
-             "seconds; *same cores* compares the engine's wall-clock rate on N devices (N cores) with scipy on the "
-             "same N cores (N processes).")
+    L.append(
+        "cfg-tu/s = configurations x simulated time units per second. *per CPU-s*: work / CPU time of the "
+        "process (what a core does while it runs; insensitive to waiting for a core). Ratios are against the "
+        "scipy baseline's rate per CPU-second (one configuration per core): *per core* compares CPU "
+        "seconds; *same cores* compares the engine's wall-clock rate on N devices (N cores) with scipy on the "
+        "same N cores (N processes)."
+    )
     L.append("")
-    L.append("| engine | dtype | dt | devices | batch | compile s | run s wall | cfg-tu/s wall | cfg-tu/s per CPU-s "
-             "| x scipy per core | x scipy on the same cores (wall) | peak RSS MB | iterations mean / max |")
+    L.append(
+        "| engine | dtype | dt | devices | batch | compile s | run s wall | cfg-tu/s wall | cfg-tu/s per CPU-s "
+        "| x scipy per core | x scipy on the same cores (wall) | peak RSS MB | iterations mean / max |"
+    )
     L.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
 
     def row(name, dtype, dt, ndev, batch, x, work, rss, iters=""):
         w, c = work / x["wall"], work / x["cpu"]
         per_core = fmt(c / base["cpu"]) if base else "-"
         same = fmt(w / (ndev * base["cpu"])) if base else "-"
-        L.append(f"| {name} | {dtype} | {dt} | {ndev} | {batch} | {x['compile']:.1f} | {x['wall']:.3g} | {fmt(w)} | "
-                 f"{fmt(c)} | {per_core} | {same} | {rss:.0f} | {iters} |")
+        L.append(
+            f"| {name} | {dtype} | {dt} | {ndev} | {batch} | {x['compile']:.1f} | {x['wall']:.3g} | {fmt(w)} | "
+            f"{fmt(c)} | {per_core} | {same} | {rss:.0f} | {iters} |"
+        )
 
     for r in res["exact"]:
         if "error" in r:
             L.append(f"| exact | {r['dtype']} | {r['dt']} | 1 | {r['B']} | error | | | | | | | |")
             continue
         hz = "" if r["horizon"] == meta["horizon"] else f" (horizon {r['horizon']:g})"
-        row(f"exact, `measure`{hz}", r["dtype"], f"{r['dt']:g}", 1, r["B"], r, r["B"] * r["t_sim"], r["rss"],
-            f"{r['steps_mean']:,.0f} / {r['steps_max']:,}")
+        row(
+            f"exact, `measure`{hz}",
+            r["dtype"],
+            f"{r['dt']:g}",
+            1,
+            r["B"],
+            r,
+            r["B"] * r["t_sim"],
+            r["rss"],
+            f"{r['steps_mean']:,.0f} / {r['steps_max']:,}",
+        )
     for r in res["sharded"]:
         if "error" in r:
             L.append(f"| exact, shard_map | float64 | {r['dt']} | 2 | {r['B']} | error | | | | | | | |")
             continue
         for label, x in r["runs"].items():
-            row("exact, sweep engine `shard_map`", "float64", f"{r['dt']:g}", int(label.split()[0]), r["B"], x,
-                r["B"] * r["t_sim"], r["rss"])
+            row(
+                "exact, sweep engine `shard_map`",
+                "float64",
+                f"{r['dt']:g}",
+                int(label.split()[0]),
+                r["B"],
+                x,
+                r["B"] * r["t_sim"],
+                r["rss"],
+            )
     for r in res["smoothed"]:
         if "error" in r:
             L.append("| smoothed | float64 | adaptive | 1 | error | | | | | | | | |")
             continue
-        row(f"smoothed, diffrax Tsit5, eps=1e-3, t=0..{r['T']:g}", "float64", "adaptive (rtol 1e-7)", 1, r["B"], r,
-            r["B"] * r["t_sim"], r["rss"])
+        row(
+            f"smoothed, diffrax Tsit5, eps=1e-3, t=0..{r['T']:g}",
+            "float64",
+            "adaptive (rtol 1e-7)",
+            1,
+            r["B"],
+            r,
+            r["B"] * r["t_sim"],
+            r["rss"],
+        )
     if sc:
-        L.append(f"| scipy `solve_ivp` DOP853 per mode, rtol 1e-9, t=0..{sc['T']:g} | float64 | adaptive | 1 | "
-                 f"{len(sc['rows'])}, one at a time | - | {base_wall:.3g} | {fmt(base['wall'])} | {fmt(base['cpu'])} | "
-                 f"1 | 1 | {sc['rss']:.0f} | |")
+        L.append(
+            f"| scipy `solve_ivp` DOP853 per mode, rtol 1e-9, t=0..{sc['T']:g} | float64 | adaptive | 1 | "
+            f"{len(sc['rows'])}, one at a time | - | {base_wall:.3g} | {fmt(base['wall'])} | {fmt(base['cpu'])} | "
+            f"1 | 1 | {sc['rss']:.0f} | |"
+        )
     L.append("")
 
     for r in res["sharded"]:
@@ -793,30 +1017,36 @@ def report(res: dict, meta: dict) -> str:
         one, many = r["runs"]["1 device"], r["runs"][f"{nd} devices"]
         L.append(f"## Sharding over {nd} devices (the sweep engine's `_sharding._run_chunk`, `shard_map`)")
         L.append("")
-        L.append(f"Batch {r['B']}, float64, {r['micro_batch'] or 'no'} configurations per loop on a device: "
-                 f"{one['wall']:.3g} s wall on 1 device, {many['wall']:.3g} s on {nd} "
-                 f"({one['wall'] / many['wall']:.2f}x; CPU time {one['cpu']:.3g} s vs {many['cpu']:.3g} s). With "
-                 f"{nd} devices the busiest thread used {many['busy']:.3g} s of CPU: the wall time with a free core "
-                 f"per device ({r['B'] * r['t_sim'] / many['busy']:,.0f} cfg-tu/s) when other jobs share the "
-                 "cores. The batch is "
-                 "sorted by omega (as `measure` does). Each device's loop ends on its own: measuring tau_5 "
-                 f"(z = 5, horizon {r['tau_horizon']:g}) on the same configurations ordered by expected cost "
-                 "(`_schedule.cost_order`), device 0 holds the cheaper half, and its output is ready first:")
+        L.append(
+            f"Batch {r['B']}, float64, {r['micro_batch'] or 'no'} configurations per loop on a device: "
+            f"{one['wall']:.3g} s wall on 1 device, {many['wall']:.3g} s on {nd} "
+            f"({one['wall'] / many['wall']:.2f}x; CPU time {one['cpu']:.3g} s vs {many['cpu']:.3g} s). With "
+            f"{nd} devices the busiest thread used {many['busy']:.3g} s of CPU: the wall time with a free core "
+            f"per device ({r['B'] * r['t_sim'] / many['busy']:,.0f} cfg-tu/s) when other jobs share the "
+            "cores. The batch is "
+            "sorted by omega (as `measure` does). Each device's loop ends on its own: measuring tau_5 "
+            f"(z = 5, horizon {r['tau_horizon']:g}) on the same configurations ordered by expected cost "
+            "(`_schedule.cost_order`), device 0 holds the cheaper half, and its output is ready first:"
+        )
         L.append("")
         L.append("| device | median tau_5 | iterations: sum / max / mean | output ready after s |")
         L.append("|---|---|---|---|")
         for d in r["per_device"]:
-            L.append(f"| {d['device']} | {fmt(d['tau_median'])} | {d['steps_sum']:,.0f} / {d['steps_max']:,} / "
-                     f"{d['steps_mean']:,.0f} | {d['ready']:.3g} |")
+            L.append(
+                f"| {d['device']} | {fmt(d['tau_median'])} | {d['steps_sum']:,.0f} / {d['steps_max']:,} / "
+                f"{d['steps_mean']:,.0f} | {d['ready']:.3g} |"
+            )
         L.append("")
 
     acc = res["accuracy"][0] if res["accuracy"] and "error" not in res["accuracy"][0] else None
     if acc:
         L.append("## Accuracy against a tight scipy reference (rtol 1e-11 for X, 1e-10 for tau_5)")
         L.append("")
-        L.append(f"Relative error of X at t = {acc['T']:g} and of tau_5 (z = 5 after t_start, horizon "
-                 f"{acc['tau_horizon']:g}) on the first {len(acc['omega'])} benchmark configurations "
-                 "(median / max over them; `-`: not computed or not reached).")
+        L.append(
+            f"Relative error of X at t = {acc['T']:g} and of tau_5 (z = 5 after t_start, horizon "
+            f"{acc['tau_horizon']:g}) on the first {len(acc['omega'])} benchmark configurations "
+            "(median / max over them; `-`: not computed or not reached)."
+        )
         L.append("")
         lift = acc.get("liftoff", [False] * len(acc["omega"]))
         L.append("| engine | X: median | X: max | tau_5: median | tau_5: max | tau_5: max without lift-off |")
@@ -828,13 +1058,17 @@ def report(res: dict, meta: dict) -> str:
             ex = [x for x in ex if math.isfinite(x)]
             et = [x for x in et if math.isfinite(x)]
             cell = lambda v, f: f"{f(v):.1e}" if v else "-"
-            L.append(f"| {name} | {cell(ex, statistics.median)} | {cell(ex, max)} | {cell(et, statistics.median)} | "
-                     f"{cell(et, max)} | {cell(ec, max)} |")
+            L.append(
+                f"| {name} | {cell(ex, statistics.median)} | {cell(ex, max)} | {cell(et, statistics.median)} | "
+                f"{cell(et, max)} | {cell(ec, max)} |"
+            )
         L.append("")
-        L.append("Under the paper's reading (`n_i = |N_i|`) a configuration that lifts off is integrated through "
-                 "it: the right-hand side has a kink where a normal force changes sign, which the reference "
-                 "locates and the engine does not (it flags it), so there the engine converges erratically "
-                 "(SPEC: such results are outside the model's validity).")
+        L.append(
+            "Under the paper's reading (`n_i = |N_i|`) a configuration that lifts off is integrated through "
+            "it: the right-hand side has a kink where a normal force changes sign, which the reference "
+            "locates and the engine does not (it flags it), so there the engine converges erratically "
+            "(SPEC: such results are outside the model's validity)."
+        )
         L.append("")
         L.append("| omega | a | X ref | tau_5 ref | lifts off (paper reading) |")
         L.append("|---|---|---|---|---|")
@@ -847,21 +1081,26 @@ def report(res: dict, meta: dict) -> str:
     s = res["schedule"][0] if res["schedule"] and "error" not in res["schedule"][0] else None
     if s:
         fig8 = s.get("grid", "fig8") == "fig8"
-        what = (f"omega/wn1 in [0.05, 2.5] ({s['N']} points), a = 0.05" if fig8 else
-                f"an omega x a map ({s['N']} x {s['N']} over omega {OMEGA}, a {AMPL}, as a list)")
+        what = (
+            f"omega/wn1 in [0.05, 2.5] ({s['N']} points), a = 0.05"
+            if fig8
+            else f"an omega x a map ({s['N']} x {s['N']} over omega {OMEGA}, a {AMPL}, as a list)"
+        )
         tau = s["tau_range"] or [math.nan, math.nan]
         L.append(f"## Long sweeps: cost-ordered chunks ({'Fig. 8 sweep' if fig8 else 'omega x a map'})")
         L.append("")
-        L.append(f"`sweep` over {what}, z = 5, horizon {s['horizon']:g}, dt = {s['dt']:g}, paper contact, chunks "
-                 f"of {s['chunk']} on {s['n_devices']} devices; {s['reached']} of {s['n_configs']} configurations "
-                 f"reach z (tau_5 from {tau[0]:.3g} to {tau[1]:.3g}). Lane efficiency = "
-                 "iterations the configurations need / lane-iterations their loops ran (a device's shard of "
-                 f"a chunk runs through the work queue on {s.get('micro_batch') or 'all'} lanes until its last "
-                 "lane is done; counted by replaying the queue's list scheduling on the iterations each "
-                 "configuration took); it does not depend on the load of the machine. `natural` and `cost` are "
-                 "`sweep(order=...)`; `random` is a shuffled list in natural order. The cost order's wall time "
-                 "includes its pilot run (compiled beforehand). Results bit-for-bit identical in every order: "
-                 f"{s['same_results']}.")
+        L.append(
+            f"`sweep` over {what}, z = 5, horizon {s['horizon']:g}, dt = {s['dt']:g}, paper contact, chunks "
+            f"of {s['chunk']} on {s['n_devices']} devices; {s['reached']} of {s['n_configs']} configurations "
+            f"reach z (tau_5 from {tau[0]:.3g} to {tau[1]:.3g}). Lane efficiency = "
+            "iterations the configurations need / lane-iterations their loops ran (a device's shard of "
+            f"a chunk runs through the work queue on {s.get('micro_batch') or 'all'} lanes until its last "
+            "lane is done; counted by replaying the queue's list scheduling on the iterations each "
+            "configuration took); it does not depend on the load of the machine. `natural` and `cost` are "
+            "`sweep(order=...)`; `random` is a shuffled list in natural order. The cost order's wall time "
+            "includes its pilot run (compiled beforehand). Results bit-for-bit identical in every order: "
+            f"{s['same_results']}."
+        )
         L.append("")
         L.append("| order | wall s | busiest thread CPU s | lane efficiency |")
         L.append("|---|---|---|---|")
@@ -875,20 +1114,26 @@ def report(res: dict, meta: dict) -> str:
     if maps:
         L.append("## Maps: memory")
         L.append("")
-        L.append(f"`sweep` over an N x N grid, omega in {OMEGA}, a in {AMPL}, z = 5, horizon {MAP_HORIZON:g} "
-                 f"(the README's example), dt = {meta['dt']:g}, float64, paper contact, default chunks, all devices, "
-                 "results kept in memory (no `path`). Peak RSS is the whole process (Python, JAX, XLA's "
-                 "compiled code); what the sweep adds grows with the results kept, not with the steps.")
+        L.append(
+            f"`sweep` over an N x N grid, omega in {OMEGA}, a in {AMPL}, z = 5, horizon {MAP_HORIZON:g} "
+            f"(the README's example), dt = {meta['dt']:g}, float64, paper contact, default chunks, all devices, "
+            "results kept in memory (no `path`). Peak RSS is the whole process (Python, JAX, XLA's "
+            "compiled code); what the sweep adds grows with the results kept, not with the steps."
+        )
         L.append("")
-        L.append("| N x N | configurations | devices | wall s (compile included) | mean steps | results MB "
-                 "| peak RSS MB | valid |")
+        L.append(
+            "| N x N | configurations | devices | wall s (compile included) | mean steps | results MB "
+            "| peak RSS MB | valid |"
+        )
         L.append("|---|---|---|---|---|---|---|---|")
         for r in maps:
             if "error" in r:
                 L.append(f"| {r['N']} x {r['N']} | error: `{r['error'][-200:]}` | | | | | | |")
                 continue
-            L.append(f"| {r['N']} x {r['N']} | {r['n_configs']:,} | {r['n_devices']} | {r['wall']:.3g} | "
-                     f"{r['steps_mean']:,.0f} | {r['data_mb']:.1f} | {r['rss']:.0f} | {r['n_ok']:,} |")
+            L.append(
+                f"| {r['N']} x {r['N']} | {r['n_configs']:,} | {r['n_devices']} | {r['wall']:.3g} | "
+                f"{r['steps_mean']:,.0f} | {r['data_mb']:.1f} | {r['rss']:.0f} | {r['n_ok']:,} |"
+            )
         L.append("")
     if base:
         L.append("## Baseline detail")
@@ -896,8 +1141,9 @@ def report(res: dict, meta: dict) -> str:
         L.append("| omega | a | scipy wall s | cfg-tu/s | mode segments |")
         L.append("|---|---|---|---|---|")
         for r in sc["rows"]:
-            L.append(f"| {r['omega']:.3f} | {r['a']:.4f} | {r['wall']:.3g} | {sc['T'] / r['wall']:.3g} | "
-                     f"{r['segments']:,} |")
+            L.append(
+                f"| {r['omega']:.3f} | {r['a']:.4f} | {r['wall']:.3g} | {sc['T'] / r['wall']:.3g} | {r['segments']:,} |"
+            )
         L.append("")
     return "\n".join(L) + "\n"
 

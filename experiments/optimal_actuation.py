@@ -72,17 +72,25 @@ def d0_study(settings):
             pb = lj.Params.grid(omega=np.asarray(omegas), d=0.0, mhat=mhat)
             fig = _pareto.exact_figures(pb, batch, HORIZON)
             i = int(np.nanargmax(np.abs(fig.speed)))
-            res[f"sawtooth{sense:+d}"] = {"max_abs_speed": float(np.abs(fig.speed[i])), "omega": float(omegas[i]),
-                                          "speed": float(fig.speed[i]), "cost": float(fig.cost[i])}
+            res[f"sawtooth{sense:+d}"] = {
+                "max_abs_speed": float(np.abs(fig.speed[i])),
+                "omega": float(omegas[i]),
+                "speed": float(fig.speed[i]),
+                "cost": float(fig.cost[i]),
+            }
         entry = {"sinusoid_max_abs_speed": vmax_sin, **res}
         if mhat != 0.5:
             for direction in (1, -1):
-                opt = _optimise.optimise(p, 0.005, A_MAX, direction=direction, harmonics=3, settings=settings,
-                                         sweep=sweep)
+                opt = _optimise.optimise(
+                    p, 0.005, A_MAX, direction=direction, harmonics=3, settings=settings, sweep=sweep
+                )
                 entry[f"optimised{direction:+d}"] = {
-                    "feasible_exact": opt.feasible_exact, "mean_speed_exact": opt.mean_speed_exact,
-                    "cost_of_transport_exact": opt.cost_of_transport_exact, "omega": opt.omega,
-                    "cos": opt.cos.tolist(), "sin": opt.sin.tolist(),
+                    "feasible_exact": opt.feasible_exact,
+                    "mean_speed_exact": opt.mean_speed_exact,
+                    "cost_of_transport_exact": opt.cost_of_transport_exact,
+                    "omega": opt.omega,
+                    "cos": opt.cos.tolist(),
+                    "sin": opt.sin.tolist(),
                 }
                 print(f"\n=== d = 0, mhat = {mhat}, direction {direction:+d} ===\n{opt.summary()}", flush=True)
         out[f"mhat={mhat}"] = entry
@@ -110,8 +118,9 @@ def main():
         (OUT / "summary_d0.json").write_text(json.dumps(_jsonable(d0), indent=1))
         print(f"total {time.perf_counter() - t0:.0f} s")
         return
-    sweep = _pareto.sinusoid_sweep(params, A_MAX, omegas=_pareto.default_omegas(params, 32), amplitudes=6,
-                                   horizon=HORIZON)
+    sweep = _pareto.sinusoid_sweep(
+        params, A_MAX, omegas=_pareto.default_omegas(params, 32), amplitudes=6, horizon=HORIZON
+    )
     print(f"sinusoid sweep: {len(sweep.a)} configurations, {time.perf_counter() - t0:.0f} s", flush=True)
     rows, optima = main_speeds(params, settings, sweep, speeds)
     plots.plot_pareto(sweep, optima, OUT / "pareto.png")
@@ -122,10 +131,12 @@ def main():
     (OUT / "summary.json").write_text(json.dumps(_jsonable(summary), indent=1))
     print("\nv_min | sinusoid CoT | optimised CoT (exact) | improvement | speed (exact) | wall s")
     for r in rows:
-        print(f"{r['v_min']:5g} | {r['sinusoid_cost_of_transport'] or float('nan'):.4g} | "
-              f"{r['cost_of_transport_exact'] or float('nan'):.4g} | "
-              f"{100 * (r['improvement_vs_sinusoid'] or float('nan')):.1f} % | {r['mean_speed_exact']:.4g} | "
-              f"{r['wall_s']:.0f}")
+        print(
+            f"{r['v_min']:5g} | {r['sinusoid_cost_of_transport'] or float('nan'):.4g} | "
+            f"{r['cost_of_transport_exact'] or float('nan'):.4g} | "
+            f"{100 * (r['improvement_vs_sinusoid'] or float('nan')):.1f} % | {r['mean_speed_exact']:.4g} | "
+            f"{r['wall_s']:.0f}"
+        )
     print(f"total {summary['total_s']:.0f} s")
 
 

@@ -21,7 +21,8 @@ def register(app: typer.Typer) -> None:
         *,
         model: Values,
         t_from: float | None = typer.Option(
-            None, "--t-from", help="First animated time (default: two actuation periods before --t-end)."),
+            None, "--t-from", help="First animated time (default: two actuation periods before --t-end)."
+        ),
         t_end: float = typer.Option(40.0, "--t-end", help="Last animated time (the simulation runs from t = 0)."),
         frames: int = typer.Option(60, "--frames", help="Number of frames (states saved evenly in the span)."),
         fps: float = typer.Option(12.0, "--fps", help="Frames per second of the GIF."),
@@ -57,8 +58,14 @@ def register(app: typer.Typer) -> None:
                 raise ValueError(f"--fps and --dpi must be > 0, got {fps!r} and {dpi!r}.")
             if out.suffix.lower() != ".gif":
                 raise ValueError(f"--out must name a .gif file, got {str(out)!r}.")
-            traj = simulate(params, t_end, np.linspace(t_from, t_end, frames), dynamics=Exact(dt=run["dt"]),
-                            contact=run["contact"], start=run["start"])
+            traj = simulate(
+                params,
+                t_end,
+                np.linspace(t_from, t_end, frames),
+                dynamics=Exact(dt=run["dt"]),
+                contact=run["contact"],
+                start=run["start"],
+            )
             if not np.asarray(traj.valid).any():
                 raise ValueError(
                     f"lift-off at t = {float(np.asarray(traj.t_liftoff)):.4g}, before the animated span "
@@ -74,8 +81,13 @@ def register(app: typer.Typer) -> None:
             raise typer.Exit(code=2) from None
         valid = np.asarray(traj.valid)
         s1, s2 = (s[valid] for s in stuck_masks(traj.mode))
-        typer.echo(f"wrote {path} ({int(valid.sum())} frames, t = {t_from:.4g}..{t_end:.4g}); "
-                   f"m1 stuck in {int(s1.sum())} frames, m2 stuck in {int(s2.sum())} frames")
+        typer.echo(
+            f"wrote {path} ({int(valid.sum())} frames, t = {t_from:.4g}..{t_end:.4g}); "
+            f"m1 stuck in {int(s1.sum())} frames, m2 stuck in {int(s2.sum())} frames"
+        )
         if bool(np.asarray(traj.liftoff)):
-            typer.echo(f"warning: lift-off at t = {float(np.asarray(traj.t_liftoff)):.4g} (the model no longer "
-                       "applies; frames after it are not drawn)", err=True)
+            typer.echo(
+                f"warning: lift-off at t = {float(np.asarray(traj.t_liftoff)):.4g} (the model no longer "
+                "applies; frames after it are not drawn)",
+                err=True,
+            )

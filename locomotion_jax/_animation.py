@@ -114,8 +114,7 @@ class _Scene:
         ax.spines[["left", "right", "top"]].set_visible(False)
         ax.set_xlabel("x (dimensionless)", labelpad=1)
         # Ground with ticks every 0.1: steps of a few hundredths are visible against them.
-        ax.add_patch(Rectangle((lo, -0.2), hi - lo, 0.2, facecolor="0.92", edgecolor="none", hatch="////",
-                               zorder=0))
+        ax.add_patch(Rectangle((lo, -0.2), hi - lo, 0.2, facecolor="0.92", edgecolor="none", hatch="////", zorder=0))
         ax.axhline(0.0, color="0.3", lw=1.0, zorder=1)
         ticks = np.arange(math.floor(lo * 10), math.ceil(hi * 10) + 1) / 10
         ax.vlines(ticks, -0.06, 0.0, color="0.4", lw=0.6, zorder=1)
@@ -134,8 +133,10 @@ class _Scene:
         label = dict(ha="center", va="bottom", fontsize=8, color=STUCK_COLOR, fontweight="bold", zorder=4)
         self.label1 = ax.text(0, self.h + 0.05, "stuck", gid="label1", **label)
         self.label2 = ax.text(0, self.h + 0.05, "stuck", gid="label2", **label)
-        self.names = (ax.text(0, self.h / 2, "m1", ha="center", va="center", fontsize=8, color="w", zorder=5),
-                      ax.text(0, self.h / 2, "m2", ha="center", va="center", fontsize=8, color="w", zorder=5))
+        self.names = (
+            ax.text(0, self.h / 2, "m1", ha="center", va="center", fontsize=8, color="w", zorder=5),
+            ax.text(0, self.h / 2, "m2", ha="center", va="center", fontsize=8, color="w", zorder=5),
+        )
         self.clock = ax.set_title(" ", loc="left", fontsize=8, family="monospace")
         if title:
             fig.suptitle(title, fontsize=9)
@@ -147,11 +148,11 @@ class _Scene:
     def _trace(self, axt: Axes) -> None:
         """$x_i(t) - x_i(t_0)$ over the animated span, stuck intervals in the stuck colour."""
         f = self.frames
-        t = self.t[f[0]: f[-1] + 1]
+        t = self.t[f[0] : f[-1] + 1]
         for k, (x, stuck, name) in enumerate(((self.x1, self.stuck1, "m1"), (self.x2, self.stuck2, "m2"))):
-            rel = x[f[0]: f[-1] + 1] - x[f[0]]
+            rel = x[f[0] : f[-1] + 1] - x[f[0]]
             axt.plot(t, rel, color="0.55" if k == 0 else "0.2", lw=1.0, label=f"$x_{k + 1} - x_{k + 1}(t_0)$")
-            s = stuck[f[0]: f[-1] + 1]
+            s = stuck[f[0] : f[-1] + 1]
             axt.plot(t, np.where(s, rel, np.nan), color=STUCK_COLOR, lw=2.2, solid_capstyle="butt")
         axt.plot([], [], color=STUCK_COLOR, lw=2.2, label="stuck")
         axt.set_xlim(t[0], t[-1])
@@ -178,8 +179,17 @@ class _Scene:
         self.names[0].set_x(x1)
         self.names[1].set_x(x2)
         self.clock.set_text(f"t = {self.t[j]:7.3f}   X = {self.X[j]:+.4f}   {_MODE_TEXT[Mode(self.mode[j])]}")
-        out = [self.box1, self.box2, self.spring, self.anchor1, self.anchor2, self.label1, self.label2,
-               *self.names, self.clock]
+        out = [
+            self.box1,
+            self.box2,
+            self.spring,
+            self.anchor1,
+            self.anchor2,
+            self.label1,
+            self.label2,
+            *self.names,
+            self.clock,
+        ]
         if self.cursor is not None:
             self.cursor.set_xdata([self.t[j], self.t[j]])
             out.append(self.cursor)
@@ -237,8 +247,10 @@ def animate(
         ```
     """
     if params.batch_shape != ():
-        raise ValueError(f"animate: params must be one configuration, got batch shape {params.batch_shape}; "
-                         "pass params[index] together with index=.")
+        raise ValueError(
+            f"animate: params must be one configuration, got batch shape {params.batch_shape}; "
+            "pass params[index] together with index=."
+        )
     if max_frames < 1:
         raise ValueError(f"animate: max_frames must be >= 1, got {max_frames}.")
     data = _select(traj, tuple(index))
@@ -250,8 +262,9 @@ def animate(
     if idx.size == 0:
         valid = t[np.asarray(data["valid"], bool)]
         upto = f"valid up to t = {valid[-1]:.4g}" if valid.size else "none valid: the run stopped before them"
-        raise ValueError(f"animate: no valid saved state in t_range={t_range!r} "
-                         f"(saved times {t[0]:.4g}..{t[-1]:.4g}, {upto}).")
+        raise ValueError(
+            f"animate: no valid saved state in t_range={t_range!r} (saved times {t[0]:.4g}..{t[-1]:.4g}, {upto})."
+        )
     stride = max(1, math.ceil(idx.size / max_frames))
     frames = idx[::stride]
     fig = Figure(figsize=figsize, layout="constrained")
@@ -261,8 +274,9 @@ def animate(
     # again for every frame (most of the cost of writing a GIF).
     fig.draw_without_rendering()
     fig.set_layout_engine("none")
-    return FuncAnimation(fig, scene.draw, frames=len(frames), init_func=lambda: scene.draw(0),
-                         interval=interval, blit=False, repeat=True)
+    return FuncAnimation(
+        fig, scene.draw, frames=len(frames), init_func=lambda: scene.draw(0), interval=interval, blit=False, repeat=True
+    )
 
 
 def save_gif(anim: FuncAnimation, path: str | os.PathLike, *, fps: float | int = 20.0, dpi: float | int = 80) -> Path:

@@ -51,9 +51,7 @@ def safe_params(params: Params) -> tuple[Params, jax.Array]:
     """Replace an invalid configuration by the defaults (so nothing becomes NaN) and
     return the validity flag; the caller marks it `Status.INVALID` and skips it."""
     valid = params.is_valid()
-    values = {
-        n: jnp.where(valid, getattr(params, n), jnp.asarray(DEFAULTS[n], params.dtype)) for n in PARAM_NAMES
-    }
+    values = {n: jnp.where(valid, getattr(params, n), jnp.asarray(DEFAULTS[n], params.dtype)) for n in PARAM_NAMES}
     return Params(**values, check=False), valid
 
 

@@ -57,9 +57,13 @@ def _cpu_count() -> int:
 @app.callback()
 def _global(
     x64: Annotated[bool, typer.Option("--x64/--no-x64", help="Compute in float64 (default) or float32.")] = True,
-    cpu_devices: Annotated[int, typer.Option(
-        help="Host (CPU) devices for sweeps: 0 = one per core, 1 = a single device. XLA runs one "
-             "computation on one core, so sweeps shard over these devices to use every core.")] = 0,
+    cpu_devices: Annotated[
+        int,
+        typer.Option(
+            help="Host (CPU) devices for sweeps: 0 = one per core, 1 = a single device. XLA runs one "
+            "computation on one core, so sweeps shard over these devices to use every core."
+        ),
+    ] = 0,
 ) -> None:
     # XLA reads XLA_FLAGS when its backends start (the first computation), so
     # setting it here, before any command computes, is in time. A flag already
@@ -211,12 +215,17 @@ def sweep(
     chunk_size: Annotated[int, typer.Option(help="Configurations per compiled chunk.")] = 4096,
     run: Values,
     overwrite: Annotated[bool, typer.Option(help="Discard what is stored at --out and recompute.")] = False,
-    on_invalid: Annotated[str, typer.Option(
-        help="'raise': reject invalid configurations; 'flag': record them as Status.INVALID.")] = "raise",
+    on_invalid: Annotated[
+        str, typer.Option(help="'raise': reject invalid configurations; 'flag': record them as Status.INVALID.")
+    ] = "raise",
     progress: Annotated[bool, typer.Option(help="Show a progress bar.")] = True,
-    order: Annotated[Literal["auto", "natural", "cost"], typer.Option(
-        help="Chunk order: 'natural' (grid order), 'cost' (sorted by a short pilot run's expected cost, so "
-             "slow configurations share chunks) or 'auto' (cost for large exact sweeps). Same results.")] = "auto",
+    order: Annotated[
+        Literal["auto", "natural", "cost"],
+        typer.Option(
+            help="Chunk order: 'natural' (grid order), 'cost' (sorted by a short pilot run's expected cost, so "
+            "slow configurations share chunks) or 'auto' (cost for large exact sweeps). Same results."
+        ),
+    ] = "auto",
 ) -> None:
     """Map the measurements over a grid of parameters and write an xarray/NetCDF file.
 
@@ -234,8 +243,19 @@ def sweep(
     if not axes:
         raise ValueError("nothing to sweep: give at least one range, e.g. --omega 1:25:256.")
     measurement = {n: run[n] for n in ("z", "horizon", "window", "contact", "start")}
-    ds = sweep_fn(axes, fixed=fixed, mode=mode, **measurement, dynamics=Exact(dt=run["dt"]), chunk_size=chunk_size,
-                  path=out, overwrite=overwrite, progress=progress, on_invalid=on_invalid, order=order)
+    ds = sweep_fn(
+        axes,
+        fixed=fixed,
+        mode=mode,
+        **measurement,
+        dynamics=Exact(dt=run["dt"]),
+        chunk_size=chunk_size,
+        path=out,
+        overwrite=overwrite,
+        progress=progress,
+        on_invalid=on_invalid,
+        order=order,
+    )
     from ._status import Regime, Status
 
     typer.echo(f"wrote {out}: " + " x ".join(f"{n}[{s}]" for n, s in ds.sizes.items()))
@@ -246,6 +266,7 @@ def sweep(
 
 
 # -- figures ----------------------------------------------------------------------------
+
 
 def figure_names(figs: list[str] | None) -> list[str]:
     """Normalise figure names ('fig6', '6', 'all'); `ValueError` for unknown ones."""
@@ -266,11 +287,13 @@ def figure_names(figs: list[str] | None) -> list[str]:
 @app.command()
 @_friendly
 def figures(
-    figs: Annotated[list[str] | None, typer.Argument(
-        help=f"Figures to make ({', '.join(FIGURES)}); default all.")] = None,
+    figs: Annotated[
+        list[str] | None, typer.Argument(help=f"Figures to make ({', '.join(FIGURES)}); default all.")
+    ] = None,
     quick: Annotated[bool, typer.Option(help="Small grids and short horizons (CI size).")] = False,
     out: Annotated[Path, typer.Option(help="Output directory for data, PNGs and the report.")] = Path(
-        "experiments/output"),
+        "experiments/output"
+    ),
 ) -> None:
     """Reproduce the paper's figures (SPEC §6): data, PNGs and the reproduction report."""
     names = figure_names(figs)

@@ -46,8 +46,9 @@ DESCRIPTIONS: dict[str, str] = {
 
 def option(name: str, annotation: Any, default: Any, help: str) -> inspect.Parameter:
     """One typer option `--NAME` (underscores become dashes), as a signature parameter."""
-    return inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=default,
-                             annotation=Annotated[annotation, typer.Option(help=help)])
+    return inspect.Parameter(
+        name, inspect.Parameter.KEYWORD_ONLY, default=default, annotation=Annotated[annotation, typer.Option(help=help)]
+    )
 
 
 def _model_help(name: str, form: str = "") -> str:
@@ -58,8 +59,12 @@ def _model_help(name: str, form: str = "") -> str:
 
 def model_options(names: Iterable[str] = MODEL_NAMES) -> Group:
     """The model parameters `names` as float options, defaulting to the paper's values (`omega_over_wn1`: none)."""
-    return tuple(option(n, float | None, None, _model_help(n)) if n == "omega_over_wn1"
-                 else option(n, float, DEFAULTS[n], _model_help(n)) for n in names)
+    return tuple(
+        option(n, float | None, None, _model_help(n))
+        if n == "omega_over_wn1"
+        else option(n, float, DEFAULTS[n], _model_help(n))
+        for n in names
+    )
 
 
 def axis_options(names: Iterable[str] = MODEL_NAMES) -> Group:
@@ -67,14 +72,17 @@ def axis_options(names: Iterable[str] = MODEL_NAMES) -> Group:
     return tuple(option(n, str | None, None, _model_help(n, ": start:stop:count, v1,v2,... or a value")) for n in names)
 
 
-_RUN = {p.name: p for p in (
-    option("contact", str, "strict", "'strict' (stop at lift-off) or 'paper' (n_i = |N_i|, flagged)."),
-    option("start", str, "paper", "'paper' (eq. 14) or 'relaxed' (spring at rest length)."),
-    option("dt", float, 0.01, "RK4 step of the exact hybrid integrator."),
-    option("z", float, 5.0, "Distance to travel for tau_z, e_z (paper: 5)."),
-    option("horizon", float, 2000.0, "Time allowed after t_start."),
-    option("window", float, 25.0, "Regime window Delta tau (paper: 25)."),
-)}
+_RUN = {
+    p.name: p
+    for p in (
+        option("contact", str, "strict", "'strict' (stop at lift-off) or 'paper' (n_i = |N_i|, flagged)."),
+        option("start", str, "paper", "'paper' (eq. 14) or 'relaxed' (spring at rest length)."),
+        option("dt", float, 0.01, "RK4 step of the exact hybrid integrator."),
+        option("z", float, 5.0, "Distance to travel for tau_z, e_z (paper: 5)."),
+        option("horizon", float, 2000.0, "Time allowed after t_start."),
+        option("window", float, 25.0, "Regime window Delta tau (paper: 25)."),
+    )
+}
 
 RUN_NAMES: tuple[str, ...] = tuple(_RUN)
 """The settings of a simulation or measurement on the exact model."""

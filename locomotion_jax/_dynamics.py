@@ -70,8 +70,14 @@ class Smoothed(AbstractDynamics):
     max_steps: int = eqx.field(static=True, default=2_000_000)
     solver: str = eqx.field(static=True, default="tsit5")
 
-    def __init__(self, eps: ArrayLike = 1e-3, rtol: float = 1e-7, atol: float = 1e-9,
-                 max_steps: int = 2_000_000, solver: str = "tsit5"):
+    def __init__(
+        self,
+        eps: ArrayLike = 1e-3,
+        rtol: float = 1e-7,
+        atol: float = 1e-9,
+        max_steps: int = 2_000_000,
+        solver: str = "tsit5",
+    ):
         self.eps = jnp.asarray(eps)
         self.rtol, self.atol, self.max_steps, self.solver = rtol, atol, max_steps, solver
         if solver not in ("tsit5", "kvaerno5"):
@@ -86,5 +92,10 @@ class Smoothed(AbstractDynamics):
             raise ValueError(f"Smoothed.eps must be > 0, got {eps!r}.")
 
     def describe(self) -> dict:
-        return {"dynamics": "smoothed", "eps": float(jnp.max(self.eps)), "rtol": self.rtol,
-                "atol": self.atol, "solver": self.solver}
+        return {
+            "dynamics": "smoothed",
+            "eps": float(jnp.max(self.eps)),
+            "rtol": self.rtol,
+            "atol": self.atol,
+            "solver": self.solver,
+        }

@@ -82,8 +82,17 @@ class Consts(NamedTuple):
 def consts(params: Params, wave: AbstractWaveform) -> Consts:
     """Per-configuration constants; the phase rotates at the *waveform's* base frequency."""
     return Consts(
-        k=params.k, c=params.c, d=params.d, dd=params.d * params.d, m1=params.m1, m2=params.m2,
-        im1=1 / params.m1, im2=1 / params.m2, mhat=params.mhat, mu_s=params.mu_s, mu_k=params.mu_k,
+        k=params.k,
+        c=params.c,
+        d=params.d,
+        dd=params.d * params.d,
+        m1=params.m1,
+        m2=params.m2,
+        im1=1 / params.m1,
+        im2=1 / params.m2,
+        mhat=params.mhat,
+        mu_s=params.mu_s,
+        mu_k=params.mu_k,
         one=params.k / params.k,
     )
 
@@ -262,8 +271,11 @@ def _derivs(P: Consts, geo, y: "State", a1, a2, dl0, ddl0) -> _D:
     pl1 = (T1 - pl * l1) * il
     pl2 = (T2 - 2 * pl1 * l1 - pl * l2) * il
     return _D(
-        fx=pl1 * u + pl * u1, fy=pl1 * P.d, tension=T1,
-        fx2=pl2 * u + 2 * pl1 * u1 + pl * u2, fy2=pl2 * P.d,
+        fx=pl1 * u + pl * u1,
+        fy=pl1 * P.d,
+        tension=T1,
+        fx2=pl2 * u + 2 * pl1 * u1 + pl * u2,
+        fy2=pl2 * P.d,
     )
 
 
@@ -448,9 +460,20 @@ def init(params: Params, wave: AbstractWaveform, contact: Contact, x1: Array, x2
     no = jnp.asarray(False)
     f32 = jnp.finfo(dtype).bits < 64
     return Hybrid(
-        t=zero, y=y, comp=State(*(zero,) * 6) if f32 else None, cph=cph, sph=sph,
-        stuck1=absF <= P.mu_s * f.n1, stuck2=absF <= P.mu_s * f.n2, s1=s1, s2=-s1, pend1=no, pend2=no,
-        status=status, t_liftoff=jnp.where(lifted, zero, jnp.inf).astype(dtype), n_switch=jnp.zeros((), jnp.int32),
+        t=zero,
+        y=y,
+        comp=State(*(zero,) * 6) if f32 else None,
+        cph=cph,
+        sph=sph,
+        stuck1=absF <= P.mu_s * f.n1,
+        stuck2=absF <= P.mu_s * f.n2,
+        s1=s1,
+        s2=-s1,
+        pend1=no,
+        pend2=no,
+        status=status,
+        t_liftoff=jnp.where(lifted, zero, jnp.inf).astype(dtype),
+        n_switch=jnp.zeros((), jnp.int32),
     )
 
 
@@ -645,8 +668,17 @@ def step(
     t_target = jnp.where(target_now, t0, tc)
     y_target = yc.map(lambda a, b: jnp.where(target_now, b, a), yA)
     info = StepInfo(
-        commit=commit, t0=t0, y0=y0, tension0=f0.tension, t1=tc, y1=yc, stuck1=st1, stuck2=st2,
-        target_fired=target_now | (commit & target_cut), t_target=t_target, y_target=y_target,
+        commit=commit,
+        t0=t0,
+        y0=y0,
+        tension0=f0.tension,
+        t1=tc,
+        y1=yc,
+        stuck1=st1,
+        stuck2=st2,
+        target_fired=target_now | (commit & target_cut),
+        t_target=t_target,
+        y_target=y_target,
     )
     return new, info
 

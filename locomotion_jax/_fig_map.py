@@ -56,9 +56,15 @@ def data_6(size: dict) -> xr.Dataset:
     axes = dict(omega=np.linspace(*OMEGA_RANGE, size["n_omega"]), a=np.linspace(*A_RANGE, size["n_a"]))
     # omega is the slow axis: a chunk then holds a few omegas, whose costs are alike
     # (the number of switches grows with omega).
-    ds = run_sweep(axes, horizon=25.0, window=25.0, dt=size["dt"], max_steps=MAX_STEPS_6[size["dt"]],
-                   chunk_size=size["chunk"],
-                   progress=size.get("progress", False))
+    ds = run_sweep(
+        axes,
+        horizon=25.0,
+        window=25.0,
+        dt=size["dt"],
+        max_steps=MAX_STEPS_6[size["dt"]],
+        chunk_size=size["chunk"],
+        progress=size.get("progress", False),
+    )
     ds.attrs["grid"] = ", ".join(describe_axis(k, v) for k, v in axes.items())
     ds.attrs["fixed"] = describe_params({}, axes)
     if size.get("n_check"):
@@ -73,8 +79,14 @@ def _dt_crosscheck(ds: xr.Dataset, size: dict) -> xr.Dataset:
     io = rng.integers(0, ds.omega.size, n)
     ia = rng.integers(0, ds.a.size, n)
     # Pairs (omega_i, a_i) are not a grid: one `measure` batch.
-    m = measure(Params(omega=ds.omega.values[io], a=ds.a.values[ia]), 5.0, horizon=25.0, window=25.0,
-                dynamics=Exact(0.01, MAX_STEPS_6[0.01]), **PAPER)
+    m = measure(
+        Params(omega=ds.omega.values[io], a=ds.a.values[ia]),
+        5.0,
+        horizon=25.0,
+        window=25.0,
+        dynamics=Exact(0.01, MAX_STEPS_6[0.01]),
+        **PAPER,
+    )
     fine = np.asarray(m.regime)
     agree = float(np.mean(fine == ds.regime.values[io, ia]))
     ds.attrs["dt_check"] = f"{n} random configurations re-run at dt = 0.01: regime agrees for {100 * agree:.1f}%"
@@ -106,8 +118,9 @@ def plot_6(ds: xr.Dataset, path) -> None:
     a, om = ds.a.values, ds.omega.values
     cls = _classes(ds)
     cmap = ListedColormap(CLASS_COLORS)
-    ax.pcolormesh(a, om, cls, cmap=cmap, norm=BoundaryNorm([-0.5, 0.5, 1.5, 2.5, 3.5], 4), shading="nearest",
-                  rasterized=True)
+    ax.pcolormesh(
+        a, om, cls, cmap=cmap, norm=BoundaryNorm([-0.5, 0.5, 1.5, 2.5, 3.5], 4), shading="nearest", rasterized=True
+    )
     lift = ds.liftoff.values.astype(float)
     steady = ds.liftoff_steady.values.astype(float) if "liftoff_steady" in ds else lift
     transient = lift * (1 - steady)
@@ -123,19 +136,26 @@ def plot_6(ds: xr.Dataset, path) -> None:
     ax.plot(a, boundary(ds) + (om[1] - om[0]) / 2, color="k", linewidth=0.9, drawstyle="steps-mid")
     for y, lab in ((WN2, r"$\omega_{n2}=\omega_{n3}$"), (WN1, r"$\omega_{n1}$")):
         ax.axhline(y, color="k", linestyle=":", linewidth=1)
-        ax.text(a[0], y, lab, ha="left", va="bottom", fontsize=8,
-                bbox=dict(facecolor="white", alpha=0.8, linewidth=0, pad=1))
+        ax.text(
+            a[0],
+            y,
+            lab,
+            ha="left",
+            va="bottom",
+            fontsize=8,
+            bbox=dict(facecolor="white", alpha=0.8, linewidth=0, pad=1),
+        )
     ax.set_xlabel(r"amplitude $a$")
     ax.set_ylabel(r"frequency $\omega$")
     sec = ax.secondary_yaxis("right", functions=(lambda w: w / WN1, lambda r: r * WN1))
     sec.set_ylabel(r"$\omega / \omega_{n1}$")
     handles = [Patch(color=c, label=CLASS_NAMES[k]) for k, c in enumerate(CLASS_COLORS) if (cls == k).any()]
-    handles.append(Patch(facecolor="none", edgecolor=pl.LIFTOFF_COLOR, hatch="////",
-                         label="lift-off, steady motion (invalid)"))
+    handles.append(
+        Patch(facecolor="none", edgecolor=pl.LIFTOFF_COLOR, hatch="////", label="lift-off, steady motion (invalid)")
+    )
     handles.append(Patch(facecolor="none", edgecolor="0.3", hatch="...", label="lift-off, start transient only"))
     ax.legend(handles=handles, fontsize=7, loc="upper right", framealpha=0.9)
-    ax.set_title(f"Fig. 6: regime over ({a.size} a) x ({om.size} omega); black line: top of the SSL region",
-                 fontsize=9)
+    ax.set_title(f"Fig. 6: regime over ({a.size} a) x ({om.size} omega); black line: top of the SSL region", fontsize=9)
     pl.save(fig, path)
 
 
@@ -159,8 +179,11 @@ def check_6(ds: xr.Dataset) -> Verdict:
     # Sharp peaks: the boundary rises by >= 3 grid steps of omega and falls back within
     # 2 steps of a (local maxima that stand out of their neighbours).
     d_om = om[1] - om[0]
-    peaks = [j for j in range(1, b.size - 1) if np.isfinite(b[j]) and
-             b[j] - np.nanmax([b[max(j - 2, 0)], b[min(j + 2, b.size - 1)]]) >= 3 * d_om]
+    peaks = [
+        j
+        for j in range(1, b.size - 1)
+        if np.isfinite(b[j]) and b[j] - np.nanmax([b[max(j - 2, 0)], b[min(j + 2, b.size - 1)]]) >= 3 * d_om
+    ]
     lift = ds.liftoff.values
     lines = [
         f"moving SSL at omega < wn2 = {WN2:.2f} for {100 * below:.1f}% of its configurations (highest omega {top:.2f}; "
@@ -171,18 +194,24 @@ def check_6(ds: xr.Dataset) -> Verdict:
         f"top of the SSL region falls with a: Spearman(a, omega_c) = {rho:+.2f}",
         f"the paper's regime (SSL incl. at rest) is predicted by omega alone for {100 * by_om:.0f}% of the map, "
         f"by a alone for {100 * by_a:.0f}%",
-        f"{len(peaks)} sharp peak(s) in the boundary" + (" at a = " + ", ".join(f"{a[j]:.3f}" for j in peaks[:8])
-                                                        if peaks else ""),
+        f"{len(peaks)} sharp peak(s) in the boundary"
+        + (" at a = " + ", ".join(f"{a[j]:.3f}" for j in peaks[:8]) if peaks else ""),
         f"lift-off (paper reading) in {100 * lift.mean():.0f}% of the map: {liftoff_summary(ds)}; "
         f"undetermined (engine step cap) {int((cls == UNDETERMINED).sum())}",
     ]
     if "dt_check" in ds.attrs:
         lines.append(ds.attrs["dt_check"])
-    facts = dict(ssl_below_natural=below >= 0.95, ssl_at_small_a=rho < 0, omega_matters_most=by_om > by_a,
-                 sharp_peaks=len(peaks) > 0)
+    facts = dict(
+        ssl_below_natural=below >= 0.95,
+        ssl_at_small_a=rho < 0,
+        omega_matters_most=by_om > by_a,
+        sharp_peaks=len(peaks) > 0,
+    )
     diffs = []
     if top >= WN2:
-        diffs.append(f"moving SSL reaches omega = {top:.1f} = {top / WN1:.2f} wn1 at the smallest amplitudes, "
-                     "above wn2 = wn3, in a narrow strip just above the amplitude at which motion starts"
-                     + ("; 'below the natural frequencies' holds for a >= 0.02" if top_big < WN2 else ""))
+        diffs.append(
+            f"moving SSL reaches omega = {top:.1f} = {top / WN1:.2f} wn1 at the smallest amplitudes, "
+            "above wn2 = wn3, in a narrow strip just above the amplitude at which motion starts"
+            + ("; 'below the natural frequencies' holds for a >= 0.02" if top_big < WN2 else "")
+        )
     return Verdict.from_facts(facts, lines, diffs)

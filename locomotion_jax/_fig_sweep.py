@@ -32,8 +32,14 @@ OMEGAS_5 = (2.0, 6.0, 9.5, 16.0, 23.0)  # Figs. 9 and 12
 
 
 def _sweep(axes, size, fixed=None, chunk=None):
-    ds = run_sweep(axes, fixed=fixed, dt=size["dt"], horizon=size["horizon"], chunk_size=chunk or size["chunk"],
-                   progress=size.get("progress", False))
+    ds = run_sweep(
+        axes,
+        fixed=fixed,
+        dt=size["dt"],
+        horizon=size["horizon"],
+        chunk_size=chunk or size["chunk"],
+        progress=size.get("progress", False),
+    )
     ds.attrs["grid"] = ", ".join(describe_axis(k, v) for k, v in axes.items())
     ds.attrs["fixed"] = describe_params(fixed or {}, axes)
     return steady_liftoff(ds, fixed, dt=size["dt"])
@@ -76,8 +82,9 @@ def _extras(ds, multi=False):
 
     capped = _mask(ds, "status") == Status.MAX_STEPS
     unreached = ~_mask(ds, "reached") & ~capped
-    items = pl.legend_extras(ssl=not multi, liftoff=bool(_mask(ds, "liftoff").any()), hatched=not multi,
-                             unreached=bool(unreached.any()))
+    items = pl.legend_extras(
+        ssl=not multi, liftoff=bool(_mask(ds, "liftoff").any()), hatched=not multi, unreached=bool(unreached.any())
+    )
     if capped.any():
         items.append(Line2D([], [], marker="v", linestyle="", color="red", markersize=4, label="step cap (engine)"))
     if multi:
@@ -92,14 +99,18 @@ def _stall_note(ds, axis_names):
         return []
     idx = np.argwhere(np.atleast_1d(capped))
     where = "; ".join(", ".join(f"{n}={float(ds[n].values[i]):.3g}" for n, i in zip(axis_names, ix)) for ix in idx[:6])
-    return [f"{capped.sum()} configuration(s) hit the engine's step cap (max_steps) before the end of the "
-            f"measurement, so their values are undetermined: {where}{' ...' if len(idx) > 6 else ''}"]
+    return [
+        f"{capped.sum()} configuration(s) hit the engine's step cap (max_steps) before the end of the "
+        f"measurement, so their values are undetermined: {where}{' ...' if len(idx) > 6 else ''}"
+    ]
 
 
 # -- Fig. 7 --------------------------------------------------------------------------
 
-SIZES_7 = {"quick": dict(n=11, dt=0.02, horizon=600.0, chunk=11),
-           "default": dict(n=51, dt=0.01, horizon=2000.0, chunk=17)}
+SIZES_7 = {
+    "quick": dict(n=11, dt=0.02, horizon=600.0, chunk=11),
+    "default": dict(n=51, dt=0.01, horizon=2000.0, chunk=17),
+}
 
 
 def data_7(size: dict) -> xr.Dataset:
@@ -133,16 +144,20 @@ def check_7(ds: xr.Dataset) -> Verdict:
     i_min = int(np.nanargmin(np.where(ok, tau, np.nan)))
     spread = (np.nanmax(tau[ok]) - np.nanmin(tau[ok])) / np.nanmedian(tau[ok])
     helps = bool(better[1:].any()) and x[i_min] > 0
-    lines = [f"tau_5 = {t0:.0f} at mu_s = mu_k, minimum {tau[i_min]:.0f} at mu_s - mu_k = {x[i_min]:.2f} "
-             f"({100 * (1 - tau[i_min] / t0):.0f}% faster); faster than at mu_s = mu_k for "
-             f"{100 * better.mean():.0f}% of the range",
-             f"tau_5 between {np.nanmin(tau[ok]):.0f} and {np.nanmax(tau[ok]):.0f} "
-             f"(median {np.nanmedian(tau[ok]):.0f}): "
-             f"spread (max - min)/median = {100 * spread:.0f}%"]
+    lines = [
+        f"tau_5 = {t0:.0f} at mu_s = mu_k, minimum {tau[i_min]:.0f} at mu_s - mu_k = {x[i_min]:.2f} "
+        f"({100 * (1 - tau[i_min] / t0):.0f}% faster); faster than at mu_s = mu_k for "
+        f"{100 * better.mean():.0f}% of the range",
+        f"tau_5 between {np.nanmin(tau[ok]):.0f} and {np.nanmax(tau[ok]):.0f} "
+        f"(median {np.nanmedian(tau[ok]):.0f}): "
+        f"spread (max - min)/median = {100 * spread:.0f}%",
+    ]
     jumps = np.flatnonzero(np.abs(np.diff(np.log(np.where(ok, tau, np.nan)))) > 0.25)
     if jumps.size:
-        lines.append("jumps of tau_5 by more than 25% between mu_s - mu_k = " + ", ".join(
-            f"{x[j]:.2f} and {x[j + 1]:.2f}" for j in jumps))
+        lines.append(
+            "jumps of tau_5 by more than 25% between mu_s - mu_k = "
+            + ", ".join(f"{x[j]:.2f} and {x[j + 1]:.2f}" for j in jumps)
+        )
     if not ok.all():
         lines.append(f"z not reached for {int((~ok).sum())} value(s)")
     if _mask(ds, "liftoff").any():
@@ -150,17 +165,21 @@ def check_7(ds: xr.Dataset) -> Verdict:
     facts = dict(helps_in_a_range=helps, small_overall=spread < 0.5)
     diffs = []
     if not facts["small_overall"]:
-        diffs.append(f"the effect is not small here: tau_5 falls by {100 * (1 - tau[i_min] / t0):.0f}% from "
-                     f"mu_s = mu_k to mu_s - mu_k = {x[i_min]:.2f}" + (
-                         f" and jumps at mu_s - mu_k = {x[jumps[-1] + 1]:.2f}" if jumps.size else "")
-                     + "; the paper calls the effect of mu_s 'not significant' without numbers")
+        diffs.append(
+            f"the effect is not small here: tau_5 falls by {100 * (1 - tau[i_min] / t0):.0f}% from "
+            f"mu_s = mu_k to mu_s - mu_k = {x[i_min]:.2f}"
+            + (f" and jumps at mu_s - mu_k = {x[jumps[-1] + 1]:.2f}" if jumps.size else "")
+            + "; the paper calls the effect of mu_s 'not significant' without numbers"
+        )
     return Verdict.from_facts(facts, lines, diffs + _stall_note(ds, ["dmu"]))
 
 
 # -- Fig. 8 --------------------------------------------------------------------------
 
-SIZES_8 = {"quick": dict(n=40, dt=0.02, horizon=800.0, chunk=10),
-           "default": dict(n=400, dt=0.01, horizon=2000.0, chunk=16)}
+SIZES_8 = {
+    "quick": dict(n=40, dt=0.02, horizon=800.0, chunk=10),
+    "default": dict(n=400, dt=0.01, horizon=2000.0, chunk=16),
+}
 
 
 def data_8(size: dict) -> xr.Dataset:
@@ -207,21 +226,32 @@ def check_8(ds: xr.Dataset) -> Verdict:
         f"{r[i_e]:.2f} (e_5 = {e[i_e]:.0f}{', steady lift-off' if steady[i_e] else ''})",
         "local minimum near wn2/wn1 = 0.71: " + (", ".join(f"{r[i]:.2f}" for i in wn2_min) or "none"),
         f"{len(ssl_minima)} local minima of tau_5 in the SSL range omega/wn1 < 0.3 (at "
-        + ", ".join(f"{r[i]:.2f}" for i in ssl_minima) + f"); e_5 there {e_low.min():.1f}..{e_low.max():.1f}"
-        if e_low.size else "no finite e_5 below 0.3",
+        + ", ".join(f"{r[i]:.2f}" for i in ssl_minima)
+        + f"); e_5 there {e_low.min():.1f}..{e_low.max():.1f}"
+        if e_low.size
+        else "no finite e_5 below 0.3",
         f"SSL for omega/wn1 <= {ssl_top:.2f}; lift-off (any time) for "
-        + (f"{band.min():.2f}..{band.max():.2f}" if band.size else "none") + "; steady motion loses contact for "
+        + (f"{band.min():.2f}..{band.max():.2f}" if band.size else "none")
+        + "; steady motion loses contact for "
         + (f"{sband.min():.2f}..{sband.max():.2f}" if sband.size else "none"),
     ]
-    facts = dict(fastest_near_wn1=fastest, most_energy_near_wn1=costliest, minimum_near_wn2=bool(wn2_min),
-                 several_ssl_minima=len(ssl_minima) >= 2)
+    facts = dict(
+        fastest_near_wn1=fastest,
+        most_energy_near_wn1=costliest,
+        minimum_near_wn2=bool(wn2_min),
+        several_ssl_minima=len(ssl_minima) >= 2,
+    )
     diffs = []
     if steady[i_t] or steady[i_e]:
-        diffs.append("the fastest and the most energetic frequencies lie where even the steady motion loses "
-                     "contact: the model does not cover them, the paper's curve there is the n=|N| reading")
+        diffs.append(
+            "the fastest and the most energetic frequencies lie where even the steady motion loses "
+            "contact: the model does not cover them, the paper's curve there is the n=|N| reading"
+        )
     if not wn2_min:
-        diffs.append("no separate minimum of tau_5 near wn2 = wn3: tau_5 falls steadily from the SSL/SL "
-                     "transition into the lift-off band")
+        diffs.append(
+            "no separate minimum of tau_5 near wn2 = wn3: tau_5 falls steadily from the SSL/SL "
+            "transition into the lift-off band"
+        )
     if ssl_top > 0.3:
         diffs.append(f"SSL extends to omega/wn1 = {ssl_top:.2f}, beyond the paper's 0.3")
     return Verdict.from_facts(facts, lines, diffs + _stall_note(ds, ["ratio"]))
@@ -229,8 +259,10 @@ def check_8(ds: xr.Dataset) -> Verdict:
 
 # -- Fig. 9 --------------------------------------------------------------------------
 
-SIZES_9 = {"quick": dict(n=8, dt=0.02, horizon=600.0, chunk=8),
-           "default": dict(n=36, dt=0.01, horizon=2000.0, chunk=12)}
+SIZES_9 = {
+    "quick": dict(n=8, dt=0.02, horizon=600.0, chunk=8),
+    "default": dict(n=36, dt=0.01, horizon=2000.0, chunk=12),
+}
 
 
 def data_9(size: dict) -> xr.Dataset:
@@ -275,24 +307,31 @@ def check_9(ds: xr.Dataset) -> Verdict:
         f"speed vs energy over all (omega, a): Spearman rho = {rho:+.2f} (faster costs more: {yes(rho > 0)})",
         f"a > 0.08: omega=6 faster and cheaper than omega=16 at {100 * win_hi:.0f}% of the amplitudes",
         f"a <= 0.08: median |tau(6)/tau(16) - 1| = {100 * dt_lo:.0f}%, |e(6)/e(16) - 1| = {100 * de_lo:.0f}%",
-        "lift-off (any time / steady motion): " + "; ".join(
-            f"omega={om:g}: {first(lift, j)} / {first(steady, j)}" for j, om in enumerate(ds.omega.values)
-            if lift[j].any()),
+        "lift-off (any time / steady motion): "
+        + "; ".join(
+            f"omega={om:g}: {first(lift, j)} / {first(steady, j)}"
+            for j, om in enumerate(ds.omega.values)
+            if lift[j].any()
+        ),
     ]
     facts = dict(faster_costs_more=rho > 0, low_beats_high_above_0_08=win_hi >= 0.75)
     diffs = []
     if lift[i16][hi].any() or lift[i6][hi].any():
-        diffs.append(f"above a = 0.08, {100 * lift[i16][hi].mean():.0f}% of the omega = 16 and "
-                     f"{100 * lift[i6][hi].mean():.0f}% of the omega = 6 runs lift off (steady motion: "
-                     f"{100 * steady[i16][hi].mean():.0f}% and {100 * steady[i6][hi].mean():.0f}%), so the comparison "
-                     "there involves configurations outside the model (n=|N| reading)")
+        diffs.append(
+            f"above a = 0.08, {100 * lift[i16][hi].mean():.0f}% of the omega = 16 and "
+            f"{100 * lift[i6][hi].mean():.0f}% of the omega = 6 runs lift off (steady motion: "
+            f"{100 * steady[i16][hi].mean():.0f}% and {100 * steady[i6][hi].mean():.0f}%), so the comparison "
+            "there involves configurations outside the model (n=|N| reading)"
+        )
     return Verdict.from_facts(facts, lines, diffs + _stall_note(ds, ["omega", "a"]))
 
 
 # -- Fig. 12 -------------------------------------------------------------------------
 
-SIZES_12 = {"quick": dict(n=13, dt=0.02, horizon=600.0, chunk=13),
-            "default": dict(n=97, dt=0.01, horizon=2000.0, chunk=8)}
+SIZES_12 = {
+    "quick": dict(n=13, dt=0.02, horizon=600.0, chunk=13),
+    "default": dict(n=97, dt=0.01, horizon=2000.0, chunk=8),
+}
 TARGETS_12 = {23.0: (0.05, 0.5, 0.95), 6.0: (0.27, 0.5, 0.73)}
 
 
@@ -341,8 +380,10 @@ def check_12(ds: xr.Dataset) -> Verdict:
         found = [mins[np.argmin(np.abs(mins - t))] if mins.size else np.nan for t in targets]
         ok = [abs(f - t) <= tol for f, t in zip(found, targets)]
         facts[f"minima_at_{om:g}"] = all(ok)
-        lines.append(f"omega={om:g}: local minima of tau_5 nearest to " + ", ".join(
-            f"{t:g} -> {f:.2f}{'' if k else ' (miss)'}" for t, f, k in zip(targets, found, ok)))
+        lines.append(
+            f"omega={om:g}: local minima of tau_5 nearest to "
+            + ", ".join(f"{t:g} -> {f:.2f}{'' if k else ' (miss)'}" for t, f, k in zip(targets, found, ok))
+        )
     if 2.0 in omegas:
         reached = _mask(ds, "reached")[omegas.index(2.0)]
         span = (mh[reached].min(), mh[reached].max()) if reached.any() else (np.nan, np.nan)
@@ -350,10 +391,18 @@ def check_12(ds: xr.Dataset) -> Verdict:
         lines.append(f"omega=2: z reached only for mhat in [{span[0]:.2f}, {span[1]:.2f}]")
     lift = _mask(ds, "liftoff")
     steady = _mask(ds, "liftoff_steady") & lift
-    lines.append("lift-off (any time / steady motion) at: " + "; ".join(
-        f"omega={om:g}: {lift[j].sum()} / {steady[j].sum()} of {mh.size} mass ratios"
-        for j, om in enumerate(omegas) if lift[j].any()))
-    diffs = [f"omega={om:g}: {100 * lift[j].mean():.0f}% of the mass ratios lift off ({100 * steady[j].mean():.0f}% "
-             "in the steady motion), so this curve lies mostly outside the model's validity"
-             for j, om in enumerate(omegas) if lift[j].mean() > 0.5]
+    lines.append(
+        "lift-off (any time / steady motion) at: "
+        + "; ".join(
+            f"omega={om:g}: {lift[j].sum()} / {steady[j].sum()} of {mh.size} mass ratios"
+            for j, om in enumerate(omegas)
+            if lift[j].any()
+        )
+    )
+    diffs = [
+        f"omega={om:g}: {100 * lift[j].mean():.0f}% of the mass ratios lift off ({100 * steady[j].mean():.0f}% "
+        "in the steady motion), so this curve lies mostly outside the model's validity"
+        for j, om in enumerate(omegas)
+        if lift[j].mean() > 0.5
+    ]
     return Verdict.from_facts(facts, lines, diffs + _stall_note(ds, ["omega", "mhat"]))

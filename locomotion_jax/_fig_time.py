@@ -35,9 +35,17 @@ def data_4b(size: dict) -> xr.Dataset:
     tr = simulate(p, 20.0, t, dynamics=Exact(size["dt"]), **PAPER).to_numpy()
     data = {k: (("d", "t"), tr[k]) for k in STATE}
     data.update({k: ("d", tr[k]) for k in ("liftoff", "t_liftoff", "status")})
-    return xr.Dataset(data, coords=dict(d=d, t=t), attrs=dict(
-        dt=size["dt"], dynamics="exact", grid=f"d in {{{', '.join(f'{v:g}' for v in d)}}}, "
-        f"t in [0, 20] ({t.size} saved points)", fixed=describe_params(fixed, ("d",)), **PAPER))
+    return xr.Dataset(
+        data,
+        coords=dict(d=d, t=t),
+        attrs=dict(
+            dt=size["dt"],
+            dynamics="exact",
+            grid=f"d in {{{', '.join(f'{v:g}' for v in d)}}}, t in [0, 20] ({t.size} saved points)",
+            fixed=describe_params(fixed, ("d",)),
+            **PAPER,
+        ),
+    )
 
 
 def plot_4b(ds: xr.Dataset, path) -> None:
@@ -47,8 +55,13 @@ def plot_4b(ds: xr.Dataset, path) -> None:
     for i, d in enumerate(ds.d.values):
         dx = ds.X.values[i] - ds.X.values[i, 0]
         lift = bool(ds.liftoff.values[i])
-        ax.plot(t, dx, label=f"d = {d:g}" + (" (lift-off)" if lift else ""),
-                linestyle="--" if lift else "-", color=pl.LIFTOFF_COLOR if lift else None)
+        ax.plot(
+            t,
+            dx,
+            label=f"d = {d:g}" + (" (lift-off)" if lift else ""),
+            linestyle="--" if lift else "-",
+            color=pl.LIFTOFF_COLOR if lift else None,
+        )
     ax.set_xlabel(r"dimensionless time $t$")
     ax.set_ylabel(r"centre of mass $x(t) - x(0)$")
     ax.set_title(r"Fig. 4b: $\ell_0 = 0.05\sin(\pi t) + 3$, $c = 0.01$")
@@ -99,10 +112,21 @@ def _two_regimes(size: dict) -> xr.Dataset:
     regime = np.where(stuck.sum(axis=-1) > 1, int(Regime.SSL), int(Regime.SL))
     data["regime"] = ("omega", regime)
     data["mean_speed"] = ("omega", (tr["X"][:, -1] - tr["X"][:, 0]) / WINDOW)
-    return xr.Dataset(data, coords=dict(omega=om, t=t - ts), attrs=dict(
-        dt=size["dt"], dynamics="exact", t_start=ts, window=WINDOW, wn1=float(np.max(np.asarray(p.wn1))),
-        grid=f"omega in {{2 (0.2 wn1), 23 (2.3 wn1)}}, t in [t_start, t_start + {WINDOW:g}] "
-        f"({t.size} saved points), t_start = {ts:.2f}", fixed=describe_params({}, ("omega",)), **PAPER))
+    return xr.Dataset(
+        data,
+        coords=dict(omega=om, t=t - ts),
+        attrs=dict(
+            dt=size["dt"],
+            dynamics="exact",
+            t_start=ts,
+            window=WINDOW,
+            wn1=float(np.max(np.asarray(p.wn1))),
+            grid=f"omega in {{2 (0.2 wn1), 23 (2.3 wn1)}}, t in [t_start, t_start + {WINDOW:g}] "
+            f"({t.size} saved points), t_start = {ts:.2f}",
+            fixed=describe_params({}, ("omega",)),
+            **PAPER,
+        ),
+    )
 
 
 def data_5(size: dict) -> xr.Dataset:
@@ -173,8 +197,11 @@ def check_5(ds: xr.Dataset) -> Verdict:
         f"2.3 wn1: stuck {100 * max(f_sl):.0f}% of the window (regime {'SL' if int(ds.regime[1]) == 0 else 'SSL'})",
         f"mean speeds over the window {float(ds.mean_speed[0]):.4f} and {float(ds.mean_speed[1]):.4f}",
     ]
-    diffs = [f"lift-off at omega = {float(o):g} (paper reading continued)" for o, l in
-             zip(ds.omega.values, ds.liftoff.values) if l]
+    diffs = [
+        f"lift-off at omega = {float(o):g} (paper reading continued)"
+        for o, l in zip(ds.omega.values, ds.liftoff.values)
+        if l
+    ]
     return Verdict.from_facts(dict(ssl_sticks=ssl_sticks, sl_never_sticks=sl_slides), lines, diffs)
 
 
@@ -196,27 +223,36 @@ def check_10(ds: xr.Dataset) -> Verdict:
     lines, divisors, amp, rms = [], [], [], []
     for i, name in enumerate(("SSL", "SL")):
         k, a = _harmonics(ds, i)
-        power = a ** 2 / (a ** 2).sum()
+        power = a**2 / (a**2).sum()
         # The force's period is T/g, g = gcd of the harmonics of omega that carry power.
         g = int(np.gcd.reduce(k[power > 0.01]))
         divisors.append(g)
         f = ds.f_ex.values[i]
         amp.append(0.5 * (f.max() - f.min()))
         rms.append(float(np.std(f)))
-        lines.append(f"{name} ({float(ds.omega[i]) / ds.attrs['wn1']:.1f} wn1): period of F_ex = T/{g} "
-                     f"(odd harmonics {100 * power[0::2].sum():.1g}% of the power, strongest harmonic "
-                     f"{int(k[np.argmax(a)])}); amplitude {amp[-1]:.3f}, rms {rms[-1]:.3f}")
+        lines.append(
+            f"{name} ({float(ds.omega[i]) / ds.attrs['wn1']:.1f} wn1): period of F_ex = T/{g} "
+            f"(odd harmonics {100 * power[0::2].sum():.1g}% of the power, strongest harmonic "
+            f"{int(k[np.argmax(a)])}); amplitude {amp[-1]:.3f}, rms {rms[-1]:.3f}"
+        )
     ratio = amp[1] / amp[0]
     v = ds.mean_speed.values
-    lines.append(f"SL/SSL force amplitude {ratio:.2f} (rms {rms[1] / rms[0]:.2f}) at mean speeds "
-                 f"{v[0]:.4f} vs {v[1]:.4f} (ratio {v[1] / v[0]:.2f})")
-    facts = dict(half_period=all(g == 2 for g in divisors), sl_about_twice=1.7 <= ratio <= 2.5,
-                 similar_speed=0.67 <= v[1] / v[0] <= 1.5)
+    lines.append(
+        f"SL/SSL force amplitude {ratio:.2f} (rms {rms[1] / rms[0]:.2f}) at mean speeds "
+        f"{v[0]:.4f} vs {v[1]:.4f} (ratio {v[1] / v[0]:.2f})"
+    )
+    facts = dict(
+        half_period=all(g == 2 for g in divisors),
+        sl_about_twice=1.7 <= ratio <= 2.5,
+        similar_speed=0.67 <= v[1] / v[0] <= 1.5,
+    )
     diffs = []
     if not facts["sl_about_twice"]:
-        diffs.append(f"the SL force amplitude (half peak-to-peak) is {ratio:.2f} times SSL's, where the paper "
-                     f"reads 'almost twice' off its plot; the rms ratio is {rms[1] / rms[0]:.2f}: the SSL force "
-                     "is near zero while both masses stick and peaks briefly at the switches")
+        diffs.append(
+            f"the SL force amplitude (half peak-to-peak) is {ratio:.2f} times SSL's, where the paper "
+            f"reads 'almost twice' off its plot; the rms ratio is {rms[1] / rms[0]:.2f}: the SSL force "
+            "is near zero while both masses stick and peaks briefly at the switches"
+        )
     return Verdict.from_facts(facts, lines, diffs)
 
 
@@ -241,6 +277,8 @@ def plot_10(ds: xr.Dataset, path) -> None:
         bot.set_xlabel(r"$t - t_s$")
     axes[0, 0].legend(fontsize=8, loc="upper left")
     axes[1, 0].legend(fontsize=8, loc="upper left")
-    fig.suptitle("Fig. 10: resultant friction + damping force and velocities "
-                 "(shading: orange $m_1$ stuck, green $m_2$ stuck)", fontsize=10)
+    fig.suptitle(
+        "Fig. 10: resultant friction + damping force and velocities (shading: orange $m_1$ stuck, green $m_2$ stuck)",
+        fontsize=10,
+    )
     pl.save(fig, path)

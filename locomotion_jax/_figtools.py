@@ -81,8 +81,15 @@ def run_sweep(
     import locomotion_jax
 
     axes = {k: np.atleast_1d(np.asarray(v, dtype=float)) for k, v in axes.items()}
-    kwargs = dict(fixed=dict(fixed or {}), z=z, horizon=horizon, window=window, dynamics=Exact(dt, max_steps),
-                  chunk_size=chunk_size, **PAPER)
+    kwargs = dict(
+        fixed=dict(fixed or {}),
+        z=z,
+        horizon=horizon,
+        window=window,
+        dynamics=Exact(dt, max_steps),
+        chunk_size=chunk_size,
+        **PAPER,
+    )
     if hasattr(locomotion_jax, "sweep"):
         ds = locomotion_jax.sweep(axes, **kwargs, path=None, progress=progress)
         ds.attrs["engine"] = "locomotion_jax.sweep"
@@ -114,8 +121,16 @@ def _fallback_sweep(axes, *, fixed, z, horizon, window, dynamics, contact, start
     return xr.Dataset(data, coords=dict(axes), attrs=dict(engine="fallback: measure on Params.grid", **attrs))
 
 
-def steady_liftoff(ds: xr.Dataset, fixed: Mapping[str, float] | None = None, *, dt: float = 0.01,
-                   window: float = 5.0, n_save: int = 201, chunk: int = 256, stride: int = 1) -> xr.Dataset:
+def steady_liftoff(
+    ds: xr.Dataset,
+    fixed: Mapping[str, float] | None = None,
+    *,
+    dt: float = 0.01,
+    window: float = 5.0,
+    n_save: int = 201,
+    chunk: int = 256,
+    stride: int = 1,
+) -> xr.Dataset:
     """Add `min_normal` and `liftoff_steady` to a sweep dataset.
 
     `liftoff` flags any zero crossing of a normal force, and with the pre-stretched
@@ -151,15 +166,25 @@ def steady_liftoff(ds: xr.Dataset, fixed: Mapping[str, float] | None = None, *, 
         min_n[tuple(idx.T)] = np.concatenate(out)
     steady = np.nan_to_num(min_n, nan=1.0) <= 0
     if stride > 1:  # nearest re-simulated neighbour
-        near = tuple(np.minimum((np.rint(np.arange(s) / stride) * stride).astype(int), (s - 1) // stride * stride)
-                     for s in lift.shape)
+        near = tuple(
+            np.minimum((np.rint(np.arange(s) / stride) * stride).astype(int), (s - 1) // stride * stride)
+            for s in lift.shape
+        )
         steady = lift & steady[np.ix_(*near)]
-    ds["min_normal"] = (dims, min_n, {"description": f"lowest normal force over [t_s, t_s + {window:g}] "
-                                                    "(re-simulated lift-off configurations only)"})
+    ds["min_normal"] = (
+        dims,
+        min_n,
+        {
+            "description": f"lowest normal force over [t_s, t_s + {window:g}] "
+            "(re-simulated lift-off configurations only)"
+        },
+    )
     ds["liftoff_steady"] = (dims, steady)
-    ds.attrs["steady_check"] = (f"lowest normal force over [t_s, t_s + {window:g}] sampled every "
-                                f"{window / (n_save - 1):.3g}" + (f", every {stride}th configuration per axis "
-                                                                   "(nearest neighbour)" if stride > 1 else ""))
+    ds.attrs["steady_check"] = (
+        f"lowest normal force over [t_s, t_s + {window:g}] sampled every "
+        f"{window / (n_save - 1):.3g}"
+        + (f", every {stride}th configuration per axis (nearest neighbour)" if stride > 1 else "")
+    )
     return ds
 
 
@@ -169,8 +194,10 @@ def liftoff_summary(ds: xr.Dataset) -> str:
     if "liftoff_steady" not in ds:
         return f"{lift.sum()} of {lift.size} configurations lift off"
     steady = np.asarray(ds.liftoff_steady.values, bool)
-    return (f"{lift.sum()} of {lift.size} configurations lift off, {(lift & ~steady).sum()} of them only in the "
-            f"start transient (the steady motion keeps contact)")
+    return (
+        f"{lift.sum()} of {lift.size} configurations lift off, {(lift & ~steady).sum()} of them only in the "
+        f"start transient (the steady motion keeps contact)"
+    )
 
 
 def describe_params(fixed: Mapping[str, float], swept: Any = ()) -> str:

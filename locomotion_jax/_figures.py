@@ -53,7 +53,7 @@ class FigureSpec:
     @property
     def stem(self) -> str:
         digits = "".join(ch for ch in self.name if ch.isdigit())
-        return "fig" + digits.zfill(2) + self.name[len(digits):]
+        return "fig" + digits.zfill(2) + self.name[len(digits) :]
 
 
 _PERIODS = "The time axis shows the first 3 actuation periods after $t_s$ of the 25-unit window that the check uses."
@@ -61,73 +61,137 @@ FIGURES: dict[str, FigureSpec] = {
     s.name: s
     for s in (
         FigureSpec(
-            "4b", "centre-of-mass displacement X(t) for five offsets d",
+            "4b",
+            "centre-of-mass displacement X(t) for five offsets d",
             "moves forward for d>0, backward for d<0, stationary for d=0",
-            ("$\\omega = \\pi$ in the dimensionless model ($\\ell_0 = 0.05\\sin(\\pi t) + 3$) and $c = 0.01$ "
-             "(SPEC §6); the caption gives no damping.",
-             "Plotted from $t = 0$ (no transient removed), as the paper's figure starts at rest; "
-             "$x(t) - x(0)$ on the vertical axis."),
-            (), ftime.SIZES_4B, ftime.data_4b, ftime.plot_4b, ftime.check_4b),
+            (
+                "$\\omega = \\pi$ in the dimensionless model ($\\ell_0 = 0.05\\sin(\\pi t) + 3$) and $c = 0.01$ "
+                "(SPEC §6); the caption gives no damping.",
+                "Plotted from $t = 0$ (no transient removed), as the paper's figure starts at rest; "
+                "$x(t) - x(0)$ on the vertical axis.",
+            ),
+            (),
+            ftime.SIZES_4B,
+            ftime.data_4b,
+            ftime.plot_4b,
+            ftime.check_4b,
+        ),
         FigureSpec(
-            "5", "positions and velocities in SSL (0.2 wn1) and SL (2.3 wn1)",
+            "5",
+            "positions and velocities in SSL (0.2 wn1) and SL (2.3 wn1)",
             "SSL shows sticking intervals, SL none",
-            ("Positions are shown relative to their values at $t_s$ (both drift forward).", _PERIODS,
-             "Stuck fractions are taken over the paper's window [t_s, t_s + 25]."),
-            (), ftime.SIZES_5, ftime.data_5, ftime.plot_5, ftime.check_5),
+            (
+                "Positions are shown relative to their values at $t_s$ (both drift forward).",
+                _PERIODS,
+                "Stuck fractions are taken over the paper's window [t_s, t_s + 25].",
+            ),
+            (),
+            ftime.SIZES_5,
+            ftime.data_5,
+            ftime.plot_5,
+            ftime.check_5,
+        ),
         FigureSpec(
-            "6", "SSL region in the (a, omega) plane",
+            "6",
+            "SSL region in the (a, omega) plane",
             "SSL only below the natural frequencies and at small a; omega matters most; the boundary has sharp peaks",
-            (f"Ranges a in [{fmap.A_RANGE[0]:g}, {fmap.A_RANGE[1]:g}], omega in [{fmap.OMEGA_RANGE[0]:g}, "
-             f"{fmap.OMEGA_RANGE[1]:g}] (the paper's are not stated).",
-             "Each configuration runs only to the end of the regime window (horizon = window = 25).",
-             "Runs in which both masses stay stuck through the window are drawn as 'at rest': the paper's rule "
-             "counts them as SSL (a mass sticks), but nothing moves.",
-             "dt = 0.02 for the map (only the regime is needed; switching times are located exactly); a random "
-             "sample is re-run at dt = 0.01 to measure the agreement (default size)."),
-            ("The paper notes that its boundary peaks were 'very sensitive to tolerances in our numerical "
-             "integration'; ours come from exact event location on a much denser grid, so individual peaks "
-             "need not coincide.",),
-            fmap.SIZES_6, fmap.data_6, fmap.plot_6, fmap.check_6),
+            (
+                f"Ranges a in [{fmap.A_RANGE[0]:g}, {fmap.A_RANGE[1]:g}], omega in [{fmap.OMEGA_RANGE[0]:g}, "
+                f"{fmap.OMEGA_RANGE[1]:g}] (the paper's are not stated).",
+                "Each configuration runs only to the end of the regime window (horizon = window = 25).",
+                "Runs in which both masses stay stuck through the window are drawn as 'at rest': the paper's rule "
+                "counts them as SSL (a mass sticks), but nothing moves.",
+                "dt = 0.02 for the map (only the regime is needed; switching times are located exactly); a random "
+                "sample is re-run at dt = 0.01 to measure the agreement (default size).",
+            ),
+            (
+                "The paper notes that its boundary peaks were 'very sensitive to tolerances in our numerical "
+                "integration'; ours come from exact event location on a much denser grid, so individual peaks "
+                "need not coincide.",
+            ),
+            fmap.SIZES_6,
+            fmap.data_6,
+            fmap.plot_6,
+            fmap.check_6,
+        ),
         FigureSpec(
-            "7", "tau_5 vs mu_s - mu_k at omega = 0.2 wn1",
+            "7",
+            "tau_5 vs mu_s - mu_k at omega = 0.2 wn1",
             "larger static friction helps in a range; effect small overall",
             ("mu_s from 0.5 to 1.0 at mu_k = 0.5, as the caption states.",),
-            (), fsw.SIZES_7, fsw.data_7, fsw.plot_7, fsw.check_7),
+            (),
+            fsw.SIZES_7,
+            fsw.data_7,
+            fsw.plot_7,
+            fsw.check_7,
+        ),
         FigureSpec(
-            "8", "tau_5 and e_5 vs omega/wn1",
+            "8",
+            "tau_5 and e_5 vs omega/wn1",
             "fastest near wn1 (with the most energy); local minima near wn2 = wn3; several sensitive minima in "
             "the SSL range omega/wn1 < 0.3",
             ("omega/wn1 from 0.05 to 2.5 (the paper's range is not stated); logarithmic vertical axes.",),
-            ("SPEC §1: a band of frequencies around resonance loses contact, so the paper's minimum of tau_5 "
-             "near wn1 lies where the model's own assumption fails. With the pre-stretched start (eq. 14) the "
-             "band of any lift-off is wider than the band where the steady motion itself loses contact (both "
-             "are listed above and drawn: hatched vs dotted).",),
-            fsw.SIZES_8, fsw.data_8, fsw.plot_8, fsw.check_8),
+            (
+                "SPEC §1: a band of frequencies around resonance loses contact, so the paper's minimum of tau_5 "
+                "near wn1 lies where the model's own assumption fails. With the pre-stretched start (eq. 14) the "
+                "band of any lift-off is wider than the band where the steady motion itself loses contact (both "
+                "are listed above and drawn: hatched vs dotted).",
+            ),
+            fsw.SIZES_8,
+            fsw.data_8,
+            fsw.plot_8,
+            fsw.check_8,
+        ),
         FigureSpec(
-            "9", "tau_5 and e_5 vs a for five omegas",
+            "9",
+            "tau_5 and e_5 vs a for five omegas",
             "faster costs more energy; for a > 0.08, omega = 0.6 wn1 beats 1.6 wn1 in time and energy",
-            ("a from 0.01 to 0.15 (the paper discusses a <= 0.08 and a > 0.08 but does not state its range).",
-             "'faster costs more' is tested as a positive rank correlation between speed 5/tau_5 and e_5."),
-            ("SPEC §1: with the pre-stretched start (eq. 14), large a at high omega lifts a mass off in the "
-             "first period (e.g. a >= 0.08 at omega = 23).",),
-            fsw.SIZES_9, fsw.data_9, fsw.plot_9, fsw.check_9),
+            (
+                "a from 0.01 to 0.15 (the paper discusses a <= 0.08 and a > 0.08 but does not state its range).",
+                "'faster costs more' is tested as a positive rank correlation between speed 5/tau_5 and e_5.",
+            ),
+            (
+                "SPEC §1: with the pre-stretched start (eq. 14), large a at high omega lifts a mass off in the "
+                "first period (e.g. a >= 0.08 at omega = 23).",
+            ),
+            fsw.SIZES_9,
+            fsw.data_9,
+            fsw.plot_9,
+            fsw.check_9,
+        ),
         FigureSpec(
-            "10", "friction + damping force F_ex (eq. 17) and velocities, SSL vs SL",
+            "10",
+            "friction + damping force F_ex (eq. 17) and velocities, SSL vs SL",
             "force period is half the actuation period; SL force amplitude about twice SSL's at similar speed",
-            ("$F_{ex}\\cdot E_1 = m_1\\ddot x_1 + m_2\\ddot x_2$: the total friction (static or kinetic) plus "
-             "damping force; amplitude = half the peak-to-peak value over the window.",
-             "The period is read from the spectrum of $F_{ex}$ over a whole number of actuation periods: "
-             "the period is T/g, g the greatest common divisor of the harmonics of omega that carry more than "
-             "1% of the power ('half the period' = g = 2).", _PERIODS),
-            (), ftime.SIZES_5, ftime.data_10, ftime.plot_10, ftime.check_10),
+            (
+                "$F_{ex}\\cdot E_1 = m_1\\ddot x_1 + m_2\\ddot x_2$: the total friction (static or kinetic) plus "
+                "damping force; amplitude = half the peak-to-peak value over the window.",
+                "The period is read from the spectrum of $F_{ex}$ over a whole number of actuation periods: "
+                "the period is T/g, g the greatest common divisor of the harmonics of omega that carry more than "
+                "1% of the power ('half the period' = g = 2).",
+                _PERIODS,
+            ),
+            (),
+            ftime.SIZES_5,
+            ftime.data_10,
+            ftime.plot_10,
+            ftime.check_10,
+        ),
         FigureSpec(
-            "12", "natural frequencies, tau_5 and e_5 vs the mass ratio",
-            "at 23: minima of tau_5 near mhat 0.05, 0.5, 0.95; at 6: near 0.27, 0.5, 0.73; at 2: motion only "
-            "near 0.5",
-            ("$m_1 + m_2 = 2$ at every mass ratio (SPEC §6), so $m_1 = 2\\hat m$; mhat from 0.02 to 0.98.",
-             "$t_s$ = 80 periods of the lowest natural frequency at each mass ratio.",
-             "A minimum 'near' a value: a local minimum of tau_5 within max(0.05, 1.5 grid steps)."),
-            (), fsw.SIZES_12, fsw.data_12, fsw.plot_12, fsw.check_12),
+            "12",
+            "natural frequencies, tau_5 and e_5 vs the mass ratio",
+            "at 23: minima of tau_5 near mhat 0.05, 0.5, 0.95; at 6: near 0.27, 0.5, 0.73; at 2: motion only near 0.5",
+            (
+                "$m_1 + m_2 = 2$ at every mass ratio (SPEC §6), so $m_1 = 2\\hat m$; mhat from 0.02 to 0.98.",
+                "$t_s$ = 80 periods of the lowest natural frequency at each mass ratio.",
+                "A minimum 'near' a value: a local minimum of tau_5 within max(0.05, 1.5 grid steps).",
+            ),
+            (),
+            fsw.SIZES_12,
+            fsw.data_12,
+            fsw.plot_12,
+            fsw.check_12,
+        ),
     )
 }
 
@@ -198,8 +262,9 @@ def run_figures(figs: list[str], quick: bool, out: Path) -> list[Path]:
         ds = spec.data(size)
         elapsed, cpu = time.perf_counter() - t0, time.process_time() - c0
         dtype = next((str(v.dtype) for v in ds.data_vars.values() if v.dtype.kind == "f"), "?")
-        ds.attrs.update(figure=name, size=size_name, run_time_s=elapsed, cpu_time_s=cpu, dtype=dtype,
-                        package_version=_version())
+        ds.attrs.update(
+            figure=name, size=size_name, run_time_s=elapsed, cpu_time_s=cpu, dtype=dtype, package_version=_version()
+        )
         nc, png = out / f"{spec.stem}.nc", out / f"{spec.stem}.png"
         _write_nc(ds, nc)
         spec.plot(ds, png)

@@ -28,7 +28,6 @@ STICK_TOL = 1e-6
 """A mass counts as stuck in the window (SSL) only for a total stuck time above this."""
 
 
-
 def _energy(params, wave, t, y):
     l0, _ = wave(t)
     return model.total_energy(params, l0, y.x1, y.v1, y.x2, y.v2)
@@ -71,8 +70,17 @@ def _setup(params, wave, z, horizon, window, contact, start):
     zero = jnp.zeros((), dtype)
     no = jnp.asarray(False)
     acc = _Acc(
-        started=no, X0=zero, ed0=zero, w0=zero, e0=zero, reached=no, t_z=jnp.asarray(jnp.inf, dtype),
-        y_z=exact.State(*(zero,) * 6), stuck1=zero, stuck2=zero, steps=jnp.zeros((), jnp.int32),
+        started=no,
+        X0=zero,
+        ed0=zero,
+        w0=zero,
+        e0=zero,
+        reached=no,
+        t_z=jnp.asarray(jnp.inf, dtype),
+        y_z=exact.State(*(zero,) * 6),
+        stuck1=zero,
+        stuck2=zero,
+        steps=jnp.zeros((), jnp.int32),
     )
     fixed = _Fixed(params, wave, P, ws, ws + window, ws + horizon, jnp.asarray(z, dtype))
     return fixed, (st, acc)
@@ -177,8 +185,9 @@ def _exact_one(params, wave, z, horizon, window, contact, start, dt, max_steps):
     return _results(fixed, dyn)
 
 
-def exact_batch(params, wave, wave_axes, z, horizon, window, contact, start, dt, max_steps,
-                lanes: int | None = None) -> dict[str, jax.Array]:
+def exact_batch(
+    params, wave, wave_axes, z, horizon, window, contact, start, dt, max_steps, lanes: int | None = None
+) -> dict[str, jax.Array]:
     """`measure` on a flat batch (not jitted): a work queue over `lanes` lanes ([`_queue.run_queue`][]).
 
     `lanes=None` takes `_batch.MICRO_BATCH_CPU` on a CPU (wider kernels are split over
@@ -257,8 +266,14 @@ def measure(
         total = horizon_bound(flat, horizon)
         max_steps = dynamics.max_steps or default_max_steps(total, dynamics.dt)
         out = _exact_batch(
-            flat, wave, axes, *(jnp.asarray(v, flat.dtype) for v in (z, horizon, window)),
-            contact, start, dynamics.dt, jnp.asarray(max_steps, jnp.int32),
+            flat,
+            wave,
+            axes,
+            *(jnp.asarray(v, flat.dtype) for v in (z, horizon, window)),
+            contact,
+            start,
+            dynamics.dt,
+            jnp.asarray(max_steps, jnp.int32),
         )
     elif isinstance(dynamics, Smoothed):
         from ._smooth import measure_smoothed

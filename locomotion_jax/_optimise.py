@@ -223,7 +223,17 @@ def _run_stage(state, prob, eps, lr, settings: Settings, outer: int, log):
     weight = jnp.where(g0[:, 0] > settings.phase1_threshold, 0.0, 1.0).astype(dtype)
     for it in range(outer):
         theta, opt_state, best, cost, g, hist = _block(
-            theta, opt_state, best, prob, eps_a, v_target, margin, lam, rho, weight, jnp.asarray(lr, dtype),
+            theta,
+            opt_state,
+            best,
+            prob,
+            eps_a,
+            v_target,
+            margin,
+            lam,
+            rho,
+            weight,
+            jnp.asarray(lr, dtype),
             settings.inner,
         )
         phase1 = np.asarray(weight == 0)
@@ -234,11 +244,23 @@ def _run_stage(state, prob, eps, lr, settings: Settings, outer: int, log):
         grow = viol > 0.25 * viol_prev
         rho = jnp.where(jnp.asarray(grow), jnp.minimum(rho * settings.rho_growth, settings.rho_max), rho)
         viol_prev = viol
-        log.append({"eps": eps, "outer": it, "cost": np.asarray(cost).tolist(), "phase1": phase1.tolist(),
-                    "g_speed": g_np[:, 0].tolist(), "g_normal": g_np[:, 1].tolist()})
+        log.append(
+            {
+                "eps": eps,
+                "outer": it,
+                "cost": np.asarray(cost).tolist(),
+                "phase1": phase1.tolist(),
+                "g_speed": g_np[:, 0].tolist(),
+                "g_normal": g_np[:, 1].tolist(),
+            }
+        )
         if settings.verbose:
-            print(f"  eps={eps:.0e} outer {it}: cost {np.round(np.asarray(cost), 3)} "
-                  f"speed-violation {np.round(g_np[:, 0], 3)}", file=sys.stderr, flush=True)
+            print(
+                f"  eps={eps:.0e} outer {it}: cost {np.round(np.asarray(cost), 3)} "
+                f"speed-violation {np.round(g_np[:, 0], 3)}",
+                file=sys.stderr,
+                flush=True,
+            )
     # Starts with no feasible iterate in this stage continue from their last one.
     found = jnp.isfinite(best.cost)
     best_theta = jax.tree_util.tree_map(
@@ -292,8 +314,9 @@ def optimise(
     if sweep is None:
         sweep = pareto.sinusoid_sweep(params, a_max, horizon=settings.verify_horizon, dt=settings.verify_dt)
     if settings.refine_baseline:
-        baseline = pareto.refine_sinusoid(params, a_max, speed, direction, sweep, horizon=settings.verify_horizon,
-                                          dt=settings.verify_dt)
+        baseline = pareto.refine_sinusoid(
+            params, a_max, speed, direction, sweep, horizon=settings.verify_horizon, dt=settings.verify_dt
+        )
     else:
         baseline = pareto.best_sinusoid(sweep, speed, direction)
     omegas = _start_omegas(params, sweep, speed, direction, a_max, omega, settings)
@@ -317,11 +340,26 @@ def optimise(
         # measurement are sized at the starts' centre (a drift to the range's end shortens
         # them by a factor of at most `omega_range` squared).
         # Every stage shares the finest stage's compiled loop (one compilation per optimisation).
-        plan = make_plan(params, lo, centre, eps, settings.transient, settings.measured, settings.backprop,
-                         eps_min=min(settings.eps_schedule))
-        return _Problem(params, jnp.asarray(a_max, dtype), jnp.asarray(direction, dtype),
-                        jnp.asarray(math.log(lo), dtype), jnp.asarray(math.log(hi), dtype), plan,
-                        settings.temperature, free)
+        plan = make_plan(
+            params,
+            lo,
+            centre,
+            eps,
+            settings.transient,
+            settings.measured,
+            settings.backprop,
+            eps_min=min(settings.eps_schedule),
+        )
+        return _Problem(
+            params,
+            jnp.asarray(a_max, dtype),
+            jnp.asarray(direction, dtype),
+            jnp.asarray(math.log(lo), dtype),
+            jnp.asarray(math.log(hi), dtype),
+            plan,
+            settings.temperature,
+            free,
+        )
 
     lr = settings.learning_rate
     for stage, eps in enumerate(settings.eps_schedule):
@@ -330,8 +368,12 @@ def optimise(
     candidates = [("initial", theta), ("optimised", best_theta)]
     eps_f = settings.eps_schedule[-1]
     for round_ in range(settings.corrections):
-        fig = pareto.exact_figures(_batched(params, n), _fourier_batch(best_theta, a_max, params.lbar),
-                                   settings.verify_horizon, settings.verify_dt)
+        fig = pareto.exact_figures(
+            _batched(params, n),
+            _fourier_batch(best_theta, a_max, params.lbar),
+            settings.verify_horizon,
+            settings.verify_dt,
+        )
         v_dir = direction * np.nan_to_num(fig.speed, nan=0.0)
         short = fig.ok & (v_dir < speed)
         if not (short.any() or (~fig.ok).any()):
@@ -345,8 +387,9 @@ def optimise(
         state = (best_theta, os_, lam_, rho_, jnp.asarray(v_t, dtype), jnp.asarray(m_t, dtype))
         state, best_theta = _run_stage(state, problem(eps_f), eps_f, lr, settings, settings.correction_outer, log)
         candidates.append((f"corrected{round_ + 1}", best_theta))
-    return _select(params, speed, direction, a_max, harmonics, free, settings, candidates, problem(eps_f),
-                   baseline, log, t0)
+    return _select(
+        params, speed, direction, a_max, harmonics, free, settings, candidates, problem(eps_f), baseline, log, t0
+    )
 
 
 def _select(params, speed, direction, a_max, harmonics, free, settings, candidates, prob, baseline, log, t0):
@@ -356,10 +399,12 @@ def _select(params, speed, direction, a_max, harmonics, free, settings, candidat
     theta = jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *(th for _, th in candidates))
     n = theta["cos"].shape[0]
     eps_f = settings.eps_schedule[-1]
-    cost_s, g_s, r_s = _evaluate(theta, prob, jnp.asarray(eps_f, dtype), jnp.full((n,), speed, dtype),
-                                 jnp.full((n,), settings.margin, dtype))
-    fig = pareto.exact_figures(_batched(params, n), _fourier_batch(theta, a_max, params.lbar),
-                               settings.verify_horizon, settings.verify_dt)
+    cost_s, g_s, r_s = _evaluate(
+        theta, prob, jnp.asarray(eps_f, dtype), jnp.full((n,), speed, dtype), jnp.full((n,), settings.margin, dtype)
+    )
+    fig = pareto.exact_figures(
+        _batched(params, n), _fourier_batch(theta, a_max, params.lbar), settings.verify_horizon, settings.verify_dt
+    )
     strokes = a_max * np.asarray(jax.vmap(cons.stroke)(theta["cos"], theta["sin"]))
     tol = 8 * float(jnp.finfo(dtype).eps)
     ok_speed = fig.ok & (direction * np.nan_to_num(fig.speed, nan=-np.inf) >= speed)
@@ -369,10 +414,17 @@ def _select(params, speed, direction, a_max, harmonics, free, settings, candidat
     with np.errstate(divide="ignore", invalid="ignore"):
         cost_s = np.asarray(r_s.dissipated) / np.abs(np.asarray(r_s.distance))
     table = [
-        {"candidate": names[i], "omega": float(np.exp(theta["log_omega"][i])),
-         "mean_speed_exact": float(fig.speed[i]), "cost_of_transport_exact": float(fig.cost[i]),
-         "liftoff_exact": bool(fig.liftoff[i]), "stroke": float(strokes[i]), "feasible_exact": bool(feasible[i]),
-         "mean_speed_smoothed": float(v_s[i]), "cost_of_transport_smoothed": float(cost_s[i])}
+        {
+            "candidate": names[i],
+            "omega": float(np.exp(theta["log_omega"][i])),
+            "mean_speed_exact": float(fig.speed[i]),
+            "cost_of_transport_exact": float(fig.cost[i]),
+            "liftoff_exact": bool(fig.liftoff[i]),
+            "stroke": float(strokes[i]),
+            "feasible_exact": bool(feasible[i]),
+            "mean_speed_smoothed": float(v_s[i]),
+            "cost_of_transport_smoothed": float(cost_s[i]),
+        }
         for i in range(n)
     ]
     if feasible.any():
@@ -387,15 +439,33 @@ def _select(params, speed, direction, a_max, harmonics, free, settings, candidat
     c = a_max * np.asarray(theta["cos"][k], float)
     s = a_max * np.asarray(theta["sin"][k], float)
     return Optimum(
-        v_min=speed, direction=direction, a_max=float(a_max), margin=settings.margin, harmonics=harmonics,
-        free_omega=free, cos=c, sin=s, omega=float(np.exp(theta["log_omega"][k])), lbar=float(params.lbar),
-        mean_speed_exact=float(fig.speed[k]), cost_of_transport_exact=float(fig.cost[k]),
-        stroke_exact=float(strokes[k]), liftoff_exact=bool(fig.liftoff[k]),
+        v_min=speed,
+        direction=direction,
+        a_max=float(a_max),
+        margin=settings.margin,
+        harmonics=harmonics,
+        free_omega=free,
+        cos=c,
+        sin=s,
+        omega=float(np.exp(theta["log_omega"][k])),
+        lbar=float(params.lbar),
+        mean_speed_exact=float(fig.speed[k]),
+        cost_of_transport_exact=float(fig.cost[k]),
+        stroke_exact=float(strokes[k]),
+        liftoff_exact=bool(fig.liftoff[k]),
         constraints_exact={"speed": bool(ok_speed[k]), "stroke": bool(ok_stroke[k]), "no_liftoff": bool(fig.ok[k])},
-        feasible_exact=bool(feasible[k]), mean_speed_smoothed=float(v_s[k]),
-        cost_of_transport_smoothed=float(cost_s[k]), min_normal_smoothed=float(r_s.min_normal[k]), eps=eps_f,
-        sinusoid=baseline, sinusoid_cost_of_transport=sin_cost, improvement_vs_sinusoid=improvement,
-        initial_cost_of_transport_exact=init_cost, source=names[k], candidates=table, history=log,
+        feasible_exact=bool(feasible[k]),
+        mean_speed_smoothed=float(v_s[k]),
+        cost_of_transport_smoothed=float(cost_s[k]),
+        min_normal_smoothed=float(r_s.min_normal[k]),
+        eps=eps_f,
+        sinusoid=baseline,
+        sinusoid_cost_of_transport=sin_cost,
+        improvement_vs_sinusoid=improvement,
+        initial_cost_of_transport_exact=init_cost,
+        source=names[k],
+        candidates=table,
+        history=log,
         runtime_s=time.perf_counter() - t0,
     )
 
@@ -424,5 +494,3 @@ def _start_omegas(params, sweep, speed, direction, a_max, omega, settings: Setti
     # No sinusoid is fast enough: start where sinusoids are fastest.
     i = int(np.argmax(np.where(sweep.ok, v, -np.inf)))
     return [float(sweep.omega[i])]
-
-

@@ -60,20 +60,43 @@ def register(app: typer.Typer) -> None:
 
         try:
             params = to_params(model)
-            settings = Settings(starts=starts, outer=outer, inner=inner, eps_schedule=_eps_schedule(eps),
-                                margin=margin, verify_horizon=horizon, seed=seed, verbose=verbose,
-                                transient=transient, measured=measured, corrections=corrections)
+            settings = Settings(
+                starts=starts,
+                outer=outer,
+                inner=inner,
+                eps_schedule=_eps_schedule(eps),
+                margin=margin,
+                verify_horizon=horizon,
+                seed=seed,
+                verbose=verbose,
+                transient=transient,
+                measured=measured,
+                corrections=corrections,
+            )
             # Validate before the (long) sinusoid sweep.
             from ._constraints import check_inputs
 
             check_inputs(params, v_min, a_max, direction, harmonics, omega, margin)
             log = (lambda msg: print(msg, file=sys.stderr, flush=True)) if verbose or not json_out else (lambda m: None)
             log(f"sweeping {sweep_amplitudes} x {sweep_omegas} sinusoids on the exact model ...")
-            sweep = _pareto.sinusoid_sweep(params, a_max, omegas=_pareto.default_omegas(params, sweep_omegas),
-                                           amplitudes=sweep_amplitudes, horizon=horizon)
+            sweep = _pareto.sinusoid_sweep(
+                params,
+                a_max,
+                omegas=_pareto.default_omegas(params, sweep_omegas),
+                amplitudes=sweep_amplitudes,
+                horizon=horizon,
+            )
             log("optimising ...")
-            result = _optimise.optimise(params, v_min, a_max, direction=direction, omega=omega,
-                                        harmonics=harmonics, settings=settings, sweep=sweep)
+            result = _optimise.optimise(
+                params,
+                v_min,
+                a_max,
+                direction=direction,
+                omega=omega,
+                harmonics=harmonics,
+                settings=settings,
+                sweep=sweep,
+            )
         except ValueError as err:
             typer.echo(f"Error: {err}", err=True)
             raise typer.Exit(code=2) from None

@@ -28,12 +28,20 @@ def plot_waveform(opt: Optimum, path: Path) -> Path:
     phase = np.linspace(0, 1, 400)
     fig, ax = plt.subplots(figsize=(6, 3.6))
     l0, _ = opt.waveform(jnp.asarray(phase * 2 * math.pi / opt.omega))
-    ax.plot(phase, np.asarray(l0) - opt.lbar, lw=2,
-            label=f"optimised, $\\omega$ = {opt.omega:.3g} ({opt.harmonics} harmonics)")
+    ax.plot(
+        phase,
+        np.asarray(l0) - opt.lbar,
+        lw=2,
+        label=f"optimised, $\\omega$ = {opt.omega:.3g} ({opt.harmonics} harmonics)",
+    )
     if opt.sinusoid is not None:
         s = opt.sinusoid
-        ax.plot(phase, s["a"] * np.sin(2 * math.pi * phase), "--",
-                label=f"best sinusoid, a = {s['a']:.3g}, $\\omega$ = {s['omega']:.3g}")
+        ax.plot(
+            phase,
+            s["a"] * np.sin(2 * math.pi * phase),
+            "--",
+            label=f"best sinusoid, a = {s['a']:.3g}, $\\omega$ = {s['omega']:.3g}",
+        )
     ax.axhline(opt.a_max, color="k", lw=0.8, ls=":")
     ax.axhline(-opt.a_max, color="k", lw=0.8, ls=":", label="stroke limit")
     ax.set_xlabel("t / period")
@@ -109,4 +117,3 @@ def save_all(opt: Optimum, params: Params, sweep: SinusoidSweep, out: Path, hori
         plot_period(opt, params, out / "period.png", horizon),
         plot_pareto(sweep, [opt], out / "pareto.png", opt.direction),
     ]
-

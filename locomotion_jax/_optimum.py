@@ -152,9 +152,9 @@ class Optimum:
             f"{fmt(self.cost_of_transport_smoothed)} (eps = {self.eps:g})",
             f"stroke {fmt(self.stroke_exact)} (limit {self.a_max:g}); min normal force (smoothed) "
             f"{fmt(self.min_normal_smoothed)}; lift-off on the exact model: {self.liftoff_exact}",
-            "constraints on the exact model: " + ", ".join(
-                f"{k} {'holds' if v else 'VIOLATED'}" for k, v in self.constraints_exact.items()
-            ) + f" -> {'FEASIBLE' if self.feasible_exact else 'INFEASIBLE'}",
+            "constraints on the exact model: "
+            + ", ".join(f"{k} {'holds' if v else 'VIOLATED'}" for k, v in self.constraints_exact.items())
+            + f" -> {'FEASIBLE' if self.feasible_exact else 'INFEASIBLE'}",
         ]
         if self.sinusoid is None:
             lines.append("best sinusoid: none meets the requirement on the exact model")
@@ -164,8 +164,10 @@ class Optimum:
                 f"best sinusoid: a = {s['a']:.4g}, omega = {s['omega']:.4g}: mean speed {s['mean_speed']:.4g}, "
                 f"cost of transport {s['cost_of_transport']:.4g}"
             )
-        lines.append(f"improvement vs sinusoid: {fmt(100 * self.improvement_vs_sinusoid)} %  "
-                     f"(winner: {self.source}; {self.runtime_s:.0f} s)")
+        lines.append(
+            f"improvement vs sinusoid: {fmt(100 * self.improvement_vs_sinusoid)} %  "
+            f"(winner: {self.source}; {self.runtime_s:.0f} s)"
+        )
         return "\n".join(lines)
 
 

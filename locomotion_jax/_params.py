@@ -140,9 +140,7 @@ class Params(eqx.Module):
         """Build from a mapping; unknown names raise `ValueError` listing the valid ones."""
         unknown = sorted(set(values) - set(PARAM_NAMES))
         if unknown:
-            raise ValueError(
-                f"Unknown parameter(s) {unknown}; valid names are {list(PARAM_NAMES)}."
-            )
+            raise ValueError(f"Unknown parameter(s) {unknown}; valid names are {list(PARAM_NAMES)}.")
         return cls(**values, check=check)
 
     @classmethod

@@ -39,9 +39,7 @@ class ExactFigures(NamedTuple):
     liftoff: np.ndarray
 
 
-def exact_figures(
-    params: Params, waveform: AbstractWaveform | None, horizon: float, dt: float = 0.01
-) -> ExactFigures:
+def exact_figures(params: Params, waveform: AbstractWaveform | None, horizon: float, dt: float = 0.01) -> ExactFigures:
     """Mean speed and cost of transport on the exact dynamics (module docstring).
 
     `params` may be batched; a `waveform` whose `omega` has the batch shape is
@@ -49,8 +47,14 @@ def exact_figures(
     """
     params = with_waveform_frequency(params, waveform)
     m = measure(
-        params, z=1e30, horizon=horizon, window=min(25.0, horizon), dynamics=Exact(dt=dt),
-        waveform=waveform, contact="strict", start="relaxed",
+        params,
+        z=1e30,
+        horizon=horizon,
+        window=min(25.0, horizon),
+        dynamics=Exact(dt=dt),
+        waveform=waveform,
+        contact="strict",
+        start="relaxed",
     )
     status = np.asarray(m.status)
     ok = (status == int(Status.OK)) & ~np.asarray(m.liftoff)
@@ -58,8 +62,9 @@ def exact_figures(
     e_d = np.asarray(m.e_d, dtype=float)
     with np.errstate(divide="ignore", invalid="ignore"):
         cost = np.where(ok, e_d / np.abs(speed * horizon), np.nan)
-    return ExactFigures(speed=np.where(ok, speed, np.nan), cost=cost, ok=ok, status=status,
-                        liftoff=np.asarray(m.liftoff))
+    return ExactFigures(
+        speed=np.where(ok, speed, np.nan), cost=cost, ok=ok, status=status, liftoff=np.asarray(m.liftoff)
+    )
 
 
 def with_waveform_frequency(params: Params, waveform: AbstractWaveform | None) -> Params:
@@ -116,8 +121,9 @@ def sinusoid_sweep(
     grid = Params.grid(a=jnp.asarray(amps, params.dtype), omega=jnp.asarray(omegas, params.dtype), **values)
     fig = exact_figures(grid, None, horizon, dt)
     a, w = np.meshgrid(amps, omegas, indexing="ij")
-    return SinusoidSweep(a=a.ravel(), omega=w.ravel(), speed=fig.speed.ravel(), cost=fig.cost.ravel(),
-                         ok=fig.ok.ravel())
+    return SinusoidSweep(
+        a=a.ravel(), omega=w.ravel(), speed=fig.speed.ravel(), cost=fig.cost.ravel(), ok=fig.ok.ravel()
+    )
 
 
 def best_sinusoid(sweep: SinusoidSweep, v_min: float, direction: int) -> dict | None:
@@ -126,8 +132,12 @@ def best_sinusoid(sweep: SinusoidSweep, v_min: float, direction: int) -> dict | 
     if not feasible.any():
         return None
     i = int(np.argmin(np.where(feasible, sweep.cost, np.inf)))
-    return {"a": float(sweep.a[i]), "omega": float(sweep.omega[i]), "mean_speed": float(sweep.speed[i]),
-            "cost_of_transport": float(sweep.cost[i])}
+    return {
+        "a": float(sweep.a[i]),
+        "omega": float(sweep.omega[i]),
+        "mean_speed": float(sweep.speed[i]),
+        "cost_of_transport": float(sweep.cost[i]),
+    }
 
 
 def refine_sinusoid(

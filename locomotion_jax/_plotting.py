@@ -63,8 +63,9 @@ def hatch_liftoff(ax: Axes, x: np.ndarray, liftoff: np.ndarray, steady: np.ndarr
             ax.axvspan(*_edges(x, i, j), facecolor="none", edgecolor=color, hatch=hatch, linewidth=0, zorder=0.5)
 
 
-def mark_liftoff(ax: Axes, x: np.ndarray, y: np.ndarray, liftoff: np.ndarray, steady: np.ndarray | None = None,
-                 size: float = 6) -> None:
+def mark_liftoff(
+    ax: Axes, x: np.ndarray, y: np.ndarray, liftoff: np.ndarray, steady: np.ndarray | None = None, size: float = 6
+) -> None:
     """Grey crosses on configurations whose steady motion loses contact (all lift-offs
     without `steady`), light-grey pluses where only the start transient does."""
     x, y, liftoff = np.asarray(x), np.asarray(y), np.asarray(liftoff, bool)
@@ -80,8 +81,16 @@ def mark_unreached(ax: Axes, x: np.ndarray, reached: np.ndarray, color="k") -> N
     m = ~np.asarray(reached, bool)
     if m.any():
         tr = blended_transform_factory(ax.transData, ax.transAxes)
-        ax.plot(np.asarray(x)[m], np.full(m.sum(), 0.985), "v", color=color, markersize=4,
-                transform=tr, clip_on=False, zorder=6)
+        ax.plot(
+            np.asarray(x)[m],
+            np.full(m.sum(), 0.985),
+            "v",
+            color=color,
+            markersize=4,
+            transform=tr,
+            clip_on=False,
+            zorder=6,
+        )
 
 
 def vlines(ax: Axes, where: dict[str, float], *, text=True) -> None:
@@ -102,15 +111,36 @@ def legend_extras(ssl=True, liftoff=True, unreached=True, hatched=False) -> list
         items.append(Patch(color=SSL_COLOR, label="SSL (a mass sticks)"))
     if liftoff:
         if hatched:
-            items.append(Patch(facecolor="none", edgecolor=LIFTOFF_COLOR, hatch="///",
-                               label="lift-off, steady motion (invalid; grey curve)"))
-            items.append(Patch(facecolor="none", edgecolor=TRANSIENT_COLOR, hatch="...",
-                               label="lift-off in start transient only (invalid)"))
+            items.append(
+                Patch(
+                    facecolor="none",
+                    edgecolor=LIFTOFF_COLOR,
+                    hatch="///",
+                    label="lift-off, steady motion (invalid; grey curve)",
+                )
+            )
+            items.append(
+                Patch(
+                    facecolor="none",
+                    edgecolor=TRANSIENT_COLOR,
+                    hatch="...",
+                    label="lift-off in start transient only (invalid)",
+                )
+            )
         else:
-            items.append(Line2D([], [], marker="x", linestyle="", color=LIFTOFF_COLOR,
-                                label="lift-off, steady motion (invalid)"))
-            items.append(Line2D([], [], marker="+", linestyle="", color=TRANSIENT_COLOR,
-                                label="lift-off, start transient only (invalid)"))
+            items.append(
+                Line2D([], [], marker="x", linestyle="", color=LIFTOFF_COLOR, label="lift-off, steady motion (invalid)")
+            )
+            items.append(
+                Line2D(
+                    [],
+                    [],
+                    marker="+",
+                    linestyle="",
+                    color=TRANSIENT_COLOR,
+                    label="lift-off, start transient only (invalid)",
+                )
+            )
     if unreached:
         items.append(Line2D([], [], marker="v", linestyle="", color="k", markersize=4, label="z not reached"))
     return items

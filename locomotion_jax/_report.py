@@ -53,8 +53,11 @@ def _section(spec, ds: xr.Dataset, verdict, link: str) -> str:
         f"- Fixed: {a.get('fixed', '?')}.",
         f"- Dynamics: {a.get('dynamics', 'exact')}, dt = {a.get('dt', '?')}; contact = `{a.get('contact', 'paper')}`, "
         f"start = `{a.get('start', 'paper')}`"
-        + (f"; z = {a['z']:g}, horizon = {a['horizon']:g} after t_s, window = {a['window']:g}"
-           if "horizon" in a else "")
+        + (
+            f"; z = {a['z']:g}, horizon = {a['horizon']:g} after t_s, window = {a['window']:g}"
+            if "horizon" in a
+            else ""
+        )
         + ".",
     ]
     if "steady_check" in a:
@@ -99,18 +102,20 @@ def write_report(specs, data_dir: Path, path: Path, version: str) -> Path:
         verdict = spec.check(ds)
         t = float(ds.attrs.get("run_time_s", 0.0))
         total += t
-        rows.append(f"| {spec.name} | {spec.claim} | **{verdict.holds}** | "
-                    f"{ds.attrs.get('size', '?')} | {_fmt_time(t)} |")
+        rows.append(
+            f"| {spec.name} | {spec.claim} | **{verdict.holds}** | {ds.attrs.get('size', '?')} | {_fmt_time(t)} |"
+        )
         sections.append(_section(spec, ds, verdict, (rel / f"{spec.stem}.png").as_posix()))
     when = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
     text = HEADER.format(data_dir=data_dir.as_posix(), version=version, when=when, machine=_machine())
-    text += ("## Summary\n\n| Fig. | the paper's claim | holds in our data | size | run time |\n"
-             "|---|---|---|---|---|\n" + "\n".join(rows) + f"\n\nTotal compute time: {_fmt_time(total)}.\n\n")
+    text += (
+        "## Summary\n\n| Fig. | the paper's claim | holds in our data | size | run time |\n"
+        "|---|---|---|---|---|\n" + "\n".join(rows) + f"\n\nTotal compute time: {_fmt_time(total)}.\n\n"
+    )
     text += "".join(sections)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(text)
     return path
-
 
 
 def _machine() -> str:

@@ -37,8 +37,16 @@ ITERS_PER_SWITCH = 0.5
 """Extra iterations per mode switch (a step cut at an event; measured 0.44-0.56)."""
 
 
-def pilot(values: Mapping[str, Any], *, contact: str = "strict", start: str = "paper", dtype: Any = None,
-          t_pilot: float = PILOT_T, dt: float = PILOT_DT, chunk_size: int = 1 << 16) -> dict[str, np.ndarray]:
+def pilot(
+    values: Mapping[str, Any],
+    *,
+    contact: str = "strict",
+    start: str = "paper",
+    dtype: Any = None,
+    t_pilot: float = PILOT_T,
+    dt: float = PILOT_DT,
+    chunk_size: int = 1 << 16,
+) -> dict[str, np.ndarray]:
     """Run the exact engine briefly on every configuration.
 
     **Arguments:** `values`, one 1-D array per name of `PARAM_NAMES` (missing names
@@ -67,20 +75,36 @@ def pilot(values: Mapping[str, Any], *, contact: str = "strict", start: str = "p
         take = np.minimum(idx, n - 1)
         live = (idx < n) & valid[take]  # NaN padding is flagged invalid and costs no steps
         params = Params(**{k: np.where(live, v[take], np.nan) for k, v in fields.items()}, check=False)
-        tr = simulate(params, t_pilot, save_at=np.asarray([0.5 * t_pilot, t_pilot]), dynamics=Exact(dt=dt),
-                      contact=contact, start=start, dtype=dtype)
+        tr = simulate(
+            params,
+            t_pilot,
+            save_at=np.asarray([0.5 * t_pilot, t_pilot]),
+            dynamics=Exact(dt=dt),
+            contact=contact,
+            start=start,
+            dtype=dtype,
+        )
         m = min(size, n - lo)
         X = np.asarray(tr.X, np.float64)[:m]
-        speed[lo:lo + m] = np.abs(X[:, 1] - X[:, 0]) / (0.5 * t_pilot)
-        rate[lo:lo + m] = np.asarray(tr.n_switch)[:m] / t_pilot
-        t_lift[lo:lo + m] = np.asarray(tr.t_liftoff, np.float64)[:m]
-        ok[lo:lo + m] = live[:m] & (np.asarray(tr.status)[:m] != int(Status.INVALID))
+        speed[lo : lo + m] = np.abs(X[:, 1] - X[:, 0]) / (0.5 * t_pilot)
+        rate[lo : lo + m] = np.asarray(tr.n_switch)[:m] / t_pilot
+        t_lift[lo : lo + m] = np.asarray(tr.t_liftoff, np.float64)[:m]
+        ok[lo : lo + m] = live[:m] & (np.asarray(tr.status)[:m] != int(Status.INVALID))
     return dict(speed=np.where(ok, speed, 0.0), switch_rate=rate, t_liftoff=t_lift, valid=ok)
 
 
-def expected_cost(values: Mapping[str, Any], *, z: float, horizon: float, window: float, dt: float,
-                  contact: str = "strict", start: str = "paper", dtype: Any = None,
-                  pilot_result: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
+def expected_cost(
+    values: Mapping[str, Any],
+    *,
+    z: float,
+    horizon: float,
+    window: float,
+    dt: float,
+    contact: str = "strict",
+    start: str = "paper",
+    dtype: Any = None,
+    pilot_result: Mapping[str, np.ndarray] | None = None,
+) -> np.ndarray:
     """Expected integrator iterations of [`measure`][] for each configuration.
 
     A configuration runs to $t_\\text{start} + \\max(\\text{window}, \\min(\\tau_z, \\text{horizon}))$
@@ -88,8 +112,7 @@ def expected_cost(values: Mapping[str, Any], *, z: float, horizon: float, window
     `1/dt + ITERS_PER_SWITCH * switch_rate` iterations per time unit; $\\tau_z$ is
     estimated as $z$ over the pilot's speed. Invalid configurations cost 0.
     """
-    pr = dict(pilot_result) if pilot_result is not None else pilot(values, contact=contact, start=start,
-                                                                    dtype=dtype)
+    pr = dict(pilot_result) if pilot_result is not None else pilot(values, contact=contact, start=start, dtype=dtype)
     k = np.asarray(values.get("k", 50.0), np.float64)
     mhat = np.asarray(values.get("mhat", 0.5), np.float64)
     with np.errstate(all="ignore"):

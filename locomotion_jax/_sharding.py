@@ -74,8 +74,16 @@ def device_count(mesh: Mesh) -> int:
     return int(mesh.devices.size)
 
 
-def _run_chunk(flat: Params, zhw: jax.Array, dynamics: AbstractDynamics, contact: str, start: str,
-               max_steps: int, mesh: Mesh, micro_batch: int | None) -> dict[str, jax.Array]:
+def _run_chunk(
+    flat: Params,
+    zhw: jax.Array,
+    dynamics: AbstractDynamics,
+    contact: str,
+    start: str,
+    max_steps: int,
+    mesh: Mesh,
+    micro_batch: int | None,
+) -> dict[str, jax.Array]:
     # Runs only while tracing: counts compilations, not calls.
     TRACES["run_chunk"] += 1
 
@@ -125,9 +133,19 @@ def _to_host(x: jax.Array) -> np.ndarray:
     return np.asarray(multihost_utils.process_allgather(x, tiled=True))
 
 
-def dispatch_chunk(values: Mapping[str, np.ndarray], dtype: np.dtype, z: float, horizon: float, window: float,
-                   dynamics: AbstractDynamics, contact: str, start: str, max_steps: int,
-                   mesh: Mesh, micro_batch: int | None = None) -> dict[str, jax.Array]:
+def dispatch_chunk(
+    values: Mapping[str, np.ndarray],
+    dtype: np.dtype,
+    z: float,
+    horizon: float,
+    window: float,
+    dynamics: AbstractDynamics,
+    contact: str,
+    start: str,
+    max_steps: int,
+    mesh: Mesh,
+    micro_batch: int | None = None,
+) -> dict[str, jax.Array]:
     """Start the computation of one chunk (asynchronously) and return its device outputs.
 
     **Arguments:**

@@ -124,8 +124,20 @@ def _trajectory(params, wave, wave_axes, contact, start, save_at, rows, valid, s
 
     der = jax.vmap(one, in_axes=(0, wave_axes, 0, 1, 1, 1))(params, wave, t, y, stuck, sdir)
     return dict(
-        t=t, x1=y[0], v1=y[1], x2=y[2], v2=y[3], e_d=y[4], w=y[5], mode=mode_code(stuck[0], stuck[1]),
-        valid=valid, status=status, liftoff=jnp.isfinite(t_lift), t_liftoff=t_lift, n_switch=n_switch, **der,
+        t=t,
+        x1=y[0],
+        v1=y[1],
+        x2=y[2],
+        v2=y[3],
+        e_d=y[4],
+        w=y[5],
+        mode=mode_code(stuck[0], stuck[1]),
+        valid=valid,
+        status=status,
+        liftoff=jnp.isfinite(t_lift),
+        t_liftoff=t_lift,
+        n_switch=n_switch,
+        **der,
     )
 
 

@@ -67,9 +67,17 @@ def solve(params, wave, contact, dyn: Smoothed, t0, t1, y0, saveat, extra_events
     if conds:
         event = diffrax.Event(conds, root_finder=optx.Newton(rtol=1e-10, atol=1e-12))
     return diffrax.diffeqsolve(
-        term, _solver(dyn), t0, t1, None, y0, saveat=saveat,
+        term,
+        _solver(dyn),
+        t0,
+        t1,
+        None,
+        y0,
+        saveat=saveat,
         stepsize_controller=diffrax.PIDController(rtol=dyn.rtol, atol=dyn.atol, dtmin=None),
-        max_steps=dyn.max_steps, event=event, throw=False,
+        max_steps=dyn.max_steps,
+        event=event,
+        throw=False,
     )
 
 
@@ -120,9 +128,14 @@ def simulate_one(params, wave, save, contact, start, dyn):
         r = smooth_rates(params, wave, contact, dyn.eps, t, y)
         stuck = jnp.abs(jnp.stack([y[1], y[3]])) < STICK_SPEED * dyn.eps
         return dict(
-            e=model.total_energy(params, f.l0, y[0], y[1], y[2], y[3]), l0=f.l0, N1=f.N1, N2=f.N2,
-            f_ex=params.m1 * r[1] + params.m2 * r[3], X=model.centre_of_mass(params, y[0], y[2]),
-            stuck1=stuck[0], stuck2=stuck[1],
+            e=model.total_energy(params, f.l0, y[0], y[1], y[2], y[3]),
+            l0=f.l0,
+            N1=f.N1,
+            N2=f.N2,
+            f_ex=params.m1 * r[1] + params.m2 * r[3],
+            X=model.centre_of_mass(params, y[0], y[2]),
+            stuck1=stuck[0],
+            stuck2=stuck[1],
         )
 
     der = jax.vmap(derived)(save, ys)
@@ -133,9 +146,20 @@ def simulate_one(params, wave, save, contact, start, dyn):
 
     mode = mode_code(der.pop("stuck1"), der.pop("stuck2"))
     return dict(
-        t=save, x1=ys[:, 0], v1=ys[:, 1], x2=ys[:, 2], v2=ys[:, 3], e_d=ys[:, 4], w=ys[:, 5], mode=mode,
-        valid=ok_rows, status=status, liftoff=jnp.isfinite(t_lift), t_liftoff=jnp.asarray(t_lift, ys.dtype),
-        n_switch=jnp.sum(mode[1:] != mode[:-1]).astype(jnp.int32), **der,
+        t=save,
+        x1=ys[:, 0],
+        v1=ys[:, 1],
+        x2=ys[:, 2],
+        v2=ys[:, 3],
+        e_d=ys[:, 4],
+        w=ys[:, 5],
+        mode=mode,
+        valid=ok_rows,
+        status=status,
+        liftoff=jnp.isfinite(t_lift),
+        t_liftoff=jnp.asarray(t_lift, ys.dtype),
+        n_switch=jnp.sum(mode[1:] != mode[:-1]).astype(jnp.int32),
+        **der,
     )
 
 
@@ -191,12 +215,24 @@ def measure_one(params, wave, z, horizon, window, contact, start, dyn: Smoothed)
     elapsed = tC - ws
     e_z = jnp.where(reached, e_d, inf)
     return dict(
-        tau_z=tau, e_z=e_z, reached=reached, regime=regime.astype(jnp.int32),
+        tau_z=tau,
+        e_z=e_z,
+        reached=reached,
+        regime=regime.astype(jnp.int32),
         mean_speed=jnp.where(okA & (elapsed > 0), (com(yC) - X0) / jnp.where(elapsed > 0, elapsed, 1), nan),
-        cost_of_transport=e_z / z, stick_fraction1=jnp.where(window_ok, frac[0], nan),
-        stick_fraction2=jnp.where(window_ok, frac[1], nan), e_d=e_d, work=work, delta_e=delta_e,
-        balance=work - e_d - delta_e, liftoff=lift, t_liftoff=t_lift, status=status, t_start=ws,
-        X_start=jnp.where(okA, X0, nan), n_steps=(solA.stats["num_steps"] + solC.stats["num_steps"]).astype(jnp.int32),
+        cost_of_transport=e_z / z,
+        stick_fraction1=jnp.where(window_ok, frac[0], nan),
+        stick_fraction2=jnp.where(window_ok, frac[1], nan),
+        e_d=e_d,
+        work=work,
+        delta_e=delta_e,
+        balance=work - e_d - delta_e,
+        liftoff=lift,
+        t_liftoff=t_lift,
+        status=status,
+        t_start=ws,
+        X_start=jnp.where(okA, X0, nan),
+        n_steps=(solA.stats["num_steps"] + solC.stats["num_steps"]).astype(jnp.int32),
         n_switch=jnp.zeros((), jnp.int32),
     )
 

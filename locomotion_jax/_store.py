@@ -127,9 +127,17 @@ class ChunkStore:
     permutation is missing or damaged.
     """
 
-    def __init__(self, path: Path, spec: Mapping[str, Any], chunk_size: int, n_configs: int,
-                 overwrite: bool = False, write: bool = True, order: str = "natural",
-                 permutation: Callable[[], np.ndarray] | None = None):
+    def __init__(
+        self,
+        path: Path,
+        spec: Mapping[str, Any],
+        chunk_size: int,
+        n_configs: int,
+        overwrite: bool = False,
+        write: bool = True,
+        order: str = "natural",
+        permutation: Callable[[], np.ndarray] | None = None,
+    ):
         self.path = path
         self.parts = path.with_name(path.name + ".parts")
         self.write = write
@@ -171,8 +179,10 @@ class ChunkStore:
         file = self.parts / ORDER
         perm = np.load(file) if file.is_file() else np.zeros(0, np.int64)
         if perm.shape != (int(stored["n_configs"]),) or digest(perm, "<i8") != stored["permutation_sha256"]:
-            raise ValueError(f"{file} is missing or damaged: the stored chunks cannot be placed. "
-                             "Pass overwrite=True (CLI: --overwrite) to recompute the sweep.")
+            raise ValueError(
+                f"{file} is missing or damaged: the stored chunks cannot be placed. "
+                "Pass overwrite=True (CLI: --overwrite) to recompute the sweep."
+            )
         return perm
 
     def _file(self, index: int) -> Path:

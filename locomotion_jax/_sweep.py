@@ -159,9 +159,10 @@ class _Grid:
         # Axes are identified by a digest of their float64 values (plus a readable
         # summary): the coordinates themselves are in the dataset, and a list sweep of
         # a million configurations should not become a 20 MB attribute.
-        axes = {n: {"n": int(v.size), "first": float(v[0]), "last": float(v[-1]),
-                    "sha256": digest(v, "<f8")}
-                for n, v in self.values.items()}
+        axes = {
+            n: {"n": int(v.size), "first": float(v[0]), "last": float(v[-1]), "sha256": digest(v, "<f8")}
+            for n, v in self.values.items()
+        }
         return {"mode": self.mode, "axes": axes, "fixed": dict(sorted(self.fixed.items()))}
 
 
@@ -221,8 +222,9 @@ def _max_steps(grid: _Grid, dynamics: AbstractDynamics, horizon: float) -> int:
     return default_max_steps(horizon_bound(Params(k=k, mhat=mh, check=False), horizon), dynamics.dt)
 
 
-def resolve_order(order: str, dynamics: AbstractDynamics, horizon: float, window: float, n_configs: int,
-                  loops_per_device: int) -> str:
+def resolve_order(
+    order: str, dynamics: AbstractDynamics, horizon: float, window: float, n_configs: int, loops_per_device: int
+) -> str:
     """The order a sweep's chunks are cut in: `"natural"` (grid order) or `"cost"`.
 
     `"auto"` picks `"cost"` where sorting can pay for its pilot run: the exact
@@ -238,8 +240,7 @@ def resolve_order(order: str, dynamics: AbstractDynamics, horizon: float, window
         raise ValueError(f"order must be one of {', '.join(map(repr, ORDERS))}, got {order!r}.")
     if order != "auto":
         return order
-    pays = (isinstance(dynamics, Exact) and horizon > window and loops_per_device > 1
-            and n_configs >= AUTO_MIN_CONFIGS)
+    pays = isinstance(dynamics, Exact) and horizon > window and loops_per_device > 1 and n_configs >= AUTO_MIN_CONFIGS
     return "cost" if pays else "natural"
 
 
@@ -248,16 +249,32 @@ def _loops_per_device(n_chunks: int, shard: int, micro_batch: int | None) -> int
     return n_chunks * (-(-shard // micro_batch) if micro_batch else 1)
 
 
-def _cost_permutation(grid: _Grid, z: float, horizon: float, window: float, dynamics: AbstractDynamics,
-                      contact: str, start: str, dtype: np.dtype) -> np.ndarray:
+def _cost_permutation(
+    grid: _Grid,
+    z: float,
+    horizon: float,
+    window: float,
+    dynamics: AbstractDynamics,
+    contact: str,
+    start: str,
+    dtype: np.dtype,
+) -> np.ndarray:
     """The flat configuration numbers by increasing expected cost (`_schedule.cost_order`, a pilot run)."""
     from ._schedule import cost_order
 
     STATS["pilots"] += 1
     # The pilot runs the exact engine; for the smoothed one only the durations it predicts matter.
     dt = dynamics.dt if isinstance(dynamics, Exact) else Exact().dt
-    return cost_order(grid.config_values(np.arange(grid.size)), z=z, horizon=horizon, window=window, dt=dt,
-                      contact=contact, start=start, dtype=dtype)
+    return cost_order(
+        grid.config_values(np.arange(grid.size)),
+        z=z,
+        horizon=horizon,
+        window=window,
+        dt=dt,
+        contact=contact,
+        start=start,
+        dtype=dtype,
+    )
 
 
 def _in_grid_order(run: np.ndarray, perm: np.ndarray) -> np.ndarray:
@@ -271,16 +288,30 @@ def _attrs(grid: _Grid, spec: dict, dynamics: AbstractDynamics, max_steps: int, 
     from . import __version__
     from ._store import canonical
 
-    attrs: dict[str, Any] = {"title": "locomotion_jax parameter sweep (Zhou, Majidi, O'Reilly 2014)",
-                             "sweep_mode": grid.mode, "swept": ",".join(grid.names)}
+    attrs: dict[str, Any] = {
+        "title": "locomotion_jax parameter sweep (Zhou, Majidi, O'Reilly 2014)",
+        "sweep_mode": grid.mode,
+        "swept": ",".join(grid.names),
+    }
     attrs.update({f"fixed_{n}": v for n, v in grid.fixed.items()})
     attrs.update({f"dynamics_{k}" if k != "dynamics" else "dynamics": v for k, v in dynamics.describe().items()})
-    attrs.update(max_steps=max_steps, dtype=spec["dtype"], contact=spec["contact"], start=spec["start"],
-                 z=spec["z"], horizon=spec["horizon"], window=spec["window"], on_invalid=spec["on_invalid"],
-                 order=order, version=__version__, jax_version=jax.__version__, n_devices=n_devices,
-                 status_codes=", ".join(f"{int(s)}={s.name}" for s in Status),
-                 regime_codes=", ".join(f"{int(r)}={r.name}" for r in Regime),
-                 sweep_spec=canonical(spec))
+    attrs.update(
+        max_steps=max_steps,
+        dtype=spec["dtype"],
+        contact=spec["contact"],
+        start=spec["start"],
+        z=spec["z"],
+        horizon=spec["horizon"],
+        window=spec["window"],
+        on_invalid=spec["on_invalid"],
+        order=order,
+        version=__version__,
+        jax_version=jax.__version__,
+        n_devices=n_devices,
+        status_codes=", ".join(f"{int(s)}={s.name}" for s in Status),
+        regime_codes=", ".join(f"{int(r)}={r.name}" for r in Regime),
+        sweep_spec=canonical(spec),
+    )
     return attrs
 
 
@@ -384,14 +415,25 @@ def sweep(
     if on_invalid == "raise":
         _check_valid(grid)
     desc = dynamics.describe() | ({"max_steps": dynamics.max_steps} if isinstance(dynamics, Exact) else {})
-    spec = {"spec_version": 1, **grid.spec(), "z": float(z), "horizon": float(horizon), "window": float(window),
-            "dynamics": desc, "contact": contact, "start": start, "dtype": dt.name, "on_invalid": on_invalid}
+    spec = {
+        "spec_version": 1,
+        **grid.spec(),
+        "z": float(z),
+        "horizon": float(horizon),
+        "window": float(window),
+        "dynamics": desc,
+        "contact": contact,
+        "start": start,
+        "dtype": dt.name,
+        "on_invalid": on_invalid,
+    }
 
     mesh = sharding.batch_mesh()
     ndev = sharding.device_count(mesh)
     chunk = -(-min(int(chunk_size), grid.size) // ndev) * ndev
-    loops = _loops_per_device(-(-grid.size // chunk), sharding.padded_size(chunk, ndev, dt) // ndev,
-                              sharding.MICRO_BATCH)
+    loops = _loops_per_device(
+        -(-grid.size // chunk), sharding.padded_size(chunk, ndev, dt) // ndev, sharding.MICRO_BATCH
+    )
     order = resolve_order(order, dynamics, horizon, window, grid.size, loops)
     permutation = None
     if order == "cost":  # called only when needed: not for a finished or resumed sweep
@@ -402,8 +444,16 @@ def sweep(
         finished = read_finished(path, spec, overwrite)
         if finished is not None:
             return finished
-        store = ChunkStore(path, spec, chunk, grid.size, overwrite, write=jax.process_index() == 0,
-                           order=order, permutation=permutation)
+        store = ChunkStore(
+            path,
+            spec,
+            chunk,
+            grid.size,
+            overwrite,
+            write=jax.process_index() == 0,
+            order=order,
+            permutation=permutation,
+        )
         # A resumed sweep keeps its chunking and its order.
         chunk, order, perm = store.chunk_size, store.order, store.permutation
     else:
@@ -420,8 +470,15 @@ def sweep(
     n_done = sum(min(chunk, grid.size - i * chunk) for i in done)
     from tqdm.auto import tqdm
 
-    bar = tqdm(total=grid.size, initial=n_done, unit="config", unit_scale=True, desc="sweep",
-               disable=not progress or jax.process_index() != 0, smoothing=0.1)
+    bar = tqdm(
+        total=grid.size,
+        initial=n_done,
+        unit="config",
+        unit_scale=True,
+        desc="sweep",
+        disable=not progress or jax.process_index() != 0,
+        smoothing=0.1,
+    )
 
     def finish(i: int, out: dict) -> None:
         n = min(chunk, grid.size - i * chunk)
@@ -453,8 +510,9 @@ def sweep(
     for i in sorted(done):
         results[i] = store.load(i)
         STATS["chunks_loaded"] += 1
-    flat_res = {k: _in_grid_order(np.concatenate([results[i][k] for i in range(n_chunks)]), perm)
-                for k in MEASURE_FIELDS}
+    flat_res = {
+        k: _in_grid_order(np.concatenate([results[i][k] for i in range(n_chunks)]), perm) for k in MEASURE_FIELDS
+    }
     if RATIO in grid.values or RATIO in grid.fixed:
         flat_res["omega"] = grid.config_values(np.arange(grid.size))["omega"]
     ds = _dataset(grid, flat_res, _attrs(grid, spec, dynamics, max_steps, ndev, order))

@@ -91,8 +91,10 @@ sl = lj.Params(omega=2.3 * float(base.wn1))  # omega = 23: the paper's slip exam
 
 # %%
 T_END = 40.0
-full = {name: lj.simulate(p, T_END, save_at=np.linspace(0.0, T_END, N_SAVE)) for name, p in
-        (("SSL, omega = 0.2 wn1", ssl), ("SL, omega = 2.3 wn1", sl))}
+full = {
+    name: lj.simulate(p, T_END, save_at=np.linspace(0.0, T_END, N_SAVE))
+    for name, p in (("SSL, omega = 0.2 wn1", ssl), ("SL, omega = 2.3 wn1", sl))
+}
 fig, ax = plt.subplots(figsize=(7, 2.6), layout="constrained")
 for name, tr in full.items():
     ax.plot(tr.t, tr.X, label=f"{name}: status {lj.Status(int(tr.status)).name}")
@@ -107,6 +109,7 @@ plt.show()
 # $\omega = 23$ a period lasts only 0.27). Stuck intervals are drawn thick and red. In SSL each mass in
 # turn stands still while the other one slides; in SL both always slip, and the masses slide back and
 # forth with a small net advance per period.
+
 
 # %%
 def stuck_masks(mode):
@@ -176,10 +179,12 @@ ax.plot(t, np.abs(fx_spring), color="k", label="$|f_x|$ (spring, horizontal)")
 ax.plot(t, float(p.mu_s) * np.asarray(zoom_ssl.N1), color="C0", label="$\\mu_s N_1$ (limit of mass 1)")
 ax.plot(t, float(p.mu_s) * np.asarray(zoom_ssl.N2), color="C1", label="$\\mu_s N_2$ (limit of mass 2)")
 s1, s2 = stuck_masks(zoom_ssl.mode)
-ax.fill_between(t, 0, 1, where=s1, transform=ax.get_xaxis_transform(), color="C0", alpha=0.15, lw=0,
-                label="mass 1 stuck")
-ax.fill_between(t, 0, 1, where=s2, transform=ax.get_xaxis_transform(), color="C1", alpha=0.15, lw=0,
-                label="mass 2 stuck")
+ax.fill_between(
+    t, 0, 1, where=s1, transform=ax.get_xaxis_transform(), color="C0", alpha=0.15, lw=0, label="mass 1 stuck"
+)
+ax.fill_between(
+    t, 0, 1, where=s2, transform=ax.get_xaxis_transform(), color="C1", alpha=0.15, lw=0, label="mass 2 stuck"
+)
 ax.set_xlabel("t")
 ax.set_ylabel("force")
 ax.legend(fontsize=7, ncols=2, loc="upper left")
@@ -197,8 +202,9 @@ plt.show()
 # or the command line (`locomotion-jax animate --omega 2 --out ssl.gif`) writes a GIF.
 
 # %%
-anim = lj.animate(zoom_ssl, ssl, max_frames=FRAMES, interval=80,
-                  title="SSL, omega = 0.2 wn1: red = stuck (anchored), blue = slipping")
+anim = lj.animate(
+    zoom_ssl, ssl, max_frames=FRAMES, interval=80, title="SSL, omega = 0.2 wn1: red = stuck (anchored), blue = slipping"
+)
 HTML(anim.to_jshtml(default_mode="loop"))
 
 # %% [markdown]
@@ -229,8 +235,12 @@ def explore(omega=2.0, a=0.05, d=0.5, mhat=0.5):
     fig, axes = plt.subplots(3, 1, figsize=(7, 5.2), sharex=True, layout="constrained")
     status = lj.Status(int(tr.status))
     note = f", LIFT-OFF at t = {float(tr.t_liftoff):.3g}" if bool(tr.liftoff) else ""
-    plot_case(axes, tr, f"omega = {omega:.3g} ({omega / float(p.wn1):.2f} wn1), a = {a:.3g}, d = {d:.2g}, "
-                        f"mhat = {mhat:.2g}: {status.name}{note}")
+    plot_case(
+        axes,
+        tr,
+        f"omega = {omega:.3g} ({omega / float(p.wn1):.2f} wn1), a = {a:.3g}, d = {d:.2g}, "
+        f"mhat = {mhat:.2g}: {status.name}{note}",
+    )
     plt.show()
     return tr
 

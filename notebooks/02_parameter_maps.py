@@ -61,11 +61,24 @@ from matplotlib.patches import Patch
 
 # CI runs every notebook top to bottom at a small size (tests/test_notebooks.py sets LOCOMOTION_NB_SMALL=1).
 SMALL = os.environ.get("LOCOMOTION_NB_SMALL") == "1"
-SIZE = (dict(n_ratio=8, n_a=4, n_tau_ratio=6, n_tau_a=3, z=1.0, horizon=150.0, n_slice=16, n_mhat=5,
-             n_mhat_omega=6, chunk=16)
-        if SMALL else
-        dict(n_ratio=128, n_a=64, n_tau_ratio=64, n_tau_a=16, z=5.0, horizon=1000.0, n_slice=200, n_mhat=49,
-             n_mhat_omega=96, chunk=128))
+SIZE = (
+    dict(
+        n_ratio=8, n_a=4, n_tau_ratio=6, n_tau_a=3, z=1.0, horizon=150.0, n_slice=16, n_mhat=5, n_mhat_omega=6, chunk=16
+    )
+    if SMALL
+    else dict(
+        n_ratio=128,
+        n_a=64,
+        n_tau_ratio=64,
+        n_tau_a=16,
+        z=5.0,
+        horizon=1000.0,
+        n_slice=200,
+        n_mhat=49,
+        n_mhat_omega=96,
+        chunk=128,
+    )
+)
 Z, HORIZON, WINDOW = SIZE["z"], SIZE["horizon"], 25.0
 # One step cap for every sweep (it is a compile-time constant, so all sweeps share one compilation):
 # room for the slowest t_start of the notebook (mhat = 0.05 or 0.95: about 98) plus the longest horizon.
@@ -100,15 +113,28 @@ regime_map
 # %%
 print("dimensions:", dict(regime_map.sizes))
 print("fixed parameters:", {k.removeprefix("fixed_"): v for k, v in regime_map.attrs.items() if k.startswith("fixed_")})
-print("contact:", regime_map.attrs["contact"], "| start:", regime_map.attrs["start"],
-      "| dynamics:", regime_map.attrs["dynamics"], "| status codes:", regime_map.attrs["status_codes"])
+print(
+    "contact:",
+    regime_map.attrs["contact"],
+    "| start:",
+    regime_map.attrs["start"],
+    "| dynamics:",
+    regime_map.attrs["dynamics"],
+    "| status codes:",
+    regime_map.attrs["status_codes"],
+)
 # The regime at a = 0.05 (nearest grid value) for every frequency, as a small table:
 at_a = regime_map[["regime", "status", "mean_speed", "stick_fraction1"]].sel(a=0.05, method="nearest")
 print(at_a.to_dataframe().round(4).head(8))
 # Counts of each outcome over the map:
 codes, counts = np.unique(regime_map.regime.values, return_counts=True)
-print({lj.Regime(int(c)).name: int(n) for c, n in zip(codes, counts)},
-      "| lift-off:", int(regime_map.liftoff.sum()), "of", regime_map.liftoff.size)
+print(
+    {lj.Regime(int(c)).name: int(n) for c, n in zip(codes, counts)},
+    "| lift-off:",
+    int(regime_map.liftoff.sum()),
+    "of",
+    regime_map.liftoff.size,
+)
 
 # %% [markdown]
 # ### The map, with the natural frequencies
@@ -145,17 +171,22 @@ def natural_frequencies(ax, wn_over_wn1):
 
 cls = classes(regime_map)
 fig, ax = plt.subplots(figsize=(7.5, 4.2), layout="constrained")
-ax.pcolormesh(amps, ratios, cls, cmap=ListedColormap(CLASS_COLORS), norm=BoundaryNorm(np.arange(-0.5, 4), 4),
-              shading="nearest")
+ax.pcolormesh(
+    amps, ratios, cls, cmap=ListedColormap(CLASS_COLORS), norm=BoundaryNorm(np.arange(-0.5, 4), 4), shading="nearest"
+)
 hatch_liftoff(ax, amps, ratios, regime_map.liftoff.values)
 natural_frequencies(ax, [(1.0, r"$\omega_{n1}$"), (WN2 / WN1, r"$\omega_{n2} = \omega_{n3}$")])
 ax.set_xlabel("amplitude $a$")
 ax.set_ylabel(r"$\omega / \omega_{n1}$")
-ax.legend(handles=[Patch(color=c, label=n) for c, n in zip(CLASS_COLORS, CLASS_NAMES)]
-          + [Patch(fc="none", ec="k", hatch="////", label="lift-off (strict contact)")],
-          fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
-ax.set_title(f"Regime over {ratios.size} frequencies x {amps.size} amplitudes (paper defaults otherwise)",
-             fontsize=9)
+ax.legend(
+    handles=[Patch(color=c, label=n) for c, n in zip(CLASS_COLORS, CLASS_NAMES)]
+    + [Patch(fc="none", ec="k", hatch="////", label="lift-off (strict contact)")],
+    fontsize=7,
+    loc="upper left",
+    bbox_to_anchor=(1.01, 1.0),
+    frameon=False,
+)
+ax.set_title(f"Regime over {ratios.size} frequencies x {amps.size} amplitudes (paper defaults otherwise)", fontsize=9)
 if IMAGES:
     fig.savefig(os.path.join(IMAGES, "02_parameter_maps.png"), dpi=72)
 plt.show()
@@ -179,8 +210,10 @@ t_amps = np.linspace(0.02, 0.12, SIZE["n_tau_a"])
 tau_map = lj.sweep({"omega_over_wn1": t_ratios, "a": t_amps}, z=Z, horizon=HORIZON, window=WINDOW, **OPTS)
 
 fig, axes = plt.subplots(1, 2, figsize=(10, 4), layout="constrained", sharey=True)
-for ax, name, label in ((axes[0], "tau_z", rf"$\tau_{{{Z:g}}}$ (time to travel z = {Z:g})"),
-                        (axes[1], "e_z", rf"$e_{{{Z:g}}}$ (energy dissipated meanwhile)")):
+for ax, name, label in (
+    (axes[0], "tau_z", rf"$\tau_{{{Z:g}}}$ (time to travel z = {Z:g})"),
+    (axes[1], "e_z", rf"$e_{{{Z:g}}}$ (energy dissipated meanwhile)"),
+):
     values = tau_map[name].where(tau_map.reached)  # inf (not reached) -> NaN -> drawn grey
     finite = values.values[np.isfinite(values.values)]
     cmap = plt.get_cmap("viridis").with_extremes(bad="0.8")
@@ -208,20 +241,31 @@ print(f"reached z in {int(tau_map.reached.sum())} of {tau_map.reached.size} conf
 # %%
 coarse = tau_map.sel(a=0.05, method="nearest")
 fine_ratios = np.linspace(0.05, 2.5, SIZE["n_slice"])
-fine = lj.sweep({"omega_over_wn1": fine_ratios}, fixed={"a": float(coarse.a)}, z=Z, horizon=HORIZON,
-                window=WINDOW, **OPTS)
+fine = lj.sweep(
+    {"omega_over_wn1": fine_ratios}, fixed={"a": float(coarse.a)}, z=Z, horizon=HORIZON, window=WINDOW, **OPTS
+)
 
 fig, axes = plt.subplots(2, 1, figsize=(7, 5), sharex=True, layout="constrained")
 for ax, name, label in ((axes[0], "tau_z", rf"$\tau_{{{Z:g}}}$"), (axes[1], "e_z", rf"$e_{{{Z:g}}}$")):
     ok = fine.reached & ~fine.liftoff
     ax.semilogy(fine_ratios, fine[name].where(ok), ".-", ms=3, label=f"fine sweep ({fine_ratios.size} frequencies)")
-    ax.semilogy(coarse.omega_over_wn1, coarse[name].where(coarse.reached), "s", mfc="none",
-                label="slice of the map")
+    ax.semilogy(coarse.omega_over_wn1, coarse[name].where(coarse.reached), "s", mfc="none", label="slice of the map")
     ssl = (fine.regime == lj.Regime.SSL).values
-    ax.fill_between(fine_ratios, 0, 1, where=ssl, transform=ax.get_xaxis_transform(), color="#cfe3f7", lw=0,
-                    label="SSL")
-    ax.fill_between(fine_ratios, 0, 1, where=fine.liftoff.values, transform=ax.get_xaxis_transform(),
-                    facecolor="none", edgecolor="0.5", hatch="///", lw=0, label="lift-off")
+    ax.fill_between(
+        fine_ratios, 0, 1, where=ssl, transform=ax.get_xaxis_transform(), color="#cfe3f7", lw=0, label="SSL"
+    )
+    ax.fill_between(
+        fine_ratios,
+        0,
+        1,
+        where=fine.liftoff.values,
+        transform=ax.get_xaxis_transform(),
+        facecolor="none",
+        edgecolor="0.5",
+        hatch="///",
+        lw=0,
+        label="lift-off",
+    )
     for r in (WN2 / WN1, 1.0):
         ax.axvline(r, color="k", ls=":", lw=1)
     ax.set_ylabel(label)
@@ -256,12 +300,14 @@ wn = {r"$\omega_{n1}$": pc.wn1, r"$\omega_{n2} = \sqrt{k/m_1}$": pc.wn2, r"$\ome
 
 fig, axes = plt.subplots(1, 2, figsize=(10, 4.2), layout="constrained", sharey=True)
 cls = classes(mass_map)
-axes[0].pcolormesh(mhats, omegas, cls.T, cmap=ListedColormap(CLASS_COLORS), norm=BoundaryNorm(np.arange(-0.5, 4), 4),
-                   shading="nearest")
+axes[0].pcolormesh(
+    mhats, omegas, cls.T, cmap=ListedColormap(CLASS_COLORS), norm=BoundaryNorm(np.arange(-0.5, 4), 4), shading="nearest"
+)
 speed = mass_map.mean_speed.where(~mass_map.liftoff).T
 lim = float(np.nanmax(np.abs(speed.values))) if np.isfinite(speed.values).any() else 1.0
-m = axes[1].pcolormesh(mhats, omegas, speed, cmap=plt.get_cmap("RdBu_r").with_extremes(bad="0.8"),
-                       vmin=-lim, vmax=lim, shading="nearest")
+m = axes[1].pcolormesh(
+    mhats, omegas, speed, cmap=plt.get_cmap("RdBu_r").with_extremes(bad="0.8"), vmin=-lim, vmax=lim, shading="nearest"
+)
 fig.colorbar(m, ax=axes[1], label="mean speed over the window (grey: lift-off)")
 for ax in axes:
     hatch_liftoff(ax, mhats, omegas, mass_map.liftoff.values.T)

@@ -58,8 +58,17 @@ HARMONICS = 2 if SMALL else 3
 SPEEDS = (0.01,) if SMALL else (0.01, 0.02, 0.03)  # required mean speeds: one optimum each
 V_MIN = SPEEDS[-1] if SMALL else 0.02  # the one looked at in detail
 if SMALL:
-    SETTINGS = lj.OptimiseSettings(starts=2, eps_schedule=(1e-2,), outer=1, inner=4, corrections=0,
-                                   verify_horizon=10.0, transient=4.0, measured=3.0, refine_baseline=False)
+    SETTINGS = lj.OptimiseSettings(
+        starts=2,
+        eps_schedule=(1e-2,),
+        outer=1,
+        inner=4,
+        corrections=0,
+        verify_horizon=10.0,
+        transient=4.0,
+        measured=3.0,
+        refine_baseline=False,
+    )
     SWEEP = dict(omegas=np.array([1.0, 2.0, 4.0, 6.0]), amplitudes=2)
 else:
     SETTINGS = lj.OptimiseSettings()  # 8 starts, eps 1e-2 -> 1e-3, exact verification over 60 time units
@@ -79,8 +88,7 @@ params = lj.Params(a=A_MAX)  # the paper's defaults; `a` and `omega` are the opt
 # %%
 sweep = lj.sinusoid_sweep(params, A_MAX, horizon=SETTINGS.verify_horizon, **SWEEP)
 baseline = lj.best_sinusoid(sweep, V_MIN, +1)
-print(f"{sweep.ok.sum()} of {sweep.ok.size} sinusoids finish without lift-off; "
-      f"fastest: {np.nanmax(sweep.speed):.4f}")
+print(f"{sweep.ok.sum()} of {sweep.ok.size} sinusoids finish without lift-off; fastest: {np.nanmax(sweep.speed):.4f}")
 print(f"best sinusoid for v >= {V_MIN}:", baseline)
 
 # %% [markdown]
@@ -102,9 +110,11 @@ print(opt.summary())
 
 # %%
 for v, o in optima.items():
-    print(f"v_min = {v:<5g} feasible on the exact model: {o.feasible_exact!s:5}  speed {o.mean_speed_exact:.4f}  "
-          f"cost {o.cost_of_transport_exact:.4g}  best sinusoid {o.sinusoid_cost_of_transport:.4g}  "
-          f"improvement {100 * o.improvement_vs_sinusoid:+.1f} %")
+    print(
+        f"v_min = {v:<5g} feasible on the exact model: {o.feasible_exact!s:5}  speed {o.mean_speed_exact:.4f}  "
+        f"cost {o.cost_of_transport_exact:.4g}  best sinusoid {o.sinusoid_cost_of_transport:.4g}  "
+        f"improvement {100 * o.improvement_vs_sinusoid:+.1f} %"
+    )
 
 # %% [markdown]
 # ## 3. Check it yourself on the exact model
@@ -113,6 +123,7 @@ for v, o in optima.items():
 # again with `lj.simulate` (one batched call: the sinusoid written as a `Fourier` series with the same
 # number of harmonics) over the same measured interval, and speed and cost are recomputed from the
 # saved centre of mass $X$ and dissipated energy $e_d$.
+
 
 # %%
 def as_fourier(o):
@@ -134,12 +145,16 @@ check = lj.simulate(pair, t1, save_at=np.linspace(t0, t1, 401), waveform=stacked
 for i, name in enumerate(waves):
     dX = float(check.X[i, -1] - check.X[i, 0])
     de = float(check.e_d[i, -1] - check.e_d[i, 0])
-    print(f"{name:14s} speed {dX / SETTINGS.verify_horizon:.5f}  cost of transport {de / abs(dX):.5f}  "
-          f"status {lj.Status(int(check.status[i])).name}")
+    print(
+        f"{name:14s} speed {dX / SETTINGS.verify_horizon:.5f}  cost of transport {de / abs(dX):.5f}  "
+        f"status {lj.Status(int(check.status[i])).name}"
+    )
 print(f"optimiser's figures: optimum speed {opt.mean_speed_exact:.5f} cost {opt.cost_of_transport_exact:.5f}")
 if opt.sinusoid is not None:
-    print(f"                     sinusoid speed {opt.sinusoid['mean_speed']:.5f} "
-          f"cost {opt.sinusoid_cost_of_transport:.5f}")
+    print(
+        f"                     sinusoid speed {opt.sinusoid['mean_speed']:.5f} "
+        f"cost {opt.sinusoid_cost_of_transport:.5f}"
+    )
 
 fig, axes = plt.subplots(1, 2, figsize=(10, 3.2), layout="constrained")
 for i, name in enumerate(waves):
@@ -163,14 +178,14 @@ plt.show()
 # sinusoid at that speed.
 
 # %%
-fig, axes = plt.subplot_mosaic([["wave", "pareto"], ["period", "pareto"]], figsize=(11, 6.4),
-                               layout="constrained", width_ratios=[1, 1.15])
+fig, axes = plt.subplot_mosaic(
+    [["wave", "pareto"], ["period", "pareto"]], figsize=(11, 6.4), layout="constrained", width_ratios=[1, 1.15]
+)
 ax = axes["wave"]
 phase = np.linspace(0.0, 1.0, 400)
 for (name, wave), style in zip(waves.items(), ("-", "--")):
     l0, _ = wave(jnp.asarray(phase * 2 * np.pi / float(wave.omega)))
-    ax.plot(phase, np.asarray(l0) - float(wave.lbar), style, lw=2,
-            label=f"{name}, $\\omega$ = {float(wave.omega):.3g}")
+    ax.plot(phase, np.asarray(l0) - float(wave.lbar), style, lw=2, label=f"{name}, $\\omega$ = {float(wave.omega):.3g}")
 for sign in (1, -1):
     ax.axhline(sign * A_MAX, color="k", ls=":", lw=0.8)
 ax.set_xlabel("t / period")
@@ -181,18 +196,25 @@ ax.legend(fontsize=7, loc="lower left")
 ax = axes["period"]
 period = 2 * np.pi / opt.omega
 t_end = period * np.floor(t1 / period)
-one = lj.simulate(params.replace(omega=opt.omega), t_end, save_at=np.linspace(t_end - period, t_end, 401),
-                  waveform=waves["optimum"], start="relaxed")
+one = lj.simulate(
+    params.replace(omega=opt.omega),
+    t_end,
+    save_at=np.linspace(t_end - period, t_end, 401),
+    waveform=waves["optimum"],
+    start="relaxed",
+)
 ph = (np.asarray(one.t) - float(one.t[0])) / period
 mode = np.asarray(one.mode)
 for k, x in ((1, one.x1), (2, one.x2)):
     ax.plot(ph, np.asarray(x) - float(x[0]), label=f"$x_{k} - x_{k}(t_0)$")
 stuck1 = np.isin(mode, [lj.Mode.BOTH_STICK, lj.Mode.M2_SLIPS])
 stuck2 = np.isin(mode, [lj.Mode.BOTH_STICK, lj.Mode.M1_SLIPS])
-ax.fill_between(ph, 0, 1, where=stuck1, transform=ax.get_xaxis_transform(), color="C0", alpha=0.15, lw=0,
-                label="m1 stuck")
-ax.fill_between(ph, 0, 1, where=stuck2, transform=ax.get_xaxis_transform(), color="C1", alpha=0.15, lw=0,
-                label="m2 stuck")
+ax.fill_between(
+    ph, 0, 1, where=stuck1, transform=ax.get_xaxis_transform(), color="C0", alpha=0.15, lw=0, label="m1 stuck"
+)
+ax.fill_between(
+    ph, 0, 1, where=stuck2, transform=ax.get_xaxis_transform(), color="C1", alpha=0.15, lw=0, label="m2 stuck"
+)
 ax.set_xlabel("(t - t0) / period")
 ax.set_ylabel("displacement")
 ax.set_title("one steady-state period of the optimum (exact model)", fontsize=9)
@@ -204,8 +226,14 @@ ax.scatter(sweep.speed[good], sweep.cost[good], s=8, c="0.7", label="sinusoids (
 front = lj.pareto_front(sweep.speed, sweep.cost, sweep.ok)
 ax.plot(sweep.speed[front], sweep.cost[front], "o-", ms=3, color="C0", label="sinusoids' Pareto front")
 feasible = [o for o in optima.values() if o.feasible_exact]
-ax.plot([o.mean_speed_exact for o in feasible], [o.cost_of_transport_exact for o in feasible], "*", ms=12,
-        color="C3", label="optimised waveforms (verified)")
+ax.plot(
+    [o.mean_speed_exact for o in feasible],
+    [o.cost_of_transport_exact for o in feasible],
+    "*",
+    ms=12,
+    color="C3",
+    label="optimised waveforms (verified)",
+)
 for v in SPEEDS:
     ax.axvline(v, color="C3", lw=0.6, ls=":")
 ax.set_xlabel("mean speed (exact model)")

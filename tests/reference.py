@@ -278,6 +278,7 @@ class _HybridSolver:
             else:
                 j = 2 * i + 1
                 if self.y[j] != 0.0:
+
                     def g_vel(t, y, j=j):
                         return float(y[j])
                 else:
@@ -310,6 +311,7 @@ class _HybridSolver:
                     fx, N1, N2, *_ = forces(t, float(y[0]), float(y[2]))
                     return (N1 if i == 0 else N2) / (t - t0)
             else:
+
                 def g_normal(t, y, i=i):
                     fx, N1, N2, *_ = forces(t, float(y[0]), float(y[2]))
                     return N1 if i == 0 else N2
@@ -500,8 +502,14 @@ class _HybridSolver:
             events, tags = self._make_events(rhs, X_ref, z)
             t0 = self.t
             res = solve_ivp(
-                rhs, (t0, t_target), self.y, method="DOP853",
-                rtol=self.rtol, atol=self.atol, dense_output=True, events=events,
+                rhs,
+                (t0, t_target),
+                self.y,
+                method="DOP853",
+                rtol=self.rtol,
+                atol=self.atol,
+                dense_output=True,
+                events=events,
                 max_step=self.max_step,
             )
             if res.status == -1:
@@ -531,8 +539,9 @@ class _HybridSolver:
                 # The terminal event is the one whose (single) root equals t1.
                 hit = [k for k, te in enumerate(res.t_events) if len(te) and te[-1] == t1]
                 if not hit:
-                    hit = [max(range(len(tags)),
-                               key=lambda k: res.t_events[k][-1] if len(res.t_events[k]) else -np.inf)]
+                    hit = [
+                        max(range(len(tags)), key=lambda k: res.t_events[k][-1] if len(res.t_events[k]) else -np.inf)
+                    ]
                 tag = tags[hit[0]]
 
             if tag[0] == "target":
@@ -581,8 +590,9 @@ class _HybridSolver:
         return tot[0], tot[1]
 
 
-def reference_simulate(params: dict, t_end: float, save_at=None, *, contact="strict", start="paper",
-                       rtol=1e-11, atol=1e-12) -> dict:
+def reference_simulate(
+    params: dict, t_end: float, save_at=None, *, contact="strict", start="paper", rtol=1e-11, atol=1e-12
+) -> dict:
     """Simulate the exact hybrid model on ``[0, t_end]`` and sample it at ``save_at``.
 
     Args:
@@ -612,18 +622,30 @@ def reference_simulate(params: dict, t_end: float, save_at=None, *, contact="str
     Y, modes = solver.sample(ts_eval)
     x1, v1, x2, v2, e_d, w = Y
     return dict(
-        t=ts.copy(), x1=x1, v1=v1, x2=x2, v2=v2,
+        t=ts.copy(),
+        x1=x1,
+        v1=v1,
+        x2=x2,
+        v2=v2,
         X=(model.m1 * x1 + model.m2 * x2) / (model.m1 + model.m2),
-        e_d=e_d, w=w, e=model.energy(ts_eval, x1, v1, x2, v2), mode=modes,
-        liftoff=bool(solver.liftoff), t_liftoff=float(solver.t_liftoff),
-        n_switches=int(solver.n_switches), n_segments=len(solver.segments),
-        events=list(solver.events), valid_until=float(valid_until),
-        contact=contact, start=start,
+        e_d=e_d,
+        w=w,
+        e=model.energy(ts_eval, x1, v1, x2, v2),
+        mode=modes,
+        liftoff=bool(solver.liftoff),
+        t_liftoff=float(solver.t_liftoff),
+        n_switches=int(solver.n_switches),
+        n_segments=len(solver.segments),
+        events=list(solver.events),
+        valid_until=float(valid_until),
+        contact=contact,
+        start=start,
     )
 
 
-def reference_measure(params: dict, z=5.0, *, horizon=2000.0, window=25.0, contact="strict", start="paper",
-                      rtol=1e-11, atol=1e-12) -> dict:
+def reference_measure(
+    params: dict, z=5.0, *, horizon=2000.0, window=25.0, contact="strict", start="paper", rtol=1e-11, atol=1e-12
+) -> dict:
     """Measurements of SPEC section 5.
 
     * ``t_start = 80 * 2 pi / min(wn1, wn2, wn3)`` (eqs. 11-12).
@@ -642,8 +664,18 @@ def reference_measure(params: dict, z=5.0, *, horizon=2000.0, window=25.0, conta
     t_window = t_start + window
     t_horizon = t_start + horizon
     nan, inf = math.nan, math.inf
-    out = dict(tau_z=inf, e_z=inf, reached=False, regime=-1, mean_speed=nan,
-               stick_fraction1=nan, stick_fraction2=nan, t_start=t_start, X_start=nan, e_d_start=nan)
+    out = dict(
+        tau_z=inf,
+        e_z=inf,
+        reached=False,
+        regime=-1,
+        mean_speed=nan,
+        stick_fraction1=nan,
+        stick_fraction2=nan,
+        t_start=t_start,
+        X_start=nan,
+        e_d_start=nan,
+    )
 
     if solver.advance(t_start) == "time":
         X_s, ed_s = float(solver.X), float(solver.y[4])
@@ -651,8 +683,7 @@ def reference_measure(params: dict, z=5.0, *, horizon=2000.0, window=25.0, conta
         reason = solver.advance(t_horizon, X_ref=X_s, z=z)
         if reason == "target":
             tau = solver.t - t_start
-            out.update(tau_z=tau, e_z=float(solver.y[4]) - ed_s, reached=True,
-                       mean_speed=float((solver.X - X_s) / tau))
+            out.update(tau_z=tau, e_z=float(solver.y[4]) - ed_s, reached=True, mean_speed=float((solver.X - X_s) / tau))
             solver.advance(t_window)  # the regime window may extend beyond tau_z
         else:
             if solver.t > t_start:
@@ -661,6 +692,11 @@ def reference_measure(params: dict, z=5.0, *, horizon=2000.0, window=25.0, conta
         if not solver.stopped or solver.t >= t_window:
             s1, s2 = solver.stuck_time(t_start, t_window)
             out.update(regime=int(max(s1, s2) > 1e-6), stick_fraction1=s1 / window, stick_fraction2=s2 / window)
-    out.update(liftoff=bool(solver.liftoff), t_liftoff=float(solver.t_liftoff),
-               n_segments=len(solver.segments), contact=contact, start=start)
+    out.update(
+        liftoff=bool(solver.liftoff),
+        t_liftoff=float(solver.t_liftoff),
+        n_segments=len(solver.segments),
+        contact=contact,
+        start=start,
+    )
     return out

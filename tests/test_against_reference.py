@@ -64,8 +64,13 @@ def reference_results():
 @pytest.fixture(scope="module")
 def batch():
     cols = list(zip(*CONFIGS))
-    return lj.Params(omega=jnp.array(cols[0]), a=jnp.array(cols[1]), d=jnp.array(cols[2]),
-                     mhat=jnp.array(cols[3]), mu_s=jnp.array(cols[4]))
+    return lj.Params(
+        omega=jnp.array(cols[0]),
+        a=jnp.array(cols[1]),
+        d=jnp.array(cols[2]),
+        mhat=jnp.array(cols[3]),
+        mu_s=jnp.array(cols[4]),
+    )
 
 
 def test_tau5_e5_regime_float64(reference_results, batch):
@@ -114,8 +119,9 @@ def test_trajectory_matches_reference():
     save = np.linspace(0.0, 40.0, 401)
     for omega in (2.0, 23.0):
         ref = reference_simulate(dict(omega=omega), 40.0, save_at=save, contact="paper")
-        tr = lj.simulate(lj.Params(omega=omega), 40.0, save_at=jnp.asarray(save), contact="paper",
-                         dynamics=lj.Exact(dt=0.005))
+        tr = lj.simulate(
+            lj.Params(omega=omega), 40.0, save_at=jnp.asarray(save), contact="paper", dynamics=lj.Exact(dt=0.005)
+        )
         for name in ("x1", "x2", "v1", "v2", "e_d", "w"):
             np.testing.assert_allclose(getattr(tr, name), ref[name], atol=2e-6, err_msg=name)
         agree = np.mean(np.asarray(tr.mode) == ref["mode"])

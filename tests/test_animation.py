@@ -99,8 +99,7 @@ def test_animate_rejects_bad_input(ssl, tmp_path):
         lj.animate(traj, p, t_range=(100.0, 200.0))
     # A batch of two (the same run twice, shifted), built without compiling a batched simulation.
     batch = lj.Params.stack([p, p])
-    tr2 = jax.tree_util.tree_map(lambda x: jnp.stack([x, x + 1.0]) if x.dtype.kind == "f" else jnp.stack([x, x]),
-                                 traj)
+    tr2 = jax.tree_util.tree_map(lambda x: jnp.stack([x, x + 1.0]) if x.dtype.kind == "f" else jnp.stack([x, x]), traj)
     with pytest.raises(ValueError, match="index"):
         lj.animate(tr2, batch[0])
     with pytest.raises(ValueError, match="one configuration"):
@@ -133,8 +132,19 @@ def _blocks(frame: np.ndarray, color: str, top: int) -> list[tuple[float, float]
 def test_cli_writes_gif_and_stuck_mass_stands_still_in_it(ssl, tmp_path):
     p, traj = ssl
     out = tmp_path / "gifs" / "ssl.gif"
-    args = ["animate", "--omega", str(OMEGA), "--t-end", str(T_END), "--frames", str(FRAMES), "--dpi", "50",
-            "--out", str(out)]
+    args = [
+        "animate",
+        "--omega",
+        str(OMEGA),
+        "--t-end",
+        str(T_END),
+        "--frames",
+        str(FRAMES),
+        "--dpi",
+        "50",
+        "--out",
+        str(out),
+    ]
     res = CliRunner().invoke(plugin_app(register), args)
     assert res.exit_code == 0, res.output
     assert out.exists() and out.stat().st_size > 0
@@ -183,8 +193,20 @@ def test_cli_liftoff(tmp_path):
     app = plugin_app(register)
     out = tmp_path / "lift.gif"
     # As many frames as the fixture: the same compiled simulation serves.
-    common = ["animate", "--omega", "23", "--a", "0.1", "--frames", str(FRAMES), "--dpi", "30", "--no-trace",
-              "--out", str(out)]
+    common = [
+        "animate",
+        "--omega",
+        "23",
+        "--a",
+        "0.1",
+        "--frames",
+        str(FRAMES),
+        "--dpi",
+        "30",
+        "--no-trace",
+        "--out",
+        str(out),
+    ]
     res = CliRunner().invoke(app, common + ["--t-end", "3"])
     assert res.exit_code == 2 and "lift-off at t = 0.1667" in res.output and not out.exists()
     # A span that contains the lift-off: the frames before it are drawn, and the command says so.

@@ -56,8 +56,23 @@ def test_simulate_text_and_not_reached_encoding():
 
 def test_sweep_writes_and_reads_back(tmp_path):
     out = tmp_path / "maps" / "s.nc"
-    args = ["sweep", "--omega", "2,6", "--a", "0.02:0.05:2", "--d", "0.5", "--chunk-size", "4", "--out", str(out),
-            "--no-progress", "--order", "cost", *FAST]
+    args = [
+        "sweep",
+        "--omega",
+        "2,6",
+        "--a",
+        "0.02:0.05:2",
+        "--d",
+        "0.5",
+        "--chunk-size",
+        "4",
+        "--out",
+        str(out),
+        "--no-progress",
+        "--order",
+        "cost",
+        *FAST,
+    ]
     res = invoke(*args)
     assert res.exit_code == 0, res.output
     assert "omega[2] x a[2]" in res.stdout

@@ -214,9 +214,16 @@ def test_random_configurations_never_stall_or_nan(contact):
     rng = np.random.default_rng(1)
     B = 32
     mu_k = rng.uniform(0.1, 0.8, B)
-    p = lj.Params(omega=rng.uniform(0.5, 30, B), a=rng.uniform(0.0, 0.3, B), d=rng.uniform(-1, 1, B),
-                  mhat=rng.uniform(0.05, 0.95, B), mu_k=mu_k, mu_s=mu_k + rng.uniform(0, 0.5, B),
-                  c=rng.uniform(0, 0.1, B), k=rng.uniform(20, 100, B))
+    p = lj.Params(
+        omega=rng.uniform(0.5, 30, B),
+        a=rng.uniform(0.0, 0.3, B),
+        d=rng.uniform(-1, 1, B),
+        mhat=rng.uniform(0.05, 0.95, B),
+        mu_k=mu_k,
+        mu_s=mu_k + rng.uniform(0, 0.5, B),
+        c=rng.uniform(0, 0.1, B),
+        k=rng.uniform(20, 100, B),
+    )
     m = lj.measure(p, z=0.5, horizon=20.0, contact=contact)
     status = np.asarray(m.status)
     assert not np.any(status == lj.Status.MAX_STEPS)

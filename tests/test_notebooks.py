@@ -101,8 +101,15 @@ finally:
 def _execute(name: str, out_dir: Path) -> tuple[nbformat.NotebookNode, float]:
     """Run one notebook in a fresh client process; raise with the kernel's traceback if a cell fails."""
     out = out_dir / f"{name}.ipynb"
-    args = [sys.executable, "-c", _RUNNER, str(NOTEBOOKS / f"{name}.ipynb"), str(out), str(NOTEBOOKS),
-            str(CELL_TIMEOUT)]
+    args = [
+        sys.executable,
+        "-c",
+        _RUNNER,
+        str(NOTEBOOKS / f"{name}.ipynb"),
+        str(out),
+        str(NOTEBOOKS),
+        str(CELL_TIMEOUT),
+    ]
     proc = subprocess.run(args, capture_output=True, text=True, timeout=NOTEBOOK_TIMEOUT)
     if proc.returncode:
         raise RuntimeError(f"{name} failed (exit {proc.returncode}):\n{proc.stderr[-6000:]}")

@@ -21,22 +21,40 @@ from plugin_app import plugin_app
 from typer.testing import CliRunner
 
 
-TINY = Settings(starts=2, eps_schedule=(1e-2,), outer=1, inner=4, corrections=0, verify_horizon=10.0,
-                transient=4.0, measured=3.0, refine_baseline=False)
+TINY = Settings(
+    starts=2,
+    eps_schedule=(1e-2,),
+    outer=1,
+    inner=4,
+    corrections=0,
+    verify_horizon=10.0,
+    transient=4.0,
+    measured=3.0,
+    refine_baseline=False,
+)
 
 
 @pytest.fixture(scope="module")
 def tiny_sweep():
     # Two amplitudes x three frequencies around omega = 4, exact model, short horizon.
-    return _pareto.sinusoid_sweep(lj.Params(), 0.05, omegas=np.array([2.0, 4.0, 6.0]), amplitudes=2,
-                                  horizon=TINY.verify_horizon)
+    return _pareto.sinusoid_sweep(
+        lj.Params(), 0.05, omegas=np.array([2.0, 4.0, 6.0]), amplitudes=2, horizon=TINY.verify_horizon
+    )
 
 
 def _problem(eps, free_omega=True, detach=None):
     p = lj.Params()
     plan = _objective.make_plan(p, 4.0, 4.0, eps, 3.0, 3.0, detach)
-    return _optimise._Problem(p, jnp.asarray(0.05), jnp.asarray(1.0), jnp.asarray(math.log(2.0)),
-                              jnp.asarray(math.log(8.0)), plan, 0.005, free_omega)
+    return _optimise._Problem(
+        p,
+        jnp.asarray(0.05),
+        jnp.asarray(1.0),
+        jnp.asarray(math.log(2.0)),
+        jnp.asarray(math.log(8.0)),
+        plan,
+        0.005,
+        free_omega,
+    )
 
 
 def test_gradient_matches_finite_differences():
@@ -98,8 +116,9 @@ def test_d0_equal_masses_cannot_move():
     wave = lj.Fourier(np.array([0.01, -0.012, 0.004]), np.array([0.03, 0.015, -0.006]), 3.0, 3.0)
     fig = _pareto.exact_figures(p, wave, TINY.verify_horizon)  # shapes shared with other tests: one compile
     assert bool(fig.ok) and abs(float(fig.speed)) < 1e-10
-    tr = lj.simulate(_pareto.with_waveform_frequency(p, wave), 30.0, np.linspace(0, 30, 61), waveform=wave,
-                     start="relaxed")
+    tr = lj.simulate(
+        _pareto.with_waveform_frequency(p, wave), 30.0, np.linspace(0, 30, 61), waveform=wave, start="relaxed"
+    )
     np.testing.assert_allclose(tr.X, tr.X[0], atol=1e-10)
     # The smoothed rollout of the optimiser keeps the symmetry too.
     plan = _objective.make_plan(p, 3.0, 3.0, 1e-2, 4.0, 4.0)
@@ -119,8 +138,9 @@ def test_compilations_per_optimisation(tiny_sweep):
     # (another batch size): two traces.
     settings = eqx.tree_at(lambda s: (s.eps_schedule, s.outer), TINY, ((1e-2, 5e-3), 2))
     jax.clear_caches()
-    run = lambda v: _optimise.optimise(lj.Params(), v, 0.05, omega=4.0, harmonics=2, settings=settings,
-                                       sweep=tiny_sweep)
+    run = lambda v: _optimise.optimise(
+        lj.Params(), v, 0.05, omega=4.0, harmonics=2, settings=settings, sweep=tiny_sweep
+    )
     before = dict(_optimise.TRACES)
     run(0.01)
     grew = {k: _optimise.TRACES[k] - before.get(k, 0) for k in ("block", "evaluate")}
@@ -169,15 +189,48 @@ def test_optimum_verified_and_no_worse_than_initial_guess(tiny_optimum):
 def test_cli_infeasible_requirement_is_reported_infeasible():
     # Nothing reaches a mean speed of 0.5 with a stroke of 0.03: the result must say so.
     # Same shapes and static settings as TINY, so the compiled functions are reused.
-    args = ["optimize", "--v-min", "0.5", "--a-max", "0.03", "--omega", "4", "--harmonics", "2", "--json",
-            "--starts", "2", "--outer", "1", "--inner", "4", "--eps", "1e-2", "--horizon", "10",
-            "--transient", "4", "--measured", "3", "--corrections", "0",
-            "--sweep-omegas", "3", "--sweep-amplitudes", "2"]
+    args = [
+        "optimize",
+        "--v-min",
+        "0.5",
+        "--a-max",
+        "0.03",
+        "--omega",
+        "4",
+        "--harmonics",
+        "2",
+        "--json",
+        "--starts",
+        "2",
+        "--outer",
+        "1",
+        "--inner",
+        "4",
+        "--eps",
+        "1e-2",
+        "--horizon",
+        "10",
+        "--transient",
+        "4",
+        "--measured",
+        "3",
+        "--corrections",
+        "0",
+        "--sweep-omegas",
+        "3",
+        "--sweep-amplitudes",
+        "2",
+    ]
     res = CliRunner().invoke(plugin_app(register), args)
     assert res.exit_code == 0, res.output
     out = json.loads(res.stdout)
-    for key in ("mean_speed_exact", "cost_of_transport_exact", "feasible_exact", "sinusoid_cost_of_transport",
-                "improvement_vs_sinusoid"):
+    for key in (
+        "mean_speed_exact",
+        "cost_of_transport_exact",
+        "feasible_exact",
+        "sinusoid_cost_of_transport",
+        "improvement_vs_sinusoid",
+    ):
         assert key in out
     assert out["feasible_exact"] is False
     assert out["constraints_exact"]["speed"] is False

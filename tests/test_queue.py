@@ -37,8 +37,16 @@ def test_queue_matches_one_loop_per_configuration():
     om = np.array([1.5, 23.0, 4.0, np.nan, 9.0, 2.0, 17.0, 6.0, 12.0, 3.0, 20.0])
     a = np.array([0.05, 0.1, 0.02, 0.05, 0.09, 0.05, 0.03, 0.08, 0.05, 0.06, 0.04])
     flat, wave, axes, _ = prepare(lj.Params(omega=om, a=a, check=False), None, None)
-    args = (flat, wave, axes, *(jnp.asarray(v, flat.dtype) for v in (0.5, 30.0, 5.0)), "strict", "paper", 0.02,
-            jnp.asarray(40_000, jnp.int32))
+    args = (
+        flat,
+        wave,
+        axes,
+        *(jnp.asarray(v, flat.dtype) for v in (0.5, 30.0, 5.0)),
+        "strict",
+        "paper",
+        0.02,
+        jnp.asarray(40_000, jnp.int32),
+    )
     queued = _measure.exact_batch(*args, lanes=3)
     alone = jax.vmap(lambda p, w: _measure._exact_one(p, w, *args[3:]))(flat, wave)
     assert int(queued["status"][3]) == lj.Status.INVALID
@@ -46,5 +54,10 @@ def test_queue_matches_one_loop_per_configuration():
     # Equal to rounding (a lane's position in a SIMD vector can change the last bit);
     # `balance` is a difference of O(1) energies, so its error is absolute.
     for k, v in alone.items():
-        np.testing.assert_allclose(np.asarray(queued[k], float), np.asarray(v, float), rtol=1e-12,
-                                   atol=1e-15 if k == "balance" else 0, err_msg=k)
+        np.testing.assert_allclose(
+            np.asarray(queued[k], float),
+            np.asarray(v, float),
+            rtol=1e-12,
+            atol=1e-15 if k == "balance" else 0,
+            err_msg=k,
+        )

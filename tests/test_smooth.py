@@ -15,8 +15,9 @@ EPSS = np.array([3e-2, 1e-2, 3e-3, 1e-3, 3e-4])
 
 
 def _error(omega, eps, exact):
-    sm = lj.simulate(lj.Params(omega=omega), T, save_at=jnp.array([0.0, T]),
-                     dynamics=lj.Smoothed(eps=eps, rtol=1e-8, atol=1e-10))
+    sm = lj.simulate(
+        lj.Params(omega=omega), T, save_at=jnp.array([0.0, T]), dynamics=lj.Smoothed(eps=eps, rtol=1e-8, atol=1e-10)
+    )
     return abs(float(sm.X[-1] - exact.X[-1])) + abs(float(sm.e_d[-1] - exact.e_d[-1]))
 
 

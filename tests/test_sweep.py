@@ -50,8 +50,13 @@ def two_devices(tmp_path_factory):
     that it runs while the other tests do (XLA_FLAGS must be set before JAX starts)."""
     path = tmp_path_factory.mktemp("two") / "two.nc"
     env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2", "JAX_PLATFORMS": "cpu"}
-    proc = subprocess.Popen([sys.executable, "-c", HELPER, json.dumps(AXES), str(path)], env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", HELPER, json.dumps(AXES), str(path)],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     yield proc, path
     if proc.poll() is None:
         proc.kill()
