@@ -8,19 +8,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import Array, ArrayLike
+from .._custom_types import Array, ValuesLike
 from .._params import Params
 from ._actuator import AbstractActuator, RestLength
 from ._friction import AbstractFriction, Coulomb
 from ._springwaves import SpringFourier, to_spring_fourier, TravellingWave
 
 
-def _float(x: ArrayLike) -> Array:
+def _float(x: ValuesLike) -> Array:
     x = jnp.asarray(x)
     return x if jnp.issubdtype(x.dtype, jnp.floating) else x.astype(jnp.result_type(float))
 
 
-def _per(name: str, x: ArrayLike, n: int, what: str) -> Array:
+def _per(name: str, x: ValuesLike, n: int, what: str) -> Array:
     """A per-mass or per-spring field: a scalar, or an array whose last axis has length `n` (or 1)."""
     x = _float(x)
     if x.ndim == 0:
@@ -86,11 +86,11 @@ class Chain(eqx.Module):
 
     def __init__(
         self,
-        masses: ArrayLike,
-        k: ArrayLike = 50.0,
-        d: ArrayLike = 0.5,
-        lbar: ArrayLike | None = None,
-        c: ArrayLike = 0.01,
+        masses: ValuesLike,
+        k: ValuesLike = 50.0,
+        d: ValuesLike = 0.5,
+        lbar: ValuesLike | None = None,
+        c: ValuesLike = 0.01,
         waveforms: Any = None,
         friction: AbstractFriction | None = None,
         actuator: AbstractActuator | None = None,
@@ -143,6 +143,22 @@ class Chain(eqx.Module):
             masses=jnp.stack([p.m1, p.m2], -1), k=p.k[..., None], d=p.d[..., None], lbar=p.lbar[..., None],
             c=p.c[..., None], waveforms=wave, friction=Coulomb(p.mu_s[..., None], p.mu_k[..., None]), check=False,
         )  # fmt: skip
+
+    @classmethod
+    def stack(cls, items: "list[Chain]") -> "Chain":
+        """Stack chains of the same N, friction law and actuator along a new leading batch axis."""
+        if len(items) == 0:
+            raise ValueError("Chain.stack needs at least one Chain.")
+        items = [c.broadcast() for c in items]
+        H = max(c.waves.harmonics for c in items)
+        pad = lambda w: jnp.pad(w, [(0, 0)] * (w.ndim - 1) + [(0, H - w.shape[-1])])
+        items = [eqx.tree_at(lambda c: (c.waves.cos, c.waves.sin), c, (pad(c.waves.cos), pad(c.waves.sin)))
+                 for c in items]  # fmt: skip
+        structures = {jax.tree_util.tree_structure(c) for c in items}
+        shapes = {tuple(x.shape for x in jax.tree_util.tree_leaves(c)) for c in items}
+        if len(structures) > 1 or len(shapes) > 1:
+            raise ValueError("Chain.stack: the chains differ in N, friction law, actuator or batch shape.")
+        return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *items)
 
     # -- shapes ------------------------------------------------------------------
 
@@ -269,12 +285,19 @@ class Chain(eqx.Module):
     def validate(self) -> "Chain":
         """Raise `ValueError` at the first invalid value: parameter, mass or spring index, batch index, range."""
         shape = self.batch_shape
+        c = self.broadcast()
+        values = {"masses": c.m, "c": c.c, "k": c.k, "d": c.d, "lbar": c.lbar, "waveforms": c.waves.stroke(),
+                  "omega": jnp.broadcast_to(c.waves.omega[..., None], c.k.shape), **c.friction.fields()}  # fmt: skip
         for name, mask, valid, kind in self._checks():
             bad = ~np.broadcast_to(np.asarray(mask), shape + mask.shape[-1:])
             if bad.any():
                 where = tuple(int(i) for i in np.argwhere(bad)[0])
                 at = f" at batch index {where[:-1]}" if shape else ""
-                raise ValueError(f"Invalid parameter {name!r} of {kind} {where[-1]}{at}; the valid range is {valid}.")
+                got = float(np.asarray(values[name])[where]) if name in values else None
+                got_s = "" if got is None else f": got {'stroke' if name == 'waveforms' else name}={got!r}"
+                raise ValueError(
+                    f"Invalid parameter {name!r} of {kind} {where[-1]}{at}{got_s}; the valid range is {valid}."
+                )
         return self
 
 

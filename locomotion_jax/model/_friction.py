@@ -12,10 +12,10 @@ import dataclasses
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._custom_types import Array, ArrayLike
+from .._custom_types import Array, ValuesLike
 
 
-def _arr(x: ArrayLike) -> Array:
+def _arr(x: ValuesLike) -> Array:
     x = jnp.asarray(x)
     return x if jnp.issubdtype(x.dtype, jnp.floating) else x.astype(jnp.result_type(float))
 
@@ -59,7 +59,7 @@ class Coulomb(AbstractFriction):
     mu_s: Array
     mu_k: Array
 
-    def __init__(self, mu_s: ArrayLike = 0.7, mu_k: ArrayLike = 0.5):
+    def __init__(self, mu_s: ValuesLike = 0.7, mu_k: ValuesLike = 0.5):
         self.mu_s = _arr(mu_s)
         self.mu_k = _arr(mu_k)
 
@@ -92,7 +92,7 @@ class AnisotropicCoulomb(AbstractFriction):
     mu_k_fwd: Array
     mu_k_bwd: Array
 
-    def __init__(self, mu_s_fwd: ArrayLike, mu_s_bwd: ArrayLike, mu_k_fwd: ArrayLike, mu_k_bwd: ArrayLike):
+    def __init__(self, mu_s_fwd: ValuesLike, mu_s_bwd: ValuesLike, mu_k_fwd: ValuesLike, mu_k_bwd: ValuesLike):
         self.mu_s_fwd = _arr(mu_s_fwd)
         self.mu_s_bwd = _arr(mu_s_bwd)
         self.mu_k_fwd = _arr(mu_k_fwd)
@@ -137,7 +137,7 @@ class Stribeck(AbstractFriction):
     mu_k: Array
     v_s: Array
 
-    def __init__(self, mu_s: ArrayLike = 0.7, mu_k: ArrayLike = 0.5, v_s: ArrayLike = 0.1):
+    def __init__(self, mu_s: ValuesLike = 0.7, mu_k: ValuesLike = 0.5, v_s: ValuesLike = 0.1):
         self.mu_s = _arr(mu_s)
         self.mu_k = _arr(mu_k)
         self.v_s = _arr(v_s)

@@ -6,7 +6,7 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from .._actuation import AbstractWaveform, Fourier, Sinusoid
-from .._custom_types import Array, ArrayLike
+from .._custom_types import Array, ValuesLike
 
 
 class SpringFourier(eqx.Module):
@@ -23,7 +23,7 @@ class SpringFourier(eqx.Module):
     sin: Array
     omega: Array
 
-    def __init__(self, cos: ArrayLike, sin: ArrayLike, omega: ArrayLike):
+    def __init__(self, cos: ValuesLike, sin: ValuesLike, omega: ValuesLike):
         self.cos = jnp.asarray(cos)
         self.sin = jnp.asarray(sin)
         self.omega = jnp.asarray(omega)
@@ -74,7 +74,7 @@ class TravellingWave(eqx.Module):
     omega: Array
     phi: Array
 
-    def __init__(self, a: ArrayLike, omega: ArrayLike, phi: ArrayLike = 0.0):
+    def __init__(self, a: ValuesLike, omega: ValuesLike, phi: ValuesLike = 0.0):
         self.a = jnp.asarray(a)
         self.omega = jnp.asarray(omega)
         self.phi = jnp.asarray(phi)

@@ -76,7 +76,8 @@ def _initial(C: Chain, valid, contact, start) -> engine.Hybrid:
 
 
 def _com(C: Chain, x: jax.Array) -> jax.Array:
-    return (C.m * x).sum(-1) / C.m.sum(-1)
+    """Centre of mass $\\sum_i m_i x_i / \\sum_i m_i$ of one configuration (`x`: `(..., N)`)."""
+    return jnp.matmul(x, C.m) / C.m.sum()
 
 
 def chain_dynamics(dynamics: Any, waveform: Any) -> Exact:
