@@ -64,6 +64,16 @@ def _global(
             "computation on one core, so sweeps shard over these devices to use every core."
         ),
     ] = 0,
+    cache: Annotated[
+        bool,
+        typer.Option(
+            "--cache/--no-cache",
+            envvar="LOCOMOTION_JAX_CACHE",
+            help="Keep compiled code in a per-user cache directory ($LOCOMOTION_JAX_CACHE_DIR, default "
+            "~/.cache/locomotion_jax/jax), so the next call does not compile again. Off: --no-cache or "
+            "LOCOMOTION_JAX_CACHE=0.",
+        ),
+    ] = True,
 ) -> None:
     # XLA reads XLA_FLAGS when its backends start (the first computation), so
     # setting it here, before any command computes, is in time. A flag already
@@ -78,6 +88,13 @@ def _global(
     import jax
 
     jax.config.update("jax_enable_x64", x64)
+    if cache:
+        from ._cache import enable_compilation_cache
+
+        try:
+            enable_compilation_cache()
+        except ValueError as err:  # an unwritable cache costs time, not the result
+            typer.echo(f"Warning: {err} Running without the compilation cache.", err=True)
 
 
 def _json_value(x: Any) -> Any:
