@@ -11,7 +11,6 @@ import sys
 from pathlib import Path
 
 import pytest
-
 from locomotion_jax import _cache
 
 
