@@ -226,7 +226,13 @@ def parse_axis(name: str, text: str) -> float | np.ndarray:
 @expand(given=axis_options(SWEEP_NAMES), run=run_options())
 def sweep(
     *,
-    out: Annotated[Path, typer.Option(help="Output NetCDF file (resumable: rerun with the same path).")],
+    out: Annotated[
+        Path,
+        typer.Option(
+            help="Output: a NetCDF file (.nc), or a Zarr store (.zarr) that several processes can fill at once "
+            "(jax.distributed). Resumable: rerun with the same path."
+        ),
+    ],
     given: Values,
     mode: Annotated[str, typer.Option(help="'grid' (outer product) or 'list' (zip axes of equal length).")] = "grid",
     chunk_size: Annotated[int, typer.Option(help="Configurations per compiled chunk.")] = 4096,
@@ -244,7 +250,7 @@ def sweep(
         ),
     ] = "auto",
 ) -> None:
-    """Map the measurements over a grid of parameters and write an xarray/NetCDF file.
+    """Map the measurements over a grid of parameters and write an xarray/NetCDF file or Zarr store.
 
     Example: `locomotion-jax sweep --omega 1:25:256 --a 0.01:0.1:256 --out maps/ssl.nc`.
     Dimensions follow the order omega, omega_over_wn1, a, d, mhat, mu_s, mu_k, k, c, lbar.
