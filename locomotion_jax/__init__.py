@@ -8,12 +8,11 @@ faster", Nonlinear Dynamics 78 (2014); equation numbers in docstrings are the pa
 from importlib.metadata import PackageNotFoundError, version as _version
 
 from ._actuation import AbstractWaveform as AbstractWaveform, Fourier as Fourier, Sinusoid as Sinusoid
+from ._cache import enable_compilation_cache as enable_compilation_cache
 from ._dynamics import AbstractDynamics as AbstractDynamics, Exact as Exact, Smoothed as Smoothed
 from ._measure import measure as measure
-from ._optimise import optimise as optimise
 from ._optimum import OptimiseSettings as OptimiseSettings, Optimum as Optimum
 from ._params import DEFAULTS as DEFAULTS, PARAM_NAMES as PARAM_NAMES, Params as Params, VALID_RANGES as VALID_RANGES
-from ._pareto import best_sinusoid as best_sinusoid, pareto_front as pareto_front, sinusoid_sweep as sinusoid_sweep
 from ._results import (
     ChainMeasurement as ChainMeasurement,
     ChainTrajectory as ChainTrajectory,
@@ -43,10 +42,26 @@ except PackageNotFoundError:  # running from a source tree
     __version__ = "0.0.0+local"
 
 
-def __getattr__(name: str):
-    # `animate` and `save_gif` load matplotlib's animation machinery (~0.7 s): only on first use.
-    if name in ("animate", "save_gif"):
-        from . import _animation
+_LAZY = {
+    # matplotlib's animation machinery (~0.7 s)
+    "animate": "_animation",
+    "save_gif": "_animation",
+    # optax and the optimiser (~0.15 s), which a simulation or a sweep does not need
+    "optimise": "_optimise",
+    "best_sinusoid": "_pareto",
+    "pareto_front": "_pareto",
+    "sinusoid_sweep": "_pareto",
+}
+"""Public names imported on first use, so that `import locomotion_jax` stays quick."""
 
-        return getattr(_animation, name)
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        from importlib import import_module
+
+        return getattr(import_module(f".{_LAZY[name]}", __name__), name)
     raise AttributeError(f"module 'locomotion_jax' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))

@@ -64,6 +64,16 @@ def _global(
             "computation on one core, so sweeps shard over these devices to use every core."
         ),
     ] = 0,
+    cache: Annotated[
+        bool,
+        typer.Option(
+            "--cache/--no-cache",
+            envvar="LOCOMOTION_JAX_CACHE",
+            help="Keep compiled code in a per-user cache directory ($LOCOMOTION_JAX_CACHE_DIR, default "
+            "~/.cache/locomotion_jax/jax), so the next call does not compile again. Off: --no-cache or "
+            "LOCOMOTION_JAX_CACHE=0.",
+        ),
+    ] = True,
 ) -> None:
     # XLA reads XLA_FLAGS when its backends start (the first computation), so
     # setting it here, before any command computes, is in time. A flag already
@@ -78,6 +88,13 @@ def _global(
     import jax
 
     jax.config.update("jax_enable_x64", x64)
+    if cache:
+        from ._cache import enable_compilation_cache
+
+        try:
+            enable_compilation_cache()
+        except ValueError as err:  # an unwritable cache costs time, not the result
+            typer.echo(f"Warning: {err} Running without the compilation cache.", err=True)
 
 
 def _json_value(x: Any) -> Any:
@@ -209,7 +226,13 @@ def parse_axis(name: str, text: str) -> float | np.ndarray:
 @expand(given=axis_options(SWEEP_NAMES), run=run_options())
 def sweep(
     *,
-    out: Annotated[Path, typer.Option(help="Output NetCDF file (resumable: rerun with the same path).")],
+    out: Annotated[
+        Path,
+        typer.Option(
+            help="Output: a NetCDF file (.nc), or a Zarr store (.zarr) that several processes can fill at once "
+            "(jax.distributed). Resumable: rerun with the same path."
+        ),
+    ],
     given: Values,
     mode: Annotated[str, typer.Option(help="'grid' (outer product) or 'list' (zip axes of equal length).")] = "grid",
     chunk_size: Annotated[int, typer.Option(help="Configurations per compiled chunk.")] = 4096,
@@ -227,7 +250,7 @@ def sweep(
         ),
     ] = "auto",
 ) -> None:
-    """Map the measurements over a grid of parameters and write an xarray/NetCDF file.
+    """Map the measurements over a grid of parameters and write an xarray/NetCDF file or Zarr store.
 
     Example: `locomotion-jax sweep --omega 1:25:256 --a 0.01:0.1:256 --out maps/ssl.nc`.
     Dimensions follow the order omega, omega_over_wn1, a, d, mhat, mu_s, mu_k, k, c, lbar.

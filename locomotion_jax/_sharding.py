@@ -65,9 +65,10 @@ def padded_size(n: int, n_devices: int, dtype: np.dtype) -> int:
     return -(-n // (n_devices * lanes)) * n_devices * lanes
 
 
-def batch_mesh() -> Mesh:
-    """A 1-D mesh over all devices, with the single axis `"batch"`."""
-    return Mesh(np.asarray(jax.devices()), (BATCH_AXIS,))
+def batch_mesh(local: bool = False) -> Mesh:
+    """A 1-D mesh with the single axis `"batch"`: over all devices, or with `local`
+    over this process's own (under `jax.distributed`, chunks computed by one process)."""
+    return Mesh(np.asarray(jax.local_devices() if local else jax.devices()), (BATCH_AXIS,))
 
 
 def device_count(mesh: Mesh) -> int:
@@ -126,7 +127,7 @@ def _global_array(host: np.ndarray, sharding: NamedSharding) -> jax.Array:
 
 
 def _to_host(x: jax.Array) -> np.ndarray:
-    if jax.process_count() == 1:
+    if x.is_fully_addressable:  # one process, or a mesh of this process's devices
         return np.asarray(x)
     from jax.experimental import multihost_utils
 
@@ -161,13 +162,38 @@ def dispatch_chunk(
 
     **Returns:** a dict of sharded arrays (one per `Measurement` field); read them with [`fetch`][].
     """
+    return _run_chunk(
+        *_chunk_args(values, dtype, z, horizon, window, dynamics, contact, start, max_steps, mesh, micro_batch)
+    )
+
+
+def chunk_dtypes(
+    values: Mapping[str, np.ndarray],
+    dtype: np.dtype,
+    z: float,
+    horizon: float,
+    window: float,
+    dynamics: AbstractDynamics,
+    contact: str,
+    start: str,
+    max_steps: int,
+    mesh: Mesh,
+    micro_batch: int | None = None,
+) -> dict[str, np.dtype]:
+    """The dtype of each output of [`dispatch_chunk`][] for the same arguments, computed
+    without running it (the trace is kept by `jax.jit`: the chunks do not trace again)."""
+    args = _chunk_args(values, dtype, z, horizon, window, dynamics, contact, start, max_steps, mesh, micro_batch)
+    return {k: np.dtype(v.dtype) for k, v in _run_chunk.eval_shape(*args).items()}
+
+
+def _chunk_args(values, dtype, z, horizon, window, dynamics, contact, start, max_steps, mesh, micro_batch) -> tuple:
     sharding = NamedSharding(mesh, P(BATCH_AXIS))
     fields = {n: _global_array(np.asarray(values[n], dtype), sharding) for n in PARAM_NAMES}
     flat = Params(**fields, check=False)
     zhw = jnp.asarray(np.asarray([z, horizon, window], dtype))
     if isinstance(dynamics, Smoothed):
         dynamics = eqx.tree_at(lambda d: d.eps, dynamics, jnp.asarray(dynamics.eps, dtype))
-    return _run_chunk(flat, zhw, dynamics, contact, start, max_steps, mesh, micro_batch or MICRO_BATCH or None)
+    return flat, zhw, dynamics, contact, start, max_steps, mesh, micro_batch or MICRO_BATCH or None
 
 
 def fetch(out: Mapping[str, jax.Array], n: int) -> dict[str, np.ndarray]:

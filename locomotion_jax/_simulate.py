@@ -143,6 +143,11 @@ def _trajectory(params, wave, wave_axes, contact, start, save_at, rows, valid, s
     )
 
 
+# One compiled computation rather than dozens of small ones run op by op: each of
+# those is a compilation (or a compilation-cache read) of its own in a new process.
+_trajectory = jax.jit(_trajectory, static_argnames=("wave_axes", "contact", "start"))
+
+
 def simulate(
     params: "Params | Chain",
     t_end: float,

@@ -12,11 +12,12 @@ Layout for `path = "maps/fig6.nc"`:
   every chunk is done; the parts directory is then removed. Its attribute
   `sweep_spec` holds the same specification, so a rerun can recognise it.
 
-Why `.npz` per chunk instead of one Zarr store: each chunk is written to a
-temporary name and renamed (`os.replace` is atomic on POSIX), so a crash or kill
-can never leave a half-written chunk that looks complete, and no new dependency
-or store-level locking is needed. A chunk is only ever written whole, which is
-exactly what npz offers; Zarr's partial-region writes would buy nothing here.
+Why `.npz` per chunk for NetCDF output: each chunk is written to a temporary name
+and renamed (`os.replace` is atomic on POSIX), so a crash or kill can never leave
+a half-written chunk that looks complete, and a chunk of configurations in any
+order (`order="cost"`) is stored as it was run. The NetCDF file is assembled in
+memory at the end, which suits small maps; large ones, and several processes
+writing at once, go to a Zarr store (`_zarr_store`).
 """
 
 import hashlib

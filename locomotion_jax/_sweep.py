@@ -13,10 +13,13 @@ ones busy. The results are put back in grid order, identical to a natural-order
 sweep; the permutation is stored with the chunks, so a resumed sweep cuts the
 same chunks.
 
-Under `jax.distributed` every process runs the same chunks (process 0's view of
-the finished ones is broadcast), each supplies and computes its own devices'
-shards, and process 0 alone writes; `path` must then be on a file system all
-processes see. (Written for multi-host, tested on one host with forced devices.)
+Under `jax.distributed`, with a Zarr store (`path="....zarr"`, `_zarr_sweep`), the
+processes share out the chunks: each computes whole chunks on its own devices and
+writes them into the store (tested with two processes on one host). With NetCDF
+output or none, every process runs the same chunks (process 0's view of the
+finished ones is broadcast), each supplies and computes its own devices' shards
+of each chunk, and process 0 alone writes. Either way `path` must be on a file
+system all processes see.
 """
 
 import functools
@@ -40,6 +43,7 @@ from ._params import _validity, DEFAULTS, PARAM_NAMES, Params, VALID_RANGES
 from ._results import Measurement
 from ._status import Regime, Status
 from ._store import ChunkStore, digest, read_finished
+from ._zarr_store import is_zarr
 
 
 RATIO = "omega_over_wn1"
@@ -52,7 +56,7 @@ MEASURE_FIELDS: tuple[str, ...] = tuple(
 
 STATS: Counter = Counter()
 """Host-side counters: `"chunks_computed"` (chunks sent to the devices),
-`"chunks_loaded"` (chunks read back from a partial store) and `"pilots"` (pilot
+`"chunks_loaded"` (chunks read back from a partial store, or found done in a Zarr store) and `"pilots"` (pilot
 runs for `order="cost"`). Used by the tests."""
 
 ORDERS: tuple[str, ...] = ("auto", "natural", "cost")
@@ -361,6 +365,15 @@ def sweep(
     computing; a different specification at the same path is an error unless
     `overwrite=True`.
 
+    A `path` ending in `.zarr` is a Zarr (v3) store instead (`_zarr_store`): every
+    array is created whole at the start and each chunk, a block of the grid, is
+    written into its region as it is done, so memory stays bounded by the chunk
+    whatever the size of the map. Several processes can fill one store at once:
+    under `jax.distributed` (or simply started on the same store) each process
+    computes whole chunks on its own devices, taking them in turn through a lock
+    per chunk, and returns when the store is complete (`_zarr_sweep`). The result is
+    the store opened lazily (`xarray.open_zarr`); chunks are cut in grid order.
+
     **Arguments:**
 
     - `axes`: parameter name -> 1-D values (names of `PARAM_NAMES`, or
@@ -371,7 +384,8 @@ def sweep(
     - `z`, `horizon`, `window`, `dynamics`, `contact`, `start`, `dtype`: as in [`measure`][]
       (`dtype` defaults to JAX's default float).
     - `chunk_size`: configurations per chunk (rounded up to a multiple of the device count).
-    - `path`: NetCDF file for the result (and resumable chunks); `None` keeps it in memory.
+    - `path`: NetCDF file (resumable through its parts directory) or Zarr store
+      (`.zarr`) for the result; `None` keeps it in memory.
     - `overwrite`: discard whatever is stored at `path` (finished or partial) and recompute.
     - `progress`: show a tqdm progress bar.
     - `on_invalid`: `"raise"` (default) rejects invalid configurations before any
@@ -381,8 +395,9 @@ def sweep(
       so that a chunk's loops do not wait for one slow configuration; `"auto"`
       (default) chooses (see [`resolve_order`][]). The results are identical; a
       resumed sweep keeps the order it was started in. Recorded in the attribute `order`.
+      A Zarr store is always cut in grid order (`"cost"` is refused there).
 
-    **Returns:** an `xarray.Dataset`: one dimension and coordinate per swept axis, one
+    **Returns:** an `xarray.Dataset` (read lazily from a Zarr store): one dimension and coordinate per swept axis, one
     variable per [`Measurement`][] field (plus `omega` when `omega_over_wn1` is swept),
     and attributes recording the fixed parameters, dynamics, dtype, contact, start,
     z, horizon, window, order, step cap, package version and the specification (`sweep_spec`, JSON).
@@ -427,6 +442,33 @@ def sweep(
         "dtype": dt.name,
         "on_invalid": on_invalid,
     }
+
+    if path is not None and is_zarr(path):
+        if order not in ORDERS:
+            resolve_order(order, dynamics, horizon, window, grid.size, 1)  # raises
+        if order == "cost":
+            raise ValueError(
+                "order='cost' is for NetCDF output or path=None: a Zarr store's chunks are blocks of the grid, "
+                "computed in grid order. Use order='natural' or 'auto'."
+            )
+        from ._zarr_sweep import sweep_to_zarr
+
+        return sweep_to_zarr(
+            grid,
+            spec,
+            Path(path).expanduser(),
+            int(chunk_size),
+            z=z,
+            horizon=horizon,
+            window=window,
+            dynamics=dynamics,
+            contact=contact,
+            start=start,
+            dtype=dt,
+            max_steps=_max_steps(grid, dynamics, horizon),
+            overwrite=overwrite,
+            progress=progress,
+        )
 
     mesh = sharding.batch_mesh()
     ndev = sharding.device_count(mesh)

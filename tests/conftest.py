@@ -1,10 +1,14 @@
 """Test configuration: float64 on, strict promotion off (the package mixes Python
-floats freely), rank promotion raises (catches silent broadcasting bugs)."""
+floats freely), rank promotion raises (catches silent broadcasting bugs), the
+CLI's compilation cache off."""
 
 import os
 
 
 os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
+# The CLI, called in-process by the tests, would otherwise turn on the persistent
+# compilation cache (a global setting) in ~/.cache for the rest of the session.
+os.environ.setdefault("LOCOMOTION_JAX_CACHE", "0")
 
 import jax
 

@@ -1,0 +1,121 @@
+"""Multi-process sweeps: processes under `jax.distributed` (127.0.0.1, one CPU device
+each) share out the chunks of one Zarr store; the result equals a one-process sweep
+bit for bit, and a sweep whose processes were killed is resumed by another process.
+
+The processes run `tests/distributed_sweep.py`; they share a compilation cache (so
+only the first one compiles), and the coordinator listens on a port free at run time.
+"""
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import locomotion_jax as lj
+import numpy as np
+import pytest
+import xarray as xr
+from distributed_sweep import AXES, SETTINGS
+
+
+HELPER = Path(__file__).with_name("distributed_sweep.py")
+N_CHUNKS = 8  # 8 x 4 configurations in chunks of 4 (rows of the grid)
+TIMEOUT = 240
+
+
+@pytest.fixture(scope="module")
+def reference():
+    """The same sweep in this process (in memory, NetCDF-style chunks, whatever its devices)."""
+    return lj.sweep(AXES, **SETTINGS)
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    # Under pytest-xdist the workers' temporary directories share a parent: share the cache too.
+    root = tmp_path_factory.getbasetemp()
+    path = (root.parent if os.environ.get("PYTEST_XDIST_WORKER") else root) / "jax_cache_distributed"
+    path.mkdir(exist_ok=True)
+    return path
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _start(store: Path, cache: Path, n: int = 1, die_after: dict[int, int] | None = None) -> list[subprocess.Popen]:
+    env = dict(os.environ, DISTRIBUTED_SWEEP_CACHE=str(cache))
+    env["PYTHONPATH"] = os.pathsep.join([str(HELPER.parents[1]), env.get("PYTHONPATH", "")])
+    port = _free_port()
+    procs = []
+    for p in range(n):
+        cmd = [sys.executable, str(HELPER), str(store), "--process-id", str(p), "--processes", str(n)]
+        cmd += ["--port", str(port)]
+        if die_after and p in die_after:
+            cmd += ["--die-after", str(die_after[p])]
+        procs.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env))
+    return procs
+
+
+def _wait(procs: list[subprocess.Popen]) -> list[tuple[int, str, str]]:
+    try:
+        outputs = [p.communicate(timeout=TIMEOUT) for p in procs]
+        return [(p.returncode, *o) for p, o in zip(procs, outputs)]
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+
+
+def _report(stdout: str) -> dict:
+    return json.loads(stdout.strip().splitlines()[-1])
+
+
+def _assert_same(store: Path, reference: xr.Dataset) -> None:
+    ds = xr.open_zarr(store, consolidated=True)  # as a user opens it
+    assert set(ds.data_vars) == set(reference.data_vars)
+    for name in reference.variables:
+        assert ds[name].dims == reference[name].dims, name
+        assert ds[name].dtype == reference[name].dtype, name
+        np.testing.assert_array_equal(ds[name].values, reference[name].values, err_msg=name)
+
+
+@pytest.mark.slow
+def test_two_processes_equal_one(tmp_path, cache, reference):
+    store = tmp_path / "map.zarr"
+    results = _wait(_start(store, cache, n=2))
+    for rc, out, err in results:
+        assert rc == 0, err[-3000:]
+    reports = sorted((_report(out) for _, out, _ in results), key=lambda r: r["process"])
+    assert [r["processes"] for r in reports] == [2, 2]
+    # Every chunk computed once, and each process computed some (process 1 starts
+    # with chunk 1; chunks free later go to whichever process is free).
+    assert sum(r["chunks_computed"] for r in reports) == N_CHUNKS
+    assert all(r["chunks_computed"] >= 1 and r["chunks_loaded"] == 0 for r in reports), reports
+    _assert_same(store, reference)
+
+
+@pytest.mark.slow
+def test_killed_processes_resume(tmp_path, cache, reference):
+    store = tmp_path / "map.zarr"
+    # Process 0 dies writing its third chunk, process 1 writing its second: each
+    # leaves half a chunk written, its lock file, and no completion mark. (When
+    # one dies, jax.distributed may abort the other first.)
+    results = _wait(_start(store, cache, n=2, die_after={0: 2, 1: 1}))
+    assert all(rc != 0 for rc, _, _ in results)
+    assert -signal.SIGKILL in [rc for rc, _, _ in results]
+    meta = store / ".locomotion_jax"
+    done = {p.name for p in (meta / "done").iterdir()}
+    stale = {p.name.removesuffix(".lock") for p in (meta / "claims").iterdir()} - done
+    assert 1 <= len(done) < N_CHUNKS and stale, (done, stale)
+    # A new process, outside the killed run, finishes exactly what is left.
+    [(rc, out, err)] = _wait(_start(store, cache, n=1))
+    assert rc == 0, err[-3000:]
+    report = _report(out)
+    assert report["chunks_loaded"] == len(done)
+    assert report["chunks_computed"] == N_CHUNKS - len(done)
+    _assert_same(store, reference)
