@@ -35,8 +35,9 @@ class Settings(eqx.Module):
     - `omega_range`: a free $\\omega$ stays within this factor of its starts.
     - `corrections`, `correction_outer`: exact-feedback rounds and their blocks.
     - `verify_horizon`, `verify_dt`: exact verification (after the paper's transient).
-    - `refine_baseline`: refine the best sinusoid of the sweep on a local grid
-      (`_pareto.refine_sinusoid`), so the optimum is compared with a well-resolved sinusoid.
+    - `refine_baseline`: refine the best sinusoids of the sweep by a zooming local grid
+      search (`_pareto.refine_sinusoid`: 3 levels, each 4x finer, to 1/64 of the coarse
+      grid's step), so the optimum is compared with a well-resolved sinusoid.
     - `seed`: for the random starts. `verbose`: print progress per block.
     """
 
