@@ -23,6 +23,7 @@ jax.config.update("jax_enable_x64", True)
 import locomotion_jax as lj  # noqa: E402
 import numpy as np  # noqa: E402
 from locomotion_jax import _optimise, _optimise_plots as plots, _pareto  # noqa: E402
+from locomotion_jax._constraints import stroke  # noqa: E402
 from locomotion_jax._optimum import Settings  # noqa: E402
 
 
@@ -61,13 +62,16 @@ def d0_study(settings):
         p = lj.Params(d=0.0, mhat=mhat)
         sweep = _pareto.sinusoid_sweep(p, A_MAX, omegas=_pareto.default_omegas(p, 16), amplitudes=3, horizon=HORIZON)
         vmax_sin = float(np.nanmax(np.abs(sweep.speed)))
-        # Saw-tooth (time-asymmetric, even harmonics) of both senses over the same frequencies.
+        # Saw-tooth (time-asymmetric, even harmonics) of both senses over the same frequencies,
+        # scaled so that its true stroke max_t |l0 - lbar| is a_max (`_constraints.stroke`: the
+        # maximum over a phase grid, polished by Newton; the shape (1, -1/2, 1/3) peaks at 1.4428).
         n = np.arange(1, 4)
-        saw = (-1.0) ** (n + 1) / n
+        shape = (-1.0) ** (n + 1) / n
+        saw = shape * A_MAX / float(stroke(np.zeros(3), shape))
         omegas = _pareto.default_omegas(p, 16)
-        res = {}
+        res = {"sawtooth_stroke": float(stroke(np.zeros(3), saw))}
         for sense in (1, -1):
-            waves = [lj.Fourier(np.zeros(3), sense * saw * A_MAX / 1.2, w, p.lbar) for w in omegas]
+            waves = [lj.Fourier(np.zeros(3), sense * saw, w, p.lbar) for w in omegas]
             batch = _pareto.stack_waveforms(waves)
             pb = lj.Params.grid(omega=np.asarray(omegas), d=0.0, mhat=mhat)
             fig = _pareto.exact_figures(pb, batch, HORIZON)
