@@ -24,6 +24,7 @@ import locomotion_jax as lj  # noqa: E402
 import numpy as np  # noqa: E402
 from locomotion_jax import _optimise, _optimise_plots as plots, _pareto  # noqa: E402
 from locomotion_jax._constraints import stroke  # noqa: E402
+from locomotion_jax._json import jsonable  # noqa: E402
 from locomotion_jax._optimum import Settings  # noqa: E402
 
 
@@ -98,7 +99,7 @@ def d0_study(settings):
                 }
                 print(f"\n=== d = 0, mhat = {mhat}, direction {direction:+d} ===\n{opt.summary()}", flush=True)
         out[f"mhat={mhat}"] = entry
-        print(f"d = 0, mhat = {mhat}: {json.dumps(entry)}", flush=True)
+        print(f"d = 0, mhat = {mhat}: {json.dumps(jsonable(entry))}", flush=True)
     return out
 
 
@@ -119,7 +120,7 @@ def main():
     t0 = time.perf_counter()
     if args.only_d0:
         d0 = d0_study(settings)
-        (OUT / "summary_d0.json").write_text(json.dumps(_jsonable(d0), indent=1))
+        (OUT / "summary_d0.json").write_text(json.dumps(jsonable(d0), indent=1))
         print(f"total {time.perf_counter() - t0:.0f} s")
         return
     sweep = _pareto.sinusoid_sweep(
@@ -132,7 +133,7 @@ def main():
     if not args.no_d0:
         summary["d0"] = d0_study(settings)
     summary["total_s"] = time.perf_counter() - t0
-    (OUT / "summary.json").write_text(json.dumps(_jsonable(summary), indent=1))
+    (OUT / "summary.json").write_text(json.dumps(jsonable(summary), indent=1))
     print("\nv_min | sinusoid CoT | optimised CoT (exact) | improvement | speed (exact) | wall s")
     for r in rows:
         print(
@@ -142,12 +143,6 @@ def main():
             f"{r['wall_s']:.0f}"
         )
     print(f"total {summary['total_s']:.0f} s")
-
-
-def _jsonable(x):
-    from locomotion_jax._optimum import _jsonable as j
-
-    return j(x)
 
 
 if __name__ == "__main__":
