@@ -183,8 +183,10 @@ def _results(f: _Fixed, dyn) -> dict:
     )
 
 
-def _exact_one(params, wave, z, horizon, window, contact, start, dt, max_steps, t_start):
-    """One configuration, in its own loop (under `vmap`: a loop of lanes that idle once done)."""
+def _exact_one(params, wave, z, horizon, window, contact, start, dt, max_steps, t_start=jnp.nan):
+    """One configuration, in its own loop (under `vmap`: a loop of lanes that idle once done).
+
+    `t_start`: the measurement's start, NaN for the paper's."""
     fixed, dyn = _setup(params, wave, z, horizon, window, contact, start, t_start)
     dyn = jax.lax.while_loop(lambda d: _running(fixed, d, max_steps), lambda d: _advance(fixed, d, contact, dt), dyn)
     return _results(fixed, dyn)
