@@ -42,7 +42,7 @@ def _key(case):
     return (cfg["m"].size, cfg["A"].shape[-1], cfg["friction"], cfg["actuator"], case["contact"], case["start"])
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _package_group(key) -> dict:
     """The package's measurements of every case with this structure, in one batched call."""
     names = [c["name"] for c in CASES if _key(c) == key]
