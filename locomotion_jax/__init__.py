@@ -48,6 +48,7 @@ _LAZY = {
     "save_gif": "_animation",
     # optax and the optimiser (~0.15 s), which a simulation or a sweep does not need
     "optimise": "_optimise",
+    "optimize": "_optimise",
     "best_sinusoid": "_pareto",
     "pareto_front": "_pareto",
     "sinusoid_sweep": "_pareto",

@@ -494,3 +494,7 @@ def _start_omegas(params, sweep, speed, direction, a_max, omega, settings: Setti
     # No sinusoid is fast enough: start where sinusoids are fastest.
     i = int(np.argmax(np.where(sweep.ok, v, -np.inf)))
     return [float(sweep.omega[i])]
+
+
+optimize = optimise
+"""The same function under its US spelling (the CLI's command is `optimize`)."""

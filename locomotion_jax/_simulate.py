@@ -15,14 +15,9 @@ from ._custom_types import Array, ArrayLike, Contact
 from ._dynamics import AbstractDynamics, Exact, Smoothed
 from ._params import Params
 from ._results import ChainTrajectory, Trajectory
-from ._status import Status
+from ._status import mode_code, Status
 from .model._chain import Chain
 from .run._chain import chain_dynamics, simulate_chain
-
-
-def mode_code(stuck1: Array, stuck2: Array) -> Array:
-    """Sect. 2.2 modes: 0 both stick, 1 both slip, 2 m1 slips, 3 m2 slips."""
-    return jnp.where(stuck1, jnp.where(stuck2, 0, 3), jnp.where(stuck2, 2, 1)).astype(jnp.int32)
 
 
 def derived_fields(params: Params, wave: AbstractWaveform, contact: Contact, t, y, stuck, sdir) -> dict:

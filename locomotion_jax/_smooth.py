@@ -23,7 +23,7 @@ from ._batch import safe_params
 from ._custom_types import Array, Contact
 from ._dynamics import Smoothed
 from ._params import Params
-from ._status import Regime, Status
+from ._status import mode_code, Regime, Status
 
 
 STICK_SPEED = 3.0  # in units of eps
@@ -142,7 +142,6 @@ def simulate_one(params, wave, save, contact, start, dyn):
     if contact == "paper":
         lifted = (der["N1"] <= 0) | (der["N2"] <= 0)
         t_lift = jnp.where(jnp.any(lifted), save[jnp.argmax(lifted)], jnp.inf)
-    from ._simulate import mode_code
 
     mode = mode_code(der.pop("stuck1"), der.pop("stuck2"))
     return dict(

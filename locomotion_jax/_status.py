@@ -8,6 +8,10 @@ exported as labelled arrays (xarray/NetCDF), where integers travel unchanged.
 
 import enum
 
+import jax.numpy as jnp
+
+from ._custom_types import Array
+
 
 class Status(enum.IntEnum):
     """Outcome of one simulated configuration.
@@ -50,3 +54,8 @@ class Mode(enum.IntEnum):
     BOTH_SLIP = 1
     M1_SLIPS = 2
     M2_SLIPS = 3
+
+
+def mode_code(stuck1: Array, stuck2: Array) -> Array:
+    """Sect. 2.2 modes: 0 both stick, 1 both slip, 2 m1 slips, 3 m2 slips."""
+    return jnp.where(stuck1, jnp.where(stuck2, 0, 3), jnp.where(stuck2, 2, 1)).astype(jnp.int32)

@@ -124,33 +124,51 @@ class AnisotropicCoulomb(AbstractFriction):
 class Stribeck(AbstractFriction):
     """Coulomb friction whose kinetic coefficient falls with speed (Stribeck effect).
 
-    $$\\mu_k(|v|) = \\mu_k + (\\mu_s - \\mu_k)\\, e^{-(|v|/v_s)^2},$$
+    $$\mu_k(|v|) = \mu_k + (\mu_s - \mu_k)\, e^{-(|v|/v_s)^2},$$
 
     so a mass that has just broken away feels the static coefficient, and the
-    kinetic one is approached above the Stribeck speed $v_s$. Static limit $\\mu_s$
-    (isotropic).
+    kinetic one is approached above the Stribeck speed $v_s$. Optionally anisotropic:
+    backward motion uses `mu_s_bwd`, `mu_k_bwd` in the same formula (default: the forward ones).
 
-    **Arguments:** `mu_s`, `mu_k` ($\\mu_s \\ge \\mu_k \\ge 0$) and `v_s > 0`, scalars or per mass.
+    **Arguments:** `mu_s`, `mu_k` ($\mu_s \ge \mu_k \ge 0$), `v_s > 0`, and optionally `mu_s_bwd`,
+    `mu_k_bwd`; scalars or per mass.
     """
 
     mu_s: Array
     mu_k: Array
     v_s: Array
+    mu_s_bwd: Array
+    mu_k_bwd: Array
 
-    def __init__(self, mu_s: ValuesLike = 0.7, mu_k: ValuesLike = 0.5, v_s: ValuesLike = 0.1):
+    def __init__(
+        self,
+        mu_s: ValuesLike = 0.7,
+        mu_k: ValuesLike = 0.5,
+        v_s: ValuesLike = 0.1,
+        *,
+        mu_s_bwd: ValuesLike | None = None,
+        mu_k_bwd: ValuesLike | None = None,
+    ):
         self.mu_s = _arr(mu_s)
         self.mu_k = _arr(mu_k)
         self.v_s = _arr(v_s)
+        self.mu_s_bwd = self.mu_s if mu_s_bwd is None else _arr(mu_s_bwd)
+        self.mu_k_bwd = self.mu_k if mu_k_bwd is None else _arr(mu_k_bwd)
 
     def static_limits(self) -> tuple[Array, Array]:
-        return self.mu_s, self.mu_s
+        return self.mu_s, self.mu_s_bwd
 
     def kinetic(self, speed: Array, direction: Array) -> Array:
+        fwd = direction > 0
+        mu_s = jnp.where(fwd, self.mu_s, self.mu_s_bwd)
+        mu_k = jnp.where(fwd, self.mu_k, self.mu_k_bwd)
         r = speed / self.v_s
-        return self.mu_k + (self.mu_s - self.mu_k) * jnp.exp(-r * r)
+        return mu_k + (mu_s - mu_k) * jnp.exp(-r * r)
 
     def validity(self) -> dict[str, Array]:
-        return {"mu_s": self.mu_s >= self.mu_k, "mu_k": self.mu_k >= 0, "v_s": self.v_s > 0}
+        return {"mu_s": self.mu_s >= self.mu_k, "mu_k": self.mu_k >= 0, "v_s": self.v_s > 0,
+                "mu_s_bwd": self.mu_s_bwd >= self.mu_k_bwd, "mu_k_bwd": self.mu_k_bwd >= 0}  # fmt: skip
 
     def valid_ranges(self) -> dict[str, str]:
-        return {"mu_s": "mu_s >= mu_k", "mu_k": "mu_k >= 0", "v_s": "v_s > 0"}
+        return {"mu_s": "mu_s >= mu_k", "mu_k": "mu_k >= 0", "v_s": "v_s > 0", "mu_s_bwd": "mu_s_bwd >= mu_k_bwd",
+                "mu_k_bwd": "mu_k_bwd >= 0"}  # fmt: skip

@@ -1,0 +1,88 @@
+"""The N-mass exact engine against the independent N-mass reference (`tests/reference_chain.py`,
+an event-driven scipy solver sharing no code with the package) on the cases of `tests/chain_cases.py`:
+chains of 3, 4 and 6 masses, travelling waves both ways, isotropic, anisotropic and Stribeck
+friction, rest-length and internal-force actuators, d = 0 and d != 0, SSL and SL.
+
+The package runs the cases in batches (one compilation per chain structure); the reference runs
+live, one case per test, so the work is shared between pytest-xdist workers.
+"""
+
+import functools
+
+import locomotion_jax as lj
+import numpy as np
+import pytest
+from chain_cases import CASES, HORIZON, Z
+from reference_chain import chain_config, reference_chain_measure
+
+
+RTOL = 1e-3
+"""tau_5 and e_5 (or the mean speed where 5 is not reached): float64, dt = 0.01."""
+
+
+def to_chain(cfg: dict) -> lj.Chain:
+    """A reference configuration as the package's `Chain` (written from the conventions, not shared)."""
+    aniso = not (np.array_equal(cfg["mu_s_fwd"], cfg["mu_s_bwd"]) and np.array_equal(cfg["mu_k_fwd"], cfg["mu_k_bwd"]))
+    if cfg["friction"] == "stribeck":
+        friction = lj.Stribeck(cfg["mu_s_fwd"], cfg["mu_k_fwd"], cfg["v_s"], mu_s_bwd=cfg["mu_s_bwd"],
+                               mu_k_bwd=cfg["mu_k_bwd"])  # fmt: skip
+    elif aniso:
+        friction = lj.AnisotropicCoulomb(cfg["mu_s_fwd"], cfg["mu_s_bwd"], cfg["mu_k_fwd"], cfg["mu_k_bwd"])
+    else:
+        friction = lj.Coulomb(cfg["mu_s_fwd"], cfg["mu_k_fwd"])
+    return lj.Chain(
+        masses=cfg["m"], k=cfg["k"], d=cfg["d"], lbar=cfg["lbar"], c=cfg["c"],
+        waveforms=lj.SpringFourier(cfg["A"], cfg["B"], cfg["omega"]), friction=friction,
+        actuator=lj.InternalForce() if cfg["actuator"] == "force" else lj.RestLength(),
+    )  # fmt: skip
+
+
+def _key(case):
+    cfg = chain_config(**case["config"])
+    return (cfg["m"].size, cfg["A"].shape[-1], cfg["friction"], cfg["actuator"], case["contact"], case["start"])
+
+
+@functools.cache
+def _package_group(key) -> dict:
+    """The package's measurements of every case with this structure, in one batched call."""
+    names = [c["name"] for c in CASES if _key(c) == key]
+    chains = [to_chain(chain_config(**c["config"])) for c in CASES if _key(c) == key]
+    kinds = {type(ch.friction) for ch in chains}
+    out = {}
+    for kind in kinds:  # one call per friction class (a batch shares one pytree structure)
+        sel = [i for i, ch in enumerate(chains) if type(ch.friction) is kind]
+        m = lj.measure(lj.Chain.stack([chains[i] for i in sel]), z=Z, horizon=HORIZON, contact=key[4], start=key[5])
+        for j, i in enumerate(sel):
+            out[names[i]] = {k: np.asarray(v)[j] for k, v in m.to_numpy().items()}
+    return out
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c["name"] for c in CASES])
+def test_chain_against_reference(case):
+    cfg = chain_config(**case["config"])
+    ref = reference_chain_measure(cfg, z=Z, horizon=HORIZON, contact=case["contact"], start=case["start"])
+    got = _package_group(_key(case))[case["name"]]
+    assert int(got["status"]) == lj.Status.OK and not ref["liftoff"]
+    assert bool(got["reached"]) == bool(ref["reached"])
+    np.testing.assert_allclose(got["t_start"], ref["t_start"], rtol=1e-12)
+    if ref["reached"]:
+        np.testing.assert_allclose(got["tau_z"], ref["tau_z"], rtol=RTOL)
+        np.testing.assert_allclose(got["e_z"], ref["e_z"], rtol=RTOL)
+    else:
+        np.testing.assert_allclose(got["mean_speed"], ref["mean_speed"], rtol=RTOL)
+    assert int(got["regime"]) == (lj.Regime.SSL if ref["regime"] == "SSL" else lj.Regime.SL)
+    np.testing.assert_allclose(got["stick_fraction"], ref["stick_fraction"], atol=5e-3)
+    # The energy balance (eq. 16 generalised) of the package's run.
+    assert abs(float(got["balance"])) < 1e-6 * max(1.0, float(got["e_d"]))
+
+
+def test_cases_cover_what_they_claim():
+    """At least 15 Coulomb cases over N = 3, 4, 6, both wave directions, d = 0 and d != 0, both
+    friction kinds; three force-actuator and three Stribeck cases."""
+    cfgs = [(c, chain_config(**c["config"])) for c in CASES]
+    coulomb = [(c, g) for c, g in cfgs if g["friction"] == "coulomb" and g["actuator"] == "length"]
+    assert len(coulomb) >= 12 and len(cfgs) >= 18
+    assert {g["m"].size for _, g in coulomb} >= {3, 4, 6}
+    assert any(np.all(g["d"] == 0) for _, g in coulomb) and any(np.any(g["d"] != 0) for _, g in coulomb)
+    assert sum(g["actuator"] == "force" for _, g in cfgs) >= 3
+    assert sum(g["friction"] == "stribeck" for _, g in cfgs) >= 3
