@@ -19,7 +19,7 @@ and compile time are per case):
   time, peak memory and the size of the results;
 - 256 x 256 and 2048 x 2048 regime maps written into a Zarr store (`ZARR_MAP`
   settings; 64 and 128 with `--quick`): wall and CPU time, peak memory, store size.
-  Alone: `python benchmarks/run.py --skip exact,sharded,smoothed,scipy,accuracy,schedule,map --out /tmp/zarr.md`.
+  Alone: `python benchmarks/run.py --skip exact,sharded,smoothed,scipy,accuracy,schedule,map,chain --out /tmp/zarr.md`.
 
 Timings are medians of several runs after a warm-up (`block_until_ready`).
 Throughput is configurations x simulated time units per second ("cfg-tu/s"), by
@@ -598,6 +598,41 @@ def case_zarr_map(spec: dict) -> dict:
     return result
 
 
+def case_chain(spec: dict) -> dict:
+    """`measure` on a batch of N-mass chains (the N-mass engine): travelling waves on the
+    benchmark's (omega, a) configurations, N masses of 1, the paper's spring and friction."""
+    jax = setup_jax()
+    import jax.numpy as jnp
+    import locomotion_jax as lj
+    import numpy as np
+
+    om, a = configs(spec["B"])
+    n = spec["N"]
+    dtype = jnp.float32 if spec["dtype"] == "float32" else jnp.float64
+    if spec.get("params"):  # the two-mass model on its own engine, for comparison
+        mech = lj.Params(omega=om, a=a).astype(dtype)
+    else:
+        phi = np.linspace(0, np.pi, om.size)
+        waves = lj.SpringFourier(
+            -a[:, None, None] * np.sin(phi[:, None, None] * np.arange(n - 1)[None, :, None]),
+            a[:, None, None] * np.cos(phi[:, None, None] * np.arange(n - 1)[None, :, None]),
+            om,
+        )
+        mech = lj.Chain(masses=np.ones((om.size, n)), waveforms=waves, friction=lj.Coulomb(0.7, 0.5)).astype(dtype)
+    t_start = np.full(om.size, 80.0)
+    clock = CompileClock()
+    dyn = lj.Exact(dt=spec["dt"])
+    run = lambda: lj.measure(
+        mech, z=1e30, horizon=spec["horizon"], window=min(25.0, spec["horizon"]), t_start=t_start, dynamics=dyn,
+        contact="paper",
+    ).e_d  # fmt: skip
+    first, walls, cpus, _ = timed(run, spec["repeats"])
+    return dict(
+        spec, first=first, compile=clock.total, wall=statistics.median(walls), cpu=statistics.median(cpus),
+        t_sim=80.0 + spec["horizon"], rss=maxrss_mb(), platform=jax.devices()[0].platform,
+    )  # fmt: skip
+
+
 CASES = dict(
     exact=case_exact,
     sharded=case_sharded,
@@ -607,6 +642,7 @@ CASES = dict(
     schedule=case_schedule,
     map=case_map,
     zarr_map=case_zarr_map,
+    chain=case_chain,
 )
 
 
@@ -795,6 +831,15 @@ def main():
                 f"zarr map {n} x {n}: "
                 + (r.get("error") or f"{r['wall']:.1f} s, {r['rss']:.0f} MB, {r['store_mb']:.0f} MB")
             )
+
+    if "chain" not in skip:
+        B = 64 if q else 1024
+        for n, params in ((2, True), (2, False), (4, False), (8, False)):
+            spec = dict(kind="chain", N=n, params=params, B=B, dtype="float64", dt=dt, horizon=H, repeats=2)
+            r = spawn(spec)
+            results["chain"].append(r)
+            rate = r["B"] * r["t_sim"] / r["wall"] if "wall" in r else 0.0
+            log(f"chain N={n}{' (Params engine)' if params else ''}: " + (r.get("error") or f"{rate:,.0f} cfg-tu/s"))
 
     meta = dict(
         machine=machine(),
@@ -1255,6 +1300,27 @@ def report(res: dict, meta: dict) -> str:
                 f"{r['store_mb']:.1f} ({r['n_files']:,}) | {g['SSL']:,} / {g['SL']:,} / {g['UNDETERMINED']:,} |"
             )
         L.append("")
+    chains = [r for r in res.get("chain", []) if "error" not in r]
+    if chains:
+        L.append("## Chains of N masses")
+        L.append("")
+        L.append(
+            "`measure` on batches of N-mass chains (`lj.Chain`, the N-mass engine; travelling waves, unit masses, "
+            "the paper's spring and friction, t_start = 80), against the two-mass model on its own engine. "
+            "*per mass* divides the rate by N."
+        )
+        L.append("")
+        L.append("| mechanism | N | batch | compile s | run s wall | cfg-tu/s wall | per CPU-s | per mass (wall) |")
+        L.append("|---|---|---|---|---|---|---|---|")
+        for r in chains:
+            w, c = r["B"] * r["t_sim"] / r["wall"], r["B"] * r["t_sim"] / r["cpu"]
+            name = "Params (two-mass engine)" if r.get("params") else "Chain (N-mass engine)"
+            L.append(
+                f"| {name} | {r['N']} | {r['B']} | {r['compile']:.1f} | {r['wall']:.3g} | {fmt(w)} | {fmt(c)} | "
+                f"{fmt(w / r['N'])} |"
+            )
+        L.append("")
+
     if base:
         L.append("## Baseline detail")
         L.append("")

@@ -23,6 +23,8 @@ jax.config.update("jax_enable_x64", True)
 import locomotion_jax as lj  # noqa: E402
 import numpy as np  # noqa: E402
 from locomotion_jax import _optimise, _optimise_plots as plots, _pareto  # noqa: E402
+from locomotion_jax._constraints import stroke  # noqa: E402
+from locomotion_jax._json import jsonable  # noqa: E402
 from locomotion_jax._optimum import Settings  # noqa: E402
 
 
@@ -61,13 +63,16 @@ def d0_study(settings):
         p = lj.Params(d=0.0, mhat=mhat)
         sweep = _pareto.sinusoid_sweep(p, A_MAX, omegas=_pareto.default_omegas(p, 16), amplitudes=3, horizon=HORIZON)
         vmax_sin = float(np.nanmax(np.abs(sweep.speed)))
-        # Saw-tooth (time-asymmetric, even harmonics) of both senses over the same frequencies.
+        # Saw-tooth (time-asymmetric, even harmonics) of both senses over the same frequencies,
+        # scaled so that its true stroke max_t |l0 - lbar| is a_max (`_constraints.stroke`: the
+        # maximum over a phase grid, polished by Newton; the shape (1, -1/2, 1/3) peaks at 1.4428).
         n = np.arange(1, 4)
-        saw = (-1.0) ** (n + 1) / n
+        shape = (-1.0) ** (n + 1) / n
+        saw = shape * A_MAX / float(stroke(np.zeros(3), shape))
         omegas = _pareto.default_omegas(p, 16)
-        res = {}
+        res = {"sawtooth_stroke": float(stroke(np.zeros(3), saw))}
         for sense in (1, -1):
-            waves = [lj.Fourier(np.zeros(3), sense * saw * A_MAX / 1.2, w, p.lbar) for w in omegas]
+            waves = [lj.Fourier(np.zeros(3), sense * saw, w, p.lbar) for w in omegas]
             batch = _pareto.stack_waveforms(waves)
             pb = lj.Params.grid(omega=np.asarray(omegas), d=0.0, mhat=mhat)
             fig = _pareto.exact_figures(pb, batch, HORIZON)
@@ -94,7 +99,7 @@ def d0_study(settings):
                 }
                 print(f"\n=== d = 0, mhat = {mhat}, direction {direction:+d} ===\n{opt.summary()}", flush=True)
         out[f"mhat={mhat}"] = entry
-        print(f"d = 0, mhat = {mhat}: {json.dumps(entry)}", flush=True)
+        print(f"d = 0, mhat = {mhat}: {json.dumps(jsonable(entry))}", flush=True)
     return out
 
 
@@ -115,7 +120,7 @@ def main():
     t0 = time.perf_counter()
     if args.only_d0:
         d0 = d0_study(settings)
-        (OUT / "summary_d0.json").write_text(json.dumps(_jsonable(d0), indent=1))
+        (OUT / "summary_d0.json").write_text(json.dumps(jsonable(d0), indent=1))
         print(f"total {time.perf_counter() - t0:.0f} s")
         return
     sweep = _pareto.sinusoid_sweep(
@@ -128,7 +133,7 @@ def main():
     if not args.no_d0:
         summary["d0"] = d0_study(settings)
     summary["total_s"] = time.perf_counter() - t0
-    (OUT / "summary.json").write_text(json.dumps(_jsonable(summary), indent=1))
+    (OUT / "summary.json").write_text(json.dumps(jsonable(summary), indent=1))
     print("\nv_min | sinusoid CoT | optimised CoT (exact) | improvement | speed (exact) | wall s")
     for r in rows:
         print(
@@ -138,12 +143,6 @@ def main():
             f"{r['wall_s']:.0f}"
         )
     print(f"total {summary['total_s']:.0f} s")
-
-
-def _jsonable(x):
-    from locomotion_jax._optimum import _jsonable as j
-
-    return j(x)
 
 
 if __name__ == "__main__":

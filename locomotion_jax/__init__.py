@@ -1,4 +1,4 @@
-"""locomotion_jax: friction-driven (stick-slip) two-mass locomotion in JAX.
+"""locomotion_jax: friction-driven (stick-slip) locomotion in JAX: the two-mass model and chains of N masses.
 
 The model of X. Zhou, C. Majidi, O. M. O'Reilly, "Energy efficiency in
 friction-based locomotion mechanisms for soft and hard robots: slower can be
@@ -13,10 +13,27 @@ from ._dynamics import AbstractDynamics as AbstractDynamics, Exact as Exact, Smo
 from ._measure import measure as measure
 from ._optimum import OptimiseSettings as OptimiseSettings, Optimum as Optimum
 from ._params import DEFAULTS as DEFAULTS, PARAM_NAMES as PARAM_NAMES, Params as Params, VALID_RANGES as VALID_RANGES
-from ._results import Measurement as Measurement, Trajectory as Trajectory
+from ._results import (
+    ChainMeasurement as ChainMeasurement,
+    ChainTrajectory as ChainTrajectory,
+    Measurement as Measurement,
+    Trajectory as Trajectory,
+)
 from ._simulate import simulate as simulate
 from ._status import Mode as Mode, Regime as Regime, Status as Status
 from ._sweep import sweep as sweep
+from .model import (
+    AbstractActuator as AbstractActuator,
+    AbstractFriction as AbstractFriction,
+    AnisotropicCoulomb as AnisotropicCoulomb,
+    Chain as Chain,
+    Coulomb as Coulomb,
+    InternalForce as InternalForce,
+    RestLength as RestLength,
+    SpringFourier as SpringFourier,
+    Stribeck as Stribeck,
+    TravellingWave as TravellingWave,
+)
 
 
 try:

@@ -1,24 +1,25 @@
-"""The `locomotion-jax` command line: simulate, sweep, figures (and optimize, when installed).
+"""The `locomotion-jax` command line: simulate, sweep, figures, and the plug-in commands of [`PLUGINS`][].
 
 Heavy imports (the package's numerics, matplotlib, xarray) happen inside the
 commands, so `--help` is quick and `--x64` takes effect before any array exists.
 
 Errors in the arguments end with `Error: ...` on stderr and exit code 2, never a traceback.
+JSON output (`--json`) encodes every non-finite number as `null` (`_json.py`).
 """
 
 import functools
 import importlib
-import json
 import math
 import os
 import sys
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Literal
 
 import numpy as np
 import typer
 
 from ._cli_options import axis_options, expand, MODEL_NAMES, model_options, run_options, to_params, Values
+from ._json import dumps
 
 
 FIGURES: tuple[str, ...] = ("4b", "5", "6", "7", "8", "9", "10", "12")
@@ -111,17 +112,6 @@ def _global(
             typer.echo(f"Warning: {err} Running without the compilation cache.", err=True)
 
 
-def _json_value(x: Any) -> Any:
-    """JSON has no NaN/inf: NaN -> null (not computable), +-inf -> "inf"/"-inf" (e.g. never reached)."""
-    x = np.asarray(x).item()
-    if isinstance(x, float):
-        if math.isnan(x):
-            return None
-        if math.isinf(x):
-            return "inf" if x > 0 else "-inf"
-    return x
-
-
 def _plot(traj, path: Path, title: str) -> None:
     from matplotlib.figure import Figure  # no pyplot: no global backend state
 
@@ -158,16 +148,16 @@ def simulate(
     model: Values,
     t_end: Annotated[float, typer.Option(help="End time of the plotted trajectory.")] = 20.0,
     run: Values,
-    out: Annotated[Path, typer.Option(help="Directory for the PNG plot.")] = Path("."),
-    plot: Annotated[bool, typer.Option(help="Save the plot of x1, x2, v1, v2 and the mode.")] = True,
+    out: Annotated[Path | None, typer.Option(help="Directory for the PNG plot; without it nothing is written.")] = None,
+    plot: Annotated[bool, typer.Option(help="With --out, save the plot of x1, x2, v1, v2 and the mode.")] = True,
     as_json: Annotated[bool, typer.Option("--json", help="Print the measurements as one JSON object.")] = False,
 ) -> None:
-    """Simulate one configuration: print its measurements and plot x1, x2, v1, v2, mode vs time.
+    """Simulate one configuration: print its measurements; with --out, plot x1, x2, v1, v2, mode vs time.
 
     With --json, stdout is one JSON object: every Measurement field, `regime_name`,
     `status_name`, the parameters and settings, and `plot` (the PNG path or null).
-    NaN (not computable) is encoded as null, +inf/-inf (e.g. tau_z never reached) as
-    the strings "inf"/"-inf".
+    Non-finite numbers are null: NaN (not computable) and inf (tau_z and e_z when z is
+    not reached, t_liftoff without lift-off; `reached` and `liftoff` say which).
     """
     from . import Exact, measure, PARAM_NAMES, Regime, simulate as simulate_fn, Status
 
@@ -177,6 +167,7 @@ def simulate(
         values["omega"] = float(params.omega)
     omega, a, d, mhat = values["omega"], values["a"], values["d"], values["mhat"]
     exact = dict(dynamics=Exact(dt=run["dt"]), contact=run["contact"], start=run["start"])
+    plot = plot and out is not None
     if plot and t_end <= 0:
         raise ValueError(f"--t-end must be > 0, got {t_end!r}.")
     png = None
@@ -190,13 +181,13 @@ def simulate(
         traj = simulate_fn(params, t_end, np.linspace(0.0, t_end, 2001), **exact)
         png = out / f"simulate_omega{omega:.4g}_a{a:.4g}_d{d:.4g}.png"
         _plot(traj, png, f"omega = {omega:.4g}, a = {a:.4g}, d = {d:.4g}, mhat = {mhat:.4g}")
-    fields = {name: _json_value(v) for name, v in m.to_numpy().items()}
+    fields = {name: np.asarray(v).item() for name, v in m.to_numpy().items()}
     fields["regime_name"] = Regime(int(m.regime)).name
     fields["status_name"] = Status(int(m.status)).name
     settings = {n: run[n] for n in ("z", "horizon", "window", "contact", "start", "dt")}  # in the order printed
     if as_json:
         record = {**fields, "params": values, **settings, "plot": None if png is None else str(png)}
-        typer.echo(json.dumps(record))
+        typer.echo(dumps(record))
         return
     typer.echo("parameters: " + ", ".join(f"{n}={v:g}" for n, v in values.items()))
     typer.echo("settings:   " + ", ".join(f"{n}={v}" for n, v in settings.items()))
@@ -346,7 +337,8 @@ def figures(
 
 
 PLUGINS: tuple[str, ...] = ("locomotion_jax._optimise_cli", "locomotion_jax._animate_cli")
-"""Modules that add a subcommand (`optimize`, `animate`) through `register(app)`, when installed."""
+"""Modules that add a subcommand (`optimize`, `animate`) through `register(app)`; [`_register_optional`][]
+skips one whose module is absent."""
 
 
 def _register_optional(app: typer.Typer, modules: tuple[str, ...] = PLUGINS) -> None:

@@ -1,5 +1,6 @@
 """Type aliases shared across the package (jaxtyping, as in diffrax)."""
 
+from collections.abc import Sequence
 from typing import Literal, TypeAlias
 
 import numpy as np
@@ -13,6 +14,9 @@ IntScalar: TypeAlias = Int[Array, ""]
 State6: TypeAlias = Float[Array, "6"]
 """Hybrid-integrator state `(x1, v1, x2, v2, e_d, w)`: positions, velocities, and
 the running dissipated energy (eq. 15) and actuator work (eq. 16)."""
+
+ValuesLike: TypeAlias = ArrayLike | Sequence[float] | Sequence[Sequence[float]]
+"""Per-mass or per-spring values: a scalar, an array, or a (nested) list of numbers."""
 
 Contact: TypeAlias = Literal["strict", "paper"]
 """Normal-force reading: `"strict"` uses the signed $N_i$ of eq. (5) and stops at
@@ -35,5 +39,6 @@ __all__ = [
     "RealScalarLike",
     "Start",
     "State6",
+    "ValuesLike",
     "np",
 ]

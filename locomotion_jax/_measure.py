@@ -17,11 +17,14 @@ from . import _exact as exact, _model as model
 from ._actuation import AbstractWaveform
 from ._batch import default_max_steps, horizon_bound, MICRO_BATCH_CPU, prepare, safe_params, unflatten
 from ._compile import engine_jit
+from ._custom_types import ArrayLike
 from ._dynamics import AbstractDynamics, Exact, Smoothed
 from ._params import Params
 from ._queue import run_queue
-from ._results import Measurement
+from ._results import ChainMeasurement, Measurement
 from ._status import Regime, Status
+from .model._chain import Chain
+from .run._chain import chain_dynamics, measure_chain
 
 
 STICK_TOL = 1e-6
@@ -59,14 +62,16 @@ class _Fixed(NamedTuple):
     z: jax.Array
 
 
-def _setup(params, wave, z, horizon, window, contact, start):
-    """`(fixed, dyn)` of one configuration: its constants, and the loop state `(Hybrid, _Acc)`."""
+def _setup(params, wave, z, horizon, window, contact, start, t_start):
+    """`(fixed, dyn)` of one configuration: its constants, and the loop state `(Hybrid, _Acc)`.
+
+    `t_start` is the measurement's start, or NaN for the paper's (`Params.t_start`)."""
     params, valid = safe_params(params)
     dtype = params.dtype
     P = exact.consts(params, wave)
     st = exact.init(params, wave, contact, jnp.zeros((), dtype), model.initial_gap(params, start))
     st = eqx.tree_at(lambda s: s.status, st, jnp.where(valid, st.status, Status.INVALID).astype(jnp.int32))
-    ws = params.t_start.astype(dtype)
+    ws = jnp.where(jnp.isnan(t_start), params.t_start, t_start).astype(dtype)
     zero = jnp.zeros((), dtype)
     no = jnp.asarray(False)
     acc = _Acc(
@@ -178,15 +183,26 @@ def _results(f: _Fixed, dyn) -> dict:
     )
 
 
-def _exact_one(params, wave, z, horizon, window, contact, start, dt, max_steps):
+def _exact_one(params, wave, z, horizon, window, contact, start, dt, max_steps, t_start):
     """One configuration, in its own loop (under `vmap`: a loop of lanes that idle once done)."""
-    fixed, dyn = _setup(params, wave, z, horizon, window, contact, start)
+    fixed, dyn = _setup(params, wave, z, horizon, window, contact, start, t_start)
     dyn = jax.lax.while_loop(lambda d: _running(fixed, d, max_steps), lambda d: _advance(fixed, d, contact, dt), dyn)
     return _results(fixed, dyn)
 
 
 def exact_batch(
-    params, wave, wave_axes, z, horizon, window, contact, start, dt, max_steps, lanes: int | None = None
+    params,
+    wave,
+    wave_axes,
+    z,
+    horizon,
+    window,
+    contact,
+    start,
+    dt,
+    max_steps,
+    lanes: int | None = None,
+    t_start: jax.Array | None = None,
 ) -> dict[str, jax.Array]:
     """`measure` on a flat batch (not jitted): a work queue over `lanes` lanes ([`_queue.run_queue`][]).
 
@@ -194,16 +210,19 @@ def exact_batch(
     threads and run slower, benchmarks/NOTES.md), else the whole batch in one `vmap`.
     The queue takes the highest frequencies (most mode switches per time unit) first,
     so that the last configurations, run while lanes run out of work, are short.
+    `t_start`: per-configuration measurement starts (NaN: the paper's), default all the paper's.
     """
     n = params.omega.shape[0]
+    if t_start is None:
+        t_start = jnp.full((n,), jnp.nan, params.dtype)
     if lanes is None:
         lanes = MICRO_BATCH_CPU if jax.default_backend() == "cpu" else n
     if lanes >= n:
-        fn = lambda p, w: _exact_one(p, w, z, horizon, window, contact, start, dt, max_steps)
-        return jax.vmap(fn, in_axes=(0, wave_axes))(params, wave)
+        fn = lambda p, w, ts: _exact_one(p, w, z, horizon, window, contact, start, dt, max_steps, ts)
+        return jax.vmap(fn, in_axes=(0, wave_axes, 0))(params, wave, t_start)
     take = lambda i: jax.tree_util.tree_map(lambda x: x[i], params)
     pick_wave = (lambda i: wave) if wave_axes is None else (lambda i: jax.tree_util.tree_map(lambda x: x[i], wave))
-    setup = lambda i: _setup(take(i), pick_wave(i), z, horizon, window, contact, start)
+    setup = lambda i: _setup(take(i), pick_wave(i), z, horizon, window, contact, start, t_start[i])
     running = lambda f, d: _running(f, d, max_steps)
     advance = lambda f, d: _advance(f, d, contact, dt)
     order = jnp.argsort(-jnp.where(jnp.isfinite(params.omega), params.omega, -jnp.inf))
@@ -213,6 +232,16 @@ def exact_batch(
 _exact_batch = engine_jit(exact_batch, ("wave_axes", "contact", "start", "dt", "lanes"))
 
 
+def _start_times(t_start: ArrayLike | None, shape: tuple[int, ...], dtype: Any) -> jax.Array | None:
+    """Explicit measurement starts, broadcast to the batch and flattened (`None`: the paper's)."""
+    if t_start is None:
+        return None
+    ts = np.broadcast_to(np.asarray(t_start, float), shape)
+    if not np.all(np.isfinite(ts)) or np.any(ts < 0):
+        raise ValueError(f"t_start must be finite and >= 0, got {t_start!r}.")
+    return jnp.asarray(ts.reshape((-1,)), dtype)
+
+
 def check_measure_args(z: float, horizon: float, window: float) -> None:
     for name, value in (("z", z), ("horizon", horizon), ("window", window)):
         if not (np.isfinite(value) and value > 0):
@@ -220,17 +249,18 @@ def check_measure_args(z: float, horizon: float, window: float) -> None:
 
 
 def measure(
-    params: Params,
+    params: "Params | Chain",
     z: float = 5.0,
     *,
     horizon: float = 2000.0,
     window: float = 25.0,
+    t_start: ArrayLike | None = None,
     dynamics: AbstractDynamics | None = None,
     waveform: AbstractWaveform | None = None,
     contact: str = "strict",
     start: str = "paper",
     dtype: Any = None,
-) -> Measurement:
+) -> "Measurement | ChainMeasurement":
     """Measure $\\tau_z$, $e_z$, the regime and more (Sects. 3-5; SPEC §5).
 
     One configuration or a batch: the batch runs under `vmap` in one compiled
@@ -240,13 +270,18 @@ def measure(
 
     **Arguments:**
 
-    - `params`: [`Params`][] (any batch shape).
+    - `params`: the mechanism: [`Params`][] (the paper's two-mass model) or a [`Chain`][]
+      (any batch shape).
     - `z`: distance to travel (paper: 5).
     - `horizon`: time allowed after $t_\\text{start}$ (default 2000).
     - `window`: the regime window $\\Delta\\tau$ (paper: 25).
-    - `dynamics`, `waveform`, `contact`, `start`, `dtype`: as in [`simulate`][].
+    - `t_start`: start of the measurement (scalar or batch-shaped); default 80 periods of the
+      lowest natural frequency with one mass held (`Params.t_start`, `Chain.t_start`).
+    - `dynamics`, `waveform`, `contact`, `start`, `dtype`: as in [`simulate`][] (a chain
+      carries its own waveforms and needs `Exact` dynamics).
 
-    **Returns:** a [`Measurement`][] with batch shape `params.batch_shape`.
+    **Returns:** a [`Measurement`][] with batch shape `params.batch_shape`, or a
+    [`ChainMeasurement`][] for a chain.
 
     **Raises:** `ValueError` for invalid arguments (before any computation).
 
@@ -261,9 +296,14 @@ def measure(
     model.check_contact(contact)
     model.initial_gap(Params(), start)
     check_measure_args(z, horizon, window)
+    if isinstance(params, Chain):
+        dyn = chain_dynamics(dynamics, waveform)
+        return measure_chain(params, z, t_start=t_start, horizon=horizon, window=window, dt=dyn.dt,
+                             max_steps=dyn.max_steps, contact=contact, start=start, dtype=dtype)  # fmt: skip
     flat, wave, axes, shape = prepare(params, waveform, dtype)
     if isinstance(dynamics, Exact):
-        total = horizon_bound(flat, horizon)
+        ts = _start_times(t_start, shape, flat.dtype)
+        total = horizon_bound(flat, horizon) if ts is None else float(np.max(np.asarray(ts))) + horizon
         max_steps = dynamics.max_steps or default_max_steps(total, dynamics.dt)
         out = _exact_batch(
             flat,
@@ -274,10 +314,15 @@ def measure(
             start,
             dynamics.dt,
             jnp.asarray(max_steps, jnp.int32),
+            t_start=ts,
         )
     elif isinstance(dynamics, Smoothed):
         from ._smooth import measure_smoothed
 
+        if t_start is not None:
+            raise ValueError(
+                "t_start= is supported by the Exact dynamics only; the smoothed model uses Params.t_start."
+            )
         out = measure_smoothed(flat, wave, axes, float(z), float(horizon), float(window), contact, start, dynamics)
     else:
         raise TypeError(f"dynamics must be Exact or Smoothed, got {type(dynamics).__name__}.")

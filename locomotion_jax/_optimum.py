@@ -1,7 +1,6 @@
 """Settings and result of the actuation optimiser (SPEC §7)."""
 
 import dataclasses
-import json
 import math
 from typing import Any
 
@@ -9,6 +8,7 @@ import equinox as eqx
 import numpy as np
 
 from ._actuation import Fourier
+from ._json import dumps, jsonable
 
 
 class Settings(eqx.Module):
@@ -35,8 +35,9 @@ class Settings(eqx.Module):
     - `omega_range`: a free $\\omega$ stays within this factor of its starts.
     - `corrections`, `correction_outer`: exact-feedback rounds and their blocks.
     - `verify_horizon`, `verify_dt`: exact verification (after the paper's transient).
-    - `refine_baseline`: refine the best sinusoid of the sweep on a local grid
-      (`_pareto.refine_sinusoid`), so the optimum is compared with a well-resolved sinusoid.
+    - `refine_baseline`: refine the best sinusoids of the sweep by a zooming local grid
+      search (`_pareto.refine_sinusoid`: 3 levels, each 4x finer, to 1/64 of the coarse
+      grid's step), so the optimum is compared with a well-resolved sinusoid.
     - `seed`: for the random starts. `verbose`: print progress per block.
     """
 
@@ -132,10 +133,10 @@ class Optimum:
         """JSON-ready dict (`nan` and `inf` become `None`); `full` adds candidates and history."""
         skip = () if full else ("candidates", "history")
         out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in skip}
-        return _jsonable(out)
+        return jsonable(out)
 
     def to_json(self, full: bool = False, **kwargs) -> str:
-        return json.dumps(self.to_dict(full), **kwargs)
+        return dumps(self.to_dict(full), **kwargs)
 
     def summary(self) -> str:
         """Human-readable report."""
@@ -169,22 +170,6 @@ class Optimum:
             f"(winner: {self.source}; {self.runtime_s:.0f} s)"
         )
         return "\n".join(lines)
-
-
-def _jsonable(x: Any) -> Any:
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, (np.bool_, bool)):
-        return bool(x)
-    if isinstance(x, (np.integer, int)):
-        return int(x)
-    if isinstance(x, (np.floating, float)):
-        return float(x) if math.isfinite(float(x)) else None
-    return x
 
 
 OptimiseSettings = Settings

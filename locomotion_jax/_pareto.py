@@ -148,36 +148,58 @@ def refine_sinusoid(
     sweep: SinusoidSweep,
     *,
     top: int = 3,
-    points: int = 7,
+    points: int = 9,
+    levels: int = 3,
     horizon: float = 60.0,
     dt: float = 0.01,
 ) -> dict | None:
-    """A fairer baseline: refine the best sinusoid of a coarse sweep on a local grid.
+    """The best sinusoid of a coarse sweep, refined by a zooming local grid search.
 
-    Around each of the `top` cheapest feasible sinusoids of `sweep`, a
-    `points` x `points` exact sweep over $\\omega \\in [0.85, 1.15]\\,\\omega^*$ and
-    $a \\in [0.6\\,a^*, \\min(a_\\max, 1.4\\,a^*)]$ (one compiled call for all), then
-    the cheapest feasible sinusoid of the coarse and fine grids together.
+    Level 1 lays a `points` x `points` grid around each of the `top` cheapest
+    feasible sinusoids of `sweep`, one coarse grid step either side: in $a$
+    linearly (the window kept inside $(0, a_\\max]$), in $\\omega$ logarithmically.
+    Each further level zooms on the `top` cheapest feasible sinusoids found so far,
+    its half-width one step of the previous level's grid, so every level is
+    $(\\text{points} - 1)/2$ times finer. All candidates of a level run in one
+    batched exact call of fixed size (one compilation for all levels).
+
+    With the defaults (9 points, 3 levels) the final step is 1/64 of the coarse
+    one: for `default_omegas(params, 32)` and 6 amplitudes up to `a_max = 0.05`,
+    0.2 % in $\\omega$ and $1.3 \\times 10^{-4}$ in $a$.
+    Feasible means as in [`best_sinusoid`][]: no lift-off, $\\sigma \\bar v \\ge v_\\min$,
+    and $a \\le a_\\max$ by construction.
+
+    **Returns:** the cheapest feasible sinusoid of the coarse and all fine grids
+    (a dict as from [`best_sinusoid`][]), `None` if the coarse sweep has none.
     """
-    coarse = best_sinusoid(sweep, v_min, direction)
-    if coarse is None:
+    found = [sweep]
+    if best_sinusoid(sweep, v_min, direction) is None:
         return None
-    feasible = sweep.ok & (direction * np.nan_to_num(sweep.speed, nan=-np.inf) >= v_min)
-    order = np.argsort(np.where(feasible, sweep.cost, np.inf))[: min(top, int(feasible.sum()))]
-    a, w = [], []
-    for i in order:
-        aa = np.linspace(0.6 * sweep.a[i], min(a_max, 1.4 * sweep.a[i]), points)
-        ww = sweep.omega[i] * np.linspace(0.85, 1.15, points)
-        ga, gw = np.meshgrid(aa, ww, indexing="ij")
-        a.append(ga.ravel())
-        w.append(gw.ravel())
-    a, w = np.concatenate(a), np.concatenate(w)
+    a_steps = np.diff(np.unique(sweep.a))
+    w_steps = np.diff(np.log(np.unique(sweep.omega)))
+    half_a = float(a_steps.max()) if a_steps.size else 0.5 * float(sweep.a.max())
+    half_w = float(w_steps.max()) if w_steps.size else 0.1
     values = {k: v for k, v in params.as_dict().items() if k not in ("a", "omega")}
-    batch = Params(a=jnp.asarray(a, params.dtype), omega=jnp.asarray(w, params.dtype), **values)
-    fig = exact_figures(batch, None, horizon, dt)
-    fine = SinusoidSweep(a=a, omega=w, speed=fig.speed, cost=fig.cost, ok=fig.ok)
-    best = best_sinusoid(fine, v_min, direction)
-    return coarse if best is None or best["cost_of_transport"] >= coarse["cost_of_transport"] else best
+    shrink = 2.0 / (points - 1)
+    for _ in range(levels):
+        every = SinusoidSweep(*(np.concatenate(x) for x in zip(*found)))
+        feasible = every.ok & (direction * np.nan_to_num(every.speed, nan=-np.inf) >= v_min)
+        ranked = np.argsort(np.where(feasible, every.cost, np.inf))[: min(top, int(feasible.sum()))]
+        centres = [(every.a[i], every.omega[i]) for i in ranked]
+        centres += centres[:1] * (top - len(centres))  # a fixed batch size: one compilation
+        a, w = [], []
+        for ac, wc in centres:
+            lo, hi = max(ac - half_a, 0.5 * ac), min(ac + half_a, a_max)
+            ga, gw = np.meshgrid(np.linspace(lo, hi, points), wc * np.exp(np.linspace(-half_w, half_w, points)))
+            a.append(ga.ravel())
+            w.append(gw.ravel())
+        a, w = np.concatenate(a), np.concatenate(w)
+        batch = Params(a=jnp.asarray(a, params.dtype), omega=jnp.asarray(w, params.dtype), **values)
+        fig = exact_figures(batch, None, horizon, dt)
+        found.append(SinusoidSweep(a=a, omega=w, speed=fig.speed, cost=fig.cost, ok=fig.ok))
+        half_a, half_w = shrink * half_a, shrink * half_w
+    every = SinusoidSweep(*(np.concatenate(x) for x in zip(*found)))
+    return best_sinusoid(every, v_min, direction)
 
 
 def pareto_front(speed: np.ndarray, cost: np.ndarray, ok: np.ndarray, direction: int = 1) -> np.ndarray:

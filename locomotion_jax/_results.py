@@ -1,6 +1,7 @@
 """Result containers with named fields (compare diffrax `Solution`)."""
 
 import equinox as eqx
+import jax.numpy as jnp
 import numpy as np
 
 from ._custom_types import Array
@@ -49,8 +50,22 @@ class Trajectory(eqx.Module):
     start: str = eqx.field(static=True)
     contact: str = eqx.field(static=True)
 
+    @property
+    def x(self) -> Array:
+        """Positions with a trailing mass axis, `(..., n_save, 2)` (as a chain's)."""
+        return _stack(self.x1, self.x2)
+
+    @property
+    def v(self) -> Array:
+        """Velocities with a trailing mass axis, `(..., n_save, 2)`."""
+        return _stack(self.v1, self.v2)
+
     def to_numpy(self) -> dict[str, np.ndarray]:
         return {k: np.asarray(getattr(self, k)) for k in self.__dataclass_fields__ if k not in ("start", "contact")}
+
+
+def _stack(a: Array, b: Array) -> Array:
+    return jnp.stack([a, b], -1)
 
 
 class Measurement(eqx.Module):
@@ -88,6 +103,78 @@ class Measurement(eqx.Module):
     cost_of_transport: Array
     stick_fraction1: Array
     stick_fraction2: Array
+    e_d: Array
+    work: Array
+    delta_e: Array
+    balance: Array
+    liftoff: Array
+    t_liftoff: Array
+    status: Array
+    t_start: Array
+    X_start: Array
+    n_steps: Array
+    n_switch: Array
+    z: float = eqx.field(static=True)
+    start: str = eqx.field(static=True)
+    contact: str = eqx.field(static=True)
+
+    @property
+    def stick_fraction(self) -> Array:
+        """Stick fractions with a trailing mass axis, `(..., 2)` (as a chain's)."""
+        return _stack(self.stick_fraction1, self.stick_fraction2)
+
+    def to_numpy(self) -> dict[str, np.ndarray]:
+        skip = ("z", "start", "contact")
+        return {k: np.asarray(getattr(self, k)) for k in self.__dataclass_fields__ if k not in skip}
+
+
+class ChainTrajectory(eqx.Module):
+    """States of a chain of N masses saved at the requested times (compare [`Trajectory`][]).
+
+    Per-time fields have shape `batch_shape + (n_save,)`, per-mass ones a trailing
+    mass axis `(..., n_save, N)`, per-spring ones a trailing spring axis `(..., n_save, N-1)`.
+
+    - `t`; `x`, `v`: positions and velocities; `stuck`: whether each mass is stuck.
+    - `X`: centre of mass $\\sum m_i x_i / \\sum m_i$; `e_d`, `w`, `e`: dissipated energy and
+      actuator work since $t = 0$, total energy (SPEC §8).
+    - `N`: signed normal forces; `l0`: rest lengths; `tension`: spring tensions.
+    - `valid`, `status`, `liftoff`, `t_liftoff`, `n_switch`, `start`, `contact`: as in [`Trajectory`][].
+    """
+
+    t: Array
+    x: Array
+    v: Array
+    stuck: Array
+    X: Array
+    e_d: Array
+    w: Array
+    e: Array
+    N: Array
+    l0: Array
+    tension: Array
+    valid: Array
+    status: Array
+    liftoff: Array
+    t_liftoff: Array
+    n_switch: Array
+    start: str = eqx.field(static=True)
+    contact: str = eqx.field(static=True)
+
+    def to_numpy(self) -> dict[str, np.ndarray]:
+        return {k: np.asarray(getattr(self, k)) for k in self.__dataclass_fields__ if k not in ("start", "contact")}
+
+
+class ChainMeasurement(eqx.Module):
+    """The steady-state measurements of a chain (compare [`Measurement`][], whose fields these are),
+    with `stick_fraction` of shape `batch_shape + (N,)`: the fraction of the window each mass is stuck."""
+
+    tau_z: Array
+    e_z: Array
+    reached: Array
+    regime: Array
+    mean_speed: Array
+    cost_of_transport: Array
+    stick_fraction: Array
     e_d: Array
     work: Array
     delta_e: Array

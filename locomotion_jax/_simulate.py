@@ -14,8 +14,10 @@ from ._compile import engine_jit
 from ._custom_types import Array, ArrayLike, Contact
 from ._dynamics import AbstractDynamics, Exact, Smoothed
 from ._params import Params
-from ._results import Trajectory
+from ._results import ChainTrajectory, Trajectory
 from ._status import Status
+from .model._chain import Chain
+from .run._chain import chain_dynamics, simulate_chain
 
 
 def mode_code(stuck1: Array, stuck2: Array) -> Array:
@@ -147,7 +149,7 @@ _trajectory = jax.jit(_trajectory, static_argnames=("wave_axes", "contact", "sta
 
 
 def simulate(
-    params: Params,
+    params: "Params | Chain",
     t_end: float,
     save_at: ArrayLike | None = None,
     *,
@@ -156,12 +158,13 @@ def simulate(
     contact: str = "strict",
     start: str = "paper",
     dtype: Any = None,
-) -> Trajectory:
-    """Integrate the two-mass model from $t = 0$ to `t_end`, saving at `save_at`.
+) -> "Trajectory | ChainTrajectory":
+    """Integrate the two-mass model or a chain from $t = 0$ to `t_end`, saving at `save_at`.
 
     **Arguments:**
 
-    - `params`: one configuration or a batch ([`Params`][]).
+    - `params`: the mechanism, one configuration or a batch: [`Params`][] (the paper's
+      two-mass model) or a [`Chain`][] of N masses (which carries its own waveforms).
     - `t_end`: final time (> 0).
     - `save_at`: increasing times in `[0, t_end]`; default 1001 equally spaced
       times. Memory grows with `len(save_at)`, not with the number of steps.
@@ -171,7 +174,8 @@ def simulate(
       flagged). `start`: `"paper"` (eq. 14, default) or `"relaxed"`.
     - `dtype`: cast parameters to this floating dtype (default: theirs).
 
-    **Returns:** a [`Trajectory`][] with batch shape `params.batch_shape`.
+    **Returns:** a [`Trajectory`][] with batch shape `params.batch_shape`, or a
+    [`ChainTrajectory`][] for a chain.
 
     **Raises:** `ValueError` for invalid arguments (before any computation).
 
@@ -187,8 +191,6 @@ def simulate(
     model.initial_gap(Params(), start)  # validates `start`
     if not np.isfinite(t_end) or t_end <= 0:
         raise ValueError(f"t_end must be a finite number > 0, got {t_end!r}.")
-    flat, wave, axes, shape = prepare(params, waveform, dtype)
-    dt_type = flat.dtype
     if save_at is None:
         save_at = np.linspace(0.0, float(t_end), 1001)
     save_np = np.asarray(save_at, dtype=float)
@@ -196,7 +198,12 @@ def simulate(
         raise ValueError(f"save_at must be a non-empty 1-D array, got shape {save_np.shape}.")
     if np.any(np.diff(save_np) < 0) or save_np[0] < 0 or save_np[-1] > t_end or not np.all(np.isfinite(save_np)):
         raise ValueError("save_at must be finite, non-decreasing and inside [0, t_end].")
-    save = jnp.asarray(save_np, dt_type)
+    if isinstance(params, Chain):
+        dyn = chain_dynamics(dynamics, waveform)
+        return simulate_chain(params, float(t_end), save_np, dt=dyn.dt, max_steps=dyn.max_steps, contact=contact,
+                              start=start, dtype=dtype)  # fmt: skip
+    flat, wave, axes, shape = prepare(params, waveform, dtype)
+    save = jnp.asarray(save_np, flat.dtype)
     if isinstance(dynamics, Exact):
         max_steps = dynamics.max_steps or default_max_steps(float(t_end), dynamics.dt) + 4 * save_np.size
         rows, valid, status, t_lift, n_switch = _exact_batch(

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import typer
 import xarray as xr
-from locomotion_jax import _cli, _sweep
+from locomotion_jax import _cli, _json, _sweep
 from typer.testing import CliRunner
 
 
@@ -32,26 +32,70 @@ def invoke(*args: str):
     return runner.invoke(_cli.app, list(args))
 
 
+def _strict_json(text: str):
+    """Parse one JSON object, refusing the non-standard NaN/Infinity literals."""
+
+    def refuse(name):
+        raise AssertionError(f"non-standard JSON literal {name}")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def _text_value(stdout: str, name: str) -> str:
+    """The value printed on the `  name  value` line of `simulate`'s text report."""
+    (line,) = [ln for ln in stdout.splitlines() if ln.split()[:1] == [name]]
+    return line.split()[1]
+
+
 def test_simulate_json_matches_measure_and_plots(tmp_path):
     res = invoke("simulate", "--omega", "2", "--a", "0.05", "--t-end", "5", "--out", str(tmp_path), "--json", *FAST)
     assert res.exit_code == 0, res.output
-    record = json.loads(res.stdout)  # stdout is exactly one JSON object
+    record = _strict_json(res.stdout)  # stdout is exactly one JSON object
     m = lj.measure(lj.Params(omega=2.0, a=0.05), 0.3, horizon=30.0, window=5.0, dynamics=lj.Exact(dt=0.02))
     assert record["tau_z"] == pytest.approx(float(m.tau_z), rel=1e-12)
     assert record["status_name"] == "OK" and record["regime_name"] == lj.Regime(int(m.regime)).name
-    assert record["t_liftoff"] == "inf"  # +inf is encoded as a string, NaN as null
+    assert not np.isfinite(float(m.t_liftoff))  # inf (no lift-off) is encoded as null, like NaN
+    assert record["t_liftoff"] is None and record["liftoff"] is False
     assert record["params"]["omega"] == 2.0 and record["contact"] == "strict"
     png = tmp_path / record["plot"].split("/")[-1]
     assert png.exists() and png.read_bytes()[:4] == b"\x89PNG"
 
 
+def test_simulate_writes_nothing_without_out(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    for extra in ([], ["--json"]):
+        res = invoke("simulate", "--omega", "2", "--t-end", "2", *extra, *FAST)
+        assert res.exit_code == 0, res.output
+        assert "plot:" not in res.stdout
+    assert _strict_json(res.stdout)["plot"] is None
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_simulate_text_and_not_reached_encoding():
-    # omega = 0.1: far too slow to travel z in the horizon -> tau_z is inf.
-    res = invoke("simulate", "--omega", "0.1", "--no-plot", *FAST)
+    # omega = 0.1: far too slow to travel z in the horizon -> tau_z and e_z are inf.
+    res = invoke("simulate", "--omega", "0.1", *FAST)
     assert res.exit_code == 0, res.output
-    assert "tau_z" in res.stdout and "inf" in res.stdout and "regime_name" in res.stdout
-    res = invoke("simulate", "--omega", "0.1", "--no-plot", "--json", *FAST)
-    assert json.loads(res.stdout)["tau_z"] == "inf" and json.loads(res.stdout)["reached"] is False
+    assert _text_value(res.stdout, "tau_z") == "inf" and _text_value(res.stdout, "e_z") == "inf"
+    assert _text_value(res.stdout, "reached") == "False"
+    res = invoke("simulate", "--omega", "2", *FAST)  # reached: a finite tau_z in the same place
+    assert float(_text_value(res.stdout, "tau_z")) > 0 and _text_value(res.stdout, "reached") == "True"
+    res = invoke("simulate", "--omega", "0.1", "--json", *FAST)
+    record = _strict_json(res.stdout)
+    assert record["tau_z"] is None and record["e_z"] is None and record["reached"] is False
+
+
+def test_json_encoding_of_non_finite_numbers():
+    # One encoder for every JSON output of the CLI (simulate, optimize): NaN and +-inf are null.
+    values = {"nan": np.nan, "inf": np.float64(np.inf), "-inf": -np.inf, "x": np.float32(1.5), "n": np.int32(3)}
+    values["nested"] = [np.array([1.0, np.inf]), {"b": np.bool_(True)}]
+    assert _strict_json(_json.dumps(values)) == {
+        "nan": None,
+        "inf": None,
+        "-inf": None,
+        "x": 1.5,
+        "n": 3,
+        "nested": [[1.0, None], {"b": True}],
+    }
 
 
 def test_sweep_writes_and_reads_back(tmp_path):

@@ -1,0 +1,11 @@
+"""The physics of friction-driven mechanisms: chains, friction laws, actuators, actuation signals."""
+
+from ._actuator import AbstractActuator as AbstractActuator, InternalForce as InternalForce, RestLength as RestLength
+from ._chain import Chain as Chain
+from ._friction import (
+    AbstractFriction as AbstractFriction,
+    AnisotropicCoulomb as AnisotropicCoulomb,
+    Coulomb as Coulomb,
+    Stribeck as Stribeck,
+)
+from ._springwaves import SpringFourier as SpringFourier, TravellingWave as TravellingWave

@@ -1,0 +1,305 @@
+"""A chain of N masses joined by N-1 actuated springs (SPEC §8); N = 2 is the paper's model."""
+
+import math
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._custom_types import Array, ValuesLike
+from .._params import Params
+from ._actuator import AbstractActuator, RestLength
+from ._friction import AbstractFriction, Coulomb
+from ._springwaves import SpringFourier, to_spring_fourier, TravellingWave
+
+
+def _float(x: ValuesLike) -> Array:
+    x = jnp.asarray(x)
+    return x if jnp.issubdtype(x.dtype, jnp.floating) else x.astype(jnp.result_type(float))
+
+
+def _per(name: str, x: ValuesLike, n: int, what: str) -> Array:
+    """A per-mass or per-spring field: a scalar, or an array whose last axis has length `n` (or 1)."""
+    x = _float(x)
+    if x.ndim == 0:
+        return x[None]
+    if x.shape[-1] not in (1, n):
+        raise ValueError(
+            f"Invalid parameter {name!r}: its last axis must have length {n} (one value per {what}) or be a "
+            f"scalar; got shape {x.shape}."
+        )
+    return x
+
+
+class Chain(eqx.Module):
+    """A chain of masses $m_0, \\dots, m_{N-1}$ on a line, $x_0 < \\dots < x_{N-1}$, joined by springs (SPEC §8).
+
+    Spring $j$ joins masses $j$ and $j+1$: stiffness $k_j$, vertical offset $d_j$, mean
+    rest length $\\bar\\ell_j$, and an actuation signal $s_j(t)$ (the `waveforms`) that the
+    `actuator` turns into a rest length $\\ell_{0,j}(t) = \\bar\\ell_j + s_j(t)$ ([`RestLength`][],
+    the paper's) or an internal force $f_j(t) = s_j(t)$ ([`InternalForce`][]). With
+    $u_j = x_{j+1} - x_j$, $\\ell_j = \\sqrt{u_j^2 + d_j^2}$ (eq. 2), $T_j = k_j(\\ell_j - \\ell_{0,j})$,
+    $f_{x,j} = T_j u_j/\\ell_j$ and $f_{y,j} = T_j d_j/\\ell_j$:
+
+    $$F_i = f_{x,i} - f_{x,i-1} + f_i - f_{i-1}, \\qquad N_i = m_i - f_{y,i} + f_{y,i-1}$$
+
+    (missing springs count zero; eqs. 5 and 8 for $N = 2$). Each mass has damping $c_i$
+    and the `friction` law.
+
+    Per-mass fields have a last axis of length N and per-spring fields of length N-1
+    (a scalar is broadcast); leading axes are batch axes, broadcast against each other.
+
+    **Arguments:**
+
+    - `masses`: $m_i > 0$, shape `(..., N)`, $N \\ge 2$.
+    - `k`, `d`, `lbar`: per spring ($k_j > 0$, $|d_j| < \\bar\\ell_j$, $\\bar\\ell_j > 0$); `lbar=None`
+      takes the mean rest lengths of Sinusoid/Fourier waveforms, else 3.
+    - `c`: damping per mass, $c_i \\ge 0$.
+    - `waveforms`: a [`TravellingWave`][], a [`SpringFourier`][], one `Sinusoid`/`Fourier` for every
+      spring, or a list of them (one per spring, a common base frequency). Default: no actuation.
+    - `friction`: an [`AbstractFriction`][] with per-mass coefficients; default `Coulomb(0.7, 0.5)`.
+    - `actuator`: [`RestLength`][] (default) or [`InternalForce`][].
+    - `check`: validate concrete values (default); invalid values raise `ValueError` naming the
+      parameter, the mass or spring index and the valid range. With `check=False` an invalid
+      configuration is flagged `Status.INVALID` in its own result instead.
+
+    !!! Example
+
+        ```python
+        worm = Chain(masses=[1.0, 1.0, 1.0], k=50.0, d=0.5, lbar=3.0, c=0.01,
+                     waveforms=TravellingWave(a=0.05, omega=2.0, phi=2 * jnp.pi / 3),
+                     friction=AnisotropicCoulomb(0.7, 0.9, 0.5, 0.7))
+        paper = Chain.from_params(Params(omega=2.0))   # the paper's two-mass model
+        ```
+    """
+
+    m: Array
+    c: Array
+    k: Array
+    d: Array
+    lbar: Array
+    waves: SpringFourier
+    friction: AbstractFriction
+    actuator: AbstractActuator = eqx.field(static=True)
+
+    def __init__(
+        self,
+        masses: ValuesLike,
+        k: ValuesLike = 50.0,
+        d: ValuesLike = 0.5,
+        lbar: ValuesLike | None = None,
+        c: ValuesLike = 0.01,
+        waveforms: Any = None,
+        friction: AbstractFriction | None = None,
+        actuator: AbstractActuator | None = None,
+        *,
+        check: bool = True,
+    ):
+        m = _float(masses)
+        if m.ndim == 0 or m.shape[-1] < 2:
+            raise ValueError(
+                f"Invalid parameter 'masses': a chain needs N >= 2 masses (last axis); got shape {m.shape}."
+            )
+        n = m.shape[-1]
+        self.m = m
+        self.c = _per("c", c, n, "mass")
+        self.k = _per("k", k, n - 1, "spring")
+        self.d = _per("d", d, n - 1, "spring")
+        if waveforms is None:
+            waveforms = TravellingWave(0.0, 0.0)
+        self.waves, wave_lbar = to_spring_fourier(waveforms, n - 1)
+        if lbar is None:
+            lbar = 3.0 if wave_lbar is None else wave_lbar
+        elif wave_lbar is not None and _concrete(wave_lbar) and _concrete(lbar):
+            if not np.allclose(np.asarray(wave_lbar), np.asarray(lbar)):
+                raise ValueError(
+                    f"Invalid parameter 'lbar': got lbar={lbar!r}, but the waveforms' mean rest lengths are "
+                    f"{np.asarray(wave_lbar).tolist()}; give one of them (lbar=None takes the waveforms')."
+                )
+        self.lbar = _per("lbar", lbar, n - 1, "spring")
+        friction = Coulomb() if friction is None else friction
+        if not isinstance(friction, AbstractFriction):
+            raise TypeError(f"friction must be an AbstractFriction, got {type(friction).__name__}.")
+        for name, value in friction.fields().items():
+            _per(name, value, n, "mass")
+        self.friction = friction
+        actuator = RestLength() if actuator is None else actuator
+        if not isinstance(actuator, AbstractActuator):
+            raise TypeError(f"actuator must be an AbstractActuator, got {type(actuator).__name__}.")
+        self.actuator = actuator
+        if check and all(_concrete(x) for x in jax.tree_util.tree_leaves(self)):
+            self.validate()
+
+    @classmethod
+    def from_params(cls, params: Params, waveform: Any = None) -> "Chain":
+        """The two-mass chain of the paper's model: $m_1 = 2\\hat m$, $m_2 = 2(1 - \\hat m)$, eq. (13)."""
+        p = params.broadcast()
+        from .._actuation import Sinusoid
+
+        wave = Sinusoid(p.a, p.omega, p.lbar) if waveform is None else waveform
+        return cls(
+            masses=jnp.stack([p.m1, p.m2], -1), k=p.k[..., None], d=p.d[..., None], lbar=p.lbar[..., None],
+            c=p.c[..., None], waveforms=wave, friction=Coulomb(p.mu_s[..., None], p.mu_k[..., None]), check=False,
+        )  # fmt: skip
+
+    @classmethod
+    def stack(cls, items: "list[Chain]") -> "Chain":
+        """Stack chains of the same N, friction law and actuator along a new leading batch axis."""
+        if len(items) == 0:
+            raise ValueError("Chain.stack needs at least one Chain.")
+        items = [c.broadcast() for c in items]
+        H = max(c.waves.harmonics for c in items)
+        pad = lambda w: jnp.pad(w, [(0, 0)] * (w.ndim - 1) + [(0, H - w.shape[-1])])
+        items = [eqx.tree_at(lambda c: (c.waves.cos, c.waves.sin), c, (pad(c.waves.cos), pad(c.waves.sin)))
+                 for c in items]  # fmt: skip
+        structures = {jax.tree_util.tree_structure(c) for c in items}
+        shapes = {tuple(x.shape for x in jax.tree_util.tree_leaves(c)) for c in items}
+        if len(structures) > 1 or len(shapes) > 1:
+            raise ValueError("Chain.stack: the chains differ in N, friction law, actuator or batch shape.")
+        return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *items)
+
+    # -- shapes ------------------------------------------------------------------
+
+    @property
+    def n_masses(self) -> int:
+        return self.m.shape[-1]
+
+    @property
+    def batch_shape(self) -> tuple[int, ...]:
+        shapes = [x.shape[:-1] for x in (self.m, self.c, self.k, self.d, self.lbar)]
+        shapes += [self.waves.cos.shape[:-2], self.waves.sin.shape[:-2], self.waves.omega.shape]
+        shapes += [x.shape[:-1] for x in jax.tree_util.tree_leaves(self.friction) if jnp.ndim(x) > 0]
+        shapes += [() for x in jax.tree_util.tree_leaves(self.friction) if jnp.ndim(x) == 0]
+        return tuple(np.broadcast_shapes(*shapes))
+
+    @property
+    def dtype(self) -> Any:
+        return jnp.result_type(*jax.tree_util.tree_leaves(self))
+
+    def broadcast(self) -> "Chain":
+        """Every field broadcast to `batch_shape` (and its mass or spring axis) with one dtype."""
+        b, dt, n = self.batch_shape, self.dtype, self.n_masses
+        full = lambda x, tail: jnp.broadcast_to(jnp.asarray(x, dt), b + tail)
+        fr = jax.tree_util.tree_map(lambda x: full(x if jnp.ndim(x) else x[None], (n,)), self.friction)
+        H = self.waves.harmonics
+        waves = SpringFourier(full(self.waves.cos, (n - 1, H)), full(self.waves.sin, (n - 1, H)),
+                              full(self.waves.omega, ()))  # fmt: skip
+        return eqx.tree_at(
+            lambda c: (c.m, c.c, c.k, c.d, c.lbar, c.waves, c.friction), self,
+            (full(self.m, (n,)), full(self.c, (n,)), full(self.k, (n - 1,)), full(self.d, (n - 1,)),
+             full(self.lbar, (n - 1,)), waves, fr),
+        )  # fmt: skip
+
+    def astype(self, dtype: Any) -> "Chain":
+        dtype = jnp.dtype(dtype)
+        if dtype == jnp.float64 and not jax.config.read("jax_enable_x64"):
+            raise ValueError(
+                "dtype=float64 requested but JAX runs in 32-bit mode; enable it with "
+                'jax.config.update("jax_enable_x64", True) at start-up (or the CLI flag --x64).'
+            )
+        return jax.tree_util.tree_map(lambda x: x.astype(dtype), self)
+
+    def __getitem__(self, index: Any) -> "Chain":
+        """Index the batch axes of the broadcast chain."""
+        nb = len(self.batch_shape)
+        idx = index if isinstance(index, tuple) else (index,)
+        if len(idx) > nb:
+            raise IndexError(f"too many indices for a chain batch of shape {self.batch_shape}.")
+        return jax.tree_util.tree_map(lambda x: x[idx], self.broadcast())
+
+    # -- derived quantities --------------------------------------------------------
+
+    @property
+    def total_mass(self) -> Array:
+        return self.m.sum(-1)
+
+    def natural_frequencies(self) -> Array:
+        """Natural frequencies of the linearised chain with mass $i$ held, for each $i$: shape `(..., N, N-1)`.
+
+        Springs of stiffness $k_j$ between neighbours (the geometry factor ignored, as in
+        eqs. 11-12). For $N = 2$: $(\\omega_{n2}, \\omega_{n3})$, i.e. $\\sqrt{k/m_1}$ and $\\sqrt{k/m_2}$.
+        """
+        c = self.broadcast()
+        n = self.n_masses
+        K = jnp.zeros(c.k.shape[:-1] + (n, n), c.k.dtype)
+        j = jnp.arange(n - 1)
+        K = K.at[..., j, j].add(c.k).at[..., j + 1, j + 1].add(c.k)
+        K = K.at[..., j, j + 1].add(-c.k).at[..., j + 1, j].add(-c.k)
+        s = 1 / jnp.sqrt(c.m)
+        Kn = K * s[..., :, None] * s[..., None, :]
+        out = []
+        for held in range(n):
+            keep = np.array([i for i in range(n) if i != held])
+            out.append(jnp.sqrt(jnp.clip(jnp.linalg.eigvalsh(Kn[..., keep[:, None], keep[None, :]]), 0)))
+        return jnp.stack(out, -2)
+
+    @property
+    def omega_min(self) -> Array:
+        """The lowest natural frequency with one mass held, over which mass (SPEC §5 for $N = 2$)."""
+        return self.natural_frequencies().min((-2, -1))
+
+    @property
+    def t_start(self) -> Array:
+        """Default start of the measurement: 80 periods of [`omega_min`][] (Sect. 3 for $N = 2$)."""
+        return 80 * 2 * math.pi / self.omega_min
+
+    # -- validation ------------------------------------------------------------------
+
+    def _checks(self) -> list[tuple[str, Array, str, str]]:
+        """`(name, valid mask (..., axis), valid range, index kind)` of every constraint."""
+        c = self.broadcast()
+        fr = c.friction
+        stroke = c.waves.stroke()
+        checks = [
+            ("masses", c.m > 0, "m_i > 0", "mass"),
+            ("c", c.c >= 0, "c_i >= 0", "mass"),
+            ("k", c.k > 0, "k_j > 0", "spring"),
+            ("lbar", c.lbar > 0, "lbar_j > 0", "spring"),
+            ("d", jnp.abs(c.d) < c.lbar, "|d_j| < lbar_j", "spring"),
+            ("omega", (c.waves.omega >= 0)[..., None], "omega >= 0", "spring"),
+        ]
+        if isinstance(self.actuator, RestLength):
+            checks.append(("waveforms", stroke < c.lbar, "stroke (sum of amplitudes) < lbar_j", "spring"))
+        ranges = fr.valid_ranges()
+        for name, ok in fr.validity().items():
+            checks.append((name, ok, ranges.get(name, "valid"), "mass"))
+        for name, value in [("masses", c.m), ("c", c.c), ("k", c.k), ("d", c.d), ("lbar", c.lbar)]:
+            checks.append(
+                (name, jnp.isfinite(value), "finite", "mass" if value.shape[-1] == c.m.shape[-1] else "spring")
+            )
+        for name, value in fr.fields().items():
+            checks.append((name, jnp.isfinite(value), "finite", "mass"))
+        checks.append(("waveforms", jnp.isfinite(c.waves.cos).all(-1) & jnp.isfinite(c.waves.sin).all(-1), "finite",
+                       "spring"))  # fmt: skip
+        return checks
+
+    def is_valid(self) -> Array:
+        """Traceable mask (batch shape) of configurations inside the valid ranges."""
+        ok = jnp.ones(self.batch_shape, bool)
+        for _, mask, _, _ in self._checks():
+            ok = ok & jnp.broadcast_to(mask, self.batch_shape + mask.shape[-1:]).all(-1)
+        return ok
+
+    def validate(self) -> "Chain":
+        """Raise `ValueError` at the first invalid value: parameter, mass or spring index, batch index, range."""
+        shape = self.batch_shape
+        c = self.broadcast()
+        values = {"masses": c.m, "c": c.c, "k": c.k, "d": c.d, "lbar": c.lbar, "waveforms": c.waves.stroke(),
+                  "omega": jnp.broadcast_to(c.waves.omega[..., None], c.k.shape), **c.friction.fields()}  # fmt: skip
+        for name, mask, valid, kind in self._checks():
+            bad = ~np.broadcast_to(np.asarray(mask), shape + mask.shape[-1:])
+            if bad.any():
+                where = tuple(int(i) for i in np.argwhere(bad)[0])
+                at = f" at batch index {where[:-1]}" if shape else ""
+                got = float(np.asarray(values[name])[where]) if name in values else None
+                got_s = "" if got is None else f": got {'stroke' if name == 'waveforms' else name}={got!r}"
+                raise ValueError(
+                    f"Invalid parameter {name!r} of {kind} {where[-1]}{at}{got_s}; the valid range is {valid}."
+                )
+        return self
+
+
+def _concrete(x: Any) -> bool:
+    return not isinstance(x, jax.core.Tracer)

@@ -1,0 +1,156 @@
+"""Friction laws of one mass on the ground (SPEC §2 and §8).
+
+A law supplies what the exact engine needs: the static limits that hold a stuck
+mass and the kinetic coefficient of a slipping one. Coefficients are per-mass
+arrays (trailing axis of length N, or broadcastable to it); any leading axes are
+batch axes.
+"""
+
+import abc
+import dataclasses
+
+import equinox as eqx
+import jax.numpy as jnp
+
+from .._custom_types import Array, ValuesLike
+
+
+def _arr(x: ValuesLike) -> Array:
+    x = jnp.asarray(x)
+    return x if jnp.issubdtype(x.dtype, jnp.floating) else x.astype(jnp.result_type(float))
+
+
+class AbstractFriction(eqx.Module):
+    """Base class of friction laws (abstract/final pattern).
+
+    Sign conventions (SPEC §8): a mass slipping with velocity $v$ in direction
+    $\\sigma = \\operatorname{sgn} v$ feels $-\\sigma\\,\\mu_k(\\sigma, |v|)\\,n$; a stuck mass
+    stays stuck while $-\\mu_{s,\\mathrm{bwd}}\\,n \\le F \\le \\mu_{s,\\mathrm{fwd}}\\,n$.
+    """
+
+    @abc.abstractmethod
+    def static_limits(self) -> tuple[Array, Array]:
+        """Static coefficients $(\\mu_{s,\\mathrm{fwd}}, \\mu_{s,\\mathrm{bwd}})$, per mass."""
+
+    @abc.abstractmethod
+    def kinetic(self, speed: Array, direction: Array) -> Array:
+        """Kinetic coefficient $\\mu_k \\ge 0$ of a mass slipping at `speed` $= |v|$ in
+        `direction` $\\sigma = \\pm 1$ (smooth in the speed)."""
+
+    def fields(self) -> dict[str, Array]:
+        """The coefficient arrays by name (every array field of the law)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+
+    def validity(self) -> dict[str, Array]:
+        """Per-field masks of valid values; a law with constraints overrides this."""
+        return {}
+
+    def valid_ranges(self) -> dict[str, str]:
+        """Human-readable valid range of each constrained field, for error messages."""
+        return {}
+
+
+class Coulomb(AbstractFriction):
+    """Isotropic Coulomb friction, the paper's law (eqs. 7, 9): static $\\mu_s$, kinetic $\\mu_k$.
+
+    **Arguments:** `mu_s`, `mu_k`: scalars or per-mass arrays, $\\mu_s \\ge \\mu_k \\ge 0$.
+    """
+
+    mu_s: Array
+    mu_k: Array
+
+    def __init__(self, mu_s: ValuesLike = 0.7, mu_k: ValuesLike = 0.5):
+        self.mu_s = _arr(mu_s)
+        self.mu_k = _arr(mu_k)
+
+    def static_limits(self) -> tuple[Array, Array]:
+        return self.mu_s, self.mu_s
+
+    def kinetic(self, speed: Array, direction: Array) -> Array:
+        return jnp.broadcast_to(self.mu_k, jnp.shape(speed)).astype(speed.dtype)
+
+    def validity(self) -> dict[str, Array]:
+        return {"mu_s": self.mu_s >= self.mu_k, "mu_k": self.mu_k >= 0}
+
+    def valid_ranges(self) -> dict[str, str]:
+        return {"mu_s": "mu_s >= mu_k", "mu_k": "mu_k >= 0"}
+
+
+class AnisotropicCoulomb(AbstractFriction):
+    """Coulomb friction with direction-dependent coefficients (bristles, scales; SPEC §8).
+
+    Slipping forward ($v > 0$) the friction is $-\\mu_{k,\\mathrm{fwd}}\\,n$, backward
+    $+\\mu_{k,\\mathrm{bwd}}\\,n$; a stuck mass holds while
+    $-\\mu_{s,\\mathrm{bwd}}\\,n \\le F \\le \\mu_{s,\\mathrm{fwd}}\\,n$.
+
+    **Arguments:** `mu_s_fwd`, `mu_s_bwd`, `mu_k_fwd`, `mu_k_bwd`: scalars or per-mass
+    arrays with $\\mu_{s,\\cdot} \\ge \\mu_{k,\\cdot} \\ge 0$ in each direction.
+    """
+
+    mu_s_fwd: Array
+    mu_s_bwd: Array
+    mu_k_fwd: Array
+    mu_k_bwd: Array
+
+    def __init__(self, mu_s_fwd: ValuesLike, mu_s_bwd: ValuesLike, mu_k_fwd: ValuesLike, mu_k_bwd: ValuesLike):
+        self.mu_s_fwd = _arr(mu_s_fwd)
+        self.mu_s_bwd = _arr(mu_s_bwd)
+        self.mu_k_fwd = _arr(mu_k_fwd)
+        self.mu_k_bwd = _arr(mu_k_bwd)
+
+    def static_limits(self) -> tuple[Array, Array]:
+        return self.mu_s_fwd, self.mu_s_bwd
+
+    def kinetic(self, speed: Array, direction: Array) -> Array:
+        return jnp.where(direction > 0, self.mu_k_fwd, self.mu_k_bwd).astype(speed.dtype)
+
+    def mirrored(self) -> "AnisotropicCoulomb":
+        """The same law with forward and backward swapped (mirror image of the ground)."""
+        return AnisotropicCoulomb(self.mu_s_bwd, self.mu_s_fwd, self.mu_k_bwd, self.mu_k_fwd)
+
+    def validity(self) -> dict[str, Array]:
+        return {
+            "mu_s_fwd": self.mu_s_fwd >= self.mu_k_fwd,
+            "mu_s_bwd": self.mu_s_bwd >= self.mu_k_bwd,
+            "mu_k_fwd": self.mu_k_fwd >= 0,
+            "mu_k_bwd": self.mu_k_bwd >= 0,
+        }
+
+    def valid_ranges(self) -> dict[str, str]:
+        return {"mu_s_fwd": "mu_s_fwd >= mu_k_fwd", "mu_s_bwd": "mu_s_bwd >= mu_k_bwd",
+                "mu_k_fwd": "mu_k_fwd >= 0", "mu_k_bwd": "mu_k_bwd >= 0"}  # fmt: skip
+
+
+class Stribeck(AbstractFriction):
+    """Coulomb friction whose kinetic coefficient falls with speed (Stribeck effect).
+
+    $$\\mu_k(|v|) = \\mu_k + (\\mu_s - \\mu_k)\\, e^{-(|v|/v_s)^2},$$
+
+    so a mass that has just broken away feels the static coefficient, and the
+    kinetic one is approached above the Stribeck speed $v_s$. Static limit $\\mu_s$
+    (isotropic).
+
+    **Arguments:** `mu_s`, `mu_k` ($\\mu_s \\ge \\mu_k \\ge 0$) and `v_s > 0`, scalars or per mass.
+    """
+
+    mu_s: Array
+    mu_k: Array
+    v_s: Array
+
+    def __init__(self, mu_s: ValuesLike = 0.7, mu_k: ValuesLike = 0.5, v_s: ValuesLike = 0.1):
+        self.mu_s = _arr(mu_s)
+        self.mu_k = _arr(mu_k)
+        self.v_s = _arr(v_s)
+
+    def static_limits(self) -> tuple[Array, Array]:
+        return self.mu_s, self.mu_s
+
+    def kinetic(self, speed: Array, direction: Array) -> Array:
+        r = speed / self.v_s
+        return self.mu_k + (self.mu_s - self.mu_k) * jnp.exp(-r * r)
+
+    def validity(self) -> dict[str, Array]:
+        return {"mu_s": self.mu_s >= self.mu_k, "mu_k": self.mu_k >= 0, "v_s": self.v_s > 0}
+
+    def valid_ranges(self) -> dict[str, str]:
+        return {"mu_s": "mu_s >= mu_k", "mu_k": "mu_k >= 0", "v_s": "v_s > 0"}

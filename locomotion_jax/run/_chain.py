@@ -1,0 +1,297 @@
+"""`simulate` and `measure` for chains of N masses (SPEC §5 and §8) on the N-mass exact engine.
+
+The same loops as the two-mass front ends (`_simulate`, `_measure`): a flat batch,
+one `vmap`, each configuration stopping on its own; `measure` runs through the work
+queue (`_queue.run_queue`) and keeps running sums only, so memory does not grow with
+the number of steps.
+"""
+
+import math
+from typing import Any, NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._batch import default_max_steps, MICRO_BATCH_CPU
+from .._compile import engine_jit
+from .._dynamics import Exact
+from .._exact import Target
+from .._queue import run_queue
+from .._results import ChainMeasurement, ChainTrajectory
+from .._status import Regime, Status
+from ..dynamics import _chain_exact as engine
+from ..model._chain import Chain
+
+
+STICK_TOL = 1e-6
+"""A mass counts as stuck in the window (SSL) only for a total stuck time above this."""
+
+
+# -- batch preparation ------------------------------------------------------------------
+
+
+def prepare_chain(chain: Chain, dtype: Any) -> tuple[Chain, jax.Array, tuple[int, ...]]:
+    """Cast, broadcast and flatten; returns `(flat_chain, valid, batch_shape)`.
+
+    An invalid configuration is replaced by a valid one of the batch (so nothing
+    turns into NaN) and flagged in `valid`; its result says `Status.INVALID`.
+    """
+    if not isinstance(chain, Chain):
+        raise TypeError(f"expected a locomotion_jax.Chain, got {type(chain).__name__}.")
+    if dtype is not None:
+        chain = chain.astype(dtype)
+    chain = chain.broadcast()
+    shape = chain.batch_shape
+    size = math.prod(shape)
+    if size == 0:
+        raise ValueError("the chain batch is empty (a zero-length axis).")
+    nb = len(shape)
+    flat = jax.tree_util.tree_map(lambda x: x.reshape((size,) + x.shape[nb:]), chain)
+    valid = flat.is_valid()
+    try:
+        ok = np.asarray(valid)
+        fallback = int(np.argmax(ok)) if ok.any() else 0
+    except jax.errors.ConcretizationTypeError:
+        fallback = 0
+    pick = lambda x: jnp.where(valid.reshape((size,) + (1,) * (x.ndim - 1)), x, x[fallback])
+    return jax.tree_util.tree_map(pick, flat), valid, shape
+
+
+def _unflatten(tree: Any, shape: tuple[int, ...]) -> Any:
+    return jax.tree_util.tree_map(lambda x: x.reshape(shape + x.shape[1:]), tree)
+
+
+def _check(contact: str, start: str) -> None:
+    if contact not in ("strict", "paper"):
+        raise ValueError(f"contact must be 'strict' or 'paper', got {contact!r}.")
+    if start not in ("paper", "relaxed"):
+        raise ValueError(f"start must be 'paper' (eq. 14) or 'relaxed', got {start!r}.")
+
+
+def _initial(C: Chain, valid, contact, start) -> engine.Hybrid:
+    st = engine.init(C, contact, engine.initial_positions(C, start))
+    return eqx.tree_at(lambda s: s.status, st, jnp.where(valid, st.status, Status.INVALID).astype(jnp.int32))
+
+
+def _com(C: Chain, x: jax.Array) -> jax.Array:
+    """Centre of mass $\\sum_i m_i x_i / \\sum_i m_i$ of one configuration (`x`: `(..., N)`)."""
+    return jnp.matmul(x, C.m) / C.m.sum()
+
+
+def chain_dynamics(dynamics: Any, waveform: Any) -> Exact:
+    """A chain runs on the N-mass exact engine and carries its own actuation."""
+    if waveform is not None:
+        raise ValueError("waveform= applies to Params; a Chain carries its own waveforms (Chain(waveforms=...)).")
+    if not isinstance(dynamics, Exact):
+        raise ValueError(f"a Chain runs with Exact dynamics; got {type(dynamics).__name__}.")
+    return dynamics
+
+
+# -- simulate -------------------------------------------------------------------------------
+
+
+def _row(s: engine.Hybrid) -> jax.Array:
+    dt = s.t.dtype
+    return jnp.concatenate([s.y.x, s.y.v, s.y.ed[None], s.y.w[None], s.stuck.astype(dt), s.sdir])
+
+
+def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps):
+    n = save_at.shape[0]
+
+    def init_one(C, ok):
+        st = _initial(C, ok, contact, start)
+        return st, jnp.zeros((), jnp.int32), jnp.zeros((n,) + _row(st).shape, st.t.dtype), jnp.zeros((), jnp.int32)
+
+    def active(c):
+        s, idx, _, steps = c
+        return (idx < n) & (s.status == Status.OK) & (steps < max_steps)
+
+    def body(C, c):
+        s, idx, rows, steps = c
+        act = active(c)
+        at = jnp.minimum(idx, n - 1)
+        record = act & (save_at[at] <= s.t)
+        new_s, _ = engine.step(C, contact, dt, s, save_at[at])
+        rows = rows.at[at].set(jnp.where(record, _row(s), rows[at]))
+        adv = act & ~record
+        s = jax.tree_util.tree_map(lambda a, b: jnp.where(adv, a, b), new_s, s)
+        return s, idx + record.astype(jnp.int32), rows, steps + act.astype(jnp.int32)
+
+    c = jax.vmap(init_one)(C, valid)
+    c = jax.lax.while_loop(lambda c: jnp.any(jax.vmap(active)(c)), lambda c: jax.vmap(body)(C, c), c)
+    s, idx, rows, _ = c
+    ok_rows = jnp.arange(n)[None, :] < idx[:, None]
+    rows = jnp.where(ok_rows[..., None], rows, jax.vmap(_row)(s)[:, None, :])
+    status = jnp.where((s.status == Status.OK) & (idx < n), Status.MAX_STEPS, s.status).astype(jnp.int32)
+    return rows, ok_rows, status, s.t_liftoff, s.n_switch
+
+
+_simulate_batch = engine_jit(_simulate_batch, ("contact", "start", "dt"))
+
+
+def _derived(C: Chain, contact, t, x, v):
+    """Energy, normal forces, rest lengths and tensions at one saved state."""
+    omega = C.waves.omega
+    dr = engine.drive(C, jnp.cos(omega * t), jnp.sin(omega * t))
+    tension, _, N, _ = engine.loads(C, contact, dr.l0, dr.f, x)
+    e = engine.energy(C, engine.State(x, v, t, t), tension)
+    return dict(e=e, N=N, l0=dr.l0, tension=tension)
+
+
+def simulate_chain(chain: Chain, t_end: float, save_at, *, dt: float, max_steps: int | None, contact: str,
+                   start: str, dtype: Any) -> ChainTrajectory:  # fmt: skip
+    """`simulate` for a [`Chain`][] with the exact engine (arguments as in `simulate`)."""
+    _check(contact, start)
+    flat, valid, shape = prepare_chain(chain, dtype)
+    save = jnp.asarray(save_at, flat.dtype)
+    N = flat.n_masses
+    steps = max_steps or default_max_steps(float(t_end), dt) + 4 * save.shape[0]
+    rows, ok, status, t_lift, n_switch = _simulate_batch(
+        flat, valid, save, contact, start, dt, jnp.asarray(steps, jnp.int32)
+    )
+    x, v = rows[..., :N], rows[..., N : 2 * N]
+    t = jnp.broadcast_to(save, rows.shape[:-1])
+    der = jax.vmap(lambda C, t, x, v: jax.vmap(lambda *a: _derived(C, contact, *a))(t, x, v))(flat, t, x, v)
+    out = dict(
+        t=t, x=x, v=v, stuck=rows[..., 2 * N + 2 : 3 * N + 2] > 0.5, X=jax.vmap(_com)(flat, x),
+        e_d=rows[..., 2 * N], w=rows[..., 2 * N + 1], valid=ok, status=status, liftoff=jnp.isfinite(t_lift),
+        t_liftoff=t_lift, n_switch=n_switch, **der,
+    )  # fmt: skip
+    return ChainTrajectory(**_unflatten(out, shape), start=start, contact=contact)
+
+
+# -- measure ----------------------------------------------------------------------------------
+
+
+class _Acc(eqx.Module):
+    started: jax.Array
+    X0: jax.Array
+    ed0: jax.Array
+    w0: jax.Array
+    e0: jax.Array
+    reached: jax.Array
+    t_z: jax.Array
+    y_z: engine.State
+    stuck: jax.Array
+    steps: jax.Array
+
+
+class _Fixed(NamedTuple):
+    C: Chain
+    ws: jax.Array
+    we: jax.Array
+    te: jax.Array
+    z: jax.Array
+
+
+def _setup(C, valid, t_start, z, horizon, window, contact, start):
+    st = _initial(C, valid, contact, start)
+    dtype = st.t.dtype
+    ws = jnp.where(jnp.isfinite(t_start), t_start, C.t_start).astype(dtype)
+    zero = jnp.zeros((), dtype)
+    no = jnp.asarray(False)
+    acc = _Acc(
+        started=no, X0=zero, ed0=zero, w0=zero, e0=zero, reached=no, t_z=jnp.asarray(jnp.inf, dtype),
+        y_z=st.y.map(jnp.zeros_like), stuck=jnp.zeros_like(st.y.x), steps=jnp.zeros((), jnp.int32),
+    )  # fmt: skip
+    return _Fixed(C, ws, ws + window, ws + horizon, jnp.asarray(z, dtype)), (st, acc)
+
+
+def _finished(f: _Fixed, s, a):
+    return (s.t >= f.te) | (a.reached & (s.t >= f.we))
+
+
+def _running(f: _Fixed, dyn, max_steps):
+    s, a = dyn
+    return (s.status == Status.OK) & ~_finished(f, s, a) & (a.steps < max_steps)
+
+
+def _advance(f: _Fixed, dyn, contact, dt):
+    s, a = dyn
+    t_stop = jnp.where(s.t < f.ws, f.ws, jnp.where(s.t < f.we, f.we, f.te))
+    begin = ~a.started & (s.t >= f.ws)
+    started = a.started | begin
+    X0 = jnp.where(begin, _com(f.C, s.y.x), a.X0)
+    target = Target(active=started & ~a.reached, X0=X0, z=f.z)
+    s_new, info = engine.step(f.C, contact, dt, s, t_stop, target)
+    inside = info.commit & started & (info.t1 <= f.we)
+    dur = jnp.where(inside, info.t1 - info.t0, 0)
+    hit = info.target_fired
+    a_new = _Acc(
+        started=started, X0=X0, ed0=jnp.where(begin, info.y0.ed, a.ed0), w0=jnp.where(begin, info.y0.w, a.w0),
+        e0=jnp.where(begin, engine.energy(f.C, info.y0, info.tension0), a.e0), reached=a.reached | hit,
+        t_z=jnp.where(hit, info.t_target, a.t_z), y_z=info.y_target.map(lambda n, o: jnp.where(hit, n, o), a.y_z),
+        stuck=a.stuck + jnp.where(info.stuck, dur, 0), steps=a.steps + 1,
+    )  # fmt: skip
+    return s_new, a_new
+
+
+def _energy_at(C: Chain, contact, t, y):
+    omega = C.waves.omega
+    dr = engine.drive(C, jnp.cos(omega * t), jnp.sin(omega * t))
+    tension, _, _, _ = engine.loads(C, contact, dr.l0, dr.f, y.x)
+    return engine.energy(C, y, tension)
+
+
+def _results(f: _Fixed, dyn, contact) -> dict:
+    s, a = dyn
+    ws, we, z = f.ws, f.we, f.z
+    dtype = ws.dtype
+    status = jnp.where((s.status == Status.OK) & ~_finished(f, s, a), Status.MAX_STEPS, s.status).astype(jnp.int32)
+    nan, inf = jnp.asarray(jnp.nan, dtype), jnp.asarray(jnp.inf, dtype)
+    regime = jnp.where(s.t >= we, jnp.where(jnp.max(a.stuck) > STICK_TOL, Regime.SSL, Regime.SL), Regime.UNDETERMINED)
+    t_end = jnp.where(a.reached, a.t_z, s.t)
+    y_end = a.y_z.map(lambda zv, sv: jnp.where(a.reached, zv, sv), s.y)
+    elapsed = t_end - ws
+    measured = a.started & (elapsed > 0)
+    mean_speed = jnp.where(measured, (_com(f.C, y_end.x) - a.X0) / jnp.where(measured, elapsed, 1), nan)
+    e_d = jnp.where(a.started, y_end.ed - a.ed0, nan)
+    work = jnp.where(a.started, y_end.w - a.w0, nan)
+    delta_e = jnp.where(a.started, _energy_at(f.C, contact, t_end, y_end) - a.e0, nan)
+    e_z = jnp.where(a.reached, y_end.ed - a.ed0, inf)
+    covered = jnp.clip(jnp.minimum(s.t, we) - ws, 0, None)
+    frac = jnp.where(covered > 0, a.stuck / jnp.where(covered > 0, covered, 1), nan)
+    return dict(
+        tau_z=jnp.where(a.reached, a.t_z - ws, inf), e_z=e_z, reached=a.reached, regime=regime.astype(jnp.int32),
+        mean_speed=mean_speed, cost_of_transport=e_z / z, stick_fraction=frac, e_d=e_d, work=work,
+        delta_e=delta_e, balance=work - e_d - delta_e, liftoff=jnp.isfinite(s.t_liftoff), t_liftoff=s.t_liftoff,
+        status=status, t_start=ws, X_start=jnp.where(a.started, a.X0, nan), n_steps=a.steps, n_switch=s.n_switch,
+    )  # fmt: skip
+
+
+def _measure_batch(C, valid, t_start, z, horizon, window, contact, start, dt, max_steps, lanes):
+    n = valid.shape[0]
+    take = lambda i: (jax.tree_util.tree_map(lambda x: x[i], C), valid[i], t_start[i])
+    setup = lambda i: _setup(*take(i), z, horizon, window, contact, start)
+    running = lambda f, d: _running(f, d, max_steps)
+    advance = lambda f, d: _advance(f, d, contact, dt)
+    results = lambda f, d: _results(f, d, contact)
+    order = jnp.argsort(-jnp.where(jnp.isfinite(C.waves.omega), C.waves.omega, -jnp.inf))
+    return run_queue(setup, running, advance, results, n, lanes, order)
+
+
+_measure_batch = engine_jit(_measure_batch, ("contact", "start", "dt", "lanes"))
+
+
+def measure_chain(chain: Chain, z: float, *, t_start: Any, horizon: float, window: float, dt: float,
+                  max_steps: int | None, contact: str, start: str, dtype: Any) -> ChainMeasurement:  # fmt: skip
+    """`measure` for a [`Chain`][] with the exact engine (arguments as in `measure`)."""
+    _check(contact, start)
+    flat, valid, shape = prepare_chain(chain, dtype)
+    n = valid.shape[0]
+    if t_start is None:
+        ts = jnp.full((n,), jnp.inf, flat.dtype)
+    else:
+        ts = jnp.broadcast_to(jnp.asarray(t_start, flat.dtype), shape).reshape((n,))
+        if not np.all(np.isfinite(np.asarray(ts))) or np.any(np.asarray(ts) < 0):
+            raise ValueError(f"t_start must be finite and >= 0, got {t_start!r}.")
+    ts_host = np.asarray(jnp.where(jnp.isfinite(ts), ts, flat.t_start))
+    steps = max_steps or default_max_steps(float(np.max(ts_host)) + horizon, dt)
+    lanes = min(n, MICRO_BATCH_CPU) if jax.default_backend() == "cpu" else n
+    out = _measure_batch(
+        flat, valid, ts, *(jnp.asarray(v, flat.dtype) for v in (z, horizon, window)), contact, start, dt,
+        jnp.asarray(steps, jnp.int32), lanes,
+    )  # fmt: skip
+    return ChainMeasurement(**_unflatten(out, shape), z=float(z), start=start, contact=contact)
