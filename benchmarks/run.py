@@ -16,7 +16,10 @@ and compile time are per case):
 - a Fig. 8 style sweep in natural, random and cost order (`sweep(order=...)`, `_schedule`);
   `--case '{"kind": "schedule", "grid": "map", ...}'` runs an omega x a map instead;
 - 64 x 64 and 512 x 512 (omega, a) maps with the public `sweep` on all devices: wall
-  time, peak memory and the size of the results.
+  time, peak memory and the size of the results;
+- 256 x 256 and 2048 x 2048 regime maps written into a Zarr store (`ZARR_MAP`
+  settings; 64 and 128 with `--quick`): wall and CPU time, peak memory, store size.
+  Alone: `python benchmarks/run.py --skip exact,sharded,smoothed,scipy,accuracy,schedule,map,chain --out /tmp/zarr.md`.
 
 Timings are medians of several runs after a warm-up (`block_until_ready`).
 Throughput is configurations x simulated time units per second ("cfg-tu/s"), by
@@ -531,6 +534,70 @@ def case_map(spec: dict) -> dict:
     )
 
 
+ZARR_MAP = dict(dtype="float32", dt=0.05, horizon=10.0, window=10.0, chunk=4096)
+"""The Zarr map case's settings: a regime map (SSL/SL over omega x a) cheap enough for
+2048 x 2048 on 2 cores. Every run covers t_start (80 periods of the lowest natural
+frequency, ~50 time units here) before its window, so a short horizon alone does not make
+it cheap: float32 and dt = 0.05 (on a 256 x 256 map the regime of 2 configurations in
+65,536 differs from float64 at dt = 0.03), window = horizon = 10 (the paper: 25). The
+2048 x 2048 map still takes about 40 CPU-minutes: 20 minutes of the full run on 2 cores."""
+
+
+def _tree_size(path: Path) -> tuple[int, int]:
+    files = [p for p in path.rglob("*") if p.is_file()]
+    return sum(p.stat().st_size for p in files), len(files)
+
+
+def case_zarr_map(spec: dict) -> dict:
+    """An N x N (omega, a) regime map written into a Zarr store (`sweep(path="....zarr")`):
+    wall and CPU time, peak memory, the store's size; the map is never held in memory."""
+    jax = setup_jax()
+    import tempfile
+
+    import locomotion_jax as lj
+    import numpy as np
+
+    n = spec["N"]
+    grid = {"omega": np.linspace(*OMEGA, n), "a": np.linspace(*AMPL, n)}
+    kw = dict(
+        z=5.0,
+        horizon=spec["horizon"],
+        window=spec["window"],
+        dynamics=lj.Exact(dt=spec["dt"]),
+        contact="paper",
+        dtype=spec["dtype"],
+        chunk_size=spec["chunk"],
+        progress=False,
+    )
+    cpu0 = resource.getrusage(resource.RUSAGE_SELF)
+    with tempfile.TemporaryDirectory(prefix="zarr_map_") as tmp:
+        path = Path(tmp) / "map.zarr"
+        t0 = time.perf_counter()
+        ds = lj.sweep(grid, path=path, **kw)
+        wall = time.perf_counter() - t0
+        cpu1 = resource.getrusage(resource.RUSAGE_SELF)
+        size, files = _tree_size(path)
+        regime = np.asarray(ds.regime.values)  # one variable (int32): 16 MB at 2048 x 2048
+        status = np.asarray(ds.status.values)
+        counts = {r.name: int((regime == int(r)).sum()) for r in lj.Regime}
+        result = dict(
+            spec,
+            wall=wall,
+            cpu=(cpu1.ru_utime + cpu1.ru_stime) - (cpu0.ru_utime + cpu0.ru_stime),
+            rss=maxrss_mb(),
+            n_configs=n * n,
+            n_chunks=int(np.prod([-(-x // b) for x, b in zip(ds.regime.shape, ds.attrs["sweep_block"])])),
+            block=ds.attrs["sweep_block"],
+            store_mb=size / 2**20,
+            n_files=files,
+            data_mb=sum(v.size * v.dtype.itemsize for v in ds.data_vars.values()) / 2**20,
+            n_devices=len(jax.devices()),
+            regimes=counts,
+            n_ok=int((status == int(lj.Status.OK)).sum()),
+        )
+    return result
+
+
 def case_chain(spec: dict) -> dict:
     """`measure` on a batch of N-mass chains (the N-mass engine): travelling waves on the
     benchmark's (omega, a) configurations, N masses of 1, the paper's spring and friction."""
@@ -574,6 +641,7 @@ CASES = dict(
     accuracy=case_accuracy,
     schedule=case_schedule,
     map=case_map,
+    zarr_map=case_zarr_map,
     chain=case_chain,
 )
 
@@ -754,6 +822,15 @@ def main():
             r = spawn(dict(kind="map", N=n, horizon=MAP_HORIZON, dt=dt), devices=args.devices if cpu_platform else None)
             results["map"].append(r)
             log(f"map {n} x {n}: " + (r.get("error") or f"{r['wall']:.1f} s, {r['rss']:.0f} MB"))
+    if "zarr_map" not in skip:
+        for n in (64, 128) if q else (256, 2048):
+            spec = dict(kind="zarr_map", N=n, **ZARR_MAP)
+            r = spawn(spec, devices=args.devices if cpu_platform else None)
+            results["zarr_map"].append(r)
+            log(
+                f"zarr map {n} x {n}: "
+                + (r.get("error") or f"{r['wall']:.1f} s, {r['rss']:.0f} MB, {r['store_mb']:.0f} MB")
+            )
 
     if "chain" not in skip:
         B = 64 if q else 1024
@@ -923,6 +1000,20 @@ def targets(res: dict, meta: dict, base: dict | None) -> list[str]:
                 "< the machine's memory",
                 f"{r['rss']:.0f} MB ({r['data_mb']:.1f} MB of results, {r['wall']:.0f} s); {small['rss']:.0f} MB",
                 ok(r["rss"] < _memory_mb(meta)),
+            )
+        )
+    zmaps = [r for r in res.get("zarr_map", []) if "error" not in r]
+    if len(zmaps) >= 2:
+        big, small = max(zmaps, key=lambda r: r["N"]), min(zmaps, key=lambda r: r["N"])
+        rows.append(
+            (
+                f"{big['N']} x {big['N']} regime map into a Zarr store ({big['n_configs']:,} configurations, "
+                f"{big['n_devices']} devices): peak RSS vs {small['N']} x {small['N']} "
+                f"({big['n_configs'] // small['n_configs']}x the configurations)",
+                "independent of the map's size",
+                f"{big['rss']:.0f} MB vs {small['rss']:.0f} MB ({big['data_mb']:.0f} MB of results, "
+                f"{big['store_mb']:.0f} MB on disk, {big['wall'] / 60:.1f} min)",
+                ok(big["rss"] <= 1.1 * small["rss"]),
             )
         )
     if not rows:
@@ -1178,6 +1269,35 @@ def report(res: dict, meta: dict) -> str:
             L.append(
                 f"| {r['N']} x {r['N']} | {r['n_configs']:,} | {r['n_devices']} | {r['wall']:.3g} | "
                 f"{r['steps_mean']:,.0f} | {r['data_mb']:.1f} | {r['rss']:.0f} | {r['n_ok']:,} |"
+            )
+        L.append("")
+    zmaps = res.get("zarr_map", [])
+    if zmaps:
+        z = next((r for r in zmaps if "error" not in r), zmaps[0])
+        L.append("## Maps into a Zarr store: larger than memory")
+        L.append("")
+        L.append(
+            f'`sweep(path="map.zarr")` over an N x N grid, omega in {OMEGA}, a in {AMPL}: a regime map, '
+            f"z = 5, {z['dtype']}, dt = {z['dt']:g}, window = horizon = {z['horizon']:g}, paper contact, chunks of "
+            f"{z['chunk']} configurations (blocks of whole rows), all devices. Each chunk is written into its "
+            "region of the store as it is done and dropped: nothing of the map is kept in memory. CPU s is the "
+            "process's (both devices' threads), robust to other load on the machine."
+        )
+        L.append("")
+        L.append(
+            "| N x N | configurations | chunks | devices | wall s (compile included) | CPU s | peak RSS MB "
+            "| results MB (in memory) | store MB (files) | SSL / SL / undetermined |"
+        )
+        L.append("|---|---|---|---|---|---|---|---|---|---|")
+        for r in zmaps:
+            if "error" in r:
+                L.append(f"| {r['N']} x {r['N']} | error: `{r['error'][-200:]}` | | | | | | | | |")
+                continue
+            g = r["regimes"]
+            L.append(
+                f"| {r['N']} x {r['N']} | {r['n_configs']:,} | {r['n_chunks']:,} | {r['n_devices']} | "
+                f"{r['wall']:.3g} | {r['cpu']:.3g} | {r['rss']:.0f} | {r['data_mb']:.1f} | "
+                f"{r['store_mb']:.1f} ({r['n_files']:,}) | {g['SSL']:,} / {g['SL']:,} / {g['UNDETERMINED']:,} |"
             )
         L.append("")
     chains = [r for r in res.get("chain", []) if "error" not in r]

@@ -75,6 +75,14 @@ def _global(
             "LOCOMOTION_JAX_CACHE=0.",
         ),
     ] = True,
+    distributed: Annotated[
+        bool,
+        typer.Option(
+            help="Join a multi-process run: jax.distributed.initialize() with its settings from the environment "
+            "(Slurm's srun, Open MPI, Kubernetes; JAX_COORDINATOR_ADDRESS). A sweep into a .zarr store then "
+            "shares out its chunks between the processes."
+        ),
+    ] = False,
 ) -> None:
     # XLA reads XLA_FLAGS when its backends start (the first computation), so
     # setting it here, before any command computes, is in time. A flag already
@@ -89,6 +97,12 @@ def _global(
     import jax
 
     jax.config.update("jax_enable_x64", x64)
+    if distributed:
+        try:
+            jax.distributed.initialize()
+        except (ValueError, RuntimeError) as err:
+            message = f"jax.distributed.initialize() failed: {err}"
+            raise typer.BadParameter(message, param_hint="--distributed") from None
     if cache:
         from ._cache import enable_compilation_cache
 

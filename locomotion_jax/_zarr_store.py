@@ -134,6 +134,7 @@ class ZarrStore:
         self.blocks = Blocks(attrs["sweep_shape"], attrs["sweep_block"])
         self.spec = json.loads(attrs["sweep_spec"])
         self.meta = path / META
+        self._arrays: dict[str, Any] = {}  # opened once: a lookup reads metadata (half the cost of a write)
 
     # -- creation and opening ----------------------------------------------------------
 
@@ -244,7 +245,9 @@ class ZarrStore:
         region = self.blocks.region(index)
         shape = tuple(r.stop - r.start for r in region)
         for name, values in results.items():
-            self.group[name][region] = np.asarray(values).reshape(shape)
+            if name not in self._arrays:
+                self._arrays[name] = self.group[name]
+            self._arrays[name][region] = np.asarray(values).reshape(shape)
         self._mark(index).touch()
 
     def dataset(self):

@@ -92,7 +92,7 @@ def sweep_to_zarr(
         if me == 0:
             try:
                 create()
-            except ValueError as err:
+            except Exception as err:  # raised after the barrier: the others must not wait for ever
                 error = err
         _barrier("locomotion_jax.sweep: store created")
         if error is not None:

@@ -2,8 +2,9 @@
 each) share out the chunks of one Zarr store; the result equals a one-process sweep
 bit for bit, and a sweep whose processes were killed is resumed by another process.
 
-The processes run `tests/distributed_sweep.py`; they share a compilation cache (so
-only the first one compiles), and the coordinator listens on a port free at run time.
+The processes run the CLI or `tests/distributed_sweep.py`; they share a compilation
+cache (so that fewer of them compile), and the coordinator listens on a port free at
+run time.
 """
 
 import json
@@ -41,10 +42,16 @@ def cache(tmp_path_factory):
     return path
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+def _free_port(low: int = 0, high: int = 0) -> int:
+    """A port nobody listens on now: any (the default), or one in `[low, high]`."""
+    for port in [0] if not low else np.random.default_rng().permutation(np.arange(low, high + 1))[:200]:
+        with socket.socket() as s:
+            try:
+                s.bind(("127.0.0.1", int(port)))
+            except OSError:
+                continue
+            return s.getsockname()[1]
+    raise RuntimeError(f"no free port in [{low}, {high}]")
 
 
 def _start(store: Path, cache: Path, n: int = 1, die_after: dict[int, int] | None = None) -> list[subprocess.Popen]:
@@ -86,16 +93,30 @@ def _assert_same(store: Path, reference: xr.Dataset) -> None:
 
 @pytest.mark.slow
 def test_two_processes_equal_one(tmp_path, cache, reference):
+    """The README's Slurm launch, `srun locomotion-jax --distributed sweep ...`, with the
+    variables srun sets for two tasks on one node (jax.distributed reads them)."""
     store = tmp_path / "map.zarr"
-    results = _wait(_start(store, cache, n=2))
+    args = ["--distributed", "--cpu-devices", "1", "sweep", "--omega", "1:24:8", "--a", "0.02:0.1:4"]
+    args += ["--horizon", "30", "--window", "25", "--chunk-size", "4", "--out", str(store), "--no-progress"]
+    # jax.distributed's coordinator port under Slurm: 61440 + SLURM_JOB_ID % 4096.
+    job = _free_port(61440, 65535) - 61440
+    slurm = dict(SLURM_JOB_ID=str(job), SLURM_STEP_NODELIST="localhost", SLURM_NTASKS="2")
+    procs = []
+    for p in range(2):
+        env = dict(os.environ, **slurm, SLURM_PROCID=str(p), SLURM_LOCALID=str(p), LOCOMOTION_JAX_CACHE_DIR=str(cache))
+        env["LOCOMOTION_JAX_CACHE"] = "1"
+        env["PYTHONPATH"] = os.pathsep.join([str(HELPER.parents[1]), env.get("PYTHONPATH", "")])
+        cmd = [sys.executable, "-m", "locomotion_jax._cli", *args]
+        procs.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env))
+    results = _wait(procs)
     for rc, out, err in results:
         assert rc == 0, err[-3000:]
-    reports = sorted((_report(out) for _, out, _ in results), key=lambda r: r["process"])
-    assert [r["processes"] for r in reports] == [2, 2]
-    # Every chunk computed once, and each process computed some (process 1 starts
-    # with chunk 1; chunks free later go to whichever process is free).
-    assert sum(r["chunks_computed"] for r in reports) == N_CHUNKS
-    assert all(r["chunks_computed"] >= 1 and r["chunks_loaded"] == 0 for r in reports), reports
+        assert f"wrote {store}: omega[8] x a[4]" in out
+    # Every chunk was taken once (a claim records its holder), by both processes:
+    # process 1 starts with chunk 1, and a chunk free later goes to whichever is free.
+    holders = [f.read_text().split()[2] for f in sorted((store / ".locomotion_jax" / "claims").iterdir())]
+    assert len(holders) == N_CHUNKS and {str(p.pid) for p in procs} == set(holders), holders
+    assert len(list((store / ".locomotion_jax" / "done").iterdir())) == N_CHUNKS
     _assert_same(store, reference)
 
 
