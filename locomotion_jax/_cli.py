@@ -336,8 +336,8 @@ def figures(
         typer.echo(str(path))
 
 
-PLUGINS: tuple[str, ...] = ("locomotion_jax._optimise_cli", "locomotion_jax._animate_cli")
-"""Modules that add a subcommand (`optimize`, `animate`) through `register(app)`; [`_register_optional`][]
+PLUGINS: tuple[str, ...] = ("locomotion_jax._optimise_cli", "locomotion_jax._animate_cli", "locomotion_jax._chain_cli")
+"""Modules that add a subcommand (`optimize`, `animate`, `chain`) through `register(app)`; [`_register_optional`][]
 skips one whose module is absent."""
 
 

@@ -26,9 +26,9 @@ import functools
 import math
 import os
 from collections import Counter
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
@@ -43,6 +43,10 @@ from ._params import _validity, DEFAULTS, PARAM_NAMES, Params, VALID_RANGES
 from ._results import Measurement
 from ._status import Regime, Status
 from ._store import ChunkStore, digest, read_finished
+
+
+if TYPE_CHECKING:
+    from .model._chain import Chain
 from ._zarr_store import is_zarr
 
 
@@ -346,6 +350,8 @@ def sweep(
     progress: bool = True,
     on_invalid: Literal["raise", "flag"] = "raise",
     order: Literal["auto", "natural", "cost"] = "auto",
+    mechanism: "Callable[..., Chain] | None" = None,
+    t_start: float | None = None,
 ):
     """Evaluate [`measure`][] over a grid (or list) of parameters, in chunks, on all devices.
 
@@ -396,6 +402,15 @@ def sweep(
       (default) chooses (see [`resolve_order`][]). The results are identical; a
       resumed sweep keeps the order it was started in. Recorded in the attribute `order`.
       A Zarr store is always cut in grid order (`"cost"` is refused there).
+    - `mechanism`: a map over chains of N masses instead of the paper's model: a
+      function from the swept values (keyword arguments named as the axes, plus
+      `fixed`, each a 1-D array with one entry per configuration) to a batched
+      [`Chain`][] of that batch shape (build it with `check=False` and let
+      `on_invalid` decide). The axes' names are then free. Chain maps run chunk by
+      chunk on the N-mass exact engine (`dynamics` must be `Exact`), in memory or
+      written to a NetCDF `path` when done (no resume, no Zarr store, grid order).
+    - `t_start`: an explicit measurement start for every configuration (chains only;
+      default `Chain.t_start`).
 
     **Returns:** an `xarray.Dataset` (read lazily from a Zarr store): one dimension and coordinate per swept axis, one
     variable per [`Measurement`][] field (plus `omega` when `omega_over_wn1` is swept),
@@ -416,6 +431,11 @@ def sweep(
         ```
     """
     dynamics = Exact() if dynamics is None else dynamics
+    if mechanism is not None:
+        return _sweep_mechanism(mechanism, axes, fixed, mode, z, horizon, window, t_start, dynamics, contact, start,
+                                dtype, chunk_size, path, overwrite, progress, on_invalid, order)  # fmt: skip
+    if t_start is not None:
+        raise ValueError("t_start is for chain maps (mechanism=...); the paper's model starts at Params.t_start.")
     if not isinstance(dynamics, (Exact, Smoothed)):
         raise TypeError(f"dynamics must be Exact or Smoothed, got {type(dynamics).__name__}.")
     model.check_contact(contact)
@@ -561,6 +581,31 @@ def sweep(
     if store is not None:
         store.finalize(ds)
     return ds
+
+
+def _sweep_mechanism(mechanism, axes, fixed, mode, z, horizon, window, t_start, dynamics, contact, start, dtype,
+                     chunk_size, path, overwrite, progress, on_invalid, order):  # fmt: skip
+    """`sweep` over chains built by `mechanism` (see `run._chain_sweep`)."""
+    from .run._chain_sweep import sweep_chain
+
+    if not callable(mechanism):
+        raise TypeError(f"mechanism must be a function of the swept values returning a Chain, got {mechanism!r}.")
+    if not isinstance(dynamics, Exact):
+        raise TypeError(f"dynamics must be Exact for a chain map, got {type(dynamics).__name__}.")
+    if order == "cost":
+        raise ValueError("order='cost' is for maps of the paper's model; a chain map runs in grid order.")
+    if on_invalid not in ("raise", "flag"):
+        raise ValueError(f"on_invalid must be 'raise' or 'flag', got {on_invalid!r}.")
+    if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1:
+        raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}.")
+    if path is not None and Path(path).exists() and not overwrite:
+        raise ValueError(f"{str(path)!r} exists; a chain map is not resumed: pass overwrite=True or another path.")
+    check_measure_args(z, horizon, window)
+    return sweep_chain(
+        mechanism, axes, fixed=fixed, mode=mode, z=z, horizon=horizon, window=window, t_start=t_start,
+        dt=dynamics.dt, max_steps=dynamics.max_steps, contact=contact, start=start, dtype=dtype,
+        chunk_size=int(chunk_size), path=path, progress=progress, on_invalid=on_invalid,
+    )  # fmt: skip
 
 
 def _from_process0(x: np.ndarray) -> np.ndarray:

@@ -241,3 +241,38 @@ def test_wrong_dynamics_or_waveform_for_chain():
         lj.measure(chain, dynamics=lj.Smoothed(1e-3))
     with pytest.raises(ValueError, match="carries its own waveforms"):
         lj.simulate(chain, 10.0, waveform=lj.Sinusoid(0.1, 2.0, 3.0))
+
+
+# -- maps over chains -----------------------------------------------------------------------------
+
+
+def _worm(phi, omega, a=0.08):
+    return lj.Chain(masses=np.ones(phi.shape + (3,)), d=0.0, waveforms=lj.TravellingWave(a, omega, phi),
+                    friction=lj.AnisotropicCoulomb(0.7, 0.9, 0.5, 0.7), check=False)  # fmt: skip
+
+
+def test_sweep_over_chains_equals_measure(tmp_path):
+    """`sweep(axes, mechanism=...)`: each point of the map is `measure` of its own chain, in chunks
+    (the last one padded), written to NetCDF; an invalid point is flagged, the others run."""
+    phi = np.array([-np.pi / 2, 0.0, np.pi / 2])
+    omega = np.array([3.0, -1.0])  # omega < 0 is invalid
+    kw = dict(z=1.0, horizon=80.0, t_start=30.0)
+    ds = lj.sweep({"phi": phi, "omega": omega}, mechanism=_worm, chunk_size=4, on_invalid="flag",
+                  path=tmp_path / "worm.nc", progress=False, **kw)  # fmt: skip
+    P, W = np.meshgrid(phi, omega, indexing="ij")
+    ref = lj.measure(_worm(P, W), **kw)
+    assert ds.stick_fraction.dims == ("phi", "omega", "mass")
+    for name in ("tau_z", "e_z", "mean_speed", "stick_fraction", "status", "regime", "balance"):
+        np.testing.assert_allclose(ds[name].values, np.asarray(getattr(ref, name)), rtol=1e-12, err_msg=name)
+    assert (ds.status.values[:, 1] == lj.Status.INVALID).all()
+    assert (ds.status.values[:, 0] == lj.Status.OK).all() and ds.reached.values[:, 0].any()
+    xr = pytest.importorskip("xarray")
+    with xr.open_dataset(tmp_path / "worm.nc") as back:
+        np.testing.assert_array_equal(back.tau_z.values, ds.tau_z.values)
+    with pytest.raises(ValueError, match=r"Invalid configuration at grid index \(0, 1\).*omega"):
+        lj.sweep({"phi": phi, "omega": omega}, mechanism=_worm, progress=False, **kw)
+    with pytest.raises(ValueError, match="batch shape"):
+        lj.sweep({"phi": phi}, fixed={"omega": 2.0}, mechanism=lambda phi, omega: _worm(phi[:1], omega),
+                 progress=False, **kw)  # fmt: skip
+    with pytest.raises(ValueError, match="t_start is for chain maps"):
+        lj.sweep({"omega": [1.0, 2.0]}, t_start=10.0, progress=False)

@@ -202,6 +202,28 @@ def test_optimize_registered_when_module_exists(monkeypatch):
 def test_installed_plugins_are_registered():
     commands = {c.name or c.callback.__name__ for c in _cli.app.registered_commands}
     assert {"simulate", "sweep", "figures"} <= commands
-    for module, command in (("_optimise_cli", "optimize"), ("_animate_cli", "animate")):
+    for module, command in (("_optimise_cli", "optimize"), ("_animate_cli", "animate"), ("_chain_cli", "chain")):
         if (Path(_cli.__file__).parent / f"{module}.py").exists():
             assert command in commands
+
+
+def test_chain_json_matches_measure():
+    """`chain`: per-mass lists parsed, the anisotropic law built, the result that of `measure`."""
+    args = ["--masses", "1,1,1", "--d", "0", "--a", "0.08", "--omega", "3", "--phi", "2.0944", "--friction",
+            "anisotropic", "--mu-s-bwd", "0.9", "--mu-k-bwd", "0.7", "--z", "1", "--horizon", "60",
+            "--t-start", "30", "--dt", "0.02"]  # fmt: skip
+    res = invoke("chain", *args, "--json")
+    assert res.exit_code == 0, res.output
+    record = _strict_json(res.stdout)
+    mech = lj.Chain(masses=[1.0] * 3, d=0.0, waveforms=lj.TravellingWave(0.08, 3.0, 2.0944),
+                    friction=lj.AnisotropicCoulomb(0.7, 0.9, 0.5, 0.7))  # fmt: skip
+    m = lj.measure(mech, 1.0, horizon=60.0, t_start=30.0, dynamics=lj.Exact(dt=0.02))
+    assert record["mean_speed"] == pytest.approx(float(m.mean_speed), rel=1e-12) and record["n_masses"] == 3
+    assert record["stick_fraction"] == pytest.approx(np.asarray(m.stick_fraction).tolist(), rel=1e-12)
+    assert record["status_name"] == "OK"
+    text = invoke("chain", *args)
+    assert text.exit_code == 0 and "stick_fraction" in text.stdout and "anisotropic friction" in text.stdout
+    bad = invoke("chain", "--masses", "1,1,1", "--k", "50,-1")
+    assert bad.exit_code == 2 and "'k'" in bad.output and "spring 1" in bad.output
+    bad = invoke("chain", "--masses", "1,1", "--mu-s-bwd", "0.9")
+    assert bad.exit_code == 2 and "--friction anisotropic" in bad.output

@@ -122,7 +122,7 @@ class AnisotropicCoulomb(AbstractFriction):
 
 
 class Stribeck(AbstractFriction):
-    """Coulomb friction whose kinetic coefficient falls with speed (Stribeck effect).
+    r"""Coulomb friction whose kinetic coefficient falls with speed (Stribeck effect).
 
     $$\mu_k(|v|) = \mu_k + (\mu_s - \mu_k)\, e^{-(|v|/v_s)^2},$$
 

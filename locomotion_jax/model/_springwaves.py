@@ -75,13 +75,12 @@ class TravellingWave(eqx.Module):
     phi: Array
 
     def __init__(self, a: ValuesLike, omega: ValuesLike, phi: ValuesLike = 0.0):
-        self.a = jnp.asarray(a)
-        self.omega = jnp.asarray(omega)
-        self.phi = jnp.asarray(phi)
+        # One batch shape for the three (a batch may vary any of them).
+        self.a, self.omega, self.phi = jnp.broadcast_arrays(jnp.asarray(a), jnp.asarray(omega), jnp.asarray(phi))
 
     def spring_fourier(self, springs: int) -> SpringFourier:
         """$a \\sin(\\omega t - j\\varphi) = a\\cos(j\\varphi) \\sin\\omega t - a \\sin(j\\varphi) \\cos\\omega t$."""
-        j = jnp.arange(springs)
+        j = jnp.arange(springs).reshape((1,) * self.phi.ndim + (springs,))
         lag = self.phi[..., None] * j
         a = self.a[..., None]
         return SpringFourier((-a * jnp.sin(lag))[..., None], (a * jnp.cos(lag))[..., None], self.omega)
