@@ -8,6 +8,7 @@ live, one case per test, so the work is shared between pytest-xdist workers.
 """
 
 import functools
+import os
 
 import locomotion_jax as lj
 import numpy as np
@@ -18,6 +19,14 @@ from reference_chain import chain_config, reference_chain_measure
 
 RTOL = 1e-3
 """tau_5 and e_5 (or the mean speed where 5 is not reached): float64, dt = 0.01."""
+
+QUICK = ("n3_iso_fwd_ssl", "n3_unequal_paper", "n3_aniso_d0_sl", "n4_aniso_d0_sl", "n6_aniso_d0_bwd_sl",
+         "n3_force_aniso_d0", "n3_stribeck")  # fmt: skip
+"""The cases run by default (N = 3, 4, 6; both contacts and starts; isotropic, anisotropic and Stribeck
+friction; the force actuator; d = 0 and d != 0; SSL and SL). `LOCOMOTION_JAX_FULL_REFERENCE=1` runs all
+of `CASES` (about 3 CPU-minutes of reference solves)."""
+
+RUN = CASES if os.environ.get("LOCOMOTION_JAX_FULL_REFERENCE") == "1" else [c for c in CASES if c["name"] in QUICK]
 
 
 def to_chain(cfg: dict) -> lj.Chain:
@@ -45,8 +54,8 @@ def _key(case):
 @functools.cache
 def _package_group(key) -> dict:
     """The package's measurements of every case with this structure, in one batched call."""
-    names = [c["name"] for c in CASES if _key(c) == key]
-    chains = [to_chain(chain_config(**c["config"])) for c in CASES if _key(c) == key]
+    names = [c["name"] for c in RUN if _key(c) == key]
+    chains = [to_chain(chain_config(**c["config"])) for c in RUN if _key(c) == key]
     kinds = {type(ch.friction) for ch in chains}
     out = {}
     for kind in kinds:  # one call per friction class (a batch shares one pytree structure)
@@ -57,7 +66,7 @@ def _package_group(key) -> dict:
     return out
 
 
-@pytest.mark.parametrize("case", CASES, ids=[c["name"] for c in CASES])
+@pytest.mark.parametrize("case", RUN, ids=[c["name"] for c in RUN])
 def test_chain_against_reference(case):
     cfg = chain_config(**case["config"])
     ref = reference_chain_measure(cfg, z=Z, horizon=HORIZON, contact=case["contact"], start=case["start"])
@@ -72,8 +81,9 @@ def test_chain_against_reference(case):
         np.testing.assert_allclose(got["mean_speed"], ref["mean_speed"], rtol=RTOL)
     assert int(got["regime"]) == (lj.Regime.SSL if ref["regime"] == "SSL" else lj.Regime.SL)
     np.testing.assert_allclose(got["stick_fraction"], ref["stick_fraction"], atol=5e-3)
-    # The energy balance (eq. 16 generalised) of the package's run.
-    assert abs(float(got["balance"])) < 1e-6 * max(1.0, float(got["e_d"]))
+    # The energy balance (eq. 16 generalised) of the package's run: RK4's error at dt = 0.01, largest
+    # (5e-6 of e_d) at the highest frequency, omega = 14.
+    assert abs(float(got["balance"])) < 2e-5 * max(1.0, float(got["e_d"]))
 
 
 def test_cases_cover_what_they_claim():
