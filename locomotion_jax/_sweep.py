@@ -42,7 +42,7 @@ from ._measure import check_measure_args
 from ._params import _validity, DEFAULTS, PARAM_NAMES, Params, VALID_RANGES
 from ._results import Measurement
 from ._status import Regime, Status
-from ._store import ChunkStore, digest, read_finished
+from ._store import ChunkOrder, ChunkStore, digest, read_finished
 
 
 if TYPE_CHECKING:
@@ -194,7 +194,8 @@ def _check_valid(grid: _Grid, block: int = 1 << 18) -> int:
     where = {n: int(i[0]) for n, i in grid.index(np.asarray([first])).items()}
     at = ", ".join(f"{n}[{i}]={float(grid.values[n][i])!r}" for n, i in where.items())
     try:
-        Params(**{n: float(v[0]) for n, v in one.items()})
+        values: dict[str, Any] = {n: float(v[0]) for n, v in one.items()}
+        Params(**values)
         reason = f"omega derived from {RATIO} is invalid ({VALID_RANGES['omega']})"
     except ValueError as err:
         reason = str(err)
@@ -232,7 +233,7 @@ def _max_steps(grid: _Grid, dynamics: AbstractDynamics, horizon: float) -> int:
 
 def resolve_order(
     order: str, dynamics: AbstractDynamics, horizon: float, window: float, n_configs: int, loops_per_device: int
-) -> str:
+) -> ChunkOrder:
     """The order a sweep's chunks are cut in: `"natural"` (grid order) or `"cost"`.
 
     `"auto"` picks `"cost"` where sorting can pay for its pilot run: the exact
@@ -246,7 +247,7 @@ def resolve_order(
     """
     if order not in ORDERS:
         raise ValueError(f"order must be one of {', '.join(map(repr, ORDERS))}, got {order!r}.")
-    if order != "auto":
+    if order == "natural" or order == "cost":
         return order
     pays = isinstance(dynamics, Exact) and horizon > window and loops_per_device > 1 and n_configs >= AUTO_MIN_CONFIGS
     return "cost" if pays else "natural"
@@ -569,7 +570,8 @@ def sweep(
     finally:
         bar.close()
 
-    for i in sorted(done):
+    for i in sorted(done):  # `done` is empty without a store
+        assert store is not None
         results[i] = store.load(i)
         STATS["chunks_loaded"] += 1
     flat_res = {
