@@ -400,7 +400,8 @@ def sweep(
     - `order`: `"natural"` cuts the chunks in grid order; `"cost"` first sorts the
       configurations by expected cost (a pilot run of each, `_schedule.cost_order`),
       so that a chunk's loops do not wait for one slow configuration; `"auto"`
-      (default) chooses (see [`resolve_order`][]). The results are identical; a
+      (default) chooses `"cost"` where sorting pays for its pilot run (`_sweep.resolve_order`:
+      large exact sweeps whose runs end at $\\tau_z$). The results are identical; a
       resumed sweep keeps the order it was started in. Recorded in the attribute `order`.
       A Zarr store is always cut in grid order (`"cost"` is refused there).
     - `mechanism`: a map over chains of N masses instead of the paper's model: a
@@ -585,8 +586,8 @@ def sweep(
     return ds
 
 
-def _sweep_mechanism(mechanism, axes, fixed, mode, z, horizon, window, t_start, dynamics, contact, start, dtype,
-                     chunk_size, path, overwrite, progress, on_invalid, order):  # fmt: skip
+def _sweep_mechanism(mechanism: "Callable[..., Chain]", axes, fixed, mode, z, horizon, window, t_start, dynamics,
+                     contact, start, dtype, chunk_size, path, overwrite, progress, on_invalid, order):  # fmt: skip
     """`sweep` over chains built by `mechanism` (see `run._chain_sweep`)."""
     from .run._chain_sweep import sweep_chain
 
