@@ -293,8 +293,8 @@ def optimise(
       sinusoids' frequencies).
     - `harmonics`: number $N$ of harmonics.
     - `settings`: [`Settings`][] (continuation, iterations, margins, horizons).
-    - `sweep`: a precomputed [`sinusoid_sweep`][] for the same `params`, `a_max` and
-      horizon (the baseline); computed if `None`.
+    - `sweep`: a precomputed [`sinusoid_sweep`][locomotion_jax._pareto.sinusoid_sweep] for the same
+      `params`, `a_max` and horizon (the baseline); computed if `None`.
 
     **Returns:** an [`Optimum`][]: coefficients, exact and smoothed figures,
     constraint checks on the exact model and the best sinusoid for comparison.
