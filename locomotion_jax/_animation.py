@@ -125,12 +125,14 @@ class _Scene:
         self.box2 = Rectangle((0, 0), self.w2, self.h, ec="k", lw=1.0, zorder=3, gid="mass2")
         ax.add_patch(self.box1)
         ax.add_patch(self.box2)
-        style = dict(marker="^", ms=9, color=STUCK_COLOR, mec="k", mew=0.8, ls="none", zorder=4)
+        style: dict[str, Any] = dict(marker="^", ms=9, color=STUCK_COLOR, mec="k", mew=0.8, ls="none", zorder=4)
         self.anchor1 = Line2D([], [], gid="anchor1", **style)
         self.anchor2 = Line2D([], [], gid="anchor2", **style)
         ax.add_line(self.anchor1)
         ax.add_line(self.anchor2)
-        label = dict(ha="center", va="bottom", fontsize=8, color=STUCK_COLOR, fontweight="bold", zorder=4)
+        label: dict[str, Any] = dict(
+            ha="center", va="bottom", fontsize=8, color=STUCK_COLOR, fontweight="bold", zorder=4
+        )
         self.label1 = ax.text(0, self.h + 0.05, "stuck", gid="label1", **label)
         self.label2 = ax.text(0, self.h + 0.05, "stuck", gid="label2", **label)
         self.names = (
@@ -293,5 +295,6 @@ def save_gif(anim: FuncAnimation, path: str | os.PathLike, *, fps: float | int =
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    anim.save(path, writer=PillowWriter(fps=fps), dpi=dpi)
+    # matplotlib's stubs say `fps: int`; the writer takes any positive number (frame duration 1000/fps ms).
+    anim.save(path, writer=PillowWriter(fps=fps), dpi=dpi)  # pyright: ignore[reportArgumentType]
     return path

@@ -37,13 +37,13 @@ def prepare(params: Params, waveform: AbstractWaveform | None, dtype: Any):
     else:
         if not isinstance(waveform, AbstractWaveform):
             raise TypeError(f"waveform must be an AbstractWaveform, got {type(waveform).__name__}.")
-        waveform = jax.tree_util.tree_map(lambda x: jnp.asarray(x, dt), waveform)
-        if shape and jnp.shape(waveform.omega) == shape:
+        cast: AbstractWaveform = jax.tree_util.tree_map(lambda x: jnp.asarray(x, dt), waveform)
+        if shape and jnp.shape(cast.omega) == shape:
             nb = len(shape)
-            wave = jax.tree_util.tree_map(lambda x: x.reshape((size,) + x.shape[nb:]), waveform)
+            wave = jax.tree_util.tree_map(lambda x: x.reshape((size,) + x.shape[nb:]), cast)
             axes = 0
         else:
-            wave, axes = waveform, None
+            wave, axes = cast, None
     return flat, wave, axes, shape
 
 

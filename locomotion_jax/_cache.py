@@ -59,7 +59,9 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path:
 
     **Arguments:**
 
-    - `path`: the cache directory (created if missing); default [`cache_dir`][].
+    - `path`: the cache directory (created if missing); default `$LOCOMOTION_JAX_CACHE_DIR`
+      if set, else `locomotion_jax/jax` in the platform's per-user cache directory
+      (`~/.cache` on Linux: `_cache.cache_dir`).
 
     **Returns:** the directory in use.
 

@@ -13,7 +13,7 @@ import math
 import os
 import sys
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
 import typer
@@ -166,20 +166,20 @@ def simulate(
     if model["omega_over_wn1"] is not None:
         values["omega"] = float(params.omega)
     omega, a, d, mhat = values["omega"], values["a"], values["d"], values["mhat"]
-    exact = dict(dynamics=Exact(dt=run["dt"]), contact=run["contact"], start=run["start"])
-    plot = plot and out is not None
-    if plot and t_end <= 0:
+    exact: dict[str, Any] = dict(dynamics=Exact(dt=run["dt"]), contact=run["contact"], start=run["start"])
+    plot_dir = out if plot else None
+    if plot_dir is not None and t_end <= 0:
         raise ValueError(f"--t-end must be > 0, got {t_end!r}.")
     png = None
-    if plot:
+    if plot_dir is not None:
         try:
-            out.mkdir(parents=True, exist_ok=True)
+            plot_dir.mkdir(parents=True, exist_ok=True)
         except OSError as err:
             raise ValueError(f"--out {out}: cannot create the directory ({err.strerror or err}).") from None
     m = measure(params, run["z"], horizon=run["horizon"], window=run["window"], **exact)
-    if plot:
+    if plot_dir is not None:
         traj = simulate_fn(params, t_end, np.linspace(0.0, t_end, 2001), **exact)
-        png = out / f"simulate_omega{omega:.4g}_a{a:.4g}_d{d:.4g}.png"
+        png = plot_dir / f"simulate_omega{omega:.4g}_a{a:.4g}_d{d:.4g}.png"
         _plot(traj, png, f"omega = {omega:.4g}, a = {a:.4g}, d = {d:.4g}, mhat = {mhat:.4g}")
     fields = {name: np.asarray(v).item() for name, v in m.to_numpy().items()}
     fields["regime_name"] = Regime(int(m.regime)).name
@@ -239,12 +239,15 @@ def sweep(
         ),
     ],
     given: Values,
-    mode: Annotated[str, typer.Option(help="'grid' (outer product) or 'list' (zip axes of equal length).")] = "grid",
+    mode: Annotated[
+        Literal["grid", "list"], typer.Option(help="'grid' (outer product) or 'list' (zip axes of equal length).")
+    ] = "grid",
     chunk_size: Annotated[int, typer.Option(help="Configurations per compiled chunk.")] = 4096,
     run: Values,
     overwrite: Annotated[bool, typer.Option(help="Discard what is stored at --out and recompute.")] = False,
     on_invalid: Annotated[
-        str, typer.Option(help="'raise': reject invalid configurations; 'flag': record them as Status.INVALID.")
+        Literal["raise", "flag"],
+        typer.Option(help="'raise': reject invalid configurations; 'flag': record them as Status.INVALID."),
     ] = "raise",
     progress: Annotated[bool, typer.Option(help="Show a progress bar.")] = True,
     order: Annotated[

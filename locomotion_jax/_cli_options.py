@@ -93,7 +93,7 @@ def run_options(names: Iterable[str] = RUN_NAMES) -> Group:
     return tuple(_RUN[n] for n in names)
 
 
-def to_params(model: Mapping[str, float | None]) -> Params:
+def to_params(model: Mapping[str, Any]) -> Params:
     """The `Params` of the model options; `omega_over_wn1`, when given, sets omega to that multiple of wn1.
 
     **Raises:** `ValueError` naming the parameter and its valid range for an invalid value.

@@ -6,6 +6,7 @@ Each figure has `data(size) -> xarray.Dataset`, `plot(ds, path)` and
 """
 
 import math
+from typing import Any
 
 import numpy as np
 import xarray as xr
@@ -29,11 +30,11 @@ SIZES_4B = {"quick": dict(dt=0.02, n_save=501), "default": dict(dt=0.01, n_save=
 def data_4b(size: dict) -> xr.Dataset:
     """X(t) for t in [0, 20] with l0 = 0.05 sin(pi t) + 3 and each d (paper Fig. 4b)."""
     d = np.asarray(D_VALUES)
-    fixed = dict(omega=math.pi, c=0.01)
+    fixed: dict[str, Any] = dict(omega=math.pi, c=0.01)
     p = Params(d=d, **fixed)
     t = np.linspace(0.0, 20.0, size["n_save"])
     tr = simulate(p, 20.0, t, dynamics=Exact(size["dt"]), **PAPER).to_numpy()
-    data = {k: (("d", "t"), tr[k]) for k in STATE}
+    data: dict[str, tuple[Any, np.ndarray]] = {k: (("d", "t"), tr[k]) for k in STATE}
     data.update({k: ("d", tr[k]) for k in ("liftoff", "t_liftoff", "status")})
     return xr.Dataset(
         data,
@@ -104,7 +105,7 @@ def _two_regimes(size: dict) -> xr.Dataset:
     ts = float(np.max(np.asarray(p.t_start)))
     t = ts + np.linspace(0.0, WINDOW, size["n_save"])
     tr = simulate(p, float(t[-1]), t, dynamics=Exact(size["dt"]), **PAPER).to_numpy()
-    data = {k: (("omega", "t"), tr[k]) for k in STATE}
+    data: dict[str, tuple[Any, np.ndarray]] = {k: (("omega", "t"), tr[k]) for k in STATE}
     data.update({k: ("omega", tr[k]) for k in ("liftoff", "status")})
     # The paper's window rule (Sect. 3) on the saved window: SSL if a mass is stuck for a
     # positive time (more than one save interval); mean speed of X over the window.

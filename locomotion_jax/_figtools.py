@@ -9,19 +9,27 @@ per swept parameter, one variable per `Measurement` field).
 import dataclasses
 import sys
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, TypedDict
 
 import jax
 import numpy as np
 import xarray as xr
 
 from ._batch import default_max_steps, horizon_bound
+from ._custom_types import Contact, Start
 from ._dynamics import Exact
 from ._measure import measure
 from ._params import DEFAULTS, Params
 
 
-PAPER = dict(contact="paper", start="paper")
+class Reading(TypedDict):
+    """The `contact` and `start` arguments of [`simulate`][], [`measure`][] and [`sweep`][]."""
+
+    contact: Contact
+    start: Start
+
+
+PAPER: Reading = {"contact": "paper", "start": "paper"}
 """Every reproduction uses the paper's $n_i = |N_i|$ reading (lift-off flagged, not
 stopped) and the paper's initial condition, eq. (14) (SPEC §1)."""
 
@@ -81,7 +89,7 @@ def run_sweep(
     import locomotion_jax
 
     axes = {k: np.atleast_1d(np.asarray(v, dtype=float)) for k, v in axes.items()}
-    kwargs = dict(
+    kwargs: dict[str, Any] = dict(
         fixed=dict(fixed or {}),
         z=z,
         horizon=horizon,
@@ -153,8 +161,9 @@ def steady_liftoff(
     min_n = np.full(lift.shape, np.nan)
     idx = np.argwhere(lift & coarse)
     if idx.size:
-        values = {d: ds[d].values[idx[:, k]] for k, d in enumerate(dims)}
-        params = Params(**values, **dict(fixed or {}))
+        values: dict[str, Any] = {d: ds[d].values[idx[:, k]] for k, d in enumerate(dims)}
+        fixed_values: dict[str, Any] = dict(fixed or {})
+        params = Params(**values, **fixed_values)
         t = float(np.max(np.asarray(params.t_start))) + np.linspace(0.0, window, n_save)
         n, out = len(idx), []
         step = min(chunk, n)

@@ -6,7 +6,7 @@ number of steps. $|X - X_0| = z$ is an event of the integrator (`_exact.Target`)
 located like a mode switch, so `tau_z` and `e_z` share the integrator's order.
 """
 
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, overload
 
 import equinox as eqx
 import jax
@@ -248,6 +248,38 @@ def check_measure_args(z: float, horizon: float, window: float) -> None:
     for name, value in (("z", z), ("horizon", horizon), ("window", window)):
         if not (np.isfinite(value) and value > 0):
             raise ValueError(f"{name} must be a finite number > 0, got {value!r}.")
+
+
+@overload
+def measure(
+    params: Params,
+    z: float = 5.0,
+    *,
+    horizon: float = 2000.0,
+    window: float = 25.0,
+    t_start: ArrayLike | None = None,
+    dynamics: AbstractDynamics | None = None,
+    waveform: AbstractWaveform | None = None,
+    contact: str = "strict",
+    start: str = "paper",
+    dtype: Any = None,
+) -> Measurement: ...
+
+
+@overload
+def measure(
+    params: Chain,
+    z: float = 5.0,
+    *,
+    horizon: float = 2000.0,
+    window: float = 25.0,
+    t_start: ArrayLike | None = None,
+    dynamics: AbstractDynamics | None = None,
+    waveform: AbstractWaveform | None = None,
+    contact: str = "strict",
+    start: str = "paper",
+    dtype: Any = None,
+) -> ChainMeasurement: ...
 
 
 def measure(

@@ -30,23 +30,19 @@ class Forces(NamedTuple):
     n2: Array
 
 
-def spring_length(params: Params, x1: ArrayLike, x2: ArrayLike) -> Array:
+def spring_length(params: Params, x1: Array, x2: Array) -> Array:
     """Eq. (2): $\\ell = \\sqrt{(x_2 - x_1)^2 + d^2}$."""
     dx = x2 - x1
     return jnp.sqrt(dx * dx + params.d * params.d)
 
 
-def forces(
-    params: Params, wave: AbstractWaveform, t: ArrayLike, x1: ArrayLike, x2: ArrayLike, contact: Contact
-) -> Forces:
+def forces(params: Params, wave: AbstractWaveform, t: ArrayLike, x1: Array, x2: Array, contact: Contact) -> Forces:
     """Spring and normal forces at time `t` (see [`spring_forces`][])."""
     l0, dl0 = wave(t)
     return spring_forces(params, l0, dl0, x1, x2, contact)
 
 
-def spring_forces(
-    params: Params, l0: ArrayLike, dl0: ArrayLike, x1: ArrayLike, x2: ArrayLike, contact: Contact
-) -> Forces:
+def spring_forces(params: Params, l0: Array, dl0: Array, x1: Array, x2: Array, contact: Contact) -> Forces:
     """Spring and normal forces for a given rest length $\\ell_0$ and rate.
 
     - Tension $T = k(\\ell - \\ell_0(t))$; horizontal force on $m_1$ (eq. 8, in the

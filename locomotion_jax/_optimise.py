@@ -42,7 +42,7 @@ import math
 import sys
 import time
 from collections import Counter
-from typing import Any
+from typing import Any, cast
 
 import equinox as eqx
 import jax
@@ -175,7 +175,8 @@ def _block(theta, opt_state, best, prob, eps, v_target, margin, lam, rho, weight
             best = jax.tree_util.tree_map(lambda a, b: jnp.where(better, a, b), _Best(theta, cost), best)
             updates, opt_state = opt.update(grad, opt_state, theta)
             updates = jax.tree_util.tree_map(lambda u: -lr * u, updates)
-            theta = project(optax.apply_updates(theta, updates), prob.log_lo, prob.log_hi)
+            # `apply_updates` returns the structure of `theta` (a dict); its stubs say `optax.Params`.
+            theta = project(cast(dict, optax.apply_updates(theta, updates)), prob.log_lo, prob.log_hi)
             return (theta, opt_state, best), jnp.concatenate([cost[None], g])
 
         (theta, opt_state, best), hist = jax.lax.scan(body, (theta, opt_state, best), None, length=steps)
@@ -292,8 +293,8 @@ def optimise(
       sinusoids' frequencies).
     - `harmonics`: number $N$ of harmonics.
     - `settings`: [`Settings`][] (continuation, iterations, margins, horizons).
-    - `sweep`: a precomputed [`sinusoid_sweep`][] for the same `params`, `a_max` and
-      horizon (the baseline); computed if `None`.
+    - `sweep`: a precomputed [`sinusoid_sweep`][locomotion_jax._pareto.sinusoid_sweep] for the same
+      `params`, `a_max` and horizon (the baseline); computed if `None`.
 
     **Returns:** an [`Optimum`][]: coefficients, exact and smoothed figures,
     constraint checks on the exact model and the best sinusoid for comparison.
@@ -362,6 +363,7 @@ def optimise(
         )
 
     lr = settings.learning_rate
+    best_theta = theta  # replaced by the first stage (`eps_schedule` is never empty)
     for stage, eps in enumerate(settings.eps_schedule):
         lr = settings.learning_rate * settings.lr_decay**stage
         state, best_theta = _run_stage(state, problem(eps), eps, lr, settings, settings.outer, log)

@@ -12,7 +12,7 @@ from ._json import dumps, jsonable
 
 
 class Settings(eqx.Module):
-    """Static settings of [`optimise`][] (Python numbers; changing them recompiles).
+    """Static settings of [`optimise`][locomotion_jax._optimise.optimise] (Python numbers; changing them recompiles).
 
     - `starts`: number of starts optimised together under `vmap`.
     - `start_frequencies`: base frequencies the starts are spread over when
@@ -77,7 +77,8 @@ class Settings(eqx.Module):
 
 @dataclasses.dataclass(frozen=True)
 class Optimum:
-    """Result of [`optimise`][]; every figure called `*_exact` is from the exact hybrid model.
+    """Result of [`optimise`][locomotion_jax._optimise.optimise]; every figure called `*_exact` is from the exact
+    hybrid model.
 
     - `cos`, `sin`, `omega`, `lbar`: the waveform ([`Fourier`][], `waveform`).
     - `mean_speed_exact`, `cost_of_transport_exact`: signed mean speed and

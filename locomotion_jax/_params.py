@@ -7,6 +7,7 @@ from typing import Any
 
 import equinox as eqx
 import jax
+import jax.core  # (jax.core.Tracer) for type checkers
 import jax.numpy as jnp
 import numpy as np
 
@@ -210,8 +211,7 @@ class Params(eqx.Module):
 
     def replace(self, **changes: ArrayLike) -> "Params":
         """Copy with some fields changed (validated like the constructor)."""
-        values = self.as_dict()
-        values.update(changes)
+        values: dict[str, ArrayLike] = {**self.as_dict(), **changes}
         return Params.from_dict(values)
 
     # -- derived quantities ---------------------------------------------------

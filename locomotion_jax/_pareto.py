@@ -11,7 +11,7 @@ and
 - lift-off (eq. 5) anywhere in the run makes the configuration infeasible.
 """
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -117,7 +117,7 @@ def sinusoid_sweep(
         amps = a_max * np.arange(1, int(amplitudes) + 1) / int(amplitudes)
     else:
         amps = np.asarray(amplitudes, float)
-    values = {k: v for k, v in params.as_dict().items() if k not in ("a", "omega")}
+    values: dict[str, Any] = {k: v for k, v in params.as_dict().items() if k not in ("a", "omega")}
     grid = Params.grid(a=jnp.asarray(amps, params.dtype), omega=jnp.asarray(omegas, params.dtype), **values)
     fig = exact_figures(grid, None, horizon, dt)
     a, w = np.meshgrid(amps, omegas, indexing="ij")
@@ -179,7 +179,7 @@ def refine_sinusoid(
     w_steps = np.diff(np.log(np.unique(sweep.omega)))
     half_a = float(a_steps.max()) if a_steps.size else 0.5 * float(sweep.a.max())
     half_w = float(w_steps.max()) if w_steps.size else 0.1
-    values = {k: v for k, v in params.as_dict().items() if k not in ("a", "omega")}
+    values: dict[str, Any] = {k: v for k, v in params.as_dict().items() if k not in ("a", "omega")}
     shrink = 2.0 / (points - 1)
     for _ in range(levels):
         every = SinusoidSweep(*(np.concatenate(x) for x in zip(*found)))

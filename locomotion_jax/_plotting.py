@@ -7,6 +7,7 @@ natural frequencies as dotted lines.
 """
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -21,7 +22,7 @@ from ._figtools import runs
 SSL_COLOR = "#cfe3f7"
 LIFTOFF_COLOR = "0.45"
 TRANSIENT_COLOR = "0.7"  # lift-off only in the start transient (steady motion keeps contact)
-WN_STYLE = dict(color="0.25", linestyle=":", linewidth=1.0)
+WN_STYLE: dict[str, Any] = dict(color="0.25", linestyle=":", linewidth=1.0)
 
 
 def new_figure(nrows: int = 1, ncols: int = 1, *, size=(6.4, 4.0), **kwargs) -> tuple[Figure, np.ndarray]:

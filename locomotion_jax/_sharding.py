@@ -97,6 +97,7 @@ def _run_chunk(
             return exact_batch(p, wave, 0, z, horizon, window, contact, start, dyn.dt, max_steps, lanes=micro_batch)
         from ._smooth import measure_one
 
+        assert isinstance(dyn, Smoothed)  # `sweep` accepts Exact or Smoothed
         one = lambda q, w: measure_one(q, w, z, horizon, window, contact, start, dyn)
         if not micro_batch or micro_batch >= p.omega.shape[0]:
             return jax.vmap(one)(p, wave)
@@ -183,7 +184,9 @@ def chunk_dtypes(
     """The dtype of each output of [`dispatch_chunk`][] for the same arguments, computed
     without running it (the trace is kept by `jax.jit`: the chunks do not trace again)."""
     args = _chunk_args(values, dtype, z, horizon, window, dynamics, contact, start, max_steps, mesh, micro_batch)
-    return {k: np.dtype(v.dtype) for k, v in _run_chunk.eval_shape(*args).items()}
+    # `_run_chunk` is the `jax.jit` wrapper (reassigned above), which has `eval_shape`.
+    out = _run_chunk.eval_shape(*args)  # pyright: ignore[reportFunctionMemberAccess]
+    return {k: np.dtype(v.dtype) for k, v in out.items()}
 
 
 def _chunk_args(values, dtype, z, horizon, window, dynamics, contact, start, max_steps, mesh, micro_batch) -> tuple:

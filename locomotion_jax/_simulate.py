@@ -1,6 +1,6 @@
 """`simulate`: trajectories saved at requested times (memory grows with the saves only)."""
 
-from typing import Any
+from typing import Any, overload
 
 import equinox as eqx
 import jax
@@ -141,6 +141,34 @@ def _trajectory(params, wave, wave_axes, contact, start, save_at, rows, valid, s
 # One compiled computation rather than dozens of small ones run op by op: each of
 # those is a compilation (or a compilation-cache read) of its own in a new process.
 _trajectory = jax.jit(_trajectory, static_argnames=("wave_axes", "contact", "start"))
+
+
+@overload
+def simulate(
+    params: Params,
+    t_end: float,
+    save_at: ArrayLike | None = None,
+    *,
+    dynamics: AbstractDynamics | None = None,
+    waveform: AbstractWaveform | None = None,
+    contact: str = "strict",
+    start: str = "paper",
+    dtype: Any = None,
+) -> Trajectory: ...
+
+
+@overload
+def simulate(
+    params: Chain,
+    t_end: float,
+    save_at: ArrayLike | None = None,
+    *,
+    dynamics: AbstractDynamics | None = None,
+    waveform: AbstractWaveform | None = None,
+    contact: str = "strict",
+    start: str = "paper",
+    dtype: Any = None,
+) -> ChainTrajectory: ...
 
 
 def simulate(

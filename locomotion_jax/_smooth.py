@@ -98,6 +98,12 @@ def _longest_run(flags: Array) -> Array:
     return jnp.max(runs)
 
 
+def _saved(sol: diffrax.Solution) -> tuple[Array, Array]:
+    """`(sol.ts, sol.ys)`, which every `SaveAt` here requests (diffrax types them optional)."""
+    assert sol.ts is not None and sol.ys is not None
+    return sol.ts, sol.ys
+
+
 def _event_hit(sol, k) -> Array:
     if sol.event_mask is None:
         return jnp.asarray(False)
@@ -113,8 +119,9 @@ def simulate_one(params, wave, save, contact, start, dyn):
     params, valid = safe_params(params)
     y0 = _y0(params, start)
     sol = solve(params, wave, contact, dyn, save[0], save[-1], y0, diffrax.SaveAt(ts=save, t1=True))
-    ys = sol.ys[:-1]  # (n, 6); inf after a terminating event
-    t_final = sol.ts[-1]
+    sol_ts, sol_ys = _saved(sol)
+    ys = sol_ys[:-1]  # (n, 6); inf after a terminating event
+    t_final = sol_ts[-1]
     ok_rows = jnp.all(jnp.isfinite(ys), axis=-1) & valid
     last = jnp.max(jnp.where(ok_rows, jnp.arange(ys.shape[0]), 0))
     ys = jnp.where(ok_rows[:, None], ys, ys[last][None, :])
@@ -178,14 +185,15 @@ def measure_one(params, wave, z, horizon, window, contact, start, dyn: Smoothed)
     ws = params.t_start.astype(dtype)
     com = lambda y: model.centre_of_mass(params, y[0], y[2])
     solA = solve(params, wave, contact, dyn, jnp.zeros((), dtype), ws, y0, diffrax.SaveAt(t1=True))
-    yA = solA.ys[-1]
+    tsA, ysA = _saved(solA)
+    yA = ysA[-1]
     liftA = _event_hit(solA, 0) if contact == "strict" else jnp.asarray(False)
     okA = ~liftA & ~_failed(solA) & valid
     yA = jnp.where(okA, yA, y0)
     X0 = com(yA)
     ts = ws + jnp.linspace(0, 1, WINDOW_SAMPLES, dtype=dtype) * window
     solB = solve(params, wave, contact, dyn, ws, ws + window, yA, diffrax.SaveAt(ts=ts))
-    vB = solB.ys[:, jnp.array([1, 3])]
+    vB = _saved(solB)[1][:, jnp.array([1, 3])]
     finite = jnp.all(jnp.isfinite(vB), axis=-1)
     stuckB = (jnp.abs(vB) < STICK_SPEED * dyn.eps) & finite[:, None]
     frac = jnp.sum(stuckB, axis=0) / jnp.maximum(jnp.sum(finite), 1)
@@ -195,10 +203,11 @@ def measure_one(params, wave, z, horizon, window, contact, start, dyn: Smoothed)
 
     reach = lambda t, y, args, **kw: z - jnp.abs(com(y) - X0)
     solC = solve(params, wave, contact, dyn, ws, ws + horizon, yA, diffrax.SaveAt(t1=True), (reach,))
-    yC = solC.ys[-1]
+    tsC, ysC = _saved(solC)
+    yC = ysC[-1]
     reached = _event_hit(solC, 0) & okA
     liftC = _event_hit(solC, 1) if contact == "strict" else jnp.asarray(False)
-    tC = solC.ts[-1]
+    tC = tsC[-1]
     nan = jnp.asarray(jnp.nan, dtype)
     inf = jnp.asarray(jnp.inf, dtype)
     tau = jnp.where(reached, tC - ws, inf)
@@ -210,7 +219,7 @@ def measure_one(params, wave, z, horizon, window, contact, start, dyn: Smoothed)
     failed = _failed(solA) | _failed(solC)
     status = jnp.where(lift, Status.LIFTOFF, jnp.where(failed, Status.SOLVER_FAILED, Status.OK))
     status = jnp.where(valid, status, Status.INVALID).astype(jnp.int32)
-    t_lift = jnp.where(liftA, solA.ts[-1], jnp.where(liftC, tC, inf))
+    t_lift = jnp.where(liftA, tsA[-1], jnp.where(liftC, tC, inf))
     elapsed = tC - ws
     e_z = jnp.where(reached, e_d, inf)
     return dict(
@@ -237,8 +246,8 @@ def measure_one(params, wave, z, horizon, window, contact, start, dyn: Smoothed)
 
 
 def measure_smoothed(flat, wave, axes, z, horizon, window, contact, start, dyn):
-    args = tuple(jnp.asarray(v, flat.dtype) for v in (z, horizon, window))
-    return _measure_smoothed_batch(flat, wave, axes, *args, contact, start, dyn)
+    z, horizon, window = (jnp.asarray(v, flat.dtype) for v in (z, horizon, window))
+    return _measure_smoothed_batch(flat, wave, axes, z, horizon, window, contact, start, dyn)
 
 
 @eqx.filter_jit

@@ -26,13 +26,16 @@ import os
 import shutil
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, TypeAlias
 
 import numpy as np
 
 
 MANIFEST = "manifest.json"
 ORDER = "order.npy"
+
+ChunkOrder: TypeAlias = Literal["natural", "cost"]
+"""How a sweep's configurations are cut into chunks: grid order, or sorted by expected cost."""
 
 
 def digest(values: np.ndarray, dtype: str) -> str:
@@ -136,12 +139,15 @@ class ChunkStore:
         n_configs: int,
         overwrite: bool = False,
         write: bool = True,
-        order: str = "natural",
+        order: ChunkOrder = "natural",
         permutation: Callable[[], np.ndarray] | None = None,
     ):
         self.path = path
         self.parts = path.with_name(path.name + ".parts")
         self.write = write
+        self.chunk_size: int
+        self.order: ChunkOrder
+        self.permutation: np.ndarray | None
         manifest = self.parts / MANIFEST
         try:  # fail now, not after hours of computing, if the NetCDF writer is missing
             import h5netcdf  # noqa: F401
@@ -157,14 +163,15 @@ class ChunkStore:
                 raise _mismatch(self.parts, stored["spec"], spec)
             if stored is None:
                 self.chunk_size, self.order = int(chunk_size), order
-                self.permutation = None if permutation is None else np.asarray(permutation(), np.int64)
+                perm = None if permutation is None else np.asarray(permutation(), np.int64)
+                self.permutation = perm
                 record = {"spec": spec, "chunk_size": self.chunk_size, "n_configs": int(n_configs), "order": order}
-                if self.permutation is not None:
-                    record["permutation_sha256"] = digest(self.permutation, "<i8")
+                if perm is not None:
+                    record["permutation_sha256"] = digest(perm, "<i8")
                 if write:
                     self.parts.mkdir(parents=True, exist_ok=True)
-                    if self.permutation is not None:  # before the manifest, which marks the store as started
-                        _atomic_write(self.parts / ORDER, lambda f: np.save(f, self.permutation))
+                    if perm is not None:  # before the manifest, which marks the store as started
+                        _atomic_write(self.parts / ORDER, lambda f: np.save(f, perm))
                     _atomic_write(manifest, lambda f: f.write(json.dumps(record, indent=1).encode()))
             else:
                 self.chunk_size = int(stored["chunk_size"])
@@ -197,7 +204,8 @@ class ChunkStore:
 
     def save(self, index: int, arrays: Mapping[str, np.ndarray]) -> None:
         if self.write:
-            _atomic_write(self._file(index), lambda f: np.savez(f, **arrays))
+            # numpy's stubs match `**arrays` against `savez`'s `allow_pickle` keyword
+            _atomic_write(self._file(index), lambda f: np.savez(f, **arrays))  # pyright: ignore[reportArgumentType]
 
     def load(self, index: int) -> dict[str, np.ndarray]:
         with np.load(self._file(index)) as data:

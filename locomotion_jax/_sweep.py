@@ -42,7 +42,7 @@ from ._measure import check_measure_args
 from ._params import _validity, DEFAULTS, PARAM_NAMES, Params, VALID_RANGES
 from ._results import Measurement
 from ._status import Regime, Status
-from ._store import ChunkStore, digest, read_finished
+from ._store import ChunkOrder, ChunkStore, digest, read_finished
 
 
 if TYPE_CHECKING:
@@ -194,7 +194,8 @@ def _check_valid(grid: _Grid, block: int = 1 << 18) -> int:
     where = {n: int(i[0]) for n, i in grid.index(np.asarray([first])).items()}
     at = ", ".join(f"{n}[{i}]={float(grid.values[n][i])!r}" for n, i in where.items())
     try:
-        Params(**{n: float(v[0]) for n, v in one.items()})
+        values: dict[str, Any] = {n: float(v[0]) for n, v in one.items()}
+        Params(**values)
         reason = f"omega derived from {RATIO} is invalid ({VALID_RANGES['omega']})"
     except ValueError as err:
         reason = str(err)
@@ -232,7 +233,7 @@ def _max_steps(grid: _Grid, dynamics: AbstractDynamics, horizon: float) -> int:
 
 def resolve_order(
     order: str, dynamics: AbstractDynamics, horizon: float, window: float, n_configs: int, loops_per_device: int
-) -> str:
+) -> ChunkOrder:
     """The order a sweep's chunks are cut in: `"natural"` (grid order) or `"cost"`.
 
     `"auto"` picks `"cost"` where sorting can pay for its pilot run: the exact
@@ -246,7 +247,7 @@ def resolve_order(
     """
     if order not in ORDERS:
         raise ValueError(f"order must be one of {', '.join(map(repr, ORDERS))}, got {order!r}.")
-    if order != "auto":
+    if order == "natural" or order == "cost":
         return order
     pays = isinstance(dynamics, Exact) and horizon > window and loops_per_device > 1 and n_configs >= AUTO_MIN_CONFIGS
     return "cost" if pays else "natural"
@@ -399,7 +400,8 @@ def sweep(
     - `order`: `"natural"` cuts the chunks in grid order; `"cost"` first sorts the
       configurations by expected cost (a pilot run of each, `_schedule.cost_order`),
       so that a chunk's loops do not wait for one slow configuration; `"auto"`
-      (default) chooses (see [`resolve_order`][]). The results are identical; a
+      (default) chooses `"cost"` where sorting pays for its pilot run (`_sweep.resolve_order`:
+      large exact sweeps whose runs end at $\\tau_z$). The results are identical; a
       resumed sweep keeps the order it was started in. Recorded in the attribute `order`.
       A Zarr store is always cut in grid order (`"cost"` is refused there).
     - `mechanism`: a map over chains of N masses instead of the paper's model: a
@@ -569,7 +571,8 @@ def sweep(
     finally:
         bar.close()
 
-    for i in sorted(done):
+    for i in sorted(done):  # `done` is empty without a store
+        assert store is not None
         results[i] = store.load(i)
         STATS["chunks_loaded"] += 1
     flat_res = {
@@ -583,8 +586,8 @@ def sweep(
     return ds
 
 
-def _sweep_mechanism(mechanism, axes, fixed, mode, z, horizon, window, t_start, dynamics, contact, start, dtype,
-                     chunk_size, path, overwrite, progress, on_invalid, order):  # fmt: skip
+def _sweep_mechanism(mechanism: "Callable[..., Chain]", axes, fixed, mode, z, horizon, window, t_start, dynamics,
+                     contact, start, dtype, chunk_size, path, overwrite, progress, on_invalid, order):  # fmt: skip
     """`sweep` over chains built by `mechanism` (see `run._chain_sweep`)."""
     from .run._chain_sweep import sweep_chain
 

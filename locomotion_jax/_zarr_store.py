@@ -106,7 +106,7 @@ class Claim:
         self._fd = fd
 
     def release(self) -> None:
-        if self._fd is not None:
+        if self._fd is not None and fcntl is not None:  # a claim holds a descriptor only where fcntl exists
             fcntl.flock(self._fd, fcntl.LOCK_UN)
             os.close(self._fd)
             self._fd = None
@@ -150,7 +150,7 @@ class ZarrStore:
         try:
             group = zarr.open_group(path, mode="r+", zarr_format=3, use_consolidated=True)
             attrs = dict(group.attrs)
-            version, stored = attrs["locomotion_jax_store"], json.loads(attrs["sweep_spec"])
+            version, stored = attrs["locomotion_jax_store"], json.loads(str(attrs["sweep_spec"]))
         except Exception as err:  # not a sweep store: never write into it
             raise ValueError(
                 f"Output path {path} exists and is not a locomotion_jax sweep store ({type(err).__name__}); "

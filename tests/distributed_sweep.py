@@ -16,6 +16,7 @@ import os
 import signal
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -23,7 +24,7 @@ import numpy as np
 AXES = {"omega": np.linspace(1.0, 24.0, 8), "a": np.linspace(0.02, 0.1, 4)}
 """The test sweep: 32 configurations, in chunks of 4 (8 chunks)."""
 
-SETTINGS = dict(horizon=30.0, window=25.0, chunk_size=4, progress=False)
+SETTINGS: dict[str, Any] = dict(horizon=30.0, window=25.0, chunk_size=4, progress=False)
 
 
 def main() -> None:

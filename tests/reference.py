@@ -36,6 +36,8 @@ actuator work ``w`` (integral of ``-T dl0/dt``), so that the balance
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Any, cast
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -48,6 +50,14 @@ DEFAULTS = dict(k=50.0, c=0.01, d=0.5, lbar=3.0, a=0.05, omega=2.0, mu_s=0.7, mu
 
 # Friction-mode codes of SPEC section 2.
 MODE_BOTH_STUCK, MODE_BOTH_SLIP, MODE_M1_SLIPS, MODE_M2_SLIPS = 0, 1, 2, 3
+
+
+def _terminal(event: Callable[..., float], direction: float) -> Callable[..., float]:
+    """`event` marked for `solve_ivp` as terminal, firing on zero crossings in `direction`."""
+    setattr(event, "terminal", True)
+    setattr(event, "direction", direction)
+    return event
+
 
 # Tolerances of the post-event re-check of the non-triggering mass (forces and
 # velocities are O(1) here; located events leave residuals ~1e-15).
@@ -272,8 +282,7 @@ class _HybridSolver:
                     fx, N1, N2, *_ = forces(t, float(y[0]), float(y[2]))
                     return mu_s * normal(N1 if i == 0 else N2) - abs(sgnF * fx)
 
-                g_stick.terminal, g_stick.direction = True, -1.0
-                events.append(g_stick)
+                events.append(_terminal(g_stick, -1.0))
                 tags.append(("stick_limit", i))
             else:
                 j = 2 * i + 1
@@ -289,13 +298,14 @@ class _HybridSolver:
                     # v_i returns to zero after the start.
                     t0, a0 = self.t, float(rhs(self.t, self.y)[j])
 
-                    def g_vel(t, y, j=j, t0=t0, a0=a0):
+                    def g_vel_from_rest(t, y, j=j, t0=t0, a0=a0):
                         return a0 if t <= t0 else float(y[j]) / (t - t0)
+
+                    g_vel = g_vel_from_rest
 
                 # v_i moves from 0 (or its side s_i) towards s_i: only a crossing back
                 # towards -s_i counts, so the start is never re-detected.
-                g_vel.terminal, g_vel.direction = True, -float(self.slip_dir[i])
-                events.append(g_vel)
+                events.append(_terminal(g_vel, -float(self.slip_dir[i])))
                 tags.append(("v_zero", i))
 
         for i in (0, 1):
@@ -305,11 +315,13 @@ class _HybridSolver:
                 # step is located instead of being reported at t0 (or missed).
                 t0, dN0 = self.t, self._normal_rate(i)
 
-                def g_normal(t, y, i=i, t0=t0, dN0=dN0):
+                def g_normal_restart(t, y, i=i, t0=t0, dN0=dN0):
                     if t <= t0:
                         return dN0
                     fx, N1, N2, *_ = forces(t, float(y[0]), float(y[2]))
                     return (N1 if i == 0 else N2) / (t - t0)
+
+                g_normal = g_normal_restart
             else:
 
                 def g_normal(t, y, i=i):
@@ -318,8 +330,7 @@ class _HybridSolver:
 
             # Strict: N_i > 0 throughout, stop when it reaches 0.  Paper: every crossing
             # ends a segment (|N_i| has a kink there); the direction follows the side.
-            g_normal.terminal, g_normal.direction = True, -float(self.n_side[i])
-            events.append(g_normal)
+            events.append(_terminal(g_normal, -float(self.n_side[i])))
             tags.append(("normal_zero", i))
 
         if X_ref is not None:
@@ -332,9 +343,7 @@ class _HybridSolver:
             def g_down(t, y):
                 return (m1 * y[0] + m2 * y[2]) / M - X_ref + z
 
-            g_up.terminal, g_up.direction = True, 1.0
-            g_down.terminal, g_down.direction = True, -1.0
-            events += [g_up, g_down]
+            events += [_terminal(g_up, 1.0), _terminal(g_down, -1.0)]
             tags += [("target", 0), ("target", 1)]
         return events, tags
 
@@ -379,7 +388,7 @@ class _HybridSolver:
             out.append((("target", 0), z - np.abs(X - X_ref)))
         return out
 
-    def _audit(self, sol, t0, t1, X_ref, z, n_sub=16, tol=1e-12):
+    def _audit(self, sol, t0, t1, X_ref, z, n_sub=16, tol=1e-12) -> tuple[float, Any] | None:
         """Look for switching events that scipy's step-end sign test missed.
 
         scipy only compares event values at the ends of each accepted step, so a
@@ -409,10 +418,11 @@ class _HybridSolver:
         ta = grid[ok[-1]] if ok.size else t0
         tb = grid[k]
 
-        def qfun(t):
+        def qfun(t) -> float:
             for tg, val in self._switching_values(np.array([t]), sol(np.array([t])), X_ref, z):
                 if tg == tag:
                     return float(val[0])
+            raise AssertionError(f"no switching function {tag}")  # `tag` came from the same list
 
         if qfun(ta) <= 0.0 and ta == t0:
             # The function starts on its switching surface (e.g. v_i = 0 after a switch):
@@ -423,10 +433,11 @@ class _HybridSolver:
         if qfun(ta) <= 0.0:
             t_ev = ta
         else:
-            t_ev = brentq(qfun, ta, tb, xtol=4 * np.finfo(float).eps, rtol=4 * np.finfo(float).eps)
+            # A float without `full_output` (scipy's stubs return every variant's type).
+            t_ev = cast(float, brentq(qfun, ta, tb, xtol=4 * np.finfo(float).eps, rtol=4 * np.finfo(float).eps))
         if t_ev >= t1:
             return None
-        return t_ev, tag
+        return cast(float, t_ev), tag  # a float or a numpy float64 (a float too); numpy's stubs say ndarray
 
     def _check_consistency(self, tol: float = 1e-8):
         """Raise if the state lies clearly on the wrong side of a switching surface.
@@ -664,7 +675,7 @@ def reference_measure(
     t_window = t_start + window
     t_horizon = t_start + horizon
     nan, inf = math.nan, math.inf
-    out = dict(
+    out: dict[str, Any] = dict(
         tau_z=inf,
         e_z=inf,
         reached=False,

@@ -71,6 +71,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Any, cast
 
 import numpy as np
 from scipy.integrate import DOP853, OdeSolution
@@ -668,6 +669,7 @@ class _ChainSolver:
             msg = solver.step()
             if solver.status == "failed":
                 raise RuntimeError(f"DOP853 failed at t={solver.t}: {msg}")
+            assert solver.t_old is not None and solver.y_old is not None  # set by every step taken
             ta, tb = solver.t_old, solver.t
             p = solver.dense_output()
             grid = ta + (tb - ta) * self._frac
@@ -743,7 +745,8 @@ class _ChainSolver:
             return self._row_value(row, t, p(t), t0, X_ref, z)
 
         eps = 4 * np.finfo(float).eps
-        return float(brentq(g, tl, grid[kmin], xtol=eps * max(1.0, abs(tl)), rtol=eps))
+        # A float without `full_output` (scipy's stubs return every variant's type).
+        return float(cast(float, brentq(g, tl, grid[kmin], xtol=eps * max(1.0, abs(tl)), rtol=eps)))
 
     # -- re-decision after an event ---------------------------------------------------------
     def _log(self, kind: str, switch: bool = True):
@@ -956,7 +959,7 @@ def reference_chain_measure(
     solver = _ChainSolver(chain, start, rtol, atol, keep_dense=False)
     n = chain.n
     nan, inf = math.nan, math.inf
-    out = dict(
+    out: dict[str, Any] = dict(
         tau_z=inf,
         e_z=inf,
         reached=False,

@@ -3,6 +3,7 @@
 
 import math
 from concurrent.futures import ProcessPoolExecutor
+from typing import Any
 
 import jax.numpy as jnp
 import locomotion_jax as lj
@@ -111,7 +112,8 @@ def test_fourth_order_convergence(omega):
     for dt in dts:
         tr = lj.simulate(lj.Params(omega=omega), T, save_at=jnp.array([0.0, T]), dynamics=lj.Exact(dt=float(dt)))
         errs.append(abs(float(tr.X[-1]) - ref["X"][-1]) + abs(float(tr.e_d[-1]) - ref["e_d"][-1]))
-    slope = linregress(np.log(dts), np.log(errs)).slope
+    # scipy's stubs do not name the fields of linregress's result
+    slope = linregress(np.log(dts), np.log(errs)).slope  # pyright: ignore[reportAttributeAccessIssue]
     assert slope > 3.5, (slope, errs)
 
 
@@ -129,7 +131,7 @@ def test_trajectory_matches_reference():
 
 
 def test_liftoff_time_matches_reference():
-    p = dict(omega=23.0, a=0.08)
+    p: dict[str, Any] = dict(omega=23.0, a=0.08)
     ref = reference_simulate(p, 2.0, save_at=np.linspace(0, 2, 21))
     tr = lj.simulate(lj.Params(**p), 2.0, save_at=jnp.linspace(0, 2, 21))
     assert bool(tr.liftoff) and ref["liftoff"]

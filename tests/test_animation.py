@@ -16,7 +16,9 @@ from locomotion_jax._animate_cli import register
 from locomotion_jax._animation import SLIP_COLOR, STUCK_COLOR, stuck_masks
 from matplotlib.animation import AbstractMovieWriter
 from matplotlib.colors import to_rgb, to_rgba
-from PIL import Image
+from matplotlib.lines import Line2D
+from matplotlib.patches import Rectangle
+from PIL import GifImagePlugin, Image
 from plugin_app import plugin_app
 from typer.testing import CliRunner
 
@@ -45,18 +47,22 @@ class _Recorder(AbstractMovieWriter):
         self.frames = []
 
     def setup(self, fig, outfile, dpi=None):
-        super().setup(fig, outfile, dpi)
+        # Abstract in the base class, but implemented there (it keeps fig, outfile and dpi).
+        super().setup(fig, outfile, dpi)  # pyright: ignore[reportAbstractUsage]
 
     def grab_frame(self, **savefig_kwargs):
         art = {a.get_gid(): a for a in self.fig.findobj() if a.get_gid()}
         rec = {}
         for k in (1, 2):
             box, anchor = art[f"mass{k}"], art[f"anchor{k}"]
+            assert isinstance(box, Rectangle) and isinstance(anchor, Line2D)
             rec[f"x{k}"] = box.get_x() + box.get_width() / 2
             rec[f"face{k}"] = box.get_facecolor()
             rec[f"anchor{k}"] = anchor.get_visible()
             rec[f"anchor_x{k}"] = float(np.asarray(anchor.get_xdata())[0])
-        xs, _ = art["spring"].get_data()
+        spring = art["spring"]
+        assert isinstance(spring, Line2D)
+        xs = np.asarray(spring.get_xdata())
         rec["spring"] = (float(xs[0]), float(xs[-1]))
         self.frames.append(rec)
 
@@ -150,7 +156,7 @@ def test_cli_writes_gif_and_stuck_mass_stands_still_in_it(ssl, tmp_path):
     assert out.exists() and out.stat().st_size > 0
     assert "m1 stuck in" in res.output
     img = Image.open(out)
-    assert img.format == "GIF" and img.n_frames == FRAMES
+    assert img.format == "GIF" and isinstance(img, GifImagePlugin.GifImageFile) and img.n_frames == FRAMES
     frames = []
     for i in range(img.n_frames):
         img.seek(i)
@@ -214,4 +220,5 @@ def test_cli_liftoff(tmp_path):
     assert res.exit_code == 0, res.output
     assert "warning: lift-off at t = 0.1667" in res.output
     img = Image.open(out)
+    assert isinstance(img, GifImagePlugin.GifImageFile)
     assert img.n_frames == np.sum(np.linspace(0, 0.25, FRAMES) < 0.1666)  # the states saved before the lift-off

@@ -2,6 +2,8 @@
 a user-defined friction law, float32, and bad input. (The comparison with the independent
 N-mass reference is in `test_chain_reference.py`.)"""
 
+from typing import Any
+
 import jax
 import jax.numpy as jnp
 import locomotion_jax as lj
@@ -43,7 +45,7 @@ def test_two_mass_chain_equals_paper_engine(contact, start):
             lj.Params(omega=9.5, a=0.05),
         ]  # fmt: skip
     )
-    kw = dict(z=2.0, horizon=300.0, contact=contact, start=start)
+    kw: dict[str, Any] = dict(z=2.0, horizon=300.0, contact=contact, start=start)
     ref = lj.measure(p, **kw)
     got = lj.measure(lj.Chain.from_params(p), **kw)
     assert np.array_equal(np.asarray(got.status), np.asarray(ref.status))
@@ -256,7 +258,7 @@ def test_sweep_over_chains_equals_measure(tmp_path):
     (the last one padded), written to NetCDF; an invalid point is flagged, the others run."""
     phi = np.array([-np.pi / 2, 0.0, np.pi / 2])
     omega = np.array([3.0, -1.0])  # omega < 0 is invalid
-    kw = dict(z=1.0, horizon=80.0, t_start=30.0)
+    kw: dict[str, Any] = dict(z=1.0, horizon=80.0, t_start=30.0)
     ds = lj.sweep({"phi": phi, "omega": omega}, mechanism=_worm, chunk_size=4, on_invalid="flag",
                   path=tmp_path / "worm.nc", progress=False, **kw)  # fmt: skip
     P, W = np.meshgrid(phi, omega, indexing="ij")

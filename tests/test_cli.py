@@ -186,7 +186,7 @@ def test_optimize_registered_when_module_exists(monkeypatch):
         def optimize() -> None:
             typer.echo("optimising")
 
-    fake.register = register
+    setattr(fake, "register", register)
     monkeypatch.setitem(sys.modules, "locomotion_jax._optimise_cli", fake)
     app = typer.Typer()
 
@@ -200,7 +200,7 @@ def test_optimize_registered_when_module_exists(monkeypatch):
 
 
 def test_installed_plugins_are_registered():
-    commands = {c.name or c.callback.__name__ for c in _cli.app.registered_commands}
+    commands = {c.name or getattr(c.callback, "__name__", None) for c in _cli.app.registered_commands}
     assert {"simulate", "sweep", "figures"} <= commands
     for module, command in (("_optimise_cli", "optimize"), ("_animate_cli", "animate"), ("_chain_cli", "chain")):
         if (Path(_cli.__file__).parent / f"{module}.py").exists():

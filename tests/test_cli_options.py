@@ -2,6 +2,7 @@
 
 import inspect
 
+import click
 import locomotion_jax as lj
 import pytest
 import typer.main
@@ -10,7 +11,9 @@ from typer.testing import CliRunner
 
 
 def _options(command: str) -> dict:
-    return {p.name: p for p in typer.main.get_command(_cli.app).commands[command].params}
+    group = typer.main.get_command(_cli.app)
+    assert isinstance(group, click.Group)
+    return {p.name: p for p in group.commands[command].params}
 
 
 @pytest.mark.parametrize("command", ["simulate", "animate", "optimize"])

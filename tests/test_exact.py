@@ -2,6 +2,7 @@
 qualitative facts (Figs. 4b, 5), mirror symmetry, batching, dtypes, no retracing."""
 
 import math
+from typing import Any
 
 import jax.numpy as jnp
 import locomotion_jax as lj
@@ -84,7 +85,7 @@ def test_batch_equals_single_runs_and_isolates_failures():
     omegas = jnp.array([2.0, 10.0, 0.5, 23.0, 16.0])
     mhat = jnp.array([0.5, 0.5, 0.5, 0.5, 1.2])
     batch = lj.Params(omega=omegas, mhat=mhat, check=False)
-    kw = dict(z=0.5, horizon=60.0)
+    kw: dict[str, Any] = dict(z=0.5, horizon=60.0)
     m = lj.measure(batch, **kw)
     st = [int(s) for s in m.status]
     assert st[0] == lj.Status.OK and st[3] == lj.Status.OK
@@ -191,9 +192,10 @@ def test_one_compilation_for_new_values():
     p1 = lj.Params.grid(omega=jnp.array([2.0, 3.0]))
     p2 = lj.Params.grid(omega=jnp.array([5.0, 7.0]), a=0.06, d=0.4)
     lj.measure(p1, z=0.2, horizon=20.0)
-    before = f._cache_size()
+    # `f` is the `jax.jit` wrapper, which has `_cache_size` (pyright sees the function it wraps).
+    before = f._cache_size()  # pyright: ignore[reportFunctionMemberAccess]
     lj.measure(p2, z=0.3, horizon=25.0, window=20.0)
-    assert f._cache_size() == before
+    assert f._cache_size() == before  # pyright: ignore[reportFunctionMemberAccess]
 
 
 def test_fourier_waveform_matches_sinusoid():

@@ -35,9 +35,10 @@ def test_refinement_finds_the_cheaper_sinusoids(coarse, v_min, a, omega, cost):
     assert bool(quoted.ok) and float(quoted.speed) >= v_min
     assert abs(float(quoted.cost) - cost) < TOL
     # ...and cheaper than anything on the coarse grid (so this test needs the refinement).
-    assert _pareto.best_sinusoid(coarse, v_min, +1)["cost_of_transport"] > cost + 10 * TOL
+    on_grid = _pareto.best_sinusoid(coarse, v_min, +1)
+    assert on_grid is not None and on_grid["cost_of_transport"] > cost + 10 * TOL
     best = _pareto.refine_sinusoid(p, A_MAX, v_min, +1, coarse, horizon=HORIZON)
-    assert best["cost_of_transport"] <= cost + TOL
+    assert best is not None and best["cost_of_transport"] <= cost + TOL
     assert best["a"] <= A_MAX and best["mean_speed"] >= v_min
     # The reported figures are those of the reported sinusoid, run again on its own.
     again = _pareto.exact_figures(lj.Params(a=best["a"], omega=best["omega"]), None, HORIZON)

@@ -11,6 +11,7 @@ import subprocess
 import sys
 import textwrap
 from types import SimpleNamespace
+from typing import Any
 
 import jax
 import locomotion_jax as lj
@@ -20,7 +21,7 @@ import xarray as xr
 from locomotion_jax import _schedule, _sharding, _store, _sweep
 
 
-FAST = dict(z=0.3, horizon=30.0, window=5.0, dynamics=lj.Exact(dt=0.02), progress=False)
+FAST: dict[str, Any] = dict(z=0.3, horizon=30.0, window=5.0, dynamics=lj.Exact(dt=0.02), progress=False)
 AXES = {"omega": [2.0, 6.0, 9.5, 16.0, 23.0], "a": [0.02, 0.05]}  # 10 configurations
 EXACT_FIELDS = ("reached", "regime", "status", "liftoff")
 # Iteration counts: measure() itself gives 5993 vs 6009 steps for one configuration in a
@@ -174,7 +175,7 @@ def test_cost_order_gives_identical_results_and_compiles_once(monkeypatch):
     axes = {"omega": AXES["omega"], "mu_s": [0.7, 0.4]}
     # Chunks of 9 (two chunks, a shape of this test's own): without `_sharding.padded_size`
     # the ninth lane is a SIMD remainder, computed 1 ulp differently from the others.
-    kw = dict(fixed={"a": 0.05}, chunk_size=9, on_invalid="flag", **FAST)
+    kw: dict[str, Any] = dict(fixed={"a": 0.05}, chunk_size=9, on_invalid="flag", **FAST)
     real, perms = _sweep._cost_permutation, []
 
     def spy(*args):

@@ -6,6 +6,7 @@ tests/test_sweep.py, so that the compilations are shared.
 """
 
 import os
+from typing import Any
 
 import locomotion_jax as lj
 import numpy as np
@@ -16,7 +17,7 @@ from locomotion_jax._zarr_store import block_shape, Blocks, NOT_COMPUTED, ZarrSt
 from typer.testing import CliRunner
 
 
-FAST = dict(z=0.3, horizon=30.0, window=5.0, dynamics=lj.Exact(dt=0.02), progress=False)
+FAST: dict[str, Any] = dict(z=0.3, horizon=30.0, window=5.0, dynamics=lj.Exact(dt=0.02), progress=False)
 AXES = {"omega": [2.0, 6.0, 9.5, 16.0, 23.0], "a": [0.02, 0.05]}  # 10 configurations
 
 
@@ -76,7 +77,7 @@ def test_store_refuses_another_sweep(tmp_path, memory):
     with pytest.raises(ValueError, match=r"different specification:\n  axes: stored .*\n.*overwrite=True"):
         lj.sweep(other, chunk_size=4, path=path, **FAST)
     with pytest.raises(ValueError, match=r"different specification:\n  z: stored 0\.3, requested 0\.4"):
-        lj.sweep(AXES, chunk_size=4, path=path, **(FAST | {"z": 0.4}))
+        lj.sweep(AXES, chunk_size=4, path=path, **dict(FAST, z=0.4))
     with pytest.raises(ValueError, match="order='cost' is for NetCDF output"):
         lj.sweep(AXES, path=path, order="cost", **FAST)
     # Something else at the path is never written into.
@@ -135,7 +136,7 @@ def test_blocks_tile_the_grid(shape, chunk, block):
 
 def test_store_list_mode_with_ratio(tmp_path):
     axes = {"omega_over_wn1": [0.2, 1.0, 2.3], "a": [0.02, 0.05, 0.08]}
-    kw = dict(mode="list", chunk_size=2, **FAST)
+    kw: dict[str, Any] = dict(mode="list", chunk_size=2, **FAST)
     ds = lj.sweep(axes, path=tmp_path / "list.zarr", **kw)
     assert_identical_values(xr.open_zarr(tmp_path / "list.zarr"), lj.sweep(axes, **kw))
     assert set(ds.coords) == {"omega_over_wn1", "a"} and ds.tau_z.dims == ("config",)

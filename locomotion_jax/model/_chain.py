@@ -5,6 +5,7 @@ from typing import Any
 
 import equinox as eqx
 import jax
+import jax.core  # (jax.core.Tracer) for type checkers
 import jax.numpy as jnp
 import numpy as np
 

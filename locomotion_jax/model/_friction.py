@@ -124,13 +124,13 @@ class AnisotropicCoulomb(AbstractFriction):
 class Stribeck(AbstractFriction):
     r"""Coulomb friction whose kinetic coefficient falls with speed (Stribeck effect).
 
-    $$\mu_k(|v|) = \mu_k + (\mu_s - \mu_k)\, e^{-(|v|/v_s)^2},$$
+    $$\\mu_k(|v|) = \\mu_k + (\\mu_s - \\mu_k)\\, e^{-(|v|/v_s)^2},$$
 
     so a mass that has just broken away feels the static coefficient, and the
     kinetic one is approached above the Stribeck speed $v_s$. Optionally anisotropic:
     backward motion uses `mu_s_bwd`, `mu_k_bwd` in the same formula (default: the forward ones).
 
-    **Arguments:** `mu_s`, `mu_k` ($\mu_s \ge \mu_k \ge 0$), `v_s > 0`, and optionally `mu_s_bwd`,
+    **Arguments:** `mu_s`, `mu_k` ($\\mu_s \\ge \\mu_k \\ge 0$), `v_s > 0`, and optionally `mu_s_bwd`,
     `mu_k_bwd`; scalars or per mass.
     """
 

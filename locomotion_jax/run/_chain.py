@@ -290,8 +290,6 @@ def measure_chain(chain: Chain, z: float, *, t_start: Any, horizon: float, windo
     ts_host = np.asarray(jnp.where(jnp.isfinite(ts), ts, flat.t_start))
     steps = max_steps or default_max_steps(float(np.max(ts_host)) + horizon, dt)
     lanes = min(n, MICRO_BATCH_CPU) if jax.default_backend() == "cpu" else n
-    out = _measure_batch(
-        flat, valid, ts, *(jnp.asarray(v, flat.dtype) for v in (z, horizon, window)), contact, start, dt,
-        jnp.asarray(steps, jnp.int32), lanes,
-    )  # fmt: skip
+    z_, h_, w_ = (jnp.asarray(v, flat.dtype) for v in (z, horizon, window))
+    out = _measure_batch(flat, valid, ts, z_, h_, w_, contact, start, dt, jnp.asarray(steps, jnp.int32), lanes)
     return ChainMeasurement(**_unflatten(out, shape), z=float(z), start=start, contact=contact)
