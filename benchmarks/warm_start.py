@@ -20,8 +20,20 @@ from pathlib import Path
 
 COMMANDS = {
     "`simulate --omega 2`": ["simulate", "--omega", "2"],
-    "`sweep` (16 x 16, dt 0.05)": ["sweep", "--omega", "1:20:16", "--a", "0.01:0.1:16", "--dt", "0.05",
-                                   "--horizon", "100", "--no-progress", "--out", "{out}"],  # fmt: skip
+    "`sweep` (16 x 16, dt 0.05)": [
+        "sweep",
+        "--omega",
+        "1:20:16",
+        "--a",
+        "0.01:0.1:16",
+        "--dt",
+        "0.05",
+        "--horizon",
+        "100",
+        "--no-progress",
+        "--out",
+        "{out}",
+    ],  # fmt: skip
 }
 
 
