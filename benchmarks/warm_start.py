@@ -70,7 +70,7 @@ def main() -> int:
     print("|---|---|---|---|---|")
     for label, first, second, cold, nbytes in rows:
         cells = [f"{w:.1f} s ({c:.1f} s)" for w, c in (first, second, cold)]
-        print(f"| {label} | {' | '.join(cells)} | {nbytes / 1e6:.0f} MB |")
+        print(f"| {label} | {' | '.join(cells)} | {nbytes / 1e3:.0f} kB |")
     print(f"\nwall time (CPU time); {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} at the end")
     return 0
 
