@@ -20,7 +20,11 @@ thus costs one extra iteration, and the results converge at fourth order in `dt`
 
 - a slipping mass $i$ with slip direction $\\sigma_i$: $\\sigma_i v_i$ (velocity zero);
 - a stuck mass $i$: $\\mu_s n_i - |F_i|$ (static friction exceeded, eq. 7);
-- strict contact only: $\\min(N_1, N_2)$ (lift-off, eq. 5), which stops the run;
+- strict contact: $\\min(N_1, N_2)$ (lift-off, eq. 5), which stops the run;
+- paper contact: $\\min(\\nu_1 N_1, \\nu_2 N_2)$ with $\\nu_i = \\pm 1$ the side of $N_i$, a
+  sign change of a normal force: $n_i = |N_i|$ has a kink there, so the step is cut
+  at it and $\\nu_i$ flips (the first one, from above, sets `t_liftoff`). Inside a
+  step $n_i = \\nu_i N_i$, smooth, so that the step's dense output stays accurate.
 - optionally a caller's target (`measure`: $|X - X_0| = z$).
 
 When several events cross in one step, the earliest by the secant of each
@@ -132,7 +136,8 @@ class Hybrid(eqx.Module):
     `None`); `cph, sph` are $\\cos\\omega t, \\sin\\omega t$ (carried, see the module
     docstring); `stuck*`/`s*` the mode and slip direction of each mass; `pend*`
     flags a mass whose event was located at `t` (it switches at the start of the
-    next iteration).
+    next iteration); `nu*` the side ($\\pm 1$) of each normal force (paper contact:
+    flipped where a crossing is located, so that $n_i = \\nu_i N_i$ over a step).
     """
 
     t: Array
@@ -146,6 +151,8 @@ class Hybrid(eqx.Module):
     s2: Array
     pend1: Array
     pend2: Array
+    nu1: Array
+    nu2: Array
     status: Array
     t_liftoff: Array
     n_switch: Array
@@ -241,9 +248,11 @@ class _D(NamedTuple):
     fy2: Array
 
 
-def _forces(P: Consts, contact: Contact, l0, x1, x2) -> tuple[_F, tuple]:
+def _forces(P: Consts, contact: Contact, l0, x1, x2, sides=None) -> tuple[_F, tuple]:
     """Spring and normal forces (eqs. 2, 5, 8), as in `_model.spring_forces`; also
-    returns the geometry `(u, il, pl)` reused by [`_derivs`][]."""
+    returns the geometry `(u, il, pl)` reused by [`_derivs`][]. With `sides`
+    $(\\nu_1, \\nu_2)$ (paper contact, inside a step) $n_i = \\nu_i N_i$: $|N_i|$ on the side
+    the step started on, continued smoothly past a crossing (where the step is cut)."""
     u = x2 - x1
     length = jnp.sqrt(u * u + P.dd)
     il = 1 / length
@@ -253,7 +262,12 @@ def _forces(P: Consts, contact: Contact, l0, x1, x2) -> tuple[_F, tuple]:
     fy = pl * P.d
     N1 = P.m1 - fy
     N2 = P.m2 + fy
-    n1, n2 = (jnp.abs(N1), jnp.abs(N2)) if contact == "paper" else (N1, N2)
+    if contact != "paper":
+        n1, n2 = N1, N2
+    elif sides is None:
+        n1, n2 = jnp.abs(N1), jnp.abs(N2)
+    else:
+        n1, n2 = sides[0] * N1, sides[1] * N2
     return _F(fx, fy, tension, N1, N2, n1, n2), (u, il, pl)
 
 
@@ -296,20 +310,20 @@ def _rates(P: Consts, f: _F, y: State, a1, a2, s1, s2, dl0) -> State:
     return State(y.v1, a1, y.v2, a2, pd, -f.tension * dl0)
 
 
-def _normal_rates(contact, f: _F, D: _D):
-    """$\\dot n_i$, $\\ddot n_i$ from $N_1 = m_1 - f_y$, $N_2 = m_2 + f_y$ (eq. 5)."""
+def _normal_rates(contact, D: _D, sides):
+    """$\\dot n_i$, $\\ddot n_i$ from $N_1 = m_1 - f_y$, $N_2 = m_2 + f_y$ (eq. 5);
+    paper contact: $n_i = \\nu_i N_i$ over the step."""
     n1d, n2d, n1dd, n2dd = -D.fy, D.fy, -D.fy2, D.fy2
-    if contact == "paper":  # n = |N|
-        p1, p2 = f.N1 >= 0, f.N2 >= 0
-        n1d, n1dd = jnp.where(p1, n1d, -n1d), jnp.where(p1, n1dd, -n1dd)
-        n2d, n2dd = jnp.where(p2, n2d, -n2d), jnp.where(p2, n2dd, -n2dd)
+    if contact == "paper":
+        nu1, nu2 = sides
+        n1d, n1dd, n2d, n2dd = nu1 * n1d, nu1 * n1dd, nu2 * n2d, nu2 * n2dd
     return n1d, n2d, n1dd, n2dd
 
 
-def _second(P: Consts, contact, f: _F, D: _D, y: State, a1, a2, st1, st2, s1, s2, dl0, ddl0) -> State:
+def _second(P: Consts, contact, f: _F, D: _D, y: State, a1, a2, st1, st2, s1, s2, dl0, ddl0, sides) -> State:
     """Second time derivative of every state entry in a fixed mode (for the quintic
     dense output): $\\ddot x_i = a_i$, $\\ddot v_i = \\dot a_i$, and the rates of the integrands."""
-    n1d, n2d, _, _ = _normal_rates(contact, f, D)
+    n1d, n2d, _, _ = _normal_rates(contact, D, sides)
     zero = jnp.zeros_like(a1)
     j1 = jnp.where(st1, zero, (D.fx - P.c * a1 - P.mu_k * n1d * s1) * P.im1)
     j2 = jnp.where(st2, zero, (-D.fx - P.c * a2 - P.mu_k * n2d * s2) * P.im2)
@@ -328,9 +342,10 @@ def _mass_events(P: Consts, f: _F, y: State, st1, st2, s1, s2) -> tuple[Array, A
     return g1, g2
 
 
-def _events(P, contact, f: _F, D: _D, y: State, r: State, j: State, st1, st2, s1, s2, target):
-    """Values, first and second time derivatives of all events (lists)."""
-    n1d, n2d, n1dd, n2dd = _normal_rates(contact, f, D)
+def _events(P, contact, f: _F, D: _D, y: State, r: State, j: State, st1, st2, s1, s2, target, sides):
+    """Values, first and second time derivatives of all events (lists); `sides` are the
+    signs $\\nu_i$ of the normal forces at the step's start (paper contact)."""
+    n1d, n2d, n1dd, n2dd = _normal_rates(contact, D, sides)
     sg = jnp.where(f.fx >= 0, 1.0, -1.0).astype(f.fx.dtype)  # |F_i| = |fx|: d|F|/dt = sgn(fx) dfx/dt
     g1, g2 = _mass_events(P, f, y, st1, st2, s1, s2)
     gs = [g1, g2]
@@ -347,6 +362,13 @@ def _events(P, contact, f: _F, D: _D, y: State, r: State, j: State, st1, st2, s1
         gs.append(jnp.minimum(f.N1, f.N2))
         ds.append(jnp.where(low1, -D.fy, D.fy))
         es.append(jnp.where(low1, -D.fy2, D.fy2))
+    else:  # paper: a sign change of N_i, from the side `sides` it starts the step on
+        nu1, nu2 = sides
+        q1, q2 = nu1 * f.N1, nu2 * f.N2
+        low1 = q1 <= q2
+        gs.append(jnp.minimum(q1, q2))
+        ds.append(jnp.where(low1, -nu1 * D.fy, nu2 * D.fy))
+        es.append(jnp.where(low1, -nu1 * D.fy2, nu2 * D.fy2))
     if target is not None:
         active, X0, z = target
         rel = P.mhat * y.x1 + (1 - P.mhat) * y.x2 - X0
@@ -459,6 +481,7 @@ def init(params: Params, wave: AbstractWaveform, contact: Contact, x1: Array, x2
     status = jnp.where(lifted & (contact == "strict"), Status.LIFTOFF, Status.OK).astype(jnp.int32)
     no = jnp.asarray(False)
     f32 = jnp.finfo(dtype).bits < 64
+    side = lambda N: jnp.where(N > 0, 1.0, -1.0).astype(dtype)
     return Hybrid(
         t=zero,
         y=y,
@@ -471,6 +494,8 @@ def init(params: Params, wave: AbstractWaveform, contact: Contact, x1: Array, x2
         s2=-s1,
         pend1=no,
         pend2=no,
+        nu1=side(f.N1),
+        nu2=side(f.N2),
         status=status,
         t_liftoff=jnp.where(lifted, zero, jnp.inf).astype(dtype),
         n_switch=jnp.zeros((), jnp.int32),
@@ -544,8 +569,9 @@ def step(
     k1 = _rates(P, f0, y0, a01, a02, s1, s2, dl00)
     D0 = _derivs(P, geo0, y0, a01, a02, dl00, ddl00)
     D0 = D0._replace(fx=keep(D0.fx), fy=keep(D0.fy))
-    j0 = _second(P, contact, f0, D0, y0, a01, a02, st1, st2, s1, s2, dl00, ddl00)
-    g0s, d0s, e0s = _events(P, contact, f0, D0, y0, k1, j0, st1, st2, s1, s2, target)
+    sides = (st.nu1, st.nu2)
+    j0 = _second(P, contact, f0, D0, y0, a01, a02, st1, st2, s1, s2, dl00, ddl00, sides)
+    g0s, d0s, e0s = _events(P, contact, f0, D0, y0, k1, j0, st1, st2, s1, s2, target, sides)
 
     # -- step length: dt, or less to land on t_stop, or less to end just past the
     # earliest event predicted by the Taylor quadratic of each event function. A
@@ -574,7 +600,7 @@ def step(
 
     # -- one RK4 step of length h.
     def stage(l0, dl0, y):
-        f, _ = _forces(P, contact, l0, y.x1, y.x2)
+        f, _ = _forces(P, contact, l0, y.x1, y.x2, sides)
         a1, a2 = _accel(P, f, y, st1, st2, s1, s2)
         return _rates(P, f, y, keep(a1), keep(a2), s1, s2, dl0)
 
@@ -584,13 +610,13 @@ def step(
     incr = k1.map(lambda a, b, c, d: keep((h / 6) * (a + 2 * (b + c) + d)), k2, k3, k4)
     y1 = y0.map(lambda a, b: keep(a + b), incr)
 
-    f1, geo1 = _forces(P, contact, l0e, y1.x1, y1.x2)
+    f1, geo1 = _forces(P, contact, l0e, y1.x1, y1.x2, sides)
     a11, a12 = (keep(x) for x in _accel(P, f1, y1, st1, st2, s1, s2))
     r1 = _rates(P, f1, y1, a11, a12, s1, s2, dl0e)
     D1 = _derivs(P, geo1, y1, a11, a12, dl0e, ddl0e)
     D1 = D1._replace(fx=keep(D1.fx), fy=keep(D1.fy))
-    j1 = _second(P, contact, f1, D1, y1, a11, a12, st1, st2, s1, s2, dl0e, ddl0e)
-    g1s, d1s, e1s = _events(P, contact, f1, D1, y1, r1, j1, st1, st2, s1, s2, target)
+    j1 = _second(P, contact, f1, D1, y1, a11, a12, st1, st2, s1, s2, dl0e, ddl0e, sides)
+    g1s, d1s, e1s = _events(P, contact, f1, D1, y1, r1, j1, st1, st2, s1, s2, target, sides)
     g1s = [keep(g) for g in g1s]
     n_ev = len(g1s)
 
@@ -639,11 +665,17 @@ def step(
         yc = y0.map(lambda a, b: a + b, corr)
         comp_new = yc.map(lambda tot, a, b: (tot - a) - b, y0, corr)
 
-    lift = stop0
-    if contact == "strict":
-        lift_cut = first[2]
-        lift = lift | lift_cut
-        t_lift = jnp.where(lift_cut & ~jnp.isfinite(t_lift), tc, t_lift)
+    # A normal force's crossing: the first one is a lift-off (from above: no earlier one),
+    # which stops the run under the strict reading.
+    lift_cut = first[2]
+    t_lift = jnp.where(lift_cut & ~jnp.isfinite(t_lift), tc, t_lift)
+    lift = stop0 | lift_cut if contact == "strict" else stop0
+    nu1, nu2 = sides
+    if contact == "paper":
+        # The crossing normal force changes side. N1 + N2 = m1 + m2 > 0, so only one
+        # can be at zero: the lower of the two at the step's end.
+        low1 = nu1 * f1.N1 <= nu2 * f1.N2
+        nu1, nu2 = jnp.where(lift_cut & low1, -nu1, nu1), jnp.where(lift_cut & ~low1, -nu2, nu2)
     commit = ~stop0
     target_cut = first[-1] if target is not None else jnp.asarray(False)
     status = jnp.where(lift, Status.LIFTOFF, st.status).astype(jnp.int32)
@@ -661,6 +693,8 @@ def step(
         s2=keepc(s2, st.s2),
         pend1=commit & first[0],
         pend2=commit & first[1],
+        nu1=keepc(nu1, st.nu1),
+        nu2=keepc(nu2, st.nu2),
         status=status,
         t_liftoff=t_lift.astype(dtype),
         n_switch=n_switch,

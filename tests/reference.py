@@ -44,7 +44,7 @@ from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
 
-__all__ = ["DEFAULTS", "reference_simulate", "reference_measure"]
+__all__ = ["DEFAULTS", "reference_natural_frequencies", "reference_simulate", "reference_measure"]
 
 DEFAULTS = dict(k=50.0, c=0.01, d=0.5, lbar=3.0, a=0.05, omega=2.0, mu_s=0.7, mu_k=0.5, mhat=0.5)
 
@@ -599,6 +599,11 @@ class _HybridSolver:
                     if seg.stuck[i]:
                         tot[i] += hi - lo
         return tot[0], tot[1]
+
+
+def reference_natural_frequencies(params: dict) -> tuple[float, float, float]:
+    """``(wn1, wn2, wn3)`` of eqs. (11-12) for ``params`` (any subset of ``DEFAULTS``)."""
+    return _Model(params, "strict").natural_frequencies()
 
 
 def reference_simulate(

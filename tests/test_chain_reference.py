@@ -1,7 +1,9 @@
 """The N-mass exact engine against the independent N-mass reference (`tests/reference_chain.py`,
 an event-driven scipy solver sharing no code with the package) on the cases of `tests/chain_cases.py`:
 chains of 3, 4 and 6 masses, travelling waves both ways, isotropic, anisotropic and Stribeck
-friction, rest-length and internal-force actuators, d = 0 and d != 0, SSL and SL.
+friction, rest-length and internal-force actuators, d = 0 and d != 0, SSL and SL; and chains that
+lift off (`LIFTOFF_CASES`): the paper's reading integrates through every sign change of a normal
+force (where `n_i = |N_i|` has a kink), the strict reading stops at the first.
 
 The package runs the cases in batches (one compilation per chain structure); the reference runs
 live, one case per test, so the work is shared between pytest-xdist workers.
@@ -63,6 +65,51 @@ def _package_group(key) -> dict:
         m = lj.measure(lj.Chain.stack([chains[i] for i in sel]), z=Z, horizon=HORIZON, contact=key[4], start=key[5])
         for j, i in enumerate(sel):
             out[names[i]] = {k: np.asarray(v)[j] for k, v in m.to_numpy().items()}
+    return out
+
+
+# N = 3 near its resonance, a wave travelling forwards: a normal force changes sign in the
+# first period, and again and again under the paper's reading.
+LIFTOFF_CASES = [
+    dict(
+        name=f"n3_liftoff_{contact}_w{omega:g}",
+        config=dict(masses=[1.0] * 3, omega=omega, a=0.06, phi=0.5),
+        contact=contact,
+        start="paper",
+    )
+    for contact, omega in (("paper", 8.0), ("paper", 10.0), ("strict", 8.0), ("strict", 10.0))
+]
+LIFTOFF_RTOL = 1e-4
+"""tau_5 and e_5 through the lift-offs (measured 1e-6 to 2e-5)."""
+
+
+@pytest.mark.xdist_group("chain_liftoff")  # one worker compiles and runs the package's batch
+@pytest.mark.parametrize("case", LIFTOFF_CASES, ids=[c["name"] for c in LIFTOFF_CASES])
+def test_chain_liftoff_against_reference(case):
+    cfg = chain_config(**case["config"])
+    ref = reference_chain_measure(cfg, z=Z, horizon=HORIZON, contact=case["contact"], start=case["start"])
+    got = _liftoff_group()[case["name"]]
+    assert ref["liftoff"] and bool(got["liftoff"])
+    np.testing.assert_allclose(got["t_liftoff"], ref["t_liftoff"], rtol=1e-5)
+    if case["contact"] == "strict":  # stopped there, before the measurement
+        assert int(got["status"]) == lj.Status.LIFTOFF and not ref["reached"] and not bool(got["reached"])
+        assert int(got["regime"]) == lj.Regime.UNDETERMINED and ref["regime"] is None
+        return
+    assert int(got["status"]) == lj.Status.OK and ref["reached"] and bool(got["reached"])
+    np.testing.assert_allclose(got["tau_z"], ref["tau_z"], rtol=LIFTOFF_RTOL)
+    np.testing.assert_allclose(got["e_z"], ref["e_z"], rtol=LIFTOFF_RTOL)
+    assert int(got["regime"]) == (lj.Regime.SSL if ref["regime"] == "SSL" else lj.Regime.SL)
+    np.testing.assert_allclose(got["stick_fraction"], ref["stick_fraction"], atol=5e-4)
+
+
+@functools.cache
+def _liftoff_group() -> dict:
+    out = {}
+    for contact in ("paper", "strict"):
+        cases = [c for c in LIFTOFF_CASES if c["contact"] == contact]
+        chains = lj.Chain.stack([to_chain(chain_config(**c["config"])) for c in cases])
+        m = lj.measure(chains, z=Z, horizon=HORIZON, contact=contact, start="paper").to_numpy()
+        out.update({c["name"]: {k: v[i] for k, v in m.items()} for i, c in enumerate(cases)})
     return out
 
 

@@ -18,7 +18,11 @@ only.
 
 - mass $i$ slipping in direction $\\sigma_i$: $\\sigma_i v_i$;
 - mass $i$ stuck: $\\min(\\mu_{s,\\mathrm{fwd}} n_i - F_i,\\; F_i + \\mu_{s,\\mathrm{bwd}} n_i)$ (eq. 7 generalised);
-- strict contact only: $\\min_i N_i$ (lift-off), which stops the run;
+- strict contact: $\\min_i N_i$ (lift-off), which stops the run;
+- paper contact: $\\nu_i N_i$ for each mass, with $\\nu_i = \\pm 1$ the side of $N_i$: $n_i = |N_i|$
+  has a kink where $N_i$ changes sign, so the step is cut there and $\\nu_i$ flips (the first
+  crossing, from above, sets `t_liftoff`). Inside a step $n_i = \\nu_i N_i$, smooth, so that the
+  step's dense output and the derivatives along the motion stay accurate;
 - optionally a caller's target $z - |X - X_0|$.
 """
 
@@ -50,7 +54,9 @@ class Hybrid(eqx.Module):
     """Integrator state of one configuration (compare `_exact.Hybrid`).
 
     `stuck`, `sdir`, `pend` are per-mass arrays: the mode, slip direction and a flag
-    for an event located at `t` (the mass is re-decided at the next iteration).
+    for an event located at `t` (the mass is re-decided at the next iteration); `side`
+    the side ($\\pm 1$) of each normal force (paper contact: flipped where a crossing is
+    located, so that $n_i = \\nu_i N_i$ over a step).
     """
 
     t: Array
@@ -61,6 +67,7 @@ class Hybrid(eqx.Module):
     stuck: Array
     sdir: Array
     pend: Array
+    side: Array
     status: Array
     t_liftoff: Array
     n_switch: Array
@@ -107,29 +114,38 @@ def _diff(a: Array) -> Array:
     return jnp.concatenate([a, zero]) - jnp.concatenate([zero, a])
 
 
-def loads(C: Chain, contact: Contact, l0: Array, f: Array, x: Array) -> tuple[Array, Array, Array, Array]:
+def loads(
+    C: Chain, contact: Contact, l0: Array, f: Array, x: Array, side: Array | None = None
+) -> tuple[Array, Array, Array, Array]:
     """Tensions $T_j$, horizontal loads $F_i$, signed normal forces $N_i$ and the normal forces
-    $n_i$ entering friction ($|N_i|$ under the paper's reading), SPEC §8."""
+    $n_i$ entering friction, SPEC §8: $N_i$ (strict) or $|N_i|$ (paper); with `side`
+    $\\nu_i$ (paper, inside a step) $\\nu_i N_i$, which is $|N_i|$ on the side the step started on,
+    continued smoothly past a crossing (where the step is cut)."""
     u = x[1:] - x[:-1]
     length = jnp.sqrt(u * u + C.d * C.d)
     tension = C.k * (length - l0)
     per_len = tension / length
     F = _diff(per_len * u + f)
     N = C.m - _diff(per_len * C.d)
-    n = jnp.abs(N) if contact == "paper" else N
+    if contact != "paper":
+        n = N
+    elif side is None:
+        n = jnp.abs(N)
+    else:
+        n = side * N
     return tension, F, N, n
 
 
-def _accel(C: Chain, contact, stuck, sdir, l0, f, x, v) -> Array:
+def _accel(C: Chain, contact, stuck, sdir, side, l0, f, x, v) -> Array:
     """Accelerations in a fixed mode: $m_i \\dot v_i = F_i - c_i v_i - \\sigma_i \\mu_k n_i$; zero when stuck."""
-    _, F, _, n = loads(C, contact, l0, f, x)
+    _, F, _, n = loads(C, contact, l0, f, x, side)
     mu = C.friction.kinetic(sdir * v, sdir)
     return jnp.where(stuck, 0, (F - C.c * v - sdir * mu * n) / C.m)
 
 
-def _rates(C: Chain, contact, stuck, sdir, l0, dl0, f, x, v) -> State:
+def _rates(C: Chain, contact, stuck, sdir, side, l0, dl0, f, x, v) -> State:
     """Rates of every state entry: $\\dot x_i$, $\\dot v_i$, and the integrands of $e_d$ and $w$."""
-    tension, F, _, n = loads(C, contact, l0, f, x)
+    tension, F, _, n = loads(C, contact, l0, f, x, side)
     speed = sdir * v  # |v_i| in a slip segment; 0 when stuck
     mu = C.friction.kinetic(speed, sdir)
     a = jnp.where(stuck, 0, (F - C.c * v - sdir * mu * n) / C.m)
@@ -144,18 +160,22 @@ def mass_events(C: Chain, stuck: Array, sdir: Array, F: Array, n: Array, v: Arra
     return jnp.where(stuck, jnp.minimum(mu_f * n - F, F + mu_b * n), sdir * v)
 
 
-def _events(C: Chain, contact, stuck, sdir, target, l0, f, x, v) -> Array:
-    _, F, N, n = loads(C, contact, l0, f, x)
+def _events(C: Chain, contact, stuck, sdir, side, target, l0, f, x, v) -> Array:
+    """Event values: per mass, then lift-off (strict: one) or the normal forces' crossings
+    (paper: one per mass), then the target (module docstring)."""
+    _, F, N, n = loads(C, contact, l0, f, x, side)
     gs = [mass_events(C, stuck, sdir, F, n, v)]
     if contact == "strict":
         gs.append(N.min()[None])
+    else:
+        gs.append(side * N)
     if target is not None:
         rel = (C.m * x).sum() / C.m.sum() - target.X0
         gs.append(jnp.where(target.active, target.z - jnp.abs(rel), jnp.inf)[None])
     return jnp.concatenate(gs)
 
 
-def _with_derivatives(C, contact, stuck, sdir, target, dr: Drive, y: State):
+def _with_derivatives(C, contact, stuck, sdir, side, target, dr: Drive, y: State):
     """Rates and event values with their first and second time derivatives along the motion.
 
     Returns `(r, j, g, dg, ddg)`: the state's rate $\\dot y$ and second derivative $\\ddot y$, and
@@ -163,15 +183,16 @@ def _with_derivatives(C, contact, stuck, sdir, target, dr: Drive, y: State):
     """
 
     def both(l0, dl0, f, x, v):
-        return _rates(C, contact, stuck, sdir, l0, dl0, f, x, v), _events(C, contact, stuck, sdir, target, l0, f, x, v)
+        rates = _rates(C, contact, stuck, sdir, side, l0, dl0, f, x, v)
+        return rates, _events(C, contact, stuck, sdir, side, target, l0, f, x, v)
 
     def first(l0, dl0, f, df, x, v):
-        a = _accel(C, contact, stuck, sdir, l0, f, x, v)
+        a = _accel(C, contact, stuck, sdir, side, l0, f, x, v)
         xd = jnp.where(stuck, 0, v)
         return jax.jvp(both, (l0, dl0, f, x, v), (dl0, dr.ddl0, df, xd, a))
 
     args = (dr.l0, dr.dl0, dr.f, dr.df, y.x, y.v)
-    a = _accel(C, contact, stuck, sdir, dr.l0, dr.f, y.x, y.v)
+    a = _accel(C, contact, stuck, sdir, side, dr.l0, dr.f, y.x, y.v)
     xd = jnp.where(stuck, 0, y.v)
     # The outer jvp differentiates `first` along the motion once more; only the events'
     # second derivative is taken from it (the rates' would need the third rate of l0).
@@ -200,8 +221,8 @@ def init(C: Chain, contact: Contact, x: Array) -> Hybrid:
     y = State(x, jnp.zeros_like(x), zero, zero)
     return Hybrid(
         t=zero, y=y, comp=y.map(jnp.zeros_like) if f32 else None, cph=cph, sph=sph, stuck=stuck, sdir=sdir,
-        pend=jnp.zeros_like(stuck), status=status, t_liftoff=jnp.where(lifted, zero, jnp.inf).astype(dtype),
-        n_switch=jnp.zeros((), jnp.int32),
+        pend=jnp.zeros_like(stuck), side=jnp.where(N > 0, 1.0, -1.0).astype(dtype), status=status,
+        t_liftoff=jnp.where(lifted, zero, jnp.inf).astype(dtype), n_switch=jnp.zeros((), jnp.int32),
     )  # fmt: skip
 
 
@@ -254,7 +275,8 @@ def step(
     else:
         target_now = jnp.asarray(False)
 
-    k1, j0, g0, d0, e0 = _with_derivatives(C, contact, stuck, sdir, target, dr0, y0)
+    side = st.side
+    k1, j0, g0, d0, e0 = _with_derivatives(C, contact, stuck, sdir, side, target, dr0, y0)
 
     # -- step length: dt, or less to land on t_stop or just past the earliest predicted event.
     span = t_stop - t0
@@ -273,14 +295,14 @@ def step(
 
     # -- one RK4 step of length h.
     def stage(dr, y):
-        return _rates(C, contact, stuck, sdir, dr.l0, dr.dl0, dr.f, y.x, y.v)
+        return _rates(C, contact, stuck, sdir, side, dr.l0, dr.dl0, dr.f, y.x, y.v)
 
     k2 = stage(drm, y0.map(lambda a, b: a + (0.5 * h) * b, k1))
     k3 = stage(drm, y0.map(lambda a, b: a + (0.5 * h) * b, k2))
     k4 = stage(dre, y0.map(lambda a, b: a + h * b, k3))
     incr = k1.map(lambda a, b, c, d: (h / 6) * (a + 2 * (b + c) + d), k2, k3, k4)
     y1 = y0.map(lambda a, b: a + b, incr)
-    r1, j1, g1, d1, e1 = _with_derivatives(C, contact, stuck, sdir, target, dre, y1)
+    r1, j1, g1, d1, e1 = _with_derivatives(C, contact, stuck, sdir, side, target, dre, y1)
 
     # -- events: the earliest crossing by the secant of each crossed function.
     crossed = g1 < 0
@@ -315,11 +337,18 @@ def step(
         yc = y0.map(lambda a, b: a + b, corr)
         comp_new = yc.map(lambda tot, a, b: (tot - a) - b, y0, corr)
 
-    lift = stop0
+    # A normal force's crossing: the first one is a lift-off (from above: no earlier one),
+    # which stops the run under the strict reading; under the paper's the crossing force
+    # changes side.
     if contact == "strict":
         lift_cut = first[n_mass]
-        lift = lift | lift_cut
-        t_lift = jnp.where(lift_cut & ~jnp.isfinite(t_lift), tc, t_lift)
+        lift = stop0 | lift_cut
+    else:
+        flip = first[n_mass : 2 * n_mass]
+        lift_cut = jnp.any(flip)
+        lift = stop0
+        side = jnp.where(flip, -side, side)
+    t_lift = jnp.where(lift_cut & ~jnp.isfinite(t_lift), tc, t_lift)
     commit = ~stop0
     target_cut = first[-1] if target is not None else jnp.asarray(False)
     status = jnp.where(lift, Status.LIFTOFF, st.status).astype(jnp.int32)
@@ -328,7 +357,8 @@ def step(
     new = Hybrid(
         t=keep(tc, t0), y=yc.map(keep, yA), comp=None if comp_new is None else comp_new.map(keep, st.comp),
         cph=keep(cph, st.cph), sph=keep(sph, st.sph), stuck=keep(stuck, st.stuck), sdir=keep(sdir, st.sdir),
-        pend=commit & first[:n_mass], status=status, t_liftoff=t_lift.astype(dtype), n_switch=n_switch,
+        pend=commit & first[:n_mass], side=keep(side, st.side), status=status, t_liftoff=t_lift.astype(dtype),
+        n_switch=n_switch,
     )  # fmt: skip
     info = StepInfo(
         commit=commit, t0=t0, y0=y0, tension0=tension0, t1=tc, y1=yc, stuck=stuck,
