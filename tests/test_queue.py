@@ -9,6 +9,8 @@ import pytest
 from locomotion_jax import _exact as exact, _measure, _model as model, _simulate
 from locomotion_jax._batch import prepare, safe_params
 from locomotion_jax._queue import run_queue, Stream
+from locomotion_jax.dynamics import _chain_exact as chain_engine
+from locomotion_jax.run import _chain
 
 
 def _counting(n, lanes, order=None):
@@ -85,31 +87,37 @@ def test_queue_matches_one_loop_per_configuration():
         )
 
 
-def _saves_alone(p, w, save_at, contact, start, dt, max_steps):
+def _plain_saves(s, step, row, save_at, max_steps):
     # One configuration's saves in a plain loop of its own (no queue, no buffer): each
     # row written into the full array of saves as it falls.
     n = save_at.shape[0]
-    params, ok = safe_params(p)
-    s = exact.init(params, w, contact, jnp.zeros((), params.dtype), model.initial_gap(params, start))
-    s = eqx.tree_at(lambda s: s.status, s, jnp.where(ok, s.status, lj.Status.INVALID).astype(jnp.int32))
-    row = lambda s: jnp.stack([*s.y, s.stuck1.astype(s.t.dtype), s.stuck2.astype(s.t.dtype), s.s1, s.s2])
     running = lambda c: (c[1] < n) & (c[0].status == lj.Status.OK) & (c[3] < max_steps)
-    P = exact.consts(params, w)
 
     def body(c):
         s, idx, rows, steps = c
         record = save_at[idx] <= s.t
-        new_s, _ = exact.step(params, w, contact, dt, s, save_at[idx], None, P)
+        new_s = step(s, save_at[idx])
         rows = rows.at[idx].set(jnp.where(record, row(s), rows[idx]))
         s = jax.tree_util.tree_map(lambda a, b: jnp.where(record, b, a), new_s, s)
         return s, idx + record.astype(jnp.int32), rows, steps + 1
 
     zi = jnp.zeros((), jnp.int32)
-    s, idx, rows, _ = jax.lax.while_loop(running, body, (s, zi, jnp.zeros((n, 10), params.dtype), zi))
+    rows = jnp.zeros((n,) + row(s).shape, s.t.dtype)
+    s, idx, rows, _ = jax.lax.while_loop(running, body, (s, zi, rows, zi))
     valid = jnp.arange(n) < idx
     rows = jnp.where(valid[:, None], rows, row(s)[None, :])
     status = jnp.where((s.status == lj.Status.OK) & (idx < n), lj.Status.MAX_STEPS, s.status).astype(jnp.int32)
     return rows, valid, status, s.t_liftoff, s.n_switch
+
+
+def _saves_alone(p, w, save_at, contact, start, dt, max_steps):
+    params, ok = safe_params(p)
+    s = exact.init(params, w, contact, jnp.zeros((), params.dtype), model.initial_gap(params, start))
+    s = eqx.tree_at(lambda s: s.status, s, jnp.where(ok, s.status, lj.Status.INVALID).astype(jnp.int32))
+    row = lambda s: jnp.stack([*s.y, s.stuck1.astype(s.t.dtype), s.stuck2.astype(s.t.dtype), s.s1, s.s2])
+    P = exact.consts(params, w)
+    step = lambda s, t_stop: exact.step(params, w, contact, dt, s, t_stop, None, P)[0]
+    return _plain_saves(s, step, row, save_at, max_steps)
 
 
 @pytest.mark.parametrize("dtype", [jnp.float64, jnp.float32])
@@ -149,3 +157,34 @@ def test_simulate_queue_matches_one_loop_per_configuration(dtype, max_steps):
         scale = np.max(np.abs(ref[ran, :, :6]), axis=1, keepdims=True)
         assert np.max(np.abs(rows[ran, :, :6] - ref[ran, :, :6]) / scale) < 2e-4
         np.testing.assert_allclose(queued[3], alone[3], rtol=1e-6)
+
+
+@pytest.mark.parametrize("max_steps", [40_000, 500])
+def test_chain_simulate_queue_matches_one_loop_per_configuration(max_steps):
+    # The chain engine's `simulate` through the same queue (3 lanes, buffers of 4 rows)
+    # against one plain loop per configuration, bit for bit: runs to the end, lift-offs
+    # (two at the start, three later), an invalid chain, and (500) the step cap.
+    cases = [(0.06, 2.0, 0.5), (0.3, 20.0, 0.8), (0.08, 5.0, 0.5), (0.06, 3.0, 0.0), (0.2, 15.0, 0.9)]
+    cases += [(0.05, 9.0, 0.4), (0.1, 12.0, 0.6)]
+    wave = lambda a, om: lj.TravellingWave(a, om, 2.0)
+    chains = [lj.Chain(masses=[1.0, 1.0, 1.0], d=d, waveforms=wave(a, om)) for a, om, d in cases]
+    chains.append(lj.Chain(masses=[1.0, -1.0, 1.0], waveforms=wave(0.06, 2.0), check=False))
+    flat, ok, _ = _chain.prepare_chain(lj.Chain.stack(chains), None)
+    save_at = jnp.asarray(np.concatenate([[0.0, 0.0], np.linspace(0.1, 12.0, 22), [12.0, 12.0]]))
+    cap = jnp.asarray(max_steps, jnp.int32)
+    queued = _chain._simulate_batch(flat, ok, save_at, "strict", "paper", 0.02, cap, 3, 4)
+
+    def alone(C, ok):
+        s = _chain._initial(C, ok, "strict", "paper")
+        step = lambda s, t_stop: chain_engine.step(C, "strict", 0.02, s, t_stop)[0]
+        return _plain_saves(s, step, _chain._row, save_at, cap)
+
+    ref = jax.vmap(alone)(flat, ok)
+    S = lj.Status
+    want = [S.OK, S.LIFTOFF, S.LIFTOFF, S.OK, S.LIFTOFF, S.LIFTOFF, S.LIFTOFF, S.INVALID]
+    if max_steps == 500:
+        want[0] = want[3] = S.MAX_STEPS
+    np.testing.assert_array_equal(ref[2], want)
+    np.testing.assert_array_equal(np.asarray(ref[1]).sum(axis=1)[[2, 5, 6]] > 0, True)
+    for q, r, name in zip(queued, ref, ("rows", "valid", "status", "t_liftoff", "n_switch"), strict=True):
+        np.testing.assert_array_equal(np.asarray(q), np.asarray(r), err_msg=name)
