@@ -1,4 +1,4 @@
-"""Benchmark of locomotion_jax against an event-driven scipy baseline (issue 5).
+"""Benchmark of locomotion_jax against an event-driven scipy baseline.
 
 One run times, on the same machine and in separate processes (so that peak memory
 and compile time are per case):
@@ -891,7 +891,7 @@ def _memory_mb(meta: dict) -> float:
 
 
 def targets(res: dict, meta: dict, base: dict | None) -> list[str]:
-    """The issue's targets against what this run measured (a table with a verdict per line)."""
+    """The performance targets against what this run measured (a table with a verdict per line)."""
     dt, H, T = meta["dt"], meta["horizon"], TARGETS
     ok = lambda good: "**met**" if good else "not met"
     rows = []

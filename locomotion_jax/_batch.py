@@ -71,8 +71,8 @@ def horizon_bound(params: Params, t_extra: float) -> float:
 
 
 MICRO_BATCH_CPU = 64
-"""Lanes of the exact engine's loops on a CPU (`measure`'s work queue, `simulate`'s
-sub-batches). Above 64 elements per kernel XLA's CPU runtime splits every kernel
+"""Lanes of the exact engine's loops on a CPU (the work queues of `measure` and
+`simulate`). Above 64 elements per kernel XLA's CPU runtime splits every kernel
 over its thread pool, which costs more than it gains for kernels this small
 (benchmarks/NOTES.md, cost model 3)."""
 

@@ -328,13 +328,8 @@ def figures(
 ) -> None:
     """Reproduce the paper's figures (SPEC §6): data, PNGs and the reproduction report."""
     names = figure_names(figs)
-    try:
-        from ._figures import run_figures
-    except ModuleNotFoundError as err:
-        if err.name != "locomotion_jax._figures":
-            raise
-        typer.echo("Error: the figure scripts (locomotion_jax._figures) are not installed.", err=True)
-        raise typer.Exit(1) from None
+    from ._figures import run_figures
+
     for path in run_figures(names, quick, out):
         typer.echo(str(path))
 

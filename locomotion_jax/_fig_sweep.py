@@ -46,7 +46,7 @@ def _sweep(axes, size, fixed=None, chunk=None):
 
 
 def _mask(ds, name):
-    if name == "liftoff_steady" and name not in ds:  # data written before the steady check existed
+    if name == "liftoff_steady" and name not in ds:  # `steady_liftoff` not run: every lift-off counts
         name = "liftoff"
     return np.asarray(ds[name].values)
 

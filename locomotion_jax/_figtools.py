@@ -1,25 +1,21 @@
 """Shared pieces of the figure reproductions: the sweep call, verdicts, small analyses.
 
-The figures call [`locomotion_jax.sweep`][] when the package provides it; until
-then a small private fallback runs [`measure`][] on [`Params.grid`][] chunk by
-chunk and labels the result the same way (one `xarray.Dataset`, one dimension
-per swept parameter, one variable per `Measurement` field).
+The figures' grids run through [`locomotion_jax.sweep`][] (one `xarray.Dataset`,
+one dimension per swept parameter, one variable per `Measurement` field).
 """
 
 import dataclasses
-import sys
 from collections.abc import Mapping
 from typing import Any, TypedDict
 
-import jax
 import numpy as np
 import xarray as xr
 
 from ._batch import default_max_steps, horizon_bound
 from ._custom_types import Contact, Start
 from ._dynamics import Exact
-from ._measure import measure
 from ._params import DEFAULTS, Params
+from ._sweep import sweep
 
 
 class Reading(TypedDict):
@@ -81,13 +77,9 @@ def run_sweep(
 ) -> xr.Dataset:
     """Measure a grid of configurations under the paper's reading (`PAPER`).
 
-    Uses `locomotion_jax.sweep` if the package has it (checked at call time),
-    otherwise `_fallback_sweep`. Chunks should group configurations of similar
-    cost: under `vmap` a chunk runs as long as its slowest member. `max_steps`
-    overrides the engine's step cap (`None`: its default from the horizon).
+    Runs [`locomotion_jax.sweep`][] in chunks of `chunk_size` configurations.
+    `max_steps` overrides the engine's step cap (`None`: its default from the horizon).
     """
-    import locomotion_jax
-
     axes = {k: np.atleast_1d(np.asarray(v, dtype=float)) for k, v in axes.items()}
     kwargs: dict[str, Any] = dict(
         fixed=dict(fixed or {}),
@@ -98,35 +90,10 @@ def run_sweep(
         chunk_size=chunk_size,
         **PAPER,
     )
-    if hasattr(locomotion_jax, "sweep"):
-        ds = locomotion_jax.sweep(axes, **kwargs, path=None, progress=progress)
-        ds.attrs["engine"] = "locomotion_jax.sweep"
-    else:
-        ds = _fallback_sweep(axes, **kwargs, progress=progress)
+    ds = sweep(axes, **kwargs, path=None, progress=progress)
+    ds.attrs["engine"] = "locomotion_jax.sweep"
     ds.attrs.update(dynamics="exact", dt=float(dt), z=float(z), horizon=float(horizon), window=float(window), **PAPER)
     return ds
-
-
-def _fallback_sweep(axes, *, fixed, z, horizon, window, dynamics, contact, start, chunk_size, progress):
-    """`measure` on `Params.grid(**axes, **fixed)` in equal-sized chunks (one compilation)."""
-    grid = Params.grid(**axes, **fixed).broadcast()
-    shape = grid.batch_shape
-    flat = jax.tree_util.tree_map(lambda x: x.reshape(-1), grid)
-    size = int(np.prod(shape))
-    # One step cap for the whole grid, so every chunk shares one compiled program.
-    dynamics = Exact(dynamics.dt, dynamics.max_steps or default_max_steps(horizon_bound(flat, horizon), dynamics.dt))
-    n = min(chunk_size, size)
-    parts = []
-    for lo in range(0, size, n):
-        idx = np.minimum(np.arange(lo, lo + n), size - 1)  # pad the last chunk: same shape
-        m = measure(flat[idx], z, horizon=horizon, window=window, dynamics=dynamics, contact=contact, start=start)
-        parts.append({k: v[: min(n, size - lo)] for k, v in m.to_numpy().items()})
-        if progress:
-            print(f"  configurations {min(lo + n, size)}/{size}", file=sys.stderr, flush=True)
-    dims = list(axes)
-    data = {k: (dims, np.concatenate([p[k] for p in parts]).reshape(shape)) for k in parts[0]}
-    attrs = {f"fixed_{k}": float(v) for k, v in fixed.items()}
-    return xr.Dataset(data, coords=dict(axes), attrs=dict(engine="fallback: measure on Params.grid", **attrs))
 
 
 def steady_liftoff(
@@ -150,7 +117,7 @@ def steady_liftoff(
 
     `stride > 1` re-simulates only every `stride`-th configuration along each axis and
     gives every flagged configuration the verdict of its nearest re-simulated one
-    (`simulate` saves states, so it costs far more per configuration than `measure`).
+    (each re-simulation runs its configuration again from $t = 0$).
     """
     from ._simulate import simulate
 

@@ -20,7 +20,8 @@ bump, $v_s = \\sqrt{\\varepsilon_\\text{ref}\\,\\varepsilon}$, $\\varepsilon_\\t
 it still satisfies $v_s \\to 0$ and $v_s / \\varepsilon \\to \\infty$ as
 $\\varepsilon \\to 0$, so it converges to the exact law, and at
 $\\varepsilon = 10^{-4}$ speed and cost of transport agree with the exact engine
-to about 1 % (omega = 1, 3, 6; measured while writing this module).
+to about 1 % (omega = 1, 3, 6: a one-off check, not a test; every optimum is
+verified on the exact engine, `_optimise`).
 """
 
 import math

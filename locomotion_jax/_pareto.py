@@ -68,11 +68,12 @@ def exact_figures(params: Params, waveform: AbstractWaveform | None, horizon: fl
 
 
 def with_waveform_frequency(params: Params, waveform: AbstractWaveform | None) -> Params:
-    """`params` with `omega` set to the waveform's base frequency (and broadcast to it).
+    """`params` broadcast to the waveform's batch shape, with `omega` set to its base frequency.
 
-    The waveform alone defines the actuation, but the exact engine (since the
-    phase-rotation rewrite of `_exact.step`) advances the phase at `params.omega`;
-    keeping the two equal makes every exact run here correct either way.
+    The waveform alone defines the actuation (the exact engine rotates the phase at
+    `waveform.omega`). The broadcast makes `measure` and `simulate` batch the waveform
+    with the parameters (a waveform whose `omega` has the params' batch shape is
+    batched with them), and `omega` orders their work queue (highest first).
     """
     if waveform is None:
         return params

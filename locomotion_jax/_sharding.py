@@ -2,18 +2,14 @@
 
 The batch axis of a chunk is split over a 1-D mesh of every device JAX sees
 (`jax.devices()`: all local devices, or all devices of all hosts under
-`jax.distributed`). Each device runs `measure`'s per-configuration integrator
-under `vmap` on its own shard through `jax.shard_map`, so each device's
-`while_loop` stops as soon as *its* slowest configuration is done, instead of
-every device waiting for the globally slowest one (which a plain `jit` with a
-sharded input would not guarantee).
+`jax.distributed`). Each device runs `measure`'s work queue on its own shard
+(`_measure.exact_batch`) through `jax.shard_map`, so each device stops as soon as
+*its* configurations are done, instead of every device waiting for the globally
+slowest one (which a plain `jit` with a sharded input would not guarantee).
 
 The smoothed model (diffrax) does not go through `shard_map` (its closure
 conversion rejects the per-device types); it runs under `jit` on the sharded batch,
 which XLA partitions automatically (same results; devices wait for each other).
-
-Besides `_measure`/`_batch`, this is the one place that calls `jax.vmap`
-(STYLE §3: library functions handle one configuration; the sweep batches).
 """
 
 from collections import Counter

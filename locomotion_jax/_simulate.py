@@ -15,6 +15,7 @@ from ._custom_types import Array, ArrayLike, Contact
 from ._dynamics import AbstractDynamics, Exact, Smoothed
 from ._params import Params
 from ._results import ChainTrajectory, Trajectory
+from ._saves import BUFFER, run_saves
 from ._status import mode_code, Status
 from .model._chain import Chain
 from .run._chain import chain_dynamics, simulate_chain
@@ -34,78 +35,39 @@ def derived_fields(params: Params, wave: AbstractWaveform, contact: Contact, t, 
     }
 
 
-def _row(s: exact.Hybrid, dtype) -> Array:
+def _row(s: exact.Hybrid) -> Array:
+    dtype = s.t.dtype
     return jnp.stack([*s.y, s.stuck1.astype(dtype), s.stuck2.astype(dtype), s.s1, s.s2])
 
 
-def _init_one(params, wave, save_at, contact, start):
+def _init(params, wave, contact, start) -> tuple[tuple, exact.Hybrid]:
     params, valid = safe_params(params)
-    dtype = params.dtype
-    st = exact.init(params, wave, contact, jnp.zeros((), dtype), model.initial_gap(params, start))
+    st = exact.init(params, wave, contact, jnp.zeros((), params.dtype), model.initial_gap(params, start))
     st = eqx.tree_at(lambda s: s.status, st, jnp.where(valid, st.status, Status.INVALID).astype(jnp.int32))
-    rows = jnp.zeros((save_at.shape[0], 10), dtype)
-    zi = jnp.zeros((), jnp.int32)
-    return params, (st, zi, rows, zi)
+    return (params, wave, exact.consts(params, wave)), st
 
 
-def _active(c, n, max_steps):
-    s, idx, _, steps = c
-    return (idx < n) & (s.status == Status.OK) & (steps < max_steps)
+def _exact_batch(
+    params, wave, wave_axes, save_at, contact, start, dt, max_steps, lanes: int | None = None, buffer: int = BUFFER
+):
+    """The saved rows of a flat batch ([`_saves.run_saves`][]: a work queue over `lanes` lanes).
 
-
-def _body_one(params, wave, c, save_at, contact, dt, max_steps):
-    n = save_at.shape[0]
-    s, idx, rows, steps = c
-    active = _active(c, n, max_steps)
-    at = jnp.minimum(idx, n - 1)
-    target = save_at[at]
-    record = active & (target <= s.t)
-    new_s, _ = exact.step(params, wave, contact, dt, s, target, None, exact.consts(params, wave))
-    # One row written in place: under `vmap` a while loop would select every carried
-    # array, all rows included, on every iteration; this loop masks by hand instead.
-    rows = rows.at[at].set(jnp.where(record, _row(s, s.t.dtype), rows[at]))
-    advance = active & ~record
-    s = jax.tree_util.tree_map(lambda a, b: jnp.where(advance, a, b), new_s, s)
-    return s, idx + record.astype(jnp.int32), rows, steps + active.astype(jnp.int32)
-
-
-def _run(params, wave, wave_axes, save_at, contact, start, dt, max_steps):
-    n = save_at.shape[0]
-    params, c = jax.vmap(lambda p, w: _init_one(p, w, save_at, contact, start), in_axes=(0, wave_axes))(params, wave)
-    body_one = lambda p, w, c: _body_one(p, w, c, save_at, contact, dt, max_steps)
-    c = jax.lax.while_loop(
-        lambda c: jnp.any(jax.vmap(lambda c: _active(c, n, max_steps))(c)),
-        lambda c: jax.vmap(body_one, in_axes=(0, wave_axes, 0))(params, wave, c),
-        c,
-    )
-    s, idx, rows, _ = c
-    valid_rows = jnp.arange(n)[None, :] < idx[:, None]
-    last = jax.vmap(lambda s: _row(s, s.t.dtype))(s)
-    rows = jnp.where(valid_rows[..., None], rows, last[:, None, :])
-    status = jnp.where((s.status == Status.OK) & (idx < n), Status.MAX_STEPS, s.status).astype(jnp.int32)
-    return rows, valid_rows, status, s.t_liftoff, s.n_switch
-
-
-def _exact_batch(params, wave, wave_axes, save_at, contact, start, dt, max_steps):
+    `lanes=None` takes `_batch.MICRO_BATCH_CPU` on a CPU, else the whole batch. The
+    queue takes the highest frequencies first, as in `measure`. A row is the state
+    $(x_1, v_1, x_2, v_2, e_d, w)$, the stick flags and the slip directions.
+    """
     n = params.omega.shape[0]
-    mb = MICRO_BATCH_CPU if jax.default_backend() == "cpu" else None
-    run = lambda p, w: _run(p, w, wave_axes, save_at, contact, start, dt, max_steps)
-    if not mb or n <= mb:
-        return run(params, wave)
-    # Sub-batches in sequence (`_batch.MICRO_BATCH_CPU` wide): each loop stops with its own
-    # slowest configuration and its state stays in cache.
-    k = -(-n // mb)
-    pad = k * mb - n
-    grow = lambda x: jnp.concatenate([x, jnp.repeat(x[-1:], pad, axis=0)]).reshape((k, mb) + x.shape[1:])
-    params_k = jax.tree_util.tree_map(grow, params)
-    if wave_axes is None:
-        out = jax.lax.map(lambda p: run(p, wave), params_k)
-    else:
-        out = jax.lax.map(lambda a: run(*a), (params_k, jax.tree_util.tree_map(grow, wave)))
-    return jax.tree_util.tree_map(lambda x: x.reshape((k * mb,) + x.shape[2:])[:n], out)
+    if lanes is None:
+        lanes = MICRO_BATCH_CPU if jax.default_backend() == "cpu" else n
+    take = lambda i: jax.tree_util.tree_map(lambda x: x[i], params)
+    pick_wave = (lambda i: wave) if wave_axes is None else (lambda i: jax.tree_util.tree_map(lambda x: x[i], wave))
+    init = lambda i: _init(take(i), pick_wave(i), contact, start)
+    step = lambda f, s, t_stop: exact.step(f[0], f[1], contact, dt, s, t_stop, None, f[2])[0]
+    order = jnp.argsort(-jnp.where(jnp.isfinite(params.omega), params.omega, -jnp.inf))
+    return run_saves(init, step, _row, n, save_at, max_steps, lanes, order, buffer)
 
 
-_exact_batch = engine_jit(_exact_batch, ("wave_axes", "contact", "start", "dt"))
+_exact_batch = engine_jit(_exact_batch, ("wave_axes", "contact", "start", "dt", "lanes", "buffer"))
 
 
 def _trajectory(params, wave, wave_axes, contact, start, save_at, rows, valid, status, t_lift, n_switch):
@@ -199,6 +161,12 @@ def simulate(
 
     **Returns:** a [`Trajectory`][] with batch shape `params.batch_shape`, or a
     [`ChainTrajectory`][] for a chain.
+
+    With [`Exact`][] dynamics (both engines) the batch runs through the work queue of
+    `measure` ([`_saves.run_saves`][]), at about `measure`'s cost over the same run plus
+    one iteration per save (benchmarks/simulate_vs_measure.py). [`Smoothed`][] dynamics
+    run diffrax's `diffeqsolve` under `vmap`, as `measure` does with them: the solve is
+    one loop of diffrax's own, which a work queue cannot take step by step.
 
     **Raises:** `ValueError` for invalid arguments (before any computation).
 

@@ -8,7 +8,7 @@ as it is done (`_store`), and counted on a progress bar from the host.
 With `order="cost"` the configurations are first sorted by expected cost (a short
 pilot run of each, `_schedule`), so each chunk, and each device's share of it,
 holds configurations of similar duration: a loop runs until its slowest
-configuration is done, and one reaching $z$ late no longer keeps a chunk of fast
+configuration is done, and one reaching $z$ late does not keep a chunk of fast
 ones busy. The results are put back in grid order, identical to a natural-order
 sweep; the permutation is stored with the chunks, so a resumed sweep cuts the
 same chunks.

@@ -51,12 +51,16 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import ipywidgets as widgets
 import locomotion_jax as lj
 import matplotlib.pyplot as plt
 import numpy as np
 from IPython.display import display, HTML
 
+
+try:  # the sliders of the last section; `pip install -e ".[notebooks]"` installs them
+    import ipywidgets as widgets
+except ModuleNotFoundError:
+    widgets = None
 
 # CI runs every notebook top to bottom at a small size (tests/test_notebooks.py sets LOCOMOTION_NB_SMALL=1).
 SMALL = os.environ.get("LOCOMOTION_NB_SMALL") == "1"
@@ -221,8 +225,9 @@ HTML(anim_sl.to_jshtml(default_mode="loop"))
 # parameters are traced arrays, so new values do not recompile) and redraw the last two periods.
 # Things to try: $d = 0$ (the symmetric spring does not crawl), $d < 0$ (it crawls backwards),
 # $\hat m$ away from 0.5, or a large $a$ at high $\omega$ (a normal force reaches zero: **lift-off**,
-# where the model no longer applies, and the simulation stops there). Without a front end (CI, a
-# static viewer) the panel runs once with the defaults.
+# where the model does not apply, and the simulation stops there). Without a front end (CI, a
+# static viewer) the panel runs once with the defaults; without `ipywidgets` installed there is no
+# panel, and `explore` runs once with the defaults (call it with other values in a new cell).
 
 # %%
 T_EXPLORE = 30.0
@@ -245,21 +250,26 @@ def explore(omega=2.0, a=0.05, d=0.5, mhat=0.5):
     return tr
 
 
-slider = dict(continuous_update=False, readout_format=".3g")
-panel = widgets.interactive(
-    explore,
-    omega=widgets.FloatSlider(value=2.0, min=0.5, max=30.0, step=0.1, description="omega", **slider),
-    a=widgets.FloatSlider(value=0.05, min=0.0, max=0.15, step=0.005, description="a", **slider),
-    d=widgets.FloatSlider(value=0.5, min=-1.0, max=1.0, step=0.05, description="d", **slider),
-    mhat=widgets.FloatSlider(value=0.5, min=0.05, max=0.95, step=0.01, description="mhat", **slider),
-)
-display(panel)
+if widgets is None:
+    print('No sliders: ipywidgets is not installed (pip install -e ".[notebooks]").')
+    result = explore()
+else:
+    slider = dict(continuous_update=False, readout_format=".3g")
+    panel = widgets.interactive(
+        explore,
+        omega=widgets.FloatSlider(value=2.0, min=0.5, max=30.0, step=0.1, description="omega", **slider),
+        a=widgets.FloatSlider(value=0.05, min=0.0, max=0.15, step=0.005, description="a", **slider),
+        d=widgets.FloatSlider(value=0.5, min=-1.0, max=1.0, step=0.05, description="d", **slider),
+        mhat=widgets.FloatSlider(value=0.5, min=0.05, max=0.95, step=0.01, description="mhat", **slider),
+    )
+    display(panel)
+    result = panel.result
 
 # %%
 # `interactive` ran `explore` once with the defaults. A widget callback only prints its errors,
 # so check here that it returned a trajectory (this makes a broken panel fail CI).
-assert isinstance(panel.result, lj.Trajectory), "explore() failed: see the traceback in the panel above"
-print("panel ready:", lj.Status(int(panel.result.status)).name)
+assert isinstance(result, lj.Trajectory), "explore() failed: see the traceback in the panel above"
+print("explore ready:", lj.Status(int(result.status)).name)
 
 # %% [markdown]
 # **Next:** `02_parameter_maps` maps the SSL and SL regions and the travel time over

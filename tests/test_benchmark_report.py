@@ -1,5 +1,5 @@
 """The committed benchmark report is what `benchmarks/run.py` renders from its saved
-results, and the README quotes it (issue 5: numbers generated, never hand-typed)."""
+results, and the README quotes it (numbers generated, never hand-typed)."""
 
 import importlib.util
 import json

@@ -19,6 +19,7 @@ percent-format `.py` (the reviewed source; see notebooks/README.md): the test ch
 that the two hold the same cells.
 """
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -126,3 +127,22 @@ def test_notebook_runs(name, tmp_path, monkeypatch):
     errors = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs if o.output_type == "error"]
     assert not errors, f"{name}: {errors[0].ename}: {errors[0].evalue}"
     print(f"{name}: {seconds:.0f} s")
+
+
+@pytest.mark.slow
+def test_model_tour_runs_without_ipywidgets(tmp_path, monkeypatch):
+    # The main install (`pip install -e .`) has no ipywidgets: a module of that name
+    # that fails to import stands in for it, first on the kernel's path.
+    hide = tmp_path / "hide"
+    hide.mkdir()
+    (hide / "ipywidgets.py").write_text(
+        "raise ModuleNotFoundError(\"No module named 'ipywidgets'\", name='ipywidgets')\n"
+    )
+    path = [str(hide), *filter(None, os.environ.get("PYTHONPATH", "").split(os.pathsep))]
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(path))
+    monkeypatch.setenv("LOCOMOTION_NB_SMALL", "1")
+    monkeypatch.delenv("LOCOMOTION_NB_IMAGES", raising=False)
+    nb, _ = _execute("01_model_tour", tmp_path)
+    printed = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.outputs)
+    assert "No sliders: ipywidgets is not installed" in printed
+    assert "explore ready: OK" in printed

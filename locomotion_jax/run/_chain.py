@@ -1,9 +1,9 @@
 """`simulate` and `measure` for chains of N masses (SPEC §5 and §8) on the N-mass exact engine.
 
-The same loops as the two-mass front ends (`_simulate`, `_measure`): a flat batch,
-one `vmap`, each configuration stopping on its own; `measure` runs through the work
-queue (`_queue.run_queue`) and keeps running sums only, so memory does not grow with
-the number of steps.
+The same loops as the two-mass front ends (`_simulate`, `_measure`): a flat batch
+through the work queue (`_queue.run_queue`), each configuration stopping on its own;
+`simulate` saves states at the requested times (`_saves.run_saves`), `measure` keeps
+running sums only, so memory does not grow with the number of steps.
 """
 
 import math
@@ -20,6 +20,7 @@ from .._dynamics import Exact
 from .._exact import Target
 from .._queue import run_queue
 from .._results import ChainMeasurement, ChainTrajectory
+from .._saves import BUFFER, run_saves
 from .._status import Regime, Status
 from ..dynamics import _chain_exact as engine
 from ..model._chain import Chain
@@ -97,38 +98,16 @@ def _row(s: engine.Hybrid) -> jax.Array:
     return jnp.concatenate([s.y.x, s.y.v, s.y.ed[None], s.y.w[None], s.stuck.astype(dt), s.sdir])
 
 
-def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps):
-    n = save_at.shape[0]
-
-    def init_one(C, ok):
-        st = _initial(C, ok, contact, start)
-        return st, jnp.zeros((), jnp.int32), jnp.zeros((n,) + _row(st).shape, st.t.dtype), jnp.zeros((), jnp.int32)
-
-    def active(c):
-        s, idx, _, steps = c
-        return (idx < n) & (s.status == Status.OK) & (steps < max_steps)
-
-    def body(C, c):
-        s, idx, rows, steps = c
-        act = active(c)
-        at = jnp.minimum(idx, n - 1)
-        record = act & (save_at[at] <= s.t)
-        new_s, _ = engine.step(C, contact, dt, s, save_at[at])
-        rows = rows.at[at].set(jnp.where(record, _row(s), rows[at]))
-        adv = act & ~record
-        s = jax.tree_util.tree_map(lambda a, b: jnp.where(adv, a, b), new_s, s)
-        return s, idx + record.astype(jnp.int32), rows, steps + act.astype(jnp.int32)
-
-    c = jax.vmap(init_one)(C, valid)
-    c = jax.lax.while_loop(lambda c: jnp.any(jax.vmap(active)(c)), lambda c: jax.vmap(body)(C, c), c)
-    s, idx, rows, _ = c
-    ok_rows = jnp.arange(n)[None, :] < idx[:, None]
-    rows = jnp.where(ok_rows[..., None], rows, jax.vmap(_row)(s)[:, None, :])
-    status = jnp.where((s.status == Status.OK) & (idx < n), Status.MAX_STEPS, s.status).astype(jnp.int32)
-    return rows, ok_rows, status, s.t_liftoff, s.n_switch
+def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps, lanes, buffer=BUFFER):
+    """The saved rows of a flat batch: the work queue of [`_saves.run_saves`][], highest frequencies first."""
+    take = lambda i: jax.tree_util.tree_map(lambda x: x[i], C)
+    init = lambda i: (take(i), _initial(take(i), valid[i], contact, start))
+    step = lambda C, s, t_stop: engine.step(C, contact, dt, s, t_stop)[0]
+    order = jnp.argsort(-jnp.where(jnp.isfinite(C.waves.omega), C.waves.omega, -jnp.inf))
+    return run_saves(init, step, _row, valid.shape[0], save_at, max_steps, lanes, order, buffer)
 
 
-_simulate_batch = engine_jit(_simulate_batch, ("contact", "start", "dt"))
+_simulate_batch = engine_jit(_simulate_batch, ("contact", "start", "dt", "lanes", "buffer"))
 
 
 def _derived(C: Chain, contact, t, x, v):
@@ -148,8 +127,10 @@ def simulate_chain(chain: Chain, t_end: float, save_at, *, dt: float, max_steps:
     save = jnp.asarray(save_at, flat.dtype)
     N = flat.n_masses
     steps = max_steps or default_max_steps(float(t_end), dt) + 4 * save.shape[0]
+    n = valid.shape[0]
+    lanes = min(n, MICRO_BATCH_CPU) if jax.default_backend() == "cpu" else n
     rows, ok, status, t_lift, n_switch = _simulate_batch(
-        flat, valid, save, contact, start, dt, jnp.asarray(steps, jnp.int32)
+        flat, valid, save, contact, start, dt, jnp.asarray(steps, jnp.int32), lanes
     )
     x, v = rows[..., :N], rows[..., N : 2 * N]
     t = jnp.broadcast_to(save, rows.shape[:-1])
