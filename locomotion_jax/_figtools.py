@@ -11,7 +11,6 @@ from typing import Any, TypedDict
 import numpy as np
 import xarray as xr
 
-from ._batch import default_max_steps, horizon_bound
 from ._custom_types import Contact, Start
 from ._dynamics import Exact
 from ._params import DEFAULTS, Params
