@@ -118,7 +118,7 @@ def run_queue(
         pos, nxt, fixed, dyn, out = carry
         dyn = until_one_finishes(pos, fixed, dyn)
         if stream is not None:  # every lane's buffered rows, into its configuration's rows
-            dyn, rows, slots = drain_all(fixed, dyn)
+            dyn, rows, slots = drain_all(fixed, dyn)  # pyright: ignore[reportPossiblyUnboundVariable]  # set with `stream`
             cfg = jnp.where(pos < n, config(pos), n)[:, None]  # n: out of bounds, dropped
             out = {**out, "stream": out["stream"].at[cfg, slots].set(rows, mode="drop")}
         done = (pos < n) & ~running_all(fixed, dyn)

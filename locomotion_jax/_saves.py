@@ -27,16 +27,16 @@ BUFFER = 8
 class _Dyn(NamedTuple):
     """The loop state of one configuration.
 
-    `idx` saves are done; the last `count` of them wait in `rows` (in order) for the
-    outer loop, and `targets` are the save times `idx - count` onwards (so the
-    current one is `targets[count]`, chosen without a gather).
+    `idx` saves are done; the last `n_buffered` of them wait in `rows` (in order) for the
+    outer loop, and `targets` are the save times `idx - n_buffered` onwards (so the
+    current one is `targets[n_buffered]`, chosen without a gather).
     """
 
     s: Any  # the engine's hybrid state
     idx: Array
     steps: Array
     rows: Array  # (buffer, row size)
-    count: Array
+    n_buffered: Array
     targets: Array  # (buffer,)
 
 
@@ -87,7 +87,7 @@ def run_saves(
         return (d.idx < n_save) & (d.s.status == Status.OK) & (d.steps < max_steps)
 
     def advance(fixed, d: _Dyn) -> _Dyn:
-        slot = jnp.arange(buffer) == d.count
+        slot = jnp.arange(buffer) == d.n_buffered
         target = jnp.sum(jnp.where(slot, d.targets, 0))
         record = target <= d.s.t
         new_s = step(fixed, d.s, target)
@@ -97,12 +97,12 @@ def run_saves(
         rows = jnp.where((slot & record)[:, None], row(d.s)[None, :], d.rows)
         s = jax.tree_util.tree_map(lambda a, b: jnp.where(record, b, a), new_s, d.s)
         saved = record.astype(jnp.int32)
-        return _Dyn(s, d.idx + saved, d.steps + 1, rows, d.count + saved, d.targets)
+        return _Dyn(s, d.idx + saved, d.steps + 1, rows, d.n_buffered + saved, d.targets)
 
     def drain(fixed, d: _Dyn) -> tuple[_Dyn, Array, Array]:
         k = jnp.arange(buffer)
-        slots = jnp.where(k < d.count, d.idx - d.count + k, n_save)  # past the end: dropped
-        emptied = d._replace(count=zi, targets=_targets(save_at, d.idx, buffer))
+        slots = jnp.where(k < d.n_buffered, d.idx - d.n_buffered + k, n_save)  # past the end: dropped
+        emptied = d._replace(n_buffered=zi, targets=_targets(save_at, d.idx, buffer))
         return emptied, d.rows, slots
 
     def results(fixed, d: _Dyn) -> dict[str, Array]:
@@ -116,7 +116,7 @@ def run_saves(
             n_switch=s.n_switch,
         )
 
-    full = lambda fixed, d: d.count >= buffer
+    full = lambda fixed, d: d.n_buffered >= buffer
     out = run_queue(setup, running, advance, results, n, lanes, order, Stream(full, drain, n_save))
     valid = jnp.arange(n_save)[None, :] < out["saved"][:, None]
     rows = jnp.where(valid[..., None], out["stream"], out["last"][:, None, :])

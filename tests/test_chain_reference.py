@@ -11,6 +11,7 @@ live, one case per test, so the work is shared between pytest-xdist workers.
 
 import functools
 import os
+from typing import Any
 
 import locomotion_jax as lj
 import numpy as np
@@ -70,7 +71,7 @@ def _package_group(key) -> dict:
 
 # N = 3 near its resonance, a wave travelling forwards: a normal force changes sign in the
 # first period, and again and again under the paper's reading.
-LIFTOFF_CASES = [
+LIFTOFF_CASES: list[dict[str, Any]] = [
     dict(
         name=f"n3_liftoff_{contact}_w{omega:g}",
         config=dict(masses=[1.0] * 3, omega=omega, a=0.06, phi=0.5),
