@@ -88,7 +88,7 @@ class _Model:
     Masses (Sect. 2.1): ``m1 = 2 mhat``, ``m2 = 2 (1 - mhat)`` so that ``m1 + m2 = 2``.
     """
 
-    def __init__(self, params: dict, contact: str):
+    def __init__(self, params: dict, contact: str, wave=None):
         unknown = set(params) - set(DEFAULTS)
         if unknown:
             raise ValueError(f"unknown parameter(s) {sorted(unknown)}; valid: {sorted(DEFAULTS)}")
@@ -101,6 +101,14 @@ class _Model:
         self.lbar = float(p["lbar"])
         self.a = float(p["a"])
         self.omega = float(p["omega"])
+        # Optional Fourier actuation (replaces eq. 13's sinusoid, ``a`` unused):
+        # l0 = lbar + sum_h cos_h cos(h omega t) + sin_h sin(h omega t), h = 1..H.
+        self.wave = None
+        if wave is not None:
+            cos, sin = (np.atleast_1d(np.asarray(w, dtype=float)) for w in wave)
+            if cos.shape != sin.shape or cos.ndim != 1:
+                raise ValueError(f"wave must be two 1-D sequences of the same length, got {cos.shape}, {sin.shape}")
+            self.wave = (cos.tolist(), sin.tolist())
         self.mu_s = float(p["mu_s"])
         self.mu_k = float(p["mu_k"])
         mhat = float(p["mhat"])
@@ -118,11 +126,39 @@ class _Model:
         m1, m2, k = self.m1, self.m2, self.k
         return (math.sqrt(k * (m1 + m2) / (m1 * m2)), math.sqrt(k / m1), math.sqrt(k / m2))
 
+    @property
+    def fastest_drive(self) -> float:
+        """The highest frequency in the actuation."""
+        return self.omega * (1 if self.wave is None else len(self.wave[0]))
+
+    def rest_length(self, t: float) -> tuple[float, float]:
+        """``(l0, dl0/dt)`` at time ``t``: eq. (13), or the Fourier series of ``wave``."""
+        if self.wave is None:
+            wt = self.omega * t
+            return self.a * math.sin(wt) + self.lbar, self.a * self.omega * math.cos(wt)
+        l0, l0dot = self.lbar, 0.0
+        for h, (ch, sh) in enumerate(zip(*self.wave), start=1):
+            hw = h * self.omega
+            c, s = math.cos(hw * t), math.sin(hw * t)
+            l0 += ch * c + sh * s
+            l0dot += hw * (sh * c - ch * s)
+        return l0, l0dot
+
+    def rest_length_array(self, t) -> np.ndarray:
+        """``l0`` at the times ``t`` (numpy-vectorised)."""
+        t = np.asarray(t, dtype=float)
+        if self.wave is None:
+            return self.a * np.sin(self.omega * t) + self.lbar
+        l0 = np.full_like(t, self.lbar)
+        for h, (ch, sh) in enumerate(zip(*self.wave), start=1):
+            l0 = l0 + ch * np.cos(h * self.omega * t) + sh * np.sin(h * self.omega * t)
+        return l0
+
     # -- forces -------------------------------------------------------------------------
     def forces(self, t: float, x1: float, x2: float):
         """Spring and normal forces at time ``t``.
 
-        Actuation, eq. (13): ``l0 = a sin(omega t) + lbar``.
+        Actuation, eq. (13): ``l0 = a sin(omega t) + lbar`` (or the Fourier series of ``wave``).
         Spring length, eq. (2): ``l = sqrt((x2 - x1)^2 + d^2)``; tension ``T = k (l - l0)``.
         Horizontal force on m1, eq. (8): ``fx = T (x2 - x1)/l`` (on m2: ``-fx``); ``fy = T d / l``.
         Normal forces, eq. (5): ``N1 = m1 - fy``, ``N2 = m2 + fy``.
@@ -131,9 +167,12 @@ class _Model:
         """
         dx = x2 - x1
         ell = math.sqrt(dx * dx + self.d * self.d)
-        wt = self.omega * t
-        l0 = self.a * math.sin(wt) + self.lbar
-        l0dot = self.a * self.omega * math.cos(wt)
+        if self.wave is None:
+            wt = self.omega * t
+            l0 = self.a * math.sin(wt) + self.lbar
+            l0dot = self.a * self.omega * math.cos(wt)
+        else:
+            l0, l0dot = self.rest_length(t)
         T = self.k * (ell - l0)
         fx = T * dx / ell
         fy = T * self.d / ell
@@ -147,7 +186,7 @@ class _Model:
         """Total energy, eq. (10): ``e = m1 v1^2/2 + m2 v2^2/2 + k (l - l0)^2/2`` (numpy-vectorised)."""
         t, x1, v1, x2, v2 = (np.asarray(u, dtype=float) for u in (t, x1, v1, x2, v2))
         ell = np.sqrt((x2 - x1) ** 2 + self.d**2)
-        l0 = self.a * np.sin(self.omega * t) + self.lbar
+        l0 = self.rest_length_array(t)
         return 0.5 * self.m1 * v1**2 + 0.5 * self.m2 * v2**2 + 0.5 * self.k * (ell - l0) ** 2
 
     def initial_state(self, start: str) -> np.ndarray:
@@ -203,7 +242,7 @@ class _HybridSolver:
         self.stopped = False  # strict-mode lift-off ends the run
         self._tiny_run = 0
         self._normal_restart = (-1, math.nan)  # (mass, time) of a paper-mode N_i crossing
-        wmax = max(model.omega, *model.natural_frequencies())
+        wmax = max(model.fastest_drive, *model.natural_frequencies())
         # Events are detected from sign changes between accepted steps; capping the
         # step at 1/16 of the fastest period keeps short excursions from being missed.
         self.max_step = 2.0 * math.pi / wmax / 16.0
@@ -370,7 +409,7 @@ class _HybridSolver:
         x1, v1, x2, v2 = Y[0], Y[1], Y[2], Y[3]
         dx = x2 - x1
         ell = np.sqrt(dx * dx + m.d * m.d)
-        T = m.k * (ell - (m.a * np.sin(m.omega * t) + m.lbar))
+        T = m.k * (ell - m.rest_length_array(t))
         fx = T * dx / ell
         fy = T * m.d / ell
         N = (m.m1 - fy, m.m2 + fy)
@@ -607,7 +646,7 @@ def reference_natural_frequencies(params: dict) -> tuple[float, float, float]:
 
 
 def reference_simulate(
-    params: dict, t_end: float, save_at=None, *, contact="strict", start="paper", rtol=1e-11, atol=1e-12
+    params: dict, t_end: float, save_at=None, *, contact="strict", start="paper", wave=None, rtol=1e-11, atol=1e-12
 ) -> dict:
     """Simulate the exact hybrid model on ``[0, t_end]`` and sample it at ``save_at``.
 
@@ -618,6 +657,8 @@ def reference_simulate(
         contact: ``'strict'`` (``n_i = N_i``, stop at the first lift-off) or ``'paper'``
             (``n_i = |N_i|``, continue but flag lift-off).
         start: ``'paper'`` (eq. 14) or ``'relaxed'``.
+        wave: ``(cos, sin)``, the Fourier coefficients of harmonics ``1..H`` of ``omega``:
+            ``l0 = lbar + sum_h cos_h cos(h omega t) + sin_h sin(h omega t)`` replaces eq. (13).
 
     Returns:
         dict with arrays ``t, x1, v1, x2, v2, X, e_d, w, e, mode`` at ``save_at`` and the
@@ -626,7 +667,7 @@ def reference_simulate(
         ``n_switches`` counts stick<->slip changes only (not reversals).  After a strict
         lift-off stop the samples repeat the last valid state.
     """
-    model = _Model(params, contact)
+    model = _Model(params, contact, wave)
     ts = np.linspace(0.0, t_end, 1001) if save_at is None else np.atleast_1d(np.asarray(save_at, dtype=float))
     if ts.ndim != 1 or np.any(ts < 0.0) or np.any(ts > t_end):
         raise ValueError(f"save_at must be a 1-D array of times in [0, t_end={t_end}]")

@@ -1,6 +1,7 @@
 """The options shared by the subcommands (`_cli_options`): one declaration, the same contract everywhere."""
 
 import inspect
+import math
 
 import click
 import locomotion_jax as lj
@@ -53,7 +54,13 @@ def test_expand_needs_the_placeholder():
 def test_to_params_omega_over_wn1():
     model = {n: lj.DEFAULTS[n] for n in lj.PARAM_NAMES}
     assert float(_cli_options.to_params({**model, "omega_over_wn1": None}).omega) == lj.DEFAULTS["omega"]
-    params = _cli_options.to_params({**model, "omega_over_wn1": 0.2})
-    assert float(params.omega) == pytest.approx(0.2 * float(lj.Params().wn1), rel=1e-12)
+    # wn1 = sqrt(k (m1 + m2) / (m1 m2)) with m1 = 2 mhat, m2 = 2 (1 - mhat) (eqs. 6, 11), written
+    # out here; unequal masses and another k, where a wrong formula could not hide behind wn1 = 10.
+    k, mhat = 30.0, 0.3
+    m1, m2 = 2 * mhat, 2 * (1 - mhat)
+    wn1 = math.sqrt(k * (m1 + m2) / (m1 * m2))
+    params = _cli_options.to_params({**model, "k": k, "mhat": mhat, "omega_over_wn1": 0.2})
+    assert float(params.omega) == pytest.approx(0.2 * wn1, rel=1e-12)
+    assert float(params.k) == k and float(params.mhat) == mhat
     with pytest.raises(ValueError, match="mu_s >= mu_k"):
         _cli_options.to_params({"mu_s": 0.1, "mu_k": 0.5})

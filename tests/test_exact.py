@@ -210,9 +210,11 @@ def test_fourier_waveform_matches_sinusoid():
 
 
 @pytest.mark.parametrize("contact", ["strict", "paper"])
-def test_random_configurations_never_stall_or_nan(contact):
+def test_random_configurations_never_stall_and_stay_consistent(contact):
     # Wild random parameters: every run ends on its own (no Zeno stall: the step cap
-    # is never hit), nothing is NaN, and the energy balance holds.
+    # is never hit), the results are consistent with each other, and the energy balance
+    # holds. dt = 0.005: at dt = 0.01 the stiffest of them (omega = 26, k = 97, a = 0.13)
+    # leaves an integration error of 7e-4 of e_d in the balance (2e-5 at 0.005, 4e-7 at 0.0025).
     rng = np.random.default_rng(1)
     B = 32
     mu_k = rng.uniform(0.1, 0.8, B)
@@ -226,15 +228,27 @@ def test_random_configurations_never_stall_or_nan(contact):
         c=rng.uniform(0, 0.1, B),
         k=rng.uniform(20, 100, B),
     )
-    m = lj.measure(p, z=0.5, horizon=20.0, contact=contact)
-    status = np.asarray(m.status)
+    horizon = 20.0
+    m = lj.measure(p, z=0.5, horizon=horizon, contact=contact, dynamics=lj.Exact(dt=0.005))
+    r = m.to_numpy()
+    status = r["status"]
     assert not np.any(status == lj.Status.MAX_STEPS)
     if contact == "paper":
         assert np.all(status == lj.Status.OK)
-    assert not np.any(np.isnan(np.asarray(m.tau_z)))
+    else:  # a lift-off, and only a lift-off, stops a strict run
+        np.testing.assert_array_equal(status == lj.Status.LIFTOFF, r["liftoff"])
+    assert 5 <= np.sum(r["liftoff"]) and np.sum(status == lj.Status.OK) >= 5  # both kinds are present
+    # tau_z and e_z are finite exactly when z was reached, and then inside the horizon.
+    np.testing.assert_array_equal(np.isfinite(r["tau_z"]), r["reached"])
+    np.testing.assert_array_equal(np.isfinite(r["e_z"]), r["reached"])
+    assert np.all((r["tau_z"][r["reached"]] > 0) & (r["tau_z"][r["reached"]] <= horizon))
     ok = status == lj.Status.OK
-    bal = np.abs(np.asarray(m.balance)[ok]) / np.maximum(1, np.abs(np.asarray(m.e_d)[ok]))
-    assert np.all(bal < 2e-3)
+    # Dissipation (eq. 15) never decreases: mu_k n |v| and c v^2 are >= 0 (n = |N| under the paper's reading).
+    # (A configuration stuck throughout dissipates nothing.)
+    assert np.all(r["e_d"][ok] >= 0) and np.all(r["e_z"][r["reached"]] <= r["e_d"][r["reached"]] * (1 + 1e-12))
+    # Energy balance (eq. 16); measured 5.7e-7 (strict) and 2.0e-5 (paper) of e_d.
+    bal = np.abs(r["balance"][ok]) / np.maximum(1, np.abs(r["e_d"][ok]))
+    assert np.all(bal < {"strict": 3e-6, "paper": 1e-4}[contact]), np.max(bal)
 
 
 def test_waveform_frequency_is_the_waveforms_own():
