@@ -3,9 +3,9 @@
 import inspect
 import math
 
-import click
 import locomotion_jax as lj
 import pytest
+import typer.core
 import typer.main
 from locomotion_jax import _cli, _cli_options
 from typer.testing import CliRunner
@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 
 def _options(command: str) -> dict:
     group = typer.main.get_command(_cli.app)
-    assert isinstance(group, click.Group)
+    assert isinstance(group, typer.core.TyperGroup)
     return {p.name: p for p in group.commands[command].params}
 
 
