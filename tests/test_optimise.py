@@ -7,6 +7,7 @@ real runs are in `experiments/optimal_actuation.py`.
 
 import json
 import math
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -40,7 +41,7 @@ def _reference_figures(cos, sin, omega, horizon=TINY.verify_horizon, a=None):
     (`tests/reference.py`), as the optimiser defines them on the exact model: the defaults, strict
     contact, relaxed start, from t_start over `horizon`; `a` instead of `cos, sin`: eq. (13)."""
     ts = 80 * 2 * math.pi / min(reference_natural_frequencies({}))
-    kw = dict(wave=(cos, sin)) if a is None else {}
+    kw: dict[str, Any] = dict(wave=(cos, sin)) if a is None else {}
     params = dict(omega=omega) if a is None else dict(omega=omega, a=a)
     r = reference_simulate(params, ts + horizon, save_at=[ts, ts + horizon], start="relaxed", **kw)
     dX = r["X"][1] - r["X"][0]
