@@ -12,6 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._actuation import AbstractWaveform, Sinusoid
+from ._forward import concrete_value
 from ._params import DEFAULTS, PARAM_NAMES, Params
 
 
@@ -63,9 +64,10 @@ def unflatten(tree: Any, shape: tuple[int, ...]) -> Any:
 def horizon_bound(params: Params, t_extra: float) -> float:
     """Host-side bound on the simulated time, for the default step cap."""
     try:
-        ts = np.asarray(params.t_start)
+        # Under jvp/vmap the bound comes from the values beneath the tracers.
+        ts = np.asarray(concrete_value(params.t_start))
         tmax = float(np.nanmax(np.where(np.isfinite(ts), ts, 0.0)))
-    except jax.errors.ConcretizationTypeError:
+    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
         tmax = 80 * 2 * math.pi / 5.0
     return tmax + t_extra
 

@@ -3,11 +3,19 @@
 `jax.jit` with static arguments named, plus XLA options for the host CPU.
 `jax.jit` (unlike `equinox.filter_jit`) returns as soon as the work is
 dispatched, so a caller can prepare the next chunk while a device computes.
+
+Called under a transformation (`jax.jvp`, `jax.jacfwd`, `vmap`), the engine is
+compiled without the options (JAX accepts them on a top-level `jit` only) and its
+outputs pass through [`_forward.forward_only`][], so reverse mode is refused with
+a clear message.
 """
 
+import functools
 from collections.abc import Callable, Sequence
 
 import jax
+
+from ._forward import forward_only, is_traced
 
 
 COMPILER_OPTIONS: dict[str, str] = {"xla_cpu_prefer_vector_width": "512"}
@@ -21,5 +29,19 @@ other than the CPU do not read `xla_cpu_*` options."""
 
 
 def engine_jit(fn: Callable, static_argnames: Sequence[str]) -> Callable:
-    """`jax.jit(fn)` with [`COMPILER_OPTIONS`][] and the given static arguments."""
-    return jax.jit(fn, static_argnames=tuple(static_argnames), compiler_options=COMPILER_OPTIONS)
+    """`jax.jit(fn)` with [`COMPILER_OPTIONS`][] and the given static arguments (module
+    docstring: under a transformation, a plain `jit` with forward-mode-only outputs).
+    The returned function has the jitted one's `lower` and `eval_shape`."""
+    static = tuple(static_argnames)
+    top = jax.jit(fn, static_argnames=static, compiler_options=COMPILER_OPTIONS)
+    nested = jax.jit(fn, static_argnames=static)
+
+    @functools.wraps(fn)
+    def call(*args, **kwargs):
+        if is_traced((args, kwargs)):
+            return forward_only(nested(*args, **kwargs))
+        return top(*args, **kwargs)
+
+    call.lower = top.lower  # pyright: ignore[reportAttributeAccessIssue]
+    call.eval_shape = top.eval_shape  # pyright: ignore[reportAttributeAccessIssue]
+    return call

@@ -11,6 +11,7 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from ._custom_types import Array, ArrayLike
+from ._forward import check_static
 
 
 class AbstractDynamics(eqx.Module):
@@ -35,6 +36,7 @@ class Exact(AbstractDynamics):
     max_steps: int | None = eqx.field(static=True, default=None)
 
     def __check_init__(self):
+        check_static("Exact.dt", self.dt)
         if not (isinstance(self.dt, (int, float)) and 0 < self.dt <= 0.1):
             raise ValueError(f"Exact.dt must be a number in (0, 0.1], got {self.dt!r}.")
         if self.max_steps is not None and not (isinstance(self.max_steps, int) and self.max_steps > 0):

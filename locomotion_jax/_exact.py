@@ -49,6 +49,7 @@ import math
 from typing import NamedTuple
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -390,10 +391,14 @@ def _quintic(g0, D0, E0, g1, D1, E1):
     return g0, D0, 0.5 * E0, c3, c4, c5
 
 
+@jax.custom_jvp
 def _root(coef, g1):
     """First root in $[0, 1]$ of the event quintic ($p(0) \\ge 0 > p(1) = g_1$) by
     safeguarded Newton from the secant root. When $p(0) = 0$ (the event function of
-    a mass that has just switched) $p(\\theta)/\\theta$ is solved, so the start is skipped."""
+    a mass that has just switched) $p(\\theta)/\\theta$ is solved, so the start is skipped.
+
+    Differentiated by the implicit function theorem ([`_root_jvp`][]), not through
+    the iterations."""
     c0, c1, c2, c3, c4, c5 = coef
     defl = c0 == 0
     a = [jnp.where(defl, hi, lo) for lo, hi in zip((c0, c1, c2, c3, c4), (c1, c2, c3, c4, c5))]
@@ -415,6 +420,26 @@ def _root(coef, g1):
         # Inclusive: a converged Newton step lands on the bracket end it came from.
         th = jnp.where(ok & (nt >= lo) & (nt <= hi), nt, 0.5 * (lo + hi))
     return th
+
+
+@_root.defjvp
+def _root_jvp(primals, tangents):
+    """The event time's derivative: $p(\\theta^*; c) = 0$ gives
+    $\\dot\\theta^* = -\\sum_k \\dot c_k \\theta^{*k} / p'(\\theta^*)$ (implicit function theorem;
+    the root's tangent does not depend on the Newton iterations that found it). The
+    state committed at $\\theta^*$ then moves with it, which is the saltation of the
+    switch. A grazing crossing ($p'(\\theta^*) = 0$) has no derivative: its tangent is 0."""
+    coef, g1 = primals
+    dcoef, _ = tangents
+    th = _root(coef, g1)
+    dp = jnp.zeros_like(th)
+    slope = jnp.zeros_like(th)
+    for k in reversed(range(6)):
+        dp = dp * th + dcoef[k]
+        if k > 0:
+            slope = slope * th + k * coef[k]
+    ok = slope != 0
+    return th, jnp.where(ok, -dp / jnp.where(ok, slope, 1), 0)
 
 
 def _predict(g, d, e):

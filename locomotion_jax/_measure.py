@@ -19,6 +19,7 @@ from ._batch import default_max_steps, horizon_bound, MICRO_BATCH_CPU, prepare, 
 from ._compile import engine_jit
 from ._custom_types import ArrayLike
 from ._dynamics import AbstractDynamics, Exact, Smoothed
+from ._forward import check_static
 from ._params import Params
 from ._queue import run_queue
 from ._results import ChainMeasurement, Measurement
@@ -238,6 +239,7 @@ def _start_times(t_start: ArrayLike | None, shape: tuple[int, ...], dtype: Any) 
     """Explicit measurement starts, broadcast to the batch and flattened (`None`: the paper's)."""
     if t_start is None:
         return None
+    check_static("t_start", t_start)
     ts = np.broadcast_to(np.asarray(t_start, float), shape)
     if not np.all(np.isfinite(ts)) or np.any(ts < 0):
         raise ValueError(f"t_start must be finite and >= 0, got {t_start!r}.")
@@ -246,6 +248,7 @@ def _start_times(t_start: ArrayLike | None, shape: tuple[int, ...], dtype: Any) 
 
 def check_measure_args(z: float, horizon: float, window: float) -> None:
     for name, value in (("z", z), ("horizon", horizon), ("window", window)):
+        check_static(name, value)
         if not (np.isfinite(value) and value > 0):
             raise ValueError(f"{name} must be a finite number > 0, got {value!r}.")
 

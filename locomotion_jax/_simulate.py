@@ -13,6 +13,7 @@ from ._batch import default_max_steps, MICRO_BATCH_CPU, prepare, safe_params, un
 from ._compile import engine_jit
 from ._custom_types import Array, ArrayLike, Contact
 from ._dynamics import AbstractDynamics, Exact, Smoothed
+from ._forward import check_static
 from ._params import Params
 from ._results import ChainTrajectory, Trajectory
 from ._saves import BUFFER, run_saves
@@ -180,6 +181,8 @@ def simulate(
     dynamics = Exact() if dynamics is None else dynamics
     model.check_contact(contact)
     model.initial_gap(Params(), start)  # validates `start`
+    check_static("t_end", t_end)
+    check_static("save_at", save_at)
     if not np.isfinite(t_end) or t_end <= 0:
         raise ValueError(f"t_end must be a finite number > 0, got {t_end!r}.")
     if save_at is None:
