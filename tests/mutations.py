@@ -280,6 +280,14 @@ MUTATIONS = [
         (("fire = st.pend | (gA < 0)", "fire = st.pend"),),
         (CHAIN_REF,),
     ),
+    # -- derivatives -------------------------------------------------------------------------------------
+    Mutation(
+        "event_time_fixed",
+        "derivatives: an event's time does not move with the parameters (no implicit-function tangent)",
+        EXACT,
+        (("return th, jnp.where(ok, -dp / jnp.where(ok, slope, 1), 0)", "return th, jnp.zeros_like(th)"),),
+        ("tests/test_gradients.py",),
+    ),
 ]
 
 

@@ -12,6 +12,7 @@ reference's own curve, up to 6x off); with 1e-5 every case below agrees to 8e-4.
 import sys
 from pathlib import Path
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import locomotion_jax as lj
@@ -199,3 +200,28 @@ def test_measurement_derivatives_match_reference(config, names):
         rp, rm = (reference_measure({**full, name: full[name] + s}, z=1.0, horizon=100.0) for s in (h, -h))
         fd = np.array([(rp[k] - rm[k]) / (2 * h) for k in MEASURED])
         np.testing.assert_allclose(jac[:, j], fd, rtol=RTOL, err_msg=f"{config} d/d{name}")
+
+
+def test_chain_derivatives_match_reference():
+    # N = 3, anisotropic friction, a travelling wave: d(positions, e_d)/d(omega, mu_k_fwd)
+    # at the saved times, against tests/reference_chain.py.
+    from chain_cases import ANISO
+    from reference_chain import chain_config, reference_chain_simulate
+    from test_chain_reference import to_chain
+
+    kw = dict(masses=[1.0] * 3, omega=3.0, a=0.08, phi=2 * np.pi / 3, **ANISO)
+    chain = to_chain(chain_config(**kw))
+
+    def run(dw, dmu):
+        c = eqx.tree_at(lambda c: c.waves.omega, chain, chain.waves.omega + dw)
+        c = eqx.tree_at(lambda c: c.friction.mu_k_fwd, c, c.friction.mu_k_fwd + dmu)
+        traj = lj.simulate(c, t_end=T_END, save_at=SAVE, start="relaxed")
+        return jnp.concatenate([traj.x.reshape(-1), traj.e_d])
+
+    jac = np.asarray(jax.jacfwd(run, argnums=(0, 1))(0.0, 0.0))
+    for j, name in enumerate(("omega", "mu_k_fwd")):
+        h = H_REL * max(1.0, kw[name])
+        runs = [reference_chain_simulate(chain_config(**{**kw, name: kw[name] + s}), T_END, SAVE, start="relaxed")
+                for s in (h, -h)]  # fmt: skip
+        fd = np.concatenate([(runs[0]["x"] - runs[1]["x"]).reshape(-1), runs[0]["e_d"] - runs[1]["e_d"]]) / (2 * h)
+        _assert_close(jac[j], fd, f"chain d/d{name}")
