@@ -52,6 +52,9 @@ _LAZY = {
     "best_sinusoid": "_pareto",
     "pareto_front": "_pareto",
     "sinusoid_sweep": "_pareto",
+    # scipy's least squares, for parameter identification
+    "fit_trajectory": "_fit",
+    "FitResult": "_fit",
 }
 """Public names imported on first use, so that `import locomotion_jax` stays quick."""
 

@@ -11,6 +11,7 @@ reference's own curve, up to 6x off); with 1e-5 every case below agrees to 8e-4.
 
 import sys
 from pathlib import Path
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -209,7 +210,7 @@ def test_chain_derivatives_match_reference():
     from reference_chain import chain_config, reference_chain_simulate
     from test_chain_reference import to_chain
 
-    kw = dict(masses=[1.0] * 3, omega=3.0, a=0.08, phi=2 * np.pi / 3, **ANISO)
+    kw: dict[str, Any] = dict(masses=[1.0] * 3, omega=3.0, a=0.08, phi=2 * np.pi / 3, **ANISO)
     chain = to_chain(chain_config(**kw))
 
     def run(dw, dmu):

@@ -1,0 +1,74 @@
+"""Parameter identification on synthetic measurements from the independent reference."""
+
+import sys
+from pathlib import Path
+
+import jax
+import locomotion_jax as lj
+import numpy as np
+import pytest
+
+
+sys.path.insert(0, str(Path(__file__).parent))
+from reference import DEFAULTS, reference_simulate  # noqa: E402
+
+
+TRUE = dict(omega=2.0, mu_s=0.7, mu_k=0.5, c=0.01, k=50.0)
+NAMES = ("mu_s", "mu_k", "c", "k")
+SIGMA = 1e-4
+
+
+@pytest.fixture(scope="module")
+def data():
+    # Positions of both masses at 200 times, with Gaussian noise: what a camera would give.
+    t = np.linspace(0.1, 20.0, 200)
+    ref = reference_simulate({**DEFAULTS, **TRUE}, 20.0, t)
+    rng = np.random.default_rng(7)
+    x = np.stack([ref["x1"], ref["x2"]], -1) + SIGMA * rng.standard_normal((t.size, 2))
+    return t, x
+
+
+def test_fit_recovers_parameters_within_their_errors(data):
+    assert jax.numpy.asarray(1.0).dtype == np.float64  # tests/conftest.py
+    t, x = data
+    guess = lj.Params(omega=2.0, mu_s=0.65, mu_k=0.45, c=0.02, k=45.0)
+    fit = lj.fit_trajectory(t, x, guess, NAMES)
+    assert fit.success and fit.status == lj.Status.OK, fit.message
+    truth = np.array([TRUE[n] for n in NAMES])
+    # Within 4 standard errors, and the errors are informative: friction and stiffness to
+    # about 1e-3 relative; the small damping (c = 0.01) much less well determined (~30 %).
+    assert np.all(np.abs(fit.values - truth) < 4 * fit.stderr), (fit.values, fit.stderr)
+    assert np.all(fit.stderr / truth < np.array([2e-3, 2e-3, 0.5, 2e-3])), fit.stderr / truth
+    # The noise level estimated from the residuals is the one put in.
+    assert abs(fit.sigma / SIGMA - 1) < 0.15, fit.sigma
+    # Known noise: the same errors (the residuals are those of the noise).
+    known = lj.fit_trajectory(t, x, fit.params, NAMES, sigma=SIGMA)
+    np.testing.assert_allclose(known.values, fit.values, rtol=1e-6)
+    np.testing.assert_allclose(known.stderr, fit.stderr, rtol=0.2)
+    assert "| mu_s |" in fit.summary()
+
+
+def test_missing_samples_are_ignored(data):
+    t, x = data
+    x = x.copy()
+    x[::3, 0] = np.nan
+    fit = lj.fit_trajectory(t, x, lj.Params(omega=2.0, mu_k=0.45), ("mu_k",))
+    assert fit.success and abs(fit.values[0] - 0.5) < 4 * fit.stderr[0]
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(names=("mu_x",)), "names must be distinct parameter names"),
+        (dict(names=()), "names must be distinct parameter names"),
+        (dict(t=np.array([1.0, 0.5])), "t must be a non-empty 1-D array of increasing"),
+        (dict(x=np.zeros((2, 3))), r"x must have shape \(len\(t\), 2\)"),
+        (dict(sigma=0.0), "sigma must be > 0"),
+        (dict(params=lj.Params(omega=np.array([1.0, 2.0]))), "params must be one configuration"),
+    ],
+)
+def test_bad_input_is_refused(kwargs, match):
+    args = dict(t=np.array([0.5, 1.0]), x=np.zeros((2, 2)), params=lj.Params(), names=("mu_k",))
+    args.update(kwargs)
+    with pytest.raises(ValueError, match=match):
+        lj.fit_trajectory(args.pop("t"), args.pop("x"), args.pop("params"), **args)
