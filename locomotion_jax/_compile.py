@@ -31,7 +31,7 @@ other than the CPU do not read `xla_cpu_*` options."""
 def engine_jit(fn: Callable, static_argnames: Sequence[str]) -> Callable:
     """`jax.jit(fn)` with [`COMPILER_OPTIONS`][] and the given static arguments (module
     docstring: under a transformation, a plain `jit` with forward-mode-only outputs).
-    The returned function has the jitted one's `lower` and `eval_shape`."""
+    The returned function has the jitted one's `lower`, `eval_shape` and `_cache_size`."""
     static = tuple(static_argnames)
     top = jax.jit(fn, static_argnames=static, compiler_options=COMPILER_OPTIONS)
     nested = jax.jit(fn, static_argnames=static)
@@ -44,4 +44,5 @@ def engine_jit(fn: Callable, static_argnames: Sequence[str]) -> Callable:
 
     call.lower = top.lower  # pyright: ignore[reportAttributeAccessIssue]
     call.eval_shape = top.eval_shape  # pyright: ignore[reportAttributeAccessIssue]
+    call._cache_size = top._cache_size  # pyright: ignore[reportAttributeAccessIssue]
     return call
