@@ -272,40 +272,6 @@ assert isinstance(result, lj.Trajectory), "explore() failed: see the traceback i
 print("explore ready:", lj.Status(int(result.status)).name)
 
 # %% [markdown]
-# ## Sensitivities, and fitting the model to a measurement
-#
-# The exact engine differentiates in forward mode through its located stick/slip events
-# (`jax.jvp`, `jax.jacfwd`; README, "Gradients"). How does the distance travelled in 20 time
-# units depend on the frequency and the amplitude?
-
-# %%
-import jax.numpy as jnp
-
-
-def distance(theta):
-    traj = lj.simulate(lj.Params(omega=theta[0], a=theta[1]), t_end=20.0, save_at=np.array([20.0]))
-    return traj.X[-1] - traj.X[0]
-
-
-theta = jnp.array([2.0, 0.05])
-print("X(20) - X(0) =", float(distance(theta)))
-print("d/d(omega), d/d(a) =", np.asarray(jax.jacfwd(distance)(theta)))
-
-# %% [markdown]
-# The same derivatives fit the model to a measured trajectory: here a synthetic one (the model
-# at $\mu_k = 0.5$, $k = 50$, positions of both masses every 0.1 time units, noise $10^{-4}$),
-# fitted from a start 10 % off. `fit_trajectory` returns the estimates with standard errors.
-
-# %%
-t_meas = np.linspace(0.1, 20.0, 200)
-truth = lj.simulate(lj.Params(omega=2.0), t_end=20.0, save_at=t_meas)
-noise = 1e-4 * np.random.default_rng(0).standard_normal((t_meas.size, 2))
-x_meas = np.stack([np.asarray(truth.x1), np.asarray(truth.x2)], -1) + noise
-fit = lj.fit_trajectory(t_meas, x_meas, lj.Params(omega=2.0, mu_k=0.45, k=45.0), names=("mu_k", "k"))
-display(HTML(f"<pre>{fit.summary()}</pre>"))
-assert fit.success and np.all(np.abs(fit.values - np.array([0.5, 50.0])) < 5 * fit.stderr)
-
-# %% [markdown]
 # **Next:** `02_parameter_maps` maps the SSL and SL regions and the travel time over
 # $(\omega, a)$ with the sweep engine; `03_optimal_actuation` asks which waveform $\ell_0(t)$ moves
 # the robot at a required speed for the least energy.

@@ -9,6 +9,7 @@ differences are the truth here. Step study (README, "Gradients"): with relative 
 reference's own curve, up to 6x off); with 1e-5 every case below agrees to 8e-4.
 """
 
+import functools
 import sys
 from pathlib import Path
 from typing import Any
@@ -60,9 +61,10 @@ def _fields(traj) -> jax.Array:
     return jnp.stack([getattr(traj, k) for k in FIELDS], -2)  # (..., fields, times)
 
 
-@pytest.fixture(scope="module")
-def jacobian() -> np.ndarray:
-    """d(fields at SAVE)/d(NAMES) for every configuration: one `jacfwd` of one batch."""
+@functools.cache
+def _jacobian() -> np.ndarray:
+    """d(fields at SAVE)/d(NAMES) for every configuration: one `jacfwd` of one batch, once
+    per process (a module fixture would be rebuilt whenever xdist interleaves modules)."""
     base = _batch(FULL)
 
     def run(delta):
@@ -96,7 +98,8 @@ def _assert_close(got: np.ndarray, fd: np.ndarray, what: str) -> None:
 
 
 @pytest.mark.parametrize("index", range(len(CONFIGS)), ids=[str(c) for c in CONFIGS])
-def test_state_derivatives_match_reference(jacobian, index):
+def test_state_derivatives_match_reference(index):
+    jacobian = _jacobian()
     config = FULL[index]
     for j, name in enumerate(NAMES):
         _assert_close(jacobian[index, :, :, j], _reference_fd(config, name), f"{CONFIGS[index]} d/d{name}")
@@ -177,6 +180,7 @@ def test_options_cannot_be_differentiated(option):
 
 
 MEASURED = ("tau_z", "e_z", "mean_speed")
+T_START = 30.0  # the measurement's start (past the first transient; the paper's is ~100)
 
 
 @pytest.mark.parametrize(
@@ -192,13 +196,14 @@ def test_measurement_derivatives_match_reference(config, names):
 
     def run(delta):
         p = lj.Params(**{n: full[n] + (delta[names.index(n)] if n in names else 0.0) for n in full})
-        m = lj.measure(p, z=1.0, horizon=100.0)
+        m = lj.measure(p, z=1.0, horizon=100.0, t_start=T_START)
         return jnp.stack([getattr(m, k) for k in MEASURED])
 
     jac = np.asarray(jax.jacfwd(run)(jnp.zeros(len(names))))
     for j, name in enumerate(names):
         h = H_REL * max(1.0, abs(full[name]))
-        rp, rm = (reference_measure({**full, name: full[name] + s}, z=1.0, horizon=100.0) for s in (h, -h))
+        rp, rm = (reference_measure({**full, name: full[name] + s}, z=1.0, horizon=100.0, t_start=T_START)
+                  for s in (h, -h))  # fmt: skip
         fd = np.array([(rp[k] - rm[k]) / (2 * h) for k in MEASURED])
         np.testing.assert_allclose(jac[:, j], fd, rtol=RTOL, err_msg=f"{config} d/d{name}")
 
