@@ -189,9 +189,9 @@ T_START = 30.0  # the measurement's start (past the first transient; the paper's
     ids=["SSL", "SL"],
 )
 def test_measurement_derivatives_match_reference(config, names):
-    # Where tau_z is smooth. At omega = 2 its omega-derivative is not: z is reached on a
-    # nearly stuck plateau, and the reference's central differences with steps 1e-4 and
-    # 1e-5 differ by 0.5 % (README, "Gradients").
+    # Where tau_z is smooth. Measured from the paper's t_start instead, at omega = 2 its
+    # omega-derivative is not: z is reached on a nearly stuck plateau, and the reference's
+    # central differences with steps 1e-4 and 1e-5 differ by 0.5 % (README, "Gradients").
     full = {**DEFAULTS, **config}
 
     def run(delta):
