@@ -10,6 +10,7 @@ from importlib.metadata import PackageNotFoundError, version as _version
 from ._actuation import AbstractWaveform as AbstractWaveform, Fourier as Fourier, Sinusoid as Sinusoid
 from ._cache import enable_compilation_cache as enable_compilation_cache
 from ._dynamics import AbstractDynamics as AbstractDynamics, Exact as Exact, Smoothed as Smoothed
+from ._gait import Gait as Gait, GaitStatus as GaitStatus, steady_gait as steady_gait
 from ._measure import measure as measure
 from ._optimum import OptimiseSettings as OptimiseSettings, Optimum as Optimum
 from ._params import DEFAULTS as DEFAULTS, PARAM_NAMES as PARAM_NAMES, Params as Params, VALID_RANGES as VALID_RANGES

@@ -189,11 +189,15 @@ class _Model:
         l0 = self.rest_length_array(t)
         return 0.5 * self.m1 * v1**2 + 0.5 * self.m2 * v2**2 + 0.5 * self.k * (ell - l0) ** 2
 
-    def initial_state(self, start: str) -> np.ndarray:
-        """Initial condition: eq. (14) (``start='paper'``) or the relaxed spring (SPEC section 1).
+    def initial_state(self, start) -> np.ndarray:
+        """Initial condition: eq. (14) (``start='paper'``), the relaxed spring (SPEC section 1),
+        or a given ``(x1, v1, x2, v2)``.
 
         State layout: ``(x1, v1, x2, v2, e_d, w)``.
         """
+        if not isinstance(start, str):
+            x1, v1, x2, v2 = (float(v) for v in start)
+            return np.array([x1, v1, x2, v2, 0.0, 0.0])
         if start == "paper":
             x2 = self.lbar
         elif start == "relaxed":
@@ -227,7 +231,7 @@ class _HybridSolver:
     stuck flags and slip directions, and the list of integrated segments.
     """
 
-    def __init__(self, model: _Model, start: str, rtol: float, atol: float):
+    def __init__(self, model: _Model, start: str | tuple[float, float, float, float], rtol: float, atol: float):
         self.m = model
         self.rtol, self.atol = rtol, atol
         self.t = 0.0
@@ -254,10 +258,15 @@ class _HybridSolver:
             self.liftoff, self.t_liftoff = True, 0.0
             if model.strict:
                 self.stopped = True
-        # Initial modes: both masses at rest; eq. (7) decides stick or slip for each.
+        # Initial modes: a moving mass slips along its velocity; for one at rest eq. (7)
+        # decides stick or slip.
         for i, (F, N) in enumerate(((fx, N1), (-fx, N2))):
             n = model.normal(N)
-            if abs(F) <= model.mu_s * n:
+            v = self.y[2 * i + 1]
+            if v != 0.0:
+                self.stuck[i] = False
+                self.slip_dir[i] = _sign(v)
+            elif abs(F) <= model.mu_s * n:
                 self.stuck[i] = True
             else:
                 self.stuck[i] = False
@@ -646,7 +655,15 @@ def reference_natural_frequencies(params: dict) -> tuple[float, float, float]:
 
 
 def reference_simulate(
-    params: dict, t_end: float, save_at=None, *, contact="strict", start="paper", wave=None, rtol=1e-11, atol=1e-12
+    params: dict,
+    t_end: float,
+    save_at=None,
+    *,
+    contact="strict",
+    start: str | tuple[float, float, float, float] = "paper",
+    wave=None,
+    rtol=1e-11,
+    atol=1e-12,
 ) -> dict:
     """Simulate the exact hybrid model on ``[0, t_end]`` and sample it at ``save_at``.
 
@@ -656,7 +673,7 @@ def reference_simulate(
         save_at: 1-D times in ``[0, t_end]`` (default ``np.linspace(0, t_end, 1001)``).
         contact: ``'strict'`` (``n_i = N_i``, stop at the first lift-off) or ``'paper'``
             (``n_i = |N_i|``, continue but flag lift-off).
-        start: ``'paper'`` (eq. 14) or ``'relaxed'``.
+        start: ``'paper'`` (eq. 14), ``'relaxed'``, or a state ``(x1, v1, x2, v2)`` at ``t = 0``.
         wave: ``(cos, sin)``, the Fourier coefficients of harmonics ``1..H`` of ``omega``:
             ``l0 = lbar + sum_h cos_h cos(h omega t) + sin_h sin(h omega t)`` replaces eq. (13).
 

@@ -1,0 +1,384 @@
+"""Steady gaits as periodic orbits of the period map (Newton shooting on the exact model).
+
+The forcing is $T$-periodic ($T = 2\\pi/\\omega$) and the dynamics (eqs. 2-9) depend on the
+positions only through the gap $u = x_2 - x_1$, so a steady gait is a fixed point of
+the $k$-period map $\\Phi_k: (u, v_1, v_2) \\mapsto (u, v_1, v_2)$ taken at the phase
+$\\omega t \\equiv 0$, while the centre of mass (eq. 4) drifts by $\\Delta X$ per gait
+period $kT$. Each configuration is integrated for a short transient, then Newton's
+method solves $\\Phi_k(y) = y$ with the monodromy matrix $M = \\partial\\Phi_k/\\partial y$
+from forward-mode differentiation through the exact engine: located events enter with
+their implicit-function times, so $M$ includes the saltation of every switch. The
+eigenvalues of $M$ are the Floquet multipliers.
+
+A mass stuck at the section has $v_i = 0$ held by friction: its velocity is not a free
+unknown (its column of $M$ is zero, and so is its row when it is stuck again one
+period later), which makes the multiplier 0 that sticking contributes.
+"""
+
+from collections.abc import Sequence
+from typing import Any, NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import _exact as exact, _model as model
+from ._actuation import AbstractWaveform
+from ._batch import default_max_steps, prepare, safe_params, unflatten
+from ._compile import engine_jit
+from ._custom_types import Array
+from ._dynamics import AbstractDynamics, Exact
+from ._measure import STICK_TOL
+from ._params import Params
+from ._status import Regime, Status
+
+
+class GaitStatus:
+    """Outcome of the periodic-orbit solve of one configuration (beside `Status`).
+
+    - `CONVERGED`: $\\|\\Phi_k(y) - y\\|_\\infty \\le$ `tol` $(1 + \\|y\\|_\\infty)$ for the reported `k`.
+    - `NOT_CONVERGED`: no period in `periods` converged within `max_iter` Newton
+      iterations (a chaotic or quasi-periodic motion, a longer period, a switching
+      structure that changes under every step, or a singular $M - I$); its numbers are NaN.
+    - `LIFTOFF`: a normal force reached zero under the strict reading (transient or orbit).
+    - `INVALID`: parameters outside their valid range; nothing was integrated.
+    """
+
+    CONVERGED = 0
+    NOT_CONVERGED = 1
+    LIFTOFF = 2
+    INVALID = 3
+
+
+class Gait(eqx.Module):
+    """Steady gaits, per configuration (batch shape of the parameters).
+
+    - `status`: [`GaitStatus`][] code; `converged`: `status == CONVERGED`.
+    - `k`: the gait's period in actuation periods (0 when none converged); `period`: $kT$.
+    - `mean_speed`: $\\Delta X / (kT)$ over one gait period (eq. 4), exact for the orbit.
+    - `e_d`, `work`: dissipated energy (eq. 15) and actuator work (eq. 16) per gait
+      period (equal on the orbit: the energy (eq. 10) is periodic).
+    - `cost_of_transport`: $e_d / |\\Delta X|$, energy per unit distance (as `Measurement`'s $e_z/z$;
+      `inf` for a gait that does not move).
+    - `stick_fraction1`, `stick_fraction2`: fraction of the period each mass is stuck;
+      `regime`: [`Regime`][] SSL if either is stuck longer than `STICK_TOL`, else SL.
+    - `n_switch`: switches per gait period.
+    - `u, v1, v2`: the orbit's state at the section $\\omega t \\equiv 0$.
+    - `monodromy`: $M$, shape `batch + (3, 3)`, order $(u, v_1, v_2)$;
+      `multipliers`: its eigenvalues (complex, by decreasing modulus);
+      `stable`: all moduli below 1.
+    - `residual`: $\\|\\Phi_k(y) - y\\|_\\infty$ at the last iterate; `n_iter`: Newton iterations.
+    - `liftoff`: a normal force reached zero on the orbit or the transient (paper
+      reading: flagged, the orbit is still computed).
+    """
+
+    status: Array
+    converged: Array
+    k: Array
+    period: Array
+    mean_speed: Array
+    e_d: Array
+    work: Array
+    cost_of_transport: Array
+    stick_fraction1: Array
+    stick_fraction2: Array
+    regime: Array
+    n_switch: Array
+    u: Array
+    v1: Array
+    v2: Array
+    monodromy: Array
+    multipliers: Array
+    stable: Array
+    residual: Array
+    n_iter: Array
+    liftoff: Array
+    contact: str = eqx.field(static=True)
+
+
+class _Period(NamedTuple):
+    """One application of the period map: the end state and what the period accumulated."""
+
+    y: Array  # (u, v1, v2) at the end
+    dX: Array
+    ed: Array
+    w: Array
+    stuck1: Array
+    stuck2: Array
+    n_switch: Array
+    status: Array
+    lifted: Array
+
+
+def _section_state(params, wave, contact, y):
+    """The hybrid state at phase 0 for $y = (u, v_1, v_2)$: a mass at rest sticks if eq. (7)
+    allows (its velocity then carries no tangent), a moving one slips along $v_i$."""
+    dtype = params.dtype
+    st = exact.init(params, wave, contact, jnp.zeros((), dtype), y[0])
+    v1, v2 = y[1], y[2]
+    stuck1 = st.stuck1 & (v1 == 0)
+    stuck2 = st.stuck2 & (v2 == 0)
+    sgn = lambda v, s: jnp.where(v > 0, 1.0, jnp.where(v < 0, -1.0, s)).astype(dtype)
+    ys = st.y._replace(v1=jnp.where(stuck1, 0, v1), v2=jnp.where(stuck2, 0, v2))
+    return eqx.tree_at(
+        lambda s: (s.y, s.stuck1, s.stuck2, s.s1, s.s2), st, (ys, stuck1, stuck2, sgn(v1, st.s1), sgn(v2, st.s2))
+    )
+
+
+def _advance(params, wave, P, contact, dt, st, t_end, max_steps):
+    """Integrate to `t_end` (or a strict lift-off, or the step cap); also the time each mass was stuck."""
+    zero = jnp.zeros((), params.dtype)
+
+    def cond(c):
+        s, _, _, n = c
+        return (s.t < t_end) & (s.status == Status.OK) & (n < max_steps)
+
+    def body(c):
+        s, a1, a2, n = c
+        new, info = exact.step(params, wave, contact, dt, s, t_end, None, P)
+        span = jnp.where(info.commit, info.t1 - info.t0, 0)
+        return new, a1 + jnp.where(info.stuck1, span, 0), a2 + jnp.where(info.stuck2, span, 0), n + 1
+
+    st, a1, a2, _ = jax.lax.while_loop(cond, body, (st, zero, zero, jnp.zeros((), jnp.int32)))
+    return st, a1, a2
+
+
+def _period_map(params, wave, P, contact, dt, max_steps, k, y) -> _Period:
+    t_end = k * (2 * jnp.pi) / wave.omega
+    st0 = _section_state(params, wave, contact, y)
+    st, a1, a2 = _advance(params, wave, P, contact, dt, st0, t_end, max_steps)
+    com = lambda s: P.mhat * s.y.x1 + (1 - P.mhat) * s.y.x2
+    ok = (st.status == Status.OK) & (st.t >= t_end)
+    return _Period(
+        y=jnp.stack([st.y.x2 - st.y.x1, st.y.v1, st.y.v2]),
+        dX=com(st) - com(st0),
+        ed=st.y.ed,
+        w=st.y.w,
+        stuck1=a1,
+        stuck2=a2,
+        n_switch=st.n_switch,
+        status=jnp.where(ok, Status.OK, jnp.where(st.status == Status.OK, Status.MAX_STEPS, st.status)),
+        lifted=jnp.isfinite(st.t_liftoff),
+    )
+
+
+def _solve_one(params, wave, contact, start, dt, transient, k, tol, max_iter, max_steps_period, max_steps_transient):
+    """Transient, then Newton on $\\Phi_k(y) = y$; one configuration (vmapped by the caller)."""
+    params, valid = safe_params(params)
+    P = exact.consts(params, wave)
+    dtype = params.dtype
+    T = (2 * jnp.pi) / wave.omega
+
+    st = exact.init(params, wave, contact, jnp.zeros((), dtype), model.initial_gap(params, start))
+    st, _, _ = _advance(params, wave, P, contact, dt, st, transient * T, max_steps_transient)
+    trans_ok = st.status == Status.OK
+    trans_lift = jnp.isfinite(st.t_liftoff)
+    y0 = jnp.stack([st.y.x2 - st.y.x1, st.y.v1, st.y.v2])
+
+    def phi(y):
+        out = _period_map(params, wave, P, contact, dt, max_steps_period, k, y)
+        return out.y, out
+
+    def evaluate(y):
+        M, out = jax.jacfwd(phi, has_aux=True)(y)
+        return M, out
+
+    M0, out0 = evaluate(y0)
+    eye = jnp.eye(3, dtype=dtype)
+
+    def small(y, out):
+        return jnp.max(jnp.abs(out.y - y)) <= tol * (1 + jnp.max(jnp.abs(y)))
+
+    def cond(c):
+        y, M, out, it, done, failed = c
+        return ~done & ~failed & (it < max_iter)
+
+    def body(c):
+        y, M, out, it, done, failed = c
+        r = out.y - y
+        dy = jnp.linalg.solve(M - eye, -r)
+        y1 = y + dy
+        M1, out1 = evaluate(y1)
+        bad = (out1.status != Status.OK) | ~jnp.all(jnp.isfinite(y1)) | ~jnp.all(jnp.isfinite(M1))
+        return y1, M1, out1, it + 1, small(y1, out1) & ~bad, bad
+
+    go = valid & trans_ok & (out0.status == Status.OK)
+    init = (y0, M0, out0, jnp.zeros((), jnp.int32), go & small(y0, out0), ~go)
+    y, M, out, it, done, failed = jax.lax.while_loop(cond, body, init)
+    lifted = trans_lift | out.lifted
+    status = jnp.where(
+        ~valid,
+        GaitStatus.INVALID,
+        jnp.where(
+            ~trans_ok | (out.status == Status.LIFTOFF),
+            GaitStatus.LIFTOFF,
+            jnp.where(done, GaitStatus.CONVERGED, GaitStatus.NOT_CONVERGED),
+        ),
+    )
+    return dict(status=status.astype(jnp.int32), y=y, M=M, out=out, it=it, lifted=lifted & valid,
+                residual=jnp.max(jnp.abs(out.y - y)))  # fmt: skip
+
+
+def _solve_batch(params, wave, wave_axes, contact, start, dt, transient, k, tol, max_iter, msp, mst):
+    one = lambda p, w: _solve_one(p, w, contact, start, dt, transient, k, tol, max_iter, msp, mst)
+    return jax.vmap(one, in_axes=(0, wave_axes))(params, wave)
+
+
+_solve_batch = engine_jit(_solve_batch, ("wave_axes", "contact", "start", "dt"))
+
+
+def _check(periods, transient, tol, max_iter) -> tuple[int, ...]:
+    ks = (periods,) if isinstance(periods, int) else tuple(periods)
+    if not ks or any(not isinstance(k, int) or isinstance(k, bool) or k < 1 for k in ks):
+        raise ValueError(f"periods must be a positive int or a non-empty sequence of them, got {periods!r}.")
+    if not (isinstance(transient, int) and not isinstance(transient, bool) and transient >= 0):
+        raise ValueError(f"transient must be an int >= 0 (actuation periods), got {transient!r}.")
+    if not (isinstance(max_iter, int) and max_iter >= 1):
+        raise ValueError(f"max_iter must be an int >= 1, got {max_iter!r}.")
+    if not (np.isfinite(tol) and tol > 0):
+        raise ValueError(f"tol must be a finite number > 0, got {tol!r}.")
+    return ks
+
+
+def steady_gait(
+    params: Params,
+    *,
+    periods: int | Sequence[int] = (1, 2, 3, 4),
+    transient: int = 30,
+    tol: float | None = None,
+    max_iter: int = 12,
+    dynamics: AbstractDynamics | None = None,
+    waveform: AbstractWaveform | None = None,
+    contact: str = "strict",
+    start: str = "paper",
+    dtype: Any = None,
+) -> Gait:
+    """Solve the steady gait of each configuration as a periodic orbit (module docstring).
+
+    After `transient` actuation periods from the start `start`, Newton's method on the
+    period map $\\Phi_k$ is tried for each `k` in `periods` in turn, for the configurations
+    that no smaller `k` solved with a stable orbit: a period-2 gait is reported with
+    `k = 2`, while `periods=1` returns the (unstable) period-1 orbit it doubled from.
+
+    **Arguments:**
+
+    - `params`: [`Params`][] (any batch shape).
+    - `periods`: gait periods to try, in actuation periods.
+    - `transient`: actuation periods integrated before the Newton iteration.
+    - `tol`: Newton tolerance on $\\|\\Phi_k(y) - y\\|_\\infty / (1 + \\|y\\|_\\infty)$ (default 1e-11
+      in float64, 1e-5 in float32).
+    - `max_iter`: Newton iterations per `k`.
+    - `dynamics`: [`Exact`][] (its `dt`); `waveform`, `contact`, `start`, `dtype`: as in [`simulate`][].
+
+    **Returns:** a [`Gait`][] with batch shape `params.batch_shape`. Configurations without
+    a converged orbit carry NaN numbers and their `status`; the others are unaffected.
+
+    !!! Example
+
+        ```python
+        g = steady_gait(Params(omega=jnp.array([1.0, 2.0, 8.0])))
+        g.mean_speed, g.cost_of_transport, g.multipliers
+        ```
+    """
+    dynamics = Exact() if dynamics is None else dynamics
+    if not isinstance(dynamics, Exact):
+        raise TypeError(f"steady_gait needs Exact dynamics, got {type(dynamics).__name__}.")
+    model.check_contact(contact)
+    model.initial_gap(Params(), start)
+    flat, wave, axes, shape = prepare(params, waveform, dtype)
+    f32 = jnp.finfo(flat.dtype).bits < 64
+    tol = (1e-5 if f32 else 1e-11) if tol is None else float(tol)
+    ks = _check(periods, transient, tol, max_iter)
+    omega = np.asarray(wave.omega, np.float64)
+    T_max = float(np.max(2 * np.pi / omega[np.isfinite(omega) & (omega > 0)], initial=1.0))
+    mst = jnp.asarray(dynamics.max_steps or default_max_steps(transient * T_max, dynamics.dt), jnp.int32)
+
+    best = None
+    for k in ks:
+        msp = jnp.asarray(dynamics.max_steps or default_max_steps(k * T_max, dynamics.dt), jnp.int32)
+        tr, kk, tl = (jnp.asarray(v, flat.dtype) for v in (transient, k, tol))
+        n_iter = jnp.asarray(max_iter, jnp.int32)
+        r = _solve_batch(flat, wave, axes, contact, start, dynamics.dt, tr, kk, tl, n_iter, msp, mst)
+        r = jax.tree_util.tree_map(np.asarray, r)
+        r["k"] = np.where(r["status"] == GaitStatus.CONVERGED, k, 0)
+        r["stable"] = _stable(r)
+        if best is None:
+            best = r
+        else:
+            # An unstable orbit gives way to a stable one of a longer period (the attractor
+            # past a period doubling); a failed solve to any converged one.
+            converged = r["status"] == GaitStatus.CONVERGED
+            failed = best["status"] == GaitStatus.NOT_CONVERGED
+            unstable = (best["status"] == GaitStatus.CONVERGED) & ~best["stable"]
+            take = (failed & converged) | (unstable & converged & r["stable"])
+            best = jax.tree_util.tree_map(lambda a, b: np.where(_expand(take, a), b, a), best, r)
+        if not np.any(_open(best)):
+            break
+    assert best is not None
+    return unflatten(_gait(best, omega, flat, contact), shape)
+
+
+def _stable(r: dict) -> np.ndarray:
+    """All Floquet multipliers inside the unit circle (converged solves only)."""
+    ok = r["status"] == GaitStatus.CONVERGED
+    out = np.zeros(ok.shape, bool)
+    if np.any(ok):
+        out[ok] = np.max(np.abs(np.linalg.eigvals(r["M"][ok])), axis=-1) < 1
+    return out
+
+
+def _open(r: dict) -> np.ndarray:
+    """Configurations a longer period may still improve: not converged, or unstable."""
+    return (r["status"] == GaitStatus.NOT_CONVERGED) | ((r["status"] == GaitStatus.CONVERGED) & ~r["stable"])
+
+
+def _ratio(e: Any, dist: Any, ok: np.ndarray) -> np.ndarray:
+    """Energy per unit distance; `inf` for a converged gait that does not move."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(ok & (dist == 0), np.inf, e / np.where(dist == 0, 1, dist))
+
+
+def _expand(flag: np.ndarray, like: np.ndarray) -> np.ndarray:
+    return flag.reshape(flag.shape + (1,) * (np.ndim(like) - flag.ndim))
+
+
+def _gait(r: dict, omega: np.ndarray, flat: Params, contact: str) -> Gait:
+    ok = r["status"] == GaitStatus.CONVERGED
+    dtype = flat.dtype
+    nan = lambda x: jnp.asarray(np.where(_expand(ok, x), x, np.nan), dtype)
+    out: _Period = r["out"]
+    k = r["k"]
+    period = np.where(ok, k * 2 * np.pi / omega, np.nan)
+    dX = out.dX
+    M = np.where(ok[:, None, None], r["M"], np.nan)
+    mult = np.full(M.shape[:-1], np.nan + 0j)
+    if np.any(ok):
+        ev = np.linalg.eigvals(M[ok])
+        mult[ok] = np.take_along_axis(ev, np.argsort(-np.abs(ev), axis=-1), -1)
+    stuck = np.stack([out.stuck1, out.stuck2]) / np.where(ok, period, 1)
+    ssl = np.max(np.stack([out.stuck1, out.stuck2]), axis=0) > STICK_TOL
+    return Gait(
+        status=jnp.asarray(r["status"]),
+        converged=jnp.asarray(ok),
+        k=jnp.asarray(k, jnp.int32),
+        period=jnp.asarray(period, dtype),
+        mean_speed=nan(dX / np.where(ok, period, 1)),
+        e_d=nan(out.ed),
+        work=nan(out.w),
+        cost_of_transport=nan(_ratio(out.ed, np.abs(dX), ok)),
+        stick_fraction1=nan(stuck[0]),
+        stick_fraction2=nan(stuck[1]),
+        regime=jnp.asarray(np.where(ok, np.where(ssl, Regime.SSL, Regime.SL), Regime.UNDETERMINED), jnp.int32),
+        n_switch=jnp.asarray(np.where(ok, out.n_switch, 0), jnp.int32),
+        u=nan(r["y"][:, 0]),
+        v1=nan(r["y"][:, 1]),
+        v2=nan(r["y"][:, 2]),
+        monodromy=jnp.asarray(M, dtype),
+        multipliers=jnp.asarray(mult),
+        stable=jnp.asarray(r["stable"]),
+        residual=jnp.asarray(r["residual"], dtype),
+        n_iter=jnp.asarray(r["it"]),
+        liftoff=jnp.asarray(r["lifted"]),
+        contact=contact,
+    )
