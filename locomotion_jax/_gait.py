@@ -40,7 +40,8 @@ class GaitStatus:
     - `CONVERGED`: $\\|\\Phi_k(y) - y\\|_\\infty \\le$ `tol` $(1 + \\|y\\|_\\infty)$ for the reported `k`.
     - `NOT_CONVERGED`: no period in `periods` converged within `max_iter` Newton
       iterations (a chaotic or quasi-periodic motion, a longer period, a switching
-      structure that changes under every step, or a singular $M - I$); its numbers are NaN.
+      structure that changes under every step, a singular $M - I$, or the step cap
+      `Exact.max_steps` hit); its numbers are NaN.
     - `LIFTOFF`: a normal force reached zero under the strict reading (transient or orbit).
     - `INVALID`: parameters outside their valid range; nothing was integrated.
     """
@@ -68,7 +69,8 @@ class Gait(eqx.Module):
     - `monodromy`: $M$, shape `batch + (3, 3)`, order $(u, v_1, v_2)$;
       `multipliers`: its eigenvalues (complex, by decreasing modulus);
       `stable`: all moduli below 1.
-    - `residual`: $\\|\\Phi_k(y) - y\\|_\\infty$ at the last iterate; `n_iter`: Newton iterations.
+    - `residual`: $\\|\\Phi_k(y) - y\\|_\\infty$ at the last iterate (NaN where nothing was
+      solved: invalid parameters, a lift-off in the transient); `n_iter`: Newton iterations.
     - `liftoff`: a normal force reached zero on the orbit or the transient (paper
       reading: flagged, the orbit is still computed).
     """
@@ -111,6 +113,11 @@ class _Period(NamedTuple):
     lifted: Array
 
 
+def _reduced(st: exact.Hybrid) -> Array:
+    """The period map's state $(u, v_1, v_2)$ of a hybrid state."""
+    return jnp.stack([st.y.x2 - st.y.x1, st.y.v1, st.y.v2])
+
+
 def _section_state(params, wave, contact, y):
     """The hybrid state at phase 0 for $y = (u, v_1, v_2)$: a mass at rest sticks if eq. (7)
     allows (its velocity then carries no tangent), a moving one slips along $v_i$."""
@@ -151,7 +158,7 @@ def _period_map(params, wave, P, contact, dt, max_steps, k, y) -> _Period:
     com = lambda s: P.mhat * s.y.x1 + (1 - P.mhat) * s.y.x2
     ok = (st.status == Status.OK) & (st.t >= t_end)
     return _Period(
-        y=jnp.stack([st.y.x2 - st.y.x1, st.y.v1, st.y.v2]),
+        y=_reduced(st),
         dX=com(st) - com(st0),
         ed=st.y.ed,
         w=st.y.w,
@@ -163,69 +170,63 @@ def _period_map(params, wave, P, contact, dt, max_steps, k, y) -> _Period:
     )
 
 
-def _solve_one(params, wave, contact, start, dt, transient, k, tol, max_iter, max_steps_period, max_steps_transient):
-    """Transient, then Newton on $\\Phi_k(y) = y$; one configuration (vmapped by the caller)."""
+def _transient_one(params, wave, contact, start, dt, transient, max_steps):
+    """`transient` actuation periods from the start: the end's reduced state, the parameters'
+    validity, the run's `Status` and whether a normal force reached zero. One configuration."""
     params, valid = safe_params(params)
     P = exact.consts(params, wave)
-    dtype = params.dtype
-    T = (2 * jnp.pi) / wave.omega
+    st = exact.init(params, wave, contact, jnp.zeros((), params.dtype), model.initial_gap(params, start))
+    st, _, _ = _advance(params, wave, P, contact, dt, st, transient * (2 * jnp.pi) / wave.omega, max_steps)
+    return _reduced(st), valid, st.status, jnp.isfinite(st.t_liftoff)
 
-    st = exact.init(params, wave, contact, jnp.zeros((), dtype), model.initial_gap(params, start))
-    st, _, _ = _advance(params, wave, P, contact, dt, st, transient * T, max_steps_transient)
-    trans_ok = st.status == Status.OK
-    trans_lift = jnp.isfinite(st.t_liftoff)
-    y0 = jnp.stack([st.y.x2 - st.y.x1, st.y.v1, st.y.v2])
+
+def _newton_one(params, wave, contact, dt, y0, go, k, tol, max_iter, max_steps):
+    """Newton's method on $\\Phi_k(y) = y$ from `y0` (skipped where `go` is False). One configuration."""
+    params, _ = safe_params(params)
+    P = exact.consts(params, wave)
+    eye = jnp.eye(3, dtype=params.dtype)
+    k = jnp.where(go, k, 0)  # a configuration not solved here integrates nothing
 
     def phi(y):
-        out = _period_map(params, wave, P, contact, dt, max_steps_period, k, y)
+        out = _period_map(params, wave, P, contact, dt, max_steps, k, y)
         return out.y, out
 
     def evaluate(y):
-        M, out = jax.jacfwd(phi, has_aux=True)(y)
-        return M, out
-
-    M0, out0 = evaluate(y0)
-    eye = jnp.eye(3, dtype=dtype)
+        return jax.jacfwd(phi, has_aux=True)(y)
 
     def small(y, out):
         return jnp.max(jnp.abs(out.y - y)) <= tol * (1 + jnp.max(jnp.abs(y)))
 
     def cond(c):
-        y, M, out, it, done, failed = c
+        _, _, _, it, done, failed = c
         return ~done & ~failed & (it < max_iter)
 
     def body(c):
-        y, M, out, it, done, failed = c
-        r = out.y - y
-        dy = jnp.linalg.solve(M - eye, -r)
-        y1 = y + dy
+        y, M, out, it, _, _ = c
+        y1 = y + jnp.linalg.solve(M - eye, y - out.y)
         M1, out1 = evaluate(y1)
         bad = (out1.status != Status.OK) | ~jnp.all(jnp.isfinite(y1)) | ~jnp.all(jnp.isfinite(M1))
         return y1, M1, out1, it + 1, small(y1, out1) & ~bad, bad
 
-    go = valid & trans_ok & (out0.status == Status.OK)
+    M0, out0 = evaluate(y0)
+    go = go & (out0.status == Status.OK)
     init = (y0, M0, out0, jnp.zeros((), jnp.int32), go & small(y0, out0), ~go)
-    y, M, out, it, done, failed = jax.lax.while_loop(cond, body, init)
-    lifted = trans_lift | out.lifted
-    status = jnp.where(
-        ~valid,
-        GaitStatus.INVALID,
-        jnp.where(
-            ~trans_ok | (out.status == Status.LIFTOFF),
-            GaitStatus.LIFTOFF,
-            jnp.where(done, GaitStatus.CONVERGED, GaitStatus.NOT_CONVERGED),
-        ),
-    )
-    return dict(status=status.astype(jnp.int32), y=y, M=M, out=out, it=it, lifted=lifted & valid,
-                residual=jnp.max(jnp.abs(out.y - y)))  # fmt: skip
+    y, M, out, it, done, _ = jax.lax.while_loop(cond, body, init)
+    return dict(y=y, M=M, out=out, it=it, done=done, residual=jnp.max(jnp.abs(out.y - y)))
 
 
-def _solve_batch(params, wave, wave_axes, contact, start, dt, transient, k, tol, max_iter, msp, mst):
-    one = lambda p, w: _solve_one(p, w, contact, start, dt, transient, k, tol, max_iter, msp, mst)
+def _transient_batch(params, wave, wave_axes, contact, start, dt, transient, max_steps):
+    one = lambda p, w: _transient_one(p, w, contact, start, dt, transient, max_steps)
     return jax.vmap(one, in_axes=(0, wave_axes))(params, wave)
 
 
-_solve_batch = engine_jit(_solve_batch, ("wave_axes", "contact", "start", "dt"))
+def _newton_batch(params, wave, wave_axes, contact, dt, y0, go, k, tol, max_iter, max_steps):
+    one = lambda p, w, y, g: _newton_one(p, w, contact, dt, y, g, k, tol, max_iter, max_steps)
+    return jax.vmap(one, in_axes=(0, wave_axes, 0, 0))(params, wave, y0, go)
+
+
+_transient_batch = engine_jit(_transient_batch, ("wave_axes", "contact", "start", "dt"))
+_newton_batch = engine_jit(_newton_batch, ("wave_axes", "contact", "dt"))
 
 
 def _check(periods, transient, tol, max_iter) -> tuple[int, ...]:
@@ -293,16 +294,35 @@ def steady_gait(
     omega = np.asarray(wave.omega, np.float64)
     T_max = float(np.max(2 * np.pi / omega[np.isfinite(omega) & (omega > 0)], initial=1.0))
     mst = jnp.asarray(dynamics.max_steps or default_max_steps(transient * T_max, dynamics.dt), jnp.int32)
+    real = lambda v: jnp.asarray(v, flat.dtype)
 
+    # The transient is shared by every period tried.
+    y0, valid, trans, trans_lift = _transient_batch(flat, wave, axes, contact, start, dynamics.dt, real(transient), mst)
+    valid, trans = np.asarray(valid), np.asarray(trans)
+    # -1: to be solved; else the final status (invalid, a strict lift-off, the step cap).
+    base = np.select(
+        [~valid, trans == Status.LIFTOFF, trans != Status.OK],
+        [GaitStatus.INVALID, GaitStatus.LIFTOFF, GaitStatus.NOT_CONVERGED],
+        -1,
+    )
     best = None
     for k in ks:
         msp = jnp.asarray(dynamics.max_steps or default_max_steps(k * T_max, dynamics.dt), jnp.int32)
-        tr, kk, tl = (jnp.asarray(v, flat.dtype) for v in (transient, k, tol))
-        n_iter = jnp.asarray(max_iter, jnp.int32)
-        r = _solve_batch(flat, wave, axes, contact, start, dynamics.dt, tr, kk, tl, n_iter, msp, mst)
+        go = jnp.asarray((base < 0) & (True if best is None else _open(best)))
+        r = _newton_batch(flat, wave, axes, contact, dynamics.dt, y0, go, real(k), real(tol),
+                          jnp.asarray(max_iter, jnp.int32), msp)  # fmt: skip
         r = jax.tree_util.tree_map(np.asarray, r)
+        out: _Period = r["out"]
+        solved = np.where(out.status == Status.LIFTOFF, GaitStatus.LIFTOFF,
+                          np.where(r["done"], GaitStatus.CONVERGED, GaitStatus.NOT_CONVERGED))  # fmt: skip
+        r["status"] = np.where(base < 0, solved, base).astype(np.int32)
+        r["lifted"] = valid & (np.asarray(trans_lift) | out.lifted)
+        r["residual"] = np.where(base < 0, r["residual"], np.nan)
         r["k"] = np.where(r["status"] == GaitStatus.CONVERGED, k, 0)
-        r["stable"] = _stable(r)
+        r["multipliers"] = _multipliers(r)
+        r["stable"] = (r["status"] == GaitStatus.CONVERGED) & (
+            np.max(np.abs(np.nan_to_num(r["multipliers"])), axis=-1) < 1
+        )
         if best is None:
             best = r
         else:
@@ -319,12 +339,15 @@ def steady_gait(
     return unflatten(_gait(best, omega, flat, contact), shape)
 
 
-def _stable(r: dict) -> np.ndarray:
-    """All Floquet multipliers inside the unit circle (converged solves only)."""
+def _multipliers(r: dict) -> np.ndarray:
+    """Eigenvalues of the monodromy matrix by decreasing modulus (on the host: a general
+    eigensolver is not available on every JAX backend); NaN where not converged."""
     ok = r["status"] == GaitStatus.CONVERGED
-    out = np.zeros(ok.shape, bool)
+    M = r["M"]
+    out = np.full(M.shape[:-1], np.nan + 0j)
     if np.any(ok):
-        out[ok] = np.max(np.abs(np.linalg.eigvals(r["M"][ok])), axis=-1) < 1
+        ev = np.linalg.eigvals(M[ok])
+        out[ok] = np.take_along_axis(ev, np.argsort(-np.abs(ev), axis=-1), -1)
     return out
 
 
@@ -352,10 +375,6 @@ def _gait(r: dict, omega: np.ndarray, flat: Params, contact: str) -> Gait:
     period = np.where(ok, k * 2 * np.pi / omega, np.nan)
     dX = out.dX
     M = np.where(ok[:, None, None], r["M"], np.nan)
-    mult = np.full(M.shape[:-1], np.nan + 0j)
-    if np.any(ok):
-        ev = np.linalg.eigvals(M[ok])
-        mult[ok] = np.take_along_axis(ev, np.argsort(-np.abs(ev), axis=-1), -1)
     stuck = np.stack([out.stuck1, out.stuck2]) / np.where(ok, period, 1)
     ssl = np.max(np.stack([out.stuck1, out.stuck2]), axis=0) > STICK_TOL
     return Gait(
@@ -375,7 +394,7 @@ def _gait(r: dict, omega: np.ndarray, flat: Params, contact: str) -> Gait:
         v1=nan(r["y"][:, 1]),
         v2=nan(r["y"][:, 2]),
         monodromy=jnp.asarray(M, dtype),
-        multipliers=jnp.asarray(mult),
+        multipliers=jnp.asarray(r["multipliers"]),
         stable=jnp.asarray(r["stable"]),
         residual=jnp.asarray(r["residual"], dtype),
         n_iter=jnp.asarray(r["it"]),

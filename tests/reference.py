@@ -189,7 +189,7 @@ class _Model:
         l0 = self.rest_length_array(t)
         return 0.5 * self.m1 * v1**2 + 0.5 * self.m2 * v2**2 + 0.5 * self.k * (ell - l0) ** 2
 
-    def initial_state(self, start) -> np.ndarray:
+    def initial_state(self, start: str | tuple[float, float, float, float]) -> np.ndarray:
         """Initial condition: eq. (14) (``start='paper'``), the relaxed spring (SPEC section 1),
         or a given ``(x1, v1, x2, v2)``.
 
