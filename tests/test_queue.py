@@ -164,7 +164,7 @@ def test_simulate_queue_matches_one_loop_per_configuration(dtype, max_steps):
 @pytest.mark.parametrize("max_steps", [40_000, 500])
 def test_chain_simulate_queue_matches_one_loop_per_configuration(max_steps):
     # The chain engine's `simulate` through the same queue (3 lanes, buffers of 4 rows)
-    # against one plain loop per configuration, bit for bit: runs to the end, lift-offs
+    # against one plain loop per configuration (values to rounding): runs to the end, lift-offs
     # (two at the start, three later), an invalid chain, and (500) the step cap.
     cases = [(0.06, 2.0, 0.5), (0.3, 20.0, 0.8), (0.08, 5.0, 0.5), (0.06, 3.0, 0.0), (0.2, 15.0, 0.9)]
     cases += [(0.05, 9.0, 0.4), (0.1, 12.0, 0.6)]
@@ -188,5 +188,10 @@ def test_chain_simulate_queue_matches_one_loop_per_configuration(max_steps):
         want[0] = want[3] = S.MAX_STEPS
     np.testing.assert_array_equal(ref[2], want)
     np.testing.assert_array_equal(np.asarray(ref[1]).sum(axis=1)[[2, 5, 6]] > 0, True)
+    # Flags, statuses and counts exactly; values to rounding (a lane's position in a SIMD
+    # vector can change the last bit of a float64 result, as in the measure test above).
     for q, r, name in zip(queued, ref, ("rows", "valid", "status", "t_liftoff", "n_switch"), strict=True):
-        np.testing.assert_array_equal(np.asarray(q), np.asarray(r), err_msg=name)
+        if name in ("rows", "t_liftoff"):
+            np.testing.assert_allclose(np.asarray(q), np.asarray(r), rtol=1e-12, atol=1e-15, err_msg=name)
+        else:
+            np.testing.assert_array_equal(np.asarray(q), np.asarray(r), err_msg=name)
