@@ -335,8 +335,8 @@ def measure(
     check_measure_args(z, horizon, window)
     if isinstance(params, Chain):
         dyn = chain_dynamics(dynamics, waveform)
-        return measure_chain(params, z, t_start=t_start, horizon=horizon, window=window, dt=dyn.dt,
-                             max_steps=dyn.max_steps, contact=contact, start=start, dtype=dtype)  # fmt: skip
+        return measure_chain(params, z, t_start=t_start, horizon=horizon, window=window, dynamics=dyn,
+                             contact=contact, start=start, dtype=dtype)  # fmt: skip
     flat, wave, axes, shape = prepare(params, waveform, dtype)
     if isinstance(dynamics, Exact):
         ts = _start_times(t_start, shape, flat.dtype)

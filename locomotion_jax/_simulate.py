@@ -194,8 +194,7 @@ def simulate(
         raise ValueError("save_at must be finite, non-decreasing and inside [0, t_end].")
     if isinstance(params, Chain):
         dyn = chain_dynamics(dynamics, waveform)
-        return simulate_chain(params, float(t_end), save_np, dt=dyn.dt, max_steps=dyn.max_steps, contact=contact,
-                              start=start, dtype=dtype)  # fmt: skip
+        return simulate_chain(params, float(t_end), save_np, dynamics=dyn, contact=contact, start=start, dtype=dtype)
     flat, wave, axes, shape = prepare(params, waveform, dtype)
     save = jnp.asarray(save_np, flat.dtype)
     if isinstance(dynamics, Exact):

@@ -16,13 +16,13 @@ import numpy as np
 
 from .._batch import default_max_steps, MICRO_BATCH_CPU
 from .._compile import engine_jit
-from .._dynamics import Exact
+from .._dynamics import Exact, Smoothed
 from .._exact import Target
 from .._queue import run_queue
 from .._results import ChainMeasurement, ChainTrajectory
 from .._saves import BUFFER, run_saves
 from .._status import Regime, Status
-from ..dynamics import _chain_exact as engine
+from ..dynamics import _chain_exact as engine, _chain_smooth as smooth
 from ..model._chain import Chain
 
 
@@ -81,12 +81,12 @@ def _com(C: Chain, x: jax.Array) -> jax.Array:
     return jnp.matmul(x, C.m) / C.m.sum()
 
 
-def chain_dynamics(dynamics: Any, waveform: Any) -> Exact:
-    """A chain runs on the N-mass exact engine and carries its own actuation."""
+def chain_dynamics(dynamics: Any, waveform: Any) -> Exact | Smoothed:
+    """A chain runs on the N-mass exact or smoothed engine and carries its own actuation."""
     if waveform is not None:
         raise ValueError("waveform= applies to Params; a Chain carries its own waveforms (Chain(waveforms=...)).")
-    if not isinstance(dynamics, Exact):
-        raise ValueError(f"a Chain runs with Exact dynamics; got {type(dynamics).__name__}.")
+    if not isinstance(dynamics, (Exact, Smoothed)):
+        raise ValueError(f"a Chain runs with Exact or Smoothed dynamics; got {type(dynamics).__name__}.")
     return dynamics
 
 
@@ -119,12 +119,16 @@ def _derived(C: Chain, contact, t, x, v):
     return dict(e=e, N=N, l0=dr.l0, tension=tension)
 
 
-def simulate_chain(chain: Chain, t_end: float, save_at, *, dt: float, max_steps: int | None, contact: str,
-                   start: str, dtype: Any) -> ChainTrajectory:  # fmt: skip
-    """`simulate` for a [`Chain`][] with the exact engine (arguments as in `simulate`)."""
+def simulate_chain(chain: Chain, t_end: float, save_at, *, dynamics: Exact | Smoothed, contact: str, start: str,
+                   dtype: Any) -> ChainTrajectory:  # fmt: skip
+    """`simulate` for a [`Chain`][] on the N-mass exact or smoothed engine (arguments as in `simulate`)."""
     _check(contact, start)
     flat, valid, shape = prepare_chain(chain, dtype)
     save = jnp.asarray(save_at, flat.dtype)
+    if isinstance(dynamics, Smoothed):
+        out = _simulate_smoothed(flat, valid, save, contact, start, _cast_eps(dynamics, flat.dtype))
+        return ChainTrajectory(**_unflatten(out, shape), start=start, contact=contact)
+    dt, max_steps = dynamics.dt, dynamics.max_steps
     N = flat.n_masses
     steps = max_steps or default_max_steps(float(t_end), dt) + 4 * save.shape[0]
     n = valid.shape[0]
@@ -256,9 +260,9 @@ def _measure_batch(C, valid, t_start, z, horizon, window, contact, start, dt, ma
 _measure_batch = engine_jit(_measure_batch, ("contact", "start", "dt", "lanes"))
 
 
-def measure_chain(chain: Chain, z: float, *, t_start: Any, horizon: float, window: float, dt: float,
-                  max_steps: int | None, contact: str, start: str, dtype: Any) -> ChainMeasurement:  # fmt: skip
-    """`measure` for a [`Chain`][] with the exact engine (arguments as in `measure`)."""
+def measure_chain(chain: Chain, z: float, *, t_start: Any, horizon: float, window: float,
+                  dynamics: Exact | Smoothed, contact: str, start: str, dtype: Any) -> ChainMeasurement:  # fmt: skip
+    """`measure` for a [`Chain`][] on the N-mass exact or smoothed engine (arguments as in `measure`)."""
     _check(contact, start)
     flat, valid, shape = prepare_chain(chain, dtype)
     n = valid.shape[0]
@@ -268,9 +272,30 @@ def measure_chain(chain: Chain, z: float, *, t_start: Any, horizon: float, windo
         ts = jnp.broadcast_to(jnp.asarray(t_start, flat.dtype), shape).reshape((n,))
         if not np.all(np.isfinite(np.asarray(ts))) or np.any(np.asarray(ts) < 0):
             raise ValueError(f"t_start must be finite and >= 0, got {t_start!r}.")
-    ts_host = np.asarray(jnp.where(jnp.isfinite(ts), ts, flat.t_start))
-    steps = max_steps or default_max_steps(float(np.max(ts_host)) + horizon, dt)
-    lanes = min(n, MICRO_BATCH_CPU) if jax.default_backend() == "cpu" else n
     z_, h_, w_ = (jnp.asarray(v, flat.dtype) for v in (z, horizon, window))
-    out = _measure_batch(flat, valid, ts, z_, h_, w_, contact, start, dt, jnp.asarray(steps, jnp.int32), lanes)
+    if isinstance(dynamics, Smoothed):
+        out = _measure_smoothed(flat, valid, ts, z_, h_, w_, contact, start, _cast_eps(dynamics, flat.dtype))
+        return ChainMeasurement(**_unflatten(out, shape), z=float(z), start=start, contact=contact)
+    ts_host = np.asarray(jnp.where(jnp.isfinite(ts), ts, flat.t_start))
+    steps = dynamics.max_steps or default_max_steps(float(np.max(ts_host)) + horizon, dynamics.dt)
+    lanes = min(n, MICRO_BATCH_CPU) if jax.default_backend() == "cpu" else n
+    out = _measure_batch(flat, valid, ts, z_, h_, w_, contact, start, dynamics.dt, jnp.asarray(steps, jnp.int32), lanes)
     return ChainMeasurement(**_unflatten(out, shape), z=float(z), start=start, contact=contact)
+
+
+# -- the smoothed engine ----------------------------------------------------------------------
+
+
+def _cast_eps(dynamics: Smoothed, dtype: Any) -> Smoothed:
+    return eqx.tree_at(lambda d: d.eps, dynamics, jnp.asarray(dynamics.eps, dtype))
+
+
+@eqx.filter_jit
+def _simulate_smoothed(C, valid, save, contact, start, dyn):
+    return jax.vmap(lambda C, ok: smooth.simulate_one(C, ok, save, contact, start, dyn))(C, valid)
+
+
+@eqx.filter_jit
+def _measure_smoothed(C, valid, t_start, z, horizon, window, contact, start, dyn):
+    one = lambda C, ok, ts: smooth.measure_one(C, ok, ts, z, horizon, window, contact, start, dyn)
+    return jax.vmap(one)(C, valid, t_start)
