@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
-from .._custom_types import Array, Contact
+from .._custom_types import Array, ArrayLike, Contact
 from .._dynamics import Smoothed
 from .._smooth import MIN_STICK, STICK_SPEED, WINDOW_SAMPLES
 from .._status import Regime, Status
@@ -33,12 +33,12 @@ from ..model._chain import Chain
 from . import _chain_exact as exact
 
 
-def _drive(C: Chain, t: Array) -> exact.Drive:
+def _drive(C: Chain, t: ArrayLike) -> exact.Drive:
     omega = C.waves.omega
     return exact.drive(C, jnp.cos(omega * t), jnp.sin(omega * t))
 
 
-def rates(C: Chain, contact: Contact, eps: Array, t: Array, y: Array) -> Array:
+def rates(C: Chain, contact: Contact, eps: Array, t: ArrayLike, y: Array) -> Array:
     """Right-hand side on the flat state $y = (x_1..x_N, v_1..v_N, e_d, w)$."""
     n_mass = C.m.shape[-1]
     x, v = y[:n_mass], y[n_mass : 2 * n_mass]
