@@ -6,6 +6,8 @@ Each event is the zero of a scalar test function of the orbit, continuous along 
   sign; `BRANCH_POINT` where it does not;
 - `PERIOD_DOUBLING`: $\\det(M + I)$ (a real multiplier at $-1$; complex pairs contribute
   $|\\mu + 1|^2 > 0$);
+- `SWITCH`: another change of the switching structure (the number of switches per period, e.g. a
+  velocity grazing zero), bracketed by two points but not located;
 - `SSL_SL`: the slip margin, the smallest $|F_i| - \\mu_s n_i$ at a slipping mass's velocity zero
   (eq. 7; [`Gait`][]`.slip_margin`). At such an instant a mass sticks where it is negative and
   reverses where it is positive; as a stick interval shrinks to nothing, the margin at its
@@ -50,9 +52,10 @@ class EventKind:
     BRANCH_POINT = 2
     SSL_SL = 3
     LIFTOFF = 4
+    SWITCH = 5
 
 
-NAMES = {0: "FOLD", 1: "PERIOD_DOUBLING", 2: "BRANCH_POINT", 3: "SSL_SL", 4: "LIFTOFF"}
+NAMES = {0: "FOLD", 1: "PERIOD_DOUBLING", 2: "BRANCH_POINT", 3: "SSL_SL", 4: "LIFTOFF", 5: "SWITCH"}
 
 
 class BranchEvents(eqx.Module):
@@ -63,7 +66,10 @@ class BranchEvents(eqx.Module):
     - `u, v1, v2`: the orbit there; `multipliers`: its Floquet multipliers `(m, 3)`.
     - `value`: the test function there (near 0 for a smooth crossing).
     - `smooth`: the test function crossed zero continuously (False: it jumped across).
-    - `located`: the root solve converged to `LAM_TOL`.
+    - `located`: the root solve converged to `LAM_TOL` (`SWITCH` events are not located: `lam` is
+      the middle of the two points and `lam_error` half their distance).
+    - `turn`: the branch reverses its direction in $\\lambda$ across the event (at a switching
+      event: a non-smooth fold, where two pieces of the branch meet at a corner).
     """
 
     kind: Array
@@ -77,6 +83,7 @@ class BranchEvents(eqx.Module):
     value: Array
     smooth: Array
     located: Array
+    turn: Array
 
 
 def _functional(kind: int, r, contact: str) -> np.ndarray:
@@ -97,26 +104,36 @@ def _functional(kind: int, r, contact: str) -> np.ndarray:
 
 
 def _brackets(d: dict, status: np.ndarray, failed_at: np.ndarray) -> list[list[tuple]]:
-    """Per branch: `(kind, j, z_a, z_b, g_a, g_b)` for each sign change between points j and j + 1."""
+    """Per branch: `(kind, j, z_a, z_b, g_a, g_b)` for each event between points j and j + 1.
+
+    A change of the slip margin's or the smallest normal force's sign is a switching event. The
+    multipliers jump where the switching structure changes, so a sign change of $\\det(M \\mp I)$
+    is a (smooth) fold or period doubling only between points of the same structure; another change
+    of the switch count is reported as `SWITCH`."""
     B = d["valid"].shape[0]
-    tests = {
-        EventKind.SSL_SL: d["margin"],
-        EventKind.LIFTOFF: d["n_min"],
-        EventKind.PERIOD_DOUBLING: d["det_plus"],
-    }
     out: list[list[tuple]] = [[] for _ in range(B)]
     for i in range(B):
         n = int(d["count"][i])
         z = d["z"][i]
         for j in range(n - 1):
-            for kind, g in tests.items():
-                if (g[i, j] > 0) != (g[i, j + 1] > 0):
-                    out[i].append((kind, j, z[j], z[j + 1], g[i, j], g[i, j + 1]))
-            dm = d["det_minus"][i]
-            if (dm[j] > 0) != (dm[j + 1] > 0):
+            pair = lambda name: (d[name][i, j], d[name][i, j + 1])
+            row = lambda kind, g: (kind, j, z[j], z[j + 1], g[0], g[1])
+            m, nm, sw = pair("margin"), pair("n_min"), pair("n_switch")
+            if (m[0] > 0) != (m[1] > 0):
+                out[i].append(row(EventKind.SSL_SL, m))
+            if (nm[0] > 0) != (nm[1] > 0):
+                out[i].append(row(EventKind.LIFTOFF, nm))
+            if (m[0] > 0) != (m[1] > 0) or (nm[0] > 0) != (nm[1] > 0):
+                continue
+            if sw[0] != sw[1]:
+                out[i].append(row(EventKind.SWITCH, (np.nan, np.nan)))
+                continue
+            dp, dm = pair("det_plus"), pair("det_minus")
+            if (dp[0] > 0) != (dp[1] > 0):
+                out[i].append(row(EventKind.PERIOD_DOUBLING, dp))
+            if (dm[0] > 0) != (dm[1] > 0):
                 fold = (d["t"][i, j, 3] > 0) != (d["t"][i, j + 1, 3] > 0)
-                kind = EventKind.FOLD if fold else EventKind.BRANCH_POINT
-                out[i].append((kind, j, z[j], z[j + 1], dm[j], dm[j + 1]))
+                out[i].append(row(EventKind.FOLD if fold else EventKind.BRANCH_POINT, dm))
         if status[i] == 4 and n > 0:  # BranchStatus.LIFTOFF: the failed step is beyond the lift-off
             out[i].append((EventKind.LIFTOFF, n - 1, z[n - 1], failed_at[i], d["n_min"][i, n - 1], -np.inf))
     return out
@@ -203,16 +220,19 @@ def find_events(d: dict, status: np.ndarray, failed_at: np.ndarray, solve, conta
     found: list[list[dict]] = [[] for _ in range(B)]
     for r in range(max((len(x) for x in rows), default=0)):
         lane = [x[r] if r < len(x) else None for x in rows]
-        if locate:
-            res = _locate(solve, lane, contact, lam_tol)
-        else:
-            res = [None if x is None else _unlocated(x, solve, i) for i, x in enumerate(lane)]
-        for i, ev in enumerate(res):
-            if ev is not None:
-                found[i].append(ev)
+        todo = [x if locate and x is not None and x[0] != EventKind.SWITCH else None for x in lane]
+        res = _locate(solve, todo, contact, lam_tol) if any(x is not None for x in todo) else todo
+        for i, x in enumerate(lane):
+            if x is None:
+                continue
+            ev = res[i] if res[i] is not None else _unlocated(x, solve, i)
+            j = x[1]
+            t = d["t"][i, j : j + 2, 3]
+            ev["turn"] = bool(j + 1 < d["count"][i] and (t[0] > 0) != (t[1] > 0))
+            found[i].append(ev)
     m = max(1, max(len(f) for f in found))
     fill = dict(kind=-1, index=-1, lam=np.nan, lam_error=np.nan, u=np.nan, v1=np.nan, v2=np.nan,
-                multipliers=np.full(3, np.nan + 0j), value=np.nan, smooth=False, located=False)  # fmt: skip
+                multipliers=np.full(3, np.nan + 0j), value=np.nan, smooth=False, located=False, turn=False)  # fmt: skip
     table = {key: [[(f[q] if q < len(f) else fill)[key] for q in range(m)] for f in found] for key in fill}
     return BranchEvents(
         kind=jnp.asarray(table["kind"], jnp.int32),
@@ -224,15 +244,17 @@ def find_events(d: dict, status: np.ndarray, failed_at: np.ndarray, solve, conta
         multipliers=jnp.asarray(np.asarray(table["multipliers"])),
         smooth=jnp.asarray(table["smooth"], bool),
         located=jnp.asarray(table["located"], bool),
+        turn=jnp.asarray(table["turn"], bool),
     )
 
 
 def _unlocated(row: tuple, solve, i: int) -> dict:
-    """An event bracketed but not located: the linear interpolation of its test function."""
+    """An event bracketed but not located: the linear interpolation of its test function (or the
+    middle), with the distance to the farther point as its error."""
     kind, j, za, zb, ga, gb = row
     w = ga / (ga - gb) if np.isfinite(ga) and np.isfinite(gb) and ga != gb else 0.5
     z = za + w * (zb - za)
     lam = solve.lam0[i] + solve.scale[i] * z[3]
-    err = abs(solve.scale[i] * (zb[3] - za[3]))
+    err = abs(solve.scale[i] * (zb[3] - za[3])) * max(w, 1 - w)
     return dict(kind=kind, index=j, lam=lam, lam_error=err, u=z[0], v1=z[1], v2=z[2],
                 multipliers=np.full(3, np.nan + 0j), value=np.nan, smooth=False, located=False)  # fmt: skip

@@ -136,22 +136,20 @@ class Solver:
         return self.lam0 + self.scale * zeta
 
     def period(self, zeta, k):
-        omega = self.lam(zeta) if self.spec.name == "omega" else self.omega
-        return k * 2 * np.pi / omega
+        """The gait period $kT$ at `zeta` (shape `(B, n)`)."""
+        omega = self.lam(zeta.T).T if self.spec.name == "omega" else self.omega[:, None] + 0 * zeta
+        return k[:, None] * 2 * np.pi / omega
 
 
 def tangent(J: np.ndarray, prev: np.ndarray) -> np.ndarray:
-    """Unit null vectors of $[M - I, \\partial\\Phi/\\partial\\zeta]$, oriented along `prev`."""
+    """Unit null vectors of $[M - I, \\partial\\Phi/\\partial\\zeta]$ (the last right singular
+    vector), oriented along `prev`; NaN where the Jacobian is not finite."""
     A = J[:, :3].copy()
     A[:, :, :3] -= np.eye(3)
-    rows = np.concatenate([A, prev[:, None, :]], axis=1)
-    rhs = np.zeros(prev.shape)
-    rhs[:, 3] = 1
-    with np.errstate(all="ignore"):
-        bad = ~np.all(np.isfinite(rows), axis=(1, 2))
-        rows[bad] = np.eye(4)
-        t = np.linalg.solve(rows, rhs[..., None])[..., 0]
-        t = t / np.linalg.norm(t, axis=-1, keepdims=True)
+    bad = ~np.all(np.isfinite(A), axis=(1, 2))
+    A[bad] = 0
+    t = np.linalg.svd(A)[2][:, -1]
+    t = np.where((np.sum(t * prev, axis=-1) < 0)[:, None], -t, t)
     t[bad] = np.nan
     return t
 
@@ -287,11 +285,11 @@ class _Walk:
         self.failed_at = np.full((B, 4), np.nan)
         self.points: list[list[dict]] = [[] for _ in range(B)]
         for i in np.flatnonzero(ok):
-            self.points[i].append(_record(r0, self.t, i))
+            self.points[i].append(_record(r0, self.t, int(i)))
 
     def accept(self, r, tn, good):
         for i in np.flatnonzero(good):
-            self.points[i].append(_record(r, tn, i))
+            self.points[i].append(_record(r, tn, int(i)))
         self.z = np.where(good[:, None], r.z, self.z)
         self.J = np.where(good[:, None, None], r.J, self.J)
         self.t = np.where(good[:, None], tn, self.t)
@@ -401,7 +399,7 @@ def _pack(points: list[list[dict]], solve: Solver, k: np.ndarray) -> dict[str, n
     out["valid"], out["count"] = valid, count
     zeta = out["z"][..., 3]
     out["lam"] = solve.lam0[:, None] + solve.scale[:, None] * zeta
-    out["period"] = solve.period(zeta.T, k).T
+    out["period"] = solve.period(zeta, k)
     M = np.where(valid[..., None, None], out["J"][..., :3, :3], 0.0)
     ev = np.linalg.eigvals(M)
     ev = np.take_along_axis(ev, np.argsort(-np.abs(ev), axis=-1), -1)

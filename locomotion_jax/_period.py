@@ -127,11 +127,20 @@ def advance(params, wave, P, contact, dt, st, t_end, max_steps):
 
 
 def period_map(params, wave, P, contact, dt, max_steps, k, y) -> Period:
+    """$\\Phi_k(y)$ and what the $k$ periods accumulate ([`Period`][]).
+
+    A normal force that dips below zero between two step ends (a grazing excursion shorter than
+    the step, which the engine does not locate) still counts: under the strict reading such a
+    period ends with `Status.LIFTOFF` like a located one, so that lift-off does not depend on the
+    step."""
     t_end = k * (2 * jnp.pi) / wave.omega
     st0 = section_state(params, wave, contact, y)
     st, a = advance(params, wave, P, contact, dt, st0, t_end, max_steps)
     com = lambda s: P.mhat * s.y.x1 + (1 - P.mhat) * s.y.x2
     ok = (st.status == Status.OK) & (st.t >= t_end)
+    status = jnp.where(ok, Status.OK, jnp.where(st.status == Status.OK, Status.MAX_STEPS, st.status))
+    if contact == "strict":
+        status = jnp.where(a.n_min < 0, Status.LIFTOFF, status)
     return Period(
         y=reduced(st),
         dX=com(st) - com(st0),
@@ -143,8 +152,8 @@ def period_map(params, wave, P, contact, dt, max_steps, k, y) -> Period:
         margin=jnp.where(a.slid1 & a.slid2, a.margin, -jnp.inf),
         n_min=a.n_min,
         n_switch=st.n_switch,
-        status=jnp.where(ok, Status.OK, jnp.where(st.status == Status.OK, Status.MAX_STEPS, st.status)),
-        lifted=jnp.isfinite(st.t_liftoff),
+        status=status,
+        lifted=jnp.isfinite(st.t_liftoff) | (a.n_min < 0),
     )
 
 
