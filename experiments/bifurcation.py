@@ -8,8 +8,9 @@ boundary in the (a, omega) plane over the Fig. 6 regime map.
     orange, grey where the orbit itself loses contact; markers at the located events. Beside it, the
     Fig. 8 measurements by direct simulation (`_fig_sweep.data_8`: speed 5 / tau_5, cost e_5 / 5).
 (b) `boundary.png`: the SSL/SL boundary located by continuation (zeros of the slip margin, to 1e-10
-    in the parameter) along a at fixed omega and along omega at fixed a, seeded the same way, drawn
-    over a direct-simulation regime map (`_fig_map.data_6` on a coarse grid).
+    in the parameter) along a at fixed omega, seeded at a few amplitudes, one branch per pair of
+    neighbouring seeds (all in one batch), drawn over a direct-simulation regime map
+    (`_fig_map.data_6` on a coarse grid). Both use `Exact(dt=0.02)`, as the Fig. 6 map.
 
 Writes `bifurcation.png`, `boundary.png` and `gaits.json` (the located events, the run times) to
 experiments/output/gaits/. Usage: python experiments/bifurcation.py [--quick] [--out DIR]
@@ -34,10 +35,11 @@ from locomotion_jax._bifurcation import NAMES
 OUT = Path(__file__).parent / "output" / "gaits"
 WN1 = 10.0
 SIZES = {
-    "quick": dict(seeds=10, grid=6, map=(24, 20), fig8=dict(n=40, dt=0.02, horizon=800.0, chunk=10), points=120),
-    "default": dict(seeds=40, grid=20, map=(64, 48), fig8=dict(n=200, dt=0.01, horizon=2000.0, chunk=16), points=200),
+    "quick": dict(seeds=10, grid=4, map=(24, 20), fig8=dict(n=40, dt=0.02, horizon=800.0, chunk=10), points=80),
+    "default": dict(seeds=40, grid=24, map=(96, 64), fig8=dict(n=200, dt=0.01, horizon=2000.0, chunk=16), points=160),
 }
 A_SEEDS = np.array([0.002, 0.02, 0.04, 0.07, 0.1, 0.15])
+DYNAMICS = lj.Exact(dt=0.02)  # as the Fig. 6 map; the events move by ~1e-5 from dt = 0.01
 COLORS = {int(lj.Regime.SSL): "#1f5fa8", int(lj.Regime.SL): "#e07b00"}
 MARKERS = {"SSL_SL": "D", "LIFTOFF": "x", "FOLD": "^", "PERIOD_DOUBLING": "s", "BRANCH_POINT": "o"}
 
@@ -103,7 +105,7 @@ def draw_branches(ax, b: lj.Branch, field: str, scale: float) -> None:
 def panel_a(size: dict, out: Path) -> dict:
     t0 = time.perf_counter()
     grid = np.linspace(0.5, 25.0, size["seeds"])
-    b = seeded(lj.Params(), "omega", grid, contact="paper", max_points=size["points"])
+    b = seeded(lj.Params(), "omega", grid, contact="paper", max_points=size["points"], dynamics=DYNAMICS)
     t_cont = time.perf_counter() - t0
     t0 = time.perf_counter()
     ds = fsw.data_8(dict(size["fig8"], progress=False))
@@ -154,27 +156,20 @@ def panel_b(size: dict, out: Path) -> dict:
     ds = fmap.data_6(dict(n_omega=n_om, n_a=n_a, dt=0.02, chunk=256, n_check=0, stride=4))
     t_map = time.perf_counter() - t0
     t0 = time.perf_counter()
+    # Along a at each omega of the grid, seeded at A_SEEDS: every branch in one batch.
     omegas = np.linspace(1.0, 25.0, size["grid"])
-    # Along a at each omega (seeds A_SEEDS), and along omega at each a (seeds on the omega range).
     starts = np.tile(np.concatenate([A_SEEDS[:-1], A_SEEDS[1:]]), omegas.size)
     stops = np.tile(np.concatenate([A_SEEDS[1:], A_SEEDS[:-1]]), omegas.size)
-    pa = lj.Params(omega=np.repeat(omegas, 2 * (A_SEEDS.size - 1)), a=starts)
-    ba = lj.continuation(pa, "a", stops, contact="paper", max_points=size["points"])
-    amps = np.linspace(0.005, 0.15, size["grid"])
-    w_seeds = np.linspace(1.0, 25.0, A_SEEDS.size)
-    po = lj.Params(a=np.repeat(amps, 2 * (w_seeds.size - 1)),
-                   omega=np.tile(np.concatenate([w_seeds[:-1], w_seeds[1:]]), amps.size))  # fmt: skip
-    bo = lj.continuation(po, "omega", np.tile(np.concatenate([w_seeds[1:], w_seeds[:-1]]), amps.size),
-                         contact="paper", max_points=size["points"])  # fmt: skip
+    fixed = np.repeat(omegas, 2 * (A_SEEDS.size - 1))
+    b = lj.continuation(lj.Params(omega=fixed, a=starts), "a", stops, contact="paper", max_points=size["points"],
+                        max_step=0.1, locate=("SSL_SL",), dynamics=DYNAMICS)  # fmt: skip
     t_cont = time.perf_counter() - t0
-    pts = []
-    for b, along in ((ba, "a"), (bo, "omega")):
-        e = b.events
-        kind, lam, located = np.asarray(e.kind), np.asarray(e.lam), np.asarray(e.located)
-        fixed = np.asarray(pa.omega) if along == "a" else np.asarray(po.a)
-        for i, q in zip(*np.nonzero((kind == lj.EventKind.SSL_SL) & located)):
-            a, om = (lam[i, q], fixed[i]) if along == "a" else (fixed[i], lam[i, q])
-            pts.append(dict(a=float(a), omega=float(om), along=along, turn=bool(np.asarray(e.turn)[i, q])))
+    e = b.events
+    kind, lam, located, turn = (np.asarray(x) for x in (e.kind, e.lam, e.located, e.turn))
+    pts = [
+        dict(a=float(lam[i, q]), omega=float(fixed[i]), turn=bool(turn[i, q]))
+        for i, q in zip(*np.nonzero((kind == lj.EventKind.SSL_SL) & located))
+    ]
 
     from matplotlib.colors import BoundaryNorm, ListedColormap
     from matplotlib.lines import Line2D
@@ -189,9 +184,10 @@ def panel_b(size: dict, out: Path) -> dict:
     steady = ds.liftoff_steady.values.astype(float) if "liftoff_steady" in ds else ds.liftoff.values.astype(float)
     if steady.any():
         ax.contourf(a, om, steady, levels=[0.5, 1.5], colors="none", hatches=["////"])
-    for along, marker in (("a", "o"), ("omega", "s")):
-        sel = [p for p in pts if p["along"] == along]
-        ax.plot([p["a"] for p in sel], [p["omega"] for p in sel], marker, color="k", markersize=3, linestyle="")
+    for turn, marker in ((False, "o"), (True, "D")):
+        sel = [p for p in pts if p["turn"] == turn]
+        ax.plot([p["a"] for p in sel], [p["omega"] for p in sel], marker, color="k", markersize=3.5, linestyle="",
+                fillstyle="full" if not turn else "none")  # fmt: skip
     ax.set_xlabel(r"amplitude $a$")
     ax.set_ylabel(r"frequency $\omega$")
     ax.set_xlim(a[0], a[-1])
@@ -199,14 +195,23 @@ def panel_b(size: dict, out: Path) -> dict:
     handles = [Patch(color=c, label=fmap.CLASS_NAMES[k]) for k, c in enumerate(fmap.CLASS_COLORS) if (cls == k).any()]
     handles += [
         Patch(facecolor="none", edgecolor="0.3", hatch="////", label="lift-off, steady motion"),
-        Line2D([], [], marker="o", linestyle="", color="k", markersize=3, label="SSL/SL boundary, continued along a"),
-        Line2D([], [], marker="s", linestyle="", color="k", markersize=3, label="... along omega"),
+        Line2D([], [], marker="o", linestyle="", color="k", markersize=3, label="SSL/SL boundary (continuation in a)"),
+        Line2D(
+            [],
+            [],
+            marker="D",
+            linestyle="",
+            color="k",
+            markersize=3,
+            fillstyle="none",
+            label="... where the branch turns back",
+        ),
     ]
     ax.legend(handles=handles, fontsize=7, loc="upper right", framealpha=0.9)
     ax.set_title(f"SSL/SL boundary by continuation over the regime map ({n_a} a x {n_om} omega, direct simulation)",
                  fontsize=9)  # fmt: skip
     pl.save(fig, out / "boundary.png")
-    return dict(points=pts, seconds=dict(map=t_map, continuation=t_cont), branches=int(ba.status.size + bo.status.size))
+    return dict(points=pts, seconds=dict(map=t_map, continuation=t_cont), branches=int(b.status.size))
 
 
 def main(argv: list[str] | None = None) -> int:

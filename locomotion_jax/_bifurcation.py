@@ -16,7 +16,11 @@ Each event is the zero of a scalar test function of the orbit, continuous along 
   strict reading there is no orbit beyond it: the branch's failed step bounds it, counted as
   $-\\infty$.
 
-A sign change between two points brackets a root. It is located on the chord between them: the
+A sign change between two points brackets a root. A switching event is solved directly as the
+point where the branch meets the switching surface, $\\Phi_k(y; \\lambda) = y$ and $g(y, \\lambda) = 0$,
+by Newton's method with the forward-mode gradient of $g$ (quadratic convergence; at a corner of the
+branch, where the two sides' step sequences differ, it still finds the one point both sides share).
+Otherwise (and where that fails) the root is bracketed on the chord between the two points: the
 point at distance $s$ along the chord is corrected onto the branch on the hyperplane normal to the
 chord (so that folds are located too), and $s$ is found by the Illinois variant of regula falsi
 (bisection where a value is infinite), until the bracket is narrower than `LAM_TOL` in the
@@ -24,6 +28,8 @@ parameter. A test function that jumps across zero instead (a switching structure
 multipliers at once, a stick interval born at a grazing velocity zero) is located as well, to the
 same tolerance, and reported with `smooth` False.
 """
+
+from collections.abc import Sequence
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -117,7 +123,7 @@ def _brackets(d: dict, status: np.ndarray, failed_at: np.ndarray) -> list[list[t
         z = d["z"][i]
         for j in range(n - 1):
             pair = lambda name: (d[name][i, j], d[name][i, j + 1])
-            row = lambda kind, g: (kind, j, z[j], z[j + 1], g[0], g[1])
+            row = lambda kind, g: (kind, j, z[j], z[j + 1], g[0], g[1], d["J"][i, j], d["J"][i, j + 1])
             m, nm, sw = pair("margin"), pair("n_min"), pair("n_switch")
             if (m[0] > 0) != (m[1] > 0):
                 out[i].append(row(EventKind.SSL_SL, m))
@@ -135,7 +141,74 @@ def _brackets(d: dict, status: np.ndarray, failed_at: np.ndarray) -> list[list[t
                 fold = (d["t"][i, j, 3] > 0) != (d["t"][i, j + 1, 3] > 0)
                 out[i].append(row(EventKind.FOLD if fold else EventKind.BRANCH_POINT, dm))
         if status[i] == 4 and n > 0:  # BranchStatus.LIFTOFF: the failed step is beyond the lift-off
-            out[i].append((EventKind.LIFTOFF, n - 1, z[n - 1], failed_at[i], d["n_min"][i, n - 1], -np.inf))
+            Jn = d["J"][i, n - 1]
+            out[i].append(
+                (EventKind.LIFTOFF, n - 1, z[n - 1], failed_at[i], d["n_min"][i, n - 1], -np.inf, Jn, Jn * np.nan)
+            )
+    return out
+
+
+def _surface(solve, rows: list[tuple | None], lam_tol: float) -> list[dict | None]:
+    """A switching event as the solution of $\\Phi_k(y; \\lambda) = y$, $g(y, \\lambda) = 0$: Newton's
+    method, the test function $g$ (slip margin or smallest normal force) linearised with its
+    forward-mode gradient at each iterate, from the bracket's end where $|g|$ is smaller. The point
+    where the branch meets the switching surface, on whichever side the iterates lie (a corner
+    too). `None` where it does not converge within the bracket (the caller then brackets)."""
+    B = len(rows)
+    go = np.array([r is not None for r in rows])
+    pad = (EventKind.SSL_SL, 0, np.zeros(4), np.ones(4), 1.0, -1.0, np.zeros((5, 4)), np.zeros((5, 4)))
+    kind, j, za, zb, ga, gb, Ja, Jb = (np.array(x) for x in zip(*[r if r is not None else pad for r in rows]))
+    row = np.where(kind == EventKind.SSL_SL, 3, 4)
+    first = (np.abs(ga) <= np.abs(np.where(np.isfinite(gb), gb, np.inf))) | ~np.all(np.isfinite(Jb), axis=(1, 2))
+    z = np.where(first[:, None], za, zb)
+    J = np.where(first[:, None, None], Ja, Jb)
+    g = np.where(first, ga, gb).astype(float)
+    grad = J[np.arange(B), row]
+    span = np.linalg.norm(zb - za, axis=-1)
+    ok, conv = go & np.isfinite(g) & np.all(np.isfinite(grad), axis=-1), np.zeros(B, bool)
+    dlam = np.full(B, np.inf)
+    for _ in range(12):
+        active = ok & ~conv
+        if not np.any(active):
+            break
+        with np.errstate(all="ignore"):
+            norm = np.linalg.norm(grad, axis=-1)
+            c = grad / np.where(norm > 0, norm, 1)[:, None]
+            zref = z - (g / np.where(norm > 0, norm, 1))[:, None] * c
+        zref = np.where(active[:, None], zref, z)
+        r = solve(zref, zref, c, active)
+        g_new = np.where(row == 3, r.out.margin, r.out.n_min)
+        good = active & r.done & np.isfinite(g_new) & (np.linalg.norm(r.z - za, axis=-1) <= 2 * span)
+        ok &= ~(active & ~good)
+        dlam = np.where(good, np.abs(solve.scale * (r.z[:, 3] - z[:, 3])), dlam)
+        z = np.where(good[:, None], r.z, z)
+        J = np.where(good[:, None, None], r.J, J)
+        g = np.where(good, g_new, g)
+        grad = J[np.arange(B), row]
+        lam = solve.lam0 + solve.scale * z[:, 3]
+        conv |= good & (dlam <= lam_tol * np.maximum(1, np.abs(lam))) & (np.abs(g) <= 1e-9)
+    out: list[dict | None] = []
+    for i in range(B):
+        if not (go[i] and ok[i] and conv[i]):
+            out.append(None)
+            continue
+        M = J[i, :3, :3]
+        mult = np.linalg.eigvals(M)
+        out.append(
+            dict(
+                kind=int(kind[i]),
+                index=int(j[i]),
+                lam=float(solve.lam0[i] + solve.scale[i] * z[i, 3]),
+                lam_error=float(dlam[i]),
+                u=z[i, 0],
+                v1=z[i, 1],
+                v2=z[i, 2],
+                multipliers=mult[np.argsort(-np.abs(mult))],
+                value=float(abs(g[i])),
+                smooth=True,
+                located=True,
+            )  # fmt: skip
+        )
     return out
 
 
@@ -143,8 +216,8 @@ def _locate(solve, rows: list[tuple | None], contact: str, lam_tol: float) -> li
     """Illinois regula falsi on the chord of each lane's bracket, all lanes per corrector call."""
     B = len(rows)
     go = np.array([r is not None for r in rows])
-    pad = (0, 0, np.zeros(4), np.ones(4), 1.0, -1.0)
-    kind, j, za, zb, ga, gb = (np.array(x) for x in zip(*[r if r is not None else pad for r in rows]))
+    pad = (0, 0, np.zeros(4), np.ones(4), 1.0, -1.0, np.zeros((5, 4)), np.zeros((5, 4)))
+    kind, j, za, zb, ga, gb, _, _ = (np.array(x) for x in zip(*[r if r is not None else pad for r in rows]))
     L = np.linalg.norm(zb - za, axis=-1)
     e = (zb - za) / np.where(L > 0, L, 1)[:, None]
     lo, hi = np.zeros(B), L.copy()
@@ -212,20 +285,43 @@ def _locate(solve, rows: list[tuple | None], contact: str, lam_tol: float) -> li
     return out
 
 
-def find_events(d: dict, status: np.ndarray, failed_at: np.ndarray, solve, contact: str, locate: bool) -> BranchEvents:
-    """The events of each branch (module docstring), located where `locate`."""
+LOCATABLE = frozenset({EventKind.FOLD, EventKind.PERIOD_DOUBLING, EventKind.BRANCH_POINT, EventKind.SSL_SL,
+                       EventKind.LIFTOFF})  # fmt: skip
+"""The kinds with a test function (`SWITCH` has none)."""
+
+
+def kinds(locate: bool | Sequence[str]) -> frozenset[int]:
+    """The event kinds to locate: all (`True`), none (`False`), or those named."""
+    if isinstance(locate, bool):
+        return LOCATABLE if locate else frozenset()
+    codes = {name: code for code, name in NAMES.items() if code in LOCATABLE}
+    if isinstance(locate, str) or any(name not in codes for name in locate):
+        raise ValueError(f"locate must be a bool or a sequence of event kinds among {sorted(codes)}, got {locate!r}.")
+    return frozenset(codes[name] for name in locate)
+
+
+def find_events(d: dict, status: np.ndarray, failed_at: np.ndarray, solve, contact: str, locate: frozenset[int]):
+    """The events of each branch (module docstring); those of the kinds `locate` located, all branches'
+    root solves advancing together."""
     rows = _brackets(d, status, failed_at)
     B = len(rows)
     lam_tol = LAM_TOL if np.dtype(solve.dtype).itemsize == 8 else 1e-5
-    found: list[list[dict]] = [[] for _ in range(B)]
-    for r in range(max((len(x) for x in rows), default=0)):
-        lane = [x[r] if r < len(x) else None for x in rows]
-        todo = [x if locate and x is not None and x[0] != EventKind.SWITCH else None for x in lane]
-        res = _locate(solve, todo, contact, lam_tol) if any(x is not None for x in todo) else todo
+    todo = [[x for x in branch if x[0] in locate] for branch in rows]
+    done: list[dict[int, dict]] = [{} for _ in range(B)]
+    switching = (EventKind.SSL_SL, EventKind.LIFTOFF)
+    for r in range(max((len(x) for x in todo), default=0)):
+        lane = [x[r] if r < len(x) else None for x in todo]
+        newton = _surface(solve, [x if x is not None and x[0] in switching else None for x in lane], lam_tol)
+        rest = [x if x is not None and newton[i] is None else None for i, x in enumerate(lane)]
+        bracketed = _locate(solve, rest, contact, lam_tol) if any(x is not None for x in rest) else rest
         for i, x in enumerate(lane):
-            if x is None:
-                continue
-            ev = res[i] if res[i] is not None else _unlocated(x, solve, i)
+            ev = newton[i] if newton[i] is not None else bracketed[i]
+            if ev is not None:
+                done[i][id(x)] = ev
+    found: list[list[dict]] = [[] for _ in range(B)]
+    for i, branch in enumerate(rows):
+        for x in branch:
+            ev = done[i].get(id(x)) or _unlocated(x, solve, i)
             j = x[1]
             t = d["t"][i, j : j + 2, 3]
             ev["turn"] = bool(j + 1 < d["count"][i] and (t[0] > 0) != (t[1] > 0))
@@ -251,7 +347,7 @@ def find_events(d: dict, status: np.ndarray, failed_at: np.ndarray, solve, conta
 def _unlocated(row: tuple, solve, i: int) -> dict:
     """An event bracketed but not located: the linear interpolation of its test function (or the
     middle), with the distance to the farther point as its error."""
-    kind, j, za, zb, ga, gb = row
+    kind, j, za, zb, ga, gb, _, _ = row
     w = ga / (ga - gb) if np.isfinite(ga) and np.isfinite(gb) and ga != gb else 0.5
     z = za + w * (zb - za)
     lam = solve.lam0[i] + solve.scale[i] * z[3]

@@ -28,7 +28,7 @@ import numpy as np
 from . import _corrector as corrector
 from ._actuation import AbstractWaveform
 from ._batch import default_max_steps, prepare
-from ._bifurcation import BranchEvents, find_events
+from ._bifurcation import BranchEvents, find_events, kinds
 from ._custom_types import Array
 from ._dynamics import AbstractDynamics, Exact
 from ._gait import GaitStatus, steady_gait
@@ -164,7 +164,7 @@ def continuation(
     step: float = 0.01,
     max_step: float = 0.04,
     min_step: float = 1e-6,
-    locate: bool = True,
+    locate: bool | Sequence[str] = True,
     tol: float | None = None,
     max_iter: int = 8,
     transient: int = 30,
@@ -190,7 +190,8 @@ def continuation(
     - `max_points`: points per branch, the start included.
     - `step`, `max_step`, `min_step`: first, largest and smallest arclength step, with the
       parameter in units of $|$`stop` $-$ start$|$.
-    - `locate`: find and locate the branch's events.
+    - `locate`: locate the branch's events (all kinds, none, or the kinds named, e.g. `("SSL_SL",)`);
+      the others are reported between the two points that bracket them.
     - `tol`, `max_iter`: the corrector's Newton tolerance (as [`steady_gait`][]'s) and iterations.
     - `transient`, `dynamics`, `waveform`, `contact`, `start`, `dtype`: as in [`steady_gait`][].
 
@@ -209,6 +210,7 @@ def continuation(
         raise TypeError(f"continuation needs Exact dynamics, got {type(dynamics).__name__}.")
     spec = corrector.parse(parameter, waveform)
     _check(max_points, step, max_step, min_step, max_iter)
+    to_locate = kinds(locate)
     flat, wave, axes, shape = prepare(params, waveform, dtype)
     B = math.prod(shape)
     lam0 = np.broadcast_to(np.asarray(corrector.value(flat, wave, spec), np.float64), (B,))
@@ -244,7 +246,7 @@ def continuation(
     walk = _Walk(solve, r, ok, step, max_step, min_step, max_points)
     walk.run(status)
     data = _pack(walk.points, solve, k)
-    events = find_events(data, status, walk.failed_at, solve, contact, locate)
+    events = find_events(data, status, walk.failed_at, solve, contact, to_locate)
     return _branch(data, status, k, fl(g.status), events, shape, flat.dtype, spec.label, contact)
 
 
@@ -253,7 +255,8 @@ _E4 = np.eye(4)[3]
 SWITCH_STEP = 1e-3
 """Largest step across a change of switching structure (switch count, or the sign of the slip margin
 or of the smallest normal force): a step that changes it is retried shorter down to this, so that the
-corrector cannot jump to another branch with another structure."""
+corrector cannot jump to another branch with another structure (past a fold two stable gaits
+coexist, their section states a few 1e-3 apart)."""
 
 CORNER_STEP = 1e-4
 """First step onto the other piece of the branch after a corner (see `_Walk.cross`)."""
@@ -321,7 +324,7 @@ class _Walk:
             full = good & (counts >= self.max_points)
             dead = active & ~good & (self.h < self.min_step)
             lifted = dead & (r.out.status == Status.LIFTOFF)
-            invalid = dead & ~r.valid
+            invalid = dead & ~r.valid & np.all(np.isfinite(zp), axis=-1)
             self.failed_at = np.where(dead[:, None], zp, self.failed_at)
             crossed = self.cross(dead & ~lifted & ~invalid & (self.corners < MAX_CORNERS))
             dead &= ~crossed
