@@ -27,7 +27,7 @@ from . import _corrector as corrector, _model as model, _period as period
 from ._actuation import AbstractWaveform
 from ._batch import default_max_steps, prepare, unflatten
 from ._compile import engine_jit
-from ._custom_types import Array
+from ._custom_types import Array, ArrayLike
 from ._dynamics import AbstractDynamics, Exact
 from ._measure import STICK_TOL
 from ._params import Params
@@ -116,6 +116,14 @@ def _transient_batch(params, wave, wave_axes, contact, start, dt, transient, max
 _transient_batch = engine_jit(_transient_batch, ("wave_axes", "contact", "start", "dt"))
 
 
+def _transient_from_batch(params, wave, wave_axes, contact, y, dt, transient, max_steps):
+    one = lambda p, w, s: period.transient_one(p, w, contact, s, dt, transient, max_steps)
+    return jax.vmap(one, in_axes=(0, wave_axes, 0))(params, wave, y)
+
+
+_transient_from_batch = engine_jit(_transient_from_batch, ("wave_axes", "contact", "dt"))
+
+
 def _newton(flat, wave, axes, contact, dt, y0, go, k, tol, max_iter, max_steps) -> dict:
     """Newton's method on $\\Phi_k(y) = y$ from `y0` where `go`: the continuation's corrector
     ([`_corrector`][]) with the parameter held (no parameter selected, arclength scale 0)."""
@@ -156,7 +164,7 @@ def steady_gait(
     dynamics: AbstractDynamics | None = None,
     waveform: AbstractWaveform | None = None,
     contact: str = "strict",
-    start: str = "paper",
+    start: str | ArrayLike = "paper",
     dtype: Any = None,
 ) -> Gait:
     """Solve the steady gait of each configuration as a periodic orbit (module docstring).
@@ -174,7 +182,10 @@ def steady_gait(
     - `tol`: Newton tolerance on $\\|\\Phi_k(y) - y\\|_\\infty / (1 + \\|y\\|_\\infty)$ (default 1e-11
       in float64, 1e-5 in float32).
     - `max_iter`: Newton iterations per `k`.
-    - `dynamics`: [`Exact`][] (its `dt`); `waveform`, `contact`, `start`, `dtype`: as in [`simulate`][].
+    - `dynamics`: [`Exact`][] (its `dt`); `waveform`, `contact`, `dtype`: as in [`simulate`][].
+    - `start`: as in [`simulate`][] (`"paper"`, `"relaxed"`: at rest), or section states
+      $(u, v_1, v_2)$ at phase 0, an array of shape `batch + (3,)` (a mass given $v_i = 0$ starts
+      stuck where eq. 7 allows).
 
     **Returns:** a [`Gait`][] with batch shape `params.batch_shape`. Configurations without
     a converged orbit carry NaN numbers and their `status`; the others are unaffected.
@@ -190,8 +201,8 @@ def steady_gait(
     if not isinstance(dynamics, Exact):
         raise TypeError(f"steady_gait needs Exact dynamics, got {type(dynamics).__name__}.")
     model.check_contact(contact)
-    model.initial_gap(Params(), start)
     flat, wave, axes, shape = prepare(params, waveform, dtype)
+    y_start = _start_states(start, shape, flat.dtype)
     f32 = jnp.finfo(flat.dtype).bits < 64
     tol = (1e-5 if f32 else 1e-11) if tol is None else float(tol)
     ks = _check(periods, transient, tol, max_iter)
@@ -201,7 +212,11 @@ def steady_gait(
     real = lambda v: jnp.asarray(v, flat.dtype)
 
     # The transient is shared by every period tried.
-    y0, valid, trans, trans_lift = _transient_batch(flat, wave, axes, contact, start, dynamics.dt, real(transient), mst)
+    if y_start is None:
+        run = _transient_batch(flat, wave, axes, contact, start, dynamics.dt, real(transient), mst)
+    else:
+        run = _transient_from_batch(flat, wave, axes, contact, y_start, dynamics.dt, real(transient), mst)
+    y0, valid, trans, trans_lift = run
     valid, trans = np.asarray(valid), np.asarray(trans)
     # -1: to be solved; else the final status (invalid, a strict lift-off, the step cap).
     base = np.select(
@@ -239,6 +254,18 @@ def steady_gait(
             break
     assert best is not None
     return unflatten(_gait(best, omega, flat, contact), shape)
+
+
+def _start_states(start: Any, shape: tuple[int, ...], dtype: Any) -> Array | None:
+    """`None` for a named start (checked), else the section states flattened to `(size, 3)`."""
+    if isinstance(start, str):
+        model.initial_gap(Params(), start)
+        return None
+    y = np.asarray(start, np.float64)
+    if y.shape != shape + (3,) or not np.all(np.isfinite(y)):
+        raise ValueError(f"start must be 'paper', 'relaxed' or finite section states (u, v1, v2) of shape "
+                         f"{shape + (3,)}, got shape {y.shape}.")  # fmt: skip
+    return jnp.asarray(y.reshape(-1, 3), dtype)
 
 
 def _multipliers(r: dict) -> np.ndarray:

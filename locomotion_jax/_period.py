@@ -159,9 +159,14 @@ def period_map(params, wave, P, contact, dt, max_steps, k, y) -> Period:
 
 def transient_one(params, wave, contact, start, dt, transient, max_steps):
     """`transient` actuation periods from the start: the end's reduced state, the parameters'
-    validity, the run's `Status` and whether a normal force reached zero. One configuration."""
+    validity, the run's `Status` and whether a normal force reached zero. One configuration.
+    `start` names an initial condition at rest (`"paper"`, `"relaxed"`), or is a section state
+    $(u, v_1, v_2)$ at phase 0."""
     params, valid = safe_params(params)
     P = exact.consts(params, wave)
-    st = exact.init(params, wave, contact, jnp.zeros((), params.dtype), model.initial_gap(params, start))
+    if isinstance(start, str):
+        st = exact.init(params, wave, contact, jnp.zeros((), params.dtype), model.initial_gap(params, start))
+    else:
+        st = section_state(params, wave, contact, start)
     st, _ = advance(params, wave, P, contact, dt, st, transient * (2 * jnp.pi) / wave.omega, max_steps)
     return reduced(st), valid, st.status, jnp.isfinite(st.t_liftoff)
