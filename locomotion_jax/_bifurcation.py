@@ -313,7 +313,9 @@ def find_events(d: dict, status: np.ndarray, failed_at: np.ndarray, solve, conta
         lane = [x[r] if r < len(x) else None for x in todo]
         newton = _surface(solve, [x if x is not None and x[0] in switching else None for x in lane], lam_tol)
         rest = [x if x is not None and newton[i] is None else None for i, x in enumerate(lane)]
-        bracketed = _locate(solve, rest, contact, lam_tol) if any(x is not None for x in rest) else rest
+        bracketed: list[dict | None] = [None] * B
+        if any(x is not None for x in rest):
+            bracketed = _locate(solve, rest, contact, lam_tol)
         for i, x in enumerate(lane):
             ev = newton[i] if newton[i] is not None else bracketed[i]
             if ev is not None:

@@ -37,14 +37,15 @@ from ._status import Status
 
 
 class Spec(NamedTuple):
-    """A continuation parameter: a `Params` field (`index` -1) or a waveform coefficient."""
+    """A continuation parameter: a `Params` field (`harmonic` -1) or a waveform coefficient
+    (`name` "cos" or "sin", `harmonic` from 0)."""
 
     name: str
-    index: int
+    harmonic: int
 
     @property
     def label(self) -> str:
-        return self.name if self.index < 0 else f"{self.name}{self.index + 1}"
+        return self.name if self.harmonic < 0 else f"{self.name}{self.harmonic + 1}"
 
 
 def parse(parameter: str, waveform: AbstractWaveform | None) -> Spec:
@@ -70,8 +71,8 @@ def parse(parameter: str, waveform: AbstractWaveform | None) -> Spec:
 
 def value(params: Params, wave: AbstractWaveform, spec: Spec) -> Array:
     """The parameter's value (the waveform's, where it has one); not broadcast to the batch."""
-    if spec.index >= 0:
-        return getattr(wave, spec.name)[..., spec.index]
+    if spec.harmonic >= 0:
+        return getattr(wave, spec.name)[..., spec.harmonic]
     if spec.name in _WAVE_FIELDS and hasattr(wave, spec.name):
         return getattr(wave, spec.name)
     return getattr(params, spec.name)
@@ -96,12 +97,13 @@ def selector(spec: Spec | None, wave: AbstractWaveform) -> Selector:
     n = wave.harmonics if isinstance(wave, Fourier) else 0
     onehot = lambda size, i: np.arange(size) == i
     name = None if spec is None else spec.name
-    coef = spec is not None and spec.index >= 0
+    h = -1 if spec is None else spec.harmonic
+    coef = h >= 0
     return Selector(
         params=jnp.asarray(onehot(len(PARAM_NAMES), PARAM_NAMES.index(name) if name in PARAM_NAMES else -1)),
         wave=jnp.asarray([f == name and not coef for f in _WAVE_FIELDS]),
-        cos=jnp.asarray(onehot(n, spec.index if coef and name == "cos" else -1)) if fourier else None,
-        sin=jnp.asarray(onehot(n, spec.index if coef and name == "sin" else -1)) if fourier else None,
+        cos=jnp.asarray(onehot(n, h if name == "cos" else -1)) if fourier else None,
+        sin=jnp.asarray(onehot(n, h if name == "sin" else -1)) if fourier else None,
     )
 
 
@@ -173,7 +175,9 @@ def _correct_one(params, wave, sel, contact, dt, k, lam0, scale, z0, zref, c, go
 def _correct_batch(
     params, wave, wave_axes, sel, contact, dt, k, lam0, scale, z0, zref, c, go, tol, max_iter, max_steps
 ):
-    one = lambda p, w, *a: _correct_one(p, w, sel, contact, dt, *a, tol, max_iter, max_steps)
+    def one(p, w, k1, l1, s1, z1, r1, c1, g1):
+        return _correct_one(p, w, sel, contact, dt, k1, l1, s1, z1, r1, c1, g1, tol, max_iter, max_steps)
+
     return jax.vmap(one, in_axes=(0, wave_axes) + (0,) * 7)(params, wave, k, lam0, scale, z0, zref, c, go)
 
 

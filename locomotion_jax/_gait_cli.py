@@ -7,7 +7,7 @@ Floquet multiplier is a pair `[re, im]`.
 """
 
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, NoReturn
 
 import numpy as np
 import typer
@@ -53,7 +53,7 @@ def _model_values(model: Values, params) -> dict[str, float]:
     return values
 
 
-def _fail(err: Exception):
+def _fail(err: Exception) -> NoReturn:
     typer.echo(f"Error: {err}", err=True)
     raise typer.Exit(2) from None
 
