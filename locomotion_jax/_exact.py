@@ -167,6 +167,12 @@ class StepInfo(NamedTuple):
     - `t1`, `y1`: the committed end (before the switches pending there).
     - `stuck1`, `stuck2`: the mode during `[t0, t1]`.
     - `target_fired`, `t_target`, `y_target`: the caller's target event, if it fired.
+    - `zero1`, `zero2`: a slipping mass's velocity reached zero at `t0` (it stuck or
+      reversed there); `slack1`, `slack2`: $\\mu_s n_i - |F_i|$ at `t0` (eq. 7: it sticks
+      where this is $\\ge 0$).
+    - `h`: the step's full length ($t_1 - t_0$ unless cut at an event) and `fy`: the
+      vertical spring force $f_y$ with its first and second time derivatives at $t_0$
+      and at $t_0 + h$, six values for its quintic Hermite interpolant over the step.
     """
 
     commit: Array
@@ -180,6 +186,12 @@ class StepInfo(NamedTuple):
     target_fired: Array
     t_target: Array
     y_target: State
+    zero1: Array
+    zero2: Array
+    slack1: Array
+    slack2: Array
+    h: Array
+    fy: tuple[Array, Array, Array, Array, Array, Array]
 
 
 class Target(NamedTuple):
@@ -738,6 +750,12 @@ def step(
         target_fired=target_now | (commit & target_cut),
         t_target=t_target,
         y_target=y_target,
+        zero1=vel1,
+        zero2=vel2,
+        slack1=P.mu_s * f0.n1 - absF,
+        slack2=P.mu_s * f0.n2 - absF,
+        h=h,
+        fy=(f0.fy, D0.fy, D0.fy2, f1.fy, D1.fy, D1.fy2),
     )
     return new, info
 
