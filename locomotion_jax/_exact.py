@@ -34,6 +34,20 @@ negative there (simultaneous events, e.g. by symmetry when $d = 0$, $m_1 = m_2$)
 The forces depend only on positions and time, never on the other mass's mode, so
 each mass's stick condition is decided on its own.
 
+**Margins** ([`margins`][]). A result is a smooth function of the parameters only
+while its switching structure (which events happen, in which order, with which
+outcome) stays the same; the engine records how close the run came to a change of
+it. Each margin is a drive phase $\\omega\\,\\delta t$ (radians): at a located crossing
+of an event function $g$, the phase between the crossing and the vertex of $g$'s
+local parabola, $\\omega|\\dot g/\\ddot g|$ (0 at a grazing crossing, which a small change
+removes); at a turning point of $g$ that stays above zero, the same phase for the
+parabola lowered by its minimum $g_{\\min}$, $\\omega\\sqrt{2 g_{\\min}/\\ddot g}$ (0 when it
+touches zero); where a slipping mass stops, the phase $\\omega|s/\\dot s|$ to the instant
+at which $s = \\mu_s n_i - |F_i|$, which decides between sticking and reversing,
+changes sign. Scale-free, they compare events of every kind; a typical switch is at
+0.1-1 rad, and a margin below `SMOOTH_MARGIN` (in `_results`) flags a result whose
+derivative may not be a derivative.
+
 **Speed** (benchmarks/NOTES.md). XLA on the CPU duplicates shared cheap
 subexpressions into every kernel that uses them (one kernel per carried scalar),
 and its float64 `sin` costs more than a force evaluation. So the state is a flat
@@ -139,6 +153,9 @@ class Hybrid(eqx.Module):
     flags a mass whose event was located at `t` (it switches at the start of the
     next iteration); `nu*` the side ($\\pm 1$) of each normal force (paper contact:
     flipped where a crossing is located, so that $n_i = \\nu_i N_i$ over a step).
+    `cross`, `near`: the squares of the smallest margins to a change of switching
+    structure met so far ([`margins`][]), at located switches and at near misses;
+    `t_switch` the time of the last located crossing other than the target's.
     """
 
     t: Array
@@ -157,6 +174,9 @@ class Hybrid(eqx.Module):
     status: Array
     t_liftoff: Array
     n_switch: Array
+    cross: Array
+    near: Array
+    t_switch: Array
 
 
 class StepInfo(NamedTuple):
@@ -167,6 +187,10 @@ class StepInfo(NamedTuple):
     - `t1`, `y1`: the committed end (before the switches pending there).
     - `stuck1`, `stuck2`: the mode during `[t0, t1]`.
     - `target_fired`, `t_target`, `y_target`: the caller's target event, if it fired.
+    - `target_margin`: the square of the target's margin this step ([`margins`][]):
+      at its crossing, or at a near miss; `inf` if neither.
+    - `t_next`: the next event other than the target predicted from the start
+      (Taylor quadratic of each event function; `inf` if none approaches zero).
     """
 
     commit: Array
@@ -180,6 +204,8 @@ class StepInfo(NamedTuple):
     target_fired: Array
     t_target: Array
     y_target: State
+    target_margin: Array
+    t_next: Array
 
 
 class Target(NamedTuple):
@@ -489,19 +515,41 @@ def rates(params: Params, f: model.Forces, y: Array, stuck: Array, sdir: Array) 
     return jnp.stack([dx1, a1, dx2, a2, p_d, model.actuator_power(f)])
 
 
-def init(params: Params, wave: AbstractWaveform, contact: Contact, x1: Array, x2: Array) -> Hybrid:
-    """State at $t = 0$ with both masses at rest; each mass sticks if eq. (7) allows."""
+def init(
+    params: Params,
+    wave: AbstractWaveform,
+    contact: Contact,
+    x1: Array,
+    x2: Array,
+    v1: Array | None = None,
+    v2: Array | None = None,
+) -> Hybrid:
+    """State at $t = 0$: positions `x1, x2` and velocities `v1, v2` (default at rest).
+
+    A mass at rest sticks if eq. (7) allows (its velocity then carries no tangent), and
+    otherwise slips in the direction of its spring force; a moving one slips along its
+    velocity."""
     dtype = params.dtype
     P = consts(params, wave)
     zero = jnp.zeros((), dtype)
     x1 = jnp.asarray(x1, dtype)
     x2 = jnp.asarray(x2, dtype)
-    y = State(x1, 0 * x1, x2, 0 * x2, zero, zero)
     cph, sph = jnp.ones((), dtype), zero
     l0, _, _ = wave.at_phase(cph, sph)
     f, _ = _forces(P, contact, l0, x1, x2)
     absF = jnp.abs(f.fx)
     s1 = jnp.where(f.fx >= 0, 1.0, -1.0).astype(dtype)
+    s2 = -s1
+    stuck1 = absF <= P.mu_s * f.n1
+    stuck2 = absF <= P.mu_s * f.n2
+    if v1 is None or v2 is None:
+        y = State(x1, 0 * x1, x2, 0 * x2, zero, zero)
+    else:
+        v1, v2 = jnp.asarray(v1, dtype), jnp.asarray(v2, dtype)
+        stuck1, stuck2 = stuck1 & (v1 == 0), stuck2 & (v2 == 0)
+        sgn = lambda v, s: jnp.where(v > 0, 1.0, jnp.where(v < 0, -1.0, s)).astype(dtype)
+        s1, s2 = sgn(v1, s1), sgn(v2, s2)
+        y = State(x1, jnp.where(stuck1, 0, v1), x2, jnp.where(stuck2, 0, v2), zero, zero)
     lifted = (f.N1 <= 0) | (f.N2 <= 0)
     status = jnp.where(lifted & (contact == "strict"), Status.LIFTOFF, Status.OK).astype(jnp.int32)
     no = jnp.asarray(False)
@@ -513,10 +561,10 @@ def init(params: Params, wave: AbstractWaveform, contact: Contact, x1: Array, x2
         comp=State(*(zero,) * 6) if f32 else None,
         cph=cph,
         sph=sph,
-        stuck1=absF <= P.mu_s * f.n1,
-        stuck2=absF <= P.mu_s * f.n2,
+        stuck1=stuck1,
+        stuck2=stuck2,
         s1=s1,
-        s2=-s1,
+        s2=s2,
         pend1=no,
         pend2=no,
         nu1=side(f.N1),
@@ -524,6 +572,9 @@ def init(params: Params, wave: AbstractWaveform, contact: Contact, x1: Array, x2
         status=status,
         t_liftoff=jnp.where(lifted, zero, jnp.inf).astype(dtype),
         n_switch=jnp.zeros((), jnp.int32),
+        cross=jnp.asarray(jnp.inf, dtype),
+        near=jnp.asarray(jnp.inf, dtype),
+        t_switch=jnp.asarray(-jnp.inf, dtype),
     )
 
 
@@ -606,8 +657,11 @@ def step(
     span = t_stop - t0
     h_nom = jnp.minimum(jnp.asarray(dt, dtype), span)
     s_pred = jnp.asarray(jnp.inf, dtype)
-    for g, d, e in zip(g0s, d0s, e0s):
+    for g, d, e in zip(g0s[:3], d0s[:3], e0s[:3]):
         s_pred = jnp.minimum(s_pred, _predict(g, d, e))
+    s_switch = s_pred  # the next predicted event other than the target's
+    if target is not None:
+        s_pred = jnp.minimum(s_pred, _predict(g0s[3], d0s[3], e0s[3]))
     # Never shorter than a few ulps of t, or float32 time would stop advancing.
     h_pred = jnp.maximum(PREDICT_MARGIN * s_pred, 64 * jnp.finfo(dtype).eps * jnp.maximum(jnp.abs(t0), 1))
     short = h_pred < h_nom
@@ -667,6 +721,18 @@ def step(
     coef = _quintic(jnp.maximum(cg0, 0), h * cd0, h2 * ce0, jnp.minimum(cg1, 0), h * cd1, h2 * ce1)
     theta = keep(jnp.where(cut, _root(coef, jnp.minimum(cg1, 0)), 1))
 
+    # -- margins to a change of switching structure ([`margins`][]); they feed nothing back.
+    target_cut = first[-1] if target is not None else jnp.asarray(False)
+    sg0 = jnp.where(f0.fx >= 0, 1.0, -1.0).astype(dtype)
+    n1d0, n2d0, _, _ = _normal_rates(contact, D0, sides)
+    decide = (
+        (vel1, P.mu_s * f0.n1 - absF, P.mu_s * n1d0 - sg0 * D0.fx),
+        (vel2, P.mu_s * f0.n2 - absF, P.mu_s * n2d0 - sg0 * D0.fx),
+    )
+    m_cross, m_near, m_target = margins(
+        wave.omega, h, theta, coef, cut, target_cut, crossed, g0s, d0s, e0s, decide, target is not None
+    )
+
     # -- commit: the full step, or the quintic dense output at the crossing.
     H1, H2, H3, H4, H5 = (keep(x) for x in _hermite_basis(theta))
     hH1, hH4, h2H2, h2H5 = h * H1, h * H4, h2 * H2, h2 * H5
@@ -702,7 +768,6 @@ def step(
         low1 = nu1 * f1.N1 <= nu2 * f1.N2
         nu1, nu2 = jnp.where(lift_cut & low1, -nu1, nu1), jnp.where(lift_cut & ~low1, -nu2, nu2)
     commit = ~stop0
-    target_cut = first[-1] if target is not None else jnp.asarray(False)
     status = jnp.where(lift, Status.LIFTOFF, st.status).astype(jnp.int32)
 
     keepc = lambda new, old: jnp.where(commit, new, old)
@@ -723,6 +788,9 @@ def step(
         status=status,
         t_liftoff=t_lift.astype(dtype),
         n_switch=n_switch,
+        cross=jnp.where(commit, jnp.minimum(st.cross, m_cross), st.cross),
+        near=jnp.where(commit, jnp.minimum(st.near, m_near), st.near),
+        t_switch=jnp.where(commit & cut & ~target_cut, jax.lax.stop_gradient(tc), st.t_switch),
     )
     t_target = jnp.where(target_now, t0, tc)
     y_target = yc.map(lambda a, b: jnp.where(target_now, b, a), yA)
@@ -738,8 +806,58 @@ def step(
         target_fired=target_now | (commit & target_cut),
         t_target=t_target,
         y_target=y_target,
+        target_margin=jnp.where(commit, m_target, jnp.inf),
+        t_next=jax.lax.stop_gradient(t0 + s_switch),
     )
     return new, info
+
+
+def margins(omega, h, theta, coef, cut, target_cut, crossed, g0s, d0s, e0s, decide, has_target):
+    """One step's margins to a change of switching structure, as squared drive phases
+    (module docstring, "Margins"): `(cross, near, target)`, each `inf` where there is none.
+
+    - `cross`: at the located crossing (not the target's),
+      $(\\omega\\,\\dot g/\\ddot g)^2$ from the event quintic $p$ at its root:
+      $\\dot g = p'(\\theta^*)/h$, $\\ddot g = p''(\\theta^*)/h^2$. At a decision
+      `decide = ((fired, s, rate), ...)` (a slipping mass whose velocity reached zero
+      sticks if $s = \\mu_s n_i - |F_i| \\ge 0$, else reverses): $(\\omega s/\\dot s)^2$.
+    - `near`: an event function $g_0 + \\dot g_0 s + \\ddot g_0 s^2/2$ that turns inside
+      the step without crossing: $2\\omega^2 g_{\\min}/\\ddot g_0$ ($0$ if the parabola dips
+      below zero: an excursion shorter than the step).
+    - `target`: the same two for the caller's target event (the last function).
+
+    Values only: they are held out of forward-mode derivatives (`stop_gradient`).
+    """
+    sq = jax.lax.stop_gradient
+    omega, h, theta, coef = sq(omega), sq(h), sq(theta), sq(coef)
+    w2 = omega * omega
+    inf = jnp.asarray(jnp.inf, h.dtype)
+    c = coef
+    p1 = c[1] + theta * (2 * c[2] + theta * (3 * c[3] + theta * (4 * c[4] + theta * 5 * c[5])))
+    p2 = 2 * c[2] + theta * (6 * c[3] + theta * (12 * c[4] + theta * 20 * c[5]))
+    ratio = p1 / jnp.where(p2 != 0, p2, 1)
+    at_root = jnp.where(cut & (p2 != 0), w2 * (h * h) * (ratio * ratio), inf)
+    cross = jnp.where(target_cut, inf, at_root)
+    for fired, s, rate in decide:
+        s, rate = sq(s), sq(rate)
+        r = s / jnp.where(rate != 0, rate, 1)
+        cross = jnp.minimum(cross, jnp.where(fired & (rate != 0), w2 * r * r, inf))
+    near_each = []
+    for c_i, g0, d0, e0 in zip(crossed, g0s, d0s, e0s):
+        g0, d0, e0 = sq(g0), sq(d0), sq(e0)
+        turns = (e0 > 0) & (d0 < 0) & (-d0 <= h * e0) & ~c_i
+        inv = 1 / jnp.where(turns, e0, 1)
+        q = d0 * inv
+        near_each.append(jnp.where(turns, w2 * jnp.maximum(2 * g0 * inv - q * q, 0), inf))
+    n_mass = len(near_each) - (1 if has_target else 0)
+    near = near_each[0]
+    for x in near_each[1:n_mass]:
+        near = jnp.minimum(near, x)
+    if has_target:
+        target = jnp.minimum(jnp.where(target_cut, at_root, inf), near_each[-1])
+    else:
+        target = inf
+    return cross, near, target
 
 
 def _any(flags: list) -> Array:

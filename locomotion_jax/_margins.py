@@ -1,0 +1,47 @@
+"""Margins to a change of switching structure, as the front ends report them.
+
+The engines record, in squared radians of drive phase, how close a run came to a
+change of its switching structure (`_exact` module docstring, "Margins"); these
+functions turn those records into the result fields of `measure` and `simulate`.
+"""
+
+import jax
+import jax.numpy as jnp
+
+from ._custom_types import Array
+
+
+def margin_fields(
+    started: Array, reached: Array, cross: Array, near: Array, target: Array, nan: Array
+) -> dict[str, Array]:
+    """`transversality`, `near_miss` and `margin_z` of a measurement from the squared margins;
+    NaN where the measurement did not start, and `margin_z` 0 where `z` was not reached
+    (`tau_z = inf` has no derivative)."""
+    root = lambda m: jnp.where(started, jnp.sqrt(m), nan)
+    return dict(transversality=root(cross), near_miss=root(near), margin_z=root(jnp.where(reached, target, 0)))
+
+
+def coincidence(omega: Array, t_switch: Array, info) -> Array:
+    """The target's squared margin in the step where it fires (`info`, a `StepInfo`), with
+    the phase to the nearest switch: the last one (`t_switch`) or the next one predicted.
+
+    A switch that crosses $t_z$ leaves `tau_z` and `e_z` differentiable (the velocities are
+    continuous there) but changes their curvature, so that a finite difference straddling
+    it is off, and the derivative holds over a smaller range."""
+    omega = jax.lax.stop_gradient(omega)
+    t_z = jax.lax.stop_gradient(info.t_target)
+    gap = jnp.minimum(t_z - t_switch, info.t_next - t_z)
+    return jnp.minimum(info.target_margin, (omega * gap) ** 2)
+
+
+def switch_gap(omega: Array, t: Array, t_switch: Array) -> Array:
+    """Drive phase between each save time `t` and the nearest located switch, from the time
+    of the last switch at each save (`t_switch`; last axis: saves; `omega`: one per row).
+
+    The first switch after save $i$ is the last one at save $i + 1$ if that is later than
+    $t_i$; otherwise none falls before $t_{i+1}$, which then bounds the gap (as the end
+    of the run does for the last save)."""
+    later = jnp.concatenate([t_switch[..., 1:], jnp.full_like(t_switch[..., :1], jnp.inf)], -1)
+    t_next = jnp.concatenate([t[..., 1:], jnp.full_like(t[..., :1], jnp.inf)], -1)
+    after = jnp.where(later > t, later, t_next) - t
+    return omega[..., None] * jnp.minimum(t - t_switch, after)
