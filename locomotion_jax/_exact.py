@@ -187,10 +187,6 @@ class StepInfo(NamedTuple):
     - `t1`, `y1`: the committed end (before the switches pending there).
     - `stuck1`, `stuck2`: the mode during `[t0, t1]`.
     - `target_fired`, `t_target`, `y_target`: the caller's target event, if it fired.
-    - `target_margin`: the square of the target's margin this step ([`margins`][]):
-      at its crossing, or at a near miss; `inf` if neither.
-    - `t_next`: the next event other than the target predicted from the start
-      (Taylor quadratic of each event function; `inf` if none approaches zero).
     """
 
     commit: Array
@@ -204,8 +200,6 @@ class StepInfo(NamedTuple):
     target_fired: Array
     t_target: Array
     y_target: State
-    target_margin: Array
-    t_next: Array
 
 
 class Target(NamedTuple):
@@ -523,8 +517,10 @@ def init(
     x2: Array,
     v1: Array | None = None,
     v2: Array | None = None,
+    phase: tuple[Array, Array] | None = None,
 ) -> Hybrid:
-    """State at $t = 0$: positions `x1, x2` and velocities `v1, v2` (default at rest).
+    """State at $t = 0$: positions `x1, x2` and velocities `v1, v2` (default at rest);
+    `phase` $(\\cos\\omega t, \\sin\\omega t)$ of the drive (default $t = 0$) decides the modes.
 
     A mass at rest sticks if eq. (7) allows (its velocity then carries no tangent), and
     otherwise slips in the direction of its spring force; a moving one slips along its
@@ -534,7 +530,7 @@ def init(
     zero = jnp.zeros((), dtype)
     x1 = jnp.asarray(x1, dtype)
     x2 = jnp.asarray(x2, dtype)
-    cph, sph = jnp.ones((), dtype), zero
+    cph, sph = (jnp.ones((), dtype), zero) if phase is None else phase
     l0, _, _ = wave.at_phase(cph, sph)
     f, _ = _forces(P, contact, l0, x1, x2)
     absF = jnp.abs(f.fx)
@@ -657,11 +653,8 @@ def step(
     span = t_stop - t0
     h_nom = jnp.minimum(jnp.asarray(dt, dtype), span)
     s_pred = jnp.asarray(jnp.inf, dtype)
-    for g, d, e in zip(g0s[:3], d0s[:3], e0s[:3]):
+    for g, d, e in zip(g0s, d0s, e0s):
         s_pred = jnp.minimum(s_pred, _predict(g, d, e))
-    s_switch = s_pred  # the next predicted event other than the target's
-    if target is not None:
-        s_pred = jnp.minimum(s_pred, _predict(g0s[3], d0s[3], e0s[3]))
     # Never shorter than a few ulps of t, or float32 time would stop advancing.
     h_pred = jnp.maximum(PREDICT_MARGIN * s_pred, 64 * jnp.finfo(dtype).eps * jnp.maximum(jnp.abs(t0), 1))
     short = h_pred < h_nom
@@ -717,7 +710,8 @@ def step(
     for i in reversed(range(n_ev - 1)):
         vals = (g0s[i], d0s[i], e0s[i], g1s[i], d1s[i], e1s[i])
         pick = [jnp.where(first[i], v, p) for v, p in zip(vals, pick)]
-    cg0, cd0, ce0, cg1, cd1, ce1 = pick
+    # Pinned: the root finder and the margins both read them.
+    cg0, cd0, ce0, cg1, cd1, ce1 = (keep(v) for v in pick)
     coef = _quintic(jnp.maximum(cg0, 0), h * cd0, h2 * ce0, jnp.minimum(cg1, 0), h * cd1, h2 * ce1)
     theta = keep(jnp.where(cut, _root(coef, jnp.minimum(cg1, 0)), 1))
 
@@ -729,9 +723,7 @@ def step(
         (vel1, P.mu_s * f0.n1 - absF, P.mu_s * n1d0 - sg0 * D0.fx),
         (vel2, P.mu_s * f0.n2 - absF, P.mu_s * n2d0 - sg0 * D0.fx),
     )
-    m_cross, m_near, m_target = margins(
-        wave.omega, h, theta, coef, cut, target_cut, crossed, g0s, d0s, e0s, decide, target is not None
-    )
+    m_cross, m_near = margins(wave.omega, h, theta, coef, cut & ~target_cut, crossed, g0s, d0s, e0s, decide)
 
     # -- commit: the full step, or the quintic dense output at the crossing.
     H1, H2, H3, H4, H5 = (keep(x) for x in _hermite_basis(theta))
@@ -806,58 +798,76 @@ def step(
         target_fired=target_now | (commit & target_cut),
         t_target=t_target,
         y_target=y_target,
-        target_margin=jnp.where(commit, m_target, jnp.inf),
-        t_next=jax.lax.stop_gradient(t0 + s_switch),
     )
     return new, info
 
 
-def margins(omega, h, theta, coef, cut, target_cut, crossed, g0s, d0s, e0s, decide, has_target):
+def margins(omega, h, theta, coef, cut, crossed, g0s, d0s, e0s, decide):
     """One step's margins to a change of switching structure, as squared drive phases
-    (module docstring, "Margins"): `(cross, near, target)`, each `inf` where there is none.
+    (module docstring, "Margins"): `(cross, near)`, each `inf` where there is none.
 
-    - `cross`: at the located crossing (not the target's),
-      $(\\omega\\,\\dot g/\\ddot g)^2$ from the event quintic $p$ at its root:
-      $\\dot g = p'(\\theta^*)/h$, $\\ddot g = p''(\\theta^*)/h^2$. At a decision
-      `decide = ((fired, s, rate), ...)` (a slipping mass whose velocity reached zero
-      sticks if $s = \\mu_s n_i - |F_i| \\ge 0$, else reverses): $(\\omega s/\\dot s)^2$.
-    - `near`: an event function $g_0 + \\dot g_0 s + \\ddot g_0 s^2/2$ that turns inside
-      the step without crossing: $2\\omega^2 g_{\\min}/\\ddot g_0$ ($0$ if the parabola dips
-      below zero: an excursion shorter than the step).
-    - `target`: the same two for the caller's target event (the last function).
+    - `cross`: at the located crossing (`cut`), $(\\omega\\,\\dot g/\\ddot g)^2$ from the event
+      quintic $p$ at its root, $\\dot g = p'(\\theta^*)/h$, $\\ddot g = p''(\\theta^*)/h^2$; and at
+      a decision `decide = ((fired, s, rate), ...)` (a slipping mass whose velocity reached
+      zero sticks if $s = \\mu_s n_i - |F_i| \\ge 0$, else reverses): $(\\omega s/\\dot s)^2$.
+    - `near`: over every event function $g_0 + \\dot g_0 s + \\ddot g_0 s^2/2$ that turns
+      inside the step without crossing, $2\\omega^2 g_{\\min}/\\ddot g_0$ ($0$ if the parabola
+      dips below zero: an excursion shorter than the step).
 
     Values only: they are held out of forward-mode derivatives (`stop_gradient`).
     """
     sq = jax.lax.stop_gradient
-    omega, h, theta, coef = sq(omega), sq(h), sq(theta), sq(coef)
+    omega, h, theta, coef = sq(omega), sq(h), sq(theta), tuple(sq(c) for c in coef)
     w2 = omega * omega
     inf = jnp.asarray(jnp.inf, h.dtype)
     c = coef
     p1 = c[1] + theta * (2 * c[2] + theta * (3 * c[3] + theta * (4 * c[4] + theta * 5 * c[5])))
     p2 = 2 * c[2] + theta * (6 * c[3] + theta * (12 * c[4] + theta * 20 * c[5]))
     ratio = p1 / jnp.where(p2 != 0, p2, 1)
-    at_root = jnp.where(cut & (p2 != 0), w2 * (h * h) * (ratio * ratio), inf)
-    cross = jnp.where(target_cut, inf, at_root)
-    for fired, s, rate in decide:
-        s, rate = sq(s), sq(rate)
-        r = s / jnp.where(rate != 0, rate, 1)
-        cross = jnp.minimum(cross, jnp.where(fired & (rate != 0), w2 * r * r, inf))
-    near_each = []
-    for c_i, g0, d0, e0 in zip(crossed, g0s, d0s, e0s):
-        g0, d0, e0 = sq(g0), sq(d0), sq(e0)
-        turns = (e0 > 0) & (d0 < 0) & (-d0 <= h * e0) & ~c_i
-        inv = 1 / jnp.where(turns, e0, 1)
-        q = d0 * inv
-        near_each.append(jnp.where(turns, w2 * jnp.maximum(2 * g0 * inv - q * q, 0), inf))
-    n_mass = len(near_each) - (1 if has_target else 0)
-    near = near_each[0]
-    for x in near_each[1:n_mass]:
-        near = jnp.minimum(near, x)
-    if has_target:
-        target = jnp.minimum(jnp.where(target_cut, at_root, inf), near_each[-1])
-    else:
-        target = inf
-    return cross, near, target
+    cross = jnp.where(cut & (p2 != 0), w2 * (h * h) * (ratio * ratio), inf)
+    # Stacked, so that each division is one kernel for all functions (module docstring, "Speed").
+    fired, s, rate = (jnp.stack([sq(x) for x in xs]) for xs in zip(*decide))
+    r = s / jnp.where(rate != 0, rate, 1)
+    cross = jnp.minimum(cross, jnp.min(jnp.where(fired & (rate != 0), w2 * r * r, inf)))
+    c_i, g0, d0, e0 = (jnp.stack([sq(x) for x in xs]) for xs in (crossed, g0s, d0s, e0s))
+    turns = (e0 > 0) & (d0 < 0) & (-d0 <= h * e0) & ~c_i
+    inv = 1 / jnp.where(turns, e0, 1)
+    q = d0 * inv
+    near = jnp.min(jnp.where(turns, w2 * jnp.maximum(2 * g0 * inv - q * q, 0), inf))
+    return cross, near
+
+
+def probe(params: Params, wave: AbstractWaveform, contact: Contact, t: Array, y: State, target: Target):
+    """The event functions, with their first and second time derivatives, at time `t` and
+    state `y` (in the mode [`init`][] decides there): lists `(g, dg/dt, d2g/dt2)` as in a
+    step's start. For margins at a measured instant; not for the hot loop."""
+    P = consts(params, wave)
+    phase = (jnp.cos(wave.omega * t), jnp.sin(wave.omega * t))
+    st = init(params, wave, contact, y.x1, y.x2, y.v1, y.v2, phase)
+    l0, dl0, ddl0 = wave.at_phase(*phase)
+    f, geo = _forces(P, contact, l0, st.y.x1, st.y.x2)
+    a1, a2 = _accel(P, f, st.y, st.stuck1, st.stuck2, st.s1, st.s2)
+    r = _rates(P, f, st.y, a1, a2, st.s1, st.s2, dl0)
+    D = _derivs(P, geo, st.y, a1, a2, dl0, ddl0)
+    sides = (st.nu1, st.nu2)
+    j = _second(P, contact, f, D, st.y, a1, a2, st.stuck1, st.stuck2, st.s1, st.s2, dl0, ddl0, sides)
+    return _events(P, contact, f, D, st.y, r, j, st.stuck1, st.stuck2, st.s1, st.s2, target, sides)
+
+
+def target_margin(omega: Array, before: Array, gs: list, ds: list, es: list) -> Array:
+    """The squared margin of the caller's target where it fires, from [`probe`][] there
+    (target last): the phase $(\\omega\\,\\dot g/\\ddot g)^2$ to its vertex, and to the nearest
+    switch, the last one (`before`: the time since it) or the next one predicted by the Taylor
+    quadratic of each other event function. A switch that crosses the target's time
+    leaves the target's time differentiable (the velocities are continuous) but changes
+    its curvature in the parameters, so that the derivative holds over a smaller range."""
+    inf = jnp.asarray(jnp.inf, omega.dtype)
+    vertex = jnp.where(es[-1] != 0, ds[-1] / jnp.where(es[-1] != 0, es[-1], 1), inf)
+    after = inf
+    for g, d, e in zip(gs[:-1], ds[:-1], es[:-1]):
+        after = jnp.minimum(after, _predict(g, d, e))
+    gap = jnp.minimum(jnp.minimum(before, after), jnp.abs(vertex))
+    return jax.lax.stop_gradient((omega * gap) ** 2)
 
 
 def _any(flags: list) -> Array:

@@ -5,7 +5,6 @@ change of its switching structure (`_exact` module docstring, "Margins"); these
 functions turn those records into the result fields of `measure` and `simulate`.
 """
 
-import jax
 import jax.numpy as jnp
 
 from ._custom_types import Array
@@ -19,19 +18,6 @@ def margin_fields(
     (`tau_z = inf` has no derivative)."""
     root = lambda m: jnp.where(started, jnp.sqrt(m), nan)
     return dict(transversality=root(cross), near_miss=root(near), margin_z=root(jnp.where(reached, target, 0)))
-
-
-def coincidence(omega: Array, t_switch: Array, info) -> Array:
-    """The target's squared margin in the step where it fires (`info`, a `StepInfo`), with
-    the phase to the nearest switch: the last one (`t_switch`) or the next one predicted.
-
-    A switch that crosses $t_z$ leaves `tau_z` and `e_z` differentiable (the velocities are
-    continuous there) but changes their curvature, so that a finite difference straddling
-    it is off, and the derivative holds over a smaller range."""
-    omega = jax.lax.stop_gradient(omega)
-    t_z = jax.lax.stop_gradient(info.t_target)
-    gap = jnp.minimum(t_z - t_switch, info.t_next - t_z)
-    return jnp.minimum(info.target_margin, (omega * gap) ** 2)
 
 
 def switch_gap(omega: Array, t: Array, t_switch: Array) -> Array:

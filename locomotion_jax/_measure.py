@@ -29,7 +29,7 @@ from ._compile import engine_jit
 from ._custom_types import ArrayLike
 from ._dynamics import AbstractDynamics, Exact, Smoothed
 from ._forward import check_static
-from ._margins import coincidence, margin_fields
+from ._margins import margin_fields
 from ._params import Params
 from ._queue import run_queue
 from ._results import ChainMeasurement, Measurement
@@ -59,7 +59,7 @@ class _Acc(eqx.Module):
     stuck1: jax.Array
     stuck2: jax.Array
     steps: jax.Array
-    margin_z: jax.Array  # squared, see `_exact.margins`
+    before_z: jax.Array  # time from the last switch to t_z
 
 
 class _Fixed(NamedTuple):
@@ -100,7 +100,7 @@ def _setup(params, wave, z, horizon, window, contact, start, t_start, initial=No
         stuck1=zero,
         stuck2=zero,
         steps=jnp.zeros((), jnp.int32),
-        margin_z=jnp.asarray(jnp.inf, dtype),
+        before_z=jnp.asarray(jnp.inf, dtype),
     )
     fixed = _Fixed(params, wave, P, ws, ws + window, ws + horizon, jnp.asarray(z, dtype))
     return fixed, (st, acc)
@@ -137,7 +137,6 @@ def _advance(f: _Fixed, dyn, contact, dt):
     dur = jnp.where(inside, info.t1 - info.t0, 0)
     # First passage |X - X0| = z: an event of the integrator (located like a switch).
     hit = info.target_fired
-    z_margin = coincidence(f.wave.omega, s.t_switch, info)
     a_new = _Acc(
         started=started,
         X0=X0,
@@ -150,12 +149,20 @@ def _advance(f: _Fixed, dyn, contact, dt):
         stuck1=a.stuck1 + jnp.where(info.stuck1, dur, 0),
         stuck2=a.stuck2 + jnp.where(info.stuck2, dur, 0),
         steps=a.steps + 1,
-        margin_z=jnp.minimum(a.margin_z, jnp.where(hit, z_margin, info.target_margin)),
+        before_z=jnp.where(hit, jax.lax.stop_gradient(info.t_target - s.t_switch), a.before_z),
     )
     return s_new, a_new
 
 
-def _results(f: _Fixed, dyn) -> dict:
+def _margin_z(f: _Fixed, a: _Acc, contact) -> jax.Array:
+    """The target's squared margin at $t_z$ (`_exact.target_margin`), from the events there."""
+    target = exact.Target(active=jnp.asarray(True), X0=a.X0, z=f.z)
+    t_z = jnp.where(a.reached, a.t_z, f.ws)
+    events = exact.probe(f.params, f.wave, contact, t_z, a.y_z, target)
+    return exact.target_margin(f.wave.omega, a.before_z, *events)
+
+
+def _results(f: _Fixed, dyn, contact) -> dict:
     """The `Measurement` fields of one finished run (SPEC §5)."""
     s, a = dyn
     params, wave, ws, we, z = f.params, f.wave, f.ws, f.we, f.z
@@ -199,7 +206,7 @@ def _results(f: _Fixed, dyn) -> dict:
         X_start=jnp.where(a.started, a.X0, nan),
         n_steps=a.steps,
         n_switch=s.n_switch,
-        **margin_fields(a.started, a.reached, s.cross, s.near, a.margin_z, nan),
+        **margin_fields(a.started, a.reached, s.cross, s.near, _margin_z(f, a, contact), nan),
     )
 
 
@@ -209,7 +216,7 @@ def _exact_one(params, wave, z, horizon, window, contact, start, dt, max_steps, 
     `t_start`: the measurement's start, NaN for the paper's; `initial`: as in `_setup`."""
     fixed, dyn = _setup(params, wave, z, horizon, window, contact, start, t_start, initial)
     dyn = jax.lax.while_loop(lambda d: _running(fixed, d, max_steps), lambda d: _advance(fixed, d, contact, dt), dyn)
-    return _results(fixed, dyn)
+    return _results(fixed, dyn, contact)
 
 
 def exact_batch(
@@ -252,7 +259,8 @@ def exact_batch(
     running = lambda f, d: _running(f, d, max_steps)
     advance = lambda f, d: _advance(f, d, contact, dt)
     order = jnp.argsort(-jnp.where(jnp.isfinite(params.omega), params.omega, -jnp.inf))
-    return run_queue(setup, running, advance, _results, n, lanes, order)
+    results = lambda f, d: _results(f, d, contact)
+    return run_queue(setup, running, advance, results, n, lanes, order)
 
 
 _exact_batch = engine_jit(exact_batch, ("wave_axes", "contact", "start", "dt", "lanes"))

@@ -90,8 +90,6 @@ class StepInfo(NamedTuple):
     target_fired: Array
     t_target: Array
     y_target: State
-    target_margin: Array
-    t_next: Array
 
 
 class Drive(NamedTuple):
@@ -233,6 +231,23 @@ def init(C: Chain, contact: Contact, x: Array) -> Hybrid:
     )  # fmt: skip
 
 
+def probe(C: Chain, contact: Contact, t: Array, y: State, target: two_mass.Target) -> tuple[Array, Array, Array]:
+    """The event functions with their first and second time derivatives at time `t` and
+    state `y`, in the mode the state implies (a mass at rest sticks where its static limits
+    hold; compare `_exact.probe`). For margins at a measured instant; not for the hot loop."""
+    omega = C.waves.omega
+    dr = drive(C, jnp.cos(omega * t), jnp.sin(omega * t))
+    _, F, N, n = loads(C, contact, dr.l0, dr.f, y.x)
+    mu_f, mu_b = C.friction.static_limits()
+    stuck = (F <= mu_f * n) & (F >= -mu_b * n) & (y.v == 0)
+    one = jnp.ones_like(y.v)
+    sdir = jnp.where(y.v > 0, one, jnp.where(y.v < 0, -one, jnp.where(F >= 0, one, -one)))
+    side = jnp.where(N > 0, one, -one)
+    y = y._replace(v=jnp.where(stuck, 0, y.v))
+    _, _, g, d, e = _with_derivatives(C, contact, stuck, sdir, side, target, dr, y)
+    return g, d, e
+
+
 def initial_positions(C: Chain, start: str) -> Array:
     """Positions at $t = 0$: gaps $\\bar\\ell_j$ (`"paper"`, eq. 14) or the relaxed springs
     $\\sqrt{\\ell_{0,j}(0)^2 - d_j^2}$ (`"relaxed"`), with $x_0 = 0$ (SPEC §8)."""
@@ -288,9 +303,7 @@ def step(
     # -- step length: dt, or less to land on t_stop or just past the earliest predicted event.
     span = t_stop - t0
     h_nom = jnp.minimum(jnp.asarray(dt, dtype), span)
-    pred = two_mass._predict(g0, d0, e0)
-    s_pred = pred.min()
-    s_switch = pred[:-1].min() if target is not None else s_pred  # the next event other than the target's
+    s_pred = two_mass._predict(g0, d0, e0).min()
     h_pred = jnp.maximum(two_mass.PREDICT_MARGIN * s_pred, 64 * jnp.finfo(dtype).eps * jnp.maximum(jnp.abs(t0), 1))
     short = h_pred < h_nom
     lands = (span <= dt) & ~short
@@ -335,10 +348,9 @@ def step(
     hold, hold_rate = jax.jvp(limits, (dr0.l0, dr0.f, y0.x), (dr0.dl0, dr0.df, jnp.where(stuck, 0, y0.v)))
     target_cut = first[-1] if target is not None else jnp.asarray(False)
     decide = [(vel[i], hold[i], hold_rate[i]) for i in range(n_mass)]
-    m_cross, m_near, m_target = two_mass.margins(
-        omega, h, theta, coef, cut, target_cut, list(crossed), list(g0), list(d0), list(e0), decide,
-        target is not None,
-    )  # fmt: skip
+    m_cross, m_near = two_mass.margins(
+        omega, h, theta, coef, cut & ~target_cut, list(crossed), list(g0), list(d0), list(e0), decide
+    )
 
     # -- commit: the full step, or the quintic dense output at the crossing.
     H1, H2, H3, H4, H5 = two_mass._hermite_basis(theta)
@@ -388,6 +400,5 @@ def step(
         commit=commit, t0=t0, y0=y0, tension0=tension0, t1=tc, y1=yc, stuck=stuck,
         target_fired=target_now | (commit & target_cut), t_target=jnp.where(target_now, t0, tc),
         y_target=yc.map(lambda a, b: jnp.where(target_now, b, a), yA),
-        target_margin=jnp.where(commit, m_target, jnp.inf), t_next=jax.lax.stop_gradient(t0 + s_switch),
     )  # fmt: skip
     return new, info

@@ -17,8 +17,8 @@ import numpy as np
 from .._batch import default_max_steps, MICRO_BATCH_CPU
 from .._compile import engine_jit
 from .._dynamics import Exact
-from .._exact import Target
-from .._margins import coincidence, margin_fields, switch_gap
+from .._exact import Target, target_margin
+from .._margins import margin_fields, switch_gap
 from .._queue import run_queue
 from .._results import ChainMeasurement, ChainTrajectory
 from .._saves import BUFFER, run_saves
@@ -161,7 +161,7 @@ class _Acc(eqx.Module):
     y_z: engine.State
     stuck: jax.Array
     steps: jax.Array
-    margin_z: jax.Array  # squared, see `_exact.margins`
+    before_z: jax.Array  # time from the last switch to t_z
 
 
 class _Fixed(NamedTuple):
@@ -181,7 +181,7 @@ def _setup(C, valid, t_start, z, horizon, window, contact, start):
     acc = _Acc(
         started=no, X0=zero, ed0=zero, w0=zero, e0=zero, reached=no, t_z=jnp.asarray(jnp.inf, dtype),
         y_z=st.y.map(jnp.zeros_like), stuck=jnp.zeros_like(st.y.x), steps=jnp.zeros((), jnp.int32),
-        margin_z=jnp.asarray(jnp.inf, dtype),
+        before_z=jnp.asarray(jnp.inf, dtype),
     )  # fmt: skip
     return _Fixed(C, ws, ws + window, ws + horizon, jnp.asarray(z, dtype)), (st, acc)
 
@@ -213,8 +213,7 @@ def _advance(f: _Fixed, dyn, contact, dt):
         e0=jnp.where(begin, engine.energy(f.C, info.y0, info.tension0), a.e0), reached=a.reached | hit,
         t_z=jnp.where(hit, info.t_target, a.t_z), y_z=info.y_target.map(lambda n, o: jnp.where(hit, n, o), a.y_z),
         stuck=a.stuck + jnp.where(info.stuck, dur, 0), steps=a.steps + 1,
-        margin_z=jnp.minimum(a.margin_z, jnp.where(hit, coincidence(f.C.waves.omega, s.t_switch, info),
-                                                   info.target_margin)),
+        before_z=jnp.where(hit, jax.lax.stop_gradient(info.t_target - s.t_switch), a.before_z),
     )  # fmt: skip
     return s_new, a_new
 
@@ -224,6 +223,13 @@ def _energy_at(C: Chain, contact, t, y):
     dr = engine.drive(C, jnp.cos(omega * t), jnp.sin(omega * t))
     tension, _, _, _ = engine.loads(C, contact, dr.l0, dr.f, y.x)
     return engine.energy(C, y, tension)
+
+
+def _margin_z(f: _Fixed, a: _Acc, contact) -> jax.Array:
+    """The target's squared margin at $t_z$ (`_exact.target_margin`), from the events there."""
+    t_z = jnp.where(a.reached, a.t_z, f.ws)
+    g, d, e = engine.probe(f.C, contact, t_z, a.y_z, Target(active=jnp.asarray(True), X0=a.X0, z=f.z))
+    return target_margin(f.C.waves.omega, a.before_z, list(g), list(d), list(e))
 
 
 def _results(f: _Fixed, dyn, contact) -> dict:
@@ -249,7 +255,7 @@ def _results(f: _Fixed, dyn, contact) -> dict:
         mean_speed=mean_speed, cost_of_transport=e_z / z, stick_fraction=frac, e_d=e_d, work=work,
         delta_e=delta_e, balance=work - e_d - delta_e, liftoff=jnp.isfinite(s.t_liftoff), t_liftoff=s.t_liftoff,
         status=status, t_start=ws, X_start=jnp.where(a.started, a.X0, nan), n_steps=a.steps, n_switch=s.n_switch,
-        **margin_fields(a.started, a.reached, s.cross, s.near, a.margin_z, nan),
+        **margin_fields(a.started, a.reached, s.cross, s.near, _margin_z(f, a, contact), nan),
     )  # fmt: skip
 
 
