@@ -110,7 +110,9 @@ def prepare_initial(initial: Any, shape: tuple[int, ...], dtype: Any) -> jax.Arr
     state = jnp.stack(flat, -1)
     try:
         values = np.asarray(concrete_value(state))
-    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
+    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError, TypeError):
+        return state
+    if values.dtype.kind != "f":  # a tracer of `jit` beneath: the values are not known here
         return state
     if not np.all(np.isfinite(values)):
         raise ValueError("initial: every position and velocity must be finite.")

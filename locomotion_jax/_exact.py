@@ -640,7 +640,7 @@ def step(
     a01, a02 = (keep(x) for x in _accel(P, f0, y0, st1, st2, s1, s2))
     k1 = _rates(P, f0, y0, a01, a02, s1, s2, dl00)
     D0 = _derivs(P, geo0, y0, a01, a02, dl00, ddl00)
-    D0 = D0._replace(fx=keep(D0.fx), fy=keep(D0.fy))
+    D0 = D0._replace(fx=keep(D0.fx), fy=keep(D0.fy), fx2=keep(D0.fx2), fy2=keep(D0.fy2))
     sides = (st.nu1, st.nu2)
     j0 = _second(P, contact, f0, D0, y0, a01, a02, st1, st2, s1, s2, dl00, ddl00, sides)
     g0s, d0s, e0s = _events(P, contact, f0, D0, y0, k1, j0, st1, st2, s1, s2, target, sides)
@@ -710,20 +710,40 @@ def step(
     for i in reversed(range(n_ev - 1)):
         vals = (g0s[i], d0s[i], e0s[i], g1s[i], d1s[i], e1s[i])
         pick = [jnp.where(first[i], v, p) for v, p in zip(vals, pick)]
-    # Pinned: the root finder and the margins both read them.
-    cg0, cd0, ce0, cg1, cd1, ce1 = (keep(v) for v in pick)
+    cg0, cd0, ce0, cg1, cd1, ce1 = pick
     coef = _quintic(jnp.maximum(cg0, 0), h * cd0, h2 * ce0, jnp.minimum(cg1, 0), h * cd1, h2 * ce1)
     theta = keep(jnp.where(cut, _root(coef, jnp.minimum(cg1, 0)), 1))
 
     # -- margins to a change of switching structure ([`margins`][]); they feed nothing back.
+    # The events located at t (pend) are measured here, at their crossing, in the mode
+    # before the switch, from values this iteration has (forces and their rates here).
     target_cut = first[-1] if target is not None else jnp.asarray(False)
     sg0 = jnp.where(f0.fx >= 0, 1.0, -1.0).astype(dtype)
     n1d0, n2d0, _, _ = _normal_rates(contact, D0, sides)
+    ao1, ao2 = _accel(P, f0, yA, st.stuck1, st.stuck2, st.s1, st.s2)  # the mode before the switch
+    # Second rates of the forces in that mode: fx2, fy2 depend on the accelerations only
+    # through u'' = a2 - a1, linearly (eqs. 2, 8): d fx2/d u'' = pl + u^2 (k - pl)/l^2.
+    u, il, pl = geo0
+    kk = u * il * il * (P.k - pl)
+    du2 = (ao2 - ao1) - (a02 - a01)
+    fx2o = D0.fx2 + (pl + u * kk) * du2
+    fy2o = D0.fy2 + P.d * kk * du2
+    n1ddo, n2ddo = (-fy2o, fy2o) if contact != "paper" else (-st.nu1 * fy2o, st.nu2 * fy2o)
+    located = []
+    for pend, stuck, sdir, ao, sgn, n_d, n_dd, im in (
+        (st.pend1, st.stuck1, st.s1, ao1, 1.0, n1d0, n1ddo, P.im1),
+        (st.pend2, st.stuck2, st.s2, ao2, -1.0, n2d0, n2ddo, P.im2),
+    ):
+        # A stuck mass's event is mu_s n_i - |F_i|, a slipping one's sigma_i v_i (at v_i = 0).
+        aod = (sgn * D0.fx - P.c * ao - P.mu_k * n_d * sdir) * im
+        rate = jnp.where(stuck, P.mu_s * n_d - sg0 * D0.fx, sdir * ao)
+        curv = jnp.where(stuck, P.mu_s * n_dd - sg0 * fx2o, sdir * aod)
+        located.append((pend, rate, curv))
     decide = (
         (vel1, P.mu_s * f0.n1 - absF, P.mu_s * n1d0 - sg0 * D0.fx),
         (vel2, P.mu_s * f0.n2 - absF, P.mu_s * n2d0 - sg0 * D0.fx),
     )
-    m_cross, m_near = margins(wave.omega, h, theta, coef, cut & ~target_cut, crossed, g0s, d0s, e0s, decide)
+    m_cross, m_near = margins(wave.omega, h, located, decide, crossed, g0s, d0s, e0s)
 
     # -- commit: the full step, or the quintic dense output at the crossing.
     H1, H2, H3, H4, H5 = (keep(x) for x in _hermite_basis(theta))
@@ -802,39 +822,50 @@ def step(
     return new, info
 
 
-def margins(omega, h, theta, coef, cut, crossed, g0s, d0s, e0s, decide):
+def margins(omega, h, located, decide, crossed, g0s, d0s, e0s):
     """One step's margins to a change of switching structure, as squared drive phases
     (module docstring, "Margins"): `(cross, near)`, each `inf` where there is none.
 
-    - `cross`: at the located crossing (`cut`), $(\\omega\\,\\dot g/\\ddot g)^2$ from the event
-      quintic $p$ at its root, $\\dot g = p'(\\theta^*)/h$, $\\ddot g = p''(\\theta^*)/h^2$; and at
-      a decision `decide = ((fired, s, rate), ...)` (a slipping mass whose velocity reached
-      zero sticks if $s = \\mu_s n_i - |F_i| \\ge 0$, else reverses): $(\\omega s/\\dot s)^2$.
-    - `near`: over every event function $g_0 + \\dot g_0 s + \\ddot g_0 s^2/2$ that turns
-      inside the step without crossing, $2\\omega^2 g_{\\min}/\\ddot g_0$ ($0$ if the parabola
-      dips below zero: an excursion shorter than the step).
+    - `cross`: at each located crossing `located = ((fired, rate, curvature), ...)` of an
+      event function $g$ (its rate and curvature there, in the mode before the switch),
+      $(\\omega\\,\\dot g/\\ddot g)^2$; at each decision `decide = ((fired, s, rate), ...)` (a
+      slipping mass whose velocity reached zero sticks if $s = \\mu_s n_i - |F_i| \\ge 0$, else
+      reverses), $(\\omega s/\\dot s)^2$.
+    - `near`: over every event function $g_0 + \\dot g_0 s + \\ddot g_0 s^2/2$ (values at the
+      step's start) that turns inside the step of length `h` without crossing,
+      $2\\omega^2 g_{\\min}/\\ddot g_0$ ($0$ if the parabola dips below zero: an excursion
+      shorter than the step).
 
-    Values only: they are held out of forward-mode derivatives (`stop_gradient`).
+    Values only: they are held out of forward-mode derivatives (`stop_gradient`). Each
+    function is a scalar of its own: a stacked `(lanes, n)` array would exceed the 64
+    elements per kernel above which XLA's CPU runtime splits a kernel over threads
+    (`_batch.MICRO_BATCH_CPU`).
     """
     sq = jax.lax.stop_gradient
-    omega, h, theta, coef = sq(omega), sq(h), sq(theta), tuple(sq(c) for c in coef)
-    w2 = omega * omega
-    inf = jnp.asarray(jnp.inf, h.dtype)
-    c = coef
-    p1 = c[1] + theta * (2 * c[2] + theta * (3 * c[3] + theta * (4 * c[4] + theta * 5 * c[5])))
-    p2 = 2 * c[2] + theta * (6 * c[3] + theta * (12 * c[4] + theta * 20 * c[5]))
-    ratio = p1 / jnp.where(p2 != 0, p2, 1)
-    cross = jnp.where(cut & (p2 != 0), w2 * (h * h) * (ratio * ratio), inf)
-    # Stacked, so that each division is one kernel for all functions (module docstring, "Speed").
-    fired, s, rate = (jnp.stack([sq(x) for x in xs]) for xs in zip(*decide))
-    r = s / jnp.where(rate != 0, rate, 1)
-    cross = jnp.minimum(cross, jnp.min(jnp.where(fired & (rate != 0), w2 * r * r, inf)))
-    c_i, g0, d0, e0 = (jnp.stack([sq(x) for x in xs]) for xs in (crossed, g0s, d0s, e0s))
-    turns = (e0 > 0) & (d0 < 0) & (-d0 <= h * e0) & ~c_i
-    inv = 1 / jnp.where(turns, e0, 1)
-    q = d0 * inv
-    near = jnp.min(jnp.where(turns, w2 * jnp.maximum(2 * g0 * inv - q * q, 0), inf))
-    return cross, near
+    h = sq(h)
+    w2 = sq(omega * omega)
+    zero = jnp.zeros_like(h)
+    cross = []
+    for fired, num, den in (*located, *decide):
+        num, den = sq(num), sq(den)
+        cross.append((jnp.where(fired, num * num, 1), jnp.where(fired, den * den, zero)))
+    near = []
+    for c_i, g0, d0, e0 in zip(crossed, g0s, d0s, e0s):
+        g0, d0, e0 = sq(g0), sq(d0), sq(e0)
+        turns = (e0 > 0) & (d0 < 0) & (-d0 <= h * e0) & ~c_i
+        near.append((jnp.where(turns, jnp.maximum(2 * g0 * e0 - d0 * d0, 0), 1), jnp.where(turns, e0 * e0, zero)))
+    return tuple(w2 * _smallest_ratio(pairs) for pairs in (cross, near))
+
+
+def _smallest_ratio(pairs: list) -> Array:
+    """$\\min_i a_i / b_i$ over pairs with $a_i \\ge 0$, $b_i \\ge 0$ (none: $a_i > 0 = b_i$, `inf`),
+    chosen by cross-multiplied comparisons, so that one division serves them all (XLA
+    makes a kernel of each division, and fuses their operands into every one of them)."""
+    a, b = pairs[0]
+    for ai, bi in pairs[1:]:
+        smaller = ai * b < a * bi
+        a, b = jnp.where(smaller, ai, a), jnp.where(smaller, bi, b)
+    return jnp.where(b > 0, a / jnp.where(b > 0, b, 1), jnp.inf)
 
 
 def probe(params: Params, wave: AbstractWaveform, contact: Contact, t: Array, y: State, target: Target):
@@ -854,20 +885,20 @@ def probe(params: Params, wave: AbstractWaveform, contact: Contact, t: Array, y:
     return _events(P, contact, f, D, st.y, r, j, st.stuck1, st.stuck2, st.s1, st.s2, target, sides)
 
 
-def target_margin(omega: Array, before: Array, gs: list, ds: list, es: list) -> Array:
-    """The squared margin of the caller's target where it fires, from [`probe`][] there
-    (target last): the phase $(\\omega\\,\\dot g/\\ddot g)^2$ to its vertex, and to the nearest
-    switch, the last one (`before`: the time since it) or the next one predicted by the Taylor
-    quadratic of each other event function. A switch that crosses the target's time
-    leaves the target's time differentiable (the velocities are continuous) but changes
-    its curvature in the parameters, so that the derivative holds over a smaller range."""
-    inf = jnp.asarray(jnp.inf, omega.dtype)
+def target_margin(before: Array, gs: list, ds: list, es: list) -> Array:
+    """The time between the caller's target crossing and the nearest change of its
+    switching structure, from [`probe`][] there (target last): the vertex of the target
+    function's local parabola ($|\\dot g/\\ddot g|$), the last switch (`before`: the time
+    since it) or the next one predicted by the Taylor quadratic of each other event
+    function. A switch that crosses the target's time leaves that time differentiable
+    (the velocities are continuous) but changes its curvature in the parameters, so
+    that the derivative holds over a smaller range."""
+    inf = jnp.asarray(jnp.inf, before.dtype)
     vertex = jnp.where(es[-1] != 0, ds[-1] / jnp.where(es[-1] != 0, es[-1], 1), inf)
     after = inf
     for g, d, e in zip(gs[:-1], ds[:-1], es[:-1]):
         after = jnp.minimum(after, _predict(g, d, e))
-    gap = jnp.minimum(jnp.minimum(before, after), jnp.abs(vertex))
-    return jax.lax.stop_gradient((omega * gap) ** 2)
+    return jax.lax.stop_gradient(jnp.minimum(jnp.minimum(before, after), jnp.abs(vertex)))
 
 
 def _any(flags: list) -> Array:

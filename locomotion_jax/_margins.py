@@ -3,6 +3,10 @@
 The engines record, in squared radians of drive phase, how close a run came to a
 change of its switching structure (`_exact` module docstring, "Margins"); these
 functions turn those records into the result fields of `measure` and `simulate`.
+The target's margin is relative to `tau_z` instead: a switch that meets $t_z$ is not
+locked to the drive as the switches are to each other, and $t_z$ moves by about
+$\\tau_z$ times a relative change of a parameter (its logarithmic sensitivity is of
+order one), so `margin_z` estimates the relative change that reaches it.
 """
 
 import jax.numpy as jnp
@@ -11,13 +15,15 @@ from ._custom_types import Array
 
 
 def margin_fields(
-    started: Array, reached: Array, cross: Array, near: Array, target: Array, nan: Array
+    started: Array, reached: Array, cross: Array, near: Array, gap: Array, tau: Array, nan: Array
 ) -> dict[str, Array]:
-    """`transversality`, `near_miss` and `margin_z` of a measurement from the squared margins;
-    NaN where the measurement did not start, and `margin_z` 0 where `z` was not reached
+    """`transversality`, `near_miss` (radians, from the squared phases) and `margin_z` (the
+    time `gap` from $t_z$ to the nearest change of structure, relative to `tau` $= \\tau_z$)
+    of a measurement; NaN where it did not start, `margin_z` 0 where `z` was not reached
     (`tau_z = inf` has no derivative)."""
     root = lambda m: jnp.where(started, jnp.sqrt(m), nan)
-    return dict(transversality=root(cross), near_miss=root(near), margin_z=root(jnp.where(reached, target, 0)))
+    rel = jnp.where(reached, gap / jnp.where(reached & (tau > 0), tau, 1), 0)
+    return dict(transversality=root(cross), near_miss=root(near), margin_z=jnp.where(started, rel, nan))
 
 
 def switch_gap(omega: Array, t: Array, t_switch: Array) -> Array:

@@ -155,11 +155,11 @@ def _advance(f: _Fixed, dyn, contact, dt):
 
 
 def _margin_z(f: _Fixed, a: _Acc, contact) -> jax.Array:
-    """The target's squared margin at $t_z$ (`_exact.target_margin`), from the events there."""
+    """The time from $t_z$ to the nearest change of the target's structure (`_exact.target_margin`)."""
     target = exact.Target(active=jnp.asarray(True), X0=a.X0, z=f.z)
     t_z = jnp.where(a.reached, a.t_z, f.ws)
     events = exact.probe(f.params, f.wave, contact, t_z, a.y_z, target)
-    return exact.target_margin(f.wave.omega, a.before_z, *events)
+    return exact.target_margin(a.before_z, *events)
 
 
 def _results(f: _Fixed, dyn, contact) -> dict:
@@ -206,7 +206,7 @@ def _results(f: _Fixed, dyn, contact) -> dict:
         X_start=jnp.where(a.started, a.X0, nan),
         n_steps=a.steps,
         n_switch=s.n_switch,
-        **margin_fields(a.started, a.reached, s.cross, s.near, _margin_z(f, a, contact), nan),
+        **margin_fields(a.started, a.reached, s.cross, s.near, _margin_z(f, a, contact), a.t_z - ws, nan),
     )
 
 

@@ -250,7 +250,7 @@ def test_initial_state_is_validated():
         lj.measure(p, z=0.1, horizon=5.0, initial=(0.0, np.nan, 3.0, 0.0))
     with pytest.raises(ValueError, match="broadcast"):
         lj.simulate(p, t_end=1.0, initial=(np.zeros(3), 0.0, 3.0, 0.0))
-    with pytest.raises(TypeError, match="initial must be a tuple"):
+    with pytest.raises(TypeError, match="initial"):  # the package's, or the test suite's type checker
         lj.simulate(p, t_end=1.0, initial=np.array([0.0, 0.0, 3.0, 0.0]))  # pyright: ignore[reportArgumentType]
     with pytest.raises(ValueError, match="Exact dynamics only"):
         lj.simulate(p, t_end=1.0, initial=(0.0, 0.0, 3.0, 0.0), dynamics=lj.Smoothed())
@@ -274,15 +274,15 @@ def test_measure_failures_are_flagged_with_finite_derivatives():
         (_, m), (tangent, _) = jax.jvp(fields, (jnp.asarray(0.05),), (jnp.asarray(1.0),))
         return m, np.asarray(tangent)
 
-    m, tangent = run([6.0, 9.0, 0.5, 12.0])
+    m, tangent = run([6.0, 9.0, 0.5, 7.0])
     assert [int(s) for s in m.status] == [lj.Status.OK, lj.Status.LIFTOFF, lj.Status.OK, lj.Status.OK]
     assert not bool(m.reached[2])
     assert [bool(s) for s in m.smooth] == [True, False, False, True]
     assert np.all(np.isfinite(tangent))
-    _, other = run([6.0, 7.0, 7.0, 12.0])
+    _, other = run([6.0, 7.0, 7.0, 7.0])
     np.testing.assert_allclose(tangent[:, [0, 3]], other[:, [0, 3]], rtol=1e-12)
 
 
 def test_integers_cannot_be_differentiated():
-    with pytest.raises(TypeError, match="requires real- or complex-valued inputs"):
+    with pytest.raises(TypeError, match="jacfwd requires real"):
         jax.jacfwd(lambda w: lj.simulate(lj.Params(omega=w), t_end=1.0).x1)(2)

@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
-from locomotion_jax._results import SMOOTH_MARGIN
+from locomotion_jax._results import SMOOTH_MARGIN, SMOOTH_MARGIN_Z
 
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -73,15 +73,17 @@ def _tau5():
 
 
 def test_tau5_at_omega_2_is_flagged():
-    # The example: a switch (mass 1 sticking) falls 0.017 rad of drive phase from
-    # t_5, and crosses it at omega = 2 - 1e-4. tau_5 stays differentiable there (the
-    # velocities are continuous), but its curvature changes: the flag is down.
+    # The example: a switch (mass 1 sticking) falls 0.0085 time units from t_5
+    # (4e-5 of tau_5), and crosses it at omega = 2 - 1e-4 (a relative change of 5e-5).
+    # tau_5 stays differentiable there (the velocities are continuous), but its curvature
+    # changes: the flag is down.
     omega, m, _ = _tau5()
-    assert float(m.margin_z[0]) < SMOOTH_MARGIN and not bool(m.smooth[0])
+    assert float(m.margin_z[0]) < SMOOTH_MARGIN_Z and not bool(m.smooth[0])
+    assert 2e-5 < float(m.margin_z[0]) < 1e-4
     assert min(float(m.transversality[0]), float(m.near_miss[0])) > SMOOTH_MARGIN  # no grazing
     # The margin closes where the switch count at t_5 changes.
     assert int(m.n_switch[5]) != int(m.n_switch[6])
-    assert float(m.margin_z[5]) < 0.01 and float(m.margin_z[6]) < 0.01
+    assert float(m.margin_z[5]) < 1e-5 and float(m.margin_z[6]) < 1e-5
 
 
 def test_tau5_at_omega_2_reference_differences_disagree():

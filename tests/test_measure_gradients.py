@@ -4,13 +4,13 @@
 `mu_s`, `mu_k` and `B2`, the second harmonic's sine coefficient of the waveform
 $\\ell_0 = \\bar\\ell + a \\sin\\omega t + B_2 \\sin 2\\omega t$ ($B_2 = 0.01$ throughout): one
 `jacfwd` of one batch, against the reference's (`tests/reference.py`, rtol 1e-11) central
-differences at relative steps 1e-5. A derivative is claimed only where the result is
+differences at steps of 1e-5 of each value. A derivative is claimed only where the result is
 flagged `smooth`; there it must agree within 1e-3.
 
 CI runs two configurations (SSL and SL, z = 1 measured from t = 30).
-`LOCOMOTION_JAX_FULL_REFERENCE=1` runs twelve (z = 1 from t = 30) and the same twelve
-for `tau_5`, `e_5` from the paper's t_start where they are smooth, with the step study
-(steps 1e-4, 1e-5, 1e-6) printed (README, "Gradients").
+`LOCOMOTION_JAX_FULL_REFERENCE=1` runs twelve (six SSL, six SL) for `tau_1` and for
+`tau_5`, `e_5` from the paper's t_start, with the step study (steps 1e-4, 1e-5, 1e-6)
+printed (README, "Gradients").
 """
 
 import functools
@@ -34,21 +34,23 @@ NAMES = ("omega", "a", "d", "mu_s", "mu_k", "B2")
 FIELDS = ("tau_z", "e_z", "mean_speed", "cost_of_transport")
 B2 = 0.01
 RTOL = 1e-3
-CI = [dict(omega=2.0), dict(omega=6.0)]  # SSL, SL
-CONFIGS = [  # SSL then SL (at z = 1 from t = 30)
-    dict(omega=1.0, a=0.08),
-    dict(omega=2.0),
-    dict(omega=2.5, mu_s=0.6),
-    dict(omega=3.0, mu_k=0.3, mu_s=0.5),
-    dict(omega=4.0, a=0.04),
-    dict(omega=2.0, d=0.3, mu_s=0.8),
-    dict(omega=5.0, d=0.3),
-    dict(omega=6.0),
-    dict(omega=6.0, d=-0.5),
-    dict(omega=7.0, a=0.03),
-    dict(omega=12.0, a=0.03),
-    dict(omega=16.0, a=0.02),
+# Configurations flagged smooth (z = 1 from t = 30 and z = 5 from the paper's start), found
+# by a scan of 64 random ones (26 lift off under the strict reading, 29 of the rest smooth).
+CONFIGS = [  # six SSL, then six SL
+    dict(omega=1.56, a=0.059, d=0.5, mu_s=0.6, mu_k=0.4),
+    dict(omega=3.37, a=0.060, d=-0.4, mu_s=0.8, mu_k=0.5),
+    dict(omega=3.57, a=0.033, d=0.5, mu_s=0.8, mu_k=0.5),
+    dict(omega=5.79, a=0.032, d=0.5, mu_s=0.6, mu_k=0.5),
+    dict(omega=6.12, a=0.031, d=0.3, mu_s=0.6, mu_k=0.5),
+    dict(omega=6.18, a=0.024, d=-0.4, mu_s=0.8, mu_k=0.5),
+    dict(omega=6.62, a=0.070, d=-0.4, mu_s=0.8, mu_k=0.4),
+    dict(omega=6.79, a=0.068, d=-0.4, mu_s=0.7, mu_k=0.4),
+    dict(omega=12.57, a=0.043, d=0.3, mu_s=0.7, mu_k=0.5),
+    dict(omega=14.72, a=0.039, d=0.5, mu_s=0.6, mu_k=0.5),
+    dict(omega=16.54, a=0.066, d=0.3, mu_s=0.7, mu_k=0.5),
+    dict(omega=17.22, a=0.055, d=-0.4, mu_s=0.7, mu_k=0.4),
 ]
+CI = [CONFIGS[3], CONFIGS[7]]  # SSL, SL
 SETTINGS = {"z1": (1.0, 30.0, 100.0), "z5": (5.0, None, 1000.0)}  # z, t_start (None: the paper's), horizon
 
 pytestmark = pytest.mark.xdist_group("gradients")
@@ -83,7 +85,7 @@ def _reference_fd(config: tuple, setting: str, name: str, rel: float) -> np.ndar
     z, t_start, horizon = SETTINGS[setting]
     full = {**DEFAULTS, **dict(config)}
     value = B2 if name == "B2" else full[name]
-    h = rel * max(1.0, abs(value))
+    h = rel * abs(value)  # relative to the value: a and B2 are small
 
     def at(v):
         cfg = dict(full)
@@ -135,8 +137,7 @@ def test_measurement_derivatives_match_reference_full(setting):
     regimes = np.asarray(m.regime)[np.asarray(m.smooth)]
     print(f"\n{setting}: {n_smooth} of {len(CONFIGS)} smooth (SSL {int((regimes == 1).sum())}, "
           f"SL {int((regimes == 0).sum())}); worst relative error {worst:.2e}")  # fmt: skip
-    if setting == "z1":
-        assert n_smooth >= 10 and set(regimes) == {0, 1}
+    assert n_smooth >= 10 and set(regimes) == {0, 1}
     # Step study: the reference's differences at 1e-4 and 1e-6 against those at 1e-5.
     for i, config in enumerate(CONFIGS):
         key = tuple(sorted(config.items()))

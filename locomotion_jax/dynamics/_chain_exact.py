@@ -348,9 +348,14 @@ def step(
     hold, hold_rate = jax.jvp(limits, (dr0.l0, dr0.f, y0.x), (dr0.dl0, dr0.df, jnp.where(stuck, 0, y0.v)))
     target_cut = first[-1] if target is not None else jnp.asarray(False)
     decide = [(vel[i], hold[i], hold_rate[i]) for i in range(n_mass)]
-    m_cross, m_near = two_mass.margins(
-        omega, h, theta, coef, cut & ~target_cut, list(crossed), list(g0), list(d0), list(e0), decide
-    )
+    # The located crossing's rate and curvature from the event quintic at its root:
+    # p'(theta)/h and p''(theta)/h^2.
+    c = jax.lax.stop_gradient(coef)
+    th = jax.lax.stop_gradient(theta)
+    p1 = c[1] + th * (2 * c[2] + th * (3 * c[3] + th * (4 * c[4] + th * 5 * c[5])))
+    p2 = 2 * c[2] + th * (6 * c[3] + th * (12 * c[4] + th * 20 * c[5]))
+    located = [(cut & ~target_cut, h * p1, p2)]
+    m_cross, m_near = two_mass.margins(omega, h, located, decide, list(crossed), list(g0), list(d0), list(e0))
 
     # -- commit: the full step, or the quintic dense output at the crossing.
     H1, H2, H3, H4, H5 = two_mass._hermite_basis(theta)

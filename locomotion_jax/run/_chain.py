@@ -226,10 +226,10 @@ def _energy_at(C: Chain, contact, t, y):
 
 
 def _margin_z(f: _Fixed, a: _Acc, contact) -> jax.Array:
-    """The target's squared margin at $t_z$ (`_exact.target_margin`), from the events there."""
+    """The time from $t_z$ to the nearest change of the target's structure (`_exact.target_margin`)."""
     t_z = jnp.where(a.reached, a.t_z, f.ws)
     g, d, e = engine.probe(f.C, contact, t_z, a.y_z, Target(active=jnp.asarray(True), X0=a.X0, z=f.z))
-    return target_margin(f.C.waves.omega, a.before_z, list(g), list(d), list(e))
+    return target_margin(a.before_z, list(g), list(d), list(e))
 
 
 def _results(f: _Fixed, dyn, contact) -> dict:
@@ -255,7 +255,7 @@ def _results(f: _Fixed, dyn, contact) -> dict:
         mean_speed=mean_speed, cost_of_transport=e_z / z, stick_fraction=frac, e_d=e_d, work=work,
         delta_e=delta_e, balance=work - e_d - delta_e, liftoff=jnp.isfinite(s.t_liftoff), t_liftoff=s.t_liftoff,
         status=status, t_start=ws, X_start=jnp.where(a.started, a.X0, nan), n_steps=a.steps, n_switch=s.n_switch,
-        **margin_fields(a.started, a.reached, s.cross, s.near, _margin_z(f, a, contact), nan),
+        **margin_fields(a.started, a.reached, s.cross, s.near, _margin_z(f, a, contact), a.t_z - ws, nan),
     )  # fmt: skip
 
 
