@@ -12,6 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._actuation import AbstractWaveform, Sinusoid
+from ._custom_types import Contact
 from ._forward import concrete_value
 from ._params import DEFAULTS, PARAM_NAMES, Params
 
@@ -121,7 +122,7 @@ def prepare_initial(initial: Any, shape: tuple[int, ...], dtype: Any) -> jax.Arr
     return state
 
 
-def initial_state(params: Params, wave: AbstractWaveform, contact: str, start: str, row: jax.Array | None):
+def initial_state(params: Params, wave: AbstractWaveform, contact: Contact, start: str, row: jax.Array | None):
     """The engine's state at $t = 0$ of one configuration: at rest in the `start` position,
     or the given `row` $(x_1, v_1, x_2, v_2)$; with the validity of `row` (an invalid one is
     replaced by the start, so that nothing turns NaN)."""

@@ -188,7 +188,7 @@ def simulate(
     [`ChainTrajectory`][] for a chain.
 
     With [`Exact`][] dynamics (both engines) the batch runs through the work queue of
-    `measure` ([`_saves.run_saves`][]), at about `measure`'s cost over the same run plus
+    `measure` (`_saves.run_saves`), at about `measure`'s cost over the same run plus
     one iteration per save (benchmarks/simulate_vs_measure.py). [`Smoothed`][] dynamics
     run diffrax's `diffeqsolve` under `vmap`, as `measure` does with them: the solve is
     one loop of diffrax's own, which a work queue cannot take step by step.

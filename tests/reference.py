@@ -724,7 +724,7 @@ def reference_measure(
     horizon=2000.0,
     window=25.0,
     contact="strict",
-    start="paper",
+    start: str | tuple[float, float, float, float] = "paper",
     t_start=None,
     wave=None,
     rtol=1e-11,

@@ -251,7 +251,7 @@ def test_initial_state_is_validated():
     with pytest.raises(ValueError, match="broadcast"):
         lj.simulate(p, t_end=1.0, initial=(np.zeros(3), 0.0, 3.0, 0.0))
     with pytest.raises(TypeError, match="initial"):  # the package's, or the test suite's type checker
-        lj.simulate(p, t_end=1.0, initial=np.array([0.0, 0.0, 3.0, 0.0]))  # pyright: ignore[reportArgumentType]
+        lj.simulate(p, t_end=1.0, initial=np.array([0.0, 0.0, 3.0, 0.0]))  # pyright: ignore[reportArgumentType, reportCallIssue]
     with pytest.raises(ValueError, match="Exact dynamics only"):
         lj.simulate(p, t_end=1.0, initial=(0.0, 0.0, 3.0, 0.0), dynamics=lj.Smoothed())
     # Under jit the values are not known: the bad configuration is flagged in its own result.

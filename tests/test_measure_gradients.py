@@ -34,6 +34,7 @@ NAMES = ("omega", "a", "d", "mu_s", "mu_k", "B2")
 FIELDS = ("tau_z", "e_z", "mean_speed", "cost_of_transport")
 B2 = 0.01
 RTOL = 1e-3
+DT = 0.005  # at 0.01 one derivative of the twelve is off by 1.4e-3 (its dt error), at 0.005 by 1e-4
 # Configurations flagged smooth (z = 1 from t = 30 and z = 5 from the paper's start), found
 # by a scan of 64 random ones (26 lift off under the strict reading, 29 of the rest smooth).
 CONFIGS = [  # six SSL, then six SL
@@ -72,7 +73,7 @@ def _package(configs: tuple, setting: str):
         params = lj.Params(**{n: base[n] + shift.get(n, 0.0) for n in base})
         sin = jnp.stack([base["a"] + delta[1], jnp.full_like(base["a"], B2) + delta[5]], -1)
         wave = lj.Fourier(jnp.zeros_like(sin), sin, params.omega, base["lbar"])
-        m = lj.measure(params, z=z, t_start=t_start, horizon=horizon, waveform=wave)
+        m = lj.measure(params, z=z, t_start=t_start, horizon=horizon, waveform=wave, dynamics=lj.Exact(dt=DT))
         return jnp.stack([getattr(m, k) for k in FIELDS], -1), m
 
     jac, m = jax.jacfwd(run, has_aux=True)(jnp.zeros(len(NAMES)))
@@ -110,18 +111,20 @@ def _errors(got: np.ndarray, fd: np.ndarray) -> np.ndarray:
 
 
 def _check(configs: list, setting: str, rel: float = 1e-5) -> tuple[int, float]:
+    """Compare where smooth; returns (smooth count, worst error); asserts after all are seen."""
     jac, m = _package(tuple(tuple(sorted(c.items())) for c in configs), setting)
     smooth = np.asarray(m.smooth)
-    worst = 0.0
+    errors = {}
     for i, config in enumerate(configs):
         if not smooth[i]:
             continue
         key = tuple(sorted(config.items()))
         fd = np.stack([_reference_fd(key, setting, n, rel) for n in NAMES], -1)
-        err = _errors(jac[i], fd)
-        worst = max(worst, float(np.max(err)))
-        assert np.max(err) < RTOL, f"{config} ({setting}): package {jac[i]} vs reference {fd}"
-    return int(smooth.sum()), worst
+        errors[i] = float(np.max(_errors(jac[i], fd)))
+        print(f"  {config} ({setting}): largest relative error {errors[i]:.1e}")
+    bad = {configs[i]["omega"]: e for i, e in errors.items() if e >= RTOL}
+    assert not bad, f"derivatives off by more than {RTOL} at omega = {bad}"
+    return int(smooth.sum()), max(errors.values(), default=0.0)
 
 
 def test_measurement_derivatives_match_reference():

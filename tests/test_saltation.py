@@ -111,7 +111,7 @@ def test_state_jacobian_is_the_saltation_formula(case):
 
     # The event on the reference's flow of the first mode.
     event = lambda t, y: g(t, y)
-    event.terminal, event.direction = True, -1  # pyright: ignore[reportFunctionAttributeAccessIssue]
+    event.terminal, event.direction = True, -1  # pyright: ignore[reportFunctionMemberAccess]
     sol = solve_ivp(f_minus, (0, T_END), y0, method="DOP853", rtol=1e-12, atol=1e-13, events=event)
     assert sol.t_events[0].size == 1, "the span must hold exactly one event"
     t_e, y_e = float(sol.t_events[0][0]), sol.y_events[0][0]
