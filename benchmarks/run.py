@@ -9,6 +9,7 @@ and compile time are per case):
 - the same batch split over two forced host devices through the sweep engine's
   `shard_map` (`_sharding.dispatch_chunk`), with each device's completion time;
 - the smoothed engine (diffrax, `Smoothed(eps=1e-3)`) on a smaller batch;
+- the cost of `jax.jacfwd` through `measure` with p parameters against p + 1 plain runs;
 - the scipy baseline (`tests/reference.py`, `solve_ivp` DOP853 per mode, rtol 1e-9)
   on a few of the same configurations;
 - the accuracy of every engine against a tight scipy reference (rtol 1e-11) on
@@ -699,8 +700,41 @@ def case_gait_map(spec: dict) -> dict:
     )  # fmt: skip
 
 
+def case_jacfwd(spec: dict) -> dict:
+    """Cost of forward-mode derivatives: `jax.jacfwd` of `measure` (`tau_z`, `e_z`,
+    `mean_speed`; z = 1 from the paper's t_start) with respect to `p` parameters, against
+    the `p + 1` plain runs a one-sided finite difference needs; compilation excluded."""
+    jax = setup_jax()
+    import jax.numpy as jnp
+    import locomotion_jax as lj
+    from locomotion_jax._params import PARAM_NAMES
+
+    names = ("omega", "a", "d", "mu_s", "mu_k")[: spec["p"]]
+    om, a = configs(spec["B"])
+    base = lj.Params(omega=om, a=a).broadcast()
+
+    def run(delta):
+        shift = {n: delta[i] for i, n in enumerate(names)}
+        params = lj.Params(**{n: getattr(base, n) + shift.get(n, 0.0) for n in PARAM_NAMES})
+        m = lj.measure(params, z=1.0, horizon=spec["horizon"])
+        return jnp.stack([m.tau_z, m.e_z, m.mean_speed])
+
+    clock = CompileClock()
+    _, plain, plain_cpu, _ = timed(lambda: run(jnp.zeros(spec["p"])), spec["repeats"])
+    compile_plain = clock.total
+    _, jac, jac_cpu, _ = timed(lambda: jax.jacfwd(run)(jnp.zeros(spec["p"])), spec["repeats"])
+    cpu = statistics.median(jac_cpu) / ((spec["p"] + 1) * statistics.median(plain_cpu))
+    return dict(
+        spec, plain=statistics.median(plain), jacfwd=statistics.median(jac), ratio_cpu=cpu,
+        ratio=statistics.median(jac) / ((spec["p"] + 1) * statistics.median(plain)),
+        per_second=spec["B"] * spec["p"] * 3 / statistics.median(jac), compile=clock.total - compile_plain,
+        platform=jax.devices()[0].platform,
+    )  # fmt: skip
+
+
 CASES = dict(
     gait_map=case_gait_map,
+    jacfwd=case_jacfwd,
     exact=case_exact,
     sharded=case_sharded,
     smoothed=case_smoothed,
@@ -914,6 +948,13 @@ def main():
         results["gait_map"].append(r)
         log("gait_map: " + (r.get("error") or f"steady_gait {r['gait_warm']:.1f} s, direct {r['direct_warm']:.1f} s"))
 
+    if "jacfwd" not in skip:
+        for p in (1, 5):
+            spec = dict(kind="jacfwd", B=64 if q else 256, p=p, horizon=H, repeats=2)
+            r = spawn(spec)
+            results["jacfwd"].append(r)
+            log(f"jacfwd p={p}: " + (r.get("error") or f"{r['ratio']:.2f} x (p + 1) plain runs"))
+
     meta = dict(
         machine=machine(),
         load=(load0, os.getloadavg()),
@@ -1087,6 +1128,19 @@ def targets(res: dict, meta: dict, base: dict | None) -> list[str]:
                 f"{big['rss']:.0f} MB vs {small['rss']:.0f} MB ({big['data_mb']:.0f} MB of results, "
                 f"{big['store_mb']:.0f} MB on disk, {big['wall'] / 60:.1f} min)",
                 ok(big["rss"] <= 1.1 * small["rss"]),
+            )
+        )
+    for r in res.get("jacfwd", []):
+        if "error" in r:
+            continue
+        goal = (1 + 1.5 * r["p"]) / (r["p"] + 1)
+        rows.append(
+            (
+                f"`jax.jacfwd` of `measure` w.r.t. {r['p']} parameter(s), batch {r['B']}: time / ({r['p']} + 1) "
+                "plain runs (wall)",
+                f"<= {goal:.2f} (1 + 1.5 p plain runs)",
+                f"{r['ratio']:.2f} ({fmt(r['per_second'])} derivatives/s)",
+                ok(r["ratio"] <= goal),
             )
         )
     if not rows:
@@ -1420,6 +1474,27 @@ def report(res: dict, meta: dict) -> str:
             f"| direct simulation | {r['direct_first_row']:.1f} (first row) | {r['direct_warm']:.2f} | "
             f"{ev['50']:.1e} / {ev['95']:.1e} / {ev['100']:.1e} | {ec['50']:.1e} / {ec['95']:.1e} / {ec['100']:.1e} |"
         )
+        L.append("")
+
+    jacs = [r for r in res.get("jacfwd", []) if "error" not in r]
+    if jacs:
+        L.append("## Forward-mode derivatives")
+        L.append("")
+        L.append(
+            "`jax.jacfwd` of `measure` (`tau_z`, `e_z`, `mean_speed`; z = 1) with respect to the first p of "
+            "`omega, a, d, mu_s, mu_k`, against the p + 1 plain runs of a one-sided finite difference "
+            "(`case_jacfwd`). Derivatives per second: batch x p x 3 outputs / jacfwd time."
+        )
+        L.append("")
+        L.append(
+            "| p | batch | plain s | jacfwd s | / (p + 1) plain, wall | the same, CPU | derivatives/s | compile s |"
+        )
+        L.append("|---|---|---|---|---|---|---|---|")
+        for r in jacs:
+            L.append(
+                f"| {r['p']} | {r['B']} | {r['plain']:.3g} | {r['jacfwd']:.3g} | {r['ratio']:.2f} | "
+                f"{r['ratio_cpu']:.2f} | {fmt(r['per_second'])} | {r['compile']:.1f} |"
+            )
         L.append("")
 
     if base:

@@ -21,6 +21,8 @@ from ._results import (
     ChainMeasurement as ChainMeasurement,
     ChainTrajectory as ChainTrajectory,
     Measurement as Measurement,
+    SMOOTH_MARGIN as SMOOTH_MARGIN,
+    SMOOTH_MARGIN_Z as SMOOTH_MARGIN_Z,
     Trajectory as Trajectory,
 )
 from ._simulate import simulate as simulate

@@ -12,7 +12,6 @@ mass's velocity reaches zero, eq. 7) and the smallest normal force (eq. 5). One 
 
 from typing import NamedTuple
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 
@@ -44,18 +43,9 @@ def reduced(st: exact.Hybrid) -> Array:
 
 
 def section_state(params, wave, contact, y):
-    """The hybrid state at phase 0 for $y = (u, v_1, v_2)$: a mass at rest sticks if eq. (7)
-    allows (its velocity then carries no tangent), a moving one slips along $v_i$."""
-    dtype = params.dtype
-    st = exact.init(params, wave, contact, jnp.zeros((), dtype), y[0])
-    v1, v2 = y[1], y[2]
-    stuck1 = st.stuck1 & (v1 == 0)
-    stuck2 = st.stuck2 & (v2 == 0)
-    sgn = lambda v, s: jnp.where(v > 0, 1.0, jnp.where(v < 0, -1.0, s)).astype(dtype)
-    ys = st.y._replace(v1=jnp.where(stuck1, 0, v1), v2=jnp.where(stuck2, 0, v2))
-    return eqx.tree_at(
-        lambda s: (s.y, s.stuck1, s.stuck2, s.s1, s.s2), st, (ys, stuck1, stuck2, sgn(v1, st.s1), sgn(v2, st.s2))
-    )
+    """The hybrid state at phase 0 for $y = (u, v_1, v_2)$ with $x_1 = 0$ ([`_exact.init`][]:
+    a mass at rest sticks if eq. (7) allows, a moving one slips along $v_i$)."""
+    return exact.init(params, wave, contact, jnp.zeros((), params.dtype), y[0], y[1], y[2])
 
 
 class Orbit(NamedTuple):

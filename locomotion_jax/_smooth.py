@@ -167,6 +167,10 @@ def simulate_one(params, wave, save, contact, start, dyn):
         liftoff=jnp.isfinite(t_lift),
         t_liftoff=jnp.asarray(t_lift, ys.dtype),
         n_switch=jnp.sum(mode[1:] != mode[:-1]).astype(jnp.int32),
+        # A smooth model has no switching structure to change.
+        transversality=jnp.full_like(save, jnp.inf),
+        near_miss=jnp.full_like(save, jnp.inf),
+        switch_gap=jnp.full_like(save, jnp.inf),
         **der,
     )
 
@@ -244,6 +248,10 @@ def measure_one(params, wave, z, horizon, window, contact, start, dyn: Smoothed)
         X_start=jnp.where(okA, X0, nan),
         n_steps=(solA.stats["num_steps"] + solC.stats["num_steps"]).astype(jnp.int32),
         n_switch=jnp.zeros((), jnp.int32),
+        # A smooth model has no switching structure to change.
+        transversality=jnp.asarray(jnp.inf, ws.dtype),
+        near_miss=jnp.asarray(jnp.inf, ws.dtype),
+        margin_z=jnp.asarray(jnp.inf, ws.dtype),
     )
 
 

@@ -93,6 +93,9 @@ _DESCRIPTIONS = {
     "X_start": "centre of mass at t_start, eq. (4)",
     "n_steps": "integrator iterations",
     "n_switch": "contact-mode switches",
+    "transversality": "smallest margin (rad of drive phase) at a located switch in the measured interval",
+    "near_miss": "smallest margin (rad of drive phase) at a near miss of an event function",
+    "margin_z": "margin (rad of drive phase) of the target |X - X0| = z: its crossing, near misses, nearest switch",
     "omega": "actuation frequency derived from omega_over_wn1",
 }
 

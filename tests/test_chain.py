@@ -239,6 +239,7 @@ def test_invalid_configuration_flagged_in_batch():
 
 def test_wrong_dynamics_or_waveform_for_chain():
     chain = _kinds()["coulomb"]
+
     class Other(lj.AbstractDynamics):
         def describe(self) -> dict:
             return {}

@@ -146,6 +146,9 @@ def simulate_one(C: Chain, valid: Array, save: Array, contact: Contact, start: s
         t=save, x=x, v=v, stuck=stuck, X=jax.vmap(lambda xi: _com(C, xi))(x), e_d=ys[:, 2 * n_mass],
         w=ys[:, 2 * n_mass + 1], valid=ok_rows, status=status, liftoff=jnp.isfinite(t_lift),
         t_liftoff=jnp.asarray(t_lift, ys.dtype), n_switch=jnp.sum(changes).astype(jnp.int32), **der,
+        # A smooth model has no switching structure to change.
+        transversality=jnp.full_like(save, jnp.inf), near_miss=jnp.full_like(save, jnp.inf),
+        switch_gap=jnp.full_like(save, jnp.inf),
     )  # fmt: skip
 
 
@@ -202,4 +205,6 @@ def measure_one(
         t_liftoff=jnp.where(liftA, tsA[-1], jnp.where(liftC, tC, inf)), status=status, t_start=ws,
         X_start=jnp.where(okA, X0, nan), n_steps=(solA.stats["num_steps"] + solC.stats["num_steps"]).astype(jnp.int32),
         n_switch=jnp.zeros((), jnp.int32),
+        # A smooth model has no switching structure to change.
+        transversality=inf, near_miss=inf, margin_z=inf,
     )  # fmt: skip

@@ -17,7 +17,8 @@ import numpy as np
 from .._batch import default_max_steps, MICRO_BATCH_CPU
 from .._compile import engine_jit
 from .._dynamics import Exact, Smoothed
-from .._exact import Target
+from .._exact import Target, target_margin
+from .._margins import margin_fields, switch_gap
 from .._queue import run_queue
 from .._results import ChainMeasurement, ChainTrajectory
 from .._saves import BUFFER, run_saves
@@ -95,7 +96,8 @@ def chain_dynamics(dynamics: Any, waveform: Any) -> Exact | Smoothed:
 
 def _row(s: engine.Hybrid) -> jax.Array:
     dt = s.t.dtype
-    return jnp.concatenate([s.y.x, s.y.v, s.y.ed[None], s.y.w[None], s.stuck.astype(dt), s.sdir])
+    margins = jnp.stack([s.cross, s.near, s.t_switch])
+    return jnp.concatenate([s.y.x, s.y.v, s.y.ed[None], s.y.w[None], s.stuck.astype(dt), s.sdir, margins])
 
 
 def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps, lanes, buffer=BUFFER):
@@ -142,7 +144,9 @@ def simulate_chain(chain: Chain, t_end: float, save_at, *, dynamics: Exact | Smo
     out = dict(
         t=t, x=x, v=v, stuck=rows[..., 2 * N + 2 : 3 * N + 2] > 0.5, X=jax.vmap(_com)(flat, x),
         e_d=rows[..., 2 * N], w=rows[..., 2 * N + 1], valid=ok, status=status, liftoff=jnp.isfinite(t_lift),
-        t_liftoff=t_lift, n_switch=n_switch, **der,
+        t_liftoff=t_lift, n_switch=n_switch, transversality=jnp.sqrt(rows[..., 4 * N + 2]),
+        near_miss=jnp.sqrt(rows[..., 4 * N + 3]), switch_gap=switch_gap(flat.waves.omega, t, rows[..., 4 * N + 4]),
+        **der,
     )  # fmt: skip
     return ChainTrajectory(**_unflatten(out, shape), start=start, contact=contact)
 
@@ -161,6 +165,7 @@ class _Acc(eqx.Module):
     y_z: engine.State
     stuck: jax.Array
     steps: jax.Array
+    before_z: jax.Array  # time from the last switch to t_z
 
 
 class _Fixed(NamedTuple):
@@ -180,6 +185,7 @@ def _setup(C, valid, t_start, z, horizon, window, contact, start):
     acc = _Acc(
         started=no, X0=zero, ed0=zero, w0=zero, e0=zero, reached=no, t_z=jnp.asarray(jnp.inf, dtype),
         y_z=st.y.map(jnp.zeros_like), stuck=jnp.zeros_like(st.y.x), steps=jnp.zeros((), jnp.int32),
+        before_z=jnp.asarray(jnp.inf, dtype),
     )  # fmt: skip
     return _Fixed(C, ws, ws + window, ws + horizon, jnp.asarray(z, dtype)), (st, acc)
 
@@ -200,6 +206,8 @@ def _advance(f: _Fixed, dyn, contact, dt):
     started = a.started | begin
     X0 = jnp.where(begin, _com(f.C, s.y.x), a.X0)
     target = Target(active=started & ~a.reached, X0=X0, z=f.z)
+    # The margins cover the measured interval: they restart at t_start.
+    s = eqx.tree_at(lambda s: (s.cross, s.near), s, tuple(jnp.where(begin, jnp.inf, m) for m in (s.cross, s.near)))
     s_new, info = engine.step(f.C, contact, dt, s, t_stop, target)
     inside = info.commit & started & (info.t1 <= f.we)
     dur = jnp.where(inside, info.t1 - info.t0, 0)
@@ -209,6 +217,7 @@ def _advance(f: _Fixed, dyn, contact, dt):
         e0=jnp.where(begin, engine.energy(f.C, info.y0, info.tension0), a.e0), reached=a.reached | hit,
         t_z=jnp.where(hit, info.t_target, a.t_z), y_z=info.y_target.map(lambda n, o: jnp.where(hit, n, o), a.y_z),
         stuck=a.stuck + jnp.where(info.stuck, dur, 0), steps=a.steps + 1,
+        before_z=jnp.where(hit, jax.lax.stop_gradient(info.t_target - s.t_switch), a.before_z),
     )  # fmt: skip
     return s_new, a_new
 
@@ -218,6 +227,13 @@ def _energy_at(C: Chain, contact, t, y):
     dr = engine.drive(C, jnp.cos(omega * t), jnp.sin(omega * t))
     tension, _, _, _ = engine.loads(C, contact, dr.l0, dr.f, y.x)
     return engine.energy(C, y, tension)
+
+
+def _margin_z(f: _Fixed, a: _Acc, contact) -> jax.Array:
+    """The time from $t_z$ to the nearest change of the target's structure (`_exact.target_margin`)."""
+    t_z = jnp.where(a.reached, a.t_z, f.ws)
+    g, d, e = engine.probe(f.C, contact, t_z, a.y_z, Target(active=jnp.asarray(True), X0=a.X0, z=f.z))
+    return target_margin(a.before_z, list(g), list(d), list(e))
 
 
 def _results(f: _Fixed, dyn, contact) -> dict:
@@ -243,6 +259,7 @@ def _results(f: _Fixed, dyn, contact) -> dict:
         mean_speed=mean_speed, cost_of_transport=e_z / z, stick_fraction=frac, e_d=e_d, work=work,
         delta_e=delta_e, balance=work - e_d - delta_e, liftoff=jnp.isfinite(s.t_liftoff), t_liftoff=s.t_liftoff,
         status=status, t_start=ws, X_start=jnp.where(a.started, a.X0, nan), n_steps=a.steps, n_switch=s.n_switch,
+        **margin_fields(a.started, a.reached, s.cross, s.near, _margin_z(f, a, contact), a.t_z - ws, nan),
     )  # fmt: skip
 
 
