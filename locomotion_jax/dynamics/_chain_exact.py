@@ -211,7 +211,9 @@ def step(
     k2 = stage(drm, y0.map(lambda a, b: a + (0.5 * h) * b, k1))
     k3 = stage(drm, y0.map(lambda a, b: a + (0.5 * h) * b, k2))
     k4 = stage(dre, y0.map(lambda a, b: a + h * b, k3))
-    incr = k1.map(lambda a, b, c, d: kp((h / 6) * (a + 2 * (b + c) + d)), k2, k3, k4)
+    # The increment and (below) the Hermite basis are not kept: recomputing them where used
+    # costs fewer kernels than it adds flops (benchmarks/NOTES.md).
+    incr = k1.map(lambda a, b, c, d: (h / 6) * (a + 2 * (b + c) + d), k2, k3, k4)
     y1 = y0.map(lambda a, b: kp(a + b), incr)
     sp1 = forces.springs(P, dre.l0, y1.x)
     F1, N1 = forces.loads(P, sp1.fx, sp1.fy, dre.f)
@@ -242,7 +244,7 @@ def step(
     theta = kp(jnp.where(cut, two_mass._root(coef, jnp.minimum(cg1, 0)), 1))
 
     # -- commit: the full step, or the quintic dense output at the crossing.
-    H1, H2, H3, H4, H5 = (kp(q) for q in two_mass._hermite_basis(theta))
+    H1, H2, H3, H4, H5 = two_mass._hermite_basis(theta)
     hH1, hH4, h2H2, h2H5 = h * H1, h * H4, h2 * H2, h2 * H5
     part = incr.map(
         lambda i, a, b, c, d: H3 * i + hH1 * a + hH4 * b + h2H2 * c + h2H5 * d, k1, D1.rate, D0.second, D1.second
