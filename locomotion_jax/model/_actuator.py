@@ -17,9 +17,10 @@ from .._custom_types import Array
 class AbstractActuator(eqx.Module):
     """Base class of actuators (abstract/final pattern).
 
-    `varies_rest_length` and `applies_force` say whether [`split`][] moves the rest length
-    and applies a force at all; where one is `False`, the exact engine takes the rest
-    length $\\bar\\ell_j$ (or no force) and spends nothing on its rates.
+    `varies_rest_length` and `applies_force` say whether
+    [`split`][locomotion_jax.AbstractActuator.split] moves the rest length and applies a
+    force at all; where one is `False`, the exact engine takes the rest length
+    $\\bar\\ell_j$ (or no force) and spends nothing on its rates.
     """
 
     varies_rest_length: ClassVar[bool] = True

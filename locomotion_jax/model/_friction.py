@@ -40,10 +40,11 @@ class AbstractFriction(eqx.Module):
         `direction` $\\sigma = \\pm 1$ (smooth in the speed)."""
 
     def kinetic_rate(self, speed: Array, direction: Array, speed_rate: Array) -> Array | None:
-        """Time derivative of [`kinetic`][] while the speed changes at `speed_rate` (for the exact
-        engine's dense output and event prediction): forward-mode differentiation of `kinetic`,
-        so a law supplies values only. `None` means zero (a law whose coefficient does not
-        depend on the speed returns it, and the engine skips the terms)."""
+        """Time derivative of [`kinetic`][locomotion_jax.AbstractFriction.kinetic] while the
+        speed changes at `speed_rate` (for the exact engine's dense output and event
+        prediction). By default forward-mode differentiation of `kinetic`, so a law supplies
+        values only; `None` means zero (a law whose coefficient does not depend on the speed
+        returns it, and the engine skips those terms)."""
         return jax.jvp(lambda s: self.kinetic(s, direction), (speed,), (speed_rate,))[1]
 
     def fields(self) -> dict[str, Array]:
