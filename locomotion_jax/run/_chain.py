@@ -177,7 +177,7 @@ def _setup(C, valid, t_start, z, horizon, window, contact, start):
     P = forces.consts(C)
     st = _initial(C, valid, contact, start, P)
     dtype = st.t.dtype
-    ws = jnp.where(jnp.isfinite(t_start), t_start, C.t_start).astype(dtype)
+    ws = t_start.astype(dtype)
     zero = jnp.zeros((), dtype)
     no = jnp.asarray(False)
     acc = _Acc(
@@ -252,6 +252,8 @@ def _results(f: _Fixed, dyn, contact) -> dict:
 
 def _measure_batch(C, valid, t_start, z, horizon, window, contact, start, dt, max_steps, lanes):
     n = valid.shape[0]
+    # The default start (eigenvalues of the linearised chain) once for the batch, not in every refill.
+    t_start = jnp.where(jnp.isfinite(t_start), t_start, C.t_start)
     take = lambda i: (jax.tree_util.tree_map(lambda x: x[i], C), valid[i], t_start[i])
     setup = lambda i: _setup(*take(i), z, horizon, window, contact, start)
     running = lambda f, d: _running(f, d, max_steps)
