@@ -25,6 +25,12 @@ forward-mode derivative of `kinetic`), so a new law or actuator supplies values 
   step's dense output and the derivatives along the motion stay accurate;
 - optionally a caller's target $z - |X - X_0|$.
 
+**Margins** to a change of switching structure, as in the two-mass engine (`_exact.margins`):
+a located crossing's from the rate and curvature of its event quintic at the root; where a
+slipping mass stops, from its stick margin and that margin's rate, both from the loads and
+their rates that the step's start computes anyway; near misses from the event functions'
+Taylor parabolas there.
+
 **Speed.** As in the two-mass engine (its docstring, benchmarks/NOTES.md): the state is a
 flat set of scalars (tuples over masses, so that under `vmap` every kernel is a vector
 over the configurations), shared intermediates are pinned with [`keep`][], the phase
@@ -35,6 +41,7 @@ by `where` over the event list (no gather).
 from typing import NamedTuple
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 
 from .. import _exact as two_mass
@@ -52,7 +59,8 @@ class Hybrid(eqx.Module):
     `stuck`, `sdir`, `pend`, `side` have one entry per mass: the mode, slip direction, a
     flag for an event located at `t` (the mass is re-decided at the next iteration), and the
     side ($\\pm 1$) of its normal force (paper contact: flipped where a crossing is located,
-    so that $n_i = \\nu_i N_i$ over a step).
+    so that $n_i = \\nu_i N_i$ over a step). `cross`, `near`, `t_switch`: the margins to a
+    change of switching structure so far and the time of the last switch (as in `_exact.Hybrid`).
     """
 
     t: Array
@@ -67,6 +75,9 @@ class Hybrid(eqx.Module):
     status: Array
     t_liftoff: Array
     n_switch: Array
+    cross: Array
+    near: Array
+    t_switch: Array
 
 
 class StepInfo(NamedTuple):
@@ -105,7 +116,33 @@ def init(C: Chain, contact: Contact, x: Array, P: Consts | None = None) -> Hybri
         t=zero, y=y, comp=y.map(jnp.zeros_like) if f32 else None, cph=cph, sph=sph, stuck=stuck, sdir=sdir,
         pend=tuple(jnp.zeros_like(s) for s in stuck), side=tuple(jnp.where(q > 0, 1.0, -1.0).astype(dtype) for q in N),
         status=status, t_liftoff=jnp.where(lifted, zero, jnp.inf).astype(dtype), n_switch=jnp.zeros((), jnp.int32),
+        cross=jnp.asarray(jnp.inf, dtype), near=jnp.asarray(jnp.inf, dtype), t_switch=jnp.asarray(-jnp.inf, dtype),
     )  # fmt: skip
+
+
+def probe(
+    C: Chain | None, contact: Contact, t: Array, y: State, target: two_mass.Target, P: Consts | None = None
+) -> tuple[list, list, list]:
+    """The event functions with their first and second time derivatives at time `t` and
+    state `y`, in the mode the state implies (a mass at rest sticks where its static limits
+    hold; compare `_exact.probe`): lists in the order of the module docstring (target last).
+    For margins at a measured instant; not for the hot loop. `P` as in [`step`][]."""
+    if P is None:
+        if C is None:
+            raise TypeError("probe needs the chain C or its constants P.")
+        P = consts(C)
+    dtype = t.dtype
+    dr = drive(P, jnp.cos(P.omega * t), jnp.sin(P.omega * t))
+    sp = forces.springs(P, dr.l0, y.x)
+    F, N = forces.loads(P, sp.fx, sp.fy, dr.f)
+    n = motion.normal(contact, N)
+    stuck = tuple((p >= 0) & (v == 0) for p, v in zip(motion.stick_margin(P, F, n), y.v))
+    one = jnp.ones((), dtype)
+    sdir = tuple(jnp.where(v > 0, one, jnp.where(v < 0, -one, jnp.where(f >= 0, one, -one))) for v, f in zip(y.v, F))
+    side = tuple(jnp.where(q > 0, one, -one) for q in N)
+    v = tuple(jnp.where(s, 0, vi) for s, vi in zip(stuck, y.v))
+    D = motion.derivatives(P, contact, Mode(stuck, sdir, side), target, dr, sp, F, N, y.x, v)
+    return D.g, D.dg, D.ddg
 
 
 def initial_positions(C: Chain, start: str) -> Array:
@@ -243,6 +280,23 @@ def step(
     coef = two_mass._quintic(jnp.maximum(cg0, 0), h * cd0, h2 * ce0, jnp.minimum(cg1, 0), h * cd1, h2 * ce1)
     theta = kp(jnp.where(cut, two_mass._root(coef, jnp.minimum(cg1, 0)), 1))
 
+    # -- margins to a change of switching structure (`_exact.margins`); they feed nothing back.
+    # A slipping mass that stopped (vel) sticks where its stick margin is >= 0 (`margin`, from
+    # n_i = |N_i|); the margin's rate along the motion in the new mode from the loads' rates
+    # that the start's derivatives computed anyway.
+    dnA = motion.normal_rate(contact, N0, D0.dN)
+    hold_rate = motion.stick_margin_rate(P, F0, nA, D0.dF, dnA)
+    target_cut = first[-1] if target is not None else jnp.asarray(False)
+    decide = list(zip(vel, margin, hold_rate))
+    # The located crossing's rate and curvature from the event quintic at its root:
+    # p'(theta) = h g' and p''(theta) = h^2 g'' (their ratio is what counts).
+    c = [jax.lax.stop_gradient(q) for q in coef]
+    th = jax.lax.stop_gradient(theta)
+    p1 = c[1] + th * (2 * c[2] + th * (3 * c[3] + th * (4 * c[4] + th * 5 * c[5])))
+    p2 = 2 * c[2] + th * (6 * c[3] + th * (12 * c[4] + th * 20 * c[5]))
+    located = [(cut & ~target_cut, h * p1, p2)]
+    m_cross, m_near = two_mass.margins(P.omega, h, located, decide, crossed, g0s, d0s, e0s)
+
     # -- commit: the full step, or the quintic dense output at the crossing.
     H1, H2, H3, H4, H5 = two_mass._hermite_basis(theta)
     hH1, hH4, h2H2, h2H5 = h * H1, h * H4, h2 * H2, h2 * H5
@@ -278,7 +332,6 @@ def step(
         side = tuple(jnp.where(f, -s, s) for f, s in zip(flip, side))
     t_lift = jnp.where(lift_cut & ~jnp.isfinite(t_lift), tc, t_lift)
     commit = ~stop0
-    target_cut = first[-1] if target is not None else jnp.asarray(False)
     status = jnp.where(lift, Status.LIFTOFF, st.status).astype(jnp.int32)
 
     keepc = lambda new, old: jnp.where(commit, new, old)
@@ -287,6 +340,9 @@ def step(
         cph=keepc(cph, st.cph), sph=keepc(sph, st.sph), stuck=tuple(map(keepc, stuck, st.stuck)),
         sdir=tuple(map(keepc, sdir, st.sdir)), pend=tuple(commit & f for f in first[:n_mass]),
         side=tuple(map(keepc, side, st.side)), status=status, t_liftoff=t_lift.astype(dtype), n_switch=n_switch,
+        cross=jnp.where(commit, jnp.minimum(st.cross, m_cross), st.cross),
+        near=jnp.where(commit, jnp.minimum(st.near, m_near), st.near),
+        t_switch=jnp.where(commit & cut & ~target_cut, jax.lax.stop_gradient(tc), st.t_switch),
     )  # fmt: skip
     info = StepInfo(
         commit=commit, t0=t0, y0=y0, tension0=sp0.tension, t1=tc, y1=yc, stuck=stuck,

@@ -67,6 +67,15 @@ def normal(contact: Contact, N: Scalars, side: Scalars | None = None) -> Scalars
     return tuple(s * q for s, q in zip(side, N))
 
 
+def normal_rate(contact: Contact, N: Scalars, dN: Scalars) -> Scalars:
+    """Time derivatives of the normal forces $n_i$ of [`normal`][] without `side` from those of
+    $N_i$: $\\dot N_i$ (strict) or $\\operatorname{sgn}(N_i)\\dot N_i$ (paper; $+\\dot N_i$ at $N_i = 0$,
+    as `jax.jvp` of `jnp.abs`)."""
+    if contact != "paper":
+        return dN
+    return tuple(jnp.where(q >= 0, r, -r) for q, r in zip(N, dN))
+
+
 def stick_margin(P: Consts, F: Scalars, n: Scalars) -> list:
     """The stuck masses' event values $\\min(\\mu_{s,\\mathrm{fwd}} n_i - F_i, F_i + \\mu_{s,\\mathrm{bwd}} n_i)$;
     for an isotropic law $\\mu_s n_i - |F_i|$, the same value in fewer operations."""
@@ -113,13 +122,16 @@ def rates(P: Consts, contact: Contact, mode: Mode, dr: Drive, x: Scalars, v: Sca
 
 
 class Derivs(NamedTuple):
-    """The state's rate and second time derivative; the events' values and first two time derivatives."""
+    """The state's rate and second time derivative; the events' values and first two time
+    derivatives; the loads' first time derivatives $\\dot F_i$, $\\dot N_i$."""
 
     rate: State
     second: State
     g: list
     dg: list
     ddg: list
+    dF: Scalars
+    dN: Scalars
 
 
 def derivatives(P: Consts, contact: Contact, mode: Mode, target, dr: Drive, sp: forces.Springs, F, N, x, v) -> Derivs:
@@ -178,7 +190,7 @@ def derivatives(P: Consts, contact: Contact, mode: Mode, target, dr: Drive, sp: 
         g.append(jnp.where(target.active, target.z - jnp.abs(rel), inf))
         dg.append(jnp.where(target.active, -sgn * forces.centre_of_mass(P, xd), 0))
         ddg.append(jnp.where(target.active, -sgn * forces.centre_of_mass(P, a), 0))
-    return Derivs(rate, second, g, dg, ddg)
+    return Derivs(rate, second, g, dg, ddg, dF, dN)
 
 
 def energy(P: Consts, y: State, tension: Scalars) -> Array:
