@@ -287,6 +287,18 @@ MUTATIONS = [
         (("fire = tuple(kp(pe | (g < 0)) for pe, g in zip(st.pend, gA))", "fire = tuple(kp(pe) for pe in st.pend)"),),
         (CHAIN_REF,),
     ),
+    Mutation(
+        "chain_decision_rate_sign",
+        "chain margins: sign of F_i's rate in a stopped mass's stick-or-reverse rate",
+        CHAIN,
+        (
+            (
+                "hold_rate = motion.stick_margin_rate(P, F0, nA, D0.dF, dnA)",
+                "hold_rate = motion.stick_margin_rate(P, F0, nA, tuple(-q for q in D0.dF), dnA)",
+            ),
+        ),
+        ("tests/test_margins.py::test_chain_margins_equal_the_two_mass_engines",),
+    ),
     # -- derivatives -------------------------------------------------------------------------------------
     Mutation(
         "event_time_fixed",
