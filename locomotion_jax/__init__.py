@@ -11,6 +11,7 @@ from ._actuation import AbstractWaveform as AbstractWaveform, Fourier as Fourier
 from ._basins import Basins as Basins, basins as basins
 from ._bifurcation import BranchEvents as BranchEvents, EventKind as EventKind
 from ._cache import enable_compilation_cache as enable_compilation_cache
+from ._chain_gait import ChainGait as ChainGait
 from ._continuation import Branch as Branch, BranchStatus as BranchStatus, continuation as continuation
 from ._dynamics import AbstractDynamics as AbstractDynamics, Exact as Exact, Smoothed as Smoothed
 from ._gait import Gait as Gait, GaitStatus as GaitStatus, steady_gait as steady_gait

@@ -16,7 +16,7 @@ period later), which makes the multiplier 0 that sticking contributes.
 """
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, overload
 
 import equinox as eqx
 import jax
@@ -26,12 +26,14 @@ import numpy as np
 from . import _corrector as corrector, _model as model, _period as period
 from ._actuation import AbstractWaveform
 from ._batch import default_max_steps, prepare, unflatten
+from ._chain_gait import ChainGait
 from ._compile import engine_jit
 from ._custom_types import Array, ArrayLike
 from ._dynamics import AbstractDynamics, Exact
 from ._measure import STICK_TOL
 from ._params import Params
 from ._status import Regime, Status
+from .model._chain import Chain
 
 
 class GaitStatus:
@@ -154,8 +156,40 @@ def _check(periods, transient, tol, max_iter) -> tuple[int, ...]:
     return ks
 
 
+@overload
 def steady_gait(
     params: Params,
+    *,
+    periods: int | Sequence[int] = ...,
+    transient: int = ...,
+    tol: float | None = ...,
+    max_iter: int = ...,
+    dynamics: AbstractDynamics | None = ...,
+    waveform: AbstractWaveform | None = ...,
+    contact: str = ...,
+    start: str | ArrayLike = ...,
+    dtype: Any = ...,
+) -> Gait: ...
+
+
+@overload
+def steady_gait(
+    params: Chain,
+    *,
+    periods: int | Sequence[int] = ...,
+    transient: int = ...,
+    tol: float | None = ...,
+    max_iter: int = ...,
+    dynamics: AbstractDynamics | None = ...,
+    waveform: AbstractWaveform | None = ...,
+    contact: str = ...,
+    start: str | ArrayLike = ...,
+    dtype: Any = ...,
+) -> ChainGait: ...
+
+
+def steady_gait(
+    params: Params | Chain,
     *,
     periods: int | Sequence[int] = (1, 2, 3, 4),
     transient: int = 30,
@@ -166,7 +200,7 @@ def steady_gait(
     contact: str = "strict",
     start: str | ArrayLike = "paper",
     dtype: Any = None,
-) -> Gait:
+) -> Gait | ChainGait:
     """Solve the steady gait of each configuration as a periodic orbit (module docstring).
 
     After `transient` actuation periods from the start `start`, Newton's method on the
@@ -200,6 +234,15 @@ def steady_gait(
     dynamics = Exact() if dynamics is None else dynamics
     if not isinstance(dynamics, Exact):
         raise TypeError(f"steady_gait needs Exact dynamics, got {type(dynamics).__name__}.")
+    if isinstance(params, Chain):
+        if waveform is not None:
+            raise ValueError("waveform= applies to Params; a Chain carries its own waveforms (Chain(waveforms=...)).")
+        if not isinstance(start, str):
+            raise ValueError("start= for a Chain names a start at rest: 'paper' or 'relaxed'.")
+        from ._chain_gait import steady_gait_chain
+
+        return steady_gait_chain(params, periods=periods, transient=transient, tol=tol, max_iter=max_iter,
+                                 dynamics=dynamics, contact=contact, start=start, dtype=dtype)  # fmt: skip
     model.check_contact(contact)
     flat, wave, axes, shape = prepare(params, waveform, dtype)
     y_start = _start_states(start, shape, flat.dtype)

@@ -1,0 +1,108 @@
+"""`steady_gait` for chains of N masses: the periodic orbit against a long direct simulation
+averaged over whole periods, its monodromy against finite differences of the period map, and
+the N = 2 chain against the two-mass solver (itself compared with the reference in
+test_gait.py)."""
+
+import jax
+import jax.numpy as jnp
+import locomotion_jax as lj
+import numpy as np
+import pytest
+from locomotion_jax import _chain_gait as cg
+from locomotion_jax.dynamics import _chain_forces as forces
+
+
+P = np.pi
+
+
+@pytest.fixture(scope="module")
+def worms():
+    """N = 3 worms (travelling waves), strict contact: two stick-slip gaits (waves towards the
+    front and the rear), a pure-slip gait driven by anisotropy (d = 0), an anisotropic stick-slip
+    gait, and an invalid configuration (omega < 0)."""
+    om = np.array([3.0, 6.0, 12.0, 6.0, -1.0])
+    a = np.array([0.08, 0.05, 0.03, 0.05, 0.05])
+    phi = np.array([2 * P / 3, -2 * P / 3, 2 * P / 3, 2 * P / 3, 1.0])
+    d = np.array([0.5, 0.5, 0.0, 0.0, 0.5])
+    col = lambda *v: np.array(v)[:, None]
+    friction = lj.AnisotropicCoulomb(col(0.7, 0.7, 0.7, 0.7, 0.7), col(0.7, 0.7, 0.9, 0.9, 0.7),
+                                     col(0.5, 0.5, 0.5, 0.5, 0.5), col(0.5, 0.5, 0.7, 0.7, 0.5))  # fmt: skip
+    chain = lj.Chain(masses=np.ones((5, 3)), d=d[:, None], waveforms=lj.TravellingWave(a, om, phi),
+                     friction=friction, check=False)  # fmt: skip
+    return chain, lj.steady_gait(chain)
+
+
+def test_chain_gait_equals_long_direct_simulation(worms):
+    """Speed and cost of transport of the orbit equal `simulate` averaged over 12 periods after
+    the transient has decayed below 1e-10 (from the orbit's own multipliers), to 1e-8."""
+    chain, g = worms
+    assert list(np.asarray(g.status)) == [lj.GaitStatus.CONVERGED] * 4 + [lj.GaitStatus.INVALID]
+    assert list(np.asarray(g.regime)[:4]) == [lj.Regime.SSL, lj.Regime.SSL, lj.Regime.SL, lj.Regime.SSL]
+    assert np.all(np.asarray(g.stable)[:4]) and np.all(np.asarray(g.k)[:4] == 1)
+    assert np.all(np.isnan(np.asarray(g.mean_speed)[4])) and not np.any(np.isnan(np.asarray(g.mean_speed)[:4]))
+    omega = np.asarray(chain.waves.omega)[:4]
+    mu = np.max(np.abs(np.asarray(g.multipliers)[:4]), axis=-1)
+    # Saved at every period of its own omega, the direct run restarts its steps where the
+    # period map does (one call per omega, the same number of saves: one compilation).
+    n0 = int(np.ceil(np.max(np.log(1e-10) / np.log(mu))))
+    K = 12
+    assert n0 < 800
+    speed, cost, status = np.zeros(4), np.zeros(4), []
+    for w in np.unique(omega):
+        T = 2 * P / w
+        tr = lj.simulate(chain, (n0 + K) * T, save_at=np.arange(n0 + K + 1) * T)
+        X, ed = np.asarray(tr.X)[:4], np.asarray(tr.e_d)[:4]
+        status.append(np.asarray(tr.status)[4])
+        dX = X[:, -1] - X[:, n0]
+        at = omega == w
+        speed[at], cost[at] = (dX / (K * T))[at], ((ed[:, -1] - ed[:, n0]) / np.abs(dX))[at]
+    np.testing.assert_allclose(np.asarray(g.mean_speed)[:4], speed, rtol=1e-8)
+    np.testing.assert_allclose(np.asarray(g.cost_of_transport)[:4], cost, rtol=1e-8)
+    # On the orbit the energy is periodic: the work per period equals the dissipation, up to
+    # the integrator's error (worst here the fast pure-slip worm at 52 steps per period:
+    # 1.7e-5 at dt = 0.01, 4.8e-7 at 0.005, 1.1e-8 at 0.0025).
+    np.testing.assert_allclose(np.asarray(g.work)[:4], np.asarray(g.e_d)[:4], rtol=5e-5)
+    assert status == [lj.Status.INVALID] * len(status)
+
+
+def test_chain_monodromy_against_finite_differences(worms):
+    """The monodromy of the pure-slip worm (every mass moving at the section) against central
+    differences of the period map, and so its multipliers, to 1e-5."""
+    chain, g = worms
+    i = 2
+    one = jax.tree_util.tree_map(lambda x: x[i], chain.broadcast())
+    Pc = forces.consts(one)
+    y = jnp.asarray(g.state[i])
+    phi = jax.jit(lambda y: cg._period_map(one, Pc, "strict", 0.01, 100_000, 1.0, y).y)
+    h = 1e-6
+    cols = [(phi(y + h * e) - phi(y - h * e)) / (2 * h) for e in jnp.eye(y.shape[0], dtype=y.dtype)]
+    M_fd = np.stack([np.asarray(c) for c in cols], axis=1)
+    M = np.asarray(g.monodromy[i])
+    np.testing.assert_allclose(M, M_fd, atol=1e-5 * np.max(np.abs(M)))
+    ev = lambda A: np.sort_complex(np.linalg.eigvals(A))
+    np.testing.assert_allclose(ev(M), ev(M_fd), atol=1e-5)
+    assert np.all(np.asarray(g.state[i])[2:] != 0)  # no mass at rest at the section
+
+
+def test_two_mass_chain_gait_equals_the_two_mass_solver():
+    """`Chain.from_params` (the paper's model as N = 2) on the N-mass solver equals the two-mass
+    `steady_gait`: a stick-slip and a pure-slip gait."""
+    p = lj.Params(omega=np.array([2.0, 5.0]))
+    g2 = lj.steady_gait(p)
+    gc = lj.steady_gait(lj.Chain.from_params(p))
+    assert list(np.asarray(gc.regime)) == [lj.Regime.SSL, lj.Regime.SL]
+    for a, b in ((gc.mean_speed, g2.mean_speed), (gc.cost_of_transport, g2.cost_of_transport),
+                 (gc.stick_fraction[:, 0], g2.stick_fraction1), (gc.stick_fraction[:, 1], g2.stick_fraction2),
+                 (gc.state[:, 0], g2.u), (gc.state[:, 1], g2.v1), (gc.state[:, 2], g2.v2)):  # fmt: skip
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-10, atol=1e-13)
+    np.testing.assert_allclose(np.abs(np.asarray(gc.multipliers)), np.abs(np.asarray(g2.multipliers)), atol=1e-10)
+
+
+def test_chain_gait_bad_input():
+    chain = lj.Chain(masses=np.ones(3), waveforms=lj.TravellingWave(0.05, 3.0, 1.0))
+    with pytest.raises(ValueError, match="carries its own waveforms"):
+        lj.steady_gait(chain, waveform=lj.Sinusoid(0.1, 2.0, 3.0))
+    with pytest.raises(ValueError, match="start"):
+        lj.steady_gait(chain, start=np.zeros(5))
+    with pytest.raises(ValueError, match="contact"):
+        lj.steady_gait(chain, contact="soft")
