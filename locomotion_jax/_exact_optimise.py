@@ -1,0 +1,461 @@
+"""The exact optimiser: least cost of transport over steady gaits of the exact model (SPEC §7).
+
+Problem, for a required speed $v_\\min$ in the direction $\\sigma = \\pm 1$ and a stroke limit
+$a_\\max$, over Fourier waveforms of $N$ harmonics and a free (or fixed) base frequency:
+
+$$\\min_\\theta\\ \\frac{e_d}{\\sigma\\Delta X}\\quad\\text{s.t.}\\quad
+\\frac{\\sigma\\Delta X}{T} \\ge v_\\min,\\quad \\min_t N_{1,2} \\ge \\text{margin},\\quad
+\\max_t |\\ell_0(t) - \\bar\\ell| \\le a_\\max,$$
+
+where $\\Delta X$, $e_d$ and $\\min N$ are those of one period $T = 2\\pi/\\omega$ of the
+periodic orbit (the steady gait), with their gradients by the implicit function theorem
+(`_orbit`): no smoothing, no transient inside the optimisation, whole periods.
+
+Method:
+
+- **Starts.** Sinusoids of several amplitudes, sinusoids with a third harmonic, saw-tooth
+  ramps of both senses and random waveforms, over log-spaced base frequencies, the best
+  sinusoid of the baseline and an optional given start (continuation in $v_\\min$: the
+  previous optimum). Each is run from the relaxed spring for a transient, its orbit
+  solved, and the starts are ranked by cost of transport with a penalty on the
+  constraint violations; the best few are refined.
+- **Local refinement** by `scipy.optimize.minimize(method="trust-constr")` (an SQP
+  trust-region method: exact values, exact gradients, a quasi-Newton Hessian): the
+  trust region keeps each step within the reach of the warm-started Newton solve
+  of the orbit. The stroke is a convex set: it enters as linear constraints
+  $|s(\\phi_j)| \\le 1$ on a grid of phases, refined at the true maxima located by
+  [`_constraints.stroke`][locomotion_jax._constraints.stroke]; at the end the waveform
+  is rescaled radially onto the exact limit. The local solvers run in lockstep, so
+  that each of their evaluations is one batched (vmapped) call of the engine.
+- **Verification.** Every refined waveform (and the best start) is solved again by
+  [`steady_gait`][] under the strict contact reading from the relaxed spring (periods 1
+  to 4 tried, stability from the Floquet multipliers); the reported optimum is the
+  cheapest one that is converged, stable, without lift-off, at least as fast as
+  required and within the stroke.
+"""
+
+import math
+import time
+from typing import Any
+
+import jax.numpy as jnp
+import numpy as np
+import scipy.optimize
+
+from . import _constraints as cons, _orbit as orbit, _pareto as pareto
+from ._actuation import Fourier
+from ._gait import steady_gait
+from ._lockstep import run_lockstep
+from ._optimum import ExactSettings, Optimum
+from ._params import Params
+
+
+def normalise_phase(cos: np.ndarray, sin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Shift the time origin so that $A_1 = 0$, $B_1 \\ge 0$ (the same gait, module `_orbit`)."""
+    n = np.arange(1, len(cos) + 1)
+    d = math.atan2(-cos[0], sin[0])
+    return cos * np.cos(n * d) + sin * np.sin(n * d), sin * np.cos(n * d) - cos * np.sin(n * d)
+
+
+def to_theta(cos, sin, omega: float, a_max: float, harmonics: int) -> np.ndarray:
+    """A waveform's coefficients (padded or truncated to `harmonics`) -> decision vector."""
+    c = np.zeros(harmonics)
+    s = np.zeros(harmonics)
+    m = min(harmonics, len(cos))
+    c[:m], s[:m] = np.asarray(cos, float)[:m], np.asarray(sin, float)[:m]
+    c, s = normalise_phase(c, s)
+    return np.concatenate([c[1:] / a_max, s / a_max, [math.log(omega)]])
+
+
+def from_theta(theta: np.ndarray, a_max: float, harmonics: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """Decision vector -> `(cos, sin, omega)`."""
+    n = harmonics
+    cos = a_max * np.concatenate([[0.0], theta[: n - 1]])
+    return cos, a_max * theta[n - 1 : 2 * n - 1], float(np.exp(theta[-1]))
+
+
+def _unit_stroke(cos: np.ndarray, sin: np.ndarray, scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    s = float(cons.stroke(jnp.asarray(cos), jnp.asarray(sin)))
+    return cos * scale / s, sin * scale / s
+
+
+def start_shapes(harmonics: int, seed: int, n_random: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Unit-stroke shapes (`cos`, `sin`) the starts are made of, at several strokes."""
+    rng = np.random.default_rng(seed)
+    n = np.arange(1, harmonics + 1)
+    e = lambda k: np.eye(1, harmonics, k)[0] if k < harmonics else np.zeros(harmonics)
+    zero = np.zeros(harmonics)
+    saw = (-1.0) ** (n + 1) / n
+    shapes = [(zero, e(0))]
+    for scale in (0.3, 0.6):
+        shapes.append(_unit_stroke(zero, e(0), scale))
+    for third in (0.2, -0.2):  # the 3-harmonic optimum's inchworm has such a harmonic
+        shapes.append(_unit_stroke(zero, e(0) + third * e(2), 0.5))
+    shapes += [_unit_stroke(zero, saw), _unit_stroke(zero, -saw)]
+    for _ in range(n_random):
+        c, s = rng.normal(size=harmonics) / n**2, e(0) + rng.normal(size=harmonics) / n**2
+        shapes.append(_unit_stroke(c, s, float(rng.uniform(0.3, 1.0))))
+    return shapes
+
+
+def _stroke_rows(harmonics: int, phases: np.ndarray) -> np.ndarray:
+    """$s(\\phi_j) = \\text{rows} \\cdot \\theta$ (units of $a_\\max$) at the given phases."""
+    n = np.arange(1, harmonics + 1)
+    arg = np.outer(phases, n)
+    return np.concatenate([np.cos(arg)[:, 1:], np.sin(arg), np.zeros((len(phases), 1))], axis=1)
+
+
+def _peaks(theta: np.ndarray, harmonics: int) -> np.ndarray:
+    """Phases of the local maxima of $|s(\\phi)|$ near the top (Newton-polished on a fine grid)."""
+    m = 64 * harmonics
+    phases = np.arange(m) * 2 * np.pi / m
+    rows = _stroke_rows(harmonics, phases)
+    v = np.abs(rows @ theta)
+    top = np.flatnonzero((v >= np.roll(v, 1)) & (v >= np.roll(v, -1)) & (v > 0.9 * v.max()))
+    n = np.arange(1, harmonics + 1)
+    c = np.concatenate([[0.0], theta[: harmonics - 1]])
+    s = theta[harmonics - 1 : 2 * harmonics - 1]
+    phi = phases[top]
+    for _ in range(4):
+        arg = np.outer(phi, n)
+        d1 = (n * (s * np.cos(arg) - c * np.sin(arg))).sum(1)
+        d2 = -(n * n * (c * np.cos(arg) + s * np.sin(arg))).sum(1)
+        phi = phi - np.clip(np.where(d2 != 0, d1 / np.where(d2 != 0, d2, 1), 0), -0.5 / harmonics, 0.5 / harmonics)
+    return phi
+
+
+class _Figures:
+    """Objective and constraints of one evaluated point, as `trust-constr` wants them."""
+
+    def __init__(self, theta, orb, need_rate, direction, margin, free_omega):
+        dX, ed, low = (float(x) for x in orb.figures)
+        g_dX, g_ed, g_low = (np.asarray(g, float) for g in orb.gradient)
+        T = 2 * np.pi / math.exp(theta[-1])
+        need = need_rate * T  # required distance per period; d need / d log omega = -need
+        d_need = np.zeros_like(theta)
+        d_need[-1] = -need
+        dist, g_dist = direction * dX, direction * g_dX
+        # Cost of transport e_d / dist, the distance floored smoothly at a quarter of the
+        # required one, so that an iterate that stands still has a finite cost.
+        floor, width = 0.25 * need, 0.05 * need
+        z = (dist - floor) / width
+        den = floor + width * np.logaddexp(0, z)
+        sig = 0.5 * (1 + np.tanh(0.5 * z))
+        d_den = 0.25 * d_need + 0.05 * d_need * np.logaddexp(0, z) + sig * (g_dist - 0.25 * d_need - z * 0.05 * d_need)
+        self.f = ed / den
+        self.df = g_ed / den - ed / den**2 * d_den
+        self.c = np.array([dist / need - 1, low - margin])
+        self.dc = np.stack([g_dist / need - dist / need**2 * d_need, g_low])
+        if not free_omega:
+            self.df[-1] = 0.0
+            self.dc[:, -1] = 0.0
+        self.ok = bool(orb.ok)
+
+
+class _Bad:
+    """A point where the orbit could not be solved: the trust region must shrink."""
+
+    def __init__(self, theta, last: "_Figures | None"):
+        self.ok = False
+        self.f = (last.f if last is not None else 0.0) + 1e3
+        self.df = np.zeros_like(theta)
+        self.c = np.array([-1.0, -1.0])
+        self.dc = np.zeros((2, len(theta)))
+
+
+class _Evaluator:
+    """Batched oracle for the lockstep solvers: warm starts per solver, a transient where Newton fails."""
+
+    def __init__(self, oracle: orbit.Oracle, lanes: int, settings: ExactSettings, make):
+        self.oracle, self.lanes, self.settings, self.make = oracle, lanes, settings, make
+        self.y: dict[int, np.ndarray] = {}
+        self.last: dict[int, Any] = {}
+        self.calls = 0
+
+    def solve(self, theta: np.ndarray, y0: np.ndarray, fresh: np.ndarray):
+        """Orbits of a full batch (`lanes` rows); where Newton fails, again after a transient."""
+        dtype = self.oracle.params.dtype
+        th = jnp.asarray(theta, dtype)
+        orb = self.oracle.orbits(th, jnp.asarray(y0, dtype))
+        ok = np.asarray(orb.ok)
+        if not ok.all():
+            periods = jnp.asarray(self.settings.transient, jnp.int32)
+            y1 = self.oracle.transient(th, jnp.asarray(y0, dtype), jnp.asarray(fresh | ~ok), periods)
+            again = self.oracle.orbits(th, y1)
+            orb = type(orb)(*(np.where(_col(ok, a), a, b) for a, b in zip(orb, again)))
+        self.calls += 1
+        return type(orb)(*(np.asarray(x) for x in orb))
+
+    def __call__(self, idx: list[int], xs: list[np.ndarray]) -> list[Any]:
+        pad = idx + [idx[0]] * (self.lanes - len(idx))
+        theta = np.stack([xs[idx.index(i)] for i in pad])
+        y0 = np.stack([self.y[i] for i in pad])
+        orb = self.solve(theta, y0, np.zeros(len(pad), bool))
+        out = []
+        for k, i in enumerate(idx):
+            one = type(orb)(*(x[k] for x in orb))
+            if one.ok:
+                self.y[i] = one.y
+                fig = self.make(theta[k], one)
+                self.last[i] = fig
+            else:
+                fig = _Bad(theta[k], self.last.get(i))
+            out.append(fig)
+        return out
+
+
+def _col(flag: np.ndarray, like: Any) -> np.ndarray:
+    return flag.reshape(flag.shape + (1,) * (np.ndim(like) - 1))
+
+
+def _local_solver(x0, rows, bounds, settings: ExactSettings, log: list):
+    """One `trust-constr` run from `x0`; `ask(x)` returns the `_Figures` at `x`."""
+
+    def solve(ask):
+        cache: dict[bytes, Any] = {}
+        trace: list[dict] = []
+
+        def at(x):
+            key = np.asarray(x).tobytes()
+            if key not in cache:
+                cache.clear()
+                cache[key] = ask(np.array(x, float))
+                fig = cache[key]
+                trace.append({"f": float(fig.f), "c_speed": float(fig.c[0]), "c_normal": float(fig.c[1]), "ok": fig.ok})
+            return cache[key]
+
+        res = scipy.optimize.minimize(
+            lambda x: at(x).f,
+            x0,
+            jac=lambda x: at(x).df,
+            method="trust-constr",
+            constraints=[
+                scipy.optimize.NonlinearConstraint(
+                    lambda x: at(x).c, 0.0, np.inf, jac=lambda x: at(x).dc, hess=_zero_hessian
+                ),
+                scipy.optimize.LinearConstraint(rows, -1.0, 1.0),
+            ],
+            bounds=bounds,
+            options={"maxiter": settings.max_iter, "initial_tr_radius": settings.trust_radius, "verbose": 0},
+        )
+        log.append({"message": str(res.message), "nit": int(res.nit), "trace": trace})
+        return np.asarray(res.x, float)
+
+    return solve
+
+
+def _zero_hessian(x, v):
+    return np.zeros((len(x), len(x)))
+
+
+def _omega_bounds(params: Params, omega: float | None, settings: ExactSettings) -> tuple[float, float]:
+    if omega is not None:
+        return float(omega), float(omega)
+    wmin = float(min(params.wn1, params.wn2, params.wn3))
+    return settings.omega_min * wmin, settings.omega_max * float(params.wn1)
+
+
+def _starts(params, speed, a_max, harmonics, lo, hi, baseline, start, settings: ExactSettings) -> np.ndarray:
+    """Decision vectors of the starts (module docstring), a multiple of the batch size."""
+    omegas = [lo] if lo == hi else list(np.geomspace(max(lo, 0.1 * hi), hi / 1.5, settings.start_frequencies))
+    shapes = start_shapes(harmonics, settings.seed, settings.random_shapes)
+    out = [to_theta(a_max * c, a_max * s, w, a_max, harmonics) for w in omegas for c, s in shapes]
+    if baseline is not None and lo != hi:
+        out.append(to_theta([0.0], [baseline["a"]], baseline["omega"], a_max, harmonics))
+    if start is not None:
+        c, s, w = np.asarray(start.cos, float), np.asarray(start.sin, float), float(start.omega)
+        out.append(to_theta(c, s, w if lo != hi else lo, a_max, harmonics))
+    theta = np.stack(out)
+    theta[:, -1] = np.clip(theta[:, -1], math.log(lo), math.log(hi))
+    # Keep every start inside the stroke (a truncated start may overshoot).
+    for i, th in enumerate(theta):
+        c, s, _ = from_theta(th, 1.0, harmonics)
+        st = float(cons.stroke(jnp.asarray(c), jnp.asarray(s)))
+        if st > 1:
+            theta[i, :-1] /= st
+    return theta
+
+
+def _merit(fig: "_Figures") -> float:
+    """Ranking of the starts: cost of transport, penalised by the constraint violations."""
+    if not fig.ok:
+        return math.inf
+    return fig.f * (1 + 10 * max(0.0, -fig.c[0])) + 10 * max(0.0, -fig.c[1])
+
+
+def optimise_exact(
+    params: Params,
+    speed: float,
+    direction: int,
+    a_max: float,
+    omega: float | None,
+    harmonics: int,
+    settings: ExactSettings,
+    baseline: dict | None,
+    start: Any,
+) -> tuple[Optimum, dict]:
+    """The exact method (module docstring); inputs already checked by `optimise`."""
+    t0 = time.perf_counter()
+    dtype = params.dtype
+    lo, hi = _omega_bounds(params, omega, settings)
+    free = lo != hi
+    max_steps = int(math.ceil(2 * math.pi / lo / settings.dt)) * 3 + 200
+    oracle = orbit.Oracle(
+        params=params,
+        a_max=jnp.asarray(a_max, dtype),
+        max_steps=jnp.asarray(max_steps, jnp.int32),
+        tol=jnp.asarray(settings.newton_tol if jnp.finfo(dtype).bits == 64 else 1e-5, dtype),
+        harmonics=harmonics,
+        contact="paper",  # iterates past a lift-off stay defined; the margin constraint keeps N > 0
+        dt=settings.dt,
+        max_iter=settings.newton_iter,
+    )
+    v_target = speed * (1 + settings.speed_slack)
+    make = lambda th, orb: _Figures(th, orb, v_target, direction, settings.margin, free)
+    lanes = settings.local
+    ev = _Evaluator(oracle, lanes, settings, make)
+    log: dict[str, Any] = {}
+
+    # -- starts, screened in batches of the same size as the local solves (one compilation).
+    theta0 = _starts(params, speed, a_max, harmonics, lo, hi, baseline, start, settings)
+    n0 = len(theta0)
+    pad = (-n0) % lanes
+    theta0 = np.concatenate([theta0, theta0[:pad]])
+    figs, ys = [], []
+    for b in range(0, len(theta0), lanes):
+        th = theta0[b : b + lanes]
+        orb = ev.solve(th, np.zeros((lanes, 3)), np.ones(lanes, bool))
+        for k in range(lanes):
+            one = type(orb)(*(x[k] for x in orb))
+            figs.append(make(th[k], one) if one.ok else _Bad(th[k], None))
+            ys.append(one.y)
+    merit = np.array([_merit(f) for f in figs[:n0]])
+    order = [int(i) for i in np.argsort(merit) if np.isfinite(merit[i])][:lanes]
+    log["starts"] = [{"omega": float(np.exp(theta0[i, -1])), "merit": float(merit[i])} for i in range(n0)]
+    if not order:
+        order = [0]
+    order += order[:1] * (lanes - len(order))
+
+    # -- local refinement in lockstep, with the stroke grid refined at the true maxima.
+    grid = np.arange(settings.grid_per_harmonic * harmonics) * 2 * np.pi / (settings.grid_per_harmonic * harmonics)
+    bounds = scipy.optimize.Bounds(
+        np.r_[np.full(2 * harmonics - 1, -np.inf), math.log(lo) if free else -np.inf],
+        np.r_[np.full(2 * harmonics - 1, np.inf), math.log(hi) if free else np.inf],
+    )
+    x = [theta0[i].copy() for i in order]
+    ev.y = {k: ys[i] for k, i in enumerate(order)}
+    log["local"] = []
+    for _ in range(settings.stroke_rounds):
+        phases = [np.concatenate([grid, _peaks(xi, harmonics)]) for xi in x]
+        solvers = [_local_solver(x[k], _stroke_rows(harmonics, phases[k]), bounds, settings, log["local"])
+                   for k in range(lanes)]  # fmt: skip
+        x = run_lockstep(solvers, ev)
+        strokes = [_stroke_of(xi, harmonics) for xi in x]
+        if max(strokes) <= 1 + 1e-9:
+            break
+    # The exact stroke limit: radial rescaling of what the grid let through.
+    for k in range(lanes):
+        s = _stroke_of(x[k], harmonics)
+        if s > 1:
+            x[k][:-1] /= s
+    best_start = order[0]
+    candidates = [("start", theta0[best_start])] + [(f"local {k}", x[k]) for k in range(lanes)]
+    return _verify(params, speed, direction, a_max, harmonics, free, settings, candidates, baseline, log, t0, ev)
+
+
+def _stroke_of(theta: np.ndarray, harmonics: int) -> float:
+    c, s, _ = from_theta(theta, 1.0, harmonics)
+    return float(cons.stroke(jnp.asarray(c), jnp.asarray(s)))
+
+
+def _verify(params, speed, direction, a_max, harmonics, free, settings, candidates, baseline, log, t0, ev):
+    """Solve each candidate's steady gait (strict contact, relaxed start) and keep the cheapest feasible one."""
+    dtype = params.dtype
+    names = [n for n, _ in candidates]
+    theta = np.stack([th for _, th in candidates])
+    n = len(theta)
+    cs = [from_theta(th, a_max, harmonics) for th in theta]
+    wave = Fourier(
+        jnp.asarray(np.stack([c for c, _, _ in cs]), dtype),
+        jnp.asarray(np.stack([s for _, s, _ in cs]), dtype),
+        jnp.asarray([w for _, _, w in cs], dtype),
+        jnp.full((n,), params.lbar, dtype),
+    )
+    batch = pareto.with_waveform_frequency(params, wave)
+    gait = steady_gait(batch, waveform=wave, contact="strict", start="relaxed", transient=settings.transient,
+                       dynamics=_exact_dynamics(settings))  # fmt: skip
+    fig = pareto.gait_figures(gait)
+    strokes = np.array([a_max * _stroke_of(th, harmonics) for th in theta])
+    tol = 8 * float(jnp.finfo(dtype).eps)
+    ok_speed = fig.ok & (direction * np.nan_to_num(fig.speed, nan=-np.inf) >= speed)
+    ok_stroke = strokes <= a_max * (1 + tol)
+    feasible = ok_speed & ok_stroke & fig.ok
+    table = [
+        {
+            "candidate": names[i],
+            "omega": cs[i][2],
+            "mean_speed_exact": float(fig.speed[i]),
+            "cost_of_transport_exact": float(fig.cost[i]),
+            "stable_exact": bool(fig.ok[i]),
+            "liftoff_exact": bool(fig.liftoff[i]),
+            "stroke": float(strokes[i]),
+            "feasible_exact": bool(feasible[i]),
+        }
+        for i in range(n)
+    ]
+    if feasible.any():
+        k = int(np.argmin(np.where(feasible, fig.cost, np.inf)))
+    else:  # the closest miss: a stable gait, fastest
+        v = direction * np.nan_to_num(fig.speed, nan=-np.inf)
+        k = int(np.argmax(np.where(fig.ok, v, -np.inf))) if fig.ok.any() else 0
+    sin_cost = baseline["cost_of_transport"] if baseline else math.nan
+    improvement = 1 - float(fig.cost[k]) / sin_cost if (feasible[k] and baseline) else math.nan
+    c, s, w = cs[k]
+    rho = np.abs(np.asarray(gait.multipliers[k]))
+    opt = Optimum(
+        v_min=speed,
+        direction=direction,
+        a_max=float(a_max),
+        margin=settings.margin,
+        harmonics=harmonics,
+        free_omega=free,
+        cos=c,
+        sin=s,
+        omega=w,
+        lbar=float(params.lbar),
+        mean_speed_exact=float(fig.speed[k]),
+        cost_of_transport_exact=float(fig.cost[k]),
+        stroke_exact=float(strokes[k]),
+        liftoff_exact=bool(fig.liftoff[k]),
+        constraints_exact={
+            "speed": bool(ok_speed[k]),
+            "stroke": bool(ok_stroke[k]),
+            "no_liftoff": bool(~fig.liftoff[k]),
+            "stable": bool(fig.ok[k]),
+        },
+        feasible_exact=bool(feasible[k]),
+        mean_speed_smoothed=math.nan,
+        cost_of_transport_smoothed=math.nan,
+        min_normal_smoothed=math.nan,
+        eps=math.nan,
+        sinusoid=baseline,
+        sinusoid_cost_of_transport=sin_cost,
+        improvement_vs_sinusoid=improvement,
+        initial_cost_of_transport_exact=float(fig.cost[0]) if feasible[0] else math.nan,
+        source=names[k],
+        candidates=table,
+        history=[log],
+        runtime_s=time.perf_counter() - t0,
+        method="exact",
+        stable_exact=bool(fig.ok[k]),
+        spectral_radius_exact=float(np.max(rho)) if np.all(np.isfinite(rho)) else math.nan,
+        gait_period_exact=float(gait.period[k]),
+        evaluations=ev.calls,
+    )
+    return opt, log
+
+
+def _exact_dynamics(settings: ExactSettings):
+    from ._dynamics import Exact
+
+    return Exact(dt=settings.dt)
