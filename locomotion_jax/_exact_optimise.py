@@ -35,6 +35,7 @@ Method:
 """
 
 import math
+import sys
 import time
 from typing import Any
 
@@ -86,11 +87,10 @@ def start_shapes(harmonics: int, seed: int, n_random: int) -> list[tuple[np.ndar
     e = lambda k: np.eye(1, harmonics, k)[0] if k < harmonics else np.zeros(harmonics)
     zero = np.zeros(harmonics)
     saw = (-1.0) ** (n + 1) / n
-    shapes = [(zero, e(0))]
-    for scale in (0.3, 0.6):
-        shapes.append(_unit_stroke(zero, e(0), scale))
-    for third in (0.2, -0.2):  # the 3-harmonic optimum's inchworm has such a harmonic
-        shapes.append(_unit_stroke(zero, e(0) + third * e(2), 0.5))
+    shapes = [_unit_stroke(zero, e(0), scale) for scale in (0.2, 0.35, 0.5, 0.7, 1.0)]
+    for scale in (0.35, 0.5, 0.7):
+        for third in (0.2, -0.2):  # resonant gaits of small stroke carry such a third harmonic
+            shapes.append(_unit_stroke(zero, e(0) + third * e(2), scale))
     shapes += [_unit_stroke(zero, saw), _unit_stroke(zero, -saw)]
     for _ in range(n_random):
         c, s = rng.normal(size=harmonics) / n**2, e(0) + rng.normal(size=harmonics) / n**2
@@ -105,23 +105,50 @@ def _stroke_rows(harmonics: int, phases: np.ndarray) -> np.ndarray:
     return np.concatenate([np.cos(arg)[:, 1:], np.sin(arg), np.zeros((len(phases), 1))], axis=1)
 
 
-def _peaks(theta: np.ndarray, harmonics: int) -> np.ndarray:
-    """Phases of the local maxima of $|s(\\phi)|$ near the top (Newton-polished on a fine grid)."""
-    m = 64 * harmonics
-    phases = np.arange(m) * 2 * np.pi / m
-    rows = _stroke_rows(harmonics, phases)
-    v = np.abs(rows @ theta)
-    top = np.flatnonzero((v >= np.roll(v, 1)) & (v >= np.roll(v, -1)) & (v > 0.9 * v.max()))
-    n = np.arange(1, harmonics + 1)
-    c = np.concatenate([[0.0], theta[: harmonics - 1]])
-    s = theta[harmonics - 1 : 2 * harmonics - 1]
-    phi = phases[top]
-    for _ in range(4):
-        arg = np.outer(phi, n)
-        d1 = (n * (s * np.cos(arg) - c * np.sin(arg))).sum(1)
-        d2 = -(n * n * (c * np.cos(arg) + s * np.sin(arg))).sum(1)
-        phi = phi - np.clip(np.where(d2 != 0, d1 / np.where(d2 != 0, d2, 1), 0), -0.5 / harmonics, 0.5 / harmonics)
-    return phi
+class StrokePeaks:
+    """The stroke constraint by local reduction: $1 - |s(\\phi_k)| \\ge 0$ at the `count` highest
+    local maxima $\\phi_k$ of $|s|$ (units of $a_\\max$).
+
+    The maxima are bracketed on a grid of 64 phases per harmonic and polished by Newton's
+    method on $s' = 0$; sorted by height, the $k$-th value is a continuous function of
+    $\\theta$, with the gradient $-\\operatorname{sgn} s(\\phi_k)\\,\\partial s(\\phi_k)/\\partial\\theta$
+    (envelope theorem). Bounding all of them at once linearises the semi-infinite
+    constraint $|s(\\phi)| \\le 1$ for all $\\phi$ (with fewer maxima the highest is repeated).
+    """
+
+    def __init__(self, harmonics: int):
+        self.harmonics = harmonics
+        self.count = 2 * harmonics
+        m = 64 * harmonics
+        self.grid = np.arange(m) * 2 * np.pi / m
+        self.rows = _stroke_rows(harmonics, self.grid)
+
+    def peaks(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Phases of the highest local maxima of $|s|$ and their signed values, highest first."""
+        n = np.arange(1, self.harmonics + 1)
+        a = np.abs(self.rows @ theta)
+        top = np.flatnonzero((a >= np.roll(a, 1)) & (a > np.roll(a, -1)))
+        if top.size == 0:
+            top = np.array([int(np.argmax(a))])
+        c = np.concatenate([[0.0], theta[: self.harmonics - 1]])
+        s = theta[self.harmonics - 1 : 2 * self.harmonics - 1]
+        phi = self.grid[top]
+        h = self.grid[1]
+        for _ in range(4):
+            arg = np.outer(phi, n)
+            d1 = (n * (s * np.cos(arg) - c * np.sin(arg))).sum(1)
+            d2 = -(n * n * (c * np.cos(arg) + s * np.sin(arg))).sum(1)
+            step = np.where(d2 != 0, -d1 / np.where(d2 != 0, d2, 1), 0)
+            phi = phi + np.clip(step, -h, h)
+        val = _stroke_rows(self.harmonics, phi) @ theta
+        order = np.argsort(-np.abs(val))[: self.count]
+        order = np.concatenate([order, np.repeat(order[:1], self.count - len(order))])
+        return phi[order], val[order]
+
+    def __call__(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Constraint values `(count,)` and their Jacobian `(count, p)`."""
+        phi, val = self.peaks(theta)
+        return 1 - np.abs(val), -np.sign(val)[:, None] * _stroke_rows(self.harmonics, phi)
 
 
 class _Figures:
@@ -144,6 +171,7 @@ class _Figures:
         d_den = 0.25 * d_need + 0.05 * d_need * np.logaddexp(0, z) + sig * (g_dist - 0.25 * d_need - z * 0.05 * d_need)
         self.f = ed / den
         self.df = g_ed / den - ed / den**2 * d_den
+        self.cot = ed / dist if dist > 0 else math.inf  # the true cost of transport
         self.c = np.array([dist / need - 1, low - margin])
         self.dc = np.stack([g_dist / need - dist / need**2 * d_need, g_low])
         if not free_omega:
@@ -157,6 +185,7 @@ class _Bad:
 
     def __init__(self, theta, last: "_Figures | None"):
         self.ok = False
+        self.cot = math.inf
         self.f = (last.f if last is not None else 0.0) + 1e3
         self.df = np.zeros_like(theta)
         self.c = np.array([-1.0, -1.0])
@@ -186,6 +215,10 @@ class _Evaluator:
         self.calls += 1
         return type(orb)(*(np.asarray(x) for x in orb))
 
+    def report(self, message: str) -> None:
+        if self.settings.verbose:
+            print(message, file=sys.stderr, flush=True)
+
     def __call__(self, idx: list[int], xs: list[np.ndarray]) -> list[Any]:
         pad = idx + [idx[0]] * (self.lanes - len(idx))
         theta = np.stack([xs[idx.index(i)] for i in pad])
@@ -201,6 +234,13 @@ class _Evaluator:
             else:
                 fig = _Bad(theta[k], self.last.get(i))
             out.append(fig)
+        if self.calls % 25 == 0:
+            self.report(
+                f"  evaluation {self.calls}: cost "
+                + " ".join(f"{f.f:.4f}" for f in out)
+                + " speed constraint "
+                + " ".join(f"{f.c[0]:+.4f}" for f in out)
+            )
         return out
 
 
@@ -208,7 +248,7 @@ def _col(flag: np.ndarray, like: Any) -> np.ndarray:
     return flag.reshape(flag.shape + (1,) * (np.ndim(like) - 1))
 
 
-def _local_solver(x0, rows, bounds, settings: ExactSettings, log: list):
+def _local_solver(x0, stroke: StrokePeaks, bounds, settings: ExactSettings, log: list):
     """One `trust-constr` run from `x0`; `ask(x)` returns the `_Figures` at `x`."""
 
     def solve(ask):
@@ -233,7 +273,9 @@ def _local_solver(x0, rows, bounds, settings: ExactSettings, log: list):
                 scipy.optimize.NonlinearConstraint(
                     lambda x: at(x).c, 0.0, np.inf, jac=lambda x: at(x).dc, hess=_zero_hessian
                 ),
-                scipy.optimize.LinearConstraint(rows, -1.0, 1.0),
+                scipy.optimize.NonlinearConstraint(
+                    lambda x: stroke(x)[0], 0.0, np.inf, jac=lambda x: stroke(x)[1], hess=_zero_hessian
+                ),
             ],
             bounds=bounds,
             options={"maxiter": settings.max_iter, "initial_tr_radius": settings.trust_radius, "verbose": 0},
@@ -276,11 +318,13 @@ def _starts(params, speed, a_max, harmonics, lo, hi, baseline, start, settings: 
     return theta
 
 
-def _merit(fig: "_Figures") -> float:
-    """Ranking of the starts: cost of transport, penalised by the constraint violations."""
+def _merit(fig: "_Figures | _Bad") -> float:
+    """Ranking of the starts: the true cost of transport, penalised by the constraint violations
+    (the objective's floored distance would favour a waveform that barely moves). A speed
+    deficit is penalised mildly: the local solver closes it more easily than it lowers a cost."""
     if not fig.ok:
         return math.inf
-    return fig.f * (1 + 10 * max(0.0, -fig.c[0])) + 10 * max(0.0, -fig.c[1])
+    return fig.cot * (1 + 3 * max(0.0, -fig.c[0])) + 10 * max(0.0, -fig.c[1])
 
 
 def optimise_exact(
@@ -322,38 +366,48 @@ def optimise_exact(
     pad = (-n0) % lanes
     theta0 = np.concatenate([theta0, theta0[:pad]])
     figs, ys = [], []
+    periods = jnp.asarray(settings.transient, jnp.int32)
     for b in range(0, len(theta0), lanes):
         th = theta0[b : b + lanes]
-        orb = ev.solve(th, np.zeros((lanes, 3)), np.ones(lanes, bool))
+        rest = oracle.transient(jnp.asarray(th, dtype), jnp.zeros((lanes, 3), dtype), jnp.ones(lanes, bool), periods)
+        orb = ev.solve(th, np.asarray(rest), np.zeros(lanes, bool))
         for k in range(lanes):
             one = type(orb)(*(x[k] for x in orb))
             figs.append(make(th[k], one) if one.ok else _Bad(th[k], None))
             ys.append(one.y)
     merit = np.array([_merit(f) for f in figs[:n0]])
-    order = [int(i) for i in np.argsort(merit) if np.isfinite(merit[i])][:lanes]
+    order: list[int] = []
+    for i in np.argsort(merit):
+        # Distinct gaits only: shapes that are time shifts or mirror images of each other
+        # give the same gait, and the same merit to rounding.
+        if np.isfinite(merit[i]) and all(abs(merit[i] - merit[j]) > 1e-9 * merit[j] for j in order):
+            order.append(int(i))
+        if len(order) == lanes:
+            break
     log["starts"] = [{"omega": float(np.exp(theta0[i, -1])), "merit": float(merit[i])} for i in range(n0)]
     if not order:
         order = [0]
     order += order[:1] * (lanes - len(order))
+    ev.report(
+        f"{n0} starts screened ({time.perf_counter() - t0:.0f} s); refining: "
+        + ", ".join(f"omega {np.exp(theta0[i, -1]):.3g} merit {merit[i]:.3g}" for i in order)
+    )
 
-    # -- local refinement in lockstep, with the stroke grid refined at the true maxima.
-    grid = np.arange(settings.grid_per_harmonic * harmonics) * 2 * np.pi / (settings.grid_per_harmonic * harmonics)
+    # -- local refinement in lockstep.
     bounds = scipy.optimize.Bounds(
         np.r_[np.full(2 * harmonics - 1, -np.inf), math.log(lo) if free else -np.inf],
         np.r_[np.full(2 * harmonics - 1, np.inf), math.log(hi) if free else np.inf],
     )
-    x = [theta0[i].copy() for i in order]
     ev.y = {k: ys[i] for k, i in enumerate(order)}
     log["local"] = []
-    for _ in range(settings.stroke_rounds):
-        phases = [np.concatenate([grid, _peaks(xi, harmonics)]) for xi in x]
-        solvers = [_local_solver(x[k], _stroke_rows(harmonics, phases[k]), bounds, settings, log["local"])
-                   for k in range(lanes)]  # fmt: skip
-        x = run_lockstep(solvers, ev)
-        strokes = [_stroke_of(xi, harmonics) for xi in x]
-        if max(strokes) <= 1 + 1e-9:
-            break
-    # The exact stroke limit: radial rescaling of what the grid let through.
+    stroke = StrokePeaks(harmonics)
+    solvers = [_local_solver(theta0[i].copy(), stroke, bounds, settings, log["local"]) for i in order]
+    x = run_lockstep(solvers, ev)
+    ev.report(
+        f"local runs done ({time.perf_counter() - t0:.0f} s); stroke / a_max "
+        + " ".join(f"{_stroke_of(xi, harmonics):.8f}" for xi in x)
+    )
+    # The exact stroke limit: radial rescaling of what the constraint tolerance let through.
     for k in range(lanes):
         s = _stroke_of(x[k], harmonics)
         if s > 1:

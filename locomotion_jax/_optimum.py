@@ -81,12 +81,10 @@ class ExactSettings(eqx.Module):
 
     - `local`: starts refined locally, in lockstep (one batched engine call each step).
     - `start_frequencies`: base frequencies of the starts, log-spaced over the range.
-    - `random_shapes`: random waveforms among the start shapes (with the sinusoids of three
+    - `random_shapes`: random waveforms among the start shapes (with sinusoids of five
       strokes, sinusoids with a third harmonic and saw-tooth ramps of both senses).
     - `max_iter`: iterations of each local `trust-constr` run; `trust_radius`: its initial
       trust region (decision variables: coefficients in units of $a_\\max$, $\\log\\omega$).
-    - `stroke_rounds`: local runs, each adding the true stroke maxima of the last one to
-      the grid of `grid_per_harmonic` phases per harmonic.
     - `margin`: required $\\min_t N_{1,2}$ over the orbit (units of weight).
     - `speed_slack`: the orbit targets $v_\\min (1 + \\text{slack})$.
     - `omega_min`, `omega_max`: range of a free base frequency, in units of the smallest
@@ -99,12 +97,10 @@ class ExactSettings(eqx.Module):
     """
 
     local: int = 4
-    start_frequencies: int = 6
+    start_frequencies: int = 8
     random_shapes: int = 2
     max_iter: int = 150
     trust_radius: float = 0.1
-    stroke_rounds: int = 2
-    grid_per_harmonic: int = 8
     margin: float = 0.05
     speed_slack: float = 1e-3
     omega_min: float = 0.06
@@ -118,8 +114,8 @@ class ExactSettings(eqx.Module):
     verbose: bool = False
 
     def __check_init__(self):
-        if self.local < 1 or self.max_iter < 1 or self.stroke_rounds < 1 or self.start_frequencies < 1:
-            raise ValueError("ExactSettings: local, max_iter, stroke_rounds and start_frequencies must be >= 1.")
+        if self.local < 1 or self.max_iter < 1 or self.start_frequencies < 1:
+            raise ValueError("ExactSettings: local, max_iter and start_frequencies must be >= 1.")
         if not (0 < self.omega_min < self.omega_max):
             raise ValueError(
                 f"ExactSettings: need 0 < omega_min < omega_max, got {self.omega_min!r}, {self.omega_max!r}."
@@ -207,8 +203,11 @@ class Optimum:
         exact = self.method == "exact"
         lines = [
             f"requirement: mean speed >= {self.v_min:g} in direction {self.direction:+d}, stroke <= {self.a_max:g}, "
-            + (f"normal forces >= {self.margin:g} on the orbit, stable steady gait (exact)" if exact else
-               f"normal forces >= {self.margin:g} (smoothed), no lift-off (exact)"),
+            + (
+                f"normal forces >= {self.margin:g} on the orbit, stable steady gait (exact)"
+                if exact
+                else f"normal forces >= {self.margin:g} (smoothed), no lift-off (exact)"
+            ),
             f"method: {self.method}; base frequency omega = {self.omega:.6g} "
             f"({'optimised' if self.free_omega else 'fixed'}), lbar = {self.lbar:g}, {self.harmonics} harmonics",
             "cos coefficients: " + " ".join(f"{c:+.6f}" for c in self.cos),
@@ -251,3 +250,7 @@ class Optimum:
 
 OptimiseSettings = Settings
 """Public name of [`Settings`][] (exported as `locomotion_jax.OptimiseSettings`)."""
+
+
+ExactOptimiseSettings = ExactSettings
+"""Public name of [`ExactSettings`][] (exported as `locomotion_jax.ExactOptimiseSettings`)."""
