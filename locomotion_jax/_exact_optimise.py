@@ -37,8 +37,9 @@ Method:
 import math
 import sys
 import time
-from typing import Any
+from typing import Any, cast
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.optimize
@@ -151,6 +152,10 @@ class StrokePeaks:
         return 1 - np.abs(val), -np.sign(val)[:, None] * _stroke_rows(self.harmonics, phi)
 
 
+PENALTY = 10.0
+"""Weight of the squared relative speed deficit added to the objective (costs are O(1))."""
+
+
 class _Figures:
     """Objective and constraints of one evaluated point, as `trust-constr` wants them."""
 
@@ -174,6 +179,12 @@ class _Figures:
         self.cot = ed / dist if dist > 0 else math.inf  # the true cost of transport
         self.c = np.array([dist / need - 1, low - margin])
         self.dc = np.stack([g_dist / need - dist / need**2 * d_need, g_low])
+        # A quadratic penalty on the speed deficit, zero where the speed constraint holds:
+        # without it a waveform that stands still (e_d -> 0) would look cheap, and a local
+        # solver far from feasibility would walk there.
+        deficit = max(0.0, -self.c[0])
+        self.f = self.f + PENALTY * deficit**2
+        self.df = self.df - 2 * PENALTY * deficit * self.dc[0]
         if not free_omega:
             self.df[-1] = 0.0
             self.dc[:, -1] = 0.0
@@ -197,23 +208,25 @@ class _Evaluator:
 
     def __init__(self, oracle: orbit.Oracle, lanes: int, settings: ExactSettings, make):
         self.oracle, self.lanes, self.settings, self.make = oracle, lanes, settings, make
-        self.y: dict[int, np.ndarray] = {}
+        self.targets: dict[int, float] = {}
+        self.y: dict[int, Any] = {}
         self.last: dict[int, Any] = {}
         self.calls = 0
 
-    def solve(self, theta: np.ndarray, y0: np.ndarray, fresh: np.ndarray):
-        """Orbits of a full batch (`lanes` rows); where Newton fails, again after a transient."""
+    def solve(self, theta: np.ndarray, y0: np.ndarray, fresh: np.ndarray) -> Any:
+        """Orbits of a full batch (`lanes` rows, as numpy arrays in an `Orbit`); where Newton
+        fails, again after a transient."""
         dtype = self.oracle.params.dtype
         th = jnp.asarray(theta, dtype)
-        orb = self.oracle.orbits(th, jnp.asarray(y0, dtype))
-        ok = np.asarray(orb.ok)
+        orb: Any = jax.tree_util.tree_map(np.asarray, self.oracle.orbits(th, jnp.asarray(y0, dtype)))
+        ok = orb.ok
         if not ok.all():
             periods = jnp.asarray(self.settings.transient, jnp.int32)
             y1 = self.oracle.transient(th, jnp.asarray(y0, dtype), jnp.asarray(fresh | ~ok), periods)
-            again = self.oracle.orbits(th, y1)
-            orb = type(orb)(*(np.where(_col(ok, a), a, b) for a, b in zip(orb, again)))
+            again = jax.tree_util.tree_map(np.asarray, self.oracle.orbits(th, y1))
+            orb = jax.tree_util.tree_map(lambda a, b: np.where(_col(ok, a), a, b), orb, again)
         self.calls += 1
-        return type(orb)(*(np.asarray(x) for x in orb))
+        return orb
 
     def report(self, message: str) -> None:
         if self.settings.verbose:
@@ -226,10 +239,10 @@ class _Evaluator:
         orb = self.solve(theta, y0, np.zeros(len(pad), bool))
         out = []
         for k, i in enumerate(idx):
-            one = type(orb)(*(x[k] for x in orb))
+            one = jax.tree_util.tree_map(lambda x: x[k], orb)
             if one.ok:
                 self.y[i] = one.y
-                fig = self.make(theta[k], one)
+                fig = self.make(theta[k], one, self.targets[i])
                 self.last[i] = fig
             else:
                 fig = _Bad(theta[k], self.last.get(i))
@@ -248,7 +261,7 @@ def _col(flag: np.ndarray, like: Any) -> np.ndarray:
     return flag.reshape(flag.shape + (1,) * (np.ndim(like) - 1))
 
 
-def _local_solver(x0, stroke: StrokePeaks, bounds, settings: ExactSettings, log: list):
+def _local_solver(x0, stroke: StrokePeaks, bounds, settings: ExactSettings, log: list, max_iter: int):
     """One `trust-constr` run from `x0`; `ask(x)` returns the `_Figures` at `x`."""
 
     def solve(ask):
@@ -271,14 +284,14 @@ def _local_solver(x0, stroke: StrokePeaks, bounds, settings: ExactSettings, log:
             method="trust-constr",
             constraints=[
                 scipy.optimize.NonlinearConstraint(
-                    lambda x: at(x).c, 0.0, np.inf, jac=lambda x: at(x).dc, hess=_zero_hessian
+                    lambda x: at(x).c, 0.0, np.inf, jac=cast(Any, lambda x: at(x).dc), hess=_zero_hessian
                 ),
                 scipy.optimize.NonlinearConstraint(
-                    lambda x: stroke(x)[0], 0.0, np.inf, jac=lambda x: stroke(x)[1], hess=_zero_hessian
+                    lambda x: stroke(x)[0], 0.0, np.inf, jac=cast(Any, lambda x: stroke(x)[1]), hess=_zero_hessian
                 ),
             ],
             bounds=bounds,
-            options={"maxiter": settings.max_iter, "initial_tr_radius": settings.trust_radius, "verbose": 0},
+            options={"maxiter": max_iter, "initial_tr_radius": settings.trust_radius, "verbose": 0},
         )
         log.append({"message": str(res.message), "nit": int(res.nit), "trace": trace})
         return np.asarray(res.x, float)
@@ -355,7 +368,7 @@ def optimise_exact(
         max_iter=settings.newton_iter,
     )
     v_target = speed * (1 + settings.speed_slack)
-    make = lambda th, orb: _Figures(th, orb, v_target, direction, settings.margin, free)
+    make = lambda th, orb, v=v_target: _Figures(th, orb, v, direction, settings.margin, free)
     lanes = settings.local
     ev = _Evaluator(oracle, lanes, settings, make)
     log: dict[str, Any] = {}
@@ -365,16 +378,37 @@ def optimise_exact(
     n0 = len(theta0)
     pad = (-n0) % lanes
     theta0 = np.concatenate([theta0, theta0[:pad]])
-    figs, ys = [], []
     periods = jnp.asarray(settings.transient, jnp.int32)
-    for b in range(0, len(theta0), lanes):
-        th = theta0[b : b + lanes]
-        rest = oracle.transient(jnp.asarray(th, dtype), jnp.zeros((lanes, 3), dtype), jnp.ones(lanes, bool), periods)
-        orb = ev.solve(th, np.asarray(rest), np.zeros(lanes, bool))
-        for k in range(lanes):
-            one = type(orb)(*(x[k] for x in orb))
-            figs.append(make(th[k], one) if one.ok else _Bad(th[k], None))
-            ys.append(one.y)
+
+    def screen(theta):
+        figs, ys = [], []
+        for b in range(0, len(theta), lanes):
+            th = theta[b : b + lanes]
+            rest = oracle.transient(
+                jnp.asarray(th, dtype), jnp.zeros((lanes, 3), dtype), jnp.ones(lanes, bool), periods
+            )
+            orb = ev.solve(th, np.asarray(rest), np.zeros(lanes, bool))
+            for k in range(lanes):
+                one = jax.tree_util.tree_map(lambda x: x[k], orb)
+                figs.append(make(th[k], one) if one.ok else _Bad(th[k], None))
+                ys.append(one.y)
+        return figs, ys
+
+    figs, ys = screen(theta0)
+    if free:
+        # A good shape at too low a frequency: the same shape run faster, in proportion to
+        # its speed deficit, for the best starts that fall short.
+        best = np.argsort([_merit(f) for f in figs[:n0]])[: 2 * lanes]
+        short = [int(i) for i in best if figs[i].ok and figs[i].c[0] < 0]
+        if short:
+            extra = theta0[short].copy()
+            ratio = np.array([1.02 / max(1 + figs[i].c[0], 0.1) for i in short])
+            extra[:, -1] = np.clip(extra[:, -1] + np.log(ratio), math.log(lo), math.log(hi))
+            extra = np.concatenate([extra, extra[: (-len(extra)) % lanes]])
+            f2, y2 = screen(extra)
+            theta0 = np.concatenate([theta0[:n0], extra[: len(short)]])
+            figs, ys = figs[:n0] + f2[: len(short)], ys[:n0] + y2[: len(short)]
+            n0 = len(theta0)
     merit = np.array([_merit(f) for f in figs[:n0]])
     order: list[int] = []
     for i in np.argsort(merit):
@@ -401,8 +435,21 @@ def optimise_exact(
     ev.y = {k: ys[i] for k, i in enumerate(order)}
     log["local"] = []
     stroke = StrokePeaks(harmonics)
-    solvers = [_local_solver(theta0[i].copy(), stroke, bounds, settings, log["local"]) for i in order]
-    x = run_lockstep(solvers, ev)
+    # Continuation in the required speed: a lane that starts too slow is led to v_min in
+    # `stages` steps (geometric in speed); the last step has half the iterations.
+    v0 = [v_target * max(0.1, 1 + min(0.0, figs[i].c[0])) for i in order]
+    n = settings.stages
+    iters = (
+        [settings.max_iter // (2 * (n - 1))] * (n - 1)
+        + [settings.max_iter - (n - 1) * (settings.max_iter // (2 * (n - 1)))]
+        if n > 1
+        else [settings.max_iter]
+    )
+    x = [theta0[i].copy() for i in order]
+    for j, it in enumerate(iters):
+        ev.targets = {k: v0[k] * (v_target / v0[k]) ** ((j + 1) / len(iters)) for k in range(lanes)}
+        solvers = [_local_solver(x[k], stroke, bounds, settings, log["local"], it) for k in range(lanes)]
+        x = run_lockstep(solvers, ev)
     ev.report(
         f"local runs done ({time.perf_counter() - t0:.0f} s); stroke / a_max "
         + " ".join(f"{_stroke_of(xi, harmonics):.8f}" for xi in x)

@@ -338,7 +338,8 @@ def optimise(
         raise ValueError(f"harmonics must be an integer >= 2 for method='exact', got {harmonics!r}.")
     speed, direction = cons.check_inputs(params, v_min, a_max, direction, harmonics, omega, settings.margin)
     if sweep is None:
-        sweep = pareto.sinusoid_sweep(params, a_max, dt=settings.dt if exact else settings.verify_dt)
+        dt = cast(ExactSettings, settings).dt if exact else cast(Settings, settings).verify_dt
+        sweep = pareto.sinusoid_sweep(params, a_max, dt=dt)
     if not exact:
         return _optimise_smoothed(params, speed, direction, a_max, omega, harmonics, cast(Settings, settings), sweep)
     s = cast(ExactSettings, settings)

@@ -83,8 +83,10 @@ class ExactSettings(eqx.Module):
     - `start_frequencies`: base frequencies of the starts, log-spaced over the range.
     - `random_shapes`: random waveforms among the start shapes (with sinusoids of five
       strokes, sinusoids with a third harmonic and saw-tooth ramps of both senses).
-    - `max_iter`: iterations of each local `trust-constr` run; `trust_radius`: its initial
-      trust region (decision variables: coefficients in units of $a_\\max$, $\\log\\omega$).
+    - `max_iter`: iterations of each local `trust-constr` refinement, over `stages` runs with
+      required speeds rising geometrically from the start's speed to $v_\\min$ (for a start that
+      is too slow; the last run has half the iterations); `trust_radius`: the initial trust region
+      (decision variables: coefficients in units of $a_\\max$, $\\log\\omega$).
     - `margin`: required $\\min_t N_{1,2}$ over the orbit (units of weight).
     - `speed_slack`: the orbit targets $v_\\min (1 + \\text{slack})$.
     - `omega_min`, `omega_max`: range of a free base frequency, in units of the smallest
@@ -99,7 +101,8 @@ class ExactSettings(eqx.Module):
     local: int = 4
     start_frequencies: int = 8
     random_shapes: int = 2
-    max_iter: int = 150
+    max_iter: int = 200
+    stages: int = 3
     trust_radius: float = 0.1
     margin: float = 0.05
     speed_slack: float = 1e-3
@@ -114,8 +117,8 @@ class ExactSettings(eqx.Module):
     verbose: bool = False
 
     def __check_init__(self):
-        if self.local < 1 or self.max_iter < 1 or self.start_frequencies < 1:
-            raise ValueError("ExactSettings: local, max_iter and start_frequencies must be >= 1.")
+        if self.local < 1 or self.max_iter < 1 or self.start_frequencies < 1 or self.stages < 1:
+            raise ValueError("ExactSettings: local, max_iter, stages and start_frequencies must be >= 1.")
         if not (0 < self.omega_min < self.omega_max):
             raise ValueError(
                 f"ExactSettings: need 0 < omega_min < omega_max, got {self.omega_min!r}, {self.omega_max!r}."

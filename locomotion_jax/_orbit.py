@@ -35,7 +35,7 @@ import jax.numpy as jnp
 from . import _exact as exact
 from ._actuation import Fourier
 from ._compile import engine_jit
-from ._custom_types import Array
+from ._custom_types import Array, Contact
 from ._gait import _reduced, _section_state
 from ._model import initial_gap
 from ._params import Params
@@ -69,7 +69,7 @@ class Period(NamedTuple):
     ok: Array
 
 
-def period(params: Params, wave: Fourier, contact: str, dt: float, max_steps: Array, y: Array) -> Period:
+def period(params: Params, wave: Fourier, contact: Contact, dt: float, max_steps: Array, y: Array) -> Period:
     """The period map $\\Phi$ from the reduced state `y`, with the figures the optimiser needs."""
     P = exact.consts(params, wave)
     t_end = 2 * jnp.pi / wave.omega
@@ -200,7 +200,7 @@ class Oracle(eqx.Module):
     max_steps: Array
     tol: Array
     harmonics: int = eqx.field(static=True)
-    contact: str = eqx.field(static=True)
+    contact: Contact = eqx.field(static=True)
     dt: float = eqx.field(static=True)
     max_iter: int = eqx.field(static=True)
 

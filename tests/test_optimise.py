@@ -359,4 +359,6 @@ def test_method_choice_is_checked():
     with pytest.raises(TypeError, match="ExactSettings"):
         _optimise.optimise(lj.Params(), 0.02, 0.05, settings=TINY)
     with pytest.raises(ValueError, match="start"):
-        _optimise.optimise(lj.Params(), 0.02, 0.05, method="smoothed", start=lj.Fourier([0.0], [0.05], 2.0, 3.0))
+        _optimise.optimise(
+            lj.Params(), 0.02, 0.05, method="smoothed", start=lj.Fourier(np.zeros(1), np.full(1, 0.05), 2.0, 3.0)
+        )
