@@ -92,6 +92,7 @@ def start_shapes(harmonics: int, seed: int, n_random: int) -> list[tuple[np.ndar
     for scale in (0.35, 0.5, 0.7):
         for third in (0.2, -0.2):  # resonant gaits of small stroke carry such a third harmonic
             shapes.append(_unit_stroke(zero, e(0) + third * e(2), scale))
+            shapes.append(_unit_stroke(third * e(2), e(0), scale))
     shapes += [_unit_stroke(zero, saw), _unit_stroke(zero, -saw)]
     for _ in range(n_random):
         c, s = rng.normal(size=harmonics) / n**2, e(0) + rng.normal(size=harmonics) / n**2
@@ -192,15 +193,17 @@ class _Figures:
 
 
 class _Bad:
-    """A point where the orbit could not be solved: the trust region must shrink."""
+    """A point where the orbit could not be solved: a cost far above the last good one, so
+    that the trust region shrinks, and the last good gradients, so that the quasi-Newton
+    update skips it (a zero difference of gradients) instead of learning from it."""
 
     def __init__(self, theta, last: "_Figures | None"):
         self.ok = False
         self.cot = math.inf
         self.f = (last.f if last is not None else 0.0) + 1e3
-        self.df = np.zeros_like(theta)
-        self.c = np.array([-1.0, -1.0])
-        self.dc = np.zeros((2, len(theta)))
+        self.df = last.df if last is not None else np.zeros_like(theta)
+        self.c = last.c - 1.0 if last is not None else np.array([-1.0, -1.0])
+        self.dc = last.dc if last is not None else np.zeros((2, len(theta)))
 
 
 class _Evaluator:
@@ -262,39 +265,63 @@ def _col(flag: np.ndarray, like: Any) -> np.ndarray:
 
 
 def _local_solver(x0, stroke: StrokePeaks, bounds, settings: ExactSettings, log: list, max_iter: int):
-    """One `trust-constr` run from `x0`; `ask(x)` returns the `_Figures` at `x`."""
+    """One local run (`settings.local_method`) from `x0`; `ask(x)` returns the `_Figures` at `x`.
+
+    Returns the cheapest point it evaluated that meets every constraint (the speed, the
+    normal-force margin and the stroke, the last to 1e-9); if none does, the point with the
+    smallest speed deficit. A trust-region or line-search iterate may wander after it: the
+    objective has jumps where a held mass starts to slip."""
 
     def solve(ask):
         cache: dict[bytes, Any] = {}
         trace: list[dict] = []
+        best: dict[str, Any] = {"key": (math.inf, math.inf), "x": np.array(x0, float)}
 
         def at(x):
             key = np.asarray(x).tobytes()
             if key not in cache:
                 cache.clear()
-                cache[key] = ask(np.array(x, float))
-                fig = cache[key]
+                fig = cache[key] = ask(np.array(x, float))
                 trace.append({"f": float(fig.f), "c_speed": float(fig.c[0]), "c_normal": float(fig.c[1]), "ok": fig.ok})
+                if fig.ok:
+                    held = min(fig.c[0], fig.c[1]) >= 0 and float(np.min(stroke(np.asarray(x))[0])) >= -1e-9
+                    rank = (0.0, fig.cot) if held else (1.0, -min(fig.c[0], 0.0) - min(fig.c[1], 0.0))
+                    if rank < best["key"]:
+                        best["key"], best["x"] = rank, np.array(x, float)
             return cache[key]
 
-        res = scipy.optimize.minimize(
-            lambda x: at(x).f,
-            x0,
-            jac=lambda x: at(x).df,
-            method="trust-constr",
-            constraints=[
-                scipy.optimize.NonlinearConstraint(
-                    lambda x: at(x).c, 0.0, np.inf, jac=cast(Any, lambda x: at(x).dc), hess=_zero_hessian
-                ),
-                scipy.optimize.NonlinearConstraint(
-                    lambda x: stroke(x)[0], 0.0, np.inf, jac=cast(Any, lambda x: stroke(x)[1]), hess=_zero_hessian
-                ),
-            ],
-            bounds=bounds,
-            options={"maxiter": max_iter, "initial_tr_radius": settings.trust_radius, "verbose": 0},
-        )
+        if settings.local_method == "SLSQP":
+            res = scipy.optimize.minimize(
+                lambda x: at(x).f,
+                x0,
+                jac=lambda x: at(x).df,
+                method="SLSQP",
+                constraints=[
+                    {"type": "ineq", "fun": lambda x: at(x).c, "jac": lambda x: at(x).dc},
+                    {"type": "ineq", "fun": lambda x: stroke(x)[0], "jac": lambda x: stroke(x)[1]},
+                ],
+                bounds=bounds,
+                options={"maxiter": max_iter, "ftol": 1e-10},
+            )
+        else:
+            res = scipy.optimize.minimize(
+                lambda x: at(x).f,
+                x0,
+                jac=lambda x: at(x).df,
+                method="trust-constr",
+                constraints=[
+                    scipy.optimize.NonlinearConstraint(
+                        lambda x: at(x).c, 0.0, np.inf, jac=cast(Any, lambda x: at(x).dc), hess=_zero_hessian
+                    ),
+                    scipy.optimize.NonlinearConstraint(
+                        lambda x: stroke(x)[0], 0.0, np.inf, jac=cast(Any, lambda x: stroke(x)[1]), hess=_zero_hessian
+                    ),
+                ],
+                bounds=bounds,
+                options={"maxiter": max_iter, "initial_tr_radius": settings.trust_radius, "verbose": 0},
+            )
         log.append({"message": str(res.message), "nit": int(res.nit), "trace": trace})
-        return np.asarray(res.x, float)
+        return best["x"]
 
     return solve
 

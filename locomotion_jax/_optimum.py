@@ -86,7 +86,8 @@ class ExactSettings(eqx.Module):
     - `max_iter`: iterations of each local `trust-constr` refinement, over `stages` runs with
       required speeds rising geometrically from the start's speed to $v_\\min$ (for a start that
       is too slow; the last run has half the iterations); `trust_radius`: the initial trust region
-      (decision variables: coefficients in units of $a_\\max$, $\\log\\omega$).
+      (decision variables: coefficients in units of $a_\\max$, $\\log\\omega$); `local_method`:
+      `"trust-constr"` or `"SLSQP"` (scipy's).
     - `margin`: required $\\min_t N_{1,2}$ over the orbit (units of weight).
     - `speed_slack`: the orbit targets $v_\\min (1 + \\text{slack})$.
     - `omega_min`, `omega_max`: range of a free base frequency, in units of the smallest
@@ -101,9 +102,10 @@ class ExactSettings(eqx.Module):
     local: int = 4
     start_frequencies: int = 8
     random_shapes: int = 2
-    max_iter: int = 200
+    max_iter: int = 600
     stages: int = 3
     trust_radius: float = 0.1
+    local_method: str = "trust-constr"
     margin: float = 0.05
     speed_slack: float = 1e-3
     omega_min: float = 0.06
@@ -119,6 +121,10 @@ class ExactSettings(eqx.Module):
     def __check_init__(self):
         if self.local < 1 or self.max_iter < 1 or self.start_frequencies < 1 or self.stages < 1:
             raise ValueError("ExactSettings: local, max_iter, stages and start_frequencies must be >= 1.")
+        if self.local_method not in ("trust-constr", "SLSQP"):
+            raise ValueError(
+                f"ExactSettings.local_method must be 'trust-constr' or 'SLSQP', got {self.local_method!r}."
+            )
         if not (0 < self.omega_min < self.omega_max):
             raise ValueError(
                 f"ExactSettings: need 0 < omega_min < omega_max, got {self.omega_min!r}, {self.omega_max!r}."

@@ -267,7 +267,7 @@ def test_cli_bad_input_names_the_parameter():
 # -- the exact method ---------------------------------------------------------------
 
 EXACT_TINY = ExactSettings(
-    local=2, start_frequencies=2, random_shapes=0, max_iter=20, transient=20, refine_baseline=False
+    local=2, start_frequencies=3, random_shapes=0, max_iter=20, stages=1, transient=20, refine_baseline=False
 )
 EXACT_HARMONICS = 4
 
@@ -362,3 +362,29 @@ def test_method_choice_is_checked():
         _optimise.optimise(
             lj.Params(), 0.02, 0.05, method="smoothed", start=lj.Fourier(np.zeros(1), np.full(1, 0.05), 2.0, 3.0)
         )
+
+
+def test_objective_and_constraint_gradients_compose():
+    # The driver's objective (cost of transport with a floored distance and a penalty on
+    # the speed deficit) and constraints, built from an orbit's figures and gradients,
+    # differentiated by hand: against central differences, on a fast and a slow point.
+    rng = np.random.default_rng(5)
+    p = 5
+    W = rng.normal(size=(3, p)) * 0.01
+
+    def orbit_at(theta):
+        # Smooth stand-ins for (Delta X, e_d, min N) and their exact gradients.
+        base = np.array([0.05, 0.05, 0.5]) + W @ np.sin(theta)
+        grad = W * np.cos(theta)[None, :]
+        return _orbit.Orbit(np.zeros(3), base, grad, np.zeros((3, 3)), np.asarray(True), np.asarray(0), np.asarray(0.0))
+
+    for speed in (0.01, 0.2):  # feasible, then short of the speed (deficit penalised)
+        theta = rng.normal(size=p)
+        fig = lambda th: _exact_optimise._Figures(th, orbit_at(th), speed, 1, 0.05, True)
+        f0 = fig(theta)
+        h = 1e-6
+        fd = np.array([(fig(theta + h * e).f - fig(theta - h * e).f) / (2 * h) for e in np.eye(p)])
+        fdc = np.array([(fig(theta + h * e).c - fig(theta - h * e).c) / (2 * h) for e in np.eye(p)]).T
+        np.testing.assert_allclose(f0.df, fd, rtol=1e-6, atol=1e-9)
+        np.testing.assert_allclose(f0.dc, fdc, rtol=1e-6, atol=1e-9)
+    assert f0.c[0] < 0 and f0.f > 1  # the slow point is penalised above any physical cost
