@@ -108,14 +108,16 @@ def _stroke_rows(harmonics: int, phases: np.ndarray) -> np.ndarray:
 
 
 class StrokePeaks:
-    """The stroke constraint by local reduction: $1 - |s(\\phi_k)| \\ge 0$ at the `count` highest
-    local maxima $\\phi_k$ of $|s|$ (units of $a_\\max$).
+    """The stroke constraint by local reduction: $1 - \\max_{\\phi \\in W_k} |s(\\phi)| \\ge 0$ on
+    `count` fixed, equal windows $W_k$ of the phase (units of $a_\\max$).
 
-    The maxima are bracketed on a grid of 64 phases per harmonic and polished by Newton's
-    method on $s' = 0$; sorted by height, the $k$-th value is a continuous function of
-    $\\theta$, with the gradient $-\\operatorname{sgn} s(\\phi_k)\\,\\partial s(\\phi_k)/\\partial\\theta$
-    (envelope theorem). Bounding all of them at once linearises the semi-infinite
-    constraint $|s(\\phi)| \\le 1$ for all $\\phi$ (with fewer maxima the highest is repeated).
+    The maximum over a fixed window is a continuous function of $\\theta$ (unlike, say, the
+    $k$-th highest local maximum, which jumps when a ripple appears), so a local solver
+    sees no jumps. It is bracketed on a grid of 64 phases per harmonic and polished by
+    Newton's method on $s' = 0$ within the window; its gradient is
+    $\\operatorname{sgn} s(\\phi_k)\\,\\partial s(\\phi_k)/\\partial\\theta$ at the maximiser (envelope
+    theorem). With two windows per harmonic, every maximum of $|s|$ is in some window, so
+    bounding them all linearises $|s(\\phi)| \\le 1$ for all $\\phi$.
     """
 
     def __init__(self, harmonics: int):
@@ -124,28 +126,29 @@ class StrokePeaks:
         m = 64 * harmonics
         self.grid = np.arange(m) * 2 * np.pi / m
         self.rows = _stroke_rows(harmonics, self.grid)
+        self.width = 2 * np.pi / self.count
 
     def peaks(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Phases of the highest local maxima of $|s|$ and their signed values, highest first."""
+        """Per window: the phase of the largest $|s|$ and the signed value there."""
         n = np.arange(1, self.harmonics + 1)
-        a = np.abs(self.rows @ theta)
-        top = np.flatnonzero((a >= np.roll(a, 1)) & (a > np.roll(a, -1)))
-        if top.size == 0:
-            top = np.array([int(np.argmax(a))])
+        a = np.abs(self.rows @ theta).reshape(self.count, -1)
+        j = np.argmax(a, axis=1)
+        phi = self.grid.reshape(self.count, -1)[np.arange(self.count), j]
+        lo = np.arange(self.count) * self.width
         c = np.concatenate([[0.0], theta[: self.harmonics - 1]])
         s = theta[self.harmonics - 1 : 2 * self.harmonics - 1]
-        phi = self.grid[top]
         h = self.grid[1]
         for _ in range(4):
             arg = np.outer(phi, n)
             d1 = (n * (s * np.cos(arg) - c * np.sin(arg))).sum(1)
             d2 = -(n * n * (c * np.cos(arg) + s * np.sin(arg))).sum(1)
-            step = np.where(d2 != 0, -d1 / np.where(d2 != 0, d2, 1), 0)
-            phi = phi + np.clip(step, -h, h)
-        val = _stroke_rows(self.harmonics, phi) @ theta
-        order = np.argsort(-np.abs(val))[: self.count]
-        order = np.concatenate([order, np.repeat(order[:1], self.count - len(order))])
-        return phi[order], val[order]
+            # Newton on s' = 0 toward a maximum of |s| (a minimum of s where s < 0).
+            val = _stroke_rows(self.harmonics, phi) @ theta
+            step = np.where(val * d2 < 0, -d1 / np.where(d2 != 0, d2, 1), 0)
+            new = np.clip(phi + np.clip(step, -h, h), lo, lo + self.width)
+            better = np.abs(_stroke_rows(self.harmonics, new) @ theta) > np.abs(val)
+            phi = np.where(better, new, phi)
+        return phi, _stroke_rows(self.harmonics, phi) @ theta
 
     def __call__(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Constraint values `(count,)` and their Jacobian `(count, p)`."""
@@ -160,10 +163,10 @@ PENALTY = 10.0
 class _Figures:
     """Objective and constraints of one evaluated point, as `trust-constr` wants them."""
 
-    def __init__(self, theta, orb, need_rate, direction, margin, free_omega):
+    def __init__(self, theta, orb, need_rate, k, direction, margin, free_omega):
         dX, ed, low = (float(x) for x in orb.figures)
         g_dX, g_ed, g_low = (np.asarray(g, float) for g in orb.gradient)
-        T = 2 * np.pi / math.exp(theta[-1])
+        T = k * 2 * np.pi / math.exp(theta[-1])  # the gait's period: k actuation periods
         need = need_rate * T  # required distance per period; d need / d log omega = -need
         d_need = np.zeros_like(theta)
         d_need[-1] = -need
@@ -212,24 +215,36 @@ class _Evaluator:
     def __init__(self, oracle: orbit.Oracle, lanes: int, settings: ExactSettings, make):
         self.oracle, self.lanes, self.settings, self.make = oracle, lanes, settings, make
         self.targets: dict[int, float] = {}
+        self.k: dict[int, int] = {}
         self.y: dict[int, Any] = {}
         self.last: dict[int, Any] = {}
         self.calls = 0
 
-    def solve(self, theta: np.ndarray, y0: np.ndarray, fresh: np.ndarray) -> Any:
-        """Orbits of a full batch (`lanes` rows, as numpy arrays in an `Orbit`); where Newton
-        fails, again after a transient."""
+    def solve(self, theta: np.ndarray, y0: np.ndarray, fresh: np.ndarray, k: np.ndarray) -> tuple[Any, np.ndarray]:
+        """Orbits of a full batch (`lanes` rows; numpy arrays in an `Orbit`) and their periods `k`.
+
+        From the warm starts with the given periods first; where Newton fails, again after
+        a transient, as a period-1 gait and then as a period-2 gait (past a period doubling
+        the steady gait repeats every second period, and its figures are those of two)."""
         dtype = self.oracle.params.dtype
         th = jnp.asarray(theta, dtype)
-        orb: Any = jax.tree_util.tree_map(np.asarray, self.oracle.orbits(th, jnp.asarray(y0, dtype)))
-        ok = orb.ok
-        if not ok.all():
+        run = lambda y, kk: jax.tree_util.tree_map(
+            np.asarray, self.oracle.orbits(th, jnp.asarray(y, dtype), jnp.asarray(kk, jnp.int32))
+        )
+        orb: Any = run(y0, k)
+        k = np.array(k)
+        if not orb.ok.all():
             periods = jnp.asarray(self.settings.transient, jnp.int32)
-            y1 = self.oracle.transient(th, jnp.asarray(y0, dtype), jnp.asarray(fresh | ~ok), periods)
-            again = jax.tree_util.tree_map(np.asarray, self.oracle.orbits(th, y1))
-            orb = jax.tree_util.tree_map(lambda a, b: np.where(_col(ok, a), a, b), orb, again)
+            y1 = np.asarray(self.oracle.transient(th, jnp.asarray(y0, dtype), jnp.asarray(fresh | ~orb.ok), periods))
+            for kk in (1, 2):
+                if orb.ok.all():
+                    break
+                again = run(y1, np.full_like(k, kk))
+                take = ~orb.ok & again.ok
+                orb = jax.tree_util.tree_map(lambda a, b: np.where(_col(take, a), b, a), orb, again)
+                k = np.where(take, kk, k)
         self.calls += 1
-        return orb
+        return orb, k
 
     def report(self, message: str) -> None:
         if self.settings.verbose:
@@ -239,13 +254,13 @@ class _Evaluator:
         pad = idx + [idx[0]] * (self.lanes - len(idx))
         theta = np.stack([xs[idx.index(i)] for i in pad])
         y0 = np.stack([self.y[i] for i in pad])
-        orb = self.solve(theta, y0, np.zeros(len(pad), bool))
+        orb, ks = self.solve(theta, y0, np.zeros(len(pad), bool), np.array([self.k[i] for i in pad]))
         out = []
         for k, i in enumerate(idx):
             one = jax.tree_util.tree_map(lambda x: x[k], orb)
             if one.ok:
-                self.y[i] = one.y
-                fig = self.make(theta[k], one, self.targets[i])
+                self.y[i], self.k[i] = one.y, int(ks[k])
+                fig = self.make(theta[k], one, self.targets[i], int(ks[k]))
                 self.last[i] = fig
             else:
                 fig = _Bad(theta[k], self.last.get(i))
@@ -395,7 +410,7 @@ def optimise_exact(
         max_iter=settings.newton_iter,
     )
     v_target = speed * (1 + settings.speed_slack)
-    make = lambda th, orb, v=v_target: _Figures(th, orb, v, direction, settings.margin, free)
+    make = lambda th, orb, v, k: _Figures(th, orb, v, k, direction, settings.margin, free)
     lanes = settings.local
     ev = _Evaluator(oracle, lanes, settings, make)
     log: dict[str, Any] = {}
@@ -414,11 +429,11 @@ def optimise_exact(
             rest = oracle.transient(
                 jnp.asarray(th, dtype), jnp.zeros((lanes, 3), dtype), jnp.ones(lanes, bool), periods
             )
-            orb = ev.solve(th, np.asarray(rest), np.zeros(lanes, bool))
+            orb, kk = ev.solve(th, np.asarray(rest), np.zeros(lanes, bool), np.ones(lanes, int))
             for k in range(lanes):
                 one = jax.tree_util.tree_map(lambda x: x[k], orb)
-                figs.append(make(th[k], one) if one.ok else _Bad(th[k], None))
-                ys.append(one.y)
+                figs.append(make(th[k], one, v_target, int(kk[k])) if one.ok else _Bad(th[k], None))
+                ys.append((one.y, int(kk[k])))
         return figs, ys
 
     figs, ys = screen(theta0)
@@ -459,7 +474,8 @@ def optimise_exact(
         np.r_[np.full(2 * harmonics - 1, -np.inf), math.log(lo) if free else -np.inf],
         np.r_[np.full(2 * harmonics - 1, np.inf), math.log(hi) if free else np.inf],
     )
-    ev.y = {k: ys[i] for k, i in enumerate(order)}
+    ev.y = {k: ys[i][0] for k, i in enumerate(order)}
+    ev.k = {k: ys[i][1] for k, i in enumerate(order)}
     log["local"] = []
     stroke = StrokePeaks(harmonics)
     # Continuation in the required speed: a lane that starts too slow is led to v_min in

@@ -69,10 +69,11 @@ class Period(NamedTuple):
     ok: Array
 
 
-def period(params: Params, wave: Fourier, contact: Contact, dt: float, max_steps: Array, y: Array) -> Period:
-    """The period map $\\Phi$ from the reduced state `y`, with the figures the optimiser needs."""
+def period(params: Params, wave: Fourier, contact: Contact, dt: float, max_steps: Array, y: Array, k: Array) -> Period:
+    """The `k`-period map $\\Phi_k$ from the reduced state `y`, with the figures the optimiser needs
+    (`max_steps` per actuation period)."""
     P = exact.consts(params, wave)
-    t_end = 2 * jnp.pi / wave.omega
+    t_end = k.astype(y.dtype) * 2 * jnp.pi / wave.omega
     st0 = _section_state(params, wave, contact, y)
 
     def normal(s):
@@ -85,7 +86,7 @@ def period(params: Params, wave: Fourier, contact: Contact, dt: float, max_steps
 
     def cond(c):
         s, _, n = c
-        return (s.t < t_end) & (s.status == Status.OK) & (n < max_steps)
+        return (s.t < t_end) & (s.status == Status.OK) & (n < k * max_steps)
 
     def body(c):
         s, low, n = c
@@ -101,7 +102,8 @@ def period(params: Params, wave: Fourier, contact: Contact, dt: float, max_steps
 class Orbit(NamedTuple):
     """The steady gait of one decision vector and its sensitivities.
 
-    - `y`: the fixed point $(u, v_1, v_2)$; `figures`: $(\\Delta X, e_d, \\min N)$ over one period;
+    - `y`: the fixed point $(u, v_1, v_2)$ of $\\Phi_k$; `figures`: $(\\Delta X, e_d, \\min N)$ over
+      the gait's `k` actuation periods;
     - `gradient`: $d\\,\\text{figures}/d\\theta$, shape `(3, p)`;
     - `monodromy`: $M$ at the fixed point; `ok`: Newton converged and the period completed;
     - `n_iter`, `residual`: Newton iterations and $\\|\\Phi(y) - y\\|_\\infty$.
@@ -116,12 +118,12 @@ class Orbit(NamedTuple):
     residual: Array
 
 
-def _orbit_one(params, a_max, theta, y0, harmonics, contact, dt, max_steps, tol, max_iter) -> Orbit:
+def _orbit_one(params, a_max, theta, y0, k, harmonics, contact, dt, max_steps, tol, max_iter) -> Orbit:
     lbar = params.lbar
     eye = jnp.eye(3, dtype=theta.dtype)
 
     def run(z):
-        out = period(params, waveform(z[3:], a_max, lbar, harmonics), contact, dt, max_steps, z[:3])
+        out = period(params, waveform(z[3:], a_max, lbar, harmonics), contact, dt, max_steps, z[:3], k)
         return jnp.concatenate([out.y, out.figures]), out.ok
 
     def linearise(y):
@@ -153,10 +155,10 @@ def _orbit_one(params, a_max, theta, y0, harmonics, contact, dt, max_steps, tol,
     return Orbit(y, val[3:], grad, M, good, it, jnp.max(jnp.abs(val[:3] - y)))
 
 
-def _evaluate(params, a_max, theta, y0, harmonics, contact, dt, max_steps, tol, max_iter):
+def _evaluate(params, a_max, theta, y0, k, harmonics, contact, dt, max_steps, tol, max_iter):
     TRACES["evaluate"] += 1  # runs only while tracing
-    one = lambda th, y: _orbit_one(params, a_max, th, y, harmonics, contact, dt, max_steps, tol, max_iter)
-    return jax.vmap(one)(theta, y0)
+    one = lambda th, y, kk: _orbit_one(params, a_max, th, y, kk, harmonics, contact, dt, max_steps, tol, max_iter)
+    return jax.vmap(one)(theta, y0, k)
 
 
 def _relax(params, a_max, theta, y0, fresh, periods, harmonics, contact, dt, max_steps):
@@ -204,9 +206,10 @@ class Oracle(eqx.Module):
     dt: float = eqx.field(static=True)
     max_iter: int = eqx.field(static=True)
 
-    def orbits(self, theta: Array, y0: Array) -> Orbit:
-        """Steady gaits and sensitivities of a batch of decision vectors from warm starts `y0`."""
-        return evaluate(self.params, self.a_max, theta, y0, self.harmonics, self.contact, self.dt,
+    def orbits(self, theta: Array, y0: Array, k: Array) -> Orbit:
+        """Steady gaits of period `k` actuation periods (int32, per row) and their sensitivities,
+        for a batch of decision vectors, from warm starts `y0`."""
+        return evaluate(self.params, self.a_max, theta, y0, k, self.harmonics, self.contact, self.dt,
                         self.max_steps, self.tol, self.max_iter)  # fmt: skip
 
     def transient(self, theta: Array, y0: Array, fresh: Array, periods: Array) -> Array:

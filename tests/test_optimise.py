@@ -301,12 +301,13 @@ def test_orbit_gradients_match_finite_differences():
         ]
     )
     y = oracle.transient(jnp.asarray(theta), jnp.zeros((2, 3)), jnp.ones(2, bool), jnp.asarray(40, jnp.int32))
-    orb = oracle.orbits(jnp.asarray(theta), y)
+    one = jnp.ones(2, jnp.int32)
+    orb = oracle.orbits(jnp.asarray(theta), y, one)
     assert np.all(np.asarray(orb.ok))
     d = np.random.default_rng(3).normal(size=theta.shape)
     h = 1e-6
-    plus = oracle.orbits(jnp.asarray(theta + h * d), orb.y)
-    minus = oracle.orbits(jnp.asarray(theta - h * d), orb.y)
+    plus = oracle.orbits(jnp.asarray(theta + h * d), orb.y, one)
+    minus = oracle.orbits(jnp.asarray(theta - h * d), orb.y, one)
     fd = (np.asarray(plus.figures) - np.asarray(minus.figures)) / (2 * h)
     ad = np.einsum("bkp,bp->bk", np.asarray(orb.gradient), d)
     np.testing.assert_allclose(ad, fd, rtol=2e-4, atol=1e-6)
@@ -380,7 +381,7 @@ def test_objective_and_constraint_gradients_compose():
 
     for speed in (0.01, 0.2):  # feasible, then short of the speed (deficit penalised)
         theta = rng.normal(size=p)
-        fig = lambda th: _exact_optimise._Figures(th, orbit_at(th), speed, 1, 0.05, True)
+        fig = lambda th: _exact_optimise._Figures(th, orbit_at(th), speed, 1, 1, 0.05, True)
         f0 = fig(theta)
         h = 1e-6
         fd = np.array([(fig(theta + h * e).f - fig(theta - h * e).f) / (2 * h) for e in np.eye(p)])
@@ -388,3 +389,23 @@ def test_objective_and_constraint_gradients_compose():
         np.testing.assert_allclose(f0.df, fd, rtol=1e-6, atol=1e-9)
         np.testing.assert_allclose(f0.dc, fdc, rtol=1e-6, atol=1e-9)
     assert f0.c[0] < 0 and f0.f > 1  # the slow point is penalised above any physical cost
+
+
+def test_stroke_windows_bound_the_true_stroke():
+    # The exact method's stroke constraint: the largest window maximum is the true stroke
+    # (against a dense evaluation of the series), and the Jacobian is that of the values.
+    n_h = 16
+    peaks = _exact_optimise.StrokePeaks(n_h)
+    rng = np.random.default_rng(2)
+    n = np.arange(1, n_h + 1)
+    phase = np.linspace(0, 2 * np.pi, 400_001)
+    for _ in range(3):
+        theta = np.r_[rng.normal(size=2 * n_h - 1) / np.r_[n[1:], n], 0.3]
+        values, jac = peaks(theta)
+        cos, sin = np.r_[0.0, theta[: n_h - 1]], theta[n_h - 1 : -1]
+        dense = np.max(np.abs(np.cos(np.outer(phase, n)) @ cos + np.sin(np.outer(phase, n)) @ sin))
+        assert 1 - values.min() == pytest.approx(dense, rel=1e-8)
+        d = rng.normal(size=theta.shape)
+        h = 1e-6
+        fd = (peaks(theta + h * d)[0] - peaks(theta - h * d)[0]) / (2 * h)
+        np.testing.assert_allclose(jac @ d, fd, atol=1e-6)
