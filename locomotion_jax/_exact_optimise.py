@@ -19,14 +19,16 @@ Method:
   previous optimum). Each is run from the relaxed spring for a transient, its orbit
   solved, and the starts are ranked by cost of transport with a penalty on the
   constraint violations; the best few are refined.
-- **Local refinement** by `scipy.optimize.minimize(method="trust-constr")` (an SQP
-  trust-region method: exact values, exact gradients, a quasi-Newton Hessian): the
-  trust region keeps each step within the reach of the warm-started Newton solve
-  of the orbit. The stroke is a convex set: it enters as linear constraints
-  $|s(\\phi_j)| \\le 1$ on a grid of phases, refined at the true maxima located by
-  [`_constraints.stroke`][locomotion_jax._constraints.stroke]; at the end the waveform
-  is rescaled radially onto the exact limit. The local solvers run in lockstep, so
-  that each of their evaluations is one batched (vmapped) call of the engine.
+- **Local refinement** by a monotone descent on an exact penalty (`_descent`: L-BFGS
+  directions, a backtracking line search that accepts only a decrease, so that an iterate
+  never walks into a costlier gait or a failed orbit; the first step is bounded so that
+  it stays within the reach of the warm-started Newton solve of the orbit), or by
+  `scipy.optimize.minimize` (`trust-constr`, `SLSQP`): exact values, exact gradients.
+  The stroke is a convex set: the descent keeps it by radial rescaling onto its limit,
+  the scipy methods take it as constraints on its maxima within fixed phase windows
+  (`StrokePeaks`); at the end the waveform is rescaled radially onto the exact limit.
+  The local solvers run in lockstep, so that each of their evaluations is one batched
+  (vmapped) call of the engine.
 - **Verification.** Every refined waveform (and the best start) is solved again by
   [`steady_gait`][] under the strict contact reading from the relaxed spring (periods 1
   to 4 tried, stability from the Floquet multipliers); the reported optimum is the
@@ -161,7 +163,7 @@ PENALTY = 10.0
 
 
 class _Figures:
-    """Objective and constraints of one evaluated point, as `trust-constr` wants them."""
+    """Objective and constraints of one evaluated point, as the local solvers want them."""
 
     def __init__(self, theta, orb, need_rate, k, direction, margin, free_omega):
         dX, ed, low = (float(x) for x in orb.figures)
@@ -279,6 +281,72 @@ def _col(flag: np.ndarray, like: Any) -> np.ndarray:
     return flag.reshape(flag.shape + (1,) * (np.ndim(like) - 1))
 
 
+def _descent(x0, ask, stroke: "StrokePeaks", bounds, settings: ExactSettings, max_iter: int, at) -> None:
+    """Monotone descent on the exact penalty $\\phi = f + \\rho\\,(\\max(0, -c_v) + \\max(0, -c_N))$:
+    quasi-Newton (L-BFGS) directions, the stroke kept by radial rescaling onto its exact
+    limit, $\\omega$ clipped to its bounds, and a backtracking (Armijo) line search that accepts
+    only a decrease, so an iterate never walks into a costlier gait or a failed orbit."""
+    rho = PENALTY
+
+    def merit(fig):
+        if not fig.ok:
+            return math.inf, None
+        viol = [max(0.0, -c) for c in fig.c]
+        g = fig.df - rho * sum(fig.dc[j] for j in range(2) if fig.c[j] < 0)
+        return fig.f + rho * sum(viol), g
+
+    def project(x):
+        x = np.array(x, float)
+        st = 1 - float(np.min(stroke(x)[0]))
+        if st > 1:
+            x[:-1] /= st
+        x[-1] = np.clip(x[-1], bounds.lb[-1], bounds.ub[-1])
+        return x
+
+    x = project(x0)
+    phi, g = merit(at(x))
+    if g is None:
+        return
+    mem: list[tuple[np.ndarray, np.ndarray]] = []
+    for _ in range(max_iter):
+        # Two-loop recursion for the L-BFGS direction.
+        q = g.copy()
+        alphas = []
+        for s_, y_ in reversed(mem):
+            a_ = s_ @ q / (y_ @ s_)
+            alphas.append(a_)
+            q -= a_ * y_
+        if mem:
+            s_, y_ = mem[-1]
+            q *= (s_ @ y_) / (y_ @ y_)
+        for (s_, y_), a_ in zip(mem, reversed(alphas)):
+            q += (a_ - y_ @ q / (y_ @ s_)) * s_
+        d = -q
+        if g @ d >= 0:  # not a descent direction: restart from steepest descent
+            mem.clear()
+            d = -g
+        step = min(1.0, settings.trust_radius / max(float(np.max(np.abs(d))), 1e-300))
+        accepted = False
+        for _ in range(12):
+            xn = project(x + step * d)
+            phin, gn = merit(at(xn))
+            if gn is not None and phin <= phi + 1e-4 * float(g @ (xn - x)):
+                accepted = True
+                break
+            step *= 0.4
+        if not accepted:
+            if not mem:
+                return  # no decrease along steepest descent: a (nonsmooth) local minimum
+            mem.clear()
+            continue
+        assert gn is not None
+        sv, yv = xn - x, gn - g
+        if sv @ yv > 1e-12 * np.linalg.norm(sv) * np.linalg.norm(yv):
+            mem.append((sv, yv))
+            mem[:] = mem[-8:]
+        x, phi, g = xn, phin, gn
+
+
 def _local_solver(x0, stroke: StrokePeaks, bounds, settings: ExactSettings, log: list, max_iter: int):
     """One local run (`settings.local_method`) from `x0`; `ask(x)` returns the `_Figures` at `x`.
 
@@ -305,6 +373,10 @@ def _local_solver(x0, stroke: StrokePeaks, bounds, settings: ExactSettings, log:
                         best["key"], best["x"] = rank, np.array(x, float)
             return cache[key]
 
+        if settings.local_method == "descent":
+            _descent(np.array(x0, float), ask, stroke, bounds, settings, max_iter, at)
+            log.append({"message": "descent", "nit": len(trace), "trace": trace})
+            return best["x"]
         if settings.local_method == "SLSQP":
             res = scipy.optimize.minimize(
                 lambda x: at(x).f,

@@ -83,11 +83,12 @@ class ExactSettings(eqx.Module):
     - `start_frequencies`: base frequencies of the starts, log-spaced over the range.
     - `random_shapes`: random waveforms among the start shapes (with sinusoids of five
       strokes, sinusoids with a third harmonic and saw-tooth ramps of both senses).
-    - `max_iter`: iterations of each local `trust-constr` refinement, over `stages` runs with
+    - `max_iter`: iterations of each local refinement, over `stages` runs with
       required speeds rising geometrically from the start's speed to $v_\\min$ (for a start that
-      is too slow; the last run has half the iterations); `trust_radius`: the initial trust region
-      (decision variables: coefficients in units of $a_\\max$, $\\log\\omega$); `local_method`:
-      `"trust-constr"` or `"SLSQP"` (scipy's).
+      is too slow; the last run has half the iterations); `trust_radius`: the largest first step
+      of a line search, or the initial trust region (decision variables: coefficients in units of
+      $a_\\max$, $\\log\\omega$); `local_method`: `"descent"` (monotone L-BFGS descent on an exact
+      penalty, `_exact_optimise._descent`), `"trust-constr"` or `"SLSQP"` (scipy's).
     - `margin`: required $\\min_t N_{1,2}$ over the orbit (units of weight).
     - `speed_slack`: the orbit targets $v_\\min (1 + \\text{slack})$.
     - `omega_min`, `omega_max`: range of a free base frequency, in units of the smallest
@@ -105,7 +106,7 @@ class ExactSettings(eqx.Module):
     max_iter: int = 600
     stages: int = 3
     trust_radius: float = 0.1
-    local_method: str = "trust-constr"
+    local_method: str = "descent"
     margin: float = 0.05
     speed_slack: float = 1e-3
     omega_min: float = 0.06
@@ -121,9 +122,9 @@ class ExactSettings(eqx.Module):
     def __check_init__(self):
         if self.local < 1 or self.max_iter < 1 or self.start_frequencies < 1 or self.stages < 1:
             raise ValueError("ExactSettings: local, max_iter, stages and start_frequencies must be >= 1.")
-        if self.local_method not in ("trust-constr", "SLSQP"):
+        if self.local_method not in ("descent", "trust-constr", "SLSQP"):
             raise ValueError(
-                f"ExactSettings.local_method must be 'trust-constr' or 'SLSQP', got {self.local_method!r}."
+                f"ExactSettings.local_method must be 'descent', 'trust-constr' or 'SLSQP', got {self.local_method!r}."
             )
         if not (0 < self.omega_min < self.omega_max):
             raise ValueError(
