@@ -9,6 +9,7 @@ and compile time are per case):
 - the same batch split over two forced host devices through the sweep engine's
   `shard_map` (`_sharding.dispatch_chunk`), with each device's completion time;
 - the smoothed engine (diffrax, `Smoothed(eps=1e-3)`) on a smaller batch;
+- the cost of `jax.jacfwd` through `measure` with p parameters against p + 1 plain runs;
 - the scipy baseline (`tests/reference.py`, `solve_ivp` DOP853 per mode, rtol 1e-9)
   on a few of the same configurations;
 - the accuracy of every engine against a tight scipy reference (rtol 1e-11) on
@@ -17,6 +18,8 @@ and compile time are per case):
   `--case '{"kind": "schedule", "grid": "map", ...}'` runs an omega x a map instead;
 - 64 x 64 and 512 x 512 (omega, a) maps with the public `sweep` on all devices: wall
   time, peak memory and the size of the results;
+- a 256 x 256 map of steady speed and cost of transport (16 x 16 with `--quick`): `steady_gait`
+  against direct simulation at the same accuracy (`case_gait_map`);
 - 256 x 256 and 2048 x 2048 regime maps written into a Zarr store (`ZARR_MAP`
   settings; 64 and 128 with `--quick`): wall and CPU time, peak memory, store size.
   Alone: `python benchmarks/run.py --skip exact,sharded,smoothed,scipy,accuracy,schedule,map,chain --out /tmp/zarr.md`.
@@ -633,7 +636,105 @@ def case_chain(spec: dict) -> dict:
     )  # fmt: skip
 
 
+def case_gait_map(spec: dict) -> dict:
+    """An n x n (omega, a) map of steady speed and cost of transport (paper reading): `steady_gait`
+    (vmapped: 30 periods of transient, then Newton on the period map) against direct simulation
+    at the same accuracy. Both average over whole periods (the direct runs save at every period of
+    their own omega, one `simulate` call per omega row, so that their steps restart at each period
+    like the period map's; averaged over 12 periods, a multiple of every gait period k <= 4), so
+    the direct answer's error is the transient's remnant, |mu|^n0: n0 is the
+    number of periods after which the `quantile` of the largest Floquet multiplier's modulus
+    decays to `tol` (capped at `max_periods`). The direct runs start from the paper's start like
+    steady_gait's transient. Reported: both times (first call with compilation, then warm), the
+    direct answer's error against the steady gait's, and the configurations without a gait."""
+    jax = setup_jax()
+    import locomotion_jax as lj
+    import numpy as np
+
+    n, dt = spec["n"], spec["dt"]
+    om, a = np.linspace(1.0, 25.0, n), np.linspace(0.01, 0.1, n)
+    p = lj.Params.grid(omega=om, a=a)
+    dyn = lj.Exact(dt=dt)
+    clock = CompileClock()
+    t0 = time.perf_counter()
+    g = lj.steady_gait(p, contact="paper", dynamics=dyn)
+    jax.block_until_ready(g.mean_speed)
+    gait_first = time.perf_counter() - t0
+    compile_gait = clock.total
+    t0 = time.perf_counter()
+    g = lj.steady_gait(p, contact="paper", dynamics=dyn)
+    jax.block_until_ready(g.mean_speed)
+    gait_warm = time.perf_counter() - t0
+    ok = np.asarray(g.converged)
+    mu = np.max(np.abs(np.asarray(g.multipliers)), axis=-1)
+    # Gaits that move and are stable (at rest both masses stick: the gap is neutral, |mu| = 1).
+    moving = ok & np.asarray(g.stable) & (np.abs(np.asarray(g.mean_speed)) > 1e-6)
+    q = float(np.quantile(mu[moving], spec["quantile"])) if moving.any() else 0.5
+    n0 = int(min(spec["max_periods"], math.ceil(math.log(spec["tol"]) / math.log(min(max(q, 1e-3), 0.9999)))))
+    K = 12
+    speed = np.full((n, n), np.nan)
+    cost = np.full((n, n), np.nan)
+    walls = []
+    for i, w in enumerate(om):  # one batch per omega row: the save times are whole periods of that omega
+        T = 2 * np.pi / w
+        t0 = time.perf_counter()
+        tr = lj.simulate(lj.Params(omega=w, a=a), (n0 + K) * T, save_at=np.arange(n0 + K + 1) * T,
+                         contact="paper", dynamics=dyn)  # fmt: skip
+        X, ed = np.asarray(tr.X), np.asarray(tr.e_d)
+        walls.append(time.perf_counter() - t0)
+        dX = X[:, -1] - X[:, n0]
+        speed[i] = dX / (K * T)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cost[i] = (ed[:, -1] - ed[:, n0]) / np.abs(dX)
+    gs, gc = np.asarray(g.mean_speed), np.asarray(g.cost_of_transport)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        err_v = np.abs(speed - gs) / np.abs(gs)
+        err_c = np.abs(cost - gc) / np.abs(gc)
+    pct = lambda e: {p_: float(np.nanpercentile(e[moving], p_)) for p_ in (50, 95, 99, 100)} if moving.any() else {}
+    return dict(
+        spec, n0=n0, mu_quantile=q, gait_first=gait_first, gait_warm=gait_warm, compile_gait=compile_gait,
+        direct_first_row=walls[0], direct_warm=float(np.sum(walls[1:]) * n / max(n - 1, 1)),
+        converged=int(ok.sum()), configs=n * n, moving=int(moving.sum()), err_speed=pct(err_v),
+        err_cost=pct(err_c), statuses={int(k): int(v) for k, v in zip(*np.unique(np.asarray(g.status),
+        return_counts=True))}, rss=maxrss_mb(), platform=jax.devices()[0].platform,
+    )  # fmt: skip
+
+
+def case_jacfwd(spec: dict) -> dict:
+    """Cost of forward-mode derivatives: `jax.jacfwd` of `measure` (`tau_z`, `e_z`,
+    `mean_speed`; z = 1 from the paper's t_start) with respect to `p` parameters, against
+    the `p + 1` plain runs a one-sided finite difference needs; compilation excluded."""
+    jax = setup_jax()
+    import jax.numpy as jnp
+    import locomotion_jax as lj
+    from locomotion_jax._params import PARAM_NAMES
+
+    names = ("omega", "a", "d", "mu_s", "mu_k")[: spec["p"]]
+    om, a = configs(spec["B"])
+    base = lj.Params(omega=om, a=a).broadcast()
+
+    def run(delta):
+        shift = {n: delta[i] for i, n in enumerate(names)}
+        params = lj.Params(**{n: getattr(base, n) + shift.get(n, 0.0) for n in PARAM_NAMES})
+        m = lj.measure(params, z=1.0, horizon=spec["horizon"])
+        return jnp.stack([m.tau_z, m.e_z, m.mean_speed])
+
+    clock = CompileClock()
+    _, plain, plain_cpu, _ = timed(lambda: run(jnp.zeros(spec["p"])), spec["repeats"])
+    compile_plain = clock.total
+    _, jac, jac_cpu, _ = timed(lambda: jax.jacfwd(run)(jnp.zeros(spec["p"])), spec["repeats"])
+    cpu = statistics.median(jac_cpu) / ((spec["p"] + 1) * statistics.median(plain_cpu))
+    return dict(
+        spec, plain=statistics.median(plain), jacfwd=statistics.median(jac), ratio_cpu=cpu,
+        ratio=statistics.median(jac) / ((spec["p"] + 1) * statistics.median(plain)),
+        per_second=spec["B"] * spec["p"] * 3 / statistics.median(jac), compile=clock.total - compile_plain,
+        platform=jax.devices()[0].platform,
+    )  # fmt: skip
+
+
 CASES = dict(
+    gait_map=case_gait_map,
+    jacfwd=case_jacfwd,
     exact=case_exact,
     sharded=case_sharded,
     smoothed=case_smoothed,
@@ -841,6 +942,19 @@ def main():
             rate = r["B"] * r["t_sim"] / r["wall"] if "wall" in r else 0.0
             log(f"chain N={n}{' (Params engine)' if params else ''}: " + (r.get("error") or f"{rate:,.0f} cfg-tu/s"))
 
+    if "gait_map" not in skip:
+        spec = dict(kind="gait_map", n=16 if q else 256, dt=dt, tol=1e-8, quantile=0.95, max_periods=2000)
+        r = spawn(spec)
+        results["gait_map"].append(r)
+        log("gait_map: " + (r.get("error") or f"steady_gait {r['gait_warm']:.1f} s, direct {r['direct_warm']:.1f} s"))
+
+    if "jacfwd" not in skip:
+        for p in (1, 5):
+            spec = dict(kind="jacfwd", B=64 if q else 256, p=p, horizon=H, repeats=2)
+            r = spawn(spec)
+            results["jacfwd"].append(r)
+            log(f"jacfwd p={p}: " + (r.get("error") or f"{r['ratio']:.2f} x (p + 1) plain runs"))
+
     meta = dict(
         machine=machine(),
         load=(load0, os.getloadavg()),
@@ -1014,6 +1128,19 @@ def targets(res: dict, meta: dict, base: dict | None) -> list[str]:
                 f"{big['rss']:.0f} MB vs {small['rss']:.0f} MB ({big['data_mb']:.0f} MB of results, "
                 f"{big['store_mb']:.0f} MB on disk, {big['wall'] / 60:.1f} min)",
                 ok(big["rss"] <= 1.1 * small["rss"]),
+            )
+        )
+    for r in res.get("jacfwd", []):
+        if "error" in r:
+            continue
+        goal = (1 + 1.5 * r["p"]) / (r["p"] + 1)
+        rows.append(
+            (
+                f"`jax.jacfwd` of `measure` w.r.t. {r['p']} parameter(s), batch {r['B']}: time / ({r['p']} + 1) "
+                "plain runs (wall)",
+                f"<= {goal:.2f} (1 + 1.5 p plain runs)",
+                f"{r['ratio']:.2f} ({fmt(r['per_second'])} derivatives/s)",
+                ok(r["ratio"] <= goal),
             )
         )
     if not rows:
@@ -1318,6 +1445,55 @@ def report(res: dict, meta: dict) -> str:
             L.append(
                 f"| {name} | {r['N']} | {r['B']} | {r['compile']:.1f} | {r['wall']:.3g} | {fmt(w)} | {fmt(c)} | "
                 f"{fmt(w / r['N'])} |"
+            )
+        L.append("")
+
+    gaits = [r for r in res.get("gait_map", []) if "error" not in r]
+    for r in gaits:
+        L.append("## Steady gaits: a map of steady speed and cost of transport")
+        L.append("")
+        L.append(
+            f"{r['n']} x {r['n']} (omega in [1, 25], a in [0.01, 0.1]), paper reading, dt = {r['dt']}. "
+            "`steady_gait` (vmapped: 30 periods of transient, Newton on the period map) against direct "
+            "simulation at the same accuracy: `simulate` per omega row, saved at every period (so that its "
+            f"steps restart at each period like the period map's), averaged over 12 periods after n0 = {r['n0']} "
+            f"periods, the number after which the {r['quantile']:.0%} quantile of the largest Floquet multiplier "
+            f"({r['mu_quantile']:.4f}) decays to {r['tol']:g}. Errors: the direct answer against the steady gait's, "
+            f"over the {r['moving']:,} stable gaits that move ({r['converged']:,} of {r['configs']:,} converged)."
+        )
+        L.append("")
+        L.append(
+            "| method | first call s (compile) | warm s | speed error p50 / p95 / max | cost error p50 / p95 / max |"
+        )
+        L.append("|---|---|---|---|---|")
+        ev, ec = r["err_speed"], r["err_cost"]
+        L.append(
+            f"| steady_gait | {r['gait_first']:.1f} ({r['compile_gait']:.1f}) | {r['gait_warm']:.2f} | (reference) | |"
+        )
+        L.append(
+            f"| direct simulation | {r['direct_first_row']:.1f} (first row) | {r['direct_warm']:.2f} | "
+            f"{ev['50']:.1e} / {ev['95']:.1e} / {ev['100']:.1e} | {ec['50']:.1e} / {ec['95']:.1e} / {ec['100']:.1e} |"
+        )
+        L.append("")
+
+    jacs = [r for r in res.get("jacfwd", []) if "error" not in r]
+    if jacs:
+        L.append("## Forward-mode derivatives")
+        L.append("")
+        L.append(
+            "`jax.jacfwd` of `measure` (`tau_z`, `e_z`, `mean_speed`; z = 1) with respect to the first p of "
+            "`omega, a, d, mu_s, mu_k`, against the p + 1 plain runs of a one-sided finite difference "
+            "(`case_jacfwd`). Derivatives per second: batch x p x 3 outputs / jacfwd time."
+        )
+        L.append("")
+        L.append(
+            "| p | batch | plain s | jacfwd s | / (p + 1) plain, wall | the same, CPU | derivatives/s | compile s |"
+        )
+        L.append("|---|---|---|---|---|---|---|---|")
+        for r in jacs:
+            L.append(
+                f"| {r['p']} | {r['B']} | {r['plain']:.3g} | {r['jacfwd']:.3g} | {r['ratio']:.2f} | "
+                f"{r['ratio_cpu']:.2f} | {fmt(r['per_second'])} | {r['compile']:.1f} |"
             )
         L.append("")
 

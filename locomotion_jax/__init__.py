@@ -8,7 +8,10 @@ faster", Nonlinear Dynamics 78 (2014); equation numbers in docstrings are the pa
 from importlib.metadata import PackageNotFoundError, version as _version
 
 from ._actuation import AbstractWaveform as AbstractWaveform, Fourier as Fourier, Sinusoid as Sinusoid
+from ._basins import Basins as Basins, basins as basins
+from ._bifurcation import BranchEvents as BranchEvents, EventKind as EventKind
 from ._cache import enable_compilation_cache as enable_compilation_cache
+from ._continuation import Branch as Branch, BranchStatus as BranchStatus, continuation as continuation
 from ._dynamics import AbstractDynamics as AbstractDynamics, Exact as Exact, Smoothed as Smoothed
 from ._gait import Gait as Gait, GaitStatus as GaitStatus, steady_gait as steady_gait
 from ._measure import measure as measure
@@ -22,6 +25,8 @@ from ._results import (
     ChainMeasurement as ChainMeasurement,
     ChainTrajectory as ChainTrajectory,
     Measurement as Measurement,
+    SMOOTH_MARGIN as SMOOTH_MARGIN,
+    SMOOTH_MARGIN_Z as SMOOTH_MARGIN_Z,
     Trajectory as Trajectory,
 )
 from ._simulate import simulate as simulate

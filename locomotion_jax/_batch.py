@@ -12,6 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._actuation import AbstractWaveform, Sinusoid
+from ._custom_types import Contact
 from ._forward import concrete_value
 from ._params import DEFAULTS, PARAM_NAMES, Params
 
@@ -82,3 +83,56 @@ over its thread pool, which costs more than it gains for kernels this small
 def default_max_steps(t_total: float, dt: float) -> int:
     """Room for the nominal steps plus the event searches (a hard cap, not a cost)."""
     return int(3 * t_total / dt) + 20_000
+
+
+INITIAL_NAMES = ("x1", "v1", "x2", "v2")
+
+
+def prepare_initial(initial: Any, shape: tuple[int, ...], dtype: Any) -> jax.Array | None:
+    """An initial state `(x1, v1, x2, v2)` (each broadcastable to the batch `shape`) as a
+    flat `(size, 4)` array, or `None`. Raises a `ValueError` where its values are known
+    here (not under `jit`) and a position or velocity is not finite or `x1 >= x2`; under
+    `jit` such a configuration is flagged `INVALID` in its own result ([`initial_state`][])."""
+    if initial is None:
+        return None
+    if not isinstance(initial, (tuple, list)) or len(initial) != 4:
+        raise TypeError(f"initial must be a tuple (x1, v1, x2, v2) of arrays, got {type(initial).__name__}.")
+    size = math.prod(shape)
+    flat = []
+    for name, value in zip(INITIAL_NAMES, initial):
+        arr = jnp.asarray(value, dtype)
+        try:
+            arr = jnp.broadcast_to(arr, shape)
+        except ValueError:
+            raise ValueError(
+                f"initial {name} has shape {arr.shape}, which does not broadcast to the batch shape {shape}."
+            ) from None
+        flat.append(arr.reshape((size,)))
+    state = jnp.stack(flat, -1)
+    try:
+        values = np.asarray(concrete_value(state))
+    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError, TypeError):
+        return state
+    if values.dtype.kind != "f":  # a tracer of `jit` beneath: the values are not known here
+        return state
+    if not np.all(np.isfinite(values)):
+        raise ValueError("initial: every position and velocity must be finite.")
+    if np.any(values[:, 0] >= values[:, 2]):
+        raise ValueError("initial: the masses must be in order, x1 < x2 (eq. 2 measures x2 - x1 > 0).")
+    return state
+
+
+def initial_state(params: Params, wave: AbstractWaveform, contact: Contact, start: str, row: jax.Array | None):
+    """The engine's state at $t = 0$ of one configuration: at rest in the `start` position,
+    or the given `row` $(x_1, v_1, x_2, v_2)$; with the validity of `row` (an invalid one is
+    replaced by the start, so that nothing turns NaN)."""
+    from . import _exact as exact, _model as model
+
+    dtype = params.dtype
+    gap = model.initial_gap(params, start)
+    if row is None:
+        return exact.init(params, wave, contact, jnp.zeros((), dtype), gap), jnp.asarray(True)
+    ok = jnp.all(jnp.isfinite(row)) & (row[0] < row[2])
+    zero = jnp.zeros((), dtype)
+    x1, v1, x2, v2 = (jnp.where(ok, r, d) for r, d in zip(row, (zero, zero, gap, zero)))
+    return exact.init(params, wave, contact, x1, x2, v1, v2), ok

@@ -334,9 +334,14 @@ def figures(
         typer.echo(str(path))
 
 
-PLUGINS: tuple[str, ...] = ("locomotion_jax._optimise_cli", "locomotion_jax._animate_cli", "locomotion_jax._chain_cli")
-"""Modules that add a subcommand (`optimize`, `animate`, `chain`) through `register(app)`; [`_register_optional`][]
-skips one whose module is absent."""
+PLUGINS: tuple[str, ...] = (
+    "locomotion_jax._optimise_cli",
+    "locomotion_jax._animate_cli",
+    "locomotion_jax._chain_cli",
+    "locomotion_jax._gait_cli",
+)
+"""Modules that add subcommands (`optimize`, `animate`, `chain`, `gait` and `continue`) through `register(app)`;
+[`_register_optional`][] skips one whose module is absent."""
 
 
 def _register_optional(app: typer.Typer, modules: tuple[str, ...] = PLUGINS) -> None:

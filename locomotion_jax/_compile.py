@@ -11,11 +11,12 @@ a clear message.
 """
 
 import functools
+import inspect
 from collections.abc import Callable, Sequence
 
 import jax
 
-from ._forward import forward_only, is_traced
+from ._forward import forward_only, is_traced, jvp_leaves, one_direction_at_a_time
 
 
 COMPILER_OPTIONS: dict[str, str] = {"xla_cpu_prefer_vector_width": "512"}
@@ -36,11 +37,23 @@ def engine_jit(fn: Callable, static_argnames: Sequence[str]) -> Callable:
     top = jax.jit(fn, static_argnames=static, compiler_options=COMPILER_OPTIONS)
     nested = jax.jit(fn, static_argnames=static)
 
+    signature = inspect.signature(fn)
+
+    @functools.cache
+    def compiled_jvp(fixed: tuple, tree, active: tuple) -> Callable:
+        # One direction's jvp as a top-level computation (with the options), for eager calls.
+        run = lambda ps, ts: jvp_leaves(lambda d: fn(**dict(fixed), **d), tree, ps, ts, active)
+        return jax.jit(run, compiler_options=COMPILER_OPTIONS)
+
     @functools.wraps(fn)
     def call(*args, **kwargs):
-        if is_traced((args, kwargs)):
-            return forward_only(nested(*args, **kwargs))
-        return top(*args, **kwargs)
+        if not is_traced((args, kwargs)):
+            return top(*args, **kwargs)
+        bound = signature.bind(*args, **kwargs)
+        fixed = tuple((k, v) for k, v in bound.arguments.items() if k in static)
+        dyn = {k: v for k, v in bound.arguments.items() if k not in static}
+        compiled = lambda tree, active: compiled_jvp(fixed, tree, active)
+        return forward_only(one_direction_at_a_time(lambda d: nested(**dict(fixed), **d), dyn, compiled))
 
     call.lower = top.lower  # pyright: ignore[reportAttributeAccessIssue]
     call.eval_shape = top.eval_shape  # pyright: ignore[reportAttributeAccessIssue]

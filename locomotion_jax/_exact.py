@@ -34,6 +34,20 @@ negative there (simultaneous events, e.g. by symmetry when $d = 0$, $m_1 = m_2$)
 The forces depend only on positions and time, never on the other mass's mode, so
 each mass's stick condition is decided on its own.
 
+**Margins** ([`margins`][]). A result is a smooth function of the parameters only
+while its switching structure (which events happen, in which order, with which
+outcome) stays the same; the engine records how close the run came to a change of
+it. Each margin is a drive phase $\\omega\\,\\delta t$ (radians): at a located crossing
+of an event function $g$, the phase between the crossing and the vertex of $g$'s
+local parabola, $\\omega|\\dot g/\\ddot g|$ (0 at a grazing crossing, which a small change
+removes); at a turning point of $g$ that stays above zero, the same phase for the
+parabola lowered by its minimum $g_{\\min}$, $\\omega\\sqrt{2 g_{\\min}/\\ddot g}$ (0 when it
+touches zero); where a slipping mass stops, the phase $\\omega|s/\\dot s|$ to the instant
+at which $s = \\mu_s n_i - |F_i|$, which decides between sticking and reversing,
+changes sign. Scale-free, they compare events of every kind; a typical switch is at
+0.1-1 rad, and a margin below `SMOOTH_MARGIN` (in `_results`) flags a result whose
+derivative may not be a derivative.
+
 **Speed** (benchmarks/NOTES.md). XLA on the CPU duplicates shared cheap
 subexpressions into every kernel that uses them (one kernel per carried scalar),
 and its float64 `sin` costs more than a force evaluation. So the state is a flat
@@ -139,6 +153,9 @@ class Hybrid(eqx.Module):
     flags a mass whose event was located at `t` (it switches at the start of the
     next iteration); `nu*` the side ($\\pm 1$) of each normal force (paper contact:
     flipped where a crossing is located, so that $n_i = \\nu_i N_i$ over a step).
+    `cross`, `near`: the squares of the smallest margins to a change of switching
+    structure met so far ([`margins`][]), at located switches and at near misses;
+    `t_switch` the time of the last located crossing other than the target's.
     """
 
     t: Array
@@ -157,6 +174,9 @@ class Hybrid(eqx.Module):
     status: Array
     t_liftoff: Array
     n_switch: Array
+    cross: Array
+    near: Array
+    t_switch: Array
 
 
 class StepInfo(NamedTuple):
@@ -167,6 +187,12 @@ class StepInfo(NamedTuple):
     - `t1`, `y1`: the committed end (before the switches pending there).
     - `stuck1`, `stuck2`: the mode during `[t0, t1]`.
     - `target_fired`, `t_target`, `y_target`: the caller's target event, if it fired.
+    - `zero1`, `zero2`: a slipping mass's velocity reached zero at `t0` (it stuck or
+      reversed there); `slack1`, `slack2`: $\\mu_s n_i - |F_i|$ at `t0` (eq. 7: it sticks
+      where this is $\\ge 0$).
+    - `h`: the step's full length ($t_1 - t_0$ unless cut at an event) and `fy`: the
+      vertical spring force $f_y$ with its first and second time derivatives at $t_0$
+      and at $t_0 + h$, six values for its quintic Hermite interpolant over the step.
     """
 
     commit: Array
@@ -180,6 +206,12 @@ class StepInfo(NamedTuple):
     target_fired: Array
     t_target: Array
     y_target: State
+    zero1: Array
+    zero2: Array
+    slack1: Array
+    slack2: Array
+    h: Array
+    fy: tuple[Array, Array, Array, Array, Array, Array]
 
 
 class Target(NamedTuple):
@@ -489,19 +521,43 @@ def rates(params: Params, f: model.Forces, y: Array, stuck: Array, sdir: Array) 
     return jnp.stack([dx1, a1, dx2, a2, p_d, model.actuator_power(f)])
 
 
-def init(params: Params, wave: AbstractWaveform, contact: Contact, x1: Array, x2: Array) -> Hybrid:
-    """State at $t = 0$ with both masses at rest; each mass sticks if eq. (7) allows."""
+def init(
+    params: Params,
+    wave: AbstractWaveform,
+    contact: Contact,
+    x1: Array,
+    x2: Array,
+    v1: Array | None = None,
+    v2: Array | None = None,
+    phase: tuple[Array, Array] | None = None,
+) -> Hybrid:
+    """State at $t = 0$: positions `x1, x2` and velocities `v1, v2` (default at rest);
+    `phase` $(\\cos\\omega t, \\sin\\omega t)$ of the drive (default $t = 0$) decides the modes.
+
+    A mass at rest sticks if eq. (7) allows (its velocity then carries no tangent), and
+    otherwise slips in the direction of its spring force; a moving one slips along its
+    velocity."""
     dtype = params.dtype
     P = consts(params, wave)
     zero = jnp.zeros((), dtype)
     x1 = jnp.asarray(x1, dtype)
     x2 = jnp.asarray(x2, dtype)
-    y = State(x1, 0 * x1, x2, 0 * x2, zero, zero)
-    cph, sph = jnp.ones((), dtype), zero
+    cph, sph = (jnp.ones((), dtype), zero) if phase is None else phase
     l0, _, _ = wave.at_phase(cph, sph)
     f, _ = _forces(P, contact, l0, x1, x2)
     absF = jnp.abs(f.fx)
     s1 = jnp.where(f.fx >= 0, 1.0, -1.0).astype(dtype)
+    s2 = -s1
+    stuck1 = absF <= P.mu_s * f.n1
+    stuck2 = absF <= P.mu_s * f.n2
+    if v1 is None or v2 is None:
+        y = State(x1, 0 * x1, x2, 0 * x2, zero, zero)
+    else:
+        v1, v2 = jnp.asarray(v1, dtype), jnp.asarray(v2, dtype)
+        stuck1, stuck2 = stuck1 & (v1 == 0), stuck2 & (v2 == 0)
+        sgn = lambda v, s: jnp.where(v > 0, 1.0, jnp.where(v < 0, -1.0, s)).astype(dtype)
+        s1, s2 = sgn(v1, s1), sgn(v2, s2)
+        y = State(x1, jnp.where(stuck1, 0, v1), x2, jnp.where(stuck2, 0, v2), zero, zero)
     lifted = (f.N1 <= 0) | (f.N2 <= 0)
     status = jnp.where(lifted & (contact == "strict"), Status.LIFTOFF, Status.OK).astype(jnp.int32)
     no = jnp.asarray(False)
@@ -513,10 +569,10 @@ def init(params: Params, wave: AbstractWaveform, contact: Contact, x1: Array, x2
         comp=State(*(zero,) * 6) if f32 else None,
         cph=cph,
         sph=sph,
-        stuck1=absF <= P.mu_s * f.n1,
-        stuck2=absF <= P.mu_s * f.n2,
+        stuck1=stuck1,
+        stuck2=stuck2,
         s1=s1,
-        s2=-s1,
+        s2=s2,
         pend1=no,
         pend2=no,
         nu1=side(f.N1),
@@ -524,6 +580,9 @@ def init(params: Params, wave: AbstractWaveform, contact: Contact, x1: Array, x2
         status=status,
         t_liftoff=jnp.where(lifted, zero, jnp.inf).astype(dtype),
         n_switch=jnp.zeros((), jnp.int32),
+        cross=jnp.asarray(jnp.inf, dtype),
+        near=jnp.asarray(jnp.inf, dtype),
+        t_switch=jnp.asarray(-jnp.inf, dtype),
     )
 
 
@@ -593,7 +652,7 @@ def step(
     a01, a02 = (keep(x) for x in _accel(P, f0, y0, st1, st2, s1, s2))
     k1 = _rates(P, f0, y0, a01, a02, s1, s2, dl00)
     D0 = _derivs(P, geo0, y0, a01, a02, dl00, ddl00)
-    D0 = D0._replace(fx=keep(D0.fx), fy=keep(D0.fy))
+    D0 = D0._replace(fx=keep(D0.fx), fy=keep(D0.fy), fx2=keep(D0.fx2), fy2=keep(D0.fy2))
     sides = (st.nu1, st.nu2)
     j0 = _second(P, contact, f0, D0, y0, a01, a02, st1, st2, s1, s2, dl00, ddl00, sides)
     g0s, d0s, e0s = _events(P, contact, f0, D0, y0, k1, j0, st1, st2, s1, s2, target, sides)
@@ -667,6 +726,37 @@ def step(
     coef = _quintic(jnp.maximum(cg0, 0), h * cd0, h2 * ce0, jnp.minimum(cg1, 0), h * cd1, h2 * ce1)
     theta = keep(jnp.where(cut, _root(coef, jnp.minimum(cg1, 0)), 1))
 
+    # -- margins to a change of switching structure ([`margins`][]); they feed nothing back.
+    # The events located at t (pend) are measured here, at their crossing, in the mode
+    # before the switch, from values this iteration has (forces and their rates here).
+    target_cut = first[-1] if target is not None else jnp.asarray(False)
+    sg0 = jnp.where(f0.fx >= 0, 1.0, -1.0).astype(dtype)
+    n1d0, n2d0, _, _ = _normal_rates(contact, D0, sides)
+    ao1, ao2 = _accel(P, f0, yA, st.stuck1, st.stuck2, st.s1, st.s2)  # the mode before the switch
+    # Second rates of the forces in that mode: fx2, fy2 depend on the accelerations only
+    # through u'' = a2 - a1, linearly (eqs. 2, 8): d fx2/d u'' = pl + u^2 (k - pl)/l^2.
+    u, il, pl = geo0
+    kk = u * il * il * (P.k - pl)
+    du2 = (ao2 - ao1) - (a02 - a01)
+    fx2o = D0.fx2 + (pl + u * kk) * du2
+    fy2o = D0.fy2 + P.d * kk * du2
+    n1ddo, n2ddo = (-fy2o, fy2o) if contact != "paper" else (-st.nu1 * fy2o, st.nu2 * fy2o)
+    located = []
+    for pend, stuck, sdir, ao, sgn, n_d, n_dd, im in (
+        (st.pend1, st.stuck1, st.s1, ao1, 1.0, n1d0, n1ddo, P.im1),
+        (st.pend2, st.stuck2, st.s2, ao2, -1.0, n2d0, n2ddo, P.im2),
+    ):
+        # A stuck mass's event is mu_s n_i - |F_i|, a slipping one's sigma_i v_i (at v_i = 0).
+        aod = (sgn * D0.fx - P.c * ao - P.mu_k * n_d * sdir) * im
+        rate = jnp.where(stuck, P.mu_s * n_d - sg0 * D0.fx, sdir * ao)
+        curv = jnp.where(stuck, P.mu_s * n_dd - sg0 * fx2o, sdir * aod)
+        located.append((pend, rate, curv))
+    decide = (
+        (vel1, P.mu_s * f0.n1 - absF, P.mu_s * n1d0 - sg0 * D0.fx),
+        (vel2, P.mu_s * f0.n2 - absF, P.mu_s * n2d0 - sg0 * D0.fx),
+    )
+    m_cross, m_near = margins(wave.omega, h, located, decide, crossed, g0s, d0s, e0s)
+
     # -- commit: the full step, or the quintic dense output at the crossing.
     H1, H2, H3, H4, H5 = (keep(x) for x in _hermite_basis(theta))
     hH1, hH4, h2H2, h2H5 = h * H1, h * H4, h2 * H2, h2 * H5
@@ -702,7 +792,6 @@ def step(
         low1 = nu1 * f1.N1 <= nu2 * f1.N2
         nu1, nu2 = jnp.where(lift_cut & low1, -nu1, nu1), jnp.where(lift_cut & ~low1, -nu2, nu2)
     commit = ~stop0
-    target_cut = first[-1] if target is not None else jnp.asarray(False)
     status = jnp.where(lift, Status.LIFTOFF, st.status).astype(jnp.int32)
 
     keepc = lambda new, old: jnp.where(commit, new, old)
@@ -723,6 +812,9 @@ def step(
         status=status,
         t_liftoff=t_lift.astype(dtype),
         n_switch=n_switch,
+        cross=jnp.where(commit, jnp.minimum(st.cross, m_cross), st.cross),
+        near=jnp.where(commit, jnp.minimum(st.near, m_near), st.near),
+        t_switch=jnp.where(commit & cut & ~target_cut, jax.lax.stop_gradient(tc), st.t_switch),
     )
     t_target = jnp.where(target_now, t0, tc)
     y_target = yc.map(lambda a, b: jnp.where(target_now, b, a), yA)
@@ -738,8 +830,93 @@ def step(
         target_fired=target_now | (commit & target_cut),
         t_target=t_target,
         y_target=y_target,
+        zero1=vel1,
+        zero2=vel2,
+        slack1=P.mu_s * f0.n1 - absF,
+        slack2=P.mu_s * f0.n2 - absF,
+        h=h,
+        fy=(f0.fy, D0.fy, D0.fy2, f1.fy, D1.fy, D1.fy2),
     )
     return new, info
+
+
+def margins(omega, h, located, decide, crossed, g0s, d0s, e0s):
+    """One step's margins to a change of switching structure, as squared drive phases
+    (module docstring, "Margins"): `(cross, near)`, each `inf` where there is none.
+
+    - `cross`: at each located crossing `located = ((fired, rate, curvature), ...)` of an
+      event function $g$ (its rate and curvature there, in the mode before the switch),
+      $(\\omega\\,\\dot g/\\ddot g)^2$; at each decision `decide = ((fired, s, rate), ...)` (a
+      slipping mass whose velocity reached zero sticks if $s = \\mu_s n_i - |F_i| \\ge 0$, else
+      reverses), $(\\omega s/\\dot s)^2$.
+    - `near`: over every event function $g_0 + \\dot g_0 s + \\ddot g_0 s^2/2$ (values at the
+      step's start) that turns inside the step of length `h` without crossing,
+      $2\\omega^2 g_{\\min}/\\ddot g_0$ ($0$ if the parabola dips below zero: an excursion
+      shorter than the step).
+
+    Values only: they are held out of forward-mode derivatives (`stop_gradient`). Each
+    function is a scalar of its own: a stacked `(lanes, n)` array would exceed the 64
+    elements per kernel above which XLA's CPU runtime splits a kernel over threads
+    (`_batch.MICRO_BATCH_CPU`).
+    """
+    sq = jax.lax.stop_gradient
+    h = sq(h)
+    w2 = sq(omega * omega)
+    zero = jnp.zeros_like(h)
+    cross = []
+    for fired, num, den in (*located, *decide):
+        num, den = sq(num), sq(den)
+        cross.append((jnp.where(fired, num * num, 1), jnp.where(fired, den * den, zero)))
+    near = []
+    for c_i, g0, d0, e0 in zip(crossed, g0s, d0s, e0s):
+        g0, d0, e0 = sq(g0), sq(d0), sq(e0)
+        turns = (e0 > 0) & (d0 < 0) & (-d0 <= h * e0) & ~c_i
+        near.append((jnp.where(turns, jnp.maximum(2 * g0 * e0 - d0 * d0, 0), 1), jnp.where(turns, e0 * e0, zero)))
+    return tuple(w2 * _smallest_ratio(pairs) for pairs in (cross, near))
+
+
+def _smallest_ratio(pairs: list) -> Array:
+    """$\\min_i a_i / b_i$ over pairs with $a_i \\ge 0$, $b_i \\ge 0$ (none: $a_i > 0 = b_i$, `inf`),
+    chosen by cross-multiplied comparisons, so that one division serves them all (XLA
+    makes a kernel of each division, and fuses their operands into every one of them)."""
+    a, b = pairs[0]
+    for ai, bi in pairs[1:]:
+        smaller = ai * b < a * bi
+        a, b = jnp.where(smaller, ai, a), jnp.where(smaller, bi, b)
+    return jnp.where(b > 0, a / jnp.where(b > 0, b, 1), jnp.inf)
+
+
+def probe(params: Params, wave: AbstractWaveform, contact: Contact, t: Array, y: State, target: Target):
+    """The event functions, with their first and second time derivatives, at time `t` and
+    state `y` (in the mode [`init`][] decides there): lists `(g, dg/dt, d2g/dt2)` as in a
+    step's start. For margins at a measured instant; not for the hot loop."""
+    P = consts(params, wave)
+    phase = (jnp.cos(wave.omega * t), jnp.sin(wave.omega * t))
+    st = init(params, wave, contact, y.x1, y.x2, y.v1, y.v2, phase)
+    l0, dl0, ddl0 = wave.at_phase(*phase)
+    f, geo = _forces(P, contact, l0, st.y.x1, st.y.x2)
+    a1, a2 = _accel(P, f, st.y, st.stuck1, st.stuck2, st.s1, st.s2)
+    r = _rates(P, f, st.y, a1, a2, st.s1, st.s2, dl0)
+    D = _derivs(P, geo, st.y, a1, a2, dl0, ddl0)
+    sides = (st.nu1, st.nu2)
+    j = _second(P, contact, f, D, st.y, a1, a2, st.stuck1, st.stuck2, st.s1, st.s2, dl0, ddl0, sides)
+    return _events(P, contact, f, D, st.y, r, j, st.stuck1, st.stuck2, st.s1, st.s2, target, sides)
+
+
+def target_margin(before: Array, gs: list, ds: list, es: list) -> Array:
+    """The time between the caller's target crossing and the nearest change of its
+    switching structure, from [`probe`][] there (target last): the vertex of the target
+    function's local parabola ($|\\dot g/\\ddot g|$), the last switch (`before`: the time
+    since it) or the next one predicted by the Taylor quadratic of each other event
+    function. A switch that crosses the target's time leaves that time differentiable
+    (the velocities are continuous) but changes its curvature in the parameters, so
+    that the derivative holds over a smaller range."""
+    inf = jnp.asarray(jnp.inf, before.dtype)
+    vertex = jnp.where(es[-1] != 0, ds[-1] / jnp.where(es[-1] != 0, es[-1], 1), inf)
+    after = inf
+    for g, d, e in zip(gs[:-1], ds[:-1], es[:-1]):
+        after = jnp.minimum(after, _predict(g, d, e))
+    return jax.lax.stop_gradient(jnp.minimum(jnp.minimum(before, after), jnp.abs(vertex)))
 
 
 def _any(flags: list) -> Array:

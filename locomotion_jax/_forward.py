@@ -9,11 +9,15 @@ first thing reverse mode does with an output) raises a `TypeError` that says
 what to use instead.
 """
 
+import functools
+from collections.abc import Callable
 from typing import Any
 
 import jax
 import jax.core  # (jax.core.Tracer) for type checkers
+import jax.custom_batching
 import jax.numpy as jnp
+import numpy as np
 from jax.interpreters import ad, batching, mlir
 
 
@@ -65,6 +69,7 @@ def concrete_value(x: Any) -> Any:
     """The value under the tracers of eager transformations (`jvp`'s primal, `vmap`'s
     batched value), for host-side bounds; raises `jax.errors.ConcretizationTypeError`
     under `jit`, where there is none."""
+    tracer = x
     while isinstance(x, jax.core.Tracer):
         inner = getattr(x, "primal", None)
         if inner is None:
@@ -72,6 +77,8 @@ def concrete_value(x: Any) -> Any:
         if inner is None:
             raise jax.errors.ConcretizationTypeError(x)
         x = inner
+    if not isinstance(x, (jax.Array, np.ndarray, np.generic, int, float, complex, bool)):
+        raise jax.errors.ConcretizationTypeError(tracer)  # e.g. a `jit` tracer's inner value
     return x
 
 
@@ -83,3 +90,81 @@ def check_static(name: str, value: Any) -> None:
             "differentiated. Differentiate with respect to Params fields, waveform coefficients "
             "or a Chain's fields instead."
         )
+
+
+def jvp_leaves(fn: Callable[[Any], Any], tree: Any, primals: list, tangents: list, active: tuple) -> Any:
+    """`jax.jvp` of `fn` at the pytree `tree` of `primals`, where only the `active` leaves
+    carry `tangents` (the others are constants of `fn`)."""
+
+    def f_active(xs):
+        it = iter(xs)
+        return fn(jax.tree_util.tree_unflatten(tree, [next(it) if a else x for x, a in zip(primals, active)]))
+
+    xs = [x for x, a in zip(primals, active) if a]
+    ts = [t for t, a in zip(tangents, active) if a]
+    return jax.jvp(f_active, (xs,), (ts,))
+
+
+def one_direction_at_a_time(fn: Callable[[Any], Any], dyn: Any, compiled: Callable[[Any, tuple], Callable]) -> Any:
+    """`fn(dyn)`, differentiated in forward mode one input direction at a time.
+
+    `jax.jacfwd` pushes all `p` directions through at once (a `vmap` of `jvp`): every
+    tangent of the engine's loop becomes a `(lanes, p)` array, and beyond 64 elements per
+    kernel XLA's CPU runtime splits each kernel over its threads, which costs more than
+    the whole computation (`_batch.MICRO_BATCH_CPU`; benchmarks/NOTES.md). Here a `vmap`
+    over tangent directions alone (primal inputs unbatched, as in `jacfwd`) runs the
+    directions in turn, each a `jvp` with `(lanes,)` tangents; any other `vmap` is the usual
+    one. Inputs whose tangent is a symbolic zero stay constants.
+
+    `compiled(tree, active)` is a compiled `(primals, tangents) -> jvp` for concrete values
+    (called eagerly: one compilation serves every direction and call); under `jit` several
+    directions run in a `lax.map` of `fn`'s `jvp` (slower than eagerly: measured, not
+    understood), one as usual.
+    """
+    leaves, tree = jax.tree_util.tree_flatten(dyn)
+
+    @jax.custom_jvp
+    def f(*xs):
+        return fn(jax.tree_util.tree_unflatten(tree, list(xs)))
+
+    @functools.partial(f.defjvp, symbolic_zeros=True)
+    def _f_jvp(primals, tangents):
+        active = tuple(not isinstance(t, jax.custom_derivatives.SymbolicZero) for t in tangents)
+        ts = [t if a else None for t, a in zip(tangents, active)]
+        run = lambda ps, ts: jvp_leaves(fn, tree, ps, ts, active)
+        if not is_traced((primals, ts)):
+            return compiled(tree, active)(list(primals), ts)
+        directions = jax.custom_batching.custom_vmap(run)
+
+        @directions.def_vmap
+        def _rule(axis_size, in_batched, ps, ts):
+            p_batched, t_batched = in_batched
+            if any(p_batched) or (axis_size == 1 and is_traced((ps, ts))):
+                axes = lambda flags: [0 if b else None for b in flags]
+                out = jax.vmap(run, in_axes=(axes(p_batched), axes(t_batched)))(ps, ts)
+                return out, jax.tree_util.tree_map(lambda _: True, out)
+            pick = lambda k: [t[k] if b else t for t, b in zip(ts, t_batched)]
+            if not is_traced((ps, ts)):
+                outs = [compiled(tree, active)(ps, pick(k)) for k in range(axis_size)]
+                primal_out = outs[0][0]
+                tangent_out = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *(o[1] for o in outs))
+            else:
+                mapped = [t for t, b in zip(ts, t_batched) if b]
+
+                def one(xs):
+                    it = iter(xs)
+                    return run(ps, [next(it) if b else t for t, b in zip(ts, t_batched)])
+
+                primal_out, tangent_out = jax.lax.map(one, mapped)
+                primal_out = jax.tree_util.tree_map(lambda x: x[0], primal_out)
+            unbatched = jax.tree_util.tree_map(lambda _: False, primal_out)
+            return (primal_out, tangent_out), (unbatched, jax.tree_util.tree_map(lambda _: True, tangent_out))
+
+        # A `vmap`'s tracers carry a `batch_dim` (their class is not public).
+        if all(getattr(t, "batch_dim", None) is not None for t in ts if t is not None):
+            return directions(list(primals), ts)  # jacfwd: the primal comes with the directions
+        # Any other transformation (reverse mode's linearisation among them) needs the
+        # primal known apart from the tangents.
+        return fn(jax.tree_util.tree_unflatten(tree, list(primals))), directions(list(primals), ts)[1]
+
+    return f(*leaves)

@@ -16,18 +16,18 @@ period later), which makes the multiplier 0 that sticking contributes.
 """
 
 from collections.abc import Sequence
-from typing import Any, NamedTuple
+from typing import Any
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import _exact as exact, _model as model
+from . import _corrector as corrector, _model as model, _period as period
 from ._actuation import AbstractWaveform
-from ._batch import default_max_steps, prepare, safe_params, unflatten
+from ._batch import default_max_steps, prepare, unflatten
 from ._compile import engine_jit
-from ._custom_types import Array
+from ._custom_types import Array, ArrayLike
 from ._dynamics import AbstractDynamics, Exact
 from ._measure import STICK_TOL
 from ._params import Params
@@ -73,6 +73,13 @@ class Gait(eqx.Module):
       solved: invalid parameters, a lift-off in the transient); `n_iter`: Newton iterations.
     - `liftoff`: a normal force reached zero on the orbit or the transient (paper
       reading: flagged, the orbit is still computed).
+    - `slip_margin`: the smallest $|F_i| - \\mu_s n_i$ (eq. 7) at the instants where a
+      slipping mass's velocity reaches zero on the orbit: $> 0$, every such mass
+      reverses (SL); $< 0$, one sticks (SSL); `inf` if no velocity reaches zero, `-inf`
+      if a mass is stuck all period. It is continuous where a stick interval shrinks to
+      nothing, so that its zero is the SSL/SL boundary.
+    - `min_normal`: the smallest normal force $\\min_t \\min(N_1, N_2)$ (eq. 5) on the
+      orbit (its zero is the onset of lift-off).
     """
 
     status: Array
@@ -96,137 +103,42 @@ class Gait(eqx.Module):
     residual: Array
     n_iter: Array
     liftoff: Array
+    slip_margin: Array
+    min_normal: Array
     contact: str = eqx.field(static=True)
 
 
-class _Period(NamedTuple):
-    """One application of the period map: the end state and what the period accumulated."""
-
-    y: Array  # (u, v1, v2) at the end
-    dX: Array
-    ed: Array
-    w: Array
-    stuck1: Array
-    stuck2: Array
-    n_switch: Array
-    status: Array
-    lifted: Array
-
-
-def _reduced(st: exact.Hybrid) -> Array:
-    """The period map's state $(u, v_1, v_2)$ of a hybrid state."""
-    return jnp.stack([st.y.x2 - st.y.x1, st.y.v1, st.y.v2])
-
-
-def _section_state(params, wave, contact, y):
-    """The hybrid state at phase 0 for $y = (u, v_1, v_2)$: a mass at rest sticks if eq. (7)
-    allows (its velocity then carries no tangent), a moving one slips along $v_i$."""
-    dtype = params.dtype
-    st = exact.init(params, wave, contact, jnp.zeros((), dtype), y[0])
-    v1, v2 = y[1], y[2]
-    stuck1 = st.stuck1 & (v1 == 0)
-    stuck2 = st.stuck2 & (v2 == 0)
-    sgn = lambda v, s: jnp.where(v > 0, 1.0, jnp.where(v < 0, -1.0, s)).astype(dtype)
-    ys = st.y._replace(v1=jnp.where(stuck1, 0, v1), v2=jnp.where(stuck2, 0, v2))
-    return eqx.tree_at(
-        lambda s: (s.y, s.stuck1, s.stuck2, s.s1, s.s2), st, (ys, stuck1, stuck2, sgn(v1, st.s1), sgn(v2, st.s2))
-    )
-
-
-def _advance(params, wave, P, contact, dt, st, t_end, max_steps):
-    """Integrate to `t_end` (or a strict lift-off, or the step cap); also the time each mass was stuck."""
-    zero = jnp.zeros((), params.dtype)
-
-    def cond(c):
-        s, _, _, n = c
-        return (s.t < t_end) & (s.status == Status.OK) & (n < max_steps)
-
-    def body(c):
-        s, a1, a2, n = c
-        new, info = exact.step(params, wave, contact, dt, s, t_end, None, P)
-        span = jnp.where(info.commit, info.t1 - info.t0, 0)
-        return new, a1 + jnp.where(info.stuck1, span, 0), a2 + jnp.where(info.stuck2, span, 0), n + 1
-
-    st, a1, a2, _ = jax.lax.while_loop(cond, body, (st, zero, zero, jnp.zeros((), jnp.int32)))
-    return st, a1, a2
-
-
-def _period_map(params, wave, P, contact, dt, max_steps, k, y) -> _Period:
-    t_end = k * (2 * jnp.pi) / wave.omega
-    st0 = _section_state(params, wave, contact, y)
-    st, a1, a2 = _advance(params, wave, P, contact, dt, st0, t_end, max_steps)
-    com = lambda s: P.mhat * s.y.x1 + (1 - P.mhat) * s.y.x2
-    ok = (st.status == Status.OK) & (st.t >= t_end)
-    return _Period(
-        y=_reduced(st),
-        dX=com(st) - com(st0),
-        ed=st.y.ed,
-        w=st.y.w,
-        stuck1=a1,
-        stuck2=a2,
-        n_switch=st.n_switch,
-        status=jnp.where(ok, Status.OK, jnp.where(st.status == Status.OK, Status.MAX_STEPS, st.status)),
-        lifted=jnp.isfinite(st.t_liftoff),
-    )
-
-
-def _transient_one(params, wave, contact, start, dt, transient, max_steps):
-    """`transient` actuation periods from the start: the end's reduced state, the parameters'
-    validity, the run's `Status` and whether a normal force reached zero. One configuration."""
-    params, valid = safe_params(params)
-    P = exact.consts(params, wave)
-    st = exact.init(params, wave, contact, jnp.zeros((), params.dtype), model.initial_gap(params, start))
-    st, _, _ = _advance(params, wave, P, contact, dt, st, transient * (2 * jnp.pi) / wave.omega, max_steps)
-    return _reduced(st), valid, st.status, jnp.isfinite(st.t_liftoff)
-
-
-def _newton_one(params, wave, contact, dt, y0, go, k, tol, max_iter, max_steps):
-    """Newton's method on $\\Phi_k(y) = y$ from `y0` (skipped where `go` is False). One configuration."""
-    params, _ = safe_params(params)
-    P = exact.consts(params, wave)
-    eye = jnp.eye(3, dtype=params.dtype)
-    k = jnp.where(go, k, 0)  # a configuration not solved here integrates nothing
-
-    def phi(y):
-        out = _period_map(params, wave, P, contact, dt, max_steps, k, y)
-        return out.y, out
-
-    def evaluate(y):
-        return jax.jacfwd(phi, has_aux=True)(y)
-
-    def small(y, out):
-        return jnp.max(jnp.abs(out.y - y)) <= tol * (1 + jnp.max(jnp.abs(y)))
-
-    def cond(c):
-        _, _, _, it, done, failed = c
-        return ~done & ~failed & (it < max_iter)
-
-    def body(c):
-        y, M, out, it, _, _ = c
-        y1 = y + jnp.linalg.solve(M - eye, y - out.y)
-        M1, out1 = evaluate(y1)
-        bad = (out1.status != Status.OK) | ~jnp.all(jnp.isfinite(y1)) | ~jnp.all(jnp.isfinite(M1))
-        return y1, M1, out1, it + 1, small(y1, out1) & ~bad, bad
-
-    M0, out0 = evaluate(y0)
-    go = go & (out0.status == Status.OK)
-    init = (y0, M0, out0, jnp.zeros((), jnp.int32), go & small(y0, out0), ~go)
-    y, M, out, it, done, _ = jax.lax.while_loop(cond, body, init)
-    return dict(y=y, M=M, out=out, it=it, done=done, residual=jnp.max(jnp.abs(out.y - y)))
-
-
 def _transient_batch(params, wave, wave_axes, contact, start, dt, transient, max_steps):
-    one = lambda p, w: _transient_one(p, w, contact, start, dt, transient, max_steps)
+    one = lambda p, w: period.transient_one(p, w, contact, start, dt, transient, max_steps)
     return jax.vmap(one, in_axes=(0, wave_axes))(params, wave)
 
 
-def _newton_batch(params, wave, wave_axes, contact, dt, y0, go, k, tol, max_iter, max_steps):
-    one = lambda p, w, y, g: _newton_one(p, w, contact, dt, y, g, k, tol, max_iter, max_steps)
-    return jax.vmap(one, in_axes=(0, wave_axes, 0, 0))(params, wave, y0, go)
-
-
 _transient_batch = engine_jit(_transient_batch, ("wave_axes", "contact", "start", "dt"))
-_newton_batch = engine_jit(_newton_batch, ("wave_axes", "contact", "dt"))
+
+
+def _transient_from_batch(params, wave, wave_axes, contact, y, dt, transient, max_steps):
+    one = lambda p, w, s: period.transient_one(p, w, contact, s, dt, transient, max_steps)
+    return jax.vmap(one, in_axes=(0, wave_axes, 0))(params, wave, y)
+
+
+_transient_from_batch = engine_jit(_transient_from_batch, ("wave_axes", "contact", "dt"))
+
+
+def _newton(flat, wave, axes, contact, dt, y0, go, k, tol, max_iter, max_steps) -> dict:
+    """Newton's method on $\\Phi_k(y) = y$ from `y0` where `go`: the continuation's corrector
+    ([`_corrector`][]) with the parameter held (no parameter selected, arclength scale 0)."""
+    B = y0.shape[0]
+    dtype = flat.dtype
+    real = lambda v: jnp.asarray(v, dtype)
+    z0 = jnp.concatenate([jnp.asarray(y0, dtype), jnp.zeros((B, 1), dtype)], axis=1)
+    c = jnp.zeros((B, 4), dtype).at[:, 3].set(1)
+    zero = jnp.zeros((B,), dtype)
+    r = corrector.correct_batch(flat, wave, axes, corrector.selector(None, wave), contact, dt,
+                                jnp.full((B,), k, dtype), zero, zero, z0, z0, c, go, real(tol),
+                                jnp.asarray(max_iter, jnp.int32), max_steps)  # fmt: skip
+    r = jax.tree_util.tree_map(np.asarray, r)
+    y = r.z[:, :3]
+    return dict(y=y, M=r.J[:, :3, :3], out=r.out, it=r.it, done=r.done, residual=np.max(np.abs(r.out.y - y), axis=1))
 
 
 def _check(periods, transient, tol, max_iter) -> tuple[int, ...]:
@@ -252,7 +164,7 @@ def steady_gait(
     dynamics: AbstractDynamics | None = None,
     waveform: AbstractWaveform | None = None,
     contact: str = "strict",
-    start: str = "paper",
+    start: str | ArrayLike = "paper",
     dtype: Any = None,
 ) -> Gait:
     """Solve the steady gait of each configuration as a periodic orbit (module docstring).
@@ -270,7 +182,10 @@ def steady_gait(
     - `tol`: Newton tolerance on $\\|\\Phi_k(y) - y\\|_\\infty / (1 + \\|y\\|_\\infty)$ (default 1e-11
       in float64, 1e-5 in float32).
     - `max_iter`: Newton iterations per `k`.
-    - `dynamics`: [`Exact`][] (its `dt`); `waveform`, `contact`, `start`, `dtype`: as in [`simulate`][].
+    - `dynamics`: [`Exact`][] (its `dt`); `waveform`, `contact`, `dtype`: as in [`simulate`][].
+    - `start`: as in [`simulate`][] (`"paper"`, `"relaxed"`: at rest), or section states
+      $(u, v_1, v_2)$ at phase 0, an array of shape `batch + (3,)` (a mass given $v_i = 0$ starts
+      stuck where eq. 7 allows).
 
     **Returns:** a [`Gait`][] with batch shape `params.batch_shape`. Configurations without
     a converged orbit carry NaN numbers and their `status`; the others are unaffected.
@@ -286,8 +201,8 @@ def steady_gait(
     if not isinstance(dynamics, Exact):
         raise TypeError(f"steady_gait needs Exact dynamics, got {type(dynamics).__name__}.")
     model.check_contact(contact)
-    model.initial_gap(Params(), start)
     flat, wave, axes, shape = prepare(params, waveform, dtype)
+    y_start = _start_states(start, shape, flat.dtype)
     f32 = jnp.finfo(flat.dtype).bits < 64
     tol = (1e-5 if f32 else 1e-11) if tol is None else float(tol)
     ks = _check(periods, transient, tol, max_iter)
@@ -297,7 +212,11 @@ def steady_gait(
     real = lambda v: jnp.asarray(v, flat.dtype)
 
     # The transient is shared by every period tried.
-    y0, valid, trans, trans_lift = _transient_batch(flat, wave, axes, contact, start, dynamics.dt, real(transient), mst)
+    if y_start is None:
+        run = _transient_batch(flat, wave, axes, contact, start, dynamics.dt, real(transient), mst)
+    else:
+        run = _transient_from_batch(flat, wave, axes, contact, y_start, dynamics.dt, real(transient), mst)
+    y0, valid, trans, trans_lift = run
     valid, trans = np.asarray(valid), np.asarray(trans)
     # -1: to be solved; else the final status (invalid, a strict lift-off, the step cap).
     base = np.select(
@@ -309,10 +228,8 @@ def steady_gait(
     for k in ks:
         msp = jnp.asarray(dynamics.max_steps or default_max_steps(k * T_max, dynamics.dt), jnp.int32)
         go = jnp.asarray((base < 0) & (True if best is None else _open(best)))
-        r = _newton_batch(flat, wave, axes, contact, dynamics.dt, y0, go, real(k), real(tol),
-                          jnp.asarray(max_iter, jnp.int32), msp)  # fmt: skip
-        r = jax.tree_util.tree_map(np.asarray, r)
-        out: _Period = r["out"]
+        r = _newton(flat, wave, axes, contact, dynamics.dt, y0, go, k, tol, max_iter, msp)
+        out: period.Period = r["out"]
         solved = np.where(out.status == Status.LIFTOFF, GaitStatus.LIFTOFF,
                           np.where(r["done"], GaitStatus.CONVERGED, GaitStatus.NOT_CONVERGED))  # fmt: skip
         r["status"] = np.where(base < 0, solved, base).astype(np.int32)
@@ -337,6 +254,18 @@ def steady_gait(
             break
     assert best is not None
     return unflatten(_gait(best, omega, flat, contact), shape)
+
+
+def _start_states(start: Any, shape: tuple[int, ...], dtype: Any) -> Array | None:
+    """`None` for a named start (checked), else the section states flattened to `(size, 3)`."""
+    if isinstance(start, str):
+        model.initial_gap(Params(), start)
+        return None
+    y = np.asarray(start, np.float64)
+    if y.shape != shape + (3,) or not np.all(np.isfinite(y)):
+        raise ValueError(f"start must be 'paper', 'relaxed' or finite section states (u, v1, v2) of shape "
+                         f"{shape + (3,)}, got shape {y.shape}.")  # fmt: skip
+    return jnp.asarray(y.reshape(-1, 3), dtype)
 
 
 def _multipliers(r: dict) -> np.ndarray:
@@ -370,19 +299,19 @@ def _gait(r: dict, omega: np.ndarray, flat: Params, contact: str) -> Gait:
     ok = r["status"] == GaitStatus.CONVERGED
     dtype = flat.dtype
     nan = lambda x: jnp.asarray(np.where(_expand(ok, x), x, np.nan), dtype)
-    out: _Period = r["out"]
+    out: period.Period = r["out"]
     k = r["k"]
-    period = np.where(ok, k * 2 * np.pi / omega, np.nan)
+    kT = np.where(ok, k * 2 * np.pi / omega, np.nan)
     dX = out.dX
     M = np.where(ok[:, None, None], r["M"], np.nan)
-    stuck = np.stack([out.stuck1, out.stuck2]) / np.where(ok, period, 1)
+    stuck = np.stack([out.stuck1, out.stuck2]) / np.where(ok, kT, 1)
     ssl = np.max(np.stack([out.stuck1, out.stuck2]), axis=0) > STICK_TOL
     return Gait(
         status=jnp.asarray(r["status"]),
         converged=jnp.asarray(ok),
         k=jnp.asarray(k, jnp.int32),
-        period=jnp.asarray(period, dtype),
-        mean_speed=nan(dX / np.where(ok, period, 1)),
+        period=jnp.asarray(kT, dtype),
+        mean_speed=nan(dX / np.where(ok, kT, 1)),
         e_d=nan(out.ed),
         work=nan(out.w),
         cost_of_transport=nan(_ratio(out.ed, np.abs(dX), ok)),
@@ -399,5 +328,7 @@ def _gait(r: dict, omega: np.ndarray, flat: Params, contact: str) -> Gait:
         residual=jnp.asarray(r["residual"], dtype),
         n_iter=jnp.asarray(r["it"]),
         liftoff=jnp.asarray(r["lifted"]),
+        slip_margin=nan(out.margin),
+        min_normal=nan(out.n_min),
         contact=contact,
     )

@@ -15,11 +15,21 @@ import numpy as np
 
 from . import _exact as exact, _model as model
 from ._actuation import AbstractWaveform
-from ._batch import default_max_steps, horizon_bound, MICRO_BATCH_CPU, prepare, safe_params, unflatten
+from ._batch import (
+    default_max_steps,
+    horizon_bound,
+    initial_state,
+    MICRO_BATCH_CPU,
+    prepare,
+    prepare_initial,
+    safe_params,
+    unflatten,
+)
 from ._compile import engine_jit
 from ._custom_types import ArrayLike
 from ._dynamics import AbstractDynamics, Exact, Smoothed
 from ._forward import check_static
+from ._margins import margin_fields
 from ._params import Params
 from ._queue import run_queue
 from ._results import ChainMeasurement, Measurement
@@ -49,6 +59,7 @@ class _Acc(eqx.Module):
     stuck1: jax.Array
     stuck2: jax.Array
     steps: jax.Array
+    before_z: jax.Array  # time from the last switch to t_z
 
 
 class _Fixed(NamedTuple):
@@ -63,14 +74,16 @@ class _Fixed(NamedTuple):
     z: jax.Array
 
 
-def _setup(params, wave, z, horizon, window, contact, start, t_start):
+def _setup(params, wave, z, horizon, window, contact, start, t_start, initial=None):
     """`(fixed, dyn)` of one configuration: its constants, and the loop state `(Hybrid, _Acc)`.
 
-    `t_start` is the measurement's start, or NaN for the paper's (`Params.t_start`)."""
+    `t_start` is the measurement's start, or NaN for the paper's (`Params.t_start`);
+    `initial` the state $(x_1, v_1, x_2, v_2)$ at $t = 0$, or `None` for `start`'s."""
     params, valid = safe_params(params)
     dtype = params.dtype
     P = exact.consts(params, wave)
-    st = exact.init(params, wave, contact, jnp.zeros((), dtype), model.initial_gap(params, start))
+    st, ok = initial_state(params, wave, contact, start, initial)
+    valid = valid & ok
     st = eqx.tree_at(lambda s: s.status, st, jnp.where(valid, st.status, Status.INVALID).astype(jnp.int32))
     ws = jnp.where(jnp.isnan(t_start), params.t_start, t_start).astype(dtype)
     zero = jnp.zeros((), dtype)
@@ -87,6 +100,7 @@ def _setup(params, wave, z, horizon, window, contact, start, t_start):
         stuck1=zero,
         stuck2=zero,
         steps=jnp.zeros((), jnp.int32),
+        before_z=jnp.asarray(jnp.inf, dtype),
     )
     fixed = _Fixed(params, wave, P, ws, ws + window, ws + horizon, jnp.asarray(z, dtype))
     return fixed, (st, acc)
@@ -115,6 +129,8 @@ def _advance(f: _Fixed, dyn, contact, dt):
     started = a.started | begin
     X0 = jnp.where(begin, _com(f.P, s.y), a.X0)
     target = exact.Target(active=started & ~a.reached, X0=X0, z=f.z)
+    # The margins cover the measured interval: they restart at t_start.
+    s = eqx.tree_at(lambda s: (s.cross, s.near), s, tuple(jnp.where(begin, jnp.inf, m) for m in (s.cross, s.near)))
     s_new, info = exact.step(f.params, f.wave, contact, dt, s, t_stop, target, f.P)
     # Stick time inside the window (steps never straddle ws or we).
     inside = info.commit & started & (info.t1 <= we)
@@ -133,11 +149,20 @@ def _advance(f: _Fixed, dyn, contact, dt):
         stuck1=a.stuck1 + jnp.where(info.stuck1, dur, 0),
         stuck2=a.stuck2 + jnp.where(info.stuck2, dur, 0),
         steps=a.steps + 1,
+        before_z=jnp.where(hit, jax.lax.stop_gradient(info.t_target - s.t_switch), a.before_z),
     )
     return s_new, a_new
 
 
-def _results(f: _Fixed, dyn) -> dict:
+def _margin_z(f: _Fixed, a: _Acc, contact) -> jax.Array:
+    """The time from $t_z$ to the nearest change of the target's structure (`_exact.target_margin`)."""
+    target = exact.Target(active=jnp.asarray(True), X0=a.X0, z=f.z)
+    t_z = jnp.where(a.reached, a.t_z, f.ws)
+    events = exact.probe(f.params, f.wave, contact, t_z, a.y_z, target)
+    return exact.target_margin(a.before_z, *events)
+
+
+def _results(f: _Fixed, dyn, contact) -> dict:
     """The `Measurement` fields of one finished run (SPEC §5)."""
     s, a = dyn
     params, wave, ws, we, z = f.params, f.wave, f.ws, f.we, f.z
@@ -181,16 +206,17 @@ def _results(f: _Fixed, dyn) -> dict:
         X_start=jnp.where(a.started, a.X0, nan),
         n_steps=a.steps,
         n_switch=s.n_switch,
+        **margin_fields(a.started, a.reached, s.cross, s.near, _margin_z(f, a, contact), a.t_z - ws, nan),
     )
 
 
-def _exact_one(params, wave, z, horizon, window, contact, start, dt, max_steps, t_start=jnp.nan):
+def _exact_one(params, wave, z, horizon, window, contact, start, dt, max_steps, t_start=jnp.nan, initial=None):
     """One configuration, in its own loop (under `vmap`: a loop of lanes that idle once done).
 
-    `t_start`: the measurement's start, NaN for the paper's."""
-    fixed, dyn = _setup(params, wave, z, horizon, window, contact, start, t_start)
+    `t_start`: the measurement's start, NaN for the paper's; `initial`: as in `_setup`."""
+    fixed, dyn = _setup(params, wave, z, horizon, window, contact, start, t_start, initial)
     dyn = jax.lax.while_loop(lambda d: _running(fixed, d, max_steps), lambda d: _advance(fixed, d, contact, dt), dyn)
-    return _results(fixed, dyn)
+    return _results(fixed, dyn, contact)
 
 
 def exact_batch(
@@ -206,6 +232,7 @@ def exact_batch(
     max_steps,
     lanes: int | None = None,
     t_start: jax.Array | None = None,
+    initial: jax.Array | None = None,
 ) -> dict[str, jax.Array]:
     """`measure` on a flat batch (not jitted): a work queue over `lanes` lanes ([`_queue.run_queue`][]).
 
@@ -214,6 +241,8 @@ def exact_batch(
     The queue takes the highest frequencies (most mode switches per time unit) first,
     so that the last configurations, run while lanes run out of work, are short.
     `t_start`: per-configuration measurement starts (NaN: the paper's), default all the paper's.
+    `initial`: per-configuration states $(x_1, v_1, x_2, v_2)$ at $t = 0$, shape `(n, 4)`
+    (default: at rest in the `start` position).
     """
     n = params.omega.shape[0]
     if t_start is None:
@@ -221,15 +250,17 @@ def exact_batch(
     if lanes is None:
         lanes = MICRO_BATCH_CPU if jax.default_backend() == "cpu" else n
     if lanes >= n:
-        fn = lambda p, w, ts: _exact_one(p, w, z, horizon, window, contact, start, dt, max_steps, ts)
-        return jax.vmap(fn, in_axes=(0, wave_axes, 0))(params, wave, t_start)
+        fn = lambda p, w, ts, y0: _exact_one(p, w, z, horizon, window, contact, start, dt, max_steps, ts, y0)
+        return jax.vmap(fn, in_axes=(0, wave_axes, 0, None if initial is None else 0))(params, wave, t_start, initial)
     take = lambda i: jax.tree_util.tree_map(lambda x: x[i], params)
     pick_wave = (lambda i: wave) if wave_axes is None else (lambda i: jax.tree_util.tree_map(lambda x: x[i], wave))
-    setup = lambda i: _setup(take(i), pick_wave(i), z, horizon, window, contact, start, t_start[i])
+    pick_initial = (lambda i: None) if initial is None else (lambda i: initial[i])
+    setup = lambda i: _setup(take(i), pick_wave(i), z, horizon, window, contact, start, t_start[i], pick_initial(i))
     running = lambda f, d: _running(f, d, max_steps)
     advance = lambda f, d: _advance(f, d, contact, dt)
     order = jnp.argsort(-jnp.where(jnp.isfinite(params.omega), params.omega, -jnp.inf))
-    return run_queue(setup, running, advance, _results, n, lanes, order)
+    results = lambda f, d: _results(f, d, contact)
+    return run_queue(setup, running, advance, results, n, lanes, order)
 
 
 _exact_batch = engine_jit(exact_batch, ("wave_axes", "contact", "start", "dt", "lanes"))
@@ -265,6 +296,7 @@ def measure(
     waveform: AbstractWaveform | None = None,
     contact: str = "strict",
     start: str = "paper",
+    initial: tuple | None = None,
     dtype: Any = None,
 ) -> Measurement: ...
 
@@ -281,6 +313,7 @@ def measure(
     waveform: AbstractWaveform | None = None,
     contact: str = "strict",
     start: str = "paper",
+    initial: tuple | None = None,
     dtype: Any = None,
 ) -> ChainMeasurement: ...
 
@@ -296,6 +329,7 @@ def measure(
     waveform: AbstractWaveform | None = None,
     contact: str = "strict",
     start: str = "paper",
+    initial: tuple | None = None,
     dtype: Any = None,
 ) -> "Measurement | ChainMeasurement":
     """Measure $\\tau_z$, $e_z$, the regime and more (Sects. 3-5; SPEC §5).
@@ -314,8 +348,8 @@ def measure(
     - `window`: the regime window $\\Delta\\tau$ (paper: 25).
     - `t_start`: start of the measurement (scalar or batch-shaped); default 80 periods of the
       lowest natural frequency with one mass held (`Params.t_start`, `Chain.t_start`).
-    - `dynamics`, `waveform`, `contact`, `start`, `dtype`: as in [`simulate`][] (a chain
-      carries its own waveforms and needs `Exact` dynamics).
+    - `dynamics`, `waveform`, `contact`, `start`, `initial`, `dtype`: as in [`simulate`][]
+      (a chain carries its own waveforms and needs `Exact` dynamics).
 
     **Returns:** a [`Measurement`][] with batch shape `params.batch_shape`, or a
     [`ChainMeasurement`][] for a chain.
@@ -334,10 +368,13 @@ def measure(
     model.initial_gap(Params(), start)
     check_measure_args(z, horizon, window)
     if isinstance(params, Chain):
+        if initial is not None:
+            raise ValueError("initial= is supported for Params (the two-mass model), not for a Chain.")
         dyn = chain_dynamics(dynamics, waveform)
-        return measure_chain(params, z, t_start=t_start, horizon=horizon, window=window, dt=dyn.dt,
-                             max_steps=dyn.max_steps, contact=contact, start=start, dtype=dtype)  # fmt: skip
+        return measure_chain(params, z, t_start=t_start, horizon=horizon, window=window, dynamics=dyn,
+                             contact=contact, start=start, dtype=dtype)  # fmt: skip
     flat, wave, axes, shape = prepare(params, waveform, dtype)
+    y0 = prepare_initial(initial, shape, flat.dtype)
     if isinstance(dynamics, Exact):
         ts = _start_times(t_start, shape, flat.dtype)
         total = horizon_bound(flat, horizon) if ts is None else float(np.max(np.asarray(ts))) + horizon
@@ -352,16 +389,18 @@ def measure(
             dynamics.dt,
             jnp.asarray(max_steps, jnp.int32),
             t_start=ts,
+            initial=y0,
         )
     elif isinstance(dynamics, Smoothed):
         from ._smooth import measure_smoothed
 
-        if t_start is not None:
+        if t_start is not None or initial is not None:
             raise ValueError(
-                "t_start= is supported by the Exact dynamics only; the smoothed model uses Params.t_start."
+                "t_start= and initial= are supported by the Exact dynamics only; the smoothed model uses "
+                "Params.t_start and the start= positions."
             )
         out = measure_smoothed(flat, wave, axes, float(z), float(horizon), float(window), contact, start, dynamics)
     else:
         raise TypeError(f"dynamics must be Exact or Smoothed, got {type(dynamics).__name__}.")
     out = unflatten(out, shape)
-    return Measurement(**out, z=float(z), start=start, contact=contact)
+    return Measurement(**out, z=float(z), start="initial" if initial is not None else start, contact=contact)

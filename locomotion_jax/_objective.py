@@ -35,6 +35,7 @@ from . import _model as model
 from ._actuation import Fourier
 from ._custom_types import Array
 from ._params import Params
+from .model._friction import Coulomb
 
 
 EPS_REF = 0.1
@@ -45,13 +46,13 @@ STABILITY = 1.4
 
 
 def friction_coefficient(v: Array, params: Params, eps: Array) -> Array:
-    """Smoothed friction coefficient (same family as `Smoothed`, SPEC §3):
+    """The paper's law smoothed ([`AbstractFriction.smoothed`][locomotion_jax.AbstractFriction.smoothed] of
+    [`Coulomb`][]), with a narrower static bump than `Smoothed` (module docstring):
 
     $$\\mu(v) = \\big[\\mu_k + (\\mu_s - \\mu_k) e^{-(v/v_s)^2}\\big] \\tanh(v/\\varepsilon),
     \\qquad v_s = \\sqrt{\\varepsilon_\\text{ref}\\,\\varepsilon}.$$
     """
-    vs = jnp.sqrt(EPS_REF * eps)
-    return (params.mu_k + (params.mu_s - params.mu_k) * jnp.exp(-((v / vs) ** 2))) * jnp.tanh(v / eps)
+    return Coulomb(params.mu_s, params.mu_k).smoothed(v, eps, jnp.sqrt(EPS_REF * eps))
 
 
 def rates(params: Params, wave: Fourier, eps: Array, t: Array, y: Array) -> tuple[Array, Array]:

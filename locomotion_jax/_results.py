@@ -7,6 +7,26 @@ import numpy as np
 from ._custom_types import Array
 
 
+SMOOTH_MARGIN = 0.05
+"""The smallest `transversality` and `near_miss` (radians of drive phase; `_exact` module
+docstring, "Margins") at which a result counts as `smooth`. A relative change of a
+parameter moves the switches by a drive phase of its order (they are locked to the drive
+and to each other), so this is about the relative change that the switching structure is
+known to survive (tests/test_margins.py)."""
+
+SMOOTH_MARGIN_Z = 1e-4
+"""The smallest `Measurement.margin_z` (relative to `tau_z`) at which `tau_z` and `e_z`
+count as `smooth`. A relative change of a parameter moves $t_z$ by about $\\tau_z$ times
+it, across the switches, which are locked to the drive: where a switch meets $t_z$ the
+derivative stays continuous (the velocities are) but the curvature jumps, so a
+derivative with a small `margin_z` describes `tau_z` over that relative range only, and
+finite differences with larger steps disagree with it (tests/test_margins.py: at
+omega = 2, `margin_z` 4e-5, a switch meets $t_5$ at a relative change of 5e-5, and the
+reference's differences with steps 1e-4 and 1e-5 differ by 0.8 %). `tau_5` after a
+long transient typically has `margin_z` between 1e-4 and 3e-3: a switch every few
+tenths of a time unit, against `tau_5` of a few hundred."""
+
+
 class Trajectory(eqx.Module):
     """States saved at the requested times (one configuration or a batch).
 
@@ -25,6 +45,12 @@ class Trajectory(eqx.Module):
     - `status`: `Status` code; `liftoff`: a normal force reached zero
       (strict: the run stopped there; paper reading: flagged, continued);
       `t_liftoff`: first lift-off time (`inf` if none).
+    - `transversality`, `near_miss`: the smallest margins to a change of switching
+      structure from $t = 0$ to each save time, in radians of drive phase, at located
+      switches and at near misses (as in [`Measurement`][]; `inf`: none).
+      `switch_gap`: the drive phase between each save time and the nearest located
+      switch. The positions and energies at a save time have derivatives through a switch
+      at that time (the velocities are continuous), the velocities do not.
     - `start`, `contact`: the initial condition and contact reading used.
     """
 
@@ -47,8 +73,18 @@ class Trajectory(eqx.Module):
     liftoff: Array
     t_liftoff: Array
     n_switch: Array
+    transversality: Array
+    near_miss: Array
+    switch_gap: Array
     start: str = eqx.field(static=True)
     contact: str = eqx.field(static=True)
+
+    @property
+    def smooth(self) -> Array:
+        """Per save time: whether the saved state is a smooth function of the parameters
+        there (`transversality` and `near_miss` at least `SMOOTH_MARGIN`, and for the
+        velocities' sake `switch_gap` too; `valid`, and no lift-off)."""
+        return _smooth_rows(self)
 
     @property
     def x(self) -> Array:
@@ -66,6 +102,16 @@ class Trajectory(eqx.Module):
 
 def _stack(a: Array, b: Array) -> Array:
     return jnp.stack([a, b], -1)
+
+
+def _smooth_rows(r) -> Array:
+    margin = jnp.minimum(jnp.minimum(r.transversality, r.near_miss), r.switch_gap)
+    return (margin >= SMOOTH_MARGIN) & r.valid & ~r.liftoff[..., None]
+
+
+def _smooth(r) -> Array:
+    phases = jnp.minimum(r.transversality, r.near_miss) >= SMOOTH_MARGIN
+    return phases & (r.margin_z >= SMOOTH_MARGIN_Z) & (r.status == 0) & ~r.liftoff
 
 
 class Measurement(eqx.Module):
@@ -90,6 +136,18 @@ class Measurement(eqx.Module):
     - `liftoff`, `t_liftoff`: as in `Trajectory`. `status`: `Status` code.
     - `t_start`, `X_start`: the measurement's start time and centre of mass.
     - `n_steps`: integrator iterations used; `n_switch`: mode switches.
+    - `transversality`, `near_miss`: how close the measured interval (from
+      $t_\\text{start}$ to the end of the run) came to a change of switching structure,
+      as drive phases in radians (`_exact` module docstring, "Margins"): the smallest
+      margin at a located switch or stick-or-reverse decision, and at a near miss of an
+      event function (a stuck mass almost breaking away, a slipping one almost
+      stopping, a normal force almost reaching zero, $|X - X_0|$ turning back short of
+      `z`); `inf` where there was none (the smoothed model: always).
+    - `margin_z`: the time from $t_z$ to the nearest switch, or to the turning point of
+      $|X - X_0|$, relative to `tau_z`: about the relative change of a parameter at which
+      `tau_z` and `e_z` change their switching structure (0 where `z` was not reached).
+      Where the margins are small, a derivative may hold over a small range only or jump:
+      see `smooth`.
 
     Quantities that cannot be computed because the run stopped before
     $t_\\text{start}$ (lift-off, invalid input) are NaN, and `status` says why.
@@ -114,9 +172,20 @@ class Measurement(eqx.Module):
     X_start: Array
     n_steps: Array
     n_switch: Array
+    transversality: Array
+    near_miss: Array
+    margin_z: Array
     z: float = eqx.field(static=True)
     start: str = eqx.field(static=True)
     contact: str = eqx.field(static=True)
+
+    @property
+    def smooth(self) -> Array:
+        """Whether the results are smooth functions of the parameters here, so that their
+        derivatives are derivatives: `transversality` and `near_miss` at least
+        `SMOOTH_MARGIN`, `margin_z` at least `SMOOTH_MARGIN_Z`, `status` OK and no lift-off
+        (False where the margins are NaN)."""
+        return _smooth(self)
 
     @property
     def stick_fraction(self) -> Array:
@@ -138,7 +207,8 @@ class ChainTrajectory(eqx.Module):
     - `X`: centre of mass $\\sum m_i x_i / \\sum m_i$; `e_d`, `w`, `e`: dissipated energy and
       actuator work since $t = 0$, total energy (SPEC §8).
     - `N`: signed normal forces; `l0`: rest lengths; `tension`: spring tensions.
-    - `valid`, `status`, `liftoff`, `t_liftoff`, `n_switch`, `start`, `contact`: as in [`Trajectory`][].
+    - `valid`, `status`, `liftoff`, `t_liftoff`, `n_switch`, `transversality`, `near_miss`,
+      `switch_gap`, `smooth`, `start`, `contact`: as in [`Trajectory`][].
     """
 
     t: Array
@@ -157,8 +227,16 @@ class ChainTrajectory(eqx.Module):
     liftoff: Array
     t_liftoff: Array
     n_switch: Array
+    transversality: Array
+    near_miss: Array
+    switch_gap: Array
     start: str = eqx.field(static=True)
     contact: str = eqx.field(static=True)
+
+    @property
+    def smooth(self) -> Array:
+        """As [`Trajectory.smooth`][locomotion_jax.Trajectory.smooth]."""
+        return _smooth_rows(self)
 
     def to_numpy(self) -> dict[str, np.ndarray]:
         return {k: np.asarray(getattr(self, k)) for k in self.__dataclass_fields__ if k not in ("start", "contact")}
@@ -186,9 +264,17 @@ class ChainMeasurement(eqx.Module):
     X_start: Array
     n_steps: Array
     n_switch: Array
+    transversality: Array
+    near_miss: Array
+    margin_z: Array
     z: float = eqx.field(static=True)
     start: str = eqx.field(static=True)
     contact: str = eqx.field(static=True)
+
+    @property
+    def smooth(self) -> Array:
+        """As [`Measurement.smooth`][locomotion_jax.Measurement.smooth]."""
+        return _smooth(self)
 
     def to_numpy(self) -> dict[str, np.ndarray]:
         skip = ("z", "start", "contact")

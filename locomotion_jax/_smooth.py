@@ -24,6 +24,7 @@ from ._custom_types import Array, Contact
 from ._dynamics import Smoothed
 from ._params import Params
 from ._status import mode_code, Regime, Status
+from .model._friction import Coulomb
 
 
 STICK_SPEED = 3.0  # in units of eps
@@ -32,10 +33,10 @@ WINDOW_SAMPLES = 2501
 
 
 def friction_coefficient(v: Array, params: Params, eps: Array) -> Array:
-    """$[\\mu_k + (\\mu_s - \\mu_k) e^{-(v/v_s)^2}]\\tanh(v/\\varepsilon)$, $v_s = \\sqrt{\\varepsilon}$."""
-    vs = jnp.sqrt(eps)
-    bump = jnp.exp(-((v / vs) ** 2))
-    return (params.mu_k + (params.mu_s - params.mu_k) * bump) * jnp.tanh(v / eps)
+    """The paper's law smoothed ([`AbstractFriction.smoothed`][locomotion_jax.AbstractFriction.smoothed]
+    of [`Coulomb`][]) with $v_s = \\sqrt{\\varepsilon}$:
+    $[\\mu_k + (\\mu_s - \\mu_k) e^{-(v/v_s)^2}]\\tanh(v/\\varepsilon)$."""
+    return Coulomb(params.mu_s, params.mu_k).smoothed(v, eps, jnp.sqrt(eps))
 
 
 def smooth_rates(params: Params, wave: AbstractWaveform, contact: Contact, eps: Array, t, y) -> Array:
@@ -118,7 +119,8 @@ def _failed(sol) -> Array:
 def simulate_one(params, wave, save, contact, start, dyn):
     params, valid = safe_params(params)
     y0 = _y0(params, start)
-    sol = solve(params, wave, contact, dyn, save[0], save[-1], y0, diffrax.SaveAt(ts=save, t1=True))
+    # The motion starts at t = 0 whatever the first save time.
+    sol = solve(params, wave, contact, dyn, jnp.zeros_like(save[0]), save[-1], y0, diffrax.SaveAt(ts=save, t1=True))
     sol_ts, sol_ys = _saved(sol)
     ys = sol_ys[:-1]  # (n, 6); inf after a terminating event
     t_final = sol_ts[-1]
@@ -165,6 +167,10 @@ def simulate_one(params, wave, save, contact, start, dyn):
         liftoff=jnp.isfinite(t_lift),
         t_liftoff=jnp.asarray(t_lift, ys.dtype),
         n_switch=jnp.sum(mode[1:] != mode[:-1]).astype(jnp.int32),
+        # A smooth model has no switching structure to change.
+        transversality=jnp.full_like(save, jnp.inf),
+        near_miss=jnp.full_like(save, jnp.inf),
+        switch_gap=jnp.full_like(save, jnp.inf),
         **der,
     )
 
@@ -242,6 +248,10 @@ def measure_one(params, wave, z, horizon, window, contact, start, dyn: Smoothed)
         X_start=jnp.where(okA, X0, nan),
         n_steps=(solA.stats["num_steps"] + solC.stats["num_steps"]).astype(jnp.int32),
         n_switch=jnp.zeros((), jnp.int32),
+        # A smooth model has no switching structure to change.
+        transversality=jnp.asarray(jnp.inf, ws.dtype),
+        near_miss=jnp.asarray(jnp.inf, ws.dtype),
+        margin_z=jnp.asarray(jnp.inf, ws.dtype),
     )
 
 

@@ -93,6 +93,9 @@ _DESCRIPTIONS = {
     "X_start": "centre of mass at t_start, eq. (4)",
     "n_steps": "integrator iterations",
     "n_switch": "contact-mode switches",
+    "transversality": "smallest margin (rad of drive phase) at a located switch in the measured interval",
+    "near_miss": "smallest margin (rad of drive phase) at a near miss of an event function",
+    "margin_z": "margin (rad of drive phase) of the target |X - X0| = z: its crossing, near misses, nearest switch",
     "omega": "actuation frequency derived from omega_over_wn1",
 }
 
@@ -593,8 +596,8 @@ def _sweep_mechanism(mechanism: "Callable[..., Chain]", axes, fixed, mode, z, ho
 
     if not callable(mechanism):
         raise TypeError(f"mechanism must be a function of the swept values returning a Chain, got {mechanism!r}.")
-    if not isinstance(dynamics, Exact):
-        raise TypeError(f"dynamics must be Exact for a chain map, got {type(dynamics).__name__}.")
+    if not isinstance(dynamics, (Exact, Smoothed)):
+        raise TypeError(f"dynamics must be Exact or Smoothed for a chain map, got {type(dynamics).__name__}.")
     if order == "cost":
         raise ValueError("order='cost' is for maps of the paper's model; a chain map runs in grid order.")
     if on_invalid not in ("raise", "flag"):
@@ -606,7 +609,7 @@ def _sweep_mechanism(mechanism: "Callable[..., Chain]", axes, fixed, mode, z, ho
     check_measure_args(z, horizon, window)
     return sweep_chain(
         mechanism, axes, fixed=fixed, mode=mode, z=z, horizon=horizon, window=window, t_start=t_start,
-        dt=dynamics.dt, max_steps=dynamics.max_steps, contact=contact, start=start, dtype=dtype,
+        dynamics=dynamics, contact=contact, start=start, dtype=dtype,
         chunk_size=int(chunk_size), path=path, progress=progress, on_invalid=on_invalid,
     )  # fmt: skip
 

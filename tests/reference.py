@@ -724,12 +724,13 @@ def reference_measure(
     horizon=2000.0,
     window=25.0,
     contact="strict",
-    start="paper",
+    start: str | tuple[float, float, float, float] = "paper",
     t_start=None,
+    wave=None,
     rtol=1e-11,
     atol=1e-12,
 ) -> dict:
-    """Measurements of SPEC section 5.
+    """Measurements of SPEC section 5 (``start``, ``wave`` as in ``reference_simulate``).
 
     * ``t_start = 80 * 2 pi / min(wn1, wn2, wn3)`` (eqs. 11-12), unless given.
     * ``tau_z``: first time after ``t_start`` at which ``|X - X(t_start)| = z``, located as an
@@ -741,7 +742,7 @@ def reference_measure(
     * ``mean_speed = (X(t_m) - X(t_start)) / (t_m - t_start)`` with ``t_m = t_start + tau_z`` if
       reached, else the horizon end (or the strict lift-off time; NaN if that precedes t_start).
     """
-    model = _Model(params, contact)
+    model = _Model(params, contact, wave)
     solver = _HybridSolver(model, start, rtol, atol)
     if t_start is None:
         t_start = 80.0 * 2.0 * math.pi / min(model.natural_frequencies())

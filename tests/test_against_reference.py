@@ -58,6 +58,9 @@ GROUPS = {
     "paper": Group("paper", "paper", 5.0, 1200.0, 25.0),
     # The relaxed start, lift-off after many switches, and the work queue (2 lanes, 7 cases).
     "relaxed": Group("strict", "relaxed", 2.0, 150.0, 25.0, lanes=2),
+    # d = 0, m1 = m2 over 200 time units: both masses switch at the same instants, and losing
+    # one of two simultaneous switches makes the pair crawl (mean speed ~1e-5 instead of 0).
+    "symmetric": Group("strict", "paper", 1.0, 200.0, 25.0),
 }
 
 # (group, parameters, what the reference must find: "SSL", "SL", "liftoff" or "still")
@@ -103,6 +106,8 @@ CASES: list[tuple[str, dict[str, Any], str | None]] = [
     ("relaxed", dict(omega=6.0), "SL"),
     ("relaxed", dict(omega=2.0), "SSL"),
     ("relaxed", dict(omega=1.0, a=0.08, d=-0.4), "SSL"),
+    ("symmetric", dict(omega=2.0, d=0.0), "still"),
+    ("symmetric", dict(omega=5.0, d=0.0), "still"),
 ]
 BATCH = 32
 """Groups measured by `lj.measure` are padded to this batch size, so that those sharing

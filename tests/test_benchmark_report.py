@@ -41,3 +41,15 @@ def test_readme_quotes_the_targets_table(run, saved, tmp_path):
     quoted = copy.read_text().split(start)[1].split(end)[0]
     rows = [ln for ln in quoted.splitlines() if ln.startswith("| ") and ("met" in ln or "reported" in ln)]
     assert len(rows) >= 8 and all(ln.rstrip().endswith(("| **met** |", "| reported |")) for ln in rows)
+
+
+def test_zarr_map_case_runs_at_a_small_size(run):
+    # The benchmark's Zarr map case (2048 x 2048 in the full run) at 16 x 16, in a process of
+    # its own as the benchmark spawns it: the map is complete, every configuration has a
+    # regime, and the store on disk holds the map.
+    r = run.spawn(dict(kind="zarr_map", N=16, **run.ZARR_MAP), timeout=600)
+    assert "error" not in r, r.get("error")
+    assert r["n_configs"] == 256 and sum(r["regimes"].values()) == 256
+    assert r["regimes"]["UNDETERMINED"] == 256 - r["n_ok"]  # only runs that stopped early lack a regime
+    assert r["regimes"]["SSL"] > 0 and r["regimes"]["SL"] > 0  # the map crosses the boundary
+    assert r["store_mb"] > 0 and r["n_files"] > 1 and r["wall"] > 0 and r["rss"] > 0

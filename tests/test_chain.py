@@ -239,8 +239,13 @@ def test_invalid_configuration_flagged_in_batch():
 
 def test_wrong_dynamics_or_waveform_for_chain():
     chain = _kinds()["coulomb"]
-    with pytest.raises(ValueError, match="Exact dynamics"):
-        lj.measure(chain, dynamics=lj.Smoothed(1e-3))
+
+    class Other(lj.AbstractDynamics):
+        def describe(self) -> dict:
+            return {}
+
+    with pytest.raises(ValueError, match="Exact or Smoothed dynamics; got Other"):
+        lj.measure(chain, dynamics=Other())
     with pytest.raises(ValueError, match="carries its own waveforms"):
         lj.simulate(chain, 10.0, waveform=lj.Sinusoid(0.1, 2.0, 3.0))
 

@@ -97,7 +97,8 @@ def test_batch_equals_single_runs_and_isolates_failures():
         np.testing.assert_allclose(m.tau_z[i], single.tau_z, rtol=1e-12)
         np.testing.assert_allclose(m.e_d[i], single.e_d, rtol=1e-12)
     for name, value in m.to_numpy().items():  # no NaN except where documented
-        if name in ("mean_speed", "e_d", "work", "delta_e", "balance", "X_start", "stick_fraction1", "stick_fraction2"):
+        measured = ("mean_speed", "e_d", "work", "delta_e", "balance", "X_start", "stick_fraction1", "stick_fraction2")
+        if name in measured + ("transversality", "near_miss", "margin_z"):
             assert not np.any(np.isnan(value[[0, 2, 3]])), name
         else:
             assert not np.any(np.isnan(value)), name

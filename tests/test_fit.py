@@ -44,7 +44,9 @@ def test_fit_recovers_parameters_within_their_errors(data):
     assert abs(fit.sigma / SIGMA - 1) < 0.15, fit.sigma
     # Known noise: the same errors (the residuals are those of the noise).
     known = lj.fit_trajectory(t, x, fit.params, NAMES, sigma=SIGMA)
-    np.testing.assert_allclose(known.values, fit.values, rtol=1e-6)
+    # (The same optimum to far below its errors: c, known to 30 %, moves by ~1e-6 relative
+    # with the Jacobian's rounding.)
+    assert np.all(np.abs(known.values - fit.values) < 1e-3 * fit.stderr), (known.values, fit.values)
     np.testing.assert_allclose(known.stderr, fit.stderr, rtol=0.2)
     assert "| mu_s |" in fit.summary()
 

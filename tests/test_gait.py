@@ -187,6 +187,8 @@ def test_jit_free_of_recompilation():
     from locomotion_jax import _gait
 
     steady_gait(lj.Params(omega=3.0), periods=1)
-    sizes = _gait._transient_batch._cache_size(), _gait._newton_batch._cache_size()  # pyright: ignore[reportFunctionMemberAccess]
+    from locomotion_jax import _corrector
+
+    sizes = _gait._transient_batch._cache_size(), _corrector.correct_batch._cache_size()  # pyright: ignore[reportFunctionMemberAccess]
     steady_gait(lj.Params(omega=5.0, mu_s=0.9), periods=2, transient=10)
-    assert (_gait._transient_batch._cache_size(), _gait._newton_batch._cache_size()) == sizes  # pyright: ignore[reportFunctionMemberAccess]
+    assert (_gait._transient_batch._cache_size(), _corrector.correct_batch._cache_size()) == sizes  # pyright: ignore[reportFunctionMemberAccess]

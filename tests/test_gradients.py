@@ -179,35 +179,6 @@ def test_options_cannot_be_differentiated(option):
         jax.jvp(runs[option], (jnp.asarray(0.01),), (jnp.asarray(1.0),))
 
 
-MEASURED = ("tau_z", "e_z", "mean_speed")
-T_START = 30.0  # the measurement's start (past the first transient; the paper's is ~100)
-
-
-@pytest.mark.parametrize(
-    "config, names",
-    [(dict(omega=2.0), ("mu_k",)), (dict(omega=6.0), ("omega", "mu_k"))],
-    ids=["SSL", "SL"],
-)
-def test_measurement_derivatives_match_reference(config, names):
-    # Where tau_z is smooth. Measured from the paper's t_start instead, at omega = 2 its
-    # omega-derivative is not: z is reached on a nearly stuck plateau, and the reference's
-    # central differences with steps 1e-4 and 1e-5 differ by 0.5 % (README, "Gradients").
-    full = {**DEFAULTS, **config}
-
-    def run(delta):
-        p = lj.Params(**{n: full[n] + (delta[names.index(n)] if n in names else 0.0) for n in full})
-        m = lj.measure(p, z=1.0, horizon=100.0, t_start=T_START)
-        return jnp.stack([getattr(m, k) for k in MEASURED])
-
-    jac = np.asarray(jax.jacfwd(run)(jnp.zeros(len(names))))
-    for j, name in enumerate(names):
-        h = H_REL * max(1.0, abs(full[name]))
-        rp, rm = (reference_measure({**full, name: full[name] + s}, z=1.0, horizon=100.0, t_start=T_START)
-                  for s in (h, -h))  # fmt: skip
-        fd = np.array([(rp[k] - rm[k]) / (2 * h) for k in MEASURED])
-        np.testing.assert_allclose(jac[:, j], fd, rtol=RTOL, err_msg=f"{config} d/d{name}")
-
-
 def test_chain_derivatives_match_reference():
     # N = 3, anisotropic friction, a travelling wave: d(positions, e_d)/d(omega, mu_k_fwd)
     # at the saved times, against tests/reference_chain.py.
@@ -231,3 +202,87 @@ def test_chain_derivatives_match_reference():
                 for s in (h, -h)]  # fmt: skip
         fd = np.concatenate([(runs[0]["x"] - runs[1]["x"]).reshape(-1), runs[0]["e_d"] - runs[1]["e_d"]]) / (2 * h)
         _assert_close(jac[j], fd, f"chain d/d{name}")
+
+
+INITIAL = np.array([0.1, 0.05, 3.0, -0.02])  # (x1, v1, x2, v2) at t = 0
+
+
+def test_initial_state_derivatives_match_reference():
+    # d(fields at SAVE)/d(x1, v1, x2, v2 at t = 0), SSL and SL, against the reference
+    # started from the same state.
+    omegas = [2.0, 6.0]
+
+    def run(y):
+        batch = tuple(jnp.full(2, v) for v in y)
+        return _fields(lj.simulate(lj.Params(omega=jnp.asarray(omegas)), t_end=T_END, save_at=SAVE, initial=batch))
+
+    jac = np.asarray(jax.jacfwd(run)(jnp.asarray(INITIAL)))  # (B, fields, times, 4)
+    h = 1e-5
+    for i, omega in enumerate(omegas):
+        config = {**DEFAULTS, "omega": omega}
+        for j, name in enumerate(("x1", "v1", "x2", "v2")):
+            rp, rm = (reference_simulate(config, T_END, SAVE, start=tuple(INITIAL + s * h * np.eye(4)[j]))
+                      for s in (1, -1))  # fmt: skip
+            fd = np.stack([(rp[k] - rm[k]) / (2 * h) for k in FIELDS])
+            _assert_close(jac[i, :, :, j], fd, f"omega = {omega} d/d{name}(0)")
+
+
+def test_initial_state_in_measure_matches_reference():
+    # tau_z, e_z early in the run (t_start = 1, z = 0.1) depend on the initial state.
+    def run(y):
+        m = lj.measure(lj.Params(omega=2.0), z=0.1, t_start=1.0, horizon=20.0, initial=tuple(y))
+        return jnp.stack([m.tau_z, m.e_z])
+
+    jac = np.asarray(jax.jacfwd(run)(jnp.asarray(INITIAL)))
+    h = 1e-5
+    for j in range(4):
+        rp, rm = (reference_measure({**DEFAULTS, "omega": 2.0}, z=0.1, t_start=1.0, horizon=20.0,
+                                    start=tuple(INITIAL + s * h * np.eye(4)[j])) for s in (1, -1))  # fmt: skip
+        fd = np.array([(rp[k] - rm[k]) / (2 * h) for k in ("tau_z", "e_z")])
+        np.testing.assert_allclose(jac[:, j], fd, rtol=RTOL, atol=RTOL * np.max(np.abs(jac)), err_msg=str(j))
+
+
+def test_initial_state_is_validated():
+    p = lj.Params(omega=jnp.array([2.0, 6.0]))
+    with pytest.raises(ValueError, match="x1 < x2"):
+        lj.simulate(p, t_end=1.0, initial=(3.0, 0.0, 1.0, 0.0))
+    with pytest.raises(ValueError, match="finite"):
+        lj.measure(p, z=0.1, horizon=5.0, initial=(0.0, np.nan, 3.0, 0.0))
+    with pytest.raises(ValueError, match="broadcast"):
+        lj.simulate(p, t_end=1.0, initial=(np.zeros(3), 0.0, 3.0, 0.0))
+    with pytest.raises(TypeError, match="initial"):  # the package's, or the test suite's type checker
+        lj.simulate(p, t_end=1.0, initial=np.array([0.0, 0.0, 3.0, 0.0]))  # pyright: ignore[reportArgumentType, reportCallIssue]
+    with pytest.raises(ValueError, match="Exact dynamics only"):
+        lj.simulate(p, t_end=1.0, initial=(0.0, 0.0, 3.0, 0.0), dynamics=lj.Smoothed())
+    # Under jit the values are not known: the bad configuration is flagged in its own result.
+    run = jax.jit(lambda x2: lj.simulate(p, t_end=1.0, save_at=np.array([1.0]), initial=(0.0, 0.0, x2, 0.0)))
+    tr = run(jnp.array([3.0, -1.0]))
+    assert [int(s) for s in tr.status] == [lj.Status.OK, lj.Status.INVALID]
+    np.testing.assert_array_equal(tr.x1[0], lj.simulate(p[0], t_end=1.0, save_at=np.array([1.0]),
+                                                        initial=(0.0, 0.0, 3.0, 0.0)).x1)  # fmt: skip
+
+
+def test_measure_failures_are_flagged_with_finite_derivatives():
+    # In one batch: a lift-off before t_start (strict reading), a run that never reaches z,
+    # and two that do. The failures' derivatives are finite and flagged (`smooth` False),
+    # and the others' are those they have in a batch without failures.
+    def run(omegas):
+        def fields(a):
+            m = lj.measure(lj.Params(omega=jnp.asarray(omegas), a=a), z=0.5, t_start=10.0, horizon=30.0)
+            return jnp.stack([m.tau_z, m.e_z, m.mean_speed]), m
+
+        (_, m), (tangent, _) = jax.jvp(fields, (jnp.asarray(0.05),), (jnp.asarray(1.0),))
+        return m, np.asarray(tangent)
+
+    m, tangent = run([6.0, 9.0, 0.5, 7.0])
+    assert [int(s) for s in m.status] == [lj.Status.OK, lj.Status.LIFTOFF, lj.Status.OK, lj.Status.OK]
+    assert not bool(m.reached[2])
+    assert [bool(s) for s in m.smooth] == [True, False, False, True]
+    assert np.all(np.isfinite(tangent))
+    _, other = run([6.0, 7.0, 7.0, 7.0])
+    np.testing.assert_allclose(tangent[:, [0, 3]], other[:, [0, 3]], rtol=1e-12)
+
+
+def test_integers_cannot_be_differentiated():
+    with pytest.raises(TypeError, match="jacfwd requires real"):
+        jax.jacfwd(lambda w: lj.simulate(lj.Params(omega=w), t_end=1.0).x1)(2)

@@ -30,7 +30,7 @@ import pytest
 
 
 NOTEBOOKS = Path(__file__).resolve().parents[1] / "notebooks"
-NAMES = ("01_model_tour", "02_parameter_maps", "03_optimal_actuation", "04_gradients_and_fitting")
+NAMES = ("01_model_tour", "02_parameter_maps", "03_optimal_actuation", "04_gradients_and_fitting", "05_steady_gaits")
 CELL_TIMEOUT = 600  # seconds per cell: a hung kernel fails instead of blocking CI
 NOTEBOOK_TIMEOUT = 900  # seconds per notebook, client start included
 

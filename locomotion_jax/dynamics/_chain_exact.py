@@ -56,7 +56,8 @@ class Hybrid(eqx.Module):
     `stuck`, `sdir`, `pend` are per-mass arrays: the mode, slip direction and a flag
     for an event located at `t` (the mass is re-decided at the next iteration); `side`
     the side ($\\pm 1$) of each normal force (paper contact: flipped where a crossing is
-    located, so that $n_i = \\nu_i N_i$ over a step).
+    located, so that $n_i = \\nu_i N_i$ over a step). `cross`, `near`, `t_switch`: the margins
+    to a change of switching structure so far and the last switch (as in `_exact.Hybrid`).
     """
 
     t: Array
@@ -71,6 +72,9 @@ class Hybrid(eqx.Module):
     status: Array
     t_liftoff: Array
     n_switch: Array
+    cross: Array
+    near: Array
+    t_switch: Array
 
 
 class StepInfo(NamedTuple):
@@ -223,7 +227,25 @@ def init(C: Chain, contact: Contact, x: Array) -> Hybrid:
         t=zero, y=y, comp=y.map(jnp.zeros_like) if f32 else None, cph=cph, sph=sph, stuck=stuck, sdir=sdir,
         pend=jnp.zeros_like(stuck), side=jnp.where(N > 0, 1.0, -1.0).astype(dtype), status=status,
         t_liftoff=jnp.where(lifted, zero, jnp.inf).astype(dtype), n_switch=jnp.zeros((), jnp.int32),
+        cross=jnp.asarray(jnp.inf, dtype), near=jnp.asarray(jnp.inf, dtype), t_switch=jnp.asarray(-jnp.inf, dtype),
     )  # fmt: skip
+
+
+def probe(C: Chain, contact: Contact, t: Array, y: State, target: two_mass.Target) -> tuple[Array, Array, Array]:
+    """The event functions with their first and second time derivatives at time `t` and
+    state `y`, in the mode the state implies (a mass at rest sticks where its static limits
+    hold; compare `_exact.probe`). For margins at a measured instant; not for the hot loop."""
+    omega = C.waves.omega
+    dr = drive(C, jnp.cos(omega * t), jnp.sin(omega * t))
+    _, F, N, n = loads(C, contact, dr.l0, dr.f, y.x)
+    mu_f, mu_b = C.friction.static_limits()
+    stuck = (F <= mu_f * n) & (F >= -mu_b * n) & (y.v == 0)
+    one = jnp.ones_like(y.v)
+    sdir = jnp.where(y.v > 0, one, jnp.where(y.v < 0, -one, jnp.where(F >= 0, one, -one)))
+    side = jnp.where(N > 0, one, -one)
+    y = y._replace(v=jnp.where(stuck, 0, y.v))
+    _, _, g, d, e = _with_derivatives(C, contact, stuck, sdir, side, target, dr, y)
+    return g, d, e
 
 
 def initial_positions(C: Chain, start: str) -> Array:
@@ -317,6 +339,24 @@ def step(
     coef = two_mass._quintic(jnp.maximum(g0[i], 0), h * d0[i], h2 * e0[i], jnp.minimum(g1[i], 0), h * d1[i], h2 * e1[i])
     theta = jnp.where(cut, two_mass._root(coef, jnp.minimum(g1[i], 0)), 1)
 
+    # -- margins to a change of switching structure (`_exact.margins`); they feed nothing back.
+    # A slipping mass that stopped sticks where s = min(mu_f n - F, F + mu_b n) >= 0.
+    def limits(l0, f, x):
+        _, F, _, n = loads(C, contact, l0, f, x)
+        return jnp.minimum(mu_f * n - F, F + mu_b * n)
+
+    hold, hold_rate = jax.jvp(limits, (dr0.l0, dr0.f, y0.x), (dr0.dl0, dr0.df, jnp.where(stuck, 0, y0.v)))
+    target_cut = first[-1] if target is not None else jnp.asarray(False)
+    decide = [(vel[i], hold[i], hold_rate[i]) for i in range(n_mass)]
+    # The located crossing's rate and curvature from the event quintic at its root:
+    # p'(theta)/h and p''(theta)/h^2.
+    c = jax.lax.stop_gradient(coef)
+    th = jax.lax.stop_gradient(theta)
+    p1 = c[1] + th * (2 * c[2] + th * (3 * c[3] + th * (4 * c[4] + th * 5 * c[5])))
+    p2 = 2 * c[2] + th * (6 * c[3] + th * (12 * c[4] + th * 20 * c[5]))
+    located = [(cut & ~target_cut, h * p1, p2)]
+    m_cross, m_near = two_mass.margins(omega, h, located, decide, list(crossed), list(g0), list(d0), list(e0))
+
     # -- commit: the full step, or the quintic dense output at the crossing.
     H1, H2, H3, H4, H5 = two_mass._hermite_basis(theta)
     part = incr.map(
@@ -350,7 +390,6 @@ def step(
         side = jnp.where(flip, -side, side)
     t_lift = jnp.where(lift_cut & ~jnp.isfinite(t_lift), tc, t_lift)
     commit = ~stop0
-    target_cut = first[-1] if target is not None else jnp.asarray(False)
     status = jnp.where(lift, Status.LIFTOFF, st.status).astype(jnp.int32)
 
     keep = lambda new, old: jnp.where(commit, new, old)
@@ -358,7 +397,9 @@ def step(
         t=keep(tc, t0), y=yc.map(keep, yA), comp=None if comp_new is None else comp_new.map(keep, st.comp),
         cph=keep(cph, st.cph), sph=keep(sph, st.sph), stuck=keep(stuck, st.stuck), sdir=keep(sdir, st.sdir),
         pend=commit & first[:n_mass], side=keep(side, st.side), status=status, t_liftoff=t_lift.astype(dtype),
-        n_switch=n_switch,
+        n_switch=n_switch, cross=jnp.where(commit, jnp.minimum(st.cross, m_cross), st.cross),
+        near=jnp.where(commit, jnp.minimum(st.near, m_near), st.near),
+        t_switch=jnp.where(commit & cut & ~target_cut, jax.lax.stop_gradient(tc), st.t_switch),
     )  # fmt: skip
     info = StepInfo(
         commit=commit, t0=t0, y0=y0, tension0=tension0, t1=tc, y1=yc, stuck=stuck,

@@ -1,7 +1,8 @@
 """Friction laws of one mass on the ground (SPEC §2 and §8).
 
 A law supplies what the exact engine needs: the static limits that hold a stuck
-mass and the kinetic coefficient of a slipping one. Coefficients are per-mass
+mass and the kinetic coefficient of a slipping one; the smoothed dynamics and the
+energy balance are built from the same two methods (`AbstractFriction.smoothed`). Coefficients are per-mass
 arrays (trailing axis of length N, or broadcastable to it); any leading axes are
 batch axes.
 """
@@ -36,6 +37,25 @@ class AbstractFriction(eqx.Module):
     def kinetic(self, speed: Array, direction: Array) -> Array:
         """Kinetic coefficient $\\mu_k \\ge 0$ of a mass slipping at `speed` $= |v|$ in
         `direction` $\\sigma = \\pm 1$ (smooth in the speed)."""
+
+    def smoothed(self, v: Array, eps: Array, v_s: Array) -> Array:
+        """Smoothed friction coefficient, odd in $v$, for the smoothed dynamics (SPEC §3):
+
+        $$\\mu(v) = \\big[\\mu_{k,\\sigma}(|v|) + (\\mu_{s,\\sigma} - \\mu_{k,\\sigma}(|v|))\\,
+        e^{-(v/v_s)^2}\\big] \\tanh(v/\\varepsilon), \\qquad \\sigma = \\operatorname{sgn} v,$$
+
+        a regularised sign with a static bump of width $v_s$; the friction force is
+        $-n\\,\\mu(v)$. As $\\varepsilon \\to 0$ with $v_s \\to 0$ and $v_s/\\varepsilon \\to \\infty$
+        its peak tends to the static limit and its sliding value to the kinetic law: the
+        exact law of this class. At $v = 0$ the factor $\\tanh$ vanishes, so the switch of
+        direction $\\sigma$ leaves $\\mu$ continuous. Built from [`static_limits`][] and
+        [`kinetic`][], so a new law needs nothing more.
+        """
+        direction = jnp.where(v >= 0, 1.0, -1.0).astype(v.dtype)
+        mu_fwd, mu_bwd = self.static_limits()
+        mu_s = jnp.where(direction > 0, mu_fwd, mu_bwd)
+        mu_k = self.kinetic(jnp.abs(v), direction)
+        return (mu_k + (mu_s - mu_k) * jnp.exp(-((v / v_s) ** 2))) * jnp.tanh(v / eps)
 
     def fields(self) -> dict[str, Array]:
         """The coefficient arrays by name (every array field of the law)."""

@@ -16,13 +16,14 @@ import numpy as np
 
 from .._batch import default_max_steps, MICRO_BATCH_CPU
 from .._compile import engine_jit
-from .._dynamics import Exact
-from .._exact import Target
+from .._dynamics import Exact, Smoothed
+from .._exact import Target, target_margin
+from .._margins import margin_fields, switch_gap
 from .._queue import run_queue
 from .._results import ChainMeasurement, ChainTrajectory
 from .._saves import BUFFER, run_saves
 from .._status import Regime, Status
-from ..dynamics import _chain_exact as engine
+from ..dynamics import _chain_exact as engine, _chain_smooth as smooth
 from ..model._chain import Chain
 
 
@@ -81,12 +82,12 @@ def _com(C: Chain, x: jax.Array) -> jax.Array:
     return jnp.matmul(x, C.m) / C.m.sum()
 
 
-def chain_dynamics(dynamics: Any, waveform: Any) -> Exact:
-    """A chain runs on the N-mass exact engine and carries its own actuation."""
+def chain_dynamics(dynamics: Any, waveform: Any) -> Exact | Smoothed:
+    """A chain runs on the N-mass exact or smoothed engine and carries its own actuation."""
     if waveform is not None:
         raise ValueError("waveform= applies to Params; a Chain carries its own waveforms (Chain(waveforms=...)).")
-    if not isinstance(dynamics, Exact):
-        raise ValueError(f"a Chain runs with Exact dynamics; got {type(dynamics).__name__}.")
+    if not isinstance(dynamics, (Exact, Smoothed)):
+        raise ValueError(f"a Chain runs with Exact or Smoothed dynamics; got {type(dynamics).__name__}.")
     return dynamics
 
 
@@ -95,7 +96,8 @@ def chain_dynamics(dynamics: Any, waveform: Any) -> Exact:
 
 def _row(s: engine.Hybrid) -> jax.Array:
     dt = s.t.dtype
-    return jnp.concatenate([s.y.x, s.y.v, s.y.ed[None], s.y.w[None], s.stuck.astype(dt), s.sdir])
+    margins = jnp.stack([s.cross, s.near, s.t_switch])
+    return jnp.concatenate([s.y.x, s.y.v, s.y.ed[None], s.y.w[None], s.stuck.astype(dt), s.sdir, margins])
 
 
 def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps, lanes, buffer=BUFFER):
@@ -119,12 +121,16 @@ def _derived(C: Chain, contact, t, x, v):
     return dict(e=e, N=N, l0=dr.l0, tension=tension)
 
 
-def simulate_chain(chain: Chain, t_end: float, save_at, *, dt: float, max_steps: int | None, contact: str,
-                   start: str, dtype: Any) -> ChainTrajectory:  # fmt: skip
-    """`simulate` for a [`Chain`][] with the exact engine (arguments as in `simulate`)."""
+def simulate_chain(chain: Chain, t_end: float, save_at, *, dynamics: Exact | Smoothed, contact: str, start: str,
+                   dtype: Any) -> ChainTrajectory:  # fmt: skip
+    """`simulate` for a [`Chain`][] on the N-mass exact or smoothed engine (arguments as in `simulate`)."""
     _check(contact, start)
     flat, valid, shape = prepare_chain(chain, dtype)
     save = jnp.asarray(save_at, flat.dtype)
+    if isinstance(dynamics, Smoothed):
+        out = _simulate_smoothed(flat, valid, save, contact, start, _cast_eps(dynamics, flat.dtype))
+        return ChainTrajectory(**_unflatten(out, shape), start=start, contact=contact)
+    dt, max_steps = dynamics.dt, dynamics.max_steps
     N = flat.n_masses
     steps = max_steps or default_max_steps(float(t_end), dt) + 4 * save.shape[0]
     n = valid.shape[0]
@@ -138,7 +144,9 @@ def simulate_chain(chain: Chain, t_end: float, save_at, *, dt: float, max_steps:
     out = dict(
         t=t, x=x, v=v, stuck=rows[..., 2 * N + 2 : 3 * N + 2] > 0.5, X=jax.vmap(_com)(flat, x),
         e_d=rows[..., 2 * N], w=rows[..., 2 * N + 1], valid=ok, status=status, liftoff=jnp.isfinite(t_lift),
-        t_liftoff=t_lift, n_switch=n_switch, **der,
+        t_liftoff=t_lift, n_switch=n_switch, transversality=jnp.sqrt(rows[..., 4 * N + 2]),
+        near_miss=jnp.sqrt(rows[..., 4 * N + 3]), switch_gap=switch_gap(flat.waves.omega, t, rows[..., 4 * N + 4]),
+        **der,
     )  # fmt: skip
     return ChainTrajectory(**_unflatten(out, shape), start=start, contact=contact)
 
@@ -157,6 +165,7 @@ class _Acc(eqx.Module):
     y_z: engine.State
     stuck: jax.Array
     steps: jax.Array
+    before_z: jax.Array  # time from the last switch to t_z
 
 
 class _Fixed(NamedTuple):
@@ -176,6 +185,7 @@ def _setup(C, valid, t_start, z, horizon, window, contact, start):
     acc = _Acc(
         started=no, X0=zero, ed0=zero, w0=zero, e0=zero, reached=no, t_z=jnp.asarray(jnp.inf, dtype),
         y_z=st.y.map(jnp.zeros_like), stuck=jnp.zeros_like(st.y.x), steps=jnp.zeros((), jnp.int32),
+        before_z=jnp.asarray(jnp.inf, dtype),
     )  # fmt: skip
     return _Fixed(C, ws, ws + window, ws + horizon, jnp.asarray(z, dtype)), (st, acc)
 
@@ -196,6 +206,8 @@ def _advance(f: _Fixed, dyn, contact, dt):
     started = a.started | begin
     X0 = jnp.where(begin, _com(f.C, s.y.x), a.X0)
     target = Target(active=started & ~a.reached, X0=X0, z=f.z)
+    # The margins cover the measured interval: they restart at t_start.
+    s = eqx.tree_at(lambda s: (s.cross, s.near), s, tuple(jnp.where(begin, jnp.inf, m) for m in (s.cross, s.near)))
     s_new, info = engine.step(f.C, contact, dt, s, t_stop, target)
     inside = info.commit & started & (info.t1 <= f.we)
     dur = jnp.where(inside, info.t1 - info.t0, 0)
@@ -205,6 +217,7 @@ def _advance(f: _Fixed, dyn, contact, dt):
         e0=jnp.where(begin, engine.energy(f.C, info.y0, info.tension0), a.e0), reached=a.reached | hit,
         t_z=jnp.where(hit, info.t_target, a.t_z), y_z=info.y_target.map(lambda n, o: jnp.where(hit, n, o), a.y_z),
         stuck=a.stuck + jnp.where(info.stuck, dur, 0), steps=a.steps + 1,
+        before_z=jnp.where(hit, jax.lax.stop_gradient(info.t_target - s.t_switch), a.before_z),
     )  # fmt: skip
     return s_new, a_new
 
@@ -214,6 +227,13 @@ def _energy_at(C: Chain, contact, t, y):
     dr = engine.drive(C, jnp.cos(omega * t), jnp.sin(omega * t))
     tension, _, _, _ = engine.loads(C, contact, dr.l0, dr.f, y.x)
     return engine.energy(C, y, tension)
+
+
+def _margin_z(f: _Fixed, a: _Acc, contact) -> jax.Array:
+    """The time from $t_z$ to the nearest change of the target's structure (`_exact.target_margin`)."""
+    t_z = jnp.where(a.reached, a.t_z, f.ws)
+    g, d, e = engine.probe(f.C, contact, t_z, a.y_z, Target(active=jnp.asarray(True), X0=a.X0, z=f.z))
+    return target_margin(a.before_z, list(g), list(d), list(e))
 
 
 def _results(f: _Fixed, dyn, contact) -> dict:
@@ -239,6 +259,7 @@ def _results(f: _Fixed, dyn, contact) -> dict:
         mean_speed=mean_speed, cost_of_transport=e_z / z, stick_fraction=frac, e_d=e_d, work=work,
         delta_e=delta_e, balance=work - e_d - delta_e, liftoff=jnp.isfinite(s.t_liftoff), t_liftoff=s.t_liftoff,
         status=status, t_start=ws, X_start=jnp.where(a.started, a.X0, nan), n_steps=a.steps, n_switch=s.n_switch,
+        **margin_fields(a.started, a.reached, s.cross, s.near, _margin_z(f, a, contact), a.t_z - ws, nan),
     )  # fmt: skip
 
 
@@ -256,9 +277,9 @@ def _measure_batch(C, valid, t_start, z, horizon, window, contact, start, dt, ma
 _measure_batch = engine_jit(_measure_batch, ("contact", "start", "dt", "lanes"))
 
 
-def measure_chain(chain: Chain, z: float, *, t_start: Any, horizon: float, window: float, dt: float,
-                  max_steps: int | None, contact: str, start: str, dtype: Any) -> ChainMeasurement:  # fmt: skip
-    """`measure` for a [`Chain`][] with the exact engine (arguments as in `measure`)."""
+def measure_chain(chain: Chain, z: float, *, t_start: Any, horizon: float, window: float,
+                  dynamics: Exact | Smoothed, contact: str, start: str, dtype: Any) -> ChainMeasurement:  # fmt: skip
+    """`measure` for a [`Chain`][] on the N-mass exact or smoothed engine (arguments as in `measure`)."""
     _check(contact, start)
     flat, valid, shape = prepare_chain(chain, dtype)
     n = valid.shape[0]
@@ -268,9 +289,30 @@ def measure_chain(chain: Chain, z: float, *, t_start: Any, horizon: float, windo
         ts = jnp.broadcast_to(jnp.asarray(t_start, flat.dtype), shape).reshape((n,))
         if not np.all(np.isfinite(np.asarray(ts))) or np.any(np.asarray(ts) < 0):
             raise ValueError(f"t_start must be finite and >= 0, got {t_start!r}.")
-    ts_host = np.asarray(jnp.where(jnp.isfinite(ts), ts, flat.t_start))
-    steps = max_steps or default_max_steps(float(np.max(ts_host)) + horizon, dt)
-    lanes = min(n, MICRO_BATCH_CPU) if jax.default_backend() == "cpu" else n
     z_, h_, w_ = (jnp.asarray(v, flat.dtype) for v in (z, horizon, window))
-    out = _measure_batch(flat, valid, ts, z_, h_, w_, contact, start, dt, jnp.asarray(steps, jnp.int32), lanes)
+    if isinstance(dynamics, Smoothed):
+        out = _measure_smoothed(flat, valid, ts, z_, h_, w_, contact, start, _cast_eps(dynamics, flat.dtype))
+        return ChainMeasurement(**_unflatten(out, shape), z=float(z), start=start, contact=contact)
+    ts_host = np.asarray(jnp.where(jnp.isfinite(ts), ts, flat.t_start))
+    steps = dynamics.max_steps or default_max_steps(float(np.max(ts_host)) + horizon, dynamics.dt)
+    lanes = min(n, MICRO_BATCH_CPU) if jax.default_backend() == "cpu" else n
+    out = _measure_batch(flat, valid, ts, z_, h_, w_, contact, start, dynamics.dt, jnp.asarray(steps, jnp.int32), lanes)
     return ChainMeasurement(**_unflatten(out, shape), z=float(z), start=start, contact=contact)
+
+
+# -- the smoothed engine ----------------------------------------------------------------------
+
+
+def _cast_eps(dynamics: Smoothed, dtype: Any) -> Smoothed:
+    return eqx.tree_at(lambda d: d.eps, dynamics, jnp.asarray(dynamics.eps, dtype))
+
+
+@eqx.filter_jit
+def _simulate_smoothed(C, valid, save, contact, start, dyn):
+    return jax.vmap(lambda C, ok: smooth.simulate_one(C, ok, save, contact, start, dyn))(C, valid)
+
+
+@eqx.filter_jit
+def _measure_smoothed(C, valid, t_start, z, horizon, window, contact, start, dyn):
+    one = lambda C, ok, ts: smooth.measure_one(C, ok, ts, z, horizon, window, contact, start, dyn)
+    return jax.vmap(one)(C, valid, t_start)

@@ -60,8 +60,7 @@ def sweep_chain(
     horizon: float,
     window: float,
     t_start: float | None,
-    dt: float,
-    max_steps: int | None,
+    dynamics: Any,
     contact: str,
     start: str,
     dtype: Any,
@@ -122,7 +121,7 @@ def sweep_chain(
         for i in range(n_chunks):
             chain, n = chunk_chain(i)
             m = measure_chain(
-                chain, z, t_start=t_start, horizon=horizon, window=window, dt=dt, max_steps=max_steps,
+                chain, z, t_start=t_start, horizon=horizon, window=window, dynamics=dynamics,
                 contact=contact, start=start, dtype=dtype,
             )  # fmt: skip
             parts.append({k: v[:n] for k, v in m.to_numpy().items()})
@@ -155,8 +154,7 @@ def sweep_chain(
         "horizon": float(horizon),
         "window": float(window),
         "t_start": "Chain.t_start (80 periods of the lowest nonzero natural frequency)" if t_start is None else t_start,
-        "dynamics": "Exact",
-        "dynamics_dt": float(dt),
+        **{f"dynamics_{k}" if k != "dynamics" else k: v for k, v in dynamics.describe().items()},
         "on_invalid": on_invalid,
         "version": __version__,
         "jax_version": jax.__version__,

@@ -1,0 +1,217 @@
+"""Continuation of steady gaits: points against independent solves, a period doubling and folds where
+known ones lie, the SSL/SL boundary against a dense direct scan and the independent reference,
+lift-off against the reference, bad input per branch, and one compilation for every parameter.
+
+Every continuation here is a batch of two branches (one compiled corrector for the whole file)."""
+
+from typing import Any
+
+import jax.numpy as jnp
+import locomotion_jax as lj
+import numpy as np
+import pytest
+from locomotion_jax import BranchStatus, EventKind, GaitStatus
+from reference import reference_simulate
+
+
+pytestmark = pytest.mark.xdist_group("gait")
+
+
+def _events(b: lj.Branch, i: int, kind: int) -> list[dict[str, Any]]:
+    e = b.events
+    rows = np.flatnonzero(np.asarray(e.kind[i]) == kind)
+    keys = ("lam", "lam_error", "value", "smooth", "located", "turn")
+    out = [{key: np.asarray(getattr(e, key)[i, q]).item() for key in keys} for q in rows]
+    for q, row in zip(rows, out):
+        row["multipliers"] = np.asarray(e.multipliers[i, q])
+        row["y"] = np.asarray([float(e.u[i, q]), float(e.v1[i, q]), float(e.v2[i, q])])
+    return out
+
+
+def _reference_period(case: dict, y: np.ndarray, periods: int = 1, contact: str = "strict") -> dict:
+    """The independent solver over `periods` actuation periods from the section state `y = (u, v1, v2)`."""
+    T = 2 * np.pi / case["omega"]
+    return reference_simulate(case, periods * T, save_at=[periods * T], start=(0.0, y[1], y[0], y[2]),
+                              contact=contact, rtol=1e-12, atol=1e-13)  # fmt: skip
+
+
+def _end(r: dict) -> np.ndarray:
+    return np.array([r["x2"][0] - r["x1"][0], r["v1"][0], r["v2"][0]])
+
+
+@pytest.fixture(scope="module")
+def boundary() -> lj.Branch:
+    """Along `a` at omega = 6 across the SSL/SL boundary (a* ~ 0.02664), from either side."""
+    return lj.continuation(lj.Params(omega=6.0, a=jnp.asarray([0.05, 0.02])), "a", jnp.asarray([0.02, 0.05]))
+
+
+def test_points_equal_independent_solves(boundary):
+    """Continued points (an SL and an SSL one) equal `steady_gait` solves at the same parameter."""
+    n = int(boundary.n_points[0])
+    lam = np.asarray(boundary.lam[0, :n])
+    assert int(boundary.status[0]) == BranchStatus.REACHED and lam[0] == 0.05 and lam[-1] == 0.02
+    regime = np.asarray(boundary.regime[0, :n])
+    j = [int(np.argmin(np.abs(lam - 0.04))), int(np.argmin(np.abs(lam - 0.022)))]
+    assert list(regime[j]) == [lj.Regime.SL, lj.Regime.SSL]
+    g = lj.steady_gait(lj.Params(omega=6.0, a=jnp.asarray(lam[j])), periods=1)
+    assert np.all(np.asarray(g.status) == GaitStatus.CONVERGED)
+    for name in ("u", "v1", "v2"):
+        np.testing.assert_allclose(np.asarray(getattr(boundary, name)[0, j]), np.asarray(getattr(g, name)), atol=1e-9)
+    for name in ("mean_speed", "cost_of_transport", "e_d", "slip_margin"):
+        np.testing.assert_allclose(np.asarray(getattr(boundary, name)[0, j]), np.asarray(getattr(g, name)), rtol=1e-8)
+    np.testing.assert_allclose(
+        np.abs(np.asarray(boundary.multipliers[0, j])), np.abs(np.asarray(g.multipliers)), atol=1e-8
+    )
+
+
+def test_ssl_sl_boundary(boundary):
+    """The boundary located from both sides agrees to 1e-8; the independent reference, started on
+    the orbits at a* -+ 1e-6, sticks below and not above; a dense direct scan with `measure` flips
+    from SSL to SL between the two grid values that bracket a*."""
+    located = [_events(boundary, i, EventKind.SSL_SL) for i in range(2)]
+    assert [len(x) for x in located] == [1, 1]
+    ev0, ev1 = located[0][0], located[1][0]
+    for ev in (ev0, ev1):
+        assert ev["located"] and ev["smooth"] and not ev["turn"] and ev["lam_error"] < 1e-9
+        assert abs(ev["value"]) < 1e-8
+    a_star = ev0["lam"]
+    assert abs(a_star - ev1["lam"]) < 1e-8, (a_star, ev1["lam"])
+    assert 0.0265 < a_star < 0.0268
+    # The independent reference on the orbits just either side (the margin moves by ~35 per unit a).
+    delta = 1e-6
+    g = lj.steady_gait(lj.Params(omega=6.0, a=jnp.asarray([a_star - delta, a_star + delta])), periods=1)
+    assert list(np.asarray(g.regime)) == [lj.Regime.SSL, lj.Regime.SL]
+    for i, sticks in enumerate((True, False)):
+        y = np.asarray([float(g.u[i]), float(g.v1[i]), float(g.v2[i])])
+        r = _reference_period(dict(omega=6.0, a=a_star + (2 * i - 1) * delta), y)
+        assert any("slip->stick" in kind for _, kind in r["events"]) == sticks
+        np.testing.assert_allclose(_end(r), y, atol=1e-6)  # periodic under the reference too
+    # A dense direct scan (measure from the paper's start, 80 periods of wn2 of transient).
+    grid = a_star + (np.arange(-10, 10) + 0.5) * 1e-4
+    m = lj.measure(lj.Params(omega=6.0, a=jnp.asarray(grid)), horizon=25.0)
+    expected = np.where(grid < a_star, lj.Regime.SSL, lj.Regime.SL)
+    np.testing.assert_array_equal(np.asarray(m.regime), expected)
+
+
+def test_period_doubling():
+    """Along d at omega = 1.5, mhat = 0.3 (where d = 0.3 has a period-1 orbit with multiplier -3.57):
+    one period doubling, located from both sides to 1e-8, a multiplier at -1 there; below it
+    steady_gait's attractor has period 2, above it period 1."""
+    b = lj.continuation(lj.Params(omega=1.5, mhat=0.3, d=jnp.asarray([0.5, 0.3])), "d", jnp.asarray([0.3, 0.5]),
+                        periods=1)  # fmt: skip
+    assert list(np.asarray(b.status)) == [BranchStatus.REACHED] * 2
+    found = [_events(b, i, EventKind.PERIOD_DOUBLING) for i in range(2)]
+    assert [len(x) for x in found] == [1, 1]
+    d_star = found[0][0]["lam"]
+    assert abs(d_star - found[1][0]["lam"]) < 1e-8
+    assert 0.45 < d_star < 0.5
+    for ev in (found[0][0], found[1][0]):
+        assert ev["located"] and ev["smooth"] and not ev["turn"]
+        assert np.min(np.abs(ev["multipliers"] + 1)) < 1e-6
+    n = int(b.n_points[0])
+    lam, stable = np.asarray(b.lam[0, :n]), np.asarray(b.stable[0, :n])
+    np.testing.assert_array_equal(stable, lam > d_star)
+    g = lj.steady_gait(lj.Params(omega=1.5, mhat=0.3, d=jnp.asarray([d_star - 0.01, d_star + 0.01])))
+    assert list(np.asarray(g.k)) == [2, 1] and bool(np.all(np.asarray(g.stable)))
+
+
+def test_folds_and_a_corner():
+    """Along omega (a = 0.05): coming down on the SL branch, the slip margin reaches zero where the
+    branch turns back as an unstable SSL branch (a non-smooth fold: a corner), which turns again at
+    a smooth fold (a multiplier at +1) into the stable SSL branch; going up from 4.5 the stable SSL
+    branch folds at about 4.703. Between the SSL/SL corner and the fold both stable gaits coexist:
+    the independent reference keeps each periodic, one sticking and one not."""
+    b = lj.continuation(lj.Params(omega=jnp.asarray([5.5, 4.5])), "omega", jnp.asarray([4.5, 5.5]))
+    corner = _events(b, 0, EventKind.SSL_SL)
+    folds = _events(b, 0, EventKind.FOLD)
+    assert len(corner) == 1 and corner[0]["turn"] and corner[0]["located"]
+    assert len(folds) == 1 and folds[0]["smooth"] and folds[0]["turn"]
+    w_corner, w_fold = corner[0]["lam"], folds[0]["lam"]
+    assert 4.85 < w_corner < w_fold < 4.95
+    assert np.min(np.abs(folds[0]["multipliers"] - 1)) < 1e-6
+    up = _events(b, 1, EventKind.FOLD)
+    assert len(up) == 1 and 4.69 < up[0]["lam"] < 4.72 and np.min(np.abs(up[0]["multipliers"] - 1)) < 1e-6
+    # Between them: an SL point and a stable SSL point at about the same omega.
+    n = int(b.n_points[0])
+    lam, reg, stable = (np.asarray(x[0, :n]) for x in (b.lam, b.regime, b.stable))
+    mid = 0.5 * (w_corner + w_fold)
+    for regime, sticks in ((lj.Regime.SL, False), (lj.Regime.SSL, True)):
+        cand = np.flatnonzero((reg == regime) & stable & (np.abs(lam - mid) < 0.03))
+        assert len(cand) > 0, regime
+        j = cand[np.argmin(np.abs(lam[cand] - mid))]
+        y = np.asarray([float(b.u[0, j]), float(b.v1[0, j]), float(b.v2[0, j])])
+        r = _reference_period(dict(omega=float(lam[j])), y)
+        assert any("slip->stick" in kind for _, kind in r["events"]) == sticks
+        np.testing.assert_allclose(_end(r), y, atol=1e-6)
+
+
+def test_liftoff_and_bad_input():
+    """Strict reading along a at omega = 16: the branch ends where the smallest normal force of the
+    orbit reaches zero, located to 1e-8; under the reference the orbit's neighbourhood keeps contact
+    just below and loses it just above. An invalid configuration in the same batch is flagged alone."""
+    p = lj.Params(omega=16.0, mu_s=jnp.asarray([0.7, 0.3]), check=False)
+    b = lj.continuation(p, "a", 0.15)
+    assert list(np.asarray(b.status)) == [BranchStatus.LIFTOFF, BranchStatus.INVALID]
+    assert int(b.start_status[1]) == GaitStatus.INVALID and int(b.n_points[1]) == 0
+    assert np.all(np.isnan(np.asarray(b.lam[1]))) and np.all(np.asarray(b.events.kind[1]) == -1)
+    ev = _events(b, 0, EventKind.LIFTOFF)
+    assert len(ev) == 1 and ev[0]["located"] and ev[0]["lam_error"] < 1e-8
+    a_star = ev[0]["lam"]
+    n = int(b.n_points[0])
+    assert float(b.lam[0, n - 1]) < a_star < float(b.lam[0, n - 1]) + 1e-4
+    assert np.all(np.asarray(b.min_normal[0, :n]) > 0)
+    assert 0 < float(b.min_normal[0, n - 1]) < 1e-3
+    delta = 1e-5
+    for sign, lifts in ((-1, False), (1, True)):
+        # 40 periods under the paper reading (it integrates through a sign change of N and logs it),
+        # from the located orbit: the motion settles on the orbit at a* -+ delta.
+        y = ev[0]["y"]
+        r = _reference_period(dict(omega=16.0, a=a_star + sign * delta), y, periods=40, contact="paper")
+        T = 2 * np.pi / 16.0
+        late = [t for t, kind in r["events"] if "normal" in kind and t > 39 * T]
+        assert bool(late) == lifts, (sign, late)
+
+
+def test_waveform_coefficient():
+    """A Fourier coefficient as the parameter (d = 0, mhat = 0.3, second harmonic): points equal
+    steady_gait under the same waveform."""
+    wave = lj.Fourier(omega=2.0, lbar=3.0, cos=jnp.asarray([0.0, 0.1]), sin=jnp.asarray([0.2, 0.0]))
+    p = lj.Params(omega=2.0, d=0.0, mhat=0.3)
+    b = lj.continuation(p, "sin2", 0.04, waveform=wave, max_points=6)
+    n = int(b.n_points)
+    assert n == 6 and float(b.lam[0]) == 0.0 and b.parameter == "sin2"
+    j = n - 1
+    w2 = lj.Fourier(omega=2.0, lbar=3.0, cos=jnp.asarray([0.0, 0.1]), sin=jnp.asarray([0.2, float(b.lam[j])]))
+    g = lj.steady_gait(p, waveform=w2, periods=int(b.k))
+    assert abs(float(b.mean_speed[j]) / float(g.mean_speed) - 1) < 1e-8
+    assert abs(float(b.u[j]) - float(g.u)) < 1e-9
+
+
+def test_no_recompilation_and_parameter_leaving_its_range():
+    """Another parameter, other values and another gait period reuse the compiled corrector and
+    transient; a branch whose parameter leaves its valid range (mu_s below mu_k) ends INVALID there."""
+    from locomotion_jax import _corrector, _gait
+
+    sizes = lambda: (_gait._transient_batch._cache_size(), _corrector.correct_batch._cache_size())  # pyright: ignore[reportFunctionMemberAccess]
+    lj.continuation(lj.Params(omega=jnp.asarray([2.0, 16.0])), "omega", jnp.asarray([2.1, 15.0]), max_points=3)
+    before = sizes()
+    b = lj.continuation(lj.Params(omega=jnp.asarray([2.0, 16.0])), "mu_s", 0.4, periods=2, max_points=60)
+    assert sizes() == before
+    n = int(b.n_points[1])
+    assert int(b.status[1]) == BranchStatus.INVALID and 0.5 <= float(b.lam[1, n - 1]) < 0.5 + 1e-5
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(parameter="foo", stop=1.0), "parameter"),
+        (dict(parameter="cos1", stop=1.0), "Fourier"),
+        (dict(parameter="omega", stop=2.0), "stop"),
+        (dict(parameter="omega", stop=3.0, max_points=1), "max_points"),
+        (dict(parameter="omega", stop=3.0, step=0.5, max_step=0.1), "step"),
+        (dict(parameter="omega", stop=3.0, dynamics=lj.Smoothed()), "Exact"),
+    ],
+)
+def test_bad_arguments(kwargs, match):
+    with pytest.raises((ValueError, TypeError), match=match):
+        lj.continuation(lj.Params(omega=2.0), **kwargs)
