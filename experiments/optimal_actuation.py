@@ -8,7 +8,7 @@ over (a <= a_max, omega), refined locally; the Pareto fronts of both methods in 
 figure with the external solver's point. Then the horizontal spring (d = 0) with
 unequal masses.
 
-Run: `python experiments/optimal_actuation.py [--quick] [--no-d0] [--no-smoothed]` (x64 on;
+Run: `python experiments/optimal_actuation.py [--quick] [--no-d0] [--no-smoothed] [--d0-waveforms]` (x64 on;
 writes experiments/output/optimal/). Defaults: k=50, c=0.01, d=0.5, lbar=3, mu_s=0.7,
 mu_k=0.5, mhat=0.5, a_max = 0.05, strict contact, start from the relaxed spring (all runs).
 """
@@ -67,8 +67,9 @@ def run_speeds(params, method, settings, sweep, speeds, harmonics):
     return rows, optima
 
 
-def d0_study(settings):
-    """d = 0: equal masses cannot move (symmetry); unequal masses, sinusoid vs asymmetric waveforms."""
+def d0_study(settings, optimise=True):
+    """d = 0: equal masses cannot move (symmetry); unequal masses, sinusoid vs asymmetric waveforms
+    (and, if `optimise`, optimised waveforms of both directions)."""
     out = {}
     for mhat in (0.5, 0.3):
         p = lj.Params(d=0.0, mhat=mhat)
@@ -95,7 +96,7 @@ def d0_study(settings):
                 "cost": float(fig.cost[i]),
             }
         entry = {"sinusoid_max_abs_speed": vmax_sin, **res}
-        if mhat != 0.5:
+        if mhat != 0.5 and optimise:
             for direction in (1, -1):
                 opt = _optimise.optimise(p, 0.005, A_MAX, direction=direction, settings=settings, sweep=sweep)
                 entry[f"optimised{direction:+d}"] = {
@@ -117,6 +118,9 @@ def main():
     parser.add_argument("--quick", action="store_true", help="two speeds, small settings")
     parser.add_argument("--no-d0", action="store_true")
     parser.add_argument("--only-d0", action="store_true")
+    parser.add_argument(
+        "--d0-waveforms", action="store_true", help="only the d = 0 sinusoids and sawtooths (no optimisation)"
+    )
     parser.add_argument("--no-smoothed", action="store_true", help="skip the smoothed method")
     parser.add_argument("--speeds", type=float, nargs="*", default=None)
     args = parser.parse_args()
@@ -130,6 +134,11 @@ def main():
         smoothed = Settings(eps_schedule=(1e-2, 3e-3), outer=2, inner=20)
         speeds = args.speeds or SPEEDS[1:3]
     t0 = time.perf_counter()
+    if args.d0_waveforms:
+        d0 = d0_study(exact, optimise=False)
+        (OUT / "summary_d0_waveforms.json").write_text(json.dumps(jsonable(d0), indent=1))
+        print(f"total {time.perf_counter() - t0:.0f} s")
+        return
     if args.only_d0:
         d0 = d0_study(exact)
         (OUT / "summary_d0.json").write_text(json.dumps(jsonable(d0), indent=1))

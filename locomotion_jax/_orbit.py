@@ -36,9 +36,9 @@ from . import _exact as exact
 from ._actuation import Fourier
 from ._compile import engine_jit
 from ._custom_types import Array, Contact
-from ._period import reduced as _reduced, section_state as _section_state
 from ._model import initial_gap
 from ._params import Params
+from ._period import reduced as _reduced, section_state as _section_state
 from ._status import Status
 
 
