@@ -327,6 +327,7 @@ def _descent(x0, ask, stroke: "StrokePeaks", bounds, settings: ExactSettings, ma
             d = -g
         step = min(1.0, settings.trust_radius / max(float(np.max(np.abs(d))), 1e-300))
         accepted = False
+        xn, phin, gn = x, phi, None
         for _ in range(12):
             xn = project(x + step * d)
             phin, gn = merit(at(xn))
@@ -339,7 +340,8 @@ def _descent(x0, ask, stroke: "StrokePeaks", bounds, settings: ExactSettings, ma
                 return  # no decrease along steepest descent: a (nonsmooth) local minimum
             mem.clear()
             continue
-        assert gn is not None
+        if gn is None:  # unreachable: an accepted step has a gradient
+            return
         sv, yv = xn - x, gn - g
         if sv @ yv > 1e-12 * np.linalg.norm(sv) * np.linalg.norm(yv):
             mem.append((sv, yv))

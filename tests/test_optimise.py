@@ -377,7 +377,8 @@ def test_objective_and_constraint_gradients_compose():
         # Smooth stand-ins for (Delta X, e_d, min N) and their exact gradients.
         base = np.array([0.05, 0.05, 0.5]) + W @ np.sin(theta)
         grad = W * np.cos(theta)[None, :]
-        return _orbit.Orbit(np.zeros(3), base, grad, np.zeros((3, 3)), np.asarray(True), np.asarray(0), np.asarray(0.0))
+        a = jnp.asarray
+        return _orbit.Orbit(a(np.zeros(3)), a(base), a(grad), a(np.zeros((3, 3))), a(True), a(0), a(0.0))
 
     for speed in (0.01, 0.2):  # feasible, then short of the speed (deficit penalised)
         theta = rng.normal(size=p)
