@@ -85,7 +85,7 @@ class Fourier(AbstractWaveform):
     $$\\ell_0(t) = \\bar\\ell + \\sum_{n=1}^{N} \\big(A_n \\cos(n\\omega t) + B_n \\sin(n\\omega t)\\big).$$
 
     With $N = 1$, $A_1 = 0$, $B_1 = a$ it is eq. (13). Up to
-    [`RECURRENCE_MAX`][locomotion_jax._actuation.RECURRENCE_MAX] harmonics they are
+    `RECURRENCE_MAX` (4) harmonics they are
     built from $\\cos\\omega t, \\sin\\omega t$ by the angle-addition recurrence (no
     transcendental call); above, from the phase $\\phi = \\operatorname{atan2}(\\sin, \\cos)$
     as one vector $\\cos n\\phi, \\sin n\\phi$, $n = 1..N$.
