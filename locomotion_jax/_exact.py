@@ -586,36 +586,70 @@ def init(
     )
 
 
-def step(
-    params: Params,
-    wave: AbstractWaveform,
-    contact: Contact,
-    dt: float,
-    st: Hybrid,
-    t_stop: Array,
-    target: Target | None = None,
-    P: Consts | None = None,
-) -> tuple[Hybrid, StepInfo]:
-    """One iteration: switch what is pending, then one RK4 step, cut at the first event.
+class _Mode(NamedTuple):
+    """The mode during a step: stuck flags, slip directions, sides of the normal forces."""
 
-    The step never passes `t_stop` (a measurement boundary or save time) and lands
-    on it exactly unless an event comes first. `target` adds the caller's event
-    (`StepInfo.target_fired`). `P` are the constants of `params` (pass them to
-    hoist them out of a loop).
-    """
-    P = consts(params, wave) if P is None else P
-    keep = lambda x: _keep(P, x)
+    st1: Array
+    st2: Array
+    s1: Array
+    s2: Array
+    sides: tuple[Array, Array]
+
+
+class _Switched(NamedTuple):
+    """An iteration's start after its switches."""
+
+    f0: _F
+    geo0: tuple
+    y0: State
+    comp: State | None
+    mode: _Mode
+    vel1: Array  # a slipping mass's velocity reached zero here (it sticks or reverses)
+    vel2: Array
+    n_switch: Array
+
+
+class _Motion(NamedTuple):
+    """Accelerations, rates, their time derivatives and the event functions at one end of a step."""
+
+    a1: Array
+    a2: Array
+    r: State
+    D: _D
+    j: State
+    g: list
+    d: list
+    e: list
+
+
+class _Length(NamedTuple):
+    """The step's length and the drive at its midpoint and end."""
+
+    h: Array
+    t1: Array
+    ce: Array
+    se: Array
+    mid: tuple[Array, Array]  # (l0, dl0)
+    end: tuple[Array, Array, Array]  # (l0, dl0, ddl0)
+
+
+class _Crossing(NamedTuple):
+    """The earliest crossing of the step: which functions crossed, which came first, where."""
+
+    crossed: list
+    cut: Array
+    first: list
+    theta: Array
+
+
+def _switch(P: Consts, contact: Contact, st: "Hybrid", l0: Array, keep) -> _Switched:
+    """Forces at the start, then the switches (SPEC §2). A mass located at t (pend) or whose
+    event function is negative here switches: a stuck one slips in the direction of $F_i$; a
+    slipping one ($v_i = 0$) sticks if $|F_i| \\le \\mu_s n_i$ (eq. 7), else its friction reverses."""
     dtype = st.t.dtype
-    t0 = st.t
     yA = st.y
-    zero = jnp.zeros_like(t0)
-
-    # -- start: forces, then the switches (SPEC §2). A mass located at t (pend) or
-    # whose event function is negative here switches: a stuck one slips in the
-    # direction of F_i; a slipping one (v_i = 0) sticks if |F_i| <= mu_s n_i (eq. 7),
-    # else its friction reverses.
-    l00, dl00, ddl00 = wave.at_phase(st.cph, st.sph)
-    f0, geo0 = _forces(P, contact, l00, yA.x1, yA.x2)
+    zero = jnp.zeros_like(st.t)
+    f0, geo0 = _forces(P, contact, l0, yA.x1, yA.x2)
     f0 = f0._replace(fx=keep(f0.fx), fy=keep(f0.fy), tension=keep(f0.tension))
     f0 = f0._replace(N1=P.m1 - f0.fy, N2=P.m2 + f0.fy)
     f0 = f0._replace(n1=jnp.abs(f0.N1), n2=jnp.abs(f0.N2)) if contact == "paper" else f0._replace(n1=f0.N1, n2=f0.N2)
@@ -634,38 +668,38 @@ def step(
     if comp is not None:  # a switch sets velocities exactly (to 0): drop their compensation
         comp = comp._replace(v1=jnp.where(vel1, zero, comp.v1), v2=jnp.where(vel2, zero, comp.v2))
     n_switch = st.n_switch + (fire1 | fire2).astype(jnp.int32)
+    mode = _Mode(st1, st2, s1, s2, (st.nu1, st.nu2))
+    return _Switched(f0, geo0, y0, comp, mode, vel1, vel2, n_switch)
 
-    # Lift-off or the target found negative here (a crossing located after another
-    # one in the same step) count at t.
-    lifted0 = (f0.N1 < 0) | (f0.N2 < 0)
-    stop0 = lifted0 if contact == "strict" else jnp.asarray(False)
-    t_lift = st.t_liftoff
-    t_lift = jnp.where(lifted0 & ~jnp.isfinite(t_lift), t0, t_lift)  # flagged (paper) or stopping (strict)
-    if target is not None:
-        X_A = P.mhat * yA.x1 + (1 - P.mhat) * yA.x2
-        target_now = target.active & (jnp.abs(X_A - target.X0) >= target.z)
-        target = target._replace(active=target.active & ~target_now)
+
+def _motion(P: Consts, contact: Contact, f: _F, geo, y: State, mode: _Mode, dl0, ddl0, target, keep, pin) -> _Motion:
+    """What the step needs at one of its ends, in `mode`; `pin` also materialises the forces'
+    second rates (at the start, where the margins read them too)."""
+    st1, st2, s1, s2, sides = mode
+    a1, a2 = (keep(x) for x in _accel(P, f, y, st1, st2, s1, s2))
+    r = _rates(P, f, y, a1, a2, s1, s2, dl0)
+    D = _derivs(P, geo, y, a1, a2, dl0, ddl0)
+    if pin:
+        D = D._replace(fx=keep(D.fx), fy=keep(D.fy), fx2=keep(D.fx2), fy2=keep(D.fy2))
     else:
-        target_now = jnp.asarray(False)
+        D = D._replace(fx=keep(D.fx), fy=keep(D.fy))
+    j = _second(P, contact, f, D, y, a1, a2, st1, st2, s1, s2, dl0, ddl0, sides)
+    g, d, e = _events(P, contact, f, D, y, r, j, st1, st2, s1, s2, target, sides)
+    return _Motion(a1, a2, r, D, j, list(g), list(d), list(e))
 
-    # -- rates and events at the start, in the (new) mode.
-    a01, a02 = (keep(x) for x in _accel(P, f0, y0, st1, st2, s1, s2))
-    k1 = _rates(P, f0, y0, a01, a02, s1, s2, dl00)
-    D0 = _derivs(P, geo0, y0, a01, a02, dl00, ddl00)
-    D0 = D0._replace(fx=keep(D0.fx), fy=keep(D0.fy), fx2=keep(D0.fx2), fy2=keep(D0.fy2))
-    sides = (st.nu1, st.nu2)
-    j0 = _second(P, contact, f0, D0, y0, a01, a02, st1, st2, s1, s2, dl00, ddl00, sides)
-    g0s, d0s, e0s = _events(P, contact, f0, D0, y0, k1, j0, st1, st2, s1, s2, target, sides)
 
-    # -- step length: dt, or less to land on t_stop, or less to end just past the
-    # earliest event predicted by the Taylor quadratic of each event function. A
-    # crossing is then cut late in a short step, so the dense output there is as
-    # accurate as a step of that length (an interpolant inherits the error of the
-    # step's end state: cutting early in a full step would cost ~10x in accuracy).
+def _step_length(wave: AbstractWaveform, dt: float, st: "Hybrid", t_stop: Array, m0: _Motion, keep) -> _Length:
+    """`dt`, or less to land on `t_stop`, or less to end just past the earliest event
+    predicted by the Taylor quadratic of each event function. A crossing is then cut late in
+    a short step, so the dense output there is as accurate as a step of that length (an
+    interpolant inherits the error of the step's end state: cutting early in a full step
+    would cost ~10x in accuracy)."""
+    t0 = st.t
+    dtype = t0.dtype
     span = t_stop - t0
     h_nom = jnp.minimum(jnp.asarray(dt, dtype), span)
     s_pred = jnp.asarray(jnp.inf, dtype)
-    for g, d, e in zip(g0s, d0s, e0s):
+    for g, d, e in zip(m0.g, m0.d, m0.e):
         s_pred = jnp.minimum(s_pred, _predict(g, d, e))
     # Never shorter than a few ulps of t, or float32 time would stop advancing.
     h_pred = jnp.maximum(PREDICT_MARGIN * s_pred, 64 * jnp.finfo(dtype).eps * jnp.maximum(jnp.abs(t0), 1))
@@ -681,36 +715,36 @@ def step(
     ce, se = (keep(x) for x in _rotate(cm, sm, ca, sa))
     l0m, dl0m, _ = wave.at_phase(cm, sm)
     l0e, dl0e, ddl0e = wave.at_phase(ce, se)
+    return _Length(h, t1, ce, se, (l0m, dl0m), (l0e, dl0e, ddl0e))
 
-    # -- one RK4 step of length h.
+
+def _rk4(P: Consts, contact: Contact, y0: State, k1: State, L: _Length, mode: _Mode, keep) -> tuple[State, State]:
+    """One RK4 step of length `L.h` from `y0` (rates `k1`): the increment and the end state."""
+    st1, st2, s1, s2, sides = mode
+    h = L.h
+
     def stage(l0, dl0, y):
         f, _ = _forces(P, contact, l0, y.x1, y.x2, sides)
         a1, a2 = _accel(P, f, y, st1, st2, s1, s2)
         return _rates(P, f, y, keep(a1), keep(a2), s1, s2, dl0)
 
-    k2 = stage(l0m, dl0m, y0.map(lambda a, b: a + (0.5 * h) * b, k1))
-    k3 = stage(l0m, dl0m, y0.map(lambda a, b: a + (0.5 * h) * b, k2))
-    k4 = stage(l0e, dl0e, y0.map(lambda a, b: a + h * b, k3))
+    k2 = stage(*L.mid, y0.map(lambda a, b: a + (0.5 * h) * b, k1))
+    k3 = stage(*L.mid, y0.map(lambda a, b: a + (0.5 * h) * b, k2))
+    k4 = stage(*L.end[:2], y0.map(lambda a, b: a + h * b, k3))
     incr = k1.map(lambda a, b, c, d: keep((h / 6) * (a + 2 * (b + c) + d)), k2, k3, k4)
-    y1 = y0.map(lambda a, b: keep(a + b), incr)
+    return incr, y0.map(lambda a, b: keep(a + b), incr)
 
-    f1, geo1 = _forces(P, contact, l0e, y1.x1, y1.x2, sides)
-    a11, a12 = (keep(x) for x in _accel(P, f1, y1, st1, st2, s1, s2))
-    r1 = _rates(P, f1, y1, a11, a12, s1, s2, dl0e)
-    D1 = _derivs(P, geo1, y1, a11, a12, dl0e, ddl0e)
-    D1 = D1._replace(fx=keep(D1.fx), fy=keep(D1.fy))
-    j1 = _second(P, contact, f1, D1, y1, a11, a12, st1, st2, s1, s2, dl0e, ddl0e, sides)
-    g1s, d1s, e1s = _events(P, contact, f1, D1, y1, r1, j1, st1, st2, s1, s2, target, sides)
-    g1s = [keep(g) for g in g1s]
-    n_ev = len(g1s)
 
-    # -- events: the earliest crossing by the secant of each crossed function.
+def _first_crossing(h: Array, m0: _Motion, m1: _Motion, keep) -> _Crossing:
+    """The earliest crossing by the secant of each crossed function, then located on the
+    quintic Hermite interpolant of the first one ([`_root`][]: implicit-function derivative)."""
     h2 = h * h
-    crossed = [g < 0 for g in g1s]
+    dtype = h.dtype
+    crossed = [g < 0 for g in m1.g]
     cut = _any(crossed)
     inf = jnp.asarray(jnp.inf, dtype)
     thl = []
-    for c, g0, d0, g1 in zip(crossed, g0s, d0s, g1s):
+    for c, g0, d0, g1 in zip(crossed, m0.g, m0.d, m1.g):
         a0 = jnp.where(g0 == 0, h * d0, g0)  # deflated when starting on the surface
         den = a0 - g1
         thl.append(jnp.where(c, a0 / jnp.where(den > 0, den, 1), inf))
@@ -718,26 +752,30 @@ def step(
     for x in thl[1:]:
         th_min = jnp.minimum(th_min, x)
     first = [keep(c & (x <= th_min)) for c, x in zip(crossed, thl)]
-    pick = [g0s[-1], d0s[-1], e0s[-1], g1s[-1], d1s[-1], e1s[-1]]
-    for i in reversed(range(n_ev - 1)):
-        vals = (g0s[i], d0s[i], e0s[i], g1s[i], d1s[i], e1s[i])
+    pick = [m0.g[-1], m0.d[-1], m0.e[-1], m1.g[-1], m1.d[-1], m1.e[-1]]
+    for i in reversed(range(len(m1.g) - 1)):
+        vals = (m0.g[i], m0.d[i], m0.e[i], m1.g[i], m1.d[i], m1.e[i])
         pick = [jnp.where(first[i], v, p) for v, p in zip(vals, pick)]
     cg0, cd0, ce0, cg1, cd1, ce1 = pick
     coef = _quintic(jnp.maximum(cg0, 0), h * cd0, h2 * ce0, jnp.minimum(cg1, 0), h * cd1, h2 * ce1)
     theta = keep(jnp.where(cut, _root(coef, jnp.minimum(cg1, 0)), 1))
+    return _Crossing(crossed, cut, first, theta)
 
-    # -- margins to a change of switching structure ([`margins`][]); they feed nothing back.
-    # The events located at t (pend) are measured here, at their crossing, in the mode
-    # before the switch, from values this iteration has (forces and their rates here).
-    target_cut = first[-1] if target is not None else jnp.asarray(False)
+
+def _step_margins(P: Consts, contact: Contact, omega, st: "Hybrid", sw: _Switched, m0: _Motion, h, crossed):
+    """Margins to a change of switching structure ([`margins`][]); they feed nothing back.
+    The events located at t (pend) are measured here, at their crossing, in the mode before
+    the switch, from values this iteration has (forces and their rates here)."""
+    dtype = st.t.dtype
+    f0, D0, (u, il, pl) = sw.f0, m0.D, sw.geo0
+    absF = jnp.abs(f0.fx)
     sg0 = jnp.where(f0.fx >= 0, 1.0, -1.0).astype(dtype)
-    n1d0, n2d0, _, _ = _normal_rates(contact, D0, sides)
-    ao1, ao2 = _accel(P, f0, yA, st.stuck1, st.stuck2, st.s1, st.s2)  # the mode before the switch
+    n1d0, n2d0, _, _ = _normal_rates(contact, D0, sw.mode.sides)
+    ao1, ao2 = _accel(P, f0, st.y, st.stuck1, st.stuck2, st.s1, st.s2)  # the mode before the switch
     # Second rates of the forces in that mode: fx2, fy2 depend on the accelerations only
     # through u'' = a2 - a1, linearly (eqs. 2, 8): d fx2/d u'' = pl + u^2 (k - pl)/l^2.
-    u, il, pl = geo0
     kk = u * il * il * (P.k - pl)
-    du2 = (ao2 - ao1) - (a02 - a01)
+    du2 = (ao2 - ao1) - (m0.a2 - m0.a1)
     fx2o = D0.fx2 + (pl + u * kk) * du2
     fy2o = D0.fy2 + P.d * kk * du2
     n1ddo, n2ddo = (-fy2o, fy2o) if contact != "paper" else (-st.nu1 * fy2o, st.nu2 * fy2o)
@@ -752,24 +790,85 @@ def step(
         curv = jnp.where(stuck, P.mu_s * n_dd - sg0 * fx2o, sdir * aod)
         located.append((pend, rate, curv))
     decide = (
-        (vel1, P.mu_s * f0.n1 - absF, P.mu_s * n1d0 - sg0 * D0.fx),
-        (vel2, P.mu_s * f0.n2 - absF, P.mu_s * n2d0 - sg0 * D0.fx),
+        (sw.vel1, P.mu_s * f0.n1 - absF, P.mu_s * n1d0 - sg0 * D0.fx),
+        (sw.vel2, P.mu_s * f0.n2 - absF, P.mu_s * n2d0 - sg0 * D0.fx),
     )
-    m_cross, m_near = margins(wave.omega, h, located, decide, crossed, g0s, d0s, e0s)
+    return margins(omega, h, located, decide, crossed, m0.g, m0.d, m0.e)
+
+
+def step(
+    params: Params,
+    wave: AbstractWaveform,
+    contact: Contact,
+    dt: float,
+    st: Hybrid,
+    t_stop: Array,
+    target: Target | None = None,
+    P: Consts | None = None,
+) -> tuple[Hybrid, StepInfo]:
+    """One iteration: switch what is pending, then one RK4 step, cut at the first event.
+
+    The step never passes `t_stop` (a measurement boundary or save time) and lands
+    on it exactly unless an event comes first. `target` adds the caller's event
+    (`StepInfo.target_fired`). `P` are the constants of `params` (pass them to
+    hoist them out of a loop).
+
+    Stages: the switches at the start ([`_switch`][]), the rates and event functions there
+    ([`_motion`][]), the step's length ([`_step_length`][]), one RK4 step ([`_rk4`][]), the
+    same quantities at its end, the first crossing ([`_first_crossing`][]), the margins
+    ([`_step_margins`][]), and the commit: the full step, or the dense output at the crossing.
+    """
+    P = consts(params, wave) if P is None else P
+    keep = lambda x: _keep(P, x)
+    dtype = st.t.dtype
+    t0 = st.t
+    yA = st.y
+
+    l00, dl00, ddl00 = wave.at_phase(st.cph, st.sph)
+    sw = _switch(P, contact, st, l00, keep)
+    f0, y0, mode = sw.f0, sw.y0, sw.mode
+    st1, st2, s1, s2, sides = mode
+
+    # Lift-off or the target found negative here (a crossing located after another
+    # one in the same step) count at t.
+    lifted0 = (f0.N1 < 0) | (f0.N2 < 0)
+    stop0 = lifted0 if contact == "strict" else jnp.asarray(False)
+    t_lift = st.t_liftoff
+    t_lift = jnp.where(lifted0 & ~jnp.isfinite(t_lift), t0, t_lift)  # flagged (paper) or stopping (strict)
+    if target is not None:
+        X_A = P.mhat * yA.x1 + (1 - P.mhat) * yA.x2
+        target_now = target.active & (jnp.abs(X_A - target.X0) >= target.z)
+        target = target._replace(active=target.active & ~target_now)
+    else:
+        target_now = jnp.asarray(False)
+
+    m0 = _motion(P, contact, f0, sw.geo0, y0, mode, dl00, ddl00, target, keep, pin=True)
+    L = _step_length(wave, dt, st, t_stop, m0, keep)
+    h = L.h
+    incr, y1 = _rk4(P, contact, y0, m0.r, L, mode, keep)
+    f1, geo1 = _forces(P, contact, L.end[0], y1.x1, y1.x2, sides)
+    m1 = _motion(P, contact, f1, geo1, y1, mode, L.end[1], L.end[2], target, keep, pin=False)
+    m1 = m1._replace(g=[keep(g) for g in m1.g])
+    cr = _first_crossing(h, m0, m1, keep)
+    cut, first = cr.cut, cr.first
+    target_cut = first[-1] if target is not None else jnp.asarray(False)
+    m_cross, m_near = _step_margins(P, contact, wave.omega, st, sw, m0, h, cr.crossed)
 
     # -- commit: the full step, or the quintic dense output at the crossing.
-    H1, H2, H3, H4, H5 = (keep(x) for x in _hermite_basis(theta))
+    h2 = h * h
+    H1, H2, H3, H4, H5 = (keep(x) for x in _hermite_basis(cr.theta))
     hH1, hH4, h2H2, h2H5 = h * H1, h * H4, h2 * H2, h2 * H5
-    part = incr.map(lambda i, a, b, c, d: H3 * i + hH1 * a + hH4 * b + h2H2 * c + h2H5 * d, k1, r1, j0, j1)
+    part = incr.map(lambda i, a, b, c, d: H3 * i + hH1 * a + hH4 * b + h2H2 * c + h2H5 * d, m0.r, m1.r, m0.j, m1.j)
     delta = incr.map(lambda i, p: jnp.where(cut, p, i), part)
-    tc = jnp.where(cut, t0 + theta * h, t1)
+    tc = jnp.where(cut, t0 + cr.theta * h, L.t1)
     sc, cc = sincos(wave.omega * (tc - t0))
     cph, sph = _rotate(st.cph, st.sph, cc, sc)
-    cph = jnp.where(cut, cph, ce)
-    sph = jnp.where(cut, sph, se)
+    cph = jnp.where(cut, cph, L.ce)
+    sph = jnp.where(cut, sph, L.se)
     # Renormalise the carried phase (rounding would otherwise let its radius drift).
     norm = 1.5 - 0.5 * (cph * cph + sph * sph)
     cph, sph = cph * norm, sph * norm
+    comp = sw.comp
     if comp is None:
         yc = y0.map(lambda a, b: a + b, delta)
         comp_new = None
@@ -811,13 +910,14 @@ def step(
         nu2=keepc(nu2, st.nu2),
         status=status,
         t_liftoff=t_lift.astype(dtype),
-        n_switch=n_switch,
+        n_switch=sw.n_switch,
         cross=jnp.where(commit, jnp.minimum(st.cross, m_cross), st.cross),
         near=jnp.where(commit, jnp.minimum(st.near, m_near), st.near),
         t_switch=jnp.where(commit & cut & ~target_cut, jax.lax.stop_gradient(tc), st.t_switch),
     )
     t_target = jnp.where(target_now, t0, tc)
     y_target = yc.map(lambda a, b: jnp.where(target_now, b, a), yA)
+    absF = jnp.abs(f0.fx)
     info = StepInfo(
         commit=commit,
         t0=t0,
@@ -830,12 +930,12 @@ def step(
         target_fired=target_now | (commit & target_cut),
         t_target=t_target,
         y_target=y_target,
-        zero1=vel1,
-        zero2=vel2,
+        zero1=sw.vel1,
+        zero2=sw.vel2,
         slack1=P.mu_s * f0.n1 - absF,
         slack2=P.mu_s * f0.n2 - absF,
         h=h,
-        fy=(f0.fy, D0.fy, D0.fy2, f1.fy, D1.fy, D1.fy2),
+        fy=(f0.fy, m0.D.fy, m0.D.fy2, f1.fy, m1.D.fy, m1.D.fy2),
     )
     return new, info
 

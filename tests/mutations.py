@@ -42,6 +42,7 @@ class Mutation(NamedTuple):
 
 EXACT = "locomotion_jax/_exact.py"
 CHAIN = "locomotion_jax/dynamics/_chain_exact.py"
+CHAIN_MOTION = "locomotion_jax/dynamics/_chain_motion.py"
 MEASURE = "locomotion_jax/_measure.py"
 
 MUTATIONS = [
@@ -252,15 +253,21 @@ MUTATIONS = [
     Mutation(
         "chain_paper_n_signed",
         "chain, paper reading: n = N instead of |N|",
-        CHAIN,
-        (("n = jnp.abs(N)", "n = N"), ("n = side * N", "n = N")),
+        CHAIN_MOTION,
+        (
+            ("return tuple(jnp.abs(q) for q in N)", "return N"),
+            ("return tuple(s * q for s, q in zip(side, N))", "return N"),
+        ),
         (f"{CHAIN_REF}::test_chain_liftoff_against_reference", CHAIN_REF),
     ),
     Mutation(
         "chain_paper_kink_not_located",
         "chain, paper reading: a sign change of N is not an event",
-        CHAIN,
-        (("n = side * N", "n = jnp.abs(N)"), ("gs.append(side * N)", "gs.append(jnp.abs(side * N) + 1)")),
+        CHAIN_MOTION,
+        (
+            ("return tuple(s * q for s, q in zip(side, N))", "return tuple(jnp.abs(q) for q in N)"),
+            ("g += list(n)", "g += [jnp.abs(q) + 1 for q in n]"),
+        ),
         (f"{CHAIN_REF}::test_chain_liftoff_against_reference", CHAIN_REF),
     ),
     Mutation(
@@ -277,8 +284,20 @@ MUTATIONS = [
         "chain_no_recheck",
         "chain: after a switch only the located masses switch (no re-check)",
         CHAIN,
-        (("fire = st.pend | (gA < 0)", "fire = st.pend"),),
+        (("fire = tuple(kp(pe | (g < 0)) for pe, g in zip(st.pend, gA))", "fire = tuple(kp(pe) for pe in st.pend)"),),
         (CHAIN_REF,),
+    ),
+    Mutation(
+        "chain_decision_rate_sign",
+        "chain margins: sign of F_i's rate in a stopped mass's stick-or-reverse rate",
+        CHAIN,
+        (
+            (
+                "hold_rate = motion.stick_margin_rate(P, F0, nA, D0.dF, dnA)",
+                "hold_rate = motion.stick_margin_rate(P, F0, nA, tuple(-q for q in D0.dF), dnA)",
+            ),
+        ),
+        ("tests/test_margins.py::test_chain_margins_equal_the_two_mass_engines",),
     ),
     # -- derivatives -------------------------------------------------------------------------------------
     Mutation(

@@ -193,6 +193,28 @@ def test_user_friction_law():
     assert np.abs(balance).max() < 1e-6 * float(user.e_d[-1])
 
 
+class PlainRestLength(lj.AbstractActuator):
+    """A user's actuator: the paper's rest length, with the defaults (it may apply a force, so
+    the engine carries the force terms) and its own power written on arrays."""
+
+    def split(self, lbar, s):
+        return lbar + s, 0 * s
+
+    def power(self, tension, dl0, f, v):
+        return -jnp.sum(tension * dl0, -1) + jnp.sum(f * -jnp.diff(v, axis=-1), -1)
+
+
+def test_user_actuator():
+    """Extension is one class for actuators too: a user's (the engine's general paths: force
+    terms carried, power on arrays and differentiated by the engine) equals `RestLength`."""
+    wave = lj.TravellingWave(0.06, 2.0, np.pi / 3)
+    mk = lambda act: lj.Chain(masses=[1.0, 1.2, 0.9], d=[0.5, -0.3], waveforms=wave, actuator=act)
+    user = lj.simulate(mk(PlainRestLength()), T_END, SAVE)
+    ref = lj.simulate(mk(lj.RestLength()), T_END, SAVE)
+    np.testing.assert_allclose(user.x, ref.x, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(user.w, ref.w, rtol=1e-12, atol=1e-12)
+
+
 def test_float32_runs_close_to_float64():
     chain = _kinds()["anisotropic"]
     a = lj.measure(chain, z=1.0, horizon=200.0)

@@ -65,6 +65,20 @@ def test_transversality_vanishes_where_the_result_jumps():
     assert abs(t[1] - t[0] - 2 * D * dtau[0]) > 0.05
 
 
+def test_chain_margins_equal_the_two_mass_engines():
+    # The N-mass engine computes its margins from its own loads and their rates; at N = 2
+    # on the scan above (a stick-or-reverse decision closing in) they are the two-mass
+    # engine's, and the margin closes at the same omega.
+    omega, m, _ = _scan()
+    ts = np.full(BATCH, 30.0)
+    mc = lj.measure(lj.Chain.from_params(lj.Params(omega=omega)), z=1.0, t_start=ts, horizon=300.0)
+    for field in ("transversality", "near_miss", "margin_z"):
+        np.testing.assert_allclose(getattr(mc, field)[:21], getattr(m, field)[:21], rtol=1e-8, err_msg=field)
+    slope, icpt = np.polyfit(omega[:21], np.asarray(mc.transversality)[:21], 1)
+    assert abs(-icpt / slope - W_STAR) < 3e-4
+    assert bool(mc.smooth[0]) and not bool(mc.smooth[20])
+
+
 def _tau5():
     """tau_5 at omega = 2 from the paper's t_start, around it (relative steps 1e-4 and 1e-5),
     and on both sides of where a switch crosses t_5."""

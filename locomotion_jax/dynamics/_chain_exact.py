@@ -1,20 +1,20 @@
 """Exact hybrid stick/slip dynamics of a chain of N masses (SPEC §2 and §8).
 
 The scheme of the two-mass engine (`locomotion_jax._exact`, whose docstring states
-it in full) over arrays of masses and springs: one RK4 step per iteration, cut at
-the earliest located event; a quintic Hermite dense output from the state's first
-and second time derivatives at both ends of the step; every mass re-decided at the
-start of the next iteration.
+it in full): one RK4 step per iteration, cut at the earliest located event; a
+quintic Hermite dense output from the state's first and second time derivatives at
+both ends of the step; every mass re-decided at the start of the next iteration.
 
-What generalises is written once over arrays: the loads on each mass depend only on
-positions, time and the actuation, so each mass's stick condition is decided on its
-own, and any number of masses may switch at one instant. The first and second time
-derivatives of the rates and of the event functions, which the dense output and the
-event prediction need, are forward-mode derivatives (`jax.jvp`) of those functions
-along the motion in a fixed mode, so a new friction law or actuator supplies values
-only.
+What generalises is written once per mass and per spring: the loads on each mass
+depend only on positions, time and the actuation, so each mass's stick condition is
+decided on its own, and any number of masses may switch at one instant. The first and
+second time derivatives of the rates and of the event functions, which the dense output
+and the event prediction need, are written out by the chain rule
+([`_chain_forces`][locomotion_jax.dynamics._chain_forces]); a friction law's rate is
+its own [`kinetic_rate`][locomotion_jax.AbstractFriction.kinetic_rate] (by default a
+forward-mode derivative of `kinetic`), so a new law or actuator supplies values only.
 
-**Events** (each fires when its function goes from $\\ge 0$ to $< 0$), an array:
+**Events** (each fires when its function goes from $\\ge 0$ to $< 0$), in this order:
 
 - mass $i$ slipping in direction $\\sigma_i$: $\\sigma_i v_i$;
 - mass $i$ stuck: $\\min(\\mu_{s,\\mathrm{fwd}} n_i - F_i,\\; F_i + \\mu_{s,\\mathrm{bwd}} n_i)$ (eq. 7 generalised);
@@ -24,6 +24,18 @@ only.
   crossing, from above, sets `t_liftoff`). Inside a step $n_i = \\nu_i N_i$, smooth, so that the
   step's dense output and the derivatives along the motion stay accurate;
 - optionally a caller's target $z - |X - X_0|$.
+
+**Margins** to a change of switching structure, as in the two-mass engine (`_exact.margins`):
+a located crossing's from the rate and curvature of its event quintic at the root; where a
+slipping mass stops, from its stick margin and that margin's rate, both from the loads and
+their rates that the step's start computes anyway; near misses from the event functions'
+Taylor parabolas there.
+
+**Speed.** As in the two-mass engine (its docstring, benchmarks/NOTES.md): the state is a
+flat set of scalars (tuples over masses, so that under `vmap` every kernel is a vector
+over the configurations), shared intermediates are pinned with [`keep`][], the phase
+$(\\cos\\omega t, \\sin\\omega t)$ is carried and rotated, and the earliest event is picked
+by `where` over the event list (no gather).
 """
 
 from typing import NamedTuple
@@ -36,28 +48,19 @@ from .. import _exact as two_mass
 from .._custom_types import Array, Contact
 from .._status import Status
 from ..model._chain import Chain
-
-
-class State(NamedTuple):
-    """Integrated quantities: positions `x` (N,), velocities `v` (N,), $e_d$ (eq. 15) and $w$ (eq. 16)."""
-
-    x: Array
-    v: Array
-    ed: Array
-    w: Array
-
-    def map(self, fn, *others) -> "State":
-        return State(*(fn(*xs) for xs in zip(self, *others)))
+from . import _chain_forces as forces, _chain_motion as motion
+from ._chain_forces import Consts, consts, drive, Scalars
+from ._chain_motion import energy as energy, keep, Mode, State
 
 
 class Hybrid(eqx.Module):
-    """Integrator state of one configuration (compare `_exact.Hybrid`).
+    """Integrator state of one configuration (compare `_exact.Hybrid`): a flat pytree of scalars.
 
-    `stuck`, `sdir`, `pend` are per-mass arrays: the mode, slip direction and a flag
-    for an event located at `t` (the mass is re-decided at the next iteration); `side`
-    the side ($\\pm 1$) of each normal force (paper contact: flipped where a crossing is
-    located, so that $n_i = \\nu_i N_i$ over a step). `cross`, `near`, `t_switch`: the margins
-    to a change of switching structure so far and the last switch (as in `_exact.Hybrid`).
+    `stuck`, `sdir`, `pend`, `side` have one entry per mass: the mode, slip direction, a
+    flag for an event located at `t` (the mass is re-decided at the next iteration), and the
+    side ($\\pm 1$) of its normal force (paper contact: flipped where a crossing is located,
+    so that $n_i = \\nu_i N_i$ over a step). `cross`, `near`, `t_switch`: the margins to a
+    change of switching structure so far and the time of the last switch (as in `_exact.Hybrid`).
     """
 
     t: Array
@@ -65,10 +68,10 @@ class Hybrid(eqx.Module):
     comp: State | None
     cph: Array
     sph: Array
-    stuck: Array
-    sdir: Array
-    pend: Array
-    side: Array
+    stuck: Scalars
+    sdir: Scalars
+    pend: Scalars
+    side: Scalars
     status: Array
     t_liftoff: Array
     n_switch: Array
@@ -83,169 +86,63 @@ class StepInfo(NamedTuple):
     commit: Array
     t0: Array
     y0: State
-    tension0: Array
+    tension0: Scalars
     t1: Array
     y1: State
-    stuck: Array
+    stuck: Scalars
     target_fired: Array
     t_target: Array
     y_target: State
 
 
-class Drive(NamedTuple):
-    """Actuation at one instant: rest lengths and internal forces with their first two rates."""
-
-    l0: Array
-    dl0: Array
-    ddl0: Array
-    f: Array
-    df: Array
-    ddf: Array
-
-
-def drive(C: Chain, cph: Array, sph: Array) -> Drive:
-    """The springs' rest lengths and internal forces at phase $(\\cos\\omega t, \\sin\\omega t)$."""
-    s, ds, dds = C.waves.at_phase(cph, sph)
-    split = C.actuator.split
-    zero = jnp.zeros_like(C.lbar)
-    (l0, f), (dl0, df), (ddl0, ddf) = split(C.lbar, s), split(zero, ds), split(zero, dds)
-    return Drive(l0, dl0, ddl0, f, df, ddf)
-
-
-def _diff(a: Array) -> Array:
-    """$a_i - a_{i-1}$ over masses for a per-spring array (missing springs count zero)."""
-    zero = jnp.zeros_like(a[:1])
-    return jnp.concatenate([a, zero]) - jnp.concatenate([zero, a])
-
-
-def loads(
-    C: Chain, contact: Contact, l0: Array, f: Array, x: Array, side: Array | None = None
-) -> tuple[Array, Array, Array, Array]:
-    """Tensions $T_j$, horizontal loads $F_i$, signed normal forces $N_i$ and the normal forces
-    $n_i$ entering friction, SPEC §8: $N_i$ (strict) or $|N_i|$ (paper); with `side`
-    $\\nu_i$ (paper, inside a step) $\\nu_i N_i$, which is $|N_i|$ on the side the step started on,
-    continued smoothly past a crossing (where the step is cut)."""
-    u = x[1:] - x[:-1]
-    length = jnp.sqrt(u * u + C.d * C.d)
-    tension = C.k * (length - l0)
-    per_len = tension / length
-    F = _diff(per_len * u + f)
-    N = C.m - _diff(per_len * C.d)
-    if contact != "paper":
-        n = N
-    elif side is None:
-        n = jnp.abs(N)
-    else:
-        n = side * N
-    return tension, F, N, n
-
-
-def _accel(C: Chain, contact, stuck, sdir, side, l0, f, x, v) -> Array:
-    """Accelerations in a fixed mode: $m_i \\dot v_i = F_i - c_i v_i - \\sigma_i \\mu_k n_i$; zero when stuck."""
-    _, F, _, n = loads(C, contact, l0, f, x, side)
-    mu = C.friction.kinetic(sdir * v, sdir)
-    return jnp.where(stuck, 0, (F - C.c * v - sdir * mu * n) / C.m)
-
-
-def _rates(C: Chain, contact, stuck, sdir, side, l0, dl0, f, x, v) -> State:
-    """Rates of every state entry: $\\dot x_i$, $\\dot v_i$, and the integrands of $e_d$ and $w$."""
-    tension, F, _, n = loads(C, contact, l0, f, x, side)
-    speed = sdir * v  # |v_i| in a slip segment; 0 when stuck
-    mu = C.friction.kinetic(speed, sdir)
-    a = jnp.where(stuck, 0, (F - C.c * v - sdir * mu * n) / C.m)
-    xd = jnp.where(stuck, 0, v)
-    ed = (mu * n * speed + C.c * v * v).sum()
-    return State(xd, a, ed, C.actuator.power(tension, dl0, f, v))
-
-
-def mass_events(C: Chain, stuck: Array, sdir: Array, F: Array, n: Array, v: Array) -> Array:
-    """The per-mass event functions (module docstring)."""
-    mu_f, mu_b = C.friction.static_limits()
-    return jnp.where(stuck, jnp.minimum(mu_f * n - F, F + mu_b * n), sdir * v)
-
-
-def _events(C: Chain, contact, stuck, sdir, side, target, l0, f, x, v) -> Array:
-    """Event values: per mass, then lift-off (strict: one) or the normal forces' crossings
-    (paper: one per mass), then the target (module docstring)."""
-    _, F, N, n = loads(C, contact, l0, f, x, side)
-    gs = [mass_events(C, stuck, sdir, F, n, v)]
-    if contact == "strict":
-        gs.append(N.min()[None])
-    else:
-        gs.append(side * N)
-    if target is not None:
-        rel = (C.m * x).sum() / C.m.sum() - target.X0
-        gs.append(jnp.where(target.active, target.z - jnp.abs(rel), jnp.inf)[None])
-    return jnp.concatenate(gs)
-
-
-def _with_derivatives(C, contact, stuck, sdir, side, target, dr: Drive, y: State):
-    """Rates and event values with their first and second time derivatives along the motion.
-
-    Returns `(r, j, g, dg, ddg)`: the state's rate $\\dot y$ and second derivative $\\ddot y$, and
-    the events' values and first two derivatives, by nested `jax.jvp` in a fixed mode.
-    """
-
-    def both(l0, dl0, f, x, v):
-        rates = _rates(C, contact, stuck, sdir, side, l0, dl0, f, x, v)
-        return rates, _events(C, contact, stuck, sdir, side, target, l0, f, x, v)
-
-    def first(l0, dl0, f, df, x, v):
-        a = _accel(C, contact, stuck, sdir, side, l0, f, x, v)
-        xd = jnp.where(stuck, 0, v)
-        return jax.jvp(both, (l0, dl0, f, x, v), (dl0, dr.ddl0, df, xd, a))
-
-    args = (dr.l0, dr.dl0, dr.f, dr.df, y.x, y.v)
-    a = _accel(C, contact, stuck, sdir, side, dr.l0, dr.f, y.x, y.v)
-    xd = jnp.where(stuck, 0, y.v)
-    # The outer jvp differentiates `first` along the motion once more; only the events'
-    # second derivative is taken from it (the rates' would need the third rate of l0).
-    ((r, g), (rd, gd)), (_, (_, gdd)) = jax.jvp(first, args, (dr.dl0, dr.ddl0, dr.df, dr.ddf, xd, a))
-    return r, rd, g, gd, gdd
-
-
-def energy(C: Chain, y: State, tension: Array) -> Array:
-    """$e = \\sum_i m_i v_i^2/2 + \\sum_j T_j^2/(2 k_j)$ (eq. 10 generalised)."""
-    return 0.5 * ((C.m * y.v * y.v).sum() + (tension * tension / C.k).sum())
-
-
-def init(C: Chain, contact: Contact, x: Array) -> Hybrid:
-    """State at $t = 0$, at rest at positions `x`; each mass sticks if its stick condition holds."""
+def init(C: Chain, contact: Contact, x: Array, P: Consts | None = None) -> Hybrid:
+    """State at $t = 0$, at rest at positions `x` (shape `(N,)`); each mass sticks if its stick condition holds."""
+    P = consts(C) if P is None else P
     dtype = x.dtype
     zero = jnp.zeros((), dtype)
+    xs = forces.unstack(x)
     cph, sph = jnp.ones((), dtype), zero
-    dr = drive(C, cph, sph)
-    _, F, N, n = loads(C, contact, dr.l0, dr.f, x)
-    mu_f, mu_b = C.friction.static_limits()
-    stuck = (F <= mu_f * n) & (F >= -mu_b * n)
-    sdir = jnp.where(F >= 0, 1.0, -1.0).astype(dtype)
-    lifted = jnp.any(N <= 0)
+    dr = drive(P, cph, sph)
+    sp = forces.springs(P, dr.l0, xs)
+    F, N = forces.loads(P, sp.fx, sp.fy, dr.f)
+    n = motion.normal(contact, N)
+    stuck = tuple(p >= 0 for p in motion.stick_margin(P, F, n))
+    sdir = tuple(jnp.where(f >= 0, 1.0, -1.0).astype(dtype) for f in F)
+    lifted = jnp.any(jnp.stack([q <= 0 for q in N]))
     status = jnp.where(lifted & (contact == "strict"), Status.LIFTOFF, Status.OK).astype(jnp.int32)
     f32 = jnp.finfo(dtype).bits < 64
-    y = State(x, jnp.zeros_like(x), zero, zero)
+    y = State(xs, tuple(jnp.zeros_like(a) for a in xs), zero, zero)
     return Hybrid(
         t=zero, y=y, comp=y.map(jnp.zeros_like) if f32 else None, cph=cph, sph=sph, stuck=stuck, sdir=sdir,
-        pend=jnp.zeros_like(stuck), side=jnp.where(N > 0, 1.0, -1.0).astype(dtype), status=status,
-        t_liftoff=jnp.where(lifted, zero, jnp.inf).astype(dtype), n_switch=jnp.zeros((), jnp.int32),
+        pend=tuple(jnp.zeros_like(s) for s in stuck), side=tuple(jnp.where(q > 0, 1.0, -1.0).astype(dtype) for q in N),
+        status=status, t_liftoff=jnp.where(lifted, zero, jnp.inf).astype(dtype), n_switch=jnp.zeros((), jnp.int32),
         cross=jnp.asarray(jnp.inf, dtype), near=jnp.asarray(jnp.inf, dtype), t_switch=jnp.asarray(-jnp.inf, dtype),
     )  # fmt: skip
 
 
-def probe(C: Chain, contact: Contact, t: Array, y: State, target: two_mass.Target) -> tuple[Array, Array, Array]:
+def probe(
+    C: Chain | None, contact: Contact, t: Array, y: State, target: two_mass.Target, P: Consts | None = None
+) -> tuple[list, list, list]:
     """The event functions with their first and second time derivatives at time `t` and
     state `y`, in the mode the state implies (a mass at rest sticks where its static limits
-    hold; compare `_exact.probe`). For margins at a measured instant; not for the hot loop."""
-    omega = C.waves.omega
-    dr = drive(C, jnp.cos(omega * t), jnp.sin(omega * t))
-    _, F, N, n = loads(C, contact, dr.l0, dr.f, y.x)
-    mu_f, mu_b = C.friction.static_limits()
-    stuck = (F <= mu_f * n) & (F >= -mu_b * n) & (y.v == 0)
-    one = jnp.ones_like(y.v)
-    sdir = jnp.where(y.v > 0, one, jnp.where(y.v < 0, -one, jnp.where(F >= 0, one, -one)))
-    side = jnp.where(N > 0, one, -one)
-    y = y._replace(v=jnp.where(stuck, 0, y.v))
-    _, _, g, d, e = _with_derivatives(C, contact, stuck, sdir, side, target, dr, y)
-    return g, d, e
+    hold; compare `_exact.probe`): lists in the order of the module docstring (target last).
+    For margins at a measured instant; not for the hot loop. `P` as in [`step`][]."""
+    if P is None:
+        if C is None:
+            raise TypeError("probe needs the chain C or its constants P.")
+        P = consts(C)
+    dtype = t.dtype
+    dr = drive(P, jnp.cos(P.omega * t), jnp.sin(P.omega * t))
+    sp = forces.springs(P, dr.l0, y.x)
+    F, N = forces.loads(P, sp.fx, sp.fy, dr.f)
+    n = motion.normal(contact, N)
+    stuck = tuple((p >= 0) & (v == 0) for p, v in zip(motion.stick_margin(P, F, n), y.v))
+    one = jnp.ones((), dtype)
+    sdir = tuple(jnp.where(v > 0, one, jnp.where(v < 0, -one, jnp.where(f >= 0, one, -one))) for v, f in zip(y.v, F))
+    side = tuple(jnp.where(q > 0, one, -one) for q in N)
+    v = tuple(jnp.where(s, 0, vi) for s, vi in zip(stuck, y.v))
+    D = motion.derivatives(P, contact, Mode(stuck, sdir, side), target, dr, sp, F, N, y.x, v)
+    return D.g, D.dg, D.ddg
 
 
 def initial_positions(C: Chain, start: str) -> Array:
@@ -254,117 +151,161 @@ def initial_positions(C: Chain, start: str) -> Array:
     if start == "paper":
         gaps = C.lbar
     elif start == "relaxed":
-        l0 = drive(C, jnp.ones_like(C.waves.omega), jnp.zeros_like(C.waves.omega)).l0
+        P = consts(C)
+        l0 = jnp.stack(drive(P, jnp.ones_like(P.omega), jnp.zeros_like(P.omega)).l0, -1)
         gaps = jnp.sqrt(jnp.maximum(l0 * l0 - C.d * C.d, 0))
     else:
         raise ValueError(f"start must be 'paper' (eq. 14) or 'relaxed', got {start!r}.")
-    return jnp.concatenate([jnp.zeros_like(gaps[:1]), jnp.cumsum(gaps)])
+    return jnp.concatenate([jnp.zeros_like(gaps[..., :1]), jnp.cumsum(gaps, -1)], -1)
+
+
+def _any(flags) -> Array:
+    out = flags[0]
+    for f in flags[1:]:
+        out = out | f
+    return out
 
 
 def step(
-    C: Chain, contact: Contact, dt: float, st: Hybrid, t_stop: Array, target: two_mass.Target | None = None
+    C: Chain | None,
+    contact: Contact,
+    dt: float,
+    st: Hybrid,
+    t_stop: Array,
+    target: two_mass.Target | None = None,
+    P: Consts | None = None,
 ) -> tuple[Hybrid, StepInfo]:
-    """One iteration: re-decide the masses, one RK4 step, cut at the first event (see `_exact.step`)."""
+    """One iteration: re-decide the masses, one RK4 step, cut at the first event (see `_exact.step`).
+
+    `P` are the constants of `C` ([`_chain_forces.consts`][locomotion_jax.dynamics._chain_forces.consts];
+    pass them to compute them once per run rather than per iteration)."""
+    if P is None:
+        if C is None:
+            raise TypeError("step needs the chain C or its constants P.")
+        P = consts(C)
+    kp = lambda x: keep(P, x)
     dtype = st.t.dtype
     t0, yA = st.t, st.y
-    n_mass = C.m.shape[-1]
+    n_mass = len(P.m)
+    zero = jnp.zeros_like(t0)
 
-    # -- start: every mass whose event was located here (pend) or whose event function is
+    # -- switch: every mass whose event was located here (pend) or whose event function is
     # negative switches: a stuck one slips in the direction of F_i; a slipping one (v_i = 0)
     # sticks if the static limits hold, else it slips the other way.
-    dr0 = drive(C, st.cph, st.sph)
-    tension0, F0, N0, n0 = loads(C, contact, dr0.l0, dr0.f, yA.x)
-    gA = mass_events(C, st.stuck, st.sdir, F0, n0, yA.v)
-    fire = st.pend | (gA < 0)
-    mu_f, mu_b = C.friction.static_limits()
-    holds = (F0 <= mu_f * n0) & (F0 >= -mu_b * n0)
-    vel = fire & ~st.stuck
-    stuck = jnp.where(fire, vel & holds, st.stuck)
-    sdir = jnp.where(fire, jnp.where(F0 >= 0, 1.0, -1.0).astype(dtype), st.sdir)
-    y0 = yA._replace(v=jnp.where(vel, 0, yA.v))
+    dr0 = motion.kept(P, drive(P, st.cph, st.sph))
+    sp0 = forces.springs(P, dr0.l0, yA.x)
+    sp0 = sp0._replace(fx=tuple(map(kp, sp0.fx)), fy=tuple(map(kp, sp0.fy)), tension=tuple(map(kp, sp0.tension)))
+    F0, N0 = forces.loads(P, sp0.fx, sp0.fy, dr0.f)
+    nA = motion.normal(contact, N0)
+    margin = motion.stick_margin(P, F0, nA)
+    gA = [jnp.where(s, p, sd * v) for s, p, sd, v in zip(st.stuck, margin, st.sdir, yA.v)]
+    fire = tuple(kp(pe | (g < 0)) for pe, g in zip(st.pend, gA))
+    holds = [p >= 0 for p in margin]  # -mu_b n <= F <= mu_f n
+    vel = tuple(f & ~s for f, s in zip(fire, st.stuck))
+    stuck = tuple(jnp.where(f, ve & ho, s) for f, ve, ho, s in zip(fire, vel, holds, st.stuck))
+    sdir = tuple(jnp.where(fi, jnp.where(f >= 0, 1.0, -1.0).astype(dtype), s) for fi, f, s in zip(fire, F0, st.sdir))
+    y0 = yA._replace(v=tuple(jnp.where(ve, zero, v) for ve, v in zip(vel, yA.v)))
     comp = st.comp
-    if comp is not None:
-        comp = comp._replace(v=jnp.where(vel, 0, comp.v))
-    n_switch = st.n_switch + jnp.any(fire).astype(jnp.int32)
+    if comp is not None:  # a switch sets velocities exactly (to 0): drop their compensation
+        comp = comp._replace(v=tuple(jnp.where(ve, zero, v) for ve, v in zip(vel, comp.v)))
+    n_switch = st.n_switch + _any(fire).astype(jnp.int32)
 
-    lifted0 = jnp.any(N0 < 0)
+    lifted0 = _any([q < 0 for q in N0])
     stop0 = lifted0 if contact == "strict" else jnp.asarray(False)
     t_lift = jnp.where(lifted0 & ~jnp.isfinite(st.t_liftoff), t0, st.t_liftoff)
     if target is not None:
-        X_A = (C.m * yA.x).sum() / C.m.sum()
+        X_A = forces.centre_of_mass(P, yA.x)
         target_now = target.active & (jnp.abs(X_A - target.X0) >= target.z)
         target = target._replace(active=target.active & ~target_now)
     else:
         target_now = jnp.asarray(False)
 
-    side = st.side
-    k1, j0, g0, d0, e0 = _with_derivatives(C, contact, stuck, sdir, side, target, dr0, y0)
+    # -- derivatives at the start, in the (new) mode.
+    mode = Mode(stuck, sdir, st.side)
+    D0 = motion.derivatives(P, contact, mode, target, dr0, sp0, F0, N0, y0.x, y0.v)
 
     # -- step length: dt, or less to land on t_stop or just past the earliest predicted event.
     span = t_stop - t0
     h_nom = jnp.minimum(jnp.asarray(dt, dtype), span)
-    s_pred = two_mass._predict(g0, d0, e0).min()
+    s_pred = jnp.asarray(jnp.inf, dtype)
+    for g, d, e in zip(D0.g, D0.dg, D0.ddg):
+        s_pred = jnp.minimum(s_pred, two_mass._predict(g, d, e))
     h_pred = jnp.maximum(two_mass.PREDICT_MARGIN * s_pred, 64 * jnp.finfo(dtype).eps * jnp.maximum(jnp.abs(t0), 1))
     short = h_pred < h_nom
     lands = (span <= dt) & ~short
     t1 = jnp.where(lands, t_stop, t0 + jnp.where(short, h_pred, h_nom))
-    h = t1 - t0
-    omega = C.waves.omega
-    sa, ca = two_mass.sincos(omega * (0.5 * h))
+    h = kp(t1 - t0)
+    sa, ca = (kp(q) for q in two_mass.sincos(P.omega * (0.5 * h)))
     cm, sm = two_mass._rotate(st.cph, st.sph, ca, sa)
-    ce, se = two_mass._rotate(cm, sm, ca, sa)
-    drm, dre = drive(C, cm, sm), drive(C, ce, se)
+    ce, se = (kp(q) for q in two_mass._rotate(cm, sm, ca, sa))
+    drm, dre = motion.kept(P, drive(P, cm, sm)), motion.kept(P, drive(P, ce, se))
 
-    # -- one RK4 step of length h.
+    # -- RK4: one step of length h.
     def stage(dr, y):
-        return _rates(C, contact, stuck, sdir, side, dr.l0, dr.dl0, dr.f, y.x, y.v)
+        return motion.rates(P, contact, mode, dr, y.x, y.v)
 
+    k1 = D0.rate
     k2 = stage(drm, y0.map(lambda a, b: a + (0.5 * h) * b, k1))
     k3 = stage(drm, y0.map(lambda a, b: a + (0.5 * h) * b, k2))
     k4 = stage(dre, y0.map(lambda a, b: a + h * b, k3))
+    # The increment and (below) the Hermite basis are not kept: recomputing them where used
+    # costs fewer kernels than it adds flops (benchmarks/NOTES.md).
     incr = k1.map(lambda a, b, c, d: (h / 6) * (a + 2 * (b + c) + d), k2, k3, k4)
-    y1 = y0.map(lambda a, b: a + b, incr)
-    r1, j1, g1, d1, e1 = _with_derivatives(C, contact, stuck, sdir, side, target, dre, y1)
+    y1 = y0.map(lambda a, b: kp(a + b), incr)
+    sp1 = forces.springs(P, dre.l0, y1.x)
+    F1, N1 = forces.loads(P, sp1.fx, sp1.fy, dre.f)
+    D1 = motion.derivatives(P, contact, mode, target, dre, sp1, F1, N1, y1.x, y1.v)
 
-    # -- events: the earliest crossing by the secant of each crossed function.
-    crossed = g1 < 0
-    cut = jnp.any(crossed)
-    a0 = jnp.where(g0 == 0, h * d0, g0)  # deflated when starting on the surface
-    den = a0 - g1
-    theta_sec = jnp.where(crossed, a0 / jnp.where(den > 0, den, 1), jnp.inf)
-    th_min = theta_sec.min()
-    first = crossed & (theta_sec <= th_min)
-    i = jnp.argmin(theta_sec)
+    # -- first crossing: the earliest by the secant of each crossed function, located on its quintic.
+    g0s, d0s, e0s, d1s, e1s = D0.g, D0.dg, D0.ddg, D1.dg, D1.ddg
+    g1s = [kp(g) for g in D1.g]
     h2 = h * h
-    coef = two_mass._quintic(jnp.maximum(g0[i], 0), h * d0[i], h2 * e0[i], jnp.minimum(g1[i], 0), h * d1[i], h2 * e1[i])
-    theta = jnp.where(cut, two_mass._root(coef, jnp.minimum(g1[i], 0)), 1)
+    crossed = [g < 0 for g in g1s]
+    cut = _any(crossed)
+    inf = jnp.asarray(jnp.inf, dtype)
+    thl = []
+    for c, g0, d0, g1 in zip(crossed, g0s, d0s, g1s):
+        a0 = jnp.where(g0 == 0, h * d0, g0)  # deflated when starting on the surface
+        den = a0 - g1
+        thl.append(jnp.where(c, a0 / jnp.where(den > 0, den, 1), inf))
+    th_min = thl[0]
+    for q in thl[1:]:
+        th_min = jnp.minimum(th_min, q)
+    first = [kp(c & (q <= th_min)) for c, q in zip(crossed, thl)]
+    pick = [g0s[-1], d0s[-1], e0s[-1], g1s[-1], d1s[-1], e1s[-1]]  # the lowest index among the first
+    for i in reversed(range(len(g1s) - 1)):
+        vals = (g0s[i], d0s[i], e0s[i], g1s[i], d1s[i], e1s[i])
+        pick = [jnp.where(first[i], v, p) for v, p in zip(vals, pick)]
+    cg0, cd0, ce0, cg1, cd1, ce1 = pick
+    coef = two_mass._quintic(jnp.maximum(cg0, 0), h * cd0, h2 * ce0, jnp.minimum(cg1, 0), h * cd1, h2 * ce1)
+    theta = kp(jnp.where(cut, two_mass._root(coef, jnp.minimum(cg1, 0)), 1))
 
     # -- margins to a change of switching structure (`_exact.margins`); they feed nothing back.
-    # A slipping mass that stopped sticks where s = min(mu_f n - F, F + mu_b n) >= 0.
-    def limits(l0, f, x):
-        _, F, _, n = loads(C, contact, l0, f, x)
-        return jnp.minimum(mu_f * n - F, F + mu_b * n)
-
-    hold, hold_rate = jax.jvp(limits, (dr0.l0, dr0.f, y0.x), (dr0.dl0, dr0.df, jnp.where(stuck, 0, y0.v)))
+    # A slipping mass that stopped (vel) sticks where its stick margin is >= 0 (`margin`, from
+    # n_i = |N_i|); the margin's rate along the motion in the new mode from the loads' rates
+    # that the start's derivatives computed anyway.
+    dnA = motion.normal_rate(contact, N0, D0.dN)
+    hold_rate = motion.stick_margin_rate(P, F0, nA, D0.dF, dnA)
     target_cut = first[-1] if target is not None else jnp.asarray(False)
-    decide = [(vel[i], hold[i], hold_rate[i]) for i in range(n_mass)]
+    decide = list(zip(vel, margin, hold_rate))
     # The located crossing's rate and curvature from the event quintic at its root:
-    # p'(theta)/h and p''(theta)/h^2.
-    c = jax.lax.stop_gradient(coef)
+    # p'(theta) = h g' and p''(theta) = h^2 g'' (their ratio is what counts).
+    c = [jax.lax.stop_gradient(q) for q in coef]
     th = jax.lax.stop_gradient(theta)
     p1 = c[1] + th * (2 * c[2] + th * (3 * c[3] + th * (4 * c[4] + th * 5 * c[5])))
     p2 = 2 * c[2] + th * (6 * c[3] + th * (12 * c[4] + th * 20 * c[5]))
     located = [(cut & ~target_cut, h * p1, p2)]
-    m_cross, m_near = two_mass.margins(omega, h, located, decide, list(crossed), list(g0), list(d0), list(e0))
+    m_cross, m_near = two_mass.margins(P.omega, h, located, decide, crossed, g0s, d0s, e0s)
 
     # -- commit: the full step, or the quintic dense output at the crossing.
     H1, H2, H3, H4, H5 = two_mass._hermite_basis(theta)
+    hH1, hH4, h2H2, h2H5 = h * H1, h * H4, h2 * H2, h2 * H5
     part = incr.map(
-        lambda inc, a, b, c, d: H3 * inc + h * H1 * a + h * H4 * b + h2 * H2 * c + h2 * H5 * d, k1, r1, j0, j1
+        lambda i, a, b, c, d: H3 * i + hH1 * a + hH4 * b + h2H2 * c + h2H5 * d, k1, D1.rate, D0.second, D1.second
     )
-    delta = incr.map(lambda inc, p: jnp.where(cut, p, inc), part)
+    delta = incr.map(lambda i, p: jnp.where(cut, p, i), part)
     tc = jnp.where(cut, t0 + theta * h, t1)
-    sc, cc = two_mass.sincos(omega * (tc - t0))
+    sc, cc = two_mass.sincos(P.omega * (tc - t0))
     cph, sph = two_mass._rotate(st.cph, st.sph, cc, sc)
     cph, sph = jnp.where(cut, cph, ce), jnp.where(cut, sph, se)
     norm = 1.5 - 0.5 * (cph * cph + sph * sph)  # keeps the carried phase on the unit circle
@@ -380,29 +321,31 @@ def step(
     # A normal force's crossing: the first one is a lift-off (from above: no earlier one),
     # which stops the run under the strict reading; under the paper's the crossing force
     # changes side.
+    side = st.side
     if contact == "strict":
         lift_cut = first[n_mass]
         lift = stop0 | lift_cut
     else:
         flip = first[n_mass : 2 * n_mass]
-        lift_cut = jnp.any(flip)
+        lift_cut = _any(flip)
         lift = stop0
-        side = jnp.where(flip, -side, side)
+        side = tuple(jnp.where(f, -s, s) for f, s in zip(flip, side))
     t_lift = jnp.where(lift_cut & ~jnp.isfinite(t_lift), tc, t_lift)
     commit = ~stop0
     status = jnp.where(lift, Status.LIFTOFF, st.status).astype(jnp.int32)
 
-    keep = lambda new, old: jnp.where(commit, new, old)
+    keepc = lambda new, old: jnp.where(commit, new, old)
     new = Hybrid(
-        t=keep(tc, t0), y=yc.map(keep, yA), comp=None if comp_new is None else comp_new.map(keep, st.comp),
-        cph=keep(cph, st.cph), sph=keep(sph, st.sph), stuck=keep(stuck, st.stuck), sdir=keep(sdir, st.sdir),
-        pend=commit & first[:n_mass], side=keep(side, st.side), status=status, t_liftoff=t_lift.astype(dtype),
-        n_switch=n_switch, cross=jnp.where(commit, jnp.minimum(st.cross, m_cross), st.cross),
+        t=keepc(tc, t0), y=yc.map(keepc, yA), comp=None if comp_new is None else comp_new.map(keepc, st.comp),
+        cph=keepc(cph, st.cph), sph=keepc(sph, st.sph), stuck=tuple(map(keepc, stuck, st.stuck)),
+        sdir=tuple(map(keepc, sdir, st.sdir)), pend=tuple(commit & f for f in first[:n_mass]),
+        side=tuple(map(keepc, side, st.side)), status=status, t_liftoff=t_lift.astype(dtype), n_switch=n_switch,
+        cross=jnp.where(commit, jnp.minimum(st.cross, m_cross), st.cross),
         near=jnp.where(commit, jnp.minimum(st.near, m_near), st.near),
         t_switch=jnp.where(commit & cut & ~target_cut, jax.lax.stop_gradient(tc), st.t_switch),
     )  # fmt: skip
     info = StepInfo(
-        commit=commit, t0=t0, y0=y0, tension0=tension0, t1=tc, y1=yc, stuck=stuck,
+        commit=commit, t0=t0, y0=y0, tension0=sp0.tension, t1=tc, y1=yc, stuck=stuck,
         target_fired=target_now | (commit & target_cut), t_target=jnp.where(target_now, t0, tc),
         y_target=yc.map(lambda a, b: jnp.where(target_now, b, a), yA),
     )  # fmt: skip

@@ -1,7 +1,7 @@
 """Smoothed dynamics of a chain of N masses (SPEC §3 and §8), integrated with diffrax.
 
-The chain's loads (`_chain_exact.loads`: tensions, horizontal loads $F_i$, normal
-forces) with each mass's friction replaced by the smooth law of its friction class,
+The chain's loads ([`_chain_forces`][locomotion_jax.dynamics._chain_forces]: tensions,
+horizontal loads $F_i$, normal forces) with each mass's friction replaced by the smooth law of its friction class,
 [`AbstractFriction.smoothed`][locomotion_jax.AbstractFriction.smoothed] with the
 static bump width $v_s = \\sqrt{\\varepsilon}$ of [`Smoothed`][locomotion_jax.Smoothed]:
 
@@ -30,31 +30,38 @@ from .._dynamics import Smoothed
 from .._smooth import MIN_STICK, STICK_SPEED, WINDOW_SAMPLES
 from .._status import Regime, Status
 from ..model._chain import Chain
-from . import _chain_exact as exact
+from . import _chain_exact as exact, _chain_forces as forces, _chain_motion as motion
 
 
-def _drive(C: Chain, t: ArrayLike) -> exact.Drive:
-    omega = C.waves.omega
-    return exact.drive(C, jnp.cos(omega * t), jnp.sin(omega * t))
+def _loads(C: Chain, contact: Contact, t: ArrayLike, x: Array):
+    """The actuation, springs, horizontal loads $F_i$, signed normal forces $N_i$ and the normal
+    forces $n_i$ entering friction at time `t` and positions `x` (arrays over masses and springs)."""
+    P = forces.consts(C)
+    dr = forces.drive(P, jnp.cos(P.omega * t), jnp.sin(P.omega * t))
+    sp = forces.springs(P, dr.l0, forces.unstack(x))
+    F, N = forces.loads(P, sp.fx, sp.fy, dr.f)
+    n = _stack(motion.normal(contact, N))
+    return P, dr, sp, _stack(F), _stack(N), n
+
+
+def _stack(a) -> Array:
+    return jnp.stack(a, -1)
 
 
 def rates(C: Chain, contact: Contact, eps: Array, t: ArrayLike, y: Array) -> Array:
     """Right-hand side on the flat state $y = (x_1..x_N, v_1..v_N, e_d, w)$."""
     n_mass = C.m.shape[-1]
     x, v = y[:n_mass], y[n_mass : 2 * n_mass]
-    dr = _drive(C, t)
-    tension, F, _, n = exact.loads(C, contact, dr.l0, dr.f, x)
+    P, dr, sp, F, _, n = _loads(C, contact, t, x)
     friction = n * C.friction.smoothed(v, eps, jnp.sqrt(eps))
     a = (F - C.c * v - friction) / C.m
     p_d = (friction * v + C.c * v * v).sum()
-    p_w = C.actuator.power(tension, dr.dl0, dr.f, v)
+    p_w = forces.power(P, sp.tension, dr.dl0, dr.f, forces.unstack(v))
     return jnp.concatenate([v, a, p_d[None], jnp.asarray(p_w)[None]])
 
 
 def _normal_min(C: Chain, contact: Contact, t: Array, y: Array) -> Array:
-    dr = _drive(C, t)
-    _, _, N, _ = exact.loads(C, contact, dr.l0, dr.f, y[: C.m.shape[-1]])
-    return N.min()
+    return _loads(C, contact, t, y[: C.m.shape[-1]])[4].min()
 
 
 def solve(C: Chain, contact: Contact, dyn: Smoothed, t0, t1, y0, saveat, extra_events=()) -> diffrax.Solution:
@@ -97,10 +104,8 @@ def _com(C: Chain, x: Array) -> Array:
 
 def _energy(C: Chain, contact: Contact, t: Array, y: Array) -> Array:
     n_mass = C.m.shape[-1]
-    x, v = y[:n_mass], y[n_mass : 2 * n_mass]
-    dr = _drive(C, t)
-    tension, _, _, _ = exact.loads(C, contact, dr.l0, dr.f, x)
-    return exact.energy(C, exact.State(x, v, t, t), tension)
+    P, _, sp, _, _, _ = _loads(C, contact, t, y[:n_mass])
+    return forces.energy(P, forces.unstack(y[n_mass : 2 * n_mass]), sp.tension)
 
 
 def _longest_run(flags: Array) -> Array:
@@ -132,9 +137,8 @@ def simulate_one(C: Chain, valid: Array, save: Array, contact: Contact, start: s
     x, v = ys[:, :n_mass], ys[:, n_mass : 2 * n_mass]
 
     def derived(t, y):
-        dr = _drive(C, t)
-        tension, _, N, _ = exact.loads(C, contact, dr.l0, dr.f, y[:n_mass])
-        return dict(e=_energy(C, contact, t, y), N=N, l0=dr.l0, tension=tension)
+        _, dr, sp, _, N, _ = _loads(C, contact, t, y[:n_mass])
+        return dict(e=_energy(C, contact, t, y), N=N, l0=_stack(dr.l0), tension=_stack(sp.tension))
 
     der = jax.vmap(derived)(save, ys)
     if contact == "paper":

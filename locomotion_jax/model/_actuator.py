@@ -7,6 +7,7 @@ the work $w$ of eq. (16) generalised.
 """
 
 import abc
+from typing import ClassVar
 
 import equinox as eqx
 
@@ -14,13 +15,23 @@ from .._custom_types import Array
 
 
 class AbstractActuator(eqx.Module):
-    """Base class of actuators (abstract/final pattern)."""
+    """Base class of actuators (abstract/final pattern).
+
+    `varies_rest_length` and `applies_force` say whether
+    [`split`][locomotion_jax.AbstractActuator.split] moves the rest length and applies a
+    force at all; where one is `False`, the exact engine takes the rest length
+    $\\bar\\ell_j$ (or no force) and spends nothing on its rates.
+    """
+
+    varies_rest_length: ClassVar[bool] = True
+    applies_force: ClassVar[bool] = True
 
     @abc.abstractmethod
     def split(self, lbar: Array, s: Array) -> tuple[Array, Array]:
         """Rest lengths $\\ell_{0,j}$ and internal forces $f_j$ for signal values `s`.
 
-        Linear in `(lbar, s)`: the rates follow from `split(0, ds)`.
+        Linear in `(lbar, s)`: the rates follow from `split(0, ds)`. Elementwise over
+        springs: the engine calls it one spring at a time.
         """
 
     def power(self, tension: Array, dl0: Array, f: Array, v: Array) -> Array:
@@ -30,6 +41,8 @@ class AbstractActuator(eqx.Module):
 
 class RestLength(AbstractActuator):
     """The paper's actuator (eq. 13): a prescribed rest length $\\ell_{0,j}(t) = \\bar\\ell_j + s_j(t)$."""
+
+    applies_force: ClassVar[bool] = False
 
     def split(self, lbar: Array, s: Array) -> tuple[Array, Array]:
         return lbar + s, 0 * s
@@ -42,6 +55,8 @@ class InternalForce(AbstractActuator):
     together); the spring keeps its rest length $\\bar\\ell_j$. Models inchworm and
     capsule robots driven by an internal motor.
     """
+
+    varies_rest_length: ClassVar[bool] = False
 
     def split(self, lbar: Array, s: Array) -> tuple[Array, Array]:
         return lbar + 0 * s, s

@@ -4,13 +4,15 @@ A law supplies what the exact engine needs: the static limits that hold a stuck
 mass and the kinetic coefficient of a slipping one; the smoothed dynamics and the
 energy balance are built from the same two methods (`AbstractFriction.smoothed`). Coefficients are per-mass
 arrays (trailing axis of length N, or broadcastable to it); any leading axes are
-batch axes.
+batch axes. The law is elementwise over masses: the engine evaluates it one mass
+at a time, with that mass's coefficients (scalars) and speed.
 """
 
 import abc
 import dataclasses
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 
 from .._custom_types import Array, ValuesLike
@@ -37,6 +39,14 @@ class AbstractFriction(eqx.Module):
     def kinetic(self, speed: Array, direction: Array) -> Array:
         """Kinetic coefficient $\\mu_k \\ge 0$ of a mass slipping at `speed` $= |v|$ in
         `direction` $\\sigma = \\pm 1$ (smooth in the speed)."""
+
+    def kinetic_rate(self, speed: Array, direction: Array, speed_rate: Array) -> Array | None:
+        """Time derivative of [`kinetic`][locomotion_jax.AbstractFriction.kinetic] while the
+        speed changes at `speed_rate` (for the exact engine's dense output and event
+        prediction). By default forward-mode differentiation of `kinetic`, so a law supplies
+        values only; `None` means zero (a law whose coefficient does not depend on the speed
+        returns it, and the engine skips those terms)."""
+        return jax.jvp(lambda s: self.kinetic(s, direction), (speed,), (speed_rate,))[1]
 
     def smoothed(self, v: Array, eps: Array, v_s: Array) -> Array:
         """Smoothed friction coefficient, odd in $v$, for the smoothed dynamics (SPEC §3):
@@ -89,6 +99,9 @@ class Coulomb(AbstractFriction):
     def kinetic(self, speed: Array, direction: Array) -> Array:
         return jnp.broadcast_to(self.mu_k, jnp.shape(speed)).astype(speed.dtype)
 
+    def kinetic_rate(self, speed: Array, direction: Array, speed_rate: Array) -> None:
+        return None
+
     def validity(self) -> dict[str, Array]:
         return {"mu_s": self.mu_s >= self.mu_k, "mu_k": self.mu_k >= 0}
 
@@ -123,6 +136,9 @@ class AnisotropicCoulomb(AbstractFriction):
 
     def kinetic(self, speed: Array, direction: Array) -> Array:
         return jnp.where(direction > 0, self.mu_k_fwd, self.mu_k_bwd).astype(speed.dtype)
+
+    def kinetic_rate(self, speed: Array, direction: Array, speed_rate: Array) -> None:
+        return None
 
     def mirrored(self) -> "AnisotropicCoulomb":
         """The same law with forward and backward swapped (mirror image of the ground)."""

@@ -23,7 +23,7 @@ from .._queue import run_queue
 from .._results import ChainMeasurement, ChainTrajectory
 from .._saves import BUFFER, run_saves
 from .._status import Regime, Status
-from ..dynamics import _chain_exact as engine, _chain_smooth as smooth
+from ..dynamics import _chain_exact as engine, _chain_forces as forces, _chain_smooth as smooth
 from ..model._chain import Chain
 
 
@@ -72,8 +72,8 @@ def _check(contact: str, start: str) -> None:
         raise ValueError(f"start must be 'paper' (eq. 14) or 'relaxed', got {start!r}.")
 
 
-def _initial(C: Chain, valid, contact, start) -> engine.Hybrid:
-    st = engine.init(C, contact, engine.initial_positions(C, start))
+def _initial(C: Chain, valid, contact, start, P: forces.Consts | None = None) -> engine.Hybrid:
+    st = engine.init(C, contact, engine.initial_positions(C, start), P)
     return eqx.tree_at(lambda s: s.status, st, jnp.where(valid, st.status, Status.INVALID).astype(jnp.int32))
 
 
@@ -96,15 +96,19 @@ def chain_dynamics(dynamics: Any, waveform: Any) -> Exact | Smoothed:
 
 def _row(s: engine.Hybrid) -> jax.Array:
     dt = s.t.dtype
-    margins = jnp.stack([s.cross, s.near, s.t_switch])
-    return jnp.concatenate([s.y.x, s.y.v, s.y.ed[None], s.y.w[None], s.stuck.astype(dt), s.sdir, margins])
+    stuck = (b.astype(dt) for b in s.stuck)
+    return jnp.stack([*s.y.x, *s.y.v, s.y.ed, s.y.w, *stuck, *s.sdir, s.cross, s.near, s.t_switch])
 
 
 def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps, lanes, buffer=BUFFER):
     """The saved rows of a flat batch: the work queue of [`_saves.run_saves`][], highest frequencies first."""
     take = lambda i: jax.tree_util.tree_map(lambda x: x[i], C)
-    init = lambda i: (take(i), _initial(take(i), valid[i], contact, start))
-    step = lambda C, s, t_stop: engine.step(C, contact, dt, s, t_stop)[0]
+
+    def init(i):
+        P = forces.consts(take(i))
+        return P, _initial(take(i), valid[i], contact, start, P)
+
+    step = lambda P, s, t_stop: engine.step(None, contact, dt, s, t_stop, P=P)[0]
     order = jnp.argsort(-jnp.where(jnp.isfinite(C.waves.omega), C.waves.omega, -jnp.inf))
     return run_saves(init, step, _row, valid.shape[0], save_at, max_steps, lanes, order, buffer)
 
@@ -114,11 +118,12 @@ _simulate_batch = engine_jit(_simulate_batch, ("contact", "start", "dt", "lanes"
 
 def _derived(C: Chain, contact, t, x, v):
     """Energy, normal forces, rest lengths and tensions at one saved state."""
-    omega = C.waves.omega
-    dr = engine.drive(C, jnp.cos(omega * t), jnp.sin(omega * t))
-    tension, _, N, _ = engine.loads(C, contact, dr.l0, dr.f, x)
-    e = engine.energy(C, engine.State(x, v, t, t), tension)
-    return dict(e=e, N=N, l0=dr.l0, tension=tension)
+    P = forces.consts(C)
+    dr = forces.drive(P, jnp.cos(P.omega * t), jnp.sin(P.omega * t))
+    sp = forces.springs(P, dr.l0, forces.unstack(x))
+    _, N = forces.loads(P, sp.fx, sp.fy, dr.f)
+    e = forces.energy(P, forces.unstack(v), sp.tension)
+    return dict(e=e, N=jnp.stack(N, -1), l0=jnp.stack(dr.l0, -1), tension=jnp.stack(sp.tension, -1))
 
 
 def simulate_chain(chain: Chain, t_end: float, save_at, *, dynamics: Exact | Smoothed, contact: str, start: str,
@@ -163,13 +168,14 @@ class _Acc(eqx.Module):
     reached: jax.Array
     t_z: jax.Array
     y_z: engine.State
-    stuck: jax.Array
+    stuck: tuple[jax.Array, ...]  # stuck time per mass
     steps: jax.Array
     before_z: jax.Array  # time from the last switch to t_z
 
 
 class _Fixed(NamedTuple):
     C: Chain
+    P: forces.Consts
     ws: jax.Array
     we: jax.Array
     te: jax.Array
@@ -177,17 +183,18 @@ class _Fixed(NamedTuple):
 
 
 def _setup(C, valid, t_start, z, horizon, window, contact, start):
-    st = _initial(C, valid, contact, start)
+    P = forces.consts(C)
+    st = _initial(C, valid, contact, start, P)
     dtype = st.t.dtype
-    ws = jnp.where(jnp.isfinite(t_start), t_start, C.t_start).astype(dtype)
+    ws = t_start.astype(dtype)
     zero = jnp.zeros((), dtype)
     no = jnp.asarray(False)
     acc = _Acc(
         started=no, X0=zero, ed0=zero, w0=zero, e0=zero, reached=no, t_z=jnp.asarray(jnp.inf, dtype),
-        y_z=st.y.map(jnp.zeros_like), stuck=jnp.zeros_like(st.y.x), steps=jnp.zeros((), jnp.int32),
+        y_z=st.y.map(jnp.zeros_like), stuck=tuple(map(jnp.zeros_like, st.y.x)), steps=jnp.zeros((), jnp.int32),
         before_z=jnp.asarray(jnp.inf, dtype),
     )  # fmt: skip
-    return _Fixed(C, ws, ws + window, ws + horizon, jnp.asarray(z, dtype)), (st, acc)
+    return _Fixed(C, P, ws, ws + window, ws + horizon, jnp.asarray(z, dtype)), (st, acc)
 
 
 def _finished(f: _Fixed, s, a):
@@ -204,36 +211,34 @@ def _advance(f: _Fixed, dyn, contact, dt):
     t_stop = jnp.where(s.t < f.ws, f.ws, jnp.where(s.t < f.we, f.we, f.te))
     begin = ~a.started & (s.t >= f.ws)
     started = a.started | begin
-    X0 = jnp.where(begin, _com(f.C, s.y.x), a.X0)
+    X0 = jnp.where(begin, forces.centre_of_mass(f.P, s.y.x), a.X0)
     target = Target(active=started & ~a.reached, X0=X0, z=f.z)
     # The margins cover the measured interval: they restart at t_start.
     s = eqx.tree_at(lambda s: (s.cross, s.near), s, tuple(jnp.where(begin, jnp.inf, m) for m in (s.cross, s.near)))
-    s_new, info = engine.step(f.C, contact, dt, s, t_stop, target)
+    s_new, info = engine.step(f.C, contact, dt, s, t_stop, target, f.P)
     inside = info.commit & started & (info.t1 <= f.we)
     dur = jnp.where(inside, info.t1 - info.t0, 0)
     hit = info.target_fired
     a_new = _Acc(
         started=started, X0=X0, ed0=jnp.where(begin, info.y0.ed, a.ed0), w0=jnp.where(begin, info.y0.w, a.w0),
-        e0=jnp.where(begin, engine.energy(f.C, info.y0, info.tension0), a.e0), reached=a.reached | hit,
+        e0=jnp.where(begin, engine.energy(f.P, info.y0, info.tension0), a.e0), reached=a.reached | hit,
         t_z=jnp.where(hit, info.t_target, a.t_z), y_z=info.y_target.map(lambda n, o: jnp.where(hit, n, o), a.y_z),
-        stuck=a.stuck + jnp.where(info.stuck, dur, 0), steps=a.steps + 1,
+        stuck=tuple(q + jnp.where(b, dur, 0) for q, b in zip(a.stuck, info.stuck)), steps=a.steps + 1,
         before_z=jnp.where(hit, jax.lax.stop_gradient(info.t_target - s.t_switch), a.before_z),
     )  # fmt: skip
     return s_new, a_new
 
 
-def _energy_at(C: Chain, contact, t, y):
-    omega = C.waves.omega
-    dr = engine.drive(C, jnp.cos(omega * t), jnp.sin(omega * t))
-    tension, _, _, _ = engine.loads(C, contact, dr.l0, dr.f, y.x)
-    return engine.energy(C, y, tension)
+def _energy_at(P: forces.Consts, t, y):
+    dr = forces.drive(P, jnp.cos(P.omega * t), jnp.sin(P.omega * t))
+    return engine.energy(P, y, forces.springs(P, dr.l0, y.x).tension)
 
 
 def _margin_z(f: _Fixed, a: _Acc, contact) -> jax.Array:
     """The time from $t_z$ to the nearest change of the target's structure (`_exact.target_margin`)."""
     t_z = jnp.where(a.reached, a.t_z, f.ws)
-    g, d, e = engine.probe(f.C, contact, t_z, a.y_z, Target(active=jnp.asarray(True), X0=a.X0, z=f.z))
-    return target_margin(a.before_z, list(g), list(d), list(e))
+    g, d, e = engine.probe(f.C, contact, t_z, a.y_z, Target(active=jnp.asarray(True), X0=a.X0, z=f.z), f.P)
+    return target_margin(a.before_z, g, d, e)
 
 
 def _results(f: _Fixed, dyn, contact) -> dict:
@@ -242,18 +247,21 @@ def _results(f: _Fixed, dyn, contact) -> dict:
     dtype = ws.dtype
     status = jnp.where((s.status == Status.OK) & ~_finished(f, s, a), Status.MAX_STEPS, s.status).astype(jnp.int32)
     nan, inf = jnp.asarray(jnp.nan, dtype), jnp.asarray(jnp.inf, dtype)
-    regime = jnp.where(s.t >= we, jnp.where(jnp.max(a.stuck) > STICK_TOL, Regime.SSL, Regime.SL), Regime.UNDETERMINED)
+    stuck = jnp.stack(a.stuck)
+    regime = jnp.where(s.t >= we, jnp.where(jnp.max(stuck) > STICK_TOL, Regime.SSL, Regime.SL), Regime.UNDETERMINED)
     t_end = jnp.where(a.reached, a.t_z, s.t)
     y_end = a.y_z.map(lambda zv, sv: jnp.where(a.reached, zv, sv), s.y)
     elapsed = t_end - ws
     measured = a.started & (elapsed > 0)
-    mean_speed = jnp.where(measured, (_com(f.C, y_end.x) - a.X0) / jnp.where(measured, elapsed, 1), nan)
+    mean_speed = jnp.where(
+        measured, (forces.centre_of_mass(f.P, y_end.x) - a.X0) / jnp.where(measured, elapsed, 1), nan
+    )
     e_d = jnp.where(a.started, y_end.ed - a.ed0, nan)
     work = jnp.where(a.started, y_end.w - a.w0, nan)
-    delta_e = jnp.where(a.started, _energy_at(f.C, contact, t_end, y_end) - a.e0, nan)
+    delta_e = jnp.where(a.started, _energy_at(f.P, t_end, y_end) - a.e0, nan)
     e_z = jnp.where(a.reached, y_end.ed - a.ed0, inf)
     covered = jnp.clip(jnp.minimum(s.t, we) - ws, 0, None)
-    frac = jnp.where(covered > 0, a.stuck / jnp.where(covered > 0, covered, 1), nan)
+    frac = jnp.where(covered > 0, stuck / jnp.where(covered > 0, covered, 1), nan)
     return dict(
         tau_z=jnp.where(a.reached, a.t_z - ws, inf), e_z=e_z, reached=a.reached, regime=regime.astype(jnp.int32),
         mean_speed=mean_speed, cost_of_transport=e_z / z, stick_fraction=frac, e_d=e_d, work=work,
@@ -265,6 +273,8 @@ def _results(f: _Fixed, dyn, contact) -> dict:
 
 def _measure_batch(C, valid, t_start, z, horizon, window, contact, start, dt, max_steps, lanes):
     n = valid.shape[0]
+    # The default start (eigenvalues of the linearised chain) once for the batch, not in every refill.
+    t_start = jnp.where(jnp.isfinite(t_start), t_start, C.t_start)
     take = lambda i: (jax.tree_util.tree_map(lambda x: x[i], C), valid[i], t_start[i])
     setup = lambda i: _setup(*take(i), z, horizon, window, contact, start)
     running = lambda f, d: _running(f, d, max_steps)

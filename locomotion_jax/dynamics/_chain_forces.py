@@ -1,0 +1,270 @@
+"""The loads on a chain of N masses and their time derivatives, one mass and one spring at a time (SPEC §8).
+
+The N-mass exact engine ([`_chain_exact`][locomotion_jax.dynamics._chain_exact]) evaluates
+these at every stage of every step. They are written over Python tuples of scalars, one
+entry per mass or per spring (the chain's N is static), not over arrays with a mass axis:
+under `vmap` every intermediate is then a vector over the configurations only, which is
+what XLA's CPU backend runs fastest (a kernel over a `(lanes, N)` array is split over the
+intra-op thread pool and costs several times more; benchmarks/NOTES.md).
+
+Spring $j$ joins masses $j$ and $j+1$: $u_j = x_{j+1} - x_j$, $\\ell_j = \\sqrt{u_j^2 + d_j^2}$
+(eq. 2), $T_j = k_j(\\ell_j - \\ell_{0,j})$, $f_{x,j} = T_j u_j/\\ell_j$, $f_{y,j} = T_j d_j/\\ell_j$;
+mass $i$ feels $F_i = (f_{x,i} + f_i) - (f_{x,i-1} + f_{i-1})$ and $N_i = m_i - (f_{y,i} - f_{y,i-1})$
+(eqs. 5 and 8 generalised; missing springs count zero). Their first and second time
+derivatives along the motion are written out by the chain rule (for the quintic dense
+output and the event prediction); a friction law's and an actuator's derivatives come
+from the classes themselves ([`AbstractFriction.kinetic_rate`][locomotion_jax.AbstractFriction.kinetic_rate],
+the linearity of [`AbstractActuator.split`][locomotion_jax.AbstractActuator.split]), so those supply values only.
+"""
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from .._custom_types import Array
+from ..model._actuator import AbstractActuator
+from ..model._chain import Chain
+from ..model._friction import AbstractFriction
+
+
+Scalars = tuple[Array, ...]
+"""One scalar per mass or per spring (under `vmap`: one vector over the configurations each)."""
+
+
+class Consts(NamedTuple):
+    """Per-configuration constants of a chain, split by mass and by spring (computed once per run)."""
+
+    m: Scalars
+    im: Scalars  # 1 / m_i
+    c: Scalars
+    mu_f: Scalars  # static limits, forward and backward; `None` backward: the same as forward
+    mu_b: tuple[Array | None, ...]
+    friction: tuple[AbstractFriction, ...]  # the law with mass i's coefficients, per mass
+    k: Scalars
+    d: Scalars
+    dd: Scalars  # d_j^2
+    lbar: Scalars
+    cos: tuple[Scalars, ...]  # Fourier coefficients of each spring's signal, per harmonic
+    sin: tuple[Scalars, ...]
+    omega: Array
+    nw: Scalars  # n omega and (n omega)^2 per harmonic n = 1, ..., H
+    nw2: Scalars
+    inv_mass: Array  # 1 / sum_i m_i
+    one: Array  # 1.0 as a runtime value (see `_chain_exact.keep`)
+    actuator: AbstractActuator
+
+
+def _at(x: Array, i: int) -> Array:
+    """Entry `i` of the last axis of a per-mass or per-spring field (a length-1 axis or a scalar is broadcast)."""
+    x = jnp.asarray(x)
+    if x.ndim == 0:
+        return x
+    return x[..., i if x.shape[-1] > 1 else 0]
+
+
+def consts(C: Chain) -> Consts:
+    """Split a chain's fields by mass and by spring."""
+    n = C.m.shape[-1]
+    masses, springs = range(n), range(n - 1)
+    friction = tuple(jax.tree_util.tree_map(lambda x, i=i: _at(x, i), C.friction) for i in masses)
+    # An isotropic law returns one array for both limits: then mu_b is None (the engine's
+    # stick margin is mu n - |F|, fewer operations for the same values).
+    limits = [law.static_limits() for law in friction]
+    limits = [(f, None if b is f else b) for f, b in limits]
+    H = C.waves.cos.shape[-1]
+    nw = tuple((h + 1) * C.waves.omega for h in range(H))
+    per_spring = lambda x: tuple(_at(x, j) for j in springs)
+    wave = lambda x: tuple(tuple(x[..., j if x.shape[-2] > 1 else 0, h] for h in range(H)) for j in springs)
+    return Consts(
+        m=tuple(_at(C.m, i) for i in masses),
+        im=tuple(1 / _at(C.m, i) for i in masses),
+        c=tuple(_at(C.c, i) for i in masses),
+        mu_f=tuple(f for f, _ in limits),
+        mu_b=tuple(b for _, b in limits),
+        friction=friction,
+        k=per_spring(C.k),
+        d=per_spring(C.d),
+        dd=tuple(d * d for d in per_spring(C.d)),
+        lbar=per_spring(C.lbar),
+        cos=wave(C.waves.cos),
+        sin=wave(C.waves.sin),
+        omega=C.waves.omega,
+        nw=nw,
+        nw2=tuple(w * w for w in nw),
+        inv_mass=1 / C.m.sum(-1),
+        one=C.m[..., 0] / C.m[..., 0],
+        actuator=C.actuator,
+    )
+
+
+# -- actuation --------------------------------------------------------------------------------------
+
+
+class Drive(NamedTuple):
+    """Per spring: rest lengths and internal forces with their first two rates. An entry is `None`
+    where the actuator does not drive that quantity (its rates are zero and the rest length is
+    $\\bar\\ell_j$), so that nothing is spent on it."""
+
+    l0: Scalars
+    dl0: Scalars | None
+    ddl0: Scalars | None
+    f: Scalars | None
+    df: Scalars | None
+    ddf: Scalars | None
+
+
+def drive(P: Consts, c1: Array, s1: Array) -> Drive:
+    """The actuation at phase $(\\cos\\omega t, \\sin\\omega t)$: each spring's signal
+    $s_j = \\sum_n A_{jn}\\cos n\\omega t + B_{jn}\\sin n\\omega t$ and its rates (harmonics by the
+    angle-addition recurrence), turned into rest lengths and forces by the actuator (linear, so the
+    rates map as `split(0, ds)`). Unused entries cost nothing (the compiler drops them)."""
+    H = len(P.cos[0]) if P.cos else 0
+    phases = [(c1, s1)]
+    for _ in range(H - 1):
+        cn, sn = phases[-1]
+        phases.append((cn * c1 - sn * s1, sn * c1 + cn * s1))
+    val, rate, acc = [], [], []
+    for A, B in zip(P.cos, P.sin):
+        terms = [(A[n] * cn + B[n] * sn, P.nw[n] * (B[n] * cn - A[n] * sn)) for n, (cn, sn) in enumerate(phases)]
+        v, r, q = terms[0][0], terms[0][1], -(P.nw2[0] * terms[0][0])
+        for n, ((cn, sn), (vn, rn)) in enumerate(zip(phases[1:], terms[1:]), start=1):
+            v, r, q = (v + A[n] * cn) + B[n] * sn, r + rn, q - P.nw2[n] * vn
+        val.append(v)
+        rate.append(r)
+        acc.append(q)
+    act = P.actuator
+    split = [act.split(lb, s) for lb, s in zip(P.lbar, val)]
+    dsplit = [act.split(jnp.zeros_like(s), s) for s in rate]
+    ddsplit = [act.split(jnp.zeros_like(s), s) for s in acc]
+    pick = lambda pairs, k: tuple(p[k] for p in pairs)
+    length, force = act.varies_rest_length, act.applies_force
+    return Drive(
+        l0=pick(split, 0) if length else P.lbar, dl0=pick(dsplit, 0) if length else None,
+        ddl0=pick(ddsplit, 0) if length else None, f=pick(split, 1) if force else None,
+        df=pick(dsplit, 1) if force else None, ddf=pick(ddsplit, 1) if force else None,
+    )  # fmt: skip
+
+
+# -- springs and loads ------------------------------------------------------------------------------
+
+
+class Springs(NamedTuple):
+    """Per spring: $u_j$, $1/\\ell_j$, $T_j/\\ell_j$, $T_j$, $f_{x,j}$, $f_{y,j}$ (eqs. 2, 8)."""
+
+    u: Scalars
+    il: Scalars
+    p: Scalars
+    tension: Scalars
+    fx: Scalars
+    fy: Scalars
+
+
+def springs(P: Consts, l0: Scalars, x: Scalars) -> Springs:
+    u = tuple(b - a for a, b in zip(x[:-1], x[1:]))
+    length = [jnp.sqrt(uj * uj + dd) for uj, dd in zip(u, P.dd)]
+    il = tuple(1 / lj for lj in length)
+    tension = tuple(k * (lj - l0j) for k, lj, l0j in zip(P.k, length, l0))
+    p = tuple(T * i for T, i in zip(tension, il))
+    return Springs(u, il, p, tension, tuple(a * b for a, b in zip(p, u)), tuple(a * d for a, d in zip(p, P.d)))
+
+
+def _plus(a: Scalars, b: Scalars | None) -> Scalars:
+    return a if b is None else tuple(x + y for x, y in zip(a, b))
+
+
+def _minus(a: Scalars, b: Scalars | None) -> Scalars:
+    return a if b is None else tuple(x - y for x, y in zip(a, b))
+
+
+def per_mass(a: Scalars) -> Scalars:
+    """$a_i - a_{i-1}$ for a per-spring list (missing springs count zero)."""
+    return (a[0], *(a[i] - a[i - 1] for i in range(1, len(a))), -a[-1])
+
+
+def loads(P: Consts, fx: Scalars, fy: Scalars, f: Scalars | None) -> tuple[Scalars, Scalars]:
+    """Horizontal loads $F_i$ and signed normal forces $N_i$ (module docstring)."""
+    F = per_mass(_plus(fx, f))
+    N = tuple(m - q for m, q in zip(P.m, per_mass(fy)))
+    return F, N
+
+
+def load_rates(fx: Scalars, fy: Scalars, f: Scalars | None) -> tuple[Scalars, Scalars]:
+    """Time derivatives of $F_i$ and $N_i$ from those of $f_{x,j}$, $f_{y,j}$ and $f_j$."""
+    return per_mass(_plus(fx, f)), tuple(-q for q in per_mass(fy))
+
+
+class SpringRates(NamedTuple):
+    """First time derivatives along the motion of $\\ell_j$, $T_j$, $T_j/\\ell_j$, $f_{x,j}$, $f_{y,j}$."""
+
+    dl: Scalars
+    dtension: Scalars
+    dp: Scalars
+    dfx: Scalars
+    dfy: Scalars
+
+
+def spring_rates(P: Consts, sp: Springs, du: Scalars, dl0: Scalars | None) -> SpringRates:
+    """With $p = T/\\ell$ and $\\dot u_j = \\dot x_{j+1} - \\dot x_j$: $\\dot\\ell = u\\dot u/\\ell$,
+    $\\dot T = k(\\dot\\ell - \\dot\\ell_0)$, $\\dot p = (\\dot T - p\\dot\\ell)/\\ell$,
+    $\\dot f_x = \\dot p u + p\\dot u$, $\\dot f_y = \\dot p d$."""
+    dl = tuple(u * a * il for u, a, il in zip(sp.u, du, sp.il))
+    dT = tuple(k * e for k, e in zip(P.k, _minus(dl, dl0)))
+    dp = tuple((a - p * b) * il for a, p, b, il in zip(dT, sp.p, dl, sp.il))
+    dfx = tuple(a * u + p * b for a, u, p, b in zip(dp, sp.u, sp.p, du))
+    return SpringRates(dl, dT, dp, dfx, tuple(a * d for a, d in zip(dp, P.d)))
+
+
+def spring_second(
+    P: Consts, sp: Springs, r: SpringRates, du: Scalars, ddu: Scalars, ddl0: Scalars | None
+) -> tuple[Scalars, Scalars]:
+    """Second time derivatives $\\ddot f_{x,j}$, $\\ddot f_{y,j}$ (differentiating [`spring_rates`][] once more)."""
+    ddl = tuple((a * a + u * b - c * c) * il for a, u, b, c, il in zip(du, sp.u, ddu, r.dl, sp.il))
+    ddT = tuple(k * e for k, e in zip(P.k, _minus(ddl, ddl0)))
+    ddp = tuple((a - 2 * b * c - p * e) * il for a, b, c, p, e, il in zip(ddT, r.dp, r.dl, sp.p, ddl, sp.il))
+    ddfx = tuple(a * u + 2 * b * c + p * e for a, u, b, c, p, e in zip(ddp, sp.u, r.dp, du, sp.p, ddu))
+    return ddfx, tuple(a * d for a, d in zip(ddp, P.d))
+
+
+def power(P: Consts, tension: Scalars, dl0: Scalars | None, f: Scalars | None, v: Scalars) -> Array:
+    """The actuator's power (eq. 16 generalised): [`AbstractActuator.power`][locomotion_jax.AbstractActuator.power]."""
+    act = P.actuator
+    if type(act).power is not AbstractActuator.power:  # a user's own: called on arrays
+        stack = lambda a: jnp.stack(a, -1) if a is not None else jnp.zeros_like(jnp.stack(tension, -1))
+        return act.power(stack(tension), stack(dl0), stack(f), jnp.stack(v, -1))
+    terms = [] if dl0 is None else [-(T * r) for T, r in zip(tension, dl0)]
+    if f is not None:
+        terms += [fj * (a - b) for fj, a, b in zip(f, v[:-1], v[1:])]
+    return sum(terms[1:], terms[0]) if terms else jnp.zeros_like(v[0])
+
+
+def power_rate(P: Consts, tension, dtension, dl0, ddl0, f, df, v, a) -> Array:
+    """Time derivative of [`power`][] along the motion."""
+    act = P.actuator
+    if type(act).power is not AbstractActuator.power:
+        zeros = lambda: tuple(jnp.zeros_like(T) for T in tension)
+        args = (tension, dl0 or zeros(), f or zeros(), v)
+        rates = (dtension, ddl0 or zeros(), df or zeros(), a)
+        return jax.jvp(lambda *xs: power(P, *xs), args, rates)[1]
+    terms = [] if dl0 is None else [-(dT * r + T * rr) for T, dT, r, rr in zip(tension, dtension, dl0, ddl0)]
+    if f is not None:
+        terms += [dfj * (x - y) + fj * (p - q) for fj, dfj, x, y, p, q in zip(f, df, v[:-1], v[1:], a[:-1], a[1:])]
+    return sum(terms[1:], terms[0]) if terms else jnp.zeros_like(v[0])
+
+
+def energy(P: Consts, v: Scalars, tension: Scalars) -> Array:
+    """$e = \\sum_i m_i v_i^2/2 + \\sum_j T_j^2/(2 k_j)$ (eq. 10 generalised)."""
+    kin = [m * a * a for m, a in zip(P.m, v)]
+    pot = [T * T / k for T, k in zip(tension, P.k)]
+    return 0.5 * (sum(kin[1:], kin[0]) + sum(pot[1:], pot[0]))
+
+
+def centre_of_mass(P: Consts, x: Scalars) -> Array:
+    """$X = \\sum_i m_i x_i / \\sum_i m_i$."""
+    terms = [m * a for m, a in zip(P.m, x)]
+    return sum(terms[1:], terms[0]) * P.inv_mass
+
+
+def unstack(a: Array) -> Scalars:
+    """The entries of the last axis as a tuple."""
+    return tuple(a[..., i] for i in range(a.shape[-1]))
