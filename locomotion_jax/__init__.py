@@ -16,7 +16,11 @@ from ._continuation import Branch as Branch, BranchStatus as BranchStatus, conti
 from ._dynamics import AbstractDynamics as AbstractDynamics, Exact as Exact, Smoothed as Smoothed
 from ._gait import Gait as Gait, GaitStatus as GaitStatus, steady_gait as steady_gait
 from ._measure import measure as measure
-from ._optimum import OptimiseSettings as OptimiseSettings, Optimum as Optimum
+from ._optimum import (
+    ExactOptimiseSettings as ExactOptimiseSettings,
+    OptimiseSettings as OptimiseSettings,
+    Optimum as Optimum,
+)
 from ._params import DEFAULTS as DEFAULTS, PARAM_NAMES as PARAM_NAMES, Params as Params, VALID_RANGES as VALID_RANGES
 from ._results import (
     ChainMeasurement as ChainMeasurement,

@@ -53,7 +53,7 @@ import optax
 from . import _constraints as cons, _pareto as pareto
 from ._actuation import Fourier
 from ._objective import make_plan, Plan, rollout
-from ._optimum import Optimum, Settings
+from ._optimum import ExactSettings, Optimum, Settings
 from ._params import Params
 
 
@@ -275,51 +275,92 @@ def optimise(
     v_min: float,
     a_max: float,
     *,
+    method: str = "exact",
     direction: int | None = None,
     omega: float | None = None,
-    harmonics: int = 3,
-    settings: Settings | None = None,
+    harmonics: int | None = None,
+    settings: "Settings | ExactSettings | None" = None,
     sweep: "pareto.SinusoidSweep | None" = None,
+    start: Any = None,
 ) -> Optimum:
     """Find the periodic actuation of least cost of transport that meets a speed (SPEC §7).
+
+    Two methods:
+
+    - `"exact"` (default, `_exact_optimise`): on the steady gaits of the exact hybrid
+      model, with gradients by forward mode and the implicit function theorem, many
+      harmonics (default 16), starts screened and the best refined by a trust-region
+      SQP in lockstep, every candidate verified by [`steady_gait`][].
+    - `"smoothed"` (this module's docstring): Adam on an augmented Lagrangian of a
+      smoothed friction model (default 3 harmonics), verified on the exact model.
 
     **Arguments:**
 
     - `params`: one configuration ([`Params`][]; `a` and `omega` are ignored).
     - `v_min`: required mean speed (> 0) in `direction`; see `_constraints.check_inputs`.
     - `a_max`: stroke bound, $\\max_t |\\ell_0(t) - \\bar\\ell| \\le a_\\max$.
+    - `method`: `"exact"` or `"smoothed"`.
     - `direction`: +1 (forward, default) or -1 (backward).
-    - `omega`: fix the base frequency; `None` optimises it (starts from the best
-      sinusoids' frequencies).
-    - `harmonics`: number $N$ of harmonics.
-    - `settings`: [`Settings`][] (continuation, iterations, margins, horizons).
+    - `omega`: fix the base frequency; `None` optimises it.
+    - `harmonics`: number $N$ of harmonics (default 16 exact, 3 smoothed).
+    - `settings`: [`ExactSettings`][locomotion_jax._optimum.ExactSettings] (exact) or
+      [`Settings`][] (smoothed); defaults if `None`.
     - `sweep`: a precomputed [`sinusoid_sweep`][locomotion_jax._pareto.sinusoid_sweep] for the same
-      `params`, `a_max` and horizon (the baseline); computed if `None`.
+      `params` and `a_max` (the baseline); computed if `None`.
+    - `start`: exact method: a waveform to start from besides the built-in starts (an
+      [`Optimum`][] or a [`Fourier`][], e.g. the optimum at a nearby `v_min`: continuation).
 
-    **Returns:** an [`Optimum`][]: coefficients, exact and smoothed figures,
-    constraint checks on the exact model and the best sinusoid for comparison.
+    **Returns:** an [`Optimum`][]: coefficients, exact figures (whole periods of the steady
+    gait), constraint checks on the exact model and the best sinusoid for comparison.
 
-    **Raises:** `ValueError` for a bad requirement (see `_constraints.check_inputs`).
+    **Raises:** `ValueError` for a bad requirement (see `_constraints.check_inputs`) or
+    method; `TypeError` for settings of the other method.
 
     !!! Example
 
         ```python
-        opt = optimise(Params(), v_min=0.02, a_max=0.05, harmonics=3)
+        opt = optimise(Params(), v_min=0.05, a_max=0.05)
         opt.cost_of_transport_exact, opt.improvement_vs_sinusoid
         ```
     """
-    settings = Settings() if settings is None else settings
+    if method not in ("exact", "smoothed"):
+        raise ValueError(f"method must be 'exact' or 'smoothed', got {method!r}.")
+    exact = method == "exact"
+    if harmonics is None:
+        harmonics = 16 if exact else 3
+    kind = ExactSettings if exact else Settings
+    settings = kind() if settings is None else settings
+    if not isinstance(settings, kind):
+        raise TypeError(f"settings for method={method!r} must be a {kind.__name__}, got {type(settings).__name__}.")
+    if start is not None and not exact:
+        raise ValueError("start= is only used by method='exact'.")
+    if exact and harmonics < 2:
+        raise ValueError(f"harmonics must be an integer >= 2 for method='exact', got {harmonics!r}.")
     speed, direction = cons.check_inputs(params, v_min, a_max, direction, harmonics, omega, settings.margin)
+    if sweep is None:
+        dt = cast(ExactSettings, settings).dt if exact else cast(Settings, settings).verify_dt
+        sweep = pareto.sinusoid_sweep(params, a_max, dt=dt)
+    if not exact:
+        return _optimise_smoothed(params, speed, direction, a_max, omega, harmonics, cast(Settings, settings), sweep)
+    s = cast(ExactSettings, settings)
+    baseline = _baseline(params, a_max, speed, direction, sweep, s.refine_baseline, s.dt)
+    from ._exact_optimise import optimise_exact
+
+    opt, _ = optimise_exact(params, speed, direction, a_max, omega, harmonics, s, baseline, start)
+    return opt
+
+
+def _baseline(params, a_max, speed, direction, sweep, refine: bool, dt: float) -> dict | None:
+    if refine:
+        return pareto.refine_sinusoid(params, a_max, speed, direction, sweep, dt=dt)
+    return pareto.best_sinusoid(sweep, speed, direction)
+
+
+def _optimise_smoothed(params, speed, direction, a_max, omega, harmonics, settings: Settings, sweep) -> Optimum:
+    """The smoothed method (module docstring); inputs checked by `optimise`."""
     t0 = time.perf_counter()
     dtype = params.dtype
-    if sweep is None:
-        sweep = pareto.sinusoid_sweep(params, a_max, horizon=settings.verify_horizon, dt=settings.verify_dt)
-    if settings.refine_baseline:
-        baseline = pareto.refine_sinusoid(
-            params, a_max, speed, direction, sweep, horizon=settings.verify_horizon, dt=settings.verify_dt
-        )
-    else:
-        baseline = pareto.best_sinusoid(sweep, speed, direction)
+    baseline = _baseline(params, a_max, speed, direction, sweep, settings.refine_baseline, settings.verify_dt)
     omegas = _start_omegas(params, sweep, speed, direction, a_max, omega, settings)
     free = omega is None
     lo, hi = (min(omegas) / settings.omega_range, max(omegas) * settings.omega_range) if free else (omega, omega)
@@ -371,10 +412,7 @@ def optimise(
     eps_f = settings.eps_schedule[-1]
     for round_ in range(settings.corrections):
         fig = pareto.exact_figures(
-            _batched(params, n),
-            _fourier_batch(best_theta, a_max, params.lbar),
-            settings.verify_horizon,
-            settings.verify_dt,
+            _batched(params, n), _fourier_batch(best_theta, a_max, params.lbar), dt=settings.verify_dt
         )
         v_dir = direction * np.nan_to_num(fig.speed, nan=0.0)
         short = fig.ok & (v_dir < speed)
@@ -404,9 +442,7 @@ def _select(params, speed, direction, a_max, harmonics, free, settings, candidat
     cost_s, g_s, r_s = _evaluate(
         theta, prob, jnp.asarray(eps_f, dtype), jnp.full((n,), speed, dtype), jnp.full((n,), settings.margin, dtype)
     )
-    fig = pareto.exact_figures(
-        _batched(params, n), _fourier_batch(theta, a_max, params.lbar), settings.verify_horizon, settings.verify_dt
-    )
+    fig = pareto.exact_figures(_batched(params, n), _fourier_batch(theta, a_max, params.lbar), dt=settings.verify_dt)
     strokes = a_max * np.asarray(jax.vmap(cons.stroke)(theta["cos"], theta["sin"]))
     tol = 8 * float(jnp.finfo(dtype).eps)
     ok_speed = fig.ok & (direction * np.nan_to_num(fig.speed, nan=-np.inf) >= speed)
@@ -455,7 +491,12 @@ def _select(params, speed, direction, a_max, harmonics, free, settings, candidat
         cost_of_transport_exact=float(fig.cost[k]),
         stroke_exact=float(strokes[k]),
         liftoff_exact=bool(fig.liftoff[k]),
-        constraints_exact={"speed": bool(ok_speed[k]), "stroke": bool(ok_stroke[k]), "no_liftoff": bool(fig.ok[k])},
+        constraints_exact={
+            "speed": bool(ok_speed[k]),
+            "stroke": bool(ok_stroke[k]),
+            "no_liftoff": bool(~fig.liftoff[k]),
+            "stable": bool(fig.ok[k]),
+        },
         feasible_exact=bool(feasible[k]),
         mean_speed_smoothed=float(v_s[k]),
         cost_of_transport_smoothed=float(cost_s[k]),

@@ -35,17 +35,23 @@ def register(app: typer.Typer) -> None:
         a_max: float = typer.Option(..., "--a-max", help="Stroke bound: max |l0(t) - lbar| <= a_max."),
         direction: int | None = typer.Option(None, "--direction", help="+1 forward (default) or -1 backward."),
         omega: float | None = typer.Option(None, "--omega", help="Fix the base frequency (default: optimised)."),
-        harmonics: int = typer.Option(3, "--harmonics", help="Number of Fourier harmonics N >= 1."),
+        method: str = typer.Option(
+            "exact", "--method", help="'exact' (steady gaits of the exact model) or 'smoothed' (the older method)."
+        ),
+        harmonics: int | None = typer.Option(
+            None, "--harmonics", help="Number of Fourier harmonics N (default 16 exact, 3 smoothed)."
+        ),
         model: Values,
-        margin: float = typer.Option(0.05, "--margin", help="Normal-force margin on the smoothed model."),
-        starts: int = typer.Option(8, "--starts", help="Starts optimised in parallel."),
-        outer: int = typer.Option(3, "--outer", help="Augmented-Lagrangian blocks per smoothing stage."),
-        inner: int = typer.Option(30, "--inner", help="Adam steps per block."),
-        eps: str = typer.Option("1e-2,3e-3,1e-3", "--eps", help="Continuation in the smoothing scale."),
+        margin: float = typer.Option(0.05, "--margin", help="Normal-force margin (on the orbit, or smoothed)."),
+        local: int = typer.Option(4, "--local", help="Exact: starts refined locally, in lockstep."),
+        max_iter: int = typer.Option(150, "--max-iter", help="Exact: iterations of each local trust-region run."),
+        starts: int = typer.Option(8, "--starts", help="Smoothed: starts optimised in parallel."),
+        outer: int = typer.Option(3, "--outer", help="Smoothed: augmented-Lagrangian blocks per smoothing stage."),
+        inner: int = typer.Option(30, "--inner", help="Smoothed: Adam steps per block."),
+        eps: str = typer.Option("1e-2,3e-3,1e-3", "--eps", help="Smoothed: continuation in the smoothing scale."),
         transient: float = typer.Option(12.0, "--transient", help="Smoothed rollout: transient (time units)."),
         measured: float = typer.Option(6.0, "--measured", help="Smoothed rollout: measured time (time units)."),
-        corrections: int = typer.Option(1, "--corrections", help="Exact-feedback correction rounds."),
-        horizon: float = typer.Option(60.0, "--horizon", help="Exact verification time after the transient."),
+        corrections: int = typer.Option(1, "--corrections", help="Smoothed: exact-feedback correction rounds."),
         sweep_omegas: int = typer.Option(32, "--sweep-omegas", help="Frequencies in the sinusoid sweep."),
         sweep_amplitudes: int = typer.Option(6, "--sweep-amplitudes", help="Amplitudes in the sinusoid sweep."),
         seed: int = typer.Option(0, "--seed"),
@@ -56,27 +62,33 @@ def register(app: typer.Typer) -> None:
         """Optimise the actuation waveform for least cost of transport at a required speed,
         verify it on the exact model and compare it with the best sinusoid."""
         from . import _optimise, _pareto
-        from ._optimum import Settings
+        from ._optimum import ExactSettings, Settings
 
         try:
+            if method not in ("exact", "smoothed"):
+                raise ValueError(f"--method must be 'exact' or 'smoothed', got {method!r}.")
             params = to_params(model)
-            settings = Settings(
-                starts=starts,
-                outer=outer,
-                inner=inner,
-                eps_schedule=_eps_schedule(eps),
-                margin=margin,
-                verify_horizon=horizon,
-                seed=seed,
-                verbose=verbose,
-                transient=transient,
-                measured=measured,
-                corrections=corrections,
-            )
+            settings: ExactSettings | Settings
+            if method == "exact":
+                settings = ExactSettings(local=local, max_iter=max_iter, margin=margin, seed=seed, verbose=verbose)
+            else:
+                settings = Settings(
+                    starts=starts,
+                    outer=outer,
+                    inner=inner,
+                    eps_schedule=_eps_schedule(eps),
+                    margin=margin,
+                    seed=seed,
+                    verbose=verbose,
+                    transient=transient,
+                    measured=measured,
+                    corrections=corrections,
+                )
+            n_harm = harmonics if harmonics is not None else (16 if method == "exact" else 3)
             # Validate before the (long) sinusoid sweep.
             from ._constraints import check_inputs
 
-            check_inputs(params, v_min, a_max, direction, harmonics, omega, margin)
+            check_inputs(params, v_min, a_max, direction, n_harm, omega, margin)
             log = (lambda msg: print(msg, file=sys.stderr, flush=True)) if verbose or not json_out else (lambda m: None)
             log(f"sweeping {sweep_amplitudes} x {sweep_omegas} sinusoids on the exact model ...")
             sweep = _pareto.sinusoid_sweep(
@@ -84,16 +96,16 @@ def register(app: typer.Typer) -> None:
                 a_max,
                 omegas=_pareto.default_omegas(params, sweep_omegas),
                 amplitudes=sweep_amplitudes,
-                horizon=horizon,
             )
             log("optimising ...")
             result = _optimise.optimise(
                 params,
                 v_min,
                 a_max,
+                method=method,
                 direction=direction,
                 omega=omega,
-                harmonics=harmonics,
+                harmonics=n_harm,
                 settings=settings,
                 sweep=sweep,
             )
@@ -103,7 +115,7 @@ def register(app: typer.Typer) -> None:
         if out is not None:
             from ._optimise_plots import save_all
 
-            paths = save_all(result, params, sweep, Path(out), horizon)
+            paths = save_all(result, params, sweep, Path(out))
             if not json_out:
                 typer.echo("plots: " + ", ".join(str(p) for p in paths), err=True)
         if json_out:

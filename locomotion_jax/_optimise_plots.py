@@ -54,13 +54,12 @@ def plot_waveform(opt: Optimum, path: Path) -> Path:
     return path
 
 
-def plot_period(opt: Optimum, params: Params, path: Path, horizon: float = 60.0) -> Path:
-    """$x_1, x_2$ (relative to the period's start) and the contact modes over the last
-    period of the exact verification run."""
+def plot_period(opt: Optimum, params: Params, path: Path, periods: int = 200) -> Path:
+    """$x_1, x_2$ (relative to the period's start) and the contact modes over the last of
+    `periods` actuation periods simulated on the exact model from the relaxed spring."""
     plt = _plt()
     period = 2 * math.pi / opt.omega
-    t_end = float(params.t_start) + horizon
-    t_end = period * math.floor(t_end / period)
+    t_end = period * periods
     save = np.linspace(t_end - period, t_end, 600)
     wave = opt.waveform
     tr = simulate(with_waveform_frequency(params, wave), t_end, save, waveform=wave, start="relaxed", contact="strict")
@@ -81,9 +80,16 @@ def plot_period(opt: Optimum, params: Params, path: Path, horizon: float = 60.0)
     return path
 
 
-def plot_pareto(sweep: SinusoidSweep, optima: Sequence[Optimum], path: Path, direction: int = 1) -> Path:
-    """Cost of transport against mean speed (exact model): every sinusoid of the sweep,
-    the sinusoids' Pareto front, and the verified optima."""
+def plot_pareto(
+    sweep: SinusoidSweep,
+    optima: Sequence[Optimum] | dict[str, Sequence[Optimum]],
+    path: Path,
+    direction: int = 1,
+    peer: tuple[float, float] | None = None,
+) -> Path:
+    """Cost of transport against mean speed (exact model, steady gaits): every sinusoid of
+    the sweep, the sinusoids' Pareto front, the verified optima (a dict: one labelled
+    series per method) and optionally another solver's point `peer = (speed, cost)`."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6, 4))
     v = direction * sweep.speed
@@ -91,14 +97,20 @@ def plot_pareto(sweep: SinusoidSweep, optima: Sequence[Optimum], path: Path, dir
     ax.scatter(v[good], sweep.cost[good], s=8, c="0.7", label="sinusoids (sweep)")
     front = pareto_front(sweep.speed, sweep.cost, sweep.ok, direction)
     ax.plot(v[front], sweep.cost[front], "o-", color="C0", ms=3, label="sinusoid Pareto front")
-    feas = [o for o in optima if o.feasible_exact]
-    if feas:
+    series = optima if isinstance(optima, dict) else {"optimised waveforms": optima}
+    for j, (label, opts) in enumerate(series.items()):
+        feas = [o for o in opts if o.feasible_exact]
+        if not feas:
+            continue
         vo = np.array([direction * o.mean_speed_exact for o in feas])
         co = np.array([o.cost_of_transport_exact for o in feas])
         order = np.argsort(vo)
-        ax.plot(vo[order], co[order], "*-", color="C3", ms=10, label="optimised waveforms")
+        ax.plot(vo[order], co[order], "*-" if j == 0 else "s--", color=f"C{3 + j}", ms=9 if j == 0 else 5, label=label)
         for o in feas:
-            ax.axvline(o.v_min, color="C3", lw=0.5, ls=":")
+            ax.axvline(o.v_min, color="0.5", lw=0.4, ls=":")
+    if peer is not None:
+        ax.plot(*peer, "kx", ms=9, mew=2, label="external solver (nosnoc + IPOPT)")
+    ax.set_yscale("log")
     ax.set_xlabel("mean speed (exact model)")
     ax.set_ylabel("cost of transport $e_d / |\\Delta X|$")
     ax.set_title("Cost of transport vs speed, paper parameters")
@@ -109,11 +121,11 @@ def plot_pareto(sweep: SinusoidSweep, optima: Sequence[Optimum], path: Path, dir
     return path
 
 
-def save_all(opt: Optimum, params: Params, sweep: SinusoidSweep, out: Path, horizon: float = 60.0) -> list[Path]:
+def save_all(opt: Optimum, params: Params, sweep: SinusoidSweep, out: Path) -> list[Path]:
     """The three figures of one optimum into `out` (created)."""
     out.mkdir(parents=True, exist_ok=True)
     return [
         plot_waveform(opt, out / "waveform.png"),
-        plot_period(opt, params, out / "period.png", horizon),
+        plot_period(opt, params, out / "period.png"),
         plot_pareto(sweep, [opt], out / "pareto.png", opt.direction),
     ]

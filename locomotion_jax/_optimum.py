@@ -34,7 +34,7 @@ class Settings(eqx.Module):
       transient (truncated backpropagation, approximate); `None`: all.
     - `omega_range`: a free $\\omega$ stays within this factor of its starts.
     - `corrections`, `correction_outer`: exact-feedback rounds and their blocks.
-    - `verify_horizon`, `verify_dt`: exact verification (after the paper's transient).
+    - `verify_dt`: the exact engine's step of the verification (steady gaits, whole periods).
     - `refine_baseline`: refine the best sinusoids of the sweep by a zooming local grid
       search (`_pareto.refine_sinusoid`: 3 levels, each 4x finer, to 1/64 of the coarse
       grid's step), so the optimum is compared with a well-resolved sinusoid.
@@ -62,7 +62,6 @@ class Settings(eqx.Module):
     omega_range: float = 1.3
     corrections: int = 1
     correction_outer: int = 2
-    verify_horizon: float = 60.0
     verify_dt: float = 0.01
     refine_baseline: bool = True
     seed: int = 0
@@ -73,6 +72,64 @@ class Settings(eqx.Module):
             raise ValueError("Settings: starts, outer and inner must be >= 1.")
         if not self.eps_schedule or any(not (e > 0) for e in self.eps_schedule):
             raise ValueError(f"Settings.eps_schedule must be non-empty and positive, got {self.eps_schedule!r}.")
+
+
+class ExactSettings(eqx.Module):
+    """Settings of the exact method of [`optimise`][locomotion_jax._optimise.optimise]
+    (`method="exact"`, module `_exact_optimise`). Python numbers: changing `local`,
+    `dt`, `newton_iter` or the harmonics recompiles; the others do not.
+
+    - `local`: starts refined locally, in lockstep (one batched engine call each step).
+    - `start_frequencies`: base frequencies of the starts, log-spaced over the range.
+    - `random_shapes`: random waveforms among the start shapes (with sinusoids of five
+      strokes, sinusoids with a third harmonic and saw-tooth ramps of both senses).
+    - `max_iter`: iterations of each local refinement, over `stages` runs with
+      required speeds rising geometrically from the start's speed to $v_\\min$ (for a start that
+      is too slow; the last run has half the iterations); `trust_radius`: the largest first step
+      of a line search, or the initial trust region (decision variables: coefficients in units of
+      $a_\\max$, $\\log\\omega$); `local_method`: `"descent"` (monotone L-BFGS descent on an exact
+      penalty, `_exact_optimise._descent`), `"trust-constr"` or `"SLSQP"` (scipy's).
+    - `margin`: required $\\min_t N_{1,2}$ over the orbit (units of weight).
+    - `speed_slack`: the orbit targets $v_\\min (1 + \\text{slack})$.
+    - `omega_min`, `omega_max`: range of a free base frequency, in units of the smallest
+      natural frequency and of $\\omega_{n1}$.
+    - `dt`: the exact engine's step; `transient`: actuation periods run from the relaxed
+      spring before an orbit is first solved (also the verification's, [`steady_gait`][]);
+      `newton_tol`, `newton_iter`: the periodic-orbit solve.
+    - `refine_baseline`: refine the best sinusoids of the sweep (`_pareto.refine_sinusoid`).
+    - `seed`: for the random shapes; `verbose`: progress on stderr.
+    """
+
+    local: int = 4
+    start_frequencies: int = 8
+    random_shapes: int = 2
+    max_iter: int = 600
+    stages: int = 3
+    trust_radius: float = 0.1
+    local_method: str = "descent"
+    margin: float = 0.05
+    speed_slack: float = 1e-3
+    omega_min: float = 0.06
+    omega_max: float = 1.2
+    dt: float = 0.01
+    transient: int = 30
+    newton_tol: float = 1e-10
+    newton_iter: int = 12
+    refine_baseline: bool = True
+    seed: int = 0
+    verbose: bool = False
+
+    def __check_init__(self):
+        if self.local < 1 or self.max_iter < 1 or self.start_frequencies < 1 or self.stages < 1:
+            raise ValueError("ExactSettings: local, max_iter, stages and start_frequencies must be >= 1.")
+        if self.local_method not in ("descent", "trust-constr", "SLSQP"):
+            raise ValueError(
+                f"ExactSettings.local_method must be 'descent', 'trust-constr' or 'SLSQP', got {self.local_method!r}."
+            )
+        if not (0 < self.omega_min < self.omega_max):
+            raise ValueError(
+                f"ExactSettings: need 0 < omega_min < omega_max, got {self.omega_min!r}, {self.omega_max!r}."
+            )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -95,6 +152,12 @@ class Optimum:
     - `initial_cost_of_transport_exact`: exact cost of the best feasible initial guess.
     - `source`: which candidate won; `candidates`: every candidate's figures.
     - `history`: per block costs and constraint values; `runtime_s`.
+    - `method`: `"exact"` or `"smoothed"`. Exact method only (else `None`/NaN):
+      `stable_exact` (all Floquet multipliers inside the unit circle),
+      `spectral_radius_exact` (their largest modulus), `gait_period_exact`,
+      `evaluations` (batched orbit evaluations). With the exact method the
+      `*_smoothed` figures and `eps` are NaN, and the `*_exact` figures are those of the
+      steady gait ([`steady_gait`][]: whole periods).
     """
 
     v_min: float
@@ -125,6 +188,11 @@ class Optimum:
     candidates: list
     history: list
     runtime_s: float
+    method: str = "smoothed"
+    stable_exact: bool | None = None
+    spectral_radius_exact: float = math.nan
+    gait_period_exact: float = math.nan
+    evaluations: int = 0
 
     @property
     def waveform(self) -> Fourier:
@@ -142,22 +210,39 @@ class Optimum:
     def summary(self) -> str:
         """Human-readable report."""
         fmt = lambda v: "n/a" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.4g}"
+        exact = self.method == "exact"
         lines = [
             f"requirement: mean speed >= {self.v_min:g} in direction {self.direction:+d}, stroke <= {self.a_max:g}, "
-            f"normal forces >= {self.margin:g} (smoothed), no lift-off (exact)",
-            f"base frequency omega = {self.omega:.6g} ({'optimised' if self.free_omega else 'fixed'}), "
-            f"lbar = {self.lbar:g}, {self.harmonics} harmonics",
+            + (
+                f"normal forces >= {self.margin:g} on the orbit, stable steady gait (exact)"
+                if exact
+                else f"normal forces >= {self.margin:g} (smoothed), no lift-off (exact)"
+            ),
+            f"method: {self.method}; base frequency omega = {self.omega:.6g} "
+            f"({'optimised' if self.free_omega else 'fixed'}), lbar = {self.lbar:g}, {self.harmonics} harmonics",
             "cos coefficients: " + " ".join(f"{c:+.6f}" for c in self.cos),
             "sin coefficients: " + " ".join(f"{s:+.6f}" for s in self.sin),
-            f"mean speed:        exact {fmt(self.mean_speed_exact)}   smoothed {fmt(self.mean_speed_smoothed)}",
-            f"cost of transport: exact {fmt(self.cost_of_transport_exact)}   smoothed "
-            f"{fmt(self.cost_of_transport_smoothed)} (eps = {self.eps:g})",
-            f"stroke {fmt(self.stroke_exact)} (limit {self.a_max:g}); min normal force (smoothed) "
-            f"{fmt(self.min_normal_smoothed)}; lift-off on the exact model: {self.liftoff_exact}",
+        ]
+        if exact:
+            lines += [
+                f"steady gait (exact, whole periods): mean speed {fmt(self.mean_speed_exact)}, cost of transport "
+                f"{fmt(self.cost_of_transport_exact)}, period {fmt(self.gait_period_exact)}, stable "
+                f"{self.stable_exact} (largest multiplier modulus {fmt(self.spectral_radius_exact)})",
+                f"stroke {fmt(self.stroke_exact)} (limit {self.a_max:g}); lift-off: {self.liftoff_exact}",
+            ]
+        else:
+            lines += [
+                f"mean speed:        exact {fmt(self.mean_speed_exact)}   smoothed {fmt(self.mean_speed_smoothed)}",
+                f"cost of transport: exact {fmt(self.cost_of_transport_exact)}   smoothed "
+                f"{fmt(self.cost_of_transport_smoothed)} (eps = {self.eps:g})",
+                f"stroke {fmt(self.stroke_exact)} (limit {self.a_max:g}); min normal force (smoothed) "
+                f"{fmt(self.min_normal_smoothed)}; lift-off on the exact model: {self.liftoff_exact}",
+            ]
+        lines.append(
             "constraints on the exact model: "
             + ", ".join(f"{k} {'holds' if v else 'VIOLATED'}" for k, v in self.constraints_exact.items())
-            + f" -> {'FEASIBLE' if self.feasible_exact else 'INFEASIBLE'}",
-        ]
+            + f" -> {'FEASIBLE' if self.feasible_exact else 'INFEASIBLE'}"
+        )
         if self.sinusoid is None:
             lines.append("best sinusoid: none meets the requirement on the exact model")
         else:
@@ -175,3 +260,7 @@ class Optimum:
 
 OptimiseSettings = Settings
 """Public name of [`Settings`][] (exported as `locomotion_jax.OptimiseSettings`)."""
+
+
+ExactOptimiseSettings = ExactSettings
+"""Public name of [`ExactSettings`][] (exported as `locomotion_jax.ExactOptimiseSettings`)."""

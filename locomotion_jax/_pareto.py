@@ -1,14 +1,14 @@
 """Exact-model figures of merit, the sinusoid baseline and Pareto fronts (SPEC §7).
 
-Everything here runs the **exact** hybrid engine ([`measure`][] with
-`dynamics=Exact()`, `contact="strict"`) from the relaxed spring, so optimised
-waveforms and sinusoids are judged by the same yardstick: after the paper's
-transient ($t_\\text{start}$, SPEC §5) the run continues for `horizon` time units
-and
+Everything here is judged on the **steady gait** of the exact hybrid engine
+([`steady_gait`][]: strict contact, from the relaxed spring, a transient and then
+Newton's method on the period map), so optimised waveforms and sinusoids share one
+yardstick, and every figure is an average over whole gait periods:
 
-- mean speed $\\bar v = \\Delta X / \\text{horizon}$ (eq. 4),
-- cost of transport $e_d / |\\Delta X|$ (eq. 15 over the same interval),
-- lift-off (eq. 5) anywhere in the run makes the configuration infeasible.
+- mean speed $\\bar v = \\Delta X / T_\\text{gait}$ (eq. 4),
+- cost of transport $e_d / |\\Delta X|$ (eq. 15 over the same period),
+- feasible (`ok`) only when the orbit converged, is stable (all Floquet multipliers
+  inside the unit circle) and no normal force reaches zero (eq. 5).
 """
 
 from typing import Any, NamedTuple
@@ -19,17 +19,16 @@ import numpy as np
 
 from ._actuation import AbstractWaveform
 from ._dynamics import Exact
-from ._measure import measure
+from ._gait import Gait, GaitStatus, steady_gait
 from ._params import Params
-from ._status import Status
 
 
 class ExactFigures(NamedTuple):
     """Per-configuration exact figures (numpy arrays of the batch shape).
 
-    `speed` is the signed mean speed, `cost` the cost of transport (`nan` when
-    the run did not finish: lift-off or step cap), `ok` is True when the run
-    finished without lift-off, `status` the engine's `Status` code.
+    `speed` is the signed mean speed, `cost` the cost of transport (`nan` unless `ok`),
+    `ok` is True for a converged, stable steady gait without lift-off, `status` the
+    [`GaitStatus`][] code, `liftoff` and `stable` as in [`Gait`][].
     """
 
     speed: np.ndarray
@@ -37,43 +36,49 @@ class ExactFigures(NamedTuple):
     ok: np.ndarray
     status: np.ndarray
     liftoff: np.ndarray
+    stable: np.ndarray
 
 
-def exact_figures(params: Params, waveform: AbstractWaveform | None, horizon: float, dt: float = 0.01) -> ExactFigures:
-    """Mean speed and cost of transport on the exact dynamics (module docstring).
+def gait_figures(gait: Gait) -> ExactFigures:
+    """[`ExactFigures`][] of solved steady gaits."""
+    status = np.asarray(gait.status)
+    stable = np.asarray(gait.stable)
+    liftoff = np.asarray(gait.liftoff)
+    ok = (status == GaitStatus.CONVERGED) & stable & ~liftoff
+    speed = np.asarray(gait.mean_speed, dtype=float)
+    cost = np.asarray(gait.cost_of_transport, dtype=float)
+    return ExactFigures(
+        speed=np.where(ok, speed, np.nan),
+        cost=np.where(ok, cost, np.nan),
+        ok=ok,
+        status=status,
+        liftoff=liftoff,
+        stable=stable,
+    )
 
-    `params` may be batched; a `waveform` whose `omega` has the batch shape is
-    batched with it (as in [`measure`][]); `None` means the sinusoid of eq. (13).
+
+def exact_figures(
+    params: Params, waveform: AbstractWaveform | None, *, dt: float = 0.01, transient: int = 30
+) -> ExactFigures:
+    """Mean speed and cost of transport of the steady gait on the exact dynamics (module docstring).
+
+    `params` may be batched; a `waveform` whose `omega` has the batch shape is batched
+    with it (as in [`steady_gait`][]); `None` means the sinusoid of eq. (13).
+    `transient`: actuation periods before the Newton iteration.
     """
     params = with_waveform_frequency(params, waveform)
-    m = measure(
-        params,
-        z=1e30,
-        horizon=horizon,
-        window=min(25.0, horizon),
-        dynamics=Exact(dt=dt),
-        waveform=waveform,
-        contact="strict",
-        start="relaxed",
+    gait = steady_gait(
+        params, waveform=waveform, dynamics=Exact(dt=dt), contact="strict", start="relaxed", transient=transient
     )
-    status = np.asarray(m.status)
-    ok = (status == int(Status.OK)) & ~np.asarray(m.liftoff)
-    speed = np.asarray(m.mean_speed, dtype=float)
-    e_d = np.asarray(m.e_d, dtype=float)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cost = np.where(ok, e_d / np.abs(speed * horizon), np.nan)
-    return ExactFigures(
-        speed=np.where(ok, speed, np.nan), cost=cost, ok=ok, status=status, liftoff=np.asarray(m.liftoff)
-    )
+    return gait_figures(gait)
 
 
 def with_waveform_frequency(params: Params, waveform: AbstractWaveform | None) -> Params:
     """`params` broadcast to the waveform's batch shape, with `omega` set to its base frequency.
 
-    The waveform alone defines the actuation (the exact engine rotates the phase at
-    `waveform.omega`). The broadcast makes `measure` and `simulate` batch the waveform
-    with the parameters (a waveform whose `omega` has the params' batch shape is
-    batched with them), and `omega` orders their work queue (highest first).
+    The waveform alone defines the actuation. The broadcast makes the engines batch the
+    waveform with the parameters (a waveform whose `omega` has the params' batch shape
+    is batched with them), and `params.omega` then reports the frequency actually used.
     """
     if waveform is None:
         return params
@@ -106,12 +111,13 @@ def sinusoid_sweep(
     *,
     omegas: np.ndarray | None = None,
     amplitudes: int | np.ndarray = 6,
-    horizon: float = 60.0,
     dt: float = 0.01,
+    transient: int = 30,
 ) -> SinusoidSweep:
-    """Batched exact sweep over $(a \\le a_\\max, \\omega)$ in one compiled call.
+    """Batched exact sweep over $(a \\le a_\\max, \\omega)$: the steady gait of each sinusoid.
 
-    `amplitudes`: a count (equally spaced in $(0, a_\\max]$) or the values.
+    `amplitudes`: a count (equally spaced in $(0, a_\\max]$) or the values; `dt`,
+    `transient`: as in [`exact_figures`][].
     """
     omegas = default_omegas(params) if omegas is None else np.asarray(omegas, float)
     if np.ndim(amplitudes) == 0:
@@ -120,7 +126,7 @@ def sinusoid_sweep(
         amps = np.asarray(amplitudes, float)
     values: dict[str, Any] = {k: v for k, v in params.as_dict().items() if k not in ("a", "omega")}
     grid = Params.grid(a=jnp.asarray(amps, params.dtype), omega=jnp.asarray(omegas, params.dtype), **values)
-    fig = exact_figures(grid, None, horizon, dt)
+    fig = exact_figures(grid, None, dt=dt, transient=transient)
     a, w = np.meshgrid(amps, omegas, indexing="ij")
     return SinusoidSweep(
         a=a.ravel(), omega=w.ravel(), speed=fig.speed.ravel(), cost=fig.cost.ravel(), ok=fig.ok.ravel()
@@ -151,8 +157,8 @@ def refine_sinusoid(
     top: int = 3,
     points: int = 9,
     levels: int = 3,
-    horizon: float = 60.0,
     dt: float = 0.01,
+    transient: int = 30,
 ) -> dict | None:
     """The best sinusoid of a coarse sweep, refined by a zooming local grid search.
 
@@ -196,7 +202,7 @@ def refine_sinusoid(
             w.append(gw.ravel())
         a, w = np.concatenate(a), np.concatenate(w)
         batch = Params(a=jnp.asarray(a, params.dtype), omega=jnp.asarray(w, params.dtype), **values)
-        fig = exact_figures(batch, None, horizon, dt)
+        fig = exact_figures(batch, None, dt=dt, transient=transient)
         found.append(SinusoidSweep(a=a, omega=w, speed=fig.speed, cost=fig.cost, ok=fig.ok))
         half_a, half_w = shrink * half_a, shrink * half_w
     every = SinusoidSweep(*(np.concatenate(x) for x in zip(*found)))

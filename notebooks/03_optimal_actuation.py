@@ -28,14 +28,16 @@
 # $$\min\ \frac{e_d}{\Delta X}\quad\text{s.t.}\quad \bar v \ge v_\min,\qquad
 # \max_t|\ell_0(t) - \bar\ell| \le a_\max,\qquad \text{no lift-off } (N_1, N_2 > 0),$$
 #
-# with gradients of the *smoothed* friction model (a differentiable ODE), then **verifies every
-# candidate on the exact hybrid model** and reports only exact figures (`*_exact`). The baseline is
-# the best sinusoid $a\sin\omega t$ ($a \le a_\max$) from an exact sweep over $(a, \omega)$. All exact
-# runs start from the relaxed spring and measure after the paper's transient ($t_\text{start}$ = 80
-# periods of the slowest natural frequency).
+# directly on the **steady gaits of the exact hybrid model**: each candidate's periodic orbit is
+# solved by Newton's method, and the gradients of its speed and cost come from forward-mode
+# differentiation through the exact engine and the implicit function theorem. Every figure is an
+# average over whole periods of the steady gait (`lj.steady_gait`, strict contact, from the relaxed
+# spring), and the optimum must be a stable gait. The baseline is the best sinusoid
+# $a\sin\omega t$ ($a \le a_\max$) from an exact sweep over $(a, \omega)$.
 #
-# At full size (three speeds, default settings) this notebook takes 8 to 15 minutes on two CPU
-# cores; CI runs it at a tiny size, where the optimiser has no time to improve on its starts.
+# At full size it runs three optimisations at the default settings (16 harmonics; the README's
+# "Optimal actuation" gives the measured time of each); CI runs it at a tiny size (4 harmonics, a
+# few iterations).
 
 # %%
 import os
@@ -54,24 +56,17 @@ import numpy as np
 # CI runs every notebook top to bottom at a small size (tests/test_notebooks.py sets LOCOMOTION_NB_SMALL=1).
 SMALL = os.environ.get("LOCOMOTION_NB_SMALL") == "1"
 A_MAX = 0.05  # stroke limit: the paper's amplitude
-HARMONICS = 2 if SMALL else 3
+HARMONICS = 4 if SMALL else 16
 SPEEDS = (0.01,) if SMALL else (0.01, 0.02, 0.03)  # required mean speeds: one optimum each
 V_MIN = SPEEDS[-1] if SMALL else 0.02  # the one looked at in detail
 if SMALL:
-    SETTINGS = lj.OptimiseSettings(
-        starts=2,
-        eps_schedule=(1e-2,),
-        outer=1,
-        inner=4,
-        corrections=0,
-        verify_horizon=10.0,
-        transient=4.0,
-        measured=3.0,
+    SETTINGS = lj.ExactOptimiseSettings(
+        local=2, start_frequencies=2, random_shapes=0, max_iter=10, stages=1, transient=20,
         refine_baseline=False,
-    )
-    SWEEP = dict(omegas=np.array([1.0, 2.0, 4.0, 6.0]), amplitudes=2)
+    )  # fmt: skip
+    SWEEP = dict(omegas=np.array([1.0, 2.0, 4.0, 6.0]), amplitudes=2, transient=20)
 else:
-    SETTINGS = lj.OptimiseSettings()  # 8 starts, eps 1e-2 -> 1e-3, exact verification over 60 time units
+    SETTINGS = lj.ExactOptimiseSettings()  # 4 local trust-region runs from the best of ~50 starts
     SWEEP = dict(omegas=None, amplitudes=6)  # 6 amplitudes x 32 log-spaced frequencies (0.5 .. 25)
 IMAGES = os.environ.get("LOCOMOTION_NB_IMAGES")  # set to a directory to save this notebook's picture there
 params = lj.Params(a=A_MAX)  # the paper's defaults; `a` and `omega` are the optimiser's to choose
@@ -79,14 +74,15 @@ params = lj.Params(a=A_MAX)  # the paper's defaults; `a` and `omega` are the opt
 # %% [markdown]
 # ## 1. The baseline: every sinusoid on the exact model
 #
-# `lj.sinusoid_sweep` measures $a\sin\omega t$ over a grid of amplitudes $a \le a_\max$ and frequencies
-# in one compiled, vmapped call of the exact engine: mean speed and cost of transport
-# $e_d/|\Delta X|$, with lift-off marking a configuration infeasible. `lj.best_sinusoid` picks the
+# `lj.sinusoid_sweep` solves the steady gait of $a\sin\omega t$ over a grid of amplitudes $a \le a_\max$
+# and frequencies in one batched call of the exact engine: mean speed and cost of transport
+# $e_d/|\Delta X|$ over whole periods, with lift-off or an unstable or unconverged gait marking a
+# configuration infeasible. `lj.best_sinusoid` picks the
 # cheapest one fast enough; `lj.pareto_front` keeps the sinusoids that no other one beats in both
 # speed and cost.
 
 # %%
-sweep = lj.sinusoid_sweep(params, A_MAX, horizon=SETTINGS.verify_horizon, **SWEEP)
+sweep = lj.sinusoid_sweep(params, A_MAX, **SWEEP)
 baseline = lj.best_sinusoid(sweep, V_MIN, +1)
 print(f"{sweep.ok.sum()} of {sweep.ok.size} sinusoids finish without lift-off; fastest: {np.nanmax(sweep.speed):.4f}")
 print(f"best sinusoid for v >= {V_MIN}:", baseline)
@@ -94,16 +90,18 @@ print(f"best sinusoid for v >= {V_MIN}:", baseline)
 # %% [markdown]
 # ## 2. Optimise
 #
-# One call per required speed. The result (`lj.Optimum`) holds the coefficients, the exact and
-# smoothed figures, which constraints hold on the exact model, and the comparison with the best
+# One call per required speed, each also started from the previous speed's optimum (`start=`:
+# continuation in $v_\min$). The result (`lj.Optimum`) holds the coefficients, the exact figures,
+# which constraints hold on the exact model, the gait's stability, and the comparison with the best
 # sinusoid (`opt.sinusoid`; with `refine_baseline=True`, the default, the sweep's best sinusoid is
 # first refined on a finer local grid, so the optimum is compared with a well-resolved sinusoid);
 # `summary()` prints them.
 
 # %%
-optima = {}
+optima, previous = {}, None
 for v in SPEEDS:
-    optima[v] = lj.optimise(params, v, A_MAX, harmonics=HARMONICS, settings=SETTINGS, sweep=sweep)
+    optima[v] = lj.optimise(params, v, A_MAX, harmonics=HARMONICS, settings=SETTINGS, sweep=sweep, start=previous)
+    previous = optima[v] if optima[v].feasible_exact else previous
     print(f"v_min = {v:g}: done in {optima[v].runtime_s:.0f} s", flush=True)
 opt = optima[V_MIN]
 print(opt.summary())
@@ -119,10 +117,11 @@ for v, o in optima.items():
 # %% [markdown]
 # ## 3. Check it yourself on the exact model
 #
-# The optimiser's figures come from `measure`; here the optimum and the best sinusoid are simulated
-# again with `lj.simulate` (one batched call: the sinusoid written as a `Fourier` series with the same
-# number of harmonics) over the same measured interval, and speed and cost are recomputed from the
-# saved centre of mass $X$ and dissipated energy $e_d$.
+# The optimiser's figures are those of the periodic orbit; here the optimum and the best sinusoid are
+# simulated again directly with `lj.simulate` (one batched call: the sinusoid written as a `Fourier`
+# series with the same number of harmonics) for 150 periods from the relaxed spring, and speed and
+# cost are recomputed from the saved centre of mass $X$ and dissipated energy $e_d$ over the last 20
+# whole periods.
 
 
 # %%
@@ -137,17 +136,25 @@ def as_fourier(o):
 
 waves = as_fourier(opt)
 stacked = jax.tree_util.tree_map(lambda *xs: jnp.stack([jnp.asarray(x, float) for x in xs]), *waves.values())
-t0 = float(params.t_start)
-t1 = t0 + SETTINGS.verify_horizon
-# Each configuration's `omega` set to its waveform's base frequency (see the note at the end).
+# Each configuration's `omega` set to its waveform's base frequency; both runs on the optimum's period grid.
 pair = lj.Params.stack([params.replace(omega=float(w.omega)) for w in waves.values()])
-check = lj.simulate(pair, t1, save_at=np.linspace(t0, t1, 401), waveform=stacked, start="relaxed")
+periods = np.array([2 * np.pi / float(w.omega) for w in waves.values()])
+check = [
+    lj.simulate(
+        pair[i],
+        150 * periods[i],
+        save_at=np.linspace(130, 150, 401) * periods[i],
+        waveform=jax.tree_util.tree_map(lambda x: x[i], stacked),
+        start="relaxed",
+    )  # fmt: skip
+    for i in range(len(waves))
+]
 for i, name in enumerate(waves):
-    dX = float(check.X[i, -1] - check.X[i, 0])
-    de = float(check.e_d[i, -1] - check.e_d[i, 0])
+    dX = float(check[i].X[-1] - check[i].X[0])
+    de = float(check[i].e_d[-1] - check[i].e_d[0])
     print(
-        f"{name:14s} speed {dX / SETTINGS.verify_horizon:.5f}  cost of transport {de / abs(dX):.5f}  "
-        f"status {lj.Status(int(check.status[i])).name}"
+        f"{name:14s} speed {dX / (20 * periods[i]):.5f}  cost of transport {de / abs(dX):.5f}  "
+        f"status {lj.Status(int(check[i].status)).name}"
     )
 print(f"optimiser's figures: optimum speed {opt.mean_speed_exact:.5f} cost {opt.cost_of_transport_exact:.5f}")
 if opt.sinusoid is not None:
@@ -158,13 +165,15 @@ if opt.sinusoid is not None:
 
 fig, axes = plt.subplots(1, 2, figsize=(10, 3.2), layout="constrained")
 for i, name in enumerate(waves):
-    axes[0].plot(check.t[i] - t0, check.X[i] - check.X[i, 0], label=name)
-    axes[1].plot(check.t[i] - t0, check.e_d[i] - check.e_d[i, 0], label=name)
-axes[0].plot(check.t[0] - t0, V_MIN * (check.t[0] - t0), "k:", label=f"required speed {V_MIN:g}")
-axes[0].set_ylabel(r"$X - X(t_\mathrm{start})$")
-axes[1].set_ylabel(r"$e_d - e_d(t_\mathrm{start})$")
+    t_rel = np.asarray(check[i].t) - float(check[i].t[0])
+    axes[0].plot(t_rel, check[i].X - check[i].X[0], label=name)
+    axes[1].plot(t_rel, check[i].e_d - check[i].e_d[0], label=name)
+t_rel = np.asarray(check[0].t) - float(check[0].t[0])
+axes[0].plot(t_rel, V_MIN * t_rel, "k:", label=f"required speed {V_MIN:g}")
+axes[0].set_ylabel(r"$X - X(t_0)$")
+axes[1].set_ylabel(r"$e_d - e_d(t_0)$")
 for ax in axes:
-    ax.set_xlabel(r"$t - t_\mathrm{start}$")
+    ax.set_xlabel(r"$t - t_0$ (after 130 periods)")
     ax.legend(fontsize=8)
 plt.show()
 
@@ -195,7 +204,7 @@ ax.legend(fontsize=7, loc="lower left")
 
 ax = axes["period"]
 period = 2 * np.pi / opt.omega
-t_end = period * np.floor(t1 / period)
+t_end = 150 * period
 one = lj.simulate(
     params.replace(omega=opt.omega),
     t_end,
@@ -246,11 +255,8 @@ if IMAGES:
 plt.show()
 
 # %% [markdown]
-# **Reading the result.** The optimiser's figures are only ever the exact model's; the smoothed model
-# (`*_smoothed` fields) differs from it by a few per cent, which the optimiser corrects by re-targeting
-# the speed of a candidate that falls short on the exact model. `opt.candidates` lists every candidate
-# with its exact figures, `opt.history` the augmented-Lagrangian iterations. The same runs are
+# **Reading the result.** The optimiser's figures are only ever the exact model's, over whole periods
+# of a stable steady gait. `opt.candidates` lists every refined candidate with its verified figures,
+# `opt.history` the starts and the local iterations. The older method (`method="smoothed"`: Adam on a
+# smoothed friction model with 3 harmonics, then an exact check) is still available. The same runs are
 # available from the command line: `locomotion-jax optimize --v-min 0.02 --a-max 0.05`.
-#
-# *Note:* when simulating a `waveform=`, give `params` the waveform's base frequency as `omega` (as done
-# above): the exact engine currently advances the actuation phase at `params.omega`.

@@ -236,10 +236,10 @@ MUTATIONS = [
         (REF,),
     ),
     Mutation(
-        "exact_figures_work",
-        "the optimiser's exact cost of transport from the actuator work instead of e_d",
+        "exact_figures_energy",
+        "the optimiser's exact cost of transport as the energy per period instead of per distance",
         "locomotion_jax/_pareto.py",
-        (("e_d = np.asarray(m.e_d, dtype=float)", "e_d = np.asarray(m.work, dtype=float)"),),
+        (("cost = np.asarray(gait.cost_of_transport, dtype=float)", "cost = np.asarray(gait.e_d, dtype=float)"),),
         ("tests/test_optimise.py::test_optimum_verified_on_the_reference",),
     ),
     Mutation(
