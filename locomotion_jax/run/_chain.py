@@ -273,8 +273,6 @@ def _results(f: _Fixed, dyn, contact) -> dict:
 
 def _measure_batch(C, valid, t_start, z, horizon, window, contact, start, dt, max_steps, lanes):
     n = valid.shape[0]
-    # The default start (eigenvalues of the linearised chain) once for the batch, not in every refill.
-    t_start = jnp.where(jnp.isfinite(t_start), t_start, C.t_start)
     take = lambda i: (jax.tree_util.tree_map(lambda x: x[i], C), valid[i], t_start[i])
     setup = lambda i: _setup(*take(i), z, horizon, window, contact, start)
     running = lambda f, d: _running(f, d, max_steps)
@@ -303,8 +301,10 @@ def measure_chain(chain: Chain, z: float, *, t_start: Any, horizon: float, windo
     if isinstance(dynamics, Smoothed):
         out = _measure_smoothed(flat, valid, ts, z_, h_, w_, contact, start, _cast_eps(dynamics, flat.dtype))
         return ChainMeasurement(**_unflatten(out, shape), z=float(z), start=start, contact=contact)
-    ts_host = np.asarray(jnp.where(jnp.isfinite(ts), ts, flat.t_start))
-    steps = dynamics.max_steps or default_max_steps(float(np.max(ts_host)) + horizon, dynamics.dt)
+    # The default start (eigenvalues of the linearised chain) outside the engine's program: a
+    # batched eigensolver inside it can deadlock XLA's CPU thread pool (seen at N = 8, batch 1024).
+    ts = jnp.where(jnp.isfinite(ts), ts, flat.t_start)
+    steps = dynamics.max_steps or default_max_steps(float(np.max(np.asarray(ts))) + horizon, dynamics.dt)
     lanes = min(n, MICRO_BATCH_CPU) if jax.default_backend() == "cpu" else n
     out = _measure_batch(flat, valid, ts, z_, h_, w_, contact, start, dynamics.dt, jnp.asarray(steps, jnp.int32), lanes)
     return ChainMeasurement(**_unflatten(out, shape), z=float(z), start=start, contact=contact)
