@@ -22,10 +22,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import _gait_select as select
 from ._batch import default_max_steps
 from ._compile import engine_jit
 from ._custom_types import Array, Contact
 from ._dynamics import Exact
+from ._gait_select import GaitStatus
 from ._status import Regime, Status
 from .dynamics import _chain_exact as engine, _chain_forces as forces
 from .model._chain import Chain
@@ -201,14 +203,12 @@ def steady_gait_chain(
     dtype: Any = None,
 ) -> ChainGait:
     """[`steady_gait`][] for a [`Chain`][] (its arguments; `start` names a start at rest)."""
-    from ._gait import _check, _multipliers, _open, _ratio, GaitStatus
-
     check_contact_start(contact, start)
     flat, valid, shape = prepare_chain(chain, dtype)
     dtype_ = flat.m.dtype
     f32 = jnp.finfo(dtype_).bits < 64
     tol = (1e-5 if f32 else 1e-11) if tol is None else float(tol)
-    ks = _check(periods, transient, tol, max_iter)
+    ks = select.check(periods, transient, tol, max_iter)
     omega = np.asarray(flat.waves.omega, np.float64)
     T_max = float(np.max(2 * np.pi / omega[np.isfinite(omega) & (omega > 0)], initial=1.0))
     real = lambda v: jnp.asarray(v, dtype_)
@@ -223,44 +223,23 @@ def steady_gait_chain(
     best = None
     for k in ks:
         msp = jnp.asarray(dynamics.max_steps or default_max_steps(k * T_max, dynamics.dt), jnp.int32)
-        go = jnp.asarray((base < 0) & (True if best is None else _open(best)))
+        go = jnp.asarray((base < 0) & (True if best is None else select.still_open(best)))
         y, M, out, it, done = jax.tree_util.tree_map(
             np.asarray,
             _solve_batch(flat, contact, dynamics.dt, real(k), y0, go, real(tol), jnp.asarray(max_iter, jnp.int32), msp),
         )
-        solved = np.where(out.status == Status.LIFTOFF, GaitStatus.LIFTOFF,
-                          np.where(done, GaitStatus.CONVERGED, GaitStatus.NOT_CONVERGED))  # fmt: skip
-        r: dict[str, Any] = dict(y=y, M=M, out=out, it=it)
-        r["status"] = np.where(base < 0, solved, base).astype(np.int32)
-        r["lifted"] = (base != GaitStatus.INVALID) & (np.asarray(trans_lift) | out.lifted)
-        r["residual"] = np.where(base < 0, np.max(np.abs(out.y - y), axis=1), np.nan)
-        r["k"] = np.where(r["status"] == GaitStatus.CONVERGED, k, 0)
-        r["multipliers"] = _multipliers(r)
-        r["stable"] = (r["status"] == GaitStatus.CONVERGED) & (
-            np.max(np.abs(np.nan_to_num(r["multipliers"])), axis=-1) < 1
-        )
-        if best is None:
-            best = r
-        else:
-            # As for two masses: an unstable orbit gives way to a stable one of a longer period,
-            # a failed solve to any converged one.
-            converged = r["status"] == GaitStatus.CONVERGED
-            failed = best["status"] == GaitStatus.NOT_CONVERGED
-            unstable = (best["status"] == GaitStatus.CONVERGED) & ~best["stable"]
-            take = (failed & converged) | (unstable & converged & r["stable"])
-            best = jax.tree_util.tree_map(
-                lambda a, b: np.where(take.reshape(take.shape + (1,) * (np.ndim(a) - 1)), b, a), best, r
-            )
-        if not np.any(_open(best)):
+        r = dict(y=y, M=M, out=out, it=it, done=done, residual=np.max(np.abs(out.y - y), axis=1))
+        r = select.judge(r, base, k, (base != GaitStatus.INVALID) & (np.asarray(trans_lift) | out.lifted))
+        best = select.better(best, r)
+        if not np.any(select.still_open(best)):
             break
     assert best is not None
-    return _unflatten(_chain_gait(best, omega, dtype_, contact, _ratio, GaitStatus), shape)
+    return _unflatten(_chain_gait(best, omega, dtype_, contact), shape)
 
 
-def _chain_gait(r: dict, omega: np.ndarray, dtype: Any, contact: str, ratio, codes) -> ChainGait:
-    ok = r["status"] == codes.CONVERGED
-    expand = lambda x: ok.reshape(ok.shape + (1,) * (np.ndim(x) - 1))
-    nan = lambda x: jnp.asarray(np.where(expand(x), x, np.nan), dtype)
+def _chain_gait(r: dict, omega: np.ndarray, dtype: Any, contact: str) -> ChainGait:
+    ok = r["status"] == GaitStatus.CONVERGED
+    nan = lambda x: jnp.asarray(np.where(select.expand(ok, x), x, np.nan), dtype)
     out: _Period = r["out"]
     kT = np.where(ok, r["k"] * 2 * np.pi / omega, np.nan)
     dX = out.dX
@@ -273,7 +252,7 @@ def _chain_gait(r: dict, omega: np.ndarray, dtype: Any, contact: str, ratio, cod
         mean_speed=nan(dX / np.where(ok, kT, 1)),
         e_d=nan(out.ed),
         work=nan(out.w),
-        cost_of_transport=nan(ratio(out.ed, np.abs(dX), ok)),
+        cost_of_transport=nan(select.ratio(out.ed, np.abs(dX), ok)),
         stick_fraction=nan(out.stuck / np.where(ok, kT, 1)[:, None]),
         regime=jnp.asarray(np.where(ok, np.where(ssl, Regime.SSL, Regime.SL), Regime.UNDETERMINED), jnp.int32),
         n_switch=jnp.asarray(np.where(ok, out.n_switch, 0), jnp.int32),

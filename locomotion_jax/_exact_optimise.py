@@ -50,7 +50,7 @@ from . import _constraints as cons, _orbit as orbit, _pareto as pareto
 from ._actuation import Fourier
 from ._gait import steady_gait
 from ._lockstep import run_lockstep
-from ._optimum import ExactSettings, Optimum
+from ._optimum import ExactSettings, Optimum, verified
 from ._params import Params
 
 
@@ -604,10 +604,7 @@ def _verify(params, speed, direction, a_max, harmonics, free, settings, candidat
                        dynamics=_exact_dynamics(settings))  # fmt: skip
     fig = pareto.gait_figures(gait)
     strokes = np.array([a_max * _stroke_of(th, harmonics) for th in theta])
-    tol = 8 * float(jnp.finfo(dtype).eps)
-    ok_speed = fig.ok & (direction * np.nan_to_num(fig.speed, nan=-np.inf) >= speed)
-    ok_stroke = strokes <= a_max * (1 + tol)
-    feasible = ok_speed & ok_stroke & fig.ok
+    k, feasible, exact = verified(fig, strokes, speed, direction, a_max, float(jnp.finfo(dtype).eps), baseline)
     table = [
         {
             "candidate": names[i],
@@ -621,13 +618,6 @@ def _verify(params, speed, direction, a_max, harmonics, free, settings, candidat
         }
         for i in range(n)
     ]
-    if feasible.any():
-        k = int(np.argmin(np.where(feasible, fig.cost, np.inf)))
-    else:  # the closest miss: a stable gait, fastest
-        v = direction * np.nan_to_num(fig.speed, nan=-np.inf)
-        k = int(np.argmax(np.where(fig.ok, v, -np.inf))) if fig.ok.any() else 0
-    sin_cost = baseline["cost_of_transport"] if baseline else math.nan
-    improvement = 1 - float(fig.cost[k]) / sin_cost if (feasible[k] and baseline) else math.nan
     c, s, w = cs[k]
     rho = np.abs(np.asarray(gait.multipliers[k]))
     opt = Optimum(
@@ -641,24 +631,11 @@ def _verify(params, speed, direction, a_max, harmonics, free, settings, candidat
         sin=s,
         omega=w,
         lbar=float(params.lbar),
-        mean_speed_exact=float(fig.speed[k]),
-        cost_of_transport_exact=float(fig.cost[k]),
-        stroke_exact=float(strokes[k]),
-        liftoff_exact=bool(fig.liftoff[k]),
-        constraints_exact={
-            "speed": bool(ok_speed[k]),
-            "stroke": bool(ok_stroke[k]),
-            "no_liftoff": bool(~fig.liftoff[k]),
-            "stable": bool(fig.ok[k]),
-        },
-        feasible_exact=bool(feasible[k]),
+        **exact,
         mean_speed_smoothed=math.nan,
         cost_of_transport_smoothed=math.nan,
         min_normal_smoothed=math.nan,
         eps=math.nan,
-        sinusoid=baseline,
-        sinusoid_cost_of_transport=sin_cost,
-        improvement_vs_sinusoid=improvement,
         initial_cost_of_transport_exact=float(fig.cost[0]) if feasible[0] else math.nan,
         source=names[k],
         candidates=table,

@@ -23,35 +23,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import _corrector as corrector, _model as model, _period as period
+from . import _corrector as corrector, _gait_select as select, _model as model, _period as period
 from ._actuation import AbstractWaveform
 from ._batch import default_max_steps, prepare, unflatten
 from ._chain_gait import ChainGait
 from ._compile import engine_jit
 from ._custom_types import Array, ArrayLike
 from ._dynamics import AbstractDynamics, Exact
+from ._gait_select import GaitStatus
 from ._measure import STICK_TOL
 from ._params import Params
 from ._status import Regime, Status
 from .model._chain import Chain
-
-
-class GaitStatus:
-    """Outcome of the periodic-orbit solve of one configuration (beside `Status`).
-
-    - `CONVERGED`: $\\|\\Phi_k(y) - y\\|_\\infty \\le$ `tol` $(1 + \\|y\\|_\\infty)$ for the reported `k`.
-    - `NOT_CONVERGED`: no period in `periods` converged within `max_iter` Newton
-      iterations (a chaotic or quasi-periodic motion, a longer period, a switching
-      structure that changes under every step, a singular $M - I$, or the step cap
-      `Exact.max_steps` hit); its numbers are NaN.
-    - `LIFTOFF`: a normal force reached zero under the strict reading (transient or orbit).
-    - `INVALID`: parameters outside their valid range; nothing was integrated.
-    """
-
-    CONVERGED = 0
-    NOT_CONVERGED = 1
-    LIFTOFF = 2
-    INVALID = 3
 
 
 class Gait(eqx.Module):
@@ -141,19 +124,6 @@ def _newton(flat, wave, axes, contact, dt, y0, go, k, tol, max_iter, max_steps) 
     r = jax.tree_util.tree_map(np.asarray, r)
     y = r.z[:, :3]
     return dict(y=y, M=r.J[:, :3, :3], out=r.out, it=r.it, done=r.done, residual=np.max(np.abs(r.out.y - y), axis=1))
-
-
-def _check(periods, transient, tol, max_iter) -> tuple[int, ...]:
-    ks = (periods,) if isinstance(periods, int) else tuple(periods)
-    if not ks or any(not isinstance(k, int) or isinstance(k, bool) or k < 1 for k in ks):
-        raise ValueError(f"periods must be a positive int or a non-empty sequence of them, got {periods!r}.")
-    if not (isinstance(transient, int) and not isinstance(transient, bool) and transient >= 0):
-        raise ValueError(f"transient must be an int >= 0 (actuation periods), got {transient!r}.")
-    if not (isinstance(max_iter, int) and max_iter >= 1):
-        raise ValueError(f"max_iter must be an int >= 1, got {max_iter!r}.")
-    if not (np.isfinite(tol) and tol > 0):
-        raise ValueError(f"tol must be a finite number > 0, got {tol!r}.")
-    return ks
 
 
 @overload
@@ -248,7 +218,7 @@ def steady_gait(
     y_start = _start_states(start, shape, flat.dtype)
     f32 = jnp.finfo(flat.dtype).bits < 64
     tol = (1e-5 if f32 else 1e-11) if tol is None else float(tol)
-    ks = _check(periods, transient, tol, max_iter)
+    ks = select.check(periods, transient, tol, max_iter)
     omega = np.asarray(wave.omega, np.float64)
     T_max = float(np.max(2 * np.pi / omega[np.isfinite(omega) & (omega > 0)], initial=1.0))
     mst = jnp.asarray(dynamics.max_steps or default_max_steps(transient * T_max, dynamics.dt), jnp.int32)
@@ -270,30 +240,11 @@ def steady_gait(
     best = None
     for k in ks:
         msp = jnp.asarray(dynamics.max_steps or default_max_steps(k * T_max, dynamics.dt), jnp.int32)
-        go = jnp.asarray((base < 0) & (True if best is None else _open(best)))
+        go = jnp.asarray((base < 0) & (True if best is None else select.still_open(best)))
         r = _newton(flat, wave, axes, contact, dynamics.dt, y0, go, k, tol, max_iter, msp)
-        out: period.Period = r["out"]
-        solved = np.where(out.status == Status.LIFTOFF, GaitStatus.LIFTOFF,
-                          np.where(r["done"], GaitStatus.CONVERGED, GaitStatus.NOT_CONVERGED))  # fmt: skip
-        r["status"] = np.where(base < 0, solved, base).astype(np.int32)
-        r["lifted"] = valid & (np.asarray(trans_lift) | out.lifted)
-        r["residual"] = np.where(base < 0, r["residual"], np.nan)
-        r["k"] = np.where(r["status"] == GaitStatus.CONVERGED, k, 0)
-        r["multipliers"] = _multipliers(r)
-        r["stable"] = (r["status"] == GaitStatus.CONVERGED) & (
-            np.max(np.abs(np.nan_to_num(r["multipliers"])), axis=-1) < 1
-        )
-        if best is None:
-            best = r
-        else:
-            # An unstable orbit gives way to a stable one of a longer period (the attractor
-            # past a period doubling); a failed solve to any converged one.
-            converged = r["status"] == GaitStatus.CONVERGED
-            failed = best["status"] == GaitStatus.NOT_CONVERGED
-            unstable = (best["status"] == GaitStatus.CONVERGED) & ~best["stable"]
-            take = (failed & converged) | (unstable & converged & r["stable"])
-            best = jax.tree_util.tree_map(lambda a, b: np.where(_expand(take, a), b, a), best, r)
-        if not np.any(_open(best)):
+        r = select.judge(r, base, k, valid & (np.asarray(trans_lift) | r["out"].lifted))
+        best = select.better(best, r)
+        if not np.any(select.still_open(best)):
             break
     assert best is not None
     return unflatten(_gait(best, omega, flat, contact), shape)
@@ -311,37 +262,10 @@ def _start_states(start: Any, shape: tuple[int, ...], dtype: Any) -> Array | Non
     return jnp.asarray(y.reshape(-1, 3), dtype)
 
 
-def _multipliers(r: dict) -> np.ndarray:
-    """Eigenvalues of the monodromy matrix by decreasing modulus (on the host: a general
-    eigensolver is not available on every JAX backend); NaN where not converged."""
-    ok = r["status"] == GaitStatus.CONVERGED
-    M = r["M"]
-    out = np.full(M.shape[:-1], np.nan + 0j)
-    if np.any(ok):
-        ev = np.linalg.eigvals(M[ok])
-        out[ok] = np.take_along_axis(ev, np.argsort(-np.abs(ev), axis=-1), -1)
-    return out
-
-
-def _open(r: dict) -> np.ndarray:
-    """Configurations a longer period may still improve: not converged, or unstable."""
-    return (r["status"] == GaitStatus.NOT_CONVERGED) | ((r["status"] == GaitStatus.CONVERGED) & ~r["stable"])
-
-
-def _ratio(e: Any, dist: Any, ok: np.ndarray) -> np.ndarray:
-    """Energy per unit distance; `inf` for a converged gait that does not move."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(ok & (dist == 0), np.inf, e / np.where(dist == 0, 1, dist))
-
-
-def _expand(flag: np.ndarray, like: np.ndarray) -> np.ndarray:
-    return flag.reshape(flag.shape + (1,) * (np.ndim(like) - flag.ndim))
-
-
 def _gait(r: dict, omega: np.ndarray, flat: Params, contact: str) -> Gait:
     ok = r["status"] == GaitStatus.CONVERGED
     dtype = flat.dtype
-    nan = lambda x: jnp.asarray(np.where(_expand(ok, x), x, np.nan), dtype)
+    nan = lambda x: jnp.asarray(np.where(select.expand(ok, x), x, np.nan), dtype)
     out: period.Period = r["out"]
     k = r["k"]
     kT = np.where(ok, k * 2 * np.pi / omega, np.nan)
@@ -357,7 +281,7 @@ def _gait(r: dict, omega: np.ndarray, flat: Params, contact: str) -> Gait:
         mean_speed=nan(dX / np.where(ok, kT, 1)),
         e_d=nan(out.ed),
         work=nan(out.w),
-        cost_of_transport=nan(_ratio(out.ed, np.abs(dX), ok)),
+        cost_of_transport=nan(select.ratio(out.ed, np.abs(dX), ok)),
         stick_fraction1=nan(stuck[0]),
         stick_fraction2=nan(stuck[1]),
         regime=jnp.asarray(np.where(ok, np.where(ssl, Regime.SSL, Regime.SL), Regime.UNDETERMINED), jnp.int32),

@@ -53,7 +53,7 @@ import optax
 from . import _constraints as cons, _pareto as pareto
 from ._actuation import Fourier
 from ._objective import make_plan, Plan, rollout
-from ._optimum import ExactSettings, Optimum, Settings
+from ._optimum import ExactSettings, Optimum, Settings, verified
 from ._params import Params
 
 
@@ -444,10 +444,7 @@ def _select(params, speed, direction, a_max, harmonics, free, settings, candidat
     )
     fig = pareto.exact_figures(_batched(params, n), _fourier_batch(theta, a_max, params.lbar), dt=settings.verify_dt)
     strokes = a_max * np.asarray(jax.vmap(cons.stroke)(theta["cos"], theta["sin"]))
-    tol = 8 * float(jnp.finfo(dtype).eps)
-    ok_speed = fig.ok & (direction * np.nan_to_num(fig.speed, nan=-np.inf) >= speed)
-    ok_stroke = strokes <= a_max * (1 + tol)
-    feasible = ok_speed & ok_stroke & fig.ok
+    k, feasible, exact = verified(fig, strokes, speed, direction, a_max, float(jnp.finfo(dtype).eps), baseline)
     v_s = np.asarray(r_s.distance / r_s.duration)
     with np.errstate(divide="ignore", invalid="ignore"):
         cost_s = np.asarray(r_s.dissipated) / np.abs(np.asarray(r_s.distance))
@@ -465,15 +462,8 @@ def _select(params, speed, direction, a_max, harmonics, free, settings, candidat
         }
         for i in range(n)
     ]
-    if feasible.any():
-        k = int(np.argmin(np.where(feasible, fig.cost, np.inf)))
-    else:  # report the closest miss: no lift-off and fastest, else fastest
-        v = direction * np.nan_to_num(fig.speed, nan=-np.inf)
-        k = int(np.argmax(np.where(fig.ok, v, -np.inf))) if fig.ok.any() else 0
     init = [i for i in range(n) if names[i].startswith("initial") and feasible[i]]
     init_cost = min((float(fig.cost[i]) for i in init), default=math.nan)
-    sin_cost = baseline["cost_of_transport"] if baseline else math.nan
-    improvement = 1 - float(fig.cost[k]) / sin_cost if (feasible[k] and baseline) else math.nan
     c = a_max * np.asarray(theta["cos"][k], float)
     s = a_max * np.asarray(theta["sin"][k], float)
     return Optimum(
@@ -487,24 +477,11 @@ def _select(params, speed, direction, a_max, harmonics, free, settings, candidat
         sin=s,
         omega=float(np.exp(theta["log_omega"][k])),
         lbar=float(params.lbar),
-        mean_speed_exact=float(fig.speed[k]),
-        cost_of_transport_exact=float(fig.cost[k]),
-        stroke_exact=float(strokes[k]),
-        liftoff_exact=bool(fig.liftoff[k]),
-        constraints_exact={
-            "speed": bool(ok_speed[k]),
-            "stroke": bool(ok_stroke[k]),
-            "no_liftoff": bool(~fig.liftoff[k]),
-            "stable": bool(fig.ok[k]),
-        },
-        feasible_exact=bool(feasible[k]),
+        **exact,
         mean_speed_smoothed=float(v_s[k]),
         cost_of_transport_smoothed=float(cost_s[k]),
         min_normal_smoothed=float(r_s.min_normal[k]),
         eps=eps_f,
-        sinusoid=baseline,
-        sinusoid_cost_of_transport=sin_cost,
-        improvement_vs_sinusoid=improvement,
         initial_cost_of_transport_exact=init_cost,
         source=names[k],
         candidates=table,

@@ -264,3 +264,40 @@ OptimiseSettings = Settings
 
 ExactOptimiseSettings = ExactSettings
 """Public name of [`ExactSettings`][] (exported as `locomotion_jax.ExactOptimiseSettings`)."""
+
+
+def verified(fig: Any, strokes: np.ndarray, speed: float, direction: int, a_max: float, eps: float,
+             baseline: dict | None) -> tuple[int, np.ndarray, dict]:  # fmt: skip
+    """Choose the reported candidate from the exact check of every candidate (`fig`: steady-gait
+    figures with `speed`, `cost`, `ok` (a stable gait), `liftoff`; `strokes`: true strokes).
+
+    The cheapest feasible one (speed `>= v_min` in `direction`, stroke within `a_max` up to 8
+    `eps` relative, a stable gait), else the closest miss: the fastest stable gait. Returns its
+    index, the feasibility of every candidate, and the chosen one's [`Optimum`][] fields of the
+    exact check and the comparison with the best sinusoid `baseline`."""
+    ok_speed = fig.ok & (direction * np.nan_to_num(fig.speed, nan=-np.inf) >= speed)
+    ok_stroke = strokes <= a_max * (1 + 8 * eps)
+    feasible = ok_speed & ok_stroke & fig.ok
+    if feasible.any():
+        k = int(np.argmin(np.where(feasible, fig.cost, np.inf)))
+    else:
+        v = direction * np.nan_to_num(fig.speed, nan=-np.inf)
+        k = int(np.argmax(np.where(fig.ok, v, -np.inf))) if fig.ok.any() else 0
+    sin_cost = baseline["cost_of_transport"] if baseline else math.nan
+    fields = dict(
+        mean_speed_exact=float(fig.speed[k]),
+        cost_of_transport_exact=float(fig.cost[k]),
+        stroke_exact=float(strokes[k]),
+        liftoff_exact=bool(fig.liftoff[k]),
+        constraints_exact={
+            "speed": bool(ok_speed[k]),
+            "stroke": bool(ok_stroke[k]),
+            "no_liftoff": bool(~fig.liftoff[k]),
+            "stable": bool(fig.ok[k]),
+        },
+        feasible_exact=bool(feasible[k]),
+        sinusoid=baseline,
+        sinusoid_cost_of_transport=sin_cost,
+        improvement_vs_sinusoid=1 - float(fig.cost[k]) / sin_cost if (feasible[k] and baseline) else math.nan,
+    )
+    return k, feasible, fields
