@@ -39,11 +39,13 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 import locomotion_jax as lj  # noqa: E402
-from locomotion_jax import _exact as two_mass  # noqa: E402
-from locomotion_jax._batch import prepare  # noqa: E402
-from locomotion_jax._compile import COMPILER_OPTIONS  # noqa: E402
-from locomotion_jax.dynamics import _chain_exact as new_engine  # noqa: E402
+from locomotion_jax.dynamics import (
+    _chain_exact as new_engine,  # noqa: E402
+    _exact as two_mass,  # noqa: E402
+)
+from locomotion_jax.dynamics._compile import COMPILER_OPTIONS  # noqa: E402
 from locomotion_jax.run import _chain  # noqa: E402
+from locomotion_jax.run._batch import prepare  # noqa: E402
 
 
 def load_engine(rev: str) -> types.ModuleType:

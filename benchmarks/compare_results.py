@@ -51,7 +51,7 @@ def produce(tree: Path, out: Path) -> None:
     env = {**__import__("os").environ, **env}
     out.mkdir(parents=True)
     subprocess.run([sys.executable, "-c", MEASURE, str(out / "measure.npz")], env=env, cwd=tree, check=True)
-    cli = [sys.executable, "-c", "from locomotion_jax._cli import main; main()", "figures", "--quick"]
+    cli = [sys.executable, "-c", "from locomotion_jax.cli._main import main; main()", "figures", "--quick"]
     subprocess.run([*cli, "--out", str(out / "figures")], env=env, cwd=tree, check=True, capture_output=True)
 
 

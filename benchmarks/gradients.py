@@ -18,7 +18,7 @@ import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 import locomotion_jax as lj  # noqa: E402
-from locomotion_jax._params import PARAM_NAMES  # noqa: E402
+from locomotion_jax.model._params import PARAM_NAMES  # noqa: E402
 
 
 NAMES = ("omega", "a", "d", "mu_s", "mu_k")

@@ -193,8 +193,8 @@ def _chunk_runner(vals, n_dev, H, dyn, max_steps, micro, z=1e30):
     import jax.numpy as jnp
     import numpy as np
     from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
-    from locomotion_jax import _sharding
-    from locomotion_jax._params import PARAM_NAMES, Params
+    from locomotion_jax.maps import _sharding
+    from locomotion_jax.model._params import PARAM_NAMES, Params
 
     mesh = Mesh(np.asarray(jax.devices()[:n_dev]), (_sharding.BATCH_AXIS,))
     sharding = NamedSharding(mesh, P(_sharding.BATCH_AXIS))
@@ -213,8 +213,8 @@ def case_sharded(spec: dict) -> dict:
     jax = setup_jax()
     import locomotion_jax as lj
     import numpy as np
-    from locomotion_jax._batch import default_max_steps, MICRO_BATCH_CPU
-    from locomotion_jax._params import DEFAULTS, PARAM_NAMES
+    from locomotion_jax.model._params import DEFAULTS, PARAM_NAMES
+    from locomotion_jax.run._batch import default_max_steps, MICRO_BATCH_CPU
 
     clock = CompileClock()
     B, H, dt = spec["B"], spec["horizon"], spec["dt"]
@@ -246,7 +246,7 @@ def case_sharded(spec: dict) -> dict:
     # Each device's loop ends on its own. Measure tau_5 (z = 5) on the same
     # configurations, ordered by expected cost (`_schedule.cost_order`): device 0
     # gets the cheaper half; record when each device's shard of the output is ready.
-    from locomotion_jax import _schedule
+    from locomotion_jax.maps import _schedule
 
     H_tau = spec["tau_horizon"]
     order = _schedule.cost_order(vals, z=5.0, horizon=H_tau, window=25.0, dt=dt, contact="paper")
@@ -431,8 +431,8 @@ def case_schedule(spec: dict) -> dict:
     jax = setup_jax()
     import locomotion_jax as lj
     import numpy as np
-    from locomotion_jax import _sharding, _sweep
-    from locomotion_jax._batch import MICRO_BATCH_CPU
+    from locomotion_jax.maps import _sharding, _sweep
+    from locomotion_jax.run._batch import MICRO_BATCH_CPU
 
     chunk, dt, H = spec["chunk"], spec["dt"], spec["horizon"]
     micro = MICRO_BATCH_CPU if jax.devices()[0].platform == "cpu" else None
@@ -707,7 +707,7 @@ def case_jacfwd(spec: dict) -> dict:
     jax = setup_jax()
     import jax.numpy as jnp
     import locomotion_jax as lj
-    from locomotion_jax._params import PARAM_NAMES
+    from locomotion_jax.model._params import PARAM_NAMES
 
     names = ("omega", "a", "d", "mu_s", "mu_k")[: spec["p"]]
     om, a = configs(spec["B"])

@@ -41,7 +41,7 @@ def timed(args: list[str], env: dict, cwd: str) -> tuple[float, float]:
     args = [a.replace("{out}", tempfile.mktemp(suffix=".nc", dir=cwd)) for a in args]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     wall = time.perf_counter()
-    cli = [sys.executable, "-c", "from locomotion_jax._cli import main; main()"]
+    cli = [sys.executable, "-c", "from locomotion_jax.cli._main import main; main()"]
     proc = subprocess.run([*cli, *args], env=env, cwd=cwd, capture_output=True, text=True)
     wall = time.perf_counter() - wall
     if proc.returncode != 0:

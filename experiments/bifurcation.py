@@ -28,8 +28,8 @@ jax.config.update("jax_enable_x64", True)  # start-up choice of the script, like
 
 import locomotion_jax as lj
 import numpy as np
-from locomotion_jax import _fig_map as fmap, _fig_sweep as fsw, _plotting as pl
-from locomotion_jax._bifurcation import NAMES
+from locomotion_jax.gaits._bifurcation import NAMES
+from locomotion_jax.paper import _fig_map as fmap, _fig_sweep as fsw, _plotting as pl
 
 
 OUT = Path(__file__).parent / "output" / "gaits"

@@ -9,7 +9,7 @@ import jax
 
 jax.config.update("jax_enable_x64", True)  # start-up choice of the script, like the CLI's --x64
 
-from locomotion_jax._figures import script_main
+from locomotion_jax.paper._figures import script_main
 
 
 if __name__ == "__main__":

@@ -25,10 +25,10 @@ jax.config.update("jax_enable_x64", True)
 
 import locomotion_jax as lj  # noqa: E402
 import numpy as np  # noqa: E402
-from locomotion_jax import _optimise, _optimise_plots as plots, _pareto  # noqa: E402
-from locomotion_jax._constraints import stroke  # noqa: E402
 from locomotion_jax._json import jsonable  # noqa: E402
-from locomotion_jax._optimum import ExactSettings, Settings  # noqa: E402
+from locomotion_jax.optimisation import _optimise, _pareto, _plots as plots  # noqa: E402
+from locomotion_jax.optimisation._constraints import stroke  # noqa: E402
+from locomotion_jax.optimisation._optimum import ExactSettings, Settings  # noqa: E402
 
 
 OUT = Path(__file__).parent / "output" / "optimal"

@@ -7,21 +7,7 @@ faster", Nonlinear Dynamics 78 (2014); equation numbers in docstrings are the pa
 
 from importlib.metadata import PackageNotFoundError, version as _version
 
-from ._actuation import AbstractWaveform as AbstractWaveform, Fourier as Fourier, Sinusoid as Sinusoid
-from ._basins import Basins as Basins, basins as basins
-from ._bifurcation import BranchEvents as BranchEvents, EventKind as EventKind
 from ._cache import enable_compilation_cache as enable_compilation_cache
-from ._chain_gait import ChainGait as ChainGait
-from ._continuation import Branch as Branch, BranchStatus as BranchStatus, continuation as continuation
-from ._dynamics import AbstractDynamics as AbstractDynamics, Exact as Exact, Smoothed as Smoothed
-from ._gait import Gait as Gait, GaitStatus as GaitStatus, steady_gait as steady_gait
-from ._measure import measure as measure
-from ._optimum import (
-    ExactOptimiseSettings as ExactOptimiseSettings,
-    OptimiseSettings as OptimiseSettings,
-    Optimum as Optimum,
-)
-from ._params import DEFAULTS as DEFAULTS, PARAM_NAMES as PARAM_NAMES, Params as Params, VALID_RANGES as VALID_RANGES
 from ._results import (
     ChainMeasurement as ChainMeasurement,
     ChainTrajectory as ChainTrajectory,
@@ -30,9 +16,14 @@ from ._results import (
     SMOOTH_MARGIN_Z as SMOOTH_MARGIN_Z,
     Trajectory as Trajectory,
 )
-from ._simulate import simulate as simulate
 from ._status import Mode as Mode, Regime as Regime, Status as Status
-from ._sweep import sweep as sweep
+from .dynamics._base import AbstractDynamics as AbstractDynamics, Exact as Exact, Smoothed as Smoothed
+from .gaits._basins import Basins as Basins, basins as basins
+from .gaits._bifurcation import BranchEvents as BranchEvents, EventKind as EventKind
+from .gaits._chain_gait import ChainGait as ChainGait
+from .gaits._continuation import Branch as Branch, BranchStatus as BranchStatus, continuation as continuation
+from .gaits._gait import Gait as Gait, GaitStatus as GaitStatus, steady_gait as steady_gait
+from .maps._sweep import sweep as sweep
 from .model import (
     AbstractActuator as AbstractActuator,
     AbstractFriction as AbstractFriction,
@@ -45,6 +36,20 @@ from .model import (
     Stribeck as Stribeck,
     TravellingWave as TravellingWave,
 )
+from .model._params import (
+    DEFAULTS as DEFAULTS,
+    PARAM_NAMES as PARAM_NAMES,
+    Params as Params,
+    VALID_RANGES as VALID_RANGES,
+)
+from .model._waveform import AbstractWaveform as AbstractWaveform, Fourier as Fourier, Sinusoid as Sinusoid
+from .optimisation._optimum import (
+    ExactOptimiseSettings as ExactOptimiseSettings,
+    OptimiseSettings as OptimiseSettings,
+    Optimum as Optimum,
+)
+from .run._measure import measure as measure
+from .run._simulate import simulate as simulate
 
 
 try:
@@ -55,17 +60,17 @@ except PackageNotFoundError:  # running from a source tree
 
 _LAZY = {
     # matplotlib's animation machinery (~0.7 s)
-    "animate": "_animation",
-    "save_gif": "_animation",
+    "animate": "run._animation",
+    "save_gif": "run._animation",
     # optax and the optimiser (~0.15 s), which a simulation or a sweep does not need
-    "optimise": "_optimise",
-    "optimize": "_optimise",
-    "best_sinusoid": "_pareto",
-    "pareto_front": "_pareto",
-    "sinusoid_sweep": "_pareto",
+    "optimise": "optimisation._optimise",
+    "optimize": "optimisation._optimise",
+    "best_sinusoid": "optimisation._pareto",
+    "pareto_front": "optimisation._pareto",
+    "sinusoid_sweep": "optimisation._pareto",
     # scipy's least squares, for parameter identification
-    "fit_trajectory": "_fit",
-    "FitResult": "_fit",
+    "fit_trajectory": "optimisation._fit",
+    "FitResult": "optimisation._fit",
 }
 """Public names imported on first use, so that `import locomotion_jax` stays quick."""
 

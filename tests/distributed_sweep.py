@@ -51,7 +51,7 @@ def main() -> None:
             shutdown_timeout_seconds=30,
         )
     import locomotion_jax as lj
-    from locomotion_jax import _sweep, _zarr_store
+    from locomotion_jax.maps import _sweep, _zarr_store
 
     cache = os.environ.get("DISTRIBUTED_SWEEP_CACHE")
     if cache:  # the test's processes share their compilations

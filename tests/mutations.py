@@ -40,10 +40,10 @@ class Mutation(NamedTuple):
     equivalent: str | None = None  # why no test can kill it (its results are the unmutated ones)
 
 
-EXACT = "locomotion_jax/_exact.py"
+EXACT = "locomotion_jax/dynamics/_exact.py"
 CHAIN = "locomotion_jax/dynamics/_chain_exact.py"
 CHAIN_MOTION = "locomotion_jax/dynamics/_chain_motion.py"
-MEASURE = "locomotion_jax/_measure.py"
+MEASURE = "locomotion_jax/run/_measure.py"
 
 MUTATIONS = [
     # -- the bugs an outside audit found uncaught ----------------------------------------------
@@ -123,7 +123,7 @@ MUTATIONS = [
     Mutation(
         "wrong_wn1",
         "wn1 = sqrt(2 k / m1) (right only for m1 = m2)",
-        "locomotion_jax/_params.py",
+        "locomotion_jax/model/_params.py",
         (
             (
                 "jnp.sqrt(self.k * (self.m1 + self.m2) / (self.m1 * self.m2))",
@@ -149,7 +149,7 @@ MUTATIONS = [
     Mutation(
         "queue_done_mask",
         "work queue: every active lane is taken as done when one finishes",
-        "locomotion_jax/_queue.py",
+        "locomotion_jax/run/_queue.py",
         (("done = (pos < n) & ~running_all(fixed, dyn)", "done = pos < n"),),
         (REF,),
     ),
@@ -231,21 +231,21 @@ MUTATIONS = [
     Mutation(
         "t_start_from_wn1",
         "t_start from wn1 instead of the lowest natural frequency",
-        "locomotion_jax/_params.py",
+        "locomotion_jax/model/_params.py",
         (("return 80 * 2 * math.pi / wmin", "return 80 * 2 * math.pi / self.wn1"),),
         (REF,),
     ),
     Mutation(
         "exact_figures_energy",
         "the optimiser's exact cost of transport as the energy per period instead of per distance",
-        "locomotion_jax/_pareto.py",
+        "locomotion_jax/optimisation/_pareto.py",
         (("cost = np.asarray(gait.cost_of_transport, dtype=float)", "cost = np.asarray(gait.e_d, dtype=float)"),),
         ("tests/test_optimise.py::test_optimum_verified_on_the_reference",),
     ),
     Mutation(
         "cli_omega_over_wn1",
         "--omega-over-wn1 multiplies the default wn1 (10), not the configuration's",
-        "locomotion_jax/_cli_options.py",
+        "locomotion_jax/cli/_options.py",
         (("params.replace(omega=ratio * float(params.wn1))", "params.replace(omega=ratio * 10.0)"),),
         ("tests/test_cli_options.py",),
     ),

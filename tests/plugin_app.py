@@ -6,11 +6,11 @@ import typer
 
 
 def plugin_app(register: Callable[[typer.Typer], None]) -> typer.Typer:
-    """An app with the command that `register` adds (e.g. `_animate_cli.register`)."""
+    """An app with the command that `register` adds (e.g. `cli._animate.register`)."""
     app = typer.Typer()
     register(app)
 
-    @app.command("noop")  # a second command keeps typer in multi-command mode, as in _cli.py
+    @app.command("noop")  # a second command keeps typer in multi-command mode, as in cli/_main.py
     def noop() -> None:
         pass
 

@@ -33,8 +33,8 @@ import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
-from locomotion_jax import _measure
-from locomotion_jax._batch import default_max_steps, horizon_bound, prepare
+from locomotion_jax.run import _measure
+from locomotion_jax.run._batch import default_max_steps, horizon_bound, prepare
 from reference import reference_measure, reference_natural_frequencies, reference_simulate
 
 

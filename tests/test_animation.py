@@ -12,8 +12,8 @@ import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
-from locomotion_jax._animate_cli import register
-from locomotion_jax._animation import SLIP_COLOR, STUCK_COLOR, stuck_masks
+from locomotion_jax.cli._animate import register
+from locomotion_jax.run._animation import SLIP_COLOR, STUCK_COLOR, stuck_masks
 from matplotlib.animation import AbstractMovieWriter
 from matplotlib.colors import to_rgb, to_rgba
 from matplotlib.lines import Line2D

@@ -21,7 +21,7 @@ def _cli(args: list[str], cache: Path, tmp_path: Path, switch: str = "1") -> sub
     env[_cache.ENV_DIR] = str(cache)
     env[_cache.ENV_SWITCH] = switch  # tests/conftest.py sets "0" for the in-process CLI tests
     env["PYTHONPATH"] = os.pathsep.join([str(Path(__file__).parents[1]), env.get("PYTHONPATH", "")])
-    cmd = [sys.executable, "-m", "locomotion_jax._cli", "--cpu-devices", "1", *args]
+    cmd = [sys.executable, "-m", "locomotion_jax.cli._main", "--cpu-devices", "1", *args]
     return subprocess.run(cmd, capture_output=True, text=True, timeout=300, cwd=tmp_path, env=env)
 
 

@@ -8,8 +8,8 @@ import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
-from locomotion_jax import _chain_gait as cg
 from locomotion_jax.dynamics import _chain_forces as forces
+from locomotion_jax.gaits import _chain_gait as cg
 
 
 P = np.pi

@@ -12,7 +12,9 @@ import numpy as np
 import pytest
 import typer
 import xarray as xr
-from locomotion_jax import _cli, _json, _sweep
+from locomotion_jax import _json
+from locomotion_jax.cli import _main as _cli
+from locomotion_jax.maps import _sweep
 from typer.testing import CliRunner
 
 
@@ -179,7 +181,7 @@ def test_figure_names():
 
 
 def test_optimize_registered_when_module_exists(monkeypatch):
-    fake = types.ModuleType("locomotion_jax._optimise_cli")
+    fake = types.ModuleType("locomotion_jax.cli._optimise")
 
     def register(app: typer.Typer) -> None:
         @app.command()
@@ -187,14 +189,14 @@ def test_optimize_registered_when_module_exists(monkeypatch):
             typer.echo("optimising")
 
     setattr(fake, "register", register)
-    monkeypatch.setitem(sys.modules, "locomotion_jax._optimise_cli", fake)
+    monkeypatch.setitem(sys.modules, "locomotion_jax.cli._optimise", fake)
     app = typer.Typer()
 
     @app.command()
     def other() -> None:
         pass
 
-    _cli._register_optional(app, ("locomotion_jax._optimise_cli", "locomotion_jax._no_such_plugin"))
+    _cli._register_optional(app, ("locomotion_jax.cli._optimise", "locomotion_jax._no_such_plugin"))
     res = runner.invoke(app, ["optimize"])
     assert res.exit_code == 0 and "optimising" in res.output
 
@@ -202,7 +204,7 @@ def test_optimize_registered_when_module_exists(monkeypatch):
 def test_installed_plugins_are_registered():
     commands = {c.name or getattr(c.callback, "__name__", None) for c in _cli.app.registered_commands}
     assert {"simulate", "sweep", "figures"} <= commands
-    for module, command in (("_optimise_cli", "optimize"), ("_animate_cli", "animate"), ("_chain_cli", "chain")):
+    for module, command in (("_optimise", "optimize"), ("_animate", "animate"), ("_chain", "chain")):
         if (Path(_cli.__file__).parent / f"{module}.py").exists():
             assert command in commands
 

@@ -7,7 +7,7 @@ import jax
 import locomotion_jax as lj
 import numpy as np
 import pytest
-from locomotion_jax import _cli
+from locomotion_jax.cli import _main as _cli
 from typer.testing import CliRunner
 
 

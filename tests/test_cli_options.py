@@ -1,4 +1,4 @@
-"""The options shared by the subcommands (`_cli_options`): one declaration, the same contract everywhere."""
+"""The options shared by the subcommands (`cli._options`): one declaration, the same contract everywhere."""
 
 import inspect
 import math
@@ -7,7 +7,7 @@ import locomotion_jax as lj
 import pytest
 import typer.core
 import typer.main
-from locomotion_jax import _cli, _cli_options
+from locomotion_jax.cli import _main as _cli, _options as _cli_options
 from typer.testing import CliRunner
 
 

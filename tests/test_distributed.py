@@ -106,7 +106,7 @@ def test_two_processes_equal_one(tmp_path, cache, reference):
         env = dict(os.environ, **slurm, SLURM_PROCID=str(p), SLURM_LOCALID=str(p), LOCOMOTION_JAX_CACHE_DIR=str(cache))
         env["LOCOMOTION_JAX_CACHE"] = "1"
         env["PYTHONPATH"] = os.pathsep.join([str(HELPER.parents[1]), env.get("PYTHONPATH", "")])
-        cmd = [sys.executable, "-m", "locomotion_jax._cli", *args]
+        cmd = [sys.executable, "-m", "locomotion_jax.cli._main", *args]
         procs.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env))
     results = _wait(procs)
     for rc, out, err in results:

@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
-from locomotion_jax import _measure
+from locomotion_jax.run import _measure
 
 
 def test_energy_balance_along_trajectory():

@@ -7,10 +7,10 @@ chosen where the claims are decided (0.2 wn1 is SSL, 2.3 wn1 is SL, ...).
 import numpy as np
 import pytest
 import xarray as xr
-from locomotion_jax import _fig_sweep as fsw, _fig_time as ftime
-from locomotion_jax._figtools import local_minima, runs
-from locomotion_jax._figures import FIGURES, resolve, run_figures
 from locomotion_jax._status import Regime
+from locomotion_jax.paper import _fig_sweep as fsw, _fig_time as ftime
+from locomotion_jax.paper._figtools import local_minima, runs
+from locomotion_jax.paper._figures import FIGURES, resolve, run_figures
 
 
 def test_fig5_and_fig10_ssl_sticks_sl_slides():

@@ -184,10 +184,10 @@ def test_bad_arguments(kwargs, match):
 
 def test_jit_free_of_recompilation():
     """Another configuration of the same batch size, or another period, reuses the compiled solver."""
-    from locomotion_jax import _gait
+    from locomotion_jax.gaits import _gait
 
     steady_gait(lj.Params(omega=3.0), periods=1)
-    from locomotion_jax import _corrector
+    from locomotion_jax.gaits import _corrector
 
     sizes = _gait._transient_batch._cache_size(), _corrector.correct_batch._cache_size()  # pyright: ignore[reportFunctionMemberAccess]
     steady_gait(lj.Params(omega=5.0, mu_s=0.9), periods=2, transient=10)

@@ -16,9 +16,10 @@ import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
-from locomotion_jax import _constraints, _exact_optimise, _objective, _optimise, _orbit, _pareto
-from locomotion_jax._optimise_cli import register
-from locomotion_jax._optimum import ExactSettings, Settings
+from locomotion_jax.cli._optimise import register
+from locomotion_jax.gaits import _orbit
+from locomotion_jax.optimisation import _constraints, _exact as _exact_optimise, _objective, _optimise, _pareto
+from locomotion_jax.optimisation._optimum import ExactSettings, Settings
 from plugin_app import plugin_app
 from reference import reference_simulate
 from typer.testing import CliRunner

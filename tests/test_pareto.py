@@ -3,7 +3,7 @@
 import locomotion_jax as lj
 import numpy as np
 import pytest
-from locomotion_jax import _pareto
+from locomotion_jax.optimisation import _pareto
 
 
 A_MAX = 0.05

@@ -6,11 +6,12 @@ import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
-from locomotion_jax import _exact as exact, _measure, _model as model, _simulate
-from locomotion_jax._batch import prepare, safe_params
-from locomotion_jax._queue import run_queue, Stream
-from locomotion_jax.dynamics import _chain_exact as chain_engine
-from locomotion_jax.run import _chain
+from locomotion_jax.dynamics import _chain_exact as chain_engine, _exact as exact
+from locomotion_jax.model import _two_mass as model
+from locomotion_jax.model._params import safe_params
+from locomotion_jax.run import _chain, _measure, _simulate
+from locomotion_jax.run._batch import prepare
+from locomotion_jax.run._queue import run_queue, Stream
 
 
 def _counting(n, lanes, order=None):

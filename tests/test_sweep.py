@@ -18,7 +18,7 @@ import locomotion_jax as lj
 import numpy as np
 import pytest
 import xarray as xr
-from locomotion_jax import _schedule, _sharding, _store, _sweep
+from locomotion_jax.maps import _schedule, _sharding, _store, _sweep
 
 
 FAST: dict[str, Any] = dict(z=0.3, horizon=30.0, window=5.0, dynamics=lj.Exact(dt=0.02), progress=False)
@@ -257,7 +257,7 @@ def test_pilot_runs_in_equal_chunks(monkeypatch):
         status = np.where(np.isfinite(om), lj.Status.OK, lj.Status.INVALID)
         return SimpleNamespace(X=X, status=status, n_switch=np.nan_to_num(10 * om * t_end), t_liftoff=np.inf * om)
 
-    monkeypatch.setattr(importlib.import_module("locomotion_jax._simulate"), "simulate", fake_simulate)
+    monkeypatch.setattr(importlib.import_module("locomotion_jax.run._simulate"), "simulate", fake_simulate)
     omega = np.asarray([1.0, 2.0, np.nan, 4.0, 5.0, 6.0, 7.0])
     out = _schedule.pilot({"omega": omega, "a": np.full(7, 0.05)}, chunk_size=3)
     assert shapes == [(3,)] * 3  # the last chunk padded: one compilation

@@ -12,8 +12,8 @@ import locomotion_jax as lj
 import numpy as np
 import pytest
 import xarray as xr
-from locomotion_jax import _sweep, _zarr_store
-from locomotion_jax._zarr_store import block_shape, Blocks, NOT_COMPUTED, ZarrStore
+from locomotion_jax.maps import _sweep, _zarr_store
+from locomotion_jax.maps._zarr_store import block_shape, Blocks, NOT_COMPUTED, ZarrStore
 from typer.testing import CliRunner
 
 
@@ -144,7 +144,7 @@ def test_store_list_mode_with_ratio(tmp_path):
 
 
 def test_cli_writes_a_store(tmp_path, monkeypatch):
-    from locomotion_jax import _cli
+    from locomotion_jax.cli import _main as _cli
 
     monkeypatch.chdir(tmp_path)
     args = ["sweep", "--omega", "2,6,9.5,16,23", "--a", "0.02,0.05", "--z", "0.3", "--horizon", "30"]

@@ -1,6 +1,6 @@
 """Exact hybrid stick/slip dynamics of a chain of N masses (SPEC §2 and §8).
 
-The scheme of the two-mass engine (`locomotion_jax._exact`, whose docstring states
+The scheme of the two-mass engine (`locomotion_jax.dynamics._exact`, whose docstring states
 it in full): one RK4 step per iteration, cut at the earliest located event; a
 quintic Hermite dense output from the state's first and second time derivatives at
 both ends of the step; every mass re-decided at the start of the next iteration.
@@ -44,11 +44,10 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .. import _exact as two_mass
 from .._custom_types import Array, Contact
 from .._status import Status
 from ..model._chain import Chain
-from . import _chain_forces as forces, _chain_motion as motion
+from . import _chain_forces as forces, _chain_motion as motion, _exact as two_mass
 from ._chain_forces import Consts, consts, drive, Scalars
 from ._chain_motion import energy as energy, keep, Mode, State
 

@@ -26,11 +26,11 @@ import jax.numpy as jnp
 import optimistix as optx
 
 from .._custom_types import Array, ArrayLike, Contact
-from .._dynamics import Smoothed
-from .._smooth import MIN_STICK, STICK_SPEED, WINDOW_SAMPLES
 from .._status import Regime, Status
 from ..model._chain import Chain
 from . import _chain_exact as exact, _chain_forces as forces, _chain_motion as motion
+from ._base import Smoothed
+from ._smooth import MIN_STICK, STICK_SPEED, WINDOW_SAMPLES
 
 
 def _loads(C: Chain, contact: Contact, t: ArrayLike, x: Array):

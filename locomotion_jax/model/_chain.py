@@ -10,9 +10,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array, ValuesLike
-from .._params import Params
 from ._actuator import AbstractActuator, RestLength
 from ._friction import AbstractFriction, Coulomb
+from ._params import Params
 from ._springwaves import SpringFourier, to_spring_fourier, TravellingWave
 
 
@@ -137,7 +137,7 @@ class Chain(eqx.Module):
     def from_params(cls, params: Params, waveform: Any = None) -> "Chain":
         """The two-mass chain of the paper's model: $m_1 = 2\\hat m$, $m_2 = 2(1 - \\hat m)$, eq. (13)."""
         p = params.broadcast()
-        from .._actuation import Sinusoid
+        from ._waveform import Sinusoid
 
         wave = Sinusoid(p.a, p.omega, p.lbar) if waveform is None else waveform
         return cls(

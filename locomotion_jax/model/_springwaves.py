@@ -5,8 +5,8 @@ from collections.abc import Sequence
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._actuation import AbstractWaveform, Fourier, Sinusoid
 from .._custom_types import Array, ValuesLike
+from ._waveform import AbstractWaveform, Fourier, Sinusoid
 
 
 class SpringFourier(eqx.Module):

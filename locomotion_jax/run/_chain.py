@@ -14,17 +14,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._batch import default_max_steps, MICRO_BATCH_CPU
-from .._compile import engine_jit
-from .._dynamics import Exact, Smoothed
-from .._exact import Target, target_margin
-from .._margins import margin_fields, switch_gap
-from .._queue import run_queue
 from .._results import ChainMeasurement, ChainTrajectory
-from .._saves import BUFFER, run_saves
 from .._status import Regime, Status
 from ..dynamics import _chain_exact as engine, _chain_forces as forces, _chain_smooth as smooth
+from ..dynamics._base import Exact, Smoothed
+from ..dynamics._compile import engine_jit
+from ..dynamics._exact import Target, target_margin
+from ..dynamics._margins import margin_fields, switch_gap
 from ..model._chain import Chain
+from ._batch import default_max_steps, MICRO_BATCH_CPU
+from ._queue import run_queue
+from ._saves import BUFFER, run_saves
 
 
 STICK_TOL = 1e-6

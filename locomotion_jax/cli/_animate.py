@@ -1,0 +1,93 @@
+"""`locomotion-jax animate`: a GIF of the two masses and the tilted spring.
+
+`register(app)` adds the subcommand to a `typer.Typer` app (the main CLI in
+`_main.py` calls it; the global `--x64` flag is handled there, before any JAX
+array exists). Example: `locomotion-jax animate --omega 2 --t-from 30 --t-end 36 --out ssl.gif`.
+"""
+
+from pathlib import Path
+
+import typer
+
+from ._options import expand, model_options, run_options, to_params, Values
+
+
+def register(app: typer.Typer) -> None:
+    """Add the `animate` subcommand to `app`."""
+
+    @app.command("animate")
+    @expand(model=model_options(), run=run_options(("contact", "start", "dt")))
+    def animate(
+        *,
+        model: Values,
+        t_from: float | None = typer.Option(
+            None, "--t-from", help="First animated time (default: two actuation periods before --t-end)."
+        ),
+        t_end: float = typer.Option(40.0, "--t-end", help="Last animated time (the simulation runs from t = 0)."),
+        frames: int = typer.Option(60, "--frames", help="Number of frames (states saved evenly in the span)."),
+        fps: float = typer.Option(12.0, "--fps", help="Frames per second of the GIF."),
+        dpi: float = typer.Option(60.0, "--dpi", help="Resolution of the GIF."),
+        trace: bool = typer.Option(True, "--trace/--no-trace", help="Add the panel of displacements vs time."),
+        run: Values,
+        out: Path = typer.Option(Path("animation.gif"), "--out", help="Output GIF file."),
+    ) -> None:
+        """Simulate one configuration on the exact model and write an animated GIF of it.
+
+        Stuck masses are drawn red with an anchor under them, slipping ones blue.
+        """
+        import math
+
+        import numpy as np
+
+        from ..dynamics._base import Exact
+        from ..run._animation import animate as animate_fn, save_gif, stuck_masks
+        from ..run._simulate import simulate
+
+        try:
+            params = to_params(model)
+            w = float(params.omega)
+            if not (math.isfinite(t_end) and t_end > 0):
+                raise ValueError(f"--t-end must be a finite number > 0, got {t_end!r}.")
+            if t_from is None:
+                t_from = max(0.0, t_end - 2 * (2 * math.pi / w)) if w > 0 else 0.0
+            if not (0 <= t_from < t_end):
+                raise ValueError(f"--t-from must satisfy 0 <= t_from < t_end, got {t_from!r} (t_end = {t_end!r}).")
+            if frames < 2:
+                raise ValueError(f"--frames must be >= 2, got {frames}.")
+            if not (fps > 0 and dpi > 0):
+                raise ValueError(f"--fps and --dpi must be > 0, got {fps!r} and {dpi!r}.")
+            if out.suffix.lower() != ".gif":
+                raise ValueError(f"--out must name a .gif file, got {str(out)!r}.")
+            traj = simulate(
+                params,
+                t_end,
+                np.linspace(t_from, t_end, frames),
+                dynamics=Exact(dt=run["dt"]),
+                contact=run["contact"],
+                start=run["start"],
+            )
+            if not np.asarray(traj.valid).any():
+                raise ValueError(
+                    f"lift-off at t = {float(np.asarray(traj.t_liftoff)):.4g}, before the animated span "
+                    f"({t_from:.4g}..{t_end:.4g}): the model stops applying there (a normal force reached zero). "
+                    "Animate an earlier span (--t-from, --t-end), or use --contact paper to integrate through it."
+                )
+            a, d, mhat = model["a"], model["d"], model["mhat"]
+            title = f"omega = {w:.4g} ({w / float(params.wn1):.3g} wn1), a = {a:g}, d = {d:g}, mhat = {mhat:g}"
+            anim = animate_fn(traj, params, max_frames=frames, interval=1000.0 / fps, trace=trace, title=title)
+            path = save_gif(anim, out, fps=fps, dpi=dpi)
+        except ValueError as err:
+            typer.echo(f"Error: {err}", err=True)
+            raise typer.Exit(code=2) from None
+        valid = np.asarray(traj.valid)
+        s1, s2 = (s[valid] for s in stuck_masks(traj.mode))
+        typer.echo(
+            f"wrote {path} ({int(valid.sum())} frames, t = {t_from:.4g}..{t_end:.4g}); "
+            f"m1 stuck in {int(s1.sum())} frames, m2 stuck in {int(s2.sum())} frames"
+        )
+        if bool(np.asarray(traj.liftoff)):
+            typer.echo(
+                f"warning: lift-off at t = {float(np.asarray(traj.t_liftoff)):.4g} (the model no longer "
+                "applies; frames after it are not drawn)",
+                err=True,
+            )

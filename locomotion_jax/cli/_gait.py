@@ -1,0 +1,189 @@
+"""`locomotion-jax gait` and `locomotion-jax continue`: steady gaits from the command line.
+
+`register(app)` adds both subcommands to the main CLI (`_main.py`). `gait` solves the steady gait of
+one configuration ([`steady_gait`][]); `continue` follows it along one parameter ([`continuation`][]).
+With `--json` stdout is one JSON object; every non-finite number is `null` (`_json.py`), and a complex
+Floquet multiplier is a pair `[re, im]`.
+"""
+
+from pathlib import Path
+from typing import Annotated, Any, NoReturn
+
+import numpy as np
+import typer
+
+from .._json import dumps
+from ._options import expand, model_options, run_options, to_params, Values
+
+
+GAIT_FIELDS: tuple[str, ...] = (
+    "k", "period", "mean_speed", "cost_of_transport", "e_d", "work", "regime", "stick_fraction1",
+    "stick_fraction2", "n_switch", "u", "v1", "v2", "stable", "residual", "n_iter", "liftoff",
+    "slip_margin", "min_normal",
+)  # fmt: skip
+"""The [`Gait`][] fields `gait` prints (besides `status` and the multipliers)."""
+
+POINT_FIELDS: tuple[str, ...] = (
+    "lam", "mean_speed", "cost_of_transport", "regime", "stable", "liftoff", "u", "v1", "v2",
+    "slip_margin", "min_normal", "n_switch",
+)  # fmt: skip
+"""The per-point [`Branch`][] fields `continue` reports."""
+
+
+def _periods(text: str) -> tuple[int, ...]:
+    try:
+        ks = tuple(int(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        ks = ()
+    if not ks or any(k < 1 for k in ks):
+        raise ValueError(f"--periods must be a comma-separated list of positive integers, got {text!r}.")
+    return ks
+
+
+def _pairs(z: Any) -> list:
+    """Complex numbers as `[re, im]` pairs (NaN stays NaN, encoded as null)."""
+    z = np.asarray(z)
+    nan = np.isnan(z.real) | np.isnan(z.imag)
+    return np.stack([z.real, np.where(nan, np.nan, z.imag)], axis=-1).tolist()
+
+
+def _model_values(model: Values, params) -> dict[str, float]:
+    values = {n: v for n, v in model.items() if n != "omega_over_wn1"}
+    values["omega"] = float(params.omega)
+    return values
+
+
+def _fail(err: Exception) -> NoReturn:
+    typer.echo(f"Error: {err}", err=True)
+    raise typer.Exit(2) from None
+
+
+def register(app: typer.Typer) -> None:
+    """Add the `gait` and `continue` subcommands to `app`."""
+
+    @app.command("gait")
+    @expand(model=model_options(), run=run_options(("contact", "start", "dt")))
+    def gait(
+        *,
+        model: Values,
+        run: Values,
+        periods: Annotated[
+            str, typer.Option(help="Gait periods to try, in actuation periods (e.g. 1,2,3,4).")
+        ] = "1,2,3,4",
+        transient: Annotated[int, typer.Option(help="Actuation periods integrated before Newton's method.")] = 30,
+        as_json: Annotated[bool, typer.Option("--json", help="Print the gait as one JSON object.")] = False,
+    ) -> None:
+        """Solve the steady gait of one configuration: speed, cost of transport, Floquet multipliers, status.
+
+        The gait is a periodic orbit (fixed point of the period map), found by Newton's method
+        after a short transient; stable means every Floquet multiplier lies inside the unit circle.
+        """
+        import locomotion_jax as lj
+
+        try:
+            params = to_params(model)
+            g = lj.steady_gait(params, periods=_periods(periods), transient=transient, contact=run["contact"],
+                               start=run["start"], dynamics=lj.Exact(dt=run["dt"]))  # fmt: skip
+        except ValueError as err:
+            _fail(err)
+        record: dict[str, Any] = {name: np.asarray(getattr(g, name)).item() for name in GAIT_FIELDS}
+        record["regime_name"] = lj.Regime(int(g.regime)).name
+        record["status"] = int(g.status)
+        record["status_name"] = _name(lj.GaitStatus, int(g.status))
+        record["multipliers"] = _pairs(g.multipliers)
+        record["params"] = _model_values(model, params)
+        record.update(run)
+        if as_json:
+            typer.echo(dumps(record))
+            return
+        typer.echo("parameters: " + ", ".join(f"{n}={v:g}" for n, v in record["params"].items()))
+        typer.echo(f"status:     {record['status_name']}")
+        for name in GAIT_FIELDS + ("regime_name",):
+            v = record[name]
+            typer.echo(f"  {name:<18} {v:.10g}" if isinstance(v, float) else f"  {name:<18} {v}")
+        mult = ", ".join(_complex(z) for z in np.asarray(g.multipliers))
+        typer.echo(f"  {'multipliers':<18} {mult}")
+
+    @app.command("continue")
+    @expand(model=model_options(), run=run_options(("contact", "start", "dt")))
+    def continue_(
+        *,
+        parameter: Annotated[str, typer.Option(help="The parameter: omega, a, d, mhat, mu_s, mu_k, k, c, lbar.")],
+        stop: Annotated[float, typer.Option(help="Its end value (the start is the model option's value).")],
+        model: Values,
+        run: Values,
+        periods: Annotated[str, typer.Option(help="Gait periods to try at the start.")] = "1,2,3,4",
+        max_points: Annotated[int, typer.Option(help="Points on the branch at most.")] = 200,
+        max_step: Annotated[float, typer.Option(help="Largest step, in units of |stop - start|.")] = 0.04,
+        out: Annotated[Path | None, typer.Option(help="Write the branch as JSON to this file.")] = None,
+        as_json: Annotated[bool, typer.Option("--json", help="Print the branch as one JSON object.")] = False,
+    ) -> None:
+        """Follow the steady gait of one configuration along one parameter (pseudo-arclength continuation).
+
+        Prints one line per point (parameter, speed, cost of transport, regime, stability) and the
+        located events: folds, period doublings, the SSL/SL boundary and lift-off (to 1e-10 in the
+        parameter). With --json or --out, the points and events as one JSON object.
+        """
+        import locomotion_jax as lj
+
+        from ..gaits._bifurcation import NAMES
+
+        try:
+            params = to_params(model)
+            b = lj.continuation(params, parameter, stop, periods=_periods(periods), max_points=max_points,
+                                max_step=max_step, step=min(0.01, max_step), contact=run["contact"],
+                                start=run["start"], dynamics=lj.Exact(dt=run["dt"]))  # fmt: skip
+        except ValueError as err:
+            _fail(err)
+        n = int(b.n_points)
+        points = {name: np.asarray(getattr(b, name))[:n].tolist() for name in POINT_FIELDS}
+        points["multipliers"] = _pairs(np.asarray(b.multipliers)[:n])
+        e = b.events
+        kinds = np.asarray(e.kind)
+        events = [
+            dict(kind=NAMES[int(kinds[q])], lam=float(e.lam[q]), lam_error=float(e.lam_error[q]),
+                 located=bool(e.located[q]), smooth=bool(e.smooth[q]), turn=bool(e.turn[q]),
+                 u=float(e.u[q]), v1=float(e.v1[q]), v2=float(e.v2[q]), multipliers=_pairs(e.multipliers[q]))
+            for q in np.flatnonzero(kinds >= 0)
+        ]  # fmt: skip
+        record = dict(
+            parameter=parameter, lam_start=float(b.lam[0]) if n else float("nan"), lam_stop=stop, k=int(b.k),
+            status=int(b.status), status_name=_name(lj.BranchStatus, int(b.status)),
+            start_status_name=_name(lj.GaitStatus, int(b.start_status)), n_points=n, points=points, events=events,
+            params=_model_values(model, params), **run,
+        )  # fmt: skip
+        if out is not None:
+            try:
+                out.parent.mkdir(parents=True, exist_ok=True)
+                out.write_text(dumps(record, indent=1))
+            except OSError as err:
+                _fail(ValueError(f"--out {out}: cannot write ({err.strerror or err})."))
+        if as_json:
+            typer.echo(dumps(record))
+            return
+        typer.echo(f"{parameter} from {record['lam_start']:g} to {stop:g}: {n} points, k = {record['k']}, "
+                   f"{record['status_name']} (start: {record['start_status_name']})")  # fmt: skip
+        typer.echo(f"  {parameter:>12} {'speed':>12} {'cost':>10} {'regime':>6} {'stable':>6} {'|mu|max':>8}")
+        mu = np.abs(np.asarray(b.multipliers)[:n])
+        for j in range(n):
+            reg = lj.Regime(int(points["regime"][j])).name
+            typer.echo(f"  {points['lam'][j]:12.6g} {points['mean_speed'][j]:12.6g} "
+                       f"{points['cost_of_transport'][j]:10.5g} {reg:>6} {str(points['stable'][j]):>6} "
+                       f"{np.max(mu[j]):8.4f}")  # fmt: skip
+        for ev in events:
+            flags = ", ".join(f for f, on in (("non-smooth", not ev["smooth"]), ("turns", ev["turn"])) if on)
+            typer.echo(f"event {ev['kind']:<16} {parameter} = {ev['lam']:.12g} (+- {ev['lam_error']:.1e})"
+                       + (f" [{flags}]" if flags else ""))  # fmt: skip
+        if out is not None:
+            typer.echo(f"wrote {out}")
+
+
+def _name(codes: type, value: int) -> str:
+    for name, v in vars(codes).items():
+        if name.isupper() and v == value:
+            return name
+    return str(value)
+
+
+def _complex(z: complex) -> str:
+    return f"{z.real:.6g}" if z.imag == 0 else f"{z.real:.6g}{z.imag:+.6g}j"

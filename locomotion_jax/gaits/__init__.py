@@ -1,0 +1,1 @@
+"""Steady gaits: periodic orbits, their stability, continuation and basins."""

@@ -1,0 +1,267 @@
+"""Steady gaits of chains of N masses as periodic orbits (the N-mass counterpart of `_gait`).
+
+Every waveform of a [`Chain`][] shares the base frequency $\\omega$, so the forcing is
+$T$-periodic ($T = 2\\pi/\\omega$), and the loads depend on the positions only through the
+gaps $u_j = x_{j+1} - x_j$ (SPEC §8). A steady gait is then a fixed point of the $k$-period
+map $\\Phi_k$ of the reduced state $y = (u_1, \\dots, u_{N-1}, v_1, \\dots, v_N)$ at the phase
+$\\omega t \\equiv 0$, while the centre of mass drifts by $\\Delta X$ per gait period $kT$.
+As for two masses: a transient from the start, then Newton's method on $\\Phi_k(y) = y$ with
+the monodromy matrix $M = \\partial\\Phi_k/\\partial y$ from forward-mode differentiation through
+the N-mass exact engine (located events enter with their implicit-function times, so $M$
+includes the saltation of every switch); the Floquet multipliers are the eigenvalues of $M$.
+
+A mass at rest at the section sticks where its static limits hold, so its velocity carries
+no tangent there (its column of $M$ is zero), as in the two-mass model.
+"""
+
+from collections.abc import Sequence
+from typing import Any, NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._custom_types import Array, Contact
+from .._status import Regime, Status
+from ..dynamics import _chain_exact as engine, _chain_forces as forces
+from ..dynamics._base import Exact
+from ..dynamics._compile import engine_jit
+from ..model._chain import Chain
+from ..run._batch import default_max_steps
+from ..run._chain import _check as check_contact_start, _initial, _unflatten, prepare_chain, STICK_TOL
+from . import _select as select
+from ._select import GaitStatus
+
+
+class ChainGait(eqx.Module):
+    """Steady gaits of chains, per configuration (compare [`Gait`][], whose fields these are).
+
+    - `status` ([`GaitStatus`][]), `converged`, `k`, `period`, `mean_speed`, `e_d`, `work`,
+      `cost_of_transport`, `regime`, `n_switch`, `multipliers`, `stable`, `residual`, `n_iter`,
+      `liftoff`: as in [`Gait`][].
+    - `stick_fraction`: fraction of the gait period each mass is stuck, shape `batch + (N,)`.
+    - `state`: the orbit's reduced state at the section $\\omega t \\equiv 0$, shape
+      `batch + (2N - 1,)`, order $(u_1, \\dots, u_{N-1}, v_1, \\dots, v_N)$;
+      `monodromy`: $M$ in that order, shape `batch + (2N - 1, 2N - 1)`.
+    """
+
+    status: Array
+    converged: Array
+    k: Array
+    period: Array
+    mean_speed: Array
+    e_d: Array
+    work: Array
+    cost_of_transport: Array
+    stick_fraction: Array
+    regime: Array
+    n_switch: Array
+    state: Array
+    monodromy: Array
+    multipliers: Array
+    stable: Array
+    residual: Array
+    n_iter: Array
+    liftoff: Array
+    contact: str = eqx.field(static=True)
+
+
+class _Period(NamedTuple):
+    """One application of the period map: the end state and what the period accumulated."""
+
+    y: Array
+    dX: Array
+    ed: Array
+    w: Array
+    stuck: Array  # time each mass was stuck, shape (N,)
+    n_switch: Array
+    status: Array
+    lifted: Array
+
+
+def _reduced(st: engine.Hybrid) -> Array:
+    x, v = st.y.x, st.y.v
+    return jnp.stack([b - a for a, b in zip(x[:-1], x[1:])] + list(v))
+
+
+def _section_state(C: Chain, P: forces.Consts, contact: Contact, y: Array) -> engine.Hybrid:
+    """The hybrid state at phase 0 for a reduced state `y`, with $x_1 = 0$: a mass at rest
+    sticks where its static limits hold (eq. 7 generalised), a moving one slips along $v_i$."""
+    n = (y.shape[-1] + 1) // 2
+    x = jnp.concatenate([jnp.zeros((1,), y.dtype), jnp.cumsum(y[: n - 1])])
+    st = engine.init(C, contact, x, P)
+    vs = tuple(y[n - 1 + i] for i in range(n))
+    stuck = tuple(s & (v == 0) for s, v in zip(st.stuck, vs))
+    one = jnp.ones((), y.dtype)
+    sdir = tuple(jnp.where(v > 0, one, jnp.where(v < 0, -one, s)) for s, v in zip(st.sdir, vs))
+    ys = st.y._replace(v=tuple(jnp.where(s, 0, v) for s, v in zip(stuck, vs)))
+    return eqx.tree_at(lambda s: (s.y, s.stuck, s.sdir), st, (ys, stuck, sdir))
+
+
+def _advance(P, contact, dt, st, t_end, max_steps):
+    """Integrate to `t_end` (or a strict lift-off, or the step cap); also the time each mass was stuck."""
+
+    def cond(c):
+        s, _, n = c
+        return (s.t < t_end) & (s.status == Status.OK) & (n < max_steps)
+
+    def body(c):
+        s, stuck, n = c
+        new, info = engine.step(None, contact, dt, s, t_end, None, P)
+        span = jnp.where(info.commit, info.t1 - info.t0, 0)
+        return new, tuple(a + jnp.where(b, span, 0) for a, b in zip(stuck, info.stuck)), n + 1
+
+    zero = tuple(jnp.zeros_like(a) for a in st.y.x)
+    st, stuck, _ = jax.lax.while_loop(cond, body, (st, zero, jnp.zeros((), jnp.int32)))
+    return st, jnp.stack(stuck)
+
+
+def _period_map(C, P, contact, dt, max_steps, k, y) -> _Period:
+    """$\\Phi_k(y)$ and what the $k$ periods accumulate."""
+    t_end = k * (2 * jnp.pi) / P.omega
+    st0 = _section_state(C, P, contact, y)
+    st, stuck = _advance(P, contact, dt, st0, t_end, max_steps)
+    ok = (st.status == Status.OK) & (st.t >= t_end)
+    status = jnp.where(ok, Status.OK, jnp.where(st.status == Status.OK, Status.MAX_STEPS, st.status))
+    return _Period(
+        y=_reduced(st),
+        dX=forces.centre_of_mass(P, st.y.x) - forces.centre_of_mass(P, st0.y.x),
+        ed=st.y.ed,
+        w=st.y.w,
+        stuck=stuck,
+        n_switch=st.n_switch,
+        status=status.astype(jnp.int32),
+        lifted=jnp.isfinite(st.t_liftoff),
+    )
+
+
+def _transient_batch(C, valid, contact, start, dt, transient, max_steps):
+    def one(c, ok):
+        P = forces.consts(c)
+        st = _initial(c, ok, contact, start, P)
+        st, _ = _advance(P, contact, dt, st, transient * (2 * jnp.pi) / P.omega, max_steps)
+        return _reduced(st), st.status, jnp.isfinite(st.t_liftoff)
+
+    return jax.vmap(one)(C, valid)
+
+
+_transient_batch = engine_jit(_transient_batch, ("contact", "start", "dt"))
+
+
+def _solve_batch(C, contact, dt, k, y0, go, tol, max_iter, max_steps):
+    """Newton's method on $\\Phi_k(y) = y$ from `y0` where `go` (elsewhere nothing is integrated)."""
+
+    def one(c, y_start, g):
+        P = forces.consts(c)
+        kk = jnp.where(g, k, 0)
+        eye = jnp.eye(y_start.shape[0], dtype=y_start.dtype)
+
+        def phi(y):
+            out = _period_map(c, P, contact, dt, max_steps, kk, y)
+            return out.y, out
+
+        def evaluate(y):
+            J, out = jax.jacfwd(phi, has_aux=True)(y)
+            bad = (out.status != Status.OK) | ~jnp.all(jnp.isfinite(y)) | ~jnp.all(jnp.isfinite(J))
+            return J, out, bad
+
+        def small(y, out):
+            return jnp.max(jnp.abs(out.y - y)) <= tol * (1 + jnp.max(jnp.abs(y)))
+
+        def cond(s):
+            _, _, _, it, done, failed = s
+            return ~done & ~failed & (it < max_iter)
+
+        def body(s):
+            y, J, out, it, _, _ = s
+            y1 = y - jnp.linalg.solve(J - eye, out.y - y)
+            J1, out1, bad = evaluate(y1)
+            return y1, J1, out1, it + 1, small(y1, out1) & ~bad, bad
+
+        J0, out0, bad0 = evaluate(y_start)
+        init = (y_start, J0, out0, jnp.zeros((), jnp.int32), g & small(y_start, out0) & ~bad0, ~g | bad0)
+        y, J, out, it, done, _ = jax.lax.while_loop(cond, body, init)
+        return y, J, out, it, done & g
+
+    return jax.vmap(one)(C, y0, go)
+
+
+_solve_batch = engine_jit(_solve_batch, ("contact", "dt"))
+
+
+def steady_gait_chain(
+    chain: Chain,
+    *,
+    periods: int | Sequence[int] = (1, 2, 3, 4),
+    transient: int = 30,
+    tol: float | None = None,
+    max_iter: int = 12,
+    dynamics: Exact,
+    contact: str = "strict",
+    start: str = "paper",
+    dtype: Any = None,
+) -> ChainGait:
+    """[`steady_gait`][] for a [`Chain`][] (its arguments; `start` names a start at rest)."""
+    check_contact_start(contact, start)
+    flat, valid, shape = prepare_chain(chain, dtype)
+    dtype_ = flat.m.dtype
+    f32 = jnp.finfo(dtype_).bits < 64
+    tol = (1e-5 if f32 else 1e-11) if tol is None else float(tol)
+    ks = select.check(periods, transient, tol, max_iter)
+    omega = np.asarray(flat.waves.omega, np.float64)
+    T_max = float(np.max(2 * np.pi / omega[np.isfinite(omega) & (omega > 0)], initial=1.0))
+    real = lambda v: jnp.asarray(v, dtype_)
+    mst = jnp.asarray(dynamics.max_steps or default_max_steps(transient * T_max, dynamics.dt), jnp.int32)
+    y0, trans, trans_lift = _transient_batch(flat, valid, contact, start, dynamics.dt, real(transient), mst)
+    trans = np.asarray(trans)
+    base = np.select(
+        [trans == Status.INVALID, trans == Status.LIFTOFF, trans != Status.OK],
+        [GaitStatus.INVALID, GaitStatus.LIFTOFF, GaitStatus.NOT_CONVERGED],
+        -1,
+    )
+    best = None
+    for k in ks:
+        msp = jnp.asarray(dynamics.max_steps or default_max_steps(k * T_max, dynamics.dt), jnp.int32)
+        go = jnp.asarray((base < 0) & (True if best is None else select.still_open(best)))
+        y, M, out, it, done = jax.tree_util.tree_map(
+            np.asarray,
+            _solve_batch(flat, contact, dynamics.dt, real(k), y0, go, real(tol), jnp.asarray(max_iter, jnp.int32), msp),
+        )
+        r = dict(y=y, M=M, out=out, it=it, done=done, residual=np.max(np.abs(out.y - y), axis=1))
+        r = select.judge(r, base, k, (base != GaitStatus.INVALID) & (np.asarray(trans_lift) | out.lifted))
+        best = select.better(best, r)
+        if not np.any(select.still_open(best)):
+            break
+    assert best is not None
+    return _unflatten(_chain_gait(best, omega, dtype_, contact), shape)
+
+
+def _chain_gait(r: dict, omega: np.ndarray, dtype: Any, contact: str) -> ChainGait:
+    ok = r["status"] == GaitStatus.CONVERGED
+    nan = lambda x: jnp.asarray(np.where(select.expand(ok, x), x, np.nan), dtype)
+    out: _Period = r["out"]
+    kT = np.where(ok, r["k"] * 2 * np.pi / omega, np.nan)
+    dX = out.dX
+    ssl = np.max(out.stuck, axis=-1) > STICK_TOL
+    return ChainGait(
+        status=jnp.asarray(r["status"]),
+        converged=jnp.asarray(ok),
+        k=jnp.asarray(r["k"], jnp.int32),
+        period=jnp.asarray(kT, dtype),
+        mean_speed=nan(dX / np.where(ok, kT, 1)),
+        e_d=nan(out.ed),
+        work=nan(out.w),
+        cost_of_transport=nan(select.ratio(out.ed, np.abs(dX), ok)),
+        stick_fraction=nan(out.stuck / np.where(ok, kT, 1)[:, None]),
+        regime=jnp.asarray(np.where(ok, np.where(ssl, Regime.SSL, Regime.SL), Regime.UNDETERMINED), jnp.int32),
+        n_switch=jnp.asarray(np.where(ok, out.n_switch, 0), jnp.int32),
+        state=nan(r["y"]),
+        monodromy=nan(r["M"]),
+        multipliers=jnp.asarray(r["multipliers"]),
+        stable=jnp.asarray(r["stable"]),
+        residual=jnp.asarray(r["residual"], dtype),
+        n_iter=jnp.asarray(r["it"]),
+        liftoff=jnp.asarray(r["lifted"]),
+        contact=contact,
+    )

@@ -1,0 +1,454 @@
+"""Continuation of steady gaits along one parameter (pseudo-arclength on the period map).
+
+A steady gait of period $kT$ is a fixed point of $\\Phi_k(\\,\\cdot\\,; \\lambda)$ ([`steady_gait`][]). As the
+parameter $\\lambda$ varies, the fixed points form a curve in $(u, v_1, v_2, \\lambda)$; it is followed
+by pseudo-arclength continuation, which passes folds: from a point $z$ with unit tangent $t$ the
+predictor is $z + h\\,t$, and the corrector ([`_corrector`][]) solves the fixed point on the
+hyperplane through it normal to $t$. The new tangent is the null vector of
+$[\\,M - I,\\ \\partial\\Phi_k/\\partial\\lambda\\,]$ oriented like the old one. The step $h$ grows
+after quick corrections and halves after a failed or too distant one, or a turn of the tangent by
+more than `MAX_TURN`. Arclength is measured with $\\lambda$ in units of the range
+$|\\lambda_\\text{stop} - \\lambda_\\text{start}|$.
+
+Every configuration of the batch is a branch; all of them advance together, one batched corrector
+call per step (one compilation for the whole continuation), and each ends on its own
+([`BranchStatus`][]). Along each branch, [`_bifurcation`][] then finds and locates folds, period
+doublings, and the changes of switching structure (SSL/SL, lift-off).
+"""
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._custom_types import Array
+from .._status import Regime, Status
+from ..dynamics._base import AbstractDynamics, Exact
+from ..model._params import Params
+from ..model._waveform import AbstractWaveform
+from ..run._batch import default_max_steps, prepare
+from ..run._measure import STICK_TOL
+from . import _corrector as corrector
+from ._bifurcation import BranchEvents, find_events, kinds
+from ._gait import GaitStatus, steady_gait
+
+
+MAX_TURN = 0.5
+"""Largest angle (radians) between consecutive tangents of an accepted step, above the smallest steps
+(a change of switching structure is a corner of the branch, passed at the smallest step)."""
+
+
+class BranchStatus:
+    """Why a branch ended.
+
+    - `REACHED`: the parameter reached `stop` (the last point is solved there exactly).
+    - `LEFT_RANGE`: the branch turned back at a fold and left the range between start and stop.
+    - `MAX_POINTS`: `max_points` points were computed first.
+    - `FAILED`: the corrector failed at the smallest step (no periodic orbit continues the branch:
+      e.g. it meets a switching structure it cannot cross, or the step cap).
+    - `LIFTOFF`: strict reading: a normal force of the orbit reaches zero ahead.
+    - `INVALID`: the parameter left its valid range ahead, or the start's parameters are invalid.
+    - `NO_START`: no gait converged at the start (the start's `Gait.status` says why).
+    """
+
+    REACHED = 0
+    LEFT_RANGE = 1
+    MAX_POINTS = 2
+    FAILED = 3
+    LIFTOFF = 4
+    INVALID = 5
+    NO_START = 6
+
+
+class Branch(eqx.Module):
+    """Branches of steady gaits, one per configuration; per point, arrays of shape `batch + (n,)`
+    with NaN (or the sentinels below) past each branch's `n_points`.
+
+    - `lam`: the parameter; `u, v1, v2`: the orbit's section state (as in [`Gait`][]).
+    - `mean_speed`, `cost_of_transport`, `e_d`, `work`, `stick_fraction1`, `stick_fraction2`,
+      `n_switch`, `slip_margin`, `min_normal`: as in [`Gait`][], of each point's orbit; `regime`:
+      [`Regime`][] (UNDETERMINED past the end).
+    - `multipliers`: Floquet multipliers, `batch + (n, 3)`, by decreasing modulus; `stable`: all inside
+      the unit circle.
+    - `liftoff`: a normal force of the orbit reaches zero (`min_normal <= 0`; paper reading).
+    - `tangent`: $d\\lambda/ds$ of the unit tangent (sign change: a fold).
+    - `det_minus`, `det_plus`: $\\det(M - I)$ and $\\det(M + I)$ (test functions of a real multiplier
+      at $+1$ and $-1$).
+    - `n_points`, `status` ([`BranchStatus`][]), `k` (the gait period followed, in actuation
+      periods), `start_status` (the start's [`GaitStatus`][]): per branch.
+    - `events`: [`BranchEvents`][], the located bifurcations and switching changes.
+    """
+
+    lam: Array
+    u: Array
+    v1: Array
+    v2: Array
+    mean_speed: Array
+    cost_of_transport: Array
+    e_d: Array
+    work: Array
+    stick_fraction1: Array
+    stick_fraction2: Array
+    regime: Array
+    n_switch: Array
+    slip_margin: Array
+    min_normal: Array
+    multipliers: Array
+    stable: Array
+    liftoff: Array
+    tangent: Array
+    det_minus: Array
+    det_plus: Array
+    n_points: Array
+    status: Array
+    k: Array
+    start_status: Array
+    events: BranchEvents
+    parameter: str = eqx.field(static=True)
+    contact: str = eqx.field(static=True)
+
+
+class Solver:
+    """The batched corrector with everything but the unknowns fixed; calls return numpy arrays."""
+
+    def __init__(self, flat, wave, axes, spec, contact, dt, k, lam0, scale, tol, max_iter, max_steps):
+        self.args = (flat, wave, axes, corrector.selector(spec, wave), contact, dt)
+        dtype = flat.dtype
+        self.dtype = dtype
+        self.const = tuple(jnp.asarray(x, dtype) for x in (lam0, scale))
+        self.k = jnp.asarray(k, dtype)
+        self.opts = (jnp.asarray(tol, dtype), jnp.asarray(max_iter, jnp.int32), jnp.asarray(max_steps, jnp.int32))
+        self.lam0, self.scale, self.spec = np.asarray(lam0), np.asarray(scale), spec
+        self.omega = np.broadcast_to(np.asarray(wave.omega, np.float64), np.shape(lam0))
+
+    def __call__(self, z0, zref, c, go, max_iter: int | None = None) -> corrector.Solved:
+        arr = lambda x: jnp.asarray(x, self.dtype)
+        opts = self.opts if max_iter is None else (self.opts[0], jnp.asarray(max_iter, jnp.int32), self.opts[2])
+        r = corrector.correct_batch(*self.args, self.k, *self.const, arr(z0), arr(zref), arr(c),
+                                    jnp.asarray(go), *opts)  # fmt: skip
+        return jax.tree_util.tree_map(np.asarray, r)
+
+    def lam(self, zeta):
+        return self.lam0 + self.scale * zeta
+
+    def period(self, zeta, k):
+        """The gait period $kT$ at `zeta` (shape `(B, n)`)."""
+        omega = self.lam(zeta.T).T if self.spec.name == "omega" else self.omega[:, None] + 0 * zeta
+        return k[:, None] * 2 * np.pi / omega
+
+
+def tangent(J: np.ndarray, prev: np.ndarray) -> np.ndarray:
+    """Unit null vectors of $[M - I, \\partial\\Phi/\\partial\\zeta]$ (the last right singular
+    vector), oriented along `prev`; NaN where the Jacobian is not finite."""
+    A = J[:, :3].copy()
+    A[:, :, :3] -= np.eye(3)
+    bad = ~np.all(np.isfinite(A), axis=(1, 2))
+    A[bad] = 0
+    t = np.linalg.svd(A)[2][:, -1]
+    t = np.where((np.sum(t * prev, axis=-1) < 0)[:, None], -t, t)
+    t[bad] = np.nan
+    return t
+
+
+def continuation(
+    params: Params,
+    parameter: str,
+    stop: float | Sequence[float] | np.ndarray | Array,
+    *,
+    periods: int | Sequence[int] = (1, 2, 3, 4),
+    max_points: int = 200,
+    step: float = 0.01,
+    max_step: float = 0.04,
+    min_step: float = 1e-6,
+    locate: bool | Sequence[str] = True,
+    tol: float | None = None,
+    max_iter: int = 8,
+    transient: int = 30,
+    dynamics: AbstractDynamics | None = None,
+    waveform: AbstractWaveform | None = None,
+    contact: str = "strict",
+    start: str = "paper",
+    dtype: Any = None,
+) -> Branch:
+    """Follow the steady gait of each configuration as `parameter` goes from its value to `stop`.
+
+    The start is [`steady_gait`][]`(params, periods=periods, ...)`; its gait (of period `k`, stable or
+    not) is continued (module docstring), and with `locate` its folds, period doublings, SSL/SL
+    boundaries and lift-offs are located ([`BranchEvents`][]).
+
+    **Arguments:**
+
+    - `params`: [`Params`][] (any batch shape: one branch per configuration).
+    - `parameter`: a field of [`Params`][] (`"omega"`, `"a"`, `"d"`, `"mhat"`, `"mu_s"`, ...), or
+      `"cosN"`/`"sinN"`, the coefficient of harmonic `N` of a [`Fourier`][] `waveform`.
+    - `stop`: the parameter's end value (a number, or one per configuration).
+    - `periods`: as in [`steady_gait`][], for the start.
+    - `max_points`: points per branch, the start included.
+    - `step`, `max_step`, `min_step`: first, largest and smallest arclength step, with the
+      parameter in units of $|$`stop` $-$ start$|$.
+    - `locate`: locate the branch's events (all kinds, none, or the kinds named, e.g. `("SSL_SL",)`);
+      the others are reported between the two points that bracket them.
+    - `tol`, `max_iter`: the corrector's Newton tolerance (as [`steady_gait`][]'s) and iterations.
+    - `transient`, `dynamics`, `waveform`, `contact`, `start`, `dtype`: as in [`steady_gait`][].
+
+    **Returns:** a [`Branch`][] with batch shape `params.batch_shape`. A configuration without a start
+    gait or with invalid parameters has an empty branch and its status; the others are unaffected.
+
+    !!! Example
+
+        ```python
+        b = continuation(Params(omega=4.0), "omega", 6.0)
+        b.lam, b.mean_speed, b.stable, b.events.kind, b.events.lam
+        ```
+    """
+    dynamics = Exact() if dynamics is None else dynamics
+    if not isinstance(dynamics, Exact):
+        raise TypeError(f"continuation needs Exact dynamics, got {type(dynamics).__name__}.")
+    spec = corrector.parse(parameter, waveform)
+    _check(max_points, step, max_step, min_step, max_iter)
+    to_locate = kinds(locate)
+    flat, wave, axes, shape = prepare(params, waveform, dtype)
+    B = math.prod(shape)
+    lam0 = np.broadcast_to(np.asarray(corrector.value(flat, wave, spec), np.float64), (B,))
+    try:
+        stops = np.broadcast_to(np.asarray(stop, np.float64), shape).reshape(B)
+    except ValueError:
+        raise ValueError(f"stop must be a number or broadcast to the batch shape {shape}.") from None
+    if not np.all(np.isfinite(stops)) or np.any(stops == lam0):
+        raise ValueError(f"stop must be finite and differ from the start value of {parameter!r}, got {stop!r}.")
+    f32 = jnp.finfo(flat.dtype).bits < 64
+    tol = (1e-5 if f32 else 1e-11) if tol is None else float(tol)
+
+    g = steady_gait(params, periods=periods, transient=transient, tol=tol, dynamics=dynamics,
+                    waveform=waveform, contact=contact, start=start, dtype=dtype)  # fmt: skip
+    fl = lambda x: np.asarray(x).reshape(B, *np.shape(x)[len(shape) :])
+    ok = fl(g.converged)
+    k = np.where(ok, fl(g.k), 1)
+    scale = stops - lam0
+    omega = np.broadcast_to(np.asarray(wave.omega, np.float64), (B,))
+    if spec.name == "omega":
+        omega = np.minimum(lam0, stops)
+    omega_min = float(np.min(omega[ok & (omega > 0)], initial=np.inf))
+    T_max = 2 * np.pi / omega_min if np.isfinite(omega_min) else 1.0
+    max_steps = dynamics.max_steps or default_max_steps(float(np.max(k)) * T_max, dynamics.dt)
+    solve = Solver(flat, wave, axes, spec, contact, dynamics.dt, k, lam0, scale, tol, max_iter, max_steps)
+
+    z = np.stack([fl(g.u), fl(g.v1), fl(g.v2), np.zeros(B)], axis=-1)
+    z = np.where(ok[:, None], z, 0.0)
+    r = solve(z, z, _E4[None].repeat(B, 0), ok)
+    ok = ok & r.done
+    status = np.where(ok, BranchStatus.MAX_POINTS, np.where(fl(g.status) == GaitStatus.INVALID,
+                      BranchStatus.INVALID, BranchStatus.NO_START))  # fmt: skip
+    walk = _Walk(solve, r, ok, step, max_step, min_step, max_points)
+    walk.run(status)
+    data = _pack(walk.points, solve, k)
+    events = find_events(data, status, walk.failed_at, solve, contact, to_locate)
+    return _branch(data, status, k, fl(g.status), events, shape, flat.dtype, spec.label, contact)
+
+
+_E4 = np.eye(4)[3]
+
+SWITCH_STEP = 1e-3
+"""Largest step across a change of switching structure (switch count, or the sign of the slip margin
+or of the smallest normal force): a step that changes it is retried shorter down to this, so that the
+corrector cannot jump to another branch with another structure (past a fold two stable gaits
+coexist, their section states a few 1e-3 apart)."""
+
+CORNER_STEP = 1e-4
+"""First step onto the other piece of the branch after a corner (see `_Walk.cross`)."""
+
+CORNER_PROBE = 1e-5
+"""How far past the last point (along its tangent) the Jacobian of the other piece is evaluated."""
+
+MAX_CORNERS = 32
+"""Corners crossed per branch at most."""
+
+
+def _signature(out) -> tuple:
+    return (np.asarray(out.n_switch), np.asarray(out.margin) > 0, np.asarray(out.n_min) > 0)
+
+
+class _Walk:
+    """The predictor-corrector loop of all branches (module docstring), on the host."""
+
+    def __init__(self, solve, r0, ok, step, max_step, min_step, max_points):
+        B = len(ok)
+        self.solve, self.B = solve, B
+        self.step, self.max_step, self.min_step, self.max_points = step, max_step, min_step, max_points
+        self.z, self.J = r0.z.copy(), r0.J.copy()
+        self.t = tangent(r0.J, np.broadcast_to(_E4, (B, 4)))
+        self.sig = _signature(r0.out)
+        self.active = ok.copy()
+        self.h = np.full(B, float(step))
+        self.corners = np.zeros(B, int)
+        self.failed_at = np.full((B, 4), np.nan)
+        self.points: list[list[dict]] = [[] for _ in range(B)]
+        for i in np.flatnonzero(ok):
+            self.points[i].append(_record(r0, self.t, int(i)))
+
+    def accept(self, r, tn, good):
+        for i in np.flatnonzero(good):
+            self.points[i].append(_record(r, tn, int(i)))
+        self.z = np.where(good[:, None], r.z, self.z)
+        self.J = np.where(good[:, None, None], r.J, self.J)
+        self.t = np.where(good[:, None], tn, self.t)
+        self.sig = tuple(np.where(good, new, old) for new, old in zip(_signature(r.out), self.sig))
+
+    def run(self, status):
+        solve, B, small = self.solve, self.B, 16 * self.min_step
+        e4 = np.broadcast_to(_E4, (B, 4))
+        while np.any(self.active):
+            z, t, h, active = self.z, self.t, self.h, self.active
+            zp = z + h[:, None] * t
+            land = active & (zp[:, 3] >= 1)
+            with np.errstate(all="ignore"):
+                hl = (1 - z[:, 3]) / t[:, 3]
+            zp = np.where(land[:, None], z + hl[:, None] * t, zp)
+            r = solve(zp, zp, np.where(land[:, None], e4, t), active)
+            tn = tangent(r.J, t)
+            dist = np.linalg.norm(r.z - zp, axis=-1)
+            turn = np.arccos(np.clip(np.sum(tn * t, axis=-1), -1, 1))
+            same = np.all([a == b for a, b in zip(_signature(r.out), self.sig)], axis=0)
+            good = active & r.done & (dist <= np.maximum(h / 2, small))
+            good &= ((turn <= MAX_TURN) | (h <= small)) & (same | (h <= SWITCH_STEP))
+            self.accept(r, tn, good)
+            grow = np.where(r.it <= 2, 2.0, np.where(r.it <= 4, 1.2, 0.7))
+            self.h = np.where(good, np.minimum(grow * h, self.max_step), h / 2)
+            counts = np.array([len(p) for p in self.points])
+            reached = good & land
+            left = good & ~land & ((self.z[:, 3] < 0) | (self.z[:, 3] > 1))
+            full = good & (counts >= self.max_points)
+            dead = active & ~good & (self.h < self.min_step)
+            lifted = dead & (r.out.status == Status.LIFTOFF)
+            invalid = dead & ~r.valid & np.all(np.isfinite(zp), axis=-1)
+            self.failed_at = np.where(dead[:, None], zp, self.failed_at)
+            crossed = self.cross(dead & ~lifted & ~invalid & (self.corners < MAX_CORNERS))
+            dead &= ~crossed
+            full |= crossed & (np.array([len(p) for p in self.points]) >= self.max_points)
+            status[:] = np.select(
+                [reached, left, full & ~reached & ~left, lifted, invalid, dead],
+                [BranchStatus.REACHED, BranchStatus.LEFT_RANGE, BranchStatus.MAX_POINTS, BranchStatus.LIFTOFF,
+                 BranchStatus.INVALID, BranchStatus.FAILED],
+                status,
+            )  # fmt: skip
+            self.active = active & ~(reached | left | full | dead)
+
+    def cross(self, lanes: np.ndarray) -> np.ndarray:
+        """Continue past a corner of the branch, where the step fails at the last point: a switching
+        structure changes there (the corrector's Jacobian differs on the two sides, so that the
+        branch has a corner, and may turn back: a non-smooth fold). The other side's piece has
+        the null vector of the Jacobian just past the corner (along the tangent) as its tangent;
+        of its two orientations, the one whose corrected point has another switching structure
+        than the last point is taken."""
+        if not np.any(lanes):
+            return lanes
+        solve, B = self.solve, self.B
+        e4 = np.broadcast_to(_E4, (B, 4))
+        zq = self.z + CORNER_PROBE * self.t
+        rq = solve(zq, zq, e4, lanes, max_iter=0)
+        tq = tangent(rq.J, self.t)
+        done = np.zeros(B, bool)
+        for sign in (1.0, -1.0):
+            go = lanes & ~done & np.all(np.isfinite(tq), axis=-1)
+            if not np.any(go):
+                break
+            d = sign * tq
+            zp = self.z + CORNER_STEP * d
+            r = solve(zp, zp, d, go)
+            other = ~np.all([a == b for a, b in zip(_signature(r.out), self.sig)], axis=0)
+            good = go & r.done & other & (np.linalg.norm(r.z - zp, axis=-1) <= CORNER_STEP / 2)
+            self.accept(r, tangent(r.J, d), good)
+            done |= good
+        self.h = np.where(done, CORNER_STEP, self.h)
+        self.corners += done
+        return done
+
+
+def _check(max_points, step, max_step, min_step, max_iter) -> None:
+    if not (isinstance(max_points, int) and max_points >= 2):
+        raise ValueError(f"max_points must be an int >= 2, got {max_points!r}.")
+    if not (isinstance(max_iter, int) and max_iter >= 1):
+        raise ValueError(f"max_iter must be an int >= 1, got {max_iter!r}.")
+    if not (0 < min_step <= step <= max_step and np.isfinite(max_step)):
+        raise ValueError(f"need 0 < min_step <= step <= max_step (finite), got {min_step!r}, {step!r}, {max_step!r}.")
+
+
+_FIELDS = ("dX", "ed", "w", "stuck1", "stuck2", "margin", "n_min", "n_switch", "lifted")
+
+
+def _record(r: corrector.Solved, t: np.ndarray, i: int) -> dict:
+    rec = {name: getattr(r.out, name)[i] for name in _FIELDS}
+    return dict(rec, z=r.z[i], J=r.J[i], t=t[i])
+
+
+def _pack(points: list[list[dict]], solve: Solver, k: np.ndarray) -> dict[str, np.ndarray]:
+    """Per-point arrays `(B, n)` padded with NaN; derived quantities per point."""
+    B = len(points)
+    n = max(2, max(len(p) for p in points))
+    out: dict[str, np.ndarray] = {}
+    template = {"z": np.zeros(4), "J": np.zeros((5, 4)), "t": np.zeros(4), **{f: 0.0 for f in _FIELDS}}
+    for name, like in template.items():
+        arr = np.full((B, n) + np.shape(like), np.nan)
+        for i, p in enumerate(points):
+            for j, rec in enumerate(p):
+                arr[i, j] = rec[name]
+        out[name] = arr
+    count = np.array([len(p) for p in points])
+    valid = np.arange(n)[None, :] < count[:, None]
+    out["valid"], out["count"] = valid, count
+    zeta = out["z"][..., 3]
+    out["lam"] = solve.lam0[:, None] + solve.scale[:, None] * zeta
+    out["period"] = solve.period(zeta, k)
+    M = np.where(valid[..., None, None], out["J"][..., :3, :3], 0.0)
+    ev = np.linalg.eigvals(M)
+    ev = np.take_along_axis(ev, np.argsort(-np.abs(ev), axis=-1), -1)
+    out["multipliers"] = np.where(valid[..., None], ev, np.nan)
+    out["det_minus"] = np.where(valid, np.linalg.det(M - np.eye(3)), np.nan)
+    out["det_plus"] = np.where(valid, np.linalg.det(M + np.eye(3)), np.nan)
+    return out
+
+
+def _branch(d, status, k, start_status, events, shape, dtype, label, contact) -> Branch:
+    valid = d["valid"]
+    dX = d["dX"]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cot = np.where(valid & (dX == 0), np.inf, d["ed"] / np.abs(dX))
+        stuck = np.stack([d["stuck1"], d["stuck2"]]) / d["period"]
+    ssl = np.maximum(d["stuck1"], d["stuck2"]) > STICK_TOL
+    regime = np.where(valid, np.where(ssl, Regime.SSL, Regime.SL), Regime.UNDETERMINED)
+    n = valid.shape[1]
+    re = lambda x, dt=dtype: jnp.asarray(x, dt).reshape(shape + (n,) + np.shape(x)[2:])
+    mult = np.abs(np.nan_to_num(d["multipliers"], nan=np.inf))
+    return Branch(
+        lam=re(d["lam"]),
+        u=re(d["z"][..., 0]),
+        v1=re(d["z"][..., 1]),
+        v2=re(d["z"][..., 2]),
+        mean_speed=re(dX / d["period"]),
+        cost_of_transport=re(cot),
+        e_d=re(d["ed"]),
+        work=re(d["w"]),
+        stick_fraction1=re(stuck[0]),
+        stick_fraction2=re(stuck[1]),
+        regime=re(regime, jnp.int32),
+        n_switch=re(np.nan_to_num(d["n_switch"]), jnp.int32),
+        slip_margin=re(d["margin"]),
+        min_normal=re(d["n_min"]),
+        multipliers=jnp.asarray(d["multipliers"]).reshape(shape + (n, 3)),
+        stable=re(valid & (np.max(mult, axis=-1) < 1), bool),
+        liftoff=re(valid & (d["n_min"] <= 0), bool),
+        tangent=re(d["t"][..., 3]),
+        det_minus=re(d["det_minus"]),
+        det_plus=re(d["det_plus"]),
+        n_points=jnp.asarray(d["count"], jnp.int32).reshape(shape),
+        status=jnp.asarray(status, jnp.int32).reshape(shape),
+        k=jnp.asarray(k, jnp.int32).reshape(shape),
+        start_status=jnp.asarray(start_status, jnp.int32).reshape(shape),
+        events=jax.tree_util.tree_map(lambda x: x.reshape(shape + x.shape[1:]), events),
+        parameter=label,
+        contact=contact,
+    )

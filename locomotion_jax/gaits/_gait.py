@@ -1,0 +1,302 @@
+"""Steady gaits as periodic orbits of the period map (Newton shooting on the exact model).
+
+The forcing is $T$-periodic ($T = 2\\pi/\\omega$) and the dynamics (eqs. 2-9) depend on the
+positions only through the gap $u = x_2 - x_1$, so a steady gait is a fixed point of
+the $k$-period map $\\Phi_k: (u, v_1, v_2) \\mapsto (u, v_1, v_2)$ taken at the phase
+$\\omega t \\equiv 0$, while the centre of mass (eq. 4) drifts by $\\Delta X$ per gait
+period $kT$. Each configuration is integrated for a short transient, then Newton's
+method solves $\\Phi_k(y) = y$ with the monodromy matrix $M = \\partial\\Phi_k/\\partial y$
+from forward-mode differentiation through the exact engine: located events enter with
+their implicit-function times, so $M$ includes the saltation of every switch. The
+eigenvalues of $M$ are the Floquet multipliers.
+
+A mass stuck at the section has $v_i = 0$ held by friction: its velocity is not a free
+unknown (its column of $M$ is zero, and so is its row when it is stuck again one
+period later), which makes the multiplier 0 that sticking contributes.
+"""
+
+from collections.abc import Sequence
+from typing import Any, overload
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._custom_types import Array, ArrayLike
+from .._status import Regime, Status
+from ..dynamics._base import AbstractDynamics, Exact
+from ..dynamics._compile import engine_jit
+from ..model import _two_mass as model
+from ..model._chain import Chain
+from ..model._params import Params
+from ..model._waveform import AbstractWaveform
+from ..run._batch import default_max_steps, prepare, unflatten
+from ..run._measure import STICK_TOL
+from . import _corrector as corrector, _period as period, _select as select
+from ._chain_gait import ChainGait
+from ._select import GaitStatus
+
+
+class Gait(eqx.Module):
+    """Steady gaits, per configuration (batch shape of the parameters).
+
+    - `status`: [`GaitStatus`][] code; `converged`: `status == CONVERGED`.
+    - `k`: the gait's period in actuation periods (0 when none converged); `period`: $kT$.
+    - `mean_speed`: $\\Delta X / (kT)$ over one gait period (eq. 4), exact for the orbit.
+    - `e_d`, `work`: dissipated energy (eq. 15) and actuator work (eq. 16) per gait
+      period (equal on the orbit: the energy (eq. 10) is periodic).
+    - `cost_of_transport`: $e_d / |\\Delta X|$, energy per unit distance (as `Measurement`'s $e_z/z$;
+      `inf` for a gait that does not move).
+    - `stick_fraction1`, `stick_fraction2`: fraction of the period each mass is stuck;
+      `regime`: [`Regime`][] SSL if either is stuck longer than `STICK_TOL`, else SL.
+    - `n_switch`: switches per gait period.
+    - `u, v1, v2`: the orbit's state at the section $\\omega t \\equiv 0$.
+    - `monodromy`: $M$, shape `batch + (3, 3)`, order $(u, v_1, v_2)$;
+      `multipliers`: its eigenvalues (complex, by decreasing modulus);
+      `stable`: all moduli below 1.
+    - `residual`: $\\|\\Phi_k(y) - y\\|_\\infty$ at the last iterate (NaN where nothing was
+      solved: invalid parameters, a lift-off in the transient); `n_iter`: Newton iterations.
+    - `liftoff`: a normal force reached zero on the orbit or the transient (paper
+      reading: flagged, the orbit is still computed).
+    - `slip_margin`: the smallest $|F_i| - \\mu_s n_i$ (eq. 7) at the instants where a
+      slipping mass's velocity reaches zero on the orbit: $> 0$, every such mass
+      reverses (SL); $< 0$, one sticks (SSL); `inf` if no velocity reaches zero, `-inf`
+      if a mass is stuck all period. It is continuous where a stick interval shrinks to
+      nothing, so that its zero is the SSL/SL boundary.
+    - `min_normal`: the smallest normal force $\\min_t \\min(N_1, N_2)$ (eq. 5) on the
+      orbit (its zero is the onset of lift-off).
+    """
+
+    status: Array
+    converged: Array
+    k: Array
+    period: Array
+    mean_speed: Array
+    e_d: Array
+    work: Array
+    cost_of_transport: Array
+    stick_fraction1: Array
+    stick_fraction2: Array
+    regime: Array
+    n_switch: Array
+    u: Array
+    v1: Array
+    v2: Array
+    monodromy: Array
+    multipliers: Array
+    stable: Array
+    residual: Array
+    n_iter: Array
+    liftoff: Array
+    slip_margin: Array
+    min_normal: Array
+    contact: str = eqx.field(static=True)
+
+
+def _transient_batch(params, wave, wave_axes, contact, start, dt, transient, max_steps):
+    one = lambda p, w: period.transient_one(p, w, contact, start, dt, transient, max_steps)
+    return jax.vmap(one, in_axes=(0, wave_axes))(params, wave)
+
+
+_transient_batch = engine_jit(_transient_batch, ("wave_axes", "contact", "start", "dt"))
+
+
+def _transient_from_batch(params, wave, wave_axes, contact, y, dt, transient, max_steps):
+    one = lambda p, w, s: period.transient_one(p, w, contact, s, dt, transient, max_steps)
+    return jax.vmap(one, in_axes=(0, wave_axes, 0))(params, wave, y)
+
+
+_transient_from_batch = engine_jit(_transient_from_batch, ("wave_axes", "contact", "dt"))
+
+
+def _newton(flat, wave, axes, contact, dt, y0, go, k, tol, max_iter, max_steps) -> dict:
+    """Newton's method on $\\Phi_k(y) = y$ from `y0` where `go`: the continuation's corrector
+    ([`_corrector`][]) with the parameter held (no parameter selected, arclength scale 0)."""
+    B = y0.shape[0]
+    dtype = flat.dtype
+    real = lambda v: jnp.asarray(v, dtype)
+    z0 = jnp.concatenate([jnp.asarray(y0, dtype), jnp.zeros((B, 1), dtype)], axis=1)
+    c = jnp.zeros((B, 4), dtype).at[:, 3].set(1)
+    zero = jnp.zeros((B,), dtype)
+    r = corrector.correct_batch(flat, wave, axes, corrector.selector(None, wave), contact, dt,
+                                jnp.full((B,), k, dtype), zero, zero, z0, z0, c, go, real(tol),
+                                jnp.asarray(max_iter, jnp.int32), max_steps)  # fmt: skip
+    r = jax.tree_util.tree_map(np.asarray, r)
+    y = r.z[:, :3]
+    return dict(y=y, M=r.J[:, :3, :3], out=r.out, it=r.it, done=r.done, residual=np.max(np.abs(r.out.y - y), axis=1))
+
+
+@overload
+def steady_gait(
+    params: Params,
+    *,
+    periods: int | Sequence[int] = ...,
+    transient: int = ...,
+    tol: float | None = ...,
+    max_iter: int = ...,
+    dynamics: AbstractDynamics | None = ...,
+    waveform: AbstractWaveform | None = ...,
+    contact: str = ...,
+    start: str | ArrayLike = ...,
+    dtype: Any = ...,
+) -> Gait: ...
+
+
+@overload
+def steady_gait(
+    params: Chain,
+    *,
+    periods: int | Sequence[int] = ...,
+    transient: int = ...,
+    tol: float | None = ...,
+    max_iter: int = ...,
+    dynamics: AbstractDynamics | None = ...,
+    waveform: AbstractWaveform | None = ...,
+    contact: str = ...,
+    start: str | ArrayLike = ...,
+    dtype: Any = ...,
+) -> ChainGait: ...
+
+
+def steady_gait(
+    params: Params | Chain,
+    *,
+    periods: int | Sequence[int] = (1, 2, 3, 4),
+    transient: int = 30,
+    tol: float | None = None,
+    max_iter: int = 12,
+    dynamics: AbstractDynamics | None = None,
+    waveform: AbstractWaveform | None = None,
+    contact: str = "strict",
+    start: str | ArrayLike = "paper",
+    dtype: Any = None,
+) -> Gait | ChainGait:
+    """Solve the steady gait of each configuration as a periodic orbit (module docstring).
+
+    After `transient` actuation periods from the start `start`, Newton's method on the
+    period map $\\Phi_k$ is tried for each `k` in `periods` in turn, for the configurations
+    that no smaller `k` solved with a stable orbit: a period-2 gait is reported with
+    `k = 2`, while `periods=1` returns the (unstable) period-1 orbit it doubled from.
+
+    **Arguments:**
+
+    - `params`: [`Params`][] (any batch shape).
+    - `periods`: gait periods to try, in actuation periods.
+    - `transient`: actuation periods integrated before the Newton iteration.
+    - `tol`: Newton tolerance on $\\|\\Phi_k(y) - y\\|_\\infty / (1 + \\|y\\|_\\infty)$ (default 1e-11
+      in float64, 1e-5 in float32).
+    - `max_iter`: Newton iterations per `k`.
+    - `dynamics`: [`Exact`][] (its `dt`); `waveform`, `contact`, `dtype`: as in [`simulate`][].
+    - `start`: as in [`simulate`][] (`"paper"`, `"relaxed"`: at rest), or section states
+      $(u, v_1, v_2)$ at phase 0, an array of shape `batch + (3,)` (a mass given $v_i = 0$ starts
+      stuck where eq. 7 allows).
+
+    **Returns:** a [`Gait`][] with batch shape `params.batch_shape`. Configurations without
+    a converged orbit carry NaN numbers and their `status`; the others are unaffected.
+
+    !!! Example
+
+        ```python
+        g = steady_gait(Params(omega=jnp.array([1.0, 2.0, 8.0])))
+        g.mean_speed, g.cost_of_transport, g.multipliers
+        ```
+    """
+    dynamics = Exact() if dynamics is None else dynamics
+    if not isinstance(dynamics, Exact):
+        raise TypeError(f"steady_gait needs Exact dynamics, got {type(dynamics).__name__}.")
+    if isinstance(params, Chain):
+        if waveform is not None:
+            raise ValueError("waveform= applies to Params; a Chain carries its own waveforms (Chain(waveforms=...)).")
+        if not isinstance(start, str):
+            raise ValueError("start= for a Chain names a start at rest: 'paper' or 'relaxed'.")
+        from ._chain_gait import steady_gait_chain
+
+        return steady_gait_chain(params, periods=periods, transient=transient, tol=tol, max_iter=max_iter,
+                                 dynamics=dynamics, contact=contact, start=start, dtype=dtype)  # fmt: skip
+    model.check_contact(contact)
+    flat, wave, axes, shape = prepare(params, waveform, dtype)
+    y_start = _start_states(start, shape, flat.dtype)
+    f32 = jnp.finfo(flat.dtype).bits < 64
+    tol = (1e-5 if f32 else 1e-11) if tol is None else float(tol)
+    ks = select.check(periods, transient, tol, max_iter)
+    omega = np.asarray(wave.omega, np.float64)
+    T_max = float(np.max(2 * np.pi / omega[np.isfinite(omega) & (omega > 0)], initial=1.0))
+    mst = jnp.asarray(dynamics.max_steps or default_max_steps(transient * T_max, dynamics.dt), jnp.int32)
+    real = lambda v: jnp.asarray(v, flat.dtype)
+
+    # The transient is shared by every period tried.
+    if y_start is None:
+        run = _transient_batch(flat, wave, axes, contact, start, dynamics.dt, real(transient), mst)
+    else:
+        run = _transient_from_batch(flat, wave, axes, contact, y_start, dynamics.dt, real(transient), mst)
+    y0, valid, trans, trans_lift = run
+    valid, trans = np.asarray(valid), np.asarray(trans)
+    # -1: to be solved; else the final status (invalid, a strict lift-off, the step cap).
+    base = np.select(
+        [~valid, trans == Status.LIFTOFF, trans != Status.OK],
+        [GaitStatus.INVALID, GaitStatus.LIFTOFF, GaitStatus.NOT_CONVERGED],
+        -1,
+    )
+    best = None
+    for k in ks:
+        msp = jnp.asarray(dynamics.max_steps or default_max_steps(k * T_max, dynamics.dt), jnp.int32)
+        go = jnp.asarray((base < 0) & (True if best is None else select.still_open(best)))
+        r = _newton(flat, wave, axes, contact, dynamics.dt, y0, go, k, tol, max_iter, msp)
+        r = select.judge(r, base, k, valid & (np.asarray(trans_lift) | r["out"].lifted))
+        best = select.better(best, r)
+        if not np.any(select.still_open(best)):
+            break
+    assert best is not None
+    return unflatten(_gait(best, omega, flat, contact), shape)
+
+
+def _start_states(start: Any, shape: tuple[int, ...], dtype: Any) -> Array | None:
+    """`None` for a named start (checked), else the section states flattened to `(size, 3)`."""
+    if isinstance(start, str):
+        model.initial_gap(Params(), start)
+        return None
+    y = np.asarray(start, np.float64)
+    if y.shape != shape + (3,) or not np.all(np.isfinite(y)):
+        raise ValueError(f"start must be 'paper', 'relaxed' or finite section states (u, v1, v2) of shape "
+                         f"{shape + (3,)}, got shape {y.shape}.")  # fmt: skip
+    return jnp.asarray(y.reshape(-1, 3), dtype)
+
+
+def _gait(r: dict, omega: np.ndarray, flat: Params, contact: str) -> Gait:
+    ok = r["status"] == GaitStatus.CONVERGED
+    dtype = flat.dtype
+    nan = lambda x: jnp.asarray(np.where(select.expand(ok, x), x, np.nan), dtype)
+    out: period.Period = r["out"]
+    k = r["k"]
+    kT = np.where(ok, k * 2 * np.pi / omega, np.nan)
+    dX = out.dX
+    M = np.where(ok[:, None, None], r["M"], np.nan)
+    stuck = np.stack([out.stuck1, out.stuck2]) / np.where(ok, kT, 1)
+    ssl = np.max(np.stack([out.stuck1, out.stuck2]), axis=0) > STICK_TOL
+    return Gait(
+        status=jnp.asarray(r["status"]),
+        converged=jnp.asarray(ok),
+        k=jnp.asarray(k, jnp.int32),
+        period=jnp.asarray(kT, dtype),
+        mean_speed=nan(dX / np.where(ok, kT, 1)),
+        e_d=nan(out.ed),
+        work=nan(out.w),
+        cost_of_transport=nan(select.ratio(out.ed, np.abs(dX), ok)),
+        stick_fraction1=nan(stuck[0]),
+        stick_fraction2=nan(stuck[1]),
+        regime=jnp.asarray(np.where(ok, np.where(ssl, Regime.SSL, Regime.SL), Regime.UNDETERMINED), jnp.int32),
+        n_switch=jnp.asarray(np.where(ok, out.n_switch, 0), jnp.int32),
+        u=nan(r["y"][:, 0]),
+        v1=nan(r["y"][:, 1]),
+        v2=nan(r["y"][:, 2]),
+        monodromy=jnp.asarray(M, dtype),
+        multipliers=jnp.asarray(r["multipliers"]),
+        stable=jnp.asarray(r["stable"]),
+        residual=jnp.asarray(r["residual"], dtype),
+        n_iter=jnp.asarray(r["it"]),
+        liftoff=jnp.asarray(r["lifted"]),
+        slip_margin=nan(out.margin),
+        min_normal=nan(out.n_min),
+        contact=contact,
+    )

@@ -1,0 +1,218 @@
+"""Periodic gaits of a Fourier actuation and their exact sensitivities (the exact optimiser's oracle).
+
+The decision vector of the optimiser is
+$\\theta = (A_2, \\dots, A_N, B_1, \\dots, B_N, \\log\\omega)$, coefficients in units of
+$a_\\max$, with $A_1 = 0$: a shift of the time origin changes no gait, and fixing the
+first harmonic's phase removes that direction from the search (any waveform with a
+first harmonic has such a representation). The waveform is
+$\\ell_0(t) = \\bar\\ell + a_\\max \\sum_n A_n \\cos n\\omega t + B_n \\sin n\\omega t$ ([`Fourier`][]).
+
+For a given $\\theta$ the steady gait is the fixed point $y^*$ of the period map
+$\\Phi(y, \\theta)$ of the reduced state $y = (u, v_1, v_2)$ at the phase
+$\\omega t \\equiv 0$ (as in [`steady_gait`][]), found by Newton's method from a warm
+start with the monodromy $M = \\partial\\Phi/\\partial y$ by forward mode through the
+exact engine. Over one period the engine also accumulates the drift of the centre of
+mass $\\Delta X$ (eq. 4), the dissipated energy $e_d$ (eq. 15) and the smallest normal
+force $\\min(N_1, N_2)$ (eq. 5, at the step ends). Their total derivatives follow
+from the implicit function theorem,
+
+$$\\frac{dy^*}{d\\theta} = (I - M)^{-1}\\frac{\\partial\\Phi}{\\partial\\theta},\\qquad
+\\frac{dF}{d\\theta} = \\frac{\\partial F}{\\partial\\theta} + \\frac{\\partial F}{\\partial y}\\frac{dy^*}{d\\theta},$$
+
+so one forward-mode pass over one period in the $3 + p$ directions $(y, \\theta)$ gives
+every gradient; located events enter with their implicit-function times (the
+saltation of each switch). Whole-period averages of the orbit are exact: no
+transient, no window.
+"""
+
+from collections import Counter
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._custom_types import Array, Contact
+from .._status import Status
+from ..dynamics import _exact as exact
+from ..dynamics._compile import engine_jit
+from ..model._params import Params
+from ..model._two_mass import initial_gap
+from ..model._waveform import Fourier
+from ._period import reduced as _reduced, section_state as _section_state
+
+
+TRACES: Counter = Counter()
+"""Python-level traces of the compiled functions (keys `"evaluate"`, `"relax"`); a test
+checks that a whole optimisation traces each once."""
+
+
+def waveform(theta: Array, a_max: Array, lbar: Array, harmonics: int) -> Fourier:
+    """Decision vector(s) (module docstring) -> [`Fourier`][] waveform (batched along leading axes)."""
+    n = harmonics
+    zero = jnp.zeros(theta.shape[:-1] + (1,), theta.dtype)
+    cos = a_max * jnp.concatenate([zero, theta[..., : n - 1]], axis=-1)
+    sin = a_max * theta[..., n - 1 : 2 * n - 1]
+    return Fourier(cos, sin, jnp.exp(theta[..., -1]), lbar + 0 * theta[..., -1])
+
+
+def size(harmonics: int) -> int:
+    """Length of the decision vector for `harmonics` harmonics."""
+    return 2 * harmonics
+
+
+class Period(NamedTuple):
+    """One period from a section state: the end's reduced state, $(\\Delta X, e_d, \\min N)$, success."""
+
+    y: Array
+    figures: Array
+    ok: Array
+
+
+def period(params: Params, wave: Fourier, contact: Contact, dt: float, max_steps: Array, y: Array, k: Array) -> Period:
+    """The `k`-period map $\\Phi_k$ from the reduced state `y`, with the figures the optimiser needs
+    (`max_steps` per actuation period)."""
+    P = exact.consts(params, wave)
+    t_end = k.astype(y.dtype) * 2 * jnp.pi / wave.omega
+    st0 = _section_state(params, wave, contact, y)
+
+    def normal(s):
+        # Eq. (5) at a step's end: N1 = m1 - fy, N2 = m2 + fy, fy = T d / l.
+        l0, _, _ = wave.at_phase(s.cph, s.sph)
+        u = s.y.x2 - s.y.x1
+        length = jnp.sqrt(u * u + P.dd)
+        fy = P.k * (length - l0) / length * P.d
+        return jnp.minimum(P.m1 - fy, P.m2 + fy)
+
+    def cond(c):
+        s, _, n = c
+        return (s.t < t_end) & (s.status == Status.OK) & (n < k * max_steps)
+
+    def body(c):
+        s, low, n = c
+        s, _ = exact.step(params, wave, contact, dt, s, t_end, None, P)
+        return s, jnp.minimum(low, normal(s)), n + 1
+
+    st, low, _ = jax.lax.while_loop(cond, body, (st0, normal(st0), jnp.zeros((), jnp.int32)))
+    com = lambda s: P.mhat * s.y.x1 + (1 - P.mhat) * s.y.x2
+    ok = (st.status == Status.OK) & (st.t >= t_end)
+    return Period(_reduced(st), jnp.stack([com(st) - com(st0), st.y.ed, low]), ok)
+
+
+class Orbit(NamedTuple):
+    """The steady gait of one decision vector and its sensitivities.
+
+    - `y`: the fixed point $(u, v_1, v_2)$ of $\\Phi_k$; `figures`: $(\\Delta X, e_d, \\min N)$ over
+      the gait's `k` actuation periods;
+    - `gradient`: $d\\,\\text{figures}/d\\theta$, shape `(3, p)`;
+    - `monodromy`: $M$ at the fixed point; `ok`: Newton converged and the period completed;
+    - `n_iter`, `residual`: Newton iterations and $\\|\\Phi(y) - y\\|_\\infty$.
+    """
+
+    y: Array
+    figures: Array
+    gradient: Array
+    monodromy: Array
+    ok: Array
+    n_iter: Array
+    residual: Array
+
+
+def _orbit_one(params, a_max, theta, y0, k, harmonics, contact, dt, max_steps, tol, max_iter) -> Orbit:
+    lbar = params.lbar
+    eye = jnp.eye(3, dtype=theta.dtype)
+
+    def run(z):
+        out = period(params, waveform(z[3:], a_max, lbar, harmonics), contact, dt, max_steps, z[:3], k)
+        return jnp.concatenate([out.y, out.figures]), out.ok
+
+    def linearise(y):
+        # One forward pass in all 3 + p directions: Newton needs only M, the result all of J,
+        # and a single differentiated program halves the compile time.
+        J, (val, ok) = jax.jacfwd(lambda z: (lambda r: (r[0], r))(run(z)), has_aux=True)(jnp.concatenate([y, theta]))
+        return val, J, ok & jnp.all(jnp.isfinite(val)) & jnp.all(jnp.isfinite(J))
+
+    def small(y, val):
+        return jnp.max(jnp.abs(val[:3] - y)) <= tol * (1 + jnp.max(jnp.abs(y)))
+
+    def cond(c):
+        _, _, _, ok, it, done = c
+        return ~done & ok & (it < max_iter)
+
+    def body(c):
+        y, val, J, _, it, _ = c
+        y1 = y + jnp.linalg.solve(J[:3, :3] - eye, y - val[:3])
+        val1, J1, ok1 = linearise(y1)
+        return y1, val1, J1, ok1, it + 1, small(y1, val1)
+
+    val0, J0, ok0 = linearise(y0)
+    init = (y0, val0, J0, ok0, jnp.zeros((), jnp.int32), small(y0, val0))
+    y, val, J, ok, it, done = jax.lax.while_loop(cond, body, init)
+    M = J[:3, :3]
+    dy = jnp.linalg.solve(eye - M, J[:3, 3:])
+    grad = J[3:, 3:] + J[3:, :3] @ dy
+    good = ok & done & jnp.all(jnp.isfinite(grad))
+    return Orbit(y, val[3:], grad, M, good, it, jnp.max(jnp.abs(val[:3] - y)))
+
+
+def _evaluate(params, a_max, theta, y0, k, harmonics, contact, dt, max_steps, tol, max_iter):
+    TRACES["evaluate"] += 1  # runs only while tracing
+    one = lambda th, y, kk: _orbit_one(params, a_max, th, y, kk, harmonics, contact, dt, max_steps, tol, max_iter)
+    return jax.vmap(one)(theta, y0, k)
+
+
+def _relax(params, a_max, theta, y0, fresh, periods, harmonics, contact, dt, max_steps):
+    """`periods` actuation periods from the section state `y0`, or from the relaxed spring
+    at rest where `fresh`: the reduced state at the end (a start for Newton's method)."""
+    TRACES["relax"] += 1
+
+    def one(th, y, new):
+        wave = waveform(th, a_max, params.lbar, harmonics)
+        P = exact.consts(params, wave)
+        gap = initial_gap(params, "relaxed")
+        rest = exact.init(params, wave, contact, jnp.zeros_like(gap), gap)
+        sec = _section_state(params, wave, contact, y)
+        st = jax.tree_util.tree_map(lambda a, b: jnp.where(new, a, b), rest, sec)
+        t_end = periods.astype(gap.dtype) * 2 * jnp.pi / wave.omega
+        steps = periods * max_steps
+
+        def cond(c):
+            s, n = c
+            return (s.t < t_end) & (n < steps)
+
+        def body(c):
+            s, n = c
+            return exact.step(params, wave, contact, dt, s, t_end, None, P)[0], n + 1
+
+        st, _ = jax.lax.while_loop(cond, body, (st, jnp.zeros((), jnp.int32)))
+        return _reduced(st)
+
+    return jax.vmap(one)(theta, y0, fresh)
+
+
+evaluate = engine_jit(_evaluate, ("harmonics", "contact", "dt", "max_iter"))
+relax = engine_jit(_relax, ("harmonics", "contact", "dt"))
+
+
+class Oracle(eqx.Module):
+    """The compiled evaluations of one problem (static: harmonics, contact, step, iterations)."""
+
+    params: Params
+    a_max: Array
+    max_steps: Array
+    tol: Array
+    harmonics: int = eqx.field(static=True)
+    contact: Contact = eqx.field(static=True)
+    dt: float = eqx.field(static=True)
+    max_iter: int = eqx.field(static=True)
+
+    def orbits(self, theta: Array, y0: Array, k: Array) -> Orbit:
+        """Steady gaits of period `k` actuation periods (int32, per row) and their sensitivities,
+        for a batch of decision vectors, from warm starts `y0`."""
+        return evaluate(self.params, self.a_max, theta, y0, k, self.harmonics, self.contact, self.dt,
+                        self.max_steps, self.tol, self.max_iter)  # fmt: skip
+
+    def transient(self, theta: Array, y0: Array, fresh: Array, periods: Array) -> Array:
+        """The reduced state after `periods` periods (from `y0`, or from rest where `fresh`)."""
+        return relax(self.params, self.a_max, theta, y0, fresh, periods, self.harmonics, self.contact, self.dt,
+                     self.max_steps)  # fmt: skip

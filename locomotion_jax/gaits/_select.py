@@ -1,0 +1,96 @@
+"""What the steady-gait solvers share: the outcome codes, the argument checks, and the choice,
+per configuration, among the gait periods tried (the two-mass [`steady_gait`][] and chains)."""
+
+from typing import Any
+
+import jax
+import numpy as np
+
+from .._status import Status
+
+
+class GaitStatus:
+    """Outcome of the periodic-orbit solve of one configuration (beside `Status`).
+
+    - `CONVERGED`: $\\|\\Phi_k(y) - y\\|_\\infty \\le$ `tol` $(1 + \\|y\\|_\\infty)$ for the reported `k`.
+    - `NOT_CONVERGED`: no period in `periods` converged within `max_iter` Newton
+      iterations (a chaotic or quasi-periodic motion, a longer period, a switching
+      structure that changes under every step, a singular $M - I$, or the step cap
+      `Exact.max_steps` hit); its numbers are NaN.
+    - `LIFTOFF`: a normal force reached zero under the strict reading (transient or orbit).
+    - `INVALID`: parameters outside their valid range; nothing was integrated.
+    """
+
+    CONVERGED = 0
+    NOT_CONVERGED = 1
+    LIFTOFF = 2
+    INVALID = 3
+
+
+def check(periods, transient, tol, max_iter) -> tuple[int, ...]:
+    ks = (periods,) if isinstance(periods, int) else tuple(periods)
+    if not ks or any(not isinstance(k, int) or isinstance(k, bool) or k < 1 for k in ks):
+        raise ValueError(f"periods must be a positive int or a non-empty sequence of them, got {periods!r}.")
+    if not (isinstance(transient, int) and not isinstance(transient, bool) and transient >= 0):
+        raise ValueError(f"transient must be an int >= 0 (actuation periods), got {transient!r}.")
+    if not (isinstance(max_iter, int) and max_iter >= 1):
+        raise ValueError(f"max_iter must be an int >= 1, got {max_iter!r}.")
+    if not (np.isfinite(tol) and tol > 0):
+        raise ValueError(f"tol must be a finite number > 0, got {tol!r}.")
+    return ks
+
+
+def multipliers(r: dict) -> np.ndarray:
+    """Eigenvalues of the monodromy matrix by decreasing modulus (on the host: a general
+    eigensolver is not available on every JAX backend); NaN where not converged."""
+    ok = r["status"] == GaitStatus.CONVERGED
+    M = r["M"]
+    out = np.full(M.shape[:-1], np.nan + 0j)
+    if np.any(ok):
+        ev = np.linalg.eigvals(M[ok])
+        out[ok] = np.take_along_axis(ev, np.argsort(-np.abs(ev), axis=-1), -1)
+    return out
+
+
+def still_open(r: dict) -> np.ndarray:
+    """Configurations a longer period may still improve: not converged, or unstable."""
+    return (r["status"] == GaitStatus.NOT_CONVERGED) | ((r["status"] == GaitStatus.CONVERGED) & ~r["stable"])
+
+
+def ratio(e: Any, dist: Any, ok: np.ndarray) -> np.ndarray:
+    """Energy per unit distance; `inf` for a converged gait that does not move."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(ok & (dist == 0), np.inf, e / np.where(dist == 0, 1, dist))
+
+
+def expand(flag: np.ndarray, like: np.ndarray) -> np.ndarray:
+    return flag.reshape(flag.shape + (1,) * (np.ndim(like) - flag.ndim))
+
+
+def judge(r: dict, base: np.ndarray, k: int, lifted: np.ndarray) -> dict:
+    """Complete a Newton solve's host results `r` (`out`, `done`, `M`, `residual`) for period
+    `k`: status (`base` where the configuration was not solved: its final code, else -1),
+    lift-off, the reported `k`, multipliers and stability."""
+    out = r["out"]
+    solved = np.where(out.status == Status.LIFTOFF, GaitStatus.LIFTOFF,
+                      np.where(r["done"], GaitStatus.CONVERGED, GaitStatus.NOT_CONVERGED))  # fmt: skip
+    r["status"] = np.where(base < 0, solved, base).astype(np.int32)
+    r["lifted"] = lifted
+    r["residual"] = np.where(base < 0, r["residual"], np.nan)
+    r["k"] = np.where(r["status"] == GaitStatus.CONVERGED, k, 0)
+    r["multipliers"] = multipliers(r)
+    r["stable"] = (r["status"] == GaitStatus.CONVERGED) & (np.max(np.abs(np.nan_to_num(r["multipliers"])), axis=-1) < 1)
+    return r
+
+
+def better(best: dict | None, r: dict) -> dict:
+    """Per configuration, `r` where it improves on `best`: an unstable orbit gives way to a
+    stable one of a longer period (the attractor past a period doubling), a failed solve to any
+    converged one."""
+    if best is None:
+        return r
+    converged = r["status"] == GaitStatus.CONVERGED
+    failed = best["status"] == GaitStatus.NOT_CONVERGED
+    unstable = (best["status"] == GaitStatus.CONVERGED) & ~best["stable"]
+    take = (failed & converged) | (unstable & converged & r["stable"])
+    return jax.tree_util.tree_map(lambda a, b: np.where(expand(take, a), b, a), best, r)

@@ -1,0 +1,1 @@
+"""Parameter maps: sweeps over a grid, devices and processes, NetCDF and Zarr storage."""

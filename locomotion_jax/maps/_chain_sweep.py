@@ -1,0 +1,168 @@
+"""Maps over chains of N masses: [`sweep`][locomotion_jax.sweep] with a `mechanism` builder.
+
+A chain has no fixed list of parameter names (its fields are per mass and per spring,
+its waveform and friction law are classes), so the sweep asks the user for a builder:
+a function from the swept values (1-D arrays, one entry per configuration) to a
+batched [`Chain`][]. The configurations are cut into chunks of one shape, the last one
+padded with repeats of its last configuration, so one compilation serves the map;
+each chunk is measured by `measure_chain` (the work queue of the N-mass engine).
+"""
+
+import math
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._results import ChainMeasurement
+from ..model._chain import Chain
+
+
+def _axes(axes: Mapping[str, Any], mode: str) -> tuple[dict[str, np.ndarray], tuple[int, ...]]:
+    if mode not in ("grid", "list"):
+        raise ValueError(f"mode must be 'grid' (outer product) or 'list' (zipped axes), got {mode!r}.")
+    if not isinstance(axes, Mapping) or not axes:
+        raise ValueError("axes must be a non-empty mapping of name -> 1-D array of values.")
+    values = {}
+    for name, v in axes.items():
+        arr = np.asarray(v, dtype=np.float64)
+        if arr.ndim != 1 or arr.size == 0:
+            raise ValueError(f"Axis {name!r} must be a non-empty 1-D array, got shape {arr.shape}.")
+        values[name] = arr
+    lengths = [v.size for v in values.values()]
+    if mode == "list" and len(set(lengths)) > 1:
+        raise ValueError(f"mode='list' needs axes of equal length, got {dict(zip(values, lengths))}.")
+    return values, (tuple(lengths) if mode == "grid" else (lengths[0],))
+
+
+def _build(build: Callable[..., Chain], values, shape, mode, fixed, flat: np.ndarray) -> Chain:
+    idx = np.unravel_index(flat, shape) if mode == "grid" else (flat,) * len(values)
+    kwargs = {n: v[i] for (n, v), i in zip(values.items(), idx)}
+    chain = build(**kwargs, **fixed)
+    if not isinstance(chain, Chain):
+        raise TypeError(f"mechanism must return a Chain, got {type(chain).__name__}.")
+    if chain.batch_shape != flat.shape:
+        raise ValueError(
+            f"mechanism must return a Chain of batch shape {flat.shape} (one configuration per value of the "
+            f"swept axes), got {chain.batch_shape}; build the chain from the arrays it is given."
+        )
+    return chain
+
+
+def sweep_chain(
+    build: Callable[..., Chain],
+    axes: Mapping[str, Any],
+    *,
+    fixed: Mapping[str, Any] | None,
+    mode: str,
+    z: float,
+    horizon: float,
+    window: float,
+    t_start: float | None,
+    dynamics: Any,
+    contact: str,
+    start: str,
+    dtype: Any,
+    chunk_size: int,
+    path: str | Path | None,
+    progress: bool,
+    on_invalid: str,
+):
+    """The chain sweep behind `sweep(axes, mechanism=build)`; arguments as there.
+
+    Returns an `xarray.Dataset` with one dimension per axis (`"config"` for a list),
+    one variable per [`ChainMeasurement`][] field (`stick_fraction` with a trailing
+    `mass` dimension), the axes as coordinates and the settings as attributes.
+    """
+    import jax
+    import xarray as xr
+    from tqdm.auto import tqdm
+
+    from .. import __version__
+    from .._status import Regime, Status
+    from ..run._chain import measure_chain
+
+    values, shape = _axes(axes, mode)
+    fixed = dict(fixed or {})
+    if path is not None:
+        path = Path(path).expanduser()
+        if path.suffix != ".nc":
+            raise ValueError(
+                f"path for a chain sweep must be a NetCDF file (.nc), written when the map is done; got {str(path)!r}."
+            )
+    size = math.prod(shape)
+    chunk = min(int(chunk_size), size)
+    n_chunks = -(-size // chunk)
+
+    def chunk_chain(i: int) -> tuple[Chain, int]:
+        flat = np.arange(i * chunk, (i + 1) * chunk)
+        n = int(min(chunk, size - i * chunk))
+        chain = _build(build, values, shape, mode, fixed, np.minimum(flat, size - 1))
+        return chain, n
+
+    if on_invalid == "raise":  # before any computation: every configuration is checked
+        for i in range(n_chunks):
+            chain, n = chunk_chain(i)
+            bad = np.flatnonzero(~np.asarray(chain.is_valid())[:n])
+            if bad.size:
+                j = int(bad[0])
+                where = np.unravel_index(i * chunk + j, shape) if mode == "grid" else (i * chunk + j,)
+                at = ", ".join(f"{name}={values[name][k]!r}" for name, k in zip(values, where))
+                try:
+                    chain[j].validate()
+                except ValueError as e:
+                    index = tuple(map(int, where))
+                    raise ValueError(f"Invalid configuration at grid index {index} ({at}): {e}") from None
+
+    parts: list[dict[str, np.ndarray]] = []
+    bar = tqdm(total=size, unit="config", unit_scale=True, desc="sweep", disable=not progress)
+    try:
+        for i in range(n_chunks):
+            chain, n = chunk_chain(i)
+            m = measure_chain(
+                chain, z, t_start=t_start, horizon=horizon, window=window, dynamics=dynamics,
+                contact=contact, start=start, dtype=dtype,
+            )  # fmt: skip
+            parts.append({k: v[:n] for k, v in m.to_numpy().items()})
+            bar.update(n)
+    finally:
+        bar.close()
+
+    dims = tuple(values) if mode == "grid" else ("config",)
+    coords = {n: (n if mode == "grid" else "config", v) for n, v in values.items()}
+    data = {}
+    for name in ChainMeasurement.__dataclass_fields__:
+        if name in ("z", "start", "contact"):
+            continue
+        arr = np.concatenate([p[name] for p in parts])
+        extra = arr.shape[1:]
+        data[name] = (dims + ("mass",) * len(extra), arr.reshape(shape + extra))
+    first = _build(build, values, shape, mode, fixed, np.zeros((1,), int))
+    attrs = {
+        "title": "locomotion_jax chain sweep",
+        "sweep_mode": mode,
+        "swept": ",".join(values),
+        "n_masses": first.n_masses,
+        "friction": type(first.friction).__name__,
+        "actuator": type(first.actuator).__name__,
+        **{f"fixed_{k}": v for k, v in fixed.items() if np.ndim(v) == 0 and isinstance(v, (int, float))},
+        "dtype": str(np.dtype(first.astype(dtype).dtype if dtype is not None else first.dtype)),
+        "contact": contact,
+        "start": start,
+        "z": float(z),
+        "horizon": float(horizon),
+        "window": float(window),
+        "t_start": "Chain.t_start (80 periods of the lowest nonzero natural frequency)" if t_start is None else t_start,
+        **{f"dynamics_{k}" if k != "dynamics" else k: v for k, v in dynamics.describe().items()},
+        "on_invalid": on_invalid,
+        "version": __version__,
+        "jax_version": jax.__version__,
+        "status_codes": ", ".join(f"{int(s)}={s.name}" for s in Status),
+        "regime_codes": ", ".join(f"{int(r)}={r.name}" for r in Regime),
+    }
+    ds = xr.Dataset(data, coords=coords, attrs=attrs)
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        ds.to_netcdf(path, engine="h5netcdf")
+    return ds

@@ -1,0 +1,633 @@
+"""`sweep`: parameter maps of `measure` at scale, chunked, sharded, resumable.
+
+The grid is flattened and cut into chunks of equal (padded) size, so one
+compilation serves every chunk and memory is bounded by the chunk size, not the
+grid. Each chunk is split over all devices (`_sharding`), written to disk as soon
+as it is done (`_store`), and counted on a progress bar from the host.
+
+With `order="cost"` the configurations are first sorted by expected cost (a short
+pilot run of each, `_schedule`), so each chunk, and each device's share of it,
+holds configurations of similar duration: a loop runs until its slowest
+configuration is done, and one reaching $z$ late does not keep a chunk of fast
+ones busy. The results are put back in grid order, identical to a natural-order
+sweep; the permutation is stored with the chunks, so a resumed sweep cuts the
+same chunks.
+
+Under `jax.distributed`, with a Zarr store (`path="....zarr"`, `_zarr_sweep`), the
+processes share out the chunks: each computes whole chunks on its own devices and
+writes them into the store (tested with two processes on one host). With NetCDF
+output or none, every process runs the same chunks (process 0's view of the
+finished ones is broadcast), each supplies and computes its own devices' shards
+of each chunk, and process 0 alone writes. Either way `path` must be on a file
+system all processes see.
+"""
+
+import functools
+import math
+import os
+from collections import Counter
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any, Literal, TYPE_CHECKING
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._custom_types import ArrayLike, Contact, Start
+from .._results import Measurement
+from .._status import Regime, Status
+from ..dynamics._base import AbstractDynamics, Exact, Smoothed
+from ..model import _two_mass as model
+from ..model._params import _validity, DEFAULTS, PARAM_NAMES, Params, VALID_RANGES
+from ..run._batch import default_max_steps, horizon_bound
+from ..run._measure import check_measure_args
+from . import _sharding as sharding
+from ._store import ChunkOrder, ChunkStore, digest, read_finished
+
+
+if TYPE_CHECKING:
+    from ..model._chain import Chain
+from ._zarr_store import is_zarr
+
+
+RATIO = "omega_over_wn1"
+"""Convenience axis: $\\omega / \\omega_{n1}$ (eq. 11); `omega` is then derived per configuration."""
+
+MEASURE_FIELDS: tuple[str, ...] = tuple(
+    f for f in Measurement.__dataclass_fields__ if f not in ("z", "start", "contact")
+)
+"""The dataset's variables: every array field of [`Measurement`][]."""
+
+STATS: Counter = Counter()
+"""Host-side counters: `"chunks_computed"` (chunks sent to the devices),
+`"chunks_loaded"` (chunks read back from a partial store, or found done in a Zarr store) and `"pilots"` (pilot
+runs for `order="cost"`). Used by the tests."""
+
+ORDERS: tuple[str, ...] = ("auto", "natural", "cost")
+"""Values of `sweep(order=...)`: see [`resolve_order`][]."""
+
+AUTO_MIN_CONFIGS = 4096
+"""Smallest sweep that `order="auto"` sorts by cost. The pilot costs one compilation
+(3 s on this 2-core CPU) plus ~0.3 ms per configuration on one core. Measured
+(benchmarks/NOTES.md, 2 devices, dt = 0.02): a 64 x 64 omega x a map, lane efficiency
+0.37 -> 0.93 and 21 -> 11 s, pilot run included; the 512-point Fig. 8 line, already
+well grouped in natural order, 0.73 -> 0.785 and no time saved."""
+
+_DESCRIPTIONS = {
+    "tau_z": "time to travel z after t_start (inf: not reached)",
+    "e_z": "energy dissipated while travelling z, eq. (15) (inf: not reached)",
+    "reached": "|X - X(t_start)| reached z within the horizon",
+    "regime": "1 SSL (stick-slip), 0 SL (slip), -1 undetermined",
+    "mean_speed": "signed mean speed of the centre of mass over the measured interval",
+    "cost_of_transport": "e_z / z",
+    "stick_fraction1": "fraction of the regime window mass 1 is stuck",
+    "stick_fraction2": "fraction of the regime window mass 2 is stuck",
+    "e_d": "dissipated energy over the measured interval, eq. (15)",
+    "work": "actuator work over the measured interval, eq. (16)",
+    "delta_e": "change of total energy over the measured interval, eq. (10)",
+    "balance": "work - e_d - delta_e (zero up to integration error)",
+    "liftoff": "a normal force reached zero, eq. (5)",
+    "t_liftoff": "first lift-off time (inf: none)",
+    "status": "0 OK, 1 LIFTOFF, 2 MAX_STEPS, 3 INVALID, 4 SOLVER_FAILED",
+    "t_start": "start of the measurement: 80 periods of the lowest natural frequency",
+    "X_start": "centre of mass at t_start, eq. (4)",
+    "n_steps": "integrator iterations",
+    "n_switch": "contact-mode switches",
+    "transversality": "smallest margin (rad of drive phase) at a located switch in the measured interval",
+    "near_miss": "smallest margin (rad of drive phase) at a near miss of an event function",
+    "margin_z": "margin (rad of drive phase) of the target |X - X0| = z: its crossing, near misses, nearest switch",
+    "omega": "actuation frequency derived from omega_over_wn1",
+}
+
+
+class _Grid:
+    """Host-side description of the configurations: swept axes plus fixed values."""
+
+    def __init__(self, axes: Mapping[str, Any], fixed: Mapping[str, Any] | None, mode: str):
+        if mode not in ("grid", "list"):
+            raise ValueError(f"mode must be 'grid' (outer product) or 'list' (zipped axes), got {mode!r}.")
+        known = PARAM_NAMES + (RATIO,)
+        fixed = dict(fixed or {})
+        if not isinstance(axes, Mapping) or not axes:
+            raise ValueError("axes must be a non-empty mapping of parameter name -> 1-D array of values.")
+        for name in list(axes) + list(fixed):
+            if name not in known:
+                raise ValueError(f"Unknown parameter {name!r}; valid names are {list(known)}.")
+        self.values: dict[str, np.ndarray] = {}
+        for name, v in axes.items():
+            arr = np.asarray(v, dtype=np.float64)
+            if arr.ndim == 0:  # a scalar among the axes is a fixed value, as in Params.grid
+                fixed.setdefault(name, float(arr))
+                continue
+            if arr.ndim != 1:
+                raise ValueError(f"Axis {name!r} must be 1-D, got shape {arr.shape}.")
+            if arr.size == 0:
+                raise ValueError(f"Axis {name!r} is empty: a sweep needs at least one value per axis.")
+            if name in fixed:
+                raise ValueError(f"Parameter {name!r} is given both as an axis and as a fixed value.")
+            self.values[name] = arr
+        if not self.values:
+            raise ValueError("axes holds no 1-D axis: nothing to sweep (put scalars in fixed=).")
+        self.fixed = {}
+        for name, v in fixed.items():
+            arr = np.asarray(v, dtype=np.float64)
+            if arr.ndim != 0:
+                raise ValueError(f"Fixed parameter {name!r} must be a scalar, got shape {arr.shape}.")
+            self.fixed[name] = float(arr)
+        given = set(self.values) | set(self.fixed)
+        if "omega" in given and RATIO in given:
+            raise ValueError("Give either 'omega' or 'omega_over_wn1', not both.")
+        for name in PARAM_NAMES:  # everything not given takes the paper's default
+            if name not in given and not (name == "omega" and RATIO in given):
+                self.fixed[name] = DEFAULTS[name]
+        self.names = tuple(self.values)
+        self.mode = mode
+        lengths = [v.size for v in self.values.values()]
+        if mode == "list" and len(set(lengths)) > 1:
+            detail = ", ".join(f"{n}: {v.size}" for n, v in self.values.items())
+            raise ValueError(f"mode='list' needs axes of equal length, got {detail}.")
+        self.shape = tuple(lengths) if mode == "grid" else (lengths[0],)
+        self.size = math.prod(self.shape)
+
+    def index(self, flat: np.ndarray) -> dict[str, np.ndarray]:
+        """Index into each axis of the flat configuration numbers `flat` (C order)."""
+        if self.mode == "list":
+            return {n: flat for n in self.names}
+        return dict(zip(self.names, np.unravel_index(flat, self.shape)))
+
+    def config_values(self, flat: np.ndarray) -> dict[str, np.ndarray]:
+        """Float64 values of all of `PARAM_NAMES` for the flat configuration numbers `flat`."""
+        idx = self.index(flat)
+        raw = {n: np.full(flat.shape, v) for n, v in self.fixed.items()}
+        raw.update({n: self.values[n][idx[n]] for n in self.names})
+        if RATIO in raw:
+            ratio = raw.pop(RATIO)
+            with np.errstate(all="ignore"):  # invalid mhat/k give NaN here and are flagged anyway
+                raw["omega"] = ratio * np.sqrt(raw["k"] / (2 * raw["mhat"] * (1 - raw["mhat"])))
+        return raw
+
+    def spec(self) -> dict[str, Any]:
+        # Axes are identified by a digest of their float64 values (plus a readable
+        # summary): the coordinates themselves are in the dataset, and a list sweep of
+        # a million configurations should not become a 20 MB attribute.
+        axes = {
+            n: {"n": int(v.size), "first": float(v[0]), "last": float(v[-1]), "sha256": digest(v, "<f8")}
+            for n, v in self.values.items()
+        }
+        return {"mode": self.mode, "axes": axes, "fixed": dict(sorted(self.fixed.items()))}
+
+
+def _check_valid(grid: _Grid, block: int = 1 << 18) -> int:
+    """Raise `ValueError` for the first invalid configuration; host-only (numpy) and blockwise."""
+    n_bad, first = 0, None
+    for lo in range(0, grid.size, block):
+        flat = np.arange(lo, min(lo + block, grid.size))
+        vals = grid.config_values(flat)
+        with np.errstate(all="ignore"):
+            masks = _validity(vals, np)
+        ok = np.ones(flat.shape, bool)
+        for name in PARAM_NAMES:
+            ok &= np.broadcast_to(masks[name], flat.shape)
+        n_bad += int((~ok).sum())
+        if first is None and not ok.all():
+            first = int(flat[np.argmin(ok)])
+    if first is None:
+        return 0
+    one = grid.config_values(np.asarray([first]))
+    where = {n: int(i[0]) for n, i in grid.index(np.asarray([first])).items()}
+    at = ", ".join(f"{n}[{i}]={float(grid.values[n][i])!r}" for n, i in where.items())
+    try:
+        values: dict[str, Any] = {n: float(v[0]) for n, v in one.items()}
+        Params(**values)
+        reason = f"omega derived from {RATIO} is invalid ({VALID_RANGES['omega']})"
+    except ValueError as err:
+        reason = str(err)
+    raise ValueError(
+        f"{n_bad} of {grid.size} configurations of the sweep are invalid; the first, at {at}: {reason} "
+        "Narrow the range, or pass on_invalid='flag' (CLI: --on-invalid flag) to record them as Status.INVALID."
+    )
+
+
+def _float_dtype(dtype: Any) -> np.dtype:
+    dt = np.dtype(jnp.result_type(float) if dtype is None else dtype)
+    if not np.issubdtype(dt, np.floating):
+        raise ValueError(f"dtype must be a floating dtype, got {dt}.")
+    if dt == np.float64 and not jax.config.read("jax_enable_x64"):
+        raise ValueError(
+            "dtype=float64 requested but JAX runs in 32-bit mode; enable it with "
+            'jax.config.update("jax_enable_x64", True) at start-up (or the CLI flag --x64).'
+        )
+    return dt
+
+
+def _max_steps(grid: _Grid, dynamics: AbstractDynamics, horizon: float) -> int:
+    """One step cap for the whole sweep (a static of the compilation), from its largest t_start."""
+    if not isinstance(dynamics, Exact):
+        return 0
+    if dynamics.max_steps is not None:
+        return dynamics.max_steps
+    # t_start depends on k and mhat only (eqs. 11-12): bound it over their combinations.
+    k = grid.values.get("k", np.asarray([grid.fixed.get("k", DEFAULTS["k"])]))
+    mh = grid.values.get("mhat", np.asarray([grid.fixed.get("mhat", DEFAULTS["mhat"])]))
+    if grid.mode == "grid":
+        k, mh = (x.ravel() for x in np.meshgrid(k, mh, indexing="ij"))
+    return default_max_steps(horizon_bound(Params(k=k, mhat=mh, check=False), horizon), dynamics.dt)
+
+
+def resolve_order(
+    order: str, dynamics: AbstractDynamics, horizon: float, window: float, n_configs: int, loops_per_device: int
+) -> ChunkOrder:
+    """The order a sweep's chunks are cut in: `"natural"` (grid order) or `"cost"`.
+
+    `"auto"` picks `"cost"` where sorting can pay for its pilot run: the exact
+    engine (whose cost the pilot models), durations that can differ (`horizon >
+    window`: the run ends at $\\tau_z$ somewhere in between), several loops in
+    sequence on each device (chunks, or sub-batches of `_sharding.MICRO_BATCH`:
+    with a single loop per device the slowest configuration sets the time in any
+    order), and at least [`AUTO_MIN_CONFIGS`][] configurations.
+
+    **Raises:** `ValueError` for an unknown `order`.
+    """
+    if order not in ORDERS:
+        raise ValueError(f"order must be one of {', '.join(map(repr, ORDERS))}, got {order!r}.")
+    if order == "natural" or order == "cost":
+        return order
+    pays = isinstance(dynamics, Exact) and horizon > window and loops_per_device > 1 and n_configs >= AUTO_MIN_CONFIGS
+    return "cost" if pays else "natural"
+
+
+def _loops_per_device(n_chunks: int, shard: int, micro_batch: int | None) -> int:
+    """Integration loops each device runs one after another: chunks x sub-batches of its shard."""
+    return n_chunks * (-(-shard // micro_batch) if micro_batch else 1)
+
+
+def _cost_permutation(
+    grid: _Grid,
+    z: float,
+    horizon: float,
+    window: float,
+    dynamics: AbstractDynamics,
+    contact: str,
+    start: str,
+    dtype: np.dtype,
+) -> np.ndarray:
+    """The flat configuration numbers by increasing expected cost (`_schedule.cost_order`, a pilot run)."""
+    from ._schedule import cost_order
+
+    STATS["pilots"] += 1
+    # The pilot runs the exact engine; for the smoothed one only the durations it predicts matter.
+    dt = dynamics.dt if isinstance(dynamics, Exact) else Exact().dt
+    return cost_order(
+        grid.config_values(np.arange(grid.size)),
+        z=z,
+        horizon=horizon,
+        window=window,
+        dt=dt,
+        contact=contact,
+        start=start,
+        dtype=dtype,
+    )
+
+
+def _in_grid_order(run: np.ndarray, perm: np.ndarray) -> np.ndarray:
+    """Results listed in the order they were run (`perm[j]` is the j-th configuration run) -> grid order."""
+    out = np.empty_like(run)
+    out[perm] = run
+    return out
+
+
+def _attrs(grid: _Grid, spec: dict, dynamics: AbstractDynamics, max_steps: int, n_devices: int, order: str) -> dict:
+    from .. import __version__
+    from ._store import canonical
+
+    attrs: dict[str, Any] = {
+        "title": "locomotion_jax parameter sweep (Zhou, Majidi, O'Reilly 2014)",
+        "sweep_mode": grid.mode,
+        "swept": ",".join(grid.names),
+    }
+    attrs.update({f"fixed_{n}": v for n, v in grid.fixed.items()})
+    attrs.update({f"dynamics_{k}" if k != "dynamics" else "dynamics": v for k, v in dynamics.describe().items()})
+    attrs.update(
+        max_steps=max_steps,
+        dtype=spec["dtype"],
+        contact=spec["contact"],
+        start=spec["start"],
+        z=spec["z"],
+        horizon=spec["horizon"],
+        window=spec["window"],
+        on_invalid=spec["on_invalid"],
+        order=order,
+        version=__version__,
+        jax_version=jax.__version__,
+        n_devices=n_devices,
+        status_codes=", ".join(f"{int(s)}={s.name}" for s in Status),
+        regime_codes=", ".join(f"{int(r)}={r.name}" for r in Regime),
+        sweep_spec=canonical(spec),
+    )
+    return attrs
+
+
+def _dataset(grid: _Grid, results: dict[str, np.ndarray], attrs: dict):
+    import xarray as xr
+
+    dims = grid.names if grid.mode == "grid" else ("config",)
+    coords = {n: (n if grid.mode == "grid" else "config", grid.values[n]) for n in grid.names}
+    data = {k: (dims, v.reshape(grid.shape), {"description": _DESCRIPTIONS.get(k, k)}) for k, v in results.items()}
+    return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+def sweep(
+    axes: Mapping[str, ArrayLike | Sequence[float]],
+    *,
+    fixed: Mapping[str, float | int] | None = None,
+    mode: Literal["grid", "list"] = "grid",
+    z: float = 5.0,
+    horizon: float = 2000.0,
+    window: float = 25.0,
+    dynamics: AbstractDynamics | None = None,
+    contact: Contact = "strict",
+    start: Start = "paper",
+    dtype: Any = None,
+    chunk_size: int = 4096,
+    path: str | os.PathLike | None = None,
+    overwrite: bool = False,
+    progress: bool = True,
+    on_invalid: Literal["raise", "flag"] = "raise",
+    order: Literal["auto", "natural", "cost"] = "auto",
+    mechanism: "Callable[..., Chain] | None" = None,
+    t_start: float | None = None,
+):
+    """Evaluate [`measure`][] over a grid (or list) of parameters, in chunks, on all devices.
+
+    The configurations are flattened (C order; sorted by expected cost with
+    `order="cost"`) and cut into chunks of `chunk_size`, padded so every chunk has
+    the same shape (each device's share a whole number of SIMD vectors, so a
+    configuration's result does not depend on its place in the chunk): one
+    compilation serves the whole sweep and memory is bounded by the chunk size. Each chunk is
+    split over all devices JAX sees (a 1-D mesh; `shard_map`, so each device's
+    integration loop ends on its own), and the same code runs on several GPUs
+    or hosts. Progress (configurations/s) is reported from the host once per chunk.
+
+    With `path`, each finished chunk is written at once to `path + ".parts/"`
+    (one `.npz` per chunk and a `manifest.json` with the full specification), and
+    the final dataset to `path` as NetCDF. A rerun with the same specification
+    resumes from the finished chunks, or reads a finished sweep back without
+    computing; a different specification at the same path is an error unless
+    `overwrite=True`.
+
+    A `path` ending in `.zarr` is a Zarr (v3) store instead (`_zarr_store`): every
+    array is created whole at the start and each chunk, a block of the grid, is
+    written into its region as it is done, so memory stays bounded by the chunk
+    whatever the size of the map. Several processes can fill one store at once:
+    under `jax.distributed` (or simply started on the same store) each process
+    computes whole chunks on its own devices, taking them in turn through a lock
+    per chunk, and returns when the store is complete (`_zarr_sweep`). The result is
+    the store opened lazily (`xarray.open_zarr`); chunks are cut in grid order.
+
+    **Arguments:**
+
+    - `axes`: parameter name -> 1-D values (names of `PARAM_NAMES`, or
+      `"omega_over_wn1"` for $\\omega/\\omega_{n1}$, eq. 11). Scalars count as fixed.
+    - `fixed`: scalar values of other parameters; the rest take `DEFAULTS`.
+    - `mode`: `"grid"` (outer product, one dimension per axis, in the order given)
+      or `"list"` (axes of equal length zipped along one dimension `config`).
+    - `z`, `horizon`, `window`, `dynamics`, `contact`, `start`, `dtype`: as in [`measure`][]
+      (`dtype` defaults to JAX's default float).
+    - `chunk_size`: configurations per chunk (rounded up to a multiple of the device count).
+    - `path`: NetCDF file (resumable through its parts directory) or Zarr store
+      (`.zarr`) for the result; `None` keeps it in memory.
+    - `overwrite`: discard whatever is stored at `path` (finished or partial) and recompute.
+    - `progress`: show a tqdm progress bar.
+    - `on_invalid`: `"raise"` (default) rejects invalid configurations before any
+      computation; `"flag"` runs them as `Status.INVALID` (e.g. a `mu_s` x `mu_k` map).
+    - `order`: `"natural"` cuts the chunks in grid order; `"cost"` first sorts the
+      configurations by expected cost (a pilot run of each, `_schedule.cost_order`),
+      so that a chunk's loops do not wait for one slow configuration; `"auto"`
+      (default) chooses `"cost"` where sorting pays for its pilot run (`_sweep.resolve_order`:
+      large exact sweeps whose runs end at $\\tau_z$). The results are identical; a
+      resumed sweep keeps the order it was started in. Recorded in the attribute `order`.
+      A Zarr store is always cut in grid order (`"cost"` is refused there).
+    - `mechanism`: a map over chains of N masses instead of the paper's model: a
+      function from the swept values (keyword arguments named as the axes, plus
+      `fixed`, each a 1-D array with one entry per configuration) to a batched
+      [`Chain`][] of that batch shape (build it with `check=False` and let
+      `on_invalid` decide). The axes' names are then free. Chain maps run chunk by
+      chunk on the N-mass exact engine (`dynamics` must be `Exact`), in memory or
+      written to a NetCDF `path` when done (no resume, no Zarr store, grid order).
+    - `t_start`: an explicit measurement start for every configuration (chains only;
+      default `Chain.t_start`).
+
+    **Returns:** an `xarray.Dataset` (read lazily from a Zarr store): one dimension and coordinate per swept axis, one
+    variable per [`Measurement`][] field (plus `omega` when `omega_over_wn1` is swept),
+    and attributes recording the fixed parameters, dynamics, dtype, contact, start,
+    z, horizon, window, order, step cap, package version and the specification (`sweep_spec`, JSON).
+
+    **Raises:** `ValueError`, before any computation, for an unknown parameter, an
+    empty or non-1-D axis, an invalid configuration (naming the parameter, its valid
+    range and the grid index), bad settings, or an output path that cannot be written
+    or holds a different sweep. `TypeError` for an unknown `dynamics`.
+
+    !!! Example
+
+        ```python
+        ds = sweep({"omega": np.linspace(1, 25, 256), "a": np.linspace(0.01, 0.1, 256)},
+                   z=5.0, path="maps/ssl.nc")
+        (ds.regime == Regime.SSL).plot()
+        ```
+    """
+    dynamics = Exact() if dynamics is None else dynamics
+    if mechanism is not None:
+        return _sweep_mechanism(mechanism, axes, fixed, mode, z, horizon, window, t_start, dynamics, contact, start,
+                                dtype, chunk_size, path, overwrite, progress, on_invalid, order)  # fmt: skip
+    if t_start is not None:
+        raise ValueError("t_start is for chain maps (mechanism=...); the paper's model starts at Params.t_start.")
+    if not isinstance(dynamics, (Exact, Smoothed)):
+        raise TypeError(f"dynamics must be Exact or Smoothed, got {type(dynamics).__name__}.")
+    model.check_contact(contact)
+    model.initial_gap(Params(), start)  # validates `start`
+    check_measure_args(z, horizon, window)
+    if on_invalid not in ("raise", "flag"):
+        raise ValueError(f"on_invalid must be 'raise' or 'flag', got {on_invalid!r}.")
+    if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1:
+        raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}.")
+    dt = _float_dtype(dtype)
+    grid = _Grid(axes, fixed, mode)
+    if on_invalid == "raise":
+        _check_valid(grid)
+    desc = dynamics.describe() | ({"max_steps": dynamics.max_steps} if isinstance(dynamics, Exact) else {})
+    spec = {
+        "spec_version": 1,
+        **grid.spec(),
+        "z": float(z),
+        "horizon": float(horizon),
+        "window": float(window),
+        "dynamics": desc,
+        "contact": contact,
+        "start": start,
+        "dtype": dt.name,
+        "on_invalid": on_invalid,
+    }
+
+    if path is not None and is_zarr(path):
+        if order not in ORDERS:
+            resolve_order(order, dynamics, horizon, window, grid.size, 1)  # raises
+        if order == "cost":
+            raise ValueError(
+                "order='cost' is for NetCDF output or path=None: a Zarr store's chunks are blocks of the grid, "
+                "computed in grid order. Use order='natural' or 'auto'."
+            )
+        from ._zarr_sweep import sweep_to_zarr
+
+        return sweep_to_zarr(
+            grid,
+            spec,
+            Path(path).expanduser(),
+            int(chunk_size),
+            z=z,
+            horizon=horizon,
+            window=window,
+            dynamics=dynamics,
+            contact=contact,
+            start=start,
+            dtype=dt,
+            max_steps=_max_steps(grid, dynamics, horizon),
+            overwrite=overwrite,
+            progress=progress,
+        )
+
+    mesh = sharding.batch_mesh()
+    ndev = sharding.device_count(mesh)
+    chunk = -(-min(int(chunk_size), grid.size) // ndev) * ndev
+    loops = _loops_per_device(
+        -(-grid.size // chunk), sharding.padded_size(chunk, ndev, dt) // ndev, sharding.MICRO_BATCH
+    )
+    order = resolve_order(order, dynamics, horizon, window, grid.size, loops)
+    permutation = None
+    if order == "cost":  # called only when needed: not for a finished or resumed sweep
+        permutation = functools.partial(_cost_permutation, grid, z, horizon, window, dynamics, contact, start, dt)
+    store = None
+    if path is not None:
+        path = Path(path).expanduser()
+        finished = read_finished(path, spec, overwrite)
+        if finished is not None:
+            return finished
+        store = ChunkStore(
+            path,
+            spec,
+            chunk,
+            grid.size,
+            overwrite,
+            write=jax.process_index() == 0,
+            order=order,
+            permutation=permutation,
+        )
+        # A resumed sweep keeps its chunking and its order.
+        chunk, order, perm = store.chunk_size, store.order, store.permutation
+    else:
+        perm = None if permutation is None else permutation()
+    # perm[j] is the j-th configuration run; all processes must cut the same chunks.
+    perm = np.arange(grid.size) if perm is None else _from_process0(perm)
+    padded = sharding.padded_size(chunk, ndev, dt)
+    n_chunks = -(-grid.size // chunk)
+    max_steps = _max_steps(grid, dynamics, horizon)
+    done = _agree(store.completed() if store is not None else set(), n_chunks)
+
+    results: dict[int, dict[str, np.ndarray]] = {}
+    todo = [i for i in range(n_chunks) if i not in done]
+    n_done = sum(min(chunk, grid.size - i * chunk) for i in done)
+    from tqdm.auto import tqdm
+
+    bar = tqdm(
+        total=grid.size,
+        initial=n_done,
+        unit="config",
+        unit_scale=True,
+        desc="sweep",
+        disable=not progress or jax.process_index() != 0,
+        smoothing=0.1,
+    )
+
+    def finish(i: int, out: dict) -> None:
+        n = min(chunk, grid.size - i * chunk)
+        results[i] = sharding.fetch(out, n)
+        if store is not None:
+            store.save(i, results[i])  # written the moment it exists: an interruption loses nothing
+        bar.update(n)
+
+    try:
+        pending = None
+        for i in todo:
+            flat = np.arange(i * chunk, i * chunk + padded)
+            vals = grid.config_values(perm[np.minimum(flat, grid.size - 1)])
+            pad = flat >= min((i + 1) * chunk, grid.size)
+            # NaN padding is invalid: flagged, skipped by the integrator, and dropped.
+            vals = {n: np.where(pad, np.nan, v) for n, v in vals.items()}
+            out = sharding.dispatch_chunk(vals, dt, z, horizon, window, dynamics, contact, start, max_steps, mesh)
+            STATS["chunks_computed"] += 1
+            # Dispatch is asynchronous: the devices work on chunk i while the
+            # host saves chunk i - 1.
+            if pending is not None:
+                finish(*pending)
+            pending = (i, out)
+        if pending is not None:
+            finish(*pending)
+    finally:
+        bar.close()
+
+    for i in sorted(done):  # `done` is empty without a store
+        assert store is not None
+        results[i] = store.load(i)
+        STATS["chunks_loaded"] += 1
+    flat_res = {
+        k: _in_grid_order(np.concatenate([results[i][k] for i in range(n_chunks)]), perm) for k in MEASURE_FIELDS
+    }
+    if RATIO in grid.values or RATIO in grid.fixed:
+        flat_res["omega"] = grid.config_values(np.arange(grid.size))["omega"]
+    ds = _dataset(grid, flat_res, _attrs(grid, spec, dynamics, max_steps, ndev, order))
+    if store is not None:
+        store.finalize(ds)
+    return ds
+
+
+def _sweep_mechanism(mechanism: "Callable[..., Chain]", axes, fixed, mode, z, horizon, window, t_start, dynamics,
+                     contact, start, dtype, chunk_size, path, overwrite, progress, on_invalid, order):  # fmt: skip
+    """`sweep` over chains built by `mechanism` (see `maps._chain_sweep`)."""
+    from ._chain_sweep import sweep_chain
+
+    if not callable(mechanism):
+        raise TypeError(f"mechanism must be a function of the swept values returning a Chain, got {mechanism!r}.")
+    if not isinstance(dynamics, (Exact, Smoothed)):
+        raise TypeError(f"dynamics must be Exact or Smoothed for a chain map, got {type(dynamics).__name__}.")
+    if order == "cost":
+        raise ValueError("order='cost' is for maps of the paper's model; a chain map runs in grid order.")
+    if on_invalid not in ("raise", "flag"):
+        raise ValueError(f"on_invalid must be 'raise' or 'flag', got {on_invalid!r}.")
+    if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1:
+        raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}.")
+    if path is not None and Path(path).exists() and not overwrite:
+        raise ValueError(f"{str(path)!r} exists; a chain map is not resumed: pass overwrite=True or another path.")
+    check_measure_args(z, horizon, window)
+    return sweep_chain(
+        mechanism, axes, fixed=fixed, mode=mode, z=z, horizon=horizon, window=window, t_start=t_start,
+        dynamics=dynamics, contact=contact, start=start, dtype=dtype,
+        chunk_size=int(chunk_size), path=path, progress=progress, on_invalid=on_invalid,
+    )  # fmt: skip
+
+
+def _from_process0(x: np.ndarray) -> np.ndarray:
+    """Process 0's copy of a host array (under `jax.distributed`; unchanged on one process)."""
+    if jax.process_count() == 1:
+        return x
+    from jax.experimental import multihost_utils
+
+    return np.asarray(multihost_utils.broadcast_one_to_all(x))
+
+
+def _agree(done: set[int], n_chunks: int) -> set[int]:
+    """Under `jax.distributed`, all processes must run the same chunks: take process 0's view."""
+    if jax.process_count() == 1:
+        return done
+    mask = np.zeros(n_chunks, np.int32)
+    mask[sorted(done)] = 1
+    return {int(i) for i in np.flatnonzero(_from_process0(mask))}

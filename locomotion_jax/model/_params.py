@@ -1,0 +1,297 @@
+"""Model parameters as a pytree of floating arrays (paper Sect. 2.1, eq. 6)."""
+
+import itertools
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.core  # (jax.core.Tracer) for type checkers
+import jax.numpy as jnp
+import numpy as np
+
+from .._custom_types import Array, ArrayLike
+
+
+PARAM_NAMES: tuple[str, ...] = ("k", "c", "d", "lbar", "a", "omega", "mu_s", "mu_k", "mhat")
+
+DEFAULTS: dict[str, float] = {
+    "k": 50.0,
+    "c": 0.01,
+    "d": 0.5,
+    "lbar": 3.0,
+    "a": 0.05,
+    "omega": 2.0,
+    "mu_s": 0.7,
+    "mu_k": 0.5,
+    "mhat": 0.5,
+}
+"""The paper's defaults (Sect. 3, Fig. 5 caption); `omega = 2 = 0.2 wn1` is Fig. 5a."""
+
+# Human-readable valid ranges, used in error messages and by the CLI.
+VALID_RANGES: dict[str, str] = {
+    "k": "k > 0",
+    "c": "c >= 0",
+    "d": "|d| < lbar",
+    "lbar": "lbar > 0",
+    "a": "0 <= a < lbar",
+    "omega": "omega >= 0",
+    "mu_s": "mu_s >= mu_k",
+    "mu_k": "mu_k >= 0",
+    "mhat": "0 < mhat < 1",
+}
+
+
+def _validity(p: Mapping[str, Any], xp=jnp) -> dict[str, Any]:
+    """Per-parameter validity masks; works with numpy (host checks) or jnp (traced)."""
+    fin = {name: xp.isfinite(p[name]) for name in PARAM_NAMES}
+    ok = {
+        "k": p["k"] > 0,
+        "c": p["c"] >= 0,
+        "d": xp.abs(p["d"]) < p["lbar"],
+        "lbar": p["lbar"] > 0,
+        "a": (p["a"] >= 0) & (p["a"] < p["lbar"]),
+        "omega": p["omega"] >= 0,
+        "mu_s": p["mu_s"] >= p["mu_k"],
+        "mu_k": p["mu_k"] >= 0,
+        "mhat": (p["mhat"] > 0) & (p["mhat"] < 1),
+    }
+    return {name: fin[name] & ok[name] for name in PARAM_NAMES}
+
+
+def _is_concrete(x: Any) -> bool:
+    return not isinstance(x, jax.core.Tracer)
+
+
+class Params(eqx.Module):
+    """Dimensionless parameters of the two-mass model (eq. 6), as a pytree.
+
+    Every field is a floating array; a field may carry leading batch axes, and all
+    fields broadcast against each other, so one `Params` describes one
+    configuration or a whole batch (see [`Params.grid`][]). Fields not given take
+    the paper's defaults ([`DEFAULTS`][]).
+
+    Masses are normalised so that $m_1 + m_2 = 2$ (eq. 6 with $M = (M_1+M_2)/2$):
+    $m_1 = 2\\hat m$, $m_2 = 2(1 - \\hat m)$.
+
+    **Arguments:**
+
+    - `k`: spring stiffness, $k > 0$.
+    - `c`: linear damping on each mass, $c \\ge 0$.
+    - `d`: vertical offset of the spring, $|d| < \\bar\\ell$ (sign sets the direction).
+    - `lbar`: mean rest length $\\bar\\ell > 0$ (eq. 13).
+    - `a`: actuation amplitude, $0 \\le a < \\bar\\ell$ (eq. 13).
+    - `omega`: actuation frequency, $\\omega \\ge 0$ (eq. 13).
+    - `mu_s`, `mu_k`: static and kinetic friction, $\\mu_s \\ge \\mu_k \\ge 0$.
+    - `mhat`: mass ratio $\\hat m = m_1 / (m_1 + m_2) \\in (0, 1)$.
+    - `check`: validate concrete values (default). Invalid values raise
+      `ValueError` naming the parameter, its valid range and, in a batch, the
+      offending index. With `check=False` invalid configurations are instead
+      flagged per configuration (`Status.INVALID`) by the simulators.
+
+    **Raises:** `ValueError` for an unknown or invalid parameter.
+
+    !!! Example
+
+        ```python
+        p = Params(omega=2.0)                      # Fig. 5a
+        batch = Params.grid(omega=jnp.linspace(1, 25, 64), a=jnp.linspace(0.01, 0.1, 32))
+        batch.batch_shape  # (64, 32)
+        ```
+    """
+
+    k: Array
+    c: Array
+    d: Array
+    lbar: Array
+    a: Array
+    omega: Array
+    mu_s: Array
+    mu_k: Array
+    mhat: Array
+
+    def __init__(
+        self,
+        k: ArrayLike = DEFAULTS["k"],
+        c: ArrayLike = DEFAULTS["c"],
+        d: ArrayLike = DEFAULTS["d"],
+        lbar: ArrayLike = DEFAULTS["lbar"],
+        a: ArrayLike = DEFAULTS["a"],
+        omega: ArrayLike = DEFAULTS["omega"],
+        mu_s: ArrayLike = DEFAULTS["mu_s"],
+        mu_k: ArrayLike = DEFAULTS["mu_k"],
+        mhat: ArrayLike = DEFAULTS["mhat"],
+        *,
+        check: bool = True,
+    ):
+        values = dict(k=k, c=c, d=d, lbar=lbar, a=a, omega=omega, mu_s=mu_s, mu_k=mu_k, mhat=mhat)
+        for name, value in values.items():
+            arr = jnp.asarray(value)
+            if not jnp.issubdtype(arr.dtype, jnp.floating):
+                arr = arr.astype(jnp.result_type(float))
+            setattr(self, name, arr)
+        if check and all(_is_concrete(getattr(self, n)) for n in PARAM_NAMES):
+            self.validate()
+
+    # -- construction helpers -------------------------------------------------
+
+    @classmethod
+    def from_dict(cls, values: Mapping[str, ArrayLike], *, check: bool = True) -> "Params":
+        """Build from a mapping; unknown names raise `ValueError` listing the valid ones."""
+        unknown = sorted(set(values) - set(PARAM_NAMES))
+        if unknown:
+            raise ValueError(f"Unknown parameter(s) {unknown}; valid names are {list(PARAM_NAMES)}.")
+        return cls(**values, check=check)
+
+    @classmethod
+    def grid(cls, *, check: bool = True, **axes: ArrayLike | float) -> "Params":
+        """Outer product of 1-D axes (``indexing="ij"``), other fields at defaults.
+
+        Scalars among `axes` are fixed values. The batch shape is the lengths of
+        the 1-D axes in the order given.
+        """
+        unknown = sorted(set(axes) - set(PARAM_NAMES))
+        if unknown:
+            raise ValueError(f"Unknown parameter(s) {unknown}; valid names are {list(PARAM_NAMES)}.")
+        arrays = {n: jnp.asarray(v) for n, v in axes.items()}
+        swept = [n for n, v in arrays.items() if v.ndim == 1]
+        for n, v in arrays.items():
+            if v.ndim > 1:
+                raise ValueError(f"grid axis {n!r} must be a scalar or 1-D, got shape {v.shape}.")
+            if v.ndim == 1 and v.shape[0] == 0:
+                raise ValueError(f"grid axis {n!r} is empty.")
+        meshes = jnp.meshgrid(*(arrays[n] for n in swept), indexing="ij") if swept else []
+        values: dict[str, Any] = {n: arrays[n] for n in arrays if n not in swept}
+        values.update(dict(zip(swept, meshes)))
+        return cls(**values, check=check)
+
+    @classmethod
+    def stack(cls, items: Sequence["Params"]) -> "Params":
+        """Stack single configurations along a new leading batch axis."""
+        if len(items) == 0:
+            raise ValueError("Params.stack needs at least one Params.")
+        items = [it.broadcast() for it in items]
+        return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *items)
+
+    # -- shapes and dtypes ----------------------------------------------------
+
+    @property
+    def batch_shape(self) -> tuple[int, ...]:
+        """Broadcast shape of all fields (``()`` for a single configuration)."""
+        return tuple(np.broadcast_shapes(*(getattr(self, n).shape for n in PARAM_NAMES)))
+
+    @property
+    def dtype(self) -> jnp.dtype:
+        return jnp.result_type(*(getattr(self, n) for n in PARAM_NAMES))
+
+    def broadcast(self) -> "Params":
+        """All fields broadcast to `batch_shape` with one common dtype."""
+        shape, dtype = self.batch_shape, self.dtype
+        return jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x.astype(dtype), shape), self)
+
+    def astype(self, dtype: Any) -> "Params":
+        """Cast every field; `float64` needs `jax.config.update("jax_enable_x64", True)`."""
+        dtype = jnp.dtype(dtype)
+        if dtype == jnp.float64 and not jax.config.read("jax_enable_x64"):
+            raise ValueError(
+                "dtype=float64 requested but JAX runs in 32-bit mode; enable it with "
+                'jax.config.update("jax_enable_x64", True) at start-up (or the CLI flag --x64).'
+            )
+        if not jnp.issubdtype(dtype, jnp.floating):
+            raise ValueError(f"dtype must be a floating dtype, got {dtype}.")
+        return jax.tree_util.tree_map(lambda x: x.astype(dtype), self)
+
+    def __getitem__(self, index: Any) -> "Params":
+        """Index the (broadcast) batch axes, e.g. `batch[3]` or `batch[:, 0]`."""
+        return jax.tree_util.tree_map(lambda x: x[index], self.broadcast())
+
+    def as_dict(self) -> dict[str, Array]:
+        return {n: getattr(self, n) for n in PARAM_NAMES}
+
+    def replace(self, **changes: ArrayLike) -> "Params":
+        """Copy with some fields changed (validated like the constructor)."""
+        values: dict[str, ArrayLike] = {**self.as_dict(), **changes}
+        return Params.from_dict(values)
+
+    # -- derived quantities ---------------------------------------------------
+
+    @property
+    def m1(self) -> Array:
+        """$m_1 = 2\\hat m$ (eq. 6 with $m_1 + m_2 = 2$)."""
+        return 2 * self.mhat
+
+    @property
+    def m2(self) -> Array:
+        """$m_2 = 2(1-\\hat m)$."""
+        return 2 * (1 - self.mhat)
+
+    @property
+    def wn1(self) -> Array:
+        """Eq. (11): $\\omega_{n1} = \\sqrt{k (m_1 + m_2) / (m_1 m_2)}$ (both slip)."""
+        return jnp.sqrt(self.k * (self.m1 + self.m2) / (self.m1 * self.m2))
+
+    @property
+    def wn2(self) -> Array:
+        """Eq. (12): $\\omega_{n2} = \\sqrt{k / m_1}$ (mass 2 stuck)."""
+        return jnp.sqrt(self.k / self.m1)
+
+    @property
+    def wn3(self) -> Array:
+        """Eq. (12): $\\omega_{n3} = \\sqrt{k / m_2}$ (mass 1 stuck)."""
+        return jnp.sqrt(self.k / self.m2)
+
+    @property
+    def t_start(self) -> Array:
+        """Start of the measurement (Sect. 3): 80 periods of the lowest natural frequency."""
+        wmin = jnp.minimum(jnp.minimum(self.wn1, self.wn2), self.wn3)
+        return 80 * 2 * math.pi / wmin
+
+    # -- validation -----------------------------------------------------------
+
+    def is_valid(self) -> Array:
+        """Traceable boolean mask (batch shape) of configurations inside the valid ranges."""
+        masks = _validity(self.as_dict(), jnp)
+        out = masks[PARAM_NAMES[0]]
+        for name in PARAM_NAMES[1:]:
+            out = out & masks[name]
+        return jnp.broadcast_to(out, self.batch_shape)
+
+    def validate(self) -> "Params":
+        """Raise `ValueError` at the first invalid field (name, valid range, batch index)."""
+        shape = self.batch_shape
+        host = {n: np.broadcast_to(np.asarray(getattr(self, n)), shape) for n in PARAM_NAMES}
+        masks = _validity(host, np)
+        # lbar and mu_k first: the ranges of d, a and mu_s are stated relative to them.
+        order = ("k", "c", "lbar", "d", "a", "omega", "mu_k", "mu_s", "mhat")
+        for name in order:
+            bad = ~np.broadcast_to(masks[name], shape)
+            if bad.any():
+                idx = tuple(int(i) for i in np.argwhere(bad)[0]) if shape else ()
+                at = f" at batch index {idx}" if shape else ""
+                got = {name: float(host[name][idx])}
+                if name == "mu_s":
+                    got["mu_k"] = float(host["mu_k"][idx])
+                if name in ("a", "d"):
+                    got["lbar"] = float(host["lbar"][idx])
+                got_s = ", ".join(f"{k}={v!r}" for k, v in got.items())
+                n_bad = int(bad.sum())
+                more = f" ({n_bad} invalid configurations in the batch)" if shape and n_bad > 1 else ""
+                raise ValueError(
+                    f"Invalid parameter {name!r}{at}: got {got_s}; the valid range is "
+                    f"{VALID_RANGES[name]} (and finite){more}."
+                )
+        return self
+
+
+def batch_indices(shape: tuple[int, ...]) -> list[tuple[int, ...]]:
+    """All multi-indices of a batch shape (for tests and reports)."""
+    return list(itertools.product(*(range(s) for s in shape)))
+
+
+def safe_params(params: Params) -> tuple[Params, jax.Array]:
+    """Replace an invalid configuration by the defaults (so nothing becomes NaN) and
+    return the validity flag; the caller marks it `Status.INVALID` and skips it."""
+    valid = params.is_valid()
+    values = {n: jnp.where(valid, getattr(params, n), jnp.asarray(DEFAULTS[n], params.dtype)) for n in PARAM_NAMES}
+    return Params(**values, check=False), valid

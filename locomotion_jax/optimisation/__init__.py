@@ -1,0 +1,1 @@
+"""Optimal actuation and parameter identification."""

@@ -1,0 +1,657 @@
+"""The exact optimiser: least cost of transport over steady gaits of the exact model (SPEC §7).
+
+Problem, for a required speed $v_\\min$ in the direction $\\sigma = \\pm 1$ and a stroke limit
+$a_\\max$, over Fourier waveforms of $N$ harmonics and a free (or fixed) base frequency:
+
+$$\\min_\\theta\\ \\frac{e_d}{\\sigma\\Delta X}\\quad\\text{s.t.}\\quad
+\\frac{\\sigma\\Delta X}{T} \\ge v_\\min,\\quad \\min_t N_{1,2} \\ge \\text{margin},\\quad
+\\max_t |\\ell_0(t) - \\bar\\ell| \\le a_\\max,$$
+
+where $\\Delta X$, $e_d$ and $\\min N$ are those of one period $T = 2\\pi/\\omega$ of the
+periodic orbit (the steady gait), with their gradients by the implicit function theorem
+(`_orbit`): no smoothing, no transient inside the optimisation, whole periods.
+
+Method:
+
+- **Starts.** Sinusoids of several amplitudes, sinusoids with a third harmonic, saw-tooth
+  ramps of both senses and random waveforms, over log-spaced base frequencies, the best
+  sinusoid of the baseline and an optional given start (continuation in $v_\\min$: the
+  previous optimum). Each is run from the relaxed spring for a transient, its orbit
+  solved, and the starts are ranked by cost of transport with a penalty on the
+  constraint violations; the best few are refined.
+- **Local refinement** by a monotone descent on an exact penalty (`_descent`: L-BFGS
+  directions, a backtracking line search that accepts only a decrease, so that an iterate
+  never walks into a costlier gait or a failed orbit; the first step is bounded so that
+  it stays within the reach of the warm-started Newton solve of the orbit), or by
+  `scipy.optimize.minimize` (`trust-constr`, `SLSQP`): exact values, exact gradients.
+  The stroke is a convex set: the descent keeps it by radial rescaling onto its limit,
+  the scipy methods take it as constraints on its maxima within fixed phase windows
+  (`StrokePeaks`); at the end the waveform is rescaled radially onto the exact limit.
+  The local solvers run in lockstep, so that each of their evaluations is one batched
+  (vmapped) call of the engine.
+- **Verification.** Every refined waveform (and the best start) is solved again by
+  [`steady_gait`][] under the strict contact reading from the relaxed spring (periods 1
+  to 4 tried, stability from the Floquet multipliers); the reported optimum is the
+  cheapest one that is converged, stable, without lift-off, at least as fast as
+  required and within the stroke.
+"""
+
+import math
+import sys
+import time
+from typing import Any, cast
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import scipy.optimize
+
+from ..gaits import _orbit as orbit
+from ..gaits._gait import steady_gait
+from ..model._params import Params
+from ..model._waveform import Fourier
+from . import _constraints as cons, _pareto as pareto
+from ._lockstep import run_lockstep
+from ._optimum import ExactSettings, Optimum, verified
+
+
+def normalise_phase(cos: np.ndarray, sin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Shift the time origin so that $A_1 = 0$, $B_1 \\ge 0$ (the same gait, module `_orbit`)."""
+    n = np.arange(1, len(cos) + 1)
+    d = math.atan2(-cos[0], sin[0])
+    return cos * np.cos(n * d) + sin * np.sin(n * d), sin * np.cos(n * d) - cos * np.sin(n * d)
+
+
+def to_theta(cos, sin, omega: float, a_max: float, harmonics: int) -> np.ndarray:
+    """A waveform's coefficients (padded or truncated to `harmonics`) -> decision vector."""
+    c = np.zeros(harmonics)
+    s = np.zeros(harmonics)
+    m = min(harmonics, len(cos))
+    c[:m], s[:m] = np.asarray(cos, float)[:m], np.asarray(sin, float)[:m]
+    c, s = normalise_phase(c, s)
+    return np.concatenate([c[1:] / a_max, s / a_max, [math.log(omega)]])
+
+
+def from_theta(theta: np.ndarray, a_max: float, harmonics: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """Decision vector -> `(cos, sin, omega)`."""
+    n = harmonics
+    cos = a_max * np.concatenate([[0.0], theta[: n - 1]])
+    return cos, a_max * theta[n - 1 : 2 * n - 1], float(np.exp(theta[-1]))
+
+
+def _unit_stroke(cos: np.ndarray, sin: np.ndarray, scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    s = float(cons.stroke(jnp.asarray(cos), jnp.asarray(sin)))
+    return cos * scale / s, sin * scale / s
+
+
+def start_shapes(harmonics: int, seed: int, n_random: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Unit-stroke shapes (`cos`, `sin`) the starts are made of, at several strokes."""
+    rng = np.random.default_rng(seed)
+    n = np.arange(1, harmonics + 1)
+    e = lambda k: np.eye(1, harmonics, k)[0] if k < harmonics else np.zeros(harmonics)
+    zero = np.zeros(harmonics)
+    saw = (-1.0) ** (n + 1) / n
+    shapes = [_unit_stroke(zero, e(0), scale) for scale in (0.2, 0.35, 0.5, 0.7, 1.0)]
+    for scale in (0.35, 0.5, 0.7):
+        for third in (0.2, -0.2):  # resonant gaits of small stroke carry such a third harmonic
+            shapes.append(_unit_stroke(zero, e(0) + third * e(2), scale))
+            shapes.append(_unit_stroke(third * e(2), e(0), scale))
+    shapes += [_unit_stroke(zero, saw), _unit_stroke(zero, -saw)]
+    for _ in range(n_random):
+        c, s = rng.normal(size=harmonics) / n**2, e(0) + rng.normal(size=harmonics) / n**2
+        shapes.append(_unit_stroke(c, s, float(rng.uniform(0.3, 1.0))))
+    return shapes
+
+
+def _stroke_rows(harmonics: int, phases: np.ndarray) -> np.ndarray:
+    """$s(\\phi_j) = \\text{rows} \\cdot \\theta$ (units of $a_\\max$) at the given phases."""
+    n = np.arange(1, harmonics + 1)
+    arg = np.outer(phases, n)
+    return np.concatenate([np.cos(arg)[:, 1:], np.sin(arg), np.zeros((len(phases), 1))], axis=1)
+
+
+class StrokePeaks:
+    """The stroke constraint by local reduction: $1 - \\max_{\\phi \\in W_k} |s(\\phi)| \\ge 0$ on
+    `count` fixed, equal windows $W_k$ of the phase (units of $a_\\max$).
+
+    The maximum over a fixed window is a continuous function of $\\theta$ (unlike, say, the
+    $k$-th highest local maximum, which jumps when a ripple appears), so a local solver
+    sees no jumps. It is bracketed on a grid of 64 phases per harmonic and polished by
+    Newton's method on $s' = 0$ within the window; its gradient is
+    $\\operatorname{sgn} s(\\phi_k)\\,\\partial s(\\phi_k)/\\partial\\theta$ at the maximiser (envelope
+    theorem). With two windows per harmonic, every maximum of $|s|$ is in some window, so
+    bounding them all linearises $|s(\\phi)| \\le 1$ for all $\\phi$.
+    """
+
+    def __init__(self, harmonics: int):
+        self.harmonics = harmonics
+        self.count = 2 * harmonics
+        m = 64 * harmonics
+        self.grid = np.arange(m) * 2 * np.pi / m
+        self.rows = _stroke_rows(harmonics, self.grid)
+        self.width = 2 * np.pi / self.count
+
+    def peaks(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per window: the phase of the largest $|s|$ and the signed value there."""
+        n = np.arange(1, self.harmonics + 1)
+        a = np.abs(self.rows @ theta).reshape(self.count, -1)
+        j = np.argmax(a, axis=1)
+        phi = self.grid.reshape(self.count, -1)[np.arange(self.count), j]
+        lo = np.arange(self.count) * self.width
+        c = np.concatenate([[0.0], theta[: self.harmonics - 1]])
+        s = theta[self.harmonics - 1 : 2 * self.harmonics - 1]
+        h = self.grid[1]
+        for _ in range(4):
+            arg = np.outer(phi, n)
+            d1 = (n * (s * np.cos(arg) - c * np.sin(arg))).sum(1)
+            d2 = -(n * n * (c * np.cos(arg) + s * np.sin(arg))).sum(1)
+            # Newton on s' = 0 toward a maximum of |s| (a minimum of s where s < 0).
+            val = _stroke_rows(self.harmonics, phi) @ theta
+            step = np.where(val * d2 < 0, -d1 / np.where(d2 != 0, d2, 1), 0)
+            new = np.clip(phi + np.clip(step, -h, h), lo, lo + self.width)
+            better = np.abs(_stroke_rows(self.harmonics, new) @ theta) > np.abs(val)
+            phi = np.where(better, new, phi)
+        return phi, _stroke_rows(self.harmonics, phi) @ theta
+
+    def __call__(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Constraint values `(count,)` and their Jacobian `(count, p)`."""
+        phi, val = self.peaks(theta)
+        return 1 - np.abs(val), -np.sign(val)[:, None] * _stroke_rows(self.harmonics, phi)
+
+
+PENALTY = 10.0
+"""Weight of the squared relative speed deficit added to the objective (costs are O(1))."""
+
+
+class _Figures:
+    """Objective and constraints of one evaluated point, as the local solvers want them."""
+
+    def __init__(self, theta, orb, need_rate, k, direction, margin, free_omega):
+        dX, ed, low = (float(x) for x in orb.figures)
+        g_dX, g_ed, g_low = (np.asarray(g, float) for g in orb.gradient)
+        T = k * 2 * np.pi / math.exp(theta[-1])  # the gait's period: k actuation periods
+        need = need_rate * T  # required distance per period; d need / d log omega = -need
+        d_need = np.zeros_like(theta)
+        d_need[-1] = -need
+        dist, g_dist = direction * dX, direction * g_dX
+        # Cost of transport e_d / dist, the distance floored smoothly at a quarter of the
+        # required one, so that an iterate that stands still has a finite cost.
+        floor, width = 0.25 * need, 0.05 * need
+        z = (dist - floor) / width
+        den = floor + width * np.logaddexp(0, z)
+        sig = 0.5 * (1 + np.tanh(0.5 * z))
+        d_den = 0.25 * d_need + 0.05 * d_need * np.logaddexp(0, z) + sig * (g_dist - 0.25 * d_need - z * 0.05 * d_need)
+        self.f = ed / den
+        self.df = g_ed / den - ed / den**2 * d_den
+        self.cot = ed / dist if dist > 0 else math.inf  # the true cost of transport
+        self.c = np.array([dist / need - 1, low - margin])
+        self.dc = np.stack([g_dist / need - dist / need**2 * d_need, g_low])
+        # A quadratic penalty on the speed deficit, zero where the speed constraint holds:
+        # without it a waveform that stands still (e_d -> 0) would look cheap, and a local
+        # solver far from feasibility would walk there.
+        deficit = max(0.0, -self.c[0])
+        self.f = self.f + PENALTY * deficit**2
+        self.df = self.df - 2 * PENALTY * deficit * self.dc[0]
+        if not free_omega:
+            self.df[-1] = 0.0
+            self.dc[:, -1] = 0.0
+        self.ok = bool(orb.ok)
+
+
+class _Bad:
+    """A point where the orbit could not be solved: a cost far above the last good one, so
+    that the trust region shrinks, and the last good gradients, so that the quasi-Newton
+    update skips it (a zero difference of gradients) instead of learning from it."""
+
+    def __init__(self, theta, last: "_Figures | None"):
+        self.ok = False
+        self.cot = math.inf
+        self.f = (last.f if last is not None else 0.0) + 1e3
+        self.df = last.df if last is not None else np.zeros_like(theta)
+        self.c = last.c - 1.0 if last is not None else np.array([-1.0, -1.0])
+        self.dc = last.dc if last is not None else np.zeros((2, len(theta)))
+
+
+class _Evaluator:
+    """Batched oracle for the lockstep solvers: warm starts per solver, a transient where Newton fails."""
+
+    def __init__(self, oracle: orbit.Oracle, lanes: int, settings: ExactSettings, make):
+        self.oracle, self.lanes, self.settings, self.make = oracle, lanes, settings, make
+        self.targets: dict[int, float] = {}
+        self.k: dict[int, int] = {}
+        self.y: dict[int, Any] = {}
+        self.last: dict[int, Any] = {}
+        self.calls = 0
+
+    def solve(self, theta: np.ndarray, y0: np.ndarray, fresh: np.ndarray, k: np.ndarray) -> tuple[Any, np.ndarray]:
+        """Orbits of a full batch (`lanes` rows; numpy arrays in an `Orbit`) and their periods `k`.
+
+        From the warm starts with the given periods first; where Newton fails, again after
+        a transient, as a period-1 gait and then as a period-2 gait (past a period doubling
+        the steady gait repeats every second period, and its figures are those of two)."""
+        dtype = self.oracle.params.dtype
+        th = jnp.asarray(theta, dtype)
+        run = lambda y, kk: jax.tree_util.tree_map(
+            np.asarray, self.oracle.orbits(th, jnp.asarray(y, dtype), jnp.asarray(kk, jnp.int32))
+        )
+        orb: Any = run(y0, k)
+        k = np.array(k)
+        if not orb.ok.all():
+            periods = jnp.asarray(self.settings.transient, jnp.int32)
+            y1 = np.asarray(self.oracle.transient(th, jnp.asarray(y0, dtype), jnp.asarray(fresh | ~orb.ok), periods))
+            for kk in (1, 2):
+                if orb.ok.all():
+                    break
+                again = run(y1, np.full_like(k, kk))
+                take = ~orb.ok & again.ok
+                orb = jax.tree_util.tree_map(lambda a, b: np.where(_col(take, a), b, a), orb, again)
+                k = np.where(take, kk, k)
+        self.calls += 1
+        return orb, k
+
+    def report(self, message: str) -> None:
+        if self.settings.verbose:
+            print(message, file=sys.stderr, flush=True)
+
+    def __call__(self, idx: list[int], xs: list[np.ndarray]) -> list[Any]:
+        pad = idx + [idx[0]] * (self.lanes - len(idx))
+        theta = np.stack([xs[idx.index(i)] for i in pad])
+        y0 = np.stack([self.y[i] for i in pad])
+        orb, ks = self.solve(theta, y0, np.zeros(len(pad), bool), np.array([self.k[i] for i in pad]))
+        out = []
+        for k, i in enumerate(idx):
+            one = jax.tree_util.tree_map(lambda x: x[k], orb)
+            if one.ok:
+                self.y[i], self.k[i] = one.y, int(ks[k])
+                fig = self.make(theta[k], one, self.targets[i], int(ks[k]))
+                self.last[i] = fig
+            else:
+                fig = _Bad(theta[k], self.last.get(i))
+            out.append(fig)
+        if self.calls % 25 == 0:
+            self.report(
+                f"  evaluation {self.calls}: cost "
+                + " ".join(f"{f.f:.4f}" for f in out)
+                + " speed constraint "
+                + " ".join(f"{f.c[0]:+.4f}" for f in out)
+            )
+        return out
+
+
+def _col(flag: np.ndarray, like: Any) -> np.ndarray:
+    return flag.reshape(flag.shape + (1,) * (np.ndim(like) - 1))
+
+
+def _descent(x0, ask, stroke: "StrokePeaks", bounds, settings: ExactSettings, max_iter: int, at) -> None:
+    """Monotone descent on the exact penalty $\\phi = f + \\rho\\,(\\max(0, -c_v) + \\max(0, -c_N))$:
+    quasi-Newton (L-BFGS) directions, the stroke kept by radial rescaling onto its exact
+    limit, $\\omega$ clipped to its bounds, and a backtracking (Armijo) line search that accepts
+    only a decrease, so an iterate never walks into a costlier gait or a failed orbit."""
+    rho = PENALTY
+
+    def merit(fig):
+        if not fig.ok:
+            return math.inf, None
+        viol = [max(0.0, -c) for c in fig.c]
+        g = fig.df - rho * sum(fig.dc[j] for j in range(2) if fig.c[j] < 0)
+        return fig.f + rho * sum(viol), g
+
+    def project(x):
+        x = np.array(x, float)
+        st = 1 - float(np.min(stroke(x)[0]))
+        if st > 1:
+            x[:-1] /= st
+        x[-1] = np.clip(x[-1], bounds.lb[-1], bounds.ub[-1])
+        return x
+
+    x = project(x0)
+    phi, g = merit(at(x))
+    if g is None:
+        return
+    mem: list[tuple[np.ndarray, np.ndarray]] = []
+    for _ in range(max_iter):
+        # Two-loop recursion for the L-BFGS direction.
+        q = g.copy()
+        alphas = []
+        for s_, y_ in reversed(mem):
+            a_ = s_ @ q / (y_ @ s_)
+            alphas.append(a_)
+            q -= a_ * y_
+        if mem:
+            s_, y_ = mem[-1]
+            q *= (s_ @ y_) / (y_ @ y_)
+        for (s_, y_), a_ in zip(mem, reversed(alphas)):
+            q += (a_ - y_ @ q / (y_ @ s_)) * s_
+        d = -q
+        if g @ d >= 0:  # not a descent direction: restart from steepest descent
+            mem.clear()
+            d = -g
+        step = min(1.0, settings.trust_radius / max(float(np.max(np.abs(d))), 1e-300))
+        accepted = False
+        xn, phin, gn = x, phi, None
+        for _ in range(12):
+            xn = project(x + step * d)
+            phin, gn = merit(at(xn))
+            if gn is not None and phin <= phi + 1e-4 * float(g @ (xn - x)):
+                accepted = True
+                break
+            step *= 0.4
+        if not accepted:
+            if not mem:
+                return  # no decrease along steepest descent: a (nonsmooth) local minimum
+            mem.clear()
+            continue
+        if gn is None:  # unreachable: an accepted step has a gradient
+            return
+        sv, yv = xn - x, gn - g
+        if sv @ yv > 1e-12 * np.linalg.norm(sv) * np.linalg.norm(yv):
+            mem.append((sv, yv))
+            mem[:] = mem[-8:]
+        x, phi, g = xn, phin, gn
+
+
+def _local_solver(x0, stroke: StrokePeaks, bounds, settings: ExactSettings, log: list, max_iter: int):
+    """One local run (`settings.local_method`) from `x0`; `ask(x)` returns the `_Figures` at `x`.
+
+    Returns the cheapest point it evaluated that meets every constraint (the speed, the
+    normal-force margin and the stroke, the last to 1e-9); if none does, the point with the
+    smallest speed deficit. A trust-region or line-search iterate may wander after it: the
+    objective has jumps where a held mass starts to slip."""
+
+    def solve(ask):
+        cache: dict[bytes, Any] = {}
+        trace: list[dict] = []
+        best: dict[str, Any] = {"key": (math.inf, math.inf), "x": np.array(x0, float)}
+
+        def at(x):
+            key = np.asarray(x).tobytes()
+            if key not in cache:
+                cache.clear()
+                fig = cache[key] = ask(np.array(x, float))
+                trace.append({"f": float(fig.f), "c_speed": float(fig.c[0]), "c_normal": float(fig.c[1]), "ok": fig.ok})
+                if fig.ok:
+                    held = min(fig.c[0], fig.c[1]) >= 0 and float(np.min(stroke(np.asarray(x))[0])) >= -1e-9
+                    rank = (0.0, fig.cot) if held else (1.0, -min(fig.c[0], 0.0) - min(fig.c[1], 0.0))
+                    if rank < best["key"]:
+                        best["key"], best["x"] = rank, np.array(x, float)
+            return cache[key]
+
+        if settings.local_method == "descent":
+            _descent(np.array(x0, float), ask, stroke, bounds, settings, max_iter, at)
+            log.append({"message": "descent", "nit": len(trace), "trace": trace})
+            return best["x"]
+        if settings.local_method == "SLSQP":
+            res = scipy.optimize.minimize(
+                lambda x: at(x).f,
+                x0,
+                jac=lambda x: at(x).df,
+                method="SLSQP",
+                constraints=[
+                    {"type": "ineq", "fun": lambda x: at(x).c, "jac": lambda x: at(x).dc},
+                    {"type": "ineq", "fun": lambda x: stroke(x)[0], "jac": lambda x: stroke(x)[1]},
+                ],
+                bounds=bounds,
+                options={"maxiter": max_iter, "ftol": 1e-10},
+            )
+        else:
+            res = scipy.optimize.minimize(
+                lambda x: at(x).f,
+                x0,
+                jac=lambda x: at(x).df,
+                method="trust-constr",
+                constraints=[
+                    scipy.optimize.NonlinearConstraint(
+                        lambda x: at(x).c, 0.0, np.inf, jac=cast(Any, lambda x: at(x).dc), hess=_zero_hessian
+                    ),
+                    scipy.optimize.NonlinearConstraint(
+                        lambda x: stroke(x)[0], 0.0, np.inf, jac=cast(Any, lambda x: stroke(x)[1]), hess=_zero_hessian
+                    ),
+                ],
+                bounds=bounds,
+                options={"maxiter": max_iter, "initial_tr_radius": settings.trust_radius, "verbose": 0},
+            )
+        log.append({"message": str(res.message), "nit": int(res.nit), "trace": trace})
+        return best["x"]
+
+    return solve
+
+
+def _zero_hessian(x, v):
+    return np.zeros((len(x), len(x)))
+
+
+def _omega_bounds(params: Params, omega: float | None, settings: ExactSettings) -> tuple[float, float]:
+    if omega is not None:
+        return float(omega), float(omega)
+    wmin = float(min(params.wn1, params.wn2, params.wn3))
+    return settings.omega_min * wmin, settings.omega_max * float(params.wn1)
+
+
+def _starts(params, speed, a_max, harmonics, lo, hi, baseline, start, settings: ExactSettings) -> np.ndarray:
+    """Decision vectors of the starts (module docstring), a multiple of the batch size."""
+    omegas = [lo] if lo == hi else list(np.geomspace(max(lo, 0.1 * hi), hi / 1.5, settings.start_frequencies))
+    shapes = start_shapes(harmonics, settings.seed, settings.random_shapes)
+    out = [to_theta(a_max * c, a_max * s, w, a_max, harmonics) for w in omegas for c, s in shapes]
+    if baseline is not None and lo != hi:
+        out.append(to_theta([0.0], [baseline["a"]], baseline["omega"], a_max, harmonics))
+    if start is not None:
+        c, s, w = np.asarray(start.cos, float), np.asarray(start.sin, float), float(start.omega)
+        out.append(to_theta(c, s, w if lo != hi else lo, a_max, harmonics))
+    theta = np.stack(out)
+    theta[:, -1] = np.clip(theta[:, -1], math.log(lo), math.log(hi))
+    # Keep every start inside the stroke (a truncated start may overshoot).
+    for i, th in enumerate(theta):
+        c, s, _ = from_theta(th, 1.0, harmonics)
+        st = float(cons.stroke(jnp.asarray(c), jnp.asarray(s)))
+        if st > 1:
+            theta[i, :-1] /= st
+    return theta
+
+
+def _merit(fig: "_Figures | _Bad") -> float:
+    """Ranking of the starts: the true cost of transport, penalised by the constraint violations
+    (the objective's floored distance would favour a waveform that barely moves). A speed
+    deficit is penalised mildly: the local solver closes it more easily than it lowers a cost."""
+    if not fig.ok:
+        return math.inf
+    return fig.cot * (1 + 3 * max(0.0, -fig.c[0])) + 10 * max(0.0, -fig.c[1])
+
+
+def optimise_exact(
+    params: Params,
+    speed: float,
+    direction: int,
+    a_max: float,
+    omega: float | None,
+    harmonics: int,
+    settings: ExactSettings,
+    baseline: dict | None,
+    start: Any,
+) -> tuple[Optimum, dict]:
+    """The exact method (module docstring); inputs already checked by `optimise`."""
+    t0 = time.perf_counter()
+    dtype = params.dtype
+    lo, hi = _omega_bounds(params, omega, settings)
+    free = lo != hi
+    max_steps = int(math.ceil(2 * math.pi / lo / settings.dt)) * 3 + 200
+    oracle = orbit.Oracle(
+        params=params,
+        a_max=jnp.asarray(a_max, dtype),
+        max_steps=jnp.asarray(max_steps, jnp.int32),
+        tol=jnp.asarray(settings.newton_tol if jnp.finfo(dtype).bits == 64 else 1e-5, dtype),
+        harmonics=harmonics,
+        contact="paper",  # iterates past a lift-off stay defined; the margin constraint keeps N > 0
+        dt=settings.dt,
+        max_iter=settings.newton_iter,
+    )
+    v_target = speed * (1 + settings.speed_slack)
+    make = lambda th, orb, v, k: _Figures(th, orb, v, k, direction, settings.margin, free)
+    lanes = settings.local
+    ev = _Evaluator(oracle, lanes, settings, make)
+    log: dict[str, Any] = {}
+
+    # -- starts, screened in batches of the same size as the local solves (one compilation).
+    theta0 = _starts(params, speed, a_max, harmonics, lo, hi, baseline, start, settings)
+    n0 = len(theta0)
+    pad = (-n0) % lanes
+    theta0 = np.concatenate([theta0, theta0[:pad]])
+    periods = jnp.asarray(settings.transient, jnp.int32)
+
+    def screen(theta):
+        figs, ys = [], []
+        for b in range(0, len(theta), lanes):
+            th = theta[b : b + lanes]
+            rest = oracle.transient(
+                jnp.asarray(th, dtype), jnp.zeros((lanes, 3), dtype), jnp.ones(lanes, bool), periods
+            )
+            orb, kk = ev.solve(th, np.asarray(rest), np.zeros(lanes, bool), np.ones(lanes, int))
+            for k in range(lanes):
+                one = jax.tree_util.tree_map(lambda x: x[k], orb)
+                figs.append(make(th[k], one, v_target, int(kk[k])) if one.ok else _Bad(th[k], None))
+                ys.append((one.y, int(kk[k])))
+        return figs, ys
+
+    figs, ys = screen(theta0)
+    if free:
+        # A good shape at too low a frequency: the same shape run faster, in proportion to
+        # its speed deficit, for the best starts that fall short.
+        best = np.argsort([_merit(f) for f in figs[:n0]])[: 2 * lanes]
+        short = [int(i) for i in best if figs[i].ok and figs[i].c[0] < 0]
+        if short:
+            extra = theta0[short].copy()
+            ratio = np.array([1.02 / max(1 + figs[i].c[0], 0.1) for i in short])
+            extra[:, -1] = np.clip(extra[:, -1] + np.log(ratio), math.log(lo), math.log(hi))
+            extra = np.concatenate([extra, extra[: (-len(extra)) % lanes]])
+            f2, y2 = screen(extra)
+            theta0 = np.concatenate([theta0[:n0], extra[: len(short)]])
+            figs, ys = figs[:n0] + f2[: len(short)], ys[:n0] + y2[: len(short)]
+            n0 = len(theta0)
+    merit = np.array([_merit(f) for f in figs[:n0]])
+    order: list[int] = []
+    for i in np.argsort(merit):
+        # Distinct gaits only: shapes that are time shifts or mirror images of each other
+        # give the same gait, and the same merit to rounding.
+        if np.isfinite(merit[i]) and all(abs(merit[i] - merit[j]) > 1e-9 * merit[j] for j in order):
+            order.append(int(i))
+        if len(order) == lanes:
+            break
+    log["starts"] = [{"omega": float(np.exp(theta0[i, -1])), "merit": float(merit[i])} for i in range(n0)]
+    if not order:
+        order = [0]
+    order += order[:1] * (lanes - len(order))
+    ev.report(
+        f"{n0} starts screened ({time.perf_counter() - t0:.0f} s); refining: "
+        + ", ".join(f"omega {np.exp(theta0[i, -1]):.3g} merit {merit[i]:.3g}" for i in order)
+    )
+
+    # -- local refinement in lockstep.
+    bounds = scipy.optimize.Bounds(
+        np.r_[np.full(2 * harmonics - 1, -np.inf), math.log(lo) if free else -np.inf],
+        np.r_[np.full(2 * harmonics - 1, np.inf), math.log(hi) if free else np.inf],
+    )
+    ev.y = {k: ys[i][0] for k, i in enumerate(order)}
+    ev.k = {k: ys[i][1] for k, i in enumerate(order)}
+    log["local"] = []
+    stroke = StrokePeaks(harmonics)
+    # Continuation in the required speed: a lane that starts too slow is led to v_min in
+    # `stages` steps (geometric in speed); the last step has half the iterations.
+    v0 = [v_target * max(0.1, 1 + min(0.0, figs[i].c[0])) for i in order]
+    n = settings.stages
+    iters = (
+        [settings.max_iter // (2 * (n - 1))] * (n - 1)
+        + [settings.max_iter - (n - 1) * (settings.max_iter // (2 * (n - 1)))]
+        if n > 1
+        else [settings.max_iter]
+    )
+    x = [theta0[i].copy() for i in order]
+    for j, it in enumerate(iters):
+        ev.targets = {k: v0[k] * (v_target / v0[k]) ** ((j + 1) / len(iters)) for k in range(lanes)}
+        solvers = [_local_solver(x[k], stroke, bounds, settings, log["local"], it) for k in range(lanes)]
+        x = run_lockstep(solvers, ev)
+    ev.report(
+        f"local runs done ({time.perf_counter() - t0:.0f} s); stroke / a_max "
+        + " ".join(f"{_stroke_of(xi, harmonics):.8f}" for xi in x)
+    )
+    # The exact stroke limit: radial rescaling of what the constraint tolerance let through.
+    for k in range(lanes):
+        s = _stroke_of(x[k], harmonics)
+        if s > 1:
+            x[k][:-1] /= s
+    best_start = order[0]
+    candidates = [("start", theta0[best_start])] + [(f"local {k}", x[k]) for k in range(lanes)]
+    return _verify(params, speed, direction, a_max, harmonics, free, settings, candidates, baseline, log, t0, ev)
+
+
+def _stroke_of(theta: np.ndarray, harmonics: int) -> float:
+    c, s, _ = from_theta(theta, 1.0, harmonics)
+    return float(cons.stroke(jnp.asarray(c), jnp.asarray(s)))
+
+
+def _verify(params, speed, direction, a_max, harmonics, free, settings, candidates, baseline, log, t0, ev):
+    """Solve each candidate's steady gait (strict contact, relaxed start) and keep the cheapest feasible one."""
+    dtype = params.dtype
+    names = [n for n, _ in candidates]
+    theta = np.stack([th for _, th in candidates])
+    n = len(theta)
+    cs = [from_theta(th, a_max, harmonics) for th in theta]
+    wave = Fourier(
+        jnp.asarray(np.stack([c for c, _, _ in cs]), dtype),
+        jnp.asarray(np.stack([s for _, s, _ in cs]), dtype),
+        jnp.asarray([w for _, _, w in cs], dtype),
+        jnp.full((n,), params.lbar, dtype),
+    )
+    batch = pareto.with_waveform_frequency(params, wave)
+    gait = steady_gait(batch, waveform=wave, contact="strict", start="relaxed", transient=settings.transient,
+                       dynamics=_exact_dynamics(settings))  # fmt: skip
+    fig = pareto.gait_figures(gait)
+    strokes = np.array([a_max * _stroke_of(th, harmonics) for th in theta])
+    k, feasible, exact = verified(fig, strokes, speed, direction, a_max, float(jnp.finfo(dtype).eps), baseline)
+    table = [
+        {
+            "candidate": names[i],
+            "omega": cs[i][2],
+            "mean_speed_exact": float(fig.speed[i]),
+            "cost_of_transport_exact": float(fig.cost[i]),
+            "stable_exact": bool(fig.ok[i]),
+            "liftoff_exact": bool(fig.liftoff[i]),
+            "stroke": float(strokes[i]),
+            "feasible_exact": bool(feasible[i]),
+        }
+        for i in range(n)
+    ]
+    c, s, w = cs[k]
+    rho = np.abs(np.asarray(gait.multipliers[k]))
+    opt = Optimum(
+        v_min=speed,
+        direction=direction,
+        a_max=float(a_max),
+        margin=settings.margin,
+        harmonics=harmonics,
+        free_omega=free,
+        cos=c,
+        sin=s,
+        omega=w,
+        lbar=float(params.lbar),
+        **exact,
+        mean_speed_smoothed=math.nan,
+        cost_of_transport_smoothed=math.nan,
+        min_normal_smoothed=math.nan,
+        eps=math.nan,
+        initial_cost_of_transport_exact=float(fig.cost[0]) if feasible[0] else math.nan,
+        source=names[k],
+        candidates=table,
+        history=[log],
+        runtime_s=time.perf_counter() - t0,
+        method="exact",
+        stable_exact=bool(fig.ok[k]),
+        spectral_radius_exact=float(np.max(rho)) if np.all(np.isfinite(rho)) else math.nan,
+        gait_period_exact=float(gait.period[k]),
+        evaluations=ev.calls,
+    )
+    return opt, log
+
+
+def _exact_dynamics(settings: ExactSettings):
+    from ..dynamics._base import Exact
+
+    return Exact(dt=settings.dt)

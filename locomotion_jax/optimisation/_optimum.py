@@ -1,0 +1,304 @@
+"""Settings and result of the actuation optimiser (SPEC §7)."""
+
+import dataclasses
+import math
+from typing import Any
+
+import equinox as eqx
+import numpy as np
+
+from .._json import dumps, jsonable
+from ..model._waveform import Fourier
+
+
+class Settings(eqx.Module):
+    """Static settings of [`optimise`][locomotion_jax.optimisation._optimise.optimise] (Python numbers; changing
+    them recompiles).
+
+    - `starts`: number of starts optimised together under `vmap`.
+    - `start_frequencies`: base frequencies the starts are spread over when
+      `omega` is free (the cheapest feasible sinusoids' frequencies, at least
+      20 % apart and within a factor `omega_range` of the best).
+    - `eps_schedule`: continuation in the smoothing scale $\\varepsilon$.
+    - `outer`, `inner`: augmented-Lagrangian blocks per stage and Adam steps per block.
+    - `learning_rate`: Adam's step (decision variables are O(1): coefficients
+      in units of $a_\\max$, $\\log\\omega$); `lr_decay`: its factor per stage.
+    - `rho0`, `rho_growth`, `rho_max`: penalty parameter schedule.
+    - `speed_slack`: the smoothed model targets $v_\\min (1 + \\text{slack})$.
+    - `phase1_threshold`: a start whose speed falls short by more than this
+      fraction of the target optimises feasibility alone (cost weight 0) until it is closer.
+    - `margin`: required normal-force margin (in units of weight; $m_1 + m_2 = 2$).
+    - `margin_step`: added to a start's margin when it lifts off on the exact model.
+    - `temperature`: of the soft minimum of the normal forces.
+    - `transient`, `measured`: smoothed rollout lengths (time units; whole periods).
+    - `backprop`: differentiate only this many time units at the end of the
+      transient (truncated backpropagation, approximate); `None`: all.
+    - `omega_range`: a free $\\omega$ stays within this factor of its starts.
+    - `corrections`, `correction_outer`: exact-feedback rounds and their blocks.
+    - `verify_dt`: the exact engine's step of the verification (steady gaits, whole periods).
+    - `refine_baseline`: refine the best sinusoids of the sweep by a zooming local grid
+      search (`_pareto.refine_sinusoid`: 3 levels, each 4x finer, to 1/64 of the coarse
+      grid's step), so the optimum is compared with a well-resolved sinusoid.
+    - `seed`: for the random starts. `verbose`: print progress per block.
+    """
+
+    starts: int = 8
+    start_frequencies: int = 2
+    eps_schedule: tuple[float, ...] = (1e-2, 3e-3, 1e-3)
+    outer: int = 3
+    inner: int = 30
+    learning_rate: float = 0.03
+    lr_decay: float = 0.6
+    rho0: float = 10.0
+    rho_growth: float = 4.0
+    rho_max: float = 1e4
+    speed_slack: float = 0.02
+    phase1_threshold: float = 0.5
+    margin: float = 0.05
+    margin_step: float = 0.05
+    temperature: float = 0.005
+    transient: float = 12.0
+    measured: float = 6.0
+    backprop: float | None = None
+    omega_range: float = 1.3
+    corrections: int = 1
+    correction_outer: int = 2
+    verify_dt: float = 0.01
+    refine_baseline: bool = True
+    seed: int = 0
+    verbose: bool = False
+
+    def __check_init__(self):
+        if self.starts < 1 or self.outer < 1 or self.inner < 1:
+            raise ValueError("Settings: starts, outer and inner must be >= 1.")
+        if not self.eps_schedule or any(not (e > 0) for e in self.eps_schedule):
+            raise ValueError(f"Settings.eps_schedule must be non-empty and positive, got {self.eps_schedule!r}.")
+
+
+class ExactSettings(eqx.Module):
+    """Settings of the exact method of [`optimise`][locomotion_jax.optimisation._optimise.optimise]
+    (`method="exact"`, module `optimisation._exact`). Python numbers: changing `local`,
+    `dt`, `newton_iter` or the harmonics recompiles; the others do not.
+
+    - `local`: starts refined locally, in lockstep (one batched engine call each step).
+    - `start_frequencies`: base frequencies of the starts, log-spaced over the range.
+    - `random_shapes`: random waveforms among the start shapes (with sinusoids of five
+      strokes, sinusoids with a third harmonic and saw-tooth ramps of both senses).
+    - `max_iter`: iterations of each local refinement, over `stages` runs with
+      required speeds rising geometrically from the start's speed to $v_\\min$ (for a start that
+      is too slow; the last run has half the iterations); `trust_radius`: the largest first step
+      of a line search, or the initial trust region (decision variables: coefficients in units of
+      $a_\\max$, $\\log\\omega$); `local_method`: `"descent"` (monotone L-BFGS descent on an exact
+      penalty, `optimisation._exact._descent`), `"trust-constr"` or `"SLSQP"` (scipy's).
+    - `margin`: required $\\min_t N_{1,2}$ over the orbit (units of weight).
+    - `speed_slack`: the orbit targets $v_\\min (1 + \\text{slack})$.
+    - `omega_min`, `omega_max`: range of a free base frequency, in units of the smallest
+      natural frequency and of $\\omega_{n1}$.
+    - `dt`: the exact engine's step; `transient`: actuation periods run from the relaxed
+      spring before an orbit is first solved (also the verification's, [`steady_gait`][]);
+      `newton_tol`, `newton_iter`: the periodic-orbit solve.
+    - `refine_baseline`: refine the best sinusoids of the sweep (`_pareto.refine_sinusoid`).
+    - `seed`: for the random shapes; `verbose`: progress on stderr.
+    """
+
+    local: int = 4
+    start_frequencies: int = 8
+    random_shapes: int = 2
+    max_iter: int = 600
+    stages: int = 3
+    trust_radius: float = 0.1
+    local_method: str = "descent"
+    margin: float = 0.05
+    speed_slack: float = 1e-3
+    omega_min: float = 0.06
+    omega_max: float = 1.2
+    dt: float = 0.01
+    transient: int = 30
+    newton_tol: float = 1e-10
+    newton_iter: int = 12
+    refine_baseline: bool = True
+    seed: int = 0
+    verbose: bool = False
+
+    def __check_init__(self):
+        if self.local < 1 or self.max_iter < 1 or self.start_frequencies < 1 or self.stages < 1:
+            raise ValueError("ExactSettings: local, max_iter, stages and start_frequencies must be >= 1.")
+        if self.local_method not in ("descent", "trust-constr", "SLSQP"):
+            raise ValueError(
+                f"ExactSettings.local_method must be 'descent', 'trust-constr' or 'SLSQP', got {self.local_method!r}."
+            )
+        if not (0 < self.omega_min < self.omega_max):
+            raise ValueError(
+                f"ExactSettings: need 0 < omega_min < omega_max, got {self.omega_min!r}, {self.omega_max!r}."
+            )
+
+
+@dataclasses.dataclass(frozen=True)
+class Optimum:
+    """Result of [`optimise`][locomotion_jax.optimisation._optimise.optimise]; every figure called `*_exact` is from
+    the exact hybrid model.
+
+    - `cos`, `sin`, `omega`, `lbar`: the waveform ([`Fourier`][], `waveform`).
+    - `mean_speed_exact`, `cost_of_transport_exact`: signed mean speed and
+      $e_d / |\\Delta X|$ after the paper's transient, from the relaxed spring.
+    - `constraints_exact`: `{"speed", "stroke", "no_liftoff"}` each True when it
+      holds on the exact model; `feasible_exact`: all three.
+    - `stroke_exact`: $\\max_t |\\ell_0 - \\bar\\ell|$ (located exactly).
+    - `mean_speed_smoothed`, `cost_of_transport_smoothed`, `min_normal_smoothed`:
+      the smoothed model at the last $\\varepsilon$ (`eps`).
+    - `sinusoid`: the best sinusoid for the same requirement (exact model) or
+      `None`; `sinusoid_cost_of_transport`; `improvement_vs_sinusoid`
+      $= 1 - \\text{cost}/\\text{cost}_\\text{sin}$ (negative when the sinusoid is
+      better; `nan` when either is infeasible).
+    - `initial_cost_of_transport_exact`: exact cost of the best feasible initial guess.
+    - `source`: which candidate won; `candidates`: every candidate's figures.
+    - `history`: per block costs and constraint values; `runtime_s`.
+    - `method`: `"exact"` or `"smoothed"`. Exact method only (else `None`/NaN):
+      `stable_exact` (all Floquet multipliers inside the unit circle),
+      `spectral_radius_exact` (their largest modulus), `gait_period_exact`,
+      `evaluations` (batched orbit evaluations). With the exact method the
+      `*_smoothed` figures and `eps` are NaN, and the `*_exact` figures are those of the
+      steady gait ([`steady_gait`][]: whole periods).
+    """
+
+    v_min: float
+    direction: int
+    a_max: float
+    margin: float
+    harmonics: int
+    free_omega: bool
+    cos: np.ndarray
+    sin: np.ndarray
+    omega: float
+    lbar: float
+    mean_speed_exact: float
+    cost_of_transport_exact: float
+    stroke_exact: float
+    liftoff_exact: bool
+    constraints_exact: dict
+    feasible_exact: bool
+    mean_speed_smoothed: float
+    cost_of_transport_smoothed: float
+    min_normal_smoothed: float
+    eps: float
+    sinusoid: dict | None
+    sinusoid_cost_of_transport: float
+    improvement_vs_sinusoid: float
+    initial_cost_of_transport_exact: float
+    source: str
+    candidates: list
+    history: list
+    runtime_s: float
+    method: str = "smoothed"
+    stable_exact: bool | None = None
+    spectral_radius_exact: float = math.nan
+    gait_period_exact: float = math.nan
+    evaluations: int = 0
+
+    @property
+    def waveform(self) -> Fourier:
+        return Fourier(self.cos, self.sin, self.omega, self.lbar)
+
+    def to_dict(self, full: bool = False) -> dict[str, Any]:
+        """JSON-ready dict (`nan` and `inf` become `None`); `full` adds candidates and history."""
+        skip = () if full else ("candidates", "history")
+        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in skip}
+        return jsonable(out)
+
+    def to_json(self, full: bool = False, **kwargs) -> str:
+        return dumps(self.to_dict(full), **kwargs)
+
+    def summary(self) -> str:
+        """Human-readable report."""
+        fmt = lambda v: "n/a" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.4g}"
+        exact = self.method == "exact"
+        lines = [
+            f"requirement: mean speed >= {self.v_min:g} in direction {self.direction:+d}, stroke <= {self.a_max:g}, "
+            + (
+                f"normal forces >= {self.margin:g} on the orbit, stable steady gait (exact)"
+                if exact
+                else f"normal forces >= {self.margin:g} (smoothed), no lift-off (exact)"
+            ),
+            f"method: {self.method}; base frequency omega = {self.omega:.6g} "
+            f"({'optimised' if self.free_omega else 'fixed'}), lbar = {self.lbar:g}, {self.harmonics} harmonics",
+            "cos coefficients: " + " ".join(f"{c:+.6f}" for c in self.cos),
+            "sin coefficients: " + " ".join(f"{s:+.6f}" for s in self.sin),
+        ]
+        if exact:
+            lines += [
+                f"steady gait (exact, whole periods): mean speed {fmt(self.mean_speed_exact)}, cost of transport "
+                f"{fmt(self.cost_of_transport_exact)}, period {fmt(self.gait_period_exact)}, stable "
+                f"{self.stable_exact} (largest multiplier modulus {fmt(self.spectral_radius_exact)})",
+                f"stroke {fmt(self.stroke_exact)} (limit {self.a_max:g}); lift-off: {self.liftoff_exact}",
+            ]
+        else:
+            lines += [
+                f"mean speed:        exact {fmt(self.mean_speed_exact)}   smoothed {fmt(self.mean_speed_smoothed)}",
+                f"cost of transport: exact {fmt(self.cost_of_transport_exact)}   smoothed "
+                f"{fmt(self.cost_of_transport_smoothed)} (eps = {self.eps:g})",
+                f"stroke {fmt(self.stroke_exact)} (limit {self.a_max:g}); min normal force (smoothed) "
+                f"{fmt(self.min_normal_smoothed)}; lift-off on the exact model: {self.liftoff_exact}",
+            ]
+        lines.append(
+            "constraints on the exact model: "
+            + ", ".join(f"{k} {'holds' if v else 'VIOLATED'}" for k, v in self.constraints_exact.items())
+            + f" -> {'FEASIBLE' if self.feasible_exact else 'INFEASIBLE'}"
+        )
+        if self.sinusoid is None:
+            lines.append("best sinusoid: none meets the requirement on the exact model")
+        else:
+            s = self.sinusoid
+            lines.append(
+                f"best sinusoid: a = {s['a']:.4g}, omega = {s['omega']:.4g}: mean speed {s['mean_speed']:.4g}, "
+                f"cost of transport {s['cost_of_transport']:.4g}"
+            )
+        lines.append(
+            f"improvement vs sinusoid: {fmt(100 * self.improvement_vs_sinusoid)} %  "
+            f"(winner: {self.source}; {self.runtime_s:.0f} s)"
+        )
+        return "\n".join(lines)
+
+
+OptimiseSettings = Settings
+"""Public name of [`Settings`][] (exported as `locomotion_jax.OptimiseSettings`)."""
+
+
+ExactOptimiseSettings = ExactSettings
+"""Public name of [`ExactSettings`][] (exported as `locomotion_jax.ExactOptimiseSettings`)."""
+
+
+def verified(fig: Any, strokes: np.ndarray, speed: float, direction: int, a_max: float, eps: float,
+             baseline: dict | None) -> tuple[int, np.ndarray, dict]:  # fmt: skip
+    """Choose the reported candidate from the exact check of every candidate (`fig`: steady-gait
+    figures with `speed`, `cost`, `ok` (a stable gait), `liftoff`; `strokes`: true strokes).
+
+    The cheapest feasible one (speed `>= v_min` in `direction`, stroke within `a_max` up to 8
+    `eps` relative, a stable gait), else the closest miss: the fastest stable gait. Returns its
+    index, the feasibility of every candidate, and the chosen one's [`Optimum`][] fields of the
+    exact check and the comparison with the best sinusoid `baseline`."""
+    ok_speed = fig.ok & (direction * np.nan_to_num(fig.speed, nan=-np.inf) >= speed)
+    ok_stroke = strokes <= a_max * (1 + 8 * eps)
+    feasible = ok_speed & ok_stroke & fig.ok
+    if feasible.any():
+        k = int(np.argmin(np.where(feasible, fig.cost, np.inf)))
+    else:
+        v = direction * np.nan_to_num(fig.speed, nan=-np.inf)
+        k = int(np.argmax(np.where(fig.ok, v, -np.inf))) if fig.ok.any() else 0
+    sin_cost = baseline["cost_of_transport"] if baseline else math.nan
+    fields = dict(
+        mean_speed_exact=float(fig.speed[k]),
+        cost_of_transport_exact=float(fig.cost[k]),
+        stroke_exact=float(strokes[k]),
+        liftoff_exact=bool(fig.liftoff[k]),
+        constraints_exact={
+            "speed": bool(ok_speed[k]),
+            "stroke": bool(ok_stroke[k]),
+            "no_liftoff": bool(~fig.liftoff[k]),
+            "stable": bool(fig.ok[k]),
+        },
+        feasible_exact=bool(feasible[k]),
+        sinusoid=baseline,
+        sinusoid_cost_of_transport=sin_cost,
+        improvement_vs_sinusoid=1 - float(fig.cost[k]) / sin_cost if (feasible[k] and baseline) else math.nan,
+    )
+    return k, feasible, fields

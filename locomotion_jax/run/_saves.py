@@ -1,0 +1,123 @@
+"""Saved states of a flat batch: `simulate`'s loop, shared by both exact engines.
+
+Every configuration runs through the work queue ([`_queue.run_queue`][]), as in
+`measure`: a lane whose configuration is done takes the next one, so a batch costs
+about the mean duration of its configurations, not the longest of each group of lanes.
+Each iteration of a running configuration either saves its state (a save time is
+reached: the state stays there) or takes one integrator step towards the next save
+time. A lane holds up to `buffer` saved rows in its own state; the queue's outer loop
+copies them into the output ([`_queue.Stream`][]), so the hot loop carries no output.
+"""
+
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from .._custom_types import Array
+from .._status import Status
+from ._queue import run_queue, Stream
+
+
+BUFFER = 8
+"""Saved rows a lane holds before the work queue's outer loop copies them out."""
+
+
+class _Dyn(NamedTuple):
+    """The loop state of one configuration.
+
+    `idx` saves are done; the last `n_buffered` of them wait in `rows` (in order) for the
+    outer loop, and `targets` are the save times `idx - n_buffered` onwards (so the
+    current one is `targets[n_buffered]`, chosen without a gather).
+    """
+
+    s: Any  # the engine's hybrid state
+    idx: Array
+    steps: Array
+    rows: Array  # (buffer, row size)
+    n_buffered: Array
+    targets: Array  # (buffer,)
+
+
+def _targets(save_at: Array, first: Array, buffer: int) -> Array:
+    return save_at[jnp.minimum(first + jnp.arange(buffer), save_at.shape[0] - 1)]
+
+
+def run_saves(
+    init: Callable[[Array], tuple[Any, Any]],
+    step: Callable[[Any, Any, Array], Any],
+    row: Callable[[Any], Array],
+    n: int,
+    save_at: Array,
+    max_steps: Array,
+    lanes: int,
+    order: Array | None = None,
+    buffer: int = BUFFER,
+) -> tuple[Array, Array, Array, Array, Array]:
+    """The states of `n` configurations at the times `save_at`.
+
+    **Arguments:**
+
+    - `init(i)`: `(fixed, s)` of configuration `i` (a traced int32): what its steps
+      need, and its initial hybrid state (`status` `INVALID` for an invalid one).
+      A hybrid state has fields `t`, `status`, `t_liftoff` and `n_switch`.
+    - `step(fixed, s, t_stop)`: one integrator step, stopping at `t_stop`.
+    - `row(s)`: the saved values of a state (1-D, the state's dtype).
+    - `save_at`: non-decreasing save times; `max_steps`: cap on the iterations of
+      one configuration (a save counts as one).
+    - `lanes`, `order`: as in [`_queue.run_queue`][]; `buffer`: rows per lane.
+
+    **Returns:** `(rows, valid, status, t_liftoff, n_switch)`: `rows` of shape
+    `(n, len(save_at), row size)`; a configuration that stopped early (lift-off
+    under the strict reading, step cap, invalid) has `valid` false from there on,
+    and those rows hold its last state. `status` is `MAX_STEPS` where the step cap
+    came before the last save.
+    """
+    n_save = save_at.shape[0]
+    buffer = max(1, min(buffer, n_save))
+    zi = jnp.zeros((), jnp.int32)
+
+    def setup(i):
+        fixed, s = init(i)
+        rows = jnp.zeros((buffer,) + row(s).shape, s.t.dtype)
+        return fixed, _Dyn(s, zi, zi, rows, zi, _targets(save_at, zi, buffer))
+
+    def running(fixed, d: _Dyn) -> Array:
+        return (d.idx < n_save) & (d.s.status == Status.OK) & (d.steps < max_steps)
+
+    def advance(fixed, d: _Dyn) -> _Dyn:
+        slot = jnp.arange(buffer) == d.n_buffered
+        target = jnp.sum(jnp.where(slot, d.targets, 0))
+        record = target <= d.s.t
+        new_s = step(fixed, d.s, target)
+        # The row goes to the lane's buffer by a select over its few slots: a scatter per
+        # lane and iteration (into the output, or into a buffer of every save) costs more
+        # than the step (benchmarks/simulate_vs_measure.py).
+        rows = jnp.where((slot & record)[:, None], row(d.s)[None, :], d.rows)
+        s = jax.tree_util.tree_map(lambda a, b: jnp.where(record, b, a), new_s, d.s)
+        saved = record.astype(jnp.int32)
+        return _Dyn(s, d.idx + saved, d.steps + 1, rows, d.n_buffered + saved, d.targets)
+
+    def drain(fixed, d: _Dyn) -> tuple[_Dyn, Array, Array]:
+        k = jnp.arange(buffer)
+        slots = jnp.where(k < d.n_buffered, d.idx - d.n_buffered + k, n_save)  # past the end: dropped
+        emptied = d._replace(n_buffered=zi, targets=_targets(save_at, d.idx, buffer))
+        return emptied, d.rows, slots
+
+    def results(fixed, d: _Dyn) -> dict[str, Array]:
+        s = d.s
+        capped = (s.status == Status.OK) & (d.idx < n_save)  # stopped by the step cap before the last save
+        return dict(
+            saved=d.idx,
+            last=row(s),
+            status=jnp.where(capped, Status.MAX_STEPS, s.status).astype(jnp.int32),
+            t_liftoff=s.t_liftoff,
+            n_switch=s.n_switch,
+        )
+
+    full = lambda fixed, d: d.n_buffered >= buffer
+    out = run_queue(setup, running, advance, results, n, lanes, order, Stream(full, drain, n_save))
+    valid = jnp.arange(n_save)[None, :] < out["saved"][:, None]
+    rows = jnp.where(valid[..., None], out["stream"], out["last"][:, None, :])
+    return rows, valid, out["status"], out["t_liftoff"], out["n_switch"]
