@@ -51,7 +51,12 @@ def produce(tree: Path, out: Path) -> None:
     env = {**__import__("os").environ, **env}
     out.mkdir(parents=True)
     subprocess.run([sys.executable, "-c", MEASURE, str(out / "measure.npz")], env=env, cwd=tree, check=True)
-    cli = [sys.executable, "-c", "from locomotion_jax.cli._main import main; main()", "figures", "--quick"]
+    # The command line's module, wherever the revision keeps it.
+    main = (
+        "try:\n from locomotion_jax.cli._main import main\n"
+        "except ImportError:\n from locomotion_jax._cli import main\nmain()"
+    )
+    cli = [sys.executable, "-c", main, "figures", "--quick"]
     subprocess.run([*cli, "--out", str(out / "figures")], env=env, cwd=tree, check=True, capture_output=True)
 
 
