@@ -1,6 +1,6 @@
 """Test configuration: float64 on, strict promotion off (the package mixes Python
 floats freely), rank promotion raises (catches silent broadcasting bugs), the
-CLI's compilation cache off."""
+CLI's own compilation cache off, one compilation cache shared by the run's workers."""
 
 import os
 
@@ -10,11 +10,49 @@ os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
 # compilation cache (a global setting) in ~/.cache for the rest of the session.
 os.environ.setdefault("LOCOMOTION_JAX_CACHE", "0")
 
+import shutil
+import tempfile
+
 import jax
 
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")
+
+
+_OWN_CACHE: list[str] = []
+
+
+def _shared_compilation_cache() -> None:
+    """One persistent compilation cache for a test run, shared by pytest-xdist's workers.
+
+    The workers run different tests that compile many of the same programs (the engines
+    at the same batch shapes and settings); with the cache, a program one worker compiled
+    is read back by the other instead of compiled again. The controlling process makes a
+    new temporary directory (so every run starts empty, as in CI), passes it to the
+    workers in `LJ_TEST_CACHE_DIR` and deletes it at the end; a `LJ_TEST_CACHE_DIR` set
+    beforehand names a lasting one instead, and `LJ_TEST_CACHE_DIR=off` turns it off.
+    Results do not depend on it: the key covers the program, the compiler options and the
+    devices.
+    """
+    path = os.environ.get("LJ_TEST_CACHE_DIR")
+    if path == "off":
+        return
+    if not path:
+        path = tempfile.mkdtemp(prefix="locomotion_jax-tests-")
+        os.environ["LJ_TEST_CACHE_DIR"] = path  # inherited by the workers
+        _OWN_CACHE.append(path)
+    from locomotion_jax._cache import enable_compilation_cache
+
+    enable_compilation_cache(path)
+
+
+def pytest_unconfigure(config):
+    for path in _OWN_CACHE:
+        shutil.rmtree(path, ignore_errors=True)
+
+
+_shared_compilation_cache()
 
 import sys
 from pathlib import Path
