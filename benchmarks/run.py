@@ -780,6 +780,10 @@ def machine() -> dict:
     except OSError:
         info["cpu"] = platform.processor()
     info["cores"] = os.cpu_count()
+    import jax
+
+    devs = jax.devices()
+    info["devices"] = f"{len(devs)} x {devs[0].platform} ({devs[0].device_kind})"
     try:
         mem = [ln for ln in open("/proc/meminfo") if ln.startswith("MemTotal")][0].split()[1]
         info["memory"] = f"{int(mem) / 2**20:.1f} GiB"
@@ -1167,6 +1171,8 @@ def report(res: dict, meta: dict) -> str:
     L.append("")
     L.append(f"- Command: `{meta['command']}` ({meta['elapsed'] / 60:.1f} min)")
     L.append(f"- Machine: {m.get('cpu')}, {m.get('cores')} cores, {m.get('memory', '?')}; {m['platform']}")
+    if "devices" in m:
+        L.append(f"- JAX devices: {m['devices']}")
     L.append(
         f"- Versions: Python {m['python']}, jax {m['jax']}, jaxlib {m['jaxlib']}, numpy {m['numpy']}, "
         f"scipy {m['scipy']}, diffrax {m['diffrax']}, equinox {m['equinox']}, locomotion_jax "
