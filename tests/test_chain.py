@@ -55,7 +55,8 @@ def test_two_mass_chain_equals_paper_engine(contact, start):
     rtol = np.array([1e-10, 1e-10, 1e-10, 1e-7, 1e-10])
     for name in ("tau_z", "e_z", "e_d", "work", "t_start"):
         a, b = np.asarray(getattr(got, name)), np.asarray(getattr(ref, name))
-        same = (a == b) | (np.abs(a - b) <= rtol * np.abs(b)) | (np.isnan(a) & np.isnan(b))
+        with np.errstate(invalid="ignore"):  # inf - inf where z is not reached: equal by a == b
+            same = (a == b) | (np.abs(a - b) <= rtol * np.abs(b)) | (np.isnan(a) & np.isnan(b))
         assert same.all(), (name, a, b)
     np.testing.assert_allclose(got.mean_speed, ref.mean_speed, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(got.stick_fraction, ref.stick_fraction, rtol=1e-9, atol=1e-12)
