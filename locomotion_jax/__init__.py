@@ -7,7 +7,12 @@ faster", Nonlinear Dynamics 78 (2014); equation numbers in docstrings are the pa
 
 from importlib.metadata import PackageNotFoundError, version as _version
 
-from ._actuation import AbstractWaveform as AbstractWaveform, Fourier as Fourier, Sinusoid as Sinusoid
+from ._actuation import (
+    AbstractWaveform as AbstractWaveform,
+    Fourier as Fourier,
+    Sinusoid as Sinusoid,
+    Spline as Spline,
+)
 from ._basins import Basins as Basins, basins as basins
 from ._bifurcation import BranchEvents as BranchEvents, EventKind as EventKind
 from ._cache import enable_compilation_cache as enable_compilation_cache
