@@ -52,7 +52,7 @@ import scipy.optimize
 
 from . import _orbit as orbit, _pareto as pareto
 from ._actuation import AbstractWaveform
-from ._gait import steady_gait
+from ._gait import GaitStatus, steady_gait
 from ._lockstep import run_lockstep
 from ._optimum import ExactSettings, Optimum, verified
 from ._params import Params
@@ -248,18 +248,39 @@ def _descent(x0, ask, shape: AbstractShape, bounds, settings: ExactSettings, max
         x, phi, g = xn, phin, gn
 
 
+HALF_STEP_RTOL = 1e-3
+"""Largest relative change of a candidate's speed or cost of transport with half the step (`_verify`)."""
+
+RUNNERS_UP = (0.0, 0.25, 0.5, 0.75)
+"""Where a local run's runners-up lie in its sequence of points that meet every constraint
+(fractions of it, in the order of evaluation; `_local_solver`)."""
+
+
 def _local_solver(x0, shape: AbstractShape, bounds, settings: ExactSettings, log: list, max_iter: int):
     """One local run (`settings.local_method`) from `x0`; `ask(x)` returns the `_Figures` at `x`.
 
     Returns the cheapest point it evaluated that meets every constraint (the speed, the
     normal-force margin and the stroke, the last to 1e-9); if none does, the point with the
     smallest speed deficit. A trust-region or line-search iterate may wander after it: the
-    objective has jumps where a held mass starts to slip."""
+    objective has jumps where a held mass starts to slip. Also returns runners-up: the points
+    at the fractions `RUNNERS_UP` of its sequence of points that meet every constraint. The
+    cheapest point often lies at such a jump, where the gait is fragile (a held mass's force
+    grazes its static limit, so that the engine's step or a perturbation decides when it
+    slips); an earlier point, further from the jump the descent was drawn to, is a fallback
+    for the verification."""
 
     def solve(ask):
         cache: dict[bytes, Any] = {}
         trace: list[dict] = []
         best: dict[str, Any] = {"key": (math.inf, math.inf), "x": np.array(x0, float)}
+        held_points: list[tuple[float, np.ndarray]] = []
+
+        def result():
+            if best["key"][0] != 0.0:
+                return best["x"], []
+            picks = sorted({int(f * len(held_points)) for f in RUNNERS_UP})
+            runners = [held_points[i][1] for i in picks if held_points[i][1].tobytes() != best["x"].tobytes()]
+            return best["x"], runners
 
         def at(x):
             key = np.asarray(x).tobytes()
@@ -272,12 +293,14 @@ def _local_solver(x0, shape: AbstractShape, bounds, settings: ExactSettings, log
                     rank = (0.0, fig.cot) if held else (1.0, -min(fig.c[0], 0.0) - min(fig.c[1], 0.0))
                     if rank < best["key"]:
                         best["key"], best["x"] = rank, np.array(x, float)
+                    if held:
+                        held_points.append((fig.cot, np.array(x, float)))
             return cache[key]
 
         if settings.local_method == "descent":
             _descent(np.array(x0, float), ask, shape, bounds, settings, max_iter, at)
             log.append({"message": "descent", "nit": len(trace), "trace": trace})
-            return best["x"]
+            return result()
         if settings.local_method == "SLSQP":
             res = scipy.optimize.minimize(
                 lambda x: at(x).f,
@@ -313,7 +336,7 @@ def _local_solver(x0, shape: AbstractShape, bounds, settings: ExactSettings, log
                 options={"maxiter": max_iter, "initial_tr_radius": settings.trust_radius, "verbose": 0},
             )
         log.append({"message": str(res.message), "nit": int(res.nit), "trace": trace})
-        return best["x"]
+        return result()
 
     return solve
 
@@ -477,10 +500,11 @@ def optimise_exact(
         else [settings.max_iter]
     )
     x = [theta0[i].copy() for i in order]
+    runners: Any = [[] for _ in range(lanes)]
     for j, it in enumerate(iters):
         ev.targets = {k: v0[k] * (v_target / v0[k]) ** ((j + 1) / len(iters)) for k in range(lanes)}
         solvers = [_local_solver(x[k], shape, bounds, settings, log["local"], it) for k in range(lanes)]
-        x = run_lockstep(solvers, ev)
+        x, runners = zip(*run_lockstep(solvers, ev))
     ev.report(
         f"local runs done ({time.perf_counter() - t0:.0f} s); stroke / a_max "
         + " ".join(f"{shape.stroke(xi):.8f}" for xi in x)
@@ -491,20 +515,48 @@ def optimise_exact(
     if given is not None:
         candidates.append(("given start", theta0[given]))
     candidates += [(f"local {k}", x[k]) for k in range(lanes)]
+    for k in range(lanes):
+        candidates += [(f"local {k} runner-up {j}", shape.project(r)) for j, r in enumerate(runners[k])]
     return _verify(params, speed, direction, a_max, shape, free, settings, candidates, baseline, log, t0, ev)
 
 
 def _verify(params, speed, direction, a_max, shape, free, settings, candidates, baseline, log, t0, ev):
-    """Solve each candidate's steady gait (strict contact, relaxed start) and keep the cheapest feasible one."""
+    """Solve each candidate's steady gait (strict contact, relaxed start) and keep the cheapest feasible one.
+
+    A candidate counts as feasible only if its gait is also converged, stable and without
+    lift-off with half the engine's step, with the same speed and cost of transport to
+    `HALF_STEP_RTOL` (the figures reported are those at the full step)."""
     dtype = params.dtype
-    names = [n for n, _ in candidates]
-    theta = np.stack([th for _, th in candidates])
-    n = len(theta)
-    wave = shape.waveform(jnp.asarray(theta, dtype), jnp.asarray(a_max, dtype), jnp.asarray(params.lbar, dtype))
-    batch = pareto.with_waveform_frequency(params, wave)
-    gait = steady_gait(batch, waveform=wave, contact="strict", start="relaxed", transient=settings.transient,
-                       dynamics=_exact_dynamics(settings))  # fmt: skip
+    n = len(candidates)
+    # A fixed number of rows (padded with the first candidate), so that every optimisation
+    # with the same settings runs the same compiled verification.
+    rows = 3 + settings.local * (1 + len(RUNNERS_UP))
+    names = [name for name, _ in candidates]
+    thetas = [th for _, th in candidates] + [candidates[0][1]] * (rows - n)
+    origins = shape.origins
+    lbar, amax = jnp.asarray(params.lbar, dtype), jnp.asarray(a_max, dtype)
+
+    def gaits(theta, dt):
+        wave = shape.waveform(jnp.asarray(theta, dtype), amax, lbar)
+        batch = pareto.with_waveform_frequency(params, wave)
+        return steady_gait(batch, waveform=wave, contact="strict", start="relaxed", transient=settings.transient,
+                           dynamics=_exact_dynamics(dt))  # fmt: skip
+
+    # Every candidate at each time origin the family offers, candidate-major.
+    theta = np.stack([shape.shift(th, o) for th in thetas for o in origins])
+    gait = gaits(theta, settings.dt)
+    pick = _best_sections(gait, rows, len(origins))
+    gait = jax.tree_util.tree_map(lambda x: x[pick] if np.ndim(x) else x, gait)
+    theta = theta[pick]
     fig = pareto.gait_figures(gait)
+    half = pareto.gait_figures(gaits(theta, settings.dt / 2))
+    agree = lambda a, b: np.abs(a - b) <= HALF_STEP_RTOL * np.abs(a)
+    steady = fig.ok & half.ok & agree(fig.speed, half.speed) & agree(fig.cost, half.cost)
+    fig = fig._replace(ok=steady)
+    gait = jax.tree_util.tree_map(lambda x: x[:n] if np.ndim(x) else x, gait)
+    fig = pareto.ExactFigures(*(np.asarray(f)[:n] for f in fig))
+    half = pareto.ExactFigures(*(np.asarray(f)[:n] for f in half))
+    theta = theta[:n]
     strokes = np.array([a_max * shape.stroke(th) for th in theta])
     k, feasible, exact = verified(fig, strokes, speed, direction, a_max, float(jnp.finfo(dtype).eps), baseline)
     table = [
@@ -514,6 +566,8 @@ def _verify(params, speed, direction, a_max, shape, free, settings, candidates, 
             "mean_speed_exact": float(fig.speed[i]),
             "cost_of_transport_exact": float(fig.cost[i]),
             "stable_exact": bool(fig.ok[i]),
+            "half_step_speed": float(half.speed[i]),
+            "half_step_cost": float(half.cost[i]),
             "liftoff_exact": bool(fig.liftoff[i]),
             "stroke": float(strokes[i]),
             "feasible_exact": bool(feasible[i]),
@@ -549,7 +603,25 @@ def _verify(params, speed, direction, a_max, shape, free, settings, candidates, 
     return opt, log
 
 
-def _exact_dynamics(settings: ExactSettings):
+def _best_sections(gait: Any, n: int, m: int) -> np.ndarray:
+    """Per candidate, the index of the time origin (of `m`) whose steady gait to report.
+
+    The section of [`steady_gait`][] is the phase $\\omega t \\equiv 0$. Where a slipping mass's
+    velocity is about to reach zero there, the period map of the reduced state is nearly
+    discontinuous (a Newton iterate on the other side of $v_i = 0$ starts with the mass
+    stuck or sliding back), so that Newton's method may stall and the monodromy, hence the
+    stability verdict, depends on the last iterate. The same gait seen from another time
+    origin has its section elsewhere: we take the origin whose orbit converged with the
+    largest clearance $\\min |v_i|$ over the masses slipping at the section (a stuck mass has
+    none to lose)."""
+    status = np.asarray(gait.status).reshape(n, m)
+    v = np.abs(np.stack([np.asarray(gait.v1), np.asarray(gait.v2)], axis=-1)).reshape(n, m, 2)
+    clearance = np.min(np.where(v > 0, v, np.inf), axis=-1)
+    score = np.where(status == GaitStatus.CONVERGED, np.nan_to_num(clearance, nan=-1.0), -np.inf)
+    return np.arange(n) * m + np.argmax(score, axis=1)
+
+
+def _exact_dynamics(dt: float):
     from ._dynamics import Exact
 
-    return Exact(dt=settings.dt)
+    return Exact(dt=dt)

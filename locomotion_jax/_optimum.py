@@ -176,7 +176,9 @@ class Optimum:
     - `source`: which candidate won; `candidates`: every candidate's figures.
     - `history`: per block costs and constraint values; `runtime_s`.
     - `method`: `"exact"` or `"smoothed"`. Exact method only (else `None`/NaN):
-      `stable_exact` (all Floquet multipliers inside the unit circle),
+      `stable_exact` (a converged steady gait without lift-off whose Floquet multipliers all lie
+      inside the unit circle, and which is the same with half the engine's step: its speed
+      and cost of transport within 1e-3),
       `spectral_radius_exact` (their largest modulus), `gait_period_exact`,
       `evaluations` (batched orbit evaluations). With the exact method the
       `*_smoothed` figures and `eps` are NaN, and the `*_exact` figures are those of the

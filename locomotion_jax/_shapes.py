@@ -66,6 +66,17 @@ class AbstractShape(eqx.Module):
         """The [`Optimum`][locomotion_jax._optimum.Optimum] fields of the waveform
         (`cos`, `sin`, `control`, `harmonics`, `shape`)."""
 
+    @property
+    def origins(self) -> tuple[float, ...]:
+        """Time shifts (in periods) that [`shift`][locomotion_jax._shapes.AbstractShape.shift] represents exactly."""
+        return (0.0,)
+
+    def shift(self, theta: np.ndarray, turns: float) -> np.ndarray:
+        """The same stroke with its time origin moved by `turns` periods: $\\ell_0(\\phi + 2\\pi\\,\\text{turns})$."""
+        if turns != 0:
+            raise ValueError(f"{type(self).__name__} represents no time shift of {turns!r} periods.")
+        return np.array(theta, float)
+
     def sample(self, wave: AbstractWaveform, grid: int) -> np.ndarray:
         """$\\ell_0 - \\bar\\ell$ of any waveform at `grid` phases over one period."""
         phase = np.arange(grid) * 2 * np.pi / grid
@@ -255,6 +266,20 @@ class SplineShape(AbstractShape):
         eig = (4 + 2 * np.cos(2 * np.pi * k / self.knots)) / 6
         c = np.real(np.fft.ifft(np.fft.fft(y) / eig))
         return self.project(np.r_[c, math.log(omega)])
+
+    @property
+    def origins(self) -> tuple[float, ...]:
+        # Quarter periods: a section a quarter period away from one where a mass is about to
+        # stop (the inchworm gaits' two halves mirror each other, so half a period is not).
+        return (0.0, (self.knots // 4) / self.knots)
+
+    def shift(self, theta: np.ndarray, turns: float) -> np.ndarray:
+        j = round(turns * self.knots)
+        if abs(j - turns * self.knots) > 1e-9:
+            raise ValueError(f"a spline of {self.knots} knots shifts by whole knots, not {turns!r} periods.")
+        theta = np.array(theta, float)
+        theta[:-1] = np.roll(theta[:-1], -j)
+        return theta
 
     def project(self, theta: np.ndarray) -> np.ndarray:
         theta = np.array(theta, float)
