@@ -91,6 +91,13 @@ def test_shape_families_fit_project_and_constrain():
     np.testing.assert_allclose(
         jac @ d, (spl.constraint(x + h * d)[0] - spl.constraint(x - h * d)[0]) / (2 * h), atol=1e-7
     )
+    # A shift of the time origin by whole knots is exact: l0'(phi) = l0(phi + 2 pi turns).
+    turns = spl.origins[1]
+    moved = spl.sample(spl.waveform(jnp.asarray(spl.shift(x, turns)), jnp.asarray(1.0), jnp.asarray(0.0)), grid)
+    orig = spl.sample(spl.waveform(jnp.asarray(x), jnp.asarray(1.0), jnp.asarray(0.0)), grid)
+    np.testing.assert_allclose(moved, np.roll(orig, -round(turns * grid)), atol=1e-14)
+    with pytest.raises(ValueError, match="knots"):
+        spl.shift(x, 0.01)
     with pytest.raises(ValueError, match="knots"):
         _shapes.SplineShape(knots=3)
 
