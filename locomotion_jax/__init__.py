@@ -42,7 +42,12 @@ from .model._params import (
     Params as Params,
     VALID_RANGES as VALID_RANGES,
 )
-from .model._waveform import AbstractWaveform as AbstractWaveform, Fourier as Fourier, Sinusoid as Sinusoid
+from .model._waveform import (
+    AbstractWaveform as AbstractWaveform,
+    Fourier as Fourier,
+    Sinusoid as Sinusoid,
+    Spline as Spline,
+)
 from .optimisation._optimum import (
     ExactOptimiseSettings as ExactOptimiseSettings,
     OptimiseSettings as OptimiseSettings,

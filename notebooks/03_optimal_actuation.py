@@ -35,9 +35,11 @@
 # spring), and the optimum must be a stable gait. The baseline is the best sinusoid
 # $a\sin\omega t$ ($a \le a_\max$) from an exact sweep over $(a, \omega)$.
 #
-# At full size it runs three optimisations at the default settings (16 harmonics; the README's
-# "Optimal actuation" gives the measured time of each); CI runs it at a tiny size (4 harmonics, a
-# few iterations).
+# This notebook searches the Fourier family (`ExactOptimiseSettings(shape="fourier")`), whose
+# coefficients are easy to read; the optimiser's default stroke is a periodic spline of 64 knots
+# (`lj.Spline`), which also represents the step-like strokes of the fast gaits (the README's
+# "Optimal actuation"). At full size it runs three optimisations (16 harmonics); CI runs it at a
+# tiny size (4 harmonics, a few iterations).
 
 # %%
 import os
@@ -61,12 +63,12 @@ SPEEDS = (0.01,) if SMALL else (0.01, 0.02, 0.03)  # required mean speeds: one o
 V_MIN = SPEEDS[-1] if SMALL else 0.02  # the one looked at in detail
 if SMALL:
     SETTINGS = lj.ExactOptimiseSettings(
-        local=2, start_frequencies=2, random_shapes=0, max_iter=10, stages=1, transient=20,
-        refine_baseline=False,
+        shape="fourier", local=2, start_frequencies=2, random_shapes=0, tension_periods=2, max_iter=10, stages=1,
+        transient=20, refine_baseline=False,
     )  # fmt: skip
     SWEEP = dict(omegas=np.array([1.0, 2.0, 4.0, 6.0]), amplitudes=2, transient=20)
 else:
-    SETTINGS = lj.ExactOptimiseSettings()  # 4 local trust-region runs from the best of ~50 starts
+    SETTINGS = lj.ExactOptimiseSettings(shape="fourier")  # 4 local runs from the best of ~200 starts
     SWEEP = dict(omegas=None, amplitudes=6)  # 6 amplitudes x 32 log-spaced frequencies (0.5 .. 25)
 IMAGES = os.environ.get("LOCOMOTION_NB_IMAGES")  # set to a directory to save this notebook's picture there
 params = lj.Params(a=A_MAX)  # the paper's defaults; `a` and `omega` are the optimiser's to choose

@@ -41,6 +41,7 @@ from typing import Any, cast
 
 import numpy as np
 from scipy.integrate import solve_ivp
+from scipy.interpolate import BSpline
 from scipy.optimize import brentq
 
 
@@ -103,8 +104,18 @@ class _Model:
         self.omega = float(p["omega"])
         # Optional Fourier actuation (replaces eq. 13's sinusoid, ``a`` unused):
         # l0 = lbar + sum_h cos_h cos(h omega t) + sin_h sin(h omega t), h = 1..H.
+        # Or ``("spline", c)``: a periodic uniform cubic B-spline in the phase with control values
+        # c_j centred at the phases 2 pi j / M (scipy's BSpline on an extended knot vector).
         self.wave = None
-        if wave is not None:
+        self.spline = None
+        if wave is not None and isinstance(wave[0], str):
+            if wave[0] != "spline":
+                raise ValueError(f"unknown waveform kind {wave[0]!r}")
+            c = np.asarray(wave[1], dtype=float)
+            m = len(c)
+            # Basis i (degree 3) starts at knot i - 3 and is centred at i - 1: coefficient c_{(i-1) mod M}.
+            self.spline = (m, BSpline(np.arange(-3.0, m + 4.0), c[(np.arange(m + 3) - 1) % m], 3, extrapolate=False))
+        elif wave is not None:
             cos, sin = (np.atleast_1d(np.asarray(w, dtype=float)) for w in wave)
             if cos.shape != sin.shape or cos.ndim != 1:
                 raise ValueError(f"wave must be two 1-D sequences of the same length, got {cos.shape}, {sin.shape}")
@@ -129,10 +140,16 @@ class _Model:
     @property
     def fastest_drive(self) -> float:
         """The highest frequency in the actuation."""
+        if self.spline is not None:
+            return self.omega * self.spline[0] / 2  # knot spacing as half a period
         return self.omega * (1 if self.wave is None else len(self.wave[0]))
 
     def rest_length(self, t: float) -> tuple[float, float]:
-        """``(l0, dl0/dt)`` at time ``t``: eq. (13), or the Fourier series of ``wave``."""
+        """``(l0, dl0/dt)`` at time ``t``: eq. (13), or the Fourier series or spline of ``wave``."""
+        if self.spline is not None:
+            m, bs = self.spline
+            s = (self.omega * t * m / (2.0 * math.pi)) % m
+            return self.lbar + float(bs(s)), float(bs(s, 1)) * self.omega * m / (2.0 * math.pi)
         if self.wave is None:
             wt = self.omega * t
             return self.a * math.sin(wt) + self.lbar, self.a * self.omega * math.cos(wt)
@@ -147,6 +164,9 @@ class _Model:
     def rest_length_array(self, t) -> np.ndarray:
         """``l0`` at the times ``t`` (numpy-vectorised)."""
         t = np.asarray(t, dtype=float)
+        if self.spline is not None:
+            m, bs = self.spline
+            return self.lbar + bs((self.omega * t * m / (2.0 * np.pi)) % m)
         if self.wave is None:
             return self.a * np.sin(self.omega * t) + self.lbar
         l0 = np.full_like(t, self.lbar)
@@ -167,7 +187,7 @@ class _Model:
         """
         dx = x2 - x1
         ell = math.sqrt(dx * dx + self.d * self.d)
-        if self.wave is None:
+        if self.wave is None and self.spline is None:
             wt = self.omega * t
             l0 = self.a * math.sin(wt) + self.lbar
             l0dot = self.a * self.omega * math.cos(wt)
@@ -674,7 +694,8 @@ def reference_simulate(
         contact: ``'strict'`` (``n_i = N_i``, stop at the first lift-off) or ``'paper'``
             (``n_i = |N_i|``, continue but flag lift-off).
         start: ``'paper'`` (eq. 14), ``'relaxed'``, or a state ``(x1, v1, x2, v2)`` at ``t = 0``.
-        wave: ``(cos, sin)``, the Fourier coefficients of harmonics ``1..H`` of ``omega``:
+        wave: ``("spline", c)`` for a periodic cubic B-spline of control values ``c`` in the phase, or
+            ``(cos, sin)``, the Fourier coefficients of harmonics ``1..H`` of ``omega``:
             ``l0 = lbar + sum_h cos_h cos(h omega t) + sin_h sin(h omega t)`` replaces eq. (13).
 
     Returns:

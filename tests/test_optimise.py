@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from locomotion_jax.cli._optimise import register
 from locomotion_jax.gaits import _orbit
-from locomotion_jax.optimisation import _constraints, _exact as _exact_optimise, _objective, _optimise, _pareto
+from locomotion_jax.optimisation import _constraints, _exact as _exact_optimise, _objective, _optimise, _pareto, _shapes
 from locomotion_jax.optimisation._optimum import ExactSettings, Settings
 from plugin_app import plugin_app
 from reference import reference_simulate
@@ -41,11 +41,13 @@ def _reference_figures(cos, sin, omega, a=None, rho=0.9):
     """`(mean speed, cost of transport, lift-off)` of a waveform's steady gait on the independent
     reference (`tests/reference.py`): the defaults, strict contact, relaxed start, averaged over
     10 whole periods after a transient long enough for a gait whose largest Floquet multiplier
-    has modulus `rho` to settle to 1e-7; `a` instead of `cos, sin`: eq. (13)."""
+    has modulus `rho` to settle to 1e-7; `a` instead of `cos, sin`: eq. (13); `cos` may be
+    `("spline", control)` instead (a periodic spline, `sin` unused)."""
     T = 2 * math.pi / omega
     settle = int(min(300, max(40, math.ceil(math.log(1e-7) / math.log(max(rho, 1e-3))))))
     t0, t1 = settle * T, (settle + 10) * T
-    kw: dict[str, Any] = dict(wave=(cos, sin)) if a is None else {}
+    wave = cos if isinstance(cos, tuple) else (cos, sin)  # ("spline", control) or Fourier coefficients
+    kw: dict[str, Any] = dict(wave=wave) if a is None else {}
     params = dict(omega=omega) if a is None else dict(omega=omega, a=a)
     r = reference_simulate(params, t1, save_at=[t0, t1], start="relaxed", **kw)
     dX = r["X"][1] - r["X"][0]
@@ -268,9 +270,17 @@ def test_cli_bad_input_names_the_parameter():
 # -- the exact method ---------------------------------------------------------------
 
 EXACT_TINY = ExactSettings(
-    local=2, start_frequencies=3, random_shapes=0, max_iter=20, stages=1, transient=20, refine_baseline=False
+    knots=8,
+    tension_periods=3,
+    local=2,
+    start_frequencies=3,
+    random_shapes=0,
+    max_iter=20,
+    stages=1,
+    transient=20,
+    refine_baseline=False,
 )
-EXACT_HARMONICS = 4
+EXACT_SHAPE = _shapes.SplineShape(knots=EXACT_TINY.knots)
 
 
 def _oracle() -> _orbit.Oracle:
@@ -281,7 +291,7 @@ def _oracle() -> _orbit.Oracle:
         a_max=jnp.asarray(0.05),
         max_steps=jnp.asarray(4000, jnp.int32),
         tol=jnp.asarray(1e-12),
-        harmonics=EXACT_HARMONICS,
+        shape=EXACT_SHAPE,
         contact="paper",
         dt=EXACT_TINY.dt,
         max_iter=EXACT_TINY.newton_iter,
@@ -293,11 +303,14 @@ def test_orbit_gradients_match_finite_differences():
     # against central differences of orbits solved again at theta +- h d (float64).
     oracle = _oracle()
     a_max = 0.05
+    phase = np.arange(256) * 2 * np.pi / 256
     theta = np.stack(
         [
-            _exact_optimise.to_theta([0.0, 0.004, 0.0, 0.001], [0.03, 0.0, 0.005, 0.0], 2.0, a_max, EXACT_HARMONICS),
-            _exact_optimise.to_theta(
-                [0.0, -0.003, 0.002, 0.0], [0.016, 0.001, 0.003, 0.0], 4.8, a_max, EXACT_HARMONICS
+            EXACT_SHAPE.fit(
+                (0.03 * np.sin(phase) + 0.004 * np.cos(2 * phase) + 0.005 * np.sin(3 * phase)) / a_max, 2.0
+            ),
+            EXACT_SHAPE.fit(
+                (0.016 * np.sin(phase) - 0.003 * np.cos(2 * phase) + 0.002 * np.cos(3 * phase)) / a_max, 4.8
             ),
         ]
     )
@@ -321,7 +334,7 @@ def test_orbit_gradients_match_finite_differences():
 def exact_run(tiny_sweep):
     jax.clear_caches()
     before = dict(_orbit.TRACES)
-    opt = _optimise.optimise(lj.Params(), 0.02, 0.05, harmonics=EXACT_HARMONICS, settings=EXACT_TINY, sweep=tiny_sweep)
+    opt = _optimise.optimise(lj.Params(), 0.02, 0.05, settings=EXACT_TINY, sweep=tiny_sweep)
     grew = {k: _orbit.TRACES[k] - before.get(k, 0) for k in ("evaluate", "relax")}
     return opt, grew
 
@@ -332,7 +345,9 @@ def test_exact_optimum_verified_on_the_reference(exact_run):
     opt, _ = exact_run
     assert opt.method == "exact" and opt.feasible_exact and opt.stable_exact
     assert opt.spectral_radius_exact < 1
-    speed, cost, lifted = _reference_figures(opt.cos, opt.sin, opt.omega, rho=opt.spectral_radius_exact)
+    assert opt.shape == "spline" and opt.control is not None and len(opt.control) == EXACT_TINY.knots
+    assert isinstance(opt.waveform, lj.Spline)
+    speed, cost, lifted = _reference_figures(("spline", opt.control), None, opt.omega, rho=opt.spectral_radius_exact)
     assert not lifted and speed >= 0.02
     assert opt.mean_speed_exact == pytest.approx(speed, rel=5e-4)
     assert opt.cost_of_transport_exact == pytest.approx(cost, rel=5e-4)
@@ -351,7 +366,7 @@ def test_exact_compilations(exact_run, tiny_sweep):
     assert grew == {"evaluate": 1, "relax": 1}
     settings = eqx.tree_at(lambda s: s.max_iter, EXACT_TINY, 3)
     before = dict(_orbit.TRACES)
-    _optimise.optimise(lj.Params(), 0.025, 0.05, harmonics=EXACT_HARMONICS, settings=settings, sweep=tiny_sweep)
+    _optimise.optimise(lj.Params(), 0.025, 0.05, settings=settings, sweep=tiny_sweep)
     assert dict(_orbit.TRACES) == before
 
 
@@ -360,6 +375,10 @@ def test_method_choice_is_checked():
         _optimise.optimise(lj.Params(), 0.02, 0.05, method="adam")
     with pytest.raises(TypeError, match="ExactSettings"):
         _optimise.optimise(lj.Params(), 0.02, 0.05, settings=TINY)
+    with pytest.raises(ValueError, match="harmonics"):
+        _optimise.optimise(lj.Params(), 0.02, 0.05, harmonics=8)
+    with pytest.raises(ValueError, match="shape"):
+        ExactSettings(shape="chebyshev")
     with pytest.raises(ValueError, match="start"):
         _optimise.optimise(
             lj.Params(), 0.02, 0.05, method="smoothed", start=lj.Fourier(np.zeros(1), np.full(1, 0.05), 2.0, 3.0)
@@ -397,7 +416,7 @@ def test_stroke_windows_bound_the_true_stroke():
     # The exact method's stroke constraint: the largest window maximum is the true stroke
     # (against a dense evaluation of the series), and the Jacobian is that of the values.
     n_h = 16
-    peaks = _exact_optimise.StrokePeaks(n_h)
+    peaks = _shapes.StrokePeaks(n_h)
     rng = np.random.default_rng(2)
     n = np.arange(1, n_h + 1)
     phase = np.linspace(0, 2 * np.pi, 400_001)

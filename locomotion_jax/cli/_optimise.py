@@ -39,8 +39,14 @@ def register(app: typer.Typer) -> None:
             "exact", "--method", help="'exact' (steady gaits of the exact model) or 'smoothed' (the older method)."
         ),
         harmonics: int | None = typer.Option(
-            None, "--harmonics", help="Number of Fourier harmonics N (default 16 exact, 3 smoothed)."
+            None,
+            "--harmonics",
+            help="Number of Fourier harmonics N (smoothed: default 3; exact with --shape fourier: default 16).",
         ),
+        shape: str = typer.Option(
+            "spline", "--shape", help="Exact: 'spline' (periodic cubic B-spline stroke) or 'fourier'."
+        ),
+        knots: int = typer.Option(64, "--knots", help="Exact, spline: number of control values."),
         model: Values,
         margin: float = typer.Option(0.05, "--margin", help="Normal-force margin (on the orbit, or smoothed)."),
         local: int = typer.Option(4, "--local", help="Exact: starts refined locally, in lockstep."),
@@ -70,7 +76,9 @@ def register(app: typer.Typer) -> None:
             params = to_params(model)
             settings: ExactSettings | Settings
             if method == "exact":
-                settings = ExactSettings(local=local, max_iter=max_iter, margin=margin, seed=seed, verbose=verbose)
+                settings = ExactSettings(
+                    shape=shape, knots=knots, local=local, max_iter=max_iter, margin=margin, seed=seed, verbose=verbose
+                )
             else:
                 settings = Settings(
                     starts=starts,
@@ -105,7 +113,7 @@ def register(app: typer.Typer) -> None:
                 method=method,
                 direction=direction,
                 omega=omega,
-                harmonics=n_harm,
+                harmonics=harmonics,
                 settings=settings,
                 sweep=sweep,
             )

@@ -1,11 +1,8 @@
-"""Periodic gaits of a Fourier actuation and their exact sensitivities (the exact optimiser's oracle).
+"""Periodic gaits of a parametrised actuation and their exact sensitivities (the exact optimiser's oracle).
 
-The decision vector of the optimiser is
-$\\theta = (A_2, \\dots, A_N, B_1, \\dots, B_N, \\log\\omega)$, coefficients in units of
-$a_\\max$, with $A_1 = 0$: a shift of the time origin changes no gait, and fixing the
-first harmonic's phase removes that direction from the search (any waveform with a
-first harmonic has such a representation). The waveform is
-$\\ell_0(t) = \\bar\\ell + a_\\max \\sum_n A_n \\cos n\\omega t + B_n \\sin n\\omega t$ ([`Fourier`][]).
+The decision vector $\\theta$ holds the stroke's shape in units of $a_\\max$ and $\\log\\omega$
+(a family of `_shapes`: a [`Fourier`][] series or a periodic [`Spline`][]); the family maps it
+to the waveform $\\ell_0(t)$.
 
 For a given $\\theta$ the steady gait is the fixed point $y^*$ of the period map
 $\\Phi(y, \\theta)$ of the reduced state $y = (u, v_1, v_2)$ at the phase
@@ -38,27 +35,14 @@ from ..dynamics import _exact as exact
 from ..dynamics._compile import engine_jit
 from ..model._params import Params
 from ..model._two_mass import initial_gap
-from ..model._waveform import Fourier
+from ..model._waveform import AbstractWaveform
+from ..optimisation._shapes import AbstractShape
 from ._period import reduced as _reduced, section_state as _section_state
 
 
 TRACES: Counter = Counter()
 """Python-level traces of the compiled functions (keys `"evaluate"`, `"relax"`); a test
 checks that a whole optimisation traces each once."""
-
-
-def waveform(theta: Array, a_max: Array, lbar: Array, harmonics: int) -> Fourier:
-    """Decision vector(s) (module docstring) -> [`Fourier`][] waveform (batched along leading axes)."""
-    n = harmonics
-    zero = jnp.zeros(theta.shape[:-1] + (1,), theta.dtype)
-    cos = a_max * jnp.concatenate([zero, theta[..., : n - 1]], axis=-1)
-    sin = a_max * theta[..., n - 1 : 2 * n - 1]
-    return Fourier(cos, sin, jnp.exp(theta[..., -1]), lbar + 0 * theta[..., -1])
-
-
-def size(harmonics: int) -> int:
-    """Length of the decision vector for `harmonics` harmonics."""
-    return 2 * harmonics
 
 
 class Period(NamedTuple):
@@ -69,7 +53,9 @@ class Period(NamedTuple):
     ok: Array
 
 
-def period(params: Params, wave: Fourier, contact: Contact, dt: float, max_steps: Array, y: Array, k: Array) -> Period:
+def period(
+    params: Params, wave: AbstractWaveform, contact: Contact, dt: float, max_steps: Array, y: Array, k: Array
+) -> Period:
     """The `k`-period map $\\Phi_k$ from the reduced state `y`, with the figures the optimiser needs
     (`max_steps` per actuation period)."""
     P = exact.consts(params, wave)
@@ -118,12 +104,12 @@ class Orbit(NamedTuple):
     residual: Array
 
 
-def _orbit_one(params, a_max, theta, y0, k, harmonics, contact, dt, max_steps, tol, max_iter) -> Orbit:
+def _orbit_one(params, a_max, theta, y0, k, shape, contact, dt, max_steps, tol, max_iter) -> Orbit:
     lbar = params.lbar
     eye = jnp.eye(3, dtype=theta.dtype)
 
     def run(z):
-        out = period(params, waveform(z[3:], a_max, lbar, harmonics), contact, dt, max_steps, z[:3], k)
+        out = period(params, shape.waveform(z[3:], a_max, lbar), contact, dt, max_steps, z[:3], k)
         return jnp.concatenate([out.y, out.figures]), out.ok
 
     def linearise(y):
@@ -155,19 +141,19 @@ def _orbit_one(params, a_max, theta, y0, k, harmonics, contact, dt, max_steps, t
     return Orbit(y, val[3:], grad, M, good, it, jnp.max(jnp.abs(val[:3] - y)))
 
 
-def _evaluate(params, a_max, theta, y0, k, harmonics, contact, dt, max_steps, tol, max_iter):
+def _evaluate(params, a_max, theta, y0, k, shape, contact, dt, max_steps, tol, max_iter):
     TRACES["evaluate"] += 1  # runs only while tracing
-    one = lambda th, y, kk: _orbit_one(params, a_max, th, y, kk, harmonics, contact, dt, max_steps, tol, max_iter)
+    one = lambda th, y, kk: _orbit_one(params, a_max, th, y, kk, shape, contact, dt, max_steps, tol, max_iter)
     return jax.vmap(one)(theta, y0, k)
 
 
-def _relax(params, a_max, theta, y0, fresh, periods, harmonics, contact, dt, max_steps):
+def _relax(params, a_max, theta, y0, fresh, periods, shape, contact, dt, max_steps):
     """`periods` actuation periods from the section state `y0`, or from the relaxed spring
     at rest where `fresh`: the reduced state at the end (a start for Newton's method)."""
     TRACES["relax"] += 1
 
     def one(th, y, new):
-        wave = waveform(th, a_max, params.lbar, harmonics)
+        wave = shape.waveform(th, a_max, params.lbar)
         P = exact.consts(params, wave)
         gap = initial_gap(params, "relaxed")
         rest = exact.init(params, wave, contact, jnp.zeros_like(gap), gap)
@@ -190,18 +176,18 @@ def _relax(params, a_max, theta, y0, fresh, periods, harmonics, contact, dt, max
     return jax.vmap(one)(theta, y0, fresh)
 
 
-evaluate = engine_jit(_evaluate, ("harmonics", "contact", "dt", "max_iter"))
-relax = engine_jit(_relax, ("harmonics", "contact", "dt"))
+evaluate = engine_jit(_evaluate, ("shape", "contact", "dt", "max_iter"))
+relax = engine_jit(_relax, ("shape", "contact", "dt"))
 
 
 class Oracle(eqx.Module):
-    """The compiled evaluations of one problem (static: harmonics, contact, step, iterations)."""
+    """The compiled evaluations of one problem (static: the shape family, contact, step, iterations)."""
 
     params: Params
     a_max: Array
     max_steps: Array
     tol: Array
-    harmonics: int = eqx.field(static=True)
+    shape: AbstractShape = eqx.field(static=True)
     contact: Contact = eqx.field(static=True)
     dt: float = eqx.field(static=True)
     max_iter: int = eqx.field(static=True)
@@ -209,10 +195,10 @@ class Oracle(eqx.Module):
     def orbits(self, theta: Array, y0: Array, k: Array) -> Orbit:
         """Steady gaits of period `k` actuation periods (int32, per row) and their sensitivities,
         for a batch of decision vectors, from warm starts `y0`."""
-        return evaluate(self.params, self.a_max, theta, y0, k, self.harmonics, self.contact, self.dt,
+        return evaluate(self.params, self.a_max, theta, y0, k, self.shape, self.contact, self.dt,
                         self.max_steps, self.tol, self.max_iter)  # fmt: skip
 
     def transient(self, theta: Array, y0: Array, fresh: Array, periods: Array) -> Array:
         """The reduced state after `periods` periods (from `y0`, or from rest where `fresh`)."""
-        return relax(self.params, self.a_max, theta, y0, fresh, periods, self.harmonics, self.contact, self.dt,
+        return relax(self.params, self.a_max, theta, y0, fresh, periods, self.shape, self.contact, self.dt,
                      self.max_steps)  # fmt: skip

@@ -158,3 +158,79 @@ class Fourier(AbstractWaveform):
 
     def stroke(self) -> Array:
         return jnp.sum(jnp.sqrt(self.cos**2 + self.sin**2), axis=-1)
+
+
+def _bspline_basis(u: Array) -> tuple[Array, Array, Array]:
+    """The four uniform cubic B-spline weights at the local coordinate $u \\in [0, 1)$ and their
+    first two derivatives in $u$ (last axis: the control points $j - 1, j, j + 1, j + 2$)."""
+    v = 1 - u
+    u2, u3 = u * u, u * u * u
+    w = jnp.stack([v * v * v, 3 * u3 - 6 * u2 + 4, -3 * u3 + 3 * u2 + 3 * u + 1, u3], axis=-1) / 6
+    dw = jnp.stack([-3 * v * v, 9 * u2 - 12 * u, -9 * u2 + 6 * u + 3, 3 * u2], axis=-1) / 6
+    ddw = jnp.stack([6 * v, 18 * u - 12, 6 - 18 * u, 6 * u], axis=-1) / 6
+    return w, dw, ddw
+
+
+class Spline(AbstractWaveform):
+    """Periodic uniform cubic B-spline in the phase $\\phi = \\omega t$:
+
+    $$\\ell_0(t) = \\bar\\ell + \\sum_{j=0}^{M-1} c_j\\, B_3\\Big(\\frac{M\\phi}{2\\pi} - j\\Big),$$
+
+    with $B_3$ the cubic B-spline on four unit intervals and the control values $c_j$ repeated
+    with period $M$; the curve passes near $c_j$ at the phase $2\\pi j/M$
+    ($\\ell_0 - \\bar\\ell = (c_{j-1} + 4c_j + c_{j+1})/6$ there). The B-spline weights are
+    non-negative and sum to one, so the stroke is bounded by the control values:
+    $\\max_t |\\ell_0 - \\bar\\ell| \\le \\max_j |c_j|$, with equality where three neighbours are
+    equal (a plateau). A bound on the stroke is therefore a box on the $c_j$, and a
+    step-like stroke (a few control values from one bound to the other) carries no overshoot,
+    unlike a truncated Fourier series. $\\ell_0$ is twice continuously differentiable, so the
+    fixed-step engine keeps its order away from the knots.
+
+    **Arguments:**
+
+    - `control`: control values $c_j$, shape `(M,)` with $M \\ge 4$ (batched along leading axes).
+    - `omega`: base frequency; `lbar`: mean rest length.
+    """
+
+    control: Float[Array, " M"]
+    omega: Array
+    lbar: Array
+
+    def __init__(self, control: ArrayLike, omega: ArrayLike, lbar: ArrayLike):
+        self.control = jnp.asarray(control)
+        self.omega = jnp.asarray(omega)
+        self.lbar = jnp.asarray(lbar)
+        if self.control.ndim == 0 or self.control.shape[-1] < 4:
+            raise ValueError(
+                f"Spline: 'control' needs M >= 4 values along its last axis (got shape {self.control.shape})."
+            )
+
+    @property
+    def knots(self) -> int:
+        return self.control.shape[-1]
+
+    def __call__(self, t: ArrayLike) -> tuple[Array, Array]:
+        phase = self.omega * t
+        return self.at_phase(jnp.cos(phase), jnp.sin(phase))[:2]
+
+    def at_phase(self, cos: ArrayLike, sin: ArrayLike) -> tuple[Array, Array, Array]:
+        m = self.knots
+        c = jnp.asarray(self.control)
+        # The phase in units of the knot spacing, in [0, M).
+        s = jnp.mod(jnp.arctan2(jnp.asarray(sin), jnp.asarray(cos)) * (m / (2 * jnp.pi)), m)
+        j = jnp.floor(s)
+        w, dw, ddw = _bspline_basis(s - j)
+        offsets = jnp.arange(-1, 3, dtype=jnp.int32).reshape((1,) * j.ndim + (4,))
+        idx = (j.astype(jnp.int32)[..., None] + offsets) % m
+        ndim = max(idx.ndim, c.ndim)
+        up = lambda x: x.reshape((1,) * (ndim - x.ndim) + x.shape)  # explicit broadcasting
+        idx, c, w, dw, ddw = up(idx), up(c), up(w), up(dw), up(ddw)
+        shape = jnp.broadcast_shapes(idx.shape[:-1], c.shape[:-1])
+        cj = jnp.take_along_axis(jnp.broadcast_to(c, shape + c.shape[-1:]), jnp.broadcast_to(idx, shape + (4,)), -1)
+        rate = jnp.asarray(self.omega) * (m / (2 * jnp.pi))  # d(s)/dt
+        value, d1, d2 = jnp.sum(cj * w, -1), jnp.sum(cj * dw, -1), jnp.sum(cj * ddw, -1)
+        rate, lbar = up_to(rate, value), up_to(jnp.asarray(self.lbar), value)
+        return lbar + value, rate * d1, rate * rate * d2
+
+    def stroke(self) -> Array:
+        return jnp.max(jnp.abs(self.control), axis=-1)

@@ -1,7 +1,8 @@
 """The exact optimiser: least cost of transport over steady gaits of the exact model (SPEC §7).
 
 Problem, for a required speed $v_\\min$ in the direction $\\sigma = \\pm 1$ and a stroke limit
-$a_\\max$, over Fourier waveforms of $N$ harmonics and a free (or fixed) base frequency:
+$a_\\max$, over a family of stroke shapes (`_shapes`: a periodic cubic spline of $M$ control
+values, the default, or a Fourier series of $N$ harmonics) and a free (or fixed) base frequency:
 
 $$\\min_\\theta\\ \\frac{e_d}{\\sigma\\Delta X}\\quad\\text{s.t.}\\quad
 \\frac{\\sigma\\Delta X}{T} \\ge v_\\min,\\quad \\min_t N_{1,2} \\ge \\text{margin},\\quad
@@ -13,23 +14,26 @@ periodic orbit (the steady gait), with their gradients by the implicit function 
 
 Method:
 
-- **Starts.** Sinusoids of several amplitudes, sinusoids with a third harmonic, saw-tooth
-  ramps of both senses and random waveforms, over log-spaced base frequencies, the best
-  sinusoid of the baseline and an optional given start (continuation in $v_\\min$: the
-  previous optimum). Each is run from the relaxed spring for a transient, its orbit
-  solved, and the starts are ranked by cost of transport with a penalty on the
-  constraint violations; the best few are refined.
+- **Starts** (`_starts`), each fitted by the shape family: sinusoids of several amplitudes,
+  sinusoids with a third harmonic, saw-tooth ramps of both senses and random waveforms, over
+  log-spaced base frequencies; the rest lengths of idealised inchworm gaits whose spring
+  tension alternates in sign (the fast gaits near the quasi-static floor, which a sinusoid
+  cannot drive); the best sinusoid of the baseline; and an optional given start
+  (continuation in $v_\\min$: the optimum of a nearby requirement), which is always refined.
+  Each is run from the relaxed spring for a transient, its orbit solved, and the starts are
+  ranked by cost of transport with a penalty on the constraint violations; the best few
+  are refined.
 - **Local refinement** by a monotone descent on an exact penalty (`_descent`: L-BFGS
   directions, a backtracking line search that accepts only a decrease, so that an iterate
   never walks into a costlier gait or a failed orbit; the first step is bounded so that
   it stays within the reach of the warm-started Newton solve of the orbit), or by
   `scipy.optimize.minimize` (`trust-constr`, `SLSQP`): exact values, exact gradients.
-  The stroke is a convex set: the descent keeps it by radial rescaling onto its limit,
-  the scipy methods take it as constraints on its maxima within fixed phase windows
-  (`StrokePeaks`); at the end the waveform is rescaled radially onto the exact limit.
-  The local solvers run in lockstep, so that each of their evaluations is one batched
-  (vmapped) call of the engine.
-- **Verification.** Every refined waveform (and the best start) is solved again by
+  The stroke is a convex set: the descent keeps it by the family's projection (clipping the
+  spline's control values, radial rescaling of a Fourier series), the scipy methods take it
+  as constraints (the control values, or the Fourier series' maxima within fixed phase
+  windows, `_shapes.StrokePeaks`). The local solvers run in lockstep, so that each of their
+  evaluations is one batched (vmapped) call of the engine.
+- **Verification.** Every refined waveform (and the best and the given start) is solved again by
   [`steady_gait`][] under the strict contact reading from the relaxed spring (periods 1
   to 4 tried, stability from the Floquet multipliers); the reported optimum is the
   cheapest one that is converged, stable, without lift-off, at least as fast as
@@ -47,116 +51,14 @@ import numpy as np
 import scipy.optimize
 
 from ..gaits import _orbit as orbit
-from ..gaits._gait import steady_gait
+from ..gaits._gait import GaitStatus, steady_gait
 from ..model._params import Params
-from ..model._waveform import Fourier
-from . import _constraints as cons, _pareto as pareto
+from ..model._waveform import AbstractWaveform
+from . import _pareto as pareto
 from ._lockstep import run_lockstep
 from ._optimum import ExactSettings, Optimum, verified
-
-
-def normalise_phase(cos: np.ndarray, sin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Shift the time origin so that $A_1 = 0$, $B_1 \\ge 0$ (the same gait, module `_orbit`)."""
-    n = np.arange(1, len(cos) + 1)
-    d = math.atan2(-cos[0], sin[0])
-    return cos * np.cos(n * d) + sin * np.sin(n * d), sin * np.cos(n * d) - cos * np.sin(n * d)
-
-
-def to_theta(cos, sin, omega: float, a_max: float, harmonics: int) -> np.ndarray:
-    """A waveform's coefficients (padded or truncated to `harmonics`) -> decision vector."""
-    c = np.zeros(harmonics)
-    s = np.zeros(harmonics)
-    m = min(harmonics, len(cos))
-    c[:m], s[:m] = np.asarray(cos, float)[:m], np.asarray(sin, float)[:m]
-    c, s = normalise_phase(c, s)
-    return np.concatenate([c[1:] / a_max, s / a_max, [math.log(omega)]])
-
-
-def from_theta(theta: np.ndarray, a_max: float, harmonics: int) -> tuple[np.ndarray, np.ndarray, float]:
-    """Decision vector -> `(cos, sin, omega)`."""
-    n = harmonics
-    cos = a_max * np.concatenate([[0.0], theta[: n - 1]])
-    return cos, a_max * theta[n - 1 : 2 * n - 1], float(np.exp(theta[-1]))
-
-
-def _unit_stroke(cos: np.ndarray, sin: np.ndarray, scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    s = float(cons.stroke(jnp.asarray(cos), jnp.asarray(sin)))
-    return cos * scale / s, sin * scale / s
-
-
-def start_shapes(harmonics: int, seed: int, n_random: int) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Unit-stroke shapes (`cos`, `sin`) the starts are made of, at several strokes."""
-    rng = np.random.default_rng(seed)
-    n = np.arange(1, harmonics + 1)
-    e = lambda k: np.eye(1, harmonics, k)[0] if k < harmonics else np.zeros(harmonics)
-    zero = np.zeros(harmonics)
-    saw = (-1.0) ** (n + 1) / n
-    shapes = [_unit_stroke(zero, e(0), scale) for scale in (0.2, 0.35, 0.5, 0.7, 1.0)]
-    for scale in (0.35, 0.5, 0.7):
-        for third in (0.2, -0.2):  # resonant gaits of small stroke carry such a third harmonic
-            shapes.append(_unit_stroke(zero, e(0) + third * e(2), scale))
-            shapes.append(_unit_stroke(third * e(2), e(0), scale))
-    shapes += [_unit_stroke(zero, saw), _unit_stroke(zero, -saw)]
-    for _ in range(n_random):
-        c, s = rng.normal(size=harmonics) / n**2, e(0) + rng.normal(size=harmonics) / n**2
-        shapes.append(_unit_stroke(c, s, float(rng.uniform(0.3, 1.0))))
-    return shapes
-
-
-def _stroke_rows(harmonics: int, phases: np.ndarray) -> np.ndarray:
-    """$s(\\phi_j) = \\text{rows} \\cdot \\theta$ (units of $a_\\max$) at the given phases."""
-    n = np.arange(1, harmonics + 1)
-    arg = np.outer(phases, n)
-    return np.concatenate([np.cos(arg)[:, 1:], np.sin(arg), np.zeros((len(phases), 1))], axis=1)
-
-
-class StrokePeaks:
-    """The stroke constraint by local reduction: $1 - \\max_{\\phi \\in W_k} |s(\\phi)| \\ge 0$ on
-    `count` fixed, equal windows $W_k$ of the phase (units of $a_\\max$).
-
-    The maximum over a fixed window is a continuous function of $\\theta$ (unlike, say, the
-    $k$-th highest local maximum, which jumps when a ripple appears), so a local solver
-    sees no jumps. It is bracketed on a grid of 64 phases per harmonic and polished by
-    Newton's method on $s' = 0$ within the window; its gradient is
-    $\\operatorname{sgn} s(\\phi_k)\\,\\partial s(\\phi_k)/\\partial\\theta$ at the maximiser (envelope
-    theorem). With two windows per harmonic, every maximum of $|s|$ is in some window, so
-    bounding them all linearises $|s(\\phi)| \\le 1$ for all $\\phi$.
-    """
-
-    def __init__(self, harmonics: int):
-        self.harmonics = harmonics
-        self.count = 2 * harmonics
-        m = 64 * harmonics
-        self.grid = np.arange(m) * 2 * np.pi / m
-        self.rows = _stroke_rows(harmonics, self.grid)
-        self.width = 2 * np.pi / self.count
-
-    def peaks(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Per window: the phase of the largest $|s|$ and the signed value there."""
-        n = np.arange(1, self.harmonics + 1)
-        a = np.abs(self.rows @ theta).reshape(self.count, -1)
-        j = np.argmax(a, axis=1)
-        phi = self.grid.reshape(self.count, -1)[np.arange(self.count), j]
-        lo = np.arange(self.count) * self.width
-        c = np.concatenate([[0.0], theta[: self.harmonics - 1]])
-        s = theta[self.harmonics - 1 : 2 * self.harmonics - 1]
-        h = self.grid[1]
-        for _ in range(4):
-            arg = np.outer(phi, n)
-            d1 = (n * (s * np.cos(arg) - c * np.sin(arg))).sum(1)
-            d2 = -(n * n * (c * np.cos(arg) + s * np.sin(arg))).sum(1)
-            # Newton on s' = 0 toward a maximum of |s| (a minimum of s where s < 0).
-            val = _stroke_rows(self.harmonics, phi) @ theta
-            step = np.where(val * d2 < 0, -d1 / np.where(d2 != 0, d2, 1), 0)
-            new = np.clip(phi + np.clip(step, -h, h), lo, lo + self.width)
-            better = np.abs(_stroke_rows(self.harmonics, new) @ theta) > np.abs(val)
-            phi = np.where(better, new, phi)
-        return phi, _stroke_rows(self.harmonics, phi) @ theta
-
-    def __call__(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Constraint values `(count,)` and their Jacobian `(count, p)`."""
-        phi, val = self.peaks(theta)
-        return 1 - np.abs(val), -np.sign(val)[:, None] * _stroke_rows(self.harmonics, phi)
+from ._shapes import AbstractShape
+from ._starts import start_shapes, tension_starts
 
 
 PENALTY = 10.0
@@ -282,10 +184,10 @@ def _col(flag: np.ndarray, like: Any) -> np.ndarray:
     return flag.reshape(flag.shape + (1,) * (np.ndim(like) - 1))
 
 
-def _descent(x0, ask, stroke: "StrokePeaks", bounds, settings: ExactSettings, max_iter: int, at) -> None:
+def _descent(x0, ask, shape: AbstractShape, bounds, settings: ExactSettings, max_iter: int, at) -> None:
     """Monotone descent on the exact penalty $\\phi = f + \\rho\\,(\\max(0, -c_v) + \\max(0, -c_N))$:
-    quasi-Newton (L-BFGS) directions, the stroke kept by radial rescaling onto its exact
-    limit, $\\omega$ clipped to its bounds, and a backtracking (Armijo) line search that accepts
+    quasi-Newton (L-BFGS) directions, the stroke kept by the shape family's projection onto
+    its exact limit, $\\omega$ clipped to its bounds, and a backtracking (Armijo) line search that accepts
     only a decrease, so an iterate never walks into a costlier gait or a failed orbit."""
     rho = PENALTY
 
@@ -297,10 +199,7 @@ def _descent(x0, ask, stroke: "StrokePeaks", bounds, settings: ExactSettings, ma
         return fig.f + rho * sum(viol), g
 
     def project(x):
-        x = np.array(x, float)
-        st = 1 - float(np.min(stroke(x)[0]))
-        if st > 1:
-            x[:-1] /= st
+        x = shape.project(x)
         x[-1] = np.clip(x[-1], bounds.lb[-1], bounds.ub[-1])
         return x
 
@@ -350,18 +249,39 @@ def _descent(x0, ask, stroke: "StrokePeaks", bounds, settings: ExactSettings, ma
         x, phi, g = xn, phin, gn
 
 
-def _local_solver(x0, stroke: StrokePeaks, bounds, settings: ExactSettings, log: list, max_iter: int):
+HALF_STEP_RTOL = 1e-3
+"""Largest relative change of a candidate's speed or cost of transport with half the step (`_verify`)."""
+
+RUNNERS_UP = (0.0, 0.25, 0.5, 0.75)
+"""Where a local run's runners-up lie in its sequence of points that meet every constraint
+(fractions of it, in the order of evaluation; `_local_solver`)."""
+
+
+def _local_solver(x0, shape: AbstractShape, bounds, settings: ExactSettings, log: list, max_iter: int):
     """One local run (`settings.local_method`) from `x0`; `ask(x)` returns the `_Figures` at `x`.
 
     Returns the cheapest point it evaluated that meets every constraint (the speed, the
     normal-force margin and the stroke, the last to 1e-9); if none does, the point with the
     smallest speed deficit. A trust-region or line-search iterate may wander after it: the
-    objective has jumps where a held mass starts to slip."""
+    objective has jumps where a held mass starts to slip. Also returns runners-up: the points
+    at the fractions `RUNNERS_UP` of its sequence of points that meet every constraint. The
+    cheapest point often lies at such a jump, where the gait is fragile (a held mass's force
+    grazes its static limit, so that the engine's step or a perturbation decides when it
+    slips); an earlier point, further from the jump the descent was drawn to, is a fallback
+    for the verification."""
 
     def solve(ask):
         cache: dict[bytes, Any] = {}
         trace: list[dict] = []
         best: dict[str, Any] = {"key": (math.inf, math.inf), "x": np.array(x0, float)}
+        held_points: list[tuple[float, np.ndarray]] = []
+
+        def result():
+            if best["key"][0] != 0.0:
+                return best["x"], []
+            picks = sorted({int(f * len(held_points)) for f in RUNNERS_UP})
+            runners = [held_points[i][1] for i in picks if held_points[i][1].tobytes() != best["x"].tobytes()]
+            return best["x"], runners
 
         def at(x):
             key = np.asarray(x).tobytes()
@@ -370,16 +290,18 @@ def _local_solver(x0, stroke: StrokePeaks, bounds, settings: ExactSettings, log:
                 fig = cache[key] = ask(np.array(x, float))
                 trace.append({"f": float(fig.f), "c_speed": float(fig.c[0]), "c_normal": float(fig.c[1]), "ok": fig.ok})
                 if fig.ok:
-                    held = min(fig.c[0], fig.c[1]) >= 0 and float(np.min(stroke(np.asarray(x))[0])) >= -1e-9
+                    held = min(fig.c[0], fig.c[1]) >= 0 and shape.stroke(np.asarray(x)) <= 1 + 1e-9
                     rank = (0.0, fig.cot) if held else (1.0, -min(fig.c[0], 0.0) - min(fig.c[1], 0.0))
                     if rank < best["key"]:
                         best["key"], best["x"] = rank, np.array(x, float)
+                    if held:
+                        held_points.append((fig.cot, np.array(x, float)))
             return cache[key]
 
         if settings.local_method == "descent":
-            _descent(np.array(x0, float), ask, stroke, bounds, settings, max_iter, at)
+            _descent(np.array(x0, float), ask, shape, bounds, settings, max_iter, at)
             log.append({"message": "descent", "nit": len(trace), "trace": trace})
-            return best["x"]
+            return result()
         if settings.local_method == "SLSQP":
             res = scipy.optimize.minimize(
                 lambda x: at(x).f,
@@ -388,7 +310,7 @@ def _local_solver(x0, stroke: StrokePeaks, bounds, settings: ExactSettings, log:
                 method="SLSQP",
                 constraints=[
                     {"type": "ineq", "fun": lambda x: at(x).c, "jac": lambda x: at(x).dc},
-                    {"type": "ineq", "fun": lambda x: stroke(x)[0], "jac": lambda x: stroke(x)[1]},
+                    {"type": "ineq", "fun": lambda x: shape.constraint(x)[0], "jac": lambda x: shape.constraint(x)[1]},
                 ],
                 bounds=bounds,
                 options={"maxiter": max_iter, "ftol": 1e-10},
@@ -404,14 +326,18 @@ def _local_solver(x0, stroke: StrokePeaks, bounds, settings: ExactSettings, log:
                         lambda x: at(x).c, 0.0, np.inf, jac=cast(Any, lambda x: at(x).dc), hess=_zero_hessian
                     ),
                     scipy.optimize.NonlinearConstraint(
-                        lambda x: stroke(x)[0], 0.0, np.inf, jac=cast(Any, lambda x: stroke(x)[1]), hess=_zero_hessian
+                        lambda x: shape.constraint(x)[0],
+                        0.0,
+                        np.inf,
+                        jac=cast(Any, lambda x: shape.constraint(x)[1]),
+                        hess=_zero_hessian,
                     ),
                 ],
                 bounds=bounds,
                 options={"maxiter": max_iter, "initial_tr_radius": settings.trust_radius, "verbose": 0},
             )
         log.append({"message": str(res.message), "nit": int(res.nit), "trace": trace})
-        return best["x"]
+        return result()
 
     return solve
 
@@ -427,24 +353,32 @@ def _omega_bounds(params: Params, omega: float | None, settings: ExactSettings) 
     return settings.omega_min * wmin, settings.omega_max * float(params.wn1)
 
 
-def _starts(params, speed, a_max, harmonics, lo, hi, baseline, start, settings: ExactSettings) -> np.ndarray:
-    """Decision vectors of the starts (module docstring), a multiple of the batch size."""
+GRID = 256
+"""Phase samples per period of a start's stroke, before a shape family fits it."""
+
+
+def _as_waveform(start: Any) -> AbstractWaveform:
+    return start.waveform if isinstance(start, Optimum) else start
+
+
+def _starts(params, a_max, shape: AbstractShape, lo, hi, baseline, start, settings: ExactSettings) -> np.ndarray:
+    """Decision vectors of the starts (module docstring); the given `start` last."""
     omegas = [lo] if lo == hi else list(np.geomspace(max(lo, 0.1 * hi), hi / 1.5, settings.start_frequencies))
-    shapes = start_shapes(harmonics, settings.seed, settings.random_shapes)
-    out = [to_theta(a_max * c, a_max * s, w, a_max, harmonics) for w in omegas for c, s in shapes]
+    shapes = start_shapes(GRID, settings.seed, settings.random_shapes)
+    out = [shape.fit(v, w) for w in omegas for v in shapes]
+    phase = np.arange(GRID) * 2 * np.pi / GRID
     if baseline is not None and lo != hi:
-        out.append(to_theta([0.0], [baseline["a"]], baseline["omega"], a_max, harmonics))
+        out.append(shape.fit(baseline["a"] / a_max * np.sin(phase), baseline["omega"]))
+    if settings.tension_periods:
+        slowest = 2 * math.pi / float(min(params.wn1, params.wn2, params.wn3))
+        periods = slowest * np.geomspace(0.7, 4.0, settings.tension_periods)
+        for values, w in tension_starts(params, a_max, periods, settings.tension_levels):
+            out.append(shape.fit(values, w if lo != hi else lo))
     if start is not None:
-        c, s, w = np.asarray(start.cos, float), np.asarray(start.sin, float), float(start.omega)
-        out.append(to_theta(c, s, w if lo != hi else lo, a_max, harmonics))
+        wave = _as_waveform(start)
+        out.append(shape.fit(shape.sample(wave, GRID) / a_max, float(np.asarray(wave.omega)) if lo != hi else lo))
     theta = np.stack(out)
     theta[:, -1] = np.clip(theta[:, -1], math.log(lo), math.log(hi))
-    # Keep every start inside the stroke (a truncated start may overshoot).
-    for i, th in enumerate(theta):
-        c, s, _ = from_theta(th, 1.0, harmonics)
-        st = float(cons.stroke(jnp.asarray(c), jnp.asarray(s)))
-        if st > 1:
-            theta[i, :-1] /= st
     return theta
 
 
@@ -463,7 +397,7 @@ def optimise_exact(
     direction: int,
     a_max: float,
     omega: float | None,
-    harmonics: int,
+    shape: AbstractShape,
     settings: ExactSettings,
     baseline: dict | None,
     start: Any,
@@ -479,7 +413,7 @@ def optimise_exact(
         a_max=jnp.asarray(a_max, dtype),
         max_steps=jnp.asarray(max_steps, jnp.int32),
         tol=jnp.asarray(settings.newton_tol if jnp.finfo(dtype).bits == 64 else 1e-5, dtype),
-        harmonics=harmonics,
+        shape=shape,
         contact="paper",  # iterates past a lift-off stay defined; the margin constraint keeps N > 0
         dt=settings.dt,
         max_iter=settings.newton_iter,
@@ -491,8 +425,9 @@ def optimise_exact(
     log: dict[str, Any] = {}
 
     # -- starts, screened in batches of the same size as the local solves (one compilation).
-    theta0 = _starts(params, speed, a_max, harmonics, lo, hi, baseline, start, settings)
+    theta0 = _starts(params, a_max, shape, lo, hi, baseline, start, settings)
     n0 = len(theta0)
+    given = n0 - 1 if start is not None else None
     pad = (-n0) % lanes
     theta0 = np.concatenate([theta0, theta0[:pad]])
     periods = jnp.asarray(settings.transient, jnp.int32)
@@ -535,6 +470,9 @@ def optimise_exact(
             order.append(int(i))
         if len(order) == lanes:
             break
+    if given is not None and given not in order and np.isfinite(merit[given]):
+        # The given start (continuation: the optimum of a nearby requirement) is always refined.
+        order = order[: lanes - 1] + [given]
     log["starts"] = [{"omega": float(np.exp(theta0[i, -1])), "merit": float(merit[i])} for i in range(n0)]
     if not order:
         order = [0]
@@ -546,13 +484,12 @@ def optimise_exact(
 
     # -- local refinement in lockstep.
     bounds = scipy.optimize.Bounds(
-        np.r_[np.full(2 * harmonics - 1, -np.inf), math.log(lo) if free else -np.inf],
-        np.r_[np.full(2 * harmonics - 1, np.inf), math.log(hi) if free else np.inf],
+        np.r_[np.full(shape.size - 1, -np.inf), math.log(lo) if free else -np.inf],
+        np.r_[np.full(shape.size - 1, np.inf), math.log(hi) if free else np.inf],
     )
     ev.y = {k: ys[i][0] for k, i in enumerate(order)}
     ev.k = {k: ys[i][1] for k, i in enumerate(order)}
     log["local"] = []
-    stroke = StrokePeaks(harmonics)
     # Continuation in the required speed: a lane that starts too slow is led to v_min in
     # `stages` steps (geometric in speed); the last step has half the iterations.
     v0 = [v_target * max(0.1, 1 + min(0.0, figs[i].c[0])) for i in order]
@@ -564,73 +501,89 @@ def optimise_exact(
         else [settings.max_iter]
     )
     x = [theta0[i].copy() for i in order]
+    runners: Any = [[] for _ in range(lanes)]
     for j, it in enumerate(iters):
         ev.targets = {k: v0[k] * (v_target / v0[k]) ** ((j + 1) / len(iters)) for k in range(lanes)}
-        solvers = [_local_solver(x[k], stroke, bounds, settings, log["local"], it) for k in range(lanes)]
-        x = run_lockstep(solvers, ev)
+        solvers = [_local_solver(x[k], shape, bounds, settings, log["local"], it) for k in range(lanes)]
+        x, runners = zip(*run_lockstep(solvers, ev))
     ev.report(
         f"local runs done ({time.perf_counter() - t0:.0f} s); stroke / a_max "
-        + " ".join(f"{_stroke_of(xi, harmonics):.8f}" for xi in x)
+        + " ".join(f"{shape.stroke(xi):.8f}" for xi in x)
     )
-    # The exact stroke limit: radial rescaling of what the constraint tolerance let through.
+    # The exact stroke limit: what the constraint tolerance let through, moved onto it.
+    x = [shape.project(xi) for xi in x]
+    candidates = [("start", theta0[order[0]])]
+    if given is not None:
+        candidates.append(("given start", theta0[given]))
+    candidates += [(f"local {k}", x[k]) for k in range(lanes)]
     for k in range(lanes):
-        s = _stroke_of(x[k], harmonics)
-        if s > 1:
-            x[k][:-1] /= s
-    best_start = order[0]
-    candidates = [("start", theta0[best_start])] + [(f"local {k}", x[k]) for k in range(lanes)]
-    return _verify(params, speed, direction, a_max, harmonics, free, settings, candidates, baseline, log, t0, ev)
+        candidates += [(f"local {k} runner-up {j}", shape.project(r)) for j, r in enumerate(runners[k])]
+    return _verify(params, speed, direction, a_max, shape, free, settings, candidates, baseline, log, t0, ev)
 
 
-def _stroke_of(theta: np.ndarray, harmonics: int) -> float:
-    c, s, _ = from_theta(theta, 1.0, harmonics)
-    return float(cons.stroke(jnp.asarray(c), jnp.asarray(s)))
+def _verify(params, speed, direction, a_max, shape, free, settings, candidates, baseline, log, t0, ev):
+    """Solve each candidate's steady gait (strict contact, relaxed start) and keep the cheapest feasible one.
 
-
-def _verify(params, speed, direction, a_max, harmonics, free, settings, candidates, baseline, log, t0, ev):
-    """Solve each candidate's steady gait (strict contact, relaxed start) and keep the cheapest feasible one."""
+    A candidate counts as feasible only if its gait is also converged, stable and without
+    lift-off with half the engine's step, with the same speed and cost of transport to
+    `HALF_STEP_RTOL` (the figures reported are those at the full step)."""
     dtype = params.dtype
-    names = [n for n, _ in candidates]
-    theta = np.stack([th for _, th in candidates])
-    n = len(theta)
-    cs = [from_theta(th, a_max, harmonics) for th in theta]
-    wave = Fourier(
-        jnp.asarray(np.stack([c for c, _, _ in cs]), dtype),
-        jnp.asarray(np.stack([s for _, s, _ in cs]), dtype),
-        jnp.asarray([w for _, _, w in cs], dtype),
-        jnp.full((n,), params.lbar, dtype),
-    )
-    batch = pareto.with_waveform_frequency(params, wave)
-    gait = steady_gait(batch, waveform=wave, contact="strict", start="relaxed", transient=settings.transient,
-                       dynamics=_exact_dynamics(settings))  # fmt: skip
+    n = len(candidates)
+    # A fixed number of rows (padded with the first candidate), so that every optimisation
+    # with the same settings runs the same compiled verification.
+    rows = 3 + settings.local * (1 + len(RUNNERS_UP))
+    names = [name for name, _ in candidates]
+    thetas = [th for _, th in candidates] + [candidates[0][1]] * (rows - n)
+    origins = shape.origins
+    lbar, amax = jnp.asarray(params.lbar, dtype), jnp.asarray(a_max, dtype)
+
+    def gaits(theta, dt):
+        wave = shape.waveform(jnp.asarray(theta, dtype), amax, lbar)
+        batch = pareto.with_waveform_frequency(params, wave)
+        return steady_gait(batch, waveform=wave, contact="strict", start="relaxed", transient=settings.transient,
+                           dynamics=_exact_dynamics(dt))  # fmt: skip
+
+    # Every candidate at each time origin the family offers, candidate-major.
+    theta = np.stack([shape.shift(th, o) for th in thetas for o in origins])
+    gait = gaits(theta, settings.dt)
+    pick = _best_sections(gait, rows, len(origins))
+    gait = jax.tree_util.tree_map(lambda x: x[pick] if np.ndim(x) else x, gait)
+    theta = theta[pick]
     fig = pareto.gait_figures(gait)
-    strokes = np.array([a_max * _stroke_of(th, harmonics) for th in theta])
+    half = pareto.gait_figures(gaits(theta, settings.dt / 2))
+    agree = lambda a, b: np.abs(a - b) <= HALF_STEP_RTOL * np.abs(a)
+    steady = fig.ok & half.ok & agree(fig.speed, half.speed) & agree(fig.cost, half.cost)
+    fig = fig._replace(ok=steady)
+    gait = jax.tree_util.tree_map(lambda x: x[:n] if np.ndim(x) else x, gait)
+    fig = pareto.ExactFigures(*(np.asarray(f)[:n] for f in fig))
+    half = pareto.ExactFigures(*(np.asarray(f)[:n] for f in half))
+    theta = theta[:n]
+    strokes = np.array([a_max * shape.stroke(th) for th in theta])
     k, feasible, exact = verified(fig, strokes, speed, direction, a_max, float(jnp.finfo(dtype).eps), baseline)
     table = [
         {
             "candidate": names[i],
-            "omega": cs[i][2],
+            "omega": float(np.exp(theta[i, -1])),
             "mean_speed_exact": float(fig.speed[i]),
             "cost_of_transport_exact": float(fig.cost[i]),
             "stable_exact": bool(fig.ok[i]),
+            "half_step_speed": float(half.speed[i]),
+            "half_step_cost": float(half.cost[i]),
             "liftoff_exact": bool(fig.liftoff[i]),
             "stroke": float(strokes[i]),
             "feasible_exact": bool(feasible[i]),
         }
         for i in range(n)
     ]
-    c, s, w = cs[k]
     rho = np.abs(np.asarray(gait.multipliers[k]))
     opt = Optimum(
         v_min=speed,
         direction=direction,
         a_max=float(a_max),
         margin=settings.margin,
-        harmonics=harmonics,
         free_omega=free,
-        cos=c,
-        sin=s,
-        omega=w,
+        **shape.fields(theta[k], a_max),
+        omega=float(np.exp(theta[k, -1])),
         lbar=float(params.lbar),
         **exact,
         mean_speed_smoothed=math.nan,
@@ -651,7 +604,25 @@ def _verify(params, speed, direction, a_max, harmonics, free, settings, candidat
     return opt, log
 
 
-def _exact_dynamics(settings: ExactSettings):
+def _best_sections(gait: Any, n: int, m: int) -> np.ndarray:
+    """Per candidate, the index of the time origin (of `m`) whose steady gait to report.
+
+    The section of [`steady_gait`][] is the phase $\\omega t \\equiv 0$. Where a slipping mass's
+    velocity is about to reach zero there, the period map of the reduced state is nearly
+    discontinuous (a Newton iterate on the other side of $v_i = 0$ starts with the mass
+    stuck or sliding back), so that Newton's method may stall and the monodromy, hence the
+    stability verdict, depends on the last iterate. The same gait seen from another time
+    origin has its section elsewhere: we take the origin whose orbit converged with the
+    largest clearance $\\min |v_i|$ over the masses slipping at the section (a stuck mass has
+    none to lose)."""
+    status = np.asarray(gait.status).reshape(n, m)
+    v = np.abs(np.stack([np.asarray(gait.v1), np.asarray(gait.v2)], axis=-1)).reshape(n, m, 2)
+    clearance = np.min(np.where(v > 0, v, np.inf), axis=-1)
+    score = np.where(status == GaitStatus.CONVERGED, np.nan_to_num(clearance, nan=-1.0), -np.inf)
+    return np.arange(n) * m + np.argmax(score, axis=1)
+
+
+def _exact_dynamics(dt: float):
     from ..dynamics._base import Exact
 
-    return Exact(dt=settings.dt)
+    return Exact(dt=dt)

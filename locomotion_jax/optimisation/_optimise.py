@@ -55,6 +55,7 @@ from ..model._waveform import Fourier
 from . import _constraints as cons, _pareto as pareto
 from ._objective import make_plan, Plan, rollout
 from ._optimum import ExactSettings, Optimum, Settings, verified
+from ._shapes import FourierShape, SplineShape
 
 
 # -- decision variables -------------------------------------------------------
@@ -287,10 +288,11 @@ def optimise(
 
     Two methods:
 
-    - `"exact"` (default, `optimisation._exact`): on the steady gaits of the exact hybrid
-      model, with gradients by forward mode and the implicit function theorem, many
-      harmonics (default 16), starts screened and the best refined by a trust-region
-      SQP in lockstep, every candidate verified by [`steady_gait`][].
+    - `"exact"` (default, `_exact_optimise`): on the steady gaits of the exact hybrid
+      model, with gradients by forward mode and the implicit function theorem, over a
+      periodic cubic spline stroke of 64 knots (or a Fourier series: `ExactSettings.shape`),
+      starts screened and the best refined by a monotone descent in lockstep, every
+      candidate verified by [`steady_gait`][].
     - `"smoothed"` (this module's docstring): Adam on an augmented Lagrangian of a
       smoothed friction model (default 3 harmonics), verified on the exact model.
 
@@ -302,13 +304,16 @@ def optimise(
     - `method`: `"exact"` or `"smoothed"`.
     - `direction`: +1 (forward, default) or -1 (backward).
     - `omega`: fix the base frequency; `None` optimises it.
-    - `harmonics`: number $N$ of harmonics (default 16 exact, 3 smoothed).
+    - `harmonics`: number $N$ of Fourier harmonics: the smoothed method (default 3) and the
+      exact method with `ExactSettings(shape="fourier")` (default 16); the exact method's
+      default spline takes `ExactSettings.knots` instead.
     - `settings`: [`ExactSettings`][locomotion_jax.optimisation._optimum.ExactSettings] (exact) or
       [`Settings`][] (smoothed); defaults if `None`.
     - `sweep`: a precomputed [`sinusoid_sweep`][locomotion_jax.optimisation._pareto.sinusoid_sweep] for the same
       `params` and `a_max` (the baseline); computed if `None`.
     - `start`: exact method: a waveform to start from besides the built-in starts (an
-      [`Optimum`][] or a [`Fourier`][], e.g. the optimum at a nearby `v_min`: continuation).
+      [`Optimum`][] or any waveform, e.g. the optimum at a nearby `v_min`: continuation); it
+      is always refined, and is a candidate itself.
 
     **Returns:** an [`Optimum`][]: coefficients, exact figures (whole periods of the steady
     gait), constraint checks on the exact model and the best sinusoid for comparison.
@@ -326,12 +331,18 @@ def optimise(
     if method not in ("exact", "smoothed"):
         raise ValueError(f"method must be 'exact' or 'smoothed', got {method!r}.")
     exact = method == "exact"
-    if harmonics is None:
-        harmonics = 16 if exact else 3
     kind = ExactSettings if exact else Settings
     settings = kind() if settings is None else settings
     if not isinstance(settings, kind):
         raise TypeError(f"settings for method={method!r} must be a {kind.__name__}, got {type(settings).__name__}.")
+    spline = exact and cast(ExactSettings, settings).shape == "spline"
+    if spline and harmonics is not None:
+        raise ValueError(
+            "harmonics applies to Fourier strokes; the exact method's default stroke is a spline "
+            "(ExactSettings.knots). Pass settings=ExactSettings(shape='fourier') to optimise harmonics."
+        )
+    if harmonics is None:
+        harmonics = 16 if exact else 3
     if start is not None and not exact:
         raise ValueError("start= is only used by method='exact'.")
     if exact and harmonics < 2:
@@ -346,7 +357,8 @@ def optimise(
     baseline = _baseline(params, a_max, speed, direction, sweep, s.refine_baseline, s.dt)
     from ._exact import optimise_exact
 
-    opt, _ = optimise_exact(params, speed, direction, a_max, omega, harmonics, s, baseline, start)
+    shape = SplineShape(knots=s.knots) if spline else FourierShape(harmonics=harmonics)
+    opt, _ = optimise_exact(params, speed, direction, a_max, omega, shape, s, baseline, start)
     return opt
 
 

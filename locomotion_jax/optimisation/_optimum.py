@@ -8,7 +8,7 @@ import equinox as eqx
 import numpy as np
 
 from .._json import dumps, jsonable
-from ..model._waveform import Fourier
+from ..model._waveform import AbstractWaveform, Fourier, Spline
 
 
 class Settings(eqx.Module):
@@ -77,9 +77,17 @@ class Settings(eqx.Module):
 
 class ExactSettings(eqx.Module):
     """Settings of the exact method of [`optimise`][locomotion_jax.optimisation._optimise.optimise]
-    (`method="exact"`, module `optimisation._exact`). Python numbers: changing `local`,
+    (`method="exact"`, module `_exact_optimise`). Python numbers: changing `local`,
     `dt`, `newton_iter` or the harmonics recompiles; the others do not.
 
+    - `shape`: the family of strokes searched (`_shapes`): `"spline"` (default), a periodic cubic
+      B-spline of `knots` control values, whose stroke bound is a box on them and which
+      represents step-like strokes without overshoot; or `"fourier"`, a Fourier series of
+      `harmonics` harmonics (the argument of `optimise`, default 16).
+    - `tension_periods`, `tension_levels`: the tension-wave starts (`_starts`: idealised
+      inchworm gaits whose spring tension alternates in sign), over `tension_periods` periods
+      from 0.7 to 4 times the slowest natural period and these levels between the two masses'
+      break-away forces; 0 periods: none.
     - `local`: starts refined locally, in lockstep (one batched engine call each step).
     - `start_frequencies`: base frequencies of the starts, log-spaced over the range.
     - `random_shapes`: random waveforms among the start shapes (with sinusoids of five
@@ -89,7 +97,7 @@ class ExactSettings(eqx.Module):
       is too slow; the last run has half the iterations); `trust_radius`: the largest first step
       of a line search, or the initial trust region (decision variables: coefficients in units of
       $a_\\max$, $\\log\\omega$); `local_method`: `"descent"` (monotone L-BFGS descent on an exact
-      penalty, `optimisation._exact._descent`), `"trust-constr"` or `"SLSQP"` (scipy's).
+      penalty, `_exact_optimise._descent`), `"trust-constr"` or `"SLSQP"` (scipy's).
     - `margin`: required $\\min_t N_{1,2}$ over the orbit (units of weight).
     - `speed_slack`: the orbit targets $v_\\min (1 + \\text{slack})$.
     - `omega_min`, `omega_max`: range of a free base frequency, in units of the smallest
@@ -101,6 +109,10 @@ class ExactSettings(eqx.Module):
     - `seed`: for the random shapes; `verbose`: progress on stderr.
     """
 
+    shape: str = "spline"
+    knots: int = 64
+    tension_periods: int = 10
+    tension_levels: tuple[float, ...] = (0.3, 0.55, 0.8)
     local: int = 4
     start_frequencies: int = 8
     random_shapes: int = 2
@@ -127,6 +139,15 @@ class ExactSettings(eqx.Module):
             raise ValueError(
                 f"ExactSettings.local_method must be 'descent', 'trust-constr' or 'SLSQP', got {self.local_method!r}."
             )
+        if self.shape not in ("spline", "fourier"):
+            raise ValueError(f"ExactSettings.shape must be 'spline' or 'fourier', got {self.shape!r}.")
+        if self.knots < 4:
+            raise ValueError(f"ExactSettings.knots must be >= 4, got {self.knots!r}.")
+        if self.tension_periods < 0 or any(not (0 <= x <= 1) for x in self.tension_levels):
+            raise ValueError(
+                "ExactSettings: tension_periods must be >= 0 and tension_levels within [0, 1], got "
+                f"{self.tension_periods!r}, {self.tension_levels!r}."
+            )
         if not (0 < self.omega_min < self.omega_max):
             raise ValueError(
                 f"ExactSettings: need 0 < omega_min < omega_max, got {self.omega_min!r}, {self.omega_max!r}."
@@ -138,7 +159,9 @@ class Optimum:
     """Result of [`optimise`][locomotion_jax.optimisation._optimise.optimise]; every figure called `*_exact` is from
     the exact hybrid model.
 
-    - `cos`, `sin`, `omega`, `lbar`: the waveform ([`Fourier`][], `waveform`).
+    - `cos`, `sin`, `omega`, `lbar`: the waveform ([`Fourier`][], `waveform`); for a spline
+      (`shape == "spline"`) `cos` and `sin` are empty, `harmonics` is 0 and `control` holds
+      the [`Spline`][]'s control values.
     - `mean_speed_exact`, `cost_of_transport_exact`: signed mean speed and
       $e_d / |\\Delta X|$ after the paper's transient, from the relaxed spring.
     - `constraints_exact`: `{"speed", "stroke", "no_liftoff"}` each True when it
@@ -154,7 +177,9 @@ class Optimum:
     - `source`: which candidate won; `candidates`: every candidate's figures.
     - `history`: per block costs and constraint values; `runtime_s`.
     - `method`: `"exact"` or `"smoothed"`. Exact method only (else `None`/NaN):
-      `stable_exact` (all Floquet multipliers inside the unit circle),
+      `stable_exact` (a converged steady gait without lift-off whose Floquet multipliers all lie
+      inside the unit circle, and which is the same with half the engine's step: its speed
+      and cost of transport within 1e-3),
       `spectral_radius_exact` (their largest modulus), `gait_period_exact`,
       `evaluations` (batched orbit evaluations). With the exact method the
       `*_smoothed` figures and `eps` are NaN, and the `*_exact` figures are those of the
@@ -194,9 +219,13 @@ class Optimum:
     spectral_radius_exact: float = math.nan
     gait_period_exact: float = math.nan
     evaluations: int = 0
+    shape: str = "fourier"
+    control: np.ndarray | None = None
 
     @property
-    def waveform(self) -> Fourier:
+    def waveform(self) -> AbstractWaveform:
+        if self.control is not None:
+            return Spline(self.control, self.omega, self.lbar)
         return Fourier(self.cos, self.sin, self.omega, self.lbar)
 
     def to_dict(self, full: bool = False) -> dict[str, Any]:
@@ -220,10 +249,16 @@ class Optimum:
                 else f"normal forces >= {self.margin:g} (smoothed), no lift-off (exact)"
             ),
             f"method: {self.method}; base frequency omega = {self.omega:.6g} "
-            f"({'optimised' if self.free_omega else 'fixed'}), lbar = {self.lbar:g}, {self.harmonics} harmonics",
-            "cos coefficients: " + " ".join(f"{c:+.6f}" for c in self.cos),
-            "sin coefficients: " + " ".join(f"{s:+.6f}" for s in self.sin),
+            f"({'optimised' if self.free_omega else 'fixed'}), lbar = {self.lbar:g}, "
+            + (f"{self.harmonics} harmonics" if self.control is None else f"spline of {len(self.control)} knots"),
         ]
+        if self.control is None:
+            lines += [
+                "cos coefficients: " + " ".join(f"{c:+.6f}" for c in self.cos),
+                "sin coefficients: " + " ".join(f"{s:+.6f}" for s in self.sin),
+            ]
+        else:
+            lines.append("control values: " + " ".join(f"{c:+.5f}" for c in self.control))
         if exact:
             lines += [
                 f"steady gait (exact, whole periods): mean speed {fmt(self.mean_speed_exact)}, cost of transport "

@@ -25,15 +25,11 @@ def _plt():
 def plot_waveform(opt: Optimum, path: Path) -> Path:
     """$\\ell_0 - \\bar\\ell$ over one period: the optimum and the best sinusoid."""
     plt = _plt()
-    phase = np.linspace(0, 1, 400)
     fig, ax = plt.subplots(figsize=(6, 3.6))
+    phase = np.linspace(0, 1, 1200)  # fine enough for the steps of a spline stroke
     l0, _ = opt.waveform(jnp.asarray(phase * 2 * math.pi / opt.omega))
-    ax.plot(
-        phase,
-        np.asarray(l0) - opt.lbar,
-        lw=2,
-        label=f"optimised, $\\omega$ = {opt.omega:.3g} ({opt.harmonics} harmonics)",
-    )
+    kind = f"{opt.harmonics} harmonics" if opt.control is None else f"spline, {len(opt.control)} knots"
+    ax.plot(phase, np.asarray(l0) - opt.lbar, lw=2, label=f"optimised, $\\omega$ = {opt.omega:.3g} ({kind})")
     if opt.sinusoid is not None:
         s = opt.sinusoid
         ax.plot(

@@ -1,0 +1,119 @@
+"""The spline stroke, the exact optimiser's shape families and its tension-wave starts."""
+
+import math
+
+import jax.numpy as jnp
+import locomotion_jax as lj
+import numpy as np
+import pytest
+from locomotion_jax.optimisation import _pareto, _shapes, _starts
+from scipy.interpolate import BSpline
+
+
+def _scipy_spline(control: np.ndarray, omega: float, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Independent evaluation: scipy's B-spline on an extended knot vector, basis i centred at i - 1."""
+    m = len(control)
+    bs = BSpline(np.arange(-3.0, m + 4.0), control[(np.arange(m + 3) - 1) % m], 3, extrapolate=False)
+    s = (omega * t * m / (2 * math.pi)) % m
+    r = omega * m / (2 * math.pi)
+    return 3.0 + bs(s), r * bs(s, 1), r * r * bs(s, 2)
+
+
+@pytest.mark.parametrize("dtype", [jnp.float64, jnp.float32])
+def test_spline_value_and_derivatives(dtype):
+    # Value, rate and second rate against scipy's B-spline (an independent evaluation), the
+    # rate also against central differences of the value; the dtype is kept.
+    tol = 1e-12 if dtype == jnp.float64 else 2e-6
+    rng = np.random.default_rng(0)
+    control, omega = rng.uniform(-0.05, 0.05, 11), 2.3
+    wave = lj.Spline(jnp.asarray(control, dtype), jnp.asarray(omega, dtype), jnp.asarray(3.0, dtype))
+    t = np.linspace(0.0, 2 * 2 * math.pi / omega, 2001)
+    phase = omega * t
+    l0, dl0, ddl0 = wave.at_phase(jnp.asarray(np.cos(phase), dtype), jnp.asarray(np.sin(phase), dtype))
+    assert l0.dtype == dl0.dtype == ddl0.dtype == dtype
+    ref = _scipy_spline(control, omega, t)
+    scale = np.max(np.abs(ref[1])), np.max(np.abs(ref[2]))
+    np.testing.assert_allclose(np.asarray(l0, float), ref[0], atol=3 * tol * 3)
+    np.testing.assert_allclose(np.asarray(dl0, float), ref[1], atol=50 * tol * scale[0] + 10 * tol)
+    np.testing.assert_allclose(np.asarray(ddl0, float), ref[2], atol=50 * tol * scale[1] + 10 * tol)
+    if dtype == jnp.float64:
+        h = 1e-6
+        fd = (np.asarray(wave(jnp.asarray(t + h))[0]) - np.asarray(wave(jnp.asarray(t - h))[0])) / (2 * h)
+        np.testing.assert_allclose(np.asarray(wave(jnp.asarray(t))[1]), fd, atol=1e-8)
+    # Batched control values along a leading axis, as the optimiser's lanes use them.
+    batch = lj.Spline(jnp.stack([control, -control]), jnp.array([omega, omega]), jnp.array([3.0, 3.0]))
+    two = batch.at_phase(jnp.full(2, math.cos(0.7)), jnp.full(2, math.sin(0.7)))[0]
+    one = lj.Spline(control, omega, 3.0).at_phase(jnp.asarray(math.cos(0.7)), jnp.asarray(math.sin(0.7)))[0]
+    np.testing.assert_allclose(np.asarray(two), [float(one), 6.0 - float(one)], rtol=1e-14)
+
+
+def test_spline_stroke_is_bounded_by_its_control_values():
+    # Convex hull: the stroke never exceeds max |c_j|; it reaches it on a plateau of three equal
+    # values; spline_stroke locates the true maximum (against a dense evaluation).
+    rng = np.random.default_rng(1)
+    phase = np.linspace(0, 2 * math.pi, 200_001)
+    for m in (5, 16, 64):
+        control = rng.uniform(-1, 1, m)
+        wave = lj.Spline(control, 1.0, 0.0)
+        dense = np.max(np.abs(np.asarray(wave.at_phase(jnp.asarray(np.cos(phase)), jnp.asarray(np.sin(phase)))[0])))
+        assert dense <= float(wave.stroke()) * (1 + 1e-12)
+        assert _shapes.spline_stroke(control) == pytest.approx(dense, rel=1e-8)
+    plateau = np.r_[np.ones(3), -0.5 * np.ones(5)]
+    assert _shapes.spline_stroke(plateau) == pytest.approx(1.0, rel=1e-14)
+    assert float(lj.Spline(plateau, 1.0, 0.0).stroke()) == 1.0
+
+
+def test_shape_families_fit_project_and_constrain():
+    grid = 256
+    phase = np.arange(grid) * 2 * np.pi / grid
+    # A Fourier series is fitted exactly, up to the time shift that makes A_1 = 0, B_1 >= 0.
+    four = _shapes.FourierShape(harmonics=4)
+    values = 0.5 * np.sin(phase + 0.3) + 0.2 * np.cos(3 * phase)
+    theta = four.fit(values, 2.0)
+    assert len(theta) == four.size and float(np.exp(theta[-1])) == pytest.approx(2.0)
+    got = four.sample(four.waveform(jnp.asarray(theta), jnp.asarray(1.0), jnp.asarray(0.0)), grid)
+    np.testing.assert_allclose(np.abs(np.fft.rfft(got)), np.abs(np.fft.rfft(values)), atol=1e-9)
+    c, s, _ = _shapes.from_theta(theta, 1.0, 4)
+    assert c[0] == 0.0 and s[0] == pytest.approx(0.5)
+    # A spline interpolates the samples at its knots; the box is kept by clipping.
+    spl = _shapes.SplineShape(knots=32)
+    theta = spl.fit(0.8 * values, 3.0)
+    got = spl.sample(spl.waveform(jnp.asarray(theta), jnp.asarray(1.0), jnp.asarray(0.0)), grid)
+    np.testing.assert_allclose(got[:: grid // 32], 0.8 * values[:: grid // 32], atol=1e-12)
+    big = spl.fit(3.0 * values, 3.0)
+    assert np.max(np.abs(big[:-1])) == 1.0 and spl.stroke(big) <= 1.0
+    assert big[-1] == pytest.approx(math.log(3.0))
+    # The box constraint's Jacobian against central differences.
+    x = np.r_[np.random.default_rng(2).uniform(-0.9, 0.9, 32), 0.1]
+    g, jac = spl.constraint(x)
+    d = np.random.default_rng(3).normal(size=x.shape)
+    h = 1e-7
+    np.testing.assert_allclose(
+        jac @ d, (spl.constraint(x + h * d)[0] - spl.constraint(x - h * d)[0]) / (2 * h), atol=1e-7
+    )
+    # A shift of the time origin by whole knots is exact: l0'(phi) = l0(phi + 2 pi turns).
+    turns = spl.origins[1]
+    moved = spl.sample(spl.waveform(jnp.asarray(spl.shift(x, turns)), jnp.asarray(1.0), jnp.asarray(0.0)), grid)
+    orig = spl.sample(spl.waveform(jnp.asarray(x), jnp.asarray(1.0), jnp.asarray(0.0)), grid)
+    np.testing.assert_allclose(moved, np.roll(orig, -round(turns * grid)), atol=1e-14)
+    with pytest.raises(ValueError, match="knots"):
+        spl.shift(x, 0.01)
+    with pytest.raises(ValueError, match="knots"):
+        _shapes.SplineShape(knots=3)
+
+
+def test_tension_wave_start_is_fast_and_cheap():
+    # The idealised inchworm whose tension alternates in sign, as a spline of 64 knots run
+    # open-loop on the exact model: faster than 0.045 near the quasi-static floor (~0.922),
+    # where every sinusoid of the same stroke costs more than 3 (README, Optimal actuation).
+    params = lj.Params()
+    starts = _starts.tension_starts(params, 0.05, [1.4], (0.38,))
+    assert len(starts) == 1
+    values, omega = starts[0]
+    assert np.max(np.abs(values)) <= 1.0 and omega == pytest.approx(2 * math.pi / 1.4)
+    shape = _shapes.SplineShape(knots=64)
+    theta = shape.fit(values, omega)
+    wave = shape.waveform(jnp.asarray(theta), jnp.asarray(0.05), jnp.asarray(3.0))
+    fig = _pareto.exact_figures(params, wave)
+    assert bool(fig.ok)
+    assert float(fig.speed) > 0.045 and float(fig.cost) < 0.95
