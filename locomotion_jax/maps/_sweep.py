@@ -37,10 +37,12 @@ import numpy as np
 from .._custom_types import ArrayLike, Contact, Start
 from .._results import Measurement
 from .._status import Regime, Status
-from ..dynamics._base import AbstractDynamics, Exact, Smoothed
+from ..dynamics._base import AbstractDynamics
+from ..dynamics._exact_dynamics import Exact
+from ..dynamics._runs import horizon_bound
 from ..model import _two_mass as model
 from ..model._params import _validity, DEFAULTS, PARAM_NAMES, Params, VALID_RANGES
-from ..run._batch import default_max_steps, horizon_bound
+from ..run._batch import dynamics_arg
 from ..run._measure import check_measure_args
 from . import _sharding as sharding
 from ._store import ChunkOrder, ChunkStore, digest, read_finished
@@ -223,16 +225,12 @@ def _float_dtype(dtype: Any) -> np.dtype:
 
 def _max_steps(grid: _Grid, dynamics: AbstractDynamics, horizon: float) -> int:
     """One step cap for the whole sweep (a static of the compilation), from its largest t_start."""
-    if not isinstance(dynamics, Exact):
-        return 0
-    if dynamics.max_steps is not None:
-        return dynamics.max_steps
     # t_start depends on k and mhat only (eqs. 11-12): bound it over their combinations.
     k = grid.values.get("k", np.asarray([grid.fixed.get("k", DEFAULTS["k"])]))
     mh = grid.values.get("mhat", np.asarray([grid.fixed.get("mhat", DEFAULTS["mhat"])]))
     if grid.mode == "grid":
         k, mh = (x.ravel() for x in np.meshgrid(k, mh, indexing="ij"))
-    return default_max_steps(horizon_bound(Params(k=k, mhat=mh, check=False), horizon), dynamics.dt)
+    return dynamics.step_cap(horizon_bound(Params(k=k, mhat=mh, check=False), horizon))
 
 
 def resolve_order(
@@ -240,8 +238,9 @@ def resolve_order(
 ) -> ChunkOrder:
     """The order a sweep's chunks are cut in: `"natural"` (grid order) or `"cost"`.
 
-    `"auto"` picks `"cost"` where sorting can pay for its pilot run: the exact
-    engine (whose cost the pilot models), durations that can differ (`horizon >
+    `"auto"` picks `"cost"` where sorting can pay for its pilot run: dynamics whose
+    iterations follow from a step (`AbstractDynamics.nominal_step`; the exact engine,
+    whose cost the pilot models), durations that can differ (`horizon >
     window`: the run ends at $\\tau_z$ somewhere in between), several loops in
     sequence on each device (chunks, or sub-batches of `_sharding.MICRO_BATCH`:
     with a single loop per device the slowest configuration sets the time in any
@@ -253,7 +252,8 @@ def resolve_order(
         raise ValueError(f"order must be one of {', '.join(map(repr, ORDERS))}, got {order!r}.")
     if order == "natural" or order == "cost":
         return order
-    pays = isinstance(dynamics, Exact) and horizon > window and loops_per_device > 1 and n_configs >= AUTO_MIN_CONFIGS
+    stepped = dynamics.nominal_step() is not None
+    pays = stepped and horizon > window and loops_per_device > 1 and n_configs >= AUTO_MIN_CONFIGS
     return "cost" if pays else "natural"
 
 
@@ -276,8 +276,9 @@ def _cost_permutation(
     from ._schedule import cost_order
 
     STATS["pilots"] += 1
-    # The pilot runs the exact engine; for the smoothed one only the durations it predicts matter.
-    dt = dynamics.dt if isinstance(dynamics, Exact) else Exact().dt
+    # The pilot runs the exact engine; for adaptive dynamics only the durations it predicts matter.
+    step = dynamics.nominal_step()
+    dt = Exact().dt if step is None else step
     return cost_order(
         grid.config_values(np.arange(grid.size)),
         z=z,
@@ -413,7 +414,7 @@ def sweep(
       `fixed`, each a 1-D array with one entry per configuration) to a batched
       [`Chain`][] of that batch shape (build it with `check=False` and let
       `on_invalid` decide). The axes' names are then free. Chain maps run chunk by
-      chunk on the N-mass exact engine (`dynamics` must be `Exact`), in memory or
+      chunk on the dynamics' N-mass engine (`AbstractDynamics.measure_chain`), in memory or
       written to a NetCDF `path` when done (no resume, no Zarr store, grid order).
     - `t_start`: an explicit measurement start for every configuration (chains only;
       default `Chain.t_start`).
@@ -426,7 +427,7 @@ def sweep(
     **Raises:** `ValueError`, before any computation, for an unknown parameter, an
     empty or non-1-D axis, an invalid configuration (naming the parameter, its valid
     range and the grid index), bad settings, or an output path that cannot be written
-    or holds a different sweep. `TypeError` for an unknown `dynamics`.
+    or holds a different sweep. `TypeError` for a `dynamics` that is not an [`AbstractDynamics`][].
 
     !!! Example
 
@@ -436,14 +437,12 @@ def sweep(
         (ds.regime == Regime.SSL).plot()
         ```
     """
-    dynamics = Exact() if dynamics is None else dynamics
+    dynamics = dynamics_arg(dynamics)
     if mechanism is not None:
         return _sweep_mechanism(mechanism, axes, fixed, mode, z, horizon, window, t_start, dynamics, contact, start,
                                 dtype, chunk_size, path, overwrite, progress, on_invalid, order)  # fmt: skip
     if t_start is not None:
         raise ValueError("t_start is for chain maps (mechanism=...); the paper's model starts at Params.t_start.")
-    if not isinstance(dynamics, (Exact, Smoothed)):
-        raise TypeError(f"dynamics must be Exact or Smoothed, got {type(dynamics).__name__}.")
     model.check_contact(contact)
     model.initial_gap(Params(), start)  # validates `start`
     check_measure_args(z, horizon, window)
@@ -455,7 +454,7 @@ def sweep(
     grid = _Grid(axes, fixed, mode)
     if on_invalid == "raise":
         _check_valid(grid)
-    desc = dynamics.describe() | ({"max_steps": dynamics.max_steps} if isinstance(dynamics, Exact) else {})
+    desc = dynamics.spec()
     spec = {
         "spec_version": 1,
         **grid.spec(),
@@ -597,8 +596,6 @@ def _sweep_mechanism(mechanism: "Callable[..., Chain]", axes, fixed, mode, z, ho
 
     if not callable(mechanism):
         raise TypeError(f"mechanism must be a function of the swept values returning a Chain, got {mechanism!r}.")
-    if not isinstance(dynamics, (Exact, Smoothed)):
-        raise TypeError(f"dynamics must be Exact or Smoothed for a chain map, got {type(dynamics).__name__}.")
     if order == "cost":
         raise ValueError("order='cost' is for maps of the paper's model; a chain map runs in grid order.")
     if on_invalid not in ("raise", "flag"):

@@ -652,6 +652,6 @@ def _verify(params, speed, direction, a_max, harmonics, free, settings, candidat
 
 
 def _exact_dynamics(settings: ExactSettings):
-    from ..dynamics._base import Exact
+    from ..dynamics._exact_dynamics import Exact
 
     return Exact(dt=settings.dt)
