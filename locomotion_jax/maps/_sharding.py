@@ -166,3 +166,21 @@ def _chunk_args(values, dtype, z, horizon, window, dynamics, contact, start, max
 def fetch(out: Mapping[str, jax.Array], n: int) -> dict[str, np.ndarray]:
     """Block on a dispatched chunk and copy its first `n` (unpadded) entries to the host."""
     return {k: _to_host(v)[:n] for k, v in out.items()}
+
+
+def from_process0(x: np.ndarray) -> np.ndarray:
+    """Process 0's copy of a host array (under `jax.distributed`; unchanged on one process)."""
+    if jax.process_count() == 1:
+        return x
+    from jax.experimental import multihost_utils
+
+    return np.asarray(multihost_utils.broadcast_one_to_all(x))
+
+
+def agree(done: set[int], n_chunks: int) -> set[int]:
+    """Under `jax.distributed`, all processes must run the same chunks: take process 0's view."""
+    if jax.process_count() == 1:
+        return done
+    mask = np.zeros(n_chunks, np.int32)
+    mask[sorted(done)] = 1
+    return {int(i) for i in np.flatnonzero(from_process0(mask))}
