@@ -44,8 +44,7 @@ from locomotion_jax.dynamics import (
     _exact as two_mass,  # noqa: E402
 )
 from locomotion_jax.dynamics._compile import COMPILER_OPTIONS  # noqa: E402
-from locomotion_jax.run import _chain  # noqa: E402
-from locomotion_jax.run._batch import prepare  # noqa: E402
+from locomotion_jax.run._batch import prepare, prepare_chain  # noqa: E402
 
 
 def load_engine(rev: str) -> types.ModuleType:
@@ -118,7 +117,7 @@ def main() -> int:
         flat, wave, axes, _ = prepare(lj.Params(omega=om, a=a), None, None)
         programs["two-mass"] = (jax.vmap(two, in_axes=(0, axes)), (flat, wave))
     for n in ns:
-        cflat, ok, _ = _chain.prepare_chain(chain_mech(n, om, a), None)
+        cflat, ok, _ = prepare_chain(chain_mech(n, om, a), None)
         programs[f"{args.old} N={n}"] = (jax.vmap(chain(old, False)), (cflat, ok))
         programs[f"this N={n}"] = (jax.vmap(chain(new_engine, True)), (cflat, ok))
     compiled = {}

@@ -135,6 +135,16 @@ def maxrss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
+def _engine_settings():
+    """`(MICRO_BATCH_CPU, default_max_steps)`: in `dynamics._runs`, or in `run._batch` in the
+    trees before it (`compare.py` runs this file against older commits)."""
+    try:
+        from locomotion_jax.dynamics._runs import default_max_steps, MICRO_BATCH_CPU
+    except ImportError:
+        from locomotion_jax.run._batch import default_max_steps, MICRO_BATCH_CPU  # pyright: ignore[reportAttributeAccessIssue]
+    return MICRO_BATCH_CPU, default_max_steps
+
+
 def setup_jax():
     import jax
 
@@ -214,7 +224,8 @@ def case_sharded(spec: dict) -> dict:
     import locomotion_jax as lj
     import numpy as np
     from locomotion_jax.model._params import DEFAULTS, PARAM_NAMES
-    from locomotion_jax.run._batch import default_max_steps, MICRO_BATCH_CPU
+
+    MICRO_BATCH_CPU, default_max_steps = _engine_settings()
 
     clock = CompileClock()
     B, H, dt = spec["B"], spec["horizon"], spec["dt"]
@@ -432,7 +443,8 @@ def case_schedule(spec: dict) -> dict:
     import locomotion_jax as lj
     import numpy as np
     from locomotion_jax.maps import _sharding, _sweep
-    from locomotion_jax.run._batch import MICRO_BATCH_CPU
+
+    MICRO_BATCH_CPU, _ = _engine_settings()
 
     chunk, dt, H = spec["chunk"], spec["dt"], spec["horizon"]
     micro = MICRO_BATCH_CPU if jax.devices()[0].platform == "cpu" else None

@@ -17,7 +17,9 @@ from ._results import (
     Trajectory as Trajectory,
 )
 from ._status import Mode as Mode, Regime as Regime, Status as Status
-from .dynamics._base import AbstractDynamics as AbstractDynamics, Exact as Exact, Smoothed as Smoothed
+from .dynamics._base import AbstractDynamics as AbstractDynamics
+from .dynamics._exact_dynamics import Exact as Exact
+from .dynamics._smoothed_dynamics import Smoothed as Smoothed
 from .gaits._basins import Basins as Basins, basins as basins
 from .gaits._bifurcation import BranchEvents as BranchEvents, EventKind as EventKind
 from .gaits._chain_gait import ChainGait as ChainGait

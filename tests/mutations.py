@@ -43,7 +43,7 @@ class Mutation(NamedTuple):
 EXACT = "locomotion_jax/dynamics/_exact.py"
 CHAIN = "locomotion_jax/dynamics/_chain_exact.py"
 CHAIN_MOTION = "locomotion_jax/dynamics/_chain_motion.py"
-MEASURE = "locomotion_jax/run/_measure.py"
+MEASURE = "locomotion_jax/dynamics/_exact_measure.py"
 
 MUTATIONS = [
     # -- the bugs an outside audit found uncaught ----------------------------------------------
@@ -149,7 +149,7 @@ MUTATIONS = [
     Mutation(
         "queue_done_mask",
         "work queue: every active lane is taken as done when one finishes",
-        "locomotion_jax/run/_queue.py",
+        "locomotion_jax/dynamics/_queue.py",
         (("done = (pos < n) & ~running_all(fixed, dyn)", "done = pos < n"),),
         (REF,),
     ),

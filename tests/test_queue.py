@@ -6,12 +6,18 @@ import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
-from locomotion_jax.dynamics import _chain_exact as chain_engine, _exact as exact
+from locomotion_jax.dynamics import (
+    _chain_exact as chain_engine,
+    _chain_simulate,
+    _exact as exact,
+    _exact_measure,
+    _exact_simulate,
+)
+from locomotion_jax.dynamics._queue import run_queue, Stream
+from locomotion_jax.dynamics._runs import chain_initial_state
 from locomotion_jax.model import _two_mass as model
 from locomotion_jax.model._params import safe_params
-from locomotion_jax.run import _chain, _measure, _simulate
-from locomotion_jax.run._batch import prepare
-from locomotion_jax.run._queue import run_queue, Stream
+from locomotion_jax.run._batch import prepare, prepare_chain
 
 
 def _counting(n, lanes, order=None):
@@ -74,8 +80,8 @@ def test_queue_matches_one_loop_per_configuration():
         0.02,
         jnp.asarray(40_000, jnp.int32),
     )
-    queued = _measure.exact_batch(*args, lanes=3)
-    alone = jax.vmap(lambda p, w: _measure._exact_one(p, w, *args[3:]))(flat, wave)
+    queued = _exact_measure.exact_batch(*args, lanes=3)
+    alone = jax.vmap(lambda p, w: _exact_measure._exact_one(p, w, *args[3:]))(flat, wave)
     assert int(queued["status"][3]) == lj.Status.INVALID
     assert len(set(np.asarray(queued["status"]).tolist())) >= 3  # OK, INVALID and LIFTOFF all present
     # Equal to rounding (a lane's position in a SIMD vector can change the last bit);
@@ -117,7 +123,7 @@ def _saves_alone(p, w, save_at, contact, start, dt, max_steps):
     params, ok = safe_params(p)
     s = exact.init(params, w, contact, jnp.zeros((), params.dtype), model.initial_gap(params, start))
     s = eqx.tree_at(lambda s: s.status, s, jnp.where(ok, s.status, lj.Status.INVALID).astype(jnp.int32))
-    row = _simulate._row  # the state, modes, slip directions and the margins' records
+    row = _exact_simulate._row  # the state, modes, slip directions and the margins' records
     P = exact.consts(params, w)
     step = lambda s, t_stop: exact.step(params, w, contact, dt, s, t_stop, None, P)[0]
     return _plain_saves(s, step, row, save_at, max_steps)
@@ -136,7 +142,7 @@ def test_simulate_queue_matches_one_loop_per_configuration(dtype, max_steps):
     flat, wave, axes, _ = prepare(lj.Params(omega=om, a=a, check=False), None, dtype)
     save_at = jnp.asarray(np.concatenate([[0.0, 0.0], np.linspace(0.1, 12.0, 22), [12.0, 12.0]]), dtype)
     args = ("strict", "paper", 0.02, jnp.asarray(max_steps, jnp.int32))
-    queued = _simulate._exact_batch(flat, wave, axes, save_at, *args, lanes=3, buffer=4)
+    queued = _exact_simulate._exact_batch(flat, wave, axes, save_at, *args, lanes=3, buffer=4)
     alone = jax.vmap(lambda p, w: _saves_alone(p, w, save_at, *args))(flat, wave)
     status, valid = np.asarray(alone[2]), np.asarray(alone[1])
     lifted = status == lj.Status.LIFTOFF
@@ -172,15 +178,15 @@ def test_chain_simulate_queue_matches_one_loop_per_configuration(max_steps):
     wave = lambda a, om: lj.TravellingWave(a, om, 2.0)
     chains = [lj.Chain(masses=[1.0, 1.0, 1.0], d=d, waveforms=wave(a, om)) for a, om, d in cases]
     chains.append(lj.Chain(masses=[1.0, -1.0, 1.0], waveforms=wave(0.06, 2.0), check=False))
-    flat, ok, _ = _chain.prepare_chain(lj.Chain.stack(chains), None)
+    flat, ok, _ = prepare_chain(lj.Chain.stack(chains), None)
     save_at = jnp.asarray(np.concatenate([[0.0, 0.0], np.linspace(0.1, 12.0, 22), [12.0, 12.0]]))
     cap = jnp.asarray(max_steps, jnp.int32)
-    queued = _chain._simulate_batch(flat, ok, save_at, "strict", "paper", 0.02, cap, 3, 4)
+    queued = _chain_simulate._simulate_batch(flat, ok, save_at, "strict", "paper", 0.02, cap, 3, 4)
 
     def alone(C, ok):
-        s = _chain._initial(C, ok, "strict", "paper")
+        s = chain_initial_state(C, ok, "strict", "paper")
         step = lambda s, t_stop: chain_engine.step(C, "strict", 0.02, s, t_stop)[0]
-        return _plain_saves(s, step, _chain._row, save_at, cap)
+        return _plain_saves(s, step, _chain_simulate._row, save_at, cap)
 
     ref = jax.vmap(alone)(flat, ok)
     S = lj.Status

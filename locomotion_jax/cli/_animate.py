@@ -39,7 +39,7 @@ def register(app: typer.Typer) -> None:
 
         import numpy as np
 
-        from ..dynamics._base import Exact
+        from ..dynamics._exact_dynamics import Exact
         from ..run._animation import animate as animate_fn, save_gif, stuck_masks
         from ..run._simulate import simulate
 

@@ -1,103 +1,184 @@
-"""Choice of dynamics: the exact hybrid model or its smoothed counterpart.
+"""The interface of an integrator: what `simulate`, `measure` and `sweep` ask of the dynamics.
 
-Abstract/final pattern (equinox): callers dispatch on the concrete class.
-Python numbers here are static (changing them recompiles); `Smoothed.eps` is an
-array, so a continuation in `eps` does not recompile.
+Abstract/final pattern (equinox; diffrax's `AbstractSolver`): the front ends call only
+the methods of [`AbstractDynamics`][], which the final classes `Exact` (`_exact_dynamics`)
+and `Smoothed` (`_smoothed_dynamics`) implement; nothing tests which class it was given,
+so a new integrator is one new subclass.
 """
 
 import abc
+from typing import Any
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
+from jax.sharding import Mesh
 
-from .._custom_types import Array, ArrayLike
-from ._forward import check_static
+from .._custom_types import Array
+from ..model._chain import Chain
+from ..model._params import Params
+from ..model._waveform import AbstractWaveform
 
 
 class AbstractDynamics(eqx.Module):
-    """Base class of the dynamics strategies."""
+    """How the equations of motion are integrated: the engine behind [`simulate`][locomotion_jax.simulate],
+    [`measure`][locomotion_jax.measure] and [`sweep`][locomotion_jax.sweep].
+
+    [`Exact`][locomotion_jax.Exact] and [`Smoothed`][locomotion_jax.Smoothed] are final subclasses; a
+    new integrator is one more, implementing the methods below (none has a default). The front ends
+    call only these methods. They check the arguments first, then cast, broadcast and flatten the
+    mechanism, so every run method gets a *flat* batch (one leading axis of `n` configurations) and
+    returns a dict of arrays with that leading axis, one per array field of the result
+    ([`Trajectory`][locomotion_jax.Trajectory], [`Measurement`][locomotion_jax.Measurement],
+    [`ChainTrajectory`][locomotion_jax.ChainTrajectory] or [`ChainMeasurement`][locomotion_jax.ChainMeasurement]);
+    the front end restores the batch shape. The mechanism chooses between the two-mass and the chain
+    methods: a [`Params`][locomotion_jax.Params] runs on `*_two_mass`, a [`Chain`][locomotion_jax.Chain] on `*_chain`.
+
+    A configuration that fails (invalid parameters, lift-off, the step cap) is flagged in its own
+    `status`, never raised; an option a dynamics does not support raises `ValueError`.
+
+    !!! Example
+
+        ```python
+        class HalfStep(lj.AbstractDynamics):  # the exact engine at half its step
+            inner: lj.Exact = lj.Exact(dt=0.005)
+
+            def simulate_two_mass(self, *args):
+                return self.inner.simulate_two_mass(*args)
+
+            ...  # and so on for every method
+        ```
+    """
+
+    # -- the paper's two-mass model -------------------------------------------------------------
 
     @abc.abstractmethod
-    def describe(self) -> dict:
-        """Attributes recorded with every result (for provenance)."""
-
-
-class Exact(AbstractDynamics):
-    """Exact hybrid stick/slip dynamics (eqs. 7, 9) with located switches.
-
-    **Arguments:**
-
-    - `dt`: nominal RK4 step (fourth order; see README for accuracy vs `dt`).
-    - `max_steps`: hard cap on integrator iterations (trial steps included);
-      `None` picks one from the horizon.
-    """
-
-    dt: float = eqx.field(static=True, default=0.01)
-    max_steps: int | None = eqx.field(static=True, default=None)
-
-    def __check_init__(self):
-        check_static("Exact.dt", self.dt)
-        if not (isinstance(self.dt, (int, float)) and 0 < self.dt <= 0.1):
-            raise ValueError(f"Exact.dt must be a number in (0, 0.1], got {self.dt!r}.")
-        if self.max_steps is not None and not (isinstance(self.max_steps, int) and self.max_steps > 0):
-            raise ValueError(f"Exact.max_steps must be a positive int or None, got {self.max_steps!r}.")
-
-    def describe(self) -> dict:
-        return {"dynamics": "exact", "dt": self.dt}
-
-
-class Smoothed(AbstractDynamics):
-    """Smoothed friction integrated by diffrax (SPEC §3); differentiable.
-
-    Friction on a mass with normal force $n$ and velocity $v$:
-
-    $$f(v) = -n\\,\\big[\\mu_k + (\\mu_s - \\mu_k)\\, e^{-(v/v_s)^2}\\big] \\tanh(v/\\varepsilon),
-    \\qquad v_s = \\sqrt{\\varepsilon},$$
-
-    a regularised sign with a Stribeck-like static bump. As $\\varepsilon \\to 0$,
-    $v_s \\to 0$ and $v_s / \\varepsilon \\to \\infty$, so the peak friction tends to
-    $\\mu_s n$ and the sliding friction to $\\mu_k n$: the exact law.
-
-    **Arguments:**
-
-    - `eps`: regularisation velocity $\\varepsilon > 0$ (traced).
-    - `rtol`, `atol`: tolerances of diffrax's PID step-size controller.
-    - `max_steps`: diffrax's step cap.
-    - `solver`: `"tsit5"` (explicit, default) or `"kvaerno5"` (implicit, for very small `eps`).
-    """
-
-    eps: Array
-    rtol: float = eqx.field(static=True, default=1e-7)
-    atol: float = eqx.field(static=True, default=1e-9)
-    max_steps: int = eqx.field(static=True, default=2_000_000)
-    solver: str = eqx.field(static=True, default="tsit5")
-
-    def __init__(
+    def simulate_two_mass(
         self,
-        eps: ArrayLike = 1e-3,
-        rtol: float = 1e-7,
-        atol: float = 1e-9,
-        max_steps: int = 2_000_000,
-        solver: str = "tsit5",
-    ):
-        self.eps = jnp.asarray(eps)
-        self.rtol, self.atol, self.max_steps, self.solver = rtol, atol, max_steps, solver
-        if solver not in ("tsit5", "kvaerno5"):
-            raise ValueError(f"Smoothed.solver must be 'tsit5' or 'kvaerno5', got {solver!r}.")
-        if not (rtol > 0 and atol > 0):
-            raise ValueError(f"Smoothed.rtol and atol must be > 0, got {rtol!r}, {atol!r}.")
-        try:
-            bad = bool(jnp.any(~(self.eps > 0)))
-        except Exception:  # traced eps: checked by the caller's status instead
-            bad = False
-        if bad:
-            raise ValueError(f"Smoothed.eps must be > 0, got {eps!r}.")
+        params: Params,
+        wave: AbstractWaveform,
+        wave_axes: int | None,
+        save_at: Array,
+        t_end: float,
+        contact: str,
+        start: str,
+        initial: Array | None,
+    ) -> dict[str, Array]:
+        """The states of the two-mass model at the times `save_at` (the fields of a `Trajectory`).
 
-    def describe(self) -> dict:
-        return {
-            "dynamics": "smoothed",
-            "eps": float(jnp.max(self.eps)),
-            "rtol": self.rtol,
-            "atol": self.atol,
-            "solver": self.solver,
-        }
+        - `params`: a flat batch of `n` configurations (invalid ones are flagged `INVALID`).
+        - `wave`: the actuation $\\ell_0(t)$, batched along its leading axis if `wave_axes == 0`,
+          shared by every configuration if `None`.
+        - `save_at`: increasing times in $[0, t_\\text{end}]$, in the parameters' dtype.
+        - `contact`, `start`: as in `simulate`; `initial`: states $(x_1, v_1, x_2, v_2)$ at
+          $t = 0$, shape `(n, 4)`, or `None` for `start`'s.
+        """
+
+    @abc.abstractmethod
+    def measure_two_mass(
+        self,
+        params: Params,
+        wave: AbstractWaveform,
+        wave_axes: int | None,
+        z: float,
+        horizon: float,
+        window: float,
+        contact: str,
+        start: str,
+        t_start: Array | None,
+        initial: Array | None,
+    ) -> dict[str, Array]:
+        """The measurements of SPEC §5 on the two-mass model (the fields of a `Measurement`).
+
+        `z`, `horizon`, `window`: as in `measure`; `t_start`: the measurement's start per
+        configuration, shape `(n,)`, or `None` for `Params.t_start`; the rest as in
+        `simulate_two_mass`.
+        """
+
+    # -- chains of N masses ---------------------------------------------------------------------
+
+    @abc.abstractmethod
+    def simulate_chain(
+        self, chain: Chain, valid: Array, save_at: Array, t_end: float, contact: str, start: str
+    ) -> dict[str, Array]:
+        """The states of a flat batch of chains at the times `save_at` (the fields of a `ChainTrajectory`).
+
+        `valid`: which configurations are valid, shape `(n,)` (the front end has replaced the
+        invalid ones by a valid one of the batch; flag them `INVALID`).
+        """
+
+    @abc.abstractmethod
+    def measure_chain(
+        self,
+        chain: Chain,
+        valid: Array,
+        t_start: Array,
+        z: float,
+        horizon: float,
+        window: float,
+        contact: str,
+        start: str,
+    ) -> dict[str, Array]:
+        """The measurements of SPEC §5 on a flat batch of chains (the fields of a `ChainMeasurement`).
+
+        `t_start`: the measurement's start per configuration, shape `(n,)`, `inf` for the
+        chain's own (`Chain.t_start`); `valid` as in `simulate_chain`.
+        """
+
+    # -- sweeps ---------------------------------------------------------------------------------
+
+    @abc.abstractmethod
+    def measure_chunk(
+        self,
+        params: Params,
+        zhw: Array,
+        contact: str,
+        start: str,
+        max_steps: int,
+        mesh: Mesh,
+        lanes: int | None,
+    ) -> dict[str, Array]:
+        """One chunk of a sweep of the two-mass model, split over the devices of `mesh`.
+
+        Called while the sweep traces its chunk program (once per sweep, inside `jax.jit`),
+        so it must be traceable. `params`: the chunk, sharded along the mesh's one axis, with
+        the sinusoid of eq. (13); `zhw`: the array $(z, \\text{horizon}, \\text{window})$;
+        `max_steps`: `step_cap` of the whole sweep; `lanes`: configurations that
+        each device runs together (`None`: the dynamics' own choice).
+        """
+
+    @abc.abstractmethod
+    def step_cap(self, t_total: float) -> int:
+        """The cap on the engine's loop iterations for runs to the time `t_total`.
+
+        A static of the compilation: a sweep fixes it once, so that every chunk shares one
+        compilation. `0` where the dynamics caps its loops by a setting of its own.
+        """
+
+    @abc.abstractmethod
+    def nominal_step(self) -> float | None:
+        """The step by which a sweep's cost model predicts each configuration's iterations.
+
+        `sweep(order="cost")` sorts the configurations by the duration a pilot run of the exact
+        engine predicts, at $1/\\text{step}$ iterations per time unit. `None` where iterations
+        do not follow from a step (an adaptive solver): `order="auto"` then keeps grid order.
+        """
+
+    # -- provenance -----------------------------------------------------------------------------
+
+    @abc.abstractmethod
+    def describe(self) -> dict[str, Any]:
+        """Attributes recorded with every sweep's results (for provenance)."""
+
+    @abc.abstractmethod
+    def spec(self) -> dict[str, Any]:
+        """The settings that identify a sweep's results: a stored sweep resumes only with the same."""
+
+    def astype(self, dtype: Any) -> "AbstractDynamics":
+        """A copy with every floating array field cast to `dtype` (settings that are arrays,
+        such as `Smoothed.eps`, follow the computation's dtype)."""
+
+        def cast(x):
+            return jnp.asarray(x, dtype) if jnp.issubdtype(jnp.result_type(x), jnp.inexact) else x
+
+        return jax.tree_util.tree_map(cast, self)

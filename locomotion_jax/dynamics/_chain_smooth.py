@@ -18,9 +18,10 @@ run contiguously for longer than `_smooth.MIN_STICK`. Lift-off under the strict 
 (a normal force reaching zero) is a terminating event located by a root finder.
 """
 
-from typing import Any
+from typing import Any, TYPE_CHECKING
 
 import diffrax
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import optimistix as optx
@@ -29,8 +30,11 @@ from .._custom_types import Array, ArrayLike, Contact
 from .._status import Regime, Status
 from ..model._chain import Chain
 from . import _chain_exact as exact, _chain_forces as forces, _chain_motion as motion
-from ._base import Smoothed
 from ._smooth import MIN_STICK, STICK_SPEED, WINDOW_SAMPLES
+
+
+if TYPE_CHECKING:  # the class runs this engine: imported for annotations only
+    from ._smoothed_dynamics import Smoothed
 
 
 def _loads(C: Chain, contact: Contact, t: ArrayLike, x: Array):
@@ -64,7 +68,7 @@ def _normal_min(C: Chain, contact: Contact, t: Array, y: Array) -> Array:
     return _loads(C, contact, t, y[: C.m.shape[-1]])[4].min()
 
 
-def solve(C: Chain, contact: Contact, dyn: Smoothed, t0, t1, y0, saveat, extra_events=()) -> diffrax.Solution:
+def solve(C: Chain, contact: Contact, dyn: "Smoothed", t0, t1, y0, saveat, extra_events=()) -> diffrax.Solution:
     """One diffrax solve; a strict-contact lift-off (and any `extra_events`) terminates it."""
     term = diffrax.ODETerm(lambda t, y, args: rates(C, contact, dyn.eps, t, y))
     conds = list(extra_events)
@@ -119,7 +123,7 @@ def _longest_run(flags: Array) -> Array:
     return jnp.max(runs)
 
 
-def simulate_one(C: Chain, valid: Array, save: Array, contact: Contact, start: str, dyn: Smoothed) -> dict[str, Any]:
+def simulate_one(C: Chain, valid: Array, save: Array, contact: Contact, start: str, dyn: "Smoothed") -> dict[str, Any]:
     """The states at the times `save` of one chain (fields of `ChainTrajectory`)."""
     n_mass = C.m.shape[-1]
     y0 = _y0(C, start)
@@ -158,7 +162,7 @@ def simulate_one(C: Chain, valid: Array, save: Array, contact: Contact, start: s
 
 def measure_one(
     C: Chain, valid: Array, t_start: Array, z: Array, horizon: Array, window: Array, contact: Contact, start: str,
-    dyn: Smoothed,
+    dyn: "Smoothed",
 ) -> dict[str, Any]:  # fmt: skip
     """The measurements of SPEC §5 for one chain (fields of `ChainMeasurement`), in three solves:
     $[0, t_\\text{start}]$, the regime window (sampled), and $[t_\\text{start}, t_\\text{start} + \\text{horizon}]$
@@ -212,3 +216,16 @@ def measure_one(
         # A smooth model has no switching structure to change.
         transversality=inf, near_miss=inf, margin_z=inf,
     )  # fmt: skip
+
+
+@eqx.filter_jit
+def simulate_batch(C, valid, save, contact, start, dyn):
+    """[`simulate_one`][] over a flat batch of chains (`vmap`)."""
+    return jax.vmap(lambda C, ok: simulate_one(C, ok, save, contact, start, dyn))(C, valid)
+
+
+@eqx.filter_jit
+def measure_batch(C, valid, t_start, z, horizon, window, contact, start, dyn):
+    """[`measure_one`][] over a flat batch of chains (`vmap`)."""
+    one = lambda C, ok, ts: measure_one(C, ok, ts, z, horizon, window, contact, start, dyn)
+    return jax.vmap(one)(C, valid, t_start)

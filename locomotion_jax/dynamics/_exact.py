@@ -957,7 +957,7 @@ def margins(omega, h, located, decide, crossed, g0s, d0s, e0s):
     Values only: they are held out of forward-mode derivatives (`stop_gradient`). Each
     function is a scalar of its own: a stacked `(lanes, n)` array would exceed the 64
     elements per kernel above which XLA's CPU runtime splits a kernel over threads
-    (`_batch.MICRO_BATCH_CPU`).
+    (`_runs.MICRO_BATCH_CPU`).
     """
     sq = jax.lax.stop_gradient
     h = sq(h)

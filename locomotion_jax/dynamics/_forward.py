@@ -111,7 +111,7 @@ def one_direction_at_a_time(fn: Callable[[Any], Any], dyn: Any, compiled: Callab
     `jax.jacfwd` pushes all `p` directions through at once (a `vmap` of `jvp`): every
     tangent of the engine's loop becomes a `(lanes, p)` array, and beyond 64 elements per
     kernel XLA's CPU runtime splits each kernel over its threads, which costs more than
-    the whole computation (`_batch.MICRO_BATCH_CPU`; benchmarks/NOTES.md). Here a `vmap`
+    the whole computation (`_runs.MICRO_BATCH_CPU`; benchmarks/NOTES.md). Here a `vmap`
     over tangent directions alone (primal inputs unbatched, as in `jacfwd`) runs the
     directions in turn, each a `jvp` with `(lanes,)` tangents; any other `vmap` is the usual
     one. Inputs whose tangent is a symbolic zero stay constants.

@@ -11,6 +11,8 @@ regime is SSL when such samples run contiguously for longer than `MIN_STICK`
 reference for the regime; this one is approximate near the SSL/SL boundary.
 """
 
+from typing import TYPE_CHECKING
+
 import diffrax
 import equinox as eqx
 import jax
@@ -23,7 +25,10 @@ from ..model import _two_mass as model
 from ..model._friction import Coulomb
 from ..model._params import Params, safe_params
 from ..model._waveform import AbstractWaveform
-from ._base import Smoothed
+
+
+if TYPE_CHECKING:  # the class runs this engine: imported for annotations only
+    from ._smoothed_dynamics import Smoothed
 
 
 STICK_SPEED = 3.0  # in units of eps
@@ -45,7 +50,7 @@ def smooth_rates(params: Params, wave: AbstractWaveform, contact: Contact, eps: 
     return jnp.stack([y[1], a1, y[3], a2, p_d, model.actuator_power(f)])
 
 
-def _solver(dyn: Smoothed):
+def _solver(dyn: "Smoothed"):
     return diffrax.Tsit5() if dyn.solver == "tsit5" else diffrax.Kvaerno5()
 
 
@@ -57,7 +62,7 @@ def _liftoff_fn(params, wave, contact):
     return cond
 
 
-def solve(params, wave, contact, dyn: Smoothed, t0, t1, y0, saveat, extra_events=()):
+def solve(params, wave, contact, dyn: "Smoothed", t0, t1, y0, saveat, extra_events=()):
     """One diffrax solve; a strict-contact lift-off (and any `extra_events`) terminates it."""
     term = diffrax.ODETerm(lambda t, y, args: smooth_rates(params, wave, contact, dyn.eps, t, y))
     conds = list(extra_events)
@@ -180,7 +185,7 @@ def simulate_smoothed(flat, wave, axes, save, contact, start, dyn):
     return jax.vmap(fn, in_axes=(0, axes))(flat, wave)
 
 
-def measure_one(params, wave, z, horizon, window, contact, start, dyn: Smoothed):
+def measure_one(params, wave, z, horizon, window, contact, start, dyn: "Smoothed"):
     """Measurements of SPEC §5 on the smoothed model, in three solves:
     `[0, t_start]`, the regime window (sampled), and `[t_start, t_start + horizon]`
     terminated by the first passage $|X - X_0| = z$ (located by a root finder)."""

@@ -25,11 +25,11 @@ import numpy as np
 from .._custom_types import Array, Contact
 from .._status import Regime, Status
 from ..dynamics import _chain_exact as engine, _chain_forces as forces
-from ..dynamics._base import Exact
 from ..dynamics._compile import engine_jit
+from ..dynamics._exact_dynamics import Exact
+from ..dynamics._runs import chain_initial_state, default_max_steps, STICK_TOL
 from ..model._chain import Chain
-from ..run._batch import default_max_steps
-from ..run._chain import _check as check_contact_start, _initial, _unflatten, prepare_chain, STICK_TOL
+from ..run._batch import check_contact_start, prepare_chain, unflatten
 from . import _select as select
 from ._select import GaitStatus
 
@@ -139,7 +139,7 @@ def _period_map(C, P, contact, dt, max_steps, k, y) -> _Period:
 def _transient_batch(C, valid, contact, start, dt, transient, max_steps):
     def one(c, ok):
         P = forces.consts(c)
-        st = _initial(c, ok, contact, start, P)
+        st = chain_initial_state(c, ok, contact, start, P)
         st, _ = _advance(P, contact, dt, st, transient * (2 * jnp.pi) / P.omega, max_steps)
         return _reduced(st), st.status, jnp.isfinite(st.t_liftoff)
 
@@ -234,7 +234,7 @@ def steady_gait_chain(
         if not np.any(select.still_open(best)):
             break
     assert best is not None
-    return _unflatten(_chain_gait(best, omega, dtype_, contact), shape)
+    return unflatten(_chain_gait(best, omega, dtype_, contact), shape)
 
 
 def _chain_gait(r: dict, omega: np.ndarray, dtype: Any, contact: str) -> ChainGait:

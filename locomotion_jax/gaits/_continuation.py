@@ -27,11 +27,12 @@ import numpy as np
 
 from .._custom_types import Array
 from .._status import Regime, Status
-from ..dynamics._base import AbstractDynamics, Exact
+from ..dynamics._base import AbstractDynamics
+from ..dynamics._exact_dynamics import Exact
+from ..dynamics._runs import default_max_steps, STICK_TOL
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform
-from ..run._batch import default_max_steps, prepare
-from ..run._measure import STICK_TOL
+from ..run._batch import prepare
 from . import _corrector as corrector
 from ._bifurcation import BranchEvents, find_events, kinds
 from ._gait import GaitStatus, steady_gait

@@ -25,14 +25,15 @@ import numpy as np
 
 from .._custom_types import Array, ArrayLike
 from .._status import Regime, Status
-from ..dynamics._base import AbstractDynamics, Exact
+from ..dynamics._base import AbstractDynamics
 from ..dynamics._compile import engine_jit
+from ..dynamics._exact_dynamics import Exact
+from ..dynamics._runs import default_max_steps, STICK_TOL
 from ..model import _two_mass as model
 from ..model._chain import Chain
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform
-from ..run._batch import default_max_steps, prepare, unflatten
-from ..run._measure import STICK_TOL
+from ..run._batch import mechanism_arg, prepare, unflatten
 from . import _corrector as corrector, _period as period, _select as select
 from ._chain_gait import ChainGait
 from ._select import GaitStatus
@@ -203,17 +204,25 @@ def steady_gait(
         ```
     """
     dynamics = Exact() if dynamics is None else dynamics
-    if not isinstance(dynamics, Exact):
+    if not isinstance(dynamics, Exact):  # the solver differentiates the exact engine's steps
         raise TypeError(f"steady_gait needs Exact dynamics, got {type(dynamics).__name__}.")
-    if isinstance(params, Chain):
-        if waveform is not None:
-            raise ValueError("waveform= applies to Params; a Chain carries its own waveforms (Chain(waveforms=...)).")
-        if not isinstance(start, str):
-            raise ValueError("start= for a Chain names a start at rest: 'paper' or 'relaxed'.")
-        from ._chain_gait import steady_gait_chain
+    args = (periods, transient, tol, max_iter, dynamics, waveform, contact, start, dtype)
+    # The mechanism picks its solver (double dispatch).
+    return mechanism_arg(params).dispatch(two_mass=lambda p: _two_mass(p, *args), chain=lambda c: _chain(c, *args))
 
-        return steady_gait_chain(params, periods=periods, transient=transient, tol=tol, max_iter=max_iter,
-                                 dynamics=dynamics, contact=contact, start=start, dtype=dtype)  # fmt: skip
+
+def _chain(chain: Chain, periods, transient, tol, max_iter, dynamics: Exact, waveform, contact, start, dtype):
+    if waveform is not None:
+        raise ValueError("waveform= applies to Params; a Chain carries its own waveforms (Chain(waveforms=...)).")
+    if not isinstance(start, str):
+        raise ValueError("start= for a Chain names a start at rest: 'paper' or 'relaxed'.")
+    from ._chain_gait import steady_gait_chain
+
+    return steady_gait_chain(chain, periods=periods, transient=transient, tol=tol, max_iter=max_iter,
+                             dynamics=dynamics, contact=contact, start=start, dtype=dtype)  # fmt: skip
+
+
+def _two_mass(params: Params, periods, transient, tol, max_iter, dynamics: Exact, waveform, contact, start, dtype):
     model.check_contact(contact)
     flat, wave, axes, shape = prepare(params, waveform, dtype)
     y_start = _start_states(start, shape, flat.dtype)

@@ -5,7 +5,7 @@ its waveform and friction law are classes), so the sweep asks the user for a bui
 a function from the swept values (1-D arrays, one entry per configuration) to a
 batched [`Chain`][]. The configurations are cut into chunks of one shape, the last one
 padded with repeats of its last configuration, so one compilation serves the map;
-each chunk is measured by `measure_chain` (the work queue of the N-mass engine).
+each chunk is measured by `measure_chain` (the dynamics' N-mass engine).
 """
 
 import math
@@ -81,7 +81,7 @@ def sweep_chain(
 
     from .. import __version__
     from .._status import Regime, Status
-    from ..run._chain import measure_chain
+    from ..run._measure import measure_chain
 
     values, shape = _axes(axes, mode)
     fixed = dict(fixed or {})
@@ -120,10 +120,7 @@ def sweep_chain(
     try:
         for i in range(n_chunks):
             chain, n = chunk_chain(i)
-            m = measure_chain(
-                chain, z, t_start=t_start, horizon=horizon, window=window, dynamics=dynamics,
-                contact=contact, start=start, dtype=dtype,
-            )  # fmt: skip
+            m = measure_chain(chain, dynamics, float(z), float(horizon), float(window), t_start, contact, start, dtype)
             parts.append({k: v[:n] for k, v in m.to_numpy().items()})
             bar.update(n)
     finally:

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from .._status import Status
-from ..dynamics._base import Exact
+from ..dynamics._exact_dynamics import Exact
 from ..model._params import PARAM_NAMES, Params
 
 

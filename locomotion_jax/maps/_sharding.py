@@ -2,30 +2,27 @@
 
 The batch axis of a chunk is split over a 1-D mesh of every device JAX sees
 (`jax.devices()`: all local devices, or all devices of all hosts under
-`jax.distributed`). Each device runs `measure`'s work queue on its own shard
-(`_measure.exact_batch`) through `jax.shard_map`, so each device stops as soon as
+`jax.distributed`). How the chunk is run over the mesh is the dynamics' choice
+(`AbstractDynamics.measure_chunk`): the exact engine runs `measure`'s work queue on
+each device's own shard through `jax.shard_map`, so each device stops as soon as
 *its* configurations are done, instead of every device waiting for the globally
-slowest one (which a plain `jit` with a sharded input would not guarantee).
-
-The smoothed model (diffrax) does not go through `shard_map` (its closure
-conversion rejects the per-device types); it runs under `jit` on the sharded batch,
-which XLA partitions automatically (same results; devices wait for each other).
+slowest one (which a plain `jit` with a sharded input would not guarantee). The
+smoothed model (diffrax) does not go through `shard_map` (its closure conversion
+rejects the per-device types); it runs under `jit` on the sharded batch, which XLA
+partitions automatically (same results; devices wait for each other).
 """
 
 from collections import Counter
 from collections.abc import Mapping
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 
-from ..dynamics._base import AbstractDynamics, Exact, Smoothed
+from ..dynamics._base import AbstractDynamics
 from ..dynamics._compile import engine_jit
 from ..model._params import PARAM_NAMES, Params
-from ..model._waveform import Sinusoid
-from ..run._measure import exact_batch
 
 
 BATCH_AXIS = "batch"
@@ -41,7 +38,7 @@ one compilation.
 
 MICRO_BATCH: int | None = None
 """Lanes per device. Exact model: the width of each device's work queue (`None`:
-`_batch.MICRO_BATCH_CPU` on a CPU, where wider kernels are split over threads and
+`_runs.MICRO_BATCH_CPU` on a CPU, where wider kernels are split over threads and
 run slower, benchmarks/NOTES.md; the whole shard elsewhere). Smoothed model: if
 set, a shard runs as sub-batches of this many configurations (`lax.map`)."""
 
@@ -83,35 +80,7 @@ def _run_chunk(
 ) -> dict[str, jax.Array]:
     # Runs only while tracing: counts compilations, not calls.
     TRACES["run_chunk"] += 1
-
-    def local(p: Params, zhw: jax.Array, dyn: AbstractDynamics) -> dict[str, jax.Array]:
-        z, horizon, window = zhw[0], zhw[1], zhw[2]
-        wave = Sinusoid.from_params(p)
-        if isinstance(dyn, Exact):
-            # A work queue over `micro_batch` lanes (`_queue`): a lane whose
-            # configuration is done takes the next one.
-            return exact_batch(p, wave, 0, z, horizon, window, contact, start, dyn.dt, max_steps, lanes=micro_batch)
-        from ..dynamics._smooth import measure_one
-
-        assert isinstance(dyn, Smoothed)  # `sweep` accepts Exact or Smoothed
-        one = lambda q, w: measure_one(q, w, z, horizon, window, contact, start, dyn)
-        if not micro_batch or micro_batch >= p.omega.shape[0]:
-            return jax.vmap(one)(p, wave)
-        # Sub-batches in sequence, each vmapped: a sub-batch's while_loop stops with
-        # its own slowest configuration, and its state stays in cache.
-        return jax.lax.map(lambda args: one(*args), (p, wave), batch_size=micro_batch)
-
-    if isinstance(dynamics, Smoothed):
-        # diffrax's closure conversion rejects shard_map's per-device types, so the
-        # smoothed model is left to jit's automatic partitioning of the sharded batch
-        # (correct, but every device iterates until the slowest configuration is done).
-        return local(flat, zhw, dynamics)
-    # check_vma=False: the integrator's while_loop carries mix per-shard and
-    # replicated values, which the varying-manual-axes checker rejects.
-    sharded = jax.shard_map(
-        local, mesh=mesh, in_specs=(P(BATCH_AXIS), P(), P()), out_specs=P(BATCH_AXIS), check_vma=False
-    )
-    return sharded(flat, zhw, dynamics)
+    return dynamics.measure_chunk(flat, zhw, contact, start, max_steps, mesh, micro_batch)
 
 
 _run_chunk = engine_jit(_run_chunk, ("contact", "start", "max_steps", "mesh", "micro_batch"))
@@ -190,11 +159,28 @@ def _chunk_args(values, dtype, z, horizon, window, dynamics, contact, start, max
     fields = {n: _global_array(np.asarray(values[n], dtype), sharding) for n in PARAM_NAMES}
     flat = Params(**fields, check=False)
     zhw = jnp.asarray(np.asarray([z, horizon, window], dtype))
-    if isinstance(dynamics, Smoothed):
-        dynamics = eqx.tree_at(lambda d: d.eps, dynamics, jnp.asarray(dynamics.eps, dtype))
+    dynamics = dynamics.astype(dtype)  # its array settings (`Smoothed.eps`) in the chunk's dtype
     return flat, zhw, dynamics, contact, start, max_steps, mesh, micro_batch or MICRO_BATCH or None
 
 
 def fetch(out: Mapping[str, jax.Array], n: int) -> dict[str, np.ndarray]:
     """Block on a dispatched chunk and copy its first `n` (unpadded) entries to the host."""
     return {k: _to_host(v)[:n] for k, v in out.items()}
+
+
+def from_process0(x: np.ndarray) -> np.ndarray:
+    """Process 0's copy of a host array (under `jax.distributed`; unchanged on one process)."""
+    if jax.process_count() == 1:
+        return x
+    from jax.experimental import multihost_utils
+
+    return np.asarray(multihost_utils.broadcast_one_to_all(x))
+
+
+def agree(done: set[int], n_chunks: int) -> set[int]:
+    """Under `jax.distributed`, all processes must run the same chunks: take process 0's view."""
+    if jax.process_count() == 1:
+        return done
+    mask = np.zeros(n_chunks, np.int32)
+    mask[sorted(done)] = 1
+    return {int(i) for i in np.flatnonzero(from_process0(mask))}

@@ -23,7 +23,6 @@ system all processes see.
 """
 
 import functools
-import math
 import os
 from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
@@ -35,29 +34,23 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import ArrayLike, Contact, Start
-from .._results import Measurement
-from .._status import Regime, Status
-from ..dynamics._base import AbstractDynamics, Exact, Smoothed
+from ..dynamics._base import AbstractDynamics
+from ..dynamics._exact_dynamics import Exact
+from ..dynamics._runs import horizon_bound
 from ..model import _two_mass as model
-from ..model._params import _validity, DEFAULTS, PARAM_NAMES, Params, VALID_RANGES
-from ..run._batch import default_max_steps, horizon_bound
+from ..model._params import DEFAULTS, Params
+from ..run._batch import dynamics_arg
 from ..run._measure import check_measure_args
 from . import _sharding as sharding
-from ._store import ChunkOrder, ChunkStore, digest, read_finished
+from ._dataset import MEASURE_FIELDS, sweep_attrs, to_dataset
+from ._grid import check_valid, Grid, RATIO
+from ._store import ChunkOrder, ChunkStore, read_finished
 
 
 if TYPE_CHECKING:
     from ..model._chain import Chain
 from ._zarr_store import is_zarr
 
-
-RATIO = "omega_over_wn1"
-"""Convenience axis: $\\omega / \\omega_{n1}$ (eq. 11); `omega` is then derived per configuration."""
-
-MEASURE_FIELDS: tuple[str, ...] = tuple(
-    f for f in Measurement.__dataclass_fields__ if f not in ("z", "start", "contact")
-)
-"""The dataset's variables: every array field of [`Measurement`][]."""
 
 STATS: Counter = Counter()
 """Host-side counters: `"chunks_computed"` (chunks sent to the devices),
@@ -74,140 +67,6 @@ AUTO_MIN_CONFIGS = 4096
 0.37 -> 0.93 and 21 -> 11 s, pilot run included; the 512-point Fig. 8 line, already
 well grouped in natural order, 0.73 -> 0.785 and no time saved."""
 
-_DESCRIPTIONS = {
-    "tau_z": "time to travel z after t_start (inf: not reached)",
-    "e_z": "energy dissipated while travelling z, eq. (15) (inf: not reached)",
-    "reached": "|X - X(t_start)| reached z within the horizon",
-    "regime": "1 SSL (stick-slip), 0 SL (slip), -1 undetermined",
-    "mean_speed": "signed mean speed of the centre of mass over the measured interval",
-    "cost_of_transport": "e_z / z",
-    "stick_fraction1": "fraction of the regime window mass 1 is stuck",
-    "stick_fraction2": "fraction of the regime window mass 2 is stuck",
-    "e_d": "dissipated energy over the measured interval, eq. (15)",
-    "work": "actuator work over the measured interval, eq. (16)",
-    "delta_e": "change of total energy over the measured interval, eq. (10)",
-    "balance": "work - e_d - delta_e (zero up to integration error)",
-    "liftoff": "a normal force reached zero, eq. (5)",
-    "t_liftoff": "first lift-off time (inf: none)",
-    "status": "0 OK, 1 LIFTOFF, 2 MAX_STEPS, 3 INVALID, 4 SOLVER_FAILED",
-    "t_start": "start of the measurement: 80 periods of the lowest natural frequency",
-    "X_start": "centre of mass at t_start, eq. (4)",
-    "n_steps": "integrator iterations",
-    "n_switch": "contact-mode switches",
-    "transversality": "smallest margin (rad of drive phase) at a located switch in the measured interval",
-    "near_miss": "smallest margin (rad of drive phase) at a near miss of an event function",
-    "margin_z": "margin (rad of drive phase) of the target |X - X0| = z: its crossing, near misses, nearest switch",
-    "omega": "actuation frequency derived from omega_over_wn1",
-}
-
-
-class _Grid:
-    """Host-side description of the configurations: swept axes plus fixed values."""
-
-    def __init__(self, axes: Mapping[str, Any], fixed: Mapping[str, Any] | None, mode: str):
-        if mode not in ("grid", "list"):
-            raise ValueError(f"mode must be 'grid' (outer product) or 'list' (zipped axes), got {mode!r}.")
-        known = PARAM_NAMES + (RATIO,)
-        fixed = dict(fixed or {})
-        if not isinstance(axes, Mapping) or not axes:
-            raise ValueError("axes must be a non-empty mapping of parameter name -> 1-D array of values.")
-        for name in list(axes) + list(fixed):
-            if name not in known:
-                raise ValueError(f"Unknown parameter {name!r}; valid names are {list(known)}.")
-        self.values: dict[str, np.ndarray] = {}
-        for name, v in axes.items():
-            arr = np.asarray(v, dtype=np.float64)
-            if arr.ndim == 0:  # a scalar among the axes is a fixed value, as in Params.grid
-                fixed.setdefault(name, float(arr))
-                continue
-            if arr.ndim != 1:
-                raise ValueError(f"Axis {name!r} must be 1-D, got shape {arr.shape}.")
-            if arr.size == 0:
-                raise ValueError(f"Axis {name!r} is empty: a sweep needs at least one value per axis.")
-            if name in fixed:
-                raise ValueError(f"Parameter {name!r} is given both as an axis and as a fixed value.")
-            self.values[name] = arr
-        if not self.values:
-            raise ValueError("axes holds no 1-D axis: nothing to sweep (put scalars in fixed=).")
-        self.fixed = {}
-        for name, v in fixed.items():
-            arr = np.asarray(v, dtype=np.float64)
-            if arr.ndim != 0:
-                raise ValueError(f"Fixed parameter {name!r} must be a scalar, got shape {arr.shape}.")
-            self.fixed[name] = float(arr)
-        given = set(self.values) | set(self.fixed)
-        if "omega" in given and RATIO in given:
-            raise ValueError("Give either 'omega' or 'omega_over_wn1', not both.")
-        for name in PARAM_NAMES:  # everything not given takes the paper's default
-            if name not in given and not (name == "omega" and RATIO in given):
-                self.fixed[name] = DEFAULTS[name]
-        self.names = tuple(self.values)
-        self.mode = mode
-        lengths = [v.size for v in self.values.values()]
-        if mode == "list" and len(set(lengths)) > 1:
-            detail = ", ".join(f"{n}: {v.size}" for n, v in self.values.items())
-            raise ValueError(f"mode='list' needs axes of equal length, got {detail}.")
-        self.shape = tuple(lengths) if mode == "grid" else (lengths[0],)
-        self.size = math.prod(self.shape)
-
-    def index(self, flat: np.ndarray) -> dict[str, np.ndarray]:
-        """Index into each axis of the flat configuration numbers `flat` (C order)."""
-        if self.mode == "list":
-            return {n: flat for n in self.names}
-        return dict(zip(self.names, np.unravel_index(flat, self.shape)))
-
-    def config_values(self, flat: np.ndarray) -> dict[str, np.ndarray]:
-        """Float64 values of all of `PARAM_NAMES` for the flat configuration numbers `flat`."""
-        idx = self.index(flat)
-        raw = {n: np.full(flat.shape, v) for n, v in self.fixed.items()}
-        raw.update({n: self.values[n][idx[n]] for n in self.names})
-        if RATIO in raw:
-            ratio = raw.pop(RATIO)
-            with np.errstate(all="ignore"):  # invalid mhat/k give NaN here and are flagged anyway
-                raw["omega"] = ratio * np.sqrt(raw["k"] / (2 * raw["mhat"] * (1 - raw["mhat"])))
-        return raw
-
-    def spec(self) -> dict[str, Any]:
-        # Axes are identified by a digest of their float64 values (plus a readable
-        # summary): the coordinates themselves are in the dataset, and a list sweep of
-        # a million configurations should not become a 20 MB attribute.
-        axes = {
-            n: {"n": int(v.size), "first": float(v[0]), "last": float(v[-1]), "sha256": digest(v, "<f8")}
-            for n, v in self.values.items()
-        }
-        return {"mode": self.mode, "axes": axes, "fixed": dict(sorted(self.fixed.items()))}
-
-
-def _check_valid(grid: _Grid, block: int = 1 << 18) -> int:
-    """Raise `ValueError` for the first invalid configuration; host-only (numpy) and blockwise."""
-    n_bad, first = 0, None
-    for lo in range(0, grid.size, block):
-        flat = np.arange(lo, min(lo + block, grid.size))
-        vals = grid.config_values(flat)
-        with np.errstate(all="ignore"):
-            masks = _validity(vals, np)
-        ok = np.ones(flat.shape, bool)
-        for name in PARAM_NAMES:
-            ok &= np.broadcast_to(masks[name], flat.shape)
-        n_bad += int((~ok).sum())
-        if first is None and not ok.all():
-            first = int(flat[np.argmin(ok)])
-    if first is None:
-        return 0
-    one = grid.config_values(np.asarray([first]))
-    where = {n: int(i[0]) for n, i in grid.index(np.asarray([first])).items()}
-    at = ", ".join(f"{n}[{i}]={float(grid.values[n][i])!r}" for n, i in where.items())
-    try:
-        values: dict[str, Any] = {n: float(v[0]) for n, v in one.items()}
-        Params(**values)
-        reason = f"omega derived from {RATIO} is invalid ({VALID_RANGES['omega']})"
-    except ValueError as err:
-        reason = str(err)
-    raise ValueError(
-        f"{n_bad} of {grid.size} configurations of the sweep are invalid; the first, at {at}: {reason} "
-        "Narrow the range, or pass on_invalid='flag' (CLI: --on-invalid flag) to record them as Status.INVALID."
-    )
-
 
 def _float_dtype(dtype: Any) -> np.dtype:
     dt = np.dtype(jnp.result_type(float) if dtype is None else dtype)
@@ -221,18 +80,14 @@ def _float_dtype(dtype: Any) -> np.dtype:
     return dt
 
 
-def _max_steps(grid: _Grid, dynamics: AbstractDynamics, horizon: float) -> int:
+def _max_steps(grid: Grid, dynamics: AbstractDynamics, horizon: float) -> int:
     """One step cap for the whole sweep (a static of the compilation), from its largest t_start."""
-    if not isinstance(dynamics, Exact):
-        return 0
-    if dynamics.max_steps is not None:
-        return dynamics.max_steps
     # t_start depends on k and mhat only (eqs. 11-12): bound it over their combinations.
     k = grid.values.get("k", np.asarray([grid.fixed.get("k", DEFAULTS["k"])]))
     mh = grid.values.get("mhat", np.asarray([grid.fixed.get("mhat", DEFAULTS["mhat"])]))
     if grid.mode == "grid":
         k, mh = (x.ravel() for x in np.meshgrid(k, mh, indexing="ij"))
-    return default_max_steps(horizon_bound(Params(k=k, mhat=mh, check=False), horizon), dynamics.dt)
+    return dynamics.step_cap(horizon_bound(Params(k=k, mhat=mh, check=False), horizon))
 
 
 def resolve_order(
@@ -240,8 +95,9 @@ def resolve_order(
 ) -> ChunkOrder:
     """The order a sweep's chunks are cut in: `"natural"` (grid order) or `"cost"`.
 
-    `"auto"` picks `"cost"` where sorting can pay for its pilot run: the exact
-    engine (whose cost the pilot models), durations that can differ (`horizon >
+    `"auto"` picks `"cost"` where sorting can pay for its pilot run: dynamics whose
+    iterations follow from a step (`AbstractDynamics.nominal_step`; the exact engine,
+    whose cost the pilot models), durations that can differ (`horizon >
     window`: the run ends at $\\tau_z$ somewhere in between), several loops in
     sequence on each device (chunks, or sub-batches of `_sharding.MICRO_BATCH`:
     with a single loop per device the slowest configuration sets the time in any
@@ -253,7 +109,8 @@ def resolve_order(
         raise ValueError(f"order must be one of {', '.join(map(repr, ORDERS))}, got {order!r}.")
     if order == "natural" or order == "cost":
         return order
-    pays = isinstance(dynamics, Exact) and horizon > window and loops_per_device > 1 and n_configs >= AUTO_MIN_CONFIGS
+    stepped = dynamics.nominal_step() is not None
+    pays = stepped and horizon > window and loops_per_device > 1 and n_configs >= AUTO_MIN_CONFIGS
     return "cost" if pays else "natural"
 
 
@@ -263,7 +120,7 @@ def _loops_per_device(n_chunks: int, shard: int, micro_batch: int | None) -> int
 
 
 def _cost_permutation(
-    grid: _Grid,
+    grid: Grid,
     z: float,
     horizon: float,
     window: float,
@@ -276,8 +133,9 @@ def _cost_permutation(
     from ._schedule import cost_order
 
     STATS["pilots"] += 1
-    # The pilot runs the exact engine; for the smoothed one only the durations it predicts matter.
-    dt = dynamics.dt if isinstance(dynamics, Exact) else Exact().dt
+    # The pilot runs the exact engine; for adaptive dynamics only the durations it predicts matter.
+    step = dynamics.nominal_step()
+    dt = Exact().dt if step is None else step
     return cost_order(
         grid.config_values(np.arange(grid.size)),
         z=z,
@@ -295,46 +153,6 @@ def _in_grid_order(run: np.ndarray, perm: np.ndarray) -> np.ndarray:
     out = np.empty_like(run)
     out[perm] = run
     return out
-
-
-def _attrs(grid: _Grid, spec: dict, dynamics: AbstractDynamics, max_steps: int, n_devices: int, order: str) -> dict:
-    from .. import __version__
-    from ._store import canonical
-
-    attrs: dict[str, Any] = {
-        "title": "locomotion_jax parameter sweep (Zhou, Majidi, O'Reilly 2014)",
-        "sweep_mode": grid.mode,
-        "swept": ",".join(grid.names),
-    }
-    attrs.update({f"fixed_{n}": v for n, v in grid.fixed.items()})
-    attrs.update({f"dynamics_{k}" if k != "dynamics" else "dynamics": v for k, v in dynamics.describe().items()})
-    attrs.update(
-        max_steps=max_steps,
-        dtype=spec["dtype"],
-        contact=spec["contact"],
-        start=spec["start"],
-        z=spec["z"],
-        horizon=spec["horizon"],
-        window=spec["window"],
-        on_invalid=spec["on_invalid"],
-        order=order,
-        version=__version__,
-        jax_version=jax.__version__,
-        n_devices=n_devices,
-        status_codes=", ".join(f"{int(s)}={s.name}" for s in Status),
-        regime_codes=", ".join(f"{int(r)}={r.name}" for r in Regime),
-        sweep_spec=canonical(spec),
-    )
-    return attrs
-
-
-def _dataset(grid: _Grid, results: dict[str, np.ndarray], attrs: dict):
-    import xarray as xr
-
-    dims = grid.names if grid.mode == "grid" else ("config",)
-    coords = {n: (n if grid.mode == "grid" else "config", grid.values[n]) for n in grid.names}
-    data = {k: (dims, v.reshape(grid.shape), {"description": _DESCRIPTIONS.get(k, k)}) for k, v in results.items()}
-    return xr.Dataset(data, coords=coords, attrs=attrs)
 
 
 def sweep(
@@ -413,7 +231,7 @@ def sweep(
       `fixed`, each a 1-D array with one entry per configuration) to a batched
       [`Chain`][] of that batch shape (build it with `check=False` and let
       `on_invalid` decide). The axes' names are then free. Chain maps run chunk by
-      chunk on the N-mass exact engine (`dynamics` must be `Exact`), in memory or
+      chunk on the dynamics' N-mass engine (`AbstractDynamics.measure_chain`), in memory or
       written to a NetCDF `path` when done (no resume, no Zarr store, grid order).
     - `t_start`: an explicit measurement start for every configuration (chains only;
       default `Chain.t_start`).
@@ -426,7 +244,7 @@ def sweep(
     **Raises:** `ValueError`, before any computation, for an unknown parameter, an
     empty or non-1-D axis, an invalid configuration (naming the parameter, its valid
     range and the grid index), bad settings, or an output path that cannot be written
-    or holds a different sweep. `TypeError` for an unknown `dynamics`.
+    or holds a different sweep. `TypeError` for a `dynamics` that is not an [`AbstractDynamics`][].
 
     !!! Example
 
@@ -436,14 +254,12 @@ def sweep(
         (ds.regime == Regime.SSL).plot()
         ```
     """
-    dynamics = Exact() if dynamics is None else dynamics
+    dynamics = dynamics_arg(dynamics)
     if mechanism is not None:
         return _sweep_mechanism(mechanism, axes, fixed, mode, z, horizon, window, t_start, dynamics, contact, start,
                                 dtype, chunk_size, path, overwrite, progress, on_invalid, order)  # fmt: skip
     if t_start is not None:
         raise ValueError("t_start is for chain maps (mechanism=...); the paper's model starts at Params.t_start.")
-    if not isinstance(dynamics, (Exact, Smoothed)):
-        raise TypeError(f"dynamics must be Exact or Smoothed, got {type(dynamics).__name__}.")
     model.check_contact(contact)
     model.initial_gap(Params(), start)  # validates `start`
     check_measure_args(z, horizon, window)
@@ -452,10 +268,10 @@ def sweep(
     if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1:
         raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}.")
     dt = _float_dtype(dtype)
-    grid = _Grid(axes, fixed, mode)
+    grid = Grid(axes, fixed, mode)
     if on_invalid == "raise":
-        _check_valid(grid)
-    desc = dynamics.describe() | ({"max_steps": dynamics.max_steps} if isinstance(dynamics, Exact) else {})
+        check_valid(grid)
+    desc = dynamics.spec()
     spec = {
         "spec_version": 1,
         **grid.spec(),
@@ -527,11 +343,11 @@ def sweep(
     else:
         perm = None if permutation is None else permutation()
     # perm[j] is the j-th configuration run; all processes must cut the same chunks.
-    perm = np.arange(grid.size) if perm is None else _from_process0(perm)
+    perm = np.arange(grid.size) if perm is None else sharding.from_process0(perm)
     padded = sharding.padded_size(chunk, ndev, dt)
     n_chunks = -(-grid.size // chunk)
     max_steps = _max_steps(grid, dynamics, horizon)
-    done = _agree(store.completed() if store is not None else set(), n_chunks)
+    done = sharding.agree(store.completed() if store is not None else set(), n_chunks)
 
     results: dict[int, dict[str, np.ndarray]] = {}
     todo = [i for i in range(n_chunks) if i not in done]
@@ -584,7 +400,7 @@ def sweep(
     }
     if RATIO in grid.values or RATIO in grid.fixed:
         flat_res["omega"] = grid.config_values(np.arange(grid.size))["omega"]
-    ds = _dataset(grid, flat_res, _attrs(grid, spec, dynamics, max_steps, ndev, order))
+    ds = to_dataset(grid, flat_res, sweep_attrs(grid, spec, dynamics, max_steps, ndev, order))
     if store is not None:
         store.finalize(ds)
     return ds
@@ -597,8 +413,6 @@ def _sweep_mechanism(mechanism: "Callable[..., Chain]", axes, fixed, mode, z, ho
 
     if not callable(mechanism):
         raise TypeError(f"mechanism must be a function of the swept values returning a Chain, got {mechanism!r}.")
-    if not isinstance(dynamics, (Exact, Smoothed)):
-        raise TypeError(f"dynamics must be Exact or Smoothed for a chain map, got {type(dynamics).__name__}.")
     if order == "cost":
         raise ValueError("order='cost' is for maps of the paper's model; a chain map runs in grid order.")
     if on_invalid not in ("raise", "flag"):
@@ -613,21 +427,3 @@ def _sweep_mechanism(mechanism: "Callable[..., Chain]", axes, fixed, mode, z, ho
         dynamics=dynamics, contact=contact, start=start, dtype=dtype,
         chunk_size=int(chunk_size), path=path, progress=progress, on_invalid=on_invalid,
     )  # fmt: skip
-
-
-def _from_process0(x: np.ndarray) -> np.ndarray:
-    """Process 0's copy of a host array (under `jax.distributed`; unchanged on one process)."""
-    if jax.process_count() == 1:
-        return x
-    from jax.experimental import multihost_utils
-
-    return np.asarray(multihost_utils.broadcast_one_to_all(x))
-
-
-def _agree(done: set[int], n_chunks: int) -> set[int]:
-    """Under `jax.distributed`, all processes must run the same chunks: take process 0's view."""
-    if jax.process_count() == 1:
-        return done
-    mask = np.zeros(n_chunks, np.int32)
-    mask[sorted(done)] = 1
-    return {int(i) for i in np.flatnonzero(_from_process0(mask))}

@@ -25,6 +25,8 @@ import numpy as np
 from ..dynamics._base import AbstractDynamics
 from ..model._params import PARAM_NAMES
 from . import _sharding as sharding
+from ._dataset import DESCRIPTIONS, MEASURE_FIELDS, sweep_attrs
+from ._grid import RATIO
 from ._zarr_store import block_shape, Blocks, ZarrStore
 
 
@@ -49,11 +51,11 @@ def sweep_to_zarr(
     overwrite: bool,
     progress: bool,
 ):
-    """The body of `sweep(path="....zarr")` (arguments as there; `grid` a `_sweep._Grid`).
+    """The body of `sweep(path="....zarr")` (arguments as there; `grid` a `_grid.Grid`).
 
     **Returns:** the finished store, opened lazily (`xarray.open_zarr`).
     """
-    from ._sweep import _attrs, _DESCRIPTIONS, MEASURE_FIELDS, RATIO, STATS
+    from ._sweep import STATS
 
     mesh = sharding.batch_mesh(local=True)  # each process computes whole chunks on its own devices
     ndev = sharding.device_count(mesh)
@@ -78,11 +80,11 @@ def sweep_to_zarr(
     def create() -> ZarrStore:
         if path.exists() and not overwrite:
             return ZarrStore.open(path, spec)
-        variables = {k: (dtypes[k], {"description": _DESCRIPTIONS.get(k, k)}) for k in MEASURE_FIELDS}
-        variables |= {k: (np.dtype(np.float64), {"description": _DESCRIPTIONS[k]}) for k in derived}
+        variables = {k: (dtypes[k], {"description": DESCRIPTIONS.get(k, k)}) for k in MEASURE_FIELDS}
+        variables |= {k: (np.dtype(np.float64), {"description": DESCRIPTIONS[k]}) for k in derived}
         dims = grid.names if grid.mode == "grid" else ("config",)
         coords = {n: (n if grid.mode == "grid" else "config", grid.values[n]) for n in grid.names}
-        attrs = _attrs(grid, spec, dynamics, max_steps, ndev * n_proc, "natural")
+        attrs = sweep_attrs(grid, spec, dynamics, max_steps, ndev * n_proc, "natural")
         return ZarrStore.create(path, spec, dims, grid.shape, blocks.block, variables, coords, attrs, overwrite)
 
     if n_proc == 1:

@@ -1,6 +1,7 @@
 """A chain of N masses joined by N-1 actuated springs (SPEC §8); N = 2 is the paper's model."""
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import equinox as eqx
@@ -12,6 +13,7 @@ import numpy as np
 from .._custom_types import Array, ValuesLike
 from ._actuator import AbstractActuator, RestLength
 from ._friction import AbstractFriction, Coulomb
+from ._mechanism import AbstractMechanism, R
 from ._params import Params
 from ._springwaves import SpringFourier, to_spring_fourier, TravellingWave
 
@@ -34,7 +36,7 @@ def _per(name: str, x: ValuesLike, n: int, what: str) -> Array:
     return x
 
 
-class Chain(eqx.Module):
+class Chain(AbstractMechanism):
     """A chain of masses $m_0, \\dots, m_{N-1}$ on a line, $x_0 < \\dots < x_{N-1}$, joined by springs (SPEC §8).
 
     Spring $j$ joins masses $j$ and $j+1$: stiffness $k_j$, vertical offset $d_j$, mean
@@ -300,6 +302,10 @@ class Chain(eqx.Module):
                     f"Invalid parameter {name!r} of {kind} {where[-1]}{at}{got_s}; the valid range is {valid}."
                 )
         return self
+
+    def dispatch(self, *, two_mass: Callable[[Any], R], chain: Callable[[Any], R]) -> R:
+        """`chain(self)`: the front ends' path for chains (`AbstractMechanism`)."""
+        return chain(self)
 
 
 def _concrete(x: Any) -> bool:

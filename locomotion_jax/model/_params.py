@@ -2,16 +2,16 @@
 
 import itertools
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
-import equinox as eqx
 import jax
 import jax.core  # (jax.core.Tracer) for type checkers
 import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array, ArrayLike
+from ._mechanism import AbstractMechanism, R
 
 
 PARAM_NAMES: tuple[str, ...] = ("k", "c", "d", "lbar", "a", "omega", "mu_s", "mu_k", "mhat")
@@ -64,7 +64,7 @@ def _is_concrete(x: Any) -> bool:
     return not isinstance(x, jax.core.Tracer)
 
 
-class Params(eqx.Module):
+class Params(AbstractMechanism):
     """Dimensionless parameters of the two-mass model (eq. 6), as a pytree.
 
     Every field is a floating array; a field may carry leading batch axes, and all
@@ -282,6 +282,10 @@ class Params(eqx.Module):
                     f"{VALID_RANGES[name]} (and finite){more}."
                 )
         return self
+
+    def dispatch(self, *, two_mass: Callable[[Any], R], chain: Callable[[Any], R]) -> R:
+        """`two_mass(self)`: the front ends' path for the two-mass model (`AbstractMechanism`)."""
+        return two_mass(self)
 
 
 def batch_indices(shape: tuple[int, ...]) -> list[tuple[int, ...]]:

@@ -623,6 +623,6 @@ def _best_sections(gait: Any, n: int, m: int) -> np.ndarray:
 
 
 def _exact_dynamics(dt: float):
-    from ..dynamics._base import Exact
+    from ..dynamics._exact_dynamics import Exact
 
     return Exact(dt=dt)

@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._status import Status
-from ..dynamics._base import Exact
+from ..dynamics._exact_dynamics import Exact
 from ..model._params import PARAM_NAMES, Params
 from ..model._waveform import AbstractWaveform
 from ..run._simulate import simulate

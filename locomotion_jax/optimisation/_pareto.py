@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..dynamics._base import Exact
+from ..dynamics._exact_dynamics import Exact
 from ..gaits._gait import Gait, GaitStatus, steady_gait
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform

@@ -12,7 +12,7 @@ import numpy as np
 import xarray as xr
 
 from .._status import Regime
-from ..dynamics._base import Exact
+from ..dynamics._exact_dynamics import Exact
 from ..model._params import Params
 from ..run._simulate import simulate
 from . import _plotting as pl

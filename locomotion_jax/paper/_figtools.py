@@ -12,7 +12,7 @@ import numpy as np
 import xarray as xr
 
 from .._custom_types import Contact, Start
-from ..dynamics._base import Exact
+from ..dynamics._exact_dynamics import Exact
 from ..maps._sweep import sweep
 from ..model._params import DEFAULTS, Params
 

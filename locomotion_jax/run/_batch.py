@@ -1,4 +1,4 @@
-"""Input preparation shared by `simulate` and `measure`: dtype, batching, validity.
+"""Input preparation shared by the front ends: argument types, dtype, batching, validity.
 
 Library functions handle one configuration; this module flattens the batch
 shape, applies one `vmap`, and restores the shape.
@@ -11,10 +11,32 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import Contact
+from ..dynamics._base import AbstractDynamics
+from ..dynamics._exact_dynamics import Exact
 from ..dynamics._forward import concrete_value
+from ..model._chain import Chain
+from ..model._mechanism import AbstractMechanism
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform, Sinusoid
+
+
+def dynamics_arg(dynamics: Any) -> AbstractDynamics:
+    """The `dynamics=` argument of a front end: [`Exact`][] by default, else an [`AbstractDynamics`][]."""
+    if dynamics is None:
+        return Exact()
+    if not isinstance(dynamics, AbstractDynamics):
+        raise TypeError(
+            "dynamics must be an AbstractDynamics (Exact(), Smoothed() or a subclass of your own), "
+            f"got {type(dynamics).__name__}."
+        )
+    return dynamics
+
+
+def mechanism_arg(params: Any) -> AbstractMechanism:
+    """The mechanism argument of a front end: a [`Params`][] or a [`Chain`][]."""
+    if not isinstance(params, AbstractMechanism):
+        raise TypeError(f"params must be a locomotion_jax.Params or Chain, got {type(params).__name__}.")
+    return params
 
 
 def prepare(params: Params, waveform: AbstractWaveform | None, dtype: Any):
@@ -54,29 +76,6 @@ def unflatten(tree: Any, shape: tuple[int, ...]) -> Any:
     return jax.tree_util.tree_map(lambda x: x.reshape(shape + x.shape[1:]), tree)
 
 
-def horizon_bound(params: Params, t_extra: float) -> float:
-    """Host-side bound on the simulated time, for the default step cap."""
-    try:
-        # Under jvp/vmap the bound comes from the values beneath the tracers.
-        ts = np.asarray(concrete_value(params.t_start))
-        tmax = float(np.nanmax(np.where(np.isfinite(ts), ts, 0.0)))
-    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
-        tmax = 80 * 2 * math.pi / 5.0
-    return tmax + t_extra
-
-
-MICRO_BATCH_CPU = 64
-"""Lanes of the exact engine's loops on a CPU (the work queues of `measure` and
-`simulate`). Above 64 elements per kernel XLA's CPU runtime splits every kernel
-over its thread pool, which costs more than it gains for kernels this small
-(benchmarks/NOTES.md, cost model 3)."""
-
-
-def default_max_steps(t_total: float, dt: float) -> int:
-    """Room for the nominal steps plus the event searches (a hard cap, not a cost)."""
-    return int(3 * t_total / dt) + 20_000
-
-
 INITIAL_NAMES = ("x1", "v1", "x2", "v2")
 
 
@@ -84,7 +83,7 @@ def prepare_initial(initial: Any, shape: tuple[int, ...], dtype: Any) -> jax.Arr
     """An initial state `(x1, v1, x2, v2)` (each broadcastable to the batch `shape`) as a
     flat `(size, 4)` array, or `None`. Raises a `ValueError` where its values are known
     here (not under `jit`) and a position or velocity is not finite or `x1 >= x2`; under
-    `jit` such a configuration is flagged `INVALID` in its own result ([`initial_state`][])."""
+    `jit` such a configuration is flagged `INVALID` in its own result (`_runs.initial_state`)."""
     if initial is None:
         return None
     if not isinstance(initial, (tuple, list)) or len(initial) != 4:
@@ -114,18 +113,35 @@ def prepare_initial(initial: Any, shape: tuple[int, ...], dtype: Any) -> jax.Arr
     return state
 
 
-def initial_state(params: Params, wave: AbstractWaveform, contact: Contact, start: str, row: jax.Array | None):
-    """The engine's state at $t = 0$ of one configuration: at rest in the `start` position,
-    or the given `row` $(x_1, v_1, x_2, v_2)$; with the validity of `row` (an invalid one is
-    replaced by the start, so that nothing turns NaN)."""
-    from ..dynamics import _exact as exact
-    from ..model import _two_mass as model
+def check_contact_start(contact: str, start: str) -> None:
+    if contact not in ("strict", "paper"):
+        raise ValueError(f"contact must be 'strict' or 'paper', got {contact!r}.")
+    if start not in ("paper", "relaxed"):
+        raise ValueError(f"start must be 'paper' (eq. 14) or 'relaxed', got {start!r}.")
 
-    dtype = params.dtype
-    gap = model.initial_gap(params, start)
-    if row is None:
-        return exact.init(params, wave, contact, jnp.zeros((), dtype), gap), jnp.asarray(True)
-    ok = jnp.all(jnp.isfinite(row)) & (row[0] < row[2])
-    zero = jnp.zeros((), dtype)
-    x1, v1, x2, v2 = (jnp.where(ok, r, d) for r, d in zip(row, (zero, zero, gap, zero)))
-    return exact.init(params, wave, contact, x1, x2, v1, v2), ok
+
+def prepare_chain(chain: Chain, dtype: Any) -> tuple[Chain, jax.Array, tuple[int, ...]]:
+    """Cast, broadcast and flatten; returns `(flat_chain, valid, batch_shape)`.
+
+    An invalid configuration is replaced by a valid one of the batch (so nothing
+    turns into NaN) and flagged in `valid`; its result says `Status.INVALID`.
+    """
+    if not isinstance(chain, Chain):
+        raise TypeError(f"expected a locomotion_jax.Chain, got {type(chain).__name__}.")
+    if dtype is not None:
+        chain = chain.astype(dtype)
+    chain = chain.broadcast()
+    shape = chain.batch_shape
+    size = math.prod(shape)
+    if size == 0:
+        raise ValueError("the chain batch is empty (a zero-length axis).")
+    nb = len(shape)
+    flat = jax.tree_util.tree_map(lambda x: x.reshape((size,) + x.shape[nb:]), chain)
+    valid = flat.is_valid()
+    try:
+        ok = np.asarray(valid)
+        fallback = int(np.argmax(ok)) if ok.any() else 0
+    except jax.errors.ConcretizationTypeError:
+        fallback = 0
+    pick = lambda x: jnp.where(valid.reshape((size,) + (1,) * (x.ndim - 1)), x, x[fallback])
+    return jax.tree_util.tree_map(pick, flat), valid, shape

@@ -1,0 +1,158 @@
+"""The N-mass exact engine's measurements (SPEC §5 and §8), accumulated on the fly.
+
+The same loop as the two-mass engine's (`_exact_measure`): a flat batch through the
+work queue (`_queue.run_queue`), each configuration stopping on its own, with running
+sums only, so memory does not grow with the number of steps.
+"""
+
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._status import Regime, Status
+from ..model._chain import Chain
+from . import _chain_exact as engine, _chain_forces as forces
+from ._compile import engine_jit
+from ._exact import Target, target_margin
+from ._margins import margin_fields
+from ._queue import run_queue
+from ._runs import chain_initial_state, MICRO_BATCH_CPU, STICK_TOL
+
+
+class _Acc(eqx.Module):
+    started: jax.Array
+    X0: jax.Array
+    ed0: jax.Array
+    w0: jax.Array
+    e0: jax.Array
+    reached: jax.Array
+    t_z: jax.Array
+    y_z: engine.State
+    stuck: tuple[jax.Array, ...]  # stuck time per mass
+    steps: jax.Array
+    before_z: jax.Array  # time from the last switch to t_z
+
+
+class _Fixed(NamedTuple):
+    C: Chain
+    P: forces.Consts
+    ws: jax.Array
+    we: jax.Array
+    te: jax.Array
+    z: jax.Array
+
+
+def _setup(C, valid, t_start, z, horizon, window, contact, start):
+    P = forces.consts(C)
+    st = chain_initial_state(C, valid, contact, start, P)
+    dtype = st.t.dtype
+    ws = t_start.astype(dtype)
+    zero = jnp.zeros((), dtype)
+    no = jnp.asarray(False)
+    acc = _Acc(
+        started=no, X0=zero, ed0=zero, w0=zero, e0=zero, reached=no, t_z=jnp.asarray(jnp.inf, dtype),
+        y_z=st.y.map(jnp.zeros_like), stuck=tuple(map(jnp.zeros_like, st.y.x)), steps=jnp.zeros((), jnp.int32),
+        before_z=jnp.asarray(jnp.inf, dtype),
+    )  # fmt: skip
+    return _Fixed(C, P, ws, ws + window, ws + horizon, jnp.asarray(z, dtype)), (st, acc)
+
+
+def _finished(f: _Fixed, s, a):
+    return (s.t >= f.te) | (a.reached & (s.t >= f.we))
+
+
+def _running(f: _Fixed, dyn, max_steps):
+    s, a = dyn
+    return (s.status == Status.OK) & ~_finished(f, s, a) & (a.steps < max_steps)
+
+
+def _advance(f: _Fixed, dyn, contact, dt):
+    s, a = dyn
+    t_stop = jnp.where(s.t < f.ws, f.ws, jnp.where(s.t < f.we, f.we, f.te))
+    begin = ~a.started & (s.t >= f.ws)
+    started = a.started | begin
+    X0 = jnp.where(begin, forces.centre_of_mass(f.P, s.y.x), a.X0)
+    target = Target(active=started & ~a.reached, X0=X0, z=f.z)
+    # The margins cover the measured interval: they restart at t_start.
+    s = eqx.tree_at(lambda s: (s.cross, s.near), s, tuple(jnp.where(begin, jnp.inf, m) for m in (s.cross, s.near)))
+    s_new, info = engine.step(f.C, contact, dt, s, t_stop, target, f.P)
+    inside = info.commit & started & (info.t1 <= f.we)
+    dur = jnp.where(inside, info.t1 - info.t0, 0)
+    hit = info.target_fired
+    a_new = _Acc(
+        started=started, X0=X0, ed0=jnp.where(begin, info.y0.ed, a.ed0), w0=jnp.where(begin, info.y0.w, a.w0),
+        e0=jnp.where(begin, engine.energy(f.P, info.y0, info.tension0), a.e0), reached=a.reached | hit,
+        t_z=jnp.where(hit, info.t_target, a.t_z), y_z=info.y_target.map(lambda n, o: jnp.where(hit, n, o), a.y_z),
+        stuck=tuple(q + jnp.where(b, dur, 0) for q, b in zip(a.stuck, info.stuck)), steps=a.steps + 1,
+        before_z=jnp.where(hit, jax.lax.stop_gradient(info.t_target - s.t_switch), a.before_z),
+    )  # fmt: skip
+    return s_new, a_new
+
+
+def _energy_at(P: forces.Consts, t, y):
+    dr = forces.drive(P, jnp.cos(P.omega * t), jnp.sin(P.omega * t))
+    return engine.energy(P, y, forces.springs(P, dr.l0, y.x).tension)
+
+
+def _margin_z(f: _Fixed, a: _Acc, contact) -> jax.Array:
+    """The time from $t_z$ to the nearest change of the target's structure (`_exact.target_margin`)."""
+    t_z = jnp.where(a.reached, a.t_z, f.ws)
+    g, d, e = engine.probe(f.C, contact, t_z, a.y_z, Target(active=jnp.asarray(True), X0=a.X0, z=f.z), f.P)
+    return target_margin(a.before_z, g, d, e)
+
+
+def _results(f: _Fixed, dyn, contact) -> dict:
+    s, a = dyn
+    ws, we, z = f.ws, f.we, f.z
+    dtype = ws.dtype
+    status = jnp.where((s.status == Status.OK) & ~_finished(f, s, a), Status.MAX_STEPS, s.status).astype(jnp.int32)
+    nan, inf = jnp.asarray(jnp.nan, dtype), jnp.asarray(jnp.inf, dtype)
+    stuck = jnp.stack(a.stuck)
+    regime = jnp.where(s.t >= we, jnp.where(jnp.max(stuck) > STICK_TOL, Regime.SSL, Regime.SL), Regime.UNDETERMINED)
+    t_end = jnp.where(a.reached, a.t_z, s.t)
+    y_end = a.y_z.map(lambda zv, sv: jnp.where(a.reached, zv, sv), s.y)
+    elapsed = t_end - ws
+    measured = a.started & (elapsed > 0)
+    mean_speed = jnp.where(
+        measured, (forces.centre_of_mass(f.P, y_end.x) - a.X0) / jnp.where(measured, elapsed, 1), nan
+    )
+    e_d = jnp.where(a.started, y_end.ed - a.ed0, nan)
+    work = jnp.where(a.started, y_end.w - a.w0, nan)
+    delta_e = jnp.where(a.started, _energy_at(f.P, t_end, y_end) - a.e0, nan)
+    e_z = jnp.where(a.reached, y_end.ed - a.ed0, inf)
+    covered = jnp.clip(jnp.minimum(s.t, we) - ws, 0, None)
+    frac = jnp.where(covered > 0, stuck / jnp.where(covered > 0, covered, 1), nan)
+    return dict(
+        tau_z=jnp.where(a.reached, a.t_z - ws, inf), e_z=e_z, reached=a.reached, regime=regime.astype(jnp.int32),
+        mean_speed=mean_speed, cost_of_transport=e_z / z, stick_fraction=frac, e_d=e_d, work=work,
+        delta_e=delta_e, balance=work - e_d - delta_e, liftoff=jnp.isfinite(s.t_liftoff), t_liftoff=s.t_liftoff,
+        status=status, t_start=ws, X_start=jnp.where(a.started, a.X0, nan), n_steps=a.steps, n_switch=s.n_switch,
+        **margin_fields(a.started, a.reached, s.cross, s.near, _margin_z(f, a, contact), a.t_z - ws, nan),
+    )  # fmt: skip
+
+
+def _measure_batch(C, valid, t_start, z, horizon, window, contact, start, dt, max_steps, lanes):
+    n = valid.shape[0]
+    take = lambda i: (jax.tree_util.tree_map(lambda x: x[i], C), valid[i], t_start[i])
+    setup = lambda i: _setup(*take(i), z, horizon, window, contact, start)
+    running = lambda f, d: _running(f, d, max_steps)
+    advance = lambda f, d: _advance(f, d, contact, dt)
+    results = lambda f, d: _results(f, d, contact)
+    order = jnp.argsort(-jnp.where(jnp.isfinite(C.waves.omega), C.waves.omega, -jnp.inf))
+    return run_queue(setup, running, advance, results, n, lanes, order)
+
+
+_measure_batch = engine_jit(_measure_batch, ("contact", "start", "dt", "lanes"))
+
+
+def measure_batch(flat: Chain, valid, t_start, z, horizon, window, contact, start, dt, max_steps: int) -> dict:
+    """The fields of a [`ChainMeasurement`][locomotion_jax.ChainMeasurement] of a flat batch of
+    chains, measured from `t_start` (one per configuration); `max_steps` caps each one's iterations."""
+    n = valid.shape[0]
+    z_, h_, w_ = (jnp.asarray(v, flat.dtype) for v in (z, horizon, window))
+    lanes = min(n, MICRO_BATCH_CPU) if jax.default_backend() == "cpu" else n
+    return _measure_batch(
+        flat, valid, t_start, z_, h_, w_, contact, start, dt, jnp.asarray(max_steps, jnp.int32), lanes
+    )

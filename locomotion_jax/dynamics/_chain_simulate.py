@@ -1,0 +1,75 @@
+"""The N-mass exact engine's trajectories (SPEC §8): states saved at requested times.
+
+As for two masses (`_exact_simulate`): a flat batch through the work queue
+([`_saves.run_saves`][]), highest frequencies first, so memory grows with the saves
+only; energy, normal forces, rest lengths and tensions follow from the saved states.
+"""
+
+import jax
+import jax.numpy as jnp
+
+from ..model._chain import Chain
+from . import _chain_exact as engine, _chain_forces as forces
+from ._compile import engine_jit
+from ._margins import switch_gap
+from ._runs import chain_initial_state, MICRO_BATCH_CPU
+from ._saves import BUFFER, run_saves
+
+
+def _com(C: Chain, x: jax.Array) -> jax.Array:
+    """Centre of mass $\\sum_i m_i x_i / \\sum_i m_i$ of one configuration (`x`: `(..., N)`)."""
+    return jnp.matmul(x, C.m) / C.m.sum()
+
+
+def _row(s: engine.Hybrid) -> jax.Array:
+    dt = s.t.dtype
+    stuck = (b.astype(dt) for b in s.stuck)
+    return jnp.stack([*s.y.x, *s.y.v, s.y.ed, s.y.w, *stuck, *s.sdir, s.cross, s.near, s.t_switch])
+
+
+def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps, lanes, buffer=BUFFER):
+    """The saved rows of a flat batch: the work queue of [`_saves.run_saves`][], highest frequencies first."""
+    take = lambda i: jax.tree_util.tree_map(lambda x: x[i], C)
+
+    def init(i):
+        P = forces.consts(take(i))
+        return P, chain_initial_state(take(i), valid[i], contact, start, P)
+
+    step = lambda P, s, t_stop: engine.step(None, contact, dt, s, t_stop, P=P)[0]
+    order = jnp.argsort(-jnp.where(jnp.isfinite(C.waves.omega), C.waves.omega, -jnp.inf))
+    return run_saves(init, step, _row, valid.shape[0], save_at, max_steps, lanes, order, buffer)
+
+
+_simulate_batch = engine_jit(_simulate_batch, ("contact", "start", "dt", "lanes", "buffer"))
+
+
+def _derived(C: Chain, contact, t, x, v):
+    """Energy, normal forces, rest lengths and tensions at one saved state."""
+    P = forces.consts(C)
+    dr = forces.drive(P, jnp.cos(P.omega * t), jnp.sin(P.omega * t))
+    sp = forces.springs(P, dr.l0, forces.unstack(x))
+    _, N = forces.loads(P, sp.fx, sp.fy, dr.f)
+    e = forces.energy(P, forces.unstack(v), sp.tension)
+    return dict(e=e, N=jnp.stack(N, -1), l0=jnp.stack(dr.l0, -1), tension=jnp.stack(sp.tension, -1))
+
+
+def simulate_batch(flat: Chain, valid, save, contact, start, dt, max_steps: int) -> dict:
+    """The fields of a [`ChainTrajectory`][locomotion_jax.ChainTrajectory] of a flat batch of chains
+    (leading axis: the configurations); `max_steps` caps each one's iterations, saves included."""
+    N = flat.n_masses
+    n = valid.shape[0]
+    lanes = min(n, MICRO_BATCH_CPU) if jax.default_backend() == "cpu" else n
+    rows, ok, status, t_lift, n_switch = _simulate_batch(
+        flat, valid, save, contact, start, dt, jnp.asarray(max_steps, jnp.int32), lanes
+    )
+    x, v = rows[..., :N], rows[..., N : 2 * N]
+    t = jnp.broadcast_to(save, rows.shape[:-1])
+    der = jax.vmap(lambda C, t, x, v: jax.vmap(lambda *a: _derived(C, contact, *a))(t, x, v))(flat, t, x, v)
+    out = dict(
+        t=t, x=x, v=v, stuck=rows[..., 2 * N + 2 : 3 * N + 2] > 0.5, X=jax.vmap(_com)(flat, x),
+        e_d=rows[..., 2 * N], w=rows[..., 2 * N + 1], valid=ok, status=status, liftoff=jnp.isfinite(t_lift),
+        t_liftoff=t_lift, n_switch=n_switch, transversality=jnp.sqrt(rows[..., 4 * N + 2]),
+        near_miss=jnp.sqrt(rows[..., 4 * N + 3]), switch_gap=switch_gap(flat.waves.omega, t, rows[..., 4 * N + 4]),
+        **der,
+    )  # fmt: skip
+    return out

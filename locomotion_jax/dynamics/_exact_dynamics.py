@@ -1,0 +1,152 @@
+"""`Exact`: the hybrid stick/slip dynamics with located switches, as an `AbstractDynamics`.
+
+Its settings are Python numbers, static under `jit` (changing them recompiles). The
+two-mass runs are `_exact_simulate` and `_exact_measure`, the chains' `_chain_simulate`
+and `_chain_measure`: each a flat batch through the work queue (`_queue`).
+"""
+
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.sharding import Mesh, PartitionSpec
+
+from .._custom_types import Array
+from ..model._chain import Chain
+from ..model._params import Params
+from ..model._waveform import AbstractWaveform, Sinusoid
+from . import _chain_measure, _chain_simulate, _exact_measure, _exact_simulate
+from ._base import AbstractDynamics
+from ._forward import check_static
+from ._runs import default_max_steps, horizon_bound
+
+
+class Exact(AbstractDynamics):
+    """Exact hybrid stick/slip dynamics (eqs. 7, 9) with located switches.
+
+    **Arguments:**
+
+    - `dt`: nominal RK4 step (fourth order; see README for accuracy vs `dt`).
+    - `max_steps`: hard cap on integrator iterations (trial steps included);
+      `None` picks one from the horizon.
+    """
+
+    dt: float = eqx.field(static=True, default=0.01)
+    max_steps: int | None = eqx.field(static=True, default=None)
+
+    def __check_init__(self):
+        check_static("Exact.dt", self.dt)
+        if not (isinstance(self.dt, (int, float)) and 0 < self.dt <= 0.1):
+            raise ValueError(f"Exact.dt must be a number in (0, 0.1], got {self.dt!r}.")
+        if self.max_steps is not None and not (isinstance(self.max_steps, int) and self.max_steps > 0):
+            raise ValueError(f"Exact.max_steps must be a positive int or None, got {self.max_steps!r}.")
+
+    def simulate_two_mass(
+        self,
+        params: Params,
+        wave: AbstractWaveform,
+        wave_axes: int | None,
+        save_at: Array,
+        t_end: float,
+        contact: str,
+        start: str,
+        initial: Array | None,
+    ) -> dict[str, Array]:
+        # Room for the steps to t_end, plus the iterations that save a state.
+        max_steps = self.max_steps or default_max_steps(t_end, self.dt) + 4 * save_at.shape[0]
+        return _exact_simulate.simulate_batch(
+            params, wave, wave_axes, save_at, contact, start, self.dt, max_steps, initial
+        )
+
+    def measure_two_mass(
+        self,
+        params: Params,
+        wave: AbstractWaveform,
+        wave_axes: int | None,
+        z: float,
+        horizon: float,
+        window: float,
+        contact: str,
+        start: str,
+        t_start: Array | None,
+        initial: Array | None,
+    ) -> dict[str, Array]:
+        total = horizon_bound(params, horizon) if t_start is None else float(np.max(np.asarray(t_start))) + horizon
+        return _exact_measure._exact_batch(
+            params,
+            wave,
+            wave_axes,
+            *(jnp.asarray(v, params.dtype) for v in (z, horizon, window)),
+            contact,
+            start,
+            self.dt,
+            jnp.asarray(self.step_cap(total), jnp.int32),
+            t_start=t_start,
+            initial=initial,
+        )
+
+    def simulate_chain(
+        self, chain: Chain, valid: Array, save_at: Array, t_end: float, contact: str, start: str
+    ) -> dict[str, Array]:
+        max_steps = self.max_steps or default_max_steps(t_end, self.dt) + 4 * save_at.shape[0]
+        return _chain_simulate.simulate_batch(chain, valid, save_at, contact, start, self.dt, max_steps)
+
+    def measure_chain(
+        self,
+        chain: Chain,
+        valid: Array,
+        t_start: Array,
+        z: float,
+        horizon: float,
+        window: float,
+        contact: str,
+        start: str,
+    ) -> dict[str, Array]:
+        # The default start (eigenvalues of the linearised chain) outside the engine's program: a
+        # batched eigensolver inside it can deadlock XLA's CPU thread pool (seen at N = 8, batch 1024).
+        ts = jnp.where(jnp.isfinite(t_start), t_start, chain.t_start)
+        max_steps = self.step_cap(float(np.max(np.asarray(ts))) + horizon)
+        return _chain_measure.measure_batch(chain, valid, ts, z, horizon, window, contact, start, self.dt, max_steps)
+
+    def measure_chunk(
+        self,
+        params: Params,
+        zhw: Array,
+        contact: str,
+        start: str,
+        max_steps: int,
+        mesh: Mesh,
+        lanes: int | None,
+    ) -> dict[str, Array]:
+        def local(p: Params, zhw: Array, dyn: Exact) -> dict[str, Array]:
+            z, horizon, window = zhw[0], zhw[1], zhw[2]
+            wave = Sinusoid.from_params(p)
+            # A work queue over `lanes` lanes (`_queue`): a lane whose configuration is
+            # done takes the next one.
+            return _exact_measure.exact_batch(
+                p, wave, 0, z, horizon, window, contact, start, dyn.dt, max_steps, lanes=lanes
+            )
+
+        # shard_map, not jit's partitioning of a sharded batch: each device's loop ends
+        # with its own slowest configuration, not with the slowest of all devices.
+        # check_vma=False: the integrator's while_loop carries mix per-shard and
+        # replicated values, which the varying-manual-axes checker rejects.
+        batch = PartitionSpec(mesh.axis_names[0])
+        sharded = jax.shard_map(
+            local, mesh=mesh, in_specs=(batch, PartitionSpec(), PartitionSpec()), out_specs=batch, check_vma=False
+        )
+        return sharded(params, zhw, self)
+
+    def step_cap(self, t_total: float) -> int:
+        return self.max_steps or default_max_steps(t_total, self.dt)
+
+    def nominal_step(self) -> float | None:
+        return self.dt
+
+    def describe(self) -> dict[str, Any]:
+        return {"dynamics": "exact", "dt": self.dt}
+
+    def spec(self) -> dict[str, Any]:
+        return self.describe() | {"max_steps": self.max_steps}

@@ -1,0 +1,70 @@
+"""What the exact engines' batched runs share: lanes, step caps, initial states.
+
+The two-mass and the N-mass exact engines run a flat batch through the same work
+queue (`_queue`, `_saves`); these are the settings and the start of each configuration
+that both `simulate` and `measure` use.
+"""
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._custom_types import Contact
+from .._status import Status
+from ..model import _two_mass as model
+from ..model._chain import Chain
+from ..model._params import Params
+from ..model._waveform import AbstractWaveform
+from . import _chain_exact as chain_engine, _chain_forces as forces, _exact as exact
+from ._forward import concrete_value
+
+
+STICK_TOL = 1e-6
+"""A mass counts as stuck in the window (SSL) only for a total stuck time above this."""
+
+
+MICRO_BATCH_CPU = 64
+"""Lanes of the exact engine's loops on a CPU (the work queues of `measure` and
+`simulate`). Above 64 elements per kernel XLA's CPU runtime splits every kernel
+over its thread pool, which costs more than it gains for kernels this small
+(benchmarks/NOTES.md, cost model 3)."""
+
+
+def default_max_steps(t_total: float, dt: float) -> int:
+    """Room for the nominal steps plus the event searches (a hard cap, not a cost)."""
+    return int(3 * t_total / dt) + 20_000
+
+
+def horizon_bound(params: Params, t_extra: float) -> float:
+    """Host-side bound on the simulated time, for the default step cap."""
+    try:
+        # Under jvp/vmap the bound comes from the values beneath the tracers.
+        ts = np.asarray(concrete_value(params.t_start))
+        tmax = float(np.nanmax(np.where(np.isfinite(ts), ts, 0.0)))
+    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
+        tmax = 80 * 2 * math.pi / 5.0
+    return tmax + t_extra
+
+
+def initial_state(params: Params, wave: AbstractWaveform, contact: Contact, start: str, row: jax.Array | None):
+    """The engine's state at $t = 0$ of one configuration: at rest in the `start` position,
+    or the given `row` $(x_1, v_1, x_2, v_2)$; with the validity of `row` (an invalid one is
+    replaced by the start, so that nothing turns NaN)."""
+    dtype = params.dtype
+    gap = model.initial_gap(params, start)
+    if row is None:
+        return exact.init(params, wave, contact, jnp.zeros((), dtype), gap), jnp.asarray(True)
+    ok = jnp.all(jnp.isfinite(row)) & (row[0] < row[2])
+    zero = jnp.zeros((), dtype)
+    x1, v1, x2, v2 = (jnp.where(ok, r, d) for r, d in zip(row, (zero, zero, gap, zero)))
+    return exact.init(params, wave, contact, x1, x2, v1, v2), ok
+
+
+def chain_initial_state(C: Chain, valid, contact, start, P: forces.Consts | None = None) -> chain_engine.Hybrid:
+    """The N-mass engine's state at $t = 0$ of one chain at rest in the `start` position,
+    flagged `Status.INVALID` where the chain is not `valid`."""
+    st = chain_engine.init(C, contact, chain_engine.initial_positions(C, start), P)
+    return eqx.tree_at(lambda s: s.status, st, jnp.where(valid, st.status, Status.INVALID).astype(jnp.int32))

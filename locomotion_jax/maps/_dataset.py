@@ -1,0 +1,83 @@
+"""A sweep's results as an `xarray.Dataset`: one variable per `Measurement` field, its settings as attributes."""
+
+from typing import Any
+
+import jax
+import numpy as np
+
+from .._results import Measurement
+from .._status import Regime, Status
+from ..dynamics._base import AbstractDynamics
+from ._grid import Grid
+
+
+MEASURE_FIELDS: tuple[str, ...] = tuple(
+    f for f in Measurement.__dataclass_fields__ if f not in ("z", "start", "contact")
+)
+"""The dataset's variables: every array field of [`Measurement`][]."""
+
+DESCRIPTIONS = {
+    "tau_z": "time to travel z after t_start (inf: not reached)",
+    "e_z": "energy dissipated while travelling z, eq. (15) (inf: not reached)",
+    "reached": "|X - X(t_start)| reached z within the horizon",
+    "regime": "1 SSL (stick-slip), 0 SL (slip), -1 undetermined",
+    "mean_speed": "signed mean speed of the centre of mass over the measured interval",
+    "cost_of_transport": "e_z / z",
+    "stick_fraction1": "fraction of the regime window mass 1 is stuck",
+    "stick_fraction2": "fraction of the regime window mass 2 is stuck",
+    "e_d": "dissipated energy over the measured interval, eq. (15)",
+    "work": "actuator work over the measured interval, eq. (16)",
+    "delta_e": "change of total energy over the measured interval, eq. (10)",
+    "balance": "work - e_d - delta_e (zero up to integration error)",
+    "liftoff": "a normal force reached zero, eq. (5)",
+    "t_liftoff": "first lift-off time (inf: none)",
+    "status": "0 OK, 1 LIFTOFF, 2 MAX_STEPS, 3 INVALID, 4 SOLVER_FAILED",
+    "t_start": "start of the measurement: 80 periods of the lowest natural frequency",
+    "X_start": "centre of mass at t_start, eq. (4)",
+    "n_steps": "integrator iterations",
+    "n_switch": "contact-mode switches",
+    "transversality": "smallest margin (rad of drive phase) at a located switch in the measured interval",
+    "near_miss": "smallest margin (rad of drive phase) at a near miss of an event function",
+    "margin_z": "margin (rad of drive phase) of the target |X - X0| = z: its crossing, near misses, nearest switch",
+    "omega": "actuation frequency derived from omega_over_wn1",
+}
+
+
+def sweep_attrs(grid: Grid, spec: dict, dynamics: AbstractDynamics, max_steps: int, n_devices: int, order: str) -> dict:
+    from .. import __version__
+    from ._store import canonical
+
+    attrs: dict[str, Any] = {
+        "title": "locomotion_jax parameter sweep (Zhou, Majidi, O'Reilly 2014)",
+        "sweep_mode": grid.mode,
+        "swept": ",".join(grid.names),
+    }
+    attrs.update({f"fixed_{n}": v for n, v in grid.fixed.items()})
+    attrs.update({f"dynamics_{k}" if k != "dynamics" else "dynamics": v for k, v in dynamics.describe().items()})
+    attrs.update(
+        max_steps=max_steps,
+        dtype=spec["dtype"],
+        contact=spec["contact"],
+        start=spec["start"],
+        z=spec["z"],
+        horizon=spec["horizon"],
+        window=spec["window"],
+        on_invalid=spec["on_invalid"],
+        order=order,
+        version=__version__,
+        jax_version=jax.__version__,
+        n_devices=n_devices,
+        status_codes=", ".join(f"{int(s)}={s.name}" for s in Status),
+        regime_codes=", ".join(f"{int(r)}={r.name}" for r in Regime),
+        sweep_spec=canonical(spec),
+    )
+    return attrs
+
+
+def to_dataset(grid: Grid, results: dict[str, np.ndarray], attrs: dict):
+    import xarray as xr
+
+    dims = grid.names if grid.mode == "grid" else ("config",)
+    coords = {n: (n if grid.mode == "grid" else "config", grid.values[n]) for n in grid.names}
+    data = {k: (dims, v.reshape(grid.shape), {"description": DESCRIPTIONS.get(k, k)}) for k, v in results.items()}
+    return xr.Dataset(data, coords=coords, attrs=attrs)

@@ -1,0 +1,26 @@
+"""The mechanisms that the front ends run: the paper's two-mass model and chains of N masses."""
+
+import abc
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+import equinox as eqx
+
+
+R = TypeVar("R")
+
+
+class AbstractMechanism(eqx.Module):
+    """Base class of [`Params`][locomotion_jax.Params] (the paper's two-mass model) and
+    [`Chain`][locomotion_jax.Chain] (N masses).
+
+    The front ends (`simulate`, `measure`, `steady_gait`) do not test which of the two
+    they were given: they pass one function per kind of mechanism to `dispatch`, and the
+    mechanism calls its own with itself (double dispatch). Each function then runs the
+    dynamics' method for that kind (`AbstractDynamics.simulate_two_mass` or
+    `simulate_chain`, and so on), so that neither the front ends nor the dynamics test a class.
+    """
+
+    @abc.abstractmethod
+    def dispatch(self, *, two_mass: Callable[[Any], R], chain: Callable[[Any], R]) -> R:
+        """`two_mass(self)` for a `Params`, `chain(self)` for a `Chain`."""
