@@ -273,7 +273,7 @@ HELPER = textwrap.dedent(
     import jax
     jax.config.update("jax_enable_x64", True)
     import locomotion_jax as lj
-    from locomotion_jax import _sharding
+    from locomotion_jax.maps import _sharding
     axes, path = json.loads(sys.argv[1]), sys.argv[2]
     lj.sweep(axes, chunk_size=4, path=path, z=0.3, horizon=30.0, window=5.0,
              dynamics=lj.Exact(dt=0.02), progress=False)
