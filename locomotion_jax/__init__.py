@@ -43,6 +43,10 @@ from .model._params import (
     VALID_RANGES as VALID_RANGES,
 )
 from .model._waveform import AbstractWaveform as AbstractWaveform, Fourier as Fourier, Sinusoid as Sinusoid
+from .optimisation._chain_optimum import (
+    ChainOptimiseSettings as ChainOptimiseSettings,
+    ChainOptimum as ChainOptimum,
+)
 from .optimisation._optimum import (
     ExactOptimiseSettings as ExactOptimiseSettings,
     OptimiseSettings as OptimiseSettings,
