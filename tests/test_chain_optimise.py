@@ -15,6 +15,7 @@ import locomotion_jax as lj
 import numpy as np
 import pytest
 from locomotion_jax.cli import _main as _cli
+from locomotion_jax.gaits import _chain_orbit
 from typer.testing import CliRunner
 
 
@@ -98,6 +99,12 @@ def test_infeasible_requirement_is_flagged(infeasible):
     record = json.loads(infeasible.to_json())
     assert record["feasible_exact"] is False and record["improvement_vs_travelling_wave"] is None
     assert "INFEASIBLE" in infeasible.summary()
+
+
+@pytest.mark.slow
+def test_one_compilation_serves_every_evaluation(opt3, infeasible):
+    """Both optimisations (other requirements, other iterates, the fallbacks) share one compiled oracle."""
+    assert _chain_orbit.TRACES["evaluate"] == 1 and _chain_orbit.TRACES["relax"] <= 1
 
 
 @pytest.mark.slow
