@@ -42,7 +42,8 @@ def opt3() -> lj.ChainOptimum:
 
 @pytest.fixture(scope="module")
 def infeasible() -> lj.ChainOptimum:
-    settings = lj.ChainOptimiseSettings(**(SMALL | dict(zoom_levels=0)), max_iter=1)
+    quick: dict[str, Any] = SMALL | dict(zoom_levels=0, max_iter=1)
+    settings = lj.ChainOptimiseSettings(**quick)
     return lj.optimise(worm(), 5.0, A_MAX, harmonics=2, settings=settings)
 
 
