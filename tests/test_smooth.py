@@ -7,6 +7,7 @@ import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 from locomotion_jax.dynamics import _smooth
+from locomotion_jax.model import _two_mass
 from scipy.stats import linregress
 
 
@@ -61,7 +62,7 @@ def test_gradient_matches_finite_differences():
         dyn = lj.Smoothed(1e-2, rtol=1e-10, atol=1e-12)
         sol = _smooth.solve(p, wave, "paper", dyn, 0.0, 5.0, y0, diffrax.SaveAt(t1=True))
         assert sol.ys is not None
-        return lj.model._two_mass.centre_of_mass(p, sol.ys[-1, 0], sol.ys[-1, 2])
+        return _two_mass.centre_of_mass(p, sol.ys[-1, 0], sol.ys[-1, 2])
 
     g = jax.grad(final_x)(jnp.asarray(0.05))
     h = 1e-5
