@@ -50,6 +50,10 @@ from .model._waveform import (
     Sinusoid as Sinusoid,
     Spline as Spline,
 )
+from .optimisation._chain_optimum import (
+    ChainOptimiseSettings as ChainOptimiseSettings,
+    ChainOptimum as ChainOptimum,
+)
 from .optimisation._optimum import (
     ExactOptimiseSettings as ExactOptimiseSettings,
     OptimiseSettings as OptimiseSettings,

@@ -339,8 +339,11 @@ PLUGINS: tuple[str, ...] = (
     "locomotion_jax.cli._animate",
     "locomotion_jax.cli._chain",
     "locomotion_jax.cli._gait",
+    "locomotion_jax.cli._chain_commands",
+    "locomotion_jax.cli._chain_optimise",
 )
-"""Modules that add subcommands (`optimize`, `animate`, `chain`, `gait` and `continue`) through `register(app)`;
+"""Modules that add subcommands (`optimize`, `animate`, `chain`, `gait`, `continue`, `chain-simulate`, `chain-gait`,
+`chain-sweep`, `chain-optimize`) through `register(app)`;
 [`_register_optional`][] skips one whose module is absent."""
 
 

@@ -42,7 +42,7 @@ import math
 import sys
 import time
 from collections import Counter
-from typing import Any, cast
+from typing import Any, cast, overload
 
 import equinox as eqx
 import jax
@@ -50,9 +50,11 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from ..model._chain import Chain
 from ..model._params import Params
 from ..model._waveform import Fourier
 from . import _constraints as cons, _pareto as pareto
+from ._chain_optimum import ChainOptimiseSettings, ChainOptimum
 from ._objective import make_plan, Plan, rollout
 from ._optimum import ExactSettings, Optimum, Settings, verified
 from ._shapes import FourierShape, SplineShape
@@ -271,8 +273,24 @@ def _run_stage(state, prob, eps, lr, settings: Settings, outer: int, log):
     return (theta, opt_state, lam, rho, v_target, margin), best_theta
 
 
+@overload
 def optimise(
-    params: Params,
+    params: Params, v_min: float, a_max: float, *, method: str = ..., direction: int | None = ...,
+    omega: float | None = ..., harmonics: int | None = ..., settings: "Settings | ExactSettings | None" = ...,
+    sweep: "pareto.SinusoidSweep | None" = ..., start: Any = ...,
+) -> Optimum: ...  # fmt: skip
+
+
+@overload
+def optimise(
+    params: Chain, v_min: float, a_max: float, *, method: str = ..., direction: int | None = ...,
+    omega: float | None = ..., harmonics: int | None = ..., settings: "ChainOptimiseSettings | None" = ...,
+    sweep: None = ..., start: None = ...,
+) -> ChainOptimum: ...  # fmt: skip
+
+
+def optimise(
+    params: Params | Chain,
     v_min: float,
     a_max: float,
     *,
@@ -280,11 +298,16 @@ def optimise(
     direction: int | None = None,
     omega: float | None = None,
     harmonics: int | None = None,
-    settings: "Settings | ExactSettings | None" = None,
+    settings: "Settings | ExactSettings | ChainOptimiseSettings | None" = None,
     sweep: "pareto.SinusoidSweep | None" = None,
     start: Any = None,
-) -> Optimum:
+) -> Optimum | ChainOptimum:
     """Find the periodic actuation of least cost of transport that meets a speed (SPEC §7).
+
+    `params` may be a [`Chain`][] of N masses (SPEC §8): then the actuation is per spring
+    (travelling waves screened, then per-spring harmonics refined on the exact steady gaits;
+    module `optimisation._chain`, [`ChainOptimiseSettings`][], default 3 harmonics) and the
+    result a [`ChainOptimum`][].
 
     Two methods:
 
@@ -298,7 +321,8 @@ def optimise(
 
     **Arguments:**
 
-    - `params`: one configuration ([`Params`][]; `a` and `omega` are ignored).
+    - `params`: one configuration ([`Params`][]; `a` and `omega` are ignored), or one [`Chain`][] (its
+      waveforms are ignored; `v_min > 0`, `0 < a_max < min(lbar)`, `settings` a [`ChainOptimiseSettings`][]).
     - `v_min`: required mean speed (> 0) in `direction`; see `_constraints.check_inputs`.
     - `a_max`: stroke bound, $\\max_t |\\ell_0(t) - \\bar\\ell| \\le a_\\max$.
     - `method`: `"exact"` or `"smoothed"`.
@@ -328,6 +352,8 @@ def optimise(
         opt.cost_of_transport_exact, opt.improvement_vs_sinusoid
         ```
     """
+    if isinstance(params, Chain):
+        return _optimise_chain(params, v_min, a_max, method, direction, omega, harmonics, settings, sweep, start)
     if method not in ("exact", "smoothed"):
         raise ValueError(f"method must be 'exact' or 'smoothed', got {method!r}.")
     exact = method == "exact"
@@ -360,6 +386,18 @@ def optimise(
     shape = SplineShape(knots=s.knots) if spline else FourierShape(harmonics=harmonics)
     opt, _ = optimise_exact(params, speed, direction, a_max, omega, shape, s, baseline, start)
     return opt
+
+
+def _optimise_chain(chain, v_min, a_max, method, direction, omega, harmonics, settings, sweep, start):
+    """A [`Chain`][]: the exact method of `optimisation._chain` (travelling waves, then harmonics)."""
+    from ._chain import optimise_chain
+
+    if method != "exact":
+        raise ValueError(f"method: a Chain is optimised by the exact method only (method='exact'), got {method!r}.")
+    if sweep is not None or start is not None:
+        raise ValueError("sweep= and start= apply to Params; a Chain's baseline is its own travelling-wave screen.")
+    return optimise_chain(chain, v_min, a_max, direction=1 if direction is None else direction, omega=omega,
+                          harmonics=3 if harmonics is None else harmonics, settings=settings)  # fmt: skip
 
 
 def _baseline(params, a_max, speed, direction, sweep, refine: bool, dt: float) -> dict | None:

@@ -1,0 +1,220 @@
+"""Steady gaits of a chain under per-spring Fourier actuation, with exact sensitivities
+(the chain optimiser's oracle; the N-mass counterpart of `_orbit`).
+
+The decision vector is
+$\\theta = (A_{0,2}, \\dots, A_{0,H}, A_{1,1}, \\dots, A_{S-1,H}, B_{0,1}, \\dots, B_{S-1,H}, \\log\\omega)$:
+the Fourier coefficients of the $S = N - 1$ springs' signals
+$s_j(t) = a_\\max \\sum_n A_{jn}\\cos n\\omega t + B_{jn}\\sin n\\omega t$ ([`SpringFourier`][]),
+in units of $a_\\max$, and the common base frequency. $A_{0,1} = 0$: a shift of the time
+origin changes no gait, and fixing the phase of spring 0's first harmonic removes that
+direction (a travelling wave $a\\sin(\\omega t - j\\varphi)$ has this form).
+
+For a given $\\theta$ the steady gait is the fixed point $y^*$ of the period map
+$\\Phi_k(y, \\theta)$ of the reduced state $y = (u_1, \\dots, u_{N-1}, v_1, \\dots, v_N)$ at the
+phase $\\omega t \\equiv 0$ (as in `steady_gait(chain)`), found by Newton's method from a warm
+start with $M = \\partial\\Phi_k/\\partial y$ by forward mode through the N-mass exact engine.
+Over the $k$ periods the engine accumulates the drift of the centre of mass $\\Delta X$, the
+dissipated energy $e_d$ (SPEC §8) and the smallest normal force $\\min_{i,t} N_i$ (eq. 5
+generalised, at the step ends). Their total derivatives follow from the implicit function
+theorem, $dy^*/d\\theta = (I - M)^{-1}\\partial\\Phi/\\partial\\theta$ and
+$dF/d\\theta = \\partial F/\\partial\\theta + (\\partial F/\\partial y)\\,dy^*/d\\theta$: one forward
+pass over the gait period in the $2N - 1 + p$ directions $(y, \\theta)$ gives every gradient,
+located events entering with their implicit-function times (the saltation of each switch).
+"""
+
+from collections import Counter
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._custom_types import Array, Contact
+from .._status import Status
+from ..dynamics import _chain_exact as engine, _chain_forces as forces
+from ..dynamics._compile import engine_jit
+from ..model._chain import Chain
+from ..model._springwaves import SpringFourier
+from ._chain_gait import _reduced, _section_state
+
+
+TRACES: Counter = Counter()
+"""Python-level traces of the compiled functions (keys `"evaluate"`, `"relax"`)."""
+
+
+def size(springs: int, harmonics: int) -> int:
+    """Length of the decision vector."""
+    return 2 * springs * harmonics
+
+
+def coefficients(theta: Array, springs: int, harmonics: int) -> tuple[Array, Array]:
+    """Decision vector(s) -> `(cos, sin)` of shape `(..., springs, harmonics)`, units of $a_\\max$."""
+    SH = springs * harmonics
+    zero = jnp.zeros(theta.shape[:-1] + (1,), theta.dtype)
+    cos = jnp.concatenate([zero, theta[..., : SH - 1]], axis=-1)
+    sin = theta[..., SH - 1 : 2 * SH - 1]
+    shape = theta.shape[:-1] + (springs, harmonics)
+    return cos.reshape(shape), sin.reshape(shape)
+
+
+def with_waves(chain: Chain, theta: Array, a_max: Array, harmonics: int) -> Chain:
+    """One chain (broadcast, unbatched) with the actuation of the decision vector `theta`."""
+    S = chain.n_masses - 1
+    cos, sin = coefficients(theta, S, harmonics)
+    waves = SpringFourier(a_max * cos, a_max * sin, jnp.exp(theta[-1]))
+    return eqx.tree_at(lambda c: c.waves, chain, waves)
+
+
+class Period(NamedTuple):
+    """`k` periods from a section state: the end's reduced state, $(\\Delta X, e_d, \\min N)$, success."""
+
+    y: Array
+    figures: Array
+    ok: Array
+
+
+def period(C: Chain, contact: Contact, dt: float, max_steps: Array, y: Array, k: Array) -> Period:
+    """The `k`-period map $\\Phi_k$ from the reduced state `y`, with the figures the optimiser
+    needs (`max_steps` per actuation period)."""
+    P = forces.consts(C)
+    t_end = k.astype(y.dtype) * 2 * jnp.pi / P.omega
+    st0 = _section_state(C, P, contact, y)
+
+    def normal(s):
+        # Eq. (5) generalised (SPEC §8), at a step's end: N_i = m_i - fy_i + fy_{i-1}.
+        dr = forces.drive(P, s.cph, s.sph)
+        sp = forces.springs(P, dr.l0, s.y.x)
+        _, N = forces.loads(P, sp.fx, sp.fy, dr.f)
+        return jnp.min(jnp.stack(N))
+
+    def cond(c):
+        s, _, n = c
+        return (s.t < t_end) & (s.status == Status.OK) & (n < k * max_steps)
+
+    def body(c):
+        s, low, n = c
+        s, _ = engine.step(None, contact, dt, s, t_end, None, P)
+        return s, jnp.minimum(low, normal(s)), n + 1
+
+    st, low, _ = jax.lax.while_loop(cond, body, (st0, normal(st0), jnp.zeros((), jnp.int32)))
+    ok = (st.status == Status.OK) & (st.t >= t_end)
+    dX = forces.centre_of_mass(P, st.y.x) - forces.centre_of_mass(P, st0.y.x)
+    return Period(_reduced(st), jnp.stack([dX, st.y.ed, low]), ok)
+
+
+class Orbit(NamedTuple):
+    """The steady gait of one decision vector and its sensitivities.
+
+    - `y`: the fixed point of $\\Phi_k$; `figures`: $(\\Delta X, e_d, \\min N)$ over the gait's
+      `k` actuation periods; `gradient`: $d\\,\\text{figures}/d\\theta$, shape `(3, p)`;
+    - `monodromy`: $M$ at the fixed point; `ok`: Newton converged and the period completed;
+    - `n_iter`, `residual`: Newton iterations and $\\|\\Phi(y) - y\\|_\\infty$.
+    """
+
+    y: Array
+    figures: Array
+    gradient: Array
+    monodromy: Array
+    ok: Array
+    n_iter: Array
+    residual: Array
+
+
+def _orbit_one(C, a_max, theta, y0, k, harmonics, contact, dt, max_steps, tol, max_iter) -> Orbit:
+    ny = y0.shape[0]
+    eye = jnp.eye(ny, dtype=theta.dtype)
+
+    def run(z):
+        out = period(with_waves(C, z[ny:], a_max, harmonics), contact, dt, max_steps, z[:ny], k)
+        return jnp.concatenate([out.y, out.figures]), out.ok
+
+    def linearise(y):
+        # One forward pass in all 2N - 1 + p directions: Newton needs only M, the result all of J.
+        J, (val, ok) = jax.jacfwd(lambda z: (lambda r: (r[0], r))(run(z)), has_aux=True)(jnp.concatenate([y, theta]))
+        return val, J, ok & jnp.all(jnp.isfinite(val)) & jnp.all(jnp.isfinite(J))
+
+    def small(y, val):
+        return jnp.max(jnp.abs(val[:ny] - y)) <= tol * (1 + jnp.max(jnp.abs(y)))
+
+    def cond(c):
+        _, _, _, ok, it, done = c
+        return ~done & ok & (it < max_iter)
+
+    def body(c):
+        y, val, J, _, it, _ = c
+        y1 = y + jnp.linalg.solve(J[:ny, :ny] - eye, y - val[:ny])
+        val1, J1, ok1 = linearise(y1)
+        return y1, val1, J1, ok1, it + 1, small(y1, val1)
+
+    val0, J0, ok0 = linearise(y0)
+    init = (y0, val0, J0, ok0, jnp.zeros((), jnp.int32), small(y0, val0))
+    y, val, J, ok, it, done = jax.lax.while_loop(cond, body, init)
+    M = J[:ny, :ny]
+    dy = jnp.linalg.solve(eye - M, J[:ny, ny:])
+    grad = J[ny:, ny:] + J[ny:, :ny] @ dy
+    good = ok & done & jnp.all(jnp.isfinite(grad))
+    return Orbit(y, val[ny:], grad, M, good, it, jnp.max(jnp.abs(val[:ny] - y)))
+
+
+def _evaluate(C, a_max, theta, y0, k, harmonics, contact, dt, max_steps, tol, max_iter):
+    TRACES["evaluate"] += 1  # runs only while tracing
+    one = lambda th, y, kk: _orbit_one(C, a_max, th, y, kk, harmonics, contact, dt, max_steps, tol, max_iter)
+    return jax.vmap(one)(theta, y0, k)
+
+
+def _relax(C, a_max, theta, y0, fresh, periods, harmonics, contact, dt, max_steps):
+    """`periods` actuation periods from the section state `y0`, or from the relaxed springs at
+    rest where `fresh`: the reduced state at the end (a start for Newton's method)."""
+    TRACES["relax"] += 1
+
+    def one(th, y, new):
+        c = with_waves(C, th, a_max, harmonics)
+        P = forces.consts(c)
+        rest = engine.init(c, contact, engine.initial_positions(c, "relaxed"), P)
+        sec = _section_state(c, P, contact, y)
+        st = jax.tree_util.tree_map(lambda a, b: jnp.where(new, a, b), rest, sec)
+        t_end = periods.astype(y.dtype) * 2 * jnp.pi / P.omega
+
+        def cond(s_n):
+            s, n = s_n
+            return (s.t < t_end) & (n < periods * max_steps)
+
+        def body(s_n):
+            s, n = s_n
+            return engine.step(None, contact, dt, s, t_end, None, P)[0], n + 1
+
+        st, _ = jax.lax.while_loop(cond, body, (st, jnp.zeros((), jnp.int32)))
+        return _reduced(st)
+
+    return jax.vmap(one)(theta, y0, fresh)
+
+
+evaluate = engine_jit(_evaluate, ("harmonics", "contact", "dt", "max_iter"))
+relax = engine_jit(_relax, ("harmonics", "contact", "dt"))
+
+
+class ChainOracle(eqx.Module):
+    """The compiled evaluations of one chain problem (static: harmonics, contact, step, iterations).
+
+    `chain` is one configuration, broadcast (its waveforms are replaced by the decision vector's).
+    """
+
+    chain: Chain
+    a_max: Array
+    max_steps: Array
+    tol: Array
+    harmonics: int = eqx.field(static=True)
+    contact: Contact = eqx.field(static=True)
+    dt: float = eqx.field(static=True)
+    max_iter: int = eqx.field(static=True)
+
+    def orbits(self, theta: Array, y0: Array, k: Array) -> Orbit:
+        """Steady gaits of `k` actuation periods (int32, per row) and their sensitivities, for a
+        batch of decision vectors, from warm starts `y0`."""
+        return evaluate(self.chain, self.a_max, theta, y0, k, self.harmonics, self.contact, self.dt,
+                        self.max_steps, self.tol, self.max_iter)  # fmt: skip
+
+    def transient(self, theta: Array, y0: Array, fresh: Array, periods: Array) -> Array:
+        """The reduced state after `periods` periods (from `y0`, or from rest where `fresh`)."""
+        return relax(self.chain, self.a_max, theta, y0, fresh, periods, self.harmonics, self.contact, self.dt,
+                     self.max_steps)  # fmt: skip

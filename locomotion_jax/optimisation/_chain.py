@@ -1,0 +1,216 @@
+"""Optimal actuation of a chain of N masses (SPEC §7 and §8): least cost of transport over steady gaits.
+
+Problem, for one [`Chain`][], a required speed $v_\\min > 0$ in the direction $\\sigma = \\pm 1$ and
+a stroke limit $a_\\max$, over per-spring Fourier actuations of $H$ harmonics and a common base
+frequency ([`SpringFourier`][]), $\\ell_{0,j}(t) = \\bar\\ell_j + s_j(t)$:
+
+$$\\min\\ \\frac{e_d}{\\sigma\\Delta X}\\quad\\text{s.t.}\\quad \\frac{\\sigma\\Delta X}{kT} \\ge v_\\min,\\quad
+\\max_t |s_j(t)| \\le a_\\max\\ \\forall j,\\quad \\min_{i,t} N_i \\ge \\text{margin},\\quad\\text{a stable gait},$$
+
+with $\\Delta X$ (the centre of mass, eq. 4 generalised) and $e_d$ (eq. 15 generalised) over the
+gait period $kT$ of the periodic orbit of the exact model: whole periods, no window.
+
+Method:
+
+1. **Travelling waves** $a\\sin(\\omega t - j\\varphi)$ (`_chain_screen`): a grid over
+   $(a, \\omega, \\varphi)$ solved as steady gaits in batches of one compiled shape, and a zooming
+   refinement of the best that meets the requirement. The best one found is the baseline.
+2. **Local refinement of per-spring harmonics** (`_chain_local`) from the refined best wave and
+   the next best distinct waves of the grid: a monotone L-BFGS descent on an exact penalty,
+   with exact gradients through the periodic orbit by the implicit function theorem
+   (`gaits._chain_orbit`), the starts in lockstep (one batched evaluation per step).
+3. **Verification.** Every refined actuation and the baseline wave are solved again by
+   [`steady_gait`][] (strict contact, from the relaxed springs, periods 1 to 4); the reported
+   optimum is the cheapest that is converged, stable, without lift-off, fast enough and within
+   the stroke, so it is never costlier than the baseline. It is cross-checked by a direct
+   [`simulate`][] run averaged over whole gait periods once its transient has decayed (as its
+   largest Floquet multiplier says). If no candidate is feasible the result says so
+   (`feasible_exact = False`).
+"""
+
+import math
+import sys
+import time
+from typing import Any
+
+import jax.numpy as jnp
+import numpy as np
+
+from ..gaits._chain_orbit import ChainOracle
+from ..model._actuator import RestLength
+from ..model._chain import Chain
+from . import _chain_local as local, _chain_screen as screen
+from ._chain_optimum import ChainOptimiseSettings, ChainOptimum
+from ._lockstep import run_lockstep
+
+
+def check_inputs(chain: Any, v_min: Any, a_max: Any, direction: Any, harmonics: Any, omega: Any,
+                 settings: ChainOptimiseSettings) -> tuple[float, int]:  # fmt: skip
+    """Validate a chain requirement; return `(v_min, direction)`.
+
+    **Raises:** `ValueError` naming the argument and its valid range.
+    """
+    if not isinstance(chain, Chain):
+        raise TypeError(f"chain must be a locomotion_jax.Chain, got {type(chain).__name__}.")
+    if chain.batch_shape != ():
+        raise ValueError(
+            f"chain must be a single configuration (batch shape ()), got batch shape {chain.batch_shape}; "
+            "optimise one chain at a time (index the batch: chain[i])."
+        )
+    if not isinstance(chain.actuator, RestLength):
+        raise ValueError(f"actuator: optimise needs the RestLength actuator, got {type(chain.actuator).__name__}.")
+    chain.validate()
+    if isinstance(harmonics, bool) or not isinstance(harmonics, (int, np.integer)) or harmonics < 1:
+        raise ValueError(f"harmonics must be an integer >= 1, got {harmonics!r}.")
+    if direction not in (1, -1):
+        raise ValueError(f"direction must be +1 (forward) or -1 (backward), got {direction!r}.")
+    if not (isinstance(v_min, (int, float, np.floating, np.integer)) and np.isfinite(v_min) and v_min > 0):
+        raise ValueError(f"v_min must be a finite speed > 0 (the required mean speed in `direction`), got {v_min!r}.")
+    c = chain.broadcast()
+    lbar = np.asarray(c.lbar, np.float64)
+    if not (isinstance(a_max, (int, float, np.floating, np.integer)) and np.isfinite(a_max)
+            and 0 < a_max < lbar.min()):  # fmt: skip
+        raise ValueError(f"a_max must satisfy 0 < a_max < min(lbar) = {lbar.min():g}, got {a_max!r}.")
+    m = np.asarray(c.m, np.float64)
+    if not (np.isfinite(settings.margin) and 0 <= settings.margin < m.min()):
+        raise ValueError(f"margin must satisfy 0 <= margin < min(masses) = {m.min():g}, got {settings.margin!r}.")
+    # At rest at the relaxed gaps (l_j = lbar_j) the rest lengths l0_j = lbar_j + s_j with
+    # |s_j| <= a_max give f_y,j = -k_j d_j s_j / lbar_j: the worst normal force of mass i has
+    # both neighbouring springs' terms against it. A stroke that lifts a mass quasi-statically
+    # cannot be run at any frequency.
+    g = np.abs(np.asarray(c.k, np.float64) * np.asarray(c.d, np.float64)) / lbar
+    load = np.concatenate([g, [0.0]]) + np.concatenate([[0.0], g])
+    if np.any(m - a_max * load <= 0):
+        a_lift = float(np.min(m / np.where(load > 0, load, np.inf)))
+        raise ValueError(
+            f"a_max={a_max!r} lifts a mass off at rest (at the relaxed gaps, with every rest length in "
+            f"[lbar_j - a_max, lbar_j + a_max]); a_max must be below {a_lift:.4g} (min_i m_i / sum of "
+            "k_j |d_j| / lbar_j over the springs of mass i) for this chain."
+        )
+    if omega is not None and not (np.isfinite(omega) and omega > 0):
+        raise ValueError(f"omega must be a finite number > 0 (or None to optimise it), got {omega!r}.")
+    return float(v_min), int(direction)
+
+
+def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int = 1, omega: float | None = None,
+                   harmonics: int = 3, settings: ChainOptimiseSettings | None = None) -> ChainOptimum:  # fmt: skip
+    """`optimise(chain, v_min, a_max, ...)`: the method of the module docstring (arguments as there)."""
+    settings = ChainOptimiseSettings() if settings is None else settings
+    if not isinstance(settings, ChainOptimiseSettings):
+        raise TypeError(f"settings for a Chain must be a ChainOptimiseSettings, got {type(settings).__name__}.")
+    speed, direction = check_inputs(chain, v_min, a_max, direction, harmonics, omega, settings)
+    t0 = time.perf_counter()
+    say = (lambda m: print(m, file=sys.stderr, flush=True)) if settings.verbose else (lambda m: None)
+    base = chain.broadcast()
+    S, H = base.n_masses - 1, int(harmonics)
+    lo, hi = screen.frequency_range(base, omega, settings)
+    free = hi > lo
+
+    # 1. Travelling waves.
+    sc, best, steps = screen.screen(base, speed, direction, a_max, lo, hi, H, settings)
+    say(f"{len(sc.a)} travelling waves solved ({time.perf_counter() - t0:.0f} s)")
+    feas = screen.feasible(sc.gaits, speed, direction)
+    baseline = screen.as_dict(sc, best) if feas[best] else None
+
+    # 2. Local refinement of per-spring harmonics.
+    starts = screen.distinct_starts(sc, best, settings.local, speed, direction, steps)
+    starts += starts[:1] * (settings.local - len(starts))
+    dtype = base.dtype
+    steps_per_period = int(math.ceil(2 * math.pi / lo / settings.dt)) * 3 + 200
+    oracle = ChainOracle(
+        chain=base, a_max=jnp.asarray(a_max, dtype), max_steps=jnp.asarray(steps_per_period, jnp.int32),
+        tol=jnp.asarray(settings.newton_tol if jnp.finfo(dtype).bits == 64 else 1e-5, dtype), harmonics=H,
+        contact="paper",  # iterates past a lift-off stay defined; the margin keeps N > 0
+        dt=settings.dt, max_iter=settings.newton_iter,
+    )  # fmt: skip
+    v_target = speed * (1 + settings.speed_slack)
+    make = lambda th, orb, k: local.Figures(th, orb, v_target, k, direction, settings.margin, free)
+    ev = local.Evaluator(oracle, settings.local, settings.transient, make)
+    x0 = []
+    for lane, i in enumerate(starts):
+        cos, sin = screen.wave_coefficients(sc.a[i : i + 1], sc.phi[i : i + 1], S, H)
+        x0.append(local.pack(cos[0] / a_max, sin[0] / a_max, float(sc.omega[i])))
+        ev.y[lane], ev.k[lane] = sc.gaits.y[i], int(max(sc.gaits.k[i], 1))
+    bounds = (math.log(lo), math.log(hi))
+    proj = lambda x: local.project(x, S, H, *bounds)
+    stroke_ok = lambda x: float(np.max(local.strokes(*local.unpack(x, S, H)[:2]))) <= 1 + 1e-9
+    log: list[dict] = []
+    costs = [c for c in sc.gaits.cost[starts] if np.isfinite(c)]
+    rho = local.PENALTY * max(1.0, max(costs, default=1.0))
+    solvers = [local.local_solver(x, proj, stroke_ok, settings.max_iter, settings.trust_radius, rho, log) for x in x0]
+    xs = run_lockstep(solvers, ev)
+    say(f"local refinement done ({time.perf_counter() - t0:.0f} s, {ev.calls} batched evaluations)")
+
+    # 3. Verification of the candidates: the refined actuations, rescaled onto the exact
+    # stroke limit (what the line search's tolerance let through), and the baseline wave.
+    names = ["travelling wave"] + [f"local {lane}" for lane in range(len(xs))]
+    coefs = []
+    cos_b, sin_b = screen.wave_coefficients(sc.a[best : best + 1], sc.phi[best : best + 1], S, H)
+    coefs.append((cos_b[0], sin_b[0], float(sc.omega[best])))
+    for x in xs:
+        c, s, w = local.unpack(x, S, H)
+        scale = 1 / np.maximum(local.strokes(c, s), 1.0)
+        coefs.append((a_max * c * scale[:, None], a_max * s * scale[:, None], w))
+    cos = np.stack([c for c, _, _ in coefs])
+    sin = np.stack([s for _, s, _ in coefs])
+    om = np.array([w for _, _, w in coefs])
+    g = screen.solve(base, cos, sin, om, settings)
+    strokes = np.stack([local.strokes(c, s) for c, s in zip(cos, sin)])
+    eps = float(jnp.finfo(dtype).eps)
+    ok_speed = g.ok & (direction * np.nan_to_num(g.speed, nan=-np.inf) >= speed)
+    ok_stroke = strokes.max(axis=1) <= a_max * (1 + 8 * eps)
+    feasible = ok_speed & ok_stroke & g.ok
+    if feasible.any():
+        k = int(np.argmin(np.where(feasible, g.cost, np.inf)))
+    else:
+        v = direction * np.nan_to_num(g.speed, nan=-np.inf)
+        k = int(np.argmax(np.where(g.ok, v, -np.inf))) if g.ok.any() else 0
+    table = [dict(candidate=names[i], omega=float(om[i]), mean_speed_exact=float(g.speed[i]),
+                  cost_of_transport_exact=float(g.cost[i]), stable_exact=bool(g.ok[i]),
+                  liftoff_exact=bool(g.liftoff[i]), stroke=float(strokes[i].max()), feasible_exact=bool(feasible[i]))
+             for i in range(len(names))]  # fmt: skip
+    # The smallest normal force of the reported orbit (the oracle's figure, paper reading).
+    th = local.pack(cos[k] / a_max, sin[k] / a_max, float(om[k]))
+    y0 = np.nan_to_num(g.y[k]) if g.ok[k] else sc.gaits.y[best]
+    orb, _ = ev.solve(np.stack([th] * settings.local), np.stack([y0] * settings.local),
+                      np.full(settings.local, max(int(g.k[k]), 1)))  # fmt: skip
+    min_normal = float(orb.figures[0, 2]) if orb.ok[0] else math.nan
+    chosen = screen.with_actuation(base, cos[k : k + 1], sin[k : k + 1], om[k : k + 1])[0]
+    sim = _simulate_check(chosen, g, k, settings) if g.ok[k] else (math.nan, math.nan, 0)
+    rel = max(abs(sim[0] / g.speed[k] - 1), abs(sim[1] / g.cost[k] - 1)) if g.ok[k] else math.nan
+    say(f"verified ({time.perf_counter() - t0:.0f} s): {names[k]}, cost of transport {g.cost[k]:.6g}")
+    wave_cost = baseline["cost_of_transport"] if baseline else math.nan
+    return ChainOptimum(
+        v_min=speed, direction=direction, a_max=float(a_max), margin=settings.margin, harmonics=H, free_omega=free,
+        cos=cos[k], sin=sin[k], omega=float(om[k]), lbar=np.asarray(base.lbar, np.float64),
+        mean_speed_exact=float(g.speed[k]), cost_of_transport_exact=float(g.cost[k]),
+        gait_period_exact=float(g.period[k]), stable_exact=bool(g.ok[k]), spectral_radius_exact=float(g.radius[k]),
+        liftoff_exact=bool(g.liftoff[k]), stroke_exact=strokes[k], min_normal=min_normal,
+        constraints_exact=dict(speed=bool(ok_speed[k]), stroke=bool(ok_stroke[k]), no_liftoff=bool(~g.liftoff[k]),
+                               stable=bool(g.ok[k])),
+        feasible_exact=bool(feasible[k]), travelling_wave=baseline, travelling_wave_cost_of_transport=wave_cost,
+        improvement_vs_travelling_wave=1 - float(g.cost[k]) / wave_cost if (feasible[k] and baseline) else math.nan,
+        mean_speed_simulated=sim[0], cost_of_transport_simulated=sim[1], simulation_agreement=float(rel),
+        simulated_periods=int(sim[2]), source=names[k], candidates=table,
+        history=[{"starts": [screen.as_dict(sc, i) for i in starts], "local": log}], screened=len(sc.a),
+        evaluations=ev.calls, runtime_s=time.perf_counter() - t0, chain=chosen,
+    )  # fmt: skip
+
+
+def _simulate_check(chain: Chain, g: screen.Gaits, k: int, settings: ChainOptimiseSettings) -> tuple[float, float, int]:
+    """Mean speed and cost of transport of a direct simulation from the relaxed springs, over 10
+    whole gait periods after enough periods for the slowest Floquet mode to decay to `check_tol`."""
+    from ..dynamics._exact_dynamics import Exact
+    from ..run._simulate import simulate
+
+    rho = float(g.radius[k])
+    lo, hi = settings.check_periods
+    n = hi if not (0 < rho < 1) else int(np.clip(math.ceil(math.log(settings.check_tol) / math.log(rho)), lo, hi))
+    Tg = float(g.period[k])
+    t = np.array([n * Tg, (n + 10) * Tg])
+    traj = simulate(chain, float(t[-1]), t, dynamics=Exact(dt=settings.dt), contact="strict", start="relaxed")
+    X, ed = np.asarray(traj.X, np.float64), np.asarray(traj.e_d, np.float64)
+    if not np.all(np.asarray(traj.valid)):
+        return math.nan, math.nan, n
+    dX = X[1] - X[0]
+    return float(dX / (t[1] - t[0])), float((ed[1] - ed[0]) / abs(dX)), n

@@ -1,0 +1,232 @@
+"""The chain optimiser's local refinement: a monotone descent on an exact penalty, per start, in lockstep.
+
+Each start runs in its own thread (`_lockstep.run_lockstep`);
+its evaluations are batched into one call of the oracle (`_chain_orbit.ChainOracle`:
+periodic orbit, figures and their exact gradients). The descent takes L-BFGS directions and
+a backtracking line search that accepts only a decrease of the merit, so that an iterate
+never walks into a costlier gait or a failed orbit; the stroke of every spring is kept by
+radial rescaling of that spring's coefficients onto its exact limit (the set
+$\\{\\max_t |s_j(t)| \\le a_\\max\\}$ is convex and contains 0), $\\log\\omega$ by clipping.
+"""
+
+import math
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..gaits import _chain_orbit as orbit
+
+
+PENALTY = 10.0
+"""Weight of the squared relative speed deficit in the objective, and of the violations in the
+merit (costs of transport are O(1))."""
+
+
+def strokes(cos: np.ndarray, sin: np.ndarray) -> np.ndarray:
+    """Exact $\\max_\\phi |s_j(\\phi)|$ per spring (`cos`, `sin`: `(S, H)`): the largest value on a
+    grid of $64H + 64$ phases, polished by Newton's method on $s_j' = 0$ within its grid cell
+    (as [`_constraints.stroke`][locomotion_jax.optimisation._constraints.stroke], on the host)."""
+    S, H = cos.shape
+    m = 64 * H + 64
+    h = 2 * np.pi / m
+    n = np.arange(1, H + 1)
+    grid = np.arange(m) * h
+    vals = cos @ np.cos(np.outer(n, grid)) + sin @ np.sin(np.outer(n, grid))
+    j = np.argmax(np.abs(vals), axis=1)
+    phi = grid[j]
+    best = np.abs(vals[np.arange(S), j])
+    for _ in range(4):
+        c, s = np.cos(np.outer(phi, n)), np.sin(np.outer(phi, n))  # one phase per spring
+        d1 = (n * (sin * c - cos * s)).sum(1)
+        d2 = -(n * n * (cos * c + sin * s)).sum(1)
+        phi = phi + np.clip(np.where(d2 != 0, -d1 / np.where(d2 != 0, d2, 1), 0), -h, h)
+        best = np.maximum(best, np.abs((cos * np.cos(np.outer(phi, n)) + sin * np.sin(np.outer(phi, n))).sum(1)))
+    return best
+
+
+def unpack(theta: np.ndarray, springs: int, harmonics: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """Decision vector -> `(cos, sin)` in units of $a_\\max$ and $\\omega$."""
+    c, s = orbit.coefficients(jnp.asarray(theta), springs, harmonics)
+    return np.asarray(c), np.asarray(s), float(np.exp(theta[-1]))
+
+
+def pack(cos: np.ndarray, sin: np.ndarray, omega: float) -> np.ndarray:
+    """`(cos, sin)` (units of $a_\\max$, $A_{0,1} = 0$) and $\\omega$ -> decision vector."""
+    return np.concatenate([np.ravel(cos)[1:], np.ravel(sin), [math.log(omega)]])
+
+
+def project(theta: np.ndarray, springs: int, harmonics: int, log_lo: float, log_hi: float) -> np.ndarray:
+    """Every spring's coefficients rescaled radially onto stroke <= 1 (units of $a_\\max$), $\\log\\omega$ clipped."""
+    c, s, w = unpack(theta, springs, harmonics)
+    scale = 1 / np.maximum(strokes(c, s), 1.0)
+    return pack(c * scale[:, None], s * scale[:, None], math.exp(float(np.clip(math.log(w), log_lo, log_hi))))
+
+
+class Figures:
+    """Objective, constraints and their gradients at one evaluated point.
+
+    $f = e_d / \\max_\\text{soft}(\\sigma\\Delta X, \\Delta_\\text{need}/4) + \\rho\\,\\delta^2$ with the
+    relative speed deficit $\\delta$ (the floor keeps $f$ finite for an iterate that stands
+    still, and the penalty stops a solver far from feasibility walking towards a cheap stop);
+    constraints $c = (\\sigma\\Delta X/\\Delta_\\text{need} - 1, \\min N - \\text{margin}) \\ge 0$.
+    """
+
+    def __init__(self, theta, orb, need_rate: float, k: int, direction: int, margin: float, free_omega: bool):
+        dX, ed, low = (float(x) for x in orb.figures)
+        g_dX, g_ed, g_low = (np.asarray(g, float) for g in orb.gradient)
+        need = need_rate * k * 2 * np.pi / math.exp(theta[-1])  # distance required per gait period
+        d_need = np.zeros_like(theta)
+        d_need[-1] = -need  # d need / d log omega
+        dist, g_dist = direction * dX, direction * g_dX
+        floor, width = 0.25 * need, 0.05 * need
+        z = (dist - floor) / width
+        den = floor + width * np.logaddexp(0, z)
+        sig = 0.5 * (1 + np.tanh(0.5 * z))
+        d_den = 0.25 * d_need + 0.05 * d_need * np.logaddexp(0, z) + sig * (g_dist - 0.25 * d_need - z * 0.05 * d_need)
+        self.f = ed / den
+        self.df = g_ed / den - ed / den**2 * d_den
+        self.cot = ed / dist if dist > 0 else math.inf
+        self.speed = dX / (k * 2 * np.pi / math.exp(theta[-1]))
+        self.min_normal = low
+        self.c = np.array([dist / need - 1, low - margin])
+        self.dc = np.stack([g_dist / need - dist / need**2 * d_need, g_low])
+        deficit = max(0.0, -self.c[0])
+        self.f += PENALTY * deficit**2
+        self.df = self.df - 2 * PENALTY * deficit * self.dc[0]
+        if not free_omega:
+            self.df[-1] = 0.0
+            self.dc[:, -1] = 0.0
+        self.ok = bool(orb.ok)
+
+
+def merit(fig: Figures | None, rho: float) -> tuple[float, np.ndarray | None]:
+    """The exact penalty $f + \\rho \\sum_j \\max(0, -c_j)$ and its gradient (`inf`, `None` where no orbit)."""
+    if fig is None or not fig.ok:
+        return math.inf, None
+    viol = [max(0.0, -c) for c in fig.c]
+    g = fig.df - rho * sum(fig.dc[j] for j in range(2) if fig.c[j] < 0)
+    return fig.f + rho * sum(viol), g
+
+
+def descent(x0: np.ndarray, at, proj, max_iter: int, trust_radius: float, rho: float) -> None:
+    """Monotone L-BFGS descent on [`merit`][] from `x0` (`at(x)`: the [`Figures`][] at `x` or `None`;
+    `proj`: onto the simple constraints). Stops at `max_iter`, or where no decrease is found
+    along steepest descent (a local, possibly nonsmooth, minimum)."""
+    x = proj(x0)
+    phi, g = merit(at(x), rho)
+    if g is None:
+        return
+    mem: list[tuple[np.ndarray, np.ndarray]] = []
+    for _ in range(max_iter):
+        q = g.copy()
+        alphas = []
+        for s_, y_ in reversed(mem):
+            alphas.append(s_ @ q / (y_ @ s_))
+            q -= alphas[-1] * y_
+        if mem:
+            s_, y_ = mem[-1]
+            q *= (s_ @ y_) / (y_ @ y_)
+        for (s_, y_), a_ in zip(mem, reversed(alphas)):
+            q += (a_ - y_ @ q / (y_ @ s_)) * s_
+        d = -q
+        if g @ d >= 0:  # not a descent direction: restart from steepest descent
+            mem.clear()
+            d = -g
+        step = min(1.0, trust_radius / max(float(np.max(np.abs(d))), 1e-300))
+        accepted, xn, phin, gn = False, x, phi, None
+        for _ in range(12):
+            xn = proj(x + step * d)
+            phin, gn = merit(at(xn), rho)
+            if gn is not None and phin <= phi + 1e-4 * float(g @ (xn - x)) and phin < phi:
+                accepted = True
+                break
+            step *= 0.4
+        if not accepted or gn is None:
+            if not mem:
+                return
+            mem.clear()
+            continue
+        sv, yv = xn - x, gn - g
+        if sv @ yv > 1e-12 * np.linalg.norm(sv) * np.linalg.norm(yv):
+            mem.append((sv, yv))
+            mem[:] = mem[-8:]
+        x, phi, g = xn, phin, gn
+
+
+class Evaluator:
+    """The batched oracle for the lockstep solvers: warm starts per solver, and where Newton fails
+    from them, a transient and period-1 then period-2 gaits."""
+
+    def __init__(self, oracle: orbit.ChainOracle, lanes: int, transient: int, make):
+        self.oracle, self.lanes, self.transient, self.make = oracle, lanes, transient, make
+        self.y: dict[int, np.ndarray] = {}
+        self.k: dict[int, int] = {}
+        self.calls = 0
+
+    def solve(self, theta: np.ndarray, y0: np.ndarray, k: np.ndarray) -> tuple[Any, np.ndarray]:
+        dtype = self.oracle.chain.dtype
+        th = jnp.asarray(theta, dtype)
+        run = lambda y, kk: jax.tree_util.tree_map(
+            np.asarray, self.oracle.orbits(th, jnp.asarray(y, dtype), jnp.asarray(kk, jnp.int32))
+        )
+        orb = run(y0, k)
+        k = np.array(k)
+        if not orb.ok.all():
+            periods = jnp.asarray(self.transient, jnp.int32)
+            y1 = np.asarray(self.oracle.transient(th, jnp.asarray(y0, dtype), jnp.asarray(~orb.ok), periods))
+            for kk in (1, 2):
+                if orb.ok.all():
+                    break
+                again = run(y1, np.full_like(k, kk))
+                take = ~orb.ok & again.ok
+                orb = jax.tree_util.tree_map(lambda a, b: np.where(take.reshape((-1,) + (1,) * (a.ndim - 1)), b, a),
+                                             orb, again)  # fmt: skip
+                k = np.where(take, kk, k)
+        self.calls += 1
+        return orb, k
+
+    def __call__(self, idx: list[int], xs: list[np.ndarray]) -> list[Any]:
+        pad = idx + [idx[0]] * (self.lanes - len(idx))
+        theta = np.stack([xs[idx.index(i)] for i in pad])
+        orb, ks = self.solve(theta, np.stack([self.y[i] for i in pad]), np.array([self.k[i] for i in pad]))
+        out = []
+        for r, i in enumerate(idx):
+            one = jax.tree_util.tree_map(lambda x: x[r], orb)
+            if one.ok:
+                self.y[i], self.k[i] = one.y, int(ks[r])
+                out.append(self.make(theta[r], one, int(ks[r])))
+            else:
+                out.append(None)
+        return out
+
+
+def local_solver(x0: np.ndarray, proj, stroke_ok, max_iter: int, trust_radius: float, rho: float, log: list):
+    """One local run from `x0` for [`run_lockstep`][locomotion_jax.optimisation._lockstep.run_lockstep]:
+    returns the cheapest point evaluated that meets every constraint, else the one with the
+    smallest violation."""
+
+    def solve(ask):
+        cache: dict[bytes, Any] = {}
+        trace: list[dict] = []
+        best: dict[str, Any] = {"key": (math.inf, math.inf), "x": np.array(x0, float)}
+
+        def at(x):
+            key = np.asarray(x).tobytes()
+            if key not in cache:
+                cache.clear()
+                fig = cache[key] = ask(np.array(x, float))
+                if fig is not None:
+                    trace.append({"f": fig.f, "cot": fig.cot, "c_speed": float(fig.c[0]), "c_normal": float(fig.c[1])})
+                    held = min(fig.c[0], fig.c[1]) >= 0 and stroke_ok(x)
+                    key_ = (0.0, fig.cot) if held else (1.0, -min(fig.c[0], 0.0) - min(fig.c[1], 0.0))
+                    if key_ < best["key"]:
+                        best["key"], best["x"] = key_, np.array(x, float)
+            return cache[key]
+
+        descent(np.array(x0, float), at, proj, max_iter, trust_radius, rho)
+        log.append({"evaluations": len(trace), "trace": trace})
+        return best["x"]
+
+    return solve

@@ -1,0 +1,204 @@
+"""Settings and result of the chain optimiser (`optimise(chain, ...)`, module `optimisation._chain`)."""
+
+import dataclasses
+import math
+from typing import Any
+
+import equinox as eqx
+import numpy as np
+
+from .._json import dumps, jsonable
+from ..model._chain import Chain
+from ..model._springwaves import SpringFourier
+
+
+class ChainOptimiseSettings(eqx.Module):
+    """Settings of [`optimise`][locomotion_jax.optimisation._optimise.optimise] for a [`Chain`][]
+    (module `optimisation._chain`). Python numbers: changing `local`, `chunk`, `dt` or
+    `newton_iter` (or the harmonics) recompiles; the others do not.
+
+    - `amplitudes`, `frequencies`, `phases`: the travelling-wave screen, $a$ on
+      `amplitudes` equal steps up to $a_\\max$, $\\omega$ log-spaced over its range, the phase
+      lag $\\varphi$ on `phases` equal steps of $[-\\pi, \\pi)$ (one phase for $N = 2$).
+    - `zoom_levels`, `zoom_points`: the zooming refinement of the best travelling wave: per
+      level a grid of `zoom_points` per variable over one step either side, the step halved
+      per level.
+    - `local`: starts refined locally in lockstep (the refined best wave and the next best
+      distinct waves of the screen); `max_iter`: iterations of each local descent;
+      `trust_radius`: the largest first step of a line search (coefficients in units of
+      $a_\\max$, $\\log\\omega$).
+    - `margin`: required $\\min_{i,t} N_i$ on the orbit during the refinement (units of weight).
+    - `speed_slack`: the refinement targets $v_\\min (1 + \\text{slack})$.
+    - `omega_min`, `omega_max`: range of a free base frequency, in units of the lowest
+      natural frequency with one mass held ([`Chain.omega_min`][locomotion_jax.Chain.omega_min])
+      and of the highest natural frequency of the free chain.
+    - `dt`: the exact engine's step; `transient`: actuation periods from the relaxed springs
+      before an orbit is solved (screen, refinement, verification); `newton_tol`, `newton_iter`:
+      the periodic-orbit solve; `chunk`: configurations per compiled `steady_gait` call.
+    - `check_tol`, `check_periods`: the direct simulation of the optimum runs until the
+      largest Floquet multiplier's modulus to the power of the periods run falls below
+      `check_tol` (at most `check_periods[1]` gait periods, at least `check_periods[0]`), then
+      averages over 10 gait periods.
+    - `verbose`: progress on stderr.
+    """
+
+    amplitudes: int = 3
+    frequencies: int = 12
+    phases: int = 8
+    zoom_levels: int = 2
+    zoom_points: int = 5
+    local: int = 4
+    max_iter: int = 60
+    trust_radius: float = 0.1
+    margin: float = 0.05
+    speed_slack: float = 1e-3
+    omega_min: float = 0.06
+    omega_max: float = 1.2
+    dt: float = 0.01
+    transient: int = 30
+    newton_tol: float = 1e-10
+    newton_iter: int = 12
+    chunk: int = 32
+    check_tol: float = 1e-12
+    check_periods: tuple[int, int] = (40, 1500)
+    verbose: bool = False
+
+    def __check_init__(self):
+        counts = dict(amplitudes=self.amplitudes, frequencies=self.frequencies, phases=self.phases,
+                      zoom_points=self.zoom_points, local=self.local, max_iter=self.max_iter, chunk=self.chunk,
+                      newton_iter=self.newton_iter)  # fmt: skip
+        for name, v in counts.items():
+            if not (isinstance(v, int) and v >= 1):
+                raise ValueError(f"ChainOptimiseSettings.{name} must be an int >= 1, got {v!r}.")
+        if not (isinstance(self.zoom_levels, int) and self.zoom_levels >= 0):
+            raise ValueError(f"ChainOptimiseSettings.zoom_levels must be an int >= 0, got {self.zoom_levels!r}.")
+        if not (0 < self.omega_min < self.omega_max):
+            raise ValueError(
+                f"ChainOptimiseSettings: need 0 < omega_min < omega_max, got {self.omega_min!r}, {self.omega_max!r}."
+            )
+        if not (self.dt > 0 and self.trust_radius > 0 and self.newton_tol > 0 and self.check_tol > 0):
+            raise ValueError("ChainOptimiseSettings: dt, trust_radius, newton_tol and check_tol must be > 0.")
+        lo, hi = self.check_periods
+        if not (1 <= lo <= hi):
+            raise ValueError(f"ChainOptimiseSettings.check_periods must be (lo, hi), 1 <= lo <= hi, got {lo, hi}.")
+
+
+@dataclasses.dataclass(frozen=True)
+class ChainOptimum:
+    """Result of [`optimise`][locomotion_jax.optimisation._optimise.optimise] for a [`Chain`][]; every
+    figure called `*_exact` is the steady gait's ([`steady_gait`][]: whole periods, exact model,
+    strict contact, from the relaxed springs).
+
+    - `cos`, `sin` (shape `(S, H)`: springs, harmonics), `omega`, `lbar` (per spring): the
+      actuation $s_j(t) = \\sum_n A_{jn}\\cos n\\omega t + B_{jn}\\sin n\\omega t$
+      ([`SpringFourier`][], `waveforms`; `chain`: the input chain with it).
+    - `mean_speed_exact`, `cost_of_transport_exact` ($e_d / |\\Delta X|$ over the gait period),
+      `gait_period_exact`, `stable_exact`, `spectral_radius_exact` (largest Floquet multiplier
+      modulus), `liftoff_exact`, `stroke_exact` (per spring, $\\max_t |s_j(t)|$ located exactly),
+      `min_normal` (smallest normal force on the orbit, at the step ends).
+    - `constraints_exact` (`speed`, `stroke`, `no_liftoff`, `stable`), `feasible_exact`: all hold.
+      An infeasible requirement gives `feasible_exact = False` and the closest candidate (the
+      fastest stable gait), never an optimum.
+    - `travelling_wave`: the best travelling wave $a\\sin(\\omega t - j\\varphi)$ of the screen and
+      its zoom that meets the requirement (`a`, `omega`, `phi`, `mean_speed`,
+      `cost_of_transport`), or `None`; `travelling_wave_cost_of_transport`;
+      `improvement_vs_travelling_wave` $= 1 - \\text{cost}/\\text{cost}_\\text{wave}$ (NaN when either
+      is infeasible).
+    - `mean_speed_simulated`, `cost_of_transport_simulated`: a direct [`simulate`][] run from
+      the relaxed springs, averaged over whole gait periods after `simulated_periods` gait
+      periods; `simulation_agreement`: the larger relative difference of the two from the
+      steady gait's.
+    - `source`, `candidates`, `history`, `screened` (travelling waves solved),
+      `evaluations` (batched orbit evaluations), `runtime_s`.
+    """
+
+    v_min: float
+    direction: int
+    a_max: float
+    margin: float
+    harmonics: int
+    free_omega: bool
+    cos: np.ndarray
+    sin: np.ndarray
+    omega: float
+    lbar: np.ndarray
+    mean_speed_exact: float
+    cost_of_transport_exact: float
+    gait_period_exact: float
+    stable_exact: bool
+    spectral_radius_exact: float
+    liftoff_exact: bool
+    stroke_exact: np.ndarray
+    min_normal: float
+    constraints_exact: dict
+    feasible_exact: bool
+    travelling_wave: dict | None
+    travelling_wave_cost_of_transport: float
+    improvement_vs_travelling_wave: float
+    mean_speed_simulated: float
+    cost_of_transport_simulated: float
+    simulation_agreement: float
+    simulated_periods: int
+    source: str
+    candidates: list
+    history: list
+    screened: int
+    evaluations: int
+    runtime_s: float
+    chain: Chain = dataclasses.field(repr=False)
+
+    @property
+    def waveforms(self) -> SpringFourier:
+        return SpringFourier(self.cos, self.sin, self.omega)
+
+    def to_dict(self, full: bool = False) -> dict[str, Any]:
+        """JSON-ready dict (`nan` and `inf` become `None`); `full` adds candidates and history."""
+        skip = ("chain",) + (() if full else ("candidates", "history"))
+        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in skip}
+        out["n_masses"] = int(self.cos.shape[0]) + 1
+        return jsonable(out)
+
+    def to_json(self, full: bool = False, **kwargs) -> str:
+        return dumps(self.to_dict(full), **kwargs)
+
+    def summary(self) -> str:
+        """Human-readable report."""
+        fmt = lambda v: "n/a" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.4g}"
+        S, H = self.cos.shape
+        lines = [
+            f"chain of {S + 1} masses: mean speed >= {self.v_min:g} in direction {self.direction:+d}, stroke <= "
+            f"{self.a_max:g} per spring, normal forces >= {self.margin:g} on the orbit, stable steady gait (exact)",
+            f"base frequency omega = {self.omega:.6g} ({'optimised' if self.free_omega else 'fixed'}), "
+            f"{H} harmonics per spring",
+        ]
+        for j in range(S):
+            lines.append(f"spring {j}: cos " + " ".join(f"{c:+.5f}" for c in self.cos[j])
+                         + "  sin " + " ".join(f"{s:+.5f}" for s in self.sin[j]))  # fmt: skip
+        lines += [
+            f"steady gait (exact, whole periods): mean speed {fmt(self.mean_speed_exact)}, cost of transport "
+            f"{fmt(self.cost_of_transport_exact)}, period {fmt(self.gait_period_exact)}, stable {self.stable_exact} "
+            f"(largest multiplier modulus {fmt(self.spectral_radius_exact)})",
+            "stroke per spring "
+            + " ".join(fmt(float(s)) for s in self.stroke_exact)
+            + f" (limit {self.a_max:g}); min normal force {fmt(self.min_normal)}; lift-off: {self.liftoff_exact}",
+            f"direct simulation ({self.simulated_periods} gait periods, then 10 averaged): mean speed "
+            f"{fmt(self.mean_speed_simulated)}, cost of transport {fmt(self.cost_of_transport_simulated)} "
+            f"(relative difference {fmt(self.simulation_agreement)})",
+            "constraints on the exact model: "
+            + ", ".join(f"{k} {'holds' if v else 'VIOLATED'}" for k, v in self.constraints_exact.items())
+            + f" -> {'FEASIBLE' if self.feasible_exact else 'INFEASIBLE'}",
+        ]
+        w = self.travelling_wave
+        if w is None:
+            lines.append("best travelling wave: none meets the requirement on the exact model")
+        else:
+            lines.append(
+                f"best travelling wave: a = {w['a']:.4g}, omega = {w['omega']:.4g}, phi = {w['phi']:.4g}: mean speed "
+                f"{w['mean_speed']:.4g}, cost of transport {w['cost_of_transport']:.4g}"
+            )
+        lines.append(
+            f"improvement vs travelling wave: {fmt(100 * self.improvement_vs_travelling_wave)} %  (winner: "
+            f"{self.source}; {self.screened} waves screened, {self.evaluations} batched evaluations, "
+            f"{self.runtime_s:.0f} s)"
+        )
+        return "\n".join(lines)
