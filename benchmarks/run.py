@@ -1454,6 +1454,9 @@ def report(res: dict, meta: dict) -> str:
             "the paper's spring and friction, t_start = 80), against the two-mass model on its own engine. "
             "*per mass* divides the rate by N."
         )
+        if meta.get("chain_command"):
+            cmd, note = meta["chain_command"], meta["chain_note"]
+            L.append(f"These rows come from a later run of the chain cases alone (`{cmd}`); {note}")
         L.append("")
         L.append("| mechanism | N | batch | compile s | run s wall | cfg-tu/s wall | per CPU-s | per mass (wall) |")
         L.append("|---|---|---|---|---|---|---|---|")

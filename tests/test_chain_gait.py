@@ -15,6 +15,9 @@ from locomotion_jax.gaits import _chain_gait as cg
 P = np.pi
 
 
+pytestmark = pytest.mark.xdist_group("chain_gait")  # the module's worms are solved once, on one worker
+
+
 @pytest.fixture(scope="module")
 def worms():
     """N = 3 worms (travelling waves), strict contact: two stick-slip gaits (waves towards the

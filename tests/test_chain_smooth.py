@@ -10,6 +10,9 @@ import pytest
 TS = jnp.linspace(0.0, 10.0, 21)
 
 
+pytestmark = pytest.mark.xdist_group("chain_smooth")  # the module's chain batch is run once, on one worker
+
+
 @pytest.fixture(scope="module")
 def aniso_chain():
     # Three masses on bristles (anisotropic friction), flat springs: moves by the ground's

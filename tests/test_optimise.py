@@ -54,6 +54,9 @@ def _reference_figures(cos, sin, omega, a=None, rho=0.9):
     return dX / (t1 - t0), (r["e_d"][1] - r["e_d"][0]) / abs(dX), r["liftoff"]
 
 
+pytestmark = pytest.mark.xdist_group("optimise")  # the module's sweep and optimisations are run once, on one worker
+
+
 @pytest.fixture(scope="module")
 def tiny_sweep():
     # Two amplitudes x three frequencies around omega = 4, exact model, short horizon.

@@ -18,6 +18,9 @@ CHEAPER = [(0.02, 0.05, 1.745, 1.3272), (0.03, 0.05, 4.48, 2.6369)]
 TOL = 1e-5
 
 
+pytestmark = pytest.mark.xdist_group("pareto")  # the module's coarse sweep is run once, on one worker
+
+
 @pytest.fixture(scope="module")
 def coarse():
     # The sweep of experiments/optimal_actuation.py: 6 amplitudes x 32 frequencies.
