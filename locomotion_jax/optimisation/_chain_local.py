@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..gaits import _chain_orbit as orbit
+from ._descent import descent
 
 
 PENALTY = 10.0
@@ -101,60 +102,6 @@ class Figures:
         self.ok = bool(orb.ok)
 
 
-def merit(fig: Figures | None, rho: float) -> tuple[float, np.ndarray | None]:
-    """The exact penalty $f + \\rho \\sum_j \\max(0, -c_j)$ and its gradient (`inf`, `None` where no orbit)."""
-    if fig is None or not fig.ok:
-        return math.inf, None
-    viol = [max(0.0, -c) for c in fig.c]
-    g = fig.df - rho * sum(fig.dc[j] for j in range(2) if fig.c[j] < 0)
-    return fig.f + rho * sum(viol), g
-
-
-def descent(x0: np.ndarray, at, proj, max_iter: int, trust_radius: float, rho: float) -> None:
-    """Monotone L-BFGS descent on [`merit`][] from `x0` (`at(x)`: the [`Figures`][] at `x` or `None`;
-    `proj`: onto the simple constraints). Stops at `max_iter`, or where no decrease is found
-    along steepest descent (a local, possibly nonsmooth, minimum)."""
-    x = proj(x0)
-    phi, g = merit(at(x), rho)
-    if g is None:
-        return
-    mem: list[tuple[np.ndarray, np.ndarray]] = []
-    for _ in range(max_iter):
-        q = g.copy()
-        alphas = []
-        for s_, y_ in reversed(mem):
-            alphas.append(s_ @ q / (y_ @ s_))
-            q -= alphas[-1] * y_
-        if mem:
-            s_, y_ = mem[-1]
-            q *= (s_ @ y_) / (y_ @ y_)
-        for (s_, y_), a_ in zip(mem, reversed(alphas)):
-            q += (a_ - y_ @ q / (y_ @ s_)) * s_
-        d = -q
-        if g @ d >= 0:  # not a descent direction: restart from steepest descent
-            mem.clear()
-            d = -g
-        step = min(1.0, trust_radius / max(float(np.max(np.abs(d))), 1e-300))
-        accepted, xn, phin, gn = False, x, phi, None
-        for _ in range(12):
-            xn = proj(x + step * d)
-            phin, gn = merit(at(xn), rho)
-            if gn is not None and phin <= phi + 1e-4 * float(g @ (xn - x)) and phin < phi:
-                accepted = True
-                break
-            step *= 0.4
-        if not accepted or gn is None:
-            if not mem:
-                return
-            mem.clear()
-            continue
-        sv, yv = xn - x, gn - g
-        if sv @ yv > 1e-12 * np.linalg.norm(sv) * np.linalg.norm(yv):
-            mem.append((sv, yv))
-            mem[:] = mem[-8:]
-        x, phi, g = xn, phin, gn
-
-
 class Evaluator:
     """The batched oracle for the lockstep solvers: warm starts per solver, and where Newton fails
     from them, a transient and period-1 then period-2 gaits."""
@@ -225,7 +172,7 @@ def local_solver(x0: np.ndarray, proj, stroke_ok, max_iter: int, trust_radius: f
                         best["key"], best["x"] = key_, np.array(x, float)
             return cache[key]
 
-        descent(np.array(x0, float), at, proj, max_iter, trust_radius, rho)
+        descent(np.array(x0, float), at, proj, max_iter, trust_radius, rho, strict=True)
         log.append({"evaluations": len(trace), "trace": trace})
         return best["x"]
 

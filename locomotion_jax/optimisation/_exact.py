@@ -55,6 +55,7 @@ from ..gaits._gait import GaitStatus, steady_gait
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform
 from . import _pareto as pareto
+from ._descent import descent
 from ._lockstep import run_lockstep
 from ._optimum import ExactSettings, Optimum, verified
 from ._shapes import AbstractShape
@@ -185,68 +186,16 @@ def _col(flag: np.ndarray, like: Any) -> np.ndarray:
 
 
 def _descent(x0, ask, shape: AbstractShape, bounds, settings: ExactSettings, max_iter: int, at) -> None:
-    """Monotone descent on the exact penalty $\\phi = f + \\rho\\,(\\max(0, -c_v) + \\max(0, -c_N))$:
-    quasi-Newton (L-BFGS) directions, the stroke kept by the shape family's projection onto
-    its exact limit, $\\omega$ clipped to its bounds, and a backtracking (Armijo) line search that accepts
-    only a decrease, so an iterate never walks into a costlier gait or a failed orbit."""
-    rho = PENALTY
-
-    def merit(fig):
-        if not fig.ok:
-            return math.inf, None
-        viol = [max(0.0, -c) for c in fig.c]
-        g = fig.df - rho * sum(fig.dc[j] for j in range(2) if fig.c[j] < 0)
-        return fig.f + rho * sum(viol), g
+    """[`descent`][locomotion_jax.optimisation._descent.descent] on the exact penalty
+    $\\phi = f + \\rho\\,(\\max(0, -c_v) + \\max(0, -c_N))$, the stroke kept by the shape
+    family's projection onto its exact limit and $\\omega$ clipped to its bounds."""
 
     def project(x):
         x = shape.project(x)
         x[-1] = np.clip(x[-1], bounds.lb[-1], bounds.ub[-1])
         return x
 
-    x = project(x0)
-    phi, g = merit(at(x))
-    if g is None:
-        return
-    mem: list[tuple[np.ndarray, np.ndarray]] = []
-    for _ in range(max_iter):
-        # Two-loop recursion for the L-BFGS direction.
-        q = g.copy()
-        alphas = []
-        for s_, y_ in reversed(mem):
-            a_ = s_ @ q / (y_ @ s_)
-            alphas.append(a_)
-            q -= a_ * y_
-        if mem:
-            s_, y_ = mem[-1]
-            q *= (s_ @ y_) / (y_ @ y_)
-        for (s_, y_), a_ in zip(mem, reversed(alphas)):
-            q += (a_ - y_ @ q / (y_ @ s_)) * s_
-        d = -q
-        if g @ d >= 0:  # not a descent direction: restart from steepest descent
-            mem.clear()
-            d = -g
-        step = min(1.0, settings.trust_radius / max(float(np.max(np.abs(d))), 1e-300))
-        accepted = False
-        xn, phin, gn = x, phi, None
-        for _ in range(12):
-            xn = project(x + step * d)
-            phin, gn = merit(at(xn))
-            if gn is not None and phin <= phi + 1e-4 * float(g @ (xn - x)):
-                accepted = True
-                break
-            step *= 0.4
-        if not accepted:
-            if not mem:
-                return  # no decrease along steepest descent: a (nonsmooth) local minimum
-            mem.clear()
-            continue
-        if gn is None:  # unreachable: an accepted step has a gradient
-            return
-        sv, yv = xn - x, gn - g
-        if sv @ yv > 1e-12 * np.linalg.norm(sv) * np.linalg.norm(yv):
-            mem.append((sv, yv))
-            mem[:] = mem[-8:]
-        x, phi, g = xn, phin, gn
+    descent(x0, at, project, max_iter, settings.trust_radius, PENALTY)
 
 
 HALF_STEP_RTOL = 1e-3
