@@ -23,7 +23,6 @@ located events entering with their implicit-function times (the saltation of eac
 """
 
 from collections import Counter
-from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -36,6 +35,7 @@ from ..dynamics._compile import engine_jit
 from ..model._chain import Chain
 from ..model._springwaves import SpringFourier
 from ._chain_gait import _reduced, _section_state
+from ._orbit import newton_orbit, Orbit, Period
 
 
 TRACES: Counter = Counter()
@@ -63,14 +63,6 @@ def with_waves(chain: Chain, theta: Array, a_max: Array, harmonics: int) -> Chai
     cos, sin = coefficients(theta, S, harmonics)
     waves = SpringFourier(a_max * cos, a_max * sin, jnp.exp(theta[-1]))
     return eqx.tree_at(lambda c: c.waves, chain, waves)
-
-
-class Period(NamedTuple):
-    """`k` periods from a section state: the end's reduced state, $(\\Delta X, e_d, \\min N)$, success."""
-
-    y: Array
-    figures: Array
-    ok: Array
 
 
 def period(C: Chain, contact: Contact, dt: float, max_steps: Array, y: Array, k: Array) -> Period:
@@ -102,58 +94,14 @@ def period(C: Chain, contact: Contact, dt: float, max_steps: Array, y: Array, k:
     return Period(_reduced(st), jnp.stack([dX, st.y.ed, low]), ok)
 
 
-class Orbit(NamedTuple):
-    """The steady gait of one decision vector and its sensitivities.
-
-    - `y`: the fixed point of $\\Phi_k$; `figures`: $(\\Delta X, e_d, \\min N)$ over the gait's
-      `k` actuation periods; `gradient`: $d\\,\\text{figures}/d\\theta$, shape `(3, p)`;
-    - `monodromy`: $M$ at the fixed point; `ok`: Newton converged and the period completed;
-    - `n_iter`, `residual`: Newton iterations and $\\|\\Phi(y) - y\\|_\\infty$.
-    """
-
-    y: Array
-    figures: Array
-    gradient: Array
-    monodromy: Array
-    ok: Array
-    n_iter: Array
-    residual: Array
-
-
 def _orbit_one(C, a_max, theta, y0, k, harmonics, contact, dt, max_steps, tol, max_iter) -> Orbit:
     ny = y0.shape[0]
-    eye = jnp.eye(ny, dtype=theta.dtype)
 
     def run(z):
         out = period(with_waves(C, z[ny:], a_max, harmonics), contact, dt, max_steps, z[:ny], k)
         return jnp.concatenate([out.y, out.figures]), out.ok
 
-    def linearise(y):
-        # One forward pass in all 2N - 1 + p directions: Newton needs only M, the result all of J.
-        J, (val, ok) = jax.jacfwd(lambda z: (lambda r: (r[0], r))(run(z)), has_aux=True)(jnp.concatenate([y, theta]))
-        return val, J, ok & jnp.all(jnp.isfinite(val)) & jnp.all(jnp.isfinite(J))
-
-    def small(y, val):
-        return jnp.max(jnp.abs(val[:ny] - y)) <= tol * (1 + jnp.max(jnp.abs(y)))
-
-    def cond(c):
-        _, _, _, ok, it, done = c
-        return ~done & ok & (it < max_iter)
-
-    def body(c):
-        y, val, J, _, it, _ = c
-        y1 = y + jnp.linalg.solve(J[:ny, :ny] - eye, y - val[:ny])
-        val1, J1, ok1 = linearise(y1)
-        return y1, val1, J1, ok1, it + 1, small(y1, val1)
-
-    val0, J0, ok0 = linearise(y0)
-    init = (y0, val0, J0, ok0, jnp.zeros((), jnp.int32), small(y0, val0))
-    y, val, J, ok, it, done = jax.lax.while_loop(cond, body, init)
-    M = J[:ny, :ny]
-    dy = jnp.linalg.solve(eye - M, J[:ny, ny:])
-    grad = J[ny:, ny:] + J[ny:, :ny] @ dy
-    good = ok & done & jnp.all(jnp.isfinite(grad))
-    return Orbit(y, val[ny:], grad, M, good, it, jnp.max(jnp.abs(val[:ny] - y)))
+    return newton_orbit(run, y0, theta, tol, max_iter)
 
 
 def _evaluate(C, a_max, theta, y0, k, harmonics, contact, dt, max_steps, tol, max_iter):

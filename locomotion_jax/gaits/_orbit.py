@@ -46,7 +46,7 @@ checks that a whole optimisation traces each once."""
 
 
 class Period(NamedTuple):
-    """One period from a section state: the end's reduced state, $(\\Delta X, e_d, \\min N)$, success."""
+    """`k` periods from a section state: the end's reduced state, $(\\Delta X, e_d, \\min N)$, success."""
 
     y: Array
     figures: Array
@@ -104,22 +104,26 @@ class Orbit(NamedTuple):
     residual: Array
 
 
-def _orbit_one(params, a_max, theta, y0, k, shape, contact, dt, max_steps, tol, max_iter) -> Orbit:
-    lbar = params.lbar
-    eye = jnp.eye(3, dtype=theta.dtype)
+def newton_orbit(run, y0: Array, theta: Array, tol: Array, max_iter: Array) -> Orbit:
+    """The fixed point of a period map and the figures' implicit-function gradient.
 
-    def run(z):
-        out = period(params, shape.waveform(z[3:], a_max, lbar), contact, dt, max_steps, z[:3], k)
-        return jnp.concatenate([out.y, out.figures]), out.ok
+    `run(z)`, with `z` the section state `y` followed by the decision vector `theta`, returns
+    the state after the gait's periods followed by its figures, and whether the period
+    completed. Newton's method on $\\Phi(y) - y$ from `y0`; every iterate linearises `run` in
+    all directions at once (forward mode), so the converged Jacobian gives both the
+    monodromy $M = \\partial\\Phi/\\partial y$ and, by the implicit function theorem,
+    $d\\,\\text{figures}/d\\theta = J_{f\\theta} + J_{fy} (I - M)^{-1} J_{y\\theta}$."""
+    ny = y0.shape[0]
+    eye = jnp.eye(ny, dtype=theta.dtype)
 
     def linearise(y):
-        # One forward pass in all 3 + p directions: Newton needs only M, the result all of J,
+        # One forward pass in all ny + p directions: Newton needs only M, the result all of J,
         # and a single differentiated program halves the compile time.
         J, (val, ok) = jax.jacfwd(lambda z: (lambda r: (r[0], r))(run(z)), has_aux=True)(jnp.concatenate([y, theta]))
         return val, J, ok & jnp.all(jnp.isfinite(val)) & jnp.all(jnp.isfinite(J))
 
     def small(y, val):
-        return jnp.max(jnp.abs(val[:3] - y)) <= tol * (1 + jnp.max(jnp.abs(y)))
+        return jnp.max(jnp.abs(val[:ny] - y)) <= tol * (1 + jnp.max(jnp.abs(y)))
 
     def cond(c):
         _, _, _, ok, it, done = c
@@ -127,18 +131,26 @@ def _orbit_one(params, a_max, theta, y0, k, shape, contact, dt, max_steps, tol, 
 
     def body(c):
         y, val, J, _, it, _ = c
-        y1 = y + jnp.linalg.solve(J[:3, :3] - eye, y - val[:3])
+        y1 = y + jnp.linalg.solve(J[:ny, :ny] - eye, y - val[:ny])
         val1, J1, ok1 = linearise(y1)
         return y1, val1, J1, ok1, it + 1, small(y1, val1)
 
     val0, J0, ok0 = linearise(y0)
     init = (y0, val0, J0, ok0, jnp.zeros((), jnp.int32), small(y0, val0))
     y, val, J, ok, it, done = jax.lax.while_loop(cond, body, init)
-    M = J[:3, :3]
-    dy = jnp.linalg.solve(eye - M, J[:3, 3:])
-    grad = J[3:, 3:] + J[3:, :3] @ dy
+    M = J[:ny, :ny]
+    dy = jnp.linalg.solve(eye - M, J[:ny, ny:])
+    grad = J[ny:, ny:] + J[ny:, :ny] @ dy
     good = ok & done & jnp.all(jnp.isfinite(grad))
-    return Orbit(y, val[3:], grad, M, good, it, jnp.max(jnp.abs(val[:3] - y)))
+    return Orbit(y, val[ny:], grad, M, good, it, jnp.max(jnp.abs(val[:ny] - y)))
+
+
+def _orbit_one(params, a_max, theta, y0, k, shape, contact, dt, max_steps, tol, max_iter) -> Orbit:
+    def run(z):
+        out = period(params, shape.waveform(z[3:], a_max, params.lbar), contact, dt, max_steps, z[:3], k)
+        return jnp.concatenate([out.y, out.figures]), out.ok
+
+    return newton_orbit(run, y0, theta, tol, max_iter)
 
 
 def _evaluate(params, a_max, theta, y0, k, shape, contact, dt, max_steps, tol, max_iter):
