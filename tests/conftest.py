@@ -1,6 +1,7 @@
 """Test configuration: float64 on, strict promotion off (the package mixes Python
 floats freely), rank promotion raises (catches silent broadcasting bugs), the
-CLI's own compilation cache off, one compilation cache shared by the run's workers."""
+CLI's own compilation cache off, one compilation cache shared by the run's workers,
+and the tests marked `slow` run only with `--slow`."""
 
 import os
 
@@ -14,6 +15,7 @@ import shutil
 import tempfile
 
 import jax
+import pytest
 
 
 jax.config.update("jax_enable_x64", True)
@@ -45,6 +47,34 @@ def _shared_compilation_cache() -> None:
     from locomotion_jax._cache import enable_compilation_cache
 
     enable_compilation_cache(path)
+
+
+def pytest_addoption(parser):
+    parser.addoption(
+        "--slow",
+        action="store_true",
+        default=os.environ.get("LOCOMOTION_JAX_SLOW_TESTS") == "1",
+        help="also run the tests marked slow (end-to-end optimisations, notebooks, several processes)",
+    )
+
+
+def pytest_collection_modifyitems(config, items):
+    # The slow tests run whole optimisations, notebooks and multi-process sweeps whose parts
+    # the default tests check one by one; they take about as long again as the rest.
+    if config.getoption("--slow"):
+        return
+    skip = pytest.mark.skip(reason="slow: run with --slow")
+    for item in items:
+        if "slow" in item.keywords:
+            item.add_marker(skip)
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _release_compiled_programs():
+    # A worker runs dozens of modules; without this it keeps every program it compiled (up
+    # to ~9 GB per worker). A program needed again is read back from the shared cache.
+    yield
+    jax.clear_caches()
 
 
 def pytest_unconfigure(config):

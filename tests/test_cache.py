@@ -29,7 +29,6 @@ def _entries(cache: Path) -> set[str]:
     return {p.name for p in cache.iterdir()}
 
 
-@pytest.mark.slow
 def test_second_process_reads_the_cache(tmp_path):
     cache = tmp_path / "cache"
     args = ["simulate", "--omega", "2", "--horizon", "30", "--no-plot", "--json"]

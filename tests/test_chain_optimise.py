@@ -47,7 +47,6 @@ def infeasible() -> lj.ChainOptimum:
     return lj.optimise(worm(), 5.0, A_MAX, harmonics=2, settings=settings)
 
 
-@pytest.mark.slow
 def test_beats_its_best_travelling_wave(opt3):
     wave = opt3.travelling_wave
     assert opt3.feasible_exact and wave is not None
@@ -60,7 +59,6 @@ def test_beats_its_best_travelling_wave(opt3):
     assert opt3.mean_speed_exact >= opt3.v_min
 
 
-@pytest.mark.slow
 def test_optimum_verifies_on_steady_gait_and_simulation(opt3):
     g = _first(lj.steady_gait(lj.Chain.stack([opt3.chain] * SETTINGS.chunk), transient=SETTINGS.transient,
                               dynamics=lj.Exact(dt=SETTINGS.dt), start="relaxed"))  # fmt: skip
@@ -82,7 +80,6 @@ def test_optimum_verifies_on_steady_gait_and_simulation(opt3):
     assert opt3.min_normal >= opt3.margin
 
 
-@pytest.mark.slow
 def test_stroke_bound_holds_exactly(opt3):
     phase = np.linspace(0, 2 * np.pi, 400_001)
     n = np.arange(1, opt3.harmonics + 1)

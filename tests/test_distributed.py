@@ -91,7 +91,6 @@ def _assert_same(store: Path, reference: xr.Dataset) -> None:
         np.testing.assert_array_equal(ds[name].values, reference[name].values, err_msg=name)
 
 
-@pytest.mark.slow
 def test_two_processes_equal_one(tmp_path, cache, reference):
     """The README's Slurm launch, `srun locomotion-jax --distributed sweep ...`, with the
     variables srun sets for two tasks on one node (jax.distributed reads them)."""
@@ -120,7 +119,6 @@ def test_two_processes_equal_one(tmp_path, cache, reference):
     _assert_same(store, reference)
 
 
-@pytest.mark.slow
 def test_killed_processes_resume(tmp_path, cache, reference):
     store = tmp_path / "map.zarr"
     # Process 0 dies writing its third chunk, process 1 writing its second: each

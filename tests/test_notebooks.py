@@ -119,8 +119,9 @@ def _execute(name: str, out_dir: Path, source: Path | None = None) -> tuple[nbfo
     return nb, nb.metadata["execution_seconds"]
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize(
+    "name", [pytest.param(n, marks=pytest.mark.slow) if n == "03_optimal_actuation" else n for n in NAMES]
+)
 def test_notebook_runs(name, tmp_path, monkeypatch):
     monkeypatch.setenv("LOCOMOTION_NB_SMALL", "1")  # inherited by the client and its kernel
     monkeypatch.delenv("LOCOMOTION_NB_IMAGES", raising=False)  # never write docs/images from a test
@@ -130,7 +131,6 @@ def test_notebook_runs(name, tmp_path, monkeypatch):
     print(f"{name}: {seconds:.0f} s")
 
 
-@pytest.mark.slow
 def test_model_tour_runs_without_ipywidgets(tmp_path, monkeypatch):
     # The main install (`pip install -e .`) has no ipywidgets: a module of that name
     # that fails to import stands in for it, first on the kernel's path.

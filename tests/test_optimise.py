@@ -130,6 +130,7 @@ def test_bad_inputs(kwargs, match):
         _optimise.optimise(lj.Params(), **kwargs)
 
 
+@pytest.mark.slow
 def test_d0_equal_masses_cannot_move():
     # With d = 0 and m1 = m2 the model is symmetric under x -> -x with the masses swapped,
     # so no waveform moves the centre of mass; use a time-asymmetric, even-harmonic one.
@@ -154,6 +155,7 @@ def tiny_optimum(tiny_sweep):
     )
 
 
+@pytest.mark.slow
 def test_compilations_per_optimisation(tiny_sweep):
     # One trace of the Adam block per optimisation: not per smoothing stage (the step
     # count is traced, under a loop of the finest stage's length), outer iteration,
@@ -213,6 +215,7 @@ def test_optimum_verified_on_the_reference(tiny_optimum):
     json.dumps(opt.to_dict())
 
 
+@pytest.mark.slow
 def test_cli_infeasible_requirement_is_reported_infeasible():
     # Nothing reaches a mean speed of 0.5 with a stroke of 0.03: the result must say so.
     # Same shapes and static settings as TINY, so the compiled functions are reused.
