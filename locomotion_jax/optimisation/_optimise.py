@@ -53,6 +53,7 @@ import optax
 from ..model._chain import Chain
 from ..model._params import Params
 from ..model._waveform import Fourier
+from ..run._batch import mechanism_arg
 from . import _constraints as cons, _pareto as pareto
 from ._chain_optimum import ChainOptimiseSettings, ChainOptimum
 from ._objective import make_plan, Plan, rollout
@@ -352,8 +353,15 @@ def optimise(
         opt.cost_of_transport_exact, opt.improvement_vs_sinusoid
         ```
     """
-    if isinstance(params, Chain):
-        return _optimise_chain(params, v_min, a_max, method, direction, omega, harmonics, settings, sweep, start)
+    args = (v_min, a_max, method, direction, omega, harmonics, settings, sweep, start)
+    # The mechanism picks its optimiser (double dispatch).
+    return mechanism_arg(params).dispatch(
+        two_mass=lambda p: _optimise_params(p, *args), chain=lambda c: _optimise_chain(c, *args)
+    )
+
+
+def _optimise_params(params: Params, v_min, a_max, method, direction, omega, harmonics, settings, sweep, start):
+    """The paper's two-mass model: the exact method (the default) or the smoothed one."""
     if method not in ("exact", "smoothed"):
         raise ValueError(f"method must be 'exact' or 'smoothed', got {method!r}.")
     exact = method == "exact"
