@@ -104,7 +104,7 @@ class Orbit(NamedTuple):
     residual: Array
 
 
-def newton_orbit(run, y0: Array, theta: Array, tol: Array, max_iter: Array) -> Orbit:
+def newton_orbit(run, y0: Array, theta: Array, tol: Array | float, max_iter: Array | int) -> Orbit:
     """The fixed point of a period map and the figures' implicit-function gradient.
 
     `run(z)`, with `z` the section state `y` followed by the decision vector `theta`, returns
