@@ -185,7 +185,7 @@ def _col(flag: np.ndarray, like: Any) -> np.ndarray:
     return flag.reshape(flag.shape + (1,) * (np.ndim(like) - 1))
 
 
-def _descent(x0, ask, shape: AbstractShape, bounds, settings: ExactSettings, max_iter: int, at) -> None:
+def _descent(x0, shape: AbstractShape, bounds, settings: ExactSettings, max_iter: int, at) -> None:
     """[`descent`][locomotion_jax.optimisation._descent.descent] on the exact penalty
     $\\phi = f + \\rho\\,(\\max(0, -c_v) + \\max(0, -c_N))$, the stroke kept by the shape
     family's projection onto its exact limit and $\\omega$ clipped to its bounds."""
@@ -248,7 +248,7 @@ def _local_solver(x0, shape: AbstractShape, bounds, settings: ExactSettings, log
             return cache[key]
 
         if settings.local_method == "descent":
-            _descent(np.array(x0, float), ask, shape, bounds, settings, max_iter, at)
+            _descent(np.array(x0, float), shape, bounds, settings, max_iter, at)
             log.append({"message": "descent", "nit": len(trace), "trace": trace})
             return result()
         if settings.local_method == "SLSQP":
