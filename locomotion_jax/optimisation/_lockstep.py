@@ -12,20 +12,24 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 
+_EMPTY: Any = object()
+"""An empty request or answer slot: any value, `None` included, is a valid request or answer."""
+
+
 class _Exchange:
     def __init__(self, n: int):
         self.cv = threading.Condition()
-        self.requests: list[Any] = [None] * n
-        self.answers: list[Any] = [None] * n
+        self.requests: list[Any] = [_EMPTY] * n
+        self.answers: list[Any] = [_EMPTY] * n
         self.running = [True] * n
 
     def ask(self, i: int, x: Any) -> Any:
         with self.cv:
             self.requests[i] = x
             self.cv.notify_all()
-            while self.answers[i] is None:
+            while self.answers[i] is _EMPTY:
                 self.cv.wait()
-            answer, self.answers[i] = self.answers[i], None
+            answer, self.answers[i] = self.answers[i], _EMPTY
         if isinstance(answer, _Abort):
             raise RuntimeError("the batched evaluation failed; this solver was stopped")
         return answer
@@ -38,15 +42,17 @@ class _Exchange:
     def pending(self) -> list[int] | None:
         """Wait until every running solver has asked; their indices (`None`: all finished)."""
         with self.cv:
-            while any(r and q is None for r, q in zip(self.running, self.requests)):
+            while any(r and q is _EMPTY for r, q in zip(self.running, self.requests)):
                 self.cv.wait()
             idx = [i for i, r in enumerate(self.running) if r]
             return idx or None
 
     def answer(self, idx: list[int], answers: Sequence[Any]) -> None:
+        if len(answers) != len(idx):
+            raise ValueError(f"the batched evaluation returned {len(answers)} answers for {len(idx)} requests")
         with self.cv:
             for i, a in zip(idx, answers):
-                self.requests[i] = None
+                self.requests[i] = _EMPTY
                 self.answers[i] = a
             self.cv.notify_all()
 
@@ -58,7 +64,8 @@ def run_lockstep(
     """Run `solvers[i](ask)` in threads; `ask(x)` returns `evaluate(idx, xs)` for its own `x`.
 
     `evaluate(idx, xs)` receives the indices of the solvers waiting and their points,
-    and returns one answer each (never `None`). Returns each solver's return value;
+    and returns one answer each (any value, `None` included: the chain optimiser answers
+    `None` where the orbit solve failed). Returns each solver's return value;
     an exception in a solver is raised here once all have stopped.
     """
     ex = _Exchange(len(solvers))
