@@ -53,6 +53,7 @@ def test_chain_simulate_json_and_plot(tmp_path):
     assert bad.exit_code == 2 and "Error: --t-end must be" in bad.output
 
 
+@pytest.mark.slow  # a compilation of the chain's gait solver of its own (steady_gait is tested in test_chain_gait.py)
 def test_chain_gait_json_equals_steady_gait():
     res = invoke("chain-gait", *MECH, *WAVE, "--transient", "10", "--dt", "0.02", "--json")
     assert res.exit_code == 0, res.output
@@ -63,6 +64,9 @@ def test_chain_gait_json_equals_steady_gait():
     assert record["cost_of_transport"] == pytest.approx(float(g.cost_of_transport), rel=1e-12)
     assert record["stick_fraction"] == pytest.approx(np.asarray(g.stick_fraction).tolist(), rel=1e-12)
     assert len(record["multipliers"]) == 5 and len(record["multipliers"][0]) == 2
+
+
+def test_chain_gait_bad_input():
     bad = invoke("chain-gait", *MECH, "--periods", "0")
     assert bad.exit_code == 2 and "Error: --periods" in bad.output
 

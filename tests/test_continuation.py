@@ -172,6 +172,7 @@ def test_liftoff_and_bad_input():
         assert bool(late) == lifts, (sign, late)
 
 
+@pytest.mark.slow  # its own compilation of the corrector (a coefficient as the parameter)
 def test_waveform_coefficient():
     """A Fourier coefficient as the parameter (d = 0, mhat = 0.3, second harmonic): points equal
     steady_gait under the same waveform."""

@@ -155,6 +155,7 @@ def test_unstable_orbit_and_period_two_gait():
     assert min(u[0], u[1]) < float(g1.u) < max(u[0], u[1])
 
 
+@pytest.mark.slow  # a second compilation of the solver; float32 engines are tested in the default run
 def test_float32():
     """float32: Newton to 1e-5, speeds within 1e-4 of float64 (SL gait, complex multipliers)."""
     p = lj.Params(omega=16.0)

@@ -193,6 +193,7 @@ def test_coarse_stage_in_a_finer_loop_matches_its_own_plan():
         _objective.make_plan(p, 3.0, 3.0, 1e-3, 4.0, 4.0, eps_min=1e-2)
 
 
+@pytest.mark.slow  # the smoothed method end to end; its parts are tested above, the exact method below
 def test_optimum_verified_on_the_reference(tiny_optimum):
     # The reported exact figures of the optimum and of the best sinusoid are those of the
     # independent reference solver for the returned waveforms, over whole periods.

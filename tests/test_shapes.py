@@ -102,6 +102,7 @@ def test_shape_families_fit_project_and_constrain():
         _shapes.SplineShape(knots=3)
 
 
+@pytest.mark.slow  # a README claim at 64 knots; the starts and the spline are tested above
 def test_tension_wave_start_is_fast_and_cheap():
     # The idealised inchworm whose tension alternates in sign, as a spline of 64 knots run
     # open-loop on the exact model: faster than 0.045 near the quasi-static floor (~0.922),
