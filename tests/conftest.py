@@ -83,26 +83,12 @@ def pytest_collection_finish(session):
             )
 
 
-_RELEASE_ABOVE = 2.5 * 2**30  # bytes of resident memory
-
-
-def _resident_bytes() -> float:
-    # Linux: the second field of /proc/self/statm, in pages; elsewhere unknown (always release).
-    try:
-        with open("/proc/self/statm") as f:
-            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
-    except (OSError, ValueError, IndexError):
-        return float("inf")
-
-
 @pytest.fixture(autouse=True, scope="module")
 def _release_compiled_programs():
-    # A worker runs dozens of modules; keeping every program it compiled grew one to ~9 GB.
-    # Released only past a bound: a later module that calls a program again (the same
-    # engine at the same shapes) then neither traces nor reads it back from the cache.
+    # A worker runs dozens of modules; without this it keeps every program it compiled (up
+    # to ~9 GB per worker). A program needed again is read back from the shared cache.
     yield
-    if _resident_bytes() > _RELEASE_ABOVE:
-        jax.clear_caches()
+    jax.clear_caches()
 
 
 def pytest_unconfigure(config):

@@ -331,7 +331,8 @@ def _apply(dest: Path, m: Mutation) -> None:
 def _run_tests(dest: Path, tests: tuple[str, ...], workers: int, cache: str) -> tuple[bool, str, float]:
     """Run `tests` in the copy at `dest`; returns (all passed, first failing test or error, seconds)."""
     env = {**os.environ, "PYTHONPATH": str(dest), "LJ_REFERENCE_CACHE": cache}
-    cmd = [sys.executable, "-m", "pytest", "-q", "-x", "-p", "no:cacheprovider"]
+    # --slow: a mutation runs the tests named for it, those marked slow included.
+    cmd = [sys.executable, "-m", "pytest", "-q", "-x", "-p", "no:cacheprovider", "--slow"]
     if workers > 1:
         cmd += ["-n", str(workers)]
     t = time.time()
