@@ -51,7 +51,9 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path:
     is faster to read back than to compile again) and no minimum entry size. The
     cache key covers the program, the devices, the compiler options (the engine's
     `_compile.COMPILER_OPTIONS` included), `XLA_FLAGS` and the JAX version, so a
-    stale entry is never used; the directory can be deleted at any time.
+    stale entry is never used; the directory can be deleted at any time. It also
+    covers the directory's path (JAX puts a GPU autotuning cache inside it and keys
+    on that option), so a cache moved elsewhere is not read.
 
     This changes JAX's global configuration, for the whole process: call it once,
     at start-up (it also takes effect after computations have run). Do not point

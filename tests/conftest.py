@@ -1,6 +1,6 @@
 """Test configuration: float64 on, strict promotion off (the package mixes Python
 floats freely), rank promotion raises (catches silent broadcasting bugs), the
-CLI's own compilation cache off, one compilation cache shared by the run's workers,
+CLI's own compilation cache off, one lasting compilation cache shared by the runs and their workers,
 and the tests marked `slow` run only with `--slow`."""
 
 import os
@@ -14,6 +14,7 @@ os.environ.setdefault("LOCOMOTION_JAX_CACHE", "0")
 import shutil
 import tempfile
 import warnings
+from pathlib import Path
 
 import jax
 import pytest
@@ -26,28 +27,61 @@ jax.config.update("jax_numpy_rank_promotion", "raise")
 _OWN_CACHE: list[str] = []
 
 
+LASTING_CACHE_BYTES = 2**30
+"""Bound on the lasting test compilation cache: a run that finds it larger empties it first
+(a full run writes about 60 MB per version of the code)."""
+
+
+def _lasting_cache_dir() -> Path:
+    # Beside the package's own cache (`_cache.cache_dir`), apart from it: the tests' entries
+    # are theirs alone.
+    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return base / "locomotion_jax" / "tests"
+
+
 def _shared_compilation_cache() -> None:
-    """One persistent compilation cache for a test run, shared by pytest-xdist's workers.
+    """One persistent compilation cache for the test runs, shared by pytest-xdist's workers.
 
     The workers run different tests that compile many of the same programs (the engines
     at the same batch shapes and settings); with the cache, a program one worker compiled
-    is read back by the other instead of compiled again. The controlling process makes a
-    new temporary directory (so every run starts empty, as in CI), passes it to the
-    workers in `LJ_TEST_CACHE_DIR` and deletes it at the end; a `LJ_TEST_CACHE_DIR` set
-    beforehand names a lasting one instead, and `LJ_TEST_CACHE_DIR=off` turns it off.
-    Results do not depend on it: the key covers the program, the compiler options and the
-    devices.
+    is read back by the other instead of compiled again, and a later run reads back what an
+    earlier one compiled. By default the cache lasts, in `locomotion_jax/tests` under
+    `$XDG_CACHE_HOME` (`~/.cache`), emptied by the run that finds it over
+    `LASTING_CACHE_BYTES`.
+    `LJ_TEST_CACHE_DIR` names another lasting directory; `LJ_TEST_CACHE_DIR=fresh` makes a
+    new temporary one for the run (every program compiled, as on a clean machine) and
+    deletes it at the end; `LJ_TEST_CACHE_DIR=off` turns the cache off. The controlling
+    process resolves the choice and passes the directory to the workers in
+    `LJ_TEST_CACHE_DIR`. Results do not depend on it: JAX's key covers the program, the
+    compiler options, `XLA_FLAGS`, the devices and the JAX version, and an entry it cannot
+    read (one another process is still writing) is compiled again, with a warning.
     """
     path = os.environ.get("LJ_TEST_CACHE_DIR")
     if path == "off":
         return
-    if not path:
+    if path == "fresh":
         path = tempfile.mkdtemp(prefix="locomotion_jax-tests-")
         os.environ["LJ_TEST_CACHE_DIR"] = path  # inherited by the workers
         _OWN_CACHE.append(path)
+    else:
+        if not path:
+            path = str(_lasting_cache_dir())
+            os.environ["LJ_TEST_CACHE_DIR"] = path
+        if "PYTEST_XDIST_WORKER" not in os.environ:  # the controlling process (or the only one)
+            _bound(Path(path))
     from locomotion_jax._cache import enable_compilation_cache
 
     enable_compilation_cache(path)
+
+
+def _bound(directory: Path) -> None:
+    # JAX's own bound (`jax_compilation_cache_max_size`) rescans the directory at every
+    # write; emptying it when it outgrows the bound costs one scan per run. Only JAX's
+    # entries (`<program>-<key>-cache`) are removed.
+    files = list(directory.glob("*-cache")) if directory.is_dir() else []
+    if sum(f.stat().st_size for f in files) > LASTING_CACHE_BYTES:
+        for f in files:
+            f.unlink(missing_ok=True)
 
 
 def pytest_addoption(parser):
@@ -99,7 +133,6 @@ def pytest_unconfigure(config):
 _shared_compilation_cache()
 
 import sys
-from pathlib import Path
 
 
 # `reference.py` (the independent scipy solver) is imported by several tests.

@@ -1,7 +1,8 @@
 """The warm start: a second process reads the compiled engine from the persistent cache.
 
-The CLI runs in subprocesses (turning the cache on is a global JAX setting, which
-the test process keeps off), with the cache in a temporary directory.
+The CLI runs in subprocesses (turning the cache on is a global JAX setting, and the
+test process has the tests' own cache on, `tests/conftest.py`), with the cache in a
+temporary directory.
 """
 
 import json
@@ -73,3 +74,20 @@ def test_unwritable_cache_dir_is_a_clear_error(tmp_path):
     blocker.write_text("")
     with pytest.raises(ValueError, match="Cannot create the compilation cache directory"):
         _cache.enable_compilation_cache(blocker / "cache")
+
+
+def test_lasting_test_cache_is_emptied_past_its_bound(tmp_path, monkeypatch):
+    # tests/conftest.py's bound on the tests' lasting cache: JAX's entries go, all at once,
+    # only once they exceed it; other files stay.
+    import conftest
+
+    monkeypatch.setattr(conftest, "LASTING_CACHE_BYTES", 300)
+    for i in range(3):
+        (tmp_path / f"jit_f-{i}-cache").write_bytes(b"x" * 100)
+    (tmp_path / "notes.txt").write_text("not JAX's")
+    conftest._bound(tmp_path)
+    assert len(list(tmp_path.glob("*-cache"))) == 3
+    (tmp_path / "jit_g-3-cache").write_bytes(b"x")
+    conftest._bound(tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
+    conftest._bound(tmp_path / "missing")  # nothing there yet: nothing to do

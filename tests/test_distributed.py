@@ -35,7 +35,11 @@ def reference():
 
 @pytest.fixture(scope="module")
 def cache(tmp_path_factory):
-    # Under pytest-xdist the workers' temporary directories share a parent: share the cache too.
+    # The run's compilation cache (tests/conftest.py), where there is one; else one for this
+    # module (under pytest-xdist the workers' temporary directories share a parent: so does it).
+    shared = os.environ.get("LJ_TEST_CACHE_DIR")
+    if shared and shared != "off":
+        return Path(shared)
     root = tmp_path_factory.getbasetemp()
     path = (root.parent if os.environ.get("PYTEST_XDIST_WORKER") else root) / "jax_cache_distributed"
     path.mkdir(exist_ok=True)
