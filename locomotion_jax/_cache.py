@@ -23,23 +23,26 @@ ENV_SWITCH = "LOCOMOTION_JAX_CACHE"
 """Environment variable read by the command line: `0`, `false`, `no` or `off` turn the cache off."""
 
 
+def user_cache_root() -> Path:
+    """The platform's per-user cache directory: `$XDG_CACHE_HOME` (default `~/.cache`)
+    on Linux, `~/Library/Caches` on macOS, `%LOCALAPPDATA%` on Windows."""
+    if sys.platform == "darwin":
+        return Path.home() / "Library" / "Caches"
+    if sys.platform == "win32":
+        return Path(os.environ.get("LOCALAPPDATA") or Path.home() / "AppData" / "Local")
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+
+
 def cache_dir() -> Path:
     """The default cache directory.
 
     `$LOCOMOTION_JAX_CACHE_DIR` if set; otherwise `locomotion_jax/jax` under the
-    per-user cache directory of the platform: `$XDG_CACHE_HOME` (default
-    `~/.cache`) on Linux, `~/Library/Caches` on macOS, `%LOCALAPPDATA%` on Windows.
+    per-user cache directory of the platform ([`user_cache_root`][]).
     """
     env = os.environ.get(ENV_DIR)
     if env:
         return Path(env).expanduser()
-    if sys.platform == "darwin":
-        base = Path.home() / "Library" / "Caches"
-    elif sys.platform == "win32":
-        base = Path(os.environ.get("LOCALAPPDATA") or Path.home() / "AppData" / "Local")
-    else:
-        base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-    return base / "locomotion_jax" / "jax"
+    return user_cache_root() / "locomotion_jax" / "jax"
 
 
 def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path:

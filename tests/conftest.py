@@ -32,22 +32,16 @@ LASTING_CACHE_BYTES = 2**30
 (a full run writes about 60 MB per version of the code)."""
 
 
-def _lasting_cache_dir() -> Path:
-    # Beside the package's own cache (`_cache.cache_dir`), apart from it: the tests' entries
-    # are theirs alone.
-    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-    return base / "locomotion_jax" / "tests"
-
-
 def _shared_compilation_cache() -> None:
     """One persistent compilation cache for the test runs, shared by pytest-xdist's workers.
 
     The workers run different tests that compile many of the same programs (the engines
     at the same batch shapes and settings); with the cache, a program one worker compiled
     is read back by the other instead of compiled again, and a later run reads back what an
-    earlier one compiled. By default the cache lasts, in `locomotion_jax/tests` under
-    `$XDG_CACHE_HOME` (`~/.cache`), emptied by the run that finds it over
-    `LASTING_CACHE_BYTES`.
+    earlier one compiled. By default the cache lasts, in `locomotion_jax/tests` under the
+    platform's per-user cache directory (`_cache.user_cache_root`: `$XDG_CACHE_HOME` or
+    `~/.cache` on Linux), beside the package's own cache and apart from it, emptied by the
+    run that finds it over `LASTING_CACHE_BYTES`.
     `LJ_TEST_CACHE_DIR` names another lasting directory; `LJ_TEST_CACHE_DIR=fresh` makes a
     new temporary one for the run (every program compiled, as on a clean machine) and
     deletes it at the end; `LJ_TEST_CACHE_DIR=off` turns the cache off. The controlling
@@ -56,6 +50,8 @@ def _shared_compilation_cache() -> None:
     compiler options, `XLA_FLAGS`, the devices and the JAX version, and an entry it cannot
     read (one another process is still writing) is compiled again, with a warning.
     """
+    from locomotion_jax import _cache
+
     path = os.environ.get("LJ_TEST_CACHE_DIR")
     if path == "off":
         return
@@ -65,13 +61,11 @@ def _shared_compilation_cache() -> None:
         _OWN_CACHE.append(path)
     else:
         if not path:
-            path = str(_lasting_cache_dir())
+            path = str(_cache.user_cache_root() / "locomotion_jax" / "tests")
             os.environ["LJ_TEST_CACHE_DIR"] = path
         if "PYTEST_XDIST_WORKER" not in os.environ:  # the controlling process (or the only one)
             _bound(Path(path))
-    from locomotion_jax._cache import enable_compilation_cache
-
-    enable_compilation_cache(path)
+    _cache.enable_compilation_cache(path)
 
 
 def _bound(directory: Path) -> None:
