@@ -1,7 +1,7 @@
 """Forward-mode derivatives of the exact engine against finite differences of the reference.
 
 The package differentiates through its located events: each event time by the
-implicit function theorem (`_exact._root`), and the state committed at the event
+implicit function theorem (`_numerics.root`), and the state committed at the event
 moves with it (the saltation of the switch). The reference (`tests/reference.py`,
 event-driven DOP853 at rtol 1e-11) knows nothing of derivatives; its central
 differences are the truth here. Step study (README, "Gradients"): with relative steps

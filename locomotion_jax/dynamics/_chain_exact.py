@@ -25,7 +25,7 @@ forward-mode derivative of `kinetic`), so a new law or actuator supplies values 
   step's dense output and the derivatives along the motion stay accurate;
 - optionally a caller's target $z - |X - X_0|$.
 
-**Margins** to a change of switching structure, as in the two-mass engine (`_exact.margins`):
+**Margins** to a change of switching structure, as in the two-mass engine (`_numerics.margins`):
 a located crossing's from the rate and curvature of its event quintic at the root; where a
 slipping mass stops, from its stick margin and that margin's rate, both from the loads and
 their rates that the step's start computes anyway; near misses from the event functions'
@@ -47,7 +47,7 @@ import jax.numpy as jnp
 from .._custom_types import Array, Contact
 from .._status import Status
 from ..model._chain import Chain
-from . import _chain_forces as forces, _chain_motion as motion, _exact as two_mass
+from . import _chain_forces as forces, _chain_motion as motion, _numerics as num
 from ._chain_forces import Consts, consts, drive, Scalars
 from ._chain_motion import energy as energy, keep, Mode, State
 
@@ -120,7 +120,7 @@ def init(C: Chain, contact: Contact, x: Array, P: Consts | None = None) -> Hybri
 
 
 def probe(
-    C: Chain | None, contact: Contact, t: Array, y: State, target: two_mass.Target, P: Consts | None = None
+    C: Chain | None, contact: Contact, t: Array, y: State, target: num.Target, P: Consts | None = None
 ) -> tuple[list, list, list]:
     """The event functions with their first and second time derivatives at time `t` and
     state `y`, in the mode the state implies (a mass at rest sticks where its static limits
@@ -158,20 +158,13 @@ def initial_positions(C: Chain, start: str) -> Array:
     return jnp.concatenate([jnp.zeros_like(gaps[..., :1]), jnp.cumsum(gaps, -1)], -1)
 
 
-def _any(flags) -> Array:
-    out = flags[0]
-    for f in flags[1:]:
-        out = out | f
-    return out
-
-
 def step(
     C: Chain | None,
     contact: Contact,
     dt: float,
     st: Hybrid,
     t_stop: Array,
-    target: two_mass.Target | None = None,
+    target: num.Target | None = None,
     P: Consts | None = None,
 ) -> tuple[Hybrid, StepInfo]:
     """One iteration: re-decide the masses, one RK4 step, cut at the first event (see `_exact.step`).
@@ -207,9 +200,9 @@ def step(
     comp = st.comp
     if comp is not None:  # a switch sets velocities exactly (to 0): drop their compensation
         comp = comp._replace(v=tuple(jnp.where(ve, zero, v) for ve, v in zip(vel, comp.v)))
-    n_switch = st.n_switch + _any(fire).astype(jnp.int32)
+    n_switch = st.n_switch + num.union(fire).astype(jnp.int32)
 
-    lifted0 = _any([q < 0 for q in N0])
+    lifted0 = num.union([q < 0 for q in N0])
     stop0 = lifted0 if contact == "strict" else jnp.asarray(False)
     t_lift = jnp.where(lifted0 & ~jnp.isfinite(st.t_liftoff), t0, st.t_liftoff)
     if target is not None:
@@ -228,15 +221,15 @@ def step(
     h_nom = jnp.minimum(jnp.asarray(dt, dtype), span)
     s_pred = jnp.asarray(jnp.inf, dtype)
     for g, d, e in zip(D0.g, D0.dg, D0.ddg):
-        s_pred = jnp.minimum(s_pred, two_mass._predict(g, d, e))
-    h_pred = jnp.maximum(two_mass.PREDICT_MARGIN * s_pred, 64 * jnp.finfo(dtype).eps * jnp.maximum(jnp.abs(t0), 1))
+        s_pred = jnp.minimum(s_pred, num.predict(g, d, e))
+    h_pred = jnp.maximum(num.PREDICT_MARGIN * s_pred, 64 * jnp.finfo(dtype).eps * jnp.maximum(jnp.abs(t0), 1))
     short = h_pred < h_nom
     lands = (span <= dt) & ~short
     t1 = jnp.where(lands, t_stop, t0 + jnp.where(short, h_pred, h_nom))
     h = kp(t1 - t0)
-    sa, ca = (kp(q) for q in two_mass.sincos(P.omega * (0.5 * h)))
-    cm, sm = two_mass._rotate(st.cph, st.sph, ca, sa)
-    ce, se = (kp(q) for q in two_mass._rotate(cm, sm, ca, sa))
+    sa, ca = (kp(q) for q in num.sincos(P.omega * (0.5 * h)))
+    cm, sm = num.rotate(st.cph, st.sph, ca, sa)
+    ce, se = (kp(q) for q in num.rotate(cm, sm, ca, sa))
     drm, dre = motion.kept(P, drive(P, cm, sm)), motion.kept(P, drive(P, ce, se))
 
     # -- RK4: one step of length h.
@@ -260,7 +253,7 @@ def step(
     g1s = [kp(g) for g in D1.g]
     h2 = h * h
     crossed = [g < 0 for g in g1s]
-    cut = _any(crossed)
+    cut = num.union(crossed)
     inf = jnp.asarray(jnp.inf, dtype)
     thl = []
     for c, g0, d0, g1 in zip(crossed, g0s, d0s, g1s):
@@ -276,10 +269,10 @@ def step(
         vals = (g0s[i], d0s[i], e0s[i], g1s[i], d1s[i], e1s[i])
         pick = [jnp.where(first[i], v, p) for v, p in zip(vals, pick)]
     cg0, cd0, ce0, cg1, cd1, ce1 = pick
-    coef = two_mass._quintic(jnp.maximum(cg0, 0), h * cd0, h2 * ce0, jnp.minimum(cg1, 0), h * cd1, h2 * ce1)
-    theta = kp(jnp.where(cut, two_mass._root(coef, jnp.minimum(cg1, 0)), 1))
+    coef = num.quintic(jnp.maximum(cg0, 0), h * cd0, h2 * ce0, jnp.minimum(cg1, 0), h * cd1, h2 * ce1)
+    theta = kp(jnp.where(cut, num.root(coef, jnp.minimum(cg1, 0)), 1))
 
-    # -- margins to a change of switching structure (`_exact.margins`); they feed nothing back.
+    # -- margins to a change of switching structure (`_numerics.margins`); they feed nothing back.
     # A slipping mass that stopped (vel) sticks where its stick margin is >= 0 (`margin`, from
     # n_i = |N_i|); the margin's rate along the motion in the new mode from the loads' rates
     # that the start's derivatives computed anyway.
@@ -294,18 +287,18 @@ def step(
     p1 = c[1] + th * (2 * c[2] + th * (3 * c[3] + th * (4 * c[4] + th * 5 * c[5])))
     p2 = 2 * c[2] + th * (6 * c[3] + th * (12 * c[4] + th * 20 * c[5]))
     located = [(cut & ~target_cut, h * p1, p2)]
-    m_cross, m_near = two_mass.margins(P.omega, h, located, decide, crossed, g0s, d0s, e0s)
+    m_cross, m_near = num.margins(P.omega, h, located, decide, crossed, g0s, d0s, e0s)
 
     # -- commit: the full step, or the quintic dense output at the crossing.
-    H1, H2, H3, H4, H5 = two_mass._hermite_basis(theta)
+    H1, H2, H3, H4, H5 = num.hermite_basis(theta)
     hH1, hH4, h2H2, h2H5 = h * H1, h * H4, h2 * H2, h2 * H5
     part = incr.map(
         lambda i, a, b, c, d: H3 * i + hH1 * a + hH4 * b + h2H2 * c + h2H5 * d, k1, D1.rate, D0.second, D1.second
     )
     delta = incr.map(lambda i, p: jnp.where(cut, p, i), part)
     tc = jnp.where(cut, t0 + theta * h, t1)
-    sc, cc = two_mass.sincos(P.omega * (tc - t0))
-    cph, sph = two_mass._rotate(st.cph, st.sph, cc, sc)
+    sc, cc = num.sincos(P.omega * (tc - t0))
+    cph, sph = num.rotate(st.cph, st.sph, cc, sc)
     cph, sph = jnp.where(cut, cph, ce), jnp.where(cut, sph, se)
     norm = 1.5 - 0.5 * (cph * cph + sph * sph)  # keeps the carried phase on the unit circle
     cph, sph = cph * norm, sph * norm
@@ -326,7 +319,7 @@ def step(
         lift = stop0 | lift_cut
     else:
         flip = first[n_mass : 2 * n_mass]
-        lift_cut = _any(flip)
+        lift_cut = num.union(flip)
         lift = stop0
         side = tuple(jnp.where(f, -s, s) for f, s in zip(flip, side))
     t_lift = jnp.where(lift_cut & ~jnp.isfinite(t_lift), tc, t_lift)

@@ -15,8 +15,8 @@ from .._status import Regime, Status
 from ..model._chain import Chain
 from . import _chain_exact as engine, _chain_forces as forces
 from ._compile import engine_jit
-from ._exact import Target, target_margin
 from ._margins import margin_fields
+from ._numerics import Target, target_margin
 from ._queue import run_queue
 from ._runs import chain_initial_state, MICRO_BATCH_CPU, STICK_TOL
 
@@ -97,7 +97,7 @@ def _energy_at(P: forces.Consts, t, y):
 
 
 def _margin_z(f: _Fixed, a: _Acc, contact) -> jax.Array:
-    """The time from $t_z$ to the nearest change of the target's structure (`_exact.target_margin`)."""
+    """The time from $t_z$ to the nearest change of the target's structure (`_numerics.target_margin`)."""
     t_z = jnp.where(a.reached, a.t_z, f.ws)
     g, d, e = engine.probe(f.C, contact, t_z, a.y_z, Target(active=jnp.asarray(True), X0=a.X0, z=f.z), f.P)
     return target_margin(a.before_z, g, d, e)

@@ -59,26 +59,29 @@ Limitation: a sign change that starts and ends inside one step (a grazing
 excursion shorter than `dt`) is not seen; only grazing contacts are affected.
 """
 
-import math
 from typing import NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from .._custom_types import Array, Contact
 from .._status import Status
 from ..model import _two_mass as model
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform
-
-
-NEWTON_ITERS = 4
-"""Newton iterations on the event quintic, from its secant root (it is nearly linear)."""
-
-PREDICT_MARGIN = 1.2
-"""A step predicted to contain an event ends this factor past the predicted crossing."""
+from ._numerics import (
+    hermite_basis,
+    margins,
+    predict,
+    PREDICT_MARGIN,
+    quintic,
+    root,
+    rotate,
+    sincos,
+    Target,
+    union,
+)
 
 
 class Consts(NamedTuple):
@@ -212,50 +215,6 @@ class StepInfo(NamedTuple):
     slack2: Array
     h: Array
     fy: tuple[Array, Array, Array, Array, Array, Array]
-
-
-class Target(NamedTuple):
-    """A caller's event $g = z - |X - X_0|$ (fires when $|X - X_0|$ reaches $z$); `active` gates it."""
-
-    active: Array
-    X0: Array
-    z: Array
-
-
-# -- actuation phase ---------------------------------------------------------------
-
-
-def sincos(x: Array) -> tuple[Array, Array]:
-    """$(\\sin x, \\cos x)$ by quadrant reduction and Taylor polynomials on $[-\\pi/4, \\pi/4]$.
-
-    A few ulps in float64 for moderate $|x|$ (the engine passes step angles
-    $\\omega h$); about 40 flops, where XLA's CPU float64 `sin` costs several times more.
-    """
-    dtype = x.dtype
-    p1 = np.asarray(math.pi / 2, dtype)
-    p2 = np.asarray(math.pi / 2 - float(p1), dtype)
-    q = jnp.round(x * np.asarray(2 / math.pi, dtype))
-    r = (x - q * p1) - q * p2
-    r2 = r * r
-    s = np.asarray(1 / math.factorial(17), dtype)
-    for n in (15, 13, 11, 9, 7, 5, 3):
-        s = s * r2 + np.asarray((-1) ** ((n - 1) // 2) / math.factorial(n), dtype)
-    s = r + r * r2 * s
-    c = np.asarray(-1 / math.factorial(18), dtype)
-    for n in (16, 14, 12, 10, 8, 6, 4, 2):
-        c = c * r2 + np.asarray((-1) ** (n // 2) / math.factorial(n), dtype)
-    c = 1 + r2 * c
-    quad = jnp.mod(q, 4)
-    swap = (quad == 1) | (quad == 3)
-    sin = jnp.where(swap, c, s)
-    cos = jnp.where(swap, s, c)
-    sin = jnp.where(quad >= 2, -sin, sin)
-    cos = jnp.where((quad == 1) | (quad == 2), -cos, cos)
-    return sin, cos
-
-
-def _rotate(c, s, ca, sa):
-    return c * ca - s * sa, s * ca + c * sa
 
 
 # -- forces, rates, events -----------------------------------------------------------
@@ -411,92 +370,6 @@ def _events(P, contact, f: _F, D: _D, y: State, r: State, j: State, st1, st2, s1
         ds.append(jnp.where(active, -sr * (P.mhat * r.x1 + (1 - P.mhat) * r.x2), zero))
         es.append(jnp.where(active, -sr * (P.mhat * j.x1 + (1 - P.mhat) * j.x2), zero))
     return gs, ds, es
-
-
-def _quintic(g0, D0, E0, g1, D1, E1):
-    """Monomial coefficients of the quintic Hermite interpolant on $\\theta \\in [0, 1]$
-    with values $g$, scaled slopes $D = h\\dot g$ and curvatures $E = h^2\\ddot g$ at both ends."""
-    dg = g1 - g0
-    c3 = 10 * dg - 6 * D0 - 4 * D1 - 1.5 * E0 + 0.5 * E1
-    c4 = -15 * dg + 8 * D0 + 7 * D1 + 1.5 * E0 - E1
-    c5 = 6 * dg - 3 * D0 - 3 * D1 - 0.5 * E0 + 0.5 * E1
-    return g0, D0, 0.5 * E0, c3, c4, c5
-
-
-@jax.custom_jvp
-def _root(coef, g1):
-    """First root in $[0, 1]$ of the event quintic ($p(0) \\ge 0 > p(1) = g_1$) by
-    safeguarded Newton from the secant root. When $p(0) = 0$ (the event function of
-    a mass that has just switched) $p(\\theta)/\\theta$ is solved, so the start is skipped.
-
-    Differentiated by the implicit function theorem ([`_root_jvp`][]), not through
-    the iterations."""
-    c0, c1, c2, c3, c4, c5 = coef
-    defl = c0 == 0
-    a = [jnp.where(defl, hi, lo) for lo, hi in zip((c0, c1, c2, c3, c4), (c1, c2, c3, c4, c5))]
-    a.append(jnp.where(defl, 0, c5))
-    den = a[0] - g1
-    th = jnp.clip(jnp.where(den > 0, a[0] / jnp.where(den > 0, den, 1), 0.5), 0, 1)
-    lo, hi = jnp.zeros_like(th), jnp.ones_like(th)
-    for _ in range(NEWTON_ITERS):
-        p = a[5]
-        dp = jnp.zeros_like(th)
-        for ak in reversed(a[:5]):
-            dp = dp * th + p
-            p = p * th + ak
-        pos = p >= 0
-        lo = jnp.where(pos, th, lo)
-        hi = jnp.where(pos, hi, th)
-        ok = dp != 0
-        nt = th - p / jnp.where(ok, dp, 1)
-        # Inclusive: a converged Newton step lands on the bracket end it came from.
-        th = jnp.where(ok & (nt >= lo) & (nt <= hi), nt, 0.5 * (lo + hi))
-    return th
-
-
-@_root.defjvp
-def _root_jvp(primals, tangents):
-    """The event time's derivative: $p(\\theta^*; c) = 0$ gives
-    $\\dot\\theta^* = -\\sum_k \\dot c_k \\theta^{*k} / p'(\\theta^*)$ (implicit function theorem;
-    the root's tangent does not depend on the Newton iterations that found it). The
-    state committed at $\\theta^*$ then moves with it, which is the saltation of the
-    switch. A grazing crossing ($p'(\\theta^*) = 0$) has no derivative: its tangent is 0."""
-    coef, g1 = primals
-    dcoef, _ = tangents
-    th = _root(coef, g1)
-    dp = jnp.zeros_like(th)
-    slope = jnp.zeros_like(th)
-    for k in reversed(range(6)):
-        dp = dp * th + dcoef[k]
-        if k > 0:
-            slope = slope * th + k * coef[k]
-    ok = slope != 0
-    return th, jnp.where(ok, -dp / jnp.where(ok, slope, 1), 0)
-
-
-def _predict(g, d, e):
-    r"""Time to the root of the Taylor quadratic $g + \dot g s + \ddot g s^2/2$ of an event
-    function that is approaching zero (linear estimate plus one Newton step); `inf` if none."""
-    ok = (g > 0) & (d < 0)
-    s1 = g / jnp.where(ok, -d, 1)
-    slope = d + e * s1
-    ok = ok & (slope < 0)
-    s2 = s1 - 0.5 * e * s1 * s1 / jnp.where(ok, slope, -1)
-    return jnp.where(ok & (s2 > 0), s2, jnp.inf)
-
-
-def _hermite_basis(th):
-    """Quintic Hermite basis $(H_1, H_2, H_3, H_4, H_5)$ ($H_0 = 1 - H_3$)."""
-    t2 = th * th
-    t3 = t2 * th
-    t4 = t3 * th
-    t5 = t4 * th
-    H1 = th - 6 * t3 + 8 * t4 - 3 * t5
-    H2 = 0.5 * t2 - 1.5 * t3 + 1.5 * t4 - 0.5 * t5
-    H3 = 10 * t3 - 15 * t4 + 6 * t5
-    H4 = -4 * t3 + 7 * t4 - 3 * t5
-    H5 = 0.5 * t3 - t4 + 0.5 * t5
-    return H1, H2, H3, H4, H5
 
 
 # -- public pieces ------------------------------------------------------------------
@@ -700,7 +573,7 @@ def _step_length(wave: AbstractWaveform, dt: float, st: "Hybrid", t_stop: Array,
     h_nom = jnp.minimum(jnp.asarray(dt, dtype), span)
     s_pred = jnp.asarray(jnp.inf, dtype)
     for g, d, e in zip(m0.g, m0.d, m0.e):
-        s_pred = jnp.minimum(s_pred, _predict(g, d, e))
+        s_pred = jnp.minimum(s_pred, predict(g, d, e))
     # Never shorter than a few ulps of t, or float32 time would stop advancing.
     h_pred = jnp.maximum(PREDICT_MARGIN * s_pred, 64 * jnp.finfo(dtype).eps * jnp.maximum(jnp.abs(t0), 1))
     short = h_pred < h_nom
@@ -711,8 +584,8 @@ def _step_length(wave: AbstractWaveform, dt: float, st: "Hybrid", t_stop: Array,
     # (in float32 at t ~ 1e3, t + h rounds h by up to 1e-3 relative).
     h = keep(t1 - t0)
     sa, ca = (keep(x) for x in sincos(wave.omega * (0.5 * h)))
-    cm, sm = _rotate(st.cph, st.sph, ca, sa)
-    ce, se = (keep(x) for x in _rotate(cm, sm, ca, sa))
+    cm, sm = rotate(st.cph, st.sph, ca, sa)
+    ce, se = (keep(x) for x in rotate(cm, sm, ca, sa))
     l0m, dl0m, _ = wave.at_phase(cm, sm)
     l0e, dl0e, ddl0e = wave.at_phase(ce, se)
     return _Length(h, t1, ce, se, (l0m, dl0m), (l0e, dl0e, ddl0e))
@@ -737,11 +610,11 @@ def _rk4(P: Consts, contact: Contact, y0: State, k1: State, L: _Length, mode: _M
 
 def _first_crossing(h: Array, m0: _Motion, m1: _Motion, keep) -> _Crossing:
     """The earliest crossing by the secant of each crossed function, then located on the
-    quintic Hermite interpolant of the first one ([`_root`][]: implicit-function derivative)."""
+    quintic Hermite interpolant of the first one ([`root`][]: implicit-function derivative)."""
     h2 = h * h
     dtype = h.dtype
     crossed = [g < 0 for g in m1.g]
-    cut = _any(crossed)
+    cut = union(crossed)
     inf = jnp.asarray(jnp.inf, dtype)
     thl = []
     for c, g0, d0, g1 in zip(crossed, m0.g, m0.d, m1.g):
@@ -757,8 +630,8 @@ def _first_crossing(h: Array, m0: _Motion, m1: _Motion, keep) -> _Crossing:
         vals = (m0.g[i], m0.d[i], m0.e[i], m1.g[i], m1.d[i], m1.e[i])
         pick = [jnp.where(first[i], v, p) for v, p in zip(vals, pick)]
     cg0, cd0, ce0, cg1, cd1, ce1 = pick
-    coef = _quintic(jnp.maximum(cg0, 0), h * cd0, h2 * ce0, jnp.minimum(cg1, 0), h * cd1, h2 * ce1)
-    theta = keep(jnp.where(cut, _root(coef, jnp.minimum(cg1, 0)), 1))
+    coef = quintic(jnp.maximum(cg0, 0), h * cd0, h2 * ce0, jnp.minimum(cg1, 0), h * cd1, h2 * ce1)
+    theta = keep(jnp.where(cut, root(coef, jnp.minimum(cg1, 0)), 1))
     return _Crossing(crossed, cut, first, theta)
 
 
@@ -856,13 +729,13 @@ def step(
 
     # -- commit: the full step, or the quintic dense output at the crossing.
     h2 = h * h
-    H1, H2, H3, H4, H5 = (keep(x) for x in _hermite_basis(cr.theta))
+    H1, H2, H3, H4, H5 = (keep(x) for x in hermite_basis(cr.theta))
     hH1, hH4, h2H2, h2H5 = h * H1, h * H4, h2 * H2, h2 * H5
     part = incr.map(lambda i, a, b, c, d: H3 * i + hH1 * a + hH4 * b + h2H2 * c + h2H5 * d, m0.r, m1.r, m0.j, m1.j)
     delta = incr.map(lambda i, p: jnp.where(cut, p, i), part)
     tc = jnp.where(cut, t0 + cr.theta * h, L.t1)
     sc, cc = sincos(wave.omega * (tc - t0))
-    cph, sph = _rotate(st.cph, st.sph, cc, sc)
+    cph, sph = rotate(st.cph, st.sph, cc, sc)
     cph = jnp.where(cut, cph, L.ce)
     sph = jnp.where(cut, sph, L.se)
     # Renormalise the carried phase (rounding would otherwise let its radius drift).
@@ -940,52 +813,6 @@ def step(
     return new, info
 
 
-def margins(omega, h, located, decide, crossed, g0s, d0s, e0s):
-    """One step's margins to a change of switching structure, as squared drive phases
-    (module docstring, "Margins"): `(cross, near)`, each `inf` where there is none.
-
-    - `cross`: at each located crossing `located = ((fired, rate, curvature), ...)` of an
-      event function $g$ (its rate and curvature there, in the mode before the switch),
-      $(\\omega\\,\\dot g/\\ddot g)^2$; at each decision `decide = ((fired, s, rate), ...)` (a
-      slipping mass whose velocity reached zero sticks if $s = \\mu_s n_i - |F_i| \\ge 0$, else
-      reverses), $(\\omega s/\\dot s)^2$.
-    - `near`: over every event function $g_0 + \\dot g_0 s + \\ddot g_0 s^2/2$ (values at the
-      step's start) that turns inside the step of length `h` without crossing,
-      $2\\omega^2 g_{\\min}/\\ddot g_0$ ($0$ if the parabola dips below zero: an excursion
-      shorter than the step).
-
-    Values only: they are held out of forward-mode derivatives (`stop_gradient`). Each
-    function is a scalar of its own: a stacked `(lanes, n)` array would exceed the 64
-    elements per kernel above which XLA's CPU runtime splits a kernel over threads
-    (`_runs.MICRO_BATCH_CPU`).
-    """
-    sq = jax.lax.stop_gradient
-    h = sq(h)
-    w2 = sq(omega * omega)
-    zero = jnp.zeros_like(h)
-    cross = []
-    for fired, num, den in (*located, *decide):
-        num, den = sq(num), sq(den)
-        cross.append((jnp.where(fired, num * num, 1), jnp.where(fired, den * den, zero)))
-    near = []
-    for c_i, g0, d0, e0 in zip(crossed, g0s, d0s, e0s):
-        g0, d0, e0 = sq(g0), sq(d0), sq(e0)
-        turns = (e0 > 0) & (d0 < 0) & (-d0 <= h * e0) & ~c_i
-        near.append((jnp.where(turns, jnp.maximum(2 * g0 * e0 - d0 * d0, 0), 1), jnp.where(turns, e0 * e0, zero)))
-    return tuple(w2 * _smallest_ratio(pairs) for pairs in (cross, near))
-
-
-def _smallest_ratio(pairs: list) -> Array:
-    """$\\min_i a_i / b_i$ over pairs with $a_i \\ge 0$, $b_i \\ge 0$ (none: $a_i > 0 = b_i$, `inf`),
-    chosen by cross-multiplied comparisons, so that one division serves them all (XLA
-    makes a kernel of each division, and fuses their operands into every one of them)."""
-    a, b = pairs[0]
-    for ai, bi in pairs[1:]:
-        smaller = ai * b < a * bi
-        a, b = jnp.where(smaller, ai, a), jnp.where(smaller, bi, b)
-    return jnp.where(b > 0, a / jnp.where(b > 0, b, 1), jnp.inf)
-
-
 def probe(params: Params, wave: AbstractWaveform, contact: Contact, t: Array, y: State, target: Target):
     """The event functions, with their first and second time derivatives, at time `t` and
     state `y` (in the mode [`init`][] decides there): lists `(g, dg/dt, d2g/dt2)` as in a
@@ -1001,29 +828,6 @@ def probe(params: Params, wave: AbstractWaveform, contact: Contact, t: Array, y:
     sides = (st.nu1, st.nu2)
     j = _second(P, contact, f, D, st.y, a1, a2, st.stuck1, st.stuck2, st.s1, st.s2, dl0, ddl0, sides)
     return _events(P, contact, f, D, st.y, r, j, st.stuck1, st.stuck2, st.s1, st.s2, target, sides)
-
-
-def target_margin(before: Array, gs: list, ds: list, es: list) -> Array:
-    """The time between the caller's target crossing and the nearest change of its
-    switching structure, from [`probe`][] there (target last): the vertex of the target
-    function's local parabola ($|\\dot g/\\ddot g|$), the last switch (`before`: the time
-    since it) or the next one predicted by the Taylor quadratic of each other event
-    function. A switch that crosses the target's time leaves that time differentiable
-    (the velocities are continuous) but changes its curvature in the parameters, so
-    that the derivative holds over a smaller range."""
-    inf = jnp.asarray(jnp.inf, before.dtype)
-    vertex = jnp.where(es[-1] != 0, ds[-1] / jnp.where(es[-1] != 0, es[-1], 1), inf)
-    after = inf
-    for g, d, e in zip(gs[:-1], ds[:-1], es[:-1]):
-        after = jnp.minimum(after, _predict(g, d, e))
-    return jax.lax.stop_gradient(jnp.minimum(jnp.minimum(before, after), jnp.abs(vertex)))
-
-
-def _any(flags: list) -> Array:
-    out = flags[0]
-    for f in flags[1:]:
-        out = out | f
-    return out
 
 
 def energy(P: Consts, y: State, tension: Array) -> Array:

@@ -2,7 +2,7 @@
 
 Nothing is saved per step: the carry holds running sums (stick times in the
 window, energies at the measurement start), so memory is independent of the
-number of steps. $|X - X_0| = z$ is an event of the integrator (`_exact.Target`),
+number of steps. $|X - X_0| = z$ is an event of the integrator (`_numerics.Target`),
 located like a mode switch, so `tau_z` and `e_z` share the integrator's order.
 """
 
@@ -19,6 +19,7 @@ from ..model._waveform import AbstractWaveform
 from . import _exact as exact
 from ._compile import engine_jit
 from ._margins import margin_fields
+from ._numerics import Target, target_margin
 from ._queue import run_queue
 from ._runs import initial_state, MICRO_BATCH_CPU, STICK_TOL
 
@@ -109,7 +110,7 @@ def _advance(f: _Fixed, dyn, contact, dt):
     begin = ~a.started & (s.t >= ws)
     started = a.started | begin
     X0 = jnp.where(begin, _com(f.P, s.y), a.X0)
-    target = exact.Target(active=started & ~a.reached, X0=X0, z=f.z)
+    target = Target(active=started & ~a.reached, X0=X0, z=f.z)
     # The margins cover the measured interval: they restart at t_start.
     s = eqx.tree_at(lambda s: (s.cross, s.near), s, tuple(jnp.where(begin, jnp.inf, m) for m in (s.cross, s.near)))
     s_new, info = exact.step(f.params, f.wave, contact, dt, s, t_stop, target, f.P)
@@ -136,11 +137,11 @@ def _advance(f: _Fixed, dyn, contact, dt):
 
 
 def _margin_z(f: _Fixed, a: _Acc, contact) -> jax.Array:
-    """The time from $t_z$ to the nearest change of the target's structure (`_exact.target_margin`)."""
-    target = exact.Target(active=jnp.asarray(True), X0=a.X0, z=f.z)
+    """The time from $t_z$ to the nearest change of the target's structure (`_numerics.target_margin`)."""
+    target = Target(active=jnp.asarray(True), X0=a.X0, z=f.z)
     t_z = jnp.where(a.reached, a.t_z, f.ws)
     events = exact.probe(f.params, f.wave, contact, t_z, a.y_z, target)
-    return exact.target_margin(a.before_z, *events)
+    return target_margin(a.before_z, *events)
 
 
 def _results(f: _Fixed, dyn, contact) -> dict:

@@ -18,6 +18,7 @@ import jax.numpy as jnp
 from .._custom_types import Array
 from .._status import Status
 from ..dynamics import _exact as exact
+from ..dynamics._numerics import quintic
 from ..model import _two_mass as model
 from ..model._params import safe_params
 
@@ -65,7 +66,7 @@ def fy_range(info: exact.StepInfo) -> tuple[Array, Array]:
     of its end values and rates (an interior extremum polished by Newton's method)."""
     g0, d0, e0, g1, d1, e1 = info.fy
     h = info.h
-    c = exact._quintic(g0, h * d0, h * h * e0, g1, h * d1, h * h * e1)
+    c = quintic(g0, h * d0, h * h * e0, g1, h * d1, h * h * e1)
     end = jnp.clip((info.t1 - info.t0) / jnp.where(h > 0, h, 1), 0, 1)
     p = lambda th: c[0] + th * (c[1] + th * (c[2] + th * (c[3] + th * (c[4] + th * c[5]))))
     dp = lambda th: c[1] + th * (2 * c[2] + th * (3 * c[3] + th * (4 * c[4] + th * 5 * c[5])))
