@@ -101,6 +101,11 @@ def main() -> int:
 
     def chain(eng, tuples):
         def run(C, ok):
+            if hasattr(C, "physics") and not hasattr(eng, "initial_positions"):  # the physics interface
+                P = C.physics()
+                s = eng.init(P, contact, P.initial_positions("paper"))
+                s = jax.lax.fori_loop(0, iters, lambda i, s: eng.step(P, contact, dt, s, never)[0], s)
+                return s.y.x[-1], s.y.ed, s.cross, s.near
             s = eng.init(C, contact, eng.initial_positions(C, "paper"))
             if tuples:
                 P = eng.consts(C)

@@ -44,6 +44,7 @@ from .model._params import (
     Params as Params,
     VALID_RANGES as VALID_RANGES,
 )
+from .model._physics import AbstractPhysics as AbstractPhysics, LoadRates as LoadRates, Loads as Loads
 from .model._waveform import (
     AbstractWaveform as AbstractWaveform,
     Fourier as Fourier,

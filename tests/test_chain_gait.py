@@ -8,7 +8,6 @@ import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
-from locomotion_jax.dynamics import _chain_forces as forces
 from locomotion_jax.gaits import _chain_gait as cg
 
 
@@ -74,9 +73,9 @@ def test_chain_monodromy_against_finite_differences(worms):
     chain, g = worms
     i = 2
     one = jax.tree_util.tree_map(lambda x: x[i], chain.broadcast())
-    Pc = forces.consts(one)
+    Pc = one.physics()
     y = jnp.asarray(g.state[i])
-    phi = jax.jit(lambda y: cg._period_map(one, Pc, "strict", 0.01, 100_000, 1.0, y).y)
+    phi = jax.jit(lambda y: cg._period_map(Pc, "strict", 0.01, 100_000, 1.0, y).y)
     h = 1e-6
     cols = [(phi(y + h * e) - phi(y - h * e)) / (2 * h) for e in jnp.eye(y.shape[0], dtype=y.dtype)]
     M_fd = np.stack([np.asarray(c) for c in cols], axis=1)

@@ -184,8 +184,9 @@ def test_chain_simulate_queue_matches_one_loop_per_configuration(max_steps):
     queued = _chain_simulate._simulate_batch(flat, ok, save_at, "strict", "paper", 0.02, cap, 3, 4)
 
     def alone(C, ok):
-        s = chain_initial_state(C, ok, "strict", "paper")
-        step = lambda s, t_stop: chain_engine.step(C, "strict", 0.02, s, t_stop)[0]
+        P = C.physics()
+        s = chain_initial_state(P, ok, "strict", "paper")
+        step = lambda s, t_stop: chain_engine.step(P, "strict", 0.02, s, t_stop)[0]
         return _plain_saves(s, step, _chain_simulate._row, save_at, cap)
 
     ref = jax.vmap(alone)(flat, ok)

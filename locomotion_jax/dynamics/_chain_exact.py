@@ -1,18 +1,18 @@
-"""Exact hybrid stick/slip dynamics of a chain of N masses (SPEC §2 and §8).
+"""Exact hybrid stick/slip dynamics of any mechanism of N bodies on a line (SPEC §2 and §8),
+written once against the physics interface ([`AbstractPhysics`][locomotion_jax.AbstractPhysics]):
+chains of N masses, and the paper's model as the two-mass chain.
 
 The scheme of the two-mass engine (`locomotion_jax.dynamics._exact`, whose docstring states
 it in full): one RK4 step per iteration, cut at the earliest located event; a
 quintic Hermite dense output from the state's first and second time derivatives at
 both ends of the step; every mass re-decided at the start of the next iteration.
 
-What generalises is written once per mass and per spring: the loads on each mass
-depend only on positions, time and the actuation, so each mass's stick condition is
-decided on its own, and any number of masses may switch at one instant. The first and
-second time derivatives of the rates and of the event functions, which the dense output
-and the event prediction need, are written out by the chain rule
-([`_chain_forces`][locomotion_jax.dynamics._chain_forces]); a friction law's rate is
-its own [`kinetic_rate`][locomotion_jax.AbstractFriction.kinetic_rate] (by default a
-forward-mode derivative of `kinetic`), so a new law or actuator supplies values only.
+The mechanism supplies its loads and their first two time derivatives along the motion
+(its physics); the engine owns the rest. The loads on each body depend only on positions,
+time and the actuation, so each body's stick condition is decided on its own, and any
+number of bodies may switch at one instant. A friction law's rate is its own
+[`kinetic_rate`][locomotion_jax.AbstractFriction.kinetic_rate] (by default a forward-mode
+derivative of `kinetic`), so a new law or actuator supplies values only.
 
 **Events** (each fires when its function goes from $\\ge 0$ to $< 0$), in this order:
 
@@ -33,7 +33,7 @@ Taylor parabolas there.
 
 **Speed.** As in the two-mass engine (its docstring, benchmarks/NOTES.md): the state is a
 flat set of scalars (tuples over masses, so that under `vmap` every kernel is a vector
-over the configurations), shared intermediates are pinned with [`keep`][], the phase
+over the configurations), shared intermediates are pinned with `AbstractPhysics.keep`, the phase
 $(\\cos\\omega t, \\sin\\omega t)$ is carried and rotated, and the earliest event is picked
 by `where` over the event list (no gather).
 """
@@ -46,10 +46,9 @@ import jax.numpy as jnp
 
 from .._custom_types import Array, Contact
 from .._status import Status
-from ..model._chain import Chain
-from . import _chain_forces as forces, _chain_motion as motion, _numerics as num
-from ._chain_forces import Consts, consts, drive, Scalars
-from ._chain_motion import energy as energy, keep, Mode, State
+from ..model._physics import AbstractPhysics, Loads, Scalars
+from . import _chain_motion as motion, _numerics as num
+from ._chain_motion import energy as energy, Mode, State
 
 
 class Hybrid(eqx.Module):
@@ -85,7 +84,7 @@ class StepInfo(NamedTuple):
     commit: Array
     t0: Array
     y0: State
-    tension0: Scalars
+    loads0: Loads
     t1: Array
     y1: State
     stuck: Scalars
@@ -94,16 +93,16 @@ class StepInfo(NamedTuple):
     y_target: State
 
 
-def init(C: Chain, contact: Contact, x: Array, P: Consts | None = None) -> Hybrid:
-    """State at $t = 0$, at rest at positions `x` (shape `(N,)`); each mass sticks if its stick condition holds."""
-    P = consts(C) if P is None else P
+def init(P: AbstractPhysics, contact: Contact, x: Array) -> Hybrid:
+    """State at $t = 0$ of the mechanism with physics `P`, at rest at positions `x` (shape `(N,)`);
+    each body sticks if its stick condition holds."""
     dtype = x.dtype
     zero = jnp.zeros((), dtype)
-    xs = forces.unstack(x)
+    xs = tuple(x[..., i] for i in range(x.shape[-1]))
     cph, sph = jnp.ones((), dtype), zero
-    dr = drive(P, cph, sph)
-    sp = forces.springs(P, dr.l0, xs)
-    F, N = forces.loads(P, sp.fx, sp.fy, dr.f)
+    dr = P.drive(cph, sph)
+    L = P.loads(dr, xs)
+    F, N = L.F, L.N
     n = motion.normal(contact, N)
     stuck = tuple(p >= 0 for p in motion.stick_margin(P, F, n))
     sdir = tuple(jnp.where(f >= 0, 1.0, -1.0).astype(dtype) for f in F)
@@ -119,63 +118,37 @@ def init(C: Chain, contact: Contact, x: Array, P: Consts | None = None) -> Hybri
     )  # fmt: skip
 
 
-def probe(
-    C: Chain | None, contact: Contact, t: Array, y: State, target: num.Target, P: Consts | None = None
-) -> tuple[list, list, list]:
+def probe(P: AbstractPhysics, contact: Contact, t: Array, y: State, target: num.Target) -> tuple[list, list, list]:
     """The event functions with their first and second time derivatives at time `t` and
     state `y`, in the mode the state implies (a mass at rest sticks where its static limits
     hold; compare `_exact.probe`): lists in the order of the module docstring (target last).
-    For margins at a measured instant; not for the hot loop. `P` as in [`step`][]."""
-    if P is None:
-        if C is None:
-            raise TypeError("probe needs the chain C or its constants P.")
-        P = consts(C)
+    For margins at a measured instant; not for the hot loop."""
     dtype = t.dtype
-    dr = drive(P, jnp.cos(P.omega * t), jnp.sin(P.omega * t))
-    sp = forces.springs(P, dr.l0, y.x)
-    F, N = forces.loads(P, sp.fx, sp.fy, dr.f)
+    dr = P.drive(jnp.cos(P.omega * t), jnp.sin(P.omega * t))
+    L = P.loads(dr, y.x)
+    F, N = L.F, L.N
     n = motion.normal(contact, N)
     stuck = tuple((p >= 0) & (v == 0) for p, v in zip(motion.stick_margin(P, F, n), y.v))
     one = jnp.ones((), dtype)
     sdir = tuple(jnp.where(v > 0, one, jnp.where(v < 0, -one, jnp.where(f >= 0, one, -one))) for v, f in zip(y.v, F))
     side = tuple(jnp.where(q > 0, one, -one) for q in N)
     v = tuple(jnp.where(s, 0, vi) for s, vi in zip(stuck, y.v))
-    D = motion.derivatives(P, contact, Mode(stuck, sdir, side), target, dr, sp, F, N, y.x, v)
+    D = motion.derivatives(P, contact, Mode(stuck, sdir, side), target, dr, L, y.x, v)
     return D.g, D.dg, D.ddg
 
 
-def initial_positions(C: Chain, start: str) -> Array:
-    """Positions at $t = 0$: gaps $\\bar\\ell_j$ (`"paper"`, eq. 14) or the relaxed springs
-    $\\sqrt{\\ell_{0,j}(0)^2 - d_j^2}$ (`"relaxed"`), with $x_0 = 0$ (SPEC §8)."""
-    if start == "paper":
-        gaps = C.lbar
-    elif start == "relaxed":
-        P = consts(C)
-        l0 = jnp.stack(drive(P, jnp.ones_like(P.omega), jnp.zeros_like(P.omega)).l0, -1)
-        gaps = jnp.sqrt(jnp.maximum(l0 * l0 - C.d * C.d, 0))
-    else:
-        raise ValueError(f"start must be 'paper' (eq. 14) or 'relaxed', got {start!r}.")
-    return jnp.concatenate([jnp.zeros_like(gaps[..., :1]), jnp.cumsum(gaps, -1)], -1)
-
-
 def step(
-    C: Chain | None,
+    P: AbstractPhysics,
     contact: Contact,
     dt: float,
     st: Hybrid,
     t_stop: Array,
     target: num.Target | None = None,
-    P: Consts | None = None,
 ) -> tuple[Hybrid, StepInfo]:
-    """One iteration: re-decide the masses, one RK4 step, cut at the first event (see `_exact.step`).
+    """One iteration: re-decide the bodies, one RK4 step, cut at the first event (see `_exact.step`).
 
-    `P` are the constants of `C` ([`_chain_forces.consts`][locomotion_jax.dynamics._chain_forces.consts];
-    pass them to compute them once per run rather than per iteration)."""
-    if P is None:
-        if C is None:
-            raise TypeError("step needs the chain C or its constants P.")
-        P = consts(C)
-    kp = lambda x: keep(P, x)
+    `P` is the mechanism's physics (its `physics()`, computed once per run)."""
+    kp = P.keep
     dtype = st.t.dtype
     t0, yA = st.t, st.y
     n_mass = len(P.m)
@@ -184,10 +157,9 @@ def step(
     # -- switch: every mass whose event was located here (pend) or whose event function is
     # negative switches: a stuck one slips in the direction of F_i; a slipping one (v_i = 0)
     # sticks if the static limits hold, else it slips the other way.
-    dr0 = motion.kept(P, drive(P, st.cph, st.sph))
-    sp0 = forces.springs(P, dr0.l0, yA.x)
-    sp0 = sp0._replace(fx=tuple(map(kp, sp0.fx)), fy=tuple(map(kp, sp0.fy)), tension=tuple(map(kp, sp0.tension)))
-    F0, N0 = forces.loads(P, sp0.fx, sp0.fy, dr0.f)
+    dr0 = motion.kept(P, P.drive(st.cph, st.sph))
+    L0 = P.loads(dr0, yA.x, kp)
+    F0, N0 = L0.F, L0.N
     nA = motion.normal(contact, N0)
     margin = motion.stick_margin(P, F0, nA)
     gA = [jnp.where(s, p, sd * v) for s, p, sd, v in zip(st.stuck, margin, st.sdir, yA.v)]
@@ -206,7 +178,7 @@ def step(
     stop0 = lifted0 if contact == "strict" else jnp.asarray(False)
     t_lift = jnp.where(lifted0 & ~jnp.isfinite(st.t_liftoff), t0, st.t_liftoff)
     if target is not None:
-        X_A = forces.centre_of_mass(P, yA.x)
+        X_A = P.centre_of_mass(yA.x)
         target_now = target.active & (jnp.abs(X_A - target.X0) >= target.z)
         target = target._replace(active=target.active & ~target_now)
     else:
@@ -214,7 +186,7 @@ def step(
 
     # -- derivatives at the start, in the (new) mode.
     mode = Mode(stuck, sdir, st.side)
-    D0 = motion.derivatives(P, contact, mode, target, dr0, sp0, F0, N0, y0.x, y0.v)
+    D0 = motion.derivatives(P, contact, mode, target, dr0, L0, y0.x, y0.v)
 
     # -- step length: dt, or less to land on t_stop or just past the earliest predicted event.
     span = t_stop - t0
@@ -230,7 +202,7 @@ def step(
     sa, ca = (kp(q) for q in num.sincos(P.omega * (0.5 * h)))
     cm, sm = num.rotate(st.cph, st.sph, ca, sa)
     ce, se = (kp(q) for q in num.rotate(cm, sm, ca, sa))
-    drm, dre = motion.kept(P, drive(P, cm, sm)), motion.kept(P, drive(P, ce, se))
+    drm, dre = motion.kept(P, P.drive(cm, sm)), motion.kept(P, P.drive(ce, se))
 
     # -- RK4: one step of length h.
     def stage(dr, y):
@@ -244,9 +216,7 @@ def step(
     # costs fewer kernels than it adds flops (benchmarks/NOTES.md).
     incr = k1.map(lambda a, b, c, d: (h / 6) * (a + 2 * (b + c) + d), k2, k3, k4)
     y1 = y0.map(lambda a, b: kp(a + b), incr)
-    sp1 = forces.springs(P, dre.l0, y1.x)
-    F1, N1 = forces.loads(P, sp1.fx, sp1.fy, dre.f)
-    D1 = motion.derivatives(P, contact, mode, target, dre, sp1, F1, N1, y1.x, y1.v)
+    D1 = motion.derivatives(P, contact, mode, target, dre, P.loads(dre, y1.x), y1.x, y1.v)
 
     # -- first crossing: the earliest by the secant of each crossed function, located on its quintic.
     g0s, d0s, e0s, d1s, e1s = D0.g, D0.dg, D0.ddg, D1.dg, D1.ddg
@@ -337,7 +307,7 @@ def step(
         t_switch=jnp.where(commit & cut & ~target_cut, jax.lax.stop_gradient(tc), st.t_switch),
     )  # fmt: skip
     info = StepInfo(
-        commit=commit, t0=t0, y0=y0, tension0=sp0.tension, t1=tc, y1=yc, stuck=stuck,
+        commit=commit, t0=t0, y0=y0, loads0=L0, t1=tc, y1=yc, stuck=stuck,
         target_fired=target_now | (commit & target_cut), t_target=jnp.where(target_now, t0, tc),
         y_target=yc.map(lambda a, b: jnp.where(target_now, b, a), yA),
     )  # fmt: skip

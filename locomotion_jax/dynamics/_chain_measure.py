@@ -13,7 +13,8 @@ import jax.numpy as jnp
 
 from .._status import Regime, Status
 from ..model._chain import Chain
-from . import _chain_exact as engine, _chain_forces as forces
+from ..model._physics import AbstractPhysics
+from . import _chain_exact as engine
 from ._compile import engine_jit
 from ._margins import margin_fields
 from ._numerics import Target, target_margin
@@ -37,7 +38,7 @@ class _Acc(eqx.Module):
 
 class _Fixed(NamedTuple):
     C: Chain
-    P: forces.Consts
+    P: AbstractPhysics
     ws: jax.Array
     we: jax.Array
     te: jax.Array
@@ -45,8 +46,8 @@ class _Fixed(NamedTuple):
 
 
 def _setup(C, valid, t_start, z, horizon, window, contact, start):
-    P = forces.consts(C)
-    st = chain_initial_state(C, valid, contact, start, P)
+    P = C.physics()
+    st = chain_initial_state(P, valid, contact, start)
     dtype = st.t.dtype
     ws = t_start.astype(dtype)
     zero = jnp.zeros((), dtype)
@@ -73,17 +74,17 @@ def _advance(f: _Fixed, dyn, contact, dt):
     t_stop = jnp.where(s.t < f.ws, f.ws, jnp.where(s.t < f.we, f.we, f.te))
     begin = ~a.started & (s.t >= f.ws)
     started = a.started | begin
-    X0 = jnp.where(begin, forces.centre_of_mass(f.P, s.y.x), a.X0)
+    X0 = jnp.where(begin, f.P.centre_of_mass(s.y.x), a.X0)
     target = Target(active=started & ~a.reached, X0=X0, z=f.z)
     # The margins cover the measured interval: they restart at t_start.
     s = eqx.tree_at(lambda s: (s.cross, s.near), s, tuple(jnp.where(begin, jnp.inf, m) for m in (s.cross, s.near)))
-    s_new, info = engine.step(f.C, contact, dt, s, t_stop, target, f.P)
+    s_new, info = engine.step(f.P, contact, dt, s, t_stop, target)
     inside = info.commit & started & (info.t1 <= f.we)
     dur = jnp.where(inside, info.t1 - info.t0, 0)
     hit = info.target_fired
     a_new = _Acc(
         started=started, X0=X0, ed0=jnp.where(begin, info.y0.ed, a.ed0), w0=jnp.where(begin, info.y0.w, a.w0),
-        e0=jnp.where(begin, engine.energy(f.P, info.y0, info.tension0), a.e0), reached=a.reached | hit,
+        e0=jnp.where(begin, engine.energy(f.P, info.y0, info.loads0), a.e0), reached=a.reached | hit,
         t_z=jnp.where(hit, info.t_target, a.t_z), y_z=info.y_target.map(lambda n, o: jnp.where(hit, n, o), a.y_z),
         stuck=tuple(q + jnp.where(b, dur, 0) for q, b in zip(a.stuck, info.stuck)), steps=a.steps + 1,
         before_z=jnp.where(hit, jax.lax.stop_gradient(info.t_target - s.t_switch), a.before_z),
@@ -91,15 +92,15 @@ def _advance(f: _Fixed, dyn, contact, dt):
     return s_new, a_new
 
 
-def _energy_at(P: forces.Consts, t, y):
-    dr = forces.drive(P, jnp.cos(P.omega * t), jnp.sin(P.omega * t))
-    return engine.energy(P, y, forces.springs(P, dr.l0, y.x).tension)
+def _energy_at(P: AbstractPhysics, t, y):
+    dr = P.drive(jnp.cos(P.omega * t), jnp.sin(P.omega * t))
+    return engine.energy(P, y, P.loads(dr, y.x))
 
 
 def _margin_z(f: _Fixed, a: _Acc, contact) -> jax.Array:
     """The time from $t_z$ to the nearest change of the target's structure (`_numerics.target_margin`)."""
     t_z = jnp.where(a.reached, a.t_z, f.ws)
-    g, d, e = engine.probe(f.C, contact, t_z, a.y_z, Target(active=jnp.asarray(True), X0=a.X0, z=f.z), f.P)
+    g, d, e = engine.probe(f.P, contact, t_z, a.y_z, Target(active=jnp.asarray(True), X0=a.X0, z=f.z))
     return target_margin(a.before_z, g, d, e)
 
 
@@ -115,9 +116,7 @@ def _results(f: _Fixed, dyn, contact) -> dict:
     y_end = a.y_z.map(lambda zv, sv: jnp.where(a.reached, zv, sv), s.y)
     elapsed = t_end - ws
     measured = a.started & (elapsed > 0)
-    mean_speed = jnp.where(
-        measured, (forces.centre_of_mass(f.P, y_end.x) - a.X0) / jnp.where(measured, elapsed, 1), nan
-    )
+    mean_speed = jnp.where(measured, (f.P.centre_of_mass(y_end.x) - a.X0) / jnp.where(measured, elapsed, 1), nan)
     e_d = jnp.where(a.started, y_end.ed - a.ed0, nan)
     work = jnp.where(a.started, y_end.w - a.w0, nan)
     delta_e = jnp.where(a.started, _energy_at(f.P, t_end, y_end) - a.e0, nan)

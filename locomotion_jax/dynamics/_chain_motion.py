@@ -1,21 +1,21 @@
-"""The motion of a chain in a fixed mode: rates, and the time derivatives that the exact engine's
-dense output and event prediction need (SPEC §2 and §8).
+"""The motion of a mechanism in a fixed mode: rates, and the time derivatives that the exact engine's
+dense output and event prediction need (SPEC §2 and §8), from the mechanism's
+[`AbstractPhysics`][locomotion_jax.AbstractPhysics].
 
-Everything is over tuples of per-mass scalars (see [`_chain_forces`][locomotion_jax.dynamics._chain_forces]).
-In a fixed mode the motion is smooth: each mass is stuck ($\\dot x_i = \\dot v_i = 0$) or slips in a
-fixed direction $\\sigma_i$, and each normal force enters friction as $n_i = N_i$ (strict contact)
-or $\\nu_i N_i$ with a fixed side $\\nu_i$ (paper contact, inside a step). The event functions are
-listed in the engine's docstring ([`_chain_exact`][locomotion_jax.dynamics._chain_exact]).
+Everything is over tuples of per-body scalars. In a fixed mode the motion is smooth: each
+body is stuck ($\\dot x_i = \\dot v_i = 0$) or slips in a fixed direction $\\sigma_i$, and each
+normal force enters friction as $n_i = N_i$ (strict contact) or $\\nu_i N_i$ with a fixed side
+$\\nu_i$ (paper contact, inside a step). The event functions are listed in the engine's
+docstring ([`_chain_exact`][locomotion_jax.dynamics._chain_exact]).
 """
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 
 from .._custom_types import Array, Contact
-from . import _chain_forces as forces
-from ._chain_forces import Consts, Drive, Scalars
+from ..model._physics import AbstractPhysics, Loads, Scalars
 
 
 class State(NamedTuple):
@@ -38,18 +38,10 @@ class Mode(NamedTuple):
     side: Scalars
 
 
-def keep(P: Consts, x: Array) -> Array:
-    """Materialise `x` once per iteration (`_exact._keep`: XLA on the CPU recomputes a cheap
-    value inside every kernel that consumes it, but never duplicates a division)."""
-    if x.dtype == jnp.bool_:
-        return (x.astype(P.one.dtype) / P.one) > 0.5
-    return x / P.one
-
-
-def kept(P: Consts, dr: Drive) -> Drive:
-    """[`keep`][] every entry of an actuation (each feeds every stage that uses it)."""
-    kept = lambda q: None if q is None else tuple(keep(P, a) for a in q)
-    return Drive(tuple(keep(P, a) for a in dr.l0), kept(dr.dl0), kept(dr.ddl0), kept(dr.f), kept(dr.df), kept(dr.ddf))
+def kept(P: AbstractPhysics, dr: Any) -> Any:
+    """[`AbstractPhysics.keep`][locomotion_jax.AbstractPhysics.keep] every entry of an actuation
+    (each feeds every stage that uses it)."""
+    return jax.tree_util.tree_map(P.keep, dr)
 
 
 def _sum(terms: list) -> Array:
@@ -76,14 +68,14 @@ def normal_rate(contact: Contact, N: Scalars, dN: Scalars) -> Scalars:
     return tuple(jnp.where(q >= 0, r, -r) for q, r in zip(N, dN))
 
 
-def stick_margin(P: Consts, F: Scalars, n: Scalars) -> list:
+def stick_margin(P: AbstractPhysics, F: Scalars, n: Scalars) -> list:
     """The stuck masses' event values $\\min(\\mu_{s,\\mathrm{fwd}} n_i - F_i, F_i + \\mu_{s,\\mathrm{bwd}} n_i)$;
     for an isotropic law $\\mu_s n_i - |F_i|$, the same value in fewer operations."""
     return [mf * q - jnp.abs(f) if mb is None else jnp.minimum(mf * q - f, f + mb * q)
             for mf, mb, q, f in zip(P.mu_f, P.mu_b, n, F)]  # fmt: skip
 
 
-def stick_margin_rate(P: Consts, F: Scalars, n: Scalars, dF: Scalars, dn: Scalars) -> list:
+def stick_margin_rate(P: AbstractPhysics, F: Scalars, n: Scalars, dF: Scalars, dn: Scalars) -> list:
     """A time derivative of [`stick_margin`][] given those of $F_i$ and $n_i$: the smaller
     branch's, their mean at a tie (as `jax.jvp` of `jnp.minimum`; isotropic: $\\operatorname{sgn} F_i = 0$)."""
     out = []
@@ -97,28 +89,27 @@ def stick_margin_rate(P: Consts, F: Scalars, n: Scalars, dF: Scalars, dn: Scalar
     return out
 
 
-def _in_mode(P: Consts, contact: Contact, mode: Mode, dr: Drive, sp: forces.Springs, F, N, v):
+def _in_mode(P: AbstractPhysics, contact: Contact, mode: Mode, dr: Any, L: Loads, v: Scalars):
     """The normal forces $n_i$, speeds, kinetic coefficients and the state's rate at a state with
-    springs `sp` and loads `F`, `N`: $\\dot x_i = v_i$, $m_i \\dot v_i = F_i - c_i v_i - \\sigma_i \\mu_k n_i$
+    loads `L`: $\\dot x_i = v_i$, $m_i \\dot v_i = F_i - c_i v_i - \\sigma_i \\mu_k n_i$
     (both zero when stuck; eq. 9 generalised), $\\dot e_d = \\sum_i \\mu_k n_i |v_i| + c_i v_i^2$
     (eq. 15) and $\\dot w$, the actuator's power (eq. 16)."""
+    F, N = L.F, L.N
     n = normal(contact, N, mode.side)
     speed = tuple(sd * vi for sd, vi in zip(mode.sdir, v))  # |v_i| in a slip segment; 0 when stuck
     mu = tuple(law.kinetic(s, sd) for law, s, sd in zip(P.friction, speed, mode.sdir))
     a = tuple(
-        keep(P, jnp.where(st, 0, (f - c * vi - sd * m * q) * im))
+        P.keep(jnp.where(st, 0, (f - c * vi - sd * m * q) * im))
         for st, f, c, vi, sd, m, q, im in zip(mode.stuck, F, P.c, v, mode.sdir, mu, n, P.im)
     )
     xd = tuple(jnp.where(st, 0, vi) for st, vi in zip(mode.stuck, v))
     ed = _sum([m * q * s + c * vi * vi for m, q, s, c, vi in zip(mu, n, speed, P.c, v)])
-    return n, speed, mu, State(xd, a, ed, forces.power(P, sp.tension, dr.dl0, dr.f, v))
+    return n, speed, mu, State(xd, a, ed, P.power(dr, L, v))
 
 
-def rates(P: Consts, contact: Contact, mode: Mode, dr: Drive, x: Scalars, v: Scalars) -> State:
+def rates(P: AbstractPhysics, contact: Contact, mode: Mode, dr: Any, x: Scalars, v: Scalars) -> State:
     """The state's rate (an RK4 stage): see [`_in_mode`][]."""
-    sp = forces.springs(P, dr.l0, x)
-    F, N = forces.loads(P, sp.fx, sp.fy, dr.f)
-    return _in_mode(P, contact, mode, dr, sp, F, N, v)[3]
+    return _in_mode(P, contact, mode, dr, P.loads(dr, x), v)[3]
 
 
 class Derivs(NamedTuple):
@@ -134,18 +125,17 @@ class Derivs(NamedTuple):
     dN: Scalars
 
 
-def derivatives(P: Consts, contact: Contact, mode: Mode, target, dr: Drive, sp: forces.Springs, F, N, x, v) -> Derivs:
+def derivatives(P: AbstractPhysics, contact: Contact, mode: Mode, target, dr: Any, L: Loads, x, v) -> Derivs:
     """Rates and event values with their first and second time derivatives along the motion in a
-    fixed mode, at a state whose springs `sp` and loads `F`, `N` are given (the chain rule through
-    [`_chain_forces`][locomotion_jax.dynamics._chain_forces]; the friction law's own `kinetic_rate`)."""
-    n, speed, mu, rate = _in_mode(P, contact, mode, dr, sp, F, N, v)
+    fixed mode, at a state whose loads `L` are given (the loads' rates from the physics, the
+    friction law's own `kinetic_rate`)."""
+    F, N = L.F, L.N
+    n, speed, mu, rate = _in_mode(P, contact, mode, dr, L, v)
     xd, a = rate.x, rate.v
 
-    # First derivatives: the springs along (xd, dl0), the loads, the kinetic coefficients.
-    du = tuple(q - p for p, q in zip(xd[:-1], xd[1:]))
-    sr = forces.spring_rates(P, sp, du, dr.dl0)
-    dF, dN = forces.load_rates(tuple(map(lambda q: keep(P, q), sr.dfx)), tuple(map(lambda q: keep(P, q), sr.dfy)),
-                               dr.df)  # fmt: skip
+    # First derivatives: the loads along (xd, the actuation's rate), the kinetic coefficients.
+    R = P.load_rates(dr, L, xd, P.keep)
+    dF, dN = R.dF, R.dN
     dn = normal(contact, dN, mode.side)
     dspeed = tuple(sd * ai for sd, ai in zip(mode.sdir, a))
     dmu = [law.kinetic_rate(s, sd, ds) for law, s, sd, ds in zip(P.friction, speed, mode.sdir, dspeed)]
@@ -156,13 +146,11 @@ def derivatives(P: Consts, contact: Contact, mode: Mode, target, dr: Drive, sp: 
     )
     ded = _sum([fr * s + m * q * ds + 2 * c * vi * ai
                 for fr, s, m, q, ds, c, vi, ai in zip(fric, speed, mu, n, dspeed, P.c, v, a)])  # fmt: skip
-    dw = forces.power_rate(P, sp.tension, sr.dtension, dr.dl0, dr.ddl0, dr.f, dr.df, v, a)
+    dw = P.power_rate(dr, L, R, v, a)
     second = State(a, jerk, ded, dw)
 
     # Second derivatives of the loads, for the events' curvature.
-    ddu = tuple(q - p for p, q in zip(a[:-1], a[1:]))
-    ddfx, ddfy = forces.spring_second(P, sp, sr, du, ddu, dr.ddl0)
-    ddF, ddN = forces.load_rates(ddfx, ddfy, dr.ddf)
+    ddF, ddN = P.load_second(dr, L, R, xd, a)
     ddn = normal(contact, ddN, mode.side)
 
     stick = (stick_margin(P, F, n), stick_margin_rate(P, F, n, dF, dn), stick_margin_rate(P, F, n, ddF, ddn))
@@ -184,15 +172,15 @@ def derivatives(P: Consts, contact: Contact, mode: Mode, target, dr: Drive, sp: 
         dg += list(dn)
         ddg += list(ddn)
     if target is not None:
-        rel = forces.centre_of_mass(P, x) - target.X0
+        rel = P.centre_of_mass(x) - target.X0
         sgn = jnp.where(rel >= 0, 1.0, -1.0).astype(rel.dtype)  # d|r| = sgn(r) dr, sgn(0) = 1 (as `jax.jvp`)
         inf = jnp.asarray(jnp.inf, rel.dtype)
         g.append(jnp.where(target.active, target.z - jnp.abs(rel), inf))
-        dg.append(jnp.where(target.active, -sgn * forces.centre_of_mass(P, xd), 0))
-        ddg.append(jnp.where(target.active, -sgn * forces.centre_of_mass(P, a), 0))
+        dg.append(jnp.where(target.active, -sgn * P.centre_of_mass(xd), 0))
+        ddg.append(jnp.where(target.active, -sgn * P.centre_of_mass(a), 0))
     return Derivs(rate, second, g, dg, ddg, dF, dN)
 
 
-def energy(P: Consts, y: State, tension: Scalars) -> Array:
-    """$e = \\sum_i m_i v_i^2/2 + \\sum_j T_j^2/(2 k_j)$ (eq. 10 generalised)."""
-    return forces.energy(P, y.v, tension)
+def energy(P: AbstractPhysics, y: State, L: Loads) -> Array:
+    """The mechanical energy at state `y` with loads `L` there (eq. 10 generalised)."""
+    return P.energy(L, y.v)

@@ -9,7 +9,8 @@ import jax
 import jax.numpy as jnp
 
 from ..model._chain import Chain
-from . import _chain_exact as engine, _chain_forces as forces
+from ..model._chain_physics import ChainPhysics
+from . import _chain_exact as engine
 from ._compile import engine_jit
 from ._margins import switch_gap
 from ._runs import chain_initial_state, MICRO_BATCH_CPU
@@ -32,10 +33,10 @@ def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps, lanes, buf
     take = lambda i: jax.tree_util.tree_map(lambda x: x[i], C)
 
     def init(i):
-        P = forces.consts(take(i))
-        return P, chain_initial_state(take(i), valid[i], contact, start, P)
+        P = take(i).physics()
+        return P, chain_initial_state(P, valid[i], contact, start)
 
-    step = lambda P, s, t_stop: engine.step(None, contact, dt, s, t_stop, P=P)[0]
+    step = lambda P, s, t_stop: engine.step(P, contact, dt, s, t_stop)[0]
     order = jnp.argsort(-jnp.where(jnp.isfinite(C.waves.omega), C.waves.omega, -jnp.inf))
     return run_saves(init, step, _row, valid.shape[0], save_at, max_steps, lanes, order, buffer)
 
@@ -45,12 +46,11 @@ _simulate_batch = engine_jit(_simulate_batch, ("contact", "start", "dt", "lanes"
 
 def _derived(C: Chain, contact, t, x, v):
     """Energy, normal forces, rest lengths and tensions at one saved state."""
-    P = forces.consts(C)
-    dr = forces.drive(P, jnp.cos(P.omega * t), jnp.sin(P.omega * t))
-    sp = forces.springs(P, dr.l0, forces.unstack(x))
-    _, N = forces.loads(P, sp.fx, sp.fy, dr.f)
-    e = forces.energy(P, forces.unstack(v), sp.tension)
-    return dict(e=e, N=jnp.stack(N, -1), l0=jnp.stack(dr.l0, -1), tension=jnp.stack(sp.tension, -1))
+    P: ChainPhysics = C.physics()
+    dr = P.drive(jnp.cos(P.omega * t), jnp.sin(P.omega * t))
+    L = P.loads(dr, tuple(x[..., i] for i in range(x.shape[-1])))
+    e = P.energy(L, tuple(v[..., i] for i in range(v.shape[-1])))
+    return dict(e=e, N=jnp.stack(L.N, -1), l0=jnp.stack(dr.l0, -1), tension=jnp.stack(L.aux.tension, -1))
 
 
 def simulate_batch(flat: Chain, valid, save, contact, start, dt, max_steps: int) -> dict:

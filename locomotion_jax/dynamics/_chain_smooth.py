@@ -1,6 +1,6 @@
 """Smoothed dynamics of a chain of N masses (SPEC §3 and §8), integrated with diffrax.
 
-The chain's loads ([`_chain_forces`][locomotion_jax.dynamics._chain_forces]: tensions,
+The chain's loads (its physics, `ChainPhysics`: tensions,
 horizontal loads $F_i$, normal forces) with each mass's friction replaced by the smooth law of its friction class,
 [`AbstractFriction.smoothed`][locomotion_jax.AbstractFriction.smoothed] with the
 static bump width $v_s = \\sqrt{\\varepsilon}$ of [`Smoothed`][locomotion_jax.Smoothed]:
@@ -29,7 +29,7 @@ import optimistix as optx
 from .._custom_types import Array, ArrayLike, Contact
 from .._status import Regime, Status
 from ..model._chain import Chain
-from . import _chain_exact as exact, _chain_forces as forces, _chain_motion as motion
+from . import _chain_motion as motion
 from ._smooth import MIN_STICK, STICK_SPEED, WINDOW_SAMPLES
 
 
@@ -38,14 +38,17 @@ if TYPE_CHECKING:  # the class runs this engine: imported for annotations only
 
 
 def _loads(C: Chain, contact: Contact, t: ArrayLike, x: Array):
-    """The actuation, springs, horizontal loads $F_i$, signed normal forces $N_i$ and the normal
-    forces $n_i$ entering friction at time `t` and positions `x` (arrays over masses and springs)."""
-    P = forces.consts(C)
-    dr = forces.drive(P, jnp.cos(P.omega * t), jnp.sin(P.omega * t))
-    sp = forces.springs(P, dr.l0, forces.unstack(x))
-    F, N = forces.loads(P, sp.fx, sp.fy, dr.f)
-    n = _stack(motion.normal(contact, N))
-    return P, dr, sp, _stack(F), _stack(N), n
+    """The physics, actuation, loads, horizontal loads $F_i$, signed normal forces $N_i$ and the
+    normal forces $n_i$ entering friction at time `t` and positions `x` (arrays over the bodies)."""
+    P = C.physics()
+    dr = P.drive(jnp.cos(P.omega * t), jnp.sin(P.omega * t))
+    L = P.loads(dr, _unstack(x))
+    n = _stack(motion.normal(contact, L.N))
+    return P, dr, L, _stack(L.F), _stack(L.N), n
+
+
+def _unstack(a: Array) -> tuple[Array, ...]:
+    return tuple(a[..., i] for i in range(a.shape[-1]))
 
 
 def _stack(a) -> Array:
@@ -56,11 +59,11 @@ def rates(C: Chain, contact: Contact, eps: Array, t: ArrayLike, y: Array) -> Arr
     """Right-hand side on the flat state $y = (x_1..x_N, v_1..v_N, e_d, w)$."""
     n_mass = C.m.shape[-1]
     x, v = y[:n_mass], y[n_mass : 2 * n_mass]
-    P, dr, sp, F, _, n = _loads(C, contact, t, x)
+    P, dr, L, F, _, n = _loads(C, contact, t, x)
     friction = n * C.friction.smoothed(v, eps, jnp.sqrt(eps))
     a = (F - C.c * v - friction) / C.m
     p_d = (friction * v + C.c * v * v).sum()
-    p_w = forces.power(P, sp.tension, dr.dl0, dr.f, forces.unstack(v))
+    p_w = P.power(dr, L, _unstack(v))
     return jnp.concatenate([v, a, p_d[None], jnp.asarray(p_w)[None]])
 
 
@@ -84,7 +87,7 @@ def solve(C: Chain, contact: Contact, dyn: "Smoothed", t0, t1, y0, saveat, extra
 
 
 def _y0(C: Chain, start: str) -> Array:
-    x = exact.initial_positions(C, start)
+    x = C.physics().initial_positions(start)
     zero = jnp.zeros((1,), x.dtype)
     return jnp.concatenate([x, jnp.zeros_like(x), zero, zero])
 
@@ -108,8 +111,8 @@ def _com(C: Chain, x: Array) -> Array:
 
 def _energy(C: Chain, contact: Contact, t: Array, y: Array) -> Array:
     n_mass = C.m.shape[-1]
-    P, _, sp, _, _, _ = _loads(C, contact, t, y[:n_mass])
-    return forces.energy(P, forces.unstack(y[n_mass : 2 * n_mass]), sp.tension)
+    P, _, L, _, _, _ = _loads(C, contact, t, y[:n_mass])
+    return P.energy(L, _unstack(y[n_mass : 2 * n_mass]))
 
 
 def _longest_run(flags: Array) -> Array:
@@ -141,8 +144,8 @@ def simulate_one(C: Chain, valid: Array, save: Array, contact: Contact, start: s
     x, v = ys[:, :n_mass], ys[:, n_mass : 2 * n_mass]
 
     def derived(t, y):
-        _, dr, sp, _, N, _ = _loads(C, contact, t, y[:n_mass])
-        return dict(e=_energy(C, contact, t, y), N=N, l0=_stack(dr.l0), tension=_stack(sp.tension))
+        _, dr, L, _, N, _ = _loads(C, contact, t, y[:n_mass])
+        return dict(e=_energy(C, contact, t, y), N=N, l0=_stack(dr.l0), tension=_stack(L.aux.tension))
 
     der = jax.vmap(derived)(save, ys)
     if contact == "paper":

@@ -15,10 +15,10 @@ import numpy as np
 from .._custom_types import Contact
 from .._status import Status
 from ..model import _two_mass as model
-from ..model._chain import Chain
 from ..model._params import Params
+from ..model._physics import AbstractPhysics
 from ..model._waveform import AbstractWaveform
-from . import _chain_exact as chain_engine, _chain_forces as forces, _exact as exact
+from . import _chain_exact as chain_engine, _exact as exact
 from ._forward import concrete_value
 
 
@@ -63,8 +63,8 @@ def initial_state(params: Params, wave: AbstractWaveform, contact: Contact, star
     return exact.init(params, wave, contact, x1, x2, v1, v2), ok
 
 
-def chain_initial_state(C: Chain, valid, contact, start, P: forces.Consts | None = None) -> chain_engine.Hybrid:
-    """The N-mass engine's state at $t = 0$ of one chain at rest in the `start` position,
-    flagged `Status.INVALID` where the chain is not `valid`."""
-    st = chain_engine.init(C, contact, chain_engine.initial_positions(C, start), P)
+def chain_initial_state(P: AbstractPhysics, valid, contact, start) -> chain_engine.Hybrid:
+    """The N-body engine's state at $t = 0$ of one mechanism (its physics `P`) at rest in the
+    `start` position, flagged `Status.INVALID` where it is not `valid`."""
+    st = chain_engine.init(P, contact, P.initial_positions(start))
     return eqx.tree_at(lambda s: s.status, st, jnp.where(valid, st.status, Status.INVALID).astype(jnp.int32))

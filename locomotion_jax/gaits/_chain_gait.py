@@ -24,11 +24,12 @@ import numpy as np
 
 from .._custom_types import Array, Contact
 from .._status import Regime, Status
-from ..dynamics import _chain_exact as engine, _chain_forces as forces
+from ..dynamics import _chain_exact as engine
 from ..dynamics._compile import engine_jit
 from ..dynamics._exact_dynamics import Exact
 from ..dynamics._runs import chain_initial_state, default_max_steps, STICK_TOL
 from ..model._chain import Chain
+from ..model._physics import AbstractPhysics
 from ..run._batch import check_contact_start, prepare_chain, unflatten
 from . import _select as select
 from ._select import GaitStatus
@@ -85,12 +86,12 @@ def _reduced(st: engine.Hybrid) -> Array:
     return jnp.stack([b - a for a, b in zip(x[:-1], x[1:])] + list(v))
 
 
-def _section_state(C: Chain, P: forces.Consts, contact: Contact, y: Array) -> engine.Hybrid:
+def _section_state(P: AbstractPhysics, contact: Contact, y: Array) -> engine.Hybrid:
     """The hybrid state at phase 0 for a reduced state `y`, with $x_1 = 0$: a mass at rest
     sticks where its static limits hold (eq. 7 generalised), a moving one slips along $v_i$."""
     n = (y.shape[-1] + 1) // 2
     x = jnp.concatenate([jnp.zeros((1,), y.dtype), jnp.cumsum(y[: n - 1])])
-    st = engine.init(C, contact, x, P)
+    st = engine.init(P, contact, x)
     vs = tuple(y[n - 1 + i] for i in range(n))
     stuck = tuple(s & (v == 0) for s, v in zip(st.stuck, vs))
     one = jnp.ones((), y.dtype)
@@ -108,7 +109,7 @@ def _advance(P, contact, dt, st, t_end, max_steps):
 
     def body(c):
         s, stuck, n = c
-        new, info = engine.step(None, contact, dt, s, t_end, None, P)
+        new, info = engine.step(P, contact, dt, s, t_end)
         span = jnp.where(info.commit, info.t1 - info.t0, 0)
         return new, tuple(a + jnp.where(b, span, 0) for a, b in zip(stuck, info.stuck)), n + 1
 
@@ -117,16 +118,16 @@ def _advance(P, contact, dt, st, t_end, max_steps):
     return st, jnp.stack(stuck)
 
 
-def _period_map(C, P, contact, dt, max_steps, k, y) -> _Period:
+def _period_map(P, contact, dt, max_steps, k, y) -> _Period:
     """$\\Phi_k(y)$ and what the $k$ periods accumulate."""
     t_end = k * (2 * jnp.pi) / P.omega
-    st0 = _section_state(C, P, contact, y)
+    st0 = _section_state(P, contact, y)
     st, stuck = _advance(P, contact, dt, st0, t_end, max_steps)
     ok = (st.status == Status.OK) & (st.t >= t_end)
     status = jnp.where(ok, Status.OK, jnp.where(st.status == Status.OK, Status.MAX_STEPS, st.status))
     return _Period(
         y=_reduced(st),
-        dX=forces.centre_of_mass(P, st.y.x) - forces.centre_of_mass(P, st0.y.x),
+        dX=P.centre_of_mass(st.y.x) - P.centre_of_mass(st0.y.x),
         ed=st.y.ed,
         w=st.y.w,
         stuck=stuck,
@@ -138,8 +139,8 @@ def _period_map(C, P, contact, dt, max_steps, k, y) -> _Period:
 
 def _transient_batch(C, valid, contact, start, dt, transient, max_steps):
     def one(c, ok):
-        P = forces.consts(c)
-        st = chain_initial_state(c, ok, contact, start, P)
+        P = c.physics()
+        st = chain_initial_state(P, ok, contact, start)
         st, _ = _advance(P, contact, dt, st, transient * (2 * jnp.pi) / P.omega, max_steps)
         return _reduced(st), st.status, jnp.isfinite(st.t_liftoff)
 
@@ -153,12 +154,12 @@ def _solve_batch(C, contact, dt, k, y0, go, tol, max_iter, max_steps):
     """Newton's method on $\\Phi_k(y) = y$ from `y0` where `go` (elsewhere nothing is integrated)."""
 
     def one(c, y_start, g):
-        P = forces.consts(c)
+        P = c.physics()
         kk = jnp.where(g, k, 0)
         eye = jnp.eye(y_start.shape[0], dtype=y_start.dtype)
 
         def phi(y):
-            out = _period_map(c, P, contact, dt, max_steps, kk, y)
+            out = _period_map(P, contact, dt, max_steps, kk, y)
             return out.y, out
 
         def evaluate(y):

@@ -30,7 +30,7 @@ import jax.numpy as jnp
 
 from .._custom_types import Array, Contact
 from .._status import Status
-from ..dynamics import _chain_exact as engine, _chain_forces as forces
+from ..dynamics import _chain_exact as engine
 from ..dynamics._compile import engine_jit
 from ..model._chain import Chain
 from ..model._springwaves import SpringFourier
@@ -68,16 +68,13 @@ def with_waves(chain: Chain, theta: Array, a_max: Array, harmonics: int) -> Chai
 def period(C: Chain, contact: Contact, dt: float, max_steps: Array, y: Array, k: Array) -> Period:
     """The `k`-period map $\\Phi_k$ from the reduced state `y`, with the figures the optimiser
     needs (`max_steps` per actuation period)."""
-    P = forces.consts(C)
+    P = C.physics()
     t_end = k.astype(y.dtype) * 2 * jnp.pi / P.omega
-    st0 = _section_state(C, P, contact, y)
+    st0 = _section_state(P, contact, y)
 
     def normal(s):
         # Eq. (5) generalised (SPEC §8), at a step's end: N_i = m_i - fy_i + fy_{i-1}.
-        dr = forces.drive(P, s.cph, s.sph)
-        sp = forces.springs(P, dr.l0, s.y.x)
-        _, N = forces.loads(P, sp.fx, sp.fy, dr.f)
-        return jnp.min(jnp.stack(N))
+        return jnp.min(jnp.stack(P.loads(P.drive(s.cph, s.sph), s.y.x).N))
 
     def cond(c):
         s, _, n = c
@@ -85,12 +82,12 @@ def period(C: Chain, contact: Contact, dt: float, max_steps: Array, y: Array, k:
 
     def body(c):
         s, low, n = c
-        s, _ = engine.step(None, contact, dt, s, t_end, None, P)
+        s, _ = engine.step(P, contact, dt, s, t_end)
         return s, jnp.minimum(low, normal(s)), n + 1
 
     st, low, _ = jax.lax.while_loop(cond, body, (st0, normal(st0), jnp.zeros((), jnp.int32)))
     ok = (st.status == Status.OK) & (st.t >= t_end)
-    dX = forces.centre_of_mass(P, st.y.x) - forces.centre_of_mass(P, st0.y.x)
+    dX = P.centre_of_mass(st.y.x) - P.centre_of_mass(st0.y.x)
     return Period(_reduced(st), jnp.stack([dX, st.y.ed, low]), ok)
 
 
@@ -117,9 +114,9 @@ def _relax(C, a_max, theta, y0, fresh, periods, harmonics, contact, dt, max_step
 
     def one(th, y, new):
         c = with_waves(C, th, a_max, harmonics)
-        P = forces.consts(c)
-        rest = engine.init(c, contact, engine.initial_positions(c, "relaxed"), P)
-        sec = _section_state(c, P, contact, y)
+        P = c.physics()
+        rest = engine.init(P, contact, P.initial_positions("relaxed"))
+        sec = _section_state(P, contact, y)
         st = jax.tree_util.tree_map(lambda a, b: jnp.where(new, a, b), rest, sec)
         t_end = periods.astype(y.dtype) * 2 * jnp.pi / P.omega
 
@@ -129,7 +126,7 @@ def _relax(C, a_max, theta, y0, fresh, periods, harmonics, contact, dt, max_step
 
         def body(s_n):
             s, n = s_n
-            return engine.step(None, contact, dt, s, t_end, None, P)[0], n + 1
+            return engine.step(P, contact, dt, s, t_end)[0], n + 1
 
         st, _ = jax.lax.while_loop(cond, body, (st, jnp.zeros((), jnp.int32)))
         return _reduced(st)

@@ -12,6 +12,7 @@ import numpy as np
 
 from .._custom_types import Array, ValuesLike
 from ._actuator import AbstractActuator, RestLength
+from ._chain_physics import chain_physics, ChainPhysics
 from ._friction import AbstractFriction, Coulomb
 from ._mechanism import AbstractMechanism, R
 from ._params import Params
@@ -213,6 +214,10 @@ class Chain(AbstractMechanism):
         return jax.tree_util.tree_map(lambda x: x[idx], self.broadcast())
 
     # -- derived quantities --------------------------------------------------------
+
+    def physics(self) -> ChainPhysics:
+        """The chain's [`AbstractPhysics`][locomotion_jax.AbstractPhysics]: what the engines integrate it with."""
+        return chain_physics(self)
 
     @property
     def total_mass(self) -> Array:

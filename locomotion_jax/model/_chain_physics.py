@@ -1,39 +1,36 @@
-"""The loads on a chain of N masses and their time derivatives, one mass and one spring at a time (SPEC §8).
+"""The physics of a chain of N masses (SPEC §8): [`ChainPhysics`][], the chain's [`AbstractPhysics`][].
 
-The N-mass exact engine ([`_chain_exact`][locomotion_jax.dynamics._chain_exact]) evaluates
-these at every stage of every step. They are written over Python tuples of scalars, one
-entry per mass or per spring (the chain's N is static), not over arrays with a mass axis:
-under `vmap` every intermediate is then a vector over the configurations only, which is
-what XLA's CPU backend runs fastest (a kernel over a `(lanes, N)` array is split over the
-intra-op thread pool and costs several times more; benchmarks/NOTES.md).
+Written over Python tuples of scalars, one entry per mass or per spring (the chain's N is
+static), not over arrays with a mass axis: under `vmap` every intermediate is then a
+vector over the configurations only, which is what XLA's CPU backend runs fastest (a
+kernel over a `(lanes, N)` array is split over the intra-op thread pool and costs several
+times more; benchmarks/NOTES.md).
 
 Spring $j$ joins masses $j$ and $j+1$: $u_j = x_{j+1} - x_j$, $\\ell_j = \\sqrt{u_j^2 + d_j^2}$
 (eq. 2), $T_j = k_j(\\ell_j - \\ell_{0,j})$, $f_{x,j} = T_j u_j/\\ell_j$, $f_{y,j} = T_j d_j/\\ell_j$;
 mass $i$ feels $F_i = (f_{x,i} + f_i) - (f_{x,i-1} + f_{i-1})$ and $N_i = m_i - (f_{y,i} - f_{y,i-1})$
 (eqs. 5 and 8 generalised; missing springs count zero). Their first and second time
-derivatives along the motion are written out by the chain rule (for the quintic dense
-output and the event prediction); a friction law's and an actuator's derivatives come
-from the classes themselves ([`AbstractFriction.kinetic_rate`][locomotion_jax.AbstractFriction.kinetic_rate],
-the linearity of [`AbstractActuator.split`][locomotion_jax.AbstractActuator.split]), so those supply values only.
+derivatives along the motion are written out by the chain rule (for the engines' quintic
+dense output and event prediction); an actuator's derivatives follow from the linearity of
+[`AbstractActuator.split`][locomotion_jax.AbstractActuator.split], so it supplies values only.
 """
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 
 from .._custom_types import Array
-from ..model._actuator import AbstractActuator
-from ..model._chain import Chain
-from ..model._friction import AbstractFriction
+from ._actuator import AbstractActuator
+from ._friction import AbstractFriction
+from ._physics import AbstractPhysics, LoadRates, Loads, Scalars
 
 
-Scalars = tuple[Array, ...]
-"""One scalar per mass or per spring (under `vmap`: one vector over the configurations each)."""
-
-
-class Consts(NamedTuple):
-    """Per-configuration constants of a chain, split by mass and by spring (computed once per run)."""
+class ChainPhysics(AbstractPhysics):
+    """The physics of one chain (module docstring), split by mass and by spring once per run
+    ([`chain_physics`][]): the [`AbstractPhysics`][] that the engines integrate a
+    [`Chain`][locomotion_jax.Chain] with. `loads(...).aux` is the chain's [`Springs`][].
+    """
 
     m: Scalars
     im: Scalars  # 1 / m_i
@@ -51,8 +48,60 @@ class Consts(NamedTuple):
     nw: Scalars  # n omega and (n omega)^2 per harmonic n = 1, ..., H
     nw2: Scalars
     inv_mass: Array  # 1 / sum_i m_i
-    one: Array  # 1.0 as a runtime value (see `_chain_exact.keep`)
+    one: Array  # 1.0 as a runtime value (`AbstractPhysics.keep`)
     actuator: AbstractActuator
+
+    def drive(self, c1: Array, s1: Array) -> "Drive":
+        return drive(self, c1, s1)
+
+    def loads(self, drive: "Drive", x: Scalars, keep: Any = None) -> Loads:
+        sp = springs(self, drive.l0, x)
+        if keep is not None:
+            sp = sp._replace(
+                fx=tuple(map(keep, sp.fx)), fy=tuple(map(keep, sp.fy)), tension=tuple(map(keep, sp.tension))
+            )
+        F, N = loads(self, sp.fx, sp.fy, drive.f)
+        return Loads(F, N, sp)
+
+    def load_rates(self, drive: "Drive", loads: Loads, xd: Scalars, keep: Any = None) -> LoadRates:
+        du = tuple(q - p for p, q in zip(xd[:-1], xd[1:]))
+        sr = spring_rates(self, loads.aux, du, drive.dl0)
+        kp = (lambda q: q) if keep is None else keep
+        dF, dN = load_rates(tuple(map(kp, sr.dfx)), tuple(map(kp, sr.dfy)), drive.df)
+        return LoadRates(dF, dN, (du, sr))
+
+    def load_second(
+        self, drive: "Drive", loads: Loads, rates: LoadRates, xd: Scalars, a: Scalars
+    ) -> tuple[Scalars, Scalars]:
+        du, sr = rates.aux
+        ddu = tuple(q - p for p, q in zip(a[:-1], a[1:]))
+        ddfx, ddfy = spring_second(self, loads.aux, sr, du, ddu, drive.ddl0)
+        return load_rates(ddfx, ddfy, drive.ddf)
+
+    def power(self, drive: "Drive", loads: Loads, v: Scalars) -> Array:
+        return power(self, loads.aux.tension, drive.dl0, drive.f, v)
+
+    def power_rate(self, drive: "Drive", loads: Loads, rates: LoadRates, v: Scalars, a: Scalars) -> Array:
+        sr = rates.aux[1]
+        return power_rate(self, loads.aux.tension, sr.dtension, drive.dl0, drive.ddl0, drive.f, drive.df, v, a)
+
+    def energy(self, loads: Loads, v: Scalars) -> Array:
+        return energy(self, v, loads.aux.tension)
+
+    def centre_of_mass(self, x: Scalars) -> Array:
+        return centre_of_mass(self, x)
+
+    def initial_positions(self, start: str) -> Array:
+        """Gaps $\\bar\\ell_j$ (`"paper"`, eq. 14) or the relaxed springs $\\sqrt{\\ell_{0,j}(0)^2 - d_j^2}$
+        (`"relaxed"`), with $x_0 = 0$ (SPEC §8)."""
+        if start == "paper":
+            gaps = jnp.stack(self.lbar, -1)
+        elif start == "relaxed":
+            l0 = jnp.stack(self.drive(jnp.ones_like(self.omega), jnp.zeros_like(self.omega)).l0, -1)
+            gaps = jnp.sqrt(jnp.maximum(l0 * l0 - jnp.stack(self.dd, -1), 0))
+        else:
+            raise ValueError(f"start must be 'paper' (eq. 14) or 'relaxed', got {start!r}.")
+        return jnp.concatenate([jnp.zeros_like(gaps[..., :1]), jnp.cumsum(gaps, -1)], -1)
 
 
 def _at(x: Array, i: int) -> Array:
@@ -63,8 +112,8 @@ def _at(x: Array, i: int) -> Array:
     return x[..., i if x.shape[-1] > 1 else 0]
 
 
-def consts(C: Chain) -> Consts:
-    """Split a chain's fields by mass and by spring."""
+def chain_physics(C: Any) -> ChainPhysics:
+    """The physics of a [`Chain`][locomotion_jax.Chain]: its fields split by mass and by spring."""
     n = C.m.shape[-1]
     masses, springs = range(n), range(n - 1)
     friction = tuple(jax.tree_util.tree_map(lambda x, i=i: _at(x, i), C.friction) for i in masses)
@@ -76,7 +125,7 @@ def consts(C: Chain) -> Consts:
     nw = tuple((h + 1) * C.waves.omega for h in range(H))
     per_spring = lambda x: tuple(_at(x, j) for j in springs)
     wave = lambda x: tuple(tuple(x[..., j if x.shape[-2] > 1 else 0, h] for h in range(H)) for j in springs)
-    return Consts(
+    return ChainPhysics(
         m=tuple(_at(C.m, i) for i in masses),
         im=tuple(1 / _at(C.m, i) for i in masses),
         c=tuple(_at(C.c, i) for i in masses),
@@ -114,7 +163,7 @@ class Drive(NamedTuple):
     ddf: Scalars | None
 
 
-def drive(P: Consts, c1: Array, s1: Array) -> Drive:
+def drive(P: ChainPhysics, c1: Array, s1: Array) -> Drive:
     """The actuation at phase $(\\cos\\omega t, \\sin\\omega t)$: each spring's signal
     $s_j = \\sum_n A_{jn}\\cos n\\omega t + B_{jn}\\sin n\\omega t$ and its rates (harmonics by the
     angle-addition recurrence), turned into rest lengths and forces by the actuator (linear, so the
@@ -160,7 +209,7 @@ class Springs(NamedTuple):
     fy: Scalars
 
 
-def springs(P: Consts, l0: Scalars, x: Scalars) -> Springs:
+def springs(P: ChainPhysics, l0: Scalars, x: Scalars) -> Springs:
     u = tuple(b - a for a, b in zip(x[:-1], x[1:]))
     length = [jnp.sqrt(uj * uj + dd) for uj, dd in zip(u, P.dd)]
     il = tuple(1 / lj for lj in length)
@@ -182,7 +231,7 @@ def per_mass(a: Scalars) -> Scalars:
     return (a[0], *(a[i] - a[i - 1] for i in range(1, len(a))), -a[-1])
 
 
-def loads(P: Consts, fx: Scalars, fy: Scalars, f: Scalars | None) -> tuple[Scalars, Scalars]:
+def loads(P: ChainPhysics, fx: Scalars, fy: Scalars, f: Scalars | None) -> tuple[Scalars, Scalars]:
     """Horizontal loads $F_i$ and signed normal forces $N_i$ (module docstring)."""
     F = per_mass(_plus(fx, f))
     N = tuple(m - q for m, q in zip(P.m, per_mass(fy)))
@@ -204,7 +253,7 @@ class SpringRates(NamedTuple):
     dfy: Scalars
 
 
-def spring_rates(P: Consts, sp: Springs, du: Scalars, dl0: Scalars | None) -> SpringRates:
+def spring_rates(P: ChainPhysics, sp: Springs, du: Scalars, dl0: Scalars | None) -> SpringRates:
     """With $p = T/\\ell$ and $\\dot u_j = \\dot x_{j+1} - \\dot x_j$: $\\dot\\ell = u\\dot u/\\ell$,
     $\\dot T = k(\\dot\\ell - \\dot\\ell_0)$, $\\dot p = (\\dot T - p\\dot\\ell)/\\ell$,
     $\\dot f_x = \\dot p u + p\\dot u$, $\\dot f_y = \\dot p d$."""
@@ -216,7 +265,7 @@ def spring_rates(P: Consts, sp: Springs, du: Scalars, dl0: Scalars | None) -> Sp
 
 
 def spring_second(
-    P: Consts, sp: Springs, r: SpringRates, du: Scalars, ddu: Scalars, ddl0: Scalars | None
+    P: ChainPhysics, sp: Springs, r: SpringRates, du: Scalars, ddu: Scalars, ddl0: Scalars | None
 ) -> tuple[Scalars, Scalars]:
     """Second time derivatives $\\ddot f_{x,j}$, $\\ddot f_{y,j}$ (differentiating [`spring_rates`][] once more)."""
     ddl = tuple((a * a + u * b - c * c) * il for a, u, b, c, il in zip(du, sp.u, ddu, r.dl, sp.il))
@@ -226,7 +275,7 @@ def spring_second(
     return ddfx, tuple(a * d for a, d in zip(ddp, P.d))
 
 
-def power(P: Consts, tension: Scalars, dl0: Scalars | None, f: Scalars | None, v: Scalars) -> Array:
+def power(P: ChainPhysics, tension: Scalars, dl0: Scalars | None, f: Scalars | None, v: Scalars) -> Array:
     """The actuator's power (eq. 16 generalised): [`AbstractActuator.power`][locomotion_jax.AbstractActuator.power]."""
     act = P.actuator
     if type(act).power is not AbstractActuator.power:  # a user's own: called on arrays
@@ -238,7 +287,7 @@ def power(P: Consts, tension: Scalars, dl0: Scalars | None, f: Scalars | None, v
     return sum(terms[1:], terms[0]) if terms else jnp.zeros_like(v[0])
 
 
-def power_rate(P: Consts, tension, dtension, dl0, ddl0, f, df, v, a) -> Array:
+def power_rate(P: ChainPhysics, tension, dtension, dl0, ddl0, f, df, v, a) -> Array:
     """Time derivative of [`power`][] along the motion."""
     act = P.actuator
     if type(act).power is not AbstractActuator.power:
@@ -252,14 +301,14 @@ def power_rate(P: Consts, tension, dtension, dl0, ddl0, f, df, v, a) -> Array:
     return sum(terms[1:], terms[0]) if terms else jnp.zeros_like(v[0])
 
 
-def energy(P: Consts, v: Scalars, tension: Scalars) -> Array:
+def energy(P: ChainPhysics, v: Scalars, tension: Scalars) -> Array:
     """$e = \\sum_i m_i v_i^2/2 + \\sum_j T_j^2/(2 k_j)$ (eq. 10 generalised)."""
     kin = [m * a * a for m, a in zip(P.m, v)]
     pot = [T * T / k for T, k in zip(tension, P.k)]
     return 0.5 * (sum(kin[1:], kin[0]) + sum(pot[1:], pot[0]))
 
 
-def centre_of_mass(P: Consts, x: Scalars) -> Array:
+def centre_of_mass(P: ChainPhysics, x: Scalars) -> Array:
     """$X = \\sum_i m_i x_i / \\sum_i m_i$."""
     terms = [m * a for m, a in zip(P.m, x)]
     return sum(terms[1:], terms[0]) * P.inv_mass

@@ -1,0 +1,131 @@
+"""The physics interface: what the engines ask of a mechanism on a line, one configuration at a time.
+
+A mechanism ([`Chain`][locomotion_jax.Chain]; the paper's model is its two-body case)
+hands the engines an [`AbstractPhysics`][]: its bodies' masses, damping and friction
+laws, the actuation at a drive phase, and the loads on the bodies as functions of the
+positions, with the first and second time derivatives of those loads along a motion.
+The engines own everything else: the stick/slip decisions and the events (SPEC §2), the
+integration, the dense output and the margins. So a new mechanism is one subclass, and
+each engine is written once (jax-md passes its energy function into `nve` the same way;
+diffrax's solvers see only an `AbstractTerm`).
+
+Per-body and per-load values are tuples with one scalar per body (under `vmap`, one
+vector over the configurations each), as the engines carry them.
+"""
+
+import abc
+from typing import Any, NamedTuple
+
+import equinox as eqx
+import jax.numpy as jnp
+
+from .._custom_types import Array
+from ._friction import AbstractFriction
+
+
+Scalars = tuple[Array, ...]
+"""One scalar per body (or per spring): under `vmap`, one vector over the configurations each."""
+
+
+class Loads(NamedTuple):
+    """The loads on the bodies at one instant: horizontal $F_i$ and signed normal $N_i$ (the
+    ground's reaction; eq. 5 for the paper's model), and `aux`, what the mechanism keeps of its
+    own for the rates and the energy there (a chain: its springs' geometry and tensions)."""
+
+    F: Scalars
+    N: Scalars
+    aux: Any
+
+
+class LoadRates(NamedTuple):
+    """The first time derivatives $\\dot F_i$, $\\dot N_i$ along a motion, and the mechanism's own
+    (`aux`) for the second derivatives and the actuator's power rate."""
+
+    dF: Scalars
+    dN: Scalars
+    aux: Any
+
+
+class AbstractPhysics(eqx.Module):
+    """The forces of one configuration of a mechanism, as the exact and smoothed engines use them.
+
+    Bodies $i = 0, \\dots, N-1$ move on a line with positions $x_i$ and velocities $v_i$:
+
+    $$m_i \\dot v_i = F_i(t, x) - c_i v_i - \\text{friction}_i, \\qquad \\text{friction}_i \\text{ from } n_i(N_i)$$
+
+    (eq. 9 generalised). The loads depend on time only through the actuation, which is
+    periodic with base frequency `omega`: the engines carry the phase
+    $(\\cos\\omega t, \\sin\\omega t)$ and ask for the actuation there ([`drive`][]). The
+    loads' time derivatives along a motion ([`load_rates`][], [`load_second`][]) feed the
+    engines' quintic dense output and event prediction; they are written out by the chain
+    rule, which costs a fraction of a forward-mode derivative.
+
+    **Fields** every physics has:
+
+    - `m`, `im`, `c`: masses, inverse masses and damping per body;
+    - `friction`: the [`AbstractFriction`][locomotion_jax.AbstractFriction] of each body, with
+      that body's coefficients; `mu_f`, `mu_b`: its static limits forward and backward
+      (`mu_b[i]` is `None` for an isotropic law: the stick margin is then $\\mu n_i - |F_i|$);
+    - `omega`: the actuation's base frequency; `one`: the value 1.0 at run time (see [`keep`][]).
+    """
+
+    m: eqx.AbstractVar[Scalars]
+    im: eqx.AbstractVar[Scalars]
+    c: eqx.AbstractVar[Scalars]
+    friction: eqx.AbstractVar[tuple[AbstractFriction, ...]]
+    mu_f: eqx.AbstractVar[Scalars]
+    mu_b: eqx.AbstractVar[tuple[Array | None, ...]]
+    omega: eqx.AbstractVar[Array]
+    one: eqx.AbstractVar[Array]
+
+    @property
+    def n_bodies(self) -> int:
+        return len(self.m)
+
+    def keep(self, x: Array) -> Array:
+        """Materialise `x` once per iteration: XLA on the CPU recomputes a cheap value inside
+        every kernel that consumes it, but never duplicates a division, so dividing by the
+        run-time 1.0 pins `x` to one buffer (benchmarks/NOTES.md). Exact: the value is unchanged."""
+        if x.dtype == jnp.bool_:
+            return (x.astype(self.one.dtype) / self.one) > 0.5
+        return x / self.one
+
+    @abc.abstractmethod
+    def drive(self, c1: Array, s1: Array) -> Any:
+        """The actuation at phase $(\\cos\\omega t, \\sin\\omega t) = $ `(c1, s1)` with its first two
+        time derivatives: a pytree that [`loads`][] and the rates read (entries may be `None`)."""
+
+    @abc.abstractmethod
+    def loads(self, drive: Any, x: Scalars, keep: Any = None) -> Loads:
+        """The loads at positions `x` under the actuation `drive`. `keep`, if given, is
+        [`keep`][] applied to the intermediates that several later stages share."""
+
+    @abc.abstractmethod
+    def load_rates(self, drive: Any, loads: Loads, xd: Scalars, keep: Any = None) -> LoadRates:
+        """$\\dot F_i$, $\\dot N_i$ along the velocities `xd` (zero for a stuck body)."""
+
+    @abc.abstractmethod
+    def load_second(
+        self, drive: Any, loads: Loads, rates: LoadRates, xd: Scalars, a: Scalars
+    ) -> tuple[Scalars, Scalars]:
+        """$\\ddot F_i$, $\\ddot N_i$ along the velocities `xd` and accelerations `a`."""
+
+    @abc.abstractmethod
+    def power(self, drive: Any, loads: Loads, v: Scalars) -> Array:
+        """The power the actuators put in (eq. 16 generalised): $\\dot w$."""
+
+    @abc.abstractmethod
+    def power_rate(self, drive: Any, loads: Loads, rates: LoadRates, v: Scalars, a: Scalars) -> Array:
+        """The time derivative of [`power`][] along the motion."""
+
+    @abc.abstractmethod
+    def energy(self, loads: Loads, v: Scalars) -> Array:
+        """The mechanical energy $e$, kinetic plus stored (eq. 10 generalised)."""
+
+    @abc.abstractmethod
+    def centre_of_mass(self, x: Scalars) -> Array:
+        """$X = \\sum_i m_i x_i / \\sum_i m_i$ (eq. 3 generalised): the position a measurement follows."""
+
+    @abc.abstractmethod
+    def initial_positions(self, start: str) -> Array:
+        """Positions at $t = 0$, shape `(N,)`, for a named start (`"paper"`, eq. 14, or `"relaxed"`)."""
