@@ -61,7 +61,7 @@ DT = 0.03
 """The throughput table's step: the largest of 0.01, 0.02, 0.03, 0.04 whose tau_5 error stays under the
 target 1e-3 on every accuracy configuration that keeps contact (the accuracy table shows it)."""
 MAP_HORIZON = 25.0
-"""The map case's `sweep(horizon=...)`, as in the README's example (runs end at tau_5 or this horizon)."""
+"""The map case's `sweep(horizon=...)`, as in the example of docs/maps.md (runs end at tau_5 or this horizon)."""
 TARGETS = dict(rate=1e5, ratio=1000.0, accuracy=1e-3, compile=10.0)
 """Issue 5: float64 cfg-tu/s (wall, batches >= 1024), x scipy, tau_5 relative error, compile seconds."""
 
@@ -850,7 +850,7 @@ def main():
         Path(args.out).write_text(text)
         print(text)
         if not saved["meta"]["quick"] and Path(args.out) == HERE / "RESULTS.md":
-            quote_in_readme(saved["results"], saved["meta"])
+            quote_everywhere(saved["results"], saved["meta"])
         return
 
     q = args.quick
@@ -985,15 +985,24 @@ def main():
     Path(args.out).write_text(text)
     print(text)
     if not q and Path(args.out) == HERE / "RESULTS.md":
-        quote_in_readme(results, meta)
+        quote_everywhere(results, meta)
 
 
 README_MARKS = ("<!-- benchmark-targets: start (written by benchmarks/run.py) -->", "<!-- benchmark-targets: end -->")
+QUOTED_IN = (ROOT / "README.md", ROOT / "docs" / "performance.md")
+"""The pages that quote the targets table between `README_MARKS`: the README (a summary) and
+the documentation's performance page (beside the benchmark's description)."""
+
+
+def quote_everywhere(res: dict, meta: dict) -> None:
+    """Put this run's targets table into every page of `QUOTED_IN`."""
+    for page in QUOTED_IN:
+        quote_in_readme(res, meta, readme=page)
 
 
 def quote_in_readme(res: dict, meta: dict, readme: Path = ROOT / "README.md") -> None:
-    """Put this run's targets table between the README's markers, so the README quotes
-    `RESULTS.md` instead of hand-typed numbers."""
+    """Put this run's targets table between the markers of `readme` (the README by default;
+    any page of `QUOTED_IN`), so the page quotes `RESULTS.md` instead of hand-typed numbers."""
     text = readme.read_text()
     start, end = README_MARKS
     if start not in text or end not in text:
@@ -1149,7 +1158,7 @@ def targets(res: dict, meta: dict, base: dict | None) -> list[str]:
     for r in res.get("jacfwd", []):
         if "error" in r:
             continue
-        # No target: each direction recomputes the primal (README, "Gradients": about 2.5 p plain runs).
+        # No target: each direction recomputes the primal (docs/gradients.md: about 2.5 p plain runs).
         rows.append(
             (
                 f"`jax.jacfwd` of `measure` w.r.t. {r['p']} parameter(s), batch {r['B']}: time / ({r['p']} + 1) "

@@ -2,8 +2,9 @@
 
 - `notebooks/*.ipynb` as `notebooks/*.ipynb` (rendered by mkdocs-jupyter, which must see
   them: hence the priority);
-- `experiments/REPRODUCTION.md` as `reproduction/report.md`, with the figures it links
-  (`output/...`) under `reproduction/output/`, so its relative links hold as they are.
+- the committed reproduction report `experiments/output/REPRODUCTION.md` as
+  `reproduction/report.md`, with the figures of `experiments/output/` under `reproduction/`,
+  so that its relative links (`fig05.png`) hold as they are.
 """
 
 from pathlib import Path
@@ -17,10 +18,10 @@ ROOT = Path(__file__).resolve().parent.parent
 NOTEBOOKS = "notebooks/*.ipynb"
 """Notebooks, at the same path in the site as in the repository."""
 
-MOVED = {"reproduction/report.md": "experiments/REPRODUCTION.md"}
+MOVED = {"reproduction/report.md": "experiments/output/REPRODUCTION.md"}
 """Site path: source file (relative to the repository root)."""
 
-MOVED_FOLDERS = {"reproduction/output": ("experiments/output", "**/*.png")}
+MOVED_FOLDERS = {"reproduction": ("experiments/output", "**/*.png")}
 """Site folder: (source folder, glob)."""
 
 

@@ -27,9 +27,10 @@ from ._figtools import Verdict
 from ._report import write_report
 
 
-EXPERIMENTS = Path(__file__).resolve().parents[1] / "experiments"
-DEFAULT_OUT = EXPERIMENTS / "output"
-"""Output of the main job; the report is also copied to `experiments/REPRODUCTION.md`."""
+DEFAULT_OUT = Path("experiments/output")
+"""Default output directory of the `experiments/figNN.py` scripts, relative to the working
+directory as the CLI's `figures --out` default: from the repository root, the committed
+reference figures and report. Every run writes only into its output directory."""
 
 COMMON_READINGS = (
     "Contact reading $n_i = |N_i|$ (paper) and start eq. (14), as SPEC §1 prescribes for reproductions.",
@@ -239,9 +240,8 @@ def run_figures(figs: list[str], quick: bool, out: Path) -> list[Path]:
     - `figs`: figure names ("4b", "5", "6", "7", "8", "9", "10", "12"; "fig08" etc. also
       accepted); empty for all.
     - `quick`: the small CI size instead of the default size.
-    - `out`: output directory; receives `figNN.png`, `figNN.nc` and `REPRODUCTION.md`.
-      When it is the main job's `experiments/output`, the report is also written to
-      `experiments/REPRODUCTION.md` (with links into `output/`).
+    - `out`: output directory; receives `figNN.png`, `figNN.nc` and `REPRODUCTION.md`,
+      and nothing is written outside it.
 
     **Returns:** the paths written (PNGs, data files, reports).
 
@@ -275,13 +275,12 @@ def run_figures(figs: list[str], quick: bool, out: Path) -> list[Path]:
 
 
 def write_reports(out: Path) -> list[Path]:
-    """(Re)build `out/REPRODUCTION.md` from the data files in `out`, without recomputing;
-    for the main job's `experiments/output` also `experiments/REPRODUCTION.md`."""
-    out, specs = Path(out), list(FIGURES.values())
-    paths = [write_report(specs, out, out / "REPRODUCTION.md", _version())]
-    if EXPERIMENTS.is_dir() and out.resolve() == DEFAULT_OUT.resolve():
-        paths.append(write_report(specs, out, EXPERIMENTS / "REPRODUCTION.md", _version()))
-    return paths
+    """(Re)build `out/REPRODUCTION.md` from the data files in `out`, without recomputing.
+
+    **Returns:** `[out / "REPRODUCTION.md"]`, the one file written.
+    """
+    out = Path(out)
+    return [write_report(list(FIGURES.values()), out, out / "REPRODUCTION.md", _version())]
 
 
 def script_main(fig: str, argv: list[str] | None = None) -> int:
