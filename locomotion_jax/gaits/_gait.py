@@ -15,7 +15,6 @@ unknown (its column of $M$ is zero, and so is its row when it is stuck again one
 period later), which makes the multiplier 0 that sticking contributes.
 """
 
-import enum
 from collections.abc import Sequence
 from typing import Any, overload
 
@@ -37,29 +36,7 @@ from ..model._waveform import AbstractWaveform
 from ..run._batch import mechanism_arg, prepare, unflatten
 from . import _corrector as corrector, _period as period, _select as select
 from ._chain_gait import ChainGait
-
-
-class GaitStatus(enum.IntEnum):
-    """Outcome of the periodic-orbit solve of one configuration (beside [`Status`][]).
-
-    An `enum.IntEnum`, like `Status`: `GaitStatus(int(g.status))` names a code, and the
-    members compare equal to the integer codes stored in [`Gait`][] and in sweeps.
-
-    - `CONVERGED`: $\\|\\Phi_k(y) - y\\|_\\infty \\le$ `tol` $(1 + \\|y\\|_\\infty)$ for the reported `k`.
-    - `NOT_CONVERGED`: no period in `periods` converged within `max_iter` Newton
-      iterations (a chaotic or quasi-periodic motion, a longer period, a switching
-      structure that changes under every step, a singular $M - I$, or the step cap
-      `Exact.max_steps` hit); its numbers are NaN.
-    - `LIFTOFF`: a normal force reached zero under the strict reading (transient or orbit).
-    - `INVALID`: parameters outside their valid range; nothing was integrated.
-    """
-
-    # The solvers (`_select`, `_chain_gait`) use the plain integer constants of
-    # `_select.GaitStatus`; the members take their values from there so that the two agree.
-    CONVERGED = select.GaitStatus.CONVERGED
-    NOT_CONVERGED = select.GaitStatus.NOT_CONVERGED
-    LIFTOFF = select.GaitStatus.LIFTOFF
-    INVALID = select.GaitStatus.INVALID
+from ._select import GaitStatus as GaitStatus
 
 
 class Gait(eqx.Module):

@@ -1,6 +1,7 @@
 """What the steady-gait solvers share: the outcome codes, the argument checks, and the choice,
 per configuration, among the gait periods tried (the two-mass [`steady_gait`][] and chains)."""
 
+import enum
 from typing import Any
 
 import jax
@@ -9,8 +10,11 @@ import numpy as np
 from .._status import Status
 
 
-class GaitStatus:
-    """Outcome of the periodic-orbit solve of one configuration (beside `Status`).
+class GaitStatus(enum.IntEnum):
+    """Outcome of the periodic-orbit solve of one configuration (beside [`Status`][locomotion_jax.Status]).
+
+    An `enum.IntEnum`, like `Status`: `GaitStatus(int(g.status))` names a code, and the
+    members compare equal to the integer codes stored in a gait's results and in sweeps.
 
     - `CONVERGED`: $\\|\\Phi_k(y) - y\\|_\\infty \\le$ `tol` $(1 + \\|y\\|_\\infty)$ for the reported `k`.
     - `NOT_CONVERGED`: no period in `periods` converged within `max_iter` Newton

@@ -4,7 +4,7 @@ Two kinds:
 
 - **Generic shapes** ([`start_shapes`][]): sinusoids of several strokes, sinusoids with a
   third harmonic, saw-tooth ramps of both senses and random smooth waveforms.
-- **Tension square waves** ([`tension_wave`][]): the rest length of an idealised inchworm
+- **Tension square waves** ([`tension_waves`][]): the rest length of an idealised inchworm
   gait in which the spring's tension $T$ alternates between a compression $-T_c$ and a
   tension $T_t$, each half a period. Under compression the mass whose normal force eq. (5)
   lowers slides forward while the other is held by static friction (eq. 7), under tension the
