@@ -19,7 +19,8 @@ import locomotion_jax as lj
 import numpy as np
 import pytest
 from locomotion_jax._custom_types import Contact
-from locomotion_jax.dynamics import _chain_exact as engine
+from locomotion_jax.dynamics import _chain_exact as engine, _exact as exact
+from locomotion_jax.model import _two_mass as two_mass
 from locomotion_jax.model._physics import Scalars
 
 
@@ -162,3 +163,59 @@ def test_chain_physics_is_what_the_engine_integrates_a_chain_with():
     np.testing.assert_allclose([float(q) for q in L.F], [fx, -fx], rtol=1e-12)
     np.testing.assert_allclose([float(q) for q in L.N], [float(p.m1) - fy, float(p.m2) + fy], rtol=1e-12)
     assert eqx.is_array(P.omega)
+
+
+def _end_two_mass(p, wave, contact, start, t_end, dt):
+    """The two-mass engine from the `start` position at rest to `t_end`."""
+    P = exact.consts(p, wave)
+    st = exact.init(p, wave, contact, jnp.zeros((), p.dtype), two_mass.initial_gap(p, start))
+    cond = lambda s: (s.t < t_end) & (s.status == lj.Status.OK)
+    st = jax.lax.while_loop(cond, lambda s: exact.step(p, wave, contact, dt, s, jnp.asarray(t_end), None, P)[0], st)
+    return jnp.stack([st.t, st.y.x1, st.y.v1, st.y.x2, st.y.v2, st.y.ed, st.y.w, st.t_liftoff]), st.status, st.n_switch
+
+
+def _end_n_body(p, wave, contact, start, t_end, dt):
+    """The N-body engine on the paper's model (`Params.physics`), the same run."""
+    P = p.physics(wave)
+    st = engine.init(P, contact, P.initial_positions(start))
+    cond = lambda s: (s.t < t_end) & (s.status == lj.Status.OK)
+    st = jax.lax.while_loop(cond, lambda s: engine.step(P, contact, dt, s, jnp.asarray(t_end))[0], st)
+    y = st.y
+    return jnp.stack([st.t, y.x[0], y.v[0], y.x[1], y.v[1], y.ed, y.w, st.t_liftoff]), st.status, st.n_switch
+
+
+@pytest.mark.parametrize("kind", ["sinusoid", "fourier", "spline"])
+@pytest.mark.parametrize("contact", ["strict", "paper"])
+def test_the_papers_model_on_the_n_body_engine_equals_the_two_mass_engine(kind, contact):
+    """`Params.physics(waveform)` on the N-body engine against the two-mass engine: the end states
+    (positions, velocities, e_d, w, lift-off time) to 1e-10 relative (1e-9 past a lift-off under
+    the paper's reading), status and switch counts equal, over SSL, SL and lift-off configurations
+    with any waveform (a Spline included)."""
+    omega = np.array([1.0, 3.0, 8.0, 12.0, 20.0, 9.0])
+    a = np.array([0.05, 0.02, 0.08, 0.1, 0.03, 0.06])
+    d, mhat = np.array([0.5, 0.0, 0.5, 1.0, 0.5, 0.2]), np.array([0.5, 0.3, 0.6, 0.5, 0.5, 0.4])
+    p = lj.Params(omega=omega, a=a, d=d, mhat=mhat).broadcast()
+    lbar = np.full(omega.shape, 3.0)
+    if kind == "sinusoid":
+        wave = lj.Sinusoid(p.a, p.omega, p.lbar)
+    elif kind == "fourier":
+        wave = lj.Fourier(np.stack([0.2 * a, -0.1 * a], -1), np.stack([a, 0.3 * a], -1), omega, lbar)
+    else:
+        phase = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+        wave = lj.Spline(a[:, None] * np.sin(phase + 0.3) ** 3, omega, lbar)
+    starts = ("paper", "relaxed") if kind == "sinusoid" else ("paper",)
+    for start in starts:
+        runs = [jax.jit(jax.vmap(f, in_axes=(0, 0, None, None, None, None)), static_argnums=(2, 3, 4, 5))
+                for f in (_end_two_mass, _end_n_body)]  # fmt: skip
+        (ya, sa, na), (yb, sb, nb) = (run(p, wave, contact, start, 40.0, 0.01) for run in runs)
+        assert np.array_equal(np.asarray(sa), np.asarray(sb)) and np.array_equal(np.asarray(na), np.asarray(nb))
+        ya, yb = np.asarray(ya), np.asarray(yb)
+        scale = np.maximum(np.abs(ya), 1.0)
+        assert np.all(np.isfinite(ya) == np.isfinite(yb))
+        err = np.abs(np.where(np.isfinite(ya), ya - np.where(np.isfinite(yb), yb, 0), 0)) / scale
+        err = err.max(axis=1)
+        # Integrated through a lift-off (the paper's reading, outside the model's validity, where
+        # the kink of |N| makes the results converge erratically): 1e-9 (7e-10 seen, a Spline).
+        lifted = np.isfinite(ya[:, -1])
+        assert np.all(err < np.where(lifted, 1e-9, 1e-10)), (start, err)
+        assert {int(s) for s in np.asarray(sa)} <= {lj.Status.OK, lj.Status.LIFTOFF}

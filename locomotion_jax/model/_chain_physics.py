@@ -24,6 +24,7 @@ from .._custom_types import Array
 from ._actuator import AbstractActuator
 from ._friction import AbstractFriction
 from ._physics import AbstractPhysics, LoadRates, Loads, Scalars
+from ._waveform import AbstractWaveform
 
 
 class ChainPhysics(AbstractPhysics):
@@ -50,6 +51,9 @@ class ChainPhysics(AbstractPhysics):
     inv_mass: Array  # 1 / sum_i m_i
     one: Array  # 1.0 as a runtime value (`AbstractPhysics.keep`)
     actuator: AbstractActuator
+    # Each spring's signal as a waveform of its own (any `AbstractWaveform`, the base frequency
+    # `omega`), in place of the Fourier coefficients `cos`, `sin`; `None`: the coefficients.
+    waveforms: tuple[AbstractWaveform, ...] | None = None
 
     def drive(self, c1: Array, s1: Array) -> "Drive":
         return drive(self, c1, s1)
@@ -164,10 +168,37 @@ class Drive(NamedTuple):
 
 
 def drive(P: ChainPhysics, c1: Array, s1: Array) -> Drive:
-    """The actuation at phase $(\\cos\\omega t, \\sin\\omega t)$: each spring's signal
-    $s_j = \\sum_n A_{jn}\\cos n\\omega t + B_{jn}\\sin n\\omega t$ and its rates (harmonics by the
-    angle-addition recurrence), turned into rest lengths and forces by the actuator (linear, so the
-    rates map as `split(0, ds)`). Unused entries cost nothing (the compiler drops them)."""
+    """The actuation at phase $(\\cos\\omega t, \\sin\\omega t)$: each spring's signal $s_j$ and its
+    rates ([`_fourier_signals`][], or each spring's waveform, $\\ell_0(t) - \\bar\\ell$ of
+    `AbstractWaveform.at_phase`), turned into rest lengths and forces by the actuator (linear, so
+    the rates map as `split(0, ds)`). Unused entries cost nothing (the compiler drops them)."""
+    act = P.actuator
+    base = P.lbar
+    if P.waveforms is None:
+        val, rate, acc = _fourier_signals(P, c1, s1)
+    else:
+        at = [w.at_phase(c1, s1) for w in P.waveforms]
+        rate, acc = [q[1] for q in at], [q[2] for q in at]
+        if act.applies_force:
+            val = [q[0] - w.lbar for q, w in zip(at, P.waveforms)]
+        else:  # rest length lbar_j + (l0 - lbar_w): the waveform's l0 itself where the means agree
+            val = [q[0] for q in at]
+            base = tuple(lb - w.lbar for lb, w in zip(P.lbar, P.waveforms))
+    split = [act.split(lb, s) for lb, s in zip(base, val)]
+    dsplit = [act.split(jnp.zeros_like(s), s) for s in rate]
+    ddsplit = [act.split(jnp.zeros_like(s), s) for s in acc]
+    pick = lambda pairs, k: tuple(p[k] for p in pairs)
+    length, force = act.varies_rest_length, act.applies_force
+    return Drive(
+        l0=pick(split, 0) if length else P.lbar, dl0=pick(dsplit, 0) if length else None,
+        ddl0=pick(ddsplit, 0) if length else None, f=pick(split, 1) if force else None,
+        df=pick(dsplit, 1) if force else None, ddf=pick(ddsplit, 1) if force else None,
+    )  # fmt: skip
+
+
+def _fourier_signals(P: ChainPhysics, c1: Array, s1: Array) -> tuple[list, list, list]:
+    """$s_j = \\sum_n A_{jn}\\cos n\\omega t + B_{jn}\\sin n\\omega t$ per spring with its first two rates
+    (the harmonics' phases by the angle-addition recurrence)."""
     H = len(P.cos[0]) if P.cos else 0
     phases = [(c1, s1)]
     for _ in range(H - 1):
@@ -182,17 +213,7 @@ def drive(P: ChainPhysics, c1: Array, s1: Array) -> Drive:
         val.append(v)
         rate.append(r)
         acc.append(q)
-    act = P.actuator
-    split = [act.split(lb, s) for lb, s in zip(P.lbar, val)]
-    dsplit = [act.split(jnp.zeros_like(s), s) for s in rate]
-    ddsplit = [act.split(jnp.zeros_like(s), s) for s in acc]
-    pick = lambda pairs, k: tuple(p[k] for p in pairs)
-    length, force = act.varies_rest_length, act.applies_force
-    return Drive(
-        l0=pick(split, 0) if length else P.lbar, dl0=pick(dsplit, 0) if length else None,
-        ddl0=pick(ddsplit, 0) if length else None, f=pick(split, 1) if force else None,
-        df=pick(dsplit, 1) if force else None, ddf=pick(ddsplit, 1) if force else None,
-    )  # fmt: skip
+    return val, rate, acc
 
 
 # -- springs and loads ------------------------------------------------------------------------------

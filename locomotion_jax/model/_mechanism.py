@@ -22,5 +22,10 @@ class AbstractMechanism(eqx.Module):
     """
 
     @abc.abstractmethod
+    def physics(self) -> Any:
+        """The [`AbstractPhysics`][locomotion_jax.AbstractPhysics] of one configuration: what the
+        N-body engine integrates this mechanism with."""
+
+    @abc.abstractmethod
     def dispatch(self, *, two_mass: Callable[[Any], R], chain: Callable[[Any], R]) -> R:
         """`two_mass(self)` for a `Params`, `chain(self)` for a `Chain`."""

@@ -5,6 +5,7 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
+import equinox as eqx
 import jax
 import jax.core  # (jax.core.Tracer) for type checkers
 import jax.numpy as jnp
@@ -282,6 +283,24 @@ class Params(AbstractMechanism):
                     f"{VALID_RANGES[name]} (and finite){more}."
                 )
         return self
+
+    def physics(self, waveform: Any = None) -> Any:
+        """The paper's model as the two-mass chain (SPEC §8 at $N = 2$): its
+        [`AbstractPhysics`][locomotion_jax.AbstractPhysics], for one configuration or a batch.
+
+        `waveform`: the rest length $\\ell_0(t)$, any [`AbstractWaveform`][locomotion_jax.AbstractWaveform]
+        (`None`: the sinusoid of eq. 13). Masses $m_1 = 2\\hat m$, $m_2 = 2(1 - \\hat m)$, one spring
+        $(k, d, \\bar\\ell)$, damping $c$ on each mass, `Coulomb(mu_s, mu_k)`: the loads of eqs. (2, 5, 8).
+        """
+        from ._chain import Chain
+        from ._waveform import Fourier, Sinusoid
+
+        wave = Sinusoid.from_params(self) if waveform is None else waveform
+        if isinstance(wave, (Sinusoid, Fourier)):
+            return Chain.from_params(self, wave).physics()
+        # Any other waveform drives the spring itself; the phase turns at its base frequency.
+        rest = Chain.from_params(self, Sinusoid(jnp.zeros_like(self.a), wave.omega, self.lbar)).physics()
+        return eqx.tree_at(lambda P: P.waveforms, rest, (wave,), is_leaf=lambda x: x is None)
 
     def dispatch(self, *, two_mass: Callable[[Any], R], chain: Callable[[Any], R]) -> R:
         """`two_mass(self)`: the front ends' path for the two-mass model (`AbstractMechanism`)."""
