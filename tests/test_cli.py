@@ -144,6 +144,14 @@ def test_sweep_writes_and_reads_back(tmp_path):
         (["simulate", "--mu-s", "0.3", "--no-plot"], "mu_s"),
         (["simulate", "--omega", "abc"], "--omega"),
         (["figures", "11"], "unknown figure '11'"),
+        # --t-end was checked only with --out; 0 and nan ran with exit 0
+        (["simulate", "--t-end", "0", "--no-plot"], "--t-end must be a finite number > 0"),
+        (["simulate", "--t-end", "nan"], "--t-end must be a finite number > 0"),
+        (["sweep", "--omega", "1:inf:3", "--out", "{tmp}/x.nc"], "--omega '1:inf:3': the ends of a range"),
+        (["animate", "--fps", "inf"], "--fps and --dpi must be finite"),
+        (["gait", "--omega", "0"], "--omega must be a finite number > 0"),
+        # an unusable output path gave a traceback (an OSError, not a ValueError)
+        (["animate", "--t-end", "1", "--dt", "0.05", "--out", "{tmp}/blocker/x.gif"], "--out {tmp}/blocker/x.gif"),
     ],
 )
 def test_argument_errors(tmp_path, args, mentions):
@@ -151,10 +159,30 @@ def test_argument_errors(tmp_path, args, mentions):
     before = dict(_sweep.STATS)
     res = invoke(*(a.replace("{tmp}", str(tmp_path)) for a in args))
     assert res.exit_code == 2, res.output
-    assert mentions in res.output
+    assert mentions.replace("{tmp}", str(tmp_path)) in res.output
     assert "Traceback" not in res.output
     assert res.exception is None or isinstance(res.exception, SystemExit)
     assert dict(_sweep.STATS) == before
+
+
+def test_os_errors_name_the_option(capsys):
+    """Every command's OSError is one line naming the path option it concerns, exit code 2."""
+    app = typer.Typer()
+
+    @app.command()
+    @_cli._friendly
+    def write(out: Path = typer.Option(...)) -> None:
+        raise PermissionError(13, "Permission denied", str(out / "inside.txt"))
+
+    @app.command()
+    def other() -> None:
+        pass
+
+    res = runner.invoke(app, ["write", "--out", "/somewhere/out"])
+    assert res.exit_code == 2
+    assert res.output.strip() == (
+        "Error: --out /somewhere/out: cannot use it (Permission denied: /somewhere/out/inside.txt)."
+    )
 
 
 def test_main_prints_error_and_exits_2(capsys):

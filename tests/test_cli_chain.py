@@ -71,6 +71,28 @@ def test_chain_gait_bad_input():
     assert bad.exit_code == 2 and "Error: --periods" in bad.output
 
 
+@pytest.mark.parametrize(
+    "args, mentions",
+    [
+        # --omega inf reported CONVERGED with period 0; 0 has no period either
+        (["chain-gait", "--masses", "1,1,1", "--omega", "inf", "--json"], "--omega must be a finite number > 0"),
+        (["chain-gait", "--masses", "1,1,1", "--omega", "0", "--json"], "--omega must be a finite number > 0"),
+        (["chain", "--masses", "1,1,1", "--phi", "nan"], "'phi' of TravellingWave: got phi=nan"),
+        (["chain", "--masses", "1,1,1", "--mu-k", "inf"], "'mu_k' of mass 0: got mu_k=inf"),
+        # an unusable output path: FileExistsError from deep inside, once the map was computed
+        (["chain-sweep", "--masses", "1,1,1", "--omega", "1,2", "--out", "{tmp}/blocker/c.nc"], "Cannot write"),
+        (["chain-sweep", "--masses", "1,1,1", "--omega", "1:inf:2", "--out", "{tmp}/c.nc"], "--omega"),
+    ],
+)
+def test_chain_commands_refuse_bad_input(tmp_path, args, mentions):
+    (tmp_path / "blocker").write_text("a file where a directory is needed")
+    res = invoke(*(a.replace("{tmp}", str(tmp_path)) for a in args))
+    assert res.exit_code == 2, res.output
+    assert mentions in res.output and "Traceback" not in res.output
+    assert res.exception is None or isinstance(res.exception, SystemExit)
+    assert not (tmp_path / "c.nc").exists()
+
+
 def test_chain_sweep_writes_the_map(tmp_path):
     out = tmp_path / "worm.nc"
     meas = ["--z", "0.5", "--horizon", "20", "--t-start", "10", "--dt", "0.02", "--no-progress"]

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import typer
 
+from ._errors import friendly
 from ._options import expand, model_options, run_options, to_params, Values
 
 
@@ -16,6 +17,7 @@ def register(app: typer.Typer) -> None:
     """Add the `animate` subcommand to `app`."""
 
     @app.command("animate")
+    @friendly
     @expand(model=model_options(), run=run_options(("contact", "start", "dt")))
     def animate(
         *,
@@ -54,8 +56,8 @@ def register(app: typer.Typer) -> None:
                 raise ValueError(f"--t-from must satisfy 0 <= t_from < t_end, got {t_from!r} (t_end = {t_end!r}).")
             if frames < 2:
                 raise ValueError(f"--frames must be >= 2, got {frames}.")
-            if not (fps > 0 and dpi > 0):
-                raise ValueError(f"--fps and --dpi must be > 0, got {fps!r} and {dpi!r}.")
+            if not (math.isfinite(fps) and fps > 0 and math.isfinite(dpi) and dpi > 0):
+                raise ValueError(f"--fps and --dpi must be finite numbers > 0, got {fps!r} and {dpi!r}.")
             if out.suffix.lower() != ".gif":
                 raise ValueError(f"--out must name a .gif file, got {str(out)!r}.")
             traj = simulate(

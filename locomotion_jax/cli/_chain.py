@@ -15,6 +15,7 @@ import typer
 
 from .._json import dumps
 from ._chain_options import floats, mechanism_options, to_chain, wave_options
+from ._errors import friendly
 from ._options import expand, Values
 
 
@@ -22,6 +23,7 @@ def register(app: typer.Typer) -> None:
     """Add the `chain` subcommand to `app`."""
 
     @app.command("chain")
+    @friendly
     @expand(mech=mechanism_options(), wave=wave_options())
     def chain(
         *,

@@ -14,6 +14,7 @@ import typer
 
 from .._json import dumps
 from ._chain_options import describe, mechanism_options, to_chain, wave_options
+from ._errors import friendly
 from ._options import expand, Values
 
 
@@ -63,6 +64,7 @@ def register(app: typer.Typer) -> None:
     """Add `chain-simulate`, `chain-gait` and `chain-sweep` to `app`."""
 
     @app.command("chain-simulate")
+    @friendly
     @expand(mech=mechanism_options(), wave=wave_options())
     def chain_simulate(
         *,
@@ -125,6 +127,7 @@ def register(app: typer.Typer) -> None:
             typer.echo(f"plot: {png}")
 
     @app.command("chain-gait")
+    @friendly
     @expand(mech=mechanism_options(), wave=wave_options())
     def chain_gait(
         *,
@@ -144,10 +147,11 @@ def register(app: typer.Typer) -> None:
         """
         import locomotion_jax as lj
 
-        from ._gait import _pairs, _periods
+        from ._gait import _pairs, _periods, gait_omega
 
         try:
             ks = _periods(periods)
+            gait_omega(wave["omega"])
             mech_obj = to_chain(mech, lj.TravellingWave(wave["a"], wave["omega"], wave["phi"]))
             g = lj.steady_gait(mech_obj, periods=ks, transient=transient, dynamics=lj.Exact(dt=dt),
                                contact=contact, start=start)  # fmt: skip
@@ -171,6 +175,7 @@ def register(app: typer.Typer) -> None:
             typer.echo(f"  {name:<18} {v:.6g}" if isinstance(v, float) else f"  {name:<18} {v}")
 
     @app.command("chain-sweep")
+    @friendly
     @expand(mech=mechanism_options())
     def chain_sweep(
         *,

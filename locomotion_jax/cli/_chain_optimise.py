@@ -12,6 +12,7 @@ import numpy as np
 import typer
 
 from ._chain_options import mechanism_options, to_chain
+from ._errors import friendly
 from ._options import expand, Values
 
 
@@ -44,6 +45,7 @@ def register(app: typer.Typer) -> None:
     """Add the `chain-optimize` subcommand to `app`."""
 
     @app.command("chain-optimize")
+    @friendly
     @expand(mech=mechanism_options())
     def chain_optimize(
         *,

@@ -6,6 +6,7 @@ With `--json` stdout is one JSON object; every non-finite number is `null` (`_js
 Floquet multiplier is a pair `[re, im]`.
 """
 
+import math
 from pathlib import Path
 from typing import Annotated, Any, NoReturn
 
@@ -13,6 +14,7 @@ import numpy as np
 import typer
 
 from .._json import dumps
+from ._errors import friendly
 from ._options import expand, model_options, run_options, to_params, Values
 
 
@@ -53,6 +55,12 @@ def _model_values(model: Values, params) -> dict[str, float]:
     return values
 
 
+def gait_omega(omega: float) -> None:
+    """Refuse a forcing without a period: `ValueError` naming `--omega` unless it is finite and > 0."""
+    if not (math.isfinite(omega) and omega > 0):
+        raise ValueError(f"--omega must be a finite number > 0 for a gait (its period is 2 pi / omega), got {omega!r}.")
+
+
 def _fail(err: Exception) -> NoReturn:
     typer.echo(f"Error: {err}", err=True)
     raise typer.Exit(2) from None
@@ -62,6 +70,7 @@ def register(app: typer.Typer) -> None:
     """Add the `gait` and `continue` subcommands to `app`."""
 
     @app.command("gait")
+    @friendly
     @expand(model=model_options(), run=run_options(("contact", "start", "dt")))
     def gait(
         *,
@@ -82,6 +91,7 @@ def register(app: typer.Typer) -> None:
 
         try:
             params = to_params(model)
+            gait_omega(float(params.omega))
             g = lj.steady_gait(params, periods=_periods(periods), transient=transient, contact=run["contact"],
                                start=run["start"], dynamics=lj.Exact(dt=run["dt"]))  # fmt: skip
         except ValueError as err:
@@ -105,6 +115,7 @@ def register(app: typer.Typer) -> None:
         typer.echo(f"  {'multipliers':<18} {mult}")
 
     @app.command("continue")
+    @friendly
     @expand(model=model_options(), run=run_options(("contact", "start", "dt")))
     def continue_(
         *,
@@ -130,6 +141,7 @@ def register(app: typer.Typer) -> None:
 
         try:
             params = to_params(model)
+            gait_omega(float(params.omega))
             b = lj.continuation(params, parameter, stop, periods=_periods(periods), max_points=max_points,
                                 max_step=max_step, step=min(0.01, max_step), contact=run["contact"],
                                 start=run["start"], dynamics=lj.Exact(dt=run["dt"]))  # fmt: skip

@@ -7,7 +7,6 @@ Errors in the arguments end with `Error: ...` on stderr and exit code 2, never a
 JSON output (`--json`) encodes every non-finite number as `null` (`_json.py`).
 """
 
-import functools
 import importlib
 import math
 import os
@@ -19,6 +18,7 @@ import numpy as np
 import typer
 
 from .._json import dumps
+from ._errors import friendly as _friendly, os_error_message
 from ._options import axis_options, expand, MODEL_NAMES, model_options, run_options, to_params, Values
 
 
@@ -32,20 +32,6 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
-
-
-def _friendly(fn):
-    """Turn a `ValueError` from the library (bad arguments) into `Error: ...` and exit code 2."""
-
-    @functools.wraps(fn)
-    def wrapper(*args, **kwargs):
-        try:
-            return fn(*args, **kwargs)
-        except ValueError as err:
-            typer.echo(f"Error: {err}", err=True)
-            raise typer.Exit(2) from None
-
-    return wrapper
 
 
 def _cpu_count() -> int:
@@ -168,8 +154,8 @@ def simulate(
     omega, a, d, mhat = values["omega"], values["a"], values["d"], values["mhat"]
     exact: dict[str, Any] = dict(dynamics=Exact(dt=run["dt"]), contact=run["contact"], start=run["start"])
     plot_dir = out if plot else None
-    if plot_dir is not None and t_end <= 0:
-        raise ValueError(f"--t-end must be > 0, got {t_end!r}.")
+    if not (math.isfinite(t_end) and t_end > 0):  # checked whether or not --out asks for the plot
+        raise ValueError(f"--t-end must be a finite number > 0, got {t_end!r}.")
     png = None
     if plot_dir is not None:
         try:
@@ -218,6 +204,8 @@ def parse_axis(name: str, text: str) -> float | np.ndarray:
             lo, hi, count = float(parts[0]), float(parts[1]), int(parts[2])
             if count < 1:
                 raise ValueError(f"{opt} {text!r}: empty range (count must be >= 1).")
+            if not (math.isfinite(lo) and math.isfinite(hi)):
+                raise ValueError(f"{opt} {text!r}: the ends of a range must be finite.")
             return np.linspace(lo, hi, count)
         if "," in text:
             return np.asarray([float(v) for v in text.split(",") if v.strip()], dtype=float)
@@ -371,6 +359,9 @@ def main(argv: list[str] | None = None) -> None:
         app(args=argv, prog_name="locomotion-jax")
     except ValueError as err:  # e.g. raised by a plug-in command without `_friendly`
         typer.echo(f"Error: {err}", err=True)
+        sys.exit(2)
+    except OSError as err:
+        typer.echo(f"Error: {os_error_message(err, {})}", err=True)
         sys.exit(2)
 
 

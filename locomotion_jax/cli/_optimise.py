@@ -11,6 +11,7 @@ from pathlib import Path
 
 import typer
 
+from ._errors import friendly
 from ._options import expand, model_options, to_params, Values
 
 
@@ -28,6 +29,7 @@ def register(app: typer.Typer) -> None:
     """Add the `optimize` subcommand to `app`."""
 
     @app.command("optimize")
+    @friendly
     @expand(model=model_options(("k", "c", "d", "lbar", "mu_s", "mu_k", "mhat")))  # no a, omega: the waveform's
     def optimize(
         *,

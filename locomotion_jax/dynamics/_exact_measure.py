@@ -61,7 +61,7 @@ def _setup(params, wave, z, horizon, window, contact, start, t_start, initial=No
 
     `t_start` is the measurement's start, or NaN for the paper's (`Params.t_start`);
     `initial` the state $(x_1, v_1, x_2, v_2)$ at $t = 0$, or `None` for `start`'s."""
-    params, valid = safe_params(params)
+    params, valid = safe_params(params, wave)
     dtype = params.dtype
     P = exact.consts(params, wave)
     st, ok = initial_state(params, wave, contact, start, initial)

@@ -41,7 +41,7 @@ def _row(s: exact.Hybrid) -> Array:
 
 
 def _init(params, wave, contact, start, initial=None) -> tuple[tuple, exact.Hybrid]:
-    params, valid = safe_params(params)
+    params, valid = safe_params(params, wave)
     st, ok = initial_state(params, wave, contact, start, initial)
     valid = valid & ok
     st = eqx.tree_at(lambda s: s.status, st, jnp.where(valid, st.status, Status.INVALID).astype(jnp.int32))

@@ -121,7 +121,7 @@ def _failed(sol) -> Array:
 
 
 def simulate_one(params, wave, save, contact, start, dyn):
-    params, valid = safe_params(params)
+    params, valid = safe_params(params, wave)
     y0 = _y0(params, start)
     # The motion starts at t = 0 whatever the first save time.
     sol = solve(params, wave, contact, dyn, jnp.zeros_like(save[0]), save[-1], y0, diffrax.SaveAt(ts=save, t1=True))
@@ -189,7 +189,7 @@ def measure_one(params, wave, z, horizon, window, contact, start, dyn: "Smoothed
     """Measurements of SPEC §5 on the smoothed model, in three solves:
     `[0, t_start]`, the regime window (sampled), and `[t_start, t_start + horizon]`
     terminated by the first passage $|X - X_0| = z$ (located by a root finder)."""
-    params, valid = safe_params(params)
+    params, valid = safe_params(params, wave)
     dtype = params.dtype
     y0 = _y0(params, start)
     ws = params.t_start.astype(dtype)

@@ -206,6 +206,7 @@ def steady_gait_chain(
     """[`steady_gait`][] for a [`Chain`][] (its arguments; `start` names a start at rest)."""
     check_contact_start(contact, start)
     flat, valid, shape = prepare_chain(chain, dtype)
+    valid = valid & jnp.asarray(select.periodic(np.asarray(flat.waves.omega, np.float64), shape))
     dtype_ = flat.m.dtype
     f32 = jnp.finfo(dtype_).bits < 64
     tol = (1e-5 if f32 else 1e-11) if tol is None else float(tol)
@@ -242,7 +243,7 @@ def _chain_gait(r: dict, omega: np.ndarray, dtype: Any, contact: str) -> ChainGa
     ok = r["status"] == GaitStatus.CONVERGED
     nan = lambda x: jnp.asarray(np.where(select.expand(ok, x), x, np.nan), dtype)
     out: _Period = r["out"]
-    kT = np.where(ok, r["k"] * 2 * np.pi / omega, np.nan)
+    kT = np.where(ok, r["k"] * 2 * np.pi / np.where(ok, omega, 1), np.nan)
     dX = out.dX
     ssl = np.max(out.stuck, axis=-1) > STICK_TOL
     return ChainGait(

@@ -139,7 +139,7 @@ def _correct_one(params, wave, sel, contact, dt, k, lam0, scale, z0, zref, c, go
 
     def phi(z):
         p, w = with_value(params, wave, sel, lam0 + scale * z[3])
-        p, valid = safe_params(p)
+        p, valid = safe_params(p, w)
         out = period.period_map(p, w, exact.consts(p, w), contact, dt, max_steps, k, z[:3])
         # The switching test functions' gradients come with the monodromy (to cross a switching surface).
         return jnp.concatenate([out.y, jnp.stack([out.margin, out.n_min])]), (out, valid)

@@ -240,7 +240,7 @@ def _two_mass(params: Params, periods, transient, tol, max_iter, dynamics: Exact
     else:
         run = _transient_from_batch(flat, wave, axes, contact, y_start, dynamics.dt, real(transient), mst)
     y0, valid, trans, trans_lift = run
-    valid, trans = np.asarray(valid), np.asarray(trans)
+    valid, trans = np.asarray(valid) & select.periodic(omega, shape), np.asarray(trans)
     # -1: to be solved; else the final status (invalid, a strict lift-off, the step cap).
     base = np.select(
         [~valid, trans == Status.LIFTOFF, trans != Status.OK],
@@ -278,7 +278,7 @@ def _gait(r: dict, omega: np.ndarray, flat: Params, contact: str) -> Gait:
     nan = lambda x: jnp.asarray(np.where(select.expand(ok, x), x, np.nan), dtype)
     out: period.Period = r["out"]
     k = r["k"]
-    kT = np.where(ok, k * 2 * np.pi / omega, np.nan)
+    kT = np.where(ok, k * 2 * np.pi / np.where(ok, omega, 1), np.nan)
     dX = out.dX
     M = np.where(ok[:, None, None], r["M"], np.nan)
     stuck = np.stack([out.stuck1, out.stuck2]) / np.where(ok, kT, 1)

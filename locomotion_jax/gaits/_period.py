@@ -154,7 +154,7 @@ def transient_one(params, wave, contact, start, dt, transient, max_steps):
     validity, the run's `Status` and whether a normal force reached zero. One configuration.
     `start` names an initial condition at rest (`"paper"`, `"relaxed"`), or is a section state
     $(u, v_1, v_2)$ at phase 0."""
-    params, valid = safe_params(params)
+    params, valid = safe_params(params, wave)
     P = exact.consts(params, wave)
     if isinstance(start, str):
         st = exact.init(params, wave, contact, jnp.zeros((), params.dtype), model.initial_gap(params, start))

@@ -22,13 +22,21 @@ class GaitStatus(enum.IntEnum):
       structure that changes under every step, a singular $M - I$, or the step cap
       `Exact.max_steps` hit); its numbers are NaN.
     - `LIFTOFF`: a normal force reached zero under the strict reading (transient or orbit).
-    - `INVALID`: parameters outside their valid range; nothing was integrated.
+    - `INVALID`: parameters outside their valid range (nothing was integrated), or no
+      forcing period ($\\omega \\le 0$: a gait is periodic in $2\\pi/\\omega$).
     """
 
     CONVERGED = 0
     NOT_CONVERGED = 1
     LIFTOFF = 2
     INVALID = 3
+
+
+def periodic(omega: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """Flat mask (size of the batch `shape`) of the configurations whose forcing has a period:
+    finite $\\omega > 0$ (`omega`: one value, or one per configuration of the flat batch)."""
+    size = int(np.prod(shape, dtype=np.int64))
+    return np.broadcast_to(np.isfinite(omega) & (omega > 0), (size,))
 
 
 def check(periods, transient, tol, max_iter) -> tuple[int, ...]:

@@ -9,6 +9,7 @@ each chunk is measured by `measure_chain` (the dynamics' N-mass engine).
 """
 
 import math
+import tempfile
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -91,6 +92,7 @@ def sweep_chain(
             raise ValueError(
                 f"path for a chain sweep must be a NetCDF file (.nc), written when the map is done; got {str(path)!r}."
             )
+        _check_writable(path)  # before the work, not when the map is done
     size = math.prod(shape)
     chunk = min(int(chunk_size), size)
     n_chunks = -(-size // chunk)
@@ -160,6 +162,18 @@ def sweep_chain(
     }
     ds = xr.Dataset(data, coords=coords, attrs=attrs)
     if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        ds.to_netcdf(path, engine="h5netcdf")
+        try:
+            ds.to_netcdf(path, engine="h5netcdf")
+        except OSError as err:
+            raise ValueError(f"Cannot write the sweep output at {path}: {err.strerror or err}.") from None
     return ds
+
+
+def _check_writable(path: Path) -> None:
+    """Create `path`'s folder and a file in it, or raise `ValueError` naming the path and the reason."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=path.parent, prefix=f".{path.name}.", suffix=".probe"):
+            pass
+    except OSError as err:
+        raise ValueError(f"Cannot write the sweep output at {path}: {err.strerror or err}.") from None

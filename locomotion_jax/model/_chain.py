@@ -13,20 +13,16 @@ import numpy as np
 from .._custom_types import Array, ValuesLike
 from ._actuator import AbstractActuator, RestLength
 from ._chain_physics import chain_physics, ChainPhysics
+from ._checks import broadcast_shape, real_array, related
 from ._friction import AbstractFriction, Coulomb
 from ._mechanism import AbstractMechanism, R
 from ._params import Params
-from ._springwaves import SpringFourier, to_spring_fourier, TravellingWave
-
-
-def _float(x: ValuesLike) -> Array:
-    x = jnp.asarray(x)
-    return x if jnp.issubdtype(x.dtype, jnp.floating) else x.astype(jnp.result_type(float))
+from ._springwaves import check_waveforms, SpringFourier, to_spring_fourier, TravellingWave
 
 
 def _per(name: str, x: ValuesLike, n: int, what: str) -> Array:
     """A per-mass or per-spring field: a scalar, or an array whose last axis has length `n` (or 1)."""
-    x = _float(x)
+    x = real_array(name, x)
     if x.ndim == 0:
         return x[None]
     if x.shape[-1] not in (1, n):
@@ -101,7 +97,7 @@ class Chain(AbstractMechanism):
         *,
         check: bool = True,
     ):
-        m = _float(masses)
+        m = real_array("masses", masses)
         if m.ndim == 0 or m.shape[-1] < 2:
             raise ValueError(
                 f"Invalid parameter 'masses': a chain needs N >= 2 masses (last axis); got shape {m.shape}."
@@ -113,6 +109,8 @@ class Chain(AbstractMechanism):
         self.d = _per("d", d, n - 1, "spring")
         if waveforms is None:
             waveforms = TravellingWave(0.0, 0.0)
+        if check:
+            check_waveforms(waveforms)  # named by the waveform's own fields (phi is lost in the normal form)
         self.waves, wave_lbar = to_spring_fourier(waveforms, n - 1)
         if lbar is None:
             lbar = 3.0 if wave_lbar is None else wave_lbar
@@ -133,6 +131,7 @@ class Chain(AbstractMechanism):
         if not isinstance(actuator, AbstractActuator):
             raise TypeError(f"actuator must be an AbstractActuator, got {type(actuator).__name__}.")
         self.actuator = actuator
+        _ = self.batch_shape  # fields whose batch axes do not broadcast are refused here, named
         if check and all(_concrete(x) for x in jax.tree_util.tree_leaves(self)):
             self.validate()
 
@@ -172,11 +171,11 @@ class Chain(AbstractMechanism):
 
     @property
     def batch_shape(self) -> tuple[int, ...]:
-        shapes = [x.shape[:-1] for x in (self.m, self.c, self.k, self.d, self.lbar)]
-        shapes += [self.waves.cos.shape[:-2], self.waves.sin.shape[:-2], self.waves.omega.shape]
-        shapes += [x.shape[:-1] for x in jax.tree_util.tree_leaves(self.friction) if jnp.ndim(x) > 0]
-        shapes += [() for x in jax.tree_util.tree_leaves(self.friction) if jnp.ndim(x) == 0]
-        return tuple(np.broadcast_shapes(*shapes))
+        fields = {"masses": self.m, "c": self.c, "k": self.k, "d": self.d, "lbar": self.lbar, **self.friction.fields()}
+        shapes = {n: x.shape[:-1] for n, x in fields.items()}
+        shapes |= {"waveforms (cos)": self.waves.cos.shape[:-2], "waveforms (sin)": self.waves.sin.shape[:-2],
+                   "omega": self.waves.omega.shape}  # fmt: skip
+        return broadcast_shape(shapes)
 
     @property
     def dtype(self) -> Any:
@@ -260,27 +259,27 @@ class Chain(AbstractMechanism):
         c = self.broadcast()
         fr = c.friction
         stroke = c.waves.stroke()
-        checks = [
+        # Finite values first: a NaN is reported as the parameter that holds it, not as a relation it breaks.
+        checks = [(name, jnp.isfinite(value), "finite", "mass")
+                  for name, value in [("masses", c.m), ("c", c.c), *fr.fields().items()]]  # fmt: skip
+        checks += [(name, jnp.isfinite(value), "finite", "spring") for name, value in [("k", c.k), ("d", c.d),
+                                                                                        ("lbar", c.lbar)]]  # fmt: skip
+        checks.append(("waveforms", jnp.isfinite(c.waves.cos).all(-1) & jnp.isfinite(c.waves.sin).all(-1), "finite",
+                       "spring"))  # fmt: skip
+        omega_ok = jnp.isfinite(c.waves.omega) & (c.waves.omega >= 0)
+        checks += [
+            ("omega", jnp.broadcast_to(omega_ok[..., None], c.k.shape), "omega >= 0 and finite", "spring"),
             ("masses", c.m > 0, "m_i > 0", "mass"),
             ("c", c.c >= 0, "c_i >= 0", "mass"),
             ("k", c.k > 0, "k_j > 0", "spring"),
             ("lbar", c.lbar > 0, "lbar_j > 0", "spring"),
             ("d", jnp.abs(c.d) < c.lbar, "|d_j| < lbar_j", "spring"),
-            ("omega", (c.waves.omega >= 0)[..., None], "omega >= 0", "spring"),
         ]
         if isinstance(self.actuator, RestLength):
             checks.append(("waveforms", stroke < c.lbar, "stroke (sum of amplitudes) < lbar_j", "spring"))
         ranges = fr.valid_ranges()
         for name, ok in fr.validity().items():
             checks.append((name, ok, ranges.get(name, "valid"), "mass"))
-        for name, value in [("masses", c.m), ("c", c.c), ("k", c.k), ("d", c.d), ("lbar", c.lbar)]:
-            checks.append(
-                (name, jnp.isfinite(value), "finite", "mass" if value.shape[-1] == c.m.shape[-1] else "spring")
-            )
-        for name, value in fr.fields().items():
-            checks.append((name, jnp.isfinite(value), "finite", "mass"))
-        checks.append(("waveforms", jnp.isfinite(c.waves.cos).all(-1) & jnp.isfinite(c.waves.sin).all(-1), "finite",
-                       "spring"))  # fmt: skip
         return checks
 
     def is_valid(self) -> Array:
@@ -301,8 +300,8 @@ class Chain(AbstractMechanism):
             if bad.any():
                 where = tuple(int(i) for i in np.argwhere(bad)[0])
                 at = f" at batch index {where[:-1]}" if shape else ""
-                got = float(np.asarray(values[name])[where]) if name in values else None
-                got_s = "" if got is None else f": got {'stroke' if name == 'waveforms' else name}={got!r}"
+                shown = [(n, float(np.asarray(values[n])[where])) for n in (name, *related(name, valid, values))]
+                got_s = ": got " + ", ".join(f"{'stroke' if n == 'waveforms' else n}={v!r}" for n, v in shown)
                 raise ValueError(
                     f"Invalid parameter {name!r} of {kind} {where[-1]}{at}{got_s}; the valid range is {valid}."
                 )

@@ -16,11 +16,7 @@ import jax
 import jax.numpy as jnp
 
 from .._custom_types import Array, ValuesLike
-
-
-def _arr(x: ValuesLike) -> Array:
-    x = jnp.asarray(x)
-    return x if jnp.issubdtype(x.dtype, jnp.floating) else x.astype(jnp.result_type(float))
+from ._checks import real_array
 
 
 class AbstractFriction(eqx.Module):
@@ -90,8 +86,8 @@ class Coulomb(AbstractFriction):
     mu_k: Array
 
     def __init__(self, mu_s: ValuesLike = 0.7, mu_k: ValuesLike = 0.5):
-        self.mu_s = _arr(mu_s)
-        self.mu_k = _arr(mu_k)
+        self.mu_s = real_array("mu_s", mu_s, "Coulomb")
+        self.mu_k = real_array("mu_k", mu_k, "Coulomb")
 
     def static_limits(self) -> tuple[Array, Array]:
         return self.mu_s, self.mu_s
@@ -126,10 +122,10 @@ class AnisotropicCoulomb(AbstractFriction):
     mu_k_bwd: Array
 
     def __init__(self, mu_s_fwd: ValuesLike, mu_s_bwd: ValuesLike, mu_k_fwd: ValuesLike, mu_k_bwd: ValuesLike):
-        self.mu_s_fwd = _arr(mu_s_fwd)
-        self.mu_s_bwd = _arr(mu_s_bwd)
-        self.mu_k_fwd = _arr(mu_k_fwd)
-        self.mu_k_bwd = _arr(mu_k_bwd)
+        self.mu_s_fwd = real_array("mu_s_fwd", mu_s_fwd, "AnisotropicCoulomb")
+        self.mu_s_bwd = real_array("mu_s_bwd", mu_s_bwd, "AnisotropicCoulomb")
+        self.mu_k_fwd = real_array("mu_k_fwd", mu_k_fwd, "AnisotropicCoulomb")
+        self.mu_k_bwd = real_array("mu_k_bwd", mu_k_bwd, "AnisotropicCoulomb")
 
     def static_limits(self) -> tuple[Array, Array]:
         return self.mu_s_fwd, self.mu_s_bwd
@@ -155,6 +151,10 @@ class AnisotropicCoulomb(AbstractFriction):
     def valid_ranges(self) -> dict[str, str]:
         return {"mu_s_fwd": "mu_s_fwd >= mu_k_fwd", "mu_s_bwd": "mu_s_bwd >= mu_k_bwd",
                 "mu_k_fwd": "mu_k_fwd >= 0", "mu_k_bwd": "mu_k_bwd >= 0"}  # fmt: skip
+
+
+STRIBECK_R_MAX = 40.0
+"""Largest $|v|/v_s$ that [`Stribeck`][] evaluates: $e^{-40^2}$ is zero in float64 and float32."""
 
 
 class Stribeck(AbstractFriction):
@@ -185,11 +185,11 @@ class Stribeck(AbstractFriction):
         mu_s_bwd: ValuesLike | None = None,
         mu_k_bwd: ValuesLike | None = None,
     ):
-        self.mu_s = _arr(mu_s)
-        self.mu_k = _arr(mu_k)
-        self.v_s = _arr(v_s)
-        self.mu_s_bwd = self.mu_s if mu_s_bwd is None else _arr(mu_s_bwd)
-        self.mu_k_bwd = self.mu_k if mu_k_bwd is None else _arr(mu_k_bwd)
+        self.mu_s = real_array("mu_s", mu_s, "Stribeck")
+        self.mu_k = real_array("mu_k", mu_k, "Stribeck")
+        self.v_s = real_array("v_s", v_s, "Stribeck")
+        self.mu_s_bwd = self.mu_s if mu_s_bwd is None else real_array("mu_s_bwd", mu_s_bwd, "Stribeck")
+        self.mu_k_bwd = self.mu_k if mu_k_bwd is None else real_array("mu_k_bwd", mu_k_bwd, "Stribeck")
 
     def static_limits(self) -> tuple[Array, Array]:
         return self.mu_s, self.mu_s_bwd
@@ -198,13 +198,18 @@ class Stribeck(AbstractFriction):
         fwd = direction > 0
         mu_s = jnp.where(fwd, self.mu_s, self.mu_s_bwd)
         mu_k = jnp.where(fwd, self.mu_k, self.mu_k_bwd)
-        r = speed / self.v_s
+        # Beyond R_MAX the bump is below the dtype's resolution; the clip keeps r * r (and its
+        # derivative) finite however small v_s is.
+        r = jnp.minimum(speed / self.v_s, STRIBECK_R_MAX)
         return mu_k + (mu_s - mu_k) * jnp.exp(-r * r)
 
     def validity(self) -> dict[str, Array]:
-        return {"mu_s": self.mu_s >= self.mu_k, "mu_k": self.mu_k >= 0, "v_s": self.v_s > 0,
+        # 1 / v_s**2 must be finite: the law's rate (dense output, event prediction) scales with it.
+        v_s_ok = (self.v_s > 0) & jnp.isfinite(1 / (self.v_s * self.v_s))
+        return {"mu_s": self.mu_s >= self.mu_k, "mu_k": self.mu_k >= 0, "v_s": v_s_ok,
                 "mu_s_bwd": self.mu_s_bwd >= self.mu_k_bwd, "mu_k_bwd": self.mu_k_bwd >= 0}  # fmt: skip
 
     def valid_ranges(self) -> dict[str, str]:
-        return {"mu_s": "mu_s >= mu_k", "mu_k": "mu_k >= 0", "v_s": "v_s > 0", "mu_s_bwd": "mu_s_bwd >= mu_k_bwd",
-                "mu_k_bwd": "mu_k_bwd >= 0"}  # fmt: skip
+        return {"mu_s": "mu_s >= mu_k", "mu_k": "mu_k >= 0",
+                "v_s": "v_s > 0 with 1/v_s**2 finite (v_s > 1e-154 in float64, 1e-19 in float32)",
+                "mu_s_bwd": "mu_s_bwd >= mu_k_bwd", "mu_k_bwd": "mu_k_bwd >= 0"}  # fmt: skip

@@ -12,6 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array, ArrayLike
+from ._checks import broadcast_shape, real_array
 from ._mechanism import AbstractMechanism, R
 
 
@@ -86,7 +87,8 @@ class Params(AbstractMechanism):
     - `omega`: actuation frequency, $\\omega \\ge 0$ (eq. 13).
     - `mu_s`, `mu_k`: static and kinetic friction, $\\mu_s \\ge \\mu_k \\ge 0$.
     - `mhat`: mass ratio $\\hat m = m_1 / (m_1 + m_2) \\in (0, 1)$.
-    - `check`: validate concrete values (default). Invalid values raise
+    - `check`: validate concrete values (default). Complex or non-numeric values and
+      fields whose shapes do not broadcast are refused whatever `check`. Invalid values raise
       `ValueError` naming the parameter, its valid range and, in a batch, the
       offending index. With `check=False` invalid configurations are instead
       flagged per configuration (`Status.INVALID`) by the simulators.
@@ -128,10 +130,8 @@ class Params(AbstractMechanism):
     ):
         values = dict(k=k, c=c, d=d, lbar=lbar, a=a, omega=omega, mu_s=mu_s, mu_k=mu_k, mhat=mhat)
         for name, value in values.items():
-            arr = jnp.asarray(value)
-            if not jnp.issubdtype(arr.dtype, jnp.floating):
-                arr = arr.astype(jnp.result_type(float))
-            setattr(self, name, arr)
+            setattr(self, name, real_array(name, value))
+        _ = self.batch_shape  # fields that do not broadcast are refused here, named, whatever `check`
         if check and all(_is_concrete(getattr(self, n)) for n in PARAM_NAMES):
             self.validate()
 
@@ -180,7 +180,7 @@ class Params(AbstractMechanism):
     @property
     def batch_shape(self) -> tuple[int, ...]:
         """Broadcast shape of all fields (``()`` for a single configuration)."""
-        return tuple(np.broadcast_shapes(*(getattr(self, n).shape for n in PARAM_NAMES)))
+        return broadcast_shape({n: getattr(self, n).shape for n in PARAM_NAMES})
 
     @property
     def dtype(self) -> jnp.dtype:
@@ -312,9 +312,13 @@ def batch_indices(shape: tuple[int, ...]) -> list[tuple[int, ...]]:
     return list(itertools.product(*(range(s) for s in shape)))
 
 
-def safe_params(params: Params) -> tuple[Params, jax.Array]:
+def safe_params(params: Params, wave: Any = None) -> tuple[Params, jax.Array]:
     """Replace an invalid configuration by the defaults (so nothing becomes NaN) and
-    return the validity flag; the caller marks it `Status.INVALID` and skips it."""
-    valid = params.is_valid()
+    return the validity flag; the caller marks it `Status.INVALID` and skips it.
+
+    With the configuration's actuation `wave` (an `AbstractWaveform`), its validity
+    (`AbstractWaveform.is_valid`: finite coefficients, a positive rest length) counts too;
+    the wave itself is not replaced, so the caller must not advance an invalid configuration."""
+    valid = params.is_valid() if wave is None else params.is_valid() & wave.is_valid()
     values = {n: jnp.where(valid, getattr(params, n), jnp.asarray(DEFAULTS[n], params.dtype)) for n in PARAM_NAMES}
     return Params(**values, check=False), valid

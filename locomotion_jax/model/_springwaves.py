@@ -1,11 +1,13 @@
 """Actuation signals of a chain's springs: per-spring Fourier series of one base frequency."""
 
 from collections.abc import Sequence
+from typing import Any
 
 import equinox as eqx
 import jax.numpy as jnp
 
 from .._custom_types import Array, ValuesLike
+from ._checks import broadcast_shape, Check, first_invalid, is_concrete, real_array
 from ._waveform import AbstractWaveform, Fourier, Sinusoid
 
 
@@ -24,9 +26,9 @@ class SpringFourier(eqx.Module):
     omega: Array
 
     def __init__(self, cos: ValuesLike, sin: ValuesLike, omega: ValuesLike):
-        self.cos = jnp.asarray(cos)
-        self.sin = jnp.asarray(sin)
-        self.omega = jnp.asarray(omega)
+        self.cos = real_array("cos", cos, "SpringFourier")
+        self.sin = real_array("sin", sin, "SpringFourier")
+        self.omega = real_array("omega", omega, "SpringFourier")
         if self.cos.ndim < 2 or self.cos.shape[-2:] != self.sin.shape[-2:]:
             raise ValueError(
                 f"SpringFourier: 'cos' and 'sin' need shapes (..., springs, harmonics), equal in their last two "
@@ -59,6 +61,17 @@ class SpringFourier(eqx.Module):
         """Upper bound of $\\max_t |s_j(t)|$ per spring (sum of the harmonics' amplitudes)."""
         return jnp.sqrt(self.cos**2 + self.sin**2).sum(-1)
 
+    def checks(self) -> list[Check]:
+        """`(field, valid mask, valid range)`: finite coefficients, $\\omega \\ge 0$ and finite (batch shape)."""
+        return [("cos", jnp.isfinite(self.cos).all((-2, -1)), "finite"),
+                ("sin", jnp.isfinite(self.sin).all((-2, -1)), "finite"),
+                ("omega", jnp.isfinite(self.omega) & (self.omega >= 0), "omega >= 0 and finite")]  # fmt: skip
+
+    def validate(self) -> "SpringFourier":
+        """Raise `ValueError` at the first invalid value (field, valid range, batch index)."""
+        first_invalid("SpringFourier", self.checks(), {"cos": self.cos, "sin": self.sin, "omega": self.omega})
+        return self
+
 
 class TravellingWave(eqx.Module):
     """A wave along the chain: $s_j(t) = a \\sin(\\omega t - j\\varphi)$ on spring $j = 0, \\dots, S-1$.
@@ -75,8 +88,21 @@ class TravellingWave(eqx.Module):
     phi: Array
 
     def __init__(self, a: ValuesLike, omega: ValuesLike, phi: ValuesLike = 0.0):
+        fields = {n: real_array(n, v, "TravellingWave") for n, v in (("a", a), ("omega", omega), ("phi", phi))}
+        broadcast_shape({n: x.shape for n, x in fields.items()})  # names the fields that do not broadcast
         # One batch shape for the three (a batch may vary any of them).
-        self.a, self.omega, self.phi = jnp.broadcast_arrays(jnp.asarray(a), jnp.asarray(omega), jnp.asarray(phi))
+        self.a, self.omega, self.phi = jnp.broadcast_arrays(*fields.values())
+
+    def checks(self) -> list[Check]:
+        """`(field, valid mask, valid range)`: finite `a` and `phi`, $\\omega \\ge 0$ and finite."""
+        return [("a", jnp.isfinite(self.a), "finite"),
+                ("omega", jnp.isfinite(self.omega) & (self.omega >= 0), "omega >= 0 and finite"),
+                ("phi", jnp.isfinite(self.phi), "finite")]  # fmt: skip
+
+    def validate(self) -> "TravellingWave":
+        """Raise `ValueError` at the first invalid value (field, valid range, batch index)."""
+        first_invalid("TravellingWave", self.checks(), {"a": self.a, "omega": self.omega, "phi": self.phi})
+        return self
 
     def spring_fourier(self, springs: int) -> SpringFourier:
         """$a \\sin(\\omega t - j\\varphi) = a\\cos(j\\varphi) \\sin\\omega t - a \\sin(j\\varphi) \\cos\\omega t$."""
@@ -138,3 +164,21 @@ def to_spring_fourier(waveforms, springs: int) -> tuple[SpringFourier, Array | N
     B = jnp.stack(jnp.broadcast_arrays(*(c[1] for c in coeffs)), axis=-2)
     lbar = jnp.stack(jnp.broadcast_arrays(*(jnp.asarray(w.lbar) for w in waveforms)), axis=-1)
     return SpringFourier(A, B, omegas[0]), lbar
+
+
+def check_waveforms(waveforms: Any) -> None:
+    """Raise `ValueError` at the first invalid value of a chain's `waveforms` argument (as
+    [`to_spring_fourier`][] accepts it) whose values are known, named by the waveform's own
+    field (`phi` of a `TravellingWave`, `a` of the `Sinusoid` of spring `j`); values under
+    `jit` are left to the chain's validity mask."""
+    if isinstance(waveforms, (SpringFourier, TravellingWave, AbstractWaveform)):
+        if is_concrete(waveforms):
+            waveforms.validate()
+        return
+    if isinstance(waveforms, Sequence):
+        for j, w in enumerate(waveforms):
+            if isinstance(w, AbstractWaveform) and is_concrete(w):
+                try:
+                    w.validate()
+                except ValueError as err:
+                    raise ValueError(f"waveforms[{j}] (the waveform of spring {j}): {err}") from None

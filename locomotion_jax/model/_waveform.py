@@ -1,11 +1,15 @@
 """Actuation waveforms: the rest length $\\ell_0(t)$ and its rate (eq. 13 and beyond)."""
 
 import abc
+import dataclasses
+from typing import ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 
 from .._custom_types import Array, ArrayLike, Float
+from ._checks import all_valid, Check, first_invalid, real_array
 from ._params import Params
 
 
@@ -50,6 +54,35 @@ class AbstractWaveform(eqx.Module):
     def stroke(self) -> Array:
         """An upper bound of $\\max_t |\\ell_0(t) - \\bar\\ell|$ (sum of harmonic amplitudes)."""
 
+    stroke_check: ClassVar[tuple[str, str]] = ("stroke", "stroke < lbar")
+    """Name and valid range of the bound on the stroke in messages (the rest length stays positive)."""
+
+    def coefficients(self) -> dict[str, Array]:
+        """The shape's coefficient arrays by field name, each with a last axis of coefficients
+        (checked finite by [`checks`][]); a waveform of your own may list its own."""
+        return {}
+
+    def checks(self) -> list[Check]:
+        """`(field, valid mask, valid range)` of every constraint, finite values first: finite
+        coefficients, $\\omega \\ge 0$, $\\bar\\ell > 0$, and a stroke below $\\bar\\ell$ (so that
+        the rest length stays positive). The masks have the waveform's batch shape."""
+        out: list[Check] = [(n, jnp.isfinite(x).all(-1), "finite") for n, x in self.coefficients().items()]
+        out.append(("omega", jnp.isfinite(self.omega) & (self.omega >= 0), "omega >= 0 and finite"))
+        out.append(("lbar", jnp.isfinite(self.lbar) & (self.lbar > 0), "lbar > 0 and finite"))
+        out.append((self.stroke_check[0], self.stroke() < self.lbar, self.stroke_check[1]))
+        return out
+
+    def is_valid(self) -> Array:
+        """Traceable mask (the waveform's batch shape) of valid waveforms ([`checks`][])."""
+        checks = self.checks()
+        return all_valid(checks, tuple(np.broadcast_shapes(*(jnp.shape(m) for _, m, _ in checks))))
+
+    def validate(self) -> "AbstractWaveform":
+        """Raise `ValueError` at the first invalid value: the field, its valid range, the batch index."""
+        values = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)} | {"stroke": self.stroke()}
+        first_invalid(type(self).__name__, self.checks(), values)
+        return self
+
 
 class Sinusoid(AbstractWaveform):
     """The paper's actuation, eq. (13): $\\ell_0(t) = a \\sin(\\omega t) + \\bar\\ell$."""
@@ -58,10 +91,15 @@ class Sinusoid(AbstractWaveform):
     omega: Array
     lbar: Array
 
+    stroke_check: ClassVar[tuple[str, str]] = ("a", "|a| < lbar")
+
     def __init__(self, a: ArrayLike, omega: ArrayLike, lbar: ArrayLike):
-        self.a = jnp.asarray(a)
-        self.omega = jnp.asarray(omega)
-        self.lbar = jnp.asarray(lbar)
+        self.a = real_array("a", a, "Sinusoid")
+        self.omega = real_array("omega", omega, "Sinusoid")
+        self.lbar = real_array("lbar", lbar, "Sinusoid")
+
+    def coefficients(self) -> dict[str, Array]:
+        return {"a": self.a[..., None]}
 
     @classmethod
     def from_params(cls, params: Params) -> "Sinusoid":
@@ -101,11 +139,13 @@ class Fourier(AbstractWaveform):
     omega: Array
     lbar: Array
 
+    stroke_check: ClassVar[tuple[str, str]] = ("stroke", "stroke = sum_n sqrt(cos_n^2 + sin_n^2) < lbar")
+
     def __init__(self, cos: ArrayLike, sin: ArrayLike, omega: ArrayLike, lbar: ArrayLike):
-        self.cos = jnp.asarray(cos)
-        self.sin = jnp.asarray(sin)
-        self.omega = jnp.asarray(omega)
-        self.lbar = jnp.asarray(lbar)
+        self.cos = real_array("cos", cos, "Fourier")
+        self.sin = real_array("sin", sin, "Fourier")
+        self.omega = real_array("omega", omega, "Fourier")
+        self.lbar = real_array("lbar", lbar, "Fourier")
         if self.cos.shape[-1:] != self.sin.shape[-1:] or self.cos.ndim == 0:
             raise ValueError(
                 f"Fourier: 'cos' and 'sin' need the same number of harmonics N >= 1 "
@@ -122,6 +162,9 @@ class Fourier(AbstractWaveform):
     @property
     def harmonics(self) -> int:
         return self.cos.shape[-1]
+
+    def coefficients(self) -> dict[str, Array]:
+        return {"cos": self.cos, "sin": self.sin}
 
     def __call__(self, t: ArrayLike) -> tuple[Array, Array]:
         return self.at_phase(jnp.cos(self.omega * t), jnp.sin(self.omega * t))[:2]
@@ -196,10 +239,12 @@ class Spline(AbstractWaveform):
     omega: Array
     lbar: Array
 
+    stroke_check: ClassVar[tuple[str, str]] = ("stroke", "stroke = max_j |control_j| < lbar")
+
     def __init__(self, control: ArrayLike, omega: ArrayLike, lbar: ArrayLike):
-        self.control = jnp.asarray(control)
-        self.omega = jnp.asarray(omega)
-        self.lbar = jnp.asarray(lbar)
+        self.control = real_array("control", control, "Spline")
+        self.omega = real_array("omega", omega, "Spline")
+        self.lbar = real_array("lbar", lbar, "Spline")
         if self.control.ndim == 0 or self.control.shape[-1] < 4:
             raise ValueError(
                 f"Spline: 'control' needs M >= 4 values along its last axis (got shape {self.control.shape})."
@@ -208,6 +253,9 @@ class Spline(AbstractWaveform):
     @property
     def knots(self) -> int:
         return self.control.shape[-1]
+
+    def coefficients(self) -> dict[str, Array]:
+        return {"control": self.control}
 
     def __call__(self, t: ArrayLike) -> tuple[Array, Array]:
         phase = self.omega * t

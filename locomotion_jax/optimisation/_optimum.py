@@ -73,6 +73,10 @@ class Settings(eqx.Module):
             raise ValueError("Settings: starts, outer and inner must be >= 1.")
         if not self.eps_schedule or any(not (e > 0) for e in self.eps_schedule):
             raise ValueError(f"Settings.eps_schedule must be non-empty and positive, got {self.eps_schedule!r}.")
+        for name in ("transient", "measured"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"Settings.{name} must be a finite time > 0, got {value!r}.")
 
 
 class ExactSettings(eqx.Module):

@@ -15,6 +15,7 @@ from ..dynamics._base import AbstractDynamics
 from ..dynamics._exact_dynamics import Exact
 from ..dynamics._forward import concrete_value
 from ..model._chain import Chain
+from ..model._checks import is_concrete
 from ..model._mechanism import AbstractMechanism
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform, Sinusoid
@@ -43,7 +44,9 @@ def prepare(params: Params, waveform: AbstractWaveform | None, dtype: Any):
     """Cast, broadcast and flatten; returns `(flat_params, flat_wave, wave_axes, shape)`.
 
     A waveform whose `omega` carries the params' batch shape is batched with
-    them; otherwise it is shared by every configuration.
+    them; otherwise it is shared by every configuration. A `waveform` whose values are
+    known here is validated (`AbstractWaveform.validate`: `ValueError` naming the field
+    and its valid range); under `jit` the engines flag an invalid one `Status.INVALID`.
     """
     if not isinstance(params, Params):
         raise TypeError(f"params must be a locomotion_jax.Params, got {type(params).__name__}.")
@@ -61,6 +64,8 @@ def prepare(params: Params, waveform: AbstractWaveform | None, dtype: Any):
     else:
         if not isinstance(waveform, AbstractWaveform):
             raise TypeError(f"waveform must be an AbstractWaveform, got {type(waveform).__name__}.")
+        if is_concrete(waveform):
+            waveform.validate()  # under `jit` an invalid waveform is flagged INVALID instead (`safe_params`)
         cast: AbstractWaveform = jax.tree_util.tree_map(lambda x: jnp.asarray(x, dt), waveform)
         if shape and jnp.shape(cast.omega) == shape:
             nb = len(shape)
