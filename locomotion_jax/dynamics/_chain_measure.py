@@ -12,7 +12,6 @@ import jax
 import jax.numpy as jnp
 
 from .._status import Regime, Status
-from ..model._chain import Chain
 from ..model._physics import AbstractPhysics
 from . import _chain_exact as engine
 from ._compile import engine_jit
@@ -37,7 +36,6 @@ class _Acc(eqx.Module):
 
 
 class _Fixed(NamedTuple):
-    C: Chain
     P: AbstractPhysics
     ws: jax.Array
     we: jax.Array
@@ -45,8 +43,7 @@ class _Fixed(NamedTuple):
     z: jax.Array
 
 
-def _setup(C, valid, t_start, z, horizon, window, contact, start):
-    P = C.physics()
+def _setup(P: AbstractPhysics, valid, t_start, z, horizon, window, contact, start):
     st = chain_initial_state(P, valid, contact, start)
     dtype = st.t.dtype
     ws = t_start.astype(dtype)
@@ -57,7 +54,7 @@ def _setup(C, valid, t_start, z, horizon, window, contact, start):
         y_z=st.y.map(jnp.zeros_like), stuck=tuple(map(jnp.zeros_like, st.y.x)), steps=jnp.zeros((), jnp.int32),
         before_z=jnp.asarray(jnp.inf, dtype),
     )  # fmt: skip
-    return _Fixed(C, P, ws, ws + window, ws + horizon, jnp.asarray(z, dtype)), (st, acc)
+    return _Fixed(P, ws, ws + window, ws + horizon, jnp.asarray(z, dtype)), (st, acc)
 
 
 def _finished(f: _Fixed, s, a):
@@ -132,26 +129,31 @@ def _results(f: _Fixed, dyn, contact) -> dict:
     )  # fmt: skip
 
 
-def _measure_batch(C, valid, t_start, z, horizon, window, contact, start, dt, max_steps, lanes):
+def _measure_batch(P, valid, t_start, z, horizon, window, contact, start, dt, max_steps, lanes):
     n = valid.shape[0]
-    take = lambda i: (jax.tree_util.tree_map(lambda x: x[i], C), valid[i], t_start[i])
+    take = lambda i: (jax.tree_util.tree_map(lambda x: x[i], P), valid[i], t_start[i])
     setup = lambda i: _setup(*take(i), z, horizon, window, contact, start)
     running = lambda f, d: _running(f, d, max_steps)
     advance = lambda f, d: _advance(f, d, contact, dt)
     results = lambda f, d: _results(f, d, contact)
-    order = jnp.argsort(-jnp.where(jnp.isfinite(C.waves.omega), C.waves.omega, -jnp.inf))
+    order = jnp.argsort(-jnp.where(jnp.isfinite(P.omega), P.omega, -jnp.inf))
     return run_queue(setup, running, advance, results, n, lanes, order)
 
 
 _measure_batch = engine_jit(_measure_batch, ("contact", "start", "dt", "lanes"))
 
 
-def measure_batch(flat: Chain, valid, t_start, z, horizon, window, contact, start, dt, max_steps: int) -> dict:
+def measure_batch(
+    physics: AbstractPhysics, valid, t_start, z, horizon, window, contact, start, dt, max_steps: int
+) -> dict:
     """The fields of a [`ChainMeasurement`][locomotion_jax.ChainMeasurement] of a flat batch of
-    chains, measured from `t_start` (one per configuration); `max_steps` caps each one's iterations."""
+    mechanisms given by their physics (every array field with the batch's leading axis: a flat
+    chain's `physics()`, or the paper's model's), measured from `t_start` (one per
+    configuration); `max_steps` caps each one's iterations."""
     n = valid.shape[0]
-    z_, h_, w_ = (jnp.asarray(v, flat.dtype) for v in (z, horizon, window))
+    dtype = physics.one.dtype
+    z_, h_, w_ = (jnp.asarray(v, dtype) for v in (z, horizon, window))
     lanes = min(n, MICRO_BATCH_CPU) if jax.default_backend() == "cpu" else n
     return _measure_batch(
-        flat, valid, t_start, z_, h_, w_, contact, start, dt, jnp.asarray(max_steps, jnp.int32), lanes
+        physics, valid, t_start, z_, h_, w_, contact, start, dt, jnp.asarray(max_steps, jnp.int32), lanes
     )

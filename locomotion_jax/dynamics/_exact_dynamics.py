@@ -108,7 +108,9 @@ class Exact(AbstractDynamics):
         # batched eigensolver inside it can deadlock XLA's CPU thread pool (seen at N = 8, batch 1024).
         ts = jnp.where(jnp.isfinite(t_start), t_start, chain.t_start)
         max_steps = self.step_cap(float(np.max(np.asarray(ts))) + horizon)
-        return _chain_measure.measure_batch(chain, valid, ts, z, horizon, window, contact, start, self.dt, max_steps)
+        return _chain_measure.measure_batch(
+            chain.physics(), valid, ts, z, horizon, window, contact, start, self.dt, max_steps
+        )
 
     def measure_chunk(
         self,
