@@ -23,12 +23,12 @@ import numpy as np
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover - Python 3.10
-    import tomli as tomllib
+    import tomli as tomllib  # pyright: ignore[reportMissingImports]
 
 from ._actuator import AbstractActuator, InternalForce, RestLength
 from ._chain import Chain
 from ._friction import AbstractFriction, AnisotropicCoulomb, Coulomb, Stribeck
-from ._params import DEFAULTS, PARAM_NAMES, Params
+from ._params import PARAM_NAMES, Params
 from ._springwaves import SpringFourier, TravellingWave
 from ._waveform import AbstractWaveform, Fourier, Sinusoid, Spline
 
@@ -113,19 +113,19 @@ class _Table:
             return [float(v) for v in value]
         self.fail(key, f"expected a number or a list of {n} numbers (one per {what}), got {_shown(value)}")
 
-    def vector(self, key: str, at_least: int = 1) -> list[float]:
+    def vector(self, key: str, at_least: int = 1) -> np.ndarray:
         value = self.required(key)
         if not (isinstance(value, list) and len(value) >= at_least and all(_is_number(v) for v in value)):
             self.fail(key, f"expected a list of at least {at_least} number(s), got {_shown(value)}")
-        return [float(v) for v in value]
+        return np.asarray(value, float)
 
-    def matrix(self, key: str, rows: int, what: str) -> list[list[float]]:
+    def matrix(self, key: str, rows: int, what: str) -> np.ndarray:
         value = self.required(key)
         ok = isinstance(value, list) and len(value) == rows and all(isinstance(r, list) and r for r in value)
         ok = ok and len({len(r) for r in value}) == 1 and all(_is_number(v) for r in value for v in r)
         if not ok:
             self.fail(key, f"expected a list of {rows} lists (one per {what}) of as many numbers, got {_shown(value)}")
-        return [[float(v) for v in r] for r in value]
+        return np.asarray(value, float)
 
     def choice(self, key: str, choices: Sequence[str]) -> str:
         value = self.required(key)
@@ -210,7 +210,7 @@ def _paper(doc: _Table) -> tuple[Params, AbstractWaveform | None]:
     if table is not None:
         table.only(PARAM_NAMES)
         values = {n: table.number(n) for n in PARAM_NAMES if table.has(n)}
-    params = Params(**{**DEFAULTS, **values})
+    params = Params.from_dict(values)  # the others: the paper's defaults
     wave = doc.sub("waveform")
     return params, None if wave is None else _waveform_of_paper(wave, params)
 
@@ -232,7 +232,7 @@ def _spring_waveform(t: _Table, lbar: float) -> AbstractWaveform:
 def _chain_waveforms(doc: _Table, springs: int, lbar: float | list[float]) -> Any:
     lbars = np.broadcast_to(np.asarray(lbar, float), (springs,)).tolist()
     if doc.has("waveform") and doc.has("waveforms"):
-        doc.fail("waveforms", "give either [waveform] (one for the chain) or [[waveforms]] (one per spring), not both")
+        doc.fail("[[waveforms]]", "give either [waveform] (one for the chain) or [[waveforms]] (one per spring)")
     if doc.has("waveforms"):
         items = doc.data["waveforms"]
         if not (isinstance(items, list) and len(items) == springs):
@@ -271,19 +271,24 @@ def _chain(doc: _Table) -> Chain:
     t.only(("masses", "k", "d", "lbar", "c"))
     masses = t.vector("masses", 2)
     n = len(masses)
-    springs = {name: t.numbers(name, n - 1, "spring", default) for name, default in
-               (("k", 50.0), ("d", 0.5), ("lbar", 3.0))}  # fmt: skip
+    k, d, lbar = (
+        t.numbers(name, n - 1, "spring", default) for name, default in (("k", 50.0), ("d", 0.5), ("lbar", 3.0))
+    )
     c = t.numbers("c", n, "mass", 0.01)
     friction = doc.sub("friction")
     actuator = doc.sub("actuator")
     if actuator is not None:
         actuator.only(("type",))
-    waves = _chain_waveforms(doc, n - 1, springs["lbar"])
+    waves = _chain_waveforms(doc, n - 1, lbar)
     return Chain(
-        masses=masses, **springs, c=c, waveforms=waves,
+        masses=masses, k=k, d=d, lbar=lbar, c=c, waveforms=waves,
         friction=None if friction is None else _friction(friction, n),
         actuator=None if actuator is None else ACTUATORS[actuator.choice("type", tuple(ACTUATORS))](),
     )  # fmt: skip
+
+
+_TABLES: tuple[str, ...] = ("params", "chain", "friction", "waveform")
+"""Where the field that a constructor's message names is looked for, to give its line."""
 
 
 def _read(source: _Source, text: str) -> tuple[Params | Chain, AbstractWaveform | None]:
@@ -308,7 +313,9 @@ def _read(source: _Source, text: str) -> tuple[Params | Chain, AbstractWaveform 
     except MechanismFileError:
         raise
     except (ValueError, TypeError) as err:  # the constructors' checks of the values
-        source.fail(str(err).rstrip("."))
+        named = re.match(r"Invalid parameter '(\w+)'", str(err))
+        lines = [source.line_of(table, None, named.group(1)) for table in _TABLES] if named else []
+        source.fail(str(err).rstrip("."), next((line for line in lines if line is not None), None))
 
 
 # -- the public functions --------------------------------------------------------------------------------------
