@@ -38,6 +38,8 @@ from .model import (
     Stribeck as Stribeck,
     TravellingWave as TravellingWave,
 )
+from .model._files import load_mechanism as load_mechanism, MechanismFileError as MechanismFileError
+from .model._files_save import save_mechanism as save_mechanism
 from .model._params import (
     DEFAULTS as DEFAULTS,
     PARAM_NAMES as PARAM_NAMES,

@@ -329,9 +329,10 @@ PLUGINS: tuple[str, ...] = (
     "locomotion_jax.cli._gait",
     "locomotion_jax.cli._chain_commands",
     "locomotion_jax.cli._chain_optimise",
+    "locomotion_jax.cli._files",
 )
 """Modules that add subcommands (`optimize`, `animate`, `chain`, `gait`, `continue`, `chain-simulate`, `chain-gait`,
-`chain-sweep`, `chain-optimize`) through `register(app)`;
+`chain-sweep`, `chain-optimize`, `measure`) through `register(app)`;
 [`_register_optional`][] skips one whose module is absent."""
 
 
