@@ -99,12 +99,20 @@ class AbstractDynamics(eqx.Module):
 
     @abc.abstractmethod
     def simulate_chain(
-        self, chain: Chain, valid: Array, save_at: Array, t_end: float, contact: str, start: str
+        self,
+        chain: Chain,
+        valid: Array,
+        save_at: Array,
+        t_end: float,
+        contact: str,
+        start: str,
+        initial: Array | None = None,
     ) -> dict[str, Array]:
         """The states of a flat batch of chains at the times `save_at` (the fields of a `ChainTrajectory`).
 
         `valid`: which configurations are valid, shape `(n,)` (the front end has replaced the
-        invalid ones by a valid one of the batch; flag them `INVALID`).
+        invalid ones by a valid one of the batch; flag them `INVALID`). `initial`: the states
+        at $t = 0$, shape `(n, 2N)` (positions, then velocities), or `None` for `start`'s.
         """
 
     @abc.abstractmethod
@@ -118,11 +126,12 @@ class AbstractDynamics(eqx.Module):
         window: float,
         contact: str,
         start: str,
+        initial: Array | None = None,
     ) -> dict[str, Array]:
         """The measurements of SPEC §5 on a flat batch of chains (the fields of a `ChainMeasurement`).
 
         `t_start`: the measurement's start per configuration, shape `(n,)`, `inf` for the
-        chain's own (`Chain.t_start`); `valid` as in `simulate_chain`.
+        chain's own (`Chain.t_start`); `valid` and `initial` as in `simulate_chain`.
         """
 
     # -- sweeps ---------------------------------------------------------------------------------

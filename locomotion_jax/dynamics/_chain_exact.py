@@ -93,9 +93,10 @@ class StepInfo(NamedTuple):
     y_target: State
 
 
-def init(P: AbstractPhysics, contact: Contact, x: Array) -> Hybrid:
-    """State at $t = 0$ of the mechanism with physics `P`, at rest at positions `x` (shape `(N,)`);
-    each body sticks if its stick condition holds."""
+def init(P: AbstractPhysics, contact: Contact, x: Array, v: Array | None = None) -> Hybrid:
+    """State at $t = 0$ of the mechanism with physics `P` at positions `x` and velocities `v`
+    (shape `(N,)` each; `v=None`: at rest). A body at rest sticks where its stick condition
+    holds (eq. 7 generalised), else slips along its load; a moving one slips along its velocity."""
     dtype = x.dtype
     zero = jnp.zeros((), dtype)
     xs = tuple(x[..., i] for i in range(x.shape[-1]))
@@ -106,10 +107,17 @@ def init(P: AbstractPhysics, contact: Contact, x: Array) -> Hybrid:
     n = motion.normal(contact, N)
     stuck = tuple(p >= 0 for p in motion.stick_margin(P, F, n))
     sdir = tuple(jnp.where(f >= 0, 1.0, -1.0).astype(dtype) for f in F)
+    vs = tuple(jnp.zeros_like(a) for a in xs)
+    if v is not None:
+        vs = tuple(v[..., i] for i in range(v.shape[-1]))
+        stuck = tuple(s & (q == 0) for s, q in zip(stuck, vs))
+        one = jnp.ones((), dtype)
+        sdir = tuple(jnp.where(q > 0, one, jnp.where(q < 0, -one, s)) for s, q in zip(sdir, vs))
+        vs = tuple(jnp.where(s, 0, q) for s, q in zip(stuck, vs))
     lifted = jnp.any(jnp.stack([q <= 0 for q in N]))
     status = jnp.where(lifted & (contact == "strict"), Status.LIFTOFF, Status.OK).astype(jnp.int32)
     f32 = jnp.finfo(dtype).bits < 64
-    y = State(xs, tuple(jnp.zeros_like(a) for a in xs), zero, zero)
+    y = State(xs, vs, zero, zero)
     return Hybrid(
         t=zero, y=y, comp=y.map(jnp.zeros_like) if f32 else None, cph=cph, sph=sph, stuck=stuck, sdir=sdir,
         pend=tuple(jnp.zeros_like(s) for s in stuck), side=tuple(jnp.where(q > 0, 1.0, -1.0).astype(dtype) for q in N),

@@ -43,8 +43,8 @@ class _Fixed(NamedTuple):
     z: jax.Array
 
 
-def _setup(P: AbstractPhysics, valid, t_start, z, horizon, window, contact, start):
-    st = chain_initial_state(P, valid, contact, start)
+def _setup(P: AbstractPhysics, valid, t_start, row, z, horizon, window, contact, start):
+    st = chain_initial_state(P, valid, contact, start, row)
     dtype = st.t.dtype
     ws = t_start.astype(dtype)
     zero = jnp.zeros((), dtype)
@@ -129,9 +129,10 @@ def _results(f: _Fixed, dyn, contact) -> dict:
     )  # fmt: skip
 
 
-def _measure_batch(P, valid, t_start, z, horizon, window, contact, start, dt, max_steps, lanes):
+def _measure_batch(P, valid, t_start, initial, z, horizon, window, contact, start, dt, max_steps, lanes):
     n = valid.shape[0]
-    take = lambda i: (jax.tree_util.tree_map(lambda x: x[i], P), valid[i], t_start[i])
+    row = lambda i: None if initial is None else initial[i]
+    take = lambda i: (jax.tree_util.tree_map(lambda x: x[i], P), valid[i], t_start[i], row(i))
     setup = lambda i: _setup(*take(i), z, horizon, window, contact, start)
     running = lambda f, d: _running(f, d, max_steps)
     advance = lambda f, d: _advance(f, d, contact, dt)
@@ -144,16 +145,17 @@ _measure_batch = engine_jit(_measure_batch, ("contact", "start", "dt", "lanes"))
 
 
 def measure_batch(
-    physics: AbstractPhysics, valid, t_start, z, horizon, window, contact, start, dt, max_steps: int
+    physics: AbstractPhysics, valid, t_start, z, horizon, window, contact, start, dt, max_steps: int, initial=None
 ) -> dict:
     """The fields of a [`ChainMeasurement`][locomotion_jax.ChainMeasurement] of a flat batch of
     mechanisms given by their physics (every array field with the batch's leading axis: a flat
     chain's `physics()`, or the paper's model's), measured from `t_start` (one per
-    configuration); `max_steps` caps each one's iterations."""
+    configuration); `max_steps` caps each one's iterations; `initial`: the states at $t = 0$,
+    shape `(n, 2N)` (positions, then velocities), or `None` for `start`'s."""
     n = valid.shape[0]
     dtype = physics.one.dtype
     z_, h_, w_ = (jnp.asarray(v, dtype) for v in (z, horizon, window))
     lanes = min(n, MICRO_BATCH_CPU) if jax.default_backend() == "cpu" else n
     return _measure_batch(
-        physics, valid, t_start, z_, h_, w_, contact, start, dt, jnp.asarray(max_steps, jnp.int32), lanes
+        physics, valid, t_start, initial, z_, h_, w_, contact, start, dt, jnp.asarray(max_steps, jnp.int32), lanes
     )

@@ -28,13 +28,13 @@ def _row(s: engine.Hybrid) -> jax.Array:
     return jnp.stack([*s.y.x, *s.y.v, s.y.ed, s.y.w, *stuck, *s.sdir, s.cross, s.near, s.t_switch])
 
 
-def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps, lanes, buffer=BUFFER):
+def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps, lanes, buffer=BUFFER, initial=None):
     """The saved rows of a flat batch: the work queue of [`_saves.run_saves`][], highest frequencies first."""
     take = lambda i: jax.tree_util.tree_map(lambda x: x[i], C)
 
     def init(i):
         P = take(i).physics()
-        return P, chain_initial_state(P, valid[i], contact, start)
+        return P, chain_initial_state(P, valid[i], contact, start, None if initial is None else initial[i])
 
     step = lambda P, s, t_stop: engine.step(P, contact, dt, s, t_stop)[0]
     order = jnp.argsort(-jnp.where(jnp.isfinite(C.waves.omega), C.waves.omega, -jnp.inf))
@@ -53,14 +53,15 @@ def _derived(C: Chain, contact, t, x, v):
     return dict(e=e, N=jnp.stack(L.N, -1), l0=jnp.stack(dr.l0, -1), tension=jnp.stack(L.aux.tension, -1))
 
 
-def simulate_batch(flat: Chain, valid, save, contact, start, dt, max_steps: int) -> dict:
+def simulate_batch(flat: Chain, valid, save, contact, start, dt, max_steps: int, initial=None) -> dict:
     """The fields of a [`ChainTrajectory`][locomotion_jax.ChainTrajectory] of a flat batch of chains
-    (leading axis: the configurations); `max_steps` caps each one's iterations, saves included."""
+    (leading axis: the configurations); `max_steps` caps each one's iterations, saves included;
+    `initial`: the states at $t = 0$, shape `(n, 2N)`, or `None` for `start`'s."""
     N = flat.n_masses
     n = valid.shape[0]
     lanes = min(n, MICRO_BATCH_CPU) if jax.default_backend() == "cpu" else n
     rows, ok, status, t_lift, n_switch = _simulate_batch(
-        flat, valid, save, contact, start, dt, jnp.asarray(max_steps, jnp.int32), lanes
+        flat, valid, save, contact, start, dt, jnp.asarray(max_steps, jnp.int32), lanes, initial=initial
     )
     x, v = rows[..., :N], rows[..., N : 2 * N]
     t = jnp.broadcast_to(save, rows.shape[:-1])

@@ -88,10 +88,17 @@ class Exact(AbstractDynamics):
         )
 
     def simulate_chain(
-        self, chain: Chain, valid: Array, save_at: Array, t_end: float, contact: str, start: str
+        self,
+        chain: Chain,
+        valid: Array,
+        save_at: Array,
+        t_end: float,
+        contact: str,
+        start: str,
+        initial: Array | None = None,
     ) -> dict[str, Array]:
         max_steps = self.max_steps or default_max_steps(t_end, self.dt) + 4 * save_at.shape[0]
-        return _chain_simulate.simulate_batch(chain, valid, save_at, contact, start, self.dt, max_steps)
+        return _chain_simulate.simulate_batch(chain, valid, save_at, contact, start, self.dt, max_steps, initial)
 
     def measure_chain(
         self,
@@ -103,13 +110,14 @@ class Exact(AbstractDynamics):
         window: float,
         contact: str,
         start: str,
+        initial: Array | None = None,
     ) -> dict[str, Array]:
         # The default start (eigenvalues of the linearised chain) outside the engine's program: a
         # batched eigensolver inside it can deadlock XLA's CPU thread pool (seen at N = 8, batch 1024).
         ts = jnp.where(jnp.isfinite(t_start), t_start, chain.t_start)
         max_steps = self.step_cap(float(np.max(np.asarray(ts))) + horizon)
         return _chain_measure.measure_batch(
-            chain.physics(), valid, ts, z, horizon, window, contact, start, self.dt, max_steps
+            chain.physics(), valid, ts, z, horizon, window, contact, start, self.dt, max_steps, initial
         )
 
     def measure_chunk(

@@ -63,8 +63,17 @@ def initial_state(params: Params, wave: AbstractWaveform, contact: Contact, star
     return exact.init(params, wave, contact, x1, x2, v1, v2), ok
 
 
-def chain_initial_state(P: AbstractPhysics, valid, contact, start) -> chain_engine.Hybrid:
-    """The N-body engine's state at $t = 0$ of one mechanism (its physics `P`) at rest in the
-    `start` position, flagged `Status.INVALID` where it is not `valid`."""
-    st = chain_engine.init(P, contact, P.initial_positions(start))
+def chain_initial_state(P: AbstractPhysics, valid, contact, start, row=None) -> chain_engine.Hybrid:
+    """The N-body engine's state at $t = 0$ of one mechanism (its physics `P`): at rest in the
+    `start` position, or the state `row` $(x_0, \\dots, x_{N-1}, v_0, \\dots, v_{N-1})$ if given;
+    flagged `Status.INVALID` where the mechanism is not `valid` or `row` is not finite or its
+    positions are not in increasing order (then it starts from `start`, so that nothing turns NaN)."""
+    x = P.initial_positions(start)
+    if row is None:
+        st = chain_engine.init(P, contact, x)
+    else:
+        n = x.shape[-1]
+        ok = jnp.all(jnp.isfinite(row)) & jnp.all(row[1:n] > row[: n - 1])
+        st = chain_engine.init(P, contact, jnp.where(ok, row[:n], x), jnp.where(ok, row[n:], 0))
+        valid = valid & ok
     return eqx.tree_at(lambda s: s.status, st, jnp.where(valid, st.status, Status.INVALID).astype(jnp.int32))

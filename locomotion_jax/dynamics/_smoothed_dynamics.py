@@ -107,8 +107,17 @@ class Smoothed(AbstractDynamics):
         return _smooth.measure_smoothed(params, wave, wave_axes, z, horizon, window, contact, start, self)
 
     def simulate_chain(
-        self, chain: Chain, valid: Array, save_at: Array, t_end: float, contact: str, start: str
+        self,
+        chain: Chain,
+        valid: Array,
+        save_at: Array,
+        t_end: float,
+        contact: str,
+        start: str,
+        initial: Array | None = None,
     ) -> dict[str, Array]:
+        if initial is not None:
+            raise ValueError("initial= is supported by the Exact dynamics only.")
         return _chain_smooth.simulate_batch(chain, valid, save_at, contact, start, self.astype(chain.dtype))
 
     def measure_chain(
@@ -121,7 +130,10 @@ class Smoothed(AbstractDynamics):
         window: float,
         contact: str,
         start: str,
+        initial: Array | None = None,
     ) -> dict[str, Array]:
+        if initial is not None:
+            raise ValueError("initial= is supported by the Exact dynamics only.")
         z_, h_, w_ = (jnp.asarray(v, chain.dtype) for v in (z, horizon, window))
         dyn = self.astype(chain.dtype)
         return _chain_smooth.measure_batch(chain, valid, t_start, z_, h_, w_, contact, start, dyn)

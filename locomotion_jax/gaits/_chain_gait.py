@@ -91,13 +91,7 @@ def _section_state(P: AbstractPhysics, contact: Contact, y: Array) -> engine.Hyb
     sticks where its static limits hold (eq. 7 generalised), a moving one slips along $v_i$."""
     n = (y.shape[-1] + 1) // 2
     x = jnp.concatenate([jnp.zeros((1,), y.dtype), jnp.cumsum(y[: n - 1])])
-    st = engine.init(P, contact, x)
-    vs = tuple(y[n - 1 + i] for i in range(n))
-    stuck = tuple(s & (v == 0) for s, v in zip(st.stuck, vs))
-    one = jnp.ones((), y.dtype)
-    sdir = tuple(jnp.where(v > 0, one, jnp.where(v < 0, -one, s)) for s, v in zip(st.sdir, vs))
-    ys = st.y._replace(v=tuple(jnp.where(s, 0, v) for s, v in zip(stuck, vs)))
-    return eqx.tree_at(lambda s: (s.y, s.stuck, s.sdir), st, (ys, stuck, sdir))
+    return engine.init(P, contact, x, y[n - 1 :])
 
 
 def _advance(P, contact, dt, st, t_end, max_steps):

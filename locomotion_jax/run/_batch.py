@@ -118,6 +118,46 @@ def prepare_initial(initial: Any, shape: tuple[int, ...], dtype: Any) -> jax.Arr
     return state
 
 
+def prepare_chain_initial(initial: Any, shape: tuple[int, ...], n_bodies: int, dtype: Any) -> jax.Array | None:
+    """A chain's initial state `(x, v)` (positions and velocities, each broadcastable to
+    `shape + (N,)`) as a flat `(size, 2N)` array, or `None`. Raises a `ValueError` where its
+    values are known here (not under `jit`) and one is not finite or the positions are not in
+    increasing order; under `jit` such a configuration is flagged `INVALID` in its own result
+    (`_runs.chain_initial_state`)."""
+    if initial is None:
+        return None
+    if not isinstance(initial, (tuple, list)) or len(initial) != 2:
+        raise TypeError(
+            f"initial for a Chain must be a tuple (x, v) of positions and velocities, got {type(initial).__name__}."
+        )
+    size = math.prod(shape)
+    flat = []
+    for name, value in zip(("x", "v"), initial):
+        arr = jnp.asarray(value, dtype)
+        try:
+            arr = jnp.broadcast_to(arr, shape + (n_bodies,))
+        except ValueError:
+            raise ValueError(
+                f"initial {name} has shape {arr.shape}, which does not broadcast to {shape + (n_bodies,)} "
+                f"(the batch shape and one value per mass)."
+            ) from None
+        flat.append(arr.reshape((size, n_bodies)))
+    state = jnp.concatenate(flat, -1)
+    try:
+        values = np.asarray(concrete_value(state))
+    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError, TypeError):
+        return state
+    if values.dtype.kind != "f":  # a tracer of `jit` beneath: the values are not known here
+        return state
+    if not np.all(np.isfinite(values)):
+        raise ValueError("initial: every position and velocity must be finite.")
+    bad = np.argwhere(np.diff(values[:, :n_bodies], axis=-1) <= 0)
+    if bad.size:
+        j = int(bad[0][1])
+        raise ValueError(f"initial: the masses must be in order along the chain, x_{j} < x_{j + 1} (mass {j}).")
+    return state
+
+
 def check_contact_start(contact: str, start: str) -> None:
     if contact not in ("strict", "paper"):
         raise ValueError(f"contact must be 'strict' or 'paper', got {contact!r}.")

@@ -20,7 +20,16 @@ from ..model import _two_mass as model
 from ..model._chain import Chain
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform
-from ._batch import check_contact_start, dynamics_arg, mechanism_arg, prepare, prepare_chain, prepare_initial, unflatten
+from ._batch import (
+    check_contact_start,
+    dynamics_arg,
+    mechanism_arg,
+    prepare,
+    prepare_chain,
+    prepare_chain_initial,
+    prepare_initial,
+    unflatten,
+)
 
 
 def _start_times(t_start: ArrayLike | None, shape: tuple[int, ...], dtype: Any) -> jax.Array | None:
@@ -141,18 +150,17 @@ def _two_mass(params: Params, dynamics: AbstractDynamics, z, horizon, window, t_
 
 def _chain(chain: Chain, dynamics: AbstractDynamics, z, horizon, window, t_start, waveform, contact, start, initial,
            dtype) -> ChainMeasurement:  # fmt: skip
-    if initial is not None:
-        raise ValueError("initial= is supported for Params (the two-mass model), not for a Chain.")
     if waveform is not None:
         raise ValueError("waveform= applies to Params; a Chain carries its own waveforms (Chain(waveforms=...)).")
-    return measure_chain(chain, dynamics, z, horizon, window, t_start, contact, start, dtype)
+    return measure_chain(chain, dynamics, z, horizon, window, t_start, contact, start, dtype, initial)
 
 
 def measure_chain(chain: Chain, dynamics: AbstractDynamics, z: float, horizon: float, window: float, t_start: Any,
-                  contact: str, start: str, dtype: Any) -> ChainMeasurement:  # fmt: skip
+                  contact: str, start: str, dtype: Any, initial: Any = None) -> ChainMeasurement:  # fmt: skip
     """`measure` for a [`Chain`][] (arguments as there; also the chunks of a chain sweep)."""
     check_contact_start(contact, start)
     flat, valid, shape = prepare_chain(chain, dtype)
+    y0 = prepare_chain_initial(initial, shape, flat.n_masses, flat.dtype)
     n = valid.shape[0]
     if t_start is None:
         ts = jnp.full((n,), jnp.inf, flat.dtype)  # the chains' own, `Chain.t_start`
@@ -160,5 +168,6 @@ def measure_chain(chain: Chain, dynamics: AbstractDynamics, z: float, horizon: f
         ts = jnp.broadcast_to(jnp.asarray(t_start, flat.dtype), shape).reshape((n,))
         if not np.all(np.isfinite(np.asarray(ts))) or np.any(np.asarray(ts) < 0):
             raise ValueError(f"t_start must be finite and >= 0, got {t_start!r}.")
-    out = dynamics.measure_chain(flat, valid, ts, z, horizon, window, contact, start)
+    out = dynamics.measure_chain(flat, valid, ts, z, horizon, window, contact, start, y0)
+    start = "initial" if initial is not None else start
     return ChainMeasurement(**unflatten(out, shape), z=z, start=start, contact=contact)

@@ -13,7 +13,16 @@ from ..model import _two_mass as model
 from ..model._chain import Chain
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform
-from ._batch import check_contact_start, dynamics_arg, mechanism_arg, prepare, prepare_chain, prepare_initial, unflatten
+from ._batch import (
+    check_contact_start,
+    dynamics_arg,
+    mechanism_arg,
+    prepare,
+    prepare_chain,
+    prepare_chain_initial,
+    prepare_initial,
+    unflatten,
+)
 
 
 @overload
@@ -75,7 +84,9 @@ def simulate(
     - `initial`: instead of `start`, the state at $t = 0$: a tuple `(x1, v1, x2, v2)` of
       arrays broadcastable to the batch shape, with $x_1 < x_2$ (a mass at rest sticks if
       eq. (7) allows). Forward-mode derivatives with respect to it work as with respect
-      to a parameter. Two-mass model only.
+      to a parameter. For a chain: a tuple `(x, v)` of positions and velocities, each
+      broadcastable to the batch shape plus one value per mass, positions increasing along
+      the chain. Exact dynamics only.
     - `dtype`: cast parameters to this floating dtype (default: theirs).
 
     **Returns:** a [`Trajectory`][] with batch shape `params.batch_shape`, or a
@@ -127,12 +138,12 @@ def _two_mass(params: Params, dynamics: AbstractDynamics, t_end, save_np, wavefo
 
 
 def _chain(chain: Chain, dynamics: AbstractDynamics, t_end, save_np, waveform, contact, start, initial, dtype):
-    if initial is not None:
-        raise ValueError("initial= is supported for Params (the two-mass model), not for a Chain.")
     if waveform is not None:
         raise ValueError("waveform= applies to Params; a Chain carries its own waveforms (Chain(waveforms=...)).")
     check_contact_start(contact, start)
     flat, valid, shape = prepare_chain(chain, dtype)
+    y0 = prepare_chain_initial(initial, shape, flat.n_masses, flat.dtype)
     save = jnp.asarray(save_np, flat.dtype)
-    out = dynamics.simulate_chain(flat, valid, save, t_end, contact, start)
+    out = dynamics.simulate_chain(flat, valid, save, t_end, contact, start, y0)
+    start = "initial" if initial is not None else start
     return ChainTrajectory(**unflatten(out, shape), start=start, contact=contact)
