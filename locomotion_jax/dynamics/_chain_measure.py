@@ -11,6 +11,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._custom_types import Array
 from .._status import Regime, Status
 from ..model._chain import Chain
 from ..model._physics import AbstractPhysics
@@ -19,7 +20,7 @@ from ._compile import engine_jit
 from ._margins import margin_fields
 from ._numerics import Target, target_margin
 from ._queue import run_queue
-from ._runs import chain_initial_state, MICRO_BATCH_CPU, STICK_TOL
+from ._runs import chain_initial_state, default_lanes, step_cap, STICK_TOL
 
 
 class _Acc(eqx.Module):
@@ -43,9 +44,12 @@ class _Fixed(NamedTuple):
     we: jax.Array
     te: jax.Array
     z: jax.Array
+    cap: jax.Array  # the step cap of this configuration (`_runs.step_cap`)
 
 
-def _setup(C, valid, t_start, z, horizon, window, contact, start):
+def _setup(C, valid, t_start, z, horizon, window, contact, start, dt, max_steps):
+    """`(fixed, dyn)` of one chain; `max_steps` an explicit step cap, or 0 for the default from
+    its own span $t_\text{start}$ + `horizon` (`_runs.step_cap`)."""
     P = C.physics()
     st = chain_initial_state(P, valid, contact, start)
     dtype = st.t.dtype
@@ -57,16 +61,17 @@ def _setup(C, valid, t_start, z, horizon, window, contact, start):
         y_z=st.y.map(jnp.zeros_like), stuck=tuple(map(jnp.zeros_like, st.y.x)), steps=jnp.zeros((), jnp.int32),
         before_z=jnp.asarray(jnp.inf, dtype),
     )  # fmt: skip
-    return _Fixed(C, P, ws, ws + window, ws + horizon, jnp.asarray(z, dtype)), (st, acc)
+    te = ws + horizon
+    return _Fixed(C, P, ws, ws + window, te, jnp.asarray(z, dtype), step_cap(te, dt, max_steps)), (st, acc)
 
 
 def _finished(f: _Fixed, s, a):
     return (s.t >= f.te) | (a.reached & (s.t >= f.we))
 
 
-def _running(f: _Fixed, dyn, max_steps):
+def _running(f: _Fixed, dyn):
     s, a = dyn
-    return (s.status == Status.OK) & ~_finished(f, s, a) & (a.steps < max_steps)
+    return (s.status == Status.OK) & ~_finished(f, s, a) & (a.steps < f.cap)
 
 
 def _advance(f: _Fixed, dyn, contact, dt):
@@ -135,23 +140,23 @@ def _results(f: _Fixed, dyn, contact) -> dict:
 def _measure_batch(C, valid, t_start, z, horizon, window, contact, start, dt, max_steps, lanes):
     n = valid.shape[0]
     take = lambda i: (jax.tree_util.tree_map(lambda x: x[i], C), valid[i], t_start[i])
-    setup = lambda i: _setup(*take(i), z, horizon, window, contact, start)
-    running = lambda f, d: _running(f, d, max_steps)
+    setup = lambda i: _setup(*take(i), z, horizon, window, contact, start, dt, max_steps)
     advance = lambda f, d: _advance(f, d, contact, dt)
     results = lambda f, d: _results(f, d, contact)
     order = jnp.argsort(-jnp.where(jnp.isfinite(C.waves.omega), C.waves.omega, -jnp.inf))
-    return run_queue(setup, running, advance, results, n, lanes, order)
+    return run_queue(setup, _running, advance, results, n, lanes, order)
 
 
 _measure_batch = engine_jit(_measure_batch, ("contact", "start", "dt", "lanes"))
 
 
-def measure_batch(flat: Chain, valid, t_start, z, horizon, window, contact, start, dt, max_steps: int) -> dict:
+def measure_batch(flat: Chain, valid, t_start, z, horizon, window, contact, start, dt, max_steps: Array | int) -> dict:
     """The fields of a [`ChainMeasurement`][locomotion_jax.ChainMeasurement] of a flat batch of
-    chains, measured from `t_start` (one per configuration); `max_steps` caps each one's iterations."""
+    chains, measured from `t_start` (one per configuration); `max_steps` caps each one's iterations
+    (0: each one's own default from its span, `_runs.step_cap`)."""
     n = valid.shape[0]
     z_, h_, w_ = (jnp.asarray(v, flat.dtype) for v in (z, horizon, window))
-    lanes = min(n, MICRO_BATCH_CPU) if jax.default_backend() == "cpu" else n
+    lanes = default_lanes(n)
     return _measure_batch(
         flat, valid, t_start, z_, h_, w_, contact, start, dt, jnp.asarray(max_steps, jnp.int32), lanes
     )
