@@ -49,7 +49,7 @@ class _Fixed(NamedTuple):
 
 def _setup(C, valid, t_start, z, horizon, window, contact, start, dt, max_steps):
     """`(fixed, dyn)` of one chain; `max_steps` an explicit step cap, or 0 for the default from
-    its own span $t_\text{start}$ + `horizon` (`_runs.step_cap`)."""
+    its own span $t_\\text{start}$ + `horizon` (`_runs.step_cap`)."""
     P = C.physics()
     st = chain_initial_state(P, valid, contact, start)
     dtype = st.t.dtype

@@ -30,7 +30,7 @@ class Exact(AbstractDynamics):
     - `dt`: nominal RK4 step (fourth order; see README for accuracy vs `dt`).
     - `max_steps`: hard cap on each configuration's integrator iterations (steps cut
       at events included); `None` picks one per configuration from its own simulated
-      time (`measure`: its $t_\text{start}$ + horizon; `simulate`: `t_end`, plus the
+      time (`measure`: its $t_\\text{start}$ + horizon; `simulate`: `t_end`, plus the
       saves), so a configuration stops at the same step alone and in a batch.
     """
 

@@ -63,7 +63,7 @@ def _setup(params, wave, z, horizon, window, contact, start, dt, max_steps, t_st
     `t_start` is the measurement's start, or NaN for the paper's (`Params.t_start`);
     `initial` the state $(x_1, v_1, x_2, v_2)$ at $t = 0$, or `None` for `start`'s.
     `max_steps`: an explicit step cap, or 0 for the default from the configuration's own
-    span $t_\text{start}$ + `horizon` (`_runs.step_cap`)."""
+    span $t_\\text{start}$ + `horizon` (`_runs.step_cap`)."""
     params, valid = safe_params(params, wave)
     dtype = params.dtype
     P = exact.consts(params, wave)
