@@ -40,7 +40,7 @@ class Trajectory(eqx.Module):
       2 $m_1$ slips, 3 $m_2$ slips.
     - `l0`: rest length; `N1, N2`: signed normal forces (eq. 5); `f_ex`: the
       horizontal friction plus damping force on the system (eq. 17).
-    - `valid`: False for save times after the run stopped (lift-off or step
+    - `valid`: False for save times after the run stopped (lift-off, collision or step
       cap); those entries repeat the last state reached, never NaN.
     - `status`: `Status` code; `liftoff`: a normal force reached zero
       (strict: the run stopped there; paper reading: flagged, continued);

@@ -24,6 +24,11 @@ class Status(enum.IntEnum):
     - `INVALID`: the parameters are outside the model's valid range; nothing
       was integrated and every measurement holds its sentinel.
     - `SOLVER_FAILED`: the smoothed (diffrax) solver reported a failure.
+    - `COLLISION`: two neighbouring bodies met, a gap $x_{j+1} - x_j$ (two masses:
+      $x_2 - x_1$) reached zero, which the model does not cover (the masses would pass
+      through each other). The exact engines check every committed step's end and stop
+      the run there (not located in time: the step that closed the gap is kept, so the
+      last state has a gap $\\le 0$); results cover the part that was integrated.
     """
 
     OK = 0
@@ -31,6 +36,7 @@ class Status(enum.IntEnum):
     MAX_STEPS = 2
     INVALID = 3
     SOLVER_FAILED = 4
+    COLLISION = 5
 
 
 class Regime(enum.IntEnum):

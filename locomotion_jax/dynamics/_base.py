@@ -152,7 +152,9 @@ class AbstractDynamics(eqx.Module):
         Called while the sweep traces its chunk program (once per sweep, inside `jax.jit`),
         so it must be traceable. `params`: the chunk, sharded along the mesh's one axis, with
         the sinusoid of eq. (13); `zhw`: the array $(z, \\text{horizon}, \\text{window})$;
-        `max_steps`: `step_cap` of the whole sweep; `lanes`: configurations that
+        `max_steps`: `step_cap` of the sweep's longest run (recorded with its results; a
+        dynamics may cap each configuration by its own span instead, as `Exact` does, so that
+        a configuration's result does not depend on its chunk); `lanes`: configurations that
         each device runs together (`None`: the dynamics' own choice).
         """
 
@@ -160,8 +162,9 @@ class AbstractDynamics(eqx.Module):
     def step_cap(self, t_total: float) -> int:
         """The cap on the engine's loop iterations for runs to the time `t_total`.
 
-        A static of the compilation: a sweep fixes it once, so that every chunk shares one
-        compilation. `0` where the dynamics caps its loops by a setting of its own.
+        A sweep records it for its longest run (`max_steps` of `measure_chunk`, a static of
+        the compilation fixed once, so that every chunk shares one compilation). `0` where
+        the dynamics caps its loops by a setting of its own.
         """
 
     @abc.abstractmethod

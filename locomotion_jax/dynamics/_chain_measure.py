@@ -11,6 +11,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._custom_types import Array
 from .._status import Regime, Status
 from ..model._physics import AbstractPhysics
 from . import _chain_exact as engine
@@ -18,7 +19,7 @@ from ._compile import engine_jit
 from ._margins import margin_fields
 from ._numerics import Target, target_margin
 from ._queue import run_queue
-from ._runs import chain_initial_state, MICRO_BATCH_CPU, STICK_TOL
+from ._runs import chain_initial_state, default_lanes, step_cap, STICK_TOL
 
 
 class _Acc(eqx.Module):
@@ -41,9 +42,13 @@ class _Fixed(NamedTuple):
     we: jax.Array
     te: jax.Array
     z: jax.Array
+    cap: jax.Array  # the step cap of this configuration (`_runs.step_cap`)
 
 
-def _setup(P: AbstractPhysics, valid, t_start, row, z, horizon, window, contact, start):
+def _setup(P: AbstractPhysics, valid, t_start, row, z, horizon, window, contact, start, dt, max_steps):
+    """`(fixed, dyn)` of one configuration; `row` its initial state or `None`; `max_steps` an
+    explicit step cap, or 0 for the default from its own span $t_\\text{start}$ + `horizon`
+    (`_runs.step_cap`)."""
     st = chain_initial_state(P, valid, contact, start, row)
     dtype = st.t.dtype
     ws = t_start.astype(dtype)
@@ -54,16 +59,17 @@ def _setup(P: AbstractPhysics, valid, t_start, row, z, horizon, window, contact,
         y_z=st.y.map(jnp.zeros_like), stuck=tuple(map(jnp.zeros_like, st.y.x)), steps=jnp.zeros((), jnp.int32),
         before_z=jnp.asarray(jnp.inf, dtype),
     )  # fmt: skip
-    return _Fixed(P, ws, ws + window, ws + horizon, jnp.asarray(z, dtype)), (st, acc)
+    te = ws + horizon
+    return _Fixed(P, ws, ws + window, te, jnp.asarray(z, dtype), step_cap(te, dt, max_steps)), (st, acc)
 
 
 def _finished(f: _Fixed, s, a):
     return (s.t >= f.te) | (a.reached & (s.t >= f.we))
 
 
-def _running(f: _Fixed, dyn, max_steps):
+def _running(f: _Fixed, dyn):
     s, a = dyn
-    return (s.status == Status.OK) & ~_finished(f, s, a) & (a.steps < max_steps)
+    return (s.status == Status.OK) & ~_finished(f, s, a) & (a.steps < f.cap)
 
 
 def _advance(f: _Fixed, dyn, contact, dt):
@@ -133,29 +139,39 @@ def _measure_batch(P, valid, t_start, initial, z, horizon, window, contact, star
     n = valid.shape[0]
     row = lambda i: None if initial is None else initial[i]
     take = lambda i: (jax.tree_util.tree_map(lambda x: x[i], P), valid[i], t_start[i], row(i))
-    setup = lambda i: _setup(*take(i), z, horizon, window, contact, start)
-    running = lambda f, d: _running(f, d, max_steps)
+    setup = lambda i: _setup(*take(i), z, horizon, window, contact, start, dt, max_steps)
     advance = lambda f, d: _advance(f, d, contact, dt)
     results = lambda f, d: _results(f, d, contact)
     order = jnp.argsort(-jnp.where(jnp.isfinite(P.omega), P.omega, -jnp.inf))
-    return run_queue(setup, running, advance, results, n, lanes, order)
+    return run_queue(setup, _running, advance, results, n, lanes, order)
 
 
 _measure_batch = engine_jit(_measure_batch, ("contact", "start", "dt", "lanes"))
 
 
 def measure_batch(
-    physics: AbstractPhysics, valid, t_start, z, horizon, window, contact, start, dt, max_steps: int, initial=None
+    physics: AbstractPhysics,
+    valid,
+    t_start,
+    z,
+    horizon,
+    window,
+    contact,
+    start,
+    dt,
+    max_steps: Array | int,
+    initial=None,
 ) -> dict:
     """The fields of a [`ChainMeasurement`][locomotion_jax.ChainMeasurement] of a flat batch of
     mechanisms given by their physics (every array field with the batch's leading axis: a flat
     chain's `physics()`, or the paper's model's), measured from `t_start` (one per
-    configuration); `max_steps` caps each one's iterations; `initial`: the states at $t = 0$,
-    shape `(n, 2N)` (positions, then velocities), or `None` for `start`'s."""
+    configuration); `max_steps` caps each one's iterations (0: each one's own default from its
+    span, `_runs.step_cap`); `initial`: the states at $t = 0$, shape `(n, 2N)` (positions, then
+    velocities), or `None` for `start`'s."""
     n = valid.shape[0]
     dtype = physics.one.dtype
     z_, h_, w_ = (jnp.asarray(v, dtype) for v in (z, horizon, window))
-    lanes = min(n, MICRO_BATCH_CPU) if jax.default_backend() == "cpu" else n
+    lanes = default_lanes(n)
     return _measure_batch(
         physics, valid, t_start, initial, z_, h_, w_, contact, start, dt, jnp.asarray(max_steps, jnp.int32), lanes
     )

@@ -13,7 +13,7 @@ from ..model._chain_physics import ChainPhysics
 from . import _chain_exact as engine
 from ._compile import engine_jit
 from ._margins import switch_gap
-from ._runs import chain_initial_state, MICRO_BATCH_CPU
+from ._runs import chain_initial_state, default_lanes
 from ._saves import BUFFER, run_saves
 
 
@@ -59,7 +59,7 @@ def simulate_batch(flat: Chain, valid, save, contact, start, dt, max_steps: int,
     `initial`: the states at $t = 0$, shape `(n, 2N)`, or `None` for `start`'s."""
     N = flat.n_masses
     n = valid.shape[0]
-    lanes = min(n, MICRO_BATCH_CPU) if jax.default_backend() == "cpu" else n
+    lanes = default_lanes(n)
     rows, ok, status, t_lift, n_switch = _simulate_batch(
         flat, valid, save, contact, start, dt, jnp.asarray(max_steps, jnp.int32), lanes, initial=initial
     )

@@ -27,6 +27,9 @@ thus costs one extra iteration, and the results converge at fourth order in `dt`
   step $n_i = \\nu_i N_i$, smooth, so that the step's dense output stays accurate.
 - optionally a caller's target (`measure`: $|X - X_0| = z$).
 
+Not an event but a check: a committed step whose end has $x_2 - x_1 \\le 0$ (the masses
+met or passed through each other, outside the model) stops the run with `Status.COLLISION`.
+
 When several events cross in one step, the earliest by the secant of each
 function is located. At the start of every iteration both masses are re-checked
 (SPEC §2): the located one switches, and so does any mass whose event function is
@@ -764,7 +767,9 @@ def step(
         low1 = nu1 * f1.N1 <= nu2 * f1.N2
         nu1, nu2 = jnp.where(lift_cut & low1, -nu1, nu1), jnp.where(lift_cut & ~low1, -nu2, nu2)
     commit = ~stop0
-    status = jnp.where(lift, Status.LIFTOFF, st.status).astype(jnp.int32)
+    # The masses met (outside the model): the run stops after this step (`Status.COLLISION`).
+    met = commit & (yc.x2 - yc.x1 <= 0)
+    status = jnp.where(lift, Status.LIFTOFF, jnp.where(met, Status.COLLISION, st.status)).astype(jnp.int32)
 
     keepc = lambda new, old: jnp.where(commit, new, old)
     new = Hybrid(

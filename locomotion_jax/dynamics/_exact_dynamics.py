@@ -10,7 +10,6 @@ from typing import Any
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jax.sharding import Mesh, PartitionSpec
 
 from .._custom_types import Array
@@ -20,7 +19,7 @@ from ..model._waveform import AbstractWaveform, Sinusoid
 from . import _chain_measure, _chain_simulate, _exact_measure, _exact_simulate
 from ._base import AbstractDynamics
 from ._forward import check_static
-from ._runs import default_max_steps, horizon_bound
+from ._runs import default_max_steps
 
 
 class Exact(AbstractDynamics):
@@ -29,8 +28,10 @@ class Exact(AbstractDynamics):
     **Arguments:**
 
     - `dt`: nominal RK4 step (fourth order; see README for accuracy vs `dt`).
-    - `max_steps`: hard cap on integrator iterations (trial steps included);
-      `None` picks one from the horizon.
+    - `max_steps`: hard cap on each configuration's integrator iterations (steps cut
+      at events included); `None` picks one per configuration from its own simulated
+      time (`measure`: its $t_\\text{start}$ + horizon; `simulate`: `t_end`, plus the
+      saves), so a configuration stops at the same step alone and in a batch.
     """
 
     dt: float = eqx.field(static=True, default=0.01)
@@ -73,7 +74,6 @@ class Exact(AbstractDynamics):
         t_start: Array | None,
         initial: Array | None,
     ) -> dict[str, Array]:
-        total = horizon_bound(params, horizon) if t_start is None else float(np.max(np.asarray(t_start))) + horizon
         return _exact_measure._exact_batch(
             params,
             wave,
@@ -82,7 +82,7 @@ class Exact(AbstractDynamics):
             contact,
             start,
             self.dt,
-            jnp.asarray(self.step_cap(total), jnp.int32),
+            self._own_cap(),
             t_start=t_start,
             initial=initial,
         )
@@ -115,9 +115,8 @@ class Exact(AbstractDynamics):
         # The default start (eigenvalues of the linearised chain) outside the engine's program: a
         # batched eigensolver inside it can deadlock XLA's CPU thread pool (seen at N = 8, batch 1024).
         ts = jnp.where(jnp.isfinite(t_start), t_start, chain.t_start)
-        max_steps = self.step_cap(float(np.max(np.asarray(ts))) + horizon)
         return _chain_measure.measure_batch(
-            chain.physics(), valid, ts, z, horizon, window, contact, start, self.dt, max_steps, initial
+            chain.physics(), valid, ts, z, horizon, window, contact, start, self.dt, self._own_cap(), initial
         )
 
     def measure_chunk(
@@ -134,9 +133,11 @@ class Exact(AbstractDynamics):
             z, horizon, window = zhw[0], zhw[1], zhw[2]
             wave = Sinusoid.from_params(p)
             # A work queue over `lanes` lanes (`_queue`): a lane whose configuration is
-            # done takes the next one.
+            # done takes the next one. Each configuration's cap comes from its own span
+            # (`_own_cap`), not from the sweep's `max_steps`, so that it is the same as a
+            # `measure` of that configuration alone.
             return _exact_measure.exact_batch(
-                p, wave, 0, z, horizon, window, contact, start, dyn.dt, max_steps, lanes=lanes
+                p, wave, 0, z, horizon, window, contact, start, dyn.dt, dyn._own_cap(), lanes=lanes
             )
 
         # shard_map, not jit's partitioning of a sharded batch: each device's loop ends
@@ -151,6 +152,11 @@ class Exact(AbstractDynamics):
 
     def step_cap(self, t_total: float) -> int:
         return self.max_steps or default_max_steps(t_total, self.dt)
+
+    def _own_cap(self) -> Array:
+        """The measurement loops' `max_steps`: the explicit cap, or 0 for each configuration's
+        own default from its span (`_runs.step_cap`)."""
+        return jnp.asarray(self.max_steps or 0, jnp.int32)
 
     def nominal_step(self) -> float | None:
         return self.dt

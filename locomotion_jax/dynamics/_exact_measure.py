@@ -21,7 +21,7 @@ from ._compile import engine_jit
 from ._margins import margin_fields
 from ._numerics import Target, target_margin
 from ._queue import run_queue
-from ._runs import initial_state, MICRO_BATCH_CPU, STICK_TOL
+from ._runs import default_lanes, initial_state, step_cap, STICK_TOL
 
 
 def _energy(params, wave, t, y):
@@ -54,13 +54,16 @@ class _Fixed(NamedTuple):
     we: jax.Array  # end of the regime window
     te: jax.Array  # horizon
     z: jax.Array
+    cap: jax.Array  # the step cap of this configuration (`_runs.step_cap`)
 
 
-def _setup(params, wave, z, horizon, window, contact, start, t_start, initial=None):
+def _setup(params, wave, z, horizon, window, contact, start, dt, max_steps, t_start, initial=None):
     """`(fixed, dyn)` of one configuration: its constants, and the loop state `(Hybrid, _Acc)`.
 
     `t_start` is the measurement's start, or NaN for the paper's (`Params.t_start`);
-    `initial` the state $(x_1, v_1, x_2, v_2)$ at $t = 0$, or `None` for `start`'s."""
+    `initial` the state $(x_1, v_1, x_2, v_2)$ at $t = 0$, or `None` for `start`'s.
+    `max_steps`: an explicit step cap, or 0 for the default from the configuration's own
+    span $t_\\text{start}$ + `horizon` (`_runs.step_cap`)."""
     params, valid = safe_params(params, wave)
     dtype = params.dtype
     P = exact.consts(params, wave)
@@ -84,7 +87,8 @@ def _setup(params, wave, z, horizon, window, contact, start, t_start, initial=No
         steps=jnp.zeros((), jnp.int32),
         before_z=jnp.asarray(jnp.inf, dtype),
     )
-    fixed = _Fixed(params, wave, P, ws, ws + window, ws + horizon, jnp.asarray(z, dtype))
+    te = ws + horizon
+    fixed = _Fixed(params, wave, P, ws, ws + window, te, jnp.asarray(z, dtype), step_cap(te, dt, max_steps))
     return fixed, (st, acc)
 
 
@@ -96,9 +100,9 @@ def _finished(f: _Fixed, s, a):
     return (s.t >= f.te) | (a.reached & (s.t >= f.we))
 
 
-def _running(f: _Fixed, dyn, max_steps):
+def _running(f: _Fixed, dyn):
     s, a = dyn
-    return (s.status == Status.OK) & ~_finished(f, s, a) & (a.steps < max_steps)
+    return (s.status == Status.OK) & ~_finished(f, s, a) & (a.steps < f.cap)
 
 
 def _advance(f: _Fixed, dyn, contact, dt):
@@ -196,8 +200,8 @@ def _exact_one(params, wave, z, horizon, window, contact, start, dt, max_steps, 
     """One configuration, in its own loop (under `vmap`: a loop of lanes that idle once done).
 
     `t_start`: the measurement's start, NaN for the paper's; `initial`: as in `_setup`."""
-    fixed, dyn = _setup(params, wave, z, horizon, window, contact, start, t_start, initial)
-    dyn = jax.lax.while_loop(lambda d: _running(fixed, d, max_steps), lambda d: _advance(fixed, d, contact, dt), dyn)
+    fixed, dyn = _setup(params, wave, z, horizon, window, contact, start, dt, max_steps, t_start, initial)
+    dyn = jax.lax.while_loop(lambda d: _running(fixed, d), lambda d: _advance(fixed, d, contact, dt), dyn)
     return _results(fixed, dyn, contact)
 
 
@@ -218,31 +222,37 @@ def exact_batch(
 ) -> dict[str, jax.Array]:
     """`measure` on a flat batch (not jitted): a work queue over `lanes` lanes ([`_queue.run_queue`][]).
 
-    `lanes=None` takes `_runs.MICRO_BATCH_CPU` on a CPU (wider kernels are split over
-    threads and run slower, benchmarks/NOTES.md), else the whole batch in one `vmap`.
+    `lanes=None` takes `_runs.default_lanes` (on a CPU at most `MICRO_BATCH_CPU`: wider kernels
+    are split over threads and run slower, benchmarks/NOTES.md; a multiple of `LANE_QUANTUM`, so
+    that a configuration's result does not depend on its batch), else the whole batch in one
+    `vmap`. On a CPU the queue runs even where the lanes hold the whole batch.
     The queue takes the highest frequencies (most mode switches per time unit) first,
     so that the last configurations, run while lanes run out of work, are short.
     `t_start`: per-configuration measurement starts (NaN: the paper's), default all the paper's.
     `initial`: per-configuration states $(x_1, v_1, x_2, v_2)$ at $t = 0$, shape `(n, 4)`
     (default: at rest in the `start` position).
+    `max_steps`: an explicit cap on each configuration's iterations, or 0: each
+    configuration's own default from its span (`_runs.step_cap`), so that a
+    configuration's status and step count do not depend on its batch-mates.
     """
     n = params.omega.shape[0]
     if t_start is None:
         t_start = jnp.full((n,), jnp.nan, params.dtype)
     if lanes is None:
-        lanes = MICRO_BATCH_CPU if jax.default_backend() == "cpu" else n
-    if lanes >= n:
+        lanes = default_lanes(n)
+    if lanes == n and jax.default_backend() != "cpu":
         fn = lambda p, w, ts, y0: _exact_one(p, w, z, horizon, window, contact, start, dt, max_steps, ts, y0)
         return jax.vmap(fn, in_axes=(0, wave_axes, 0, None if initial is None else 0))(params, wave, t_start, initial)
     take = lambda i: jax.tree_util.tree_map(lambda x: x[i], params)
     pick_wave = (lambda i: wave) if wave_axes is None else (lambda i: jax.tree_util.tree_map(lambda x: x[i], wave))
     pick_initial = (lambda i: None) if initial is None else (lambda i: initial[i])
-    setup = lambda i: _setup(take(i), pick_wave(i), z, horizon, window, contact, start, t_start[i], pick_initial(i))
-    running = lambda f, d: _running(f, d, max_steps)
+    setup = lambda i: _setup(
+        take(i), pick_wave(i), z, horizon, window, contact, start, dt, max_steps, t_start[i], pick_initial(i)
+    )
     advance = lambda f, d: _advance(f, d, contact, dt)
     order = jnp.argsort(-jnp.where(jnp.isfinite(params.omega), params.omega, -jnp.inf))
     results = lambda f, d: _results(f, d, contact)
-    return run_queue(setup, running, advance, results, n, lanes, order)
+    return run_queue(setup, _running, advance, results, n, lanes, order)
 
 
 _exact_batch = engine_jit(exact_batch, ("wave_axes", "contact", "start", "dt", "lanes"))

@@ -17,7 +17,7 @@ from ..model._waveform import AbstractWaveform
 from . import _exact as exact
 from ._compile import engine_jit
 from ._margins import switch_gap
-from ._runs import initial_state, MICRO_BATCH_CPU
+from ._runs import default_lanes, initial_state
 from ._saves import BUFFER, run_saves
 
 
@@ -63,14 +63,14 @@ def _exact_batch(
 ):
     """The saved rows of a flat batch ([`_saves.run_saves`][]: a work queue over `lanes` lanes).
 
-    `lanes=None` takes `_runs.MICRO_BATCH_CPU` on a CPU, else the whole batch. The
+    `lanes=None` takes `_runs.default_lanes` (on a CPU a multiple of `LANE_QUANTUM`), else the whole batch. The
     queue takes the highest frequencies first, as in `measure`. A row is the state
     $(x_1, v_1, x_2, v_2, e_d, w)$, the stick flags, the slip directions and the records of
     the margins. `initial`: per-configuration states at $t = 0$ (`(n, 4)`), or `None`.
     """
     n = params.omega.shape[0]
     if lanes is None:
-        lanes = MICRO_BATCH_CPU if jax.default_backend() == "cpu" else n
+        lanes = default_lanes(n)
     take = lambda i: jax.tree_util.tree_map(lambda x: x[i], params)
     pick_wave = (lambda i: wave) if wave_axes is None else (lambda i: jax.tree_util.tree_map(lambda x: x[i], wave))
     init = lambda i: _init(take(i), pick_wave(i), contact, start, None if initial is None else initial[i])

@@ -75,7 +75,7 @@ def run_queue(
     - `advance(fixed, dyn)`: one iteration; returns the new `dyn`.
     - `results(fixed, dyn)`: its outputs once done (a dict of scalars or arrays;
       with a `stream`, no key `"stream"`).
-    - `n`, `lanes`: number of configurations, and of lanes (static).
+    - `n`, `lanes`: number of configurations, and of lanes (static; lanes past `n` idle).
     - `order`: the queue's order (a permutation of `range(n)`; default: as given).
       Longest first shortens the tail, where lanes run out of work.
     - `stream`: rows produced during the run ([`Stream`][]), if any.
@@ -84,7 +84,7 @@ def run_queue(
     `stream`, also `"stream"`: the rows, shape `(n, stream.size) + row shape` (zeros
     where no row was written).
     """
-    lanes = max(1, min(lanes, n))
+    lanes = max(1, lanes)  # more lanes than configurations: the extra ones idle throughout
     order = jnp.arange(n, dtype=jnp.int32) if order is None else order.astype(jnp.int32)
     config = lambda pos: order[jnp.minimum(pos, n - 1)]
     setup_all = jax.vmap(setup)

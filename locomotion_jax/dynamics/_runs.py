@@ -33,9 +33,52 @@ over its thread pool, which costs more than it gains for kernels this small
 (benchmarks/NOTES.md, cost model 3)."""
 
 
+LANE_QUANTUM = 16
+"""The CPU queues' lanes are a multiple of this (16 float32 or 8 float64 fill an AVX-512 vector)."""
+
+
+def default_lanes(n: int) -> int:
+    """The lanes of the exact engine's work queue for a flat batch of `n` configurations.
+
+    On a CPU, `MICRO_BATCH_CPU`, or fewer for a small batch, rounded *up* to a multiple of
+    `LANE_QUANTUM` (the lanes past `n` idle). XLA compiles a vmapped kernel of one lane,
+    and the lanes of a vector's remainder, to scalar code, whose rounding differs from the
+    vector code's in the last bit (measured: 4e-16 to 1e-13 relative on `measure`'s results,
+    and a different trajectory where the forcing is not resolved). With every lane inside
+    full vectors a configuration gets bitwise the same result alone and in any batch, on the
+    same machine (tests/test_batch_independence.py). Elsewhere, the whole batch in one `vmap`.
+    """
+    if jax.default_backend() != "cpu":
+        return n
+    return min(MICRO_BATCH_CPU, -(-n // LANE_QUANTUM) * LANE_QUANTUM)
+
+
+CAP_STEPS_PER_DT = 3
+"""Iterations per nominal step that the default step cap allows (steps cut at events included)."""
+
+CAP_EXTRA = 20_000
+"""Iterations the default step cap adds for the event searches."""
+
+
 def default_max_steps(t_total: float, dt: float) -> int:
     """Room for the nominal steps plus the event searches (a hard cap, not a cost)."""
-    return int(3 * t_total / dt) + 20_000
+    return int(CAP_STEPS_PER_DT * t_total / dt) + CAP_EXTRA
+
+
+def step_cap(t_total: jax.Array, dt: float, max_steps: jax.Array) -> jax.Array:
+    """The cap on one configuration's loop iterations (traced; int32).
+
+    `max_steps` where it is positive (an explicit `Exact(max_steps=...)`), else
+    `default_max_steps` of the configuration's *own* simulated time `t_total` (its
+    measurement start plus the horizon). A cap from its own time span, not the batch's
+    longest, makes a configuration's status and step count independent of its batch-mates.
+    Computed in the configuration's dtype, the same way alone and in a batch; a non-finite
+    `t_total` (an invalid configuration, which never runs) gives the bare `CAP_EXTRA`.
+    """
+    steps = jnp.floor(CAP_STEPS_PER_DT * t_total / dt)
+    # 2.1e9 + CAP_EXTRA < 2**31: the cap stays a valid int32 for any span.
+    steps = jnp.where(jnp.isfinite(steps), jnp.clip(steps, 0, 2.1e9), 0).astype(jnp.int32)
+    return jnp.where(max_steps > 0, max_steps, steps + CAP_EXTRA).astype(jnp.int32)
 
 
 def horizon_bound(params: Params, t_extra: float) -> float:

@@ -31,7 +31,7 @@ DESCRIPTIONS = {
     "balance": "work - e_d - delta_e (zero up to integration error)",
     "liftoff": "a normal force reached zero, eq. (5)",
     "t_liftoff": "first lift-off time (inf: none)",
-    "status": "0 OK, 1 LIFTOFF, 2 MAX_STEPS, 3 INVALID, 4 SOLVER_FAILED",
+    "status": ", ".join(f"{int(s)} {s.name}" for s in Status),
     "t_start": "start of the measurement: 80 periods of the lowest natural frequency",
     "X_start": "centre of mass at t_start, eq. (4)",
     "n_steps": "integrator iterations",
