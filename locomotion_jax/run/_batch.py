@@ -105,17 +105,24 @@ def prepare_initial(initial: Any, shape: tuple[int, ...], dtype: Any) -> jax.Arr
             ) from None
         flat.append(arr.reshape((size,)))
     state = jnp.stack(flat, -1)
+    values = _known_finite(state)
+    if values is not None and np.any(values[:, 0] >= values[:, 2]):
+        raise ValueError("initial: the masses must be in order, x1 < x2 (eq. 2 measures x2 - x1 > 0).")
+    return state
+
+
+def _known_finite(state: jax.Array) -> np.ndarray | None:
+    """The values of an initial state where they are known here (`None` under `jit`), refused
+    with a `ValueError` if one is not finite."""
     try:
         values = np.asarray(concrete_value(state))
     except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError, TypeError):
-        return state
+        return None
     if values.dtype.kind != "f":  # a tracer of `jit` beneath: the values are not known here
-        return state
+        return None
     if not np.all(np.isfinite(values)):
         raise ValueError("initial: every position and velocity must be finite.")
-    if np.any(values[:, 0] >= values[:, 2]):
-        raise ValueError("initial: the masses must be in order, x1 < x2 (eq. 2 measures x2 - x1 > 0).")
-    return state
+    return values
 
 
 def prepare_chain_initial(initial: Any, shape: tuple[int, ...], n_bodies: int, dtype: Any) -> jax.Array | None:
@@ -143,15 +150,8 @@ def prepare_chain_initial(initial: Any, shape: tuple[int, ...], n_bodies: int, d
             ) from None
         flat.append(arr.reshape((size, n_bodies)))
     state = jnp.concatenate(flat, -1)
-    try:
-        values = np.asarray(concrete_value(state))
-    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError, TypeError):
-        return state
-    if values.dtype.kind != "f":  # a tracer of `jit` beneath: the values are not known here
-        return state
-    if not np.all(np.isfinite(values)):
-        raise ValueError("initial: every position and velocity must be finite.")
-    bad = np.argwhere(np.diff(values[:, :n_bodies], axis=-1) <= 0)
+    values = _known_finite(state)
+    bad = np.argwhere(np.diff(values[:, :n_bodies], axis=-1) <= 0) if values is not None else np.empty((0, 2))
     if bad.size:
         j = int(bad[0][1])
         raise ValueError(f"initial: the masses must be in order along the chain, x_{j} < x_{j + 1} (mass {j}).")
