@@ -216,7 +216,10 @@ def target_margin(before: Array, gs: list, ds: list, es: list) -> Array:
 
 
 def union(flags: Sequence[Array]) -> Array:
-    """The elementwise `or` of a list of boolean arrays (one per event or per body)."""
+    """The elementwise `or` of a list of boolean arrays (one per event or per body); `False` for
+    none (a one-body mechanism has no gaps between neighbours)."""
+    if not flags:
+        return jnp.asarray(False)
     out = flags[0]
     for f in flags[1:]:
         out = out | f
