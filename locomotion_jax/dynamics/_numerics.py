@@ -184,19 +184,19 @@ def margins(omega, h, located, decide, crossed, g0s, d0s, e0s):
         g0, d0, e0 = sq(g0), sq(d0), sq(e0)
         turns = (e0 > 0) & (d0 < 0) & (-d0 <= h * e0) & ~c_i
         near.append((jnp.where(turns, jnp.maximum(2 * g0 * e0 - d0 * d0, 0), 1), jnp.where(turns, e0 * e0, zero)))
-    return tuple(_smallest_ratio(pairs, w2) for pairs in (cross, near))
+    # `inf` (no margin) stays `inf` without a drive too (w2 = 0), not NaN.
+    return tuple(jnp.where(r < jnp.inf, w2 * r, r) for r in (_smallest_ratio(pairs) for pairs in (cross, near)))
 
 
-def _smallest_ratio(pairs: list, scale: Array) -> Array:
-    """`scale` times $\\min_i a_i / b_i$ over pairs with $a_i \\ge 0$, $b_i \\ge 0$ (none: $a_i > 0 = b_i$,
-    `inf` whatever `scale`, also $\\omega = 0$), chosen by cross-multiplied comparisons, so that one
-    division serves them all (XLA makes a kernel of each division, and fuses their operands into
-    every one of them)."""
+def _smallest_ratio(pairs: list) -> Array:
+    """$\\min_i a_i / b_i$ over pairs with $a_i \\ge 0$, $b_i \\ge 0$ (none: $a_i > 0 = b_i$, `inf`),
+    chosen by cross-multiplied comparisons, so that one division serves them all (XLA
+    makes a kernel of each division, and fuses their operands into every one of them)."""
     a, b = pairs[0]
     for ai, bi in pairs[1:]:
         smaller = ai * b < a * bi
         a, b = jnp.where(smaller, ai, a), jnp.where(smaller, bi, b)
-    return jnp.where(b > 0, scale * a / jnp.where(b > 0, b, 1), jnp.inf)
+    return jnp.where(b > 0, a / jnp.where(b > 0, b, 1), jnp.inf)
 
 
 def target_margin(before: Array, gs: list, ds: list, es: list) -> Array:
