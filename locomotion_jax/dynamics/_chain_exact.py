@@ -250,7 +250,9 @@ def step(
     for i in reversed(range(len(g1s) - 1)):
         vals = (g0s[i], d0s[i], e0s[i], g1s[i], d1s[i], e1s[i])
         pick = [jnp.where(first[i], v, p) for v, p in zip(vals, pick)]
-    cg0, cd0, ce0, cg1, cd1, ce1 = pick
+    # Pinned: the event quintic's coefficients feed the root and the located margin, and XLA
+    # would recompute the picks (a `where` chain over every event) in each (benchmarks/NOTES.md).
+    cg0, cd0, ce0, cg1, cd1, ce1 = (kp(q) for q in pick)
     coef = num.quintic(jnp.maximum(cg0, 0), h * cd0, h2 * ce0, jnp.minimum(cg1, 0), h * cd1, h2 * ce1)
     theta = kp(jnp.where(cut, num.root(coef, jnp.minimum(cg1, 0)), 1))
 

@@ -69,8 +69,10 @@ class ChainPhysics(AbstractPhysics):
 
     def load_rates(self, drive: "Drive", loads: Loads, xd: Scalars, keep: Any = None) -> LoadRates:
         du = tuple(q - p for p, q in zip(xd[:-1], xd[1:]))
-        sr = spring_rates(self, loads.aux, du, drive.dl0)
         kp = (lambda q: q) if keep is None else keep
+        sr = spring_rates(self, loads.aux, du, drive.dl0)
+        # dl and dp feed the rates and the second derivatives: pinned once, not recomputed in each.
+        sr = sr._replace(dp=tuple(map(kp, sr.dp)), dl=tuple(map(kp, sr.dl)))
         dF, dN = load_rates(tuple(map(kp, sr.dfx)), tuple(map(kp, sr.dfy)), drive.df)
         return LoadRates(dF, dN, (du, sr))
 
