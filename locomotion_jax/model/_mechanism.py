@@ -21,6 +21,16 @@ class AbstractMechanism(eqx.Module):
     `simulate_chain`, and so on), so that neither the front ends nor the dynamics test a class.
     """
 
+    @property
+    @abc.abstractmethod
+    def batch_shape(self) -> tuple[int, ...]:
+        """The batch axes of the configurations (`()` for one)."""
+
+    @property
+    @abc.abstractmethod
+    def dtype(self) -> Any:
+        """The floating dtype of the configurations' fields."""
+
     @abc.abstractmethod
     def physics(self) -> Any:
         """The [`AbstractPhysics`][locomotion_jax.AbstractPhysics] of one configuration: what the

@@ -1,6 +1,7 @@
 """Parameter identification: fit the exact model to a measured trajectory.
 
-Least squares on the positions of both masses at the measured times,
+Least squares on the positions of the bodies (the paper's model: both masses; a chain:
+every mass) at the measured times,
 
 $$\\min_\\theta \\sum_{s,i} \\big(x_i(t_s; \\theta) - \\hat x_{i,s}\\big)^2 / \\sigma^2,$$
 
@@ -16,13 +17,14 @@ variance unless the noise level `sigma` is given.
 from collections.abc import Sequence
 from typing import Any, NamedTuple
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._status import Status
 from ..dynamics._exact_dynamics import Exact
-from ..model._params import PARAM_NAMES, Params
+from ..model._mechanism import AbstractMechanism
 from ..model._waveform import AbstractWaveform
 from ..run._simulate import simulate
 
@@ -37,16 +39,43 @@ BOUNDS: dict[str, tuple[float, float]] = {
     "mu_s": (0.0, np.inf),
     "mu_k": (0.0, np.inf),
     "mhat": (0.0, 1.0),
+    "m": (0.0, np.inf),
+    "v_s": (0.0, np.inf),
 }
-"""Bounds of each parameter during a fit (the model's validity, eq. 6; `mu_s >= mu_k`
-is checked on the result)."""
+"""Bounds of each parameter during a fit, by its field's name (the last part of a dotted name;
+any friction coefficient `mu_*` is $\\ge 0$; a field not listed is unbounded): the model's
+validity (eq. 6). `mu_s >= mu_k` and the rest of the validity are checked on the result's run."""
+
+
+def _bounds(name: str) -> tuple[float, float]:
+    last = name.rsplit(".", 1)[-1]
+    return BOUNDS.get(last, (0.0, np.inf) if last.startswith("mu_") else (-np.inf, np.inf))
+
+
+def _field(mechanism: Any, name: str) -> Any:
+    """The field `name` of the mechanism: an attribute, dotted for a nested one
+    (`"friction.mu_k_fwd"`); a bare name that the mechanism lacks is looked up in its
+    friction law (`"mu_k"` of a chain with `Coulomb` friction)."""
+    obj = mechanism
+    parts = name.split(".")
+    if len(parts) == 1 and not hasattr(mechanism, name) and hasattr(getattr(mechanism, "friction", None), name):
+        parts = ["friction", name]
+    for part in parts:
+        if part.startswith("_") or not hasattr(obj, part):
+            raise ValueError(
+                f"names: {name!r} is not a field of the {type(mechanism).__name__} (a dotted name reaches a "
+                "nested one, e.g. 'friction.mu_k_fwd')."
+            )
+        obj = getattr(obj, part)
+    return obj
 
 
 class FitResult(NamedTuple):
     """What [`fit_trajectory`][] found.
 
-    - `params`: the fitted `Params` (the parameters not fitted as given).
-    - `names`, `values`, `stderr`: the fitted parameters, their estimates and standard errors.
+    - `params`: the fitted mechanism (the parameters not fitted as given).
+    - `names`, `values`, `stderr`: the fitted parameters, their estimates and standard errors (a
+      field with several entries, such as a chain's `k` given per spring, gives one per entry: `k[0]`, ...).
     - `covariance`: the estimates' covariance (Gauss-Newton, at the optimum).
     - `residual_rms`: root mean square of the position residuals; `sigma`: the noise level
       used for the errors (given, or estimated from the residuals).
@@ -54,7 +83,7 @@ class FitResult(NamedTuple):
     - `status`: the model run's `Status` at the optimum (`OK`, or why the run stopped).
     """
 
-    params: Params
+    params: AbstractMechanism
     names: tuple[str, ...]
     values: np.ndarray
     stderr: np.ndarray
@@ -73,23 +102,30 @@ class FitResult(NamedTuple):
         return "\n".join(rows)
 
 
-def _check(t: np.ndarray, x: np.ndarray, params: Params, names: Sequence[str]) -> None:
-    if not isinstance(params, Params) or params.batch_shape != ():
-        raise ValueError("params must be one configuration (a Params without batch axes).")
-    if len(names) == 0 or len(set(names)) != len(names) or not set(names) <= set(PARAM_NAMES):
-        raise ValueError(f"names must be distinct parameter names from {PARAM_NAMES}, got {tuple(names)}.")
+def _check(t: np.ndarray, x: np.ndarray, mechanism: AbstractMechanism, names: Sequence[str]) -> int:
+    """Refuse bad arguments with a message naming them; the mechanism's number of bodies."""
+    if not isinstance(mechanism, AbstractMechanism) or mechanism.batch_shape != ():
+        raise ValueError("params must be one configuration (a mechanism without batch axes).")
+    if len(names) == 0 or len(set(names)) != len(names):
+        raise ValueError(f"names must be distinct parameter names, got {tuple(names)}.")
+    for name in names:
+        leaf = _field(mechanism, name)
+        if not (isinstance(leaf, jax.Array | np.ndarray) and jnp.issubdtype(leaf.dtype, jnp.floating)):
+            raise ValueError(f"names: {name!r} is not a floating-point field of the {type(mechanism).__name__}.")
+    n = mechanism.physics().n_bodies
     if t.ndim != 1 or t.size == 0 or not np.all(np.isfinite(t)) or t[0] < 0 or np.any(np.diff(t) <= 0):
         raise ValueError("t must be a non-empty 1-D array of increasing finite times >= 0.")
-    if x.shape != (t.size, 2):
-        raise ValueError(f"x must have shape (len(t), 2) = ({t.size}, 2) (positions of both masses), got {x.shape}.")
-    if np.sum(np.isfinite(x)) <= len(names):
-        raise ValueError(f"x needs more finite samples than fitted parameters ({len(names)}).")
+    if x.shape != (t.size, n):
+        raise ValueError(
+            f"x must have shape (len(t), {n}) = ({t.size}, {n}) (positions of the {n} bodies), got {x.shape}."
+        )
+    return n
 
 
 def fit_trajectory(
     t: Any,
     x: Any,
-    params: Params,
+    params: AbstractMechanism,
     names: Sequence[str] = ("mu_s", "mu_k", "c", "k"),
     *,
     sigma: float | None = None,
@@ -99,17 +135,24 @@ def fit_trajectory(
     start: str = "paper",
     max_evaluations: int = 100,
 ) -> FitResult:
-    """Fit model parameters to measured positions of the two masses (least squares).
+    """Fit a mechanism's parameters to measured positions of its bodies (least squares).
 
     **Arguments:**
 
     - `t`: measurement times (increasing, $\\ge 0$), shape `(S,)`.
-    - `x`: measured positions $(x_1, x_2)$ at `t`, shape `(S, 2)`; NaN marks a missing sample.
-    - `params`: the starting point of the fit, and the values of the parameters not fitted.
-    - `names`: the `Params` fields to fit.
+    - `x`: measured positions of the N bodies at `t`, shape `(S, N)` (the paper's model:
+      $(x_1, x_2)$); NaN marks a missing sample.
+    - `params`: the mechanism, one configuration (a [`Params`][locomotion_jax.Params], a
+      [`Chain`][locomotion_jax.Chain], ...): the starting point of the fit, and the values of
+      the parameters not fitted.
+    - `names`: the fields to fit: of a `Params`, its parameter names; of another mechanism,
+      its floating-point fields, dotted for nested ones (`"k"`, `"c"`, `"friction.mu_k_fwd"`;
+      a bare friction coefficient such as `"mu_k"` is looked up in the friction law). A field
+      with several entries (a chain's `k` given per spring) is fitted entry by entry.
     - `sigma`: the measurement noise's standard deviation, if known; otherwise it is
       estimated from the residuals (the standard errors scale with it).
-    - `waveform`, `dynamics`, `contact`, `start`: as in [`simulate`][] (exact dynamics).
+    - `waveform`, `dynamics`, `contact`, `start`: as in [`simulate`][] (exact dynamics;
+      `waveform` for the paper's model only, a chain carries its own).
     - `max_evaluations`: cap on the model runs.
 
     **Returns:** a [`FitResult`][].
@@ -127,22 +170,35 @@ def fit_trajectory(
     dynamics = Exact() if dynamics is None else dynamics
     if not isinstance(dynamics, Exact):
         raise TypeError("fit_trajectory needs the Exact dynamics.")
+    if np.sum(np.isfinite(x)) <= sum(np.size(_field(params, n)) for n in names):
+        raise ValueError("x needs more finite samples than fitted parameters.")
     mask = np.isfinite(x)
     t_end = float(t[-1]) if t[-1] > 0 else 1.0
-    base = {n: getattr(params, n) for n in PARAM_NAMES}
     scale = 1.0 if sigma is None else float(sigma)
     if not scale > 0:
         raise ValueError(f"sigma must be > 0, got {sigma!r}.")
+    leaves = [jnp.asarray(_field(params, n)) for n in names]
+    sizes = [leaf.size for leaf in leaves]
+    labels = tuple(
+        n if leaf.size == 1 else f"{n}[{', '.join(map(str, i))}]"
+        for n, leaf in zip(names, leaves)
+        for i in np.ndindex(*leaf.shape)
+    )
+    edges = np.cumsum([0, *sizes])
+
+    def build(theta):
+        # Bypasses the constructor's checks (traced values); the run flags an invalid one.
+        vals = [jnp.reshape(theta[a:b], leaf.shape).astype(leaf.dtype) for a, b, leaf in zip(edges, edges[1:], leaves)]
+        return eqx.tree_at(lambda m: [_field(m, n) for n in names], params, vals)
 
     def positions(theta):
-        p = Params(**{**base, **{n: theta[i] for i, n in enumerate(names)}}, check=False)
-        traj = simulate(p, t_end, t, dynamics=dynamics, waveform=waveform, contact=contact, start=start)
-        return jnp.stack([traj.x1, traj.x2], -1), traj.status
+        traj = simulate(build(theta), t_end, t, dynamics=dynamics, waveform=waveform, contact=contact, start=start)
+        return traj.x, traj.status
 
     def model_and_jacobian(theta):
         # One forward-mode pass per fitted parameter, all in one compiled call.
         theta = jnp.asarray(theta, params.dtype)
-        basis = jnp.eye(len(names), dtype=theta.dtype)
+        basis = jnp.eye(theta.size, dtype=theta.dtype)
         (xs, status), (jac, _) = jax.vmap(lambda e: jax.jvp(positions, (theta,), (e,)))(basis)
         return np.asarray(xs[0]), int(status[0]), np.moveaxis(np.asarray(jac), 0, -1)
 
@@ -161,9 +217,9 @@ def fit_trajectory(
     def jacobian(theta):
         return evaluate(theta)[2][mask] / scale
 
-    lower = np.array([BOUNDS[n][0] for n in names])
-    upper = np.array([BOUNDS[n][1] for n in names])
-    theta0 = np.clip(np.array([float(base[n]) for n in names]), lower, upper)
+    lower = np.concatenate([np.full(size, _bounds(n)[0]) for n, size in zip(names, sizes)])
+    upper = np.concatenate([np.full(size, _bounds(n)[1]) for n, size in zip(names, sizes)])
+    theta0 = np.clip(np.concatenate([np.ravel(np.asarray(leaf, float)) for leaf in leaves]), lower, upper)
     sol = least_squares(
         residual,
         theta0,
@@ -175,7 +231,7 @@ def fit_trajectory(
     )
     _, status, _ = evaluate(sol.x)
     r, jac = sol.fun, sol.jac
-    dof = max(r.size - len(names), 1)
+    dof = max(r.size - len(labels), 1)
     # Gauss-Newton covariance; a parameter the data do not determine gets an infinite error.
     info = jac.T @ jac
     try:
@@ -184,11 +240,11 @@ def fit_trajectory(
         cov = np.full(info.shape, np.inf)
     s2 = 1.0 if sigma is not None else float(r @ r) / dof
     cov = cov * s2
-    fitted = Params(**{**base, **{n: float(v) for n, v in zip(names, sol.x)}}, check=False)
+    fitted = build(jnp.asarray(sol.x, params.dtype))
     rms = float(np.sqrt(np.mean((r * scale) ** 2)))
     return FitResult(
         params=fitted,
-        names=names,
+        names=labels,
         values=np.asarray(sol.x),
         stderr=np.sqrt(np.abs(np.diag(cov))),
         covariance=cov,
