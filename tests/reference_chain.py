@@ -75,6 +75,7 @@ from typing import Any, cast
 
 import numpy as np
 from scipy.integrate import DOP853, OdeSolution
+from scipy.interpolate import BSpline
 from scipy.linalg import eigh
 from scipy.optimize import brentq
 
@@ -168,6 +169,7 @@ def chain_config(
     mu_k_bwd=None,
     friction: str = "coulomb",
     v_s=None,
+    spline=None,
 ) -> dict:
     """Normalised configuration of a chain (CHAIN_CONVENTIONS.md).
 
@@ -177,6 +179,9 @@ def chain_config(
     zero) or the travelling wave ``a sin(omega t - j phi)`` (``phi`` defaults to 0); with
     neither, the paper's ``a = 0.05``, ``phi = 0``.  ``mu_s_bwd``/``mu_k_bwd`` default to the
     forward values (isotropic).  ``friction`` is ``"coulomb"`` or ``"stribeck"`` (needs ``v_s > 0``).
+    ``spline``: control values ``c[j, i]``, shape ``(N-1, M)`` with ``M >= 4``, in place of the Fourier
+    actuation: ``s_j`` is the periodic uniform cubic B-spline in the phase ``omega t`` whose basis
+    function of ``c[j, i]`` is centred at the phase ``2 pi i / M``.
 
     Returns a dict with ``m, c, mu_s_fwd, mu_s_bwd, mu_k_fwd, mu_k_bwd, v_s`` (N,), ``k, d, lbar``
     (N-1,), ``A, B`` (N-1, H), ``omega``, ``actuator``, ``friction``.
@@ -227,6 +232,13 @@ def chain_config(
         if A.shape != B.shape:
             raise ValueError(f"wave_A and wave_B must have the same shape, got {A.shape} and {B.shape}")
     cfg["A"], cfg["B"] = A, B
+    cfg["spline"] = None
+    if spline is not None:
+        ctrl = np.asarray(spline, dtype=float)
+        if ctrl.ndim != 2 or ctrl.shape[0] != ns or ctrl.shape[1] < 4 or not np.all(np.isfinite(ctrl)):
+            raise ValueError(f"spline must be finite control values of shape (N-1, M >= 4), got {ctrl.shape}")
+        cfg["spline"] = ctrl
+        cfg["A"], cfg["B"] = np.zeros((ns, 1)), np.zeros((ns, 1))
 
     if actuator not in ("length", "force"):
         raise ValueError(f"actuator must be 'length' or 'force', got {actuator!r}")
@@ -329,6 +341,15 @@ class _Chain:
         self.A_rate = self.A * harm[None, :] * self.omega  # d/dt of A cos: -A n omega sin
         self.B_rate = self.B * harm[None, :] * self.omega
         self.force_actuator = cfg["actuator"] == "force"
+        # Spline actuation: per spring (M, s(u), s'(u)) with u = M phase / (2 pi) in [0, M); the basis
+        # function i (knots i - 3 .. i + 1) is centred at u = i - 1 and carries c[(i - 1) mod M].
+        self.splines = None
+        if cfg.get("spline") is not None:
+            self.splines = []
+            for ctrl in cfg["spline"]:
+                M = ctrl.size
+                b = BSpline(np.arange(-3.0, M + 4.0), ctrl[(np.arange(M + 3) - 1) % M], 3, extrapolate=False)
+                self.splines.append((M, b, b.derivative()))
         self.total_mass = float(np.sum(cfg["m"]))
         self.m_flat = np.asarray(cfg["m"], dtype=float)
         # Incidence matrix: (D @ h)_i = h_i - h_{i-1}, terms of missing springs zero.
@@ -336,8 +357,23 @@ class _Chain:
         self.D[np.arange(self.n - 1), np.arange(self.n - 1)] = 1.0
         self.D[np.arange(1, self.n), np.arange(self.n - 1)] = -1.0
 
+    def signal(self, t: float) -> tuple[list[float], list[float]]:
+        """``s_j(t)`` and ``ds_j/dt`` per spring at one time, in Python floats."""
+        if self.splines is None:
+            s, sd = self.actuation(np.array([t]))
+            return s[:, 0].tolist(), sd[:, 0].tolist()
+        out, rate = [], []
+        for M, b, db in self.splines:
+            u = (self.omega * t * M / (2.0 * math.pi)) % M
+            out.append(float(b(u)))
+            rate.append(float(db(u)) * self.omega * M / (2.0 * math.pi))
+        return out, rate
+
     def actuation(self, t: np.ndarray):
         """``s_j(t)`` and ``ds_j/dt`` as ``(N-1, S)`` arrays."""
+        if self.splines is not None:
+            pairs = [self.signal(float(ti)) for ti in np.atleast_1d(t)]
+            return np.array([p[0] for p in pairs]).T, np.array([p[1] for p in pairs]).T
         ph = self.harm_omega * t[None, :]
         cs, sn = np.cos(ph), np.sin(ph)
         return self.A @ cs + self.B @ sn, self.B_rate @ cs - self.A_rate @ sn
@@ -375,10 +411,13 @@ class _Chain:
         for j, sign in ((i - 1, -1.0), (i, 1.0)):  # spring j acts on mass j (+) and on mass j + 1 (-)
             if j < 0 or j >= self.n - 1:
                 continue
-            s = 0.0
-            for h in range(self.A.shape[1]):
-                wt = self.harm_omega[h, 0] * t
-                s += self.A[j, h] * math.cos(wt) + self.B[j, h] * math.sin(wt)
+            if self.splines is not None:
+                s = self.signal(t)[0][j]
+            else:
+                s = 0.0
+                for h in range(self.A.shape[1]):
+                    wt = self.harm_omega[h, 0] * t
+                    s += self.A[j, h] * math.cos(wt) + self.B[j, h] * math.sin(wt)
             u = float(x[j + 1] - x[j])
             d = float(cfg["d"][j])
             ell = math.sqrt(u * u + d * d)
@@ -478,7 +517,8 @@ class _ChainSolver:
         self.min_gap = float(np.min(np.diff(self.y[:n])))
         # Functions that start on zero at self.t: {row: rate at self.t}.
         self._restart: dict[int, float] = {}
-        w_fast = max(chain.omega * chain.A.shape[1], _highest_free_frequency(chain.cfg), 1e-3)
+        w_act = chain.omega * (chain.A.shape[1] if chain.splines is None else max(sp[0] for sp in chain.splines))
+        w_fast = max(w_act, _highest_free_frequency(chain.cfg), 1e-3)
         self.max_step = 2.0 * math.pi / w_fast / 8.0
         self._frac = np.arange(1, _N_SUB + 1) / _N_SUB
 
@@ -549,9 +589,12 @@ class _ChainSolver:
         springs, masses = range(n - 1), range(n)
         force_act = ch.force_actuator
 
+        splined = ch.splines is not None
+
         def rhs(t, y):
             cs = [math.cos(w * t) for w in hw]
             sn = [math.sin(w * t) for w in hw]
+            sig, sig_rate = ch.signal(t) if splined else ([], [])
             yl = y.tolist()
             x = yl[:n]
             v = [yl[n + i] * slip[i] for i in masses]
@@ -561,8 +604,11 @@ class _ChainSolver:
             for j in springs:
                 Aj, Bj = A[j], B[j]
                 s = 0.0
-                for h in harmonics:
-                    s += Aj[h] * cs[h] + Bj[h] * sn[h]
+                if splined:
+                    s = sig[j]
+                else:
+                    for h in harmonics:
+                        s += Aj[h] * cs[h] + Bj[h] * sn[h]
                 u = x[j + 1] - x[j]
                 ell = math.sqrt(u * u + d[j] * d[j])
                 if force_act:
@@ -573,6 +619,8 @@ class _ChainSolver:
                     T = k[j] * (ell - lbar[j] - s)
                     hx = T * u / ell
                     Ar, Br = A_rate[j], B_rate[j]
+                    if splined:
+                        power -= T * sig_rate[j]
                     for h in harmonics:
                         power -= T * (Br[h] * cs[h] - Ar[h] * sn[h])
                 fy = T * d[j] / ell

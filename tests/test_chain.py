@@ -357,3 +357,33 @@ def test_chain_initial_state_checks():
     alone = lj.measure(worm, z=0.1, horizon=5.0, window=2.0, t_start=0.0, initial=(x, np.zeros(3)))
     assert [int(s) for s in np.asarray(out["status"])] == [lj.Status.OK, lj.Status.INVALID]
     np.testing.assert_allclose(float(out["tau_z"][0]), float(alone.tau_z), rtol=1e-12)
+
+
+def test_chain_driven_by_splines_batches_validates_and_refuses_a_file(tmp_path):
+    """A chain takes any waveform per spring (here a `Spline`, batched along its control values):
+    a batch equals its configurations run alone, a stroke beyond `lbar` or a NaN control value is
+    refused naming the waveform, and a file refuses to hold it. (Against the reference:
+    `tests/test_chain_reference.py::test_chain_driven_by_splines_against_reference`.)"""
+    ctrl = np.array([[0.05, 0.08, -0.02, -0.07, 0.0, 0.03], [0.02, 0.06, 0.01, -0.05, -0.02, 0.01]])
+    mk = lambda c: lj.Chain(masses=[1.0, 1.0, 1.0], d=0.0, waveforms=lj.Spline(c, 3.0, 3.0),
+                            friction=lj.AnisotropicCoulomb(0.5, 0.9, 0.3, 0.7))  # fmt: skip
+    both = mk(ctrl)
+    assert both.batch_shape == (2,)
+    m = lj.measure(both, z=0.05, t_start=2.0, horizon=10.0)
+    for i in range(2):
+        alone = lj.measure(mk(ctrl[i]), z=0.05, t_start=2.0, horizon=10.0)
+        assert int(m.status[i]) == int(alone.status) == lj.Status.OK
+        np.testing.assert_allclose(np.asarray(m.e_d)[i], float(alone.e_d), rtol=1e-12)
+        np.testing.assert_allclose(np.asarray(both[i].stroke()), np.asarray(mk(ctrl[i]).stroke()))
+    with pytest.raises(ValueError, match="'stroke' of Spline"):
+        mk(np.array([0.5, 3.5, 0.0, 0.0]))  # stroke 3.5 >= lbar = 3
+    with pytest.raises(ValueError, match="control"):
+        mk(np.array([0.5, np.nan, 0.0, 0.0]))
+    flagged = lj.measure(
+        lj.Chain(masses=[1.0, 1.0, 1.0], d=0.0, waveforms=lj.Spline(np.array([[0.1] * 4, [3.5] * 4]), 3.0, 3.0),
+                 check=False),
+        z=0.05, t_start=2.0, horizon=5.0,
+    )  # fmt: skip
+    assert [int(s) for s in flagged.status] == [lj.Status.OK, lj.Status.INVALID]
+    with pytest.raises(lj.MechanismFileError, match="Spline"):
+        lj.save_mechanism(mk(ctrl[0]), tmp_path / "spline.toml")

@@ -150,3 +150,45 @@ def test_measurement_derivatives_match_reference_full(setting):
         study = [np.max(_errors(np.stack([_reference_fd(key, setting, n, r) for n in NAMES], -1), mid))
                  for r in (1e-4, 1e-6)]  # fmt: skip
         print(f"  {config}: step 1e-4 vs 1e-5 {study[0]:.1e}, 1e-6 vs 1e-5 {study[1]:.1e}")
+
+
+def test_chain_measurement_derivatives_match_reference():
+    """The same derivatives on a 3-mass worm with anisotropic friction: `jacfwd` of `tau_z`,
+    `e_z` and `mean_speed` with respect to the springs' stiffness, the backward kinetic
+    coefficient and the wave's amplitude, against central differences of the chain reference
+    (`tests/reference_chain.py`, rtol 1e-11) at steps of 1e-5 relative."""
+    from reference_chain import chain_config, reference_chain_measure
+
+    base = dict(k=50.0, mu_k_bwd=0.7, a=0.1)
+    z, t_start, horizon = 0.3, 8.0, 60.0  # flagged smooth (z = 0.2 from t = 5 is not: a switch is near)
+
+    def package(theta):
+        k, mu_k_bwd, a = theta
+        C = lj.Chain(masses=[1.0, 1.0, 1.0], k=k, d=0.0, lbar=3.0, c=0.01,
+                     friction=lj.AnisotropicCoulomb(0.5, 0.9, 0.3, mu_k_bwd),
+                     waveforms=lj.TravellingWave(a, 2.0, 0.785))  # fmt: skip
+        m = lj.measure(C, z=z, t_start=t_start, horizon=horizon, dynamics=lj.Exact(dt=DT))
+        return jnp.stack([m.tau_z, m.e_z, m.mean_speed]), m.smooth
+
+    def reference(k, mu_k_bwd, a):
+        cfg = chain_config([1.0, 1.0, 1.0], k=k, d=0.0, lbar=3.0, c=0.01, omega=2.0, a=a, phi=0.785,
+                           mu_s_fwd=0.5, mu_s_bwd=0.9, mu_k_fwd=0.3, mu_k_bwd=mu_k_bwd)  # fmt: skip
+        r = reference_chain_measure(cfg, z=z, t_start=t_start, horizon=horizon, rtol=1e-11, atol=1e-13)
+        return np.array([r["tau_z"], r["e_z"], r["mean_speed"]])
+
+    theta = jnp.array([base["k"], base["mu_k_bwd"], base["a"]])
+    values, smooth = package(theta)
+    jac = jax.jacfwd(lambda t: package(t)[0])(theta)
+    assert bool(smooth), "the configuration must be flagged smooth for its derivative to be claimed"
+    fd = []
+    for i, name in enumerate(base):
+        h = 1e-5 * base[name]
+        up, down = dict(base), dict(base)
+        up[name] += h
+        down[name] -= h
+        fd.append((reference(**up) - reference(**down)) / (2 * h))
+    fd = np.stack(fd, -1)
+    np.testing.assert_allclose(np.asarray(values), reference(**base), rtol=1e-6)
+    # Each entry within 1e-3 of its row's largest derivative (rows: tau_z, e_z, mean_speed).
+    err = np.abs(np.asarray(jac) - fd) / np.abs(fd).max(-1, keepdims=True)
+    assert np.all(err < RTOL), (np.asarray(jac), fd, err)

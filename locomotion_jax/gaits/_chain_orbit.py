@@ -62,7 +62,7 @@ def with_waves(chain: Chain, theta: Array, a_max: Array, harmonics: int) -> Chai
     S = chain.n_masses - 1
     cos, sin = coefficients(theta, S, harmonics)
     waves = SpringFourier(a_max * cos, a_max * sin, jnp.exp(theta[-1]))
-    return eqx.tree_at(lambda c: c.waves, chain, waves)
+    return chain.with_waves(waves)
 
 
 def period(C: Chain, contact: Contact, dt: float, max_steps: Array, y: Array, k: Array) -> Period:

@@ -17,7 +17,8 @@ from ._checks import broadcast_shape, real_array, related
 from ._friction import AbstractFriction, Coulomb
 from ._mechanism import AbstractMechanism, R
 from ._params import Params
-from ._springwaves import check_waveforms, SpringFourier, to_spring_fourier, TravellingWave
+from ._springwaves import check_waveforms, spring_signals, SpringFourier, to_spring_fourier, TravellingWave
+from ._waveform import AbstractWaveform
 
 
 def _per(name: str, x: ValuesLike, n: int, what: str) -> Array:
@@ -57,8 +58,9 @@ class Chain(AbstractMechanism):
     - `k`, `d`, `lbar`: per spring ($k_j > 0$, $|d_j| < \\bar\\ell_j$, $\\bar\\ell_j > 0$); `lbar=None`
       takes the mean rest lengths of Sinusoid/Fourier waveforms, else 3.
     - `c`: damping per mass, $c_i \\ge 0$.
-    - `waveforms`: a [`TravellingWave`][], a [`SpringFourier`][], one `Sinusoid`/`Fourier` for every
-      spring, or a list of them (one per spring, a common base frequency). Default: no actuation.
+    - `waveforms`: a [`TravellingWave`][], a [`SpringFourier`][], one waveform for every spring
+      (`Sinusoid`, `Fourier`, `Spline`, any [`AbstractWaveform`][locomotion_jax.AbstractWaveform]), or a
+      list of them (one per spring, a common base frequency). Default: no actuation.
     - `friction`: an [`AbstractFriction`][] with per-mass coefficients; default `Coulomb(0.7, 0.5)`.
     - `actuator`: [`RestLength`][] (default) or [`InternalForce`][].
     - `check`: validate concrete values (default); invalid values raise `ValueError` naming the
@@ -83,6 +85,9 @@ class Chain(AbstractMechanism):
     waves: SpringFourier
     friction: AbstractFriction
     actuator: AbstractActuator = eqx.field(static=True)
+    # Each spring's waveform where one is neither a Sinusoid nor a Fourier (a Spline): it drives
+    # the spring itself and `waves` keeps only the base frequency; `None`: `waves` holds the actuation.
+    signals: tuple[AbstractWaveform, ...] | None = None
 
     def __init__(
         self,
@@ -112,6 +117,7 @@ class Chain(AbstractMechanism):
         if check:
             check_waveforms(waveforms)  # named by the waveform's own fields (phi is lost in the normal form)
         self.waves, wave_lbar = to_spring_fourier(waveforms, n - 1)
+        self.signals = spring_signals(waveforms, n - 1)
         if lbar is None:
             lbar = 3.0 if wave_lbar is None else wave_lbar
         elif wave_lbar is not None and _concrete(wave_lbar) and _concrete(lbar):
@@ -175,6 +181,9 @@ class Chain(AbstractMechanism):
         shapes = {n: x.shape[:-1] for n, x in fields.items()}
         shapes |= {"waveforms (cos)": self.waves.cos.shape[:-2], "waveforms (sin)": self.waves.sin.shape[:-2],
                    "omega": self.waves.omega.shape}  # fmt: skip
+        for j, w in enumerate(self.signals or ()):
+            shapes |= {f"waveforms[{j}] ({n})": x.shape[:-1] for n, x in w.coefficients().items()}
+            shapes |= {f"waveforms[{j}] (omega)": jnp.shape(w.omega), f"waveforms[{j}] (lbar)": jnp.shape(w.lbar)}
         return broadcast_shape(shapes)
 
     @property
@@ -189,11 +198,26 @@ class Chain(AbstractMechanism):
         H = self.waves.harmonics
         waves = SpringFourier(full(self.waves.cos, (n - 1, H)), full(self.waves.sin, (n - 1, H)),
                               full(self.waves.omega, ()))  # fmt: skip
-        return eqx.tree_at(
+        out = eqx.tree_at(
             lambda c: (c.m, c.c, c.k, c.d, c.lbar, c.waves, c.friction), self,
             (full(self.m, (n,)), full(self.c, (n,)), full(self.k, (n - 1,)), full(self.d, (n - 1,)),
              full(self.lbar, (n - 1,)), waves, fr),
         )  # fmt: skip
+        if self.signals is None:
+            return out
+
+        def signal(w: AbstractWaveform) -> AbstractWaveform:
+            coef = w.coefficients()
+            full_coef = [full(x, x.shape[-1:]) for x in coef.values()]
+            w = eqx.tree_at(lambda v: [getattr(v, name) for name in coef], w, full_coef)
+            return eqx.tree_at(lambda v: (v.omega, v.lbar), w, (full(w.omega, ()), full(w.lbar, ())))
+
+        return eqx.tree_at(lambda c: c.signals, out, tuple(map(signal, self.signals)))
+
+    def with_waves(self, waves: SpringFourier) -> "Chain":
+        """A copy actuated by the Fourier coefficients `waves` (any `signals` dropped)."""
+        out = eqx.tree_at(lambda c: c.waves, self, waves)
+        return out if self.signals is None else eqx.tree_at(lambda c: c.signals, out, None)
 
     def astype(self, dtype: Any) -> "Chain":
         dtype = jnp.dtype(dtype)
@@ -216,7 +240,10 @@ class Chain(AbstractMechanism):
 
     def physics(self) -> ChainPhysics:
         """The chain's [`AbstractPhysics`][locomotion_jax.AbstractPhysics]: what the engines integrate it with."""
-        return chain_physics(self)
+        P = chain_physics(self)
+        if self.signals is None:
+            return P
+        return eqx.tree_at(lambda P: P.waveforms, P, self.signals, is_leaf=lambda x: x is None)
 
     @property
     def total_mass(self) -> Array:
@@ -258,7 +285,7 @@ class Chain(AbstractMechanism):
         """`(name, valid mask (..., axis), valid range, index kind)` of every constraint."""
         c = self.broadcast()
         fr = c.friction
-        stroke = c.waves.stroke()
+        stroke = c.stroke()
         # Finite values first: a NaN is reported as the parameter that holds it, not as a relation it breaks.
         checks = [(name, jnp.isfinite(value), "finite", "mass")
                   for name, value in [("masses", c.m), ("c", c.c), *fr.fields().items()]]  # fmt: skip
@@ -266,6 +293,8 @@ class Chain(AbstractMechanism):
                                                                                         ("lbar", c.lbar)]]  # fmt: skip
         checks.append(("waveforms", jnp.isfinite(c.waves.cos).all(-1) & jnp.isfinite(c.waves.sin).all(-1), "finite",
                        "spring"))  # fmt: skip
+        if c.signals is not None:
+            checks.append(("waveforms", jnp.stack([w.is_valid() for w in c.signals], -1), "valid", "spring"))
         omega_ok = jnp.isfinite(c.waves.omega) & (c.waves.omega >= 0)
         checks += [
             ("omega", jnp.broadcast_to(omega_ok[..., None], c.k.shape), "omega >= 0 and finite", "spring"),
@@ -282,6 +311,12 @@ class Chain(AbstractMechanism):
             checks.append((name, ok, ranges.get(name, "valid"), "mass"))
         return checks
 
+    def stroke(self) -> Array:
+        """The largest excursion of each spring's signal, shape `(..., N - 1)` (broadcast chain)."""
+        if self.signals is None:
+            return self.waves.stroke()
+        return jnp.stack([w.stroke() for w in self.signals], -1)
+
     def is_valid(self) -> Array:
         """Traceable mask (batch shape) of configurations inside the valid ranges."""
         ok = jnp.ones(self.batch_shape, bool)
@@ -293,7 +328,7 @@ class Chain(AbstractMechanism):
         """Raise `ValueError` at the first invalid value: parameter, mass or spring index, batch index, range."""
         shape = self.batch_shape
         c = self.broadcast()
-        values = {"masses": c.m, "c": c.c, "k": c.k, "d": c.d, "lbar": c.lbar, "waveforms": c.waves.stroke(),
+        values = {"masses": c.m, "c": c.c, "k": c.k, "d": c.d, "lbar": c.lbar, "waveforms": c.stroke(),
                   "omega": jnp.broadcast_to(c.waves.omega[..., None], c.k.shape), **c.friction.fields()}  # fmt: skip
         for name, mask, valid, kind in self._checks():
             bad = ~np.broadcast_to(np.asarray(mask), shape + mask.shape[-1:])

@@ -65,6 +65,11 @@ def _dump_chain(chain: Chain) -> dict[str, Any]:
     fr = chain.friction.fields()
     if any(np.ndim(x) > 1 for x in fr.values()):
         raise MechanismFileError("save_mechanism: a file describes one configuration; the friction law is batched.")
+    if chain.signals is not None:
+        raise MechanismFileError(
+            "save_mechanism: a chain driven by waveforms other than Sinusoid/Fourier (a Spline) cannot be written; "
+            "a file holds a chain's actuation as Fourier coefficients."
+        )
     w = chain.waves
     return {
         "schema": SCHEMA,

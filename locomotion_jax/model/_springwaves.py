@@ -158,12 +158,28 @@ def to_spring_fourier(waveforms, springs: int) -> tuple[SpringFourier, Array | N
                 f"waveforms: spring {j} has omega={om!r} but spring 0 has omega={omegas[0]!r}; "
                 "a chain's springs share one base frequency (use harmonics for other frequencies)."
             )
+    if not all(isinstance(w, (Sinusoid, Fourier)) for w in waveforms):
+        # Any other waveform (a Spline) drives its spring itself (`Chain.signals`); the normal form
+        # keeps the base frequency, with no harmonics.
+        zeros = jnp.zeros(jnp.shape(omegas[0]) + (springs, 1))
+        lbar = jnp.stack(jnp.broadcast_arrays(*(jnp.asarray(w.lbar) for w in waveforms)), axis=-1)
+        return SpringFourier(zeros, zeros, omegas[0]), lbar
     H = max(w.harmonics if isinstance(w, Fourier) else 1 for w in waveforms)
     coeffs = [_as_fourier(w, H) for w in waveforms]
     A = jnp.stack(jnp.broadcast_arrays(*(c[0] for c in coeffs)), axis=-2)
     B = jnp.stack(jnp.broadcast_arrays(*(c[1] for c in coeffs)), axis=-2)
     lbar = jnp.stack(jnp.broadcast_arrays(*(jnp.asarray(w.lbar) for w in waveforms)), axis=-1)
     return SpringFourier(A, B, omegas[0]), lbar
+
+
+def spring_signals(waveforms: Any, springs: int) -> tuple[AbstractWaveform, ...] | None:
+    """The waveform of each spring where one is neither a `Sinusoid` nor a `Fourier` (a `Spline`:
+    it drives its spring itself), else `None` (the normal form [`SpringFourier`][] holds the actuation)."""
+    if isinstance(waveforms, AbstractWaveform):
+        waveforms = [waveforms] * springs
+    if isinstance(waveforms, Sequence) and not all(isinstance(w, (Sinusoid, Fourier)) for w in waveforms):
+        return tuple(waveforms)
+    return None
 
 
 def check_waveforms(waveforms: Any) -> None:

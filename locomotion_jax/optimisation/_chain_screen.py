@@ -12,7 +12,6 @@ step either side of it, the step halved.
 import math
 from typing import Any, NamedTuple
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -65,7 +64,7 @@ def with_actuation(chain: Chain, cos: np.ndarray, sin: np.ndarray, omega: np.nda
     dtype = chain.dtype
     batch = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (B,) + x.shape), chain)
     waves = SpringFourier(jnp.asarray(cos, dtype), jnp.asarray(sin, dtype), jnp.asarray(omega, dtype))
-    return eqx.tree_at(lambda c: c.waves, batch, waves)
+    return batch.with_waves(waves)
 
 
 def solve(chain: Chain, cos: np.ndarray, sin: np.ndarray, omega: np.ndarray, settings: ChainOptimiseSettings) -> Gaits:
