@@ -31,7 +31,10 @@ def test_two_coexisting_gaits_and_the_reference():
         assert speed == pytest.approx(float(b.gaits.mean_speed[lab]), rel=1e-3)
         other = 1 - lab
         end = np.array([r["x2"][1] - r["x1"][1], r["v1"][1], r["v2"][1]])
-        gait = lambda i: np.array([float(b.gaits.u[i]), float(b.gaits.v1[i]), float(b.gaits.v2[i])])
+        g = b.gaits
+        assert isinstance(g, lj.Gait)  # the paper's model's gaits (a chain's are a ChainGait)
+        u, v1, v2 = np.asarray(g.u), np.asarray(g.v1), np.asarray(g.v2)
+        gait = lambda i: np.array([u[i], v1[i], v2[i]])
         assert np.linalg.norm(end - gait(lab)) < 0.1 * np.linalg.norm(end - gait(other))
         sticks = any("slip->stick" in kind and t > 59 * T for t, kind in r["events"])
         assert sticks == (int(b.gaits.regime[lab]) == lj.Regime.SSL)

@@ -104,7 +104,30 @@ def test_chain_gait_bad_input():
     chain = lj.Chain(masses=np.ones(3), waveforms=lj.TravellingWave(0.05, 3.0, 1.0))
     with pytest.raises(ValueError, match="carries its own waveforms"):
         lj.steady_gait(chain, waveform=lj.Sinusoid(0.1, 2.0, 3.0))
-    with pytest.raises(ValueError, match="start"):
+    with pytest.raises(ValueError, match=r"section states .* of shape \(5,\)"):
+        lj.steady_gait(chain, start=np.zeros(4))
+    with pytest.raises(ValueError, match="the gaps u_j must be > 0"):
         lj.steady_gait(chain, start=np.zeros(5))
     with pytest.raises(ValueError, match="contact"):
         lj.steady_gait(chain, contact="soft")
+
+
+def test_chain_basins_and_gaits_from_given_starts(worms):
+    """`steady_gait(chain, start=states)` and `basins` on a chain: starts near and far from the
+    anisotropic worm's stick-slip gait (section states: gaps, then velocities) all end on it, its
+    speed and cost to 1e-9; a start whose masses are out of order is flagged, never run."""
+    chain, gaits = worms
+    worm, gait = chain[3], jax.tree_util.tree_map(lambda x: x[3], gaits)
+    y = np.asarray(gait.state)
+    assert y.shape == (5,) and bool(gait.converged)
+    starts = np.stack([y, y + np.array([0.02, -0.02, 0.05, 0.0, -0.05]), y + np.array([-0.1, 0.1, 0, 0, 0]),
+                       np.array([3.0, 3.0, 0.0, 0.0, 0.0]), np.array([-1.0, 3.0, 0.0, 0.0, 0.0])])  # fmt: skip
+    b = lj.basins(worm, starts)
+    assert list(np.asarray(b.label)) == [0, 0, 0, 0, -1] and list(np.asarray(b.count)) == [4]
+    assert int(b.per_start.status[-1]) == lj.GaitStatus.INVALID
+    np.testing.assert_allclose(float(b.gaits.mean_speed[0]), float(gait.mean_speed), rtol=1e-9)
+    np.testing.assert_allclose(float(b.gaits.cost_of_transport[0]), float(gait.cost_of_transport), rtol=1e-9)
+    with pytest.raises(ValueError, match=r"starts must have shape grid \+ \(5,\)"):
+        lj.basins(worm, np.zeros((2, 3)))
+    with pytest.raises(ValueError, match="section states"):
+        lj.steady_gait(chain, start=np.zeros((5, 3)))

@@ -17,8 +17,9 @@ import numpy as np
 
 from .._custom_types import Array, ArrayLike
 from ..dynamics._base import AbstractDynamics
-from ..model._params import PARAM_NAMES, Params
+from ..model._mechanism import AbstractMechanism
 from ..model._waveform import AbstractWaveform
+from ._chain_gait import ChainGait
 from ._gait import Gait, steady_gait
 
 
@@ -27,19 +28,20 @@ class Basins(eqx.Module):
 
     - `label`: shape `G`: the index into `gaits` of the gait each start ends on; -1 where none
       converged (chaos, a long transient, lift-off: `per_start.status` says which).
-    - `gaits`: the distinct gaits ([`Gait`][], batch `(n,)`), by increasing mean speed.
+    - `gaits`: the distinct gaits ([`Gait`][], or a chain's `ChainGait`; batch `(n,)`), by
+      increasing mean speed.
     - `count`: shape `(n,)`: the starts in each basin.
     - `per_start`: the [`Gait`][] of every start, shape `G`.
     """
 
     label: Array
-    gaits: Gait
+    gaits: Gait | ChainGait
     count: Array
-    per_start: Gait
+    per_start: Gait | ChainGait
 
 
 def basins(
-    params: Params,
+    params: AbstractMechanism,
     starts: ArrayLike,
     *,
     periods: int | Sequence[int] = (1, 2, 3, 4),
@@ -54,9 +56,12 @@ def basins(
 
     **Arguments:**
 
-    - `params`: [`Params`][] of one configuration (batch shape `()`).
-    - `starts`: section states $(u, v_1, v_2)$ at phase 0, shape `G + (3,)` (e.g. a grid of gaps
-      and velocities). A mass given $v_i = 0$ starts stuck where eq. (7) allows.
+    - `params`: one configuration (batch shape `()`) of any mechanism: a [`Params`][], a
+      [`Chain`][locomotion_jax.Chain].
+    - `starts`: section states at phase 0, shape `G + (2N - 1,)` (e.g. a grid of gaps and
+      velocities): $(u, v_1, v_2)$ for the paper's model, the gaps then the velocities
+      $(u_0, \\dots, u_{N-2}, v_0, \\dots, v_{N-1})$ for a chain. A mass given $v_i = 0$ starts stuck
+      where eq. (7) allows.
     - `periods`, `transient`, `dynamics`, `waveform`, `contact`, `dtype`: as in [`steady_gait`][].
     - `rtol`: gaits whose mean speeds and costs of transport agree to `rtol` (relative, over
       $1 + |x|$) and have the same period are the same gait.
@@ -71,15 +76,18 @@ def basins(
         b.label, b.gaits.mean_speed, b.count
         ```
     """
-    if not isinstance(params, Params) or params.batch_shape != ():
-        raise ValueError("params must be one configuration (a Params of batch shape ()).")
+    if not isinstance(params, AbstractMechanism) or params.batch_shape != ():
+        raise ValueError("params must be one configuration (a mechanism of batch shape ()).")
+    n = params.physics().n_bodies
     y = np.asarray(starts, np.float64)
-    if y.ndim < 1 or y.shape[-1] != 3 or y.size == 0:
-        raise ValueError(f"starts must have shape grid + (3,) (u, v1, v2), got {y.shape}.")
+    if y.ndim < 1 or y.shape[-1] != 2 * n - 1 or y.size == 0:
+        what = "(u, v1, v2)" if n == 2 else f"(gaps u_0..u_{n - 2}, velocities v_0..v_{n - 1})"
+        raise ValueError(f"starts must have shape grid + ({2 * n - 1},) {what}, got {y.shape}.")
     if not (np.isfinite(rtol) and rtol > 0):
         raise ValueError(f"rtol must be a finite number > 0, got {rtol!r}.")
     grid = y.shape[:-1]
-    batch = Params(**{n: jnp.full(grid, getattr(params, n)) for n in PARAM_NAMES}, check=False)
+    # The one configuration repeated over the grid (new leading batch axes on every field).
+    batch = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(jnp.asarray(x), grid + jnp.shape(x)), params)
     g = steady_gait(batch, start=y, periods=periods, transient=transient, dynamics=dynamics, waveform=waveform,
                     contact=contact, dtype=dtype)  # fmt: skip
     label, reps = _classify(np.asarray(g.converged), np.asarray(g.k), np.asarray(g.mean_speed),

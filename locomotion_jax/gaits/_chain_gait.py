@@ -22,7 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import Array, Contact
+from .._custom_types import Array, ArrayLike, Contact
 from .._status import Regime, Status
 from ..dynamics import _chain_exact as engine
 from ..dynamics._compile import engine_jit
@@ -131,14 +131,19 @@ def _period_map(P, contact, dt, max_steps, k, y) -> _Period:
     )
 
 
-def _transient_batch(C, valid, contact, start, dt, transient, max_steps):
-    def one(c, ok):
+def _transient_batch(C, valid, contact, start, dt, transient, max_steps, y_start=None):
+    """The reduced states after `transient` actuation periods from the start at rest `start`, or
+    from the section states `y_start` (flat, `(n, 2N - 1)`) where given."""
+
+    def one(c, ok, y):
         P = c.physics()
-        st = chain_initial_state(P, ok, contact, start)
+        row = None if y is None else jnp.concatenate([jnp.zeros((1,), y.dtype), jnp.cumsum(y[: P.n_bodies - 1]),
+                                                      y[P.n_bodies - 1 :]])  # fmt: skip
+        st = chain_initial_state(P, ok, contact, start, row)
         st, _ = _advance(P, contact, dt, st, transient * (2 * jnp.pi) / P.omega, max_steps)
         return _reduced(st), st.status, jnp.isfinite(st.t_liftoff)
 
-    return jax.vmap(one)(C, valid)
+    return jax.vmap(one)(C, valid, y_start)
 
 
 _transient_batch = engine_jit(_transient_batch, ("contact", "start", "dt"))
@@ -194,12 +199,29 @@ def steady_gait_chain(
     max_iter: int = 12,
     dynamics: Exact,
     contact: str = "strict",
-    start: str = "paper",
+    start: str | ArrayLike = "paper",
     dtype: Any = None,
 ) -> ChainGait:
-    """[`steady_gait`][] for a [`Chain`][] (its arguments; `start` names a start at rest)."""
-    check_contact_start(contact, start)
+    """[`steady_gait`][] for a [`Chain`][] (its arguments; `start` names a start at rest, or gives
+    section states $(u_0, \\dots, u_{N-2}, v_0, \\dots, v_{N-1})$ at phase 0, gaps then velocities,
+    shape `batch + (2N - 1,)`)."""
+    check_contact_start(contact, start if isinstance(start, str) else "paper")
     flat, valid, shape = prepare_chain(chain, dtype)
+    y_start = None
+    if not isinstance(start, str):
+        n_red = 2 * flat.n_masses - 1
+        y = np.asarray(start, np.float64)
+        if y.shape != shape + (n_red,) or not np.all(np.isfinite(y)):
+            raise ValueError(
+                f"start must be 'paper', 'relaxed' or finite section states (gaps u_0..u_N-2, velocities "
+                f"v_0..v_N-1) of shape {shape + (n_red,)}, got shape {y.shape}."
+            )
+        if shape == () and np.any(y[: flat.n_masses - 1] <= 0):  # one configuration: refused (a batch: flagged)
+            raise ValueError(
+                f"start: the gaps u_j must be > 0 (the masses in order along the chain), got {y[: flat.n_masses - 1]}."
+            )
+        y_start = jnp.asarray(y.reshape(-1, n_red), flat.m.dtype)
+        start = "paper"
     valid = valid & jnp.asarray(select.periodic(np.asarray(flat.waves.omega, np.float64), shape))
     dtype_ = flat.m.dtype
     f32 = jnp.finfo(dtype_).bits < 64
@@ -209,7 +231,7 @@ def steady_gait_chain(
     T_max = float(np.max(2 * np.pi / omega[np.isfinite(omega) & (omega > 0)], initial=1.0))
     real = lambda v: jnp.asarray(v, dtype_)
     mst = jnp.asarray(dynamics.max_steps or default_max_steps(transient * T_max, dynamics.dt), jnp.int32)
-    y0, trans, trans_lift = _transient_batch(flat, valid, contact, start, dynamics.dt, real(transient), mst)
+    y0, trans, trans_lift = _transient_batch(flat, valid, contact, start, dynamics.dt, real(transient), mst, y_start)
     trans = np.asarray(trans)
     base = np.select(
         [trans == Status.INVALID, trans == Status.LIFTOFF, trans != Status.OK],

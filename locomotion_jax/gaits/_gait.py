@@ -190,8 +190,9 @@ def steady_gait(
     - `max_iter`: Newton iterations per `k`.
     - `dynamics`: [`Exact`][] (its `dt`); `waveform`, `contact`, `dtype`: as in [`simulate`][].
     - `start`: as in [`simulate`][] (`"paper"`, `"relaxed"`: at rest), or section states
-      $(u, v_1, v_2)$ at phase 0, an array of shape `batch + (3,)` (a mass given $v_i = 0$ starts
-      stuck where eq. 7 allows).
+      $(u, v_1, v_2)$ at phase 0, an array of shape `batch + (3,)` (a chain: gaps then velocities,
+      $(u_0, \\dots, u_{N-2}, v_0, \\dots, v_{N-1})$, shape `batch + (2N - 1,)`; a mass given
+      $v_i = 0$ starts stuck where eq. 7 allows).
 
     **Returns:** a [`Gait`][] with batch shape `params.batch_shape`. Configurations without
     a converged orbit carry NaN numbers and their `status`; the others are unaffected.
@@ -214,8 +215,6 @@ def steady_gait(
 def _chain(chain: Chain, periods, transient, tol, max_iter, dynamics: Exact, waveform, contact, start, dtype):
     if waveform is not None:
         raise ValueError("waveform= applies to Params; a Chain carries its own waveforms (Chain(waveforms=...)).")
-    if not isinstance(start, str):
-        raise ValueError("start= for a Chain names a start at rest: 'paper' or 'relaxed'.")
     from ._chain_gait import steady_gait_chain
 
     return steady_gait_chain(chain, periods=periods, transient=transient, tol=tol, max_iter=max_iter,
