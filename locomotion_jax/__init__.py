@@ -31,12 +31,18 @@ from .model import (
     AbstractFriction as AbstractFriction,
     AnisotropicCoulomb as AnisotropicCoulomb,
     Chain as Chain,
+    AbstractElement as AbstractElement,
     Coulomb as Coulomb,
+    ExternalForce as ExternalForce,
+    Force as Force,
     InternalForce as InternalForce,
+    Mechanism as Mechanism,
     RestLength as RestLength,
+    Spring as Spring,
     SpringFourier as SpringFourier,
     Stribeck as Stribeck,
     TravellingWave as TravellingWave,
+    WALL as WALL,
 )
 from .model._files import load_mechanism as load_mechanism, MechanismFileError as MechanismFileError
 from .model._files_save import save_mechanism as save_mechanism

@@ -37,20 +37,25 @@ def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps, lanes, buf
         return P, chain_initial_state(P, valid[i], contact, start, None if initial is None else initial[i])
 
     step = lambda P, s, t_stop: engine.step(P, contact, dt, s, t_stop)[0]
-    order = jnp.argsort(-jnp.where(jnp.isfinite(C.waves.omega), C.waves.omega, -jnp.inf))
+    order = jnp.argsort(-jnp.where(jnp.isfinite(C.omega), C.omega, -jnp.inf))
     return run_saves(init, step, _row, valid.shape[0], save_at, max_steps, lanes, order, buffer)
 
 
 _simulate_batch = engine_jit(_simulate_batch, ("contact", "start", "dt", "lanes", "buffer"))
 
 
+def _stack(a: tuple, like: jax.Array) -> jax.Array:
+    """A per-spring tuple as an array (a mechanism without springs: an empty last axis)."""
+    return jnp.stack(a, -1) if a else jnp.zeros(jnp.shape(like) + (0,), like.dtype)
+
+
 def _derived(C: Chain, contact, t, x, v):
-    """Energy, normal forces, rest lengths and tensions at one saved state."""
+    """Energy, normal forces, rest lengths and tensions (per spring) at one saved state."""
     P: ChainPhysics = C.physics()
     dr = P.drive(jnp.cos(P.omega * t), jnp.sin(P.omega * t))
     L = P.loads(dr, tuple(x[..., i] for i in range(x.shape[-1])))
     e = P.energy(L, tuple(v[..., i] for i in range(v.shape[-1])))
-    return dict(e=e, N=jnp.stack(L.N, -1), l0=jnp.stack(dr.l0, -1), tension=jnp.stack(L.aux.tension, -1))
+    return dict(e=e, N=jnp.stack(L.N, -1), l0=_stack(dr.l0, e), tension=_stack(L.aux.tension, e))
 
 
 def simulate_batch(flat: Chain, valid, save, contact, start, dt, max_steps: int, initial=None) -> dict:
@@ -70,7 +75,7 @@ def simulate_batch(flat: Chain, valid, save, contact, start, dt, max_steps: int,
         t=t, x=x, v=v, stuck=rows[..., 2 * N + 2 : 3 * N + 2] > 0.5, X=jax.vmap(_com)(flat, x),
         e_d=rows[..., 2 * N], w=rows[..., 2 * N + 1], valid=ok, status=status, liftoff=jnp.isfinite(t_lift),
         t_liftoff=t_lift, n_switch=n_switch, transversality=jnp.sqrt(rows[..., 4 * N + 2]),
-        near_miss=jnp.sqrt(rows[..., 4 * N + 3]), switch_gap=switch_gap(flat.waves.omega, t, rows[..., 4 * N + 4]),
+        near_miss=jnp.sqrt(rows[..., 4 * N + 3]), switch_gap=switch_gap(flat.omega, t, rows[..., 4 * N + 4]),
         **der,
     )  # fmt: skip
     return out

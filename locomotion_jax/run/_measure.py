@@ -160,7 +160,7 @@ def measure_chain(chain: Chain, dynamics: AbstractDynamics, z: float, horizon: f
     """`measure` for a [`Chain`][] (arguments as there; also the chunks of a chain sweep)."""
     check_contact_start(contact, start)
     flat, valid, shape = prepare_chain(chain, dtype)
-    y0 = prepare_chain_initial(initial, shape, flat.n_masses, flat.dtype)
+    y0 = prepare_chain_initial(initial, shape, flat.n_masses, flat.dtype, flat)
     n = valid.shape[0]
     if t_start is None:
         ts = jnp.full((n,), jnp.inf, flat.dtype)  # the chains' own, `Chain.t_start`

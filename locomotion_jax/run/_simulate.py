@@ -142,7 +142,7 @@ def _chain(chain: Chain, dynamics: AbstractDynamics, t_end, save_np, waveform, c
         raise ValueError("waveform= applies to Params; a Chain carries its own waveforms (Chain(waveforms=...)).")
     check_contact_start(contact, start)
     flat, valid, shape = prepare_chain(chain, dtype)
-    y0 = prepare_chain_initial(initial, shape, flat.n_masses, flat.dtype)
+    y0 = prepare_chain_initial(initial, shape, flat.n_masses, flat.dtype, flat)
     save = jnp.asarray(save_np, flat.dtype)
     out = dynamics.simulate_chain(flat, valid, save, t_end, contact, start, y0)
     start = "initial" if initial is not None else start
