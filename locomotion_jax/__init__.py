@@ -28,10 +28,10 @@ from .gaits._gait import Gait as Gait, GaitStatus as GaitStatus, steady_gait as 
 from .maps._sweep import sweep as sweep
 from .model import (
     AbstractActuator as AbstractActuator,
+    AbstractElement as AbstractElement,
     AbstractFriction as AbstractFriction,
     AnisotropicCoulomb as AnisotropicCoulomb,
     Chain as Chain,
-    AbstractElement as AbstractElement,
     Coulomb as Coulomb,
     ExternalForce as ExternalForce,
     Force as Force,

@@ -58,7 +58,7 @@ def signal_at(s: Signal, c1: Array, s1: Array) -> tuple[Array, Array | None, Arr
 
 def signal_nodes(s: Signal) -> list[tuple[Array, int]]:
     """Every array of a signal with the number of its trailing (non-batch) axes: a waveform's
-    coefficient arrays have one ([`AbstractWaveform.coefficients`][locomotion_jax.AbstractWaveform.coefficients]), its other fields none."""
+    coefficient arrays have one (`AbstractWaveform.coefficients`), its other fields none."""
     if not isinstance(s, AbstractWaveform):
         return [(s, 0)]
     coeffs = s.coefficients()

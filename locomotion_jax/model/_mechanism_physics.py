@@ -147,7 +147,8 @@ class MechanismPhysics(AbstractPhysics):
         return ddF, tuple(jnp.zeros_like(q) for q in ddF)
 
     def power(self, drive: Drive, loads: Loads, v: Scalars) -> Array:
-        """$\\dot w = \\sum_\\text{springs} -f\\,\\dot r + \\sum_\\text{forces} f\\,(v_b - v_a) + \\sum_i g_i v_i$ (SPEC §9)."""
+        """The power put in (SPEC §9): $\\dot w = \\sum_\\text{springs} -f\\,\\dot r$
+        $+ \\sum_\\text{forces} f\\,(v_b - v_a) + \\sum_i g_i v_i$."""
         like = v[0]
         terms = [-(T * dr) for T, dr in zip(loads.aux.tension, drive.dl0) if dr is not None]
         terms += [f * (_pos(v, e.b, like) - _pos(v, e.a, like)) for e, f in zip(self.forces, drive.f)]
