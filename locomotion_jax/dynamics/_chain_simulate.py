@@ -8,8 +8,8 @@ only; energy, normal forces, rest lengths and tensions follow from the saved sta
 import jax
 import jax.numpy as jnp
 
+from ..model._bodies import Mechanism
 from ..model._chain import Chain
-from ..model._chain_physics import ChainPhysics
 from . import _chain_exact as engine
 from ._compile import engine_jit
 from ._margins import switch_gap
@@ -17,7 +17,7 @@ from ._runs import chain_initial_state, default_lanes
 from ._saves import BUFFER, run_saves
 
 
-def _com(C: Chain, x: jax.Array) -> jax.Array:
+def _com(C: Chain | Mechanism, x: jax.Array) -> jax.Array:
     """Centre of mass $\\sum_i m_i x_i / \\sum_i m_i$ of one configuration (`x`: `(..., N)`)."""
     return jnp.matmul(x, C.m) / C.m.sum()
 
@@ -49,16 +49,16 @@ def _stack(a: tuple, like: jax.Array) -> jax.Array:
     return jnp.stack(a, -1) if a else jnp.zeros(jnp.shape(like) + (0,), like.dtype)
 
 
-def _derived(C: Chain, contact, t, x, v):
+def _derived(C: Chain | Mechanism, contact, t, x, v):
     """Energy, normal forces, rest lengths and tensions (per spring) at one saved state."""
-    P: ChainPhysics = C.physics()
+    P = C.physics()
     dr = P.drive(jnp.cos(P.omega * t), jnp.sin(P.omega * t))
     L = P.loads(dr, tuple(x[..., i] for i in range(x.shape[-1])))
     e = P.energy(L, tuple(v[..., i] for i in range(v.shape[-1])))
     return dict(e=e, N=jnp.stack(L.N, -1), l0=_stack(dr.l0, e), tension=_stack(L.aux.tension, e))
 
 
-def simulate_batch(flat: Chain, valid, save, contact, start, dt, max_steps: int, initial=None) -> dict:
+def simulate_batch(flat: Chain | Mechanism, valid, save, contact, start, dt, max_steps: int, initial=None) -> dict:
     """The fields of a [`ChainTrajectory`][locomotion_jax.ChainTrajectory] of a flat batch of chains
     (leading axis: the configurations); `max_steps` caps each one's iterations, saves included;
     `initial`: the states at $t = 0$, shape `(n, 2N)`, or `None` for `start`'s."""

@@ -125,13 +125,13 @@ def _known_finite(state: jax.Array) -> np.ndarray | None:
 
 
 def prepare_chain_initial(
-    initial: Any, shape: tuple[int, ...], n_bodies: int, dtype: Any, flat: Any = None
+    initial: Any, shape: tuple[int, ...], n_bodies: int, dtype: Any, mechanism: Any = None
 ) -> jax.Array | None:
     """A chain's or a mechanism's initial state `(x, v)` (positions and velocities, each
     broadcastable to `shape + (N,)`) as a flat `(size, 2N)` array, or `None`. Raises a
     `ValueError` where its values are known here (not under `jit`) and one is not finite or a
-    gap that must stay positive is not (`AbstractPhysics.gaps` of the flat mechanism `flat`'s
-    physics; a chain's: its positions in increasing order; `flat=None`: a chain's); under
+    gap that must stay positive is not (`AbstractPhysics.gaps` of the flat `mechanism`'s
+    physics; a chain's: its positions in increasing order; `mechanism=None`: a chain's); under
     `jit` such a configuration is flagged `INVALID` in its own result (`_runs.chain_initial_state`)."""
     if initial is None:
         return None
@@ -155,10 +155,10 @@ def prepare_chain_initial(
     values = _known_finite(state)
     if values is None:
         bad = np.empty((0, 2))
-    elif flat is None:
+    elif mechanism is None:
         bad = np.argwhere(np.diff(values[:, :n_bodies], axis=-1) <= 0)
     else:
-        gaps = flat.physics().gaps(tuple(jnp.asarray(values[:, i]) for i in range(n_bodies)))
+        gaps = mechanism.physics().gaps(tuple(jnp.asarray(values[:, i]) for i in range(n_bodies)))
         bad = np.argwhere(np.stack([np.asarray(g) <= 0 for g in gaps], -1)) if gaps else np.empty((0, 2))
     if bad.size:
         j = int(bad[0][1])
