@@ -4,7 +4,7 @@ Capsule (vibration-driven) robots, a mass on a spring to a wall, blocks pushed b
 forces: each is a set of bodies, some touching the ground (a friction law) and some
 carried by another body or free, and of elements ([`Spring`][locomotion_jax.Spring],
 [`Force`][locomotion_jax.Force], [`ExternalForce`][locomotion_jax.ExternalForce]) between
-any of them or a [`WALL`][locomotion_jax.WALL]. The front ends run it on the N-body
+any of them or a `lj.WALL`. The front ends run it on the N-body
 exact engine as they run a [`Chain`][locomotion_jax.Chain].
 """
 
@@ -76,7 +76,7 @@ class Mechanism(AbstractMechanism):
 
     Elements ([`Spring`][locomotion_jax.Spring], [`Force`][locomotion_jax.Force],
     [`ExternalForce`][locomotion_jax.ExternalForce]) join any two bodies or a body and
-    [`WALL`][locomotion_jax.WALL] (a fixed point at $x = 0$). Their waveforms share one base
+    `lj.WALL` (a fixed point at $x = 0$). Their waveforms share one base
     frequency $\\omega$ (the engine follows one phase). Energy: $e = \\sum m_i v_i^2/2 +
     \\sum f^2/(2k)$ over springs, and $w = e_d + \\Delta e$ with $w$ the work of the forces and
     the actuated rest lengths (SPEC §9).

@@ -2,7 +2,7 @@
 bodies or to a wall, internal force actuators and external forces.
 
 Each element names the bodies it acts on by their index (static: part of the mechanism's
-structure, not of its values) or [`WALL`][locomotion_jax.WALL], a fixed point at $x = 0$ of
+structure, not of its values) or `lj.WALL`, a fixed point at $x = 0$ of
 the line. Its values are arrays with the mechanism's batch axes (a scalar is broadcast).
 A signal (a rest length or a force) is a number, constant in time, or any
 [`AbstractWaveform`][locomotion_jax.AbstractWaveform] of the mechanism's base frequency:
@@ -26,7 +26,7 @@ WALL: Final = "wall"
 """A fixed anchor at $x = 0$ of the line: `Spring(0, WALL, k=1.0, rest=0.0)` ties body 0 to it."""
 
 End = int | Literal["wall"]
-"""A body index or [`WALL`][locomotion_jax.WALL]."""
+"""A body index or `lj.WALL`."""
 
 Signal = Array | AbstractWaveform
 """A constant value (array) or a waveform of time."""
@@ -104,7 +104,7 @@ class AbstractElement(eqx.Module):
 
 
 class Spring(AbstractElement):
-    """A linear spring between bodies `a` and `b` (or a body and [`WALL`][locomotion_jax.WALL]), signed
+    """A linear spring between bodies `a` and `b` (or a body and `lj.WALL`), signed
     (SPEC §9): $f = k\\,(x_b - x_a - r(t))$, $+f$ on `a` and $-f$ on `b`, so $x_b - x_a$ may change
     sign (a capsule's internal spring). Its elastic energy is $f^2/(2k)$; an actuated rest
     length $r(t)$ (a waveform) does the work $-f\\,\\dot r$.
