@@ -176,7 +176,6 @@ def run(sys: System, t_end: float, save: np.ndarray, rtol: float = 1e-12, atol: 
         segments += 1
         st, sd = list(stuck), list(sdir)
         ev, owner = events(st, sd)
-        t_eval = save[(save >= t) & (save <= t_end)]
         sol = solve_ivp(rhs, (t, t_end), y, method="DOP853", args=(st, sd), events=ev, rtol=rtol, atol=atol,
                         dense_output=True, max_step=0.05)  # fmt: skip
         t_next = sol.t[-1]
