@@ -5,6 +5,8 @@ As for two masses (`_exact_simulate`): a flat batch through the work queue
 only; energy, normal forces, rest lengths and tensions follow from the saved states.
 """
 
+from typing import Any
+
 import jax
 import jax.numpy as jnp
 
@@ -51,7 +53,7 @@ def _stack(a: tuple, like: jax.Array) -> jax.Array:
 
 def _derived(C: Chain | Mechanism, contact, t, x, v):
     """Energy, normal forces, rest lengths and tensions (per spring) at one saved state."""
-    P = C.physics()
+    P: Any = C.physics()  # a chain's or a mechanism's: both have `l0` per spring and `tension`
     dr = P.drive(jnp.cos(P.omega * t), jnp.sin(P.omega * t))
     L = P.loads(dr, tuple(x[..., i] for i in range(x.shape[-1])))
     e = P.energy(L, tuple(v[..., i] for i in range(v.shape[-1])))

@@ -205,7 +205,8 @@ class Mechanism(AbstractMechanism):
         k0, el0, w0 = waves[0]
         for k, el, w in waves[1:]:
             try:
-                same = np.array_equal(*np.broadcast_arrays(np.asarray(w.omega), np.asarray(w0.omega)))
+                mine, first = np.broadcast_arrays(np.asarray(w.omega), np.asarray(w0.omega))
+                same = np.array_equal(mine, first)
             except ValueError:
                 same = False
             if not same:
@@ -315,9 +316,9 @@ class Mechanism(AbstractMechanism):
 
     # -- validation -----------------------------------------------------------------------
 
-    def _checks(self) -> list[tuple[str, str, Array, str, Array]]:
+    def _checks(self) -> list[tuple[str, str, Array, str, Any]]:
         """`(owner, parameter, valid mask, valid range, values)`, finite values first."""
-        out: list[tuple[str, str, Array, str, Array]] = []
+        out: list[tuple[str, str, Array, str, Any]] = []
         per_body = [("masses", self.m), ("c", self.c), ("x0", self.x0), ("v0", self.v0)]
         for name, x in per_body:
             for i in range(self.n_bodies):

@@ -183,9 +183,10 @@ def prepare_chain(chain: Any, dtype: Any) -> tuple[Any, jax.Array, tuple[int, ..
     """
     if not isinstance(chain, AbstractMechanism):
         raise TypeError(f"expected a locomotion_jax.Chain or Mechanism, got {type(chain).__name__}.")
+    mech: Any = chain
     if dtype is not None:
-        chain = chain.astype(dtype)
-    chain = chain.broadcast()
+        mech = mech.astype(dtype)
+    chain = mech.broadcast()
     shape = chain.batch_shape
     size = math.prod(shape)
     if size == 0:
