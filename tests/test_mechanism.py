@@ -175,3 +175,8 @@ def test_chain_path_unchanged_for_a_chain():
 def test_bad_input_names_the_element_and_the_body(kwargs, message):
     with pytest.raises(ValueError, match=message):
         lj.Mechanism(**kwargs)
+
+
+def test_smoothed_dynamics_refuse_a_mechanism():
+    with pytest.raises(NotImplementedError, match="run a Mechanism with Exact"):
+        lj.simulate(_oscillator(), t_end=1.0, dynamics=lj.Smoothed())
