@@ -28,15 +28,21 @@ from .gaits._gait import Gait as Gait, GaitStatus as GaitStatus, steady_gait as 
 from .maps._sweep import sweep as sweep
 from .model import (
     AbstractActuator as AbstractActuator,
+    AbstractElement as AbstractElement,
     AbstractFriction as AbstractFriction,
     AnisotropicCoulomb as AnisotropicCoulomb,
     Chain as Chain,
     Coulomb as Coulomb,
+    ExternalForce as ExternalForce,
+    Force as Force,
     InternalForce as InternalForce,
+    Mechanism as Mechanism,
     RestLength as RestLength,
+    Spring as Spring,
     SpringFourier as SpringFourier,
     Stribeck as Stribeck,
     TravellingWave as TravellingWave,
+    WALL as WALL,
 )
 from .model._files import load_mechanism as load_mechanism, MechanismFileError as MechanismFileError
 from .model._files_save import save_mechanism as save_mechanism

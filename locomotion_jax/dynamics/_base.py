@@ -15,6 +15,7 @@ import jax.numpy as jnp
 from jax.sharding import Mesh
 
 from .._custom_types import Array
+from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform
@@ -100,7 +101,7 @@ class AbstractDynamics(eqx.Module):
     @abc.abstractmethod
     def simulate_chain(
         self,
-        chain: Chain,
+        chain: Chain | Mechanism,
         valid: Array,
         save_at: Array,
         t_end: float,
@@ -118,7 +119,7 @@ class AbstractDynamics(eqx.Module):
     @abc.abstractmethod
     def measure_chain(
         self,
-        chain: Chain,
+        chain: Chain | Mechanism,
         valid: Array,
         t_start: Array,
         z: float,

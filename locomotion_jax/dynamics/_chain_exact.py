@@ -25,9 +25,9 @@ derivative of `kinetic`), so a new law or actuator supplies values only.
   step's dense output and the derivatives along the motion stay accurate;
 - optionally a caller's target $z - |X - X_0|$.
 
-Not an event but a check: a committed step whose end has a gap $x_{j+1} - x_j \\le 0$
-(neighbouring bodies met or passed through each other, outside the model) stops the run
-with `Status.COLLISION`.
+Not an event but a check: a committed step whose end has a gap of the physics'
+[`gaps`][locomotion_jax.AbstractPhysics.gaps] $\\le 0$ (a chain's neighbours $x_{j+1} - x_j$:
+bodies met or passed through each other, outside the model) stops the run with `Status.COLLISION`.
 
 **Margins** to a change of switching structure, as in the two-mass engine (`_numerics.margins`):
 a located crossing's from the rate and curvature of its event quintic at the root; where a
@@ -308,8 +308,9 @@ def step(
         side = tuple(jnp.where(f, -s, s) for f, s in zip(flip, side))
     t_lift = jnp.where(lift_cut & ~jnp.isfinite(t_lift), tc, t_lift)
     commit = ~stop0
-    # Neighbours met (outside the model): the run stops after this step (`Status.COLLISION`).
-    met = commit & num.union([b - a <= 0 for a, b in zip(yc.x[:-1], yc.x[1:])])
+    # Bodies met (outside the model; the gaps the mechanism declares, a chain's neighbours'):
+    # the run stops after this step (`Status.COLLISION`).
+    met = commit & num.union([g <= 0 for g in P.gaps(yc.x)])
     status = jnp.where(lift, Status.LIFTOFF, jnp.where(met, Status.COLLISION, st.status)).astype(jnp.int32)
 
     keepc = lambda new, old: jnp.where(commit, new, old)

@@ -5,11 +5,13 @@ As for two masses (`_exact_simulate`): a flat batch through the work queue
 only; energy, normal forces, rest lengths and tensions follow from the saved states.
 """
 
+from typing import Any
+
 import jax
 import jax.numpy as jnp
 
+from ..model._bodies import Mechanism
 from ..model._chain import Chain
-from ..model._chain_physics import ChainPhysics
 from . import _chain_exact as engine
 from ._compile import engine_jit
 from ._margins import switch_gap
@@ -17,7 +19,7 @@ from ._runs import chain_initial_state, default_lanes
 from ._saves import BUFFER, run_saves
 
 
-def _com(C: Chain, x: jax.Array) -> jax.Array:
+def _com(C: Chain | Mechanism, x: jax.Array) -> jax.Array:
     """Centre of mass $\\sum_i m_i x_i / \\sum_i m_i$ of one configuration (`x`: `(..., N)`)."""
     return jnp.matmul(x, C.m) / C.m.sum()
 
@@ -37,23 +39,28 @@ def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps, lanes, buf
         return P, chain_initial_state(P, valid[i], contact, start, None if initial is None else initial[i])
 
     step = lambda P, s, t_stop: engine.step(P, contact, dt, s, t_stop)[0]
-    order = jnp.argsort(-jnp.where(jnp.isfinite(C.waves.omega), C.waves.omega, -jnp.inf))
+    order = jnp.argsort(-jnp.where(jnp.isfinite(C.omega), C.omega, -jnp.inf))
     return run_saves(init, step, _row, valid.shape[0], save_at, max_steps, lanes, order, buffer)
 
 
 _simulate_batch = engine_jit(_simulate_batch, ("contact", "start", "dt", "lanes", "buffer"))
 
 
-def _derived(C: Chain, contact, t, x, v):
-    """Energy, normal forces, rest lengths and tensions at one saved state."""
-    P: ChainPhysics = C.physics()
+def _stack(a: tuple, like: jax.Array) -> jax.Array:
+    """A per-spring tuple as an array (a mechanism without springs: an empty last axis)."""
+    return jnp.stack(a, -1) if a else jnp.zeros(jnp.shape(like) + (0,), like.dtype)
+
+
+def _derived(C: Chain | Mechanism, contact, t, x, v):
+    """Energy, normal forces, rest lengths and tensions (per spring) at one saved state."""
+    P: Any = C.physics()  # a chain's or a mechanism's: both have `l0` per spring and `tension`
     dr = P.drive(jnp.cos(P.omega * t), jnp.sin(P.omega * t))
     L = P.loads(dr, tuple(x[..., i] for i in range(x.shape[-1])))
     e = P.energy(L, tuple(v[..., i] for i in range(v.shape[-1])))
-    return dict(e=e, N=jnp.stack(L.N, -1), l0=jnp.stack(dr.l0, -1), tension=jnp.stack(L.aux.tension, -1))
+    return dict(e=e, N=jnp.stack(L.N, -1), l0=_stack(dr.l0, e), tension=_stack(L.aux.tension, e))
 
 
-def simulate_batch(flat: Chain, valid, save, contact, start, dt, max_steps: int, initial=None) -> dict:
+def simulate_batch(flat: Chain | Mechanism, valid, save, contact, start, dt, max_steps: int, initial=None) -> dict:
     """The fields of a [`ChainTrajectory`][locomotion_jax.ChainTrajectory] of a flat batch of chains
     (leading axis: the configurations); `max_steps` caps each one's iterations, saves included;
     `initial`: the states at $t = 0$, shape `(n, 2N)`, or `None` for `start`'s."""
@@ -70,7 +77,7 @@ def simulate_batch(flat: Chain, valid, save, contact, start, dt, max_steps: int,
         t=t, x=x, v=v, stuck=rows[..., 2 * N + 2 : 3 * N + 2] > 0.5, X=jax.vmap(_com)(flat, x),
         e_d=rows[..., 2 * N], w=rows[..., 2 * N + 1], valid=ok, status=status, liftoff=jnp.isfinite(t_lift),
         t_liftoff=t_lift, n_switch=n_switch, transversality=jnp.sqrt(rows[..., 4 * N + 2]),
-        near_miss=jnp.sqrt(rows[..., 4 * N + 3]), switch_gap=switch_gap(flat.waves.omega, t, rows[..., 4 * N + 4]),
+        near_miss=jnp.sqrt(rows[..., 4 * N + 3]), switch_gap=switch_gap(flat.omega, t, rows[..., 4 * N + 4]),
         **der,
     )  # fmt: skip
     return out

@@ -13,6 +13,7 @@ import jax.numpy as jnp
 from jax.sharding import Mesh, PartitionSpec
 
 from .._custom_types import Array
+from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform, Sinusoid
@@ -89,7 +90,7 @@ class Exact(AbstractDynamics):
 
     def simulate_chain(
         self,
-        chain: Chain,
+        chain: Chain | Mechanism,
         valid: Array,
         save_at: Array,
         t_end: float,
@@ -102,7 +103,7 @@ class Exact(AbstractDynamics):
 
     def measure_chain(
         self,
-        chain: Chain,
+        chain: Chain | Mechanism,
         valid: Array,
         t_start: Array,
         z: float,

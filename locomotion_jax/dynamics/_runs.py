@@ -109,14 +109,17 @@ def initial_state(params: Params, wave: AbstractWaveform, contact: Contact, star
 def chain_initial_state(P: AbstractPhysics, valid, contact, start, row=None) -> chain_engine.Hybrid:
     """The N-body engine's state at $t = 0$ of one mechanism (its physics `P`): at rest in the
     `start` position, or the state `row` $(x_0, \\dots, x_{N-1}, v_0, \\dots, v_{N-1})$ if given;
-    flagged `Status.INVALID` where the mechanism is not `valid` or `row` is not finite or its
-    positions are not in increasing order (then it starts from `start`, so that nothing turns NaN)."""
+    flagged `Status.INVALID` where the mechanism is not `valid` or `row` is not finite or one of
+    its [`gaps`][locomotion_jax.AbstractPhysics.gaps] is not positive (a chain's positions not in
+    increasing order; then it starts from `start`, so that nothing turns NaN). Without `row`, a
+    mechanism's own initial velocities (`AbstractPhysics.initial_velocities`) if it has them."""
     x = P.initial_positions(start)
     if row is None:
-        st = chain_engine.init(P, contact, x)
+        st = chain_engine.init(P, contact, x, P.initial_velocities(start))
     else:
         n = x.shape[-1]
-        ok = jnp.all(jnp.isfinite(row)) & jnp.all(row[1:n] > row[: n - 1])
+        gaps = P.gaps(tuple(row[i] for i in range(n)))
+        ok = jnp.all(jnp.isfinite(row)) & jnp.all(jnp.stack([g > 0 for g in gaps] or [jnp.asarray(True)]))
         st = chain_engine.init(P, contact, jnp.where(ok, row[:n], x), jnp.where(ok, row[n:], 0))
         valid = valid & ok
     return eqx.tree_at(lambda s: s.status, st, jnp.where(valid, st.status, Status.INVALID).astype(jnp.int32))

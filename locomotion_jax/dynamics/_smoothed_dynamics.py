@@ -14,6 +14,7 @@ import jax.numpy as jnp
 from jax.sharding import Mesh
 
 from .._custom_types import Array, ArrayLike
+from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform, Sinusoid
@@ -108,7 +109,7 @@ class Smoothed(AbstractDynamics):
 
     def simulate_chain(
         self,
-        chain: Chain,
+        chain: Chain | Mechanism,
         valid: Array,
         save_at: Array,
         t_end: float,
@@ -118,11 +119,12 @@ class Smoothed(AbstractDynamics):
     ) -> dict[str, Array]:
         if initial is not None:
             raise ValueError("initial= is supported by the Exact dynamics only.")
+        chain = _chain_only(chain)
         return _chain_smooth.simulate_batch(chain, valid, save_at, contact, start, self.astype(chain.dtype))
 
     def measure_chain(
         self,
-        chain: Chain,
+        chain: Chain | Mechanism,
         valid: Array,
         t_start: Array,
         z: float,
@@ -134,6 +136,7 @@ class Smoothed(AbstractDynamics):
     ) -> dict[str, Array]:
         if initial is not None:
             raise ValueError("initial= is supported by the Exact dynamics only.")
+        chain = _chain_only(chain)
         z_, h_, w_ = (jnp.asarray(v, chain.dtype) for v in (z, horizon, window))
         dyn = self.astype(chain.dtype)
         return _chain_smooth.measure_batch(chain, valid, t_start, z_, h_, w_, contact, start, dyn)
@@ -177,3 +180,11 @@ class Smoothed(AbstractDynamics):
 
     def spec(self) -> dict[str, Any]:
         return self.describe()
+
+
+def _chain_only(chain: Chain | Mechanism) -> Chain:
+    """The smoothed engine's N-body path runs chains (its friction is smoothed per chain); a
+    `Mechanism` (SPEC §9) runs on the exact dynamics only, for now."""
+    if not isinstance(chain, Chain):
+        raise NotImplementedError(f"Smoothed dynamics run a Chain; run a {type(chain).__name__} with Exact().")
+    return chain

@@ -1,7 +1,15 @@
 """The physics of friction-driven mechanisms: chains, friction laws, actuators, actuation signals."""
 
 from ._actuator import AbstractActuator as AbstractActuator, InternalForce as InternalForce, RestLength as RestLength
+from ._bodies import Mechanism as Mechanism
 from ._chain import Chain as Chain
+from ._elements import (
+    AbstractElement as AbstractElement,
+    ExternalForce as ExternalForce,
+    Force as Force,
+    Spring as Spring,
+    WALL as WALL,
+)
 from ._friction import (
     AbstractFriction as AbstractFriction,
     AnisotropicCoulomb as AnisotropicCoulomb,

@@ -176,6 +176,11 @@ class Chain(AbstractMechanism):
         return self.m.shape[-1]
 
     @property
+    def omega(self) -> Array:
+        """The waveforms' base frequency (batch shape)."""
+        return self.waves.omega
+
+    @property
     def batch_shape(self) -> tuple[int, ...]:
         fields = {"masses": self.m, "c": self.c, "k": self.k, "d": self.d, "lbar": self.lbar, **self.friction.fields()}
         shapes = {n: x.shape[:-1] for n, x in fields.items()}

@@ -97,6 +97,10 @@ class ChainPhysics(AbstractPhysics):
     def centre_of_mass(self, x: Scalars) -> Array:
         return centre_of_mass(self, x)
 
+    def gaps(self, x: Scalars) -> Scalars:
+        """Neighbours' gaps $x_{j+1} - x_j$ (SPEC §8: the masses stay in order)."""
+        return tuple(b - a for a, b in zip(x[:-1], x[1:]))
+
     def initial_positions(self, start: str) -> Array:
         """Gaps $\\bar\\ell_j$ (`"paper"`, eq. 14) or the relaxed springs $\\sqrt{\\ell_{0,j}(0)^2 - d_j^2}$
         (`"relaxed"`), with $x_0 = 0$ (SPEC §8)."""

@@ -129,3 +129,15 @@ class AbstractPhysics(eqx.Module):
     @abc.abstractmethod
     def initial_positions(self, start: str) -> Array:
         """Positions at $t = 0$, shape `(N,)`, for a named start (`"paper"`, eq. 14, or `"relaxed"`)."""
+
+    def initial_velocities(self, start: str) -> Array | None:
+        """Velocities at $t = 0$, shape `(N,)`, or `None` (at rest: the default). A
+        [`Mechanism`][locomotion_jax.Mechanism] returns its own `v0` (SPEC §9)."""
+        return None
+
+    def gaps(self, x: Scalars) -> Scalars:
+        """The gaps between bodies that must stay positive: the engine stops a run with
+        `Status.COLLISION` where one is $\\le 0$ after a step, and refuses an initial state where
+        one is. None by default (bodies on a line may pass each other, as a capsule's internal
+        mass passes its rest point); a chain's are its neighbours' $x_{j+1} - x_j$."""
+        return ()

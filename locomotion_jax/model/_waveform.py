@@ -8,7 +8,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import Array, ArrayLike, Float
+from .._custom_types import Array, ArrayLike, Float, ValuesLike
 from ._checks import all_valid, Check, first_invalid, real_array
 from ._params import Params
 
@@ -141,7 +141,7 @@ class Fourier(AbstractWaveform):
 
     stroke_check: ClassVar[tuple[str, str]] = ("stroke", "stroke = sum_n sqrt(cos_n^2 + sin_n^2) < lbar")
 
-    def __init__(self, cos: ArrayLike, sin: ArrayLike, omega: ArrayLike, lbar: ArrayLike):
+    def __init__(self, cos: ValuesLike, sin: ValuesLike, omega: ArrayLike, lbar: ArrayLike):
         self.cos = real_array("cos", cos, "Fourier")
         self.sin = real_array("sin", sin, "Fourier")
         self.omega = real_array("omega", omega, "Fourier")

@@ -14,7 +14,6 @@ import numpy as np
 from ..dynamics._base import AbstractDynamics
 from ..dynamics._exact_dynamics import Exact
 from ..dynamics._forward import concrete_value
-from ..model._chain import Chain
 from ..model._checks import is_concrete
 from ..model._mechanism import AbstractMechanism
 from ..model._params import Params
@@ -36,7 +35,7 @@ def dynamics_arg(dynamics: Any) -> AbstractDynamics:
 def mechanism_arg(params: Any) -> AbstractMechanism:
     """The mechanism argument of a front end: a [`Params`][] or a [`Chain`][]."""
     if not isinstance(params, AbstractMechanism):
-        raise TypeError(f"params must be a locomotion_jax.Params or Chain, got {type(params).__name__}.")
+        raise TypeError(f"params must be a locomotion_jax.Params, Chain or Mechanism, got {type(params).__name__}.")
     return params
 
 
@@ -125,12 +124,15 @@ def _known_finite(state: jax.Array) -> np.ndarray | None:
     return values
 
 
-def prepare_chain_initial(initial: Any, shape: tuple[int, ...], n_bodies: int, dtype: Any) -> jax.Array | None:
-    """A chain's initial state `(x, v)` (positions and velocities, each broadcastable to
-    `shape + (N,)`) as a flat `(size, 2N)` array, or `None`. Raises a `ValueError` where its
-    values are known here (not under `jit`) and one is not finite or the positions are not in
-    increasing order; under `jit` such a configuration is flagged `INVALID` in its own result
-    (`_runs.chain_initial_state`)."""
+def prepare_chain_initial(
+    initial: Any, shape: tuple[int, ...], n_bodies: int, dtype: Any, mechanism: Any = None
+) -> jax.Array | None:
+    """A chain's or a mechanism's initial state `(x, v)` (positions and velocities, each
+    broadcastable to `shape + (N,)`) as a flat `(size, 2N)` array, or `None`. Raises a
+    `ValueError` where its values are known here (not under `jit`) and one is not finite or a
+    gap that must stay positive is not (`AbstractPhysics.gaps` of the flat `mechanism`'s
+    physics; a chain's: its positions in increasing order; `mechanism=None`: a chain's); under
+    `jit` such a configuration is flagged `INVALID` in its own result (`_runs.chain_initial_state`)."""
     if initial is None:
         return None
     if not isinstance(initial, (tuple, list)) or len(initial) != 2:
@@ -151,7 +153,13 @@ def prepare_chain_initial(initial: Any, shape: tuple[int, ...], n_bodies: int, d
         flat.append(arr.reshape((size, n_bodies)))
     state = jnp.concatenate(flat, -1)
     values = _known_finite(state)
-    bad = np.argwhere(np.diff(values[:, :n_bodies], axis=-1) <= 0) if values is not None else np.empty((0, 2))
+    if values is None:
+        bad = np.empty((0, 2))
+    elif mechanism is None:
+        bad = np.argwhere(np.diff(values[:, :n_bodies], axis=-1) <= 0)
+    else:
+        gaps = mechanism.physics().gaps(tuple(jnp.asarray(values[:, i]) for i in range(n_bodies)))
+        bad = np.argwhere(np.stack([np.asarray(g) <= 0 for g in gaps], -1)) if gaps else np.empty((0, 2))
     if bad.size:
         j = int(bad[0][1])
         raise ValueError(f"initial: the masses must be in order along the chain, x_{j} < x_{j + 1} (mass {j}).")
@@ -165,21 +173,24 @@ def check_contact_start(contact: str, start: str) -> None:
         raise ValueError(f"start must be 'paper' (eq. 14) or 'relaxed', got {start!r}.")
 
 
-def prepare_chain(chain: Chain, dtype: Any) -> tuple[Chain, jax.Array, tuple[int, ...]]:
-    """Cast, broadcast and flatten; returns `(flat_chain, valid, batch_shape)`.
+def prepare_chain(chain: Any, dtype: Any) -> tuple[Any, jax.Array, tuple[int, ...]]:
+    """Cast, broadcast and flatten a [`Chain`][] or any mechanism of the N-body path (a
+    [`Mechanism`][locomotion_jax.Mechanism]: `astype`, `broadcast`, `batch_shape`, `is_valid`
+    and `physics`); returns `(flat, valid, batch_shape)`.
 
     An invalid configuration is replaced by a valid one of the batch (so nothing
     turns into NaN) and flagged in `valid`; its result says `Status.INVALID`.
     """
-    if not isinstance(chain, Chain):
-        raise TypeError(f"expected a locomotion_jax.Chain, got {type(chain).__name__}.")
+    if not isinstance(chain, AbstractMechanism):
+        raise TypeError(f"expected a locomotion_jax.Chain or Mechanism, got {type(chain).__name__}.")
+    mech: Any = chain
     if dtype is not None:
-        chain = chain.astype(dtype)
-    chain = chain.broadcast()
+        mech = mech.astype(dtype)
+    chain = mech.broadcast()
     shape = chain.batch_shape
     size = math.prod(shape)
     if size == 0:
-        raise ValueError("the chain batch is empty (a zero-length axis).")
+        raise ValueError(f"the {type(chain).__name__} batch is empty (a zero-length axis).")
     nb = len(shape)
     flat = jax.tree_util.tree_map(lambda x: x.reshape((size,) + x.shape[nb:]), chain)
     valid = flat.is_valid()

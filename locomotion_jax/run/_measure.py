@@ -17,6 +17,7 @@ from .._results import ChainMeasurement, Measurement
 from ..dynamics._base import AbstractDynamics
 from ..dynamics._forward import check_static
 from ..model import _two_mass as model
+from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform
@@ -69,7 +70,7 @@ def measure(
 
 @overload
 def measure(
-    params: Chain,
+    params: Chain | Mechanism,
     z: float = 5.0,
     *,
     horizon: float = 2000.0,
@@ -85,7 +86,7 @@ def measure(
 
 
 def measure(
-    params: "Params | Chain",
+    params: "Params | Chain | Mechanism",
     z: float = 5.0,
     *,
     horizon: float = 2000.0,
@@ -148,19 +149,23 @@ def _two_mass(params: Params, dynamics: AbstractDynamics, z, horizon, window, t_
     return Measurement(**unflatten(out, shape), z=z, start="initial" if initial is not None else start, contact=contact)
 
 
-def _chain(chain: Chain, dynamics: AbstractDynamics, z, horizon, window, t_start, waveform, contact, start, initial,
-           dtype) -> ChainMeasurement:  # fmt: skip
+def _chain(chain: Chain | Mechanism, dynamics: AbstractDynamics, z, horizon, window, t_start, waveform, contact,
+           start, initial, dtype) -> ChainMeasurement:  # fmt: skip
     if waveform is not None:
-        raise ValueError("waveform= applies to Params; a Chain carries its own waveforms (Chain(waveforms=...)).")
+        raise ValueError(
+            f"waveform= applies to Params; a {type(chain).__name__} carries its own waveforms (springs or links)."
+        )
     return measure_chain(chain, dynamics, z, horizon, window, t_start, contact, start, dtype, initial)
 
 
-def measure_chain(chain: Chain, dynamics: AbstractDynamics, z: float, horizon: float, window: float, t_start: Any,
-                  contact: str, start: str, dtype: Any, initial: Any = None) -> ChainMeasurement:  # fmt: skip
-    """`measure` for a [`Chain`][] (arguments as there; also the chunks of a chain sweep)."""
+def measure_chain(chain: Chain | Mechanism, dynamics: AbstractDynamics, z: float, horizon: float, window: float,
+                  t_start: Any, contact: str, start: str, dtype: Any,
+                  initial: Any = None) -> ChainMeasurement:  # fmt: skip
+    """`measure` for a [`Chain`][] or a [`Mechanism`][locomotion_jax.Mechanism] (arguments as there; also the
+    chunks of a chain sweep)."""
     check_contact_start(contact, start)
     flat, valid, shape = prepare_chain(chain, dtype)
-    y0 = prepare_chain_initial(initial, shape, flat.n_masses, flat.dtype)
+    y0 = prepare_chain_initial(initial, shape, flat.n_masses, flat.dtype, flat)
     n = valid.shape[0]
     if t_start is None:
         ts = jnp.full((n,), jnp.inf, flat.dtype)  # the chains' own, `Chain.t_start`

@@ -10,6 +10,7 @@ from .._results import ChainTrajectory, Trajectory
 from ..dynamics._base import AbstractDynamics
 from ..dynamics._forward import check_static
 from ..model import _two_mass as model
+from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform
@@ -42,7 +43,7 @@ def simulate(
 
 @overload
 def simulate(
-    params: Chain,
+    params: Chain | Mechanism,
     t_end: float,
     save_at: ArrayLike | None = None,
     *,
@@ -56,7 +57,7 @@ def simulate(
 
 
 def simulate(
-    params: "Params | Chain",
+    params: "Params | Chain | Mechanism",
     t_end: float,
     save_at: ArrayLike | None = None,
     *,
@@ -137,12 +138,16 @@ def _two_mass(params: Params, dynamics: AbstractDynamics, t_end, save_np, wavefo
     return Trajectory(**unflatten(out, shape), start="initial" if initial is not None else start, contact=contact)
 
 
-def _chain(chain: Chain, dynamics: AbstractDynamics, t_end, save_np, waveform, contact, start, initial, dtype):
+def _chain(
+    chain: Chain | Mechanism, dynamics: AbstractDynamics, t_end, save_np, waveform, contact, start, initial, dtype
+):
     if waveform is not None:
-        raise ValueError("waveform= applies to Params; a Chain carries its own waveforms (Chain(waveforms=...)).")
+        raise ValueError(
+            f"waveform= applies to Params; a {type(chain).__name__} carries its own waveforms (springs or links)."
+        )
     check_contact_start(contact, start)
     flat, valid, shape = prepare_chain(chain, dtype)
-    y0 = prepare_chain_initial(initial, shape, flat.n_masses, flat.dtype)
+    y0 = prepare_chain_initial(initial, shape, flat.n_masses, flat.dtype, flat)
     save = jnp.asarray(save_np, flat.dtype)
     out = dynamics.simulate_chain(flat, valid, save, t_end, contact, start, y0)
     start = "initial" if initial is not None else start

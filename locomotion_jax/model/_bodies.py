@@ -1,0 +1,377 @@
+"""[`Mechanism`][locomotion_jax.Mechanism]: bodies on a line and the elements between them (SPEC §9).
+
+Capsule (vibration-driven) robots, a mass on a spring to a wall, blocks pushed by external
+forces: each is a set of bodies, some touching the ground (a friction law) and some
+carried by another body or free, and of elements ([`Spring`][locomotion_jax.Spring],
+[`Force`][locomotion_jax.Force], [`ExternalForce`][locomotion_jax.ExternalForce]) between
+any of them or a `lj.WALL`. The front ends run it on the N-body
+exact engine as they run a [`Chain`][locomotion_jax.Chain].
+"""
+
+import math
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._custom_types import Array, ValuesLike
+from ._checks import broadcast_shape, is_concrete, real_array
+from ._elements import AbstractElement, signal_checks, signal_nodes, Spring, WALL
+from ._friction import AbstractFriction, Coulomb
+from ._mechanism import AbstractMechanism, R
+from ._mechanism_physics import ground_body, mechanism_physics, MechanismPhysics
+from ._waveform import AbstractWaveform
+
+
+MEASURE_PERIODS = 20
+"""A mechanism's default measurement start: this many periods of its actuation ($t = 0$ unactuated)."""
+
+
+def _per_body(name: str, x: Any, n: int) -> Array:
+    """A per-body field: a scalar, or an array whose last axis has length `n`."""
+    arr = real_array(name, x)
+    if arr.ndim == 0:
+        return jnp.broadcast_to(arr, (n,))
+    if arr.shape[-1] != n:
+        raise ValueError(
+            f"Invalid parameter {name!r}: its last axis must have length {n} (one value per body), got shape "
+            f"{arr.shape}."
+        )
+    return arr
+
+
+def _split_law(law: AbstractFriction, i: int, n: int) -> AbstractFriction:
+    """Body `i`'s law from one law for every body (scalar coefficients, or a last axis of length `n`)."""
+
+    def at(x: Array) -> Array:
+        if jnp.ndim(x) == 0:
+            return x
+        if x.shape[-1] not in (1, n):
+            raise ValueError(
+                f"friction: a law given for every body needs scalar coefficients or a last axis of length {n} "
+                f"(one per body), got shape {x.shape}."
+            )
+        return x[..., i if x.shape[-1] > 1 else 0]
+
+    return jax.tree_util.tree_map(at, law)
+
+
+def _body(i: Any, n: int) -> bool:
+    return i == WALL or (isinstance(i, int) and 0 <= i < n)
+
+
+class Mechanism(AbstractMechanism):
+    """Bodies on a line with friction, carried bodies, springs, internal and external forces (SPEC §9).
+
+    Body $i$ (mass $m_i$, position $x_i$, velocity $v_i$, ground damping $c_i$) obeys
+    $m_i\\dot v_i = F_i - c_i v_i - \\text{friction}_i$, with $F_i$ the sum of every element's
+    force on it. A body with a friction law touches the ground with the normal load
+    $N_i = m_i + $ the weights it carries, and sticks and slips as in SPEC §8. A body with
+    none (`friction[i] = None`) feels no friction: `carried_by[i] = j` puts its weight on
+    body $j$ (or on the body that finally carries $j$), as an internal mass loads its
+    capsule; `carried_by[i] = None` leaves it free on the line.
+
+    Elements ([`Spring`][locomotion_jax.Spring], [`Force`][locomotion_jax.Force],
+    [`ExternalForce`][locomotion_jax.ExternalForce]) join any two bodies or a body and
+    `lj.WALL` (a fixed point at $x = 0$). Their waveforms share one base
+    frequency $\\omega$ (the engine follows one phase). Energy: $e = \\sum m_i v_i^2/2 +
+    \\sum f^2/(2k)$ over springs, and $w = e_d + \\Delta e$ with $w$ the work of the forces and
+    the actuated rest lengths (SPEC §9).
+
+    Per-body fields have a last axis of length N (a scalar is broadcast); leading axes of
+    any field are batch axes, broadcast against each other.
+
+    **Arguments:**
+
+    - `masses`: $m_i > 0$, shape `(..., N)`.
+    - `friction`: one [`AbstractFriction`][locomotion_jax.AbstractFriction] for every body not
+      carried (scalar or per-body coefficients), or a list with a law or `None` per body.
+      Default: `Coulomb(0.7, 0.5)` for every body not carried.
+    - `carried_by`: per body, the index of the body that carries it, or `None`.
+    - `links`: the elements.
+    - `c`: ground damping per body, $c_i \\ge 0$ (default 0).
+    - `x0`, `v0`: the initial positions (default 0) and velocities (default 0) per body; a
+      body in contact at rest starts stuck where its static limits hold.
+    - `check`: validate concrete values (default); with `check=False` an invalid
+      configuration is flagged `Status.INVALID` in its own result instead.
+
+    **Raises:** `ValueError` naming the element and the body for bad structure (a body carried
+    by itself or in a loop, a carried body with a friction law, a link to a missing body, an
+    initial state of the wrong length, waveforms of different base frequencies) and, with
+    `check`, for values out of range (`k <= 0`, $m_i \\le 0$, ...).
+
+    !!! Example
+
+        ```python
+        osc = Mechanism(masses=[1.0], friction=Coulomb(1.0, 1.0),
+                        links=[Spring(0, WALL, k=1.0, rest=0.0)], x0=[12.0], v0=[6.0])
+        capsule = Mechanism(masses=[1.0, 0.5], friction=[Coulomb(0.5, 0.4), None], carried_by=[None, 0],
+                            links=[Spring(0, 1, k=10.0), Force(0, 1, Sinusoid(a=0.6, omega=3.0, lbar=0.0))])
+        ```
+    """
+
+    m: Array
+    c: Array
+    x0: Array
+    v0: Array
+    friction: tuple[AbstractFriction | None, ...]
+    links: tuple[AbstractElement, ...]
+    carried_by: tuple[int | None, ...] = eqx.field(static=True)
+
+    def __init__(
+        self,
+        masses: ValuesLike,
+        friction: "AbstractFriction | Sequence[AbstractFriction | None] | None" = None,
+        carried_by: "Sequence[int | None] | None" = None,
+        links: Sequence[AbstractElement] = (),
+        c: ValuesLike = 0.0,
+        x0: ValuesLike | None = None,
+        v0: ValuesLike = 0.0,
+        *,
+        check: bool = True,
+    ):
+        m = real_array("masses", masses)
+        if m.ndim == 0 or m.shape[-1] < 1:
+            raise ValueError(f"Invalid parameter 'masses': one value per body (last axis), got shape {m.shape}.")
+        n = m.shape[-1]
+        self.m = m
+        self.c = _per_body("c", c, n)
+        self.x0 = _per_body("x0", 0.0 if x0 is None else x0, n)
+        self.v0 = _per_body("v0", v0, n)
+        carried = [None] * n if carried_by is None else list(carried_by)
+        if len(carried) != n:
+            raise ValueError(f"carried_by: one entry per body ({n}), got {len(carried)}.")
+        for i, j in enumerate(carried):
+            if j is None:
+                continue
+            if isinstance(j, bool) or not isinstance(j, int) or not 0 <= j < n:
+                raise ValueError(f"carried_by: body {i} is carried by {j!r}, which is not a body (0 to {n - 1}).")
+            if j == i:
+                raise ValueError(f"carried_by: body {i} is carried by itself.")
+        for i in range(n):
+            ground_body(tuple(carried), i)  # refuses a loop, naming its bodies
+        self.carried_by = tuple(carried)
+        self.friction = self._laws(friction, n)
+        for i, j in enumerate(carried):
+            if j is not None and self.friction[i] is not None:
+                raise ValueError(
+                    f"friction: body {i} is carried by body {j} (no ground contact) but has a friction law; "
+                    f"give None for it."
+                )
+            if j is not None and self.friction[ground_body(self.carried_by, i)] is None:
+                g = ground_body(self.carried_by, i)
+                raise ValueError(
+                    f"carried_by: body {i} is carried by body {g}, which does not touch the ground (no friction law)."
+                )
+        links = tuple(links)
+        for k, el in enumerate(links):
+            if not isinstance(el, AbstractElement):
+                raise TypeError(f"links[{k}] must be a Spring, Force or ExternalForce, got {type(el).__name__}.")
+            ends = el.bodies()
+            for e in ends:
+                if not _body(e, n):
+                    raise ValueError(
+                        f"links[{k}] {el.describe()}: body {e} does not exist (the mechanism has bodies 0 to {n - 1})."
+                    )
+            if len(ends) == 2 and ends[0] == ends[1]:
+                raise ValueError(f"links[{k}] {el.describe()}: joins body {ends[0]} to itself.")
+        self.links = links
+        self._check_frequencies()
+        _ = self.batch_shape  # fields whose batch axes do not broadcast are refused here, named
+        if check and is_concrete(self):
+            self.validate()
+
+    @staticmethod
+    def _laws(friction: Any, n: int) -> tuple[AbstractFriction | None, ...]:
+        if friction is None or isinstance(friction, AbstractFriction):
+            law = Coulomb() if friction is None else friction
+            return tuple(_split_law(law, i, n) for i in range(n))
+        laws = tuple(friction)
+        if len(laws) != n:
+            raise ValueError(f"friction: one law or None per body ({n}), got {len(laws)}.")
+        for i, law in enumerate(laws):
+            if law is not None and not isinstance(law, AbstractFriction):
+                raise TypeError(f"friction[{i}] (body {i}) must be an AbstractFriction or None, got {law!r}.")
+        return laws
+
+    def _check_frequencies(self) -> None:
+        """All waveforms share one base frequency (the engine follows one phase $\\omega t$)."""
+        waves = [(k, el, w) for k, el in enumerate(self.links) for w in el.signals() if isinstance(w, AbstractWaveform)]
+        if not waves or not all(is_concrete(w.omega) for _, _, w in waves):
+            return
+        k0, el0, w0 = waves[0]
+        for k, el, w in waves[1:]:
+            try:
+                mine, first = np.broadcast_arrays(np.asarray(w.omega), np.asarray(w0.omega))
+                same = np.array_equal(mine, first)
+            except ValueError:
+                same = False
+            if not same:
+                raise ValueError(
+                    f"links[{k}] {el.describe()}: its waveform's omega={np.asarray(w.omega).tolist()!r} differs from "
+                    f"the mechanism's base frequency omega={np.asarray(w0.omega).tolist()!r} (links[{k0}] "
+                    f"{el0.describe()}); all waveforms of one mechanism share it (use harmonics of it in a Fourier)."
+                )
+
+    # -- structure and batching -------------------------------------------------------
+
+    def _nodes(self) -> list[tuple[str, Array, int]]:
+        """Every array field: `(name for messages, array, number of trailing non-batch axes)`."""
+        out = [("masses", self.m, 1), ("c", self.c, 1), ("x0", self.x0, 1), ("v0", self.v0, 1)]
+        for i, law in enumerate(self.friction):
+            if law is not None:
+                out += [(f"{name} (body {i})", x, 0) for name, x in law.fields().items()]
+        for k, el in enumerate(self.links):
+            out += [(f"{name} of links[{k}]", x, 0) for name, x in el.values().items()]
+            for s in el.signals():
+                out += [(f"waveform of links[{k}]", x, tail) for x, tail in signal_nodes(s)]
+        return out
+
+    @property
+    def n_masses(self) -> int:
+        """The number of bodies $N$ (the name the chain path uses)."""
+        return self.m.shape[-1]
+
+    @property
+    def n_bodies(self) -> int:
+        return self.m.shape[-1]
+
+    @property
+    def batch_shape(self) -> tuple[int, ...]:
+        shapes = {}
+        for name, x, tail in self._nodes():
+            shape = jnp.shape(x)
+            shapes[name] = shape[: len(shape) - tail]
+        return broadcast_shape(shapes)
+
+    @property
+    def dtype(self) -> Any:
+        return jnp.result_type(*jax.tree_util.tree_leaves(self))
+
+    def broadcast(self) -> "Mechanism":
+        """Every field broadcast to `batch_shape` (and its own trailing axes) with one dtype."""
+        b, dt = self.batch_shape, self.dtype
+        tails = {id(x): tail for _, x, tail in self._nodes()}
+        leaves, tree = jax.tree_util.tree_flatten(self)
+        full = lambda x, tail: jnp.broadcast_to(jnp.asarray(x, dt), b + jnp.shape(x)[jnp.ndim(x) - tail :])
+        return jax.tree_util.tree_unflatten(tree, [full(x, tails.get(id(x), 0)) for x in leaves])
+
+    def astype(self, dtype: Any) -> "Mechanism":
+        dtype = jnp.dtype(dtype)
+        if dtype == jnp.float64 and not jax.config.read("jax_enable_x64"):
+            raise ValueError(
+                "dtype=float64 requested but JAX runs in 32-bit mode; enable it with "
+                'jax.config.update("jax_enable_x64", True) at start-up (or the CLI flag --x64).'
+            )
+        return jax.tree_util.tree_map(lambda x: x.astype(dtype), self)
+
+    def __getitem__(self, index: Any) -> "Mechanism":
+        """Index the batch axes of the broadcast mechanism."""
+        idx = index if isinstance(index, tuple) else (index,)
+        if len(idx) > len(self.batch_shape):
+            raise IndexError(f"too many indices for a mechanism batch of shape {self.batch_shape}.")
+        return jax.tree_util.tree_map(lambda x: x[idx], self.broadcast())
+
+    @classmethod
+    def stack(cls, items: "list[Mechanism]") -> "Mechanism":
+        """Stack mechanisms of the same structure (bodies, laws, elements) along a new leading batch axis."""
+        if len(items) == 0:
+            raise ValueError("Mechanism.stack needs at least one Mechanism.")
+        items = [q.broadcast() for q in items]
+        structures = {jax.tree_util.tree_structure(q) for q in items}
+        shapes = {tuple(x.shape for x in jax.tree_util.tree_leaves(q)) for q in items}
+        if len(structures) > 1 or len(shapes) > 1:
+            raise ValueError("Mechanism.stack: the mechanisms differ in structure (bodies, laws, elements) or shape.")
+        return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *items)
+
+    # -- derived quantities -------------------------------------------------------------
+
+    def waveforms(self) -> list[AbstractWaveform]:
+        """The elements' waveforms, in the order of `links`."""
+        return [s for el in self.links for s in el.signals() if isinstance(s, AbstractWaveform)]
+
+    def physics(self) -> MechanismPhysics:
+        """The mechanism's [`AbstractPhysics`][locomotion_jax.AbstractPhysics]: what the engine integrates it with."""
+        return mechanism_physics(self)
+
+    @property
+    def omega(self) -> Array:
+        """The base frequency of the actuation (0 without any waveform), batch shape."""
+        waves = self.waveforms()
+        w = waves[0].omega if waves else jnp.zeros((), self.dtype)
+        return jnp.broadcast_to(jnp.asarray(w, self.dtype), self.batch_shape)
+
+    @property
+    def total_mass(self) -> Array:
+        return self.m.sum(-1)
+
+    @property
+    def t_start(self) -> Array:
+        """Default start of a measurement: `MEASURE_PERIODS` periods of the actuation (0 without one)."""
+        w = self.omega
+        return jnp.where(w > 0, MEASURE_PERIODS * 2 * math.pi / jnp.where(w > 0, w, 1), 0.0)
+
+    # -- validation -----------------------------------------------------------------------
+
+    def _checks(self) -> list[tuple[str, str, Array, str, Any]]:
+        """`(owner, parameter, valid mask, valid range, values)`, finite values first."""
+        out: list[tuple[str, str, Array, str, Any]] = []
+        per_body = [("masses", self.m), ("c", self.c), ("x0", self.x0), ("v0", self.v0)]
+        for name, x in per_body:
+            for i in range(self.n_bodies):
+                out.append((f"body {i}", name, jnp.isfinite(x[..., i]), "finite", x[..., i]))
+        for i in range(self.n_bodies):
+            out.append((f"body {i}", "masses", self.m[..., i] > 0, "m_i > 0", self.m[..., i]))
+            out.append((f"body {i}", "c", self.c[..., i] >= 0, "c_i >= 0", self.c[..., i]))
+        for i, law in enumerate(self.friction):
+            if law is None:
+                continue
+            owner = f"{type(law).__name__} of body {i}"
+            fields = law.fields()
+            out += [(owner, name, jnp.isfinite(x), "finite", x) for name, x in fields.items()]
+            ranges = law.valid_ranges()
+            out += [(owner, name, ok, ranges.get(name, "valid"), fields[name]) for name, ok in law.validity().items()]
+        waves = self.waveforms()
+        for k, el in enumerate(self.links):
+            owner = f"links[{k}] {el.describe()}"
+            for name, x in el.values().items():
+                out.append((owner, name, jnp.isfinite(x), "finite", x))
+            if isinstance(el, Spring):
+                out.append((owner, "k", el.k > 0, "k > 0", el.k))
+            for s in el.signals():
+                for name, ok, valid in signal_checks(s):
+                    out.append((owner, name, ok, valid, getattr(s, name, s)))
+                if isinstance(s, AbstractWaveform) and s is not waves[0]:
+                    same = s.omega == waves[0].omega
+                    out.append((owner, "omega", same, "the mechanism's base frequency (the first waveform's omega)",
+                                s.omega))  # fmt: skip
+        return out
+
+    def is_valid(self) -> Array:
+        """Traceable mask (batch shape) of configurations inside the valid ranges."""
+        ok = jnp.ones(self.batch_shape, bool)
+        for *_, mask, _, _ in self._checks():
+            ok = ok & jnp.broadcast_to(mask, self.batch_shape)
+        return ok
+
+    def validate(self) -> "Mechanism":
+        """Raise `ValueError` at the first invalid value, naming the element or body, the parameter,
+        the batch index and the valid range."""
+        shape = self.batch_shape
+        for owner, name, mask, valid, value in self._checks():
+            bad = ~np.broadcast_to(np.asarray(mask), shape)
+            if bad.any():
+                where = tuple(int(i) for i in np.argwhere(bad)[0]) if shape else ()
+                at = f" at batch index {where}" if shape else ""
+                v = np.broadcast_to(np.asarray(value), shape)[where] if np.ndim(value) <= len(shape) else value
+                got = np.asarray(v).tolist()
+                raise ValueError(f"Invalid parameter {name!r} of {owner}{at}: got {name}={got!r}; the valid range is "
+                                 f"{valid}.")  # fmt: skip
+        return self
+
+    def dispatch(self, *, two_mass: Callable[[Any], R], chain: Callable[[Any], R]) -> R:
+        """`chain(self)`: a mechanism runs on the N-body path, as a chain does (`AbstractMechanism`)."""
+        return chain(self)

@@ -1,0 +1,226 @@
+"""The physics of a [`Mechanism`][locomotion_jax.Mechanism] (SPEC §9): bodies with or without ground
+contact, linear springs between any two bodies or to a wall, internal and external forces.
+
+Over tuples of per-body scalars, as [`ChainPhysics`][locomotion_jax.model._chain_physics.ChainPhysics]
+(the same reason: under `vmap` every intermediate is a vector over the configurations).
+
+With $u = x_b - x_a$ ($x = 0$ for a wall) a spring's force is $f = k(u - r(t))$, $+f$ on `a`
+and $-f$ on `b`; an internal force $f(t)$ acts $+f$ on `b`, $-f$ on `a`; an external force
+$g_i(t)$ on body $i$. $F_i$ sums them. The springs are horizontal, so the normal loads are
+constant: $N_i = m_i + $ (the weights that body $i$ carries, directly or through other
+carried bodies) for a body in contact.
+
+A body without ground contact (carried, or free) gets a friction law of no friction
+(`_NoContact`: kinetic coefficient 0, static limit $-1$) and the normal load 1: it never
+sticks (its stick margin $-1 - |F_i|$ is negative), feels no friction and dissipates
+nothing, and neither lifts off nor flips a contact side. So the exact engine runs it
+unchanged; its only trace is an event where its velocity changes sign. Its `N` in a
+trajectory is this 1, not a load.
+"""
+
+from typing import Any, NamedTuple
+
+import jax.numpy as jnp
+
+from .._custom_types import Array
+from ._elements import ExternalForce, Force, signal_at, Spring, WALL
+from ._friction import AbstractFriction
+from ._physics import AbstractPhysics, LoadRates, Loads, Scalars
+
+
+class _NoContact(AbstractFriction):
+    """No ground contact: no friction, and a negative static limit, so that the body never sticks."""
+
+    one: Array
+
+    def static_limits(self) -> tuple[Array, Array]:
+        limit = -self.one
+        return limit, limit
+
+    def kinetic(self, speed: Array, direction: Array) -> Array:
+        return jnp.zeros_like(speed)
+
+    def kinetic_rate(self, speed: Array, direction: Array, speed_rate: Array) -> None:
+        return None
+
+
+class Drive(NamedTuple):
+    """The actuation at one phase: per spring its rest length and rates, per internal force and
+    per external force its value and rates (`None` rates: zero)."""
+
+    l0: Scalars
+    dl0: tuple[Array | None, ...]
+    ddl0: tuple[Array | None, ...]
+    f: Scalars
+    df: tuple[Array | None, ...]
+    ddf: tuple[Array | None, ...]
+    g: Scalars
+    dg: tuple[Array | None, ...]
+    ddg: tuple[Array | None, ...]
+
+
+class SpringState(NamedTuple):
+    """Per spring: its extension $u = x_b - x_a$ and force `tension` $= k(u - r)$."""
+
+    u: Scalars
+    tension: Scalars
+
+
+def _pos(x: Scalars, end: "int | str", like: Array) -> Array:
+    return jnp.zeros_like(like) if end == WALL else x[int(end)]
+
+
+def _add(terms: list[list[Array]], end: "int | str", value: Array | None, sign: float) -> None:
+    if end != WALL and value is not None:
+        terms[int(end)].append(value if sign > 0 else -value)
+
+
+def _sum(terms: list[Array], like: Array) -> Array:
+    return sum(terms[1:], terms[0]) if terms else jnp.zeros_like(like)
+
+
+def _rate(x: Array | None, like: Array) -> Array:
+    return jnp.zeros_like(like) if x is None else x
+
+
+class MechanismPhysics(AbstractPhysics):
+    """The [`AbstractPhysics`][locomotion_jax.AbstractPhysics] of one [`Mechanism`][locomotion_jax.Mechanism]
+    (module docstring): what the exact engine integrates it with. `loads(...).aux` is a [`SpringState`][]."""
+
+    m: Scalars
+    im: Scalars
+    c: Scalars
+    friction: tuple[AbstractFriction, ...]
+    mu_f: Scalars
+    mu_b: tuple[Array | None, ...]
+    omega: Array
+    one: Array
+    normal: Scalars  # the constant normal loads N_i (1 for a body without contact)
+    x0: Scalars
+    v0: Scalars
+    inv_mass: Array
+    springs: tuple[Spring, ...]
+    forces: tuple[Force, ...]
+    externals: tuple[ExternalForce, ...]
+
+    def drive(self, c1: Array, s1: Array) -> Drive:
+        at = lambda s: signal_at(s, c1, s1)
+        sp = [at(s.rest) for s in self.springs]
+        fo = [at(f.waveform) for f in self.forces]
+        ex = [at(g.waveform) for g in self.externals]
+        col = lambda q, k: tuple(p[k] for p in q)
+        return Drive(col(sp, 0), col(sp, 1), col(sp, 2), col(fo, 0), col(fo, 1), col(fo, 2),
+                     col(ex, 0), col(ex, 1), col(ex, 2))  # fmt: skip
+
+    def _forces(self, u: Scalars, r: tuple, f: tuple, g: tuple, like: Array) -> Scalars:
+        """$F_i$ (or a rate of it) from the springs' `k (u - r)`, the forces `f` and the external `g`."""
+        terms: list[list[Array]] = [[] for _ in self.m]
+        for s, uj, rj in zip(self.springs, u, r):
+            T = s.k * (uj if rj is None else uj - rj)
+            _add(terms, s.a, T, 1.0)
+            _add(terms, s.b, T, -1.0)
+        for el, fj in zip(self.forces, f):
+            _add(terms, el.b, fj, 1.0)
+            _add(terms, el.a, fj, -1.0)
+        for el, gj in zip(self.externals, g):
+            _add(terms, el.i, gj, 1.0)
+        return tuple(_sum(t, like) for t in terms)
+
+    def _u(self, x: Scalars) -> Scalars:
+        return tuple(_pos(x, s.b, x[0]) - _pos(x, s.a, x[0]) for s in self.springs)
+
+    def loads(self, drive: Drive, x: Scalars, keep: Any = None) -> Loads:
+        u = self._u(x)
+        tension = tuple(s.k * (uj - r) for s, uj, r in zip(self.springs, u, drive.l0))
+        F = self._forces(u, drive.l0, drive.f, drive.g, x[0])
+        return Loads(F, self.normal, SpringState(u, tension))
+
+    def load_rates(self, drive: Drive, loads: Loads, xd: Scalars, keep: Any = None) -> LoadRates:
+        du = self._u(xd)
+        dF = self._forces(du, drive.dl0, drive.df, drive.dg, xd[0])
+        return LoadRates(dF, tuple(jnp.zeros_like(q) for q in dF), du)
+
+    def load_second(
+        self, drive: Drive, loads: Loads, rates: LoadRates, xd: Scalars, a: Scalars
+    ) -> tuple[Scalars, Scalars]:
+        ddF = self._forces(self._u(a), drive.ddl0, drive.ddf, drive.ddg, a[0])
+        return ddF, tuple(jnp.zeros_like(q) for q in ddF)
+
+    def power(self, drive: Drive, loads: Loads, v: Scalars) -> Array:
+        """The power put in (SPEC §9): $\\dot w = \\sum_\\text{springs} -f\\,\\dot r$
+        $+ \\sum_\\text{forces} f\\,(v_b - v_a) + \\sum_i g_i v_i$."""
+        like = v[0]
+        terms = [-(T * dr) for T, dr in zip(loads.aux.tension, drive.dl0) if dr is not None]
+        terms += [f * (_pos(v, e.b, like) - _pos(v, e.a, like)) for e, f in zip(self.forces, drive.f)]
+        terms += [g * v[e.i] for e, g in zip(self.externals, drive.g)]
+        return _sum(terms, like)
+
+    def power_rate(self, drive: Drive, loads: Loads, rates: LoadRates, v: Scalars, a: Scalars) -> Array:
+        like = v[0]
+        terms = []
+        for s, T, du, dr, ddr in zip(self.springs, loads.aux.tension, rates.aux, drive.dl0, drive.ddl0):
+            if dr is not None:
+                dT = s.k * (du - dr)
+                terms.append(-(dT * dr + T * _rate(ddr, like)))
+        for e, f, df in zip(self.forces, drive.f, drive.df):
+            dv = _pos(v, e.b, like) - _pos(v, e.a, like)
+            terms.append(_rate(df, like) * dv + f * (_pos(a, e.b, like) - _pos(a, e.a, like)))
+        for e, g, dg in zip(self.externals, drive.g, drive.dg):
+            terms.append(_rate(dg, like) * v[e.i] + g * a[e.i])
+        return _sum(terms, like)
+
+    def energy(self, loads: Loads, v: Scalars) -> Array:
+        """$e = \\sum_i m_i v_i^2/2 + \\sum_\\text{springs} f^2/(2k)$ (SPEC §9)."""
+        kin = [m * q * q for m, q in zip(self.m, v)]
+        pot = [T * T / s.k for s, T in zip(self.springs, loads.aux.tension)]
+        return 0.5 * _sum(kin + pot, v[0])
+
+    def centre_of_mass(self, x: Scalars) -> Array:
+        return _sum([m * q for m, q in zip(self.m, x)], x[0]) * self.inv_mass
+
+    def initial_positions(self, start: str) -> Array:
+        """The mechanism's own `x0` (whatever the named start)."""
+        return jnp.stack(self.x0, -1)
+
+    def initial_velocities(self, start: str) -> Array | None:
+        return jnp.stack(self.v0, -1)
+
+
+def ground_body(carried_by: tuple[int | None, ...], i: int) -> int:
+    """The body in contact that finally carries body `i` (`i` itself if it is not carried)."""
+    seen = {i}
+    while carried_by[i] is not None:
+        i = int(carried_by[i])  # type: ignore[arg-type]
+        if i in seen:
+            raise ValueError(f"carried_by: bodies {sorted(seen)} carry each other in a loop.")
+        seen.add(i)
+    return i
+
+
+def mechanism_physics(M: Any) -> MechanismPhysics:
+    """The physics of a [`Mechanism`][locomotion_jax.Mechanism] (one configuration or a flat batch)."""
+    n = M.m.shape[-1]
+    m = tuple(M.m[..., i] for i in range(n))
+    one = m[0] / m[0]
+    contact = [law is not None for law in M.friction]
+    normal: list[Array] = [mi if c else one for mi, c in zip(m, contact)]
+    for i in range(n):
+        if M.carried_by[i] is not None:
+            g = ground_body(M.carried_by, i)
+            if contact[g]:
+                normal[g] = normal[g] + m[i]
+    friction = tuple(law if law is not None else _NoContact(one) for law in M.friction)
+    limits = [law.static_limits() for law in friction]
+    limits = [(f, None if b is f else b) for f, b in limits]
+    waves = M.waveforms()
+    omega = jnp.broadcast_to(waves[0].omega, one.shape).astype(one.dtype) if waves else jnp.zeros_like(one)
+    links = M.links
+    return MechanismPhysics(
+        m=m, im=tuple(1 / q for q in m), c=tuple(M.c[..., i] for i in range(n)), friction=friction,
+        mu_f=tuple(f for f, _ in limits), mu_b=tuple(b for _, b in limits), omega=omega, one=one,
+        normal=tuple(normal), x0=tuple(M.x0[..., i] for i in range(n)), v0=tuple(M.v0[..., i] for i in range(n)),
+        inv_mass=1 / M.m.sum(-1),
+        springs=tuple(e for e in links if isinstance(e, Spring)),
+        forces=tuple(e for e in links if isinstance(e, Force)),
+        externals=tuple(e for e in links if isinstance(e, ExternalForce)),
+    )  # fmt: skip
