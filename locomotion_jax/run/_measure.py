@@ -165,12 +165,9 @@ def measure_chain(chain: Chain, dynamics: AbstractDynamics, z: float, horizon: f
     valid, unresolved = guard_chain(dynamics, flat, valid, shape)
     y0 = prepare_chain_initial(initial, shape, flat.n_masses, flat.dtype)
     n = valid.shape[0]
-    if t_start is None:
+    ts = _start_times(t_start, shape, flat.dtype)  # checked on the host, as for the two-mass model
+    if ts is None:
         ts = jnp.full((n,), jnp.inf, flat.dtype)  # the chains' own, `Chain.t_start`
-    else:
-        ts = jnp.broadcast_to(jnp.asarray(t_start, flat.dtype), shape).reshape((n,))
-        if not np.all(np.isfinite(np.asarray(ts))) or np.any(np.asarray(ts) < 0):
-            raise ValueError(f"t_start must be finite and >= 0, got {t_start!r}.")
     out = flag(dynamics.measure_chain(flat, valid, ts, z, horizon, window, contact, start, y0), unresolved)
     start = "initial" if initial is not None else start
     return ChainMeasurement(**unflatten(out, shape), z=z, start=start, contact=contact)
