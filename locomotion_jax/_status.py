@@ -29,6 +29,10 @@ class Status(enum.IntEnum):
       through each other). The exact engines check every committed step's end and stop
       the run there (not located in time: the step that closed the gap is kept, so the
       last state has a gap $\\le 0$); results cover the part that was integrated.
+    - `UNRESOLVED`: the fixed step of [`Exact`][locomotion_jax.Exact] dynamics is too long for
+      one of the configuration's time scales (the forcing's highest harmonic, a natural
+      period, a damping or Stribeck time; docs/engines.md, "Resolution guards"); nothing
+      was integrated and every measurement holds its sentinel, as for `INVALID`.
     """
 
     OK = 0
@@ -37,6 +41,7 @@ class Status(enum.IntEnum):
     INVALID = 3
     SOLVER_FAILED = 4
     COLLISION = 5
+    UNRESOLVED = 6
 
 
 class Regime(enum.IntEnum):

@@ -87,6 +87,12 @@ def pytest_addoption(parser):
     )
 
 
+def pytest_configure(config):
+    # tests/test_fuzz.py draws this many times more examples under --slow (read at its import).
+    if config.getoption("--slow"):
+        os.environ.setdefault("LJ_FUZZ_SCALE", "20")
+
+
 def pytest_collection_modifyitems(config, items):
     # The slow tests run whole optimisations, notebooks and multi-process sweeps whose parts
     # the default tests check one by one; they take about as long again as the rest.

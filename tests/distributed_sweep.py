@@ -42,6 +42,8 @@ def main() -> None:
 
     jax.config.update("jax_enable_x64", True)
     if args.processes > 1:
+        # A lost process must not take the others with it (the CLI's --distributed does the same).
+        jax.config.update("jax_enable_recoverability", True)
         jax.distributed.initialize(
             f"127.0.0.1:{args.port}",
             num_processes=args.processes,

@@ -45,6 +45,12 @@ CHAIN = "locomotion_jax/dynamics/_chain_exact.py"
 CHAIN_MOTION = "locomotion_jax/dynamics/_chain_motion.py"
 MEASURE = "locomotion_jax/dynamics/_exact_measure.py"
 NUMERICS = "locomotion_jax/dynamics/_numerics.py"
+PARAMS = "locomotion_jax/model/_params.py"
+CHAIN_MODEL = "locomotion_jax/model/_chain.py"
+FRICTION = "locomotion_jax/model/_friction.py"
+RESOLUTION = "locomotion_jax/run/_resolution.py"
+VALIDATION = "tests/test_validation.py"
+RESOLUTION_TESTS = "tests/test_resolution.py"
 
 MUTATIONS = [
     # -- the bugs an outside audit found uncaught ----------------------------------------------
@@ -307,6 +313,98 @@ MUTATIONS = [
         NUMERICS,
         (("return th, jnp.where(ok, -dp / jnp.where(ok, slope, 1), 0)", "return th, jnp.zeros_like(th)"),),
         ("tests/test_gradients.py",),
+    ),
+    # -- validation at the boundary and the resolution guards (issue 29) --------------------------------
+    Mutation(
+        "params_mu_s_bound_flipped",
+        "validation: Params' mu_s >= mu_k flipped to mu_s <= mu_k",
+        PARAMS,
+        (('"mu_s": p["mu_s"] >= p["mu_k"],', '"mu_s": p["mu_s"] <= p["mu_k"],'),),
+        (f"{VALIDATION}::test_params_bounds",),
+    ),
+    Mutation(
+        "params_d_check_dropped",
+        "validation: Params' |d| < lbar not checked",
+        PARAMS,
+        (('"d": xp.abs(p["d"]) < p["lbar"],', '"d": xp.abs(p["d"]) >= 0,'),),
+        (f"{VALIDATION}::test_params_bounds",),
+    ),
+    Mutation(
+        "params_k_subnormal_allowed",
+        "validation: Params' k only > 0 (a subnormal k flushed to zero in the engines)",
+        PARAMS,
+        (('"k": normal_positive(p["k"], xp),', '"k": p["k"] > 0,'),),
+        (f"{VALIDATION}::test_params_bounds",),
+    ),
+    Mutation(
+        "params_lbar_square_unchecked",
+        "validation: Params' lbar only > 0 (its square may under- or overflow)",
+        PARAMS,
+        (('"lbar": normal_positive(p["lbar"], xp, 2),', '"lbar": p["lbar"] > 0,'),),
+        (f"{VALIDATION}::test_params_bounds",),
+    ),
+    Mutation(
+        "chain_mass_bound_loosened",
+        "validation: a chain's masses m_i >= 0 allowed (zero mass)",
+        CHAIN_MODEL,
+        (('("masses", normal_positive(c.m), ', '("masses", c.m >= 0, '),),
+        (f"{VALIDATION}::test_chain_bounds",),
+    ),
+    Mutation(
+        "chain_damping_check_dropped",
+        "validation: a chain's c_i >= 0 not checked",
+        CHAIN_MODEL,
+        (('("c", c.c >= 0, "c_i >= 0", "mass"),', '("c", c.c == c.c, "c_i >= 0", "mass"),'),),
+        (f"{VALIDATION}::test_chain_bounds",),
+    ),
+    Mutation(
+        "coulomb_mu_k_check_dropped",
+        "validation: Coulomb's mu_k >= 0 not checked",
+        FRICTION,
+        (('"mu_k": self.mu_k >= 0}', '"mu_k": self.mu_k == self.mu_k}'),),
+        (f"{VALIDATION}::test_friction_bounds",),
+    ),
+    Mutation(
+        "stribeck_v_s_square_unchecked",
+        "validation: Stribeck's v_s only > 0 (1/v_s**2 may overflow)",
+        FRICTION,
+        (("v_s_ok = (self.v_s > 0) & jnp.isfinite(1 / (self.v_s * self.v_s))", "v_s_ok = self.v_s > 0"),),
+        (f"{VALIDATION}::test_stribeck_tiny_v_s",),
+    ),
+    Mutation(
+        "params_waveform_not_validated",
+        "validation: a waveform given to Params with known values is not checked by the front end",
+        "locomotion_jax/run/_batch.py",
+        (("            waveform.validate()  # under", "            pass  # under"),),
+        (f"{VALIDATION}::test_waveform_of_params_is_validated",),
+    ),
+    Mutation(
+        "resolution_guard_dropped",
+        "resolution guard: no scale is compared with the step",
+        RESOLUTION,
+        (("bad = bad | (dt > s.limit())", "bad = bad | (dt > jnp.inf)"),),
+        (RESOLUTION_TESTS,),
+    ),
+    Mutation(
+        "resolution_threshold_halved",
+        "resolution guard: 2 steps per period instead of 4",
+        RESOLUTION,
+        (("STEPS_PER_PERIOD = 4", "STEPS_PER_PERIOD = 2"),),
+        (RESOLUTION_TESTS,),
+    ),
+    Mutation(
+        "resolution_natural_period_ignored",
+        "resolution guard: the natural periods are not checked (only the forcing)",
+        RESOLUTION,
+        (("natural = 2 * math.pi / params.wn1", "natural = jnp.inf * params.wn1"),),
+        (RESOLUTION_TESTS,),
+    ),
+    Mutation(
+        "unresolved_flagged_invalid",
+        "resolution guard: an unresolved configuration of a batch flagged INVALID, not UNRESOLVED",
+        RESOLUTION,
+        (("xp.where(mask, Status.UNRESOLVED, status)", "xp.where(mask, Status.INVALID, status)"),),
+        (RESOLUTION_TESTS,),
     ),
 ]
 

@@ -1,6 +1,7 @@
 """Multi-process sweeps: processes under `jax.distributed` (127.0.0.1, one CPU device
 each) share out the chunks of one Zarr store; the result equals a one-process sweep
-bit for bit, and a sweep whose processes were killed is resumed by another process.
+bit for bit, a sweep whose processes were killed is resumed by another process, and a
+survivor of a killed process finishes the store and exits 0.
 
 The processes run the CLI or `tests/distributed_sweep.py`; they share a compilation
 cache (so that fewer of them compile), and the coordinator listens on a port free at
@@ -141,4 +142,18 @@ def test_killed_processes_resume(tmp_path, cache, reference):
     report = _report(out)
     assert report["chunks_loaded"] == len(done)
     assert report["chunks_computed"] == N_CHUNKS - len(done)
+    _assert_same(store, reference)
+
+
+def test_survivor_takes_over_and_exits_cleanly(tmp_path, cache, reference):
+    """Process 1 dies writing its first chunk (chunk 1); process 0 takes it over, completes the
+    store and exits 0, saying which chunk it took over (JAX used to abort it at its shutdown
+    barrier, exit 134, after the store was complete)."""
+    store = tmp_path / "map.zarr"
+    (rc0, out0, err0), (rc1, _, _) = _wait(_start(store, cache, n=2, die_after={1: 0}))
+    assert rc1 == -signal.SIGKILL
+    assert rc0 == 0, err0[-3000:]
+    assert "process 0 of 2: the store is complete. Chunks taken over from processes that stopped: 1 (held by" in err0
+    assert _report(out0)["chunks_computed"] == N_CHUNKS
+    assert len(list((store / ".locomotion_jax" / "done").iterdir())) == N_CHUNKS
     _assert_same(store, reference)

@@ -227,7 +227,7 @@ BROKEN = {
     "negative_mass": (
         WORM.replace("[1.0, 1.0, 1.0]", "[1.0, -1.0, 1.0]"),
         r"^worm.toml, line 5: Invalid "
-        r"parameter 'masses' of mass 1: got masses=-1.0; the valid range is m_i > 0\.$",
+        r"parameter 'masses' of mass 1: got masses=-1.0; the valid range is m_i > 0, a normal float\.$",
     ),
     "friction_range": (
         WORM.replace("mu_s_bwd = 0.9", "mu_s_bwd = 0.6"),

@@ -108,6 +108,16 @@ def test_relation_shows_both_values():
         lj.Chain(masses=[1.0, 1.0], d=4.0)
 
 
+@pytest.mark.parametrize(
+    "law, name",
+    [(lj.Coulomb(0.7, -0.1), "mu_k"), (lj.AnisotropicCoulomb(0.7, 0.9, 0.5, -0.1), "mu_k_bwd"),
+     (lj.Stribeck(0.7, 0.5, -0.1), "v_s")],
+)  # fmt: skip
+def test_friction_bounds(law, name):
+    with pytest.raises(ValueError, match=rf"Invalid parameter '{name}' of mass 0"):
+        lj.Chain(masses=[1.0, 1.0], friction=law)
+
+
 def test_stribeck_tiny_v_s():
     """v_s = 1e-160 ran to status OK with NaN (1/v_s**2 overflows in the law's rate)."""
     with pytest.raises(ValueError, match=r"'v_s' of mass 0: got v_s=1e-160; the valid range is v_s > 0 with 1/v_s"):
@@ -131,6 +141,41 @@ def test_mismatched_lengths_name_parameters():
         lj.TravellingWave(np.array([0.01, 0.02]), np.array([1.0, 2.0, 3.0]))
     with pytest.raises(ValueError, match=r"'masses' \(shape \(2,\)\) and 'c' \(shape \(3,\)\)"):
         lj.Chain(masses=jnp.ones((2, 2)), c=jnp.full((3, 1), 0.01))
+
+
+@pytest.mark.parametrize(
+    "values, name",
+    [
+        (dict(mu_s=0.4, mu_k=0.5), "mu_s"),
+        (dict(mu_k=-0.1, mu_s=0.5), "mu_k"),
+        (dict(d=4.0), "d"),
+        (dict(a=5.0), "a"),
+        (dict(a=-0.01), "a"),
+        (dict(mhat=1.0), "mhat"),
+        (dict(c=-0.01), "c"),
+        (dict(omega=-1.0), "omega"),
+        # Subnormal values are flushed to zero by XLA's CPU code (a NaN with status OK, found by
+        # tests/test_fuzz.py), and a length whose square under- or overflows breaks eq. (2).
+        (dict(k=1e-310), "k"),
+        (dict(mhat=1e-310), "mhat"),
+        (dict(lbar=1e-300, a=0.0, d=0.0), "lbar"),
+        (dict(lbar=1e300), "lbar"),
+    ],
+)
+def test_params_bounds(values, name):
+    with pytest.raises(ValueError, match=rf"Invalid parameter '{name}'"):
+        lj.Params(**values)
+    assert not bool(lj.Params(**values, check=False).is_valid())
+
+
+@pytest.mark.parametrize(
+    "kwargs, name",
+    [(dict(masses=[1.0, 0.0]), "masses"), (dict(masses=[1.0, 1e-310]), "masses"), (dict(k=1e-310), "k"),
+     (dict(k=0.0), "k"), (dict(lbar=1e-300, d=0.0), "lbar"), (dict(c=-0.01), "c")],
+)  # fmt: skip
+def test_chain_bounds(kwargs, name):
+    with pytest.raises(ValueError, match=rf"Invalid parameter '{name}'"):
+        lj.Chain(**{"masses": [1.0, 1.0], **kwargs})
 
 
 @pytest.mark.parametrize(

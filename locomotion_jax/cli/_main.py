@@ -84,6 +84,10 @@ def _global(
 
     jax.config.update("jax_enable_x64", x64)
     if distributed:
+        # A process that dies must not take the others with it: without this, JAX's coordination
+        # client aborts the survivors (SIGABRT, exit 134) when it learns of the loss, though they
+        # can finish a sweep's store by taking over the lost process's chunks.
+        jax.config.update("jax_enable_recoverability", True)
         try:
             jax.distributed.initialize()
         except (ValueError, RuntimeError) as err:

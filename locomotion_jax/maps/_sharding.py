@@ -23,9 +23,13 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 from ..dynamics._base import AbstractDynamics
 from ..dynamics._compile import engine_jit
 from ..model._params import PARAM_NAMES, Params
+from ..run._resolution import flag, guard_values
 
 
 BATCH_AXIS = "batch"
+
+UNRESOLVED_KEY = "_unresolved"
+"""The host mask of a chunk's unresolved configurations, carried from `dispatch_chunk` to `fetch`."""
 
 TRACES: Counter = Counter()
 """Python-level traces of the chunk function, by key `"run_chunk"`.
@@ -126,11 +130,16 @@ def dispatch_chunk(
     - `mesh`: from [`batch_mesh`][].
     - `micro_batch`: configurations vmapped together per device (default [`MICRO_BATCH`][]: all).
 
+    A configuration whose step does not resolve its time scales (`run._resolution`) is run as
+    an invalid one (not integrated) and [`fetch`][] flags it `Status.UNRESOLVED`.
+
     **Returns:** a dict of sharded arrays (one per `Measurement` field); read them with [`fetch`][].
     """
-    return _run_chunk(
+    values, unresolved = guard_values(values, dtype, dynamics)
+    out = _run_chunk(
         *_chunk_args(values, dtype, z, horizon, window, dynamics, contact, start, max_steps, mesh, micro_batch)
     )
+    return out if unresolved is None else {**out, UNRESOLVED_KEY: jnp.asarray(unresolved)}
 
 
 def chunk_dtypes(
@@ -165,7 +174,9 @@ def _chunk_args(values, dtype, z, horizon, window, dynamics, contact, start, max
 
 def fetch(out: Mapping[str, jax.Array], n: int) -> dict[str, np.ndarray]:
     """Block on a dispatched chunk and copy its first `n` (unpadded) entries to the host."""
-    return {k: _to_host(v)[:n] for k, v in out.items()}
+    host = {k: _to_host(v)[:n] for k, v in out.items() if k != UNRESOLVED_KEY}
+    mask = out.get(UNRESOLVED_KEY)
+    return host if mask is None else flag(host, np.asarray(mask)[:n])
 
 
 def from_process0(x: np.ndarray) -> np.ndarray:

@@ -100,10 +100,15 @@ class Blocks:
 
 
 class Claim:
-    """A chunk's lock, held until [`release`][]; the kernel releases it if the process dies."""
+    """A chunk's lock, held until [`release`][]; the kernel releases it if the process dies.
 
-    def __init__(self, fd: int | None):
+    `previous`: the holder line an earlier claim left (`"host pid N since ..."`), or `None`. A
+    chunk that is claimed again is not done, so its earlier holder stopped before finishing it:
+    this process takes it over."""
+
+    def __init__(self, fd: int | None, previous: str | None = None):
         self._fd = fd
+        self.previous = previous
 
     def release(self) -> None:
         if self._fd is not None and fcntl is not None:  # a claim holds a descriptor only where fcntl exists
@@ -236,9 +241,11 @@ class ZarrStore:
             os.close(fd)
             return None
         # Who holds it, for a person looking at a stalled sweep (the lock is the flock, not this text).
+        previous = os.read(fd, 4096).decode(errors="replace").strip() or None
+        os.lseek(fd, 0, os.SEEK_SET)
         os.ftruncate(fd, 0)
         os.write(fd, f"{socket.gethostname()} pid {os.getpid()} since {time.strftime('%Y-%m-%dT%H:%M:%S')}\n".encode())
-        return Claim(fd)
+        return Claim(fd, previous)
 
     def write(self, index: int, results: Mapping[str, np.ndarray]) -> None:
         """Write chunk `index`'s results (flat, in the block's C order) to its region, then mark it done."""

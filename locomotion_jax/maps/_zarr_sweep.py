@@ -15,6 +15,7 @@ configurations of a chunk run as one padded batch, exactly as in a NetCDF sweep,
 so the values do not depend on the store, the chunking or the number of processes.
 """
 
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -24,7 +25,7 @@ import numpy as np
 
 from ..dynamics._base import AbstractDynamics
 from ..model._params import PARAM_NAMES
-from . import _sharding as sharding
+from . import _peers, _sharding as sharding
 from ._dataset import DESCRIPTIONS, MEASURE_FIELDS, sweep_attrs
 from ._grid import RATIO
 from ._zarr_store import block_shape, Blocks, ZarrStore
@@ -129,6 +130,7 @@ def sweep_to_zarr(
         bar.update(size(index))
 
     pending = None
+    taken: dict[int, str] = {}
     try:
         while queue:
             for index in queue:
@@ -140,6 +142,8 @@ def sweep_to_zarr(
                 if store.is_done(index):  # finished between our check and our lock
                     claim.release()
                     continue
+                if claim.previous is not None:  # its earlier holder stopped before finishing it
+                    taken[index] = claim.previous
                 out = run(blocks, index)
                 STATS["chunks_computed"] += 1
                 # Dispatch is asynchronous: the devices work on this chunk while the
@@ -158,7 +162,17 @@ def sweep_to_zarr(
         if pending is not None:
             pending[2].release()
         bar.close()
+    if n_proc > 1:
+        _end_with_lost_peers(me, n_proc, taken)
     return store.dataset()
+
+
+def _end_with_lost_peers(me: int, n_proc: int, taken: dict[int, str]) -> None:
+    """Under `jax.distributed`, once the store is complete: if this process took over chunks from
+    holders that stopped, say which (and which processes the coordination service counts lost:
+    not alone, since a peer that finished and left is not alive either)."""
+    if taken:
+        print(_peers.report_takeover(me, n_proc, taken, _peers.lost_peers(n_proc, me)), file=sys.stderr, flush=True)
 
 
 def _barrier(name: str) -> None:

@@ -16,7 +16,7 @@ from ._chain_physics import chain_physics, ChainPhysics
 from ._checks import broadcast_shape, real_array, related
 from ._friction import AbstractFriction, Coulomb
 from ._mechanism import AbstractMechanism, R
-from ._params import Params
+from ._params import normal_positive, Params
 from ._springwaves import check_waveforms, spring_signals, SpringFourier, to_spring_fourier, TravellingWave
 from ._waveform import AbstractWaveform
 
@@ -303,10 +303,10 @@ class Chain(AbstractMechanism):
         omega_ok = jnp.isfinite(c.waves.omega) & (c.waves.omega >= 0)
         checks += [
             ("omega", jnp.broadcast_to(omega_ok[..., None], c.k.shape), "omega >= 0 and finite", "spring"),
-            ("masses", c.m > 0, "m_i > 0", "mass"),
+            ("masses", normal_positive(c.m), "m_i > 0, a normal float", "mass"),
             ("c", c.c >= 0, "c_i >= 0", "mass"),
-            ("k", c.k > 0, "k_j > 0", "spring"),
-            ("lbar", c.lbar > 0, "lbar_j > 0", "spring"),
+            ("k", normal_positive(c.k), "k_j > 0, a normal float", "spring"),
+            ("lbar", normal_positive(c.lbar, jnp, 2), "lbar_j > 0 with lbar_j**2 a normal float", "spring"),
             ("d", jnp.abs(c.d) < c.lbar, "|d_j| < lbar_j", "spring"),
         ]
         if isinstance(self.actuator, RestLength):

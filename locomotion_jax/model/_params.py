@@ -33,31 +33,44 @@ DEFAULTS: dict[str, float] = {
 
 # Human-readable valid ranges, used in error messages and by the CLI.
 VALID_RANGES: dict[str, str] = {
-    "k": "k > 0",
+    "k": "k > 0, a normal float (k >= 2.3e-308 in float64, 1.2e-38 in float32)",
     "c": "c >= 0",
     "d": "|d| < lbar",
-    "lbar": "lbar > 0",
+    "lbar": "lbar > 0 with lbar**2 a normal float (1.5e-154 <= lbar <= 6.7e153 in float64, 1.1e-19 to 9.2e18 "
+    "in float32)",
     "a": "0 <= a < lbar",
     "omega": "omega >= 0",
     "mu_s": "mu_s >= mu_k",
     "mu_k": "mu_k >= 0",
-    "mhat": "0 < mhat < 1",
+    "mhat": "0 < mhat < 1, a normal float",
 }
+
+
+def normal_positive(x: Any, xp=jnp, power: int = 1) -> Any:
+    """`x > 0` with `x**power` a normal float, not subnormal and a quarter of the largest at most:
+    XLA's CPU code flushes subnormal numbers to zero, so a subnormal stiffness or mass, or a
+    length whose square underflows ($\\ell^2 = u^2 + d^2$, eq. 2), became 0 inside the engines, and
+    one whose square overflows inf (a NaN with status OK, found by tests/test_fuzz.py)."""
+    dtype = xp.asarray(x).dtype
+    info = xp.finfo(dtype if xp.issubdtype(dtype, xp.floating) else float)
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+        xp_ = x**power
+        return (x > 0) & (xp_ >= info.tiny) & (xp_ <= info.max / 4)
 
 
 def _validity(p: Mapping[str, Any], xp=jnp) -> dict[str, Any]:
     """Per-parameter validity masks; works with numpy (host checks) or jnp (traced)."""
     fin = {name: xp.isfinite(p[name]) for name in PARAM_NAMES}
     ok = {
-        "k": p["k"] > 0,
+        "k": normal_positive(p["k"], xp),
         "c": p["c"] >= 0,
         "d": xp.abs(p["d"]) < p["lbar"],
-        "lbar": p["lbar"] > 0,
+        "lbar": normal_positive(p["lbar"], xp, 2),
         "a": (p["a"] >= 0) & (p["a"] < p["lbar"]),
         "omega": p["omega"] >= 0,
         "mu_s": p["mu_s"] >= p["mu_k"],
         "mu_k": p["mu_k"] >= 0,
-        "mhat": (p["mhat"] > 0) & (p["mhat"] < 1),
+        "mhat": normal_positive(p["mhat"], xp) & (p["mhat"] < 1),
     }
     return {name: fin[name] & ok[name] for name in PARAM_NAMES}
 

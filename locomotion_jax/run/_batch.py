@@ -197,7 +197,7 @@ def prepare_chain(chain: Any, dtype: Any) -> tuple[Any, jax.Array, tuple[int, ..
     try:
         ok = np.asarray(valid)
         fallback = int(np.argmax(ok)) if ok.any() else 0
-    except jax.errors.ConcretizationTypeError:
-        fallback = 0
+    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
+        fallback = 0  # under `jit`: the first configuration (an invalid one only runs flagged)
     pick = lambda x: jnp.where(valid.reshape((size,) + (1,) * (x.ndim - 1)), x, x[fallback])
     return jax.tree_util.tree_map(pick, flat), valid, shape

@@ -31,6 +31,7 @@ from ._batch import (
     prepare_initial,
     unflatten,
 )
+from ._resolution import flag, guard_chain, guard_two_mass
 
 
 def _start_times(t_start: ArrayLike | None, shape: tuple[int, ...], dtype: Any) -> jax.Array | None:
@@ -143,9 +144,10 @@ def measure(
 def _two_mass(params: Params, dynamics: AbstractDynamics, z, horizon, window, t_start, waveform, contact, start,
               initial, dtype) -> Measurement:  # fmt: skip
     flat, wave, axes, shape = prepare(params, waveform, dtype)
+    flat, unresolved = guard_two_mass(dynamics, flat, wave, shape)
     y0 = prepare_initial(initial, shape, flat.dtype)
     ts = _start_times(t_start, shape, flat.dtype)
-    out = dynamics.measure_two_mass(flat, wave, axes, z, horizon, window, contact, start, ts, y0)
+    out = flag(dynamics.measure_two_mass(flat, wave, axes, z, horizon, window, contact, start, ts, y0), unresolved)
     return Measurement(**unflatten(out, shape), z=z, start="initial" if initial is not None else start, contact=contact)
 
 
@@ -165,14 +167,12 @@ def measure_chain(chain: Chain | Mechanism, dynamics: AbstractDynamics, z: float
     chunks of a chain sweep)."""
     check_contact_start(contact, start)
     flat, valid, shape = prepare_chain(chain, dtype)
+    valid, unresolved = guard_chain(dynamics, flat, valid, shape)
     y0 = prepare_chain_initial(initial, shape, flat.n_masses, flat.dtype, flat)
     n = valid.shape[0]
-    if t_start is None:
+    ts = _start_times(t_start, shape, flat.dtype)  # checked on the host, as for the two-mass model
+    if ts is None:
         ts = jnp.full((n,), jnp.inf, flat.dtype)  # the chains' own, `Chain.t_start`
-    else:
-        ts = jnp.broadcast_to(jnp.asarray(t_start, flat.dtype), shape).reshape((n,))
-        if not np.all(np.isfinite(np.asarray(ts))) or np.any(np.asarray(ts) < 0):
-            raise ValueError(f"t_start must be finite and >= 0, got {t_start!r}.")
-    out = dynamics.measure_chain(flat, valid, ts, z, horizon, window, contact, start, y0)
+    out = flag(dynamics.measure_chain(flat, valid, ts, z, horizon, window, contact, start, y0), unresolved)
     start = "initial" if initial is not None else start
     return ChainMeasurement(**unflatten(out, shape), z=z, start=start, contact=contact)

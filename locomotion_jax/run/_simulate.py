@@ -24,6 +24,7 @@ from ._batch import (
     prepare_initial,
     unflatten,
 )
+from ._resolution import flag, guard_chain, guard_two_mass
 
 
 @overload
@@ -132,9 +133,10 @@ def simulate(
 
 def _two_mass(params: Params, dynamics: AbstractDynamics, t_end, save_np, waveform, contact, start, initial, dtype):
     flat, wave, axes, shape = prepare(params, waveform, dtype)
+    flat, unresolved = guard_two_mass(dynamics, flat, wave, shape)
     y0 = prepare_initial(initial, shape, flat.dtype)
     save = jnp.asarray(save_np, flat.dtype)
-    out = dynamics.simulate_two_mass(flat, wave, axes, save, t_end, contact, start, y0)
+    out = flag(dynamics.simulate_two_mass(flat, wave, axes, save, t_end, contact, start, y0), unresolved)
     return Trajectory(**unflatten(out, shape), start="initial" if initial is not None else start, contact=contact)
 
 
@@ -147,8 +149,9 @@ def _chain(
         )
     check_contact_start(contact, start)
     flat, valid, shape = prepare_chain(chain, dtype)
+    valid, unresolved = guard_chain(dynamics, flat, valid, shape)
     y0 = prepare_chain_initial(initial, shape, flat.n_masses, flat.dtype, flat)
     save = jnp.asarray(save_np, flat.dtype)
-    out = dynamics.simulate_chain(flat, valid, save, t_end, contact, start, y0)
+    out = flag(dynamics.simulate_chain(flat, valid, save, t_end, contact, start, y0), unresolved)
     start = "initial" if initial is not None else start
     return ChainTrajectory(**unflatten(out, shape), start=start, contact=contact)
