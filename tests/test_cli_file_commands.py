@@ -13,6 +13,7 @@ from pathlib import Path
 import equinox as eqx
 import jax
 import locomotion_jax as lj
+import numpy as np
 import pytest
 from locomotion_jax.cli import _main as _cli
 from test_cli_files import assert_record_equals
@@ -166,3 +167,11 @@ def test_animate_and_sweep_send_the_other_kind_to_its_command():
     assert res.exit_code == 2 and "chain-sweep" in res.output
     res = invoke("chain-sweep", PAPER, "--phi", "0,1", "--out", "m.nc")
     assert res.exit_code == 2 and "the paper's model" in res.output
+
+
+def test_chain_commands_default_to_flat_springs(monkeypatch, tmp_path):
+    # d = 0 by default, as every worm of the README (Chain's own default stays the paper's 0.5).
+    seen = capture(monkeypatch, lj, "sweep")
+    invoke("chain-sweep", "--masses", "1,1,1", "--phi", "0,1", "--out", str(tmp_path / "w.nc"))
+    chain = seen["kwargs"]["mechanism"](a=0.05, omega=2.0, phi=0.0)
+    np.testing.assert_array_equal(np.asarray(chain.d), 0.0)

@@ -34,7 +34,7 @@ def mechanism_options(masses_required: bool = True) -> Group:
     return (
         option("masses", str, ..., masses) if masses_required else option("masses", str | None, None, masses),
         option("k", str, "50", "Stiffness per spring (one value or N-1)."),
-        option("d", str, "0.5", "Vertical offset per spring."),
+        option("d", str, "0", "Vertical offset per spring (default 0: flat springs, as a worm on the ground)."),
         option("lbar", str, "3", "Mean rest length per spring."),
         option("c", str, "0.01", "Damping per mass."),
         option("actuator", Literal["length", "force"], "length", "The signal is a rest length or an internal force."),
