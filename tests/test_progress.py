@@ -21,3 +21,15 @@ def test_chain_optimisation_says_what_it_compiles_before_compiling(monkeypatch, 
     settings = lj.ChainOptimiseSettings(amplitudes=2, frequencies=2, phases=2, verbose=True)
     with pytest.raises(Stop):
         lj.optimise(worm, 0.1, 0.1, settings=settings)
+
+
+def test_sweep_bar_shows_before_the_first_chunk(monkeypatch, capsys):
+    from locomotion_jax.maps import _sweep
+
+    def dispatch(*args, **kwargs):
+        assert "compiling (first call only)" in capsys.readouterr().err  # the bar, before the long work
+        raise Stop
+
+    monkeypatch.setattr(_sweep.sharding, "dispatch_chunk", dispatch)
+    with pytest.raises(Stop):
+        lj.sweep({"omega": [1.0, 2.0]}, z=0.5, horizon=5.0, window=2.0, order="natural")
