@@ -33,3 +33,17 @@ def test_sweep_bar_shows_before_the_first_chunk(monkeypatch, capsys):
     monkeypatch.setattr(_sweep.sharding, "dispatch_chunk", dispatch)
     with pytest.raises(Stop):
         lj.sweep({"omega": [1.0, 2.0]}, z=0.5, horizon=5.0, window=2.0, order="natural")
+
+
+@pytest.mark.parametrize("args", [["gait", "--omega", "2"], ["chain-gait", "--masses", "1,1,1"]], ids=lambda a: a[0])
+def test_gait_commands_say_they_compile_before_solving(monkeypatch, args):
+    from locomotion_jax.cli import _main as _cli
+    from typer.testing import CliRunner
+
+    def steady_gait(*a, **k):
+        raise ValueError("stood in")
+
+    monkeypatch.setattr(lj, "steady_gait", steady_gait)
+    res = CliRunner().invoke(_cli.app, args)
+    assert res.exit_code == 2
+    assert res.output.index("solving the steady gait") < res.output.index("Error: stood in"), res.output

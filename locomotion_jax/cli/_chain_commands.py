@@ -90,8 +90,10 @@ def chain_gait_report(chain: Any, ks: tuple[int, ...], transient: int, contact: 
     """Solve and print the steady gait of `chain` (`chain-gait`, `gait FILE`); `extra`: the mechanism in the JSON."""
     import locomotion_jax as lj
 
+    from ._files import note
     from ._gait import _pairs
 
+    note(f"solving the steady gait, periods {','.join(map(str, ks))} (compiling the solver: first call only)...")
     g = lj.steady_gait(chain, periods=ks, transient=transient, dynamics=lj.Exact(dt=dt), contact=contact, start=start)
     names = ("k", "period", "mean_speed", "cost_of_transport", "e_d", "work", "regime", "stick_fraction",
              "n_switch", "state", "stable", "residual", "n_iter", "liftoff")  # fmt: skip

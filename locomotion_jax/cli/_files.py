@@ -61,6 +61,11 @@ def refuse_options(file: Path, names: Iterable[str]) -> None:
         raise ValueError(f"{options}: the mechanism comes from {file}; change it there, or leave out the file.")
 
 
+def note(message: str) -> None:
+    """A progress line on stderr before a long computation (stdout stays the report, or one JSON object)."""
+    typer.echo(message, err=True)
+
+
 def kind_of(mech: Any) -> str:
     """`"chain"` or `"paper"`, as the file's `kind`."""
     from ..model._chain import Chain

@@ -94,7 +94,7 @@ def register(app: typer.Typer) -> None:
         """
         import locomotion_jax as lj
 
-        from ._files import kind_of, label, load, refuse_options
+        from ._files import kind_of, label, load, note, refuse_options
 
         ks = _periods(periods)
         wave = None
@@ -114,6 +114,7 @@ def register(app: typer.Typer) -> None:
             values = {"params": {n: float(v) for n, v in params.as_dict().items()}, "mechanism": str(file)}
         gait_omega(float(params.omega if wave is None else wave.omega))
         extra = {} if wave is None else {"waveform": wave}
+        note(f"solving the steady gait, periods {','.join(map(str, ks))} (compiling the solver: first call only)...")
         g = lj.steady_gait(params, periods=ks, transient=transient, contact=run["contact"], start=run["start"],
                            dynamics=lj.Exact(dt=run["dt"]), **extra)  # fmt: skip
         record: dict[str, Any] = {name: np.asarray(getattr(g, name)).item() for name in GAIT_FIELDS}
