@@ -20,6 +20,7 @@ def register(app: typer.Typer) -> None:
     @friendly
     @expand(model=model_options(), run=run_options(("contact", "start", "dt")))
     def animate(
+        file: Path | None = typer.Argument(None, help="A mechanism file of the paper's model (TOML)."),
         *,
         model: Values,
         t_from: float | None = typer.Option(
@@ -35,7 +36,8 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Simulate one configuration on the exact model and write an animated GIF of it.
 
-        Stuck masses are drawn red with an anchor under them, slipping ones blue.
+        Stuck masses are drawn red with an anchor under them, slipping ones blue. With a mechanism
+        FILE (the paper's model, with its waveform if it has one) instead of the model options.
         """
         import math
 
@@ -46,8 +48,18 @@ def register(app: typer.Typer) -> None:
         from ..run._simulate import simulate
 
         try:
-            params = to_params(model)
-            w = float(params.omega)
+            wave = None
+            if file is None:
+                params = to_params(model)
+            else:
+                from ._files import kind_of, load, refuse_options
+
+                refuse_options(file, model)
+                params, wave = load(file)
+                if kind_of(params) == "chain":
+                    raise ValueError(f"{file} is a chain; animate draws the paper's two-mass model. "
+                                     f"Plot the chain with `locomotion-jax simulate {file} --out DIR`.")  # fmt: skip
+            w = float(params.omega if wave is None else wave.omega)
             if not (math.isfinite(t_end) and t_end > 0):
                 raise ValueError(f"--t-end must be a finite number > 0, got {t_end!r}.")
             if t_from is None:
@@ -67,6 +79,7 @@ def register(app: typer.Typer) -> None:
                 dynamics=Exact(dt=run["dt"]),
                 contact=run["contact"],
                 start=run["start"],
+                **({} if wave is None else {"waveform": wave}),
             )
             if not np.asarray(traj.valid).any():
                 raise ValueError(
@@ -74,8 +87,9 @@ def register(app: typer.Typer) -> None:
                     f"({t_from:.4g}..{t_end:.4g}): the model stops applying there (a normal force reached zero). "
                     "Animate an earlier span (--t-from, --t-end), or use --contact paper to integrate through it."
                 )
-            a, d, mhat = model["a"], model["d"], model["mhat"]
-            title = f"omega = {w:.4g} ({w / float(params.wn1):.3g} wn1), a = {a:g}, d = {d:g}, mhat = {mhat:g}"
+            a, d, mhat = (float(getattr(params, n)) for n in ("a", "d", "mhat"))
+            shape = f"a = {a:g}" if wave is None else f"{type(wave).__name__} waveform"
+            title = f"omega = {w:.4g} ({w / float(params.wn1):.3g} wn1), {shape}, d = {d:g}, mhat = {mhat:g}"
             anim = animate_fn(traj, params, max_frames=frames, interval=1000.0 / fps, trace=trace, title=title)
             path = save_gif(anim, out, fps=fps, dpi=dpi)
         except ValueError as err:

@@ -24,6 +24,31 @@ Dt = Annotated[float, typer.Option(help="Step of the exact engine.")]
 Json = Annotated[bool, typer.Option("--json", help="Print one JSON object instead of the report.")]
 
 
+_DEFAULTS: dict[str, str] = {"a": "0.05", "omega": "2", "phi": "0"}
+"""The wave of `chain-sweep` without a mechanism file."""
+
+_ORDER = "locomotion_jax.axis_order"
+
+
+def _recorder(name: str) -> Any:
+    # click processes the options in the order of the command line, so the sweep's dimensions can follow it.
+    def record(value: str | None) -> str | None:
+        if value is not None:
+            from ._files import context
+
+            context().meta.setdefault(_ORDER, []).append(name)
+        return value
+
+    return record
+
+
+def _axis(name: str, what: str, default: str) -> Any:
+    return typer.Option(
+        help=f"{what}: start:stop:count, v1,v2,... or a value (default: {default}, or the mechanism file's).",
+        callback=_recorder(name),
+    )
+
+
 def _fail(err: Exception) -> NoReturn:
     typer.echo(f"Error: {err}", err=True)
     raise typer.Exit(2) from None
@@ -58,6 +83,33 @@ def _plot(traj: Any, path: Path, title: str) -> None:
         a.legend(loc="upper left", fontsize="small", ncol=min(x.shape[-1], 4))
     fig.suptitle(title)
     fig.savefig(path, dpi=120)
+
+
+def chain_gait_report(chain: Any, ks: tuple[int, ...], transient: int, contact: str, start: str, dt: float,
+                      as_json: bool, header: str, extra: dict[str, Any]) -> None:  # fmt: skip
+    """Solve and print the steady gait of `chain` (`chain-gait`, `gait FILE`); `extra`: the mechanism in the JSON."""
+    import locomotion_jax as lj
+
+    from ._files import note
+    from ._gait import _pairs
+
+    note(f"solving the steady gait, periods {','.join(map(str, ks))} (compiling the solver: first call only)...")
+    g = lj.steady_gait(chain, periods=ks, transient=transient, dynamics=lj.Exact(dt=dt), contact=contact, start=start)
+    names = ("k", "period", "mean_speed", "cost_of_transport", "e_d", "work", "regime", "stick_fraction",
+             "n_switch", "state", "stable", "residual", "n_iter", "liftoff")  # fmt: skip
+    fields = {n: _plain(getattr(g, n)) for n in names}
+    fields["status_name"] = lj.GaitStatus(int(g.status)).name
+    fields["regime_name"] = lj.Regime(int(g.regime)).name
+    fields["multipliers"] = _pairs(g.multipliers)
+    if as_json:
+        typer.echo(dumps({**fields, **extra, "periods": list(ks), "transient": transient, "contact": contact,
+                          "start": start, "dt": dt}))  # fmt: skip
+        return
+    typer.echo(f"{header}: {fields['status_name']}")
+    for name, v in fields.items():
+        if isinstance(v, list):
+            v = "[" + ", ".join(f"{x:.4g}" if isinstance(x, float) else str(x) for x in v) + "]"
+        typer.echo(f"  {name:<18} {v:.6g}" if isinstance(v, float) else f"  {name:<18} {v}")
 
 
 def register(app: typer.Typer) -> None:
@@ -147,43 +199,27 @@ def register(app: typer.Typer) -> None:
         """
         import locomotion_jax as lj
 
-        from ._gait import _pairs, _periods, gait_omega
+        from ._gait import _periods, gait_omega
 
-        try:
-            ks = _periods(periods)
-            gait_omega(wave["omega"])
-            mech_obj = to_chain(mech, lj.TravellingWave(wave["a"], wave["omega"], wave["phi"]))
-            g = lj.steady_gait(mech_obj, periods=ks, transient=transient, dynamics=lj.Exact(dt=dt),
-                               contact=contact, start=start)  # fmt: skip
-        except ValueError as err:
-            _fail(err)
-        names = ("k", "period", "mean_speed", "cost_of_transport", "e_d", "work", "regime", "stick_fraction",
-                 "n_switch", "state", "stable", "residual", "n_iter", "liftoff")  # fmt: skip
-        fields = {n: _plain(getattr(g, n)) for n in names}
-        fields["status_name"] = {0: "CONVERGED", 1: "NOT_CONVERGED", 2: "LIFTOFF", 3: "INVALID"}[int(g.status)]
-        fields["regime_name"] = lj.Regime(int(g.regime)).name
-        fields["multipliers"] = _pairs(g.multipliers)
-        if as_json:
-            typer.echo(dumps({**fields, **describe(mech), **wave, "periods": list(ks), "transient": transient,
-                              "contact": contact, "start": start, "dt": dt}))  # fmt: skip
-            return
-        typer.echo(f"chain of {mech_obj.n_masses} masses; a={wave['a']:g}, omega={wave['omega']:g}, "
-                   f"phi={wave['phi']:g}: {fields['status_name']}")  # fmt: skip
-        for name, v in fields.items():
-            if isinstance(v, list):
-                v = "[" + ", ".join(f"{x:.4g}" if isinstance(x, float) else str(x) for x in v) + "]"
-            typer.echo(f"  {name:<18} {v:.6g}" if isinstance(v, float) else f"  {name:<18} {v}")
+        ks = _periods(periods)
+        gait_omega(wave["omega"])
+        mech_obj = to_chain(mech, lj.TravellingWave(wave["a"], wave["omega"], wave["phi"]))
+        header = f"chain of {mech_obj.n_masses} masses; a={wave['a']:g}, omega={wave['omega']:g}, phi={wave['phi']:g}"
+        chain_gait_report(mech_obj, ks, transient, contact, start, dt, as_json, header, {**describe(mech), **wave})
 
     @app.command("chain-sweep")
     @friendly
-    @expand(mech=mechanism_options())
+    @expand(mech=mechanism_options(masses_required=False))
     def chain_sweep(
+        file: Annotated[
+            Path | None, typer.Argument(help="A chain's mechanism file (TOML), instead of the mechanism options.")
+        ] = None,
         *,
         out: Annotated[Path, typer.Option(help="Output NetCDF file (.nc).")],
         mech: Values,
-        a: Annotated[str, typer.Option(help="Wave amplitude: start:stop:count, v1,v2,... or a value.")] = "0.05",
-        omega: Annotated[str, typer.Option(help="Wave frequency: start:stop:count, v1,v2,... or a value.")] = "2",
-        phi: Annotated[str, typer.Option(help="Phase lag: start:stop:count, v1,v2,... or a value.")] = "0",
+        a: Annotated[str | None, _axis("a", "Wave amplitude", "0.05")] = None,
+        omega: Annotated[str | None, _axis("omega", "Wave frequency", "2")] = None,
+        phi: Annotated[str | None, _axis("phi", "Phase lag", "0")] = None,
         mode: Annotated[Literal["grid", "list"], typer.Option(help="'grid' (outer product) or 'list' (zip).")] = "grid",
         z: Annotated[float, typer.Option(help="Distance whose travel time and energy are measured.")] = 5.0,
         horizon: Annotated[float, typer.Option(help="Longest measured time after the start.")] = 2000.0,
@@ -202,22 +238,45 @@ def register(app: typer.Typer) -> None:
 
         Example: `locomotion-jax chain-sweep --masses 1,1,1,1 --d 0 --friction anisotropic
         --mu-s-bwd 0.9 --mu-k-bwd 0.7 --phi -3.1:3.1:32 --omega 1,2,4 --a 0.1 --out worm.nc`.
-        Dimensions follow the order a, omega, phi (those given as ranges or lists).
+        Dimensions follow the order of the options on the command line (those given as ranges or
+        lists), as `lj.sweep` follows the order of its `axes`. With a FILE (a chain), the mechanism
+        comes from the file, and the wave's values not given from its waveform table (a TravellingWave).
         """
         import locomotion_jax as lj
 
+        from ._files import context, refuse_options
         from ._main import parse_axis
 
         try:
-            parsed = {n: parse_axis(n, text) for n, text in (("a", a), ("omega", omega), ("phi", phi))}
+            texts = {"a": a, "omega": omega, "phi": phi}
+            if file is not None:
+                from ._file_commands import chain_sweep_mechanism, with_wave
+
+                refuse_options(file, mech)
+                chain, texts = chain_sweep_mechanism(file, texts)
+
+                def build_file(**v):
+                    return with_wave(chain, lj.TravellingWave(v["a"], v["omega"], v["phi"]), on_invalid == "raise")
+
+                build = build_file
+            else:
+                if mech["masses"] is None:
+                    raise ValueError("--masses is required (or give a chain's mechanism file).")
+                texts = {n: _DEFAULTS[n] if t is None else t for n, t in texts.items()}
+                to_chain(mech)  # the mechanism's options checked before any computation
+
+                def build_options(**v):
+                    return to_chain(mech, lj.TravellingWave(v["a"], v["omega"], v["phi"]), check=on_invalid == "raise")
+
+                build = build_options
+
+            first = context().meta.get(_ORDER, [])  # the options given, in their order
+            order = [*first, *(n for n in texts if n not in first)]
+            parsed = {n: parse_axis(n, texts[n]) for n in order}
             axes = {n: v for n, v in parsed.items() if isinstance(v, np.ndarray)}
             fixed = {n: v for n, v in parsed.items() if not isinstance(v, np.ndarray)}
             if not axes:
                 raise ValueError("nothing to sweep: give at least one range or list, e.g. --phi -3.1:3.1:32.")
-            to_chain(mech)  # the mechanism's options checked before any computation
-
-            def build(**v):
-                return to_chain(mech, lj.TravellingWave(v["a"], v["omega"], v["phi"]), check=on_invalid == "raise")
 
             ds = lj.sweep(
                 axes, fixed=fixed, mode=mode, mechanism=build, z=z, horizon=horizon, window=window, t_start=t_start,

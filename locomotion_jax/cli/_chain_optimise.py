@@ -41,6 +41,25 @@ def _plot(opt, path: Path) -> None:
     fig.savefig(path, dpi=120)
 
 
+def optimise_chain(chain, v_min: float, a_max: float, direction: int, omega: float | None, harmonics: int,
+                   settings, out: Path | None, as_json: bool) -> None:  # fmt: skip
+    """Optimise `chain` and print the result (`chain-optimize`, `optimize FILE`); with `out`, save it and a plot."""
+    import locomotion_jax as lj
+
+    if out is not None:
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise ValueError(f"--out {out}: cannot create the directory ({err.strerror or err}).") from None
+    opt = lj.optimise(chain, v_min, a_max, direction=direction, omega=omega, harmonics=harmonics, settings=settings)
+    if out is not None:
+        (out / "chain_optimum.json").write_text(opt.to_json(full=True, indent=1))
+        _plot(opt, out / "chain_optimum.png")
+        if not as_json:
+            typer.echo(f"wrote {out / 'chain_optimum.json'}, {out / 'chain_optimum.png'}", err=True)
+    typer.echo(opt.to_json() if as_json else opt.summary())
+
+
 def register(app: typer.Typer) -> None:
     """Add the `chain-optimize` subcommand to `app`."""
 
@@ -81,26 +100,10 @@ def register(app: typer.Typer) -> None:
         """
         import locomotion_jax as lj
 
-        try:
-            chain = to_chain(mech)
-            settings = lj.ChainOptimiseSettings(
-                amplitudes=amplitudes, frequencies=frequencies, phases=phases, zoom_levels=zoom_levels,
-                zoom_points=zoom_points, local=local, max_iter=max_iter, margin=margin, transient=transient, dt=dt,
-                verbose=verbose,
-            )  # fmt: skip
-            if out is not None:
-                try:
-                    out.mkdir(parents=True, exist_ok=True)
-                except OSError as err:
-                    raise ValueError(f"--out {out}: cannot create the directory ({err.strerror or err}).") from None
-            opt = lj.optimise(chain, v_min, a_max, direction=direction, omega=omega, harmonics=harmonics,
-                              settings=settings)  # fmt: skip
-        except ValueError as err:
-            typer.echo(f"Error: {err}", err=True)
-            raise typer.Exit(2) from None
-        if out is not None:
-            (out / "chain_optimum.json").write_text(opt.to_json(full=True, indent=1))
-            _plot(opt, out / "chain_optimum.png")
-            if not as_json:
-                typer.echo(f"wrote {out / 'chain_optimum.json'}, {out / 'chain_optimum.png'}", err=True)
-        typer.echo(opt.to_json() if as_json else opt.summary())
+        chain = to_chain(mech)
+        settings = lj.ChainOptimiseSettings(
+            amplitudes=amplitudes, frequencies=frequencies, phases=phases, zoom_levels=zoom_levels,
+            zoom_points=zoom_points, local=local, max_iter=max_iter, margin=margin, transient=transient, dt=dt,
+            verbose=verbose,
+        )  # fmt: skip
+        optimise_chain(chain, v_min, a_max, direction, omega, harmonics, settings, out, as_json)

@@ -27,12 +27,14 @@ def one(values: list[float]) -> float | list[float]:
     return values[0] if len(values) == 1 else values
 
 
-def mechanism_options() -> Group:
-    """Masses, springs, damping, actuator and friction law of a chain."""
+def mechanism_options(masses_required: bool = True) -> Group:
+    """Masses, springs, damping, actuator and friction law of a chain (`--masses` optional where a
+    mechanism file may replace the options)."""
+    masses = "Masses m_i, comma-separated (N >= 2; the total sets the scale)."
     return (
-        option("masses", str, ..., "Masses m_i, comma-separated (N >= 2; the total sets the scale)."),
+        option("masses", str, ..., masses) if masses_required else option("masses", str | None, None, masses),
         option("k", str, "50", "Stiffness per spring (one value or N-1)."),
-        option("d", str, "0.5", "Vertical offset per spring."),
+        option("d", str, "0", "Vertical offset per spring (default 0: flat springs, as a worm on the ground)."),
         option("lbar", str, "3", "Mean rest length per spring."),
         option("c", str, "0.01", "Damping per mass."),
         option("actuator", Literal["length", "force"], "length", "The signal is a rest length or an internal force."),

@@ -73,6 +73,9 @@ def register(app: typer.Typer) -> None:
     @friendly
     @expand(model=model_options(), run=run_options(("contact", "start", "dt")))
     def gait(
+        file: Annotated[
+            Path | None, typer.Argument(help="A mechanism file (TOML), instead of the model options.")
+        ] = None,
         *,
         model: Values,
         run: Values,
@@ -86,26 +89,46 @@ def register(app: typer.Typer) -> None:
 
         The gait is a periodic orbit (fixed point of the period map), found by Newton's method
         after a short transient; stable means every Floquet multiplier lies inside the unit circle.
+        With a mechanism FILE: a chain's gait is reported as by `chain-gait`; the paper's model's
+        with the file's waveform, and `--json` names the `mechanism` file.
         """
         import locomotion_jax as lj
 
-        try:
+        from ._files import kind_of, label, load, note, refuse_options
+
+        ks = _periods(periods)
+        wave = None
+        if file is None:
             params = to_params(model)
-            gait_omega(float(params.omega))
-            g = lj.steady_gait(params, periods=_periods(periods), transient=transient, contact=run["contact"],
-                               start=run["start"], dynamics=lj.Exact(dt=run["dt"]))  # fmt: skip
-        except ValueError as err:
-            _fail(err)
+            values: dict[str, Any] = {"params": _model_values(model, params)}
+        else:
+            from ._chain_commands import chain_gait_report
+
+            refuse_options(file, model)
+            mech, wave = load(file)
+            if kind_of(mech) == "chain":
+                how = (run["contact"], run["start"], run["dt"])
+                return chain_gait_report(mech, ks, transient, *how, as_json, label(file, mech, None),
+                                         {"mechanism": str(file), "kind": "chain"})  # fmt: skip
+            params = mech
+            values = {"params": {n: float(v) for n, v in params.as_dict().items()}, "mechanism": str(file)}
+        gait_omega(float(params.omega if wave is None else wave.omega))
+        extra = {} if wave is None else {"waveform": wave}
+        note(f"solving the steady gait, periods {','.join(map(str, ks))} (compiling the solver: first call only)...")
+        g = lj.steady_gait(params, periods=ks, transient=transient, contact=run["contact"], start=run["start"],
+                           dynamics=lj.Exact(dt=run["dt"]), **extra)  # fmt: skip
         record: dict[str, Any] = {name: np.asarray(getattr(g, name)).item() for name in GAIT_FIELDS}
         record["regime_name"] = lj.Regime(int(g.regime)).name
         record["status"] = int(g.status)
         record["status_name"] = _name(lj.GaitStatus, int(g.status))
         record["multipliers"] = _pairs(g.multipliers)
-        record["params"] = _model_values(model, params)
+        record.update(values)
         record.update(run)
         if as_json:
             typer.echo(dumps(record))
             return
+        if file is not None:
+            typer.echo(label(file, params, wave))
         typer.echo("parameters: " + ", ".join(f"{n}={v:g}" for n, v in record["params"].items()))
         typer.echo(f"status:     {record['status_name']}")
         for name in GAIT_FIELDS + ("regime_name",):

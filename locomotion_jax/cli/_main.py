@@ -134,6 +134,10 @@ def _plot(traj, path: Path, title: str) -> None:
 @_friendly
 @expand(model=model_options(), run=run_options())
 def simulate(
+    file: Annotated[
+        Path | None,
+        typer.Argument(help="A mechanism file (TOML), instead of the model options: examples/worm.toml."),
+    ] = None,
     *,
     model: Values,
     t_end: Annotated[float, typer.Option(help="End time of the plotted trajectory.")] = 20.0,
@@ -148,24 +152,37 @@ def simulate(
     `status_name`, the parameters and settings, and `plot` (the PNG path or null).
     Non-finite numbers are null: NaN (not computable) and inf (tau_z and e_z when z is
     not reached, t_liftoff without lift-off; `reached` and `liftoff` say which).
+
+    With a mechanism FILE (a chain or the paper's model), the measurements are those of
+    `measure FILE`, and `--json` names the `mechanism` and its `kind` instead of `params`.
     """
     from .. import Exact, measure, PARAM_NAMES, Regime, simulate as simulate_fn, Status
 
+    plot_dir = out if plot else None
+    if not (math.isfinite(t_end) and t_end > 0):  # checked whether or not --out asks for the plot
+        raise ValueError(f"--t-end must be a finite number > 0, got {t_end!r}.")
+    if file is None:
+        to_params(model)  # checked before the directory is made
+    else:
+        from ._files import refuse_options
+
+        refuse_options(file, model)
+    if plot_dir is not None:
+        try:
+            plot_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise ValueError(f"--out {out}: cannot create the directory ({err.strerror or err}).") from None
+    if file is not None:
+        from ._file_commands import simulate_file
+
+        return simulate_file(file, run, t_end, plot_dir, as_json)
     params = to_params(model)
     values = {n: model[n] for n in PARAM_NAMES}  # as given, but omega as computed from --omega-over-wn1
     if model["omega_over_wn1"] is not None:
         values["omega"] = float(params.omega)
     omega, a, d, mhat = values["omega"], values["a"], values["d"], values["mhat"]
     exact: dict[str, Any] = dict(dynamics=Exact(dt=run["dt"]), contact=run["contact"], start=run["start"])
-    plot_dir = out if plot else None
-    if not (math.isfinite(t_end) and t_end > 0):  # checked whether or not --out asks for the plot
-        raise ValueError(f"--t-end must be a finite number > 0, got {t_end!r}.")
     png = None
-    if plot_dir is not None:
-        try:
-            plot_dir.mkdir(parents=True, exist_ok=True)
-        except OSError as err:
-            raise ValueError(f"--out {out}: cannot create the directory ({err.strerror or err}).") from None
     m = measure(params, run["z"], horizon=run["horizon"], window=run["window"], **exact)
     if plot_dir is not None:
         traj = simulate_fn(params, t_end, np.linspace(0.0, t_end, 2001), **exact)
@@ -222,6 +239,10 @@ def parse_axis(name: str, text: str) -> float | np.ndarray:
 @_friendly
 @expand(given=axis_options(SWEEP_NAMES), run=run_options())
 def sweep(
+    file: Annotated[
+        Path | None,
+        typer.Argument(help="A mechanism file of the paper's model (TOML): its values are the fixed ones."),
+    ] = None,
     *,
     out: Annotated[
         Path,
@@ -255,12 +276,17 @@ def sweep(
     Example: `locomotion-jax sweep --omega 1:25:256 --a 0.01:0.1:256 --out maps/ssl.nc`.
     Dimensions follow the order omega, omega_over_wn1, a, d, mhat, mu_s, mu_k, k, c, lbar.
     An interrupted sweep resumes from its finished chunks when rerun with the same
-    arguments; a finished one is read back.
+    arguments; a finished one is read back. With a mechanism FILE (the paper's model), the
+    parameters not given as options take the file's values (a chain's file: `chain-sweep FILE`).
     """
     from .. import Exact
     from ..maps._sweep import sweep as sweep_fn
 
     parsed = {n: parse_axis(n, text) for n, text in given.items() if text is not None}  # in SWEEP_NAMES order
+    if file is not None:
+        from ._file_commands import sweep_axes
+
+        parsed = sweep_axes(file, parsed)
     axes = {n: v for n, v in parsed.items() if isinstance(v, np.ndarray)}
     fixed = {n: v for n, v in parsed.items() if not isinstance(v, np.ndarray)}
     if not axes:

@@ -32,9 +32,14 @@ def register(app: typer.Typer) -> None:
     @friendly
     @expand(model=model_options(("k", "c", "d", "lbar", "mu_s", "mu_k", "mhat")))  # no a, omega: the waveform's
     def optimize(
+        file: Path | None = typer.Argument(
+            None, help="A mechanism file (TOML), instead of the model options: the paper's model or a chain."
+        ),
         *,
         v_min: float = typer.Option(..., "--v-min", help="Required mean speed (> 0) in --direction."),
-        a_max: float = typer.Option(..., "--a-max", help="Stroke bound: max |l0(t) - lbar| <= a_max."),
+        a_max: float | None = typer.Option(
+            None, "--a-max", help="Stroke bound: max |l0(t) - lbar| <= a_max (default with a FILE: its amplitude)."
+        ),
         direction: int | None = typer.Option(None, "--direction", help="+1 forward (default) or -1 backward."),
         omega: float | None = typer.Option(None, "--omega", help="Fix the base frequency (default: optimised)."),
         method: str = typer.Option(
@@ -68,14 +73,44 @@ def register(app: typer.Typer) -> None:
         verbose: bool = typer.Option(False, "--verbose", help="Progress per block (stderr)."),
     ) -> None:
         """Optimise the actuation waveform for least cost of transport at a required speed,
-        verify it on the exact model and compare it with the best sinusoid."""
+        verify it on the exact model and compare it with the best sinusoid.
+
+        With a mechanism FILE the mechanism is the file's, and --a-max defaults to the amplitude of its
+        sinusoid or travelling wave (the waveform itself is what is optimised). A chain's file is
+        optimised as by `chain-optimize` (exact method; --harmonics default 3; --local, --max-iter,
+        --margin, --omega, --direction, --out, --json and --verbose apply)."""
         from ..optimisation import _optimise, _pareto
         from ..optimisation._optimum import ExactSettings, Settings
 
         try:
             if method not in ("exact", "smoothed"):
                 raise ValueError(f"--method must be 'exact' or 'smoothed', got {method!r}.")
-            params = to_params(model)
+            if file is None:
+                if a_max is None:
+                    raise ValueError("--a-max is required (without a mechanism file, whose amplitude it defaults to).")
+                params = to_params(model)
+            else:
+                from ._file_commands import amplitude
+                from ._files import given, kind_of, load, refuse_options
+
+                refuse_options(file, model)
+                mech, wave = load(file)
+                a_max = amplitude(file, mech, wave) if a_max is None else a_max
+                if kind_of(mech) == "chain":
+                    import locomotion_jax as lj
+
+                    from ._chain_optimise import optimise_chain
+
+                    if method != "exact":
+                        raise ValueError("--method: a chain is optimised by the exact method only.")
+                    chain_settings = lj.ChainOptimiseSettings(local=local, margin=margin, verbose=verbose)
+                    if given(["max_iter"]):  # the chain's own default otherwise
+                        chain_settings = lj.ChainOptimiseSettings(
+                            local=local, margin=margin, verbose=verbose, max_iter=max_iter
+                        )
+                    sign, n_harm = 1 if direction is None else direction, 3 if harmonics is None else harmonics
+                    return optimise_chain(mech, v_min, a_max, sign, omega, n_harm, chain_settings, out, json_out)
+                params = mech
             settings: ExactSettings | Settings
             if method == "exact":
                 settings = ExactSettings(

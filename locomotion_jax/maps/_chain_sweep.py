@@ -119,12 +119,14 @@ def sweep_chain(
 
     parts: list[dict[str, np.ndarray]] = []
     bar = tqdm(total=size, unit="config", unit_scale=True, desc="sweep", disable=not progress)
+    bar.set_postfix_str("compiling (first call only)...")  # shown from the first second
     try:
         for i in range(n_chunks):
             chain, n = chunk_chain(i)
             m = measure_chain(chain, dynamics, float(z), float(horizon), float(window), t_start, contact, start, dtype)
             parts.append({k: v[:n] for k, v in m.to_numpy().items()})
             bar.update(n)
+            bar.set_postfix_str("")
     finally:
         bar.close()
 

@@ -371,7 +371,10 @@ def sweep(
         if store is not None:
             store.save(i, results[i])  # written the moment it exists: an interruption loses nothing
         bar.update(n)
+        bar.set_postfix_str("")
 
+    if todo:  # the bar shows from the first second; the first chunk's count comes after its compilation
+        bar.set_postfix_str("compiling (first call only)...")
     try:
         pending = None
         for i in todo:

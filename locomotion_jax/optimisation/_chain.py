@@ -106,7 +106,10 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     lo, hi = screen.frequency_range(base, omega, settings)
     free = hi > lo
 
-    # 1. Travelling waves.
+    # 1. Travelling waves. Progress from the first second: compiling the screen alone takes minutes.
+    size = settings.amplitudes * settings.frequencies * settings.phases
+    say(f"screening {size} travelling waves, then {settings.zoom_levels} zoom level(s) (compiling the screen: "
+        "first call only)...")  # fmt: skip
     sc, best, steps = screen.screen(base, speed, direction, a_max, lo, hi, H, settings)
     say(f"{len(sc.a)} travelling waves solved ({time.perf_counter() - t0:.0f} s)")
     feas = screen.feasible(sc.gaits, speed, direction)
@@ -138,6 +141,7 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     costs = [c for c in sc.gaits.cost[starts] if np.isfinite(c)]
     rho = local.PENALTY * max(1.0, max(costs, default=1.0))
     solvers = [local.local_solver(x, proj, stroke_ok, settings.max_iter, settings.trust_radius, rho, log) for x in x0]
+    say(f"refining {len(solvers)} starts locally, in lockstep (compiling the orbit solver: first call only)...")
     xs = run_lockstep(solvers, ev)
     say(f"local refinement done ({time.perf_counter() - t0:.0f} s, {ev.calls} batched evaluations)")
 
@@ -154,6 +158,7 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     cos = np.stack([c for c, _, _ in coefs])
     sin = np.stack([s for _, s, _ in coefs])
     om = np.array([w for _, _, w in coefs])
+    say(f"verifying {len(names)} candidates on their steady gaits...")
     g = screen.solve(base, cos, sin, om, settings)
     strokes = np.stack([local.strokes(c, s) for c, s in zip(cos, sin)])
     eps = float(jnp.finfo(dtype).eps)

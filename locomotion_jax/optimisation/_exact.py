@@ -381,9 +381,15 @@ def optimise_exact(
     theta0 = np.concatenate([theta0, theta0[:pad]])
     periods = jnp.asarray(settings.transient, jnp.int32)
 
+    ev.report(
+        f"screening {n0} starts in batches of {lanes} (the first batch compiles the orbit solver: first call only)..."
+    )
+
     def screen(theta):
         figs, ys = [], []
         for b in range(0, len(theta), lanes):
+            if b:
+                ev.report(f"  {b} of {len(theta)} starts screened ({time.perf_counter() - t0:.0f} s)")
             th = theta[b : b + lanes]
             rest = oracle.transient(
                 jnp.asarray(th, dtype), jnp.zeros((lanes, 3), dtype), jnp.ones(lanes, bool), periods
