@@ -116,20 +116,18 @@ def run_saves(
         emptied = d._replace(n_buffered=zi, targets=_targets(save_at, d.idx, buffer))
         return emptied, d.rows, slots
 
-    def results(fixed, d: _Dyn) -> dict[str, Array]:
-        s = d.s
-        capped = (s.status == Status.OK) & (d.idx < n_save)  # stopped by the step cap before the last save
-        return dict(
-            saved=d.idx,
-            last=row(s),
-            status=jnp.where(capped, Status.MAX_STEPS, s.status).astype(jnp.int32),
-            t_liftoff=s.t_liftoff,
-            n_switch=s.n_switch,
-        )
-
+    results = lambda fixed, d: _results(d, row, n_save)
     full = lambda fixed, d: d.n_buffered >= buffer
     out = run_queue(setup, running, advance, results, n, lanes, order, Stream(full, drain, n_save))
     return _assemble(out, n_save)
+
+
+def _results(d: Any, row: Callable[[Any], Array], n_save: int) -> dict[str, Array]:
+    """A configuration's outputs once done (either loop's state: `s`, `idx` saves done)."""
+    s = d.s
+    capped = (s.status == Status.OK) & (d.idx < n_save)  # stopped by the step cap before the last save
+    status = jnp.where(capped, Status.MAX_STEPS, s.status).astype(jnp.int32)
+    return dict(saved=d.idx, last=row(s), status=status, t_liftoff=s.t_liftoff, n_switch=s.n_switch)
 
 
 def _assemble(out: dict, n_save: int) -> tuple[Array, Array, Array, Array, Array]:
@@ -175,11 +173,7 @@ def _run_few_saves(init, step, row, n, save_at, max_steps, lanes, order) -> tupl
         slot = jnp.where(record, d.idx, n_save)[None]  # past the end: dropped
         return d._replace(idx=idx, target=target_of(idx)), row(d.s)[None, :], slot
 
-    def results(fixed, d: _Few) -> dict[str, Array]:
-        s = d.s
-        capped = (s.status == Status.OK) & (d.idx < n_save)
-        return dict(saved=d.idx, last=row(s), status=jnp.where(capped, Status.MAX_STEPS, s.status).astype(jnp.int32),
-                    t_liftoff=s.t_liftoff, n_switch=s.n_switch)  # fmt: skip
+    results = lambda fixed, d: _results(d, row, n_save)
 
     # The inner loop ends where a lane is due: `running` stays true there (its save is pending),
     # so the queue drains before it decides which lanes are done.

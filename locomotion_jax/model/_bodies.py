@@ -259,15 +259,6 @@ class Mechanism(AbstractMechanism):
         full = lambda x, tail: jnp.broadcast_to(jnp.asarray(x, dt), b + jnp.shape(x)[jnp.ndim(x) - tail :])
         return jax.tree_util.tree_unflatten(tree, [full(x, tails.get(id(x), 0)) for x in leaves])
 
-    def astype(self, dtype: Any) -> "Mechanism":
-        dtype = jnp.dtype(dtype)
-        if dtype == jnp.float64 and not jax.config.read("jax_enable_x64"):
-            raise ValueError(
-                "dtype=float64 requested but JAX runs in 32-bit mode; enable it with "
-                'jax.config.update("jax_enable_x64", True) at start-up (or the CLI flag --x64).'
-            )
-        return jax.tree_util.tree_map(lambda x: x.astype(dtype), self)
-
     def __getitem__(self, index: Any) -> "Mechanism":
         """Index the batch axes of the broadcast mechanism."""
         idx = index if isinstance(index, tuple) else (index,)

@@ -224,15 +224,6 @@ class Chain(AbstractMechanism):
         out = eqx.tree_at(lambda c: c.waves, self, waves)
         return out if self.signals is None else eqx.tree_at(lambda c: c.signals, out, None)
 
-    def astype(self, dtype: Any) -> "Chain":
-        dtype = jnp.dtype(dtype)
-        if dtype == jnp.float64 and not jax.config.read("jax_enable_x64"):
-            raise ValueError(
-                "dtype=float64 requested but JAX runs in 32-bit mode; enable it with "
-                'jax.config.update("jax_enable_x64", True) at start-up (or the CLI flag --x64).'
-            )
-        return jax.tree_util.tree_map(lambda x: x.astype(dtype), self)
-
     def __getitem__(self, index: Any) -> "Chain":
         """Index the batch axes of the broadcast chain."""
         nb = len(self.batch_shape)

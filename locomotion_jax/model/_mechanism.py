@@ -5,9 +5,12 @@ from collections.abc import Callable
 from typing import Any, TypeVar
 
 import equinox as eqx
+import jax
+import jax.numpy as jnp
 
 
 R = TypeVar("R")
+M = TypeVar("M", bound="AbstractMechanism")
 
 
 class AbstractMechanism(eqx.Module):
@@ -30,6 +33,16 @@ class AbstractMechanism(eqx.Module):
     @abc.abstractmethod
     def dtype(self) -> Any:
         """The floating dtype of the configurations' fields."""
+
+    def astype(self: M, dtype: Any) -> M:
+        """Every field cast to `dtype`; `float64` needs `jax.config.update("jax_enable_x64", True)`."""
+        dtype = jnp.dtype(dtype)
+        if dtype == jnp.float64 and not jax.config.read("jax_enable_x64"):
+            raise ValueError(
+                "dtype=float64 requested but JAX runs in 32-bit mode; enable it with "
+                'jax.config.update("jax_enable_x64", True) at start-up (or the CLI flag --x64).'
+            )
+        return jax.tree_util.tree_map(lambda x: x.astype(dtype), self)
 
     @abc.abstractmethod
     def physics(self) -> Any:

@@ -206,15 +206,9 @@ class Params(AbstractMechanism):
 
     def astype(self, dtype: Any) -> "Params":
         """Cast every field; `float64` needs `jax.config.update("jax_enable_x64", True)`."""
-        dtype = jnp.dtype(dtype)
-        if dtype == jnp.float64 and not jax.config.read("jax_enable_x64"):
-            raise ValueError(
-                "dtype=float64 requested but JAX runs in 32-bit mode; enable it with "
-                'jax.config.update("jax_enable_x64", True) at start-up (or the CLI flag --x64).'
-            )
-        if not jnp.issubdtype(dtype, jnp.floating):
-            raise ValueError(f"dtype must be a floating dtype, got {dtype}.")
-        return jax.tree_util.tree_map(lambda x: x.astype(dtype), self)
+        if not jnp.issubdtype(jnp.dtype(dtype), jnp.floating):
+            raise ValueError(f"dtype must be a floating dtype, got {jnp.dtype(dtype)}.")
+        return super().astype(dtype)
 
     def __getitem__(self, index: Any) -> "Params":
         """Index the (broadcast) batch axes, e.g. `batch[3]` or `batch[:, 0]`."""
