@@ -33,6 +33,7 @@ from .model import (
     AnisotropicCoulomb as AnisotropicCoulomb,
     Chain as Chain,
     Coulomb as Coulomb,
+    Damper as Damper,
     ExternalForce as ExternalForce,
     Force as Force,
     InternalForce as InternalForce,

@@ -190,7 +190,7 @@ BROKEN = {
     "unknown_kind": (
         WORM.replace('"chain"', '"capsule"', 1),
         r"worm.toml, line 2: kind: expected one of 'paper', "
-        r"'chain', got 'capsule'",
+        r"'chain', 'mechanism', got 'capsule'",
     ),
     "missing_kind": (WORM.replace('kind = "chain"', ""), r"worm.toml: missing field 'kind'"),
     "missing_masses": (

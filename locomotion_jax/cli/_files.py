@@ -67,10 +67,11 @@ def note(message: str) -> None:
 
 
 def kind_of(mech: Any) -> str:
-    """`"chain"` or `"paper"`, as the file's `kind`."""
+    """`"chain"`, `"mechanism"` or `"paper"`, as the file's `kind`."""
+    from ..model._bodies import Mechanism
     from ..model._chain import Chain
 
-    return "chain" if isinstance(mech, Chain) else "paper"
+    return "chain" if isinstance(mech, Chain) else "mechanism" if isinstance(mech, Mechanism) else "paper"
 
 
 def measure_record(mech: Any, wave: Any, run: Values, t_start: float | None = None) -> dict[str, Any]:

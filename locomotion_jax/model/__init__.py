@@ -5,6 +5,7 @@ from ._bodies import Mechanism as Mechanism
 from ._chain import Chain as Chain
 from ._elements import (
     AbstractElement as AbstractElement,
+    Damper as Damper,
     ExternalForce as ExternalForce,
     Force as Force,
     Spring as Spring,

@@ -19,7 +19,7 @@ import numpy as np
 
 from .._custom_types import Array, ValuesLike
 from ._checks import broadcast_shape, is_concrete, real_array
-from ._elements import AbstractElement, signal_checks, signal_nodes, Spring, WALL
+from ._elements import AbstractElement, Damper, signal_checks, signal_nodes, Spring, WALL
 from ._friction import AbstractFriction, Coulomb
 from ._mechanism import AbstractMechanism, R
 from ._mechanism_physics import ground_body, mechanism_physics, MechanismPhysics
@@ -169,7 +169,8 @@ class Mechanism(AbstractMechanism):
         links = tuple(links)
         for k, el in enumerate(links):
             if not isinstance(el, AbstractElement):
-                raise TypeError(f"links[{k}] must be a Spring, Force or ExternalForce, got {type(el).__name__}.")
+                kinds = "a Spring, Damper, Force or ExternalForce"
+                raise TypeError(f"links[{k}] must be {kinds}, got {type(el).__name__}.")
             ends = el.bodies()
             for e in ends:
                 if not _body(e, n):
@@ -332,6 +333,8 @@ class Mechanism(AbstractMechanism):
                 out.append((owner, name, jnp.isfinite(x), "finite", x))
             if isinstance(el, Spring):
                 out.append((owner, "k", el.k > 0, "k > 0", el.k))
+            if isinstance(el, Damper):
+                out.append((owner, "c", el.c >= 0, "c >= 0", el.c))
             for s in el.signals():
                 for name, ok, valid in signal_checks(s):
                     out.append((owner, name, ok, valid, getattr(s, name, s)))

@@ -178,3 +178,30 @@ class ExternalForce(AbstractElement):
 
     def signals(self) -> tuple[Signal, ...]:
         return (self.waveform,)
+
+
+class Damper(AbstractElement):
+    """A linear damper between bodies `a` and `b` (or a body and `lj.WALL`) (SPEC §9):
+    $f = c\\,(v_b - v_a)$, $+f$ on `a` and $-f$ on `b`; it dissipates $c\\,(v_b - v_a)^2$.
+
+    A damper to a `WALL` (at rest) is ground damping on its body, $c_i \\mathrel{+}= c$: the engine runs
+    it so, and counts its dissipation in $e_d$. A damper between two bodies is refused by the engine
+    (`NotImplementedError` when the mechanism is run): its force depends on velocities, and the
+    physics interface's loads take positions only.
+
+    **Arguments:** `a`, `b`: body indices or `WALL` (not both; `a != b`); `c >= 0`.
+    """
+
+    a: "int | str" = eqx.field(static=True)
+    b: "int | str" = eqx.field(static=True)
+    c: Array
+
+    def __init__(self, a: End, b: End, c: ArrayLike = 1.0):
+        self.a, self.b = _end("a", "Damper", a), _end("b", "Damper", b)
+        self.c = real_array("c", c, "Damper")
+
+    def bodies(self) -> tuple["int | str", ...]:
+        return (self.a, self.b)
+
+    def values(self) -> dict[str, Array]:
+        return {"c": self.c}

@@ -1,7 +1,8 @@
 """Mechanism files: a robot described in TOML, read by [`load_mechanism`][] and written by [`save_mechanism`][].
 
 A file holds one configuration of one kind of mechanism (`kind = "paper"`: the two-mass model,
-[`Params`][]; `kind = "chain"`: a [`Chain`][]). Its friction law, actuator and waveforms are typed
+[`Params`][]; `kind = "chain"`: a [`Chain`][]; `kind = "mechanism"`: a [`Mechanism`][], bodies and
+links in arrays of tables, `_files_mechanism.py`). Its friction law, actuator and waveforms are typed
 tables (`type = "AnisotropicCoulomb"`, `type = "TravellingWave"`, ...) named after the classes, so a
 new element is one more entry of a table below, and a new kind (bodies, links and anchors of SPEC §9)
 reuses them in its own tables. Unknown kinds, tables, fields and types are refused, never ignored.
@@ -36,7 +37,7 @@ from ._waveform import AbstractWaveform, Fourier, Sinusoid, Spline
 SCHEMA = 1
 """The schema version that this reader writes and reads (`schema = 1`, optional in a file)."""
 
-KINDS: tuple[str, ...] = ("paper", "chain")
+KINDS: tuple[str, ...] = ("paper", "chain", "mechanism")
 """The kinds of mechanism a file may describe."""
 
 FRICTION: dict[str, tuple[type[AbstractFriction], tuple[str, ...], tuple[str, ...]]] = {
@@ -289,7 +290,7 @@ _TABLES: tuple[str, ...] = ("params", "chain", "friction", "waveform")
 """Where the field that a constructor's message names is looked for, to give its line."""
 
 
-def _read(source: _Source, text: str) -> tuple[Params | Chain, AbstractWaveform | None]:
+def _read(source: _Source, text: str) -> tuple[Any, AbstractWaveform | None]:
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
@@ -307,12 +308,20 @@ def _read(source: _Source, text: str) -> tuple[Params | Chain, AbstractWaveform 
     try:
         if kind == "paper":
             return _paper(doc)
+        if kind == "mechanism":
+            from ._files_mechanism import read_mechanism
+
+            return read_mechanism(doc, _friction), None
         return _chain(doc), None
     except MechanismFileError:
         raise
     except (ValueError, TypeError) as err:  # the constructors' checks of the values
         named = re.match(r"Invalid parameter '(\w+)'", str(err))
         lines = [source.line_of(table, None, named.group(1)) for table in _TABLES] if named else []
+        if kind == "mechanism":
+            from ._files_mechanism import line_of_message
+
+            lines = [line_of_message(source, str(err))]
         source.fail(str(err).rstrip("."), next((line for line in lines if line is not None), None))
 
 
@@ -329,8 +338,9 @@ def load_mechanism(path: str | Path, *, with_waveform: bool = False) -> Any:
       [`AbstractWaveform`][locomotion_jax.AbstractWaveform] (`None` without one, and for a chain, which
       carries its own), for `measure(mechanism, waveform=waveform)` and `simulate`.
 
-    **Returns:** a [`Params`][locomotion_jax.Params] (`kind = "paper"`) or a [`Chain`][locomotion_jax.Chain]
-    (`kind = "chain"`), or the pair of `with_waveform`.
+    **Returns:** a [`Params`][locomotion_jax.Params] (`kind = "paper"`), a [`Chain`][locomotion_jax.Chain]
+    (`kind = "chain"`) or a [`Mechanism`][locomotion_jax.Mechanism] (`kind = "mechanism"`: bodies and links,
+    SPEC §9), or the pair of `with_waveform`.
 
     **Raises:** [`MechanismFileError`][locomotion_jax.MechanismFileError] (a `ValueError`) naming the file,
     the line where known, the table and the field: a TOML syntax error, an unknown kind, table, field or
@@ -363,8 +373,13 @@ def load_mechanism(path: str | Path, *, with_waveform: bool = False) -> Any:
     return mech
 
 
-def describe(mechanism: Params | Chain) -> str:
+def describe(mechanism: Any) -> str:
     """A short label of a loaded mechanism, for the command line."""
+    from ._bodies import Mechanism
+
+    if isinstance(mechanism, Mechanism):
+        carried = sum(j is not None for j in mechanism.carried_by)
+        return f"mechanism of {mechanism.n_bodies} bodies ({carried} carried), {len(mechanism.links)} links"
     if isinstance(mechanism, Chain):
         return f"chain of {mechanism.n_masses} masses, {type(mechanism.friction).__name__} friction, " + (
             f"{type(mechanism.actuator).__name__} actuator"

@@ -6,8 +6,10 @@ from typing import Any
 
 import numpy as np
 
+from ._bodies import Mechanism
 from ._chain import Chain
 from ._files import ACTUATORS, FRICTION, MechanismFileError, SCHEMA
+from ._files_mechanism import dump_mechanism
 from ._params import PARAM_NAMES, Params
 from ._waveform import AbstractWaveform, Fourier, Sinusoid, Spline
 
@@ -50,6 +52,21 @@ def _dump_paper(params: Params, waveform: AbstractWaveform | None) -> dict[str, 
     return doc
 
 
+def _friction_table(law: Any, what: str) -> dict[str, Any]:
+    """One body's friction law as a table (scalar coefficients)."""
+    name = type(law).__name__
+    if name not in FRICTION or FRICTION[name][0] is not type(law):
+        raise MechanismFileError(
+            f"save_mechanism: the friction law {name} of {what} cannot be written; a file holds {', '.join(FRICTION)}."
+        )
+    fields = law.fields()
+    if any(np.ndim(x) for x in fields.values()):
+        raise MechanismFileError(
+            f"save_mechanism: a file describes one configuration; the friction law of {what} is batched."
+        )
+    return {"type": name, **{n: float(x) for n, x in fields.items()}}
+
+
 def _dump_chain(chain: Chain) -> dict[str, Any]:
     _single(chain.batch_shape)
     law = type(chain.friction).__name__
@@ -84,7 +101,11 @@ def _dump_chain(chain: Chain) -> dict[str, Any]:
 
 
 def save_mechanism(
-    mechanism: Params | Chain, path: str | Path, *, waveform: AbstractWaveform | None = None, description: str = ""
+    mechanism: "Params | Chain | Mechanism",
+    path: str | Path,
+    *,
+    waveform: AbstractWaveform | None = None,
+    description: str = "",
 ) -> Path:
     """Write one mechanism to a TOML file that [`load_mechanism`][locomotion_jax.load_mechanism] reads back
     exactly (every number written with the digits that restore it, every per-mass or per-spring shape kept).
@@ -112,8 +133,19 @@ def save_mechanism(
         doc = _dump_chain(mechanism)
     elif isinstance(mechanism, Params):
         doc = _dump_paper(mechanism, waveform)
+    elif isinstance(mechanism, Mechanism):
+        if waveform is not None:
+            raise MechanismFileError("save_mechanism: a Mechanism carries its own waveforms; waveform= is for Params.")
+        try:
+            doc = {"schema": SCHEMA, "kind": "mechanism", **dump_mechanism(mechanism, _friction_table)}
+        except MechanismFileError:
+            raise
+        except ValueError as err:
+            raise MechanismFileError(str(err)) from None
     else:
-        raise MechanismFileError(f"save_mechanism: expected a Params or a Chain, got {type(mechanism).__name__}.")
+        raise MechanismFileError(
+            f"save_mechanism: expected a Params, a Chain or a Mechanism, got {type(mechanism).__name__}."
+        )
     if description:
         doc = {"schema": doc.pop("schema"), "kind": doc.pop("kind"), "description": description, **doc}
     path = Path(path)

@@ -23,7 +23,7 @@ from typing import Any, NamedTuple
 import jax.numpy as jnp
 
 from .._custom_types import Array
-from ._elements import ExternalForce, Force, signal_at, Spring, WALL
+from ._elements import Damper, ExternalForce, Force, signal_at, Spring, WALL
 from ._friction import AbstractFriction
 from ._physics import AbstractPhysics, LoadRates, Loads, Scalars
 
@@ -209,6 +209,16 @@ def mechanism_physics(M: Any) -> MechanismPhysics:
             g = ground_body(M.carried_by, i)
             if contact[g]:
                 normal[g] = normal[g] + m[i]
+    c = [M.c[..., i] for i in range(n)]
+    for k, el in enumerate(M.links):  # a damper to a wall is ground damping on its body
+        if isinstance(el, Damper):
+            if WALL not in (el.a, el.b):
+                raise NotImplementedError(
+                    f"links[{k}] {el.describe()}: a damper between two bodies is not run yet (its force depends on "
+                    "velocities; the physics interface's loads take positions only); a damper to lj.WALL is."
+                )
+            i = int(el.b if el.a == WALL else el.a)
+            c[i] = c[i] + el.c
     friction = tuple(law if law is not None else _NoContact(one) for law in M.friction)
     limits = [law.static_limits() for law in friction]
     limits = [(f, None if b is f else b) for f, b in limits]
@@ -216,7 +226,7 @@ def mechanism_physics(M: Any) -> MechanismPhysics:
     omega = jnp.broadcast_to(waves[0].omega, one.shape).astype(one.dtype) if waves else jnp.zeros_like(one)
     links = M.links
     return MechanismPhysics(
-        m=m, im=tuple(1 / q for q in m), c=tuple(M.c[..., i] for i in range(n)), friction=friction,
+        m=m, im=tuple(1 / q for q in m), c=tuple(c), friction=friction,
         mu_f=tuple(f for f, _ in limits), mu_b=tuple(b for _, b in limits), omega=omega, one=one,
         normal=tuple(normal), x0=tuple(M.x0[..., i] for i in range(n)), v0=tuple(M.v0[..., i] for i in range(n)),
         inv_mass=1 / M.m.sum(-1),
