@@ -243,9 +243,10 @@ class Mechanism(AbstractMechanism):
     @property
     def batch_shape(self) -> tuple[int, ...]:
         shapes = {}
-        for name, x, tail in self._nodes():
+        for j, (name, x, tail) in enumerate(self._nodes()):
             shape = jnp.shape(x)
-            shapes[name] = shape[: len(shape) - tail]
+            key = name if name not in shapes else f"{name} (array {j})"  # a waveform has several arrays
+            shapes[key] = shape[: len(shape) - tail]
         return broadcast_shape(shapes)
 
     @property
