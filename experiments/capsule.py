@@ -27,6 +27,7 @@ import json
 import math
 import time
 from pathlib import Path
+from typing import cast
 
 import jax
 
@@ -42,6 +43,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.colors import ListedColormap
+from matplotlib.patches import Rectangle
 from scipy.optimize import brentq
 
 
@@ -94,7 +96,8 @@ def capsule_map(n_omega: int, n_force: int) -> dict:
         best, worst = int(np.nanargmax(speed)), int(np.nanargmin(speed))
         print(f"{name}: {W.size} capsules in {wall:.1f} s, all OK: {bool(ok.all())}; regimes {counts}; "
               f"fastest forward {speed[best]:.4g} at omega={W[best]:.3g}, F0={F[best]:.3g} (cost of transport "
-              f"{cot[best]:.3g}); fastest backward {speed[worst]:.4g} at omega={W[worst]:.3g}, F0={F[worst]:.3g}")  # fmt: skip
+              f"{cot[best]:.3g}); fastest backward {speed[worst]:.4g} at omega={W[worst]:.3g}, "
+              f"F0={F[worst]:.3g}")  # fmt: skip
     return out
 
 
@@ -113,7 +116,7 @@ def one_period(P: float, f_fwd: float) -> tuple[float, float]:
     h = lambda t: P * (math.cos(t1) - math.cos(t)) - f_fwd * (t - t1)  # omega v / g while it slips
     grid = np.linspace(t1 + 1e-9, t1 + 2 * math.pi, 4001)
     j = int(np.flatnonzero(np.array([h(t) for t in grid[1:]]) < 0)[0])
-    t2 = brentq(h, grid[j], grid[j + 1], xtol=1e-15)  # the phase at which it stops
+    t2 = cast(float, brentq(h, grid[j], grid[j + 1], xtol=1e-15))  # the phase at which it stops
     L = t2 - t1
     return P * (L * math.cos(t1) - (math.sin(t2) - math.sin(t1))) - f_fwd * L * L / 2, 1 - L / (2 * math.pi)
 
@@ -126,8 +129,9 @@ def reproduction(n: int) -> dict:
     P = np.linspace(0.05, 0.6, n)
     P = np.unique(np.concatenate([P, [p["f_fwd"], p["f_bwd"]]]))
     force = P * Mt  # m b omega^2 = P (M + m) g: the inertial force -m s''(t) of s = b sin(omega t)
-    body = lj.Mechanism(masses=[Mt], friction=lj.AnisotropicCoulomb(p["f_fwd"], p["f_bwd"], p["f_fwd"], p["f_bwd"]),
-                        links=[lj.ExternalForce(0, lj.Sinusoid(a=jnp.asarray(force), omega=omega, lbar=0.0))])  # fmt: skip
+    law = lj.AnisotropicCoulomb(p["f_fwd"], p["f_bwd"], p["f_fwd"], p["f_bwd"])
+    wave = lj.Sinusoid(a=jnp.asarray(force), omega=omega, lbar=0.0)
+    body = lj.Mechanism(masses=[Mt], friction=law, links=[lj.ExternalForce(0, wave)])
     T = 2 * math.pi / omega
     res = lj.measure(body, z=1e6, horizon=20 * T, window=20 * T, t_start=5 * T, dynamics=lj.Exact(dt=0.005))
     traj = lj.simulate(body, t_end=6 * T, save_at=jnp.linspace(T, 6 * T, 2001), dynamics=lj.Exact(dt=0.005))
@@ -171,7 +175,7 @@ def plot(res: dict, rep: dict, path: Path) -> None:
         ax.set(xlabel="omega", ylabel="F0", title="cost of transport (e_d / distance), where moving")
         ax = axes[row, 2]
         ax.pcolormesh(om, f0, regime.T, cmap=cmap, vmin=-0.5, vmax=3.5, shading="nearest")
-        handles = [plt.Rectangle((0, 0), 1, 1, color=cmap(j)) for j in range(4)]
+        handles = [Rectangle((0, 0), 1, 1, color=cmap(j)) for j in range(4)]
         ax.legend(handles, REGIMES, loc="upper right", fontsize=8)
         for w, ls in ((math.sqrt(K / m), ":"), (math.sqrt(K * (M + m) / (M * m)), "--")):
             ax.axvline(w, color="k", ls=ls, lw=0.8)
@@ -212,7 +216,7 @@ def _rounded(x):
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="a 22 x 16 map instead of 86 x 60")
     ap.add_argument("--out", default="experiments/output/capsule")
     args = ap.parse_args(argv)

@@ -1,13 +1,15 @@
 """Independent float64 reference for mechanisms on a line (SPEC §9): bodies with or without ground
-contact, carried bodies, linear springs between any bodies or to a wall (at x = 0), internal
-forces and external forces.
+contact, carried bodies, linear springs and linear dampers between any bodies or to a wall (at
+x = 0), internal forces and external forces.
 
 Written only from SPEC.md §9 (and §8 for stick and slip); it imports nothing from the
 ``locomotion_jax`` package nor from the other references, only numpy and scipy.
 
 Model (0-based bodies): a spring ``(a, b, k, r)`` exerts ``f = k (x_b - x_a - r)``, ``+f`` on ``a``
 and ``-f`` on ``b`` (``x = 0`` for the wall ``-1``); an internal force ``(a, b, s)`` exerts ``+s(t)`` on
-``b`` and ``-s(t)`` on ``a``; an external force ``(i, s)`` exerts ``s(t)`` on ``i``. A signal is
+``b`` and ``-s(t)`` on ``a``; an external force ``(i, s)`` exerts ``s(t)`` on ``i``; a damper ``(a, b, c)``
+exerts ``f = c (v_b - v_a)``, ``+f`` on ``a`` and ``-f`` on ``b`` (``v = 0`` for the wall), and dissipates
+``c (v_b - v_a)^2``. A signal is
 ``s(t) = mean + sum_n A_n cos(n w t) + B_n sin(n w t)``. A body in contact has the normal load
 ``N_i = m_i + sum of the masses it carries`` (constant: the springs are horizontal) and anisotropic
 Coulomb friction; a body without contact feels no friction. Ground damping ``c_i v_i``.
@@ -59,6 +61,7 @@ class System:
     springs: list = field(default_factory=list)  # (a, b, k, rest: float or Sig); -1 is the wall
     forces: list = field(default_factory=list)  # (a, b, Sig)
     externals: list = field(default_factory=list)  # (i, Sig)
+    dampers: list = field(default_factory=list)  # (a, b, c); -1 is the wall
 
     def normal(self) -> np.ndarray:
         N = np.array([b.m if b.law is not None else 0.0 for b in self.bodies])
@@ -96,7 +99,18 @@ class System:
             g = s.at(t)[0]
             F[i] += g
             power += g * v[i]
+        for a, b, c in self.dampers:
+            f = c * (vel(b) - vel(a))
+            if a >= 0:
+                F[a] += f
+            if b >= 0:
+                F[b] -= f
         return F, elastic, power
+
+    def damping(self, v: np.ndarray) -> float:
+        """The power the dampers dissipate."""
+        vel = lambda i: 0.0 if i < 0 else v[i]
+        return sum(c * (vel(b) - vel(a)) ** 2 for a, b, c in self.dampers)
 
 
 def run(sys: System, t_end: float, save: np.ndarray, rtol: float = 1e-12, atol: float = 1e-13) -> dict:
@@ -151,7 +165,7 @@ def run(sys: System, t_end: float, save: np.ndarray, rtol: float = 1e-12, atol: 
             a[i] = (F[i] - c[i] * v[i] - sdir[i] * mu * N[i]) / m[i]
             ed += mu * N[i] * abs(v[i]) + c[i] * v[i] ** 2
         xd = np.where([contact[i] and stuck[i] for i in range(n)], 0.0, v)
-        return np.concatenate([xd, a, [ed, power]])
+        return np.concatenate([xd, a, [ed + sys.damping(v), power]])
 
     def events(stuck, sdir):
         out, owner = [], []

@@ -8,6 +8,7 @@ weight of m: one body of mass M + m under m b omega^2 sin(omega t). The closed f
 here from the equation of motion, sharing no code with the package or the experiment."""
 
 import math
+from typing import cast
 
 import jax.numpy as jnp
 import locomotion_jax as lj
@@ -26,7 +27,7 @@ def closed_form(P: float) -> tuple[float, float]:
     h = lambda t: P * (math.cos(t1) - math.cos(t)) - F_FWD * (t - t1)  # omega v / g
     ts = np.linspace(t1 + 1e-9, t1 + 2 * math.pi, 20001)
     j = int(np.argmax(np.array([h(t) for t in ts[1:]]) < 0))
-    t2 = brentq(h, ts[j], ts[j + 1], xtol=1e-15)
+    t2 = cast(float, brentq(h, ts[j], ts[j + 1], xtol=1e-15))
     L = t2 - t1
     dx = (P * (L * math.cos(t1) - (math.sin(t2) - math.sin(t1))) - F_FWD * L * L / 2) / OMEGA**2
     return dx * OMEGA / (2 * math.pi), 1 - L / (2 * math.pi)
@@ -34,8 +35,9 @@ def closed_form(P: float) -> tuple[float, float]:
 
 def test_prescribed_internal_motion_matches_the_closed_form_and_the_regime_boundaries():
     P = np.array([0.1, 0.2, 0.21, 0.25, 0.3, 0.35, 0.4, 0.45, 0.6])
-    body = lj.Mechanism(masses=[M + m], friction=lj.AnisotropicCoulomb(F_FWD, F_BWD, F_FWD, F_BWD),
-                        links=[lj.ExternalForce(0, lj.Sinusoid(a=jnp.asarray(P * (M + m)), omega=OMEGA, lbar=0.0))])  # fmt: skip
+    wave = lj.Sinusoid(a=jnp.asarray(P * (M + m)), omega=OMEGA, lbar=0.0)
+    law = lj.AnisotropicCoulomb(F_FWD, F_BWD, F_FWD, F_BWD)
+    body = lj.Mechanism(masses=[M + m], friction=law, links=[lj.ExternalForce(0, wave)])
     T = 2 * math.pi / OMEGA
     res = lj.measure(body, z=1e6, horizon=20 * T, window=20 * T, t_start=5 * T, dynamics=lj.Exact(dt=0.005))
     assert (np.asarray(res.status) == lj.Status.OK).all()

@@ -1,8 +1,8 @@
 """`lj.Mechanism` against the independent event-driven reference (`tests/reference_mechanism.py`,
 SPEC §9): capsules with and without their internal spring, Coulomb and anisotropic friction, an
-external force, and a 3-body chain with a wall spring and an external force. Mean speed and
-dissipated energy over a window within 1e-4 relative (plus a small absolute floor for a speed
-near zero), on 10 configurations."""
+external force, and a 3-body chain with a wall spring and an external force, and with relative
+dampers (body-body and to the wall). Mean speed and dissipated energy over a window within 1e-4
+relative (plus a small absolute floor for a speed near zero), on 13 configurations."""
 
 import locomotion_jax as lj
 import numpy as np
@@ -50,6 +50,26 @@ def _three(mu, g, w):
     return M, S
 
 
+def _damped_capsule(mu, k, c, a, w):
+    """A capsule whose internal mass sits on a spring k and a damper c (body-body, SPEC §9), driven
+    by a sin(w t) between them, with a damper 0.1 from the body to the wall."""
+    links = [lj.Spring(0, 1, k=k, rest=0.0), lj.Damper(0, 1, c=c), lj.Force(0, 1, lj.Sinusoid(a, w, 0.0)),
+             lj.Damper(lj.WALL, 0, c=0.1)]  # fmt: skip
+    M = lj.Mechanism(masses=[1.0, 0.5], friction=[_law(mu), None], carried_by=[None, 0], links=links)
+    S = System([Body(1.0, mu), Body(0.5, None, carrier=0)], springs=[(0, 1, k, 0.0)],
+               forces=[(0, 1, Sig(0.0, (0.0,), (a,), w))], dampers=[(0, 1, c), (-1, 0, 0.1)])  # fmt: skip
+    return M, S
+
+
+def _damped_three(mu, g, w):
+    """`_three` with relative dampers 0-1 (0.3), 0-2 (0.2, non-neighbours) and a wall damper on 2 (0.4)."""
+    M, S = _three(mu, g, w)
+    extra = [lj.Damper(0, 1, c=0.3), lj.Damper(2, 0, c=0.2), lj.Damper(2, lj.WALL, c=0.4)]
+    M = lj.Mechanism(masses=M.m, friction=_law(mu), links=list(M.links) + extra, c=0.05, x0=[0.0, 1.0, 2.0])
+    S.dampers = [(0, 1, 0.3), (2, 0, 0.2), (2, -1, 0.4)]
+    return M, S
+
+
 CASES = {
     "capsule-aniso": lambda: _capsule(ANISO, 10.0, 0.6, 3.0),
     "capsule-aniso-soft": lambda: _capsule(ANISO, 3.0, 1.2, 2.0),
@@ -61,6 +81,9 @@ CASES = {
     "capsule-coulomb-external": lambda: _capsule(COULOMB, 6.0, 1.4, 3.0, extra=0.4),
     "three-aniso": lambda: _three(ANISO, 3.0, 2.0),
     "three-coulomb": lambda: _three(COULOMB, 4.0, 1.5),
+    "capsule-aniso-damped": lambda: _damped_capsule(ANISO, 10.0, 0.5, 0.8, 3.0),
+    "capsule-coulomb-damped": lambda: _damped_capsule(COULOMB, 6.0, 1.0, 1.6, 2.5),
+    "three-aniso-damped": lambda: _damped_three(ANISO, 3.0, 2.0),
 }
 
 

@@ -107,13 +107,14 @@ def init(P: AbstractPhysics, contact: Contact, x: Array, v: Array | None = None)
     cph, sph = jnp.ones((), dtype), zero
     dr = P.drive(cph, sph)
     L = P.loads(dr, xs)
-    F, N = L.F, L.N
-    n = motion.normal(contact, N)
-    stuck = tuple(p >= 0 for p in motion.stick_margin(P, F, n))
-    sdir = tuple(jnp.where(f >= 0, 1.0, -1.0).astype(dtype) for f in F)
     vs = tuple(jnp.zeros_like(a) for a in xs)
     if v is not None:
         vs = tuple(v[..., i] for i in range(v.shape[-1]))
+    F, N = motion.with_velocity(P, L.F, vs), L.N
+    n = motion.normal(contact, N)
+    stuck = tuple(p >= 0 for p in motion.stick_margin(P, F, n))
+    sdir = tuple(jnp.where(f >= 0, 1.0, -1.0).astype(dtype) for f in F)
+    if v is not None:
         stuck = tuple(s & (q == 0) for s, q in zip(stuck, vs))
         one = jnp.ones((), dtype)
         sdir = tuple(jnp.where(q > 0, one, jnp.where(q < 0, -one, s)) for s, q in zip(sdir, vs))
@@ -138,7 +139,7 @@ def probe(P: AbstractPhysics, contact: Contact, t: Array, y: State, target: num.
     dtype = t.dtype
     dr = P.drive(jnp.cos(P.omega * t), jnp.sin(P.omega * t))
     L = P.loads(dr, y.x)
-    F, N = L.F, L.N
+    F, N = motion.with_velocity(P, L.F, y.v), L.N
     n = motion.normal(contact, N)
     stuck = tuple((p >= 0) & (v == 0) for p, v in zip(motion.stick_margin(P, F, n), y.v))
     one = jnp.ones((), dtype)
@@ -171,7 +172,7 @@ def step(
     # sticks if the static limits hold, else it slips the other way.
     dr0 = motion.kept(P, P.drive(st.cph, st.sph))
     L0 = P.loads(dr0, yA.x, kp)
-    F0, N0 = L0.F, L0.N
+    F0, N0 = motion.with_velocity(P, L0.F, yA.v), L0.N
     nA = motion.normal(contact, N0)
     margin = motion.stick_margin(P, F0, nA)
     gA = [jnp.where(s, p, sd * v) for s, p, sd, v in zip(st.stuck, margin, st.sdir, yA.v)]

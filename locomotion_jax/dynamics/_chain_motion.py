@@ -89,12 +89,24 @@ def stick_margin_rate(P: AbstractPhysics, F: Scalars, n: Scalars, dF: Scalars, d
     return out
 
 
+def with_velocity(P: AbstractPhysics, F: Scalars, v: Scalars) -> Scalars:
+    """$F_i$ with the physics' velocity forces at velocities `v` (relative dampers); `F` itself
+    when it has none (every chain), so their runs are unchanged."""
+    D = P.velocity_forces(v)
+    return F if D is None else tuple(f + d for f, d in zip(F, D))
+
+
+def _add_power(P: AbstractPhysics, ed: Any, v: Scalars, u: Scalars, scale: float = 1.0) -> Any:
+    p = P.velocity_power(v, u)
+    return ed if p is None else ed + scale * p
+
+
 def _in_mode(P: AbstractPhysics, contact: Contact, mode: Mode, dr: Any, L: Loads, v: Scalars):
     """The normal forces $n_i$, speeds, kinetic coefficients and the state's rate at a state with
     loads `L`: $\\dot x_i = v_i$, $m_i \\dot v_i = F_i - c_i v_i - \\sigma_i \\mu_k n_i$
     (both zero when stuck; eq. 9 generalised), $\\dot e_d = \\sum_i \\mu_k n_i |v_i| + c_i v_i^2$
     (eq. 15) and $\\dot w$, the actuator's power (eq. 16)."""
-    F, N = L.F, L.N
+    F, N = with_velocity(P, L.F, v), L.N
     n = normal(contact, N, mode.side)
     speed = tuple(sd * vi for sd, vi in zip(mode.sdir, v))  # |v_i| in a slip segment; 0 when stuck
     mu = tuple(law.kinetic(s, sd) for law, s, sd in zip(P.friction, speed, mode.sdir))
@@ -103,7 +115,7 @@ def _in_mode(P: AbstractPhysics, contact: Contact, mode: Mode, dr: Any, L: Loads
         for st, f, c, vi, sd, m, q, im in zip(mode.stuck, F, P.c, v, mode.sdir, mu, n, P.im)
     )
     xd = tuple(jnp.where(st, 0, vi) for st, vi in zip(mode.stuck, v))
-    ed = _sum([m * q * s + c * vi * vi for m, q, s, c, vi in zip(mu, n, speed, P.c, v)])
+    ed = _add_power(P, _sum([m * q * s + c * vi * vi for m, q, s, c, vi in zip(mu, n, speed, P.c, v)]), v, v)
     return n, speed, mu, State(xd, a, ed, P.power(dr, L, v))
 
 
@@ -129,13 +141,13 @@ def derivatives(P: AbstractPhysics, contact: Contact, mode: Mode, target, dr: An
     """Rates and event values with their first and second time derivatives along the motion in a
     fixed mode, at a state whose loads `L` are given (the loads' rates from the physics, the
     friction law's own `kinetic_rate`)."""
-    F, N = L.F, L.N
+    F, N = with_velocity(P, L.F, v), L.N
     n, speed, mu, rate = _in_mode(P, contact, mode, dr, L, v)
     xd, a = rate.x, rate.v
 
     # First derivatives: the loads along (xd, the actuation's rate), the kinetic coefficients.
     R = P.load_rates(dr, L, xd, P.keep)
-    dF, dN = R.dF, R.dN
+    dF, dN = with_velocity(P, R.dF, a), R.dN
     dn = normal(contact, dN, mode.side)
     dspeed = tuple(sd * ai for sd, ai in zip(mode.sdir, a))
     dmu = [law.kinetic_rate(s, sd, ds) for law, s, sd, ds in zip(P.friction, speed, mode.sdir, dspeed)]
@@ -146,11 +158,13 @@ def derivatives(P: AbstractPhysics, contact: Contact, mode: Mode, target, dr: An
     )
     ded = _sum([fr * s + m * q * ds + 2 * c * vi * ai
                 for fr, s, m, q, ds, c, vi, ai in zip(fric, speed, mu, n, dspeed, P.c, v, a)])  # fmt: skip
+    ded = _add_power(P, ded, v, a, 2.0)
     dw = P.power_rate(dr, L, R, v, a)
     second = State(a, jerk, ded, dw)
 
     # Second derivatives of the loads, for the events' curvature.
     ddF, ddN = P.load_second(dr, L, R, xd, a)
+    ddF = with_velocity(P, ddF, jerk)
     ddn = normal(contact, ddN, mode.side)
 
     stick = (stick_margin(P, F, n), stick_margin_rate(P, F, n, dF, dn), stick_margin_rate(P, F, n, ddF, ddn))

@@ -184,10 +184,10 @@ class Damper(AbstractElement):
     """A linear damper between bodies `a` and `b` (or a body and `lj.WALL`) (SPEC §9):
     $f = c\\,(v_b - v_a)$, $+f$ on `a` and $-f$ on `b`; it dissipates $c\\,(v_b - v_a)^2$.
 
-    A damper to a `WALL` (at rest) is ground damping on its body, $c_i \\mathrel{+}= c$: the engine runs
-    it so, and counts its dissipation in $e_d$. A damper between two bodies is refused by the engine
-    (`NotImplementedError` when the mechanism is run): its force depends on velocities, and the
-    physics interface's loads take positions only.
+    Its force enters $F_i$ (so the stick and slip decisions) and its dissipation $e_d$. A damper to
+    a `WALL` (at rest) is ground damping on its body, $c_i \\mathrel{+}= c$, and runs as such; one
+    between two bodies runs through the physics' `velocity_forces` (the engine adds them to the
+    position-dependent loads).
 
     **Arguments:** `a`, `b`: body indices or `WALL` (not both; `a != b`); `c >= 0`.
     """

@@ -102,6 +102,7 @@ class MechanismPhysics(AbstractPhysics):
     springs: tuple[Spring, ...]
     forces: tuple[Force, ...]
     externals: tuple[ExternalForce, ...]
+    dampers: tuple[Damper, ...] = ()  # between two bodies (one to a wall is in `c`)
 
     def drive(self, c1: Array, s1: Array) -> Drive:
         at = lambda s: signal_at(s, c1, s1)
@@ -169,6 +170,23 @@ class MechanismPhysics(AbstractPhysics):
             terms.append(_rate(dg, like) * v[e.i] + g * a[e.i])
         return _sum(terms, like)
 
+    def velocity_forces(self, v: Scalars) -> Scalars | None:
+        """The relative dampers' forces $f = c(v_b - v_a)$, $+f$ on `a` and $-f$ on `b` (SPEC §9)."""
+        if not self.dampers:
+            return None
+        terms: list[list[Array]] = [[] for _ in self.m]
+        for d in self.dampers:
+            f = d.c * (v[int(d.b)] - v[int(d.a)])
+            _add(terms, d.a, f, 1.0)
+            _add(terms, d.b, f, -1.0)
+        return tuple(_sum(t, v[0]) for t in terms)
+
+    def velocity_power(self, v: Scalars, u: Scalars) -> Array | None:
+        """$\sum c\,(v_b - v_a)(u_b - u_a)$ over the relative dampers: their dissipation at `u = v`."""
+        if not self.dampers:
+            return None
+        return _sum([d.c * (v[int(d.b)] - v[int(d.a)]) * (u[int(d.b)] - u[int(d.a)]) for d in self.dampers], v[0])
+
     def energy(self, loads: Loads, v: Scalars) -> Array:
         """$e = \\sum_i m_i v_i^2/2 + \\sum_\\text{springs} f^2/(2k)$ (SPEC §9)."""
         kin = [m * q * q for m, q in zip(self.m, v)]
@@ -210,13 +228,10 @@ def mechanism_physics(M: Any) -> MechanismPhysics:
             if contact[g]:
                 normal[g] = normal[g] + m[i]
     c = [M.c[..., i] for i in range(n)]
-    for k, el in enumerate(M.links):  # a damper to a wall is ground damping on its body
+    for el in M.links:  # a damper to a wall is ground damping on its body
         if isinstance(el, Damper):
             if WALL not in (el.a, el.b):
-                raise NotImplementedError(
-                    f"links[{k}] {el.describe()}: a damper between two bodies is not run yet (its force depends on "
-                    "velocities; the physics interface's loads take positions only); a damper to lj.WALL is."
-                )
+                continue  # between two bodies: `velocity_forces`
             i = int(el.b if el.a == WALL else el.a)
             c[i] = c[i] + el.c
     friction = tuple(law if law is not None else _NoContact(one) for law in M.friction)
@@ -233,4 +248,5 @@ def mechanism_physics(M: Any) -> MechanismPhysics:
         springs=tuple(e for e in links if isinstance(e, Spring)),
         forces=tuple(e for e in links if isinstance(e, Force)),
         externals=tuple(e for e in links if isinstance(e, ExternalForce)),
+        dampers=tuple(e for e in links if isinstance(e, Damper) and WALL not in (e.a, e.b)),
     )  # fmt: skip

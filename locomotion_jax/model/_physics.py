@@ -135,6 +135,17 @@ class AbstractPhysics(eqx.Module):
         [`Mechanism`][locomotion_jax.Mechanism] returns its own `v0` (SPEC §9)."""
         return None
 
+    def velocity_forces(self, v: Scalars) -> Scalars | None:
+        """Per body, the forces linear in the velocities besides ground damping (relative dampers:
+        $+c(v_b - v_a)$ on `a`, $-c(v_b - v_a)$ on `b`), added to $F_i$; `None` (the default):
+        none. Linear, so the engine takes their rates as this map of the accelerations and jerks."""
+        return None
+
+    def velocity_power(self, v: Scalars, u: Scalars) -> Array | None:
+        """The bilinear form $\sum c\,(v_b - v_a)(u_b - u_a)$ of those forces: at `u = v` the power they
+        dissipate (into $e_d$); `None` (the default): none."""
+        return None
+
     def gaps(self, x: Scalars) -> Scalars:
         """The gaps between bodies that must stay positive: the engine stops a run with
         `Status.COLLISION` where one is $\\le 0$ after a step, and refuses an initial state where
