@@ -76,3 +76,27 @@ def test_a_batched_waveform_batches_the_mechanism():
     traj = lj.simulate(M, t_end=5.0, save_at=ts)
     alone = lj.simulate(M[1], t_end=5.0, save_at=ts)
     np.testing.assert_allclose(np.asarray(traj.x[1]), np.asarray(alone.x), rtol=1e-12, atol=1e-12)
+
+
+def test_a_batch_flags_one_bad_damper_and_runs_the_others():
+    """`check=False`: the configuration with c < 0 is INVALID, its batch-mates equal their runs alone."""
+    c = jnp.array([0.5, -1.0, 0.3])
+    M = lj.Mechanism(masses=[1.0, 0.5], friction=[lj.Coulomb(0.5, 0.4), None], carried_by=[None, 0],
+                     links=[lj.Spring(0, 1, k=10.0), lj.Damper(0, 1, c=c), lj.Force(0, 1, lj.Sinusoid(1.0, 3.0, 0.0))],
+                     check=False)  # fmt: skip
+    ts = jnp.linspace(0.0, 6.0, 7)
+    traj = lj.simulate(M, t_end=6.0, save_at=ts)
+    assert [int(s) for s in traj.status] == [lj.Status.OK, lj.Status.INVALID, lj.Status.OK]
+    for i in (0, 2):
+        np.testing.assert_allclose(np.asarray(traj.x[i]), np.asarray(lj.simulate(M[i], t_end=6.0, save_at=ts).x),
+                                   rtol=1e-12, atol=1e-12)  # fmt: skip
+
+
+def test_front_ends_not_built_for_a_mechanism_say_so():
+    """`steady_gait` and `optimise` refuse a Mechanism by name (under the tests' runtime type checks the
+    type hint refuses it first, a TypeError naming it; without them, the NotImplementedError)."""
+    M = _damped()
+    with pytest.raises((NotImplementedError, TypeError), match="Mechanism"):
+        lj.steady_gait(M)  # pyright: ignore[reportCallIssue, reportArgumentType]
+    with pytest.raises((NotImplementedError, TypeError), match="Mechanism"):
+        lj.optimise(M, v_min=0.05, a_max=0.5)  # pyright: ignore[reportCallIssue, reportArgumentType]

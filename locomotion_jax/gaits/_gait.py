@@ -213,6 +213,11 @@ def steady_gait(
 
 
 def _chain(chain: Chain, periods, transient, tol, max_iter, dynamics: Exact, waveform, contact, start, dtype):
+    if not isinstance(chain, Chain):
+        raise NotImplementedError(
+            f"steady_gait takes Params or a Chain; a {type(chain).__name__} (SPEC §9) is not solved for its "
+            "periodic gait yet (the orbit solver follows a chain's springs). Run it with simulate or measure."
+        )
     if waveform is not None:
         raise ValueError("waveform= applies to Params; a Chain carries its own waveforms (Chain(waveforms=...)).")
     from ._chain_gait import steady_gait_chain

@@ -400,6 +400,11 @@ def _optimise_chain(chain, v_min, a_max, method, direction, omega, harmonics, se
     """A [`Chain`][]: the exact method of `optimisation._chain` (travelling waves, then harmonics)."""
     from ._chain import optimise_chain
 
+    if not isinstance(chain, Chain):
+        raise NotImplementedError(
+            f"optimise takes Params or a Chain; a {type(chain).__name__} (SPEC §9) is not optimised yet (the "
+            "chain optimiser designs rest-length strokes on a chain's steady gaits, which a Mechanism lacks)."
+        )
     if method != "exact":
         raise ValueError(f"method: a Chain is optimised by the exact method only (method='exact'), got {method!r}.")
     if sweep is not None or start is not None:
