@@ -152,3 +152,19 @@ def test_broken_mechanism_file_gives_one_message(tmp_path, case):
 
 def test_examples_readme_names_the_capsule():
     assert "](capsule.toml)" in (EXAMPLES / "README.md").read_text()
+
+
+def test_cli_simulates_the_capsule_and_the_other_commands_refuse_it_by_name(tmp_path):
+    short = ["--z", "1", "--horizon", "40", "--window", "10", "--dt", "0.02"]
+    res = CliRunner().invoke(_cli.app, ["simulate", str(EXAMPLES / "capsule.toml"), *short, "--plot", "--out",
+                                        str(tmp_path), "--t-end", "10", "--json"])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    record = json.loads(res.stdout)
+    assert record["kind"] == "mechanism" and record["status_name"] == "OK"
+    assert Path(record["plot"]).is_file()
+    sweep = ["sweep", "--omega", "1,2", "--out", str(tmp_path / "s.nc")]
+    for args in (["gait"], ["optimize", "--v-min", "0.05"], sweep):
+        out = CliRunner().invoke(_cli.app, [args[0], str(EXAMPLES / "capsule.toml"), *args[1:]])
+        assert out.exit_code == 2 and 'a mechanism of bodies and links (kind = "mechanism") runs in `measure`' in (
+            out.output
+        ), (args, out.output)

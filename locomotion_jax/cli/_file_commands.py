@@ -61,7 +61,7 @@ def simulate_file(file: Path, run: Values, t_end: float, plot_dir: Path | None, 
     """`simulate FILE`: the file's measurement (as `measure FILE`) and, with `plot_dir`, a plot vs time."""
     import locomotion_jax as lj
 
-    mech, wave = load(file)
+    mech, wave = load(file, mechanism_ok=True)
     kind = kind_of(mech)
     fields = measure_record(mech, wave, run)
     png = None
@@ -69,7 +69,7 @@ def simulate_file(file: Path, run: Values, t_end: float, plot_dir: Path | None, 
         extra = {} if wave is None else {"waveform": wave}
         how: dict[str, Any] = dict(dynamics=lj.Exact(dt=run["dt"]), contact=run["contact"], start=run["start"], **extra)
         png = plot_dir / f"simulate_{file.stem}.png"
-        if kind == "chain":
+        if kind in ("chain", "mechanism"):  # a ChainTrajectory, one row per body
             from ._chain_commands import _plot as plot_chain
 
             plot_chain(lj.simulate(mech, t_end, np.linspace(0.0, t_end, 401), **how), png, label(file, mech, wave))

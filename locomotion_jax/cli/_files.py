@@ -24,15 +24,22 @@ def _plain(v: Any) -> Any:
     return v.tolist() if v.ndim else v.item()
 
 
-def load(path: Path) -> tuple[Any, Any]:
+def load(path: Path, mechanism_ok: bool = False) -> tuple[Any, Any]:
     """The file's mechanism and the paper's model's waveform (or `None`); a file that cannot be read
-    is a `ValueError` naming it."""
+    is a `ValueError` naming it, and so is a `kind = "mechanism"` file unless `mechanism_ok` (the
+    commands that run one: `measure`, `simulate`)."""
     from ..model._files import load_mechanism
 
     try:
-        return load_mechanism(path, with_waveform=True)
+        mech, wave = load_mechanism(path, with_waveform=True)
     except OSError as err:
         raise ValueError(f"{path}: cannot read the mechanism file ({err.strerror or err}).") from None
+    if not mechanism_ok and kind_of(mech) == "mechanism":
+        raise ValueError(
+            f'{path}: a mechanism of bodies and links (kind = "mechanism") runs in `measure` and `simulate`; '
+            "this command takes the paper's model or a chain."
+        )
+    return mech, wave
 
 
 def context() -> Any:
@@ -128,7 +135,7 @@ def register(app: typer.Typer) -> None:
         object: every measurement field (per-mass fields of a chain as lists), `regime_name`,
         `status_name`, `mechanism` (the file), `kind` and the settings; non-finite numbers are null.
         """
-        mech, wave = load(file)
+        mech, wave = load(file, mechanism_ok=True)
         settings = {n: run[n] for n in RUN_SETTINGS}
         fields = measure_record(mech, wave, run, t_start)
         if as_json:
