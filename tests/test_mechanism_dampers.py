@@ -100,3 +100,13 @@ def test_front_ends_not_built_for_a_mechanism_say_so():
         lj.steady_gait(M)  # pyright: ignore[reportCallIssue, reportArgumentType]
     with pytest.raises((NotImplementedError, TypeError), match="Mechanism"):
         lj.optimise(M, v_min=0.05, a_max=0.5)  # pyright: ignore[reportCallIssue, reportArgumentType]
+
+
+def test_dampers_in_float32():
+    M = _damped().astype(jnp.float32)
+    traj = lj.simulate(M, t_end=20.0, save_at=jnp.linspace(0.0, 20.0, 21))
+    assert traj.x.dtype == jnp.float32 and int(traj.status) == lj.Status.OK
+    bal = np.asarray(traj.w - traj.e_d - (traj.e - traj.e[0]))
+    ref = lj.simulate(_damped(), t_end=20.0, save_at=jnp.linspace(0.0, 20.0, 21))
+    print("float32: energy balance", np.abs(bal).max(), "; x against float64", np.abs(traj.x - ref.x).max())
+    assert np.abs(bal).max() < 1e-4 * float(traj.e_d[-1]) and float(np.abs(traj.x - ref.x).max()) < 1e-3
