@@ -4,7 +4,9 @@
   them: hence the priority);
 - the committed reproduction report `experiments/output/REPRODUCTION.md` as
   `reproduction/report.md`, with the figures of `experiments/output/` under `reproduction/`,
-  so that its relative links (`fig05.png`) hold as they are.
+  so that its relative links (`fig05.png`) hold as they are;
+- `experiments/REPRODUCTION.md` (other papers' results) as `reproduction/REPRODUCTION.md`, where the
+  link of `experiments/README.md` (included in `reproduction/index.md`) finds it.
 """
 
 from pathlib import Path
@@ -18,7 +20,10 @@ ROOT = Path(__file__).resolve().parent.parent
 NOTEBOOKS = "notebooks/*.ipynb"
 """Notebooks, at the same path in the site as in the repository."""
 
-MOVED = {"reproduction/report.md": "experiments/output/REPRODUCTION.md"}
+MOVED = {
+    "reproduction/report.md": "experiments/output/REPRODUCTION.md",
+    "reproduction/REPRODUCTION.md": "experiments/REPRODUCTION.md",  # other papers' results (capsule robots)
+}
 """Site path: source file (relative to the repository root)."""
 
 MOVED_FOLDERS = {"reproduction": ("experiments/output", "**/*.png")}
