@@ -1,11 +1,11 @@
-"""Maps over chains of N masses: [`sweep`][locomotion_jax.sweep] with a `mechanism` builder.
+"""Maps over chains of N masses and mechanisms: [`sweep`][locomotion_jax.sweep] with a `mechanism` builder.
 
 A chain has no fixed list of parameter names (its fields are per mass and per spring,
 its waveform and friction law are classes), so the sweep asks the user for a builder:
 a function from the swept values (1-D arrays, one entry per configuration) to a
-batched [`Chain`][]. The configurations are cut into chunks of one shape, the last one
-padded with repeats of its last configuration, so one compilation serves the map;
-each chunk is measured by `measure_chain` (the dynamics' N-mass engine).
+batched [`Chain`][] or [`Mechanism`][locomotion_jax.Mechanism] (SPEC §9). The configurations are
+cut into chunks of one shape, the last one padded with repeats of its last configuration, so one
+compilation serves the map; each chunk is measured by `measure_chain` (the dynamics' N-mass engine).
 """
 
 import math
@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from .._results import ChainMeasurement
+from ..model._bodies import Mechanism
 from ..model._chain import Chain
 
 
@@ -37,22 +38,22 @@ def _axes(axes: Mapping[str, Any], mode: str) -> tuple[dict[str, np.ndarray], tu
     return values, (tuple(lengths) if mode == "grid" else (lengths[0],))
 
 
-def _build(build: Callable[..., Chain], values, shape, mode, fixed, flat: np.ndarray) -> Chain:
+def _build(build: Callable[..., Any], values, shape, mode, fixed, flat: np.ndarray) -> "Chain | Mechanism":
     idx = np.unravel_index(flat, shape) if mode == "grid" else (flat,) * len(values)
     kwargs = {n: v[i] for (n, v), i in zip(values.items(), idx)}
     chain = build(**kwargs, **fixed)
-    if not isinstance(chain, Chain):
-        raise TypeError(f"mechanism must return a Chain, got {type(chain).__name__}.")
+    if not isinstance(chain, (Chain, Mechanism)):
+        raise TypeError(f"mechanism must return a Chain or a Mechanism, got {type(chain).__name__}.")
     if chain.batch_shape != flat.shape:
         raise ValueError(
-            f"mechanism must return a Chain of batch shape {flat.shape} (one configuration per value of the "
-            f"swept axes), got {chain.batch_shape}; build the chain from the arrays it is given."
+            f"mechanism must return a {type(chain).__name__} of batch shape {flat.shape} (one configuration per "
+            f"value of the swept axes), got {chain.batch_shape}; build it from the arrays it is given."
         )
     return chain
 
 
 def sweep_chain(
-    build: Callable[..., Chain],
+    build: "Callable[..., Chain | Mechanism]",
     axes: Mapping[str, Any],
     *,
     fixed: Mapping[str, Any] | None,
@@ -97,7 +98,7 @@ def sweep_chain(
     chunk = min(int(chunk_size), size)
     n_chunks = -(-size // chunk)
 
-    def chunk_chain(i: int) -> tuple[Chain, int]:
+    def chunk_chain(i: int) -> "tuple[Chain | Mechanism, int]":
         flat = np.arange(i * chunk, (i + 1) * chunk)
         n = int(min(chunk, size - i * chunk))
         chain = _build(build, values, shape, mode, fixed, np.minimum(flat, size - 1))
@@ -145,8 +146,7 @@ def sweep_chain(
         "sweep_mode": mode,
         "swept": ",".join(values),
         "n_masses": first.n_masses,
-        "friction": type(first.friction).__name__,
-        "actuator": type(first.actuator).__name__,
+        **_structure(first),
         **{f"fixed_{k}": v for k, v in fixed.items() if np.ndim(v) == 0 and isinstance(v, (int, float))},
         "dtype": str(np.dtype(first.astype(dtype).dtype if dtype is not None else first.dtype)),
         "contact": contact,
@@ -169,6 +169,14 @@ def sweep_chain(
         except OSError as err:
             raise ValueError(f"Cannot write the sweep output at {path}: {err.strerror or err}.") from None
     return ds
+
+
+def _structure(first: "Chain | Mechanism") -> dict[str, str]:
+    """A chain's friction law and actuator, or a mechanism's laws per body and its elements, as attributes."""
+    if isinstance(first, Mechanism):
+        laws = ", ".join("none" if law is None else type(law).__name__ for law in first.friction)
+        return {"kind": "mechanism", "friction": laws, "links": ", ".join(el.describe() for el in first.links)}
+    return {"friction": type(first.friction).__name__, "actuator": type(first.actuator).__name__}
 
 
 def _check_writable(path: Path) -> None:

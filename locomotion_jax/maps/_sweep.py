@@ -48,6 +48,7 @@ from ._store import ChunkOrder, ChunkStore, read_finished
 
 
 if TYPE_CHECKING:
+    from ..model._bodies import Mechanism
     from ..model._chain import Chain
 from ._zarr_store import is_zarr
 
@@ -174,7 +175,7 @@ def sweep(
     progress: bool = True,
     on_invalid: Literal["raise", "flag"] = "raise",
     order: Literal["auto", "natural", "cost"] = "auto",
-    mechanism: "Callable[..., Chain] | None" = None,
+    mechanism: "Callable[..., Chain | Mechanism] | None" = None,
     t_start: float | None = None,
 ):
     """Evaluate [`measure`][] over a grid (or list) of parameters, in chunks, on all devices.
@@ -227,10 +228,10 @@ def sweep(
       large exact sweeps whose runs end at $\\tau_z$). The results are identical; a
       resumed sweep keeps the order it was started in. Recorded in the attribute `order`.
       A Zarr store is always cut in grid order (`"cost"` is refused there).
-    - `mechanism`: a map over chains of N masses instead of the paper's model: a
+    - `mechanism`: a map over chains of N masses (or mechanisms, SPEC §9) instead of the paper's model: a
       function from the swept values (keyword arguments named as the axes, plus
       `fixed`, each a 1-D array with one entry per configuration) to a batched
-      [`Chain`][] of that batch shape (build it with `check=False` and let
+      [`Chain`][] or [`Mechanism`][locomotion_jax.Mechanism] of that batch shape (build it with `check=False` and let
       `on_invalid` decide). The axes' names are then free. Chain maps run chunk by
       chunk on the dynamics' N-mass engine (`AbstractDynamics.measure_chain`), in memory or
       written to a NetCDF `path` when done (no resume, no Zarr store, grid order).
@@ -410,13 +411,16 @@ def sweep(
     return ds
 
 
-def _sweep_mechanism(mechanism: "Callable[..., Chain]", axes, fixed, mode, z, horizon, window, t_start, dynamics,
-                     contact, start, dtype, chunk_size, path, overwrite, progress, on_invalid, order):  # fmt: skip
+def _sweep_mechanism(mechanism: "Callable[..., Chain | Mechanism]", axes, fixed, mode, z, horizon, window, t_start,
+                     dynamics, contact, start, dtype, chunk_size, path, overwrite, progress, on_invalid,
+                     order):  # fmt: skip
     """`sweep` over chains built by `mechanism` (see `maps._chain_sweep`)."""
     from ._chain_sweep import sweep_chain
 
     if not callable(mechanism):
-        raise TypeError(f"mechanism must be a function of the swept values returning a Chain, got {mechanism!r}.")
+        raise TypeError(
+            f"mechanism must be a function of the swept values returning a Chain or a Mechanism, got {mechanism!r}."
+        )
     if order == "cost":
         raise ValueError("order='cost' is for maps of the paper's model; a chain map runs in grid order.")
     if on_invalid not in ("raise", "flag"):
