@@ -182,7 +182,7 @@ class MechanismPhysics(AbstractPhysics):
         return tuple(_sum(t, v[0]) for t in terms)
 
     def velocity_power(self, v: Scalars, u: Scalars) -> Array | None:
-        """$\sum c\,(v_b - v_a)(u_b - u_a)$ over the relative dampers: their dissipation at `u = v`."""
+        """$\\sum c\\,(v_b - v_a)(u_b - u_a)$ over the relative dampers: their dissipation at `u = v`."""
         if not self.dampers:
             return None
         return _sum([d.c * (v[int(d.b)] - v[int(d.a)]) * (u[int(d.b)] - u[int(d.a)]) for d in self.dampers], v[0])

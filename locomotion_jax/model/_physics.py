@@ -142,7 +142,7 @@ class AbstractPhysics(eqx.Module):
         return None
 
     def velocity_power(self, v: Scalars, u: Scalars) -> Array | None:
-        """The bilinear form $\sum c\,(v_b - v_a)(u_b - u_a)$ of those forces: at `u = v` the power they
+        """The bilinear form $\\sum c\\,(v_b - v_a)(u_b - u_a)$ of those forces: at `u = v` the power they
         dissipate (into $e_d$); `None` (the default): none."""
         return None
 
