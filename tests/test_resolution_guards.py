@@ -159,3 +159,19 @@ def test_a_tiny_k_is_flagged_in_a_batch_and_in_a_sweep():
     _same(m, alone, [0], ("status", "n_steps", "tau_z", "mean_speed", "e_d", "balance"))
     ds = lj.sweep(dict(k=np.array([1.0, 1e-20])), z=0.1, horizon=5.0, window=2.0, progress=False)
     assert ds.status.values.tolist()[1] == U and ds.status.values.tolist()[0] == int(m.status[0])
+
+
+def test_every_measurement_path_asks_for_the_default_start(monkeypatch):
+    # With the bound lowered to 1000 steps, the default starts of ordinary configurations (about
+    # 5e4 steps at dt = 0.01) are refused or flagged, on every path that measures from them.
+    from locomotion_jax.model import _scales
+
+    monkeypatch.setattr(_scales, "MAX_START_STEPS", 1000)
+    kw: dict[str, Any] = dict(z=0.1, horizon=5.0, window=2.0)
+    with pytest.raises(ValueError, match=r"'t_start'.*Params.t_start"):
+        lj.measure(lj.Params(), **kw)
+    with pytest.raises(ValueError, match=r"'t_start'.*Chain.t_start"):
+        lj.measure(lj.Chain(masses=[1.0, 1.0, 1.0]), **kw)
+    ds = lj.sweep(dict(k=np.array([1.0, 2.0])), **kw, progress=False)
+    assert ds.status.values.tolist() == [U, U]
+    assert int(lj.measure(lj.Params(), **SHORT).status) != U  # an explicit start is not limited
