@@ -52,6 +52,22 @@ RESOLUTION = "locomotion_jax/run/_resolution.py"
 VALIDATION = "tests/test_validation.py"
 RESOLUTION_TESTS = "tests/test_resolution.py"
 GUARDS_TESTS = "tests/test_resolution_guards.py"
+GAIT_GUARDS = tuple(
+    f"{GUARDS_TESTS}::{t}"
+    for t in (
+        "test_steady_gait_refuses_an_unresolved_configuration",
+        "test_steady_gait_flags_it_in_a_batch_and_leaves_the_others_bitwise_equal",
+        "test_chain_steady_gait_flags_it_in_a_batch_and_leaves_the_others_bitwise_equal",
+    )
+)
+MECHANISM_GUARDS = tuple(
+    f"{GUARDS_TESTS}::{t}"
+    for t in (
+        "test_mechanism_scales_match_closed_forms",
+        "test_an_unresolved_mechanism_is_refused",
+        "test_an_unresolved_mechanism_is_flagged_in_a_batch",
+    )
+)
 SCALES = "locomotion_jax/model/_scales.py"
 BODIES = "locomotion_jax/model/_bodies.py"
 
@@ -415,49 +431,49 @@ MUTATIONS = [
         "steady_gait (two masses): the resolution guard is not asked",
         "locomotion_jax/gaits/_gait.py",
         (("flat, unresolved = guard_two_mass(dynamics, flat, wave, shape)", "unresolved = None"),),
-        (GUARDS_TESTS + "::test_steady_gait_refuses_an_unresolved_configuration",),
+        GAIT_GUARDS,
     ),
     Mutation(
         "gait_unresolved_not_flagged",
         "steady_gait (two masses): an unresolved configuration of a batch reported INVALID",
         "locomotion_jax/gaits/_gait.py",
         (("base = select.unresolved(base, unresolved)", "base = base"),),
-        (GUARDS_TESTS, "-k", "steady_gait"),
+        GAIT_GUARDS,
     ),
     Mutation(
         "chain_gait_guard_dropped",
         "steady_gait (chains): the resolution guard is not asked",
         "locomotion_jax/gaits/_chain_gait.py",
         (("valid, unresolved = guard_chain(dynamics, flat, valid, shape)", "unresolved = None"),),
-        (GUARDS_TESTS, "-k", "steady_gait"),
+        GAIT_GUARDS,
     ),
     Mutation(
         "mechanism_springs_ignored",
         "Mechanism.time_scales: the springs' stiffness left out of the natural period",
         BODIES,
         (("K = K.at[:, a, a].add(k)", "K = K.at[:, a, a].add(0 * k)"),),
-        (GUARDS_TESTS, "-k", "mechanism"),
+        MECHANISM_GUARDS,
     ),
     Mutation(
         "mechanism_wall_springs_ignored",
         "Mechanism.time_scales: a spring to the wall left out (only springs between two bodies)",
         BODIES,
         (("for a in ends:", "for a in ends if len(ends) == 2 else []:"),),
-        (GUARDS_TESTS, "-k", "mechanism"),
+        MECHANISM_GUARDS,
     ),
     Mutation(
         "mechanism_forcing_ignored",
         "Mechanism.time_scales: the forcing's period not compared with the step",
         BODIES,
         (("scales.append(sc.forcing(fastest, sc.flat(fastest.omega, size)))", "pass"),),
-        (GUARDS_TESTS, "-k", "mechanism"),
+        MECHANISM_GUARDS,
     ),
     Mutation(
         "mechanism_carried_load_ignored",
         "Mechanism.time_scales: a friction time over the body's own weight, not the load it carries",
         BODIES,
         (("t = sc.flat(scale[0], size) * self.m[:, i] / load", "t = sc.flat(scale[0], size)"),),
-        (GUARDS_TESTS, "-k", "mechanism"),
+        MECHANISM_GUARDS,
     ),
     Mutation(
         "default_start_unbounded",

@@ -13,6 +13,7 @@ import locomotion_jax as lj
 import numpy as np
 import pytest
 from locomotion_jax.model._scales import MAX_START_STEPS
+from locomotion_jax.optimisation._optimum import ExactSettings
 
 
 SHORT: dict[str, Any] = dict(z=0.1, t_start=1.0, horizon=5.0, window=2.0)
@@ -175,3 +176,15 @@ def test_every_measurement_path_asks_for_the_default_start(monkeypatch):
     ds = lj.sweep(dict(k=np.array([1.0, 2.0])), **kw, progress=False)
     assert ds.status.values.tolist() == [U, U]
     assert int(lj.measure(lj.Params(), **SHORT).status) != U  # an explicit start is not limited
+
+
+# -- the optimisers' entry points ---------------------------------------------------------------
+
+
+def test_optimisers_refuse_a_step_that_does_not_resolve_the_mechanism():
+    # The paper's model: at mhat = 0.001 the natural period 2 pi / wn1 = 0.28 needs dt <= 0.07.
+    with pytest.raises(ValueError, match=r"Invalid parameter 'k'.*natural period.*\(optimise: .*ExactSettings.dt"):
+        lj.optimise(lj.Params(mhat=0.001), 1e-5, 1e-4, settings=ExactSettings(dt=0.1, margin=0.001))
+    # A chain: the fastest stroke the search may reach (a given omega, with its 3 harmonics).
+    with pytest.raises(ValueError, match=r"'omega'.*K = 3.*omega=10000.*\(optimise: omega = 10000 with 3 harmonics"):
+        lj.optimise(lj.Chain(masses=[1.0, 1.0, 1.0]), 0.01, 0.05, omega=1e4)

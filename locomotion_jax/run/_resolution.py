@@ -36,6 +36,7 @@ their steps by error control (a scale they cannot resolve ends as `MAX_STEPS` or
 
 import math
 from collections.abc import Mapping
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -167,6 +168,20 @@ def guard_values(values: Mapping[str, np.ndarray], dtype, dynamics: AbstractDyna
         return values, None
     mask = np.asarray(mask)
     return {**values, "mhat": np.where(mask, np.nan, values["mhat"])}, mask
+
+
+def refuse_search(mechanism: AbstractMechanism, waveform: Any, dt: float, what: str, skip: tuple[str, ...] = ()
+                  ) -> None:  # fmt: skip
+    """Raise the `ValueError` of `refuse`, with `what` appended, where the step `dt` does not
+    resolve one configuration (`mechanism` of batch shape `()`, at the fastest forcing a search
+    such as an optimiser's may reach; `waveform` for the paper's model, else `None`). The scales
+    named in `skip` are not checked (a search that verifies them by a convergence study)."""
+    one = jax.tree_util.tree_map(lambda x: jnp.reshape(x, (1,) + jnp.shape(x)), mechanism)
+    scales = lambda: [s for s in one.time_scales(waveform) if s.name not in skip]
+    try:
+        guard(Exact(dt), scales, one.is_valid().reshape(1), True, True)
+    except ValueError as err:
+        raise ValueError(f"{err} {what}") from None
 
 
 def flag(out: dict, mask) -> dict:
