@@ -188,3 +188,16 @@ def test_optimisers_refuse_a_step_that_does_not_resolve_the_mechanism():
     # A chain: the fastest stroke the search may reach (a given omega, with its 3 harmonics).
     with pytest.raises(ValueError, match=r"'omega'.*K = 3.*omega=10000.*\(optimise: omega = 10000 with 3 harmonics"):
         lj.optimise(lj.Chain(masses=[1.0, 1.0, 1.0]), 0.01, 0.05, omega=1e4)
+
+
+# -- continuation ----------------------------------------------------------------------------------
+
+
+def test_continuation_checks_both_ends_of_its_range():
+    with pytest.raises(ValueError, match=r"Invalid parameter 'omega'.*omega=10000"):
+        lj.continuation(lj.Params(omega=4.0), "omega", 1e4, max_points=3, **GAIT)
+    om = jnp.array([4.0, 4.0])
+    b = lj.continuation(lj.Params(omega=om), "omega", jnp.array([4.5, 1e4]), max_points=3, periods=1, transient=30)
+    status = [int(v) for v in np.asarray(b.status)]
+    assert status[1] == lj.BranchStatus.UNRESOLVED and status[0] != lj.BranchStatus.UNRESOLVED
+    assert int(np.asarray(b.n_points)[0]) > 0 and int(np.asarray(b.n_points)[1]) == 0
