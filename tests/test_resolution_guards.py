@@ -144,8 +144,10 @@ def test_an_explicit_t_start_is_not_limited():
 
 
 def test_the_limit_is_on_the_steps():
-    # Params(k).t_start = 80 * 2 pi / wmin with wmin = sqrt(k / max(m1, m2)) (m1 = m2 = 1 at mhat = 1/2).
-    k_edge = (80 * 2 * math.pi / (MAX_START_STEPS * 0.01)) ** 2
+    # Params(k).t_start = 80 * 2 pi / wmin with wmin = sqrt(k / max(m1, m2)) (m1 = m2 = 1 at mhat = 1/2),
+    # against the documented bound of 1e8 steps.
+    assert MAX_START_STEPS == 10**8
+    k_edge = (80 * 2 * math.pi / (1e8 * 0.01)) ** 2
     for k, refused in ((k_edge * 0.9, True), (k_edge * 1.1, False)):
         flat = lj.Params(k=jnp.array([k]), mhat=jnp.array([0.5]))
         assert bool(np.asarray(flat.start_scale().exceeded(0.01))[0]) == refused

@@ -51,7 +51,7 @@ class AbstractMechanism(eqx.Module):
 
     @abc.abstractmethod
     def time_scales(self, waveform: Any = None) -> list[Any]:
-        """The [`TimeScale`][locomotion_jax.model._scales.TimeScale]s of a flat batch of this
+        """The time scales (`TimeScale`s of `model._scales`) of a flat batch of this
         mechanism (batch shape `(size,)`) that a fixed step must resolve: the forcing's highest
         harmonic, the highest natural period, the damping times and a friction law's own time
         (`waveform`: the paper's model's actuation, `None` for its sinusoid; other mechanisms
@@ -60,7 +60,7 @@ class AbstractMechanism(eqx.Module):
     @abc.abstractmethod
     def start_scale(self) -> Any:
         """The default measurement start (`t_start`) of a flat batch as a span
-        [`TimeScale`][locomotion_jax.model._scales.TimeScale]: it may take at most
+        `TimeScale` (`model._scales`): it may take at most
         `MAX_START_STEPS` steps."""
 
     @abc.abstractmethod

@@ -1,6 +1,6 @@
 """The time scales a mechanism sets, which a fixed step must resolve (issue 29).
 
-Each mechanism reports its own through [`AbstractMechanism.time_scales`][] (the forcing's
+Each mechanism reports its own through `AbstractMechanism.time_scales` (the forcing's
 highest harmonic, its highest natural period, its damping and Stribeck times) and
 `AbstractMechanism.start_scale` (the default measurement start), so that the resolution
 guards of `run._resolution` never ask which kind of mechanism they hold.
