@@ -28,11 +28,14 @@ class Status(enum.IntEnum):
       $x_2 - x_1$) reached zero, which the model does not cover (the masses would pass
       through each other). The exact engines check every committed step's end and stop
       the run there (not located in time: the step that closed the gap is kept, so the
-      last state has a gap $\\le 0$); results cover the part that was integrated.
+      last state has a gap $\\le 0$); the smoothed dynamics locate the gap's zero as a
+      terminating event. Results cover the part that was integrated.
     - `UNRESOLVED`: the fixed step of [`Exact`][locomotion_jax.Exact] dynamics is too long for
       one of the configuration's time scales (the forcing's highest harmonic, a natural
       period, a damping or Stribeck time; docs/engines.md, "Resolution guards"); nothing
-      was integrated and every measurement holds its sentinel, as for `INVALID`.
+      was integrated and every measurement holds its sentinel, as for `INVALID`. Also a
+      measurement whose default start (`t_start` not given) would take more than
+      `MAX_START_STEPS` steps (a very soft spring).
     """
 
     OK = 0

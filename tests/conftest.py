@@ -137,3 +137,12 @@ import sys
 
 # `reference.py` (the independent scipy solver) is imported by several tests.
 sys.path.insert(0, str(Path(__file__).parent))
+
+
+@pytest.fixture
+def isolate_xla_flags(monkeypatch):
+    """For the CLI tests (`cli_helpers`): the CLI sets XLA_FLAGS (--cpu-devices) for its own
+    process. Start JAX's backend first, so that this test process keeps its devices, and undo
+    the variable after."""
+    jax.devices()
+    monkeypatch.setenv("XLA_FLAGS", os.environ.get("XLA_FLAGS", ""))

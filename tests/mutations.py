@@ -51,6 +51,25 @@ FRICTION = "locomotion_jax/model/_friction.py"
 RESOLUTION = "locomotion_jax/run/_resolution.py"
 VALIDATION = "tests/test_validation.py"
 RESOLUTION_TESTS = "tests/test_resolution.py"
+GUARDS_TESTS = "tests/test_resolution_guards.py"
+GAIT_GUARDS = tuple(
+    f"{GUARDS_TESTS}::{t}"
+    for t in (
+        "test_steady_gait_refuses_an_unresolved_configuration",
+        "test_steady_gait_flags_it_in_a_batch_and_leaves_the_others_bitwise_equal",
+        "test_chain_steady_gait_flags_it_in_a_batch_and_leaves_the_others_bitwise_equal",
+    )
+)
+MECHANISM_GUARDS = tuple(
+    f"{GUARDS_TESTS}::{t}"
+    for t in (
+        "test_mechanism_scales_match_closed_forms",
+        "test_an_unresolved_mechanism_is_refused",
+        "test_an_unresolved_mechanism_is_flagged_in_a_batch",
+    )
+)
+SCALES = "locomotion_jax/model/_scales.py"
+BODIES = "locomotion_jax/model/_bodies.py"
 
 MUTATIONS = [
     # -- the bugs an outside audit found uncaught ----------------------------------------------
@@ -382,21 +401,21 @@ MUTATIONS = [
         "resolution_guard_dropped",
         "resolution guard: no scale is compared with the step",
         RESOLUTION,
-        (("bad = bad | (dt > s.limit())", "bad = bad | (dt > jnp.inf)"),),
+        (("bad = bad | s.exceeded(dt)", "bad = bad | (dt > jnp.inf)"),),
         (RESOLUTION_TESTS,),
     ),
     Mutation(
         "resolution_threshold_halved",
         "resolution guard: 2 steps per period instead of 4",
-        RESOLUTION,
+        SCALES,
         (("STEPS_PER_PERIOD = 4", "STEPS_PER_PERIOD = 2"),),
         (RESOLUTION_TESTS,),
     ),
     Mutation(
         "resolution_natural_period_ignored",
         "resolution guard: the natural periods are not checked (only the forcing)",
-        RESOLUTION,
-        (("natural = 2 * math.pi / params.wn1", "natural = jnp.inf * params.wn1"),),
+        PARAMS,
+        (("2 * math.pi / self.wn1, sc.STEPS_PER_PERIOD", "jnp.inf * self.wn1, sc.STEPS_PER_PERIOD"),),
         (RESOLUTION_TESTS,),
     ),
     Mutation(
@@ -405,6 +424,75 @@ MUTATIONS = [
         RESOLUTION,
         (("xp.where(mask, Status.UNRESOLVED, status)", "xp.where(mask, Status.INVALID, status)"),),
         (RESOLUTION_TESTS,),
+    ),
+    # -- the guards of steady gaits, a Mechanism's own scales and the default start ----------------
+    Mutation(
+        "gait_guard_dropped",
+        "steady_gait (two masses): the resolution guard is not asked",
+        "locomotion_jax/gaits/_gait.py",
+        (("flat, unresolved = guard_two_mass(dynamics, flat, wave, shape)", "unresolved = None"),),
+        GAIT_GUARDS,
+    ),
+    Mutation(
+        "gait_unresolved_not_flagged",
+        "steady_gait (two masses): an unresolved configuration of a batch reported INVALID",
+        "locomotion_jax/gaits/_gait.py",
+        (("base = select.unresolved(base, unresolved)", "base = base"),),
+        GAIT_GUARDS,
+    ),
+    Mutation(
+        "chain_gait_guard_dropped",
+        "steady_gait (chains): the resolution guard is not asked",
+        "locomotion_jax/gaits/_chain_gait.py",
+        (("valid, unresolved = guard_chain(dynamics, flat, valid, shape)", "unresolved = None"),),
+        GAIT_GUARDS,
+    ),
+    Mutation(
+        "mechanism_springs_ignored",
+        "Mechanism.time_scales: the springs' stiffness left out of the natural period",
+        BODIES,
+        (("K = K.at[:, a, a].add(k)", "K = K.at[:, a, a].add(0 * k)"),),
+        MECHANISM_GUARDS,
+    ),
+    Mutation(
+        "mechanism_wall_springs_ignored",
+        "Mechanism.time_scales: a spring to the wall left out (only springs between two bodies)",
+        BODIES,
+        (("for a in ends:", "for a in ends if len(ends) == 2 else []:"),),
+        MECHANISM_GUARDS,
+    ),
+    Mutation(
+        "mechanism_forcing_ignored",
+        "Mechanism.time_scales: the forcing's period not compared with the step",
+        BODIES,
+        (("scales.append(sc.forcing(fastest, sc.flat(fastest.omega, size)))", "pass"),),
+        MECHANISM_GUARDS,
+    ),
+    Mutation(
+        "mechanism_carried_load_ignored",
+        "Mechanism.time_scales: a friction time over the body's own weight, not the load it carries",
+        BODIES,
+        (("t = sc.flat(scale[0], size) * self.m[:, i] / load", "t = sc.flat(scale[0], size)"),),
+        MECHANISM_GUARDS,
+    ),
+    Mutation(
+        "default_start_unbounded",
+        "measure: the default t_start of the paper's model is not bounded",
+        "locomotion_jax/run/_measure.py",
+        (
+            (
+                "guard_two_mass(dynamics, flat, wave, shape, default_start=ts is None)",
+                "guard_two_mass(dynamics, flat, wave, shape, default_start=False)",
+            ),
+        ),  # fmt: skip
+        (GUARDS_TESTS + "::test_every_measurement_path_asks_for_the_default_start",),
+    ),
+    Mutation(
+        "default_start_bound_loosened",
+        "the default start may take 1e12 steps instead of 1e8",
+        SCALES,
+        (("MAX_START_STEPS = 10**8", "MAX_START_STEPS = 10**12"),),
+        (GUARDS_TESTS + "::test_the_limit_is_on_the_steps",),
     ),
 ]
 

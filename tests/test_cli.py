@@ -12,26 +12,14 @@ import numpy as np
 import pytest
 import typer
 import xarray as xr
+from cli_helpers import invoke, runner
 from locomotion_jax import _json
 from locomotion_jax.cli import _main as _cli
 from locomotion_jax.maps import _sweep
-from typer.testing import CliRunner
 
 
 FAST = ["--z", "0.3", "--horizon", "30", "--window", "5", "--dt", "0.02"]
-runner = CliRunner()
-
-
-@pytest.fixture(autouse=True)
-def _isolate_xla_flags(monkeypatch):
-    # The CLI sets XLA_FLAGS (--cpu-devices) for its own process. Start JAX's backend
-    # first, so that this test process keeps its devices, and undo the variable after.
-    jax.devices()
-    monkeypatch.setenv("XLA_FLAGS", os.environ.get("XLA_FLAGS", ""))
-
-
-def invoke(*args: str):
-    return runner.invoke(_cli.app, list(args))
+pytestmark = pytest.mark.usefixtures("isolate_xla_flags")
 
 
 def _strict_json(text: str):

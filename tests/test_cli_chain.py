@@ -6,16 +6,14 @@ compilation is shared)."""
 import json
 import os
 
-import jax
 import locomotion_jax as lj
 import numpy as np
 import pytest
 import xarray as xr
-from locomotion_jax.cli import _main as _cli
-from typer.testing import CliRunner
+from cli_helpers import invoke
 
 
-runner = CliRunner()
+pytestmark = pytest.mark.usefixtures("isolate_xla_flags")
 MECH = ["--masses", "1,1,1", "--d", "0", "--friction", "anisotropic", "--mu-s-bwd", "0.9", "--mu-k-bwd", "0.7"]
 WAVE = ["--a", "0.08", "--omega", "3", "--phi", "2.0944"]
 
@@ -23,17 +21,6 @@ WAVE = ["--a", "0.08", "--omega", "3", "--phi", "2.0944"]
 def worm(a=0.08, omega=3.0, phi=2.0944) -> lj.Chain:
     return lj.Chain(masses=[1.0] * 3, d=0.0, waveforms=lj.TravellingWave(a, omega, phi),
                     friction=lj.AnisotropicCoulomb(0.7, 0.9, 0.5, 0.7))  # fmt: skip
-
-
-@pytest.fixture(autouse=True)
-def _isolate_xla_flags(monkeypatch):
-    # As in test_cli.py: the CLI sets XLA_FLAGS for its own process; keep this one's devices.
-    jax.devices()
-    monkeypatch.setenv("XLA_FLAGS", os.environ.get("XLA_FLAGS", ""))
-
-
-def invoke(*args: str):
-    return runner.invoke(_cli.app, list(args))
 
 
 def test_chain_simulate_json_and_plot(tmp_path):

@@ -7,32 +7,19 @@ is tested is that the file's mechanism reaches the library unchanged; the librar
 """
 
 import json
-import os
 from pathlib import Path
 
 import equinox as eqx
-import jax
 import locomotion_jax as lj
 import numpy as np
 import pytest
-from locomotion_jax.cli import _main as _cli
+from cli_helpers import invoke
 from test_cli_files import assert_record_equals
-from typer.testing import CliRunner
 
 
-runner = CliRunner()
+pytestmark = pytest.mark.usefixtures("isolate_xla_flags")
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 WORM, PAPER = str(EXAMPLES / "worm.toml"), str(EXAMPLES / "paper.toml")
-
-
-@pytest.fixture(autouse=True)
-def _isolate_xla_flags(monkeypatch):
-    jax.devices()
-    monkeypatch.setenv("XLA_FLAGS", os.environ.get("XLA_FLAGS", ""))
-
-
-def invoke(*args: str):
-    return runner.invoke(_cli.app, list(args))
 
 
 class Captured(ValueError):

@@ -2,32 +2,18 @@
 an unreadable or broken file is one line `Error: ...`, exit code 2, no traceback (typer's CliRunner)."""
 
 import json
-import os
 from pathlib import Path
 
-import jax
 import locomotion_jax as lj
 import numpy as np
 import pytest
-from locomotion_jax.cli import _main as _cli
-from typer.testing import CliRunner
+from cli_helpers import invoke
 
 
-runner = CliRunner()
+pytestmark = pytest.mark.usefixtures("isolate_xla_flags")
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 # Short runs; the settings of tests/test_files.py's measurement, so the compilation is shared.
 SHORT = ["--z", "1", "--horizon", "40", "--window", "10", "--t-start", "20", "--dt", "0.02"]
-
-
-@pytest.fixture(autouse=True)
-def _isolate_xla_flags(monkeypatch):
-    # As in test_cli.py: the CLI sets XLA_FLAGS for its own process; keep this one's devices.
-    jax.devices()
-    monkeypatch.setenv("XLA_FLAGS", os.environ.get("XLA_FLAGS", ""))
-
-
-def invoke(*args: str):
-    return runner.invoke(_cli.app, list(args))
 
 
 def assert_record_equals(record: dict, m) -> None:

@@ -1,28 +1,15 @@
 """`locomotion-jax gait` and `locomotion-jax continue` (typer's CliRunner; one configuration each)."""
 
 import json
-import os
 
-import jax
 import locomotion_jax as lj
 import numpy as np
 import pytest
-from locomotion_jax.cli import _main as _cli
-from typer.testing import CliRunner
+from cli_helpers import invoke
 
 
-pytestmark = pytest.mark.xdist_group("gait")  # shares the compiled solver with the other gait tests
-runner = CliRunner()
-
-
-@pytest.fixture(autouse=True)
-def _isolate_xla_flags(monkeypatch):
-    jax.devices()  # as in test_cli.py: the CLI's --cpu-devices must not change this process's devices
-    monkeypatch.setenv("XLA_FLAGS", os.environ.get("XLA_FLAGS", ""))
-
-
-def invoke(*args: str):
-    return runner.invoke(_cli.app, list(args))
+# The gait group shares the compiled solver with the other gait tests.
+pytestmark = [pytest.mark.xdist_group("gait"), pytest.mark.usefixtures("isolate_xla_flags")]
 
 
 def _strict_json(text: str):

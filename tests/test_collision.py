@@ -53,3 +53,35 @@ def test_two_mass_engine_flags_the_collision():
 def test_the_status_is_named_where_statuses_are_listed():
     assert lj.Status(5).name == "COLLISION"
     assert "5 COLLISION" in DESCRIPTIONS["status"]
+
+
+def _met_first(status):
+    s = [int(v) for v in np.asarray(status)]
+    assert s[0] == lj.Status.COLLISION and s[1] != lj.Status.COLLISION, s
+
+
+def test_smoothed_dynamics_flag_the_collision():
+    # The smoothed engines locate the gap's zero as a terminating event. (The mate, far from
+    # resonance, may exhaust the smoothed solver's steps: it must not be flagged a collision.)
+    smooth = lj.Smoothed(max_steps=20000)
+    tr = lj.simulate(_capsule(), 60.0, save_at=SAVE, dynamics=smooth)
+    _met_first(tr.status)
+    gap = _gaps(np.asarray(tr.x), np.asarray(tr.valid))
+    assert gap[0] >= -1e-9 and gap[1] > 0.5
+    m = lj.measure(_capsule(), z=100.0, t_start=10.0, horizon=50.0, window=10.0, dynamics=smooth)
+    _met_first(m.status)
+    params = lj.Params(omega=OMEGA, k=K, d=0.0, a=A)
+    m2 = lj.measure(params, z=100.0, horizon=50.0, window=10.0, dynamics=smooth)
+    _met_first(m2.status)
+    tr2 = lj.simulate(params, 60.0, save_at=SAVE, dynamics=smooth)
+    _met_first(tr2.status)
+
+
+def test_gaits_flag_the_collision():
+    # The transient of the resonant capsule has its masses meet: no orbit is reported, and the
+    # status says why; the mate's gait is solved as usual.
+    for mech in (_capsule(), lj.Params(omega=OMEGA, k=K, d=0.0, a=A)):
+        g = lj.steady_gait(mech, periods=1, transient=30)
+        s = [int(v) for v in np.asarray(g.status)]
+        assert s[0] == lj.GaitStatus.COLLISION and s[1] == lj.GaitStatus.CONVERGED, s
+        assert np.isnan(float(np.asarray(g.mean_speed)[0])) and not bool(np.asarray(g.converged)[0])

@@ -44,7 +44,7 @@ def _resolution_error(scales) -> float:
     r = 0.0
     for s in scales:
         t = float(np.asarray(s.time).reshape(-1)[0])
-        if np.isfinite(t) and t > 0:
+        if np.isfinite(t) and t > 0 and s.unit != "span":
             r = max(r, DT / t * (2 * math.pi if s.unit == "period" else 1.0))
     return min(r, 1e3) ** 4
 
@@ -112,7 +112,13 @@ FLOAT_FIELDS = ("tau_z", "e_z", "mean_speed", "cost_of_transport", "e_d", "work"
 SENTINEL_INF = ("tau_z", "e_z", "cost_of_transport", "t_liftoff")  # documented `inf`: not reached / none
 
 
-def _check_measurement(m, i=(), rtol=BALANCE_RTOL):
+def _check_measurement(m, i=(), rtol=BALANCE_RTOL, energy=None):
+    """`energy()`: the largest energy the mechanism holds during the run, asked for only where the
+    residual exceeds `rtol` against the energies exchanged in the window. The fuzz found two runs
+    whose residual is the integration error of a much larger stored energy: a frictionless,
+    undriven one exchanges nothing (residual 6.6e-10, energy 0.07), and a frictionless stiff
+    one (`k = 1000`) exchanges 1e-3 while it holds 0.05 (residual 5e-4 at `dt = 0.01`, 1.6e-5
+    at 0.005, 5e-7 at 0.0025: the step's fifth-order convergence)."""
     status = int(np.asarray(m.status)[i])
     assert status in {int(s) for s in lj.Status}
     if status != lj.Status.OK:
@@ -124,7 +130,24 @@ def _check_measurement(m, i=(), rtol=BALANCE_RTOL):
             assert np.isfinite(v).all(), f"status OK with {name} = {v}"
     work, e_d, de, bal = (float(np.asarray(getattr(m, k))[i]) for k in ("work", "e_d", "delta_e", "balance"))
     scale = max(abs(work), abs(e_d), abs(de), 1e-12)
+    if abs(bal) > rtol * scale + 1e-12 and energy is not None:
+        scale = max(scale, abs(energy()))
     assert abs(bal) <= rtol * scale + 1e-12, f"energy balance {bal} against energies of {scale} (rtol {rtol:.3g})"
+
+
+def _start_energy(p, wave=None):
+    """The largest energy (eq. 10) of one configuration of the paper's model over the run."""
+    return _held(p, wave)
+
+
+def _held(mechanism, wave=None):
+    """The largest energy one configuration (the paper's model or a chain) holds over the run.
+    (Also found at `LJ_FUZZ_SCALE=20`: a frictionless, undriven chain, residual 5e-11 of its
+    held energy, none exchanged.)"""
+    t = SHORT["t_start"] + SHORT["horizon"]
+    kw = {} if wave is None else dict(waveform=wave)
+    run = lambda: lj.simulate(mechanism, t, np.linspace(0.0, t, 65), dynamics=lj.Exact(DT), **kw)
+    return lambda: float(np.max(np.abs(np.asarray(run().e))))
 
 
 def _two_mass_rtol(p, wave=None) -> float:
@@ -148,7 +171,7 @@ def test_fuzz_paper_model_measure(values):
     except ValueError as err:
         _refused_clearly(err)
         return
-    _check_measurement(m, rtol=_two_mass_rtol(p))
+    _check_measurement(m, rtol=_two_mass_rtol(p), energy=_start_energy(p))
 
 
 @_fuzz(25)
@@ -178,7 +201,7 @@ def test_fuzz_fourier_waveform(values, cos, sin):
     except ValueError as err:
         _refused_clearly(err)
         return
-    _check_measurement(m, rtol=_two_mass_rtol(p, wave))
+    _check_measurement(m, rtol=_two_mass_rtol(p, wave), energy=_start_energy(p, wave))
 
 
 def _friction(kind: str, mu_s, mu_k, v_s):
@@ -218,7 +241,7 @@ def test_fuzz_chain_measure(kind, values):
     except ValueError as err:
         _refused_clearly(err)
         return
-    _check_measurement(m, rtol=BALANCE_RTOL + _resolution_error(chain_scales(_flat(chain))))
+    _check_measurement(m, rtol=BALANCE_RTOL + _resolution_error(chain_scales(_flat(chain))), energy=_held(chain))
 
 
 @_fuzz(60)

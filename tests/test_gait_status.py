@@ -15,7 +15,7 @@ def test_gait_status_is_an_int_enum_like_status():
         assert lj.GaitStatus[member.name] is member
     # One enum: the solvers' codes are its members.
     assert _select.GaitStatus is lj.GaitStatus
-    assert [int(m) for m in lj.GaitStatus] == [0, 1, 2, 3]
+    assert [int(m) for m in lj.GaitStatus] == [0, 1, 2, 3, 4, 5]
     with pytest.raises(ValueError):
         lj.GaitStatus(99)
 

@@ -71,12 +71,25 @@ def _normal_min(C: Chain, contact: Contact, t: Array, y: Array) -> Array:
     return _loads(C, contact, t, y[: C.m.shape[-1]])[4].min()
 
 
+def _gap_min(C: Chain, y: Array) -> Array:
+    n = C.m.shape[-1]
+    gaps = C.physics().gaps(tuple(y[i] for i in range(n)))
+    return jnp.min(jnp.stack(gaps)) if gaps else jnp.asarray(jnp.inf, y.dtype)
+
+
+def met_index(contact: Contact, n_extra: int = 0) -> int:
+    """The index of the event "two bodies met" in a `solve` with `n_extra` extra events."""
+    return n_extra + (1 if contact == "strict" else 0)
+
+
 def solve(C: Chain, contact: Contact, dyn: "Smoothed", t0, t1, y0, saveat, extra_events=()) -> diffrax.Solution:
-    """One diffrax solve; a strict-contact lift-off (and any `extra_events`) terminates it."""
+    """One diffrax solve; a strict-contact lift-off, two bodies meeting (the smallest gap
+    `AbstractPhysics.gaps` reaching zero, event `met_index`) and any `extra_events` terminate it."""
     term = diffrax.ODETerm(lambda t, y, args: rates(C, contact, dyn.eps, t, y))
     conds = list(extra_events)
     if contact == "strict":
         conds.append(lambda t, y, args, **kw: _normal_min(C, contact, t, y))
+    conds.append(lambda t, y, args, **kw: _gap_min(C, y))
     event = diffrax.Event(conds, root_finder=optx.Newton(rtol=1e-10, atol=1e-12)) if conds else None
     solver = diffrax.Tsit5() if dyn.solver == "tsit5" else diffrax.Kvaerno5()
     return diffrax.diffeqsolve(
@@ -138,7 +151,9 @@ def simulate_one(C: Chain, valid: Array, save: Array, contact: Contact, start: s
     last = jnp.max(jnp.where(ok_rows, jnp.arange(ys.shape[0]), 0))
     ys = jnp.where(ok_rows[:, None], ys, ys[last][None, :])
     lift = _event_hit(sol, 0) if contact == "strict" else jnp.asarray(False)
+    met = _event_hit(sol, met_index(contact))  # two bodies met (outside the model): the run stops there
     status = jnp.where(lift, Status.LIFTOFF, jnp.where(_failed(sol), Status.SOLVER_FAILED, Status.OK))
+    status = jnp.where(met, Status.COLLISION, status)
     status = jnp.where(valid, status, Status.INVALID).astype(jnp.int32)
     t_lift = jnp.where(lift, sol_ts[-1], jnp.inf)
     x, v = ys[:, :n_mass], ys[:, n_mass : 2 * n_mass]
@@ -178,7 +193,8 @@ def measure_one(
     solA = solve(C, contact, dyn, jnp.zeros((), dtype), ws, y0, diffrax.SaveAt(t1=True))
     tsA, ysA = _saved(solA)
     liftA = _event_hit(solA, 0) if contact == "strict" else jnp.asarray(False)
-    okA = ~liftA & ~_failed(solA) & valid
+    metA = _event_hit(solA, met_index(contact))
+    okA = ~liftA & ~metA & ~_failed(solA) & valid
     yA = jnp.where(okA, ysA[-1], y0)
     X0 = com(yA)
     ts = ws + jnp.linspace(0, 1, WINDOW_SAMPLES, dtype=dtype) * window
@@ -197,6 +213,7 @@ def measure_one(
     yC, tC = ysC[-1], tsC[-1]
     reached = _event_hit(solC, 0) & okA
     liftC = _event_hit(solC, 1) if contact == "strict" else jnp.asarray(False)
+    met = metA | _event_hit(solC, met_index(contact, 1))
     nan, inf = jnp.asarray(jnp.nan, dtype), jnp.asarray(jnp.inf, dtype)
     i_ed, i_w = 2 * n_mass, 2 * n_mass + 1
     e_d = jnp.where(okA, yC[i_ed] - yA[i_ed], nan)
@@ -205,6 +222,7 @@ def measure_one(
     lift = liftA | liftC
     failed = _failed(solA) | _failed(solC)
     status = jnp.where(lift, Status.LIFTOFF, jnp.where(failed, Status.SOLVER_FAILED, Status.OK))
+    status = jnp.where(met & ~lift, Status.COLLISION, status)
     status = jnp.where(valid, status, Status.INVALID).astype(jnp.int32)
     elapsed = tC - ws
     e_z = jnp.where(reached, e_d, inf)

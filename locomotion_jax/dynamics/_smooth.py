@@ -63,11 +63,13 @@ def _liftoff_fn(params, wave, contact):
 
 
 def solve(params, wave, contact, dyn: "Smoothed", t0, t1, y0, saveat, extra_events=()):
-    """One diffrax solve; a strict-contact lift-off (and any `extra_events`) terminates it."""
+    """One diffrax solve; a strict-contact lift-off, the masses meeting (the gap $x_2 - x_1$
+    reaching zero, event `met_index`) and any `extra_events` terminate it."""
     term = diffrax.ODETerm(lambda t, y, args: smooth_rates(params, wave, contact, dyn.eps, t, y))
     conds = list(extra_events)
     if contact == "strict":
         conds.append(_liftoff_fn(params, wave, contact))
+    conds.append(lambda t, y, args, **kwargs: y[2] - y[0])
     event = None
     if conds:
         event = diffrax.Event(conds, root_finder=optx.Newton(rtol=1e-10, atol=1e-12))
@@ -115,6 +117,11 @@ def _event_hit(sol, k) -> Array:
     return jnp.asarray(sol.event_mask[k])
 
 
+def met_index(contact: Contact, n_extra: int = 0) -> int:
+    """The index of the event "the masses met" in a `solve` with `n_extra` extra events."""
+    return n_extra + (1 if contact == "strict" else 0)
+
+
 def _failed(sol) -> Array:
     ok = (sol.result == diffrax.RESULTS.successful) | (sol.result == diffrax.RESULTS.event_occurred)
     return ~ok
@@ -132,7 +139,9 @@ def simulate_one(params, wave, save, contact, start, dyn):
     last = jnp.max(jnp.where(ok_rows, jnp.arange(ys.shape[0]), 0))
     ys = jnp.where(ok_rows[:, None], ys, ys[last][None, :])
     lift = _event_hit(sol, 0) if contact == "strict" else jnp.asarray(False)
+    met = _event_hit(sol, met_index(contact))  # the masses met (outside the model): the run stops there
     status = jnp.where(lift, Status.LIFTOFF, jnp.where(_failed(sol), Status.SOLVER_FAILED, Status.OK))
+    status = jnp.where(met, Status.COLLISION, status)
     status = jnp.where(valid, status, Status.INVALID).astype(jnp.int32)
     t_lift = jnp.where(lift, t_final, jnp.inf)
 
@@ -198,7 +207,8 @@ def measure_one(params, wave, z, horizon, window, contact, start, dyn: "Smoothed
     tsA, ysA = _saved(solA)
     yA = ysA[-1]
     liftA = _event_hit(solA, 0) if contact == "strict" else jnp.asarray(False)
-    okA = ~liftA & ~_failed(solA) & valid
+    metA = _event_hit(solA, met_index(contact))
+    okA = ~liftA & ~metA & ~_failed(solA) & valid
     yA = jnp.where(okA, yA, y0)
     X0 = com(yA)
     ts = ws + jnp.linspace(0, 1, WINDOW_SAMPLES, dtype=dtype) * window
@@ -217,6 +227,7 @@ def measure_one(params, wave, z, horizon, window, contact, start, dyn: "Smoothed
     yC = ysC[-1]
     reached = _event_hit(solC, 0) & okA
     liftC = _event_hit(solC, 1) if contact == "strict" else jnp.asarray(False)
+    met = metA | _event_hit(solC, met_index(contact, 1))
     tC = tsC[-1]
     nan = jnp.asarray(jnp.nan, dtype)
     inf = jnp.asarray(jnp.inf, dtype)
@@ -228,6 +239,7 @@ def measure_one(params, wave, z, horizon, window, contact, start, dyn: "Smoothed
     lift = liftA | liftC
     failed = _failed(solA) | _failed(solC)
     status = jnp.where(lift, Status.LIFTOFF, jnp.where(failed, Status.SOLVER_FAILED, Status.OK))
+    status = jnp.where(met & ~lift, Status.COLLISION, status)
     status = jnp.where(valid, status, Status.INVALID).astype(jnp.int32)
     t_lift = jnp.where(liftA, tsA[-1], jnp.where(liftC, tC, inf))
     elapsed = tC - ws

@@ -31,6 +31,7 @@ from ..dynamics._runs import chain_initial_state, default_max_steps, STICK_TOL
 from ..model._chain import Chain
 from ..model._physics import AbstractPhysics
 from ..run._batch import check_contact_start, prepare_chain, unflatten
+from ..run._resolution import guard_chain
 from . import _select as select
 from ._select import GaitStatus
 
@@ -207,6 +208,7 @@ def steady_gait_chain(
     shape `batch + (2N - 1,)`)."""
     check_contact_start(contact, start if isinstance(start, str) else "paper")
     flat, valid, shape = prepare_chain(chain, dtype)
+    valid, unresolved = guard_chain(dynamics, flat, valid, shape)  # refused alone, skipped in a batch
     y_start = None
     if not isinstance(start, str):
         n_red = 2 * flat.n_masses - 1
@@ -234,10 +236,11 @@ def steady_gait_chain(
     y0, trans, trans_lift = _transient_batch(flat, valid, contact, start, dynamics.dt, real(transient), mst, y_start)
     trans = np.asarray(trans)
     base = np.select(
-        [trans == Status.INVALID, trans == Status.LIFTOFF, trans != Status.OK],
-        [GaitStatus.INVALID, GaitStatus.LIFTOFF, GaitStatus.NOT_CONVERGED],
+        [trans == Status.INVALID, trans == Status.LIFTOFF, trans == Status.COLLISION, trans != Status.OK],
+        [GaitStatus.INVALID, GaitStatus.LIFTOFF, GaitStatus.COLLISION, GaitStatus.NOT_CONVERGED],
         -1,
     )
+    base = select.unresolved(base, unresolved)
     best = None
     for k in ks:
         msp = jnp.asarray(dynamics.max_steps or default_max_steps(k * T_max, dynamics.dt), jnp.int32)

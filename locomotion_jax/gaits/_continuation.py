@@ -33,6 +33,7 @@ from ..dynamics._runs import default_max_steps, STICK_TOL
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform
 from ..run._batch import prepare
+from ..run._resolution import guard_two_mass
 from . import _corrector as corrector
 from ._bifurcation import BranchEvents, find_events, kinds
 from ._gait import GaitStatus, steady_gait
@@ -54,6 +55,10 @@ class BranchStatus:
     - `LIFTOFF`: strict reading: a normal force of the orbit reaches zero ahead.
     - `INVALID`: the parameter left its valid range ahead, or the start's parameters are invalid.
     - `NO_START`: no gait converged at the start (the start's `Gait.status` says why).
+    - `UNRESOLVED`: the step of `Exact` dynamics does not resolve a time scale of the start or of
+      the configuration at `stop` (`Status.UNRESOLVED`; the scales are monotonic in every
+      parameter between them or, for `mhat`, largest at the ends); nothing was continued. One
+      configuration alone is refused with a `ValueError` instead.
     """
 
     REACHED = 0
@@ -63,6 +68,7 @@ class BranchStatus:
     LIFTOFF = 4
     INVALID = 5
     NO_START = 6
+    UNRESOLVED = 7
 
 
 class Branch(eqx.Module):
@@ -224,10 +230,19 @@ def continuation(
     f32 = jnp.finfo(flat.dtype).bits < 64
     tol = (1e-5 if f32 else 1e-11) if tol is None else float(tol)
 
+    # The far end of the range must be resolved too (the start is checked by `steady_gait`).
+    # (A Fourier coefficient sets no time scale: the forcing's harmonics are counted, not weighed.)
+    far = None
+    if spec.harmonic < 0:
+        lam = jnp.asarray(stops, flat.dtype)
+        end, end_wave = corrector.with_value(flat, wave, corrector.selector(spec, wave), lam)
+        _, far = guard_two_mass(dynamics, end, end_wave, shape)
+    far = np.zeros(B, bool) if far is None else np.asarray(far)
     g = steady_gait(params, periods=periods, transient=transient, tol=tol, dynamics=dynamics,
                     waveform=waveform, contact=contact, start=start, dtype=dtype)  # fmt: skip
     fl = lambda x: np.asarray(x).reshape(B, *np.shape(x)[len(shape) :])
-    ok = fl(g.converged)
+    unresolved = far | (fl(g.status) == GaitStatus.UNRESOLVED)
+    ok = fl(g.converged) & ~unresolved
     k = np.where(ok, fl(g.k), 1)
     scale = stops - lam0
     omega = np.broadcast_to(np.asarray(wave.omega, np.float64), (B,))
@@ -244,6 +259,7 @@ def continuation(
     ok = ok & r.done
     status = np.where(ok, BranchStatus.MAX_POINTS, np.where(fl(g.status) == GaitStatus.INVALID,
                       BranchStatus.INVALID, BranchStatus.NO_START))  # fmt: skip
+    status = np.where(unresolved, BranchStatus.UNRESOLVED, status)
     walk = _Walk(solve, r, ok, step, max_step, min_step, max_points)
     walk.run(status)
     data = _pack(walk.points, solve, k)

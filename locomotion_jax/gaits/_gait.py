@@ -34,6 +34,7 @@ from ..model._chain import Chain
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform
 from ..run._batch import mechanism_arg, prepare, unflatten
+from ..run._resolution import guard_two_mass
 from . import _corrector as corrector, _period as period, _select as select
 from ._chain_gait import ChainGait
 from ._select import GaitStatus as GaitStatus
@@ -226,9 +227,15 @@ def _chain(chain: Chain, periods, transient, tol, max_iter, dynamics: Exact, wav
                              dynamics=dynamics, contact=contact, start=start, dtype=dtype)  # fmt: skip
 
 
-def _two_mass(params: Params, periods, transient, tol, max_iter, dynamics: Exact, waveform, contact, start, dtype):
+def _two_mass(params: Params, periods, transient, tol, max_iter, dynamics: Exact, waveform, contact, start, dtype,
+              guarded: bool = True):  # fmt: skip
+    """`guarded=False` skips the resolution guard: only for a caller that checks the resolution
+    itself by a convergence study (the exact optimiser's verification solves at `dt` and `dt/2`)."""
     model.check_contact(contact)
     flat, wave, axes, shape = prepare(params, waveform, dtype)
+    unresolved = None
+    if guarded:
+        flat, unresolved = guard_two_mass(dynamics, flat, wave, shape)  # refused alone, skipped in a batch
     y_start = _start_states(start, shape, flat.dtype)
     f32 = jnp.finfo(flat.dtype).bits < 64
     tol = (1e-5 if f32 else 1e-11) if tol is None else float(tol)
@@ -247,10 +254,11 @@ def _two_mass(params: Params, periods, transient, tol, max_iter, dynamics: Exact
     valid, trans = np.asarray(valid) & select.periodic(omega, shape), np.asarray(trans)
     # -1: to be solved; else the final status (invalid, a strict lift-off, the step cap).
     base = np.select(
-        [~valid, trans == Status.LIFTOFF, trans != Status.OK],
-        [GaitStatus.INVALID, GaitStatus.LIFTOFF, GaitStatus.NOT_CONVERGED],
+        [~valid, trans == Status.LIFTOFF, trans == Status.COLLISION, trans != Status.OK],
+        [GaitStatus.INVALID, GaitStatus.LIFTOFF, GaitStatus.COLLISION, GaitStatus.NOT_CONVERGED],
         -1,
     )
+    base = select.unresolved(base, unresolved)
     best = None
     for k in ks:
         msp = jnp.asarray(dynamics.max_steps or default_max_steps(k * T_max, dynamics.dt), jnp.int32)

@@ -24,12 +24,27 @@ class GaitStatus(enum.IntEnum):
     - `LIFTOFF`: a normal force reached zero under the strict reading (transient or orbit).
     - `INVALID`: parameters outside their valid range (nothing was integrated), or no
       forcing period ($\\omega \\le 0$: a gait is periodic in $2\\pi/\\omega$).
+    - `UNRESOLVED`: the step of [`Exact`][locomotion_jax.Exact] dynamics does not resolve one of
+      the configuration's time scales (`Status.UNRESOLVED`: the forcing's highest harmonic, a
+      natural period, a damping or friction time); nothing was integrated. One configuration
+      alone is refused with a `ValueError` instead.
+    - `COLLISION`: two neighbouring bodies met (`Status.COLLISION`) in the transient or on the
+      period map from the last Newton iterate; no orbit is reported, since the model does not
+      cover masses passing through each other.
     """
 
     CONVERGED = 0
     NOT_CONVERGED = 1
     LIFTOFF = 2
     INVALID = 3
+    UNRESOLVED = 4
+    COLLISION = 5
+
+
+def unresolved(base: np.ndarray, mask: Any) -> np.ndarray:
+    """`base` (the codes of the configurations not to solve, -1 elsewhere) with `UNRESOLVED` where
+    `mask` (the resolution guard's, `None`: none)."""
+    return base if mask is None else np.where(np.asarray(mask), GaitStatus.UNRESOLVED, base)
 
 
 def periodic(omega: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
@@ -84,8 +99,9 @@ def judge(r: dict, base: np.ndarray, k: int, lifted: np.ndarray) -> dict:
     `k`: status (`base` where the configuration was not solved: its final code, else -1),
     lift-off, the reported `k`, multipliers and stability."""
     out = r["out"]
+    failed = np.where(out.status == Status.COLLISION, GaitStatus.COLLISION, GaitStatus.NOT_CONVERGED)
     solved = np.where(out.status == Status.LIFTOFF, GaitStatus.LIFTOFF,
-                      np.where(r["done"], GaitStatus.CONVERGED, GaitStatus.NOT_CONVERGED))  # fmt: skip
+                      np.where(r["done"], GaitStatus.CONVERGED, failed))  # fmt: skip
     r["status"] = np.where(base < 0, solved, base).astype(np.int32)
     r["lifted"] = lifted
     r["residual"] = np.where(base < 0, r["residual"], np.nan)

@@ -130,12 +130,13 @@ def dispatch_chunk(
     - `mesh`: from [`batch_mesh`][].
     - `micro_batch`: configurations vmapped together per device (default [`MICRO_BATCH`][]: all).
 
-    A configuration whose step does not resolve its time scales (`run._resolution`) is run as
-    an invalid one (not integrated) and [`fetch`][] flags it `Status.UNRESOLVED`.
+    A configuration whose step does not resolve its time scales, or whose `Params.t_start` takes
+    more than `MAX_START_STEPS` steps (`run._resolution`), is run as an invalid one (not
+    integrated) and [`fetch`][] flags it `Status.UNRESOLVED`.
 
     **Returns:** a dict of sharded arrays (one per `Measurement` field); read them with [`fetch`][].
     """
-    values, unresolved = guard_values(values, dtype, dynamics)
+    values, unresolved = guard_values(values, dtype, dynamics, default_start=True)  # a sweep starts at Params.t_start
     out = _run_chunk(
         *_chunk_args(values, dtype, z, horizon, window, dynamics, contact, start, max_steps, mesh, micro_batch)
     )

@@ -307,6 +307,59 @@ class Mechanism(AbstractMechanism):
         w = self.omega
         return jnp.where(w > 0, MEASURE_PERIODS * 2 * math.pi / jnp.where(w > 0, w, 1), 0.0)
 
+    def time_scales(self, waveform: Any = None) -> list[Any]:
+        """The resolution guards' scales (`AbstractMechanism.time_scales`; the elements carry
+        their waveforms) of a flat batch:
+
+        - the forcing: the highest harmonic of every actuated element and external force;
+        - $2\\pi/\\omega_\\max$ of the free linearised bodies: every spring, wall springs
+          included, in the stiffness matrix, over the diagonal mass matrix;
+        - the damping time $\\min_i m_i/c_i$;
+        - a friction law's own time (`AbstractFriction.time_scale`), over the normal load of
+          the body: $(m_i/N_i)\\,v_s/\\mu_s$ with $N_i$ the weights it carries."""
+        from . import _scales as sc
+
+        n, size = self.n_bodies, self.batch_shape[0]
+        scales = []
+        waves = self.waveforms()
+        if waves:
+            fastest = max(waves, key=sc.harmonics)
+            scales.append(sc.forcing(fastest, sc.flat(fastest.omega, size)))
+        K = jnp.zeros((size, n, n), self.dtype)
+        k_max = jnp.zeros((size,), self.dtype)
+        for el in self.links:
+            k = el.values().get("k")  # a spring's stiffness (other elements have none)
+            if k is None:
+                continue
+            k = sc.flat(k, size)
+            k_max = jnp.maximum(k_max, k)
+            ends = [e for e in el.bodies() if e != WALL]
+            for a in ends:
+                K = K.at[:, a, a].add(k)
+            if len(ends) == 2:
+                K = K.at[:, ends[0], ends[1]].add(-k).at[:, ends[1], ends[0]].add(-k)
+        natural = 2 * math.pi / sc.free_frequency(self.m, K)
+        scales.append(sc.TimeScale("k", "natural period 2*pi/w_max of the free bodies and springs", natural,
+                                   sc.STEPS_PER_PERIOD, "period",
+                                   {"k (largest)": k_max, "masses (smallest)": self.m.min(-1)}))  # fmt: skip
+        scales.append(sc.TimeScale("c", "damping time min_i m_i/c_i", jnp.min(self.m / self.c, -1), sc.STEPS_PER_TIME,
+                                   "damping time", {"c (largest)": self.c.max(-1)}))  # fmt: skip
+        for i, law in enumerate(self.friction):
+            scale = None if law is None else law.time_scale()
+            if scale is None:
+                continue
+            load = sum(self.m[:, j] for j in range(n) if ground_body(self.carried_by, j) == i)
+            t = sc.flat(scale[0], size) * self.m[:, i] / load
+            scales.append(sc.TimeScale("v_s", f"friction time (m_i/N_i) v_s/mu_s of body {i}", t, sc.STEPS_PER_TIME,
+                                       "friction time", {"v_s": sc.flat(scale[1], size)}))  # fmt: skip
+        return scales
+
+    def start_scale(self) -> Any:
+        from ._scales import start_span
+
+        what = f"Mechanism.t_start ({MEASURE_PERIODS} periods of the actuation)"
+        return start_span(self.t_start, what, {"omega": self.omega})
+
     # -- validation -----------------------------------------------------------------------
 
     def _checks(self) -> list[tuple[str, str, Array, str, Any]]:

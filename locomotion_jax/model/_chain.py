@@ -275,6 +275,40 @@ class Chain(AbstractMechanism):
         """Default start of the measurement: 80 periods of [`omega_min`][] (Sect. 3 for $N = 2$)."""
         return 80 * 2 * math.pi / self.omega_min
 
+    def time_scales(self, waveform: Any = None) -> list[Any]:
+        """The resolution guards' scales (`AbstractMechanism.time_scales`; a chain carries its
+        waveforms): the forcing's highest harmonic, $2\\pi/\\omega_\\max$ of the free linearised
+        chain (by eigenvalue interlacing no lower than any of `natural_frequencies`), the
+        damping time $\\min_i m_i/c_i$ and, under a `Stribeck` law, $v_s/\\mu_s$: the time over
+        which friction alone (normal force $m_i g$, $g = 1$) changes a speed by $v_s$."""
+        from . import _scales as sc
+
+        n = self.n_masses
+        j = jnp.arange(n - 1)
+        K = jnp.zeros(self.k.shape[:-1] + (n, n), self.k.dtype)
+        K = K.at[..., j, j].add(self.k).at[..., j + 1, j + 1].add(self.k)
+        K = K.at[..., j, j + 1].add(-self.k).at[..., j + 1, j].add(-self.k)
+        natural = 2 * math.pi / sc.free_frequency(self.m, K)
+        scales = [
+            sc.forcing(self.waves, self.waves.omega),
+            sc.TimeScale("k", "natural period 2*pi/w_max of the free chain", natural, sc.STEPS_PER_PERIOD, "period",
+                         {"k (largest)": self.k.max(-1), "masses (smallest)": self.m.min(-1)}),
+            sc.TimeScale("c", "damping time min_i m_i/c_i", jnp.min(self.m / self.c, -1), sc.STEPS_PER_TIME,
+                         "damping time", {"c (largest)": self.c.max(-1)}),
+        ]  # fmt: skip
+        law = self.friction.time_scale()
+        if law is not None:
+            t, v_s = (jnp.min(jnp.broadcast_to(x, self.m.shape), -1) for x in law)
+            scales.append(sc.TimeScale("v_s", "Stribeck time v_s/mu_s", t, sc.STEPS_PER_TIME, "Stribeck time",
+                                       {"v_s (smallest)": v_s}))  # fmt: skip
+        return scales
+
+    def start_scale(self) -> Any:
+        from ._scales import start_span
+
+        what = "Chain.t_start (80 periods of the lowest natural frequency with one mass held)"
+        return start_span(self.t_start, what, {"k (smallest)": self.k.min(-1), "masses (largest)": self.m.max(-1)})
+
     # -- validation ------------------------------------------------------------------
 
     def _checks(self) -> list[tuple[str, Array, str, str]]:

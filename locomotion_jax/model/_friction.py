@@ -44,6 +44,12 @@ class AbstractFriction(eqx.Module):
         returns it, and the engine skips those terms)."""
         return jax.jvp(lambda s: self.kinetic(s, direction), (speed,), (speed_rate,))[1]
 
+    def time_scale(self) -> tuple[Array, Array] | None:
+        """The law's own time scale for the resolution guards, per mass, and the speed scale that
+        sets it: `None` for a law without one (Coulomb). `Stribeck`: $(v_s/\\mu_s, v_s)$, the time
+        over which friction alone (normal force $m_i g$, $g = 1$) changes a speed by $v_s$."""
+        return None
+
     def smoothed(self, v: Array, eps: Array, v_s: Array) -> Array:
         """Smoothed friction coefficient, odd in $v$, for the smoothed dynamics (SPEC §3):
 
@@ -202,6 +208,10 @@ class Stribeck(AbstractFriction):
         # derivative) finite however small v_s is.
         r = jnp.minimum(speed / self.v_s, STRIBECK_R_MAX)
         return mu_k + (mu_s - mu_k) * jnp.exp(-r * r)
+
+    def time_scale(self) -> tuple[Array, Array] | None:
+        mu = jnp.maximum(jnp.maximum(self.mu_s, self.mu_s_bwd), 1e-300)
+        return self.v_s / mu, self.v_s
 
     def validity(self) -> dict[str, Array]:
         # 1 / v_s**2 must be finite: the law's rate (dense output, event prediction) scales with it.

@@ -50,5 +50,19 @@ class AbstractMechanism(eqx.Module):
         N-body engine integrates this mechanism with."""
 
     @abc.abstractmethod
+    def time_scales(self, waveform: Any = None) -> list[Any]:
+        """The time scales (`TimeScale`s of `model._scales`) of a flat batch of this
+        mechanism (batch shape `(size,)`) that a fixed step must resolve: the forcing's highest
+        harmonic, the highest natural period, the damping times and a friction law's own time
+        (`waveform`: the paper's model's actuation, `None` for its sinusoid; other mechanisms
+        carry their own). The resolution guards (`run._resolution`) read them."""
+
+    @abc.abstractmethod
+    def start_scale(self) -> Any:
+        """The default measurement start (`t_start`) of a flat batch as a span
+        `TimeScale` (`model._scales`): it may take at most
+        `MAX_START_STEPS` steps."""
+
+    @abc.abstractmethod
     def dispatch(self, *, two_mass: Callable[[Any], R], chain: Callable[[Any], R]) -> R:
         """`two_mass(self)` for a `Params`, `chain(self)` for a `Chain`."""

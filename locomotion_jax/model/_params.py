@@ -255,6 +255,30 @@ class Params(AbstractMechanism):
         wmin = jnp.minimum(jnp.minimum(self.wn1, self.wn2), self.wn3)
         return 80 * 2 * math.pi / wmin
 
+    def time_scales(self, waveform: Any = None) -> list[Any]:
+        """The resolution guards' scales (`AbstractMechanism.time_scales`): the forcing of
+        `waveform` (default the sinusoid of these parameters), the natural period
+        $2\\pi/\\omega_{n1}$ (eq. 11; $\\omega_{n1} \\ge \\omega_{n2}, \\omega_{n3}$) and the
+        damping time $\\min(m_1, m_2)/c$."""
+        from . import _scales as sc
+        from ._waveform import Sinusoid
+
+        wave = Sinusoid.from_params(self) if waveform is None else waveform
+        omega = sc.flat(wave.omega, self.batch_shape[0])
+        return [
+            sc.forcing(wave, omega),
+            sc.TimeScale("k", "natural period 2*pi/wn1 (eq. 11)", 2 * math.pi / self.wn1, sc.STEPS_PER_PERIOD,
+                         "period", {"k": self.k, "mhat": self.mhat}),
+            sc.TimeScale("c", "damping time min(m1, m2)/c", jnp.minimum(self.m1, self.m2) / self.c, sc.STEPS_PER_TIME,
+                         "damping time", {"c": self.c, "mhat": self.mhat}),
+        ]  # fmt: skip
+
+    def start_scale(self) -> Any:
+        from ._scales import start_span
+
+        what = "Params.t_start (80 periods of the lowest natural frequency)"
+        return start_span(self.t_start, what, {"k": self.k, "mhat": self.mhat})
+
     # -- validation -----------------------------------------------------------
 
     def is_valid(self) -> Array:

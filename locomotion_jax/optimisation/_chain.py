@@ -39,6 +39,8 @@ import numpy as np
 from ..gaits._chain_orbit import ChainOracle
 from ..model._actuator import RestLength
 from ..model._chain import Chain
+from ..model._springwaves import SpringFourier
+from ..run._resolution import refuse_search
 from . import _chain_local as local, _chain_screen as screen
 from ._chain_optimum import ChainOptimiseSettings, ChainOptimum
 from ._lockstep import run_lockstep
@@ -105,6 +107,10 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     S, H = base.n_masses - 1, int(harmonics)
     lo, hi = screen.frequency_range(base, omega, settings)
     free = hi > lo
+    fastest = base.with_waves(SpringFourier(np.zeros((S, H)), np.zeros((S, H)), hi))
+    what = "given" if omega is not None else "ChainOptimiseSettings.omega_max times the highest natural frequency"
+    refuse_search(fastest, None, settings.dt, f"(optimise: omega = {hi:.6g} with {H} harmonics, {what}; the step "
+                  "is ChainOptimiseSettings.dt.)")  # fmt: skip
 
     # 1. Travelling waves. Progress from the first second: compiling the screen alone takes minutes.
     size = settings.amplitudes * settings.frequencies * settings.phases

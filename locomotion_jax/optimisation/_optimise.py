@@ -54,6 +54,7 @@ from ..model._chain import Chain
 from ..model._params import Params
 from ..model._waveform import Fourier
 from ..run._batch import mechanism_arg
+from ..run._resolution import refuse_search
 from . import _constraints as cons, _pareto as pareto
 from ._chain_optimum import ChainOptimiseSettings, ChainOptimum
 from ._objective import make_plan, Plan, rollout
@@ -382,6 +383,9 @@ def _optimise_params(params: Params, v_min, a_max, method, direction, omega, har
     if exact and harmonics < 2:
         raise ValueError(f"harmonics must be an integer >= 2 for method='exact', got {harmonics!r}.")
     speed, direction = cons.check_inputs(params, v_min, a_max, direction, harmonics, omega, settings.margin)
+    shape = SplineShape(knots=cast(ExactSettings, settings).knots) if spline else FourierShape(harmonics=harmonics)
+    if exact:
+        _guard_search(params, omega, shape, cast(ExactSettings, settings))
     if sweep is None:
         dt = cast(ExactSettings, settings).dt if exact else cast(Settings, settings).verify_dt
         sweep = pareto.sinusoid_sweep(params, a_max, dt=dt)
@@ -391,9 +395,23 @@ def _optimise_params(params: Params, v_min, a_max, method, direction, omega, har
     baseline = _baseline(params, a_max, speed, direction, sweep, s.refine_baseline, s.dt)
     from ._exact import optimise_exact
 
-    shape = SplineShape(knots=s.knots) if spline else FourierShape(harmonics=harmonics)
     opt, _ = optimise_exact(params, speed, direction, a_max, omega, shape, s, baseline, start)
     return opt
+
+
+def _guard_search(params: Params, omega: float | None, shape: Any, settings: ExactSettings) -> None:
+    """Refuse a search whose step `settings.dt` does not resolve the mechanism's own scales
+    (natural period, damping; `run._resolution`). The stroke's harmonics or knots at the highest
+    frequency the search reaches are not guarded here: the verification solves each candidate at
+    `dt` and `dt/2` and keeps only those that agree (`HALF_STEP_RTOL`), a convergence check."""
+    from ._exact import _omega_bounds, GRID
+
+    _, hi = _omega_bounds(params, omega, settings)
+    one = jnp.asarray(1.0, params.dtype)
+    wave = shape.waveform(jnp.asarray(shape.fit(np.zeros(GRID), hi), params.dtype), one, jnp.asarray(params.lbar))
+    what = "given" if omega is not None else "ExactSettings.omega_max * wn1, the highest the search reaches"
+    refuse_search(params, wave, settings.dt, f"(optimise: omega = {hi:.6g}, {what}; the step is ExactSettings.dt.)",
+                  skip=("omega",))  # fmt: skip
 
 
 def _optimise_chain(chain, v_min, a_max, method, direction, omega, harmonics, settings, sweep, start):

@@ -144,9 +144,9 @@ def measure(
 def _two_mass(params: Params, dynamics: AbstractDynamics, z, horizon, window, t_start, waveform, contact, start,
               initial, dtype) -> Measurement:  # fmt: skip
     flat, wave, axes, shape = prepare(params, waveform, dtype)
-    flat, unresolved = guard_two_mass(dynamics, flat, wave, shape)
-    y0 = prepare_initial(initial, shape, flat.dtype)
     ts = _start_times(t_start, shape, flat.dtype)
+    flat, unresolved = guard_two_mass(dynamics, flat, wave, shape, default_start=ts is None)
+    y0 = prepare_initial(initial, shape, flat.dtype)
     out = flag(dynamics.measure_two_mass(flat, wave, axes, z, horizon, window, contact, start, ts, y0), unresolved)
     return Measurement(**unflatten(out, shape), z=z, start="initial" if initial is not None else start, contact=contact)
 
@@ -167,10 +167,10 @@ def measure_chain(chain: Chain | Mechanism, dynamics: AbstractDynamics, z: float
     chunks of a chain sweep)."""
     check_contact_start(contact, start)
     flat, valid, shape = prepare_chain(chain, dtype)
-    valid, unresolved = guard_chain(dynamics, flat, valid, shape)
+    ts = _start_times(t_start, shape, flat.dtype)  # checked on the host, as for the two-mass model
+    valid, unresolved = guard_chain(dynamics, flat, valid, shape, default_start=ts is None)
     y0 = prepare_chain_initial(initial, shape, flat.n_masses, flat.dtype, flat)
     n = valid.shape[0]
-    ts = _start_times(t_start, shape, flat.dtype)  # checked on the host, as for the two-mass model
     if ts is None:
         ts = jnp.full((n,), jnp.inf, flat.dtype)  # the chains' own, `Chain.t_start`
     out = flag(dynamics.measure_chain(flat, valid, ts, z, horizon, window, contact, start, y0), unresolved)

@@ -11,22 +11,29 @@ each configuration's shortest time scales with its step before anything runs:
   `SpringFourier`, the number of knots of a `Spline`, whose pieces span $2\\pi/(M\\omega)$);
 - the mechanism: its highest natural period, $2\\pi/\\omega_{n1}$ for the paper's model
   (eq. 11; $\\omega_{n1} \\ge \\omega_{n2}, \\omega_{n3}$) and $2\\pi/\\omega_\\max$ of the
-  free linearised chain for a `Chain` (by eigenvalue interlacing, no higher than any
-  frequency of `Chain.natural_frequencies` with one mass held);
+  free linearised bodies for a `Chain` or a `Mechanism` (every spring, wall springs included;
+  by eigenvalue interlacing no higher than any frequency with one mass held);
 - the damping: the decay time $m_i / c_i$ of each mass;
 - a `Stribeck` law: the time $v_s / \\mu_s$ over which friction alone (normal force
   $m_i g$, $g = 1$) changes a speed by the law's own scale $v_s$.
 
-A period needs `STEPS_PER_PERIOD` steps, a decay or Stribeck time `STEPS_PER_TIME`. A
-configuration whose step is longer is refused with a `ValueError` naming the parameter
-and the largest step that resolves it (one configuration whose values are known), or
-flagged `Status.UNRESOLVED` in its own result and never run (a batch, or under `jit`).
+Each mechanism reports these itself (`AbstractMechanism.time_scales`, `model._scales`), so
+the guards do not ask which kind of mechanism they hold. A period needs `STEPS_PER_PERIOD`
+steps, a decay or Stribeck time `STEPS_PER_TIME`. A configuration whose step is longer is
+refused with a `ValueError` naming the parameter and the largest step that resolves it (one
+configuration whose values are known), or flagged `Status.UNRESOLVED` in its own result and
+never run (a batch, or under `jit`).
+
+A measurement's default start (`t_start` not given: 80 periods of the lowest natural
+frequency, `AbstractMechanism.start_scale`) may take at most `MAX_START_STEPS` steps: a valid
+but very soft spring would otherwise set a start of ages. Such a configuration is refused
+naming `t_start` and the spring, or flagged `UNRESOLVED` in a batch; an explicit `t_start`
+is not limited.
 Only [`Exact`][locomotion_jax.Exact] dynamics are guarded: the smoothed dynamics choose
 their steps by error control (a scale they cannot resolve ends as `MAX_STEPS` or
 `SOLVER_FAILED`), and a dynamics of one's own states its own needs.
 """
 
-import dataclasses
 import math
 from collections.abc import Mapping
 from typing import Any
@@ -39,49 +46,17 @@ import numpy as np
 from .._status import Status
 from ..dynamics._base import AbstractDynamics
 from ..dynamics._exact_dynamics import Exact
-from ..model._chain import Chain
 from ..model._checks import is_concrete
-from ..model._friction import Stribeck
+from ..model._mechanism import AbstractMechanism
 from ..model._params import Params
-from ..model._springwaves import SpringFourier
-from ..model._waveform import AbstractWaveform, Fourier, Sinusoid, Spline
-
-
-STEPS_PER_PERIOD = 4
-"""Least steps per forcing or natural period: $\\omega\\,\\Delta t \\le \\pi/2$, inside RK4's
-stability interval ($|\\omega \\Delta t| < 2\\sqrt 2$) with a margin of 1.8, and twice the
-sampling theorem's two points per period. The paper's figures take at least 8.8 steps per
-period (Fig. 12, quick size: $\\omega_{n1} = 35.7$ at $\\hat m = 0.02$ with `dt = 0.02`),
-so none of them is affected."""
-
-STEPS_PER_TIME = 1
-"""Least steps per damping time $m_i/c_i$ or Stribeck time $v_s/\\mu_s$ (not periods:
-RK4 is stable for a decay rate up to $2.78/\\Delta t$)."""
-
-
-@dataclasses.dataclass(frozen=True)
-class Scale:
-    """One time scale of every configuration of a flat batch, and what sets it."""
-
-    name: str  # the parameter a message names
-    what: str  # e.g. "forcing period 2*pi/(K*omega)"
-    time: jax.Array  # shape (size,)
-    steps: int
-    unit: str  # "period" or "time": what `steps` counts per
-    shown: Mapping[str, jax.Array]  # values a message shows, each shape (size,)
-
-    def limit(self) -> jax.Array:
-        """The longest step that resolves it."""
-        return self.time / self.steps
-
-
-def harmonics(wave: AbstractWaveform | SpringFourier) -> int:
-    """$K$: the forcing's shortest period is $2\\pi/(K\\omega)$ (a spline's knot spacing for a `Spline`)."""
-    if isinstance(wave, (Fourier, SpringFourier)):
-        return int(wave.harmonics)
-    if isinstance(wave, Spline):
-        return int(wave.knots)
-    return 1
+from ..model._scales import (  # noqa: F401 (re-exported: the tests and sweeps read them here)
+    harmonics,
+    MAX_START_STEPS,
+    STEPS_PER_PERIOD,
+    STEPS_PER_TIME,
+    TimeScale as Scale,
+)
+from ..model._waveform import AbstractWaveform, Sinusoid
 
 
 def _flat(x, size: int) -> jax.Array:
@@ -89,76 +64,45 @@ def _flat(x, size: int) -> jax.Array:
     return jnp.broadcast_to(x.reshape((-1,)) if x.size == size else x.reshape(()), (size,))
 
 
-def _forcing(wave: AbstractWaveform | SpringFourier, omega: jax.Array) -> Scale:
-    K = harmonics(wave)
-    what = f"forcing period 2*pi/(K*omega) (K = {K})"
-    return Scale("omega", what, 2 * math.pi / (K * omega), STEPS_PER_PERIOD, "period", {"omega": omega})
-
-
 def two_mass_scales(params: Params, wave: AbstractWaveform) -> list[Scale]:
     """The scales of a flat batch of the paper's model (`params` of shape `(size,)`)."""
-    omega = _flat(wave.omega, params.batch_shape[0])
-    m_min = jnp.minimum(params.m1, params.m2)
-    natural = 2 * math.pi / params.wn1
-    return [
-        _forcing(wave, omega),
-        Scale("k", "natural period 2*pi/wn1 (eq. 11)", natural, STEPS_PER_PERIOD, "period",
-              {"k": params.k, "mhat": params.mhat}),
-        Scale("c", "damping time min(m1, m2)/c", m_min / params.c, STEPS_PER_TIME, "damping time",
-              {"c": params.c, "mhat": params.mhat}),
-    ]  # fmt: skip
+    return params.time_scales(wave)
 
 
-def _free_frequency(chain: Chain) -> jax.Array:
-    """Highest natural frequency of the free linearised chain (no mass held), batch shape."""
-    n = chain.n_masses
-    j = jnp.arange(n - 1)
-    K = jnp.zeros(chain.k.shape[:-1] + (n, n), chain.k.dtype)
-    K = K.at[..., j, j].add(chain.k).at[..., j + 1, j + 1].add(chain.k)
-    K = K.at[..., j, j + 1].add(-chain.k).at[..., j + 1, j].add(-chain.k)
-    s = 1 / jnp.sqrt(chain.m)
-    return jnp.sqrt(jnp.clip(jnp.linalg.eigvalsh(K * s[..., :, None] * s[..., None, :])[..., -1], 0))
-
-
-def chain_scales(chain: Chain) -> list[Scale]:
-    """The scales of a flat, broadcast batch of chains (batch shape `(size,)`)."""
-    natural = 2 * math.pi / _free_frequency(chain)
-    decay = jnp.min(chain.m / chain.c, -1)
-    scales = [
-        _forcing(chain.waves, chain.waves.omega),
-        Scale("k", "natural period 2*pi/w_max of the free chain", natural, STEPS_PER_PERIOD, "period",
-              {"k (largest)": chain.k.max(-1), "masses (smallest)": chain.m.min(-1)}),
-        Scale("c", "damping time min_i m_i/c_i", decay, STEPS_PER_TIME, "damping time",
-              {"c (largest)": chain.c.max(-1)}),
-    ]  # fmt: skip
-    fr = chain.friction
-    if isinstance(fr, Stribeck):
-        t = jnp.min(fr.v_s / jnp.maximum(jnp.maximum(fr.mu_s, fr.mu_s_bwd), 1e-300), -1)
-        scales.append(Scale("v_s", "Stribeck time v_s/mu_s", t, STEPS_PER_TIME, "Stribeck time",
-                            {"v_s (smallest)": fr.v_s.min(-1)}))  # fmt: skip
-    return scales
+def chain_scales(mechanism: AbstractMechanism) -> list[Scale]:
+    """The scales of a flat, broadcast batch of a mechanism of the N-body path (a chain or a
+    `Mechanism`; batch shape `(size,)`)."""
+    return mechanism.time_scales()
 
 
 def unresolved(scales: list[Scale], dt: float, valid: jax.Array) -> jax.Array:
-    """Mask of the valid configurations whose step `dt` is longer than one of their scales allows."""
+    """Mask of the valid configurations whose step `dt` does not serve one of their scales."""
     bad = jnp.zeros_like(valid)
     for s in scales:
-        bad = bad | (dt > s.limit())  # False for NaN: an invalid configuration stays INVALID
+        bad = bad | s.exceeded(dt)  # False for NaN: an invalid configuration stays INVALID
     return valid & bad
 
 
 def refuse(scales: list[Scale], dt: float) -> None:
     """Raise the `ValueError` for one configuration whose values are known (index 0)."""
     for s in scales:
-        limit = float(np.asarray(s.limit())[0])
-        if dt > limit:
-            shown = ", ".join(f"{n}={float(np.asarray(v)[0]):.6g}" for n, v in s.shown.items())
+        if not bool(np.asarray(s.exceeded(dt))[0]):
+            continue
+        shown = ", ".join(f"{n}={float(np.asarray(v)[0]):.6g}" for n, v in s.shown.items())
+        time = float(np.asarray(s.time)[0])
+        if s.unit == "span":
             raise ValueError(
-                f"Invalid parameter {s.name!r}: Exact(dt={dt!r}) does not resolve the {s.what} = "
-                f"{float(np.asarray(s.time)[0]):.6g} ({shown}); it needs dt <= {limit:.3g} ({s.steps} steps per "
-                f"{s.unit}). Give Exact(dt={_round_down(limit)!r}) "
-                "or smaller, or change the parameter."
+                f"Invalid parameter 't_start': the {s.what} = {time:.6g} ({shown}) would take {time / dt:.3g} steps "
+                f"of Exact(dt={dt!r}), more than {s.steps:.3g}. Give an explicit t_start= (e.g. a few periods of "
+                "the forcing), or stiffer springs."
             )
+        limit = float(np.asarray(s.limit())[0])
+        raise ValueError(
+            f"Invalid parameter {s.name!r}: Exact(dt={dt!r}) does not resolve the {s.what} = "
+            f"{time:.6g} ({shown}); it needs dt <= {limit:.3g} ({s.steps} steps per "
+            f"{s.unit}). Give Exact(dt={_round_down(limit)!r}) "
+            "or smaller, or change the parameter."
+        )
 
 
 def _round_down(x: float) -> float:
@@ -185,12 +129,15 @@ def guard(dynamics: AbstractDynamics, scales_fn, valid: jax.Array, scalar: bool,
     return mask
 
 
-def guard_two_mass(dynamics: AbstractDynamics, flat: Params, wave: AbstractWaveform, shape: tuple[int, ...]):
+def guard_two_mass(dynamics: AbstractDynamics, flat: Params, wave: AbstractWaveform, shape: tuple[int, ...],
+                   default_start: bool = False):  # fmt: skip
     """`(flat, mask)`: the flat params with the unresolved configurations marked invalid (the
-    engines then skip them; `flag` turns their status into `UNRESOLVED`), and the mask or `None`."""
+    engines then skip them; `flag` turns their status into `UNRESOLVED`), and the mask or `None`.
+    `default_start`: the run starts its measurement at `Params.t_start` (its span is guarded)."""
     size = flat.batch_shape[0]
     valid = flat.is_valid() & _flat(wave.is_valid(), size)
-    mask = guard(dynamics, lambda: two_mass_scales(flat, wave), valid, shape == (), is_concrete((flat, wave)))
+    scales = lambda: flat.time_scales(wave) + ([flat.start_scale()] if default_start else [])
+    mask = guard(dynamics, scales, valid, shape == (), is_concrete((flat, wave)))
     if mask is None:
         return flat, None
     # An invalid configuration is never advanced by the engines (`safe_params`): that is how a
@@ -198,27 +145,43 @@ def guard_two_mass(dynamics: AbstractDynamics, flat: Params, wave: AbstractWavef
     return eqx.tree_at(lambda p: p.mhat, flat, jnp.where(mask, jnp.nan, flat.mhat)), mask
 
 
-def guard_chain(dynamics: AbstractDynamics, flat: Any, valid: jax.Array, shape: tuple[int, ...]):
-    """`(valid, mask)`: `valid` without the unresolved chains, and the mask or `None`. A
-    [`Mechanism`][locomotion_jax.Mechanism]'s time scales are not guarded yet (`None`)."""
-    if not isinstance(flat, Chain):
-        return valid, None
-    mask = guard(dynamics, lambda: chain_scales(flat), valid, shape == (), is_concrete((flat, valid)))
+def guard_chain(dynamics: AbstractDynamics, flat: AbstractMechanism, valid: jax.Array, shape: tuple[int, ...],
+                default_start: bool = False):  # fmt: skip
+    """`(valid, mask)`: `valid` without the unresolved configurations of a flat mechanism of the
+    N-body path (a [`Chain`][] or a [`Mechanism`][locomotion_jax.Mechanism]), and the mask or
+    `None`; `default_start` as in `guard_two_mass`."""
+    scales = lambda: flat.time_scales() + ([flat.start_scale()] if default_start else [])
+    mask = guard(dynamics, scales, valid, shape == (), is_concrete((flat, valid)))
     return (valid, None) if mask is None else (valid & ~mask, mask)
 
 
-def guard_values(values: Mapping[str, np.ndarray], dtype, dynamics: AbstractDynamics):
+def guard_values(values: Mapping[str, np.ndarray], dtype, dynamics: AbstractDynamics, default_start: bool = False):
     """A sweep chunk's host values with the unresolved configurations made invalid (NaN), and
     their mask (host) or `None` (the sweeps then set their status with `flag`)."""
     if not isinstance(dynamics, Exact):
         return values, None
     with np.errstate(all="ignore"):
         flat = Params(**{n: jnp.asarray(v, dtype) for n, v in values.items()}, check=False)
-        mask = guard(dynamics, lambda: two_mass_scales(flat, Sinusoid.from_params(flat)), flat.is_valid(), False, True)
+        scales = lambda: flat.time_scales(Sinusoid.from_params(flat)) + ([flat.start_scale()] if default_start else [])
+        mask = guard(dynamics, scales, flat.is_valid(), False, True)
     if mask is None:
         return values, None
     mask = np.asarray(mask)
     return {**values, "mhat": np.where(mask, np.nan, values["mhat"])}, mask
+
+
+def refuse_search(mechanism: AbstractMechanism, waveform: Any, dt: float, what: str, skip: tuple[str, ...] = ()
+                  ) -> None:  # fmt: skip
+    """Raise the `ValueError` of `refuse`, with `what` appended, where the step `dt` does not
+    resolve one configuration (`mechanism` of batch shape `()`, at the fastest forcing a search
+    such as an optimiser's may reach; `waveform` for the paper's model, else `None`). The scales
+    named in `skip` are not checked (a search that verifies them by a convergence study)."""
+    one = jax.tree_util.tree_map(lambda x: jnp.reshape(x, (1,) + jnp.shape(x)), mechanism)
+    scales = lambda: [s for s in one.time_scales(waveform) if s.name not in skip]
+    try:
+        guard(Exact(dt), scales, one.is_valid().reshape(1), True, True)
+    except ValueError as err:
+        raise ValueError(f"{err} {what}") from None
 
 
 def flag(out: dict, mask) -> dict:
