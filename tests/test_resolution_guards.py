@@ -90,6 +90,10 @@ def test_mechanism_scales_match_closed_forms():
     assert _scale(mech, "k") == pytest.approx(2 * math.pi / math.sqrt(w2), rel=1e-12)
     assert _scale(mech, "omega") == pytest.approx(2 * math.pi / (3 * 2.0), rel=1e-15)  # third harmonic
     assert _scale(mech, "c") == pytest.approx(min(m0 / 0.1, m1 / 0.4), rel=1e-15)
+    # Dampers by the rows of M^-1 C: a wall damper adds its c to its body's, a relative one 2c to each end.
+    damped = lj.Mechanism(masses=[m0, m1], links=[lj.Spring(0, 1, k=k), lj.Damper(0, lj.WALL, 0.3),
+                                                   lj.Damper(0, 1, 0.2)], c=[0.1, 0.4])  # fmt: skip
+    assert _scale(damped, "c") == pytest.approx(min(m0 / (0.1 + 0.3 + 0.4), m1 / (0.4 + 0.4)), rel=1e-15)
     # A carried body's weight loads its carrier: (m_0 / N_0) v_s / mu_s with N_0 = m_0 + m_1.
     capsule = lj.Mechanism(masses=[1.0, 0.5], friction=[lj.Stribeck(0.7, 0.5, 0.02), None], carried_by=[None, 0],
                            links=[lj.Spring(0, 1, k=10.0), lj.Force(0, 1, lj.Sinusoid(0.6, 3.0, 0.0))])  # fmt: skip

@@ -314,7 +314,8 @@ class Mechanism(AbstractMechanism):
         - the forcing: the highest harmonic of every actuated element and external force;
         - $2\\pi/\\omega_\\max$ of the free linearised bodies: every spring, wall springs
           included, in the stiffness matrix, over the diagonal mass matrix;
-        - the damping time $\\min_i m_i/c_i$;
+        - the damping time $\\min_i m_i/c_i$, each body's $c_i$ with its dampers' (a bound of the
+          fastest decay of $M^{-1} C$ by its rows);
         - a friction law's own time (`AbstractFriction.time_scale`), over the normal load of
           the body: $(m_i/N_i)\\,v_s/\\mu_s$ with $N_i$ the weights it carries."""
         from . import _scales as sc
@@ -342,8 +343,16 @@ class Mechanism(AbstractMechanism):
         scales.append(sc.TimeScale("k", "natural period 2*pi/w_max of the free bodies and springs", natural,
                                    sc.STEPS_PER_PERIOD, "period",
                                    {"k (largest)": k_max, "masses (smallest)": self.m.min(-1)}))  # fmt: skip
-        scales.append(sc.TimeScale("c", "damping time min_i m_i/c_i", jnp.min(self.m / self.c, -1), sc.STEPS_PER_TIME,
-                                   "damping time", {"c (largest)": self.c.max(-1)}))  # fmt: skip
+        # Dampers bound the fastest decay of M^-1 C by its rows (Gershgorin): a wall damper adds
+        # its c to its body's, one between two bodies 2c to each (its diagonal and off-diagonal).
+        c = jnp.broadcast_to(self.c, (size, n))
+        for el in self.links:
+            if isinstance(el, Damper):
+                for e in el.bodies():
+                    if e != WALL:
+                        c = c.at[:, e].add((2 if WALL not in el.bodies() else 1) * sc.flat(el.c, size))
+        scales.append(sc.TimeScale("c", "damping time min_i m_i/c_i (dampers included)", jnp.min(self.m / c, -1),
+                                   sc.STEPS_PER_TIME, "damping time", {"c (largest)": c.max(-1)}))  # fmt: skip
         for i, law in enumerate(self.friction):
             scale = None if law is None else law.time_scale()
             if scale is None:
