@@ -517,11 +517,13 @@ class _Solver:
                         self._pending.append(i)
         self._arm(self._pending)
 
-    def _normal_falling(self, i: int) -> float:
+    def _normal_falling(self, i: int) -> bool:
+        """Whether ``N_i`` decreases along the current velocities (a forward difference; only its sign is used)."""
         n = self.n
         dt = 1e-7
         Y2 = self.Y.copy()
         Y2[:n] += dt * self.Y[n : 2 * n]
+        Y2[2 * n : 3 * n] += dt * self.Y[3 * n : 4 * n]
         _, V2 = self._fv(self.t + dt, Y2)
         return bool(self.md.m[i] - V2[i] < self.md.m[i] - self._fv()[1][i])
 

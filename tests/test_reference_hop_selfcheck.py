@@ -115,6 +115,9 @@ HOPPING = {
     "paper w12 a0.08 d0.25": paper_config(omega=12.0, a=0.08, d=0.25),
     "paper w9 a0.08 d0.25": paper_config(omega=9.0, a=0.08, d=0.25),
     "3-mass w10 a0.1 phi0.5": chain_config([1.0, 1.0, 1.0], omega=10.0, a=0.1, phi=0.5),
+    "3-mass unequal anisotropic w9": chain_config(
+        [0.8, 1.2, 1.0], omega=9.0, a=0.1, phi=0.7, mu_s_bwd=0.9, mu_k_bwd=0.7
+    ),
 }
 
 
