@@ -9,7 +9,9 @@ API
 ``reference_hop_simulate(cfg, t_end, save_at, *, restitution=0.0, zeno_speed=1e-3, x0=None, v0=None,
 y0=None, w0=None, rtol=1e-12, atol=1e-12)`` with ``cfg`` from ``reference_chain.chain_config(...)``,
 :func:`paper_config` or :func:`ball_config` (one body, no springs).  Default start: reference_chain's
-"paper" start (``x_0 = 0``, ``x_{j+1} = x_j + lbar_j``), ``y = 0``, at rest.  Returns a dict:
+"paper" start (``x_0 = 0``, ``x_{j+1} = x_j + lbar_j``), ``y = 0``, at rest. ``x0, v0, y0, w0`` (N values, or
+one for every body; ``y0 >= 0``) replace parts of it; a body started at ``y0 = 0`` with ``w0 < 0`` lands
+at ``t = 0`` (the impact is applied before the first sample, its loss is already in ``e_d(0)``).  Returns a dict:
 ``t`` (S,); ``x, v, y, w`` (S, N); ``e_d, work, energy`` (S,); ``n_landings`` (N,) and ``flight_time``
 (N,) over ``[0, t_end]``; ``max_height`` (N,); ``landings``: list of ``(t, body)``; and also
 ``apexes`` (list of ``(t, body, height)``, the top of every flight), ``mode`` (S, N) with
@@ -187,6 +189,7 @@ class _Solver:
         self.Y = np.zeros(4 * n + 2)
         self.Y[:n], self.Y[n : 2 * n], self.Y[2 * n : 3 * n], self.Y[3 * n : 4 * n] = x0, v0, y0, w0
         self.mode = np.full(n, _SLIP)
+        self._pending: list[int] = []  # bodies that start slipping from rest at self.t (see _arm)
         self.sdir = np.ones(n)
         self.segments: list[_Segment] = []
         self.events: list[tuple[float, str]] = []
@@ -217,7 +220,7 @@ class _Solver:
             else:
                 self.mode[i], self.sdir[i] = _SLIP, 1.0 if F[i] > 0 else -1.0
                 start_slip.append(i)
-        self._arm(start_slip)
+        self._arm(start_slip + self._pending)
 
     def _highest_freq(self) -> float:
         m, k = self.md.m, self.md.k
@@ -479,7 +482,7 @@ class _Solver:
     def _redecide(self, row: int):
         n, md = self.n, self.md
         block, forced = divmod(row, n)
-        self._pending: list[int] = []
+        self._pending = []
         F, V = self._fv()
         N = md.m - V
         # Landings and lift-offs first (they change the bodies' modes), then stick and slip.
