@@ -38,11 +38,11 @@
 # This notebook searches the Fourier family (`ExactOptimiseSettings(shape="fourier")`), whose
 # coefficients are easy to read; the optimiser's default stroke is a periodic spline of 64 knots
 # (`lj.Spline`), which also represents the step-like strokes of the fast gaits (the README's
-# "Optimal actuation"). Its default size is chosen to run in a minute or two: one required speed,
-# 6 harmonics, one local run from a few starts and a coarse sinusoid sweep, so its numbers are
+# "Optimal actuation"). Its default size is kept small: one required speed, 4 harmonics, one local
+# run of at most 20 iterations from two starts and a coarse sinusoid sweep, so its numbers are
 # illustrative (the default search, `ExactOptimiseSettings(shape="fourier")` at 16 harmonics for
 # three speeds, took over ten minutes on a 2-core CPU); the optimiser itself is checked against the event-driven
-# reference in `tests/test_optimise.py`. CI runs it at a tiny size (4 harmonics, a few iterations).
+# reference in `tests/test_optimise.py`. CI runs it at a tiny size (a few iterations).
 
 # %%
 import os
@@ -61,7 +61,7 @@ import numpy as np
 # CI runs every notebook top to bottom at a small size (tests/test_notebooks.py sets LOCOMOTION_NB_SMALL=1).
 SMALL = os.environ.get("LOCOMOTION_NB_SMALL") == "1"
 A_MAX = 0.05  # stroke limit: the paper's amplitude
-HARMONICS = 4 if SMALL else 6
+HARMONICS = 4
 SPEEDS = (0.01,) if SMALL else (0.02,)  # required mean speeds: one optimum each
 V_MIN = SPEEDS[-1]  # the one looked at in detail
 if SMALL:
@@ -71,12 +71,12 @@ if SMALL:
     )  # fmt: skip
     SWEEP = dict(omegas=np.array([1.0, 2.0, 4.0, 6.0]), amplitudes=2, transient=20)
 else:
-    # Sized to run in about a minute: one local run from the best of a few starts, one stage.
+    # Sized to run in minutes, not tens: one local run from the best of two starts, one stage.
     SETTINGS = lj.ExactOptimiseSettings(
-        shape="fourier", local=1, start_frequencies=3, random_shapes=0, tension_periods=2, max_iter=40, stages=1,
+        shape="fourier", local=1, start_frequencies=2, random_shapes=0, tension_periods=2, max_iter=20, stages=1,
         transient=20, refine_baseline=False,
     )  # fmt: skip
-    SWEEP = dict(omegas=np.geomspace(0.5, 8.0, 10), amplitudes=3, transient=20)  # 3 amplitudes x 10 frequencies
+    SWEEP = dict(omegas=np.geomspace(0.5, 8.0, 8), amplitudes=2, transient=20)  # 2 amplitudes x 8 frequencies
 IMAGES = os.environ.get("LOCOMOTION_NB_IMAGES")  # set to a directory to save this notebook's picture there
 params = lj.Params(a=A_MAX)  # the paper's defaults; `a` and `omega` are the optimiser's to choose
 
