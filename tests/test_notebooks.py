@@ -33,8 +33,6 @@ NOTEBOOKS = Path(__file__).resolve().parents[1] / "notebooks"
 NAMES = ("01_model_tour", "02_parameter_maps", "03_optimal_actuation", "04_gradients_and_fitting", "05_steady_gaits")
 CELL_TIMEOUT = 600  # seconds per cell: a hung kernel fails instead of blocking CI
 NOTEBOOK_TIMEOUT = 900  # seconds per notebook, client start included
-# Run with --slow only: each compiles optimisers or gait solvers of its own (30 s to 140 s).
-SLOW = ("03_optimal_actuation", "04_gradients_and_fitting", "05_steady_gaits")
 
 
 def test_every_notebook_is_tested():
@@ -121,7 +119,8 @@ def _execute(name: str, out_dir: Path, source: Path | None = None) -> tuple[nbfo
     return nb, nb.metadata["execution_seconds"]
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n in SLOW else n for n in NAMES])
+# Every notebook runs in the default suite (what CI runs), at the small size.
+@pytest.mark.parametrize("name", NAMES)
 def test_notebook_runs(name, tmp_path, monkeypatch):
     monkeypatch.setenv("LOCOMOTION_NB_SMALL", "1")  # inherited by the client and its kernel
     monkeypatch.delenv("LOCOMOTION_NB_IMAGES", raising=False)  # never write docs/images from a test

@@ -51,6 +51,7 @@ def basins(
     waveform: AbstractWaveform | None = None,
     contact: str = "strict",
     dtype: Any = None,
+    verbose: bool = False,
 ) -> Basins:
     """Which steady gait each start converges to, for one configuration.
 
@@ -65,6 +66,7 @@ def basins(
     - `periods`, `transient`, `dynamics`, `waveform`, `contact`, `dtype`: as in [`steady_gait`][].
     - `rtol`: gaits whose mean speeds and costs of transport agree to `rtol` (relative, over
       $1 + |x|$) and have the same period are the same gait.
+    - `verbose`: print progress to stderr from the start (the stages of [`steady_gait`][]).
 
     **Returns:** [`Basins`][].
 
@@ -89,7 +91,7 @@ def basins(
     # The one configuration repeated over the grid (new leading batch axes on every field).
     batch = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(jnp.asarray(x), grid + jnp.shape(x)), params)
     g = steady_gait(batch, start=y, periods=periods, transient=transient, dynamics=dynamics, waveform=waveform,
-                    contact=contact, dtype=dtype)  # fmt: skip
+                    contact=contact, dtype=dtype, verbose=verbose)  # fmt: skip
     label, reps = _classify(np.asarray(g.converged), np.asarray(g.k), np.asarray(g.mean_speed),
                             np.asarray(g.cost_of_transport), rtol)  # fmt: skip
     flat = jax.tree_util.tree_map(lambda x: x.reshape((-1,) + x.shape[len(grid) :]), g)

@@ -34,7 +34,7 @@ from ..model._params import Params
 from ..model._waveform import AbstractWaveform
 from ..run._batch import prepare
 from ..run._resolution import guard_two_mass
-from . import _corrector as corrector
+from . import _corrector as corrector, _progress as progress
 from ._bifurcation import BranchEvents, find_events, kinds
 from ._gait import GaitStatus, steady_gait
 
@@ -180,6 +180,7 @@ def continuation(
     contact: str = "strict",
     start: str = "paper",
     dtype: Any = None,
+    verbose: bool = False,
 ) -> Branch:
     """Follow the steady gait of each configuration as `parameter` goes from its value to `stop`.
 
@@ -201,6 +202,8 @@ def continuation(
       the others are reported between the two points that bracket them.
     - `tol`, `max_iter`: the corrector's Newton tolerance (as [`steady_gait`][]'s) and iterations.
     - `transient`, `dynamics`, `waveform`, `contact`, `start`, `dtype`: as in [`steady_gait`][].
+    - `verbose`: print progress to stderr from the start: the start gait's stages (as
+      [`steady_gait`][]'s), then the corrector's compilation, the walk and the event location.
 
     **Returns:** a [`Branch`][] with batch shape `params.batch_shape`. A configuration without a start
     gait or with invalid parameters has an empty branch and its status; the others are unaffected.
@@ -230,6 +233,8 @@ def continuation(
     f32 = jnp.finfo(flat.dtype).bits < 64
     tol = (1e-5 if f32 else 1e-11) if tol is None else float(tol)
 
+    say = progress.reporter(verbose, "continuation")
+    say(f"{B} branch(es) in {parameter!r}: the start gaits first")
     # The far end of the range must be resolved too (the start is checked by `steady_gait`).
     # (A Fourier coefficient sets no time scale: the forcing's harmonics are counted, not weighed.)
     far = None
@@ -239,7 +244,7 @@ def continuation(
         _, far = guard_two_mass(dynamics, end, end_wave, shape)
     far = np.zeros(B, bool) if far is None else np.asarray(far)
     g = steady_gait(params, periods=periods, transient=transient, tol=tol, dynamics=dynamics,
-                    waveform=waveform, contact=contact, start=start, dtype=dtype)  # fmt: skip
+                    waveform=waveform, contact=contact, start=start, dtype=dtype, verbose=verbose)  # fmt: skip
     fl = lambda x: np.asarray(x).reshape(B, *np.shape(x)[len(shape) :])
     unresolved = far | (fl(g.status) == GaitStatus.UNRESOLVED)
     ok = fl(g.converged) & ~unresolved
@@ -255,15 +260,19 @@ def continuation(
 
     z = np.stack([fl(g.u), fl(g.v1), fl(g.v2), np.zeros(B)], axis=-1)
     z = np.where(ok[:, None], z, 0.0)
+    say("the corrector: compiling (first call only) and correcting the start points")
     r = solve(z, z, _E4[None].repeat(B, 0), ok)
     ok = ok & r.done
     status = np.where(ok, BranchStatus.MAX_POINTS, np.where(fl(g.status) == GaitStatus.INVALID,
                       BranchStatus.INVALID, BranchStatus.NO_START))  # fmt: skip
     status = np.where(unresolved, BranchStatus.UNRESOLVED, status)
     walk = _Walk(solve, r, ok, step, max_step, min_step, max_points)
+    say(f"walking up to {max_points} points per branch")
     walk.run(status)
     data = _pack(walk.points, solve, k)
+    say(f"{sum(len(p) for p in walk.points)} points; locating the events")
     events = find_events(data, status, walk.failed_at, solve, contact, to_locate)
+    say("done")
     return _branch(data, status, k, fl(g.status), events, shape, flat.dtype, spec.label, contact)
 
 

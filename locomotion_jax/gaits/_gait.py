@@ -35,7 +35,7 @@ from ..model._params import Params
 from ..model._waveform import AbstractWaveform
 from ..run._batch import mechanism_arg, prepare, unflatten
 from ..run._resolution import guard_two_mass
-from . import _corrector as corrector, _period as period, _select as select
+from . import _corrector as corrector, _period as period, _progress as progress, _select as select
 from ._chain_gait import ChainGait
 from ._select import GaitStatus as GaitStatus
 
@@ -142,6 +142,7 @@ def steady_gait(
     contact: str = ...,
     start: str | ArrayLike = ...,
     dtype: Any = ...,
+    verbose: bool = ...,
 ) -> Gait: ...
 
 
@@ -158,6 +159,7 @@ def steady_gait(
     contact: str = ...,
     start: str | ArrayLike = ...,
     dtype: Any = ...,
+    verbose: bool = ...,
 ) -> ChainGait: ...
 
 
@@ -173,6 +175,7 @@ def steady_gait(
     contact: str = "strict",
     start: str | ArrayLike = "paper",
     dtype: Any = None,
+    verbose: bool = False,
 ) -> Gait | ChainGait:
     """Solve the steady gait of each configuration as a periodic orbit (module docstring).
 
@@ -194,6 +197,8 @@ def steady_gait(
       $(u, v_1, v_2)$ at phase 0, an array of shape `batch + (3,)` (a chain: gaps then velocities,
       $(u_0, \\dots, u_{N-2}, v_0, \\dots, v_{N-1})$, shape `batch + (2N - 1,)`; a mass given
       $v_i = 0$ starts stuck where eq. 7 allows).
+    - `verbose`: print progress to stderr from the start: a line before the transient and before
+      each period's Newton solve (each compiles on its first call), and one when done.
 
     **Returns:** a [`Gait`][] with batch shape `params.batch_shape`. Configurations without
     a converged orbit carry NaN numbers and their `status`; the others are unaffected.
@@ -208,9 +213,15 @@ def steady_gait(
     dynamics = Exact() if dynamics is None else dynamics
     if not isinstance(dynamics, Exact):  # the solver differentiates the exact engine's steps
         raise TypeError(f"steady_gait needs Exact dynamics, got {type(dynamics).__name__}.")
+    say = progress.reporter(verbose, "steady_gait")
+    mechanism = mechanism_arg(params)
+    say(f"{int(np.prod(mechanism.batch_shape))} configuration(s): compiling (first call only) and solving, "
+        f"transient {transient} periods, gait periods {periods}")  # fmt: skip
     args = (periods, transient, tol, max_iter, dynamics, waveform, contact, start, dtype)
     # The mechanism picks its solver (double dispatch).
-    return mechanism_arg(params).dispatch(two_mass=lambda p: _two_mass(p, *args), chain=lambda c: _chain(c, *args))
+    gait = mechanism.dispatch(two_mass=lambda p: _two_mass(p, *args, say=say), chain=lambda c: _chain(c, *args))
+    say(f"done: {int(np.sum(np.asarray(gait.converged)))} of {np.size(np.asarray(gait.converged))} converged")
+    return gait
 
 
 def _chain(chain: Chain, periods, transient, tol, max_iter, dynamics: Exact, waveform, contact, start, dtype):
@@ -228,9 +239,10 @@ def _chain(chain: Chain, periods, transient, tol, max_iter, dynamics: Exact, wav
 
 
 def _two_mass(params: Params, periods, transient, tol, max_iter, dynamics: Exact, waveform, contact, start, dtype,
-              guarded: bool = True):  # fmt: skip
+              guarded: bool = True, say=lambda message: None):  # fmt: skip
     """`guarded=False` skips the resolution guard: only for a caller that checks the resolution
-    itself by a convergence study (the exact optimiser's verification solves at `dt` and `dt/2`)."""
+    itself by a convergence study (the exact optimiser's verification solves at `dt` and `dt/2`).
+    `say` reports each stage (`steady_gait(verbose=True)`)."""
     model.check_contact(contact)
     flat, wave, axes, shape = prepare(params, waveform, dtype)
     unresolved = None
@@ -246,6 +258,7 @@ def _two_mass(params: Params, periods, transient, tol, max_iter, dynamics: Exact
     real = lambda v: jnp.asarray(v, flat.dtype)
 
     # The transient is shared by every period tried.
+    say(f"transient: {transient} periods")
     if y_start is None:
         run = _transient_batch(flat, wave, axes, contact, start, dynamics.dt, real(transient), mst)
     else:
@@ -263,6 +276,7 @@ def _two_mass(params: Params, periods, transient, tol, max_iter, dynamics: Exact
     for k in ks:
         msp = jnp.asarray(dynamics.max_steps or default_max_steps(k * T_max, dynamics.dt), jnp.int32)
         go = jnp.asarray((base < 0) & (True if best is None else select.still_open(best)))
+        say(f"gait period {k}: Newton on {int(np.sum(go))} configuration(s)")
         r = _newton(flat, wave, axes, contact, dynamics.dt, y0, go, k, tol, max_iter, msp)
         r = select.judge(r, base, k, valid & (np.asarray(trans_lift) | r["out"].lifted))
         best = select.better(best, r)

@@ -386,6 +386,11 @@ def _optimise_params(params: Params, v_min, a_max, method, direction, omega, har
     shape = SplineShape(knots=cast(ExactSettings, settings).knots) if spline else FourierShape(harmonics=harmonics)
     if exact:
         _guard_search(params, omega, shape, cast(ExactSettings, settings))
+    if settings.verbose:  # the baseline compiles and solves before the optimiser's own progress
+        what = "sweeping the sinusoids, then " if sweep is None else ""
+        refine = "refining " if settings.refine_baseline else "picking "
+        print(f"the sinusoid baseline: {what}{refine}the best one (compiles on the first call)...",
+              file=sys.stderr, flush=True)  # fmt: skip
     if sweep is None:
         dt = cast(ExactSettings, settings).dt if exact else cast(Settings, settings).verify_dt
         sweep = pareto.sinusoid_sweep(params, a_max, dt=dt)
