@@ -118,5 +118,10 @@ def initial_gap(params: Params, start: str) -> Array:
 
 
 def check_contact(contact: str) -> None:
+    if contact == "hop":
+        raise NotImplementedError(
+            "contact='hop' (flight and landing, SPEC section 10) is not implemented yet in the engine; "
+            "use contact='strict' or 'paper'."
+        )
     if contact not in ("strict", "paper"):
-        raise ValueError(f"contact must be 'strict' or 'paper', got {contact!r}.")
+        raise ValueError(f"contact must be 'strict', 'paper' or 'hop', got {contact!r}.")

@@ -167,8 +167,13 @@ def prepare_chain_initial(
 
 
 def check_contact_start(contact: str, start: str) -> None:
+    if contact == "hop":
+        raise NotImplementedError(
+            "contact='hop' (flight and landing, SPEC section 10) is not implemented yet in the engine; "
+            "use contact='strict' or 'paper'."
+        )
     if contact not in ("strict", "paper"):
-        raise ValueError(f"contact must be 'strict' or 'paper', got {contact!r}.")
+        raise ValueError(f"contact must be 'strict', 'paper' or 'hop', got {contact!r}.")
     if start not in ("paper", "relaxed"):
         raise ValueError(f"start must be 'paper' (eq. 14) or 'relaxed', got {start!r}.")
 
