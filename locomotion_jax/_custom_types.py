@@ -20,7 +20,9 @@ ValuesLike: TypeAlias = ArrayLike | Sequence[float] | Sequence[Sequence[float]]
 
 Contact: TypeAlias = Literal["strict", "paper", "hop"]
 """Normal-force reading: `"strict"` uses the signed $N_i$ of eq. (5) and stops at
-lift-off; `"paper"` uses $n_i = |N_i|$ as eq. (6) prints, flagging lift-off."""
+lift-off; `"paper"` uses $n_i = |N_i|$ as eq. (6) prints, flagging lift-off; `"hop"`
+(SPEC §10: flight and landing) is accepted as a value but not yet integrated: the front ends
+refuse it with a `NotImplementedError`."""
 
 Start: TypeAlias = Literal["paper", "relaxed"]
 """Initial condition: `"paper"` is eq. (14) ($x_2 - x_1 = \\bar\\ell$); `"relaxed"`
