@@ -8,6 +8,7 @@ import numpy as np
 from .._custom_types import ArrayLike
 from .._results import ChainTrajectory, Trajectory
 from ..dynamics._base import AbstractDynamics
+from ..dynamics._exact_dynamics import Exact
 from ..dynamics._forward import check_static
 from ..model import _two_mass as model
 from ..model._bodies import Mechanism
@@ -113,7 +114,7 @@ def simulate(
         ```
     """
     dynamics = dynamics_arg(dynamics)
-    model.check_contact(contact)
+    model.check_contact(contact, hop=True)  # each path below refuses "hop" where it does not support it
     model.initial_gap(Params(), start)  # validates `start`
     check_static("t_end", t_end)
     check_static("save_at", save_at)
@@ -132,6 +133,7 @@ def simulate(
 
 
 def _two_mass(params: Params, dynamics: AbstractDynamics, t_end, save_np, waveform, contact, start, initial, dtype):
+    model.check_contact(contact)
     flat, wave, axes, shape = prepare(params, waveform, dtype)
     flat, unresolved = guard_two_mass(dynamics, flat, wave, shape)
     y0 = prepare_initial(initial, shape, flat.dtype)
@@ -147,7 +149,9 @@ def _chain(
         raise ValueError(
             f"waveform= applies to Params; a {type(chain).__name__} carries its own waveforms (springs or links)."
         )
-    check_contact_start(contact, start)
+    check_contact_start(contact, start, chain)
+    if contact == "hop" and not isinstance(dynamics, Exact):
+        raise NotImplementedError(f"contact='hop' runs with Exact dynamics only, got {type(dynamics).__name__}.")
     flat, valid, shape = prepare_chain(chain, dtype)
     valid, unresolved = guard_chain(dynamics, flat, valid, shape)
     y0 = prepare_chain_initial(initial, shape, flat.n_masses, flat.dtype, flat)
