@@ -239,6 +239,7 @@ def step(
     fly, n_land, st_stuck, st_sdir = st.fly, st.n_land, st.stuck, st.sdir
     if contact == "hop":  # landings and lift-offs first (SPEC §10); a flying body never sticks
         assert hop is not None, "contact='hop' needs the mechanism's restitution and zeno_speed"
+        assert st.fly is not None and st.n_land is not None, "contact='hop' needs a state from init(contact='hop')"
         yA, fly, rest, landed = _impact(P, hop[0], hop[1], st, N0, kp)
         n_land = st.n_land + landed
         nA = tuple(jnp.where(f, 0, q) for f, q in zip(fly, nA))

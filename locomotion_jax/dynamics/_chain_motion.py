@@ -115,6 +115,7 @@ def _in_mode(P: AbstractPhysics, contact: Contact, mode: Mode, dr: Any, L: Loads
     ed = _sum([m * q * s + c * vi * vi for m, q, s, c, vi in zip(mu, n, speed, P.c, v)])
     rate = State(xd, a, ed, P.power(dr, L, v))
     if mode.fly is not None:  # in flight m_i w_i' = -m_i + V_i = -N_i; on the ground y_i = w_i = 0
+        assert vy is not None, "contact='hop' needs the vertical velocities"
         rate = rate._replace(
             y=tuple(jnp.where(f, q, 0) for f, q in zip(mode.fly, vy)),
             vy=tuple(jnp.where(f, -q * im, 0) for f, q, im in zip(mode.fly, N, P.im)),
@@ -194,6 +195,7 @@ def derivatives(
         dg.append(_sum([jnp.where(w, r, 0) for w, r in zip(at, dN)]) / count)
         ddg.append(_sum([jnp.where(w, r, 0) for w, r in zip(at, ddN)]) / count)
     elif fly is not None:  # per body: on the ground N_i (lift-off), in flight y_i (landing)
+        assert y is not None and vy is not None and rate.vy is not None, "contact='hop' needs the heights"
         g += [jnp.where(f, h, q) for f, h, q in zip(fly, y, N)]
         dg += [jnp.where(f, h, q) for f, h, q in zip(fly, vy, dN)]
         ddg += [jnp.where(f, h, q) for f, h, q in zip(fly, rate.vy, ddN)]
