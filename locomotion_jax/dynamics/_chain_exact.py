@@ -249,12 +249,14 @@ def step(
                         for f, v, s in zip(st.fly, yA.v, st.sdir))  # fmt: skip
         st_stuck = tuple(s & ~f for s, f in zip(st.stuck, fly))
     else:
-        rest = tuple(jnp.zeros_like(p) for p in st.pend)
+        rest = None
     margin = motion.stick_margin(P, F0, nA)
     gA = [jnp.where(s, p, sd * v) for s, p, sd, v in zip(st_stuck, margin, st_sdir, yA.v)]
     if fly is not None:  # no slip event in flight
         gA = [jnp.where(f, 0, g) for f, g in zip(fly, gA)]
-    fire = tuple(kp(pe | (g < 0) | r) for pe, g, r in zip(st.pend, gA, rest))
+    fire = tuple(kp(pe | (g < 0)) for pe, g in zip(st.pend, gA))
+    if rest is not None:  # a landing at rest horizontally: re-decided stuck or slipping
+        fire = tuple(kp(f | r) for f, r in zip(fire, rest))
     holds = [p >= 0 for p in margin]  # -mu_b n <= F <= mu_f n
     if fly is not None:
         holds = [ho & ~f for ho, f in zip(holds, fly)]
