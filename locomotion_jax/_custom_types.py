@@ -18,9 +18,11 @@ the running dissipated energy (eq. 15) and actuator work (eq. 16)."""
 ValuesLike: TypeAlias = ArrayLike | Sequence[float] | Sequence[Sequence[float]]
 """Per-mass or per-spring values: a scalar, an array, or a (nested) list of numbers."""
 
-Contact: TypeAlias = Literal["strict", "paper"]
+Contact: TypeAlias = Literal["strict", "paper", "hop"]
 """Normal-force reading: `"strict"` uses the signed $N_i$ of eq. (5) and stops at
-lift-off; `"paper"` uses $n_i = |N_i|$ as eq. (6) prints, flagging lift-off."""
+lift-off; `"paper"` uses $n_i = |N_i|$ as eq. (6) prints, flagging lift-off; `"hop"`
+(SPEC §10: flight and landing) is accepted as a value but not yet integrated: the front ends
+refuse it with a `NotImplementedError`."""
 
 Start: TypeAlias = Literal["paper", "relaxed"]
 """Initial condition: `"paper"` is eq. (14) ($x_2 - x_1 = \\bar\\ell$); `"relaxed"`

@@ -209,6 +209,9 @@ class ChainTrajectory(eqx.Module):
     - `N`: signed normal forces; `l0`: rest lengths; `tension`: spring tensions.
     - `valid`, `status`, `liftoff`, `t_liftoff`, `n_switch`, `transversality`, `near_miss`,
       `switch_gap`, `smooth`, `start`, `contact`: as in [`Trajectory`][].
+    - `y`, `vy` (`contact="hop"` only, else `None`): each body's height and vertical velocity,
+      `(..., n_save, N)`; `n_land`: the number of landings per configuration. Under `"hop"`,
+      `e` includes gravity $m_i y_i$ and the vertical kinetic energy, and `e_d` the impacts' losses.
     """
 
     t: Array
@@ -232,6 +235,9 @@ class ChainTrajectory(eqx.Module):
     switch_gap: Array
     start: str = eqx.field(static=True)
     contact: str = eqx.field(static=True)
+    y: Array | None = None
+    vy: Array | None = None
+    n_land: Array | None = None
 
     @property
     def smooth(self) -> Array:
@@ -239,7 +245,9 @@ class ChainTrajectory(eqx.Module):
         return _smooth_rows(self)
 
     def to_numpy(self) -> dict[str, np.ndarray]:
-        return {k: np.asarray(getattr(self, k)) for k in self.__dataclass_fields__ if k not in ("start", "contact")}
+        skip = ("start", "contact")
+        fields = self.__dataclass_fields__
+        return {k: np.asarray(getattr(self, k)) for k in fields if k not in skip and getattr(self, k) is not None}
 
 
 class ChainMeasurement(eqx.Module):

@@ -63,6 +63,8 @@ class Hybrid(eqx.Module):
     side ($\\pm 1$) of its normal force (paper contact: flipped where a crossing is located,
     so that $n_i = \\nu_i N_i$ over a step). `cross`, `near`, `t_switch`: the margins to a
     change of switching structure so far and the time of the last switch (as in `_exact.Hybrid`).
+    Under `contact="hop"` only (else `None`): `fly` per body (in flight), `vpend` (a landing or
+    lift-off located at `t`) and `n_land`, the number of landings so far.
     """
 
     t: Array
@@ -80,6 +82,9 @@ class Hybrid(eqx.Module):
     cross: Array
     near: Array
     t_switch: Array
+    fly: Scalars | None = None
+    vpend: Scalars | None = None
+    n_land: Array | None = None
 
 
 class StepInfo(NamedTuple):
@@ -97,10 +102,19 @@ class StepInfo(NamedTuple):
     y_target: State
 
 
-def init(P: AbstractPhysics, contact: Contact, x: Array, v: Array | None = None) -> Hybrid:
+def init(
+    P: AbstractPhysics,
+    contact: Contact,
+    x: Array,
+    v: Array | None = None,
+    height: Array | None = None,
+    vy: Array | None = None,
+) -> Hybrid:
     """State at $t = 0$ of the mechanism with physics `P` at positions `x` and velocities `v`
     (shape `(N,)` each; `v=None`: at rest). A body at rest sticks where its stick condition
-    holds (eq. 7 generalised), else slips along its load; a moving one slips along its velocity."""
+    holds (eq. 7 generalised), else slips along its load; a moving one slips along its velocity.
+    Under `contact="hop"`: the heights `height` and vertical velocities `vy` (default 0); a body
+    above the ground, moving up, or with $N_i < 0$ starts in flight."""
     dtype = x.dtype
     zero = jnp.zeros((), dtype)
     xs = tuple(x[..., i] for i in range(x.shape[-1]))
@@ -112,6 +126,13 @@ def init(P: AbstractPhysics, contact: Contact, x: Array, v: Array | None = None)
         vs = tuple(v[..., i] for i in range(v.shape[-1]))
     F, N = motion.with_velocity(P, L.F, vs), L.N
     n = motion.normal(contact, N)
+    fly = None
+    if contact == "hop":
+        zeros = jnp.zeros(x.shape[-1], dtype)
+        height = zeros if height is None else height
+        vy = zeros if vy is None else vy
+        fly = tuple((height[..., i] > 0) | (vy[..., i] > 0) | (N[i] < 0) for i in range(x.shape[-1]))
+        n = tuple(jnp.where(f, 0, q) for f, q in zip(fly, n))
     stuck = tuple(p >= 0 for p in motion.stick_margin(P, F, n))
     sdir = tuple(jnp.where(f >= 0, 1.0, -1.0).astype(dtype) for f in F)
     if v is not None:
@@ -119,16 +140,56 @@ def init(P: AbstractPhysics, contact: Contact, x: Array, v: Array | None = None)
         one = jnp.ones((), dtype)
         sdir = tuple(jnp.where(q > 0, one, jnp.where(q < 0, -one, s)) for s, q in zip(sdir, vs))
         vs = tuple(jnp.where(s, 0, q) for s, q in zip(stuck, vs))
-    lifted = jnp.any(jnp.stack([q <= 0 for q in N]))
+    lifted = jnp.any(jnp.stack([q <= 0 for q in N] if fly is None else list(fly)))
     status = jnp.where(lifted & (contact == "strict"), Status.LIFTOFF, Status.OK).astype(jnp.int32)
     f32 = jnp.finfo(dtype).bits < 64
     y = State(xs, vs, zero, zero)
+    extra: dict = {}
+    if fly is not None and height is not None and vy is not None:
+        y = y._replace(y=tuple(height[..., i] for i in range(len(xs))), vy=tuple(vy[..., i] for i in range(len(xs))))
+        stuck = tuple(s & ~f for s, f in zip(stuck, fly))
+        extra = dict(fly=fly, vpend=tuple(jnp.zeros_like(f) for f in fly), n_land=jnp.zeros((), jnp.int32))
     return Hybrid(
         t=zero, y=y, comp=y.map(jnp.zeros_like) if f32 else None, cph=cph, sph=sph, stuck=stuck, sdir=sdir,
         pend=tuple(jnp.zeros_like(s) for s in stuck), side=tuple(jnp.where(q > 0, 1.0, -1.0).astype(dtype) for q in N),
         status=status, t_liftoff=jnp.where(lifted, zero, jnp.inf).astype(dtype), n_switch=jnp.zeros((), jnp.int32),
         cross=jnp.asarray(jnp.inf, dtype), near=jnp.asarray(jnp.inf, dtype), t_switch=jnp.asarray(-jnp.inf, dtype),
+        **extra,
     )  # fmt: skip
+
+
+def _impact(P: AbstractPhysics, restitution: Scalars, zeno: Array, st: Hybrid, N0: Scalars, keep):
+    """The hopping reading's switches of vertical mode at the start of an iteration (SPEC §10):
+    a body in flight whose landing was located (or that is below the ground) lands: $w^+ = -e_i w^-$
+    (plastic, $w^+ = 0$, where $e_i |w^-| <$ `zeno`), normal impulse $P_n = m_i (w^+ - w^-)$ and
+    tangential $P_t = \\min(m_i |v^-|, \\mu_k P_n)$ against $v^-$; it stays on the ground after a
+    plastic landing if $N_i \\ge 0$. A body on the ground whose $N_i$ fell through 0 lifts off with
+    $w = 0$. Returns the new state, flight flags, the bodies that landed at rest horizontally (to
+    be re-decided stuck or slipping), the landings' count and the energy lost."""
+    yA = st.y
+    assert st.fly is not None and st.vpend is not None and yA.y is not None and yA.vy is not None
+    zero = jnp.zeros_like(st.t)
+    hs, ws, vs, fly, rest, lost, count = [], [], [], [], [], [], []
+    for i, (f, pe, h, w, v, q) in enumerate(zip(st.fly, st.vpend, yA.y, yA.vy, yA.v, N0)):
+        land = f & (pe | (h < 0))
+        lift = ~f & (pe | (q < 0))
+        m, e = P.m[i], restitution[i]
+        wp = jnp.where(e * jnp.abs(w) < zeno, zero, -e * w)
+        Pn = m * (wp - w)
+        sgn = jnp.where(v >= 0, 1.0, -1.0).astype(v.dtype)
+        mu = P.friction[i].kinetic(jnp.abs(v), sgn)
+        Pt = jnp.minimum(m * jnp.abs(v), mu * Pn)
+        vp = jnp.where(Pt >= m * jnp.abs(v), zero, v - sgn * Pt / m)
+        airborne = (wp > 0) | (q < 0)
+        lost.append(jnp.where(land, 0.5 * m * (w * w - wp * wp + v * v - vp * vp), zero))
+        hs.append(jnp.where(land | lift, zero, h))
+        ws.append(jnp.where(land, wp, jnp.where(lift, zero, w)))
+        vs.append(jnp.where(land, vp, v))
+        fly.append(keep(jnp.where(land, airborne, f | lift)))
+        rest.append(land & ~airborne & (vp == 0))
+        count.append(land.astype(jnp.int32))
+    y = yA._replace(y=tuple(hs), vy=tuple(ws), v=tuple(vs), ed=yA.ed + motion._sum(lost))
+    return y, tuple(fly), tuple(rest), motion._sum(count)
 
 
 def probe(P: AbstractPhysics, contact: Contact, t: Array, y: State, target: num.Target) -> tuple[list, list, list]:
@@ -157,10 +218,12 @@ def step(
     st: Hybrid,
     t_stop: Array,
     target: num.Target | None = None,
+    hop: tuple[Scalars, Array] | None = None,
 ) -> tuple[Hybrid, StepInfo]:
     """One iteration: re-decide the bodies, one RK4 step, cut at the first event (see `_exact.step`).
 
-    `P` is the mechanism's physics (its `physics()`, computed once per run)."""
+    `P` is the mechanism's physics (its `physics()`, computed once per run); `hop`, under
+    `contact="hop"` only: the restitution per body and the Zeno speed."""
     kp = P.keep
     dtype = st.t.dtype
     t0, yA = st.t, st.y
@@ -174,20 +237,50 @@ def step(
     L0 = P.loads(dr0, yA.x, kp)
     F0, N0 = motion.with_velocity(P, L0.F, yA.v), L0.N
     nA = motion.normal(contact, N0)
+    fly, n_land, st_stuck, st_sdir = st.fly, st.n_land, st.stuck, st.sdir
+    if contact == "hop":  # landings and lift-offs first (SPEC §10); a flying body never sticks
+        assert hop is not None, "contact='hop' needs the mechanism's restitution and zeno_speed"
+        assert st.fly is not None and st.n_land is not None, "contact='hop' needs a state from init(contact='hop')"
+        yA, fly, rest, landed = _impact(P, hop[0], hop[1], st, N0, kp)
+        F0 = motion.with_velocity(P, L0.F, yA.v)  # velocity forces after the impacts' jumps
+        n_land = st.n_land + landed
+        nA = tuple(jnp.where(f, 0, q) for f, q in zip(fly, nA))
+        one = jnp.ones((), dtype)
+        # In flight (or landing) the slip direction is that of v (no event follows its sign there).
+        st_sdir = tuple(jnp.where(f, jnp.where(v > 0, one, jnp.where(v < 0, -one, s)), s)
+                        for f, v, s in zip(st.fly, yA.v, st.sdir))  # fmt: skip
+        st_stuck = tuple(s & ~f for s, f in zip(st.stuck, fly))
+    else:
+        rest = None
     margin = motion.stick_margin(P, F0, nA)
-    gA = [jnp.where(s, p, sd * v) for s, p, sd, v in zip(st.stuck, margin, st.sdir, yA.v)]
+    gA = [jnp.where(s, p, sd * v) for s, p, sd, v in zip(st_stuck, margin, st_sdir, yA.v)]
+    if fly is not None:  # no slip event in flight
+        gA = [jnp.where(f, 0, g) for f, g in zip(fly, gA)]
     fire = tuple(kp(pe | (g < 0)) for pe, g in zip(st.pend, gA))
+    if rest is not None:  # a landing at rest horizontally: re-decided stuck or slipping
+        fire = tuple(kp(f | r) for f, r in zip(fire, rest))
     holds = [p >= 0 for p in margin]  # -mu_b n <= F <= mu_f n
-    vel = tuple(f & ~s for f, s in zip(fire, st.stuck))
-    stuck = tuple(jnp.where(f, ve & ho, s) for f, ve, ho, s in zip(fire, vel, holds, st.stuck))
-    sdir = tuple(jnp.where(fi, jnp.where(f >= 0, 1.0, -1.0).astype(dtype), s) for fi, f, s in zip(fire, F0, st.sdir))
+    if fly is not None:
+        holds = [ho & ~f for ho, f in zip(holds, fly)]
+    vel = tuple(f & ~s for f, s in zip(fire, st_stuck))
+    stuck = tuple(jnp.where(f, ve & ho, s) for f, ve, ho, s in zip(fire, vel, holds, st_stuck))
+    sdir = tuple(jnp.where(fi, jnp.where(f >= 0, 1.0, -1.0).astype(dtype), s) for fi, f, s in zip(fire, F0, st_sdir))
     y0 = yA._replace(v=tuple(jnp.where(ve, zero, v) for ve, v in zip(vel, yA.v)))
     comp = st.comp
     if comp is not None:  # a switch sets velocities exactly (to 0): drop their compensation
         comp = comp._replace(v=tuple(jnp.where(ve, zero, v) for ve, v in zip(vel, comp.v)))
+        if fly is not None and st.fly is not None and comp.y is not None and comp.vy is not None:
+            jump = [f != g for f, g in zip(fly, st.fly)]  # an impact or a lift-off sets y, w, v exactly
+            comp = comp._replace(
+                y=tuple(jnp.where(j, zero, q) for j, q in zip(jump, comp.y)),
+                vy=tuple(jnp.where(j, zero, q) for j, q in zip(jump, comp.vy)),
+                v=tuple(jnp.where(j, zero, q) for j, q in zip(jump, comp.v)),
+            )
     n_switch = st.n_switch + num.union(fire).astype(jnp.int32)
 
     lifted0 = num.union([q < 0 for q in N0])
+    if fly is not None:
+        lifted0 = num.union(list(fly))
     stop0 = lifted0 if contact == "strict" else jnp.asarray(False)
     t_lift = jnp.where(lifted0 & ~jnp.isfinite(st.t_liftoff), t0, st.t_liftoff)
     if target is not None:
@@ -198,8 +291,8 @@ def step(
         target_now = jnp.asarray(False)
 
     # -- derivatives at the start, in the (new) mode.
-    mode = Mode(stuck, sdir, st.side)
-    D0 = motion.derivatives(P, contact, mode, target, dr0, L0, y0.x, y0.v)
+    mode = Mode(stuck, sdir, st.side, fly)
+    D0 = motion.derivatives(P, contact, mode, target, dr0, L0, y0.x, y0.v, y0.y, y0.vy)
 
     # -- step length: dt, or less to land on t_stop or just past the earliest predicted event.
     span = t_stop - t0
@@ -219,7 +312,7 @@ def step(
 
     # -- RK4: one step of length h.
     def stage(dr, y):
-        return motion.rates(P, contact, mode, dr, y.x, y.v)
+        return motion.rates(P, contact, mode, dr, y)
 
     k1 = D0.rate
     k2 = stage(drm, y0.map(lambda a, b: a + (0.5 * h) * b, k1))
@@ -229,7 +322,7 @@ def step(
     # costs fewer kernels than it adds flops (benchmarks/NOTES.md).
     incr = k1.map(lambda a, b, c, d: (h / 6) * (a + 2 * (b + c) + d), k2, k3, k4)
     y1 = y0.map(lambda a, b: kp(a + b), incr)
-    D1 = motion.derivatives(P, contact, mode, target, dre, P.loads(dre, y1.x), y1.x, y1.v)
+    D1 = motion.derivatives(P, contact, mode, target, dre, P.loads(dre, y1.x), y1.x, y1.v, y1.y, y1.vy)
 
     # -- first crossing: the earliest by the secant of each crossed function, located on its quintic.
     g0s, d0s, e0s, d1s, e1s = D0.g, D0.dg, D0.ddg, D1.dg, D1.ddg
@@ -299,9 +392,14 @@ def step(
     # which stops the run under the strict reading; under the paper's the crossing force
     # changes side.
     side = st.side
+    vpend = None
     if contact == "strict":
         lift_cut = first[n_mass]
         lift = stop0 | lift_cut
+    elif fly is not None:  # a landing or a lift-off: the body switches at the next iteration
+        vpend = tuple(commit_f & f for commit_f, f in zip([~stop0] * n_mass, first[n_mass : 2 * n_mass]))
+        lift_cut = num.union([f & ~g for f, g in zip(first[n_mass : 2 * n_mass], fly)])
+        lift = stop0
     else:
         flip = first[n_mass : 2 * n_mass]
         lift_cut = num.union(flip)
@@ -323,6 +421,7 @@ def step(
         cross=jnp.where(commit, jnp.minimum(st.cross, m_cross), st.cross),
         near=jnp.where(commit, jnp.minimum(st.near, m_near), st.near),
         t_switch=jnp.where(commit & cut & ~target_cut, jax.lax.stop_gradient(tc), st.t_switch),
+        fly=fly, vpend=vpend, n_land=n_land,
     )  # fmt: skip
     info = StepInfo(
         commit=commit, t0=t0, y0=y0, loads0=L0, t1=tc, y1=yc, stuck=stuck,

@@ -19,23 +19,29 @@ from ..model._physics import AbstractPhysics, Loads, Scalars
 
 
 class State(NamedTuple):
-    """Integrated quantities: positions `x` and velocities `v` (one scalar per mass), $e_d$ (eq. 15), $w$ (eq. 16)."""
+    """Integrated quantities: positions `x` and velocities `v` (one scalar per mass), $e_d$ (eq. 15), $w$ (eq. 16);
+    under `contact="hop"` only, the heights `y` and vertical velocities `vy` per body (else `None`, so
+    that the other readings' programs carry nothing more)."""
 
     x: Scalars
     v: Scalars
     ed: Array
     w: Array
+    y: Scalars | None = None
+    vy: Scalars | None = None
 
     def map(self, fn, *others) -> "State":
         return jax.tree_util.tree_map(fn, self, *others)
 
 
 class Mode(NamedTuple):
-    """The mode during a step, per mass: stuck, slip direction $\\sigma_i$, side $\\nu_i$ of $N_i$."""
+    """The mode during a step, per mass: stuck, slip direction $\\sigma_i$, side $\\nu_i$ of $N_i$, and
+    (`contact="hop"` only) in flight."""
 
     stuck: Scalars
     sdir: Scalars
     side: Scalars
+    fly: Scalars | None = None
 
 
 def kept(P: AbstractPhysics, dr: Any) -> Any:
@@ -101,13 +107,16 @@ def _add_power(P: AbstractPhysics, ed: Any, v: Scalars, u: Scalars, scale: float
     return ed if p is None else ed + scale * p
 
 
-def _in_mode(P: AbstractPhysics, contact: Contact, mode: Mode, dr: Any, L: Loads, v: Scalars):
+def _in_mode(P: AbstractPhysics, contact: Contact, mode: Mode, dr: Any, L: Loads, v: Scalars, vy=None):
     """The normal forces $n_i$, speeds, kinetic coefficients and the state's rate at a state with
     loads `L`: $\\dot x_i = v_i$, $m_i \\dot v_i = F_i - c_i v_i - \\sigma_i \\mu_k n_i$
     (both zero when stuck; eq. 9 generalised), $\\dot e_d = \\sum_i \\mu_k n_i |v_i| + c_i v_i^2$
-    (eq. 15) and $\\dot w$, the actuator's power (eq. 16)."""
+    (eq. 15) and $\\dot w$, the actuator's power (eq. 16). Under `contact="hop"` a body in flight
+    feels no friction ($n_i = 0$) and falls: $\\dot y_i = w_i$, $m_i \\dot w_i = -m_i + V_i = -N_i$."""
     F, N = with_velocity(P, L.F, v), L.N
     n = normal(contact, N, mode.side)
+    if mode.fly is not None:  # no friction in flight
+        n = tuple(jnp.where(f, 0, q) for f, q in zip(mode.fly, n))
     speed = tuple(sd * vi for sd, vi in zip(mode.sdir, v))  # |v_i| in a slip segment; 0 when stuck
     mu = tuple(law.kinetic(s, sd) for law, s, sd in zip(P.friction, speed, mode.sdir))
     a = tuple(
@@ -116,12 +125,19 @@ def _in_mode(P: AbstractPhysics, contact: Contact, mode: Mode, dr: Any, L: Loads
     )
     xd = tuple(jnp.where(st, 0, vi) for st, vi in zip(mode.stuck, v))
     ed = _add_power(P, _sum([m * q * s + c * vi * vi for m, q, s, c, vi in zip(mu, n, speed, P.c, v)]), v, v)
-    return n, speed, mu, State(xd, a, ed, P.power(dr, L, v))
+    rate = State(xd, a, ed, P.power(dr, L, v))
+    if mode.fly is not None:  # in flight m_i w_i' = -m_i + V_i = -N_i; on the ground y_i = w_i = 0
+        assert vy is not None, "contact='hop' needs the vertical velocities"
+        rate = rate._replace(
+            y=tuple(jnp.where(f, q, 0) for f, q in zip(mode.fly, vy)),
+            vy=tuple(jnp.where(f, -q * im, 0) for f, q, im in zip(mode.fly, N, P.im)),
+        )
+    return n, speed, mu, rate
 
 
-def rates(P: AbstractPhysics, contact: Contact, mode: Mode, dr: Any, x: Scalars, v: Scalars) -> State:
+def rates(P: AbstractPhysics, contact: Contact, mode: Mode, dr: Any, y: State) -> State:
     """The state's rate (an RK4 stage): see [`_in_mode`][]."""
-    return _in_mode(P, contact, mode, dr, P.loads(dr, x), v)[3]
+    return _in_mode(P, contact, mode, dr, P.loads(dr, y.x), y.v, y.vy)[3]
 
 
 class Derivs(NamedTuple):
@@ -137,18 +153,22 @@ class Derivs(NamedTuple):
     dN: Scalars
 
 
-def derivatives(P: AbstractPhysics, contact: Contact, mode: Mode, target, dr: Any, L: Loads, x, v) -> Derivs:
+def derivatives(
+    P: AbstractPhysics, contact: Contact, mode: Mode, target, dr: Any, L: Loads, x, v, y=None, vy=None
+) -> Derivs:
     """Rates and event values with their first and second time derivatives along the motion in a
     fixed mode, at a state whose loads `L` are given (the loads' rates from the physics, the
     friction law's own `kinetic_rate`)."""
     F, N = with_velocity(P, L.F, v), L.N
-    n, speed, mu, rate = _in_mode(P, contact, mode, dr, L, v)
+    n, speed, mu, rate = _in_mode(P, contact, mode, dr, L, v, vy)
     xd, a = rate.x, rate.v
+    fly = mode.fly
+    grounded = (lambda q: q) if fly is None else (lambda q: tuple(jnp.where(f, 0, r) for f, r in zip(fly, q)))
 
     # First derivatives: the loads along (xd, the actuation's rate), the kinetic coefficients.
     R = P.load_rates(dr, L, xd, P.keep)
     dF, dN = with_velocity(P, R.dF, a), R.dN
-    dn = normal(contact, dN, mode.side)
+    dn = grounded(normal(contact, dN, mode.side))
     dspeed = tuple(sd * ai for sd, ai in zip(mode.sdir, a))
     dmu = [law.kinetic_rate(s, sd, ds) for law, s, sd, ds in zip(P.friction, speed, mode.sdir, dspeed)]
     fric = [m * q1 if r is None else r * q + m * q1 for m, q, r, q1 in zip(mu, n, dmu, dn)]  # d(mu_i n_i)/dt
@@ -161,17 +181,24 @@ def derivatives(P: AbstractPhysics, contact: Contact, mode: Mode, target, dr: An
     ded = _add_power(P, ded, v, a, 2.0)
     dw = P.power_rate(dr, L, R, v, a)
     second = State(a, jerk, ded, dw)
+    if fly is not None:
+        second = second._replace(y=rate.vy, vy=tuple(jnp.where(f, -q * im, 0) for f, q, im in zip(fly, dN, P.im)))
 
     # Second derivatives of the loads, for the events' curvature.
     ddF, ddN = P.load_second(dr, L, R, xd, a)
     ddF = with_velocity(P, ddF, jerk)
-    ddn = normal(contact, ddN, mode.side)
+    ddn = grounded(normal(contact, ddN, mode.side))
 
     stick = (stick_margin(P, F, n), stick_margin_rate(P, F, n, dF, dn), stick_margin_rate(P, F, n, ddF, ddn))
     g, dg, ddg = (
         [jnp.where(st, p, sd * q) for st, p, sd, q in zip(mode.stuck, margin, mode.sdir, slip)]
         for margin, slip in zip(stick, (v, a, jerk))
     )
+    if fly is not None:  # no friction in flight: a sign change of v_i is no event there
+        inf = jnp.asarray(jnp.inf, F[0].dtype)
+        g = [jnp.where(f, inf, q) for f, q in zip(fly, g)]
+        dg = [jnp.where(f, 0, q) for f, q in zip(fly, dg)]
+        ddg = [jnp.where(f, 0, q) for f, q in zip(fly, ddg)]
     if contact == "strict":  # min_i N_i, its rates averaged over ties (as `jax.jvp` of `jnp.min`)
         low = N[0]
         for q in N[1:]:
@@ -181,6 +208,11 @@ def derivatives(P: AbstractPhysics, contact: Contact, mode: Mode, target, dr: An
         g.append(low)
         dg.append(_sum([jnp.where(w, r, 0) for w, r in zip(at, dN)]) / count)
         ddg.append(_sum([jnp.where(w, r, 0) for w, r in zip(at, ddN)]) / count)
+    elif fly is not None:  # per body: on the ground N_i (lift-off), in flight y_i (landing)
+        assert y is not None and vy is not None and rate.vy is not None, "contact='hop' needs the heights"
+        g += [jnp.where(f, h, q) for f, h, q in zip(fly, y, N)]
+        dg += [jnp.where(f, h, q) for f, h, q in zip(fly, vy, dN)]
+        ddg += [jnp.where(f, h, q) for f, h, q in zip(fly, rate.vy, ddN)]
     else:
         g += list(n)
         dg += list(dn)
@@ -196,5 +228,9 @@ def derivatives(P: AbstractPhysics, contact: Contact, mode: Mode, target, dr: An
 
 
 def energy(P: AbstractPhysics, y: State, L: Loads) -> Array:
-    """The mechanical energy at state `y` with loads `L` there (eq. 10 generalised)."""
-    return P.energy(L, y.v)
+    """The mechanical energy at state `y` with loads `L` there (eq. 10 generalised); under
+    `contact="hop"` with each body's gravity $m_i y_i$ and vertical kinetic energy $m_i w_i^2/2$."""
+    e = P.energy(L, y.v)
+    if y.y is not None and y.vy is not None:
+        e = e + _sum([m * (h + 0.5 * q * q) for m, h, q in zip(P.m, y.y, y.vy)])
+    return e

@@ -27,7 +27,8 @@ def _com(C: Chain | Mechanism, x: jax.Array) -> jax.Array:
 def _row(s: engine.Hybrid) -> jax.Array:
     dt = s.t.dtype
     stuck = (b.astype(dt) for b in s.stuck)
-    return jnp.stack([*s.y.x, *s.y.v, s.y.ed, s.y.w, *stuck, *s.sdir, s.cross, s.near, s.t_switch])
+    hop = [] if s.y.y is None or s.y.vy is None or s.n_land is None else [*s.y.y, *s.y.vy, s.n_land.astype(dt)]
+    return jnp.stack([*s.y.x, *s.y.v, s.y.ed, s.y.w, *stuck, *s.sdir, s.cross, s.near, s.t_switch, *hop])
 
 
 def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps, lanes, buffer=BUFFER, initial=None):
@@ -38,7 +39,8 @@ def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps, lanes, buf
         P = take(i).physics()
         return P, chain_initial_state(P, valid[i], contact, start, None if initial is None else initial[i])
 
-    step = lambda P, s, t_stop: engine.step(P, contact, dt, s, t_stop)[0]
+    hop = (lambda P: P.hop()[2:]) if contact == "hop" else (lambda P: None)
+    step = lambda P, s, t_stop: engine.step(P, contact, dt, s, t_stop, hop=hop(P))[0]
     order = jnp.argsort(-jnp.where(jnp.isfinite(C.omega), C.omega, -jnp.inf))
     return run_saves(init, step, _row, valid.shape[0], save_at, max_steps, lanes, order, buffer)
 
@@ -51,12 +53,15 @@ def _stack(a: tuple, like: jax.Array) -> jax.Array:
     return jnp.stack(a, -1) if a else jnp.zeros(jnp.shape(like) + (0,), like.dtype)
 
 
-def _derived(C: Chain | Mechanism, contact, t, x, v):
-    """Energy, normal forces, rest lengths and tensions (per spring) at one saved state."""
+def _derived(C: Chain | Mechanism, contact, t, x, v, y=None, vy=None):
+    """Energy, normal forces, rest lengths and tensions (per spring) at one saved state (under
+    `contact="hop"`, the energy with each body's gravity $m_i y_i$ and vertical kinetic energy)."""
     P: Any = C.physics()  # a chain's or a mechanism's: both have `l0` per spring and `tension`
     dr = P.drive(jnp.cos(P.omega * t), jnp.sin(P.omega * t))
     L = P.loads(dr, tuple(x[..., i] for i in range(x.shape[-1])))
     e = P.energy(L, tuple(v[..., i] for i in range(v.shape[-1])))
+    if y is not None and vy is not None:
+        e = e + jnp.sum(C.m * (y + 0.5 * vy * vy), -1)
     return dict(e=e, N=jnp.stack(L.N, -1), l0=_stack(dr.l0, e), tension=_stack(L.aux.tension, e))
 
 
@@ -72,7 +77,12 @@ def simulate_batch(flat: Chain | Mechanism, valid, save, contact, start, dt, max
     )
     x, v = rows[..., :N], rows[..., N : 2 * N]
     t = jnp.broadcast_to(save, rows.shape[:-1])
-    der = jax.vmap(lambda C, t, x, v: jax.vmap(lambda *a: _derived(C, contact, *a))(t, x, v))(flat, t, x, v)
+    if contact == "hop":
+        hy, hvy = rows[..., 4 * N + 5 : 5 * N + 5], rows[..., 5 * N + 5 : 6 * N + 5]
+        der = jax.vmap(lambda C, *a: jax.vmap(lambda *b: _derived(C, contact, *b))(*a))(flat, t, x, v, hy, hvy)
+        der.update(y=hy, vy=hvy, n_land=rows[..., -1, 6 * N + 5].astype(jnp.int32))
+    else:
+        der = jax.vmap(lambda C, t, x, v: jax.vmap(lambda *a: _derived(C, contact, *a))(t, x, v))(flat, t, x, v)
     out = dict(
         t=t, x=x, v=v, stuck=rows[..., 2 * N + 2 : 3 * N + 2] > 0.5, X=jax.vmap(_com)(flat, x),
         e_d=rows[..., 2 * N], w=rows[..., 2 * N + 1], valid=ok, status=status, liftoff=jnp.isfinite(t_lift),

@@ -114,12 +114,13 @@ def chain_initial_state(P: AbstractPhysics, valid, contact, start, row=None) -> 
     increasing order; then it starts from `start`, so that nothing turns NaN). Without `row`, a
     mechanism's own initial velocities (`AbstractPhysics.initial_velocities`) if it has them."""
     x = P.initial_positions(start)
+    vert = P.hop()[:2] if contact == "hop" else (None, None)
     if row is None:
-        st = chain_engine.init(P, contact, x, P.initial_velocities(start))
+        st = chain_engine.init(P, contact, x, P.initial_velocities(start), *vert)
     else:
         n = x.shape[-1]
         gaps = P.gaps(tuple(row[i] for i in range(n)))
         ok = jnp.all(jnp.isfinite(row)) & jnp.all(jnp.stack([g > 0 for g in gaps] or [jnp.asarray(True)]))
-        st = chain_engine.init(P, contact, jnp.where(ok, row[:n], x), jnp.where(ok, row[n:], 0))
+        st = chain_engine.init(P, contact, jnp.where(ok, row[:n], x), jnp.where(ok, row[n:], 0), *vert)
         valid = valid & ok
     return eqx.tree_at(lambda s: s.status, st, jnp.where(valid, st.status, Status.INVALID).astype(jnp.int32))

@@ -95,6 +95,14 @@ class Mechanism(AbstractMechanism):
     - `c`: ground damping per body, $c_i \\ge 0$ (default 0).
     - `x0`, `v0`: the initial positions (default 0) and velocities (default 0) per body; a
       body in contact at rest starts stuck where its static limits hold.
+    - `y0`, `w0`: the initial heights $y_i \\ge 0$ (default 0) and vertical velocities (default 0)
+      per body, for the hopping reading `contact="hop"` (SPEC §10; ignored by `"strict"` and
+      `"paper"`). A body without a friction law has no vertical motion: its `y0` and `w0` are 0.
+    - `restitution`: Newton's coefficient $e_i \\in [0, 1]$ per body at a landing, $w^+ = -e_i w^-$
+      (default 0, plastic).
+    - `zeno_speed`: a rebound slower than this, $e_i |w^-| <$ `zeno_speed`, is plastic ($w^+ = 0$),
+      so that a sequence of ever shorter bounces ends after finitely many landings (default
+      `1e-3`, in the units of SPEC §8: $\\sqrt{g\\,\\bar l}$; $\\ge 0$).
     - `check`: validate concrete values (default); with `check=False` an invalid
       configuration is flagged `Status.INVALID` in its own result instead.
 
@@ -117,6 +125,10 @@ class Mechanism(AbstractMechanism):
     c: Array
     x0: Array
     v0: Array
+    y0: Array
+    w0: Array
+    restitution: Array
+    zeno_speed: Array
     friction: tuple[AbstractFriction | None, ...]
     links: tuple[AbstractElement, ...]
     carried_by: tuple[int | None, ...] = eqx.field(static=True)
@@ -131,6 +143,10 @@ class Mechanism(AbstractMechanism):
         x0: ValuesLike | None = None,
         v0: ValuesLike = 0.0,
         *,
+        y0: ValuesLike = 0.0,
+        w0: ValuesLike = 0.0,
+        restitution: ValuesLike = 0.0,
+        zeno_speed: ValuesLike = 1e-3,
         check: bool = True,
     ):
         m = real_array("masses", masses)
@@ -141,6 +157,10 @@ class Mechanism(AbstractMechanism):
         self.c = _per_body("c", c, n)
         self.x0 = _per_body("x0", 0.0 if x0 is None else x0, n)
         self.v0 = _per_body("v0", v0, n)
+        self.y0 = _per_body("y0", y0, n)
+        self.w0 = _per_body("w0", w0, n)
+        self.restitution = _per_body("restitution", restitution, n)
+        self.zeno_speed = real_array("zeno_speed", zeno_speed)
         carried = [None] * n if carried_by is None else list(carried_by)
         if len(carried) != n:
             raise ValueError(f"carried_by: one entry per body ({n}), got {len(carried)}.")
@@ -221,7 +241,16 @@ class Mechanism(AbstractMechanism):
 
     def _nodes(self) -> list[tuple[str, Array, int]]:
         """Every array field: `(name for messages, array, number of trailing non-batch axes)`."""
-        out = [("masses", self.m, 1), ("c", self.c, 1), ("x0", self.x0, 1), ("v0", self.v0, 1)]
+        out = [
+            ("masses", self.m, 1),
+            ("c", self.c, 1),
+            ("x0", self.x0, 1),
+            ("v0", self.v0, 1),
+            ("y0", self.y0, 1),
+            ("w0", self.w0, 1),
+            ("restitution", self.restitution, 1),
+            ("zeno_speed", self.zeno_speed, 0),
+        ]
         for i, law in enumerate(self.friction):
             if law is not None:
                 out += [(f"{name} (body {i})", x, 0) for name, x in law.fields().items()]
@@ -374,13 +403,22 @@ class Mechanism(AbstractMechanism):
     def _checks(self) -> list[tuple[str, str, Array, str, Any]]:
         """`(owner, parameter, valid mask, valid range, values)`, finite values first."""
         out: list[tuple[str, str, Array, str, Any]] = []
-        per_body = [("masses", self.m), ("c", self.c), ("x0", self.x0), ("v0", self.v0)]
+        per_body = [("masses", self.m), ("c", self.c), ("x0", self.x0), ("v0", self.v0), ("y0", self.y0),
+                    ("w0", self.w0), ("restitution", self.restitution)]  # fmt: skip
         for name, x in per_body:
             for i in range(self.n_bodies):
                 out.append((f"body {i}", name, jnp.isfinite(x[..., i]), "finite", x[..., i]))
+        out.append(("the mechanism", "zeno_speed", jnp.isfinite(self.zeno_speed), "finite", self.zeno_speed))
+        out.append(("the mechanism", "zeno_speed", self.zeno_speed >= 0, "zeno_speed >= 0", self.zeno_speed))
         for i in range(self.n_bodies):
             out.append((f"body {i}", "masses", self.m[..., i] > 0, "m_i > 0", self.m[..., i]))
             out.append((f"body {i}", "c", self.c[..., i] >= 0, "c_i >= 0", self.c[..., i]))
+            y, w, e = self.y0[..., i], self.w0[..., i], self.restitution[..., i]
+            out.append((f"body {i}", "y0", y >= 0, "y0_i >= 0 (a height above the ground)", y))
+            out.append((f"body {i}", "restitution", (e >= 0) & (e <= 1), "0 <= e_i <= 1", e))
+            if self.friction[i] is None:  # carried or free (SPEC 9): no vertical motion
+                out.append((f"body {i}", "y0", y == 0, "0 (a body without a friction law has no vertical motion)", y))
+                out.append((f"body {i}", "w0", w == 0, "0 (a body without a friction law has no vertical motion)", w))
         for i, law in enumerate(self.friction):
             if law is None:
                 continue

@@ -98,6 +98,10 @@ class MechanismPhysics(AbstractPhysics):
     normal: Scalars  # the constant normal loads N_i (1 for a body without contact)
     x0: Scalars
     v0: Scalars
+    y0: Scalars
+    w0: Scalars
+    restitution: Scalars
+    zeno_speed: Array
     inv_mass: Array
     springs: tuple[Spring, ...]
     forces: tuple[Force, ...]
@@ -203,6 +207,12 @@ class MechanismPhysics(AbstractPhysics):
     def initial_velocities(self, start: str) -> Array | None:
         return jnp.stack(self.v0, -1)
 
+    def hop(self) -> tuple[Array, Array, Scalars, Array]:
+        """Under `contact="hop"` the springs and forces stay horizontal: no vertical force acts
+        on a body ($V_i = 0$, $N_i = m_i$), so a body in flight falls freely and one on the
+        ground never lifts off by itself (it flies from its `y0`, `w0` or a rebound)."""
+        return jnp.stack(self.y0, -1), jnp.stack(self.w0, -1), self.restitution, self.zeno_speed
+
 
 def ground_body(carried_by: tuple[int | None, ...], i: int) -> int:
     """The body in contact that finally carries body `i` (`i` itself if it is not carried)."""
@@ -244,6 +254,9 @@ def mechanism_physics(M: Any) -> MechanismPhysics:
         m=m, im=tuple(1 / q for q in m), c=tuple(c), friction=friction,
         mu_f=tuple(f for f, _ in limits), mu_b=tuple(b for _, b in limits), omega=omega, one=one,
         normal=tuple(normal), x0=tuple(M.x0[..., i] for i in range(n)), v0=tuple(M.v0[..., i] for i in range(n)),
+        y0=tuple(M.y0[..., i] for i in range(n)), w0=tuple(M.w0[..., i] for i in range(n)),
+        restitution=tuple(M.restitution[..., i] for i in range(n)),
+        zeno_speed=jnp.broadcast_to(M.zeno_speed, one.shape).astype(one.dtype),
         inv_mass=1 / M.m.sum(-1),
         springs=tuple(e for e in links if isinstance(e, Spring)),
         forces=tuple(e for e in links if isinstance(e, Force)),

@@ -146,6 +146,15 @@ class AbstractPhysics(eqx.Module):
         dissipate (into $e_d$); `None` (the default): none."""
         return None
 
+    def hop(self) -> tuple[Array, Array, Scalars, Array]:
+        """What the hopping reading `contact="hop"` (SPEC §10) needs: the initial heights and
+        vertical velocities (shape `(N,)` each), the restitution per body and the Zeno speed.
+        A mechanism whose loads do not yet depend on the heights raises `NotImplementedError`."""
+        raise NotImplementedError(
+            f"contact='hop' is not supported by {type(self).__name__} yet (its loads do not depend on the "
+            "bodies' heights); use a Mechanism, or contact='strict' or 'paper'."
+        )
+
     def gaps(self, x: Scalars) -> Scalars:
         """The gaps between bodies that must stay positive: the engine stops a run with
         `Status.COLLISION` where one is $\\le 0$ after a step, and refuses an initial state where

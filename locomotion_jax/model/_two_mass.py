@@ -117,6 +117,13 @@ def initial_gap(params: Params, start: str) -> Array:
     raise ValueError(f"start must be 'paper' (eq. 14) or 'relaxed', got {start!r}.")
 
 
-def check_contact(contact: str) -> None:
-    if contact not in ("strict", "paper"):
-        raise ValueError(f"contact must be 'strict' or 'paper', got {contact!r}.")
+def check_contact(contact: str, hop: bool = False) -> None:
+    """Validate a `contact` reading; `"hop"` raises `NotImplementedError` unless the caller's path
+    supports it (`hop=True`)."""
+    if contact == "hop" and not hop:
+        raise NotImplementedError(
+            "contact='hop' (flight and landing, SPEC section 10) is not implemented yet for the paper's "
+            "model (Params) on this path (only lj.simulate of a Mechanism); use contact='strict' or 'paper'."
+        )
+    if contact not in ("strict", "paper", "hop"):
+        raise ValueError(f"contact must be 'strict', 'paper' or 'hop', got {contact!r}.")

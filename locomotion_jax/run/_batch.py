@@ -14,6 +14,7 @@ import numpy as np
 from ..dynamics._base import AbstractDynamics
 from ..dynamics._exact_dynamics import Exact
 from ..dynamics._forward import concrete_value
+from ..model._bodies import Mechanism
 from ..model._checks import is_concrete
 from ..model._mechanism import AbstractMechanism
 from ..model._params import Params
@@ -166,9 +167,22 @@ def prepare_chain_initial(
     return state
 
 
-def check_contact_start(contact: str, start: str) -> None:
-    if contact not in ("strict", "paper"):
-        raise ValueError(f"contact must be 'strict' or 'paper', got {contact!r}.")
+def check_contact_start(contact: str, start: str, mechanism: Any = None) -> None:
+    """Validate `contact` and `start`. `contact="hop"` runs only for a [`Mechanism`][locomotion_jax.Mechanism]
+    without carried bodies (passed as `mechanism`); elsewhere it raises `NotImplementedError`."""
+    if contact == "hop" and isinstance(mechanism, Mechanism):
+        if any(c is not None for c in mechanism.carried_by):
+            raise NotImplementedError(
+                "contact='hop' does not support carried bodies yet (carried_by); use contact='strict' or 'paper'."
+            )
+    elif contact == "hop":
+        name = type(mechanism).__name__ if mechanism is not None else "this path"
+        raise NotImplementedError(
+            f"contact='hop' (flight and landing, SPEC section 10) is not implemented yet for {name} "
+            "(only lj.simulate of a Mechanism); use contact='strict' or 'paper'."
+        )
+    if contact not in ("strict", "paper", "hop"):
+        raise ValueError(f"contact must be 'strict', 'paper' or 'hop', got {contact!r}.")
     if start not in ("paper", "relaxed"):
         raise ValueError(f"start must be 'paper' (eq. 14) or 'relaxed', got {start!r}.")
 

@@ -8,6 +8,7 @@ import numpy as np
 from .._custom_types import ArrayLike
 from .._results import ChainTrajectory, Trajectory
 from ..dynamics._base import AbstractDynamics
+from ..dynamics._exact_dynamics import Exact
 from ..dynamics._forward import check_static
 from ..model import _two_mass as model
 from ..model._bodies import Mechanism
@@ -82,7 +83,8 @@ def simulate(
       or any other [`AbstractDynamics`][].
     - `waveform`: actuation $\\ell_0(t)$; default the sinusoid of eq. (13) from `params`.
     - `contact`: `"strict"` (default: stop at lift-off) or `"paper"` ($n_i = |N_i|$,
-      flagged). `start`: `"paper"` (eq. 14, default) or `"relaxed"`.
+      flagged), or `"hop"` (flight and landing, SPEC §10; a `Mechanism` without carried bodies
+      only, Exact dynamics; docs/model.md). `start`: `"paper"` (eq. 14, default) or `"relaxed"`.
     - `initial`: instead of `start`, the state at $t = 0$: a tuple `(x1, v1, x2, v2)` of
       arrays broadcastable to the batch shape, with $x_1 < x_2$ (a mass at rest sticks if
       eq. (7) allows). Forward-mode derivatives with respect to it work as with respect
@@ -113,7 +115,7 @@ def simulate(
         ```
     """
     dynamics = dynamics_arg(dynamics)
-    model.check_contact(contact)
+    model.check_contact(contact, hop=True)  # each path below refuses "hop" where it does not support it
     model.initial_gap(Params(), start)  # validates `start`
     check_static("t_end", t_end)
     check_static("save_at", save_at)
@@ -132,6 +134,7 @@ def simulate(
 
 
 def _two_mass(params: Params, dynamics: AbstractDynamics, t_end, save_np, waveform, contact, start, initial, dtype):
+    model.check_contact(contact)
     flat, wave, axes, shape = prepare(params, waveform, dtype)
     flat, unresolved = guard_two_mass(dynamics, flat, wave, shape)
     y0 = prepare_initial(initial, shape, flat.dtype)
@@ -147,7 +150,9 @@ def _chain(
         raise ValueError(
             f"waveform= applies to Params; a {type(chain).__name__} carries its own waveforms (springs or links)."
         )
-    check_contact_start(contact, start)
+    check_contact_start(contact, start, chain)
+    if contact == "hop" and not isinstance(dynamics, Exact):
+        raise NotImplementedError(f"contact='hop' runs with Exact dynamics only, got {type(dynamics).__name__}.")
     flat, valid, shape = prepare_chain(chain, dtype)
     valid, unresolved = guard_chain(dynamics, flat, valid, shape)
     y0 = prepare_chain_initial(initial, shape, flat.n_masses, flat.dtype, flat)
