@@ -76,7 +76,7 @@ else:
         shape="fourier", local=1, start_frequencies=2, random_shapes=0, tension_periods=2, max_iter=20, stages=1,
         transient=20, refine_baseline=False,
     )  # fmt: skip
-    SWEEP = dict(omegas=np.geomspace(0.5, 8.0, 8), amplitudes=2, transient=20)  # 2 amplitudes x 8 frequencies
+    SWEEP = dict(omegas=np.geomspace(1.0, 6.0, 8), amplitudes=2, transient=20)  # 2 amplitudes x 8 frequencies
 IMAGES = os.environ.get("LOCOMOTION_NB_IMAGES")  # set to a directory to save this notebook's picture there
 params = lj.Params(a=A_MAX)  # the paper's defaults; `a` and `omega` are the optimiser's to choose
 
