@@ -173,6 +173,8 @@ def _end_with_lost_peers(me: int, n_proc: int, taken: dict[int, str]) -> None:
     not alone, since a peer that finished and left is not alive either)."""
     if taken:
         print(_peers.report_takeover(me, n_proc, taken, _peers.lost_peers(n_proc, me)), file=sys.stderr, flush=True)
+    if me == 0:
+        _peers.wait_for_peers_to_leave(n_proc)
 
 
 def _barrier(name: str) -> None:
