@@ -235,14 +235,13 @@ def step(
     # sticks if the static limits hold, else it slips the other way.
     dr0 = motion.kept(P, P.drive(st.cph, st.sph))
     L0 = P.loads(dr0, yA.x, kp)
-    F0, N0 = motion.with_velocity(P, L0.F, yA.v), L0.N
+    N0 = L0.N
     nA = motion.normal(contact, N0)
     fly, n_land, st_stuck, st_sdir = st.fly, st.n_land, st.stuck, st.sdir
     if contact == "hop":  # landings and lift-offs first (SPEC §10); a flying body never sticks
         assert hop is not None, "contact='hop' needs the mechanism's restitution and zeno_speed"
         assert st.fly is not None and st.n_land is not None, "contact='hop' needs a state from init(contact='hop')"
         yA, fly, rest, landed = _impact(P, hop[0], hop[1], st, N0, kp)
-        F0 = motion.with_velocity(P, L0.F, yA.v)  # velocity forces after the impacts' jumps
         n_land = st.n_land + landed
         nA = tuple(jnp.where(f, 0, q) for f, q in zip(fly, nA))
         one = jnp.ones((), dtype)
@@ -252,6 +251,7 @@ def step(
         st_stuck = tuple(s & ~f for s, f in zip(st.stuck, fly))
     else:
         rest = None
+    F0 = motion.with_velocity(P, L0.F, yA.v)  # after the impacts' velocity jumps
     margin = motion.stick_margin(P, F0, nA)
     gA = [jnp.where(s, p, sd * v) for s, p, sd, v in zip(st_stuck, margin, st_sdir, yA.v)]
     if fly is not None:  # no slip event in flight
@@ -397,7 +397,7 @@ def step(
         lift_cut = first[n_mass]
         lift = stop0 | lift_cut
     elif fly is not None:  # a landing or a lift-off: the body switches at the next iteration
-        vpend = tuple(commit_f & f for commit_f, f in zip([~stop0] * n_mass, first[n_mass : 2 * n_mass]))
+        vpend = tuple(first[n_mass : 2 * n_mass])  # (stop0 is False here: only strict stops)
         lift_cut = num.union([f & ~g for f, g in zip(first[n_mass : 2 * n_mass], fly)])
         lift = stop0
     else:
