@@ -162,7 +162,7 @@ MUTATIONS = [
         "regime_window_length",
         "the regime window is 25 whatever `window` says",
         MEASURE,
-        (("ws, ws + window, ws + horizon", "ws, ws + 25.0, ws + horizon"),),
+        (("P, ws, ws + window, te", "P, ws, ws + 25.0, te"),),
         (REF,),
     ),
     Mutation(
