@@ -5,9 +5,8 @@ mutations themselves takes minutes each and is done by hand (docs/development.md
 import re
 from pathlib import Path
 
-import pytest
-
 import mutations
+import pytest
 
 
 ROOT = Path(__file__).resolve().parent.parent
