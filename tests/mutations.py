@@ -494,6 +494,20 @@ MUTATIONS = [
         (("MAX_START_STEPS = 10**8", "MAX_START_STEPS = 10**12"),),
         (GUARDS_TESTS + "::test_the_limit_is_on_the_steps",),
     ),
+    Mutation(
+        "optimise_guard_skipped",
+        "optimise (the paper's model): the entry guard of the search's step is not called",
+        "locomotion_jax/optimisation/_optimise.py",
+        (("_guard_search(params, omega, shape, cast(ExactSettings, settings))", "pass"),),
+        (GUARDS_TESTS + "::test_optimisers_refuse_a_step_that_does_not_resolve_the_mechanism",),
+    ),
+    Mutation(
+        "chain_optimise_guards_its_own_waves",
+        "optimise (a chain): the guard checks the chain's own actuation, not the fastest stroke the search reaches",
+        "locomotion_jax/optimisation/_chain.py",
+        (("refuse_search(fastest, None, settings.dt", "refuse_search(base, None, settings.dt"),),
+        (GUARDS_TESTS + "::test_optimisers_refuse_a_step_that_does_not_resolve_the_mechanism",),
+    ),
 ]
 
 
