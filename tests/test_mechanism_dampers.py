@@ -93,11 +93,9 @@ def test_a_batch_flags_one_bad_damper_and_runs_the_others():
 
 
 def test_front_ends_not_built_for_a_mechanism_say_so():
-    """`steady_gait` and `optimise` refuse a Mechanism by name (under the tests' runtime type checks the
-    type hint refuses it first, a TypeError naming it; without them, the NotImplementedError)."""
+    """`optimise` refuses a Mechanism by name (under the tests' runtime type checks the type hint
+    refuses it first, a TypeError naming it; without them, the NotImplementedError)."""
     M = _damped()
-    with pytest.raises((NotImplementedError, TypeError), match="Mechanism"):
-        lj.steady_gait(M)  # pyright: ignore[reportCallIssue, reportArgumentType]
     with pytest.raises((NotImplementedError, TypeError), match="Mechanism"):
         lj.optimise(M, v_min=0.05, a_max=0.5)  # pyright: ignore[reportCallIssue, reportArgumentType]
 

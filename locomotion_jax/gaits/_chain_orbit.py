@@ -88,7 +88,7 @@ def period(C: Chain, contact: Contact, dt: float, max_steps: Array, y: Array, k:
     st, low, _ = jax.lax.while_loop(cond, body, (st0, normal(st0), jnp.zeros((), jnp.int32)))
     ok = (st.status == Status.OK) & (st.t >= t_end)
     dX = P.centre_of_mass(st.y.x) - P.centre_of_mass(st0.y.x)
-    return Period(_reduced(st), jnp.stack([dX, st.y.ed, low]), ok)
+    return Period(_reduced(st, P), jnp.stack([dX, st.y.ed, low]), ok)
 
 
 def _orbit_one(C, a_max, theta, y0, k, harmonics, contact, dt, max_steps, tol, max_iter) -> Orbit:
@@ -129,7 +129,7 @@ def _relax(C, a_max, theta, y0, fresh, periods, harmonics, contact, dt, max_step
             return engine.step(P, contact, dt, s, t_end)[0], n + 1
 
         st, _ = jax.lax.while_loop(cond, body, (st, jnp.zeros((), jnp.int32)))
-        return _reduced(st)
+        return _reduced(st, P)
 
     return jax.vmap(one)(theta, y0, fresh)
 
