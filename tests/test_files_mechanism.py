@@ -163,8 +163,21 @@ def test_cli_simulates_the_capsule_and_the_other_commands_refuse_it_by_name(tmp_
     assert record["kind"] == "mechanism" and record["status_name"] == "OK"
     assert Path(record["plot"]).is_file()
     sweep = ["sweep", "--omega", "1,2", "--out", str(tmp_path / "s.nc")]
-    for args in (["gait"], ["optimize", "--v-min", "0.05"], sweep):
+    for args in (["optimize", "--v-min", "0.05"], sweep):
         out = CliRunner().invoke(_cli.app, [args[0], str(EXAMPLES / "capsule.toml"), *args[1:]])
         assert out.exit_code == 2 and 'a mechanism of bodies and links (kind = "mechanism") runs in `measure`' in (
             out.output
         ), (args, out.output)
+
+
+def test_cli_gait_of_the_capsule_file_equals_the_library():
+    """`gait capsule.toml --json` prints what `lj.steady_gait` gives on the loaded file."""
+    args = ["gait", str(EXAMPLES / "capsule.toml"), "--periods", "1", "--transient", "10", "--dt", "0.02", "--json"]
+    res = CliRunner().invoke(_cli.app, args)
+    assert res.exit_code == 0, res.output
+    record = json.loads(res.stdout)
+    capsule = lj.load_mechanism(EXAMPLES / "capsule.toml")
+    g = lj.steady_gait(capsule, periods=1, transient=10, dynamics=lj.Exact(dt=0.02))
+    assert record["kind"] == "mechanism" and record["status_name"] == lj.GaitStatus(int(g.status)).name
+    assert record["mean_speed"] == float(g.mean_speed) and record["state"] == np.asarray(g.state).tolist()
+    assert record["status_name"] == "CONVERGED" and len(record["state"]) == 3
