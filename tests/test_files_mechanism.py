@@ -181,3 +181,32 @@ def test_cli_gait_of_the_capsule_file_equals_the_library():
     assert record["kind"] == "mechanism" and record["status_name"] == lj.GaitStatus(int(g.status)).name
     assert record["mean_speed"] == float(g.mean_speed) and record["state"] == np.asarray(g.state).tolist()
     assert record["status_name"] == "CONVERGED" and len(record["state"]) == 3
+
+
+def test_cli_animate_draws_the_capsule_files_simulation(tmp_path):
+    """`animate capsule.toml` writes one GIF frame per saved state of `lj.simulate` on the loaded file,
+    and counts each body's stuck frames as the trajectory's `stuck` says; every frame draws body i
+    centred on the trajectory's x_i."""
+    from locomotion_jax.run._mechanism_animation import animate_mechanism
+    from PIL import Image
+
+    out = tmp_path / "capsule.gif"
+    args = ["animate", str(EXAMPLES / "capsule.toml"), "--t-from", "2", "--t-end", "6", "--frames", "9", "--dt",
+            "0.01", "--out", str(out)]  # fmt: skip
+    res = CliRunner().invoke(_cli.app, args)
+    assert res.exit_code == 0, res.output
+    capsule = lj.load_mechanism(EXAMPLES / "capsule.toml")
+    traj = lj.simulate(capsule, 6.0, np.linspace(2.0, 6.0, 9), dynamics=lj.Exact(dt=0.01))
+    stuck = np.asarray(traj.stuck).sum(axis=0)
+    assert f"(9 frames, t = 2..6); body 0 stuck in {stuck[0]}, body 1 stuck in {stuck[1]} frames" in res.stdout
+    assert stuck[0] > 0 and stuck[1] == 0  # the capsule sticks, its internal mass never does
+    assert getattr(Image.open(out), "n_frames") == 9
+    anim = animate_mechanism(traj, capsule, trace=False)
+    fig = anim._fig  # pyright: ignore[reportAttributeAccessIssue]
+    for k in (0, 4, 8):
+        anim._func(k)  # pyright: ignore[reportAttributeAccessIssue]
+        for i in range(2):
+            (r,) = [a for a in fig.axes[0].patches if a.get_gid() == f"body{i}"]
+            assert abs(r.get_x() + r.get_width() / 2 - float(traj.x[k, i])) < 1e-12
+    with pytest.raises(ValueError, match="one mechanism configuration"):
+        animate_mechanism(traj, lj.Mechanism.stack([capsule, capsule]))
