@@ -163,7 +163,7 @@ def test_cli_simulates_the_capsule_and_the_other_commands_refuse_it_by_name(tmp_
     assert record["kind"] == "mechanism" and record["status_name"] == "OK"
     assert Path(record["plot"]).is_file()
     sweep = ["sweep", "--omega", "1,2", "--out", str(tmp_path / "s.nc")]
-    for args in (["optimize", "--v-min", "0.05"], sweep):
+    for args in (sweep,):
         out = CliRunner().invoke(_cli.app, [args[0], str(EXAMPLES / "capsule.toml"), *args[1:]])
         assert out.exit_code == 2 and 'a mechanism of bodies and links (kind = "mechanism") runs in `measure`' in (
             out.output
@@ -210,3 +210,25 @@ def test_cli_animate_draws_the_capsule_files_simulation(tmp_path):
             assert abs(r.get_x() + r.get_width() / 2 - float(traj.x[k, i])) < 1e-12
     with pytest.raises(ValueError, match="one mechanism configuration"):
         animate_mechanism(traj, lj.Mechanism.stack([capsule, capsule]))
+
+
+def test_cli_optimize_passes_the_capsule_files_mechanism(monkeypatch):
+    """`optimize capsule.toml` hands the loaded mechanism and the options to `lj.optimise` (the optimiser
+    itself is tested in tests/test_mechanism_optimise.py); without --a-max it says that it needs one."""
+    import equinox as eqx
+
+    seen: dict[str, Any] = {}
+
+    def stand_in(*args, **kwargs):
+        seen.update(args=args, kwargs=kwargs)
+        raise ValueError("captured")
+
+    monkeypatch.setattr(lj, "optimise", stand_in)
+    path = str(EXAMPLES / "capsule.toml")
+    res = CliRunner().invoke(_cli.app, ["optimize", path, "--v-min", "0.02", "--a-max", "0.7", "--direction", "-1"])
+    assert res.exit_code == 2 and "captured" in res.output, res.output
+    mech, v_min, a_max = seen["args"]
+    assert bool(eqx.tree_equal(mech, lj.load_mechanism(path))) and (v_min, a_max) == (0.02, 0.7)
+    assert seen["kwargs"]["direction"] == -1 and seen["kwargs"]["harmonics"] == 2
+    res = CliRunner().invoke(_cli.app, ["optimize", path, "--v-min", "0.02"])
+    assert res.exit_code == 2 and "--a-max is required" in res.output
