@@ -64,6 +64,7 @@ from .optimisation._chain_optimum import (
     ChainOptimiseSettings as ChainOptimiseSettings,
     ChainOptimum as ChainOptimum,
 )
+from .optimisation._mechanism import MechanismOptimum as MechanismOptimum
 from .optimisation._optimum import (
     ExactOptimiseSettings as ExactOptimiseSettings,
     OptimiseSettings as OptimiseSettings,

@@ -54,3 +54,21 @@ def test_prescribed_internal_motion_matches_the_closed_form_and_the_regime_bound
     traj = lj.simulate(body, t_end=6 * T, save_at=jnp.linspace(T, 6 * T, 2001), dynamics=lj.Exact(dt=0.005))
     v_min = np.asarray(traj.v)[..., 0].min(axis=-1)
     assert ((v_min < 0) == (P > F_BWD)).all() and (v_min[P <= F_BWD] == 0).all()
+
+
+def test_steady_gait_matches_the_closed_form():
+    """`lj.steady_gait` of the same body (section state: its velocity at phase 0) over the at-rest and
+    forward-only bands: the orbit's mean speed and stuck fraction are the closed form's."""
+    P = np.array([0.15, 0.2, 0.22, 0.25, 0.3, 0.35, 0.4])
+    wave = lj.Sinusoid(a=jnp.asarray(P * (M + m)), omega=OMEGA, lbar=0.0)
+    law = lj.AnisotropicCoulomb(F_FWD, F_BWD, F_FWD, F_BWD)
+    body = lj.Mechanism(masses=[M + m], friction=law, links=[lj.ExternalForce(0, wave)])
+    g = lj.steady_gait(body, periods=1, transient=3, dynamics=lj.Exact(dt=0.005))
+    assert (np.asarray(g.status) == lj.GaitStatus.CONVERGED).all() and g.state.shape == (P.size, 1)
+    exact = np.array([closed_form(float(p)) for p in P])
+    speed, stuck = np.asarray(g.mean_speed), np.asarray(g.stick_fraction)[:, 0]
+    moving = P > F_FWD
+    rel = np.abs(speed[moving] - exact[moving, 0]) / exact[moving, 0]
+    print("steady gait: max relative error of the mean speed", rel.max(), "; of the stuck fraction",
+          np.abs(stuck - exact[:, 1]).max(), "; section velocities", np.asarray(g.state)[:, 0])  # fmt: skip
+    assert (speed[~moving] == 0).all() and rel.max() < 1e-8 and np.abs(stuck - exact[:, 1]).max() < 1e-8

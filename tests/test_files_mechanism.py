@@ -163,8 +163,72 @@ def test_cli_simulates_the_capsule_and_the_other_commands_refuse_it_by_name(tmp_
     assert record["kind"] == "mechanism" and record["status_name"] == "OK"
     assert Path(record["plot"]).is_file()
     sweep = ["sweep", "--omega", "1,2", "--out", str(tmp_path / "s.nc")]
-    for args in (["gait"], ["optimize", "--v-min", "0.05"], sweep):
+    for args in (sweep,):
         out = CliRunner().invoke(_cli.app, [args[0], str(EXAMPLES / "capsule.toml"), *args[1:]])
         assert out.exit_code == 2 and 'a mechanism of bodies and links (kind = "mechanism") runs in `measure`' in (
             out.output
         ), (args, out.output)
+
+
+def test_cli_gait_of_the_capsule_file_equals_the_library():
+    """`gait capsule.toml --json` prints what `lj.steady_gait` gives on the loaded file."""
+    args = ["gait", str(EXAMPLES / "capsule.toml"), "--periods", "1", "--transient", "10", "--dt", "0.02", "--json"]
+    res = CliRunner().invoke(_cli.app, args)
+    assert res.exit_code == 0, res.output
+    record = json.loads(res.stdout)
+    capsule = lj.load_mechanism(EXAMPLES / "capsule.toml")
+    g = lj.steady_gait(capsule, periods=1, transient=10, dynamics=lj.Exact(dt=0.02))
+    assert record["kind"] == "mechanism" and record["status_name"] == lj.GaitStatus(int(g.status)).name
+    assert record["mean_speed"] == float(g.mean_speed) and record["state"] == np.asarray(g.state).tolist()
+    assert record["status_name"] == "CONVERGED" and len(record["state"]) == 3
+
+
+def test_cli_animate_draws_the_capsule_files_simulation(tmp_path):
+    """`animate capsule.toml` writes one GIF frame per saved state of `lj.simulate` on the loaded file,
+    and counts each body's stuck frames as the trajectory's `stuck` says; every frame draws body i
+    centred on the trajectory's x_i."""
+    from locomotion_jax.run._mechanism_animation import animate_mechanism
+    from PIL import Image
+
+    out = tmp_path / "capsule.gif"
+    args = ["animate", str(EXAMPLES / "capsule.toml"), "--t-from", "2", "--t-end", "6", "--frames", "9", "--dt",
+            "0.01", "--out", str(out)]  # fmt: skip
+    res = CliRunner().invoke(_cli.app, args)
+    assert res.exit_code == 0, res.output
+    capsule = lj.load_mechanism(EXAMPLES / "capsule.toml")
+    traj = lj.simulate(capsule, 6.0, np.linspace(2.0, 6.0, 9), dynamics=lj.Exact(dt=0.01))
+    stuck = np.asarray(traj.stuck).sum(axis=0)
+    assert f"(9 frames, t = 2..6); body 0 stuck in {stuck[0]}, body 1 stuck in {stuck[1]} frames" in res.stdout
+    assert stuck[0] > 0 and stuck[1] == 0  # the capsule sticks, its internal mass never does
+    assert getattr(Image.open(out), "n_frames") == 9
+    anim = animate_mechanism(traj, capsule, trace=False)
+    fig = anim._fig  # pyright: ignore[reportAttributeAccessIssue]
+    for k in (0, 4, 8):
+        anim._func(k)  # pyright: ignore[reportAttributeAccessIssue]
+        for i in range(2):
+            (r,) = [a for a in fig.axes[0].patches if a.get_gid() == f"body{i}"]
+            assert abs(r.get_x() + r.get_width() / 2 - float(traj.x[k, i])) < 1e-12
+    with pytest.raises(ValueError, match="one mechanism configuration"):
+        animate_mechanism(traj, lj.Mechanism.stack([capsule, capsule]))
+
+
+def test_cli_optimize_passes_the_capsule_files_mechanism(monkeypatch):
+    """`optimize capsule.toml` hands the loaded mechanism and the options to `lj.optimise` (the optimiser
+    itself is tested in tests/test_mechanism_optimise.py); without --a-max it says that it needs one."""
+    import equinox as eqx
+
+    seen: dict[str, Any] = {}
+
+    def stand_in(*args, **kwargs):
+        seen.update(args=args, kwargs=kwargs)
+        raise ValueError("captured")
+
+    monkeypatch.setattr(lj, "optimise", stand_in)
+    path = str(EXAMPLES / "capsule.toml")
+    res = CliRunner().invoke(_cli.app, ["optimize", path, "--v-min", "0.02", "--a-max", "0.7", "--direction", "-1"])
+    assert res.exit_code == 2 and "captured" in res.output, res.output
+    mech, v_min, a_max = seen["args"]
+    assert bool(eqx.tree_equal(mech, lj.load_mechanism(path))) and (v_min, a_max) == (0.02, 0.7)
+    assert seen["kwargs"]["direction"] == -1 and seen["kwargs"]["harmonics"] == 2
+    res = CliRunner().invoke(_cli.app, ["optimize", path, "--v-min", "0.02"])
+    assert res.exit_code == 2 and "--a-max is required" in res.output

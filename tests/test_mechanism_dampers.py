@@ -92,16 +92,6 @@ def test_a_batch_flags_one_bad_damper_and_runs_the_others():
                                    rtol=1e-12, atol=1e-12)  # fmt: skip
 
 
-def test_front_ends_not_built_for_a_mechanism_say_so():
-    """`steady_gait` and `optimise` refuse a Mechanism by name (under the tests' runtime type checks the
-    type hint refuses it first, a TypeError naming it; without them, the NotImplementedError)."""
-    M = _damped()
-    with pytest.raises((NotImplementedError, TypeError), match="Mechanism"):
-        lj.steady_gait(M)  # pyright: ignore[reportCallIssue, reportArgumentType]
-    with pytest.raises((NotImplementedError, TypeError), match="Mechanism"):
-        lj.optimise(M, v_min=0.05, a_max=0.5)  # pyright: ignore[reportCallIssue, reportArgumentType]
-
-
 def test_dampers_in_float32():
     M = _damped().astype(jnp.float32)
     traj = lj.simulate(M, t_end=20.0, save_at=jnp.linspace(0.0, 20.0, 21))

@@ -6,6 +6,7 @@ array exists). Example: `locomotion-jax animate --omega 2 --t-from 30 --t-end 36
 """
 
 from pathlib import Path
+from typing import Any
 
 import typer
 
@@ -20,7 +21,9 @@ def register(app: typer.Typer) -> None:
     @friendly
     @expand(model=model_options(), run=run_options(("contact", "start", "dt")))
     def animate(
-        file: Path | None = typer.Argument(None, help="A mechanism file of the paper's model (TOML)."),
+        file: Path | None = typer.Argument(
+            None, help='A mechanism file (TOML) of the paper\'s model or of bodies and links (kind = "mechanism").'
+        ),
         *,
         model: Values,
         t_from: float | None = typer.Option(
@@ -37,7 +40,9 @@ def register(app: typer.Typer) -> None:
         """Simulate one configuration on the exact model and write an animated GIF of it.
 
         Stuck masses are drawn red with an anchor under them, slipping ones blue. With a mechanism
-        FILE (the paper's model, with its waveform if it has one) instead of the model options.
+        FILE (the paper's model, with its waveform if it has one) instead of the model options; a
+        `kind = "mechanism"` file draws its bodies (carried ones grey, inside their carrier's row) and
+        springs, and prints how many frames each body is stuck in.
         """
         import math
 
@@ -55,10 +60,13 @@ def register(app: typer.Typer) -> None:
                 from ._files import kind_of, load, refuse_options
 
                 refuse_options(file, model)
-                params, wave = load(file)
+                params, wave = load(file, mechanism_ok=True)
                 if kind_of(params) == "chain":
-                    raise ValueError(f"{file} is a chain; animate draws the paper's two-mass model. "
-                                     f"Plot the chain with `locomotion-jax simulate {file} --out DIR`.")  # fmt: skip
+                    raise ValueError(f"{file} is a chain; animate draws the paper's two-mass model or a mechanism "
+                                     f"of bodies and links. Plot the chain with `locomotion-jax simulate {file} "
+                                     "--out DIR`.")  # fmt: skip
+                if kind_of(params) == "mechanism":
+                    return _animate_mechanism(file, params, t_from, t_end, frames, fps, dpi, trace, run, out)
             w = float(params.omega if wave is None else wave.omega)
             if not (math.isfinite(t_end) and t_end > 0):
                 raise ValueError(f"--t-end must be a finite number > 0, got {t_end!r}.")
@@ -107,3 +115,46 @@ def register(app: typer.Typer) -> None:
                 "applies; frames after it are not drawn)",
                 err=True,
             )
+
+
+def _animate_mechanism(file: Path, mech: Any, t_from: float | None, t_end: float, frames: int, fps: float,
+                       dpi: float, trace: bool, run: Values, out: Path) -> None:  # fmt: skip
+    """`animate FILE` for a `kind = "mechanism"` file: `lj.simulate` of the file's mechanism at the frame
+    times, drawn by `run._mechanism_animation`."""
+    import math
+
+    import numpy as np
+
+    from ..dynamics._exact_dynamics import Exact
+    from ..run._animation import save_gif
+    from ..run._mechanism_animation import animate_mechanism
+    from ..run._simulate import simulate
+
+    try:
+        w = float(np.asarray(mech.omega))
+        if not (math.isfinite(t_end) and t_end > 0):
+            raise ValueError(f"--t-end must be a finite number > 0, got {t_end!r}.")
+        if t_from is None:
+            t_from = max(0.0, t_end - 2 * (2 * math.pi / w)) if w > 0 else 0.0
+        if not (0 <= t_from < t_end):
+            raise ValueError(f"--t-from must satisfy 0 <= t_from < t_end, got {t_from!r} (t_end = {t_end!r}).")
+        if frames < 2:
+            raise ValueError(f"--frames must be >= 2, got {frames}.")
+        if not (math.isfinite(fps) and fps > 0 and math.isfinite(dpi) and dpi > 0):
+            raise ValueError(f"--fps and --dpi must be finite numbers > 0, got {fps!r} and {dpi!r}.")
+        if out.suffix.lower() != ".gif":
+            raise ValueError(f"--out must name a .gif file, got {str(out)!r}.")
+        traj = simulate(mech, t_end, np.linspace(t_from, t_end, frames), dynamics=Exact(dt=run["dt"]),
+                        contact=run["contact"], start=run["start"])  # fmt: skip
+        if not np.asarray(traj.valid).any():
+            raise ValueError(f"the run stopped (status {int(np.asarray(traj.status))}) before the animated span.")
+        title = f"{file.name}: {mech.n_bodies} bodies, omega = {w:.4g}"
+        anim = animate_mechanism(traj, mech, max_frames=frames, interval=1000.0 / fps, trace=trace, title=title)
+        path = save_gif(anim, out, fps=fps, dpi=dpi)
+    except ValueError as err:
+        typer.echo(f"Error: {err}", err=True)
+        raise typer.Exit(code=2) from None
+    valid = np.asarray(traj.valid, bool)
+    stuck = np.asarray(traj.stuck, bool)[valid]
+    counts = ", ".join(f"body {i} stuck in {int(stuck[:, i].sum())}" for i in range(stuck.shape[-1]))
+    typer.echo(f"wrote {path} ({int(valid.sum())} frames, t = {t_from:.4g}..{t_end:.4g}); {counts} frames")

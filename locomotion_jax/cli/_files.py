@@ -27,7 +27,7 @@ def _plain(v: Any) -> Any:
 def load(path: Path, mechanism_ok: bool = False) -> tuple[Any, Any]:
     """The file's mechanism and the paper's model's waveform (or `None`); a file that cannot be read
     is a `ValueError` naming it, and so is a `kind = "mechanism"` file unless `mechanism_ok` (the
-    commands that run one: `measure`, `simulate`)."""
+    commands that run one: `measure`, `simulate`, `gait`)."""
     from ..model._files import load_mechanism
 
     try:
@@ -36,8 +36,8 @@ def load(path: Path, mechanism_ok: bool = False) -> tuple[Any, Any]:
         raise ValueError(f"{path}: cannot read the mechanism file ({err.strerror or err}).") from None
     if not mechanism_ok and kind_of(mech) == "mechanism":
         raise ValueError(
-            f'{path}: a mechanism of bodies and links (kind = "mechanism") runs in `measure` and `simulate`; '
-            "this command takes the paper's model or a chain."
+            f'{path}: a mechanism of bodies and links (kind = "mechanism") runs in `measure`, `simulate` and '
+            "`gait`; this command takes the paper's model or a chain."
         )
     return mech, wave
 

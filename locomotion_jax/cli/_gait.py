@@ -89,8 +89,9 @@ def register(app: typer.Typer) -> None:
 
         The gait is a periodic orbit (fixed point of the period map), found by Newton's method
         after a short transient; stable means every Floquet multiplier lies inside the unit circle.
-        With a mechanism FILE: a chain's gait is reported as by `chain-gait`; the paper's model's
-        with the file's waveform, and `--json` names the `mechanism` file.
+        With a mechanism FILE: a chain's gait, or a mechanism's of bodies and links (`kind = "mechanism"`,
+        from its own x0, v0 under the default start), is reported as by `chain-gait`; the paper's
+        model's with the file's waveform, and `--json` names the `mechanism` file.
         """
         import locomotion_jax as lj
 
@@ -105,11 +106,11 @@ def register(app: typer.Typer) -> None:
             from ._chain_commands import chain_gait_report
 
             refuse_options(file, model)
-            mech, wave = load(file)
-            if kind_of(mech) == "chain":
+            mech, wave = load(file, mechanism_ok=True)
+            if kind_of(mech) in ("chain", "mechanism"):
                 how = (run["contact"], run["start"], run["dt"])
                 return chain_gait_report(mech, ks, transient, *how, as_json, label(file, mech, None),
-                                         {"mechanism": str(file), "kind": "chain"})  # fmt: skip
+                                         {"mechanism": str(file), "kind": kind_of(mech)})  # fmt: skip
             params = mech
             values = {"params": {n: float(v) for n, v in params.as_dict().items()}, "mechanism": str(file)}
         gait_omega(float(params.omega if wave is None else wave.omega))

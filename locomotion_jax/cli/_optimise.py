@@ -8,6 +8,7 @@ JSON object on stdout.
 
 import sys
 from pathlib import Path
+from typing import Any
 
 import typer
 
@@ -78,7 +79,9 @@ def register(app: typer.Typer) -> None:
         With a mechanism FILE the mechanism is the file's, and --a-max defaults to the amplitude of its
         sinusoid or travelling wave (the waveform itself is what is optimised). A chain's file is
         optimised as by `chain-optimize` (exact method; --harmonics default 3; --local, --max-iter,
-        --margin, --omega, --direction, --out, --json and --verbose apply)."""
+        --margin, --omega, --direction, --out, --json and --verbose apply); a `kind = "mechanism"` file's
+        actuated elements as by `lj.optimise` of a Mechanism (--a-max required; --harmonics default 2;
+        --local, --max-iter, --margin, --omega, --direction, --json and --verbose apply)."""
         from ..optimisation import _optimise, _pareto
         from ..optimisation._optimum import ExactSettings, Settings
 
@@ -94,7 +97,11 @@ def register(app: typer.Typer) -> None:
                 from ._files import given, kind_of, load, refuse_options
 
                 refuse_options(file, model)
-                mech, wave = load(file)
+                mech, wave = load(file, mechanism_ok=True)
+                if kind_of(mech) == "mechanism":
+                    steps = max_iter if given(["max_iter"]) else None  # the optimiser's own default otherwise
+                    return _optimise_mechanism(file, mech, v_min, a_max, direction, omega, harmonics, method, local,
+                                               margin, steps, verbose, json_out)  # fmt: skip
                 a_max = amplitude(file, mech, wave) if a_max is None else a_max
                 if kind_of(mech) == "chain":
                     import locomotion_jax as lj
@@ -167,3 +174,32 @@ def register(app: typer.Typer) -> None:
             typer.echo(result.to_json())
         else:
             typer.echo(result.summary())
+
+
+def _optimise_mechanism(file: Path, mech: Any, v_min: float, a_max: float | None, direction: int | None,
+                        omega: float | None, harmonics: int | None, method: str, local: int, margin: float,
+                        max_iter: int | None, verbose: bool, json_out: bool) -> None:  # fmt: skip
+    """`optimize FILE` for a `kind = "mechanism"` file: `lj.optimise` of the file's mechanism, printed."""
+    import locomotion_jax as lj
+
+    from .._json import dumps
+
+    if method != "exact":
+        raise ValueError("--method: a mechanism is optimised by the exact method only.")
+    if a_max is None:
+        raise ValueError(f"--a-max is required for {file} (a mechanism of bodies and links): the bound on every "
+                         "actuated signal's excursion about its mean.")  # fmt: skip
+    settings = lj.ChainOptimiseSettings(local=local, margin=margin, verbose=verbose)
+    if max_iter is not None:
+        settings = lj.ChainOptimiseSettings(local=local, margin=margin, verbose=verbose, max_iter=max_iter)
+    opt = lj.optimise(mech, v_min, a_max, direction=1 if direction is None else direction, omega=omega,
+                      harmonics=2 if harmonics is None else harmonics, settings=settings)  # fmt: skip
+    record = {**opt.to_dict(), "mechanism": str(file), "kind": "mechanism"}
+    if json_out:
+        typer.echo(dumps(record))
+        return
+    typer.echo(f"{file}: optimal actuation of links {opt.elements} ({opt.harmonics} harmonics)")
+    for name in ("omega", "mean_speed_exact", "cost_of_transport_exact", "feasible_exact", "stable_exact",
+                 "sinusoid", "improvement_vs_sinusoid", "mean_speed_simulated", "cost_of_transport_simulated",
+                 "cos", "sin"):  # fmt: skip
+        typer.echo(f"  {name:<28} {record[name]}")

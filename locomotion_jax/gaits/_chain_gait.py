@@ -12,6 +12,14 @@ includes the saltation of every switch); the Floquet multipliers are the eigenva
 
 A mass at rest at the section sticks where its static limits hold, so its velocity carries
 no tangent there (its column of $M$ is zero), as in the two-mass model.
+
+A [`Mechanism`][locomotion_jax.Mechanism] (SPEC §9) runs on the same solver through its physics.
+Its forces depend on the positions only through the springs' extensions; where no spring ties a
+body to the wall they are invariant under a common translation, and the reduced state is the
+chain's, $(u_1, \\dots, u_{N-1}, v_1, \\dots, v_N)$ with $u_j = x_{j+1} - x_j$ the positions relative
+to body 0 (of any sign: a carried mass passes its carrier). A mechanism with a spring to the wall
+(an anchored one) is not: its section state holds the absolute positions,
+$(x_1, \\dots, x_N, v_1, \\dots, v_N)$, and its centre of mass returns to where it was over a period.
 """
 
 from collections.abc import Sequence
@@ -28,7 +36,10 @@ from ..dynamics import _chain_exact as engine
 from ..dynamics._compile import engine_jit
 from ..dynamics._exact_dynamics import Exact
 from ..dynamics._runs import chain_initial_state, default_max_steps, STICK_TOL
+from ..model._bodies import Mechanism
 from ..model._chain import Chain
+from ..model._elements import WALL
+from ..model._mechanism_physics import MechanismPhysics
 from ..model._physics import AbstractPhysics
 from ..run._batch import check_contact_start, prepare_chain, unflatten
 from ..run._resolution import guard_chain
@@ -44,8 +55,9 @@ class ChainGait(eqx.Module):
       `liftoff`: as in [`Gait`][].
     - `stick_fraction`: fraction of the gait period each mass is stuck, shape `batch + (N,)`.
     - `state`: the orbit's reduced state at the section $\\omega t \\equiv 0$, shape
-      `batch + (2N - 1,)`, order $(u_1, \\dots, u_{N-1}, v_1, \\dots, v_N)$;
-      `monodromy`: $M$ in that order, shape `batch + (2N - 1, 2N - 1)`.
+      `batch + (2N - 1,)`, order $(u_1, \\dots, u_{N-1}, v_1, \\dots, v_N)$ (a mechanism anchored to
+      the wall: `batch + (2N,)`, $(x_1, \\dots, x_N, v_1, \\dots, v_N)$);
+      `monodromy`: $M$ in that order, shape `batch + (2N - 1, 2N - 1)` (anchored: `(2N, 2N)`).
     """
 
     status: Array
@@ -82,17 +94,37 @@ class _Period(NamedTuple):
     lifted: Array
 
 
-def _reduced(st: engine.Hybrid) -> Array:
+def anchored(P: AbstractPhysics) -> bool:
+    """Whether a spring ties a body of the mechanism to the wall (its forces then depend on the
+    absolute positions, and its section state holds them; module docstring). A chain: never."""
+    return isinstance(P, MechanismPhysics) and any(WALL in (s.a, s.b) for s in P.springs)
+
+
+def reduced_size(P: AbstractPhysics) -> int:
+    """Length of the section state: $2N - 1$, or $2N$ for an anchored mechanism."""
+    return 2 * P.n_bodies - (0 if anchored(P) else 1)
+
+
+def _reduced(st: engine.Hybrid, P: AbstractPhysics | None = None) -> Array:
     x, v = st.y.x, st.y.v
+    if P is not None and anchored(P):
+        return jnp.stack(list(x) + list(v))
     return jnp.stack([b - a for a, b in zip(x[:-1], x[1:])] + list(v))
 
 
+def _positions(P: AbstractPhysics, y: Array) -> Array:
+    """The positions of a section state: $x_1 = 0$ and the gaps' sums, or the anchored state's own."""
+    n = P.n_bodies
+    if anchored(P):
+        return y[:n]
+    return jnp.concatenate([jnp.zeros((1,), y.dtype), jnp.cumsum(y[: n - 1])])
+
+
 def _section_state(P: AbstractPhysics, contact: Contact, y: Array) -> engine.Hybrid:
-    """The hybrid state at phase 0 for a reduced state `y`, with $x_1 = 0$: a mass at rest
-    sticks where its static limits hold (eq. 7 generalised), a moving one slips along $v_i$."""
-    n = (y.shape[-1] + 1) // 2
-    x = jnp.concatenate([jnp.zeros((1,), y.dtype), jnp.cumsum(y[: n - 1])])
-    return engine.init(P, contact, x, y[n - 1 :])
+    """The hybrid state at phase 0 for a reduced state `y` (with $x_1 = 0$ unless anchored): a mass
+    at rest sticks where its static limits hold (eq. 7 generalised), a moving one slips along $v_i$."""
+    n = P.n_bodies
+    return engine.init(P, contact, _positions(P, y), y[y.shape[-1] - n :])
 
 
 def _advance(P, contact, dt, st, t_end, max_steps):
@@ -121,7 +153,7 @@ def _period_map(P, contact, dt, max_steps, k, y) -> _Period:
     ok = (st.status == Status.OK) & (st.t >= t_end)
     status = jnp.where(ok, Status.OK, jnp.where(st.status == Status.OK, Status.MAX_STEPS, st.status))
     return _Period(
-        y=_reduced(st),
+        y=_reduced(st, P),
         dX=P.centre_of_mass(st.y.x) - P.centre_of_mass(st0.y.x),
         ed=st.y.ed,
         w=st.y.w,
@@ -138,11 +170,10 @@ def _transient_batch(C, valid, contact, start, dt, transient, max_steps, y_start
 
     def one(c, ok, y):
         P = c.physics()
-        row = None if y is None else jnp.concatenate([jnp.zeros((1,), y.dtype), jnp.cumsum(y[: P.n_bodies - 1]),
-                                                      y[P.n_bodies - 1 :]])  # fmt: skip
+        row = None if y is None else jnp.concatenate([_positions(P, y), y[y.shape[-1] - P.n_bodies :]])
         st = chain_initial_state(P, ok, contact, start, row)
         st, _ = _advance(P, contact, dt, st, transient * (2 * jnp.pi) / P.omega, max_steps)
-        return _reduced(st), st.status, jnp.isfinite(st.t_liftoff)
+        return _reduced(st, P), st.status, jnp.isfinite(st.t_liftoff)
 
     return jax.vmap(one)(C, valid, y_start)
 
@@ -192,7 +223,7 @@ _solve_batch = engine_jit(_solve_batch, ("contact", "dt"))
 
 
 def steady_gait_chain(
-    chain: Chain,
+    chain: Chain | Mechanism,
     *,
     periods: int | Sequence[int] = (1, 2, 3, 4),
     transient: int = 30,
@@ -203,33 +234,38 @@ def steady_gait_chain(
     start: str | ArrayLike = "paper",
     dtype: Any = None,
 ) -> ChainGait:
-    """[`steady_gait`][] for a [`Chain`][] (its arguments; `start` names a start at rest, or gives
-    section states $(u_0, \\dots, u_{N-2}, v_0, \\dots, v_{N-1})$ at phase 0, gaps then velocities,
-    shape `batch + (2N - 1,)`)."""
-    check_contact_start(contact, start if isinstance(start, str) else "paper")
+    """[`steady_gait`][] for a [`Chain`][] or a [`Mechanism`][locomotion_jax.Mechanism] (its
+    arguments; `start` names a start at rest (a mechanism: its own `x0`, `v0`), or gives section
+    states at phase 0: gaps then velocities $(u_0, \\dots, u_{N-2}, v_0, \\dots, v_{N-1})$, shape
+    `batch + (2N - 1,)`, or for an anchored mechanism positions then velocities, `batch + (2N,)`)."""
+    check_contact_start(contact, start if isinstance(start, str) else "paper", chain)
+    if contact == "hop":
+        raise NotImplementedError("steady_gait does not follow flight (contact='hop'); use 'strict' or 'paper'.")
     flat, valid, shape = prepare_chain(chain, dtype)
     valid, unresolved = guard_chain(dynamics, flat, valid, shape)  # refused alone, skipped in a batch
     y_start = None
     if not isinstance(start, str):
-        n_red = 2 * flat.n_masses - 1
+        P = flat.physics()
+        n_red = reduced_size(P)
+        what = "positions x_0..x_N-1" if anchored(P) else "gaps u_0..u_N-2"
         y = np.asarray(start, np.float64)
         if y.shape != shape + (n_red,) or not np.all(np.isfinite(y)):
             raise ValueError(
-                f"start must be 'paper', 'relaxed' or finite section states (gaps u_0..u_N-2, velocities "
+                f"start must be 'paper', 'relaxed' or finite section states ({what}, velocities "
                 f"v_0..v_N-1) of shape {shape + (n_red,)}, got shape {y.shape}."
             )
-        if shape == () and np.any(y[: flat.n_masses - 1] <= 0):  # one configuration: refused (a batch: flagged)
+        if isinstance(chain, Chain) and shape == () and np.any(y[: flat.n_masses - 1] <= 0):  # refused alone
             raise ValueError(
                 f"start: the gaps u_j must be > 0 (the masses in order along the chain), got {y[: flat.n_masses - 1]}."
             )
         y_start = jnp.asarray(y.reshape(-1, n_red), flat.m.dtype)
         start = "paper"
-    valid = valid & jnp.asarray(select.periodic(np.asarray(flat.waves.omega, np.float64), shape))
+    valid = valid & jnp.asarray(select.periodic(np.asarray(flat.omega, np.float64), shape))
     dtype_ = flat.m.dtype
     f32 = jnp.finfo(dtype_).bits < 64
     tol = (1e-5 if f32 else 1e-11) if tol is None else float(tol)
     ks = select.check(periods, transient, tol, max_iter)
-    omega = np.asarray(flat.waves.omega, np.float64)
+    omega = np.asarray(flat.omega, np.float64)
     T_max = float(np.max(2 * np.pi / omega[np.isfinite(omega) & (omega > 0)], initial=1.0))
     real = lambda v: jnp.asarray(v, dtype_)
     mst = jnp.asarray(dynamics.max_steps or default_max_steps(transient * T_max, dynamics.dt), jnp.int32)

@@ -23,6 +23,7 @@ located events entering with their implicit-function times (the saltation of eac
 """
 
 from collections import Counter
+from typing import cast
 
 import equinox as eqx
 import jax
@@ -32,8 +33,12 @@ from .._custom_types import Array, Contact
 from .._status import Status
 from ..dynamics import _chain_exact as engine
 from ..dynamics._compile import engine_jit
+from ..model._bodies import Mechanism
 from ..model._chain import Chain
+from ..model._elements import Spring
+from ..model._physics import AbstractPhysics
 from ..model._springwaves import SpringFourier
+from ..model._waveform import AbstractWaveform, Fourier
 from ._chain_gait import _reduced, _section_state
 from ._orbit import newton_orbit, Orbit, Period
 
@@ -57,18 +62,42 @@ def coefficients(theta: Array, springs: int, harmonics: int) -> tuple[Array, Arr
     return cos.reshape(shape), sin.reshape(shape)
 
 
-def with_waves(chain: Chain, theta: Array, a_max: Array, harmonics: int) -> Chain:
-    """One chain (broadcast, unbatched) with the actuation of the decision vector `theta`."""
+def actuated(mechanism: Mechanism) -> list[int]:
+    """The indices in `mechanism.links` of the elements driven by a waveform (a spring's rest length,
+    an internal or an external force): the signals a [`Mechanism`][locomotion_jax.Mechanism]'s
+    decision vector sets, in this order."""
+    return [j for j, el in enumerate(mechanism.links) if any(isinstance(s, AbstractWaveform) for s in el.signals())]
+
+
+def with_fourier(mechanism: Mechanism, cos: Array, sin: Array, omega: Array) -> Mechanism:
+    """`mechanism` with each actuated element's waveform replaced by the Fourier series of
+    coefficients `cos[..., j, :]`, `sin[..., j, :]` (absolute units) and base frequency `omega`, its
+    mean (the old waveform's `lbar`) kept. Leading axes of the coefficients are batch axes."""
+    links = list(mechanism.links)
+    for j, i in enumerate(actuated(mechanism)):
+        el = links[i]
+        name = "rest" if isinstance(el, Spring) else "waveform"
+        old = getattr(el, name)
+        links[i] = eqx.tree_at(lambda e: getattr(e, name), el, Fourier(cos[..., j, :], sin[..., j, :], omega, old.lbar))
+    return eqx.tree_at(lambda m: m.links, mechanism, tuple(links))
+
+
+def with_waves(chain: Chain | Mechanism, theta: Array, a_max: Array, harmonics: int) -> Chain | Mechanism:
+    """One chain or mechanism (broadcast, unbatched) with the actuation of the decision vector `theta`
+    (a mechanism: one signal per actuated element, [`actuated`][])."""
+    if isinstance(chain, Mechanism):
+        cos, sin = coefficients(theta, len(actuated(chain)), harmonics)
+        return with_fourier(chain, a_max * cos, a_max * sin, jnp.exp(theta[-1]))
     S = chain.n_masses - 1
     cos, sin = coefficients(theta, S, harmonics)
     waves = SpringFourier(a_max * cos, a_max * sin, jnp.exp(theta[-1]))
     return chain.with_waves(waves)
 
 
-def period(C: Chain, contact: Contact, dt: float, max_steps: Array, y: Array, k: Array) -> Period:
+def period(C: Chain | Mechanism, contact: Contact, dt: float, max_steps: Array, y: Array, k: Array) -> Period:
     """The `k`-period map $\\Phi_k$ from the reduced state `y`, with the figures the optimiser
     needs (`max_steps` per actuation period)."""
-    P = C.physics()
+    P = cast(AbstractPhysics, C.physics())
     t_end = k.astype(y.dtype) * 2 * jnp.pi / P.omega
     st0 = _section_state(P, contact, y)
 
@@ -88,7 +117,7 @@ def period(C: Chain, contact: Contact, dt: float, max_steps: Array, y: Array, k:
     st, low, _ = jax.lax.while_loop(cond, body, (st0, normal(st0), jnp.zeros((), jnp.int32)))
     ok = (st.status == Status.OK) & (st.t >= t_end)
     dX = P.centre_of_mass(st.y.x) - P.centre_of_mass(st0.y.x)
-    return Period(_reduced(st), jnp.stack([dX, st.y.ed, low]), ok)
+    return Period(_reduced(st, P), jnp.stack([dX, st.y.ed, low]), ok)
 
 
 def _orbit_one(C, a_max, theta, y0, k, harmonics, contact, dt, max_steps, tol, max_iter) -> Orbit:
@@ -129,7 +158,7 @@ def _relax(C, a_max, theta, y0, fresh, periods, harmonics, contact, dt, max_step
             return engine.step(P, contact, dt, s, t_end)[0], n + 1
 
         st, _ = jax.lax.while_loop(cond, body, (st, jnp.zeros((), jnp.int32)))
-        return _reduced(st)
+        return _reduced(st, P)
 
     return jax.vmap(one)(theta, y0, fresh)
 
@@ -141,10 +170,11 @@ relax = engine_jit(_relax, ("harmonics", "contact", "dt"))
 class ChainOracle(eqx.Module):
     """The compiled evaluations of one chain problem (static: harmonics, contact, step, iterations).
 
-    `chain` is one configuration, broadcast (its waveforms are replaced by the decision vector's).
+    `chain` is one configuration, broadcast (its waveforms are replaced by the decision vector's): a
+    chain, or a [`Mechanism`][locomotion_jax.Mechanism] (one signal per actuated element).
     """
 
-    chain: Chain
+    chain: Chain | Mechanism
     a_max: Array
     max_steps: Array
     tol: Array

@@ -30,6 +30,7 @@ from ..dynamics._compile import engine_jit
 from ..dynamics._exact_dynamics import Exact
 from ..dynamics._runs import default_max_steps, STICK_TOL
 from ..model import _two_mass as model
+from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform
@@ -148,7 +149,7 @@ def steady_gait(
 
 @overload
 def steady_gait(
-    params: Chain,
+    params: Chain | Mechanism,
     *,
     periods: int | Sequence[int] = ...,
     transient: int = ...,
@@ -164,7 +165,7 @@ def steady_gait(
 
 
 def steady_gait(
-    params: Params | Chain,
+    params: Params | Chain | Mechanism,
     *,
     periods: int | Sequence[int] = (1, 2, 3, 4),
     transient: int = 30,
@@ -186,7 +187,8 @@ def steady_gait(
 
     **Arguments:**
 
-    - `params`: [`Params`][] (any batch shape).
+    - `params`: [`Params`][], a [`Chain`][] or a [`Mechanism`][locomotion_jax.Mechanism] (any batch
+      shape; a mechanism's section state: `ChainGait` and the `_chain_gait` module).
     - `periods`: gait periods to try, in actuation periods.
     - `transient`: actuation periods integrated before the Newton iteration.
     - `tol`: Newton tolerance on $\\|\\Phi_k(y) - y\\|_\\infty / (1 + \\|y\\|_\\infty)$ (default 1e-11
@@ -195,8 +197,10 @@ def steady_gait(
     - `dynamics`: [`Exact`][] (its `dt`); `waveform`, `contact`, `dtype`: as in [`simulate`][].
     - `start`: as in [`simulate`][] (`"paper"`, `"relaxed"`: at rest), or section states
       $(u, v_1, v_2)$ at phase 0, an array of shape `batch + (3,)` (a chain: gaps then velocities,
-      $(u_0, \\dots, u_{N-2}, v_0, \\dots, v_{N-1})$, shape `batch + (2N - 1,)`; a mass given
-      $v_i = 0$ starts stuck where eq. 7 allows).
+      $(u_0, \\dots, u_{N-2}, v_0, \\dots, v_{N-1})$, shape `batch + (2N - 1,)`, as is a mechanism
+      without a spring to the wall; an anchored mechanism: positions then velocities, `batch + (2N,)`;
+      a mass given $v_i = 0$ starts stuck where eq. 7 allows). A mechanism's named start is its own
+      `x0`, `v0`.
     - `verbose`: print progress to stderr from the start: a line before the transient and before
       each period's Newton solve (each compiles on its first call), and one when done.
 
@@ -224,14 +228,16 @@ def steady_gait(
     return gait
 
 
-def _chain(chain: Chain, periods, transient, tol, max_iter, dynamics: Exact, waveform, contact, start, dtype):
-    if not isinstance(chain, Chain):
+def _chain(chain: Chain | Mechanism, periods, transient, tol, max_iter, dynamics: Exact, waveform, contact, start,
+           dtype):  # fmt: skip
+    if not isinstance(chain, (Chain, Mechanism)):
         raise NotImplementedError(
-            f"steady_gait takes Params or a Chain; a {type(chain).__name__} (SPEC §9) is not solved for its "
-            "periodic gait yet (the orbit solver follows a chain's springs). Run it with simulate or measure."
+            f"steady_gait takes Params, a Chain or a Mechanism; a {type(chain).__name__} is not solved for its "
+            "periodic gait. Run it with simulate or measure."
         )
     if waveform is not None:
-        raise ValueError("waveform= applies to Params; a Chain carries its own waveforms (Chain(waveforms=...)).")
+        name = type(chain).__name__
+        raise ValueError(f"waveform= applies to Params; a {name} carries its own waveforms (in its elements).")
     from ._chain_gait import steady_gait_chain
 
     return steady_gait_chain(chain, periods=periods, transient=transient, tol=tol, max_iter=max_iter,

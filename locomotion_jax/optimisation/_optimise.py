@@ -50,6 +50,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._params import Params
 from ..model._waveform import Fourier
@@ -57,6 +58,7 @@ from ..run._batch import mechanism_arg
 from ..run._resolution import refuse_search
 from . import _constraints as cons, _pareto as pareto
 from ._chain_optimum import ChainOptimiseSettings, ChainOptimum
+from ._mechanism import MechanismOptimum
 from ._objective import make_plan, Plan, rollout
 from ._optimum import ExactSettings, Optimum, Settings, verified
 from ._shapes import FourierShape, SplineShape
@@ -291,8 +293,16 @@ def optimise(
 ) -> ChainOptimum: ...  # fmt: skip
 
 
+@overload
 def optimise(
-    params: Params | Chain,
+    params: Mechanism, v_min: float, a_max: float, *, method: str = ..., direction: int | None = ...,
+    omega: float | None = ..., harmonics: int | None = ..., settings: "ChainOptimiseSettings | None" = ...,
+    sweep: None = ..., start: None = ...,
+) -> MechanismOptimum: ...  # fmt: skip
+
+
+def optimise(
+    params: Params | Chain | Mechanism,
     v_min: float,
     a_max: float,
     *,
@@ -303,13 +313,15 @@ def optimise(
     settings: "Settings | ExactSettings | ChainOptimiseSettings | None" = None,
     sweep: "pareto.SinusoidSweep | None" = None,
     start: Any = None,
-) -> Optimum | ChainOptimum:
+) -> Optimum | ChainOptimum | MechanismOptimum:
     """Find the periodic actuation of least cost of transport that meets a speed (SPEC §7).
 
     `params` may be a [`Chain`][] of N masses (SPEC §8): then the actuation is per spring
     (travelling waves screened, then per-spring harmonics refined on the exact steady gaits;
     module `optimisation._chain`, [`ChainOptimiseSettings`][], default 3 harmonics) and the
-    result a [`ChainOptimum`][].
+    result a [`ChainOptimum`][]; a [`Mechanism`][locomotion_jax.Mechanism] (SPEC §9): the same method
+    over the Fourier coefficients of its actuated elements' waveforms (sinusoids screened; module
+    `optimisation._mechanism`, default 2 harmonics), the result a `MechanismOptimum`.
 
     Two methods:
 
@@ -423,11 +435,15 @@ def _optimise_chain(chain, v_min, a_max, method, direction, omega, harmonics, se
     """A [`Chain`][]: the exact method of `optimisation._chain` (travelling waves, then harmonics)."""
     from ._chain import optimise_chain
 
+    if isinstance(chain, Mechanism):
+        from ._mechanism import optimise_mechanism
+
+        if method != "exact" or sweep is not None or start is not None:
+            raise ValueError("a Mechanism is optimised by the exact method only, without sweep= or start=.")
+        return optimise_mechanism(chain, v_min, a_max, direction=1 if direction is None else direction, omega=omega,
+                                  harmonics=2 if harmonics is None else harmonics, settings=settings)  # fmt: skip
     if not isinstance(chain, Chain):
-        raise NotImplementedError(
-            f"optimise takes Params or a Chain; a {type(chain).__name__} (SPEC §9) is not optimised yet (the "
-            "chain optimiser designs rest-length strokes on a chain's steady gaits, which a Mechanism lacks)."
-        )
+        raise NotImplementedError(f"optimise takes Params, a Chain or a Mechanism, got {type(chain).__name__}.")
     if method != "exact":
         raise ValueError(f"method: a Chain is optimised by the exact method only (method='exact'), got {method!r}.")
     if sweep is not None or start is not None:

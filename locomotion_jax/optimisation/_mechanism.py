@@ -1,0 +1,277 @@
+"""Optimal actuation of a [`Mechanism`][locomotion_jax.Mechanism] (SPEC §9): the chain optimiser's
+method over the waveforms of the mechanism's actuated elements.
+
+Problem, for one mechanism, a required speed $v_\\min > 0$ in the direction $\\sigma = \\pm 1$ and a
+bound $a_\\max$ on every actuated signal: over Fourier series of $H$ harmonics of a common base
+frequency for each element driven by a waveform (a spring's rest length, an internal force, an
+external force; `gaits._chain_orbit.actuated`), $s_j(t) = \\bar s_j + \\sum_n A_{jn}\\cos n\\omega t +
+B_{jn}\\sin n\\omega t$ with the element's own mean $\\bar s_j$ kept,
+
+$$\\min\\ \\frac{e_d}{\\sigma\\Delta X}\\quad\\text{s.t.}\\quad \\frac{\\sigma\\Delta X}{kT} \\ge v_\\min,\\quad
+\\max_t |s_j(t) - \\bar s_j| \\le a_\\max\\ \\forall j,\\quad\\text{a stable gait},$$
+
+on the periodic orbits of the exact model ([`steady_gait`][] of a mechanism).
+
+Method (as `optimisation._chain`, with sinusoids in place of travelling waves):
+
+1. **Sinusoids**: every actuated element driven by $a\\sin\\omega t$ about its mean, on a grid of
+   `amplitudes` $\\times$ `frequencies` ([`ChainOptimiseSettings`][]), solved in one batched
+   [`steady_gait`][]; the cheapest that meets the speed is the baseline.
+2. **Local refinement** of the harmonics of every element from the best `local` sinusoids: the
+   chain's monotone L-BFGS descent on an exact penalty (`_chain_local`), with exact gradients
+   through the periodic orbit (`gaits._chain_orbit.ChainOracle`, which takes a mechanism).
+3. **Verification**: the refined actuations (rescaled onto the exact bound) and the baseline are
+   solved again by [`steady_gait`][]; the reported optimum is the cheapest converged, stable and
+   fast enough one, so never costlier than the baseline, and it is checked by a direct
+   [`simulate`][] averaged over whole gait periods once its transient has decayed.
+
+The frequency range, for a free `omega`, is `omega_min` to `omega_max` times the highest natural
+frequency of the mechanism's free bodies and springs (its resolution guard's scale), or the
+mechanism's own base frequency where it has no spring between bodies.
+"""
+
+import math
+import sys
+import time
+from typing import Any
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from .._json import jsonable
+from ..dynamics._exact_dynamics import Exact
+from ..gaits._chain_orbit import actuated, ChainOracle, with_fourier
+from ..model._bodies import Mechanism
+from . import _chain_local as local
+from ._chain_optimum import ChainOptimiseSettings
+from ._lockstep import run_lockstep
+
+
+class MechanismOptimum(eqx.Module):
+    """The optimum of [`optimise`][locomotion_jax.optimisation._optimise.optimise] for a
+    [`Mechanism`][locomotion_jax.Mechanism] (module `optimisation._mechanism`).
+
+    - `cos`, `sin`: shape `(S, H)`, the Fourier coefficients of the `S` actuated elements' signals
+      about their means (absolute units), in the order of `elements` (indices into `links`);
+      `omega`: the base frequency; `mechanism`: the mechanism driven by them.
+    - `mean_speed_exact`, `cost_of_transport_exact`, `gait_period_exact`, `stable_exact`,
+      `spectral_radius_exact`, `stroke_exact` (per element, $\\max_t |s_j - \\bar s_j|$), `feasible_exact`:
+      of its steady gait.
+    - `sinusoid`: the best sinusoid of the screen (a dict: `a`, `omega`, `mean_speed`,
+      `cost_of_transport`; `None` if none meets the speed); `improvement_vs_sinusoid`: $1 -$ the
+      ratio of the costs of transport.
+    - `mean_speed_simulated`, `cost_of_transport_simulated`, `simulated_periods`: a direct
+      simulation from the mechanism's own start, averaged over 10 gait periods after those;
+      `simulation_agreement`: the larger relative difference of the two figures.
+    - `candidates`: every verified candidate's figures; `screened`, `evaluations`, `runtime_s`.
+    """
+
+    v_min: float
+    direction: int
+    a_max: float
+    harmonics: int
+    elements: list[int]
+    cos: np.ndarray
+    sin: np.ndarray
+    omega: float
+    mean_speed_exact: float
+    cost_of_transport_exact: float
+    gait_period_exact: float
+    stable_exact: bool
+    spectral_radius_exact: float
+    stroke_exact: np.ndarray
+    feasible_exact: bool
+    sinusoid: dict | None
+    improvement_vs_sinusoid: float
+    mean_speed_simulated: float
+    cost_of_transport_simulated: float
+    simulation_agreement: float
+    simulated_periods: int
+    candidates: list[dict]
+    screened: int
+    evaluations: int
+    runtime_s: float
+    mechanism: Mechanism
+
+    def to_dict(self) -> dict[str, Any]:
+        """Every field but the mechanism, JSON-ready."""
+        names = [n for n in self.__dataclass_fields__ if n != "mechanism"]
+        return {n: jsonable(getattr(self, n)) for n in names}
+
+
+def _natural(mech: Mechanism) -> float:
+    """The highest natural frequency of the free bodies and springs (wall springs included)."""
+    m = np.asarray(mech.m, np.float64)
+    K = np.zeros((m.size, m.size))
+    for el in mech.links:
+        k = el.values().get("k")  # a spring's stiffness (other elements have none)
+        if k is None:
+            continue
+        ends = [e for e in el.bodies() if isinstance(e, int)]
+        for a in ends:
+            K[a, a] += float(k)
+        if len(ends) == 2:
+            K[ends[0], ends[1]] -= float(k)
+            K[ends[1], ends[0]] -= float(k)
+    s = 1 / np.sqrt(m)
+    return float(np.sqrt(max(np.linalg.eigvalsh(K * s[:, None] * s[None, :]).max(), 0.0)))
+
+
+def _gaits(mech: Mechanism, cos: np.ndarray, sin: np.ndarray, omega: np.ndarray, settings: ChainOptimiseSettings):
+    """Steady gaits (periods 1 and 2) of `mech` driven by each row's coefficients, as host arrays."""
+    from ..gaits._gait import steady_gait
+
+    dtype = mech.dtype
+    batch = with_fourier(mech, jnp.asarray(cos, dtype), jnp.asarray(sin, dtype), jnp.asarray(omega, dtype))
+    g = steady_gait(batch, periods=(1, 2), transient=settings.transient, dynamics=Exact(dt=settings.dt))
+    radius = np.max(np.abs(np.asarray(g.multipliers)), axis=-1)
+    ok = np.asarray(g.converged) & np.asarray(g.stable) & ~np.asarray(g.liftoff)
+    return dict(speed=np.asarray(g.mean_speed, np.float64), cost=np.asarray(g.cost_of_transport, np.float64), ok=ok,
+                k=np.asarray(g.k), period=np.asarray(g.period, np.float64), radius=radius,
+                y=np.asarray(g.state, np.float64))  # fmt: skip
+
+
+def check_inputs(mech: Any, v_min: Any, a_max: Any, direction: Any, harmonics: Any, omega: Any) -> list[int]:
+    """Validate a mechanism requirement; return the actuated elements' indices.
+
+    **Raises:** `ValueError` naming the argument and its valid range."""
+    if mech.batch_shape != ():
+        raise ValueError(f"mechanism must be a single configuration (batch shape ()), got {mech.batch_shape}.")
+    mech.validate()
+    elements = actuated(mech)
+    if not elements:
+        raise ValueError(
+            "optimise: the mechanism has no element driven by a waveform (a Spring's rest, a Force or an "
+            "ExternalForce with a Sinusoid, Fourier or Spline) whose waveform it could design."
+        )
+    if isinstance(harmonics, bool) or not isinstance(harmonics, (int, np.integer)) or harmonics < 1:
+        raise ValueError(f"harmonics must be an integer >= 1, got {harmonics!r}.")
+    if direction not in (1, -1):
+        raise ValueError(f"direction must be +1 (forward) or -1 (backward), got {direction!r}.")
+    if not (isinstance(v_min, (int, float, np.floating, np.integer)) and np.isfinite(v_min) and v_min > 0):
+        raise ValueError(f"v_min must be a finite speed > 0 (the required mean speed in `direction`), got {v_min!r}.")
+    if not (isinstance(a_max, (int, float, np.floating, np.integer)) and np.isfinite(a_max) and a_max > 0):
+        raise ValueError(f"a_max must be a finite bound > 0 on every actuated signal's excursion, got {a_max!r}.")
+    if omega is not None and not (np.isfinite(omega) and omega > 0):
+        raise ValueError(f"omega must be a finite number > 0 (or None to optimise it), got {omega!r}.")
+    return elements
+
+
+def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction: int = 1,
+                       omega: float | None = None, harmonics: int = 2,
+                       settings: ChainOptimiseSettings | None = None) -> MechanismOptimum:  # fmt: skip
+    """`optimise(mechanism, v_min, a_max, ...)`: the method of the module docstring."""
+    settings = ChainOptimiseSettings() if settings is None else settings
+    if not isinstance(settings, ChainOptimiseSettings):
+        raise TypeError(f"settings for a Mechanism must be a ChainOptimiseSettings, got {type(settings).__name__}.")
+    elements = check_inputs(mech, v_min, a_max, direction, harmonics, omega)
+    t0 = time.perf_counter()
+    say = (lambda m: print(m, file=sys.stderr, flush=True)) if settings.verbose else (lambda m: None)
+    base = mech.broadcast()
+    S, H = len(elements), int(harmonics)
+    if omega is not None:
+        lo = hi = float(omega)
+    else:
+        w = _natural(base) or float(base.omega)
+        lo, hi = settings.omega_min * w, settings.omega_max * w
+    free = hi > lo
+
+    # 1. Sinusoids a sin(omega t) on every actuated element.
+    amps = a_max * np.arange(1, settings.amplitudes + 1) / settings.amplitudes
+    oms = np.geomspace(lo, hi, settings.frequencies) if free else np.array([lo])
+    A, W = (x.ravel() for x in np.meshgrid(amps, oms, indexing="ij"))
+    zero = np.zeros((A.size, S, H))
+    sin = zero.copy()
+    sin[:, :, 0] = A[:, None]
+    say(f"screening {A.size} sinusoids (compiling the steady-gait solver: first call only)...")
+    sc = _gaits(base, zero, sin, W, settings)
+    fast = np.asarray(sc["ok"], bool) & (direction * np.nan_to_num(sc["speed"], nan=-np.inf) >= v_min)
+    order = np.lexsort((-direction * np.nan_to_num(sc["speed"], nan=-np.inf), np.where(fast, sc["cost"], np.inf),
+                        ~fast))  # fmt: skip
+    best = int(order[0])
+    sinusoid = (dict(a=float(A[best]), omega=float(W[best]), mean_speed=float(sc["speed"][best]),
+                     cost_of_transport=float(sc["cost"][best])) if fast[best] else None)  # fmt: skip
+
+    # 2. Local refinement of every element's harmonics from the best sinusoids.
+    starts = [int(i) for i in order if sc["ok"][i]][: settings.local] or [best]
+    starts += starts[:1] * (settings.local - len(starts))
+    dtype = base.dtype
+    steps = int(math.ceil(2 * math.pi / lo / settings.dt)) * 3 + 200
+    oracle = ChainOracle(chain=base, a_max=jnp.asarray(a_max, dtype), max_steps=jnp.asarray(steps, jnp.int32),
+                         tol=jnp.asarray(settings.newton_tol if jnp.finfo(dtype).bits == 64 else 1e-5, dtype),
+                         harmonics=H, contact="paper", dt=settings.dt, max_iter=settings.newton_iter)  # fmt: skip
+    v_target = v_min * (1 + settings.speed_slack)
+    make = lambda th, orb, k: local.Figures(th, orb, v_target, k, direction, settings.margin, free)
+    ev = local.Evaluator(oracle, settings.local, settings.transient, make)
+    x0 = []
+    for lane, i in enumerate(starts):
+        x0.append(local.pack(zero[i] / a_max, sin[i] / a_max, float(W[i])))
+        ev.y[lane], ev.k[lane] = sc["y"][i], int(max(sc["k"][i], 1))
+    bounds = (math.log(lo), math.log(hi))
+    proj = lambda x: local.project(x, S, H, *bounds)
+    stroke_ok = lambda x: float(np.max(local.strokes(*local.unpack(x, S, H)[:2]))) <= 1 + 1e-9
+    costs = [c for c in sc["cost"][starts] if np.isfinite(c)]
+    rho = local.PENALTY * max(1.0, max(costs, default=1.0))
+    log: list[dict] = []
+    solvers = [local.local_solver(x, proj, stroke_ok, settings.max_iter, settings.trust_radius, rho, log) for x in x0]
+    say(f"refining {len(solvers)} starts locally, in lockstep (compiling the orbit solver: first call only)...")
+    xs = run_lockstep(solvers, ev)
+
+    # 3. Verification: the baseline and the refined actuations, rescaled onto the exact bound.
+    coefs = [(zero[best], sin[best], float(W[best]))]
+    for x in xs:
+        c, s, w = local.unpack(x, S, H)
+        scale = 1 / np.maximum(local.strokes(c, s), 1.0)
+        coefs.append((a_max * c * scale[:, None], a_max * s * scale[:, None], w))
+    cos_c = np.stack([c for c, _, _ in coefs])
+    sin_c = np.stack([s for _, s, _ in coefs])
+    om_c = np.array([w for _, _, w in coefs])
+    say(f"verifying {len(coefs)} candidates on their steady gaits...")
+    g = _gaits(base, cos_c, sin_c, om_c, settings)
+    strokes = np.stack([local.strokes(c, s) for c, s in zip(cos_c, sin_c)])
+    eps = float(jnp.finfo(dtype).eps)
+    feasible = (np.asarray(g["ok"], bool) & (direction * np.nan_to_num(g["speed"], nan=-np.inf) >= v_min)
+                & (strokes.max(axis=1) <= a_max * (1 + 8 * eps)))  # fmt: skip
+    if feasible.any():
+        k = int(np.argmin(np.where(feasible, g["cost"], np.inf)))
+    else:
+        k = int(np.argmax(np.where(g["ok"], direction * np.nan_to_num(g["speed"], nan=-np.inf), -np.inf)))
+    names = ["sinusoid"] + [f"local {lane}" for lane in range(len(xs))]
+    table = [dict(candidate=names[i], omega=float(om_c[i]), mean_speed_exact=float(g["speed"][i]),
+                  cost_of_transport_exact=float(g["cost"][i]), stable_exact=bool(g["ok"][i]),
+                  stroke=float(strokes[i].max()), feasible_exact=bool(feasible[i]))
+             for i in range(len(names))]  # fmt: skip
+    chosen = with_fourier(base, jnp.asarray(cos_c[k], dtype), jnp.asarray(sin_c[k], dtype), jnp.asarray(om_c[k], dtype))
+    sim = _simulate_check(chosen, float(g["radius"][k]), float(g["period"][k]), settings) if g["ok"][k] else None
+    speed_s, cost_s, n = sim if sim is not None else (math.nan, math.nan, 0)
+    rel = max(abs(speed_s / g["speed"][k] - 1), abs(cost_s / g["cost"][k] - 1)) if sim is not None else math.nan
+    cost_sin = sinusoid["cost_of_transport"] if sinusoid else math.nan
+    say(f"verified ({time.perf_counter() - t0:.0f} s): {names[k]}, cost of transport {g['cost'][k]:.6g}")
+    return MechanismOptimum(
+        v_min=float(v_min), direction=int(direction), a_max=float(a_max), harmonics=H, elements=elements,
+        cos=cos_c[k], sin=sin_c[k], omega=float(om_c[k]), mean_speed_exact=float(g["speed"][k]),
+        cost_of_transport_exact=float(g["cost"][k]), gait_period_exact=float(g["period"][k]),
+        stable_exact=bool(g["ok"][k]), spectral_radius_exact=float(g["radius"][k]), stroke_exact=strokes[k],
+        feasible_exact=bool(feasible[k]), sinusoid=sinusoid,
+        improvement_vs_sinusoid=1 - float(g["cost"][k]) / cost_sin if (feasible[k] and sinusoid) else math.nan,
+        mean_speed_simulated=float(speed_s), cost_of_transport_simulated=float(cost_s), simulation_agreement=float(rel),
+        simulated_periods=int(n), candidates=table, screened=int(A.size), evaluations=ev.calls,
+        runtime_s=time.perf_counter() - t0, mechanism=chosen,
+    )  # fmt: skip
+
+
+def _simulate_check(mech: Mechanism, rho: float, period: float, settings: ChainOptimiseSettings):
+    """Mean speed and cost of transport of a direct simulation from the mechanism's own start, over 10
+    whole gait periods after enough periods for the slowest Floquet mode to decay to `check_tol`."""
+    from ..run._simulate import simulate
+
+    lo, hi = settings.check_periods
+    n = hi if not (0 < rho < 1) else int(np.clip(math.ceil(math.log(settings.check_tol) / math.log(rho)), lo, hi))
+    t = np.array([n * period, (n + 10) * period])
+    traj = simulate(mech, float(t[-1]), t, dynamics=Exact(dt=settings.dt), contact="strict")
+    if not np.all(np.asarray(traj.valid)):
+        return None
+    X, ed = np.asarray(traj.X, np.float64), np.asarray(traj.e_d, np.float64)
+    dX = X[1] - X[0]
+    return float(dX / (t[1] - t[0])), float((ed[1] - ed[0]) / abs(dX)), n

@@ -1,0 +1,133 @@
+"""Animation of a [`Mechanism`][locomotion_jax.Mechanism]'s bodies on their line (SPEC §9), from a
+`ChainTrajectory` of one configuration.
+
+Each body is a block centred on $x_i$: a body in ground contact stands on the ground, a carried body
+is drawn smaller inside its carrier's row, a free body above the ground. A stuck body (the
+trajectory's `stuck`) is `STUCK_COLOR` with an anchor under it, a slipping one `SLIP_COLOR`, a body
+without ground contact `FREE_COLOR`. Springs are zigzags between their ends (`lj.WALL`: a hatched
+wall at $x = 0$). The positions are the saved states, never interpolated.
+
+An optional panel below plots $x_i(t) - x_i(t_0)$ with a moving cursor. The artists carry `gid`s
+(`"body0"`, `"body1"`, ..., `"anchor0"`, ..., `"spring0"`, ...) so that tests can read each frame.
+"""
+
+import math
+from typing import Any
+
+import numpy as np
+from matplotlib.animation import FuncAnimation
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Rectangle
+
+from ..model._bodies import Mechanism
+from ..model._elements import Spring, WALL
+from ._animation import SLIP_COLOR, STUCK_COLOR
+
+
+FREE_COLOR = "#7f7f7f"
+"""Colour of a body without ground contact (carried or free)."""
+
+
+def _zigzag(xa: float, xb: float, y: float, amp: float, coils: int = 6) -> tuple[np.ndarray, np.ndarray]:
+    s = np.linspace(0.0, 1.0, 2 * coils + 3)
+    off = np.zeros_like(s)
+    off[1:-1:2], off[2:-1:2] = amp, -amp
+    off[1], off[-2] = 0.0, 0.0
+    return xa + s * (xb - xa), y + off
+
+
+def animate_mechanism(
+    traj: Any,
+    mechanism: Mechanism,
+    *,
+    max_frames: int = 200,
+    interval: float = 50.0,
+    trace: bool = True,
+    title: str | None = None,
+) -> FuncAnimation:
+    """A matplotlib animation of one mechanism's bodies (module docstring).
+
+    **Arguments:** `traj`, a `ChainTrajectory` of `mechanism` (one configuration: batch shape `()`);
+    `max_frames`: at most this many frames (a stride over the valid saved states); `interval`: ms
+    between frames; `trace`: add the displacement panel; `title`: of the figure.
+
+    **Returns:** a `FuncAnimation` on a bare `Figure` (write it with `save_gif`).
+
+    **Raises:** `ValueError` for a batch, or where no saved state is valid.
+    """
+    if mechanism.batch_shape != () or np.ndim(traj.t) != 1:
+        raise ValueError(
+            f"animate: one mechanism configuration (batch shape ()), got batch shape {mechanism.batch_shape}."
+        )
+    if max_frames < 1:
+        raise ValueError(f"animate: max_frames must be >= 1, got {max_frames}.")
+    t = np.asarray(traj.t, np.float64)
+    x = np.asarray(traj.x, np.float64)
+    stuck = np.asarray(traj.stuck, bool)
+    idx = np.flatnonzero(np.asarray(traj.valid, bool))
+    if idx.size == 0:
+        raise ValueError("animate: no valid saved state (the run stopped before the first saved time).")
+    frames = idx[:: max(1, math.ceil(idx.size / max_frames))]
+    n = x.shape[-1]
+    contact = [law is not None for law in mechanism.friction]
+    walled = any(WALL in el.bodies() for el in mechanism.links)
+    span = float(np.ptp(np.concatenate([x[idx].ravel(), [0.0] if walled else []])))
+    width = max(0.08 * span, 0.05)
+    size = [1.0 if contact[i] or mechanism.carried_by[i] is None else 0.55 for i in range(n)]
+    base = [0.0 if contact[i] else (0.2 if mechanism.carried_by[i] is not None else 1.4) for i in range(n)]
+    fig = Figure(figsize=(6.0, 4.2 if trace else 2.6), layout="constrained")
+    ax = fig.add_subplot(2, 1, 1) if trace else fig.add_subplot(1, 1, 1)
+    lo, hi = float(x[idx].min()) - 2 * width, float(x[idx].max()) + 2 * width
+    if walled:
+        lo, hi = min(lo, -2 * width), max(hi, 2 * width)
+        ax.fill_between([-width, 0.0], -0.1, 2.0, hatch="///", facecolor="none", edgecolor="k", lw=0.0)
+    ax.axhline(0.0, color="k", lw=1.0)
+    ax.set_xlim(lo, hi)
+    ax.set_ylim(-0.4, 2.2)
+    ax.set_yticks([])
+    ax.set_xlabel("x")
+    if title:
+        ax.set_title(title, fontsize="small")
+    blocks = []
+    for i in range(n):
+        h = 0.5 * size[i]
+        r = Rectangle((0.0, base[i]), width * size[i], h, gid=f"body{i}", zorder=3 + (not contact[i]))
+        ax.add_patch(r)
+        blocks.append(r)
+    anchors = [ax.plot([], [], "^", color=STUCK_COLOR, ms=6, gid=f"anchor{i}")[0] for i in range(n)]
+    springs: list[tuple[Spring, Line2D]] = []
+    for j, el in enumerate([e for e in mechanism.links if isinstance(e, Spring)]):
+        springs.append((el, ax.plot([], [], "-", color="k", lw=0.8, gid=f"spring{j}")[0]))
+    clock = ax.text(0.01, 0.97, "", transform=ax.transAxes, va="top", fontsize="small")
+    cursor = None
+    if trace:
+        axt = fig.add_subplot(2, 1, 2)
+        for i in range(n):
+            axt.plot(t[idx], x[idx, i] - x[idx[0], i], lw=1.0, label=f"body {i}")
+        axt.set_xlabel("t")
+        axt.set_ylabel("x_i(t) - x_i(t0)")
+        axt.legend(fontsize="x-small", ncol=min(n, 4), loc="upper left")
+        cursor = axt.axvline(float(t[frames[0]]), color="k", lw=0.8)
+
+    def end(e: "int | str", row: np.ndarray) -> float:
+        return 0.0 if e == WALL else float(row[int(e)])
+
+    def draw(k: int) -> list:
+        s = frames[k]
+        for i, r in enumerate(blocks):
+            r.set_x(x[s, i] - 0.5 * r.get_width())
+            r.set_facecolor(STUCK_COLOR if stuck[s, i] else (SLIP_COLOR if contact[i] else FREE_COLOR))
+            anchors[i].set_data([x[s, i]] if stuck[s, i] else [], [-0.15] if stuck[s, i] else [])
+        for el, line in springs:
+            ya = 0.15 if el.a == WALL else base[int(el.a)] + 0.12
+            line.set_data(*_zigzag(end(el.a, x[s]), end(el.b, x[s]), ya, 0.06))
+        clock.set_text(f"t = {t[s]:.3f}")
+        if cursor is not None:
+            cursor.set_xdata([t[s], t[s]])
+        return [*blocks, *anchors, *(line for _, line in springs), clock]
+
+    draw(0)
+    fig.draw_without_rendering()
+    fig.set_layout_engine("none")
+    return FuncAnimation(fig, draw, frames=len(frames), init_func=lambda: draw(0), interval=interval, blit=False)

@@ -1,0 +1,98 @@
+"""`lj.optimise` of a `lj.Mechanism` (`optimisation._mechanism`): a capsule whose internal mass sits on a
+spring and a damper, driven by an internal force, on anisotropic ground, backwards. The optimum's gait is
+checked by a direct `simulate` and by the independent reference (`tests/reference_mechanism.py`, with the
+optimum's Fourier force; within the step's truncation error, which shrinks with the step), and it beats
+the best sinusoid of a small batched sweep of the test's own. Slow (about 2 to 5 minutes)."""
+
+import jax.numpy as jnp
+import locomotion_jax as lj
+import numpy as np
+import pytest
+from reference_mechanism import Body, run, Sig, System
+
+
+MU = (0.5, 0.4, 0.4, 0.3)
+K, C, V_MIN, A_MAX = 10.0, 0.5, 0.005, 0.8
+
+
+def _capsule(force=None, check=True):
+    force = lj.Sinusoid(a=0.6, omega=3.0, lbar=0.0) if force is None else force
+    links = [lj.Spring(0, 1, k=K, rest=0.0), lj.Damper(0, 1, c=C), lj.Force(0, 1, force)]
+    return lj.Mechanism(masses=[1.0, 0.5], friction=[lj.AnisotropicCoulomb(*MU), None], carried_by=[None, 0],
+                        links=links, check=check)  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def optimum():
+    s = lj.ChainOptimiseSettings(
+        amplitudes=4, frequencies=8, local=2, max_iter=15, transient=20, dt=0.01, omega_min=0.15, omega_max=2.0
+    )
+    return lj.optimise(_capsule(), v_min=V_MIN, a_max=A_MAX, direction=-1, settings=s)
+
+
+@pytest.mark.slow
+def test_mechanism_optimum_verified_by_simulate_and_the_reference(optimum):
+    opt = optimum
+    print({k: v for k, v in opt.to_dict().items() if k not in ("candidates",)})
+    assert opt.feasible_exact and opt.stable_exact and opt.elements == [2]
+    assert -opt.mean_speed_exact >= V_MIN and float(np.max(opt.stroke_exact)) <= A_MAX * (1 + 1e-12)
+    g = lj.steady_gait(opt.mechanism, periods=(1, 2), transient=20, dynamics=lj.Exact(dt=0.01))
+    assert int(g.status) == lj.GaitStatus.CONVERGED
+    assert abs(float(g.cost_of_transport) - opt.cost_of_transport_exact) < 1e-9
+    u, v = float(g.state[0]), np.asarray(g.state[1:], float)
+    T = float(g.period)
+    # A direct simulation from the orbit's section state, over one gait period.
+    M = lj.Mechanism(masses=[1.0, 0.5], friction=[lj.AnisotropicCoulomb(*MU), None], carried_by=[None, 0],
+                     links=opt.mechanism.links, x0=[0.0, u], v0=v)  # fmt: skip
+    traj = lj.simulate(M, T, jnp.array([0.0, T]), dynamics=lj.Exact(dt=0.01))
+    dX = float(traj.X[-1] - traj.X[0])
+    speed, cost = dX / T, float(traj.e_d[-1]) / abs(dX)
+    # The independent reference with the optimum's force, s(t) = sum A_n cos(n w t) + B_n sin(n w t).
+    H = opt.cos.shape[-1]
+    force = Sig(0.0, tuple(opt.cos[0]), tuple(opt.sin[0]), opt.omega)
+    S = System([Body(1.0, MU, x0=0.0, v0=v[0]), Body(0.5, None, carrier=0, x0=u, v0=v[1])],
+               springs=[(0, 1, K, 0.0)], forces=[(0, 1, force)], dampers=[(0, 1, C)])  # fmt: skip
+    ref = run(S, T, np.array([0.0, T]))
+    r_dX = ref["com"][1] - ref["com"][0]
+    r_speed, r_cost = r_dX / T, ref["ed"][1] / abs(r_dX)
+    print(f"optimum ({H} harmonics): speed {opt.mean_speed_exact:.10f}, simulate {speed:.10f}, reference "
+          f"{r_speed:.10f}; cost {opt.cost_of_transport_exact:.10f}, simulate {cost:.10f}, reference {r_cost:.10f}; "
+          f"simulated from its start: {opt.simulation_agreement:.1e}")  # fmt: skip
+    assert abs(speed / opt.mean_speed_exact - 1) < 1e-8 and abs(cost / opt.cost_of_transport_exact - 1) < 1e-8
+    assert opt.simulation_agreement < 1e-6
+    # Against the reference the difference is the engine's truncation error at the optimiser's step
+    # (dt = 0.01 against a period of the second harmonic of 0.29): it shrinks with the step.
+    fine = lj.simulate(M, T, jnp.array([0.0, T]), dynamics=lj.Exact(dt=0.0025))
+    f_dX = float(fine.X[-1] - fine.X[0])
+    f_speed, f_cost = f_dX / T, float(fine.e_d[-1]) / abs(f_dX)
+    err = max(abs(r_speed / speed - 1), abs(r_cost / cost - 1))
+    err_fine = max(abs(r_speed / f_speed - 1), abs(r_cost / f_cost - 1))
+    print(f"against the reference: {err:.1e} at dt = 0.01, {err_fine:.1e} at dt = 0.0025")
+    assert err < 2e-5 and err_fine < err / 8
+
+
+@pytest.mark.slow
+def test_mechanism_optimum_beats_the_best_sinusoid_of_a_sweep(optimum):
+    """A batched sweep of 4 x 8 sinusoids a sin(w t) (a up to a_max, w over the optimiser's range):
+    the cheapest one fast enough costs more than the optimum."""
+    a = np.array([0.2, 0.4, 0.6, 0.8])
+    w = np.geomspace(1.0, 10.0, 8)
+    A, W = (x.ravel() for x in np.meshgrid(a, w, indexing="ij"))
+    batch = _capsule(lj.Sinusoid(a=jnp.asarray(A), omega=jnp.asarray(W), lbar=0.0))
+    g = lj.steady_gait(batch, periods=(1, 2), transient=20, dynamics=lj.Exact(dt=0.01))
+    ok = np.asarray(g.converged) & np.asarray(g.stable) & (-np.asarray(g.mean_speed) >= V_MIN)
+    best = float(np.min(np.where(ok, np.asarray(g.cost_of_transport), np.inf)))
+    print(f"best sinusoid of the sweep: {best:.6f} ({int(ok.sum())} of {ok.size} fast enough); optimum "
+          f"{optimum.cost_of_transport_exact:.6f}; the optimiser's own screen: {optimum.sinusoid}")  # fmt: skip
+    assert ok.any() and optimum.cost_of_transport_exact < best
+
+
+def test_mechanism_optimise_bad_input():
+    with pytest.raises(ValueError, match="no element driven by a waveform"):
+        lj.optimise(_capsule(force=0.3), v_min=0.01, a_max=0.5)
+    with pytest.raises(ValueError, match="a_max must be a finite bound > 0"):
+        lj.optimise(_capsule(), v_min=0.01, a_max=-1.0)
+    with pytest.raises(ValueError, match="single configuration"):
+        lj.optimise(_capsule(lj.Sinusoid(a=jnp.array([0.3, 0.4]), omega=3.0, lbar=0.0)), v_min=0.01, a_max=0.5)
+    with pytest.raises(ValueError, match="exact method only"):
+        lj.optimise(_capsule(), v_min=0.01, a_max=0.5, method="smoothed")
