@@ -2,7 +2,8 @@
 
 Each commit is checked out into a temporary git worktree and run in its own fresh process
 (float64, no persistent compilation cache): the call twice, cold (compilation included) and
-again in the same process (warm). Per call it prints the wall time, the compilations XLA ran
+again in the same process (warm). Per call it prints the wall time, the process's CPU time (less
+sensitive to other work on the machine than the wall time), the compilations XLA ran
 (count and backend seconds, from `jax.monitoring`), the wall time of each stage (from the
 optimiser's verbose progress lines: sinusoid baseline, screen, local refinement, verification
 at `dt` and `dt/2`) and the optimum's speed and cost of transport.
@@ -22,7 +23,7 @@ import time
 
 
 CHILD = r"""
-import json, sys, time
+import json, resource, sys, time
 import jax
 jax.config.update("jax_enable_x64", True)
 import jax.monitoring as mon
@@ -54,11 +55,12 @@ def stages(t0, t1):
     ends = [at[n] for n in names[1:]] + [t1]
     return {n: round(e - at[n], 1) for n, e in zip(names, ends)}
 for run in ("cold", "warm"):
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
     opt = lj.optimise(lj.Params(), v_min=0.05, a_max=0.05, settings=lj.ExactOptimiseSettings(verbose=True))
-    t1 = time.perf_counter()
+    t1, c1 = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
+    cpu = c1.ru_utime + c1.ru_stime - c0.ru_utime - c0.ru_stime
     comp = [d for t, n, d in events if t0 <= t <= t1]
-    print(json.dumps({"run": run, "wall_s": round(t1 - t0, 1), "compilations": len(comp),
+    print(json.dumps({"run": run, "wall_s": round(t1 - t0, 1), "cpu_s": round(cpu, 1), "compilations": len(comp),
                       "compile_s": round(sum(comp), 1), "stages_s": stages(t0, t1),
                       "speed": opt.mean_speed_exact, "cost_of_transport": opt.cost_of_transport_exact,
                       "feasible": opt.feasible_exact}), flush=True)
@@ -83,15 +85,16 @@ def main(argv: list[str]) -> None:
             procs.append((label, commit, p, start, tree))
             if not parallel:
                 p.wait()
-        print("| commit | call | wall s | compilations | compile s | stages s | speed | cost of transport | feasible |")
-        print("|---|---|---|---|---|---|---|---|---|")
+        print("| commit | call | wall s | CPU s | compilations | compile s | stages s | speed | cost of transport "
+              "| feasible |")  # fmt: skip
+        print("|---|---|---|---|---|---|---|---|---|---|")
         for label, commit, p, start, tree in procs:
             out, _ = p.communicate()
             for line in out.splitlines():
                 r = json.loads(line)
                 stages = ", ".join(f"{k} {v}" for k, v in r["stages_s"].items())
-                print(f"| {label} `{commit}` | {r['run']} | {r['wall_s']} | {r['compilations']} | {r['compile_s']} "
-                      f"| {stages} | {r['speed']:.6f} | {r['cost_of_transport']:.6f} | {r['feasible']} |")  # fmt: skip
+                print(f"| {label} `{commit}` | {r['run']} | {r['wall_s']} | {r['cpu_s']} | {r['compilations']} "
+                      f"| {r['compile_s']} | {stages} | {r['speed']:.6f} | {r['cost_of_transport']:.6f} | {r['feasible']} |")  # fmt: skip
             subprocess.call(["git", "-C", root, "worktree", "remove", "--force", tree])
         print(f"\nload average at the end: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
 
