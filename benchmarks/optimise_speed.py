@@ -94,7 +94,8 @@ def main(argv: list[str]) -> None:
                 r = json.loads(line)
                 stages = ", ".join(f"{k} {v}" for k, v in r["stages_s"].items())
                 print(f"| {label} `{commit}` | {r['run']} | {r['wall_s']} | {r['cpu_s']} | {r['compilations']} "
-                      f"| {r['compile_s']} | {stages} | {r['speed']:.6f} | {r['cost_of_transport']:.6f} | {r['feasible']} |")  # fmt: skip
+                      f"| {r['compile_s']} | {stages} | {r['speed']:.6f} | {r['cost_of_transport']:.6f} "
+                      f"| {r['feasible']} |")  # fmt: skip
             subprocess.call(["git", "-C", root, "worktree", "remove", "--force", tree])
         print(f"\nload average at the end: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
 
