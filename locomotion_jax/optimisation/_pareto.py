@@ -124,13 +124,31 @@ def sinusoid_sweep(
         amps = a_max * np.arange(1, int(amplitudes) + 1) / int(amplitudes)
     else:
         amps = np.asarray(amplitudes, float)
+    a, w = (x.ravel() for x in np.meshgrid(amps, omegas, indexing="ij"))
+    fig = _sinusoid_figures(params, a, w, dt, transient)
+    return SinusoidSweep(a=a, omega=w, speed=fig.speed, cost=fig.cost, ok=fig.ok)
+
+
+def bucket(n: int) -> int:
+    """The batch size that `n` sinusoids are padded to: the next power of two (at least 8), so that
+    the sweep's 192 and the refinement's 243 with the defaults run the same compiled programs."""
+    return max(8, 1 << (int(n) - 1).bit_length())
+
+
+def _sinusoid_figures(params: Params, a: np.ndarray, omega: np.ndarray, dt: float, transient: int) -> ExactFigures:
+    """[`exact_figures`][] of the sinusoids `(a, omega)` (flat arrays), the batch padded to
+    [`bucket`][locomotion_jax.optimisation._pareto.bucket] rows with copies of the last (each row's
+    gait is solved on its own; the padding is dropped)."""
+    n = len(a)
+    pad = bucket(n) - n
     values: dict[str, Any] = {k: v for k, v in params.as_dict().items() if k not in ("a", "omega")}
-    grid = Params.grid(a=jnp.asarray(amps, params.dtype), omega=jnp.asarray(omegas, params.dtype), **values)
-    fig = exact_figures(grid, None, dt=dt, transient=transient)
-    a, w = np.meshgrid(amps, omegas, indexing="ij")
-    return SinusoidSweep(
-        a=a.ravel(), omega=w.ravel(), speed=fig.speed.ravel(), cost=fig.cost.ravel(), ok=fig.ok.ravel()
+    batch = Params(
+        a=jnp.asarray(np.pad(a, (0, pad), mode="edge"), params.dtype),
+        omega=jnp.asarray(np.pad(omega, (0, pad), mode="edge"), params.dtype),
+        **values,
     )
+    fig = exact_figures(batch, None, dt=dt, transient=transient)
+    return ExactFigures(*(np.asarray(f)[:n] for f in fig))
 
 
 def best_sinusoid(sweep: SinusoidSweep, v_min: float, direction: int) -> dict | None:
@@ -168,7 +186,8 @@ def refine_sinusoid(
     Each further level zooms on the `top` cheapest feasible sinusoids found so far,
     its half-width one step of the previous level's grid, so every level is
     $(\\text{points} - 1)/2$ times finer. All candidates of a level run in one
-    batched exact call of fixed size (one compilation for all levels).
+    batched exact call of fixed size, padded as the sweep's (`bucket`: one compilation for the
+    sweep and all levels).
 
     With the defaults (9 points, 3 levels) the final step is 1/64 of the coarse
     one: for `default_omegas(params, 32)` and 6 amplitudes up to `a_max = 0.05`,
@@ -186,7 +205,6 @@ def refine_sinusoid(
     w_steps = np.diff(np.log(np.unique(sweep.omega)))
     half_a = float(a_steps.max()) if a_steps.size else 0.5 * float(sweep.a.max())
     half_w = float(w_steps.max()) if w_steps.size else 0.1
-    values: dict[str, Any] = {k: v for k, v in params.as_dict().items() if k not in ("a", "omega")}
     shrink = 2.0 / (points - 1)
     for _ in range(levels):
         every = SinusoidSweep(*(np.concatenate(x) for x in zip(*found)))
@@ -201,8 +219,7 @@ def refine_sinusoid(
             a.append(ga.ravel())
             w.append(gw.ravel())
         a, w = np.concatenate(a), np.concatenate(w)
-        batch = Params(a=jnp.asarray(a, params.dtype), omega=jnp.asarray(w, params.dtype), **values)
-        fig = exact_figures(batch, None, dt=dt, transient=transient)
+        fig = _sinusoid_figures(params, a, w, dt, transient)
         found.append(SinusoidSweep(a=a, omega=w, speed=fig.speed, cost=fig.cost, ok=fig.ok))
         half_a, half_w = shrink * half_a, shrink * half_w
     every = SinusoidSweep(*(np.concatenate(x) for x in zip(*found)))

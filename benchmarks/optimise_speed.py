@@ -1,0 +1,104 @@
+"""The paper's optimiser, old commit against new: `lj.optimise(lj.Params(), v_min=0.05, a_max=0.05)`.
+
+Each commit is checked out into a temporary git worktree and run in its own fresh process
+(float64, no persistent compilation cache): the call twice, cold (compilation included) and
+again in the same process (warm). Per call it prints the wall time, the process's CPU time (less
+sensitive to other work on the machine than the wall time), the compilations XLA ran
+(count and backend seconds, from `jax.monitoring`), the wall time of each stage (from the
+optimiser's verbose progress lines: sinusoid baseline, screen, local refinement, verification
+at `dt` and `dt/2`) and the optimum's speed and cost of transport.
+
+    python benchmarks/optimise_speed.py OLD NEW [--parallel]
+
+`--parallel` runs the two processes at once (only on a machine with cores to spare: on a
+loaded machine the two compete and both times grow).
+"""
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+
+CHILD = r"""
+import json, resource, sys, time
+import jax
+jax.config.update("jax_enable_x64", True)
+import jax.monitoring as mon
+events = []
+mon.register_event_duration_secs_listener(
+    lambda name, dur, **kw: events.append((time.perf_counter(), name, dur)) if "backend_compile" in name else None
+)
+import locomotion_jax as lj
+marks = []
+class Tee:
+    def write(self, s):
+        if s.strip():
+            marks.append((time.perf_counter(), s.strip()))
+        return len(s)
+    def flush(self):
+        pass
+sys.stderr = Tee()
+def stages(t0, t1):
+    # Stage boundaries from the verbose progress lines of the exact optimiser.
+    keys = [("baseline", "the sinusoid baseline"), ("screen", "screening"), ("local", "starts screened ("),
+            ("verify", "local runs done")]
+    at = {}
+    for t, line in marks:
+        if t0 <= t <= t1:
+            for name, key in keys:
+                if key in line and name not in at:
+                    at[name] = t
+    names = [n for n, _ in keys if n in at]
+    ends = [at[n] for n in names[1:]] + [t1]
+    return {n: round(e - at[n], 1) for n, e in zip(names, ends)}
+for run in ("cold", "warm"):
+    t0, c0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
+    opt = lj.optimise(lj.Params(), v_min=0.05, a_max=0.05, settings=lj.ExactOptimiseSettings(verbose=True))
+    t1, c1 = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
+    cpu = c1.ru_utime + c1.ru_stime - c0.ru_utime - c0.ru_stime
+    comp = [d for t, n, d in events if t0 <= t <= t1]
+    print(json.dumps({"run": run, "wall_s": round(t1 - t0, 1), "cpu_s": round(cpu, 1), "compilations": len(comp),
+                      "compile_s": round(sum(comp), 1), "stages_s": stages(t0, t1),
+                      "speed": opt.mean_speed_exact, "cost_of_transport": opt.cost_of_transport_exact,
+                      "feasible": opt.feasible_exact}), flush=True)
+"""
+
+
+def main(argv: list[str]) -> None:
+    args = [a for a in argv if not a.startswith("--")]
+    if len(args) != 2:
+        sys.exit(__doc__)
+    parallel = "--parallel" in argv
+    root = subprocess.check_output(["git", "rev-parse", "--show-toplevel"], text=True).strip()
+    with tempfile.TemporaryDirectory() as tmp:
+        procs = []
+        for label, commit in zip(("old", "new"), args):
+            tree = os.path.join(tmp, label)
+            subprocess.check_call(["git", "-C", root, "worktree", "add", "--detach", "-q", tree, commit])
+            env = dict(os.environ, PYTHONPATH=tree, JAX_ENABLE_COMPILATION_CACHE="false")
+            env.pop("LJ_CACHE_DIR", None)
+            start = time.perf_counter()
+            p = subprocess.Popen([sys.executable, "-c", CHILD], cwd=tree, env=env, stdout=subprocess.PIPE, text=True)
+            procs.append((label, commit, p, start, tree))
+            if not parallel:
+                p.wait()
+        print("| commit | call | wall s | CPU s | compilations | compile s | stages s | speed | cost of transport "
+              "| feasible |")  # fmt: skip
+        print("|---|---|---|---|---|---|---|---|---|---|")
+        for label, commit, p, start, tree in procs:
+            out, _ = p.communicate()
+            for line in out.splitlines():
+                r = json.loads(line)
+                stages = ", ".join(f"{k} {v}" for k, v in r["stages_s"].items())
+                print(f"| {label} `{commit}` | {r['run']} | {r['wall_s']} | {r['cpu_s']} | {r['compilations']} "
+                      f"| {r['compile_s']} | {stages} | {r['speed']:.6f} | {r['cost_of_transport']:.6f} "
+                      f"| {r['feasible']} |")  # fmt: skip
+            subprocess.call(["git", "-C", root, "worktree", "remove", "--force", tree])
+        print(f"\nload average at the end: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
