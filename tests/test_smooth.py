@@ -6,8 +6,8 @@ import jax
 import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
-from locomotion_jax.dynamics import _smooth
-from locomotion_jax.model import _two_mass
+from locomotion_jax.dynamics import _smoothed
+from locomotion_jax.dynamics._smoothed_dynamics import params_physics
 from scipy.stats import linregress
 
 
@@ -58,11 +58,12 @@ def test_gradient_matches_finite_differences():
     def final_x(a):
         p = lj.Params(a=a, omega=6.0, check=False)
         wave = lj.Sinusoid.from_params(p)
-        y0 = jnp.array([0.0, 0.0, 3.0, 0.0, 0.0, 0.0])
+        y0 = jnp.array([0.0, 3.0, 0.0, 0.0, 0.0, 0.0])  # (x1, x2, v1, v2, e_d, w)
         dyn = lj.Smoothed(1e-2, rtol=1e-10, atol=1e-12)
-        sol = _smooth.solve(p, wave, "paper", dyn, 0.0, 5.0, y0, diffrax.SaveAt(t1=True))
+        P = params_physics(p, wave)
+        sol, _ = _smoothed.solve(P, "paper", dyn, 0.0, 5.0, y0, diffrax.SaveAt(t1=True))
         assert sol.ys is not None
-        return _two_mass.centre_of_mass(p, sol.ys[-1, 0], sol.ys[-1, 2])
+        return _smoothed.centre_of_mass(P, sol.ys[-1])
 
     g = jax.grad(final_x)(jnp.asarray(0.05))
     h = 1e-5
