@@ -70,3 +70,23 @@ def test_gradient_matches_finite_differences():
     fd = (final_x(jnp.asarray(0.05 + h)) - final_x(jnp.asarray(0.05 - h))) / (2 * h)
     np.testing.assert_allclose(g, fd, rtol=1e-4)
     assert abs(float(g)) > 1e-3
+
+
+def test_initial_state_and_t_start():
+    # From the state saved at t1 = 2 pi (two periods of omega = 2: the actuation's phase is that of
+    # t = 0) the motion goes on as the run through t1 does, to the solver's tolerance; and a
+    # measurement from t_start = t1 starts at that run's X(t1).
+    p = lj.Params(omega=2.0)
+    dyn = lj.Smoothed(1e-2)
+    t1 = 2 * np.pi
+    full = lj.simulate(p, t1 + 5.0, save_at=jnp.array([t1, t1 + 5.0]), dynamics=dyn)
+    state = tuple(float(getattr(full, k)[0]) for k in ("x1", "v1", "x2", "v2"))
+    assert abs(state[1]) + abs(state[3]) > 1e-3  # a moving state, not the start at rest
+    cont = lj.simulate(p, 5.0, save_at=jnp.array([0.0, 5.0]), dynamics=dyn, initial=state)
+    assert cont.start == "initial"
+    for k in ("x1", "v1", "x2", "v2"):
+        np.testing.assert_allclose(float(getattr(cont, k)[-1]), float(getattr(full, k)[-1]), rtol=1e-5, atol=1e-6)
+    m = lj.measure(p, z=0.1, t_start=t1, horizon=20.0, window=5.0, dynamics=dyn)
+    assert int(m.status) == lj.Status.OK
+    np.testing.assert_allclose(float(m.t_start), t1)
+    np.testing.assert_allclose(float(m.X_start), float(full.X[0]), rtol=1e-6)
