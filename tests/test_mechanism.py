@@ -185,4 +185,5 @@ def test_smoothed_friction_oscillator_comes_to_rest_at_the_known_point():
         assert int(tr.status) == lj.Status.OK
         assert abs(float(tr.x[-1, 0]) - (15 - np.sqrt(205))) < 10 * eps
         assert abs(float(tr.v[-1, 0])) < 3 * eps
-        np.testing.assert_allclose(float(tr.w[-1] - tr.e_d[-1] - (tr.e[-1] - tr.e[0])), 0.0, atol=1e-6)
+        # w = e_d + (e - e0) relative to the initial energy (90), to the solver's tolerance (rtol 1e-7)
+        assert abs(float(tr.w[-1] - tr.e_d[-1] - (tr.e[-1] - tr.e[0]))) < 1e-6 * float(tr.e[0])
