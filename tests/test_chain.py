@@ -338,7 +338,7 @@ def test_chain_initial_state_continues_a_run():
 def test_chain_initial_state_checks():
     """A chain's initial state is refused where its values are known (naming the masses out of
     order), flagged INVALID in its own result under `jit` without changing its batch-mates,
-    and refused by the smoothed dynamics."""
+    by the exact and the smoothed dynamics."""
     worm = lj.Chain(masses=[1.0, 1.0, 1.0], waveforms=lj.TravellingWave(0.05, 2.0, 1.0))
     x = np.array([0.0, 3.0, 6.0])
     with pytest.raises(ValueError, match=r"x_1 < x_2 \(mass 1\)"):
@@ -347,14 +347,17 @@ def test_chain_initial_state_checks():
         lj.simulate(worm, t_end=1.0, initial=(x, np.array([0.0, np.nan, 0.0])))
     with pytest.raises(ValueError, match="broadcast"):
         lj.simulate(worm, t_end=1.0, initial=(x[:2], np.zeros(3)))
-    with pytest.raises(ValueError, match="Exact dynamics only"):
-        lj.simulate(worm, t_end=1.0, initial=(x, np.zeros(3)), dynamics=lj.Smoothed())
     # Past the front end's check (as under `jit`, where the values are not known there): the
     # dynamics flag the configuration whose positions are out of order, and only that one.
     flat, valid, _ = prepare_chain(lj.Chain.stack([worm, worm]), None)
     rows = jnp.asarray([[0.0, 3.0, 6.0, 0.0, 0.0, 0.0], [0.0, 3.0, 2.0, 0.0, 0.0, 0.0]])
     out = lj.Exact().measure_chain(flat, valid, jnp.zeros(2), 0.1, 5.0, 2.0, "strict", "paper", rows)
     alone = lj.measure(worm, z=0.1, horizon=5.0, window=2.0, t_start=0.0, initial=(x, np.zeros(3)))
+    assert [int(s) for s in np.asarray(out["status"])] == [lj.Status.OK, lj.Status.INVALID]
+    np.testing.assert_allclose(float(out["tau_z"][0]), float(alone.tau_z), rtol=1e-12)
+    smooth = lj.Smoothed(eps=1e-2)
+    out = smooth.measure_chain(flat, valid, jnp.zeros(2), 0.1, 5.0, 2.0, "strict", "paper", rows)
+    alone = lj.measure(worm, z=0.1, horizon=5.0, window=2.0, t_start=0.0, initial=(x, np.zeros(3)), dynamics=smooth)
     assert [int(s) for s in np.asarray(out["status"])] == [lj.Status.OK, lj.Status.INVALID]
     np.testing.assert_allclose(float(out["tau_z"][0]), float(alone.tau_z), rtol=1e-12)
 

@@ -1,5 +1,5 @@
-"""The smoothed engine of chains (`dynamics/_chain_smooth.py`): the two-mass smoothed model as
-its N = 2 case, convergence to the exact N-mass engine, the energy balance, batches."""
+"""The smoothed engine (`dynamics/_smoothed.py`) on chains: the paper's model and its two-mass chain
+through one engine, convergence to the exact N-mass engine, the energy balance, batches."""
 
 import jax.numpy as jnp
 import locomotion_jax as lj

@@ -177,6 +177,13 @@ def test_bad_input_names_the_element_and_the_body(kwargs, message):
         lj.Mechanism(**kwargs)
 
 
-def test_smoothed_dynamics_refuse_a_mechanism():
-    with pytest.raises(NotImplementedError, match="run a Mechanism with Exact"):
-        lj.simulate(_oscillator(), t_end=1.0, dynamics=lj.Smoothed())
+def test_smoothed_friction_oscillator_comes_to_rest_at_the_known_point():
+    # Siconos' oscillator (SPEC §9) on the smoothed dynamics: at t = 30 (after t* = 22.4) the mass
+    # rests near x* = 15 - sqrt(205), within about 6 eps (it creeps at a few eps below the static limit).
+    for eps in (1e-2, 1e-3):
+        tr = lj.simulate(_oscillator(), t_end=30.0, save_at=np.array([0.0, 30.0]), dynamics=lj.Smoothed(eps=eps))
+        assert int(tr.status) == lj.Status.OK
+        assert abs(float(tr.x[-1, 0]) - (15 - np.sqrt(205))) < 10 * eps
+        assert abs(float(tr.v[-1, 0])) < 3 * eps
+        # w = e_d + (e - e0) relative to the initial energy (90), to the solver's tolerance (rtol 1e-7)
+        assert abs(float(tr.w[-1] - tr.e_d[-1] - (tr.e[-1] - tr.e[0]))) < 1e-6 * float(tr.e[0])

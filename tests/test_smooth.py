@@ -6,8 +6,8 @@ import jax
 import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
-from locomotion_jax.dynamics import _smooth
-from locomotion_jax.model import _two_mass
+from locomotion_jax.dynamics import _smoothed
+from locomotion_jax.dynamics._smoothed_dynamics import params_physics
 from scipy.stats import linregress
 
 
@@ -58,14 +58,35 @@ def test_gradient_matches_finite_differences():
     def final_x(a):
         p = lj.Params(a=a, omega=6.0, check=False)
         wave = lj.Sinusoid.from_params(p)
-        y0 = jnp.array([0.0, 0.0, 3.0, 0.0, 0.0, 0.0])
+        y0 = jnp.array([0.0, 3.0, 0.0, 0.0, 0.0, 0.0])  # (x1, x2, v1, v2, e_d, w)
         dyn = lj.Smoothed(1e-2, rtol=1e-10, atol=1e-12)
-        sol = _smooth.solve(p, wave, "paper", dyn, 0.0, 5.0, y0, diffrax.SaveAt(t1=True))
+        P = params_physics(p, wave)
+        sol, _ = _smoothed.solve(P, "paper", dyn, 0.0, 5.0, y0, diffrax.SaveAt(t1=True))
         assert sol.ys is not None
-        return _two_mass.centre_of_mass(p, sol.ys[-1, 0], sol.ys[-1, 2])
+        return _smoothed.centre_of_mass(P, sol.ys[-1])
 
     g = jax.grad(final_x)(jnp.asarray(0.05))
     h = 1e-5
     fd = (final_x(jnp.asarray(0.05 + h)) - final_x(jnp.asarray(0.05 - h))) / (2 * h)
     np.testing.assert_allclose(g, fd, rtol=1e-4)
     assert abs(float(g)) > 1e-3
+
+
+def test_initial_state_and_t_start():
+    # From the state saved at t1 = 2 pi (two periods of omega = 2: the actuation's phase is that of
+    # t = 0) the motion goes on as the run through t1 does, to the solver's tolerance; and a
+    # measurement from t_start = t1 starts at that run's X(t1).
+    p = lj.Params(omega=2.0)
+    dyn = lj.Smoothed(1e-2)
+    t1 = 2 * np.pi
+    full = lj.simulate(p, t1 + 5.0, save_at=jnp.array([t1, t1 + 5.0]), dynamics=dyn)
+    state = tuple(float(getattr(full, k)[0]) for k in ("x1", "v1", "x2", "v2"))
+    assert abs(state[1]) + abs(state[3]) > 1e-3  # a moving state, not the start at rest
+    cont = lj.simulate(p, 5.0, save_at=jnp.array([0.0, 5.0]), dynamics=dyn, initial=state)
+    assert cont.start == "initial"
+    for k in ("x1", "v1", "x2", "v2"):
+        np.testing.assert_allclose(float(getattr(cont, k)[-1]), float(getattr(full, k)[-1]), rtol=1e-5, atol=1e-6)
+    m = lj.measure(p, z=0.1, t_start=t1, horizon=20.0, window=5.0, dynamics=dyn)
+    assert int(m.status) == lj.Status.OK
+    np.testing.assert_allclose(float(m.t_start), t1)
+    np.testing.assert_allclose(float(m.X_start), float(full.X[0]), rtol=1e-6)

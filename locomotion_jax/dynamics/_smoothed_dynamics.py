@@ -1,9 +1,11 @@
 """`Smoothed`: smoothed friction integrated by diffrax (SPEC §3), as an `AbstractDynamics`.
 
 `eps` is an array (traced: a continuation in `eps` does not recompile); the solver's
-settings are static. The runs are diffrax's `diffeqsolve` under `vmap` (`_smooth` for
-the two-mass model, `_chain_smooth` for chains): one loop of diffrax's own, which the
-exact engines' work queue cannot take step by step.
+settings are static. Every mechanism runs on one engine (`_smoothed`), written against the
+physics interface: the paper's model as its two-body physics (`params_physics`), with the
+N-body fields mapped to a `Trajectory`'s and a `Measurement`'s here; a `Chain` and a
+`Mechanism` with their own. Each run is diffrax's `diffeqsolve` under `vmap`: one loop of
+diffrax's own, which the exact engine's work queue cannot take step by step.
 """
 
 from typing import Any
@@ -14,24 +16,24 @@ import jax.numpy as jnp
 from jax.sharding import Mesh
 
 from .._custom_types import Array, ArrayLike
+from .._status import mode_code
 from ..model._bodies import Mechanism
 from ..model._chain import Chain
-from ..model._params import Params
+from ..model._params import Params, safe_params
+from ..model._physics import AbstractPhysics
+from ..model._two_mass import initial_gap
 from ..model._waveform import AbstractWaveform, Sinusoid
-from . import _chain_smooth, _smooth
+from . import _smoothed as _engine
 from ._base import AbstractDynamics
 
 
-_EXACT_ONLY = (
-    "t_start= and initial= are supported by the Exact dynamics only; the smoothed model uses "
-    "Params.t_start and the start= positions."
-)
-
-
 class Smoothed(AbstractDynamics):
-    """Smoothed friction integrated by diffrax (SPEC §3); differentiable.
+    """Smoothed friction integrated by diffrax (SPEC §3); differentiable. Runs every mechanism
+    (the paper's model, a `Chain`, a `Mechanism`) on one engine written against its physics,
+    with both starts, `initial=` states and `t_start`; `contact="strict"` or `"paper"`.
 
-    Friction on a mass with normal force $n$ and velocity $v$:
+    Friction on a body with normal force $n$ and velocity $v$ (the paper's Coulomb law; any
+    other law is smoothed the same way, `AbstractFriction.smoothed`):
 
     $$f(v) = -n\\,\\big[\\mu_k + (\\mu_s - \\mu_k)\\, e^{-(v/v_s)^2}\\big] \\tanh(v/\\varepsilon),
     \\qquad v_s = \\sqrt{\\varepsilon},$$
@@ -86,9 +88,8 @@ class Smoothed(AbstractDynamics):
         start: str,
         initial: Array | None,
     ) -> dict[str, Array]:
-        if initial is not None:
-            raise ValueError("initial= is supported by the Exact dynamics only.")
-        return _smooth.simulate_smoothed(params, wave, wave_axes, save_at, contact, start, self)
+        out = _simulate_two_mass(params, wave, wave_axes, save_at, contact, start, initial, self.astype(params.dtype))
+        return two_mass_trajectory(out)
 
     def measure_two_mass(
         self,
@@ -103,9 +104,10 @@ class Smoothed(AbstractDynamics):
         t_start: Array | None,
         initial: Array | None,
     ) -> dict[str, Array]:
-        if t_start is not None or initial is not None:
-            raise ValueError(_EXACT_ONLY)
-        return _smooth.measure_smoothed(params, wave, wave_axes, z, horizon, window, contact, start, self)
+        z_, h_, w_ = (jnp.asarray(v, params.dtype) for v in (z, horizon, window))
+        dyn = self.astype(params.dtype)
+        out = _measure_two_mass(params, wave, wave_axes, z_, h_, w_, contact, start, t_start, initial, dyn)
+        return two_mass_measurement(out)
 
     def simulate_chain(
         self,
@@ -117,10 +119,7 @@ class Smoothed(AbstractDynamics):
         start: str,
         initial: Array | None = None,
     ) -> dict[str, Array]:
-        if initial is not None:
-            raise ValueError("initial= is supported by the Exact dynamics only.")
-        chain = _chain_only(chain)
-        return _chain_smooth.simulate_batch(chain, valid, save_at, contact, start, self.astype(chain.dtype))
+        return _simulate_bodies(chain, valid, save_at, contact, start, initial, self.astype(chain.dtype))
 
     def measure_chain(
         self,
@@ -134,12 +133,9 @@ class Smoothed(AbstractDynamics):
         start: str,
         initial: Array | None = None,
     ) -> dict[str, Array]:
-        if initial is not None:
-            raise ValueError("initial= is supported by the Exact dynamics only.")
-        chain = _chain_only(chain)
         z_, h_, w_ = (jnp.asarray(v, chain.dtype) for v in (z, horizon, window))
         dyn = self.astype(chain.dtype)
-        return _chain_smooth.measure_batch(chain, valid, t_start, z_, h_, w_, contact, start, dyn)
+        return _measure_bodies(chain, valid, t_start, z_, h_, w_, contact, start, initial, dyn)
 
     def measure_chunk(
         self,
@@ -156,12 +152,14 @@ class Smoothed(AbstractDynamics):
         # (correct, but every device iterates until the slowest configuration is done).
         z, horizon, window = zhw[0], zhw[1], zhw[2]
         wave = Sinusoid.from_params(params)
-        one = lambda q, w: _smooth.measure_one(q, w, z, horizon, window, contact, start, self)
+        one = lambda q, w: _measure_params(q, w, z, horizon, window, contact, start, None, None, self)
         if not lanes or lanes >= params.omega.shape[0]:
-            return jax.vmap(one)(params, wave)
-        # Sub-batches in sequence, each vmapped: a sub-batch's while_loop stops with
-        # its own slowest configuration, and its state stays in cache.
-        return jax.lax.map(lambda args: one(*args), (params, wave), batch_size=lanes)
+            out = jax.vmap(one)(params, wave)
+        else:
+            # Sub-batches in sequence, each vmapped: a sub-batch's while_loop stops with
+            # its own slowest configuration, and its state stays in cache.
+            out = jax.lax.map(lambda args: one(*args), (params, wave), batch_size=lanes)
+        return two_mass_measurement(out)
 
     def step_cap(self, t_total: float) -> int:
         return 0  # each diffrax solve is capped by `max_steps`
@@ -182,9 +180,91 @@ class Smoothed(AbstractDynamics):
         return self.describe()
 
 
-def _chain_only(chain: Chain | Mechanism) -> Chain:
-    """The smoothed engine's N-body path runs chains (its friction is smoothed per chain); a
-    `Mechanism` (SPEC §9) runs on the exact dynamics only, for now."""
-    if not isinstance(chain, Chain):
-        raise NotImplementedError(f"Smoothed dynamics run a Chain; run a {type(chain).__name__} with Exact().")
-    return chain
+# -- the paper's model: its two-mass physics, and the N-body fields as the two-mass ones --------
+
+
+def params_physics(params: Params, wave: AbstractWaveform) -> AbstractPhysics:
+    """The physics of one configuration of the paper's model actuated by `wave`: the two-mass
+    chain of `Chain.from_params`, its rest length $\\ell_0(t)$ the waveform's own (its mean
+    `wave.lbar`, which may differ from `params.lbar`, the start's gap)."""
+    p = eqx.tree_at(lambda q: q.lbar, params, jnp.broadcast_to(jnp.asarray(wave.lbar, params.dtype), params.lbar.shape))
+    return Chain.from_params(p, wave).physics()
+
+
+def params_state(params: Params, start: str, initial: Array | None) -> Array:
+    """The flat state $(x_1, x_2, v_1, v_2, e_d, w)$ at $t = 0$: `initial` $(x_1, v_1, x_2, v_2)$, or
+    $x_1 = 0$ and the gap of eq. (14) or of the relaxed spring (`initial_gap`), at rest."""
+    if initial is not None:
+        return jnp.concatenate([initial[jnp.array([0, 2, 1, 3])], jnp.zeros((2,), initial.dtype)])
+    gap = initial_gap(params, start)
+    zero = 0 * gap
+    return jnp.stack([zero, gap, zero, zero, zero, zero]).astype(params.dtype)
+
+
+def _simulate_params(p, w, save, contact, start, initial, dyn):
+    p, valid = safe_params(p, w)
+    P = params_physics(p, w)
+    return _engine.simulate_one(P, valid, save, contact, params_state(p, start, initial), dyn)
+
+
+def _measure_params(p, w, z, horizon, window, contact, start, t_start, initial, dyn):
+    p, valid = safe_params(p, w)
+    ws = p.t_start if t_start is None else jnp.asarray(t_start, p.dtype)
+    P = params_physics(p, w)
+    return _engine.measure_one(P, valid, ws, z, horizon, window, contact, params_state(p, start, initial), dyn)
+
+
+@eqx.filter_jit
+def _simulate_two_mass(flat, wave, axes, save, contact, start, initial, dyn):
+    one = lambda p, w, y: _simulate_params(p, w, save, contact, start, y, dyn)
+    return jax.vmap(one, in_axes=(0, axes, 0))(flat, wave, initial)
+
+
+@eqx.filter_jit
+def _measure_two_mass(flat, wave, axes, z, horizon, window, contact, start, t_start, initial, dyn):
+    one = lambda p, w, ts, y: _measure_params(p, w, z, horizon, window, contact, start, ts, y, dyn)
+    return jax.vmap(one, in_axes=(0, axes, 0, 0))(flat, wave, t_start, initial)
+
+
+def two_mass_trajectory(out: dict[str, Array]) -> dict[str, Array]:
+    """The engine's N-body trajectory fields as a `Trajectory`'s: `x1`, `v1`, `x2`, `v2`, `N1`,
+    `N2`, the rest length `l0` and the `mode` of Sect. 2.2 from the bodies' stuck flags."""
+    out = dict(out)
+    x, v, stuck, N = out.pop("x"), out.pop("v"), out.pop("stuck"), out.pop("N")
+    del out["tension"]
+    out["l0"] = out["l0"][..., 0]
+    out.update(x1=x[..., 0], v1=v[..., 0], x2=x[..., 1], v2=v[..., 1], N1=N[..., 0], N2=N[..., 1])
+    out["mode"] = mode_code(stuck[..., 0], stuck[..., 1])
+    return out
+
+
+def two_mass_measurement(out: dict[str, Array]) -> dict[str, Array]:
+    """The engine's N-body measurement fields as a `Measurement`'s (`stick_fraction1`, `stick_fraction2`)."""
+    out = dict(out)
+    frac = out.pop("stick_fraction")
+    return out | dict(stick_fraction1=frac[..., 0], stick_fraction2=frac[..., 1])
+
+
+# -- chains and mechanisms: their own physics ---------------------------------------------------
+
+
+@eqx.filter_jit
+def _simulate_bodies(M, valid, save, contact, start, initial, dyn):
+    def one(M, ok, y):
+        P = M.physics()
+        return _engine.simulate_one(P, ok, save, contact, _engine.initial_state(P, start, y), dyn)
+
+    out = jax.vmap(one)(M, valid, initial)
+    del out["f_ex"]  # a `ChainTrajectory` has none
+    return out
+
+
+@eqx.filter_jit
+def _measure_bodies(M, valid, t_start, z, horizon, window, contact, start, initial, dyn):
+    ws = jnp.where(jnp.isfinite(t_start), t_start, M.t_start).astype(t_start.dtype)
+
+    def one(M, ok, ws, y):
+        P = M.physics()
+        return _engine.measure_one(P, ok, ws, z, horizon, window, contact, _engine.initial_state(P, start, y), dyn)
+
+    return jax.vmap(one)(M, valid, ws, initial)

@@ -14,8 +14,8 @@ A body without ground contact (carried, or free) gets a friction law of no frict
 (`_NoContact`: kinetic coefficient 0, static limit $-1$) and the normal load 1: it never
 sticks (its stick margin $-1 - |F_i|$ is negative), feels no friction and dissipates
 nothing, and neither lifts off nor flips a contact side. So the exact engine runs it
-unchanged; its only trace is an event where its velocity changes sign. Its `N` in a
-trajectory is this 1, not a load.
+unchanged; its only trace is an event where its velocity changes sign. Its smoothed law is
+zero (`Smoothed` dynamics). Its `N` in a trajectory is this 1, not a load.
 """
 
 from typing import Any, NamedTuple
@@ -42,6 +42,11 @@ class _NoContact(AbstractFriction):
 
     def kinetic_rate(self, speed: Array, direction: Array, speed_rate: Array) -> None:
         return None
+
+    def smoothed(self, v: Array, eps: Array, v_s: Array) -> Array:
+        """No friction in the smoothed dynamics either (the static bump of the default law would
+        turn the negative static limit into a force along the motion)."""
+        return jnp.zeros_like(v)
 
 
 class Drive(NamedTuple):

@@ -12,7 +12,7 @@ period (memory: one period of residuals plus one state per period). With
 $\\Delta t \\le 1.4\\,\\varepsilon$ RK4 stays inside its stability interval
 ($\\lambda \\Delta t \\le 2.78$) for normal forces up to twice the weight.
 
-**Why not `_smooth.smooth_rates` as is.** Its static bump has width
+**Why not the law of `Smoothed` as is.** Its static bump has width
 $v_s = \\sqrt{\\varepsilon}$: at $\\varepsilon = 10^{-3}$ that is 0.03, as large as
 the sliding speeds, and the measured speed of a sinusoid is 25 % off the exact
 model (omega = 6, a = 0.035). The law below is the same family with a narrower

@@ -90,7 +90,7 @@ def simulate(
       eq. (7) allows). Forward-mode derivatives with respect to it work as with respect
       to a parameter. For a chain: a tuple `(x, v)` of positions and velocities, each
       broadcastable to the batch shape plus one value per mass, positions increasing along
-      the chain. Exact dynamics only.
+      the chain.
     - `dtype`: cast parameters to this floating dtype (default: theirs).
 
     **Returns:** a [`Trajectory`][] with batch shape `params.batch_shape`, or a
