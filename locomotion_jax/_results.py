@@ -210,7 +210,8 @@ class ChainTrajectory(eqx.Module):
     - `valid`, `status`, `liftoff`, `t_liftoff`, `n_switch`, `transversality`, `near_miss`,
       `switch_gap`, `smooth`, `start`, `contact`: as in [`Trajectory`][].
     - `y`, `vy` (`contact="hop"` only, else `None`): each body's height and vertical velocity,
-      `(..., n_save, N)`; `n_land`: the number of landings per configuration. Under `"hop"`,
+      `(..., n_save, N)`; `n_land`: the number of landings per configuration; `zeno`: whether the
+      Zeno rule made a rebound plastic (a bouncing sequence that would not end). Under `"hop"`,
       `e` includes gravity $m_i y_i$ and the vertical kinetic energy, and `e_d` the impacts' losses.
     """
 
@@ -238,6 +239,7 @@ class ChainTrajectory(eqx.Module):
     y: Array | None = None
     vy: Array | None = None
     n_land: Array | None = None
+    zeno: Array | None = None
 
     @property
     def smooth(self) -> Array:
@@ -252,7 +254,14 @@ class ChainTrajectory(eqx.Module):
 
 class ChainMeasurement(eqx.Module):
     """The steady-state measurements of a chain (compare [`Measurement`][], whose fields these are),
-    with `stick_fraction` of shape `batch_shape + (N,)`: the fraction of the window each mass is stuck."""
+    with `stick_fraction` of shape `batch_shape + (N,)`: the fraction of the window each mass is stuck.
+
+    Under `contact="hop"` only (else `None`), over the same window: `flight_fraction`, shape
+    `batch_shape + (N,)`, the fraction of it each body is in flight; `landings_per_period`, the
+    landings of all bodies per actuation period $2\\pi/\\omega$; `highest_hop`, shape
+    `batch_shape + (N,)`, each body's greatest height $y_i$ (0 for a body that never flies); `zeno`,
+    whether the Zeno rule made a rebound plastic during the run (a bouncing sequence that would
+    not end; the run goes on with the body on the ground)."""
 
     tau_z: Array
     e_z: Array
@@ -278,6 +287,10 @@ class ChainMeasurement(eqx.Module):
     z: float = eqx.field(static=True)
     start: str = eqx.field(static=True)
     contact: str = eqx.field(static=True)
+    flight_fraction: Array | None = None
+    landings_per_period: Array | None = None
+    highest_hop: Array | None = None
+    zeno: Array | None = None
 
     @property
     def smooth(self) -> Array:
@@ -285,5 +298,7 @@ class ChainMeasurement(eqx.Module):
         return _smooth(self)
 
     def to_numpy(self) -> dict[str, np.ndarray]:
+        """The array fields (the hopping ones only under `contact="hop"`) as numpy arrays."""
         skip = ("z", "start", "contact")
-        return {k: np.asarray(getattr(self, k)) for k in self.__dataclass_fields__ if k not in skip}
+        fields = (k for k in self.__dataclass_fields__ if k not in skip and getattr(self, k) is not None)
+        return {k: np.asarray(getattr(self, k)) for k in fields}

@@ -83,13 +83,39 @@ def test_wrong_length_refused():
 
 
 def test_hop_front_ends_refuse_clearly():
-    """Paths that do not run the hopping reading yet say so (a Mechanism's `simulate` runs it: tests/test_hop.py)."""
+    """Paths that do not run the hopping reading yet say so (a Mechanism's or a Chain's `simulate` and
+    `measure` run it: tests/test_hop.py, tests/test_hop_reference.py)."""
     ts = np.linspace(0.0, 1.0, 5)
-    with pytest.raises(NotImplementedError, match="contact='hop'.*Mechanism"):
-        lj.measure(ball(), contact="hop")
+    with pytest.raises(NotImplementedError, match="contact='hop'.*Exact"):
+        lj.measure(ball(), contact="hop", dynamics=lj.Smoothed())
     with pytest.raises(NotImplementedError, match="contact='hop'"):
         lj.simulate(lj.Params(), t_end=1.0, save_at=ts, contact="hop")
     with pytest.raises(NotImplementedError, match="contact='hop'"):
         lj.measure(lj.Params(omega=10.0, a=0.1), contact="hop")
     with pytest.raises(ValueError, match="'strict', 'paper' or 'hop'"):
         lj.simulate(lj.Params(), t_end=1.0, save_at=ts, contact="bounce")  # type: ignore[arg-type]
+
+
+def test_zeno_sequence_flagged_in_a_batch_others_unaffected():
+    """A batch of bodies: one dropped with e = 0.5 bounces ever faster (a Zeno sequence: infinitely
+    many landings before t = 3 sqrt 2) and is stopped by the Zeno rule at its 11th landing and
+    flagged; the others (plastic, thrown sideways, and never landing) are not flagged, and each is
+    bitwise the run of its own configuration alone."""
+    ts = np.linspace(0.0, 6.0, 121)
+    y0 = jnp.array([[1.0], [0.5], [0.0], [3.0]])
+    e = jnp.array([[0.5], [0.0], [0.5], [0.5]])
+    v0 = jnp.array([[0.0], [1.0], [0.3], [0.0]])
+    w0 = jnp.array([[0.0], [0.0], [0.0], [4.0]])
+    batch = ball(y0=y0, restitution=e, v0=v0, w0=w0)
+    tr = lj.simulate(batch, t_end=6.0, save_at=ts, contact="hop")
+    assert tr.zeno is not None and tr.n_land is not None
+    print("zeno flags", np.asarray(tr.zeno), "landings", np.asarray(tr.n_land), "status", np.asarray(tr.status))
+    assert np.asarray(tr.zeno).tolist() == [True, False, False, False]
+    assert np.asarray(tr.n_land).tolist()[:2] == [11, 1] and np.all(np.asarray(tr.status) == lj.Status.OK)
+    assert tr.y is not None and np.all(np.asarray(tr.y[0, ts > 4.25]) == 0)  # at rest on the ground after the Zeno rule
+    for i in range(1, 4):
+        one = lj.simulate(ball(y0=y0[i], restitution=e[i], v0=v0[i], w0=w0[i]), t_end=6.0, save_at=ts, contact="hop")
+        for k in ("x", "v", "y", "vy", "e_d", "e", "n_land", "zeno", "status"):
+            assert np.array_equal(np.asarray(getattr(tr, k)[i]), np.asarray(getattr(one, k))), (i, k)
+    m = lj.measure(batch, z=1e3, horizon=6.0, window=6.0, t_start=0.0, contact="hop")
+    assert m.zeno is not None and np.asarray(m.zeno).tolist() == [True, False, False, False]

@@ -64,7 +64,8 @@ class Hybrid(eqx.Module):
     so that $n_i = \\nu_i N_i$ over a step). `cross`, `near`, `t_switch`: the margins to a
     change of switching structure so far and the time of the last switch (as in `_exact.Hybrid`).
     Under `contact="hop"` only (else `None`): `fly` per body (in flight), `vpend` (a landing or
-    lift-off located at `t`) and `n_land`, the number of landings so far.
+    lift-off located at `t`), `n_land`, the number of landings so far, and `zeno`, whether the
+    Zeno rule has made a rebound plastic (`restitution > 0` but $e_i |w^-| <$ `zeno_speed`).
     """
 
     t: Array
@@ -85,6 +86,7 @@ class Hybrid(eqx.Module):
     fly: Scalars | None = None
     vpend: Scalars | None = None
     n_land: Array | None = None
+    zeno: Array | None = None
 
 
 class StepInfo(NamedTuple):
@@ -120,7 +122,10 @@ def init(
     xs = tuple(x[..., i] for i in range(x.shape[-1]))
     cph, sph = jnp.ones((), dtype), zero
     dr = P.drive(cph, sph)
-    L = P.loads(dr, xs)
+    heights = None
+    if contact == "hop" and height is not None:
+        heights = tuple(height[..., i] for i in range(x.shape[-1]))
+    L = P.loads(dr, xs, y=heights)
     vs = tuple(jnp.zeros_like(a) for a in xs)
     if v is not None:
         vs = tuple(v[..., i] for i in range(v.shape[-1]))
@@ -148,7 +153,8 @@ def init(
     if fly is not None and height is not None and vy is not None:
         y = y._replace(y=tuple(height[..., i] for i in range(len(xs))), vy=tuple(vy[..., i] for i in range(len(xs))))
         stuck = tuple(s & ~f for s, f in zip(stuck, fly))
-        extra = dict(fly=fly, vpend=tuple(jnp.zeros_like(f) for f in fly), n_land=jnp.zeros((), jnp.int32))
+        extra = dict(fly=fly, vpend=tuple(jnp.zeros_like(f) for f in fly), n_land=jnp.zeros((), jnp.int32),
+                     zeno=jnp.asarray(False))  # fmt: skip
     return Hybrid(
         t=zero, y=y, comp=y.map(jnp.zeros_like) if f32 else None, cph=cph, sph=sph, stuck=stuck, sdir=sdir,
         pend=tuple(jnp.zeros_like(s) for s in stuck), side=tuple(jnp.where(q > 0, 1.0, -1.0).astype(dtype) for q in N),
@@ -165,16 +171,18 @@ def _impact(P: AbstractPhysics, restitution: Scalars, zeno: Array, st: Hybrid, N
     tangential $P_t = \\min(m_i |v^-|, \\mu_k P_n)$ against $v^-$; it stays on the ground after a
     plastic landing if $N_i \\ge 0$. A body on the ground whose $N_i$ fell through 0 lifts off with
     $w = 0$. Returns the new state, flight flags, the bodies that landed at rest horizontally (to
-    be re-decided stuck or slipping), the landings' count and the energy lost."""
+    be re-decided stuck or slipping), the landings' count, and whether the Zeno rule made one plastic."""
     yA = st.y
     assert st.fly is not None and st.vpend is not None and yA.y is not None and yA.vy is not None
     zero = jnp.zeros_like(st.t)
-    hs, ws, vs, fly, rest, lost, count = [], [], [], [], [], [], []
+    hs, ws, vs, fly, rest, lost, count, zeno_rule = [], [], [], [], [], [], [], []
     for i, (f, pe, h, w, v, q) in enumerate(zip(st.fly, st.vpend, yA.y, yA.vy, yA.v, N0)):
         land = f & (pe | (h < 0))
         lift = ~f & (pe | (q < 0))
         m, e = P.m[i], restitution[i]
-        wp = jnp.where(e * jnp.abs(w) < zeno, zero, -e * w)
+        slow = e * jnp.abs(w) < zeno
+        wp = jnp.where(slow, zero, -e * w)
+        zeno_rule.append(land & slow & (e > 0))
         Pn = m * (wp - w)
         sgn = jnp.where(v >= 0, 1.0, -1.0).astype(v.dtype)
         mu = P.friction[i].kinetic(jnp.abs(v), sgn)
@@ -189,7 +197,7 @@ def _impact(P: AbstractPhysics, restitution: Scalars, zeno: Array, st: Hybrid, N
         rest.append(land & ~airborne & (vp == 0))
         count.append(land.astype(jnp.int32))
     y = yA._replace(y=tuple(hs), vy=tuple(ws), v=tuple(vs), ed=yA.ed + motion._sum(lost))
-    return y, tuple(fly), tuple(rest), motion._sum(count)
+    return y, tuple(fly), tuple(rest), motion._sum(count), num.union(zeno_rule)
 
 
 def probe(P: AbstractPhysics, contact: Contact, t: Array, y: State, target: num.Target) -> tuple[list, list, list]:
@@ -199,7 +207,7 @@ def probe(P: AbstractPhysics, contact: Contact, t: Array, y: State, target: num.
     For margins at a measured instant; not for the hot loop."""
     dtype = t.dtype
     dr = P.drive(jnp.cos(P.omega * t), jnp.sin(P.omega * t))
-    L = P.loads(dr, y.x)
+    L = P.loads(dr, y.x, y=y.y)
     F, N = motion.with_velocity(P, L.F, y.v), L.N
     n = motion.normal(contact, N)
     stuck = tuple((p >= 0) & (v == 0) for p, v in zip(motion.stick_margin(P, F, n), y.v))
@@ -234,16 +242,19 @@ def step(
     # negative switches: a stuck one slips in the direction of F_i; a slipping one (v_i = 0)
     # sticks if the static limits hold, else it slips the other way.
     dr0 = motion.kept(P, P.drive(st.cph, st.sph))
-    L0 = P.loads(dr0, yA.x, kp)
+    L0 = P.loads(dr0, yA.x, kp, y=yA.y)
     N0 = L0.N
     nA = motion.normal(contact, N0)
-    fly, n_land, st_stuck, st_sdir = st.fly, st.n_land, st.stuck, st.sdir
+    fly, n_land, zeno_now, st_stuck, st_sdir = st.fly, st.n_land, st.zeno, st.stuck, st.sdir
     if contact == "hop":  # landings and lift-offs first (SPEC §10); a flying body never sticks
         assert hop is not None, "contact='hop' needs the mechanism's restitution and zeno_speed"
         assert st.fly is not None and st.n_land is not None, "contact='hop' needs a state from init(contact='hop')"
-        yA, fly, rest, landed = _impact(P, hop[0], hop[1], st, N0, kp)
+        yA, fly, rest, landed, zeno_hit = _impact(P, hop[0], hop[1], st, N0, kp)
+        zeno_now = zeno_hit if st.zeno is None else st.zeno | zeno_hit
+        L0 = P.loads(dr0, yA.x, kp, y=yA.y)  # the impacts set heights to 0 exactly
+        N0 = L0.N
         n_land = st.n_land + landed
-        nA = tuple(jnp.where(f, 0, q) for f, q in zip(fly, nA))
+        nA = tuple(jnp.where(f, 0, q) for f, q in zip(fly, N0))
         one = jnp.ones((), dtype)
         # In flight (or landing) the slip direction is that of v (no event follows its sign there).
         st_sdir = tuple(jnp.where(f, jnp.where(v > 0, one, jnp.where(v < 0, -one, s)), s)
@@ -322,7 +333,7 @@ def step(
     # costs fewer kernels than it adds flops (benchmarks/NOTES.md).
     incr = k1.map(lambda a, b, c, d: (h / 6) * (a + 2 * (b + c) + d), k2, k3, k4)
     y1 = y0.map(lambda a, b: kp(a + b), incr)
-    D1 = motion.derivatives(P, contact, mode, target, dre, P.loads(dre, y1.x), y1.x, y1.v, y1.y, y1.vy)
+    D1 = motion.derivatives(P, contact, mode, target, dre, P.loads(dre, y1.x, y=y1.y), y1.x, y1.v, y1.y, y1.vy)
 
     # -- first crossing: the earliest by the secant of each crossed function, located on its quintic.
     g0s, d0s, e0s, d1s, e1s = D0.g, D0.dg, D0.ddg, D1.dg, D1.ddg
@@ -421,7 +432,7 @@ def step(
         cross=jnp.where(commit, jnp.minimum(st.cross, m_cross), st.cross),
         near=jnp.where(commit, jnp.minimum(st.near, m_near), st.near),
         t_switch=jnp.where(commit & cut & ~target_cut, jax.lax.stop_gradient(tc), st.t_switch),
-        fly=fly, vpend=vpend, n_land=n_land,
+        fly=fly, vpend=vpend, n_land=n_land, zeno=zeno_now,
     )  # fmt: skip
     info = StepInfo(
         commit=commit, t0=t0, y0=y0, loads0=L0, t1=tc, y1=yc, stuck=stuck,

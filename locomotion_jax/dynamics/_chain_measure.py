@@ -3,6 +3,10 @@
 The same loop as the two-mass engine's (`_exact_measure`): a flat batch through the
 work queue (`_queue.run_queue`), each configuration stopping on its own, with running
 sums only, so memory does not grow with the number of steps.
+
+Under `contact="hop"` (SPEC §10) also, over the window like the stick fractions: each body's
+time in flight, the landings, and the highest height (each step's top in flight from the
+cubic Hermite interpolant of $y$ through its ends' heights and vertical velocities).
 """
 
 from typing import NamedTuple
@@ -34,6 +38,10 @@ class _Acc(eqx.Module):
     stuck: tuple[jax.Array, ...]  # stuck time per mass
     steps: jax.Array
     before_z: jax.Array  # time from the last switch to t_z
+    # contact="hop" only (else None): flight time and highest height per body, landings
+    flight: tuple[jax.Array, ...] | None = None
+    top: tuple[jax.Array, ...] | None = None
+    landings: jax.Array | None = None
 
 
 class _Fixed(NamedTuple):
@@ -59,6 +67,12 @@ def _setup(P: AbstractPhysics, valid, t_start, row, z, horizon, window, contact,
         y_z=st.y.map(jnp.zeros_like), stuck=tuple(map(jnp.zeros_like, st.y.x)), steps=jnp.zeros((), jnp.int32),
         before_z=jnp.asarray(jnp.inf, dtype),
     )  # fmt: skip
+    if contact == "hop":
+        acc = eqx.tree_at(
+            lambda a: (a.flight, a.top, a.landings), acc,
+            (tuple(map(jnp.zeros_like, st.y.x)), tuple(map(jnp.zeros_like, st.y.x)), jnp.zeros((), jnp.int32)),
+            is_leaf=lambda q: q is None,
+        )  # fmt: skip
     te = ws + horizon
     return _Fixed(P, ws, ws + window, te, jnp.asarray(z, dtype), step_cap(te, dt, max_steps)), (st, acc)
 
@@ -81,7 +95,8 @@ def _advance(f: _Fixed, dyn, contact, dt):
     target = Target(active=started & ~a.reached, X0=X0, z=f.z)
     # The margins cover the measured interval: they restart at t_start.
     s = eqx.tree_at(lambda s: (s.cross, s.near), s, tuple(jnp.where(begin, jnp.inf, m) for m in (s.cross, s.near)))
-    s_new, info = engine.step(f.P, contact, dt, s, t_stop, target)
+    hop = f.P.hop()[2:] if contact == "hop" else None
+    s_new, info = engine.step(f.P, contact, dt, s, t_stop, target, hop=hop)
     inside = info.commit & started & (info.t1 <= f.we)
     dur = jnp.where(inside, info.t1 - info.t0, 0)
     hit = info.target_fired
@@ -92,12 +107,49 @@ def _advance(f: _Fixed, dyn, contact, dt):
         stuck=tuple(q + jnp.where(b, dur, 0) for q, b in zip(a.stuck, info.stuck)), steps=a.steps + 1,
         before_z=jnp.where(hit, jax.lax.stop_gradient(info.t_target - s.t_switch), a.before_z),
     )  # fmt: skip
+    if a.flight is not None and a.top is not None and a.landings is not None:
+        assert s_new.fly is not None and s.n_land is not None and s_new.n_land is not None
+        assert info.y0.y is not None and info.y0.vy is not None and info.y1.y is not None and info.y1.vy is not None
+        # The landings applied at this step's start (time t0), counted inside [t_start, t_start + window).
+        at_start = started & (info.t0 < f.we)
+        landed = jnp.where(at_start, s_new.n_land - s.n_land, 0)
+        h = info.t1 - info.t0
+        tops = [_top(y0, w0, y1, w1, h) for y0, w0, y1, w1 in zip(info.y0.y, info.y0.vy, info.y1.y, info.y1.vy)]
+        a_new = eqx.tree_at(
+            lambda q: (q.flight, q.top, q.landings), a_new,
+            (tuple(q + jnp.where(fl, dur, 0) for q, fl in zip(a.flight, s_new.fly)),
+             tuple(jnp.where(inside & fl, jnp.maximum(q, p), q) for q, p, fl in zip(a.top, tops, s_new.fly)),
+             a.landings + landed),
+            is_leaf=lambda q: q is None,
+        )  # fmt: skip
     return s_new, a_new
+
+
+def _top(y0, w0, y1, w1, h):
+    """The highest value over a step of length `h` of the cubic Hermite interpolant through heights
+    `y0`, `y1` with rates `w0`, `w1` at its ends: the ends and the roots in $[0, 1]$ of its
+    derivative $A\theta^2 + B\theta + C$ (stable quadratic roots; no root: the ends)."""
+    dy = y0 - y1
+    A = 6 * dy + 3 * h * (w0 + w1)
+    B = -6 * dy - h * (4 * w0 + 2 * w1)
+    C = h * w0
+    disc = B * B - 4 * A * C
+    ok = disc >= 0
+    sq = jnp.sqrt(jnp.where(ok, disc, 0))
+    q = -0.5 * (B + jnp.where(B >= 0, sq, -sq))
+    safe = lambda num, den: jnp.where(ok & (den != 0), num / jnp.where(den != 0, den, 1), 0)
+    best = jnp.maximum(y0, y1)
+    for th in (safe(q, A), safe(C, q)):
+        th = jnp.clip(th, 0, 1)
+        p = (2 * th**3 - 3 * th**2 + 1) * y0 + (th**3 - 2 * th**2 + th) * h * w0
+        p = p + (3 * th**2 - 2 * th**3) * y1 + (th**3 - th**2) * h * w1
+        best = jnp.maximum(best, p)
+    return best
 
 
 def _energy_at(P: AbstractPhysics, t, y):
     dr = P.drive(jnp.cos(P.omega * t), jnp.sin(P.omega * t))
-    return engine.energy(P, y, P.loads(dr, y.x))
+    return engine.energy(P, y, P.loads(dr, y.x, y=y.y))
 
 
 def _margin_z(f: _Fixed, a: _Acc, contact) -> jax.Array:
@@ -126,12 +178,22 @@ def _results(f: _Fixed, dyn, contact) -> dict:
     e_z = jnp.where(a.reached, y_end.ed - a.ed0, inf)
     covered = jnp.clip(jnp.minimum(s.t, we) - ws, 0, None)
     frac = jnp.where(covered > 0, stuck / jnp.where(covered > 0, covered, 1), nan)
+    hop = {}
+    if a.flight is not None and a.top is not None and a.landings is not None:
+        periods = covered * f.P.omega / (2 * jnp.pi)
+        hop = dict(
+            flight_fraction=jnp.where(covered > 0, jnp.stack(a.flight) / jnp.where(covered > 0, covered, 1), nan),
+            landings_per_period=jnp.where(periods > 0, a.landings / jnp.where(periods > 0, periods, 1), nan),
+            highest_hop=jnp.where(a.started, jnp.stack(a.top), nan),
+            zeno=jnp.asarray(s.zeno),
+        )
     return dict(
         tau_z=jnp.where(a.reached, a.t_z - ws, inf), e_z=e_z, reached=a.reached, regime=regime.astype(jnp.int32),
         mean_speed=mean_speed, cost_of_transport=e_z / z, stick_fraction=frac, e_d=e_d, work=work,
         delta_e=delta_e, balance=work - e_d - delta_e, liftoff=jnp.isfinite(s.t_liftoff), t_liftoff=s.t_liftoff,
         status=status, t_start=ws, X_start=jnp.where(a.started, a.X0, nan), n_steps=a.steps, n_switch=s.n_switch,
         **margin_fields(a.started, a.reached, s.cross, s.near, _margin_z(f, a, contact), a.t_z - ws, nan),
+        **hop,
     )  # fmt: skip
 
 

@@ -27,7 +27,9 @@ def _com(C: Chain | Mechanism, x: jax.Array) -> jax.Array:
 def _row(s: engine.Hybrid) -> jax.Array:
     dt = s.t.dtype
     stuck = (b.astype(dt) for b in s.stuck)
-    hop = [] if s.y.y is None or s.y.vy is None or s.n_land is None else [*s.y.y, *s.y.vy, s.n_land.astype(dt)]
+    hop = []
+    if s.y.y is not None and s.y.vy is not None and s.n_land is not None and s.zeno is not None:
+        hop = [*s.y.y, *s.y.vy, s.n_land.astype(dt), s.zeno.astype(dt)]
     return jnp.stack([*s.y.x, *s.y.v, s.y.ed, s.y.w, *stuck, *s.sdir, s.cross, s.near, s.t_switch, *hop])
 
 
@@ -58,7 +60,8 @@ def _derived(C: Chain | Mechanism, contact, t, x, v, y=None, vy=None):
     `contact="hop"`, the energy with each body's gravity $m_i y_i$ and vertical kinetic energy)."""
     P: Any = C.physics()  # a chain's or a mechanism's: both have `l0` per spring and `tension`
     dr = P.drive(jnp.cos(P.omega * t), jnp.sin(P.omega * t))
-    L = P.loads(dr, tuple(x[..., i] for i in range(x.shape[-1])))
+    heights = None if y is None else tuple(y[..., i] for i in range(y.shape[-1]))
+    L = P.loads(dr, tuple(x[..., i] for i in range(x.shape[-1])), y=heights)
     e = P.energy(L, tuple(v[..., i] for i in range(v.shape[-1])))
     if y is not None and vy is not None:
         e = e + jnp.sum(C.m * (y + 0.5 * vy * vy), -1)
@@ -80,7 +83,7 @@ def simulate_batch(flat: Chain | Mechanism, valid, save, contact, start, dt, max
     if contact == "hop":
         hy, hvy = rows[..., 4 * N + 5 : 5 * N + 5], rows[..., 5 * N + 5 : 6 * N + 5]
         der = jax.vmap(lambda C, *a: jax.vmap(lambda *b: _derived(C, contact, *b))(*a))(flat, t, x, v, hy, hvy)
-        der.update(y=hy, vy=hvy, n_land=rows[..., -1, 6 * N + 5].astype(jnp.int32))
+        der.update(y=hy, vy=hvy, n_land=rows[..., -1, 6 * N + 5].astype(jnp.int32), zeno=rows[..., -1, 6 * N + 6] > 0.5)
     else:
         der = jax.vmap(lambda C, t, x, v: jax.vmap(lambda *a: _derived(C, contact, *a))(t, x, v))(flat, t, x, v)
     out = dict(

@@ -135,7 +135,7 @@ def sweep_chain(
     coords = {n: (n if mode == "grid" else "config", v) for n, v in values.items()}
     data = {}
     for name in ChainMeasurement.__dataclass_fields__:
-        if name in ("z", "start", "contact"):
+        if name in ("z", "start", "contact") or name not in parts[0]:  # the hopping fields outside "hop"
             continue
         arr = np.concatenate([p[name] for p in parts])
         extra = arr.shape[1:]

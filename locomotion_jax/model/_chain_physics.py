@@ -58,8 +58,8 @@ class ChainPhysics(AbstractPhysics):
     def drive(self, c1: Array, s1: Array) -> "Drive":
         return drive(self, c1, s1)
 
-    def loads(self, drive: "Drive", x: Scalars, keep: Any = None) -> Loads:
-        sp = springs(self, drive.l0, x)
+    def loads(self, drive: "Drive", x: Scalars, keep: Any = None, y: Scalars | None = None) -> Loads:
+        sp = springs(self, drive.l0, x, y)
         if keep is not None:
             sp = sp._replace(
                 fx=tuple(map(keep, sp.fx)), fy=tuple(map(keep, sp.fy)), tension=tuple(map(keep, sp.tension))
@@ -67,21 +67,32 @@ class ChainPhysics(AbstractPhysics):
         F, N = loads(self, sp.fx, sp.fy, drive.f)
         return Loads(F, N, sp)
 
-    def load_rates(self, drive: "Drive", loads: Loads, xd: Scalars, keep: Any = None) -> LoadRates:
+    def load_rates(
+        self, drive: "Drive", loads: Loads, xd: Scalars, keep: Any = None, yd: Scalars | None = None
+    ) -> LoadRates:
         du = tuple(q - p for p, q in zip(xd[:-1], xd[1:]))
+        dh = None if yd is None else tuple(q - p for p, q in zip(yd[:-1], yd[1:]))
         kp = (lambda q: q) if keep is None else keep
-        sr = spring_rates(self, loads.aux, du, drive.dl0)
+        sr = spring_rates(self, loads.aux, du, drive.dl0, dh)
         # dl and dp feed the rates and the second derivatives: pinned once, not recomputed in each.
         sr = sr._replace(dp=tuple(map(kp, sr.dp)), dl=tuple(map(kp, sr.dl)))
         dF, dN = load_rates(tuple(map(kp, sr.dfx)), tuple(map(kp, sr.dfy)), drive.df)
-        return LoadRates(dF, dN, (du, sr))
+        return LoadRates(dF, dN, (du, sr, dh))
 
     def load_second(
-        self, drive: "Drive", loads: Loads, rates: LoadRates, xd: Scalars, a: Scalars
+        self,
+        drive: "Drive",
+        loads: Loads,
+        rates: LoadRates,
+        xd: Scalars,
+        a: Scalars,
+        yd: Scalars | None = None,
+        ya: Scalars | None = None,
     ) -> tuple[Scalars, Scalars]:
-        du, sr = rates.aux
+        du, sr, dh = rates.aux
         ddu = tuple(q - p for p, q in zip(a[:-1], a[1:]))
-        ddfx, ddfy = spring_second(self, loads.aux, sr, du, ddu, drive.ddl0)
+        ddh = None if ya is None else tuple(q - p for p, q in zip(ya[:-1], ya[1:]))
+        ddfx, ddfy = spring_second(self, loads.aux, sr, du, ddu, drive.ddl0, dh, ddh)
         return load_rates(ddfx, ddfy, drive.ddf)
 
     def power(self, drive: "Drive", loads: Loads, v: Scalars) -> Array:
@@ -96,6 +107,14 @@ class ChainPhysics(AbstractPhysics):
 
     def centre_of_mass(self, x: Scalars) -> Array:
         return centre_of_mass(self, x)
+
+    def hop(self) -> tuple[Array, Array, Scalars, Array]:
+        """Under `contact="hop"` (SPEC §10) the springs act along $(u_j, d_j + y_{j+1} - y_j)$: a chain
+        starts on the ground at rest vertically ($y_i = w_i = 0$) and lands plastically ($e_i = 0$,
+        SPEC's default), with the Zeno speed $10^{-3}$ (moot for plastic landings)."""
+        zero = jnp.zeros_like(self.omega)
+        heights = jnp.stack([zero for _ in self.m], -1)
+        return heights, heights, tuple(zero for _ in self.m), zero + 1e-3
 
     def gaps(self, x: Scalars) -> Scalars:
         """Neighbours' gaps $x_{j+1} - x_j$ (SPEC §8: the masses stay in order)."""
@@ -226,7 +245,8 @@ def _fourier_signals(P: ChainPhysics, c1: Array, s1: Array) -> tuple[list, list,
 
 
 class Springs(NamedTuple):
-    """Per spring: $u_j$, $1/\\ell_j$, $T_j/\\ell_j$, $T_j$, $f_{x,j}$, $f_{y,j}$ (eqs. 2, 8)."""
+    """Per spring: $u_j$, $1/\\ell_j$, $T_j/\\ell_j$, $T_j$, $f_{x,j}$, $f_{y,j}$ (eqs. 2, 8); `h`, under
+    `contact="hop"` only (else `None`): the vertical offsets $h_j = d_j + y_{j+1} - y_j$ (SPEC §10)."""
 
     u: Scalars
     il: Scalars
@@ -234,15 +254,21 @@ class Springs(NamedTuple):
     tension: Scalars
     fx: Scalars
     fy: Scalars
+    h: Scalars | None = None
 
 
-def springs(P: ChainPhysics, l0: Scalars, x: Scalars) -> Springs:
+def springs(P: ChainPhysics, l0: Scalars, x: Scalars, y: Scalars | None = None) -> Springs:
+    """The springs at positions `x` and (`contact="hop"`) heights `y`: a spring acts along
+    $(u_j, h_j)$ with $h_j = d_j + y_{j+1} - y_j$ (SPEC §10), $h_j = d_j$ where `y` is `None`."""
     u = tuple(b - a for a, b in zip(x[:-1], x[1:]))
-    length = [jnp.sqrt(uj * uj + dd) for uj, dd in zip(u, P.dd)]
+    h = None if y is None else tuple(d + (b - a) for d, a, b in zip(P.d, y[:-1], y[1:]))
+    vert = P.dd if h is None else tuple(q * q for q in h)
+    length = [jnp.sqrt(uj * uj + dd) for uj, dd in zip(u, vert)]
     il = tuple(1 / lj for lj in length)
     tension = tuple(k * (lj - l0j) for k, lj, l0j in zip(P.k, length, l0))
     p = tuple(T * i for T, i in zip(tension, il))
-    return Springs(u, il, p, tension, tuple(a * b for a, b in zip(p, u)), tuple(a * d for a, d in zip(p, P.d)))
+    fy = tuple(a * d for a, d in zip(p, P.d if h is None else h))
+    return Springs(u, il, p, tension, tuple(a * b for a, b in zip(p, u)), fy, h)
 
 
 def _plus(a: Scalars, b: Scalars | None) -> Scalars:
@@ -280,26 +306,50 @@ class SpringRates(NamedTuple):
     dfy: Scalars
 
 
-def spring_rates(P: ChainPhysics, sp: Springs, du: Scalars, dl0: Scalars | None) -> SpringRates:
+def spring_rates(
+    P: ChainPhysics, sp: Springs, du: Scalars, dl0: Scalars | None, dh: Scalars | None = None
+) -> SpringRates:
     """With $p = T/\\ell$ and $\\dot u_j = \\dot x_{j+1} - \\dot x_j$: $\\dot\\ell = u\\dot u/\\ell$,
     $\\dot T = k(\\dot\\ell - \\dot\\ell_0)$, $\\dot p = (\\dot T - p\\dot\\ell)/\\ell$,
-    $\\dot f_x = \\dot p u + p\\dot u$, $\\dot f_y = \\dot p d$."""
-    dl = tuple(u * a * il for u, a, il in zip(sp.u, du, sp.il))
+    $\\dot f_x = \\dot p u + p\\dot u$, $\\dot f_y = \\dot p d$. Under `contact="hop"` (`dh`, the rates
+    $\\dot h_j = \\dot y_{j+1} - \\dot y_j$, given): $\\dot\\ell = (u\\dot u + h\\dot h)/\\ell$,
+    $\\dot f_y = \\dot p h + p\\dot h$."""
+    if dh is None or sp.h is None:
+        dl = tuple(u * a * il for u, a, il in zip(sp.u, du, sp.il))
+    else:
+        dl = tuple((u * a + h * b) * il for u, a, h, b, il in zip(sp.u, du, sp.h, dh, sp.il))
     dT = tuple(k * e for k, e in zip(P.k, _minus(dl, dl0)))
     dp = tuple((a - p * b) * il for a, p, b, il in zip(dT, sp.p, dl, sp.il))
     dfx = tuple(a * u + p * b for a, u, p, b in zip(dp, sp.u, sp.p, du))
-    return SpringRates(dl, dT, dp, dfx, tuple(a * d for a, d in zip(dp, P.d)))
+    if dh is None or sp.h is None:
+        return SpringRates(dl, dT, dp, dfx, tuple(a * d for a, d in zip(dp, P.d)))
+    return SpringRates(dl, dT, dp, dfx, tuple(a * h + p * b for a, h, p, b in zip(dp, sp.h, sp.p, dh)))
 
 
 def spring_second(
-    P: ChainPhysics, sp: Springs, r: SpringRates, du: Scalars, ddu: Scalars, ddl0: Scalars | None
+    P: ChainPhysics,
+    sp: Springs,
+    r: SpringRates,
+    du: Scalars,
+    ddu: Scalars,
+    ddl0: Scalars | None,
+    dh: Scalars | None = None,
+    ddh: Scalars | None = None,
 ) -> tuple[Scalars, Scalars]:
-    """Second time derivatives $\\ddot f_{x,j}$, $\\ddot f_{y,j}$ (differentiating [`spring_rates`][] once more)."""
-    ddl = tuple((a * a + u * b - c * c) * il for a, u, b, c, il in zip(du, sp.u, ddu, r.dl, sp.il))
-    ddT = tuple(k * e for k, e in zip(P.k, _minus(ddl, ddl0)))
+    """Second time derivatives $\\ddot f_{x,j}$, $\\ddot f_{y,j}$ (differentiating [`spring_rates`][] once
+    more; under `contact="hop"` with the vertical offsets' rates `dh`, `ddh`)."""
+    ddl = [(a * a + u * b - c * c) * il for a, u, b, c, il in zip(du, sp.u, ddu, r.dl, sp.il)]
+    tilt = dh is not None and ddh is not None and sp.h is not None
+    if tilt:
+        assert dh is not None and ddh is not None and sp.h is not None
+        ddl = [q + (a * a + h * b) * il for q, a, h, b, il in zip(ddl, dh, sp.h, ddh, sp.il)]
+    ddT = tuple(k * e for k, e in zip(P.k, _minus(tuple(ddl), ddl0)))
     ddp = tuple((a - 2 * b * c - p * e) * il for a, b, c, p, e, il in zip(ddT, r.dp, r.dl, sp.p, ddl, sp.il))
     ddfx = tuple(a * u + 2 * b * c + p * e for a, u, b, c, p, e in zip(ddp, sp.u, r.dp, du, sp.p, ddu))
-    return ddfx, tuple(a * d for a, d in zip(ddp, P.d))
+    if not tilt:
+        return ddfx, tuple(a * d for a, d in zip(ddp, P.d))
+    assert dh is not None and ddh is not None and sp.h is not None
+    return ddfx, tuple(a * h + 2 * b * c + p * e for a, h, b, c, p, e in zip(ddp, sp.h, r.dp, dh, sp.p, ddh))
 
 
 def power(P: ChainPhysics, tension: Scalars, dl0: Scalars | None, f: Scalars | None, v: Scalars) -> Array:

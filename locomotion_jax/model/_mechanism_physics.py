@@ -139,19 +139,28 @@ class MechanismPhysics(AbstractPhysics):
     def _u(self, x: Scalars) -> Scalars:
         return tuple(_pos(x, s.b, x[0]) - _pos(x, s.a, x[0]) for s in self.springs)
 
-    def loads(self, drive: Drive, x: Scalars, keep: Any = None) -> Loads:
+    def loads(self, drive: Drive, x: Scalars, keep: Any = None, y: Scalars | None = None) -> Loads:
         u = self._u(x)
         tension = tuple(s.k * (uj - r) for s, uj, r in zip(self.springs, u, drive.l0))
         F = self._forces(u, drive.l0, drive.f, drive.g, x[0])
         return Loads(F, self.normal, SpringState(u, tension))
 
-    def load_rates(self, drive: Drive, loads: Loads, xd: Scalars, keep: Any = None) -> LoadRates:
+    def load_rates(
+        self, drive: Drive, loads: Loads, xd: Scalars, keep: Any = None, yd: Scalars | None = None
+    ) -> LoadRates:
         du = self._u(xd)
         dF = self._forces(du, drive.dl0, drive.df, drive.dg, xd[0])
         return LoadRates(dF, tuple(jnp.zeros_like(q) for q in dF), du)
 
     def load_second(
-        self, drive: Drive, loads: Loads, rates: LoadRates, xd: Scalars, a: Scalars
+        self,
+        drive: Drive,
+        loads: Loads,
+        rates: LoadRates,
+        xd: Scalars,
+        a: Scalars,
+        yd: Scalars | None = None,
+        ya: Scalars | None = None,
     ) -> tuple[Scalars, Scalars]:
         ddF = self._forces(self._u(a), drive.ddl0, drive.ddf, drive.ddg, a[0])
         return ddF, tuple(jnp.zeros_like(q) for q in ddF)
@@ -213,7 +222,8 @@ class MechanismPhysics(AbstractPhysics):
         return jnp.stack(self.v0, -1)
 
     def hop(self) -> tuple[Array, Array, Scalars, Array]:
-        """Under `contact="hop"` the springs and forces stay horizontal: no vertical force acts
+        """Under `contact="hop"` the springs and forces stay horizontal (the heights `y` that `loads`
+        and the rates take are unused): no vertical force acts
         on a body ($V_i = 0$, $N_i = m_i$), so a body in flight falls freely and one on the
         ground never lifts off by itself (it flies from its `y0`, `w0` or a rebound)."""
         return jnp.stack(self.y0, -1), jnp.stack(self.w0, -1), self.restitution, self.zeno_speed

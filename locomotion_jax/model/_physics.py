@@ -96,19 +96,31 @@ class AbstractPhysics(eqx.Module):
         time derivatives: a pytree that [`loads`][] and the rates read (entries may be `None`)."""
 
     @abc.abstractmethod
-    def loads(self, drive: Any, x: Scalars, keep: Any = None) -> Loads:
+    def loads(self, drive: Any, x: Scalars, keep: Any = None, y: Scalars | None = None) -> Loads:
         """The loads at positions `x` under the actuation `drive`. `keep`, if given, is
-        [`keep`][] applied to the intermediates that several later stages share."""
+        [`keep`][] applied to the intermediates that several later stages share. `y`: the
+        bodies' heights (`contact="hop"` only; `None`: every body on the ground)."""
 
     @abc.abstractmethod
-    def load_rates(self, drive: Any, loads: Loads, xd: Scalars, keep: Any = None) -> LoadRates:
-        """$\\dot F_i$, $\\dot N_i$ along the velocities `xd` (zero for a stuck body)."""
+    def load_rates(
+        self, drive: Any, loads: Loads, xd: Scalars, keep: Any = None, yd: Scalars | None = None
+    ) -> LoadRates:
+        """$\\dot F_i$, $\\dot N_i$ along the velocities `xd` (zero for a stuck body) and, under
+        `contact="hop"`, the vertical velocities `yd` (zero for a body on the ground)."""
 
     @abc.abstractmethod
     def load_second(
-        self, drive: Any, loads: Loads, rates: LoadRates, xd: Scalars, a: Scalars
+        self,
+        drive: Any,
+        loads: Loads,
+        rates: LoadRates,
+        xd: Scalars,
+        a: Scalars,
+        yd: Scalars | None = None,
+        ya: Scalars | None = None,
     ) -> tuple[Scalars, Scalars]:
-        """$\\ddot F_i$, $\\ddot N_i$ along the velocities `xd` and accelerations `a`."""
+        """$\\ddot F_i$, $\\ddot N_i$ along the velocities `xd` and accelerations `a` (and, under
+        `contact="hop"`, the vertical ones `yd`, `ya`)."""
 
     @abc.abstractmethod
     def power(self, drive: Any, loads: Loads, v: Scalars) -> Array:

@@ -15,6 +15,7 @@ import numpy as np
 from .._custom_types import ArrayLike
 from .._results import ChainMeasurement, Measurement
 from ..dynamics._base import AbstractDynamics
+from ..dynamics._exact_dynamics import Exact
 from ..dynamics._forward import check_static
 from ..model import _two_mass as model
 from ..model._bodies import Mechanism
@@ -133,7 +134,7 @@ def measure(
         ```
     """
     dynamics = dynamics_arg(dynamics)
-    model.check_contact(contact)
+    model.check_contact(contact, hop=True)  # each path below refuses "hop" where it does not support it
     model.initial_gap(Params(), start)
     check_measure_args(z, horizon, window)
     # The mechanism picks its path (double dispatch); each path runs the dynamics' method for it.
@@ -143,6 +144,7 @@ def measure(
 
 def _two_mass(params: Params, dynamics: AbstractDynamics, z, horizon, window, t_start, waveform, contact, start,
               initial, dtype) -> Measurement:  # fmt: skip
+    model.check_contact(contact)
     flat, wave, axes, shape = prepare(params, waveform, dtype)
     ts = _start_times(t_start, shape, flat.dtype)
     flat, unresolved = guard_two_mass(dynamics, flat, wave, shape, default_start=ts is None)
@@ -165,7 +167,9 @@ def measure_chain(chain: Chain | Mechanism, dynamics: AbstractDynamics, z: float
                   initial: Any = None) -> ChainMeasurement:  # fmt: skip
     """`measure` for a [`Chain`][] or a [`Mechanism`][locomotion_jax.Mechanism] (arguments as there; also the
     chunks of a chain sweep)."""
-    check_contact_start(contact, start)
+    check_contact_start(contact, start, chain)
+    if contact == "hop" and not isinstance(dynamics, Exact):
+        raise NotImplementedError(f"contact='hop' runs with Exact dynamics only, got {type(dynamics).__name__}.")
     flat, valid, shape = prepare_chain(chain, dtype)
     ts = _start_times(t_start, shape, flat.dtype)  # checked on the host, as for the two-mass model
     valid, unresolved = guard_chain(dynamics, flat, valid, shape, default_start=ts is None)
