@@ -50,7 +50,7 @@ import jax.numpy as jnp
 
 from .._custom_types import Array, Contact
 from .._status import Status
-from ..model._physics import AbstractPhysics, Loads, Scalars
+from ..model._physics import AbstractPhysics, Loads, loads_at, Scalars
 from . import _chain_motion as motion, _numerics as num
 from ._chain_motion import energy as energy, Mode, State
 
@@ -125,7 +125,7 @@ def init(
     heights = None
     if contact == "hop" and height is not None:
         heights = tuple(height[..., i] for i in range(x.shape[-1]))
-    L = P.loads(dr, xs, y=heights)
+    L = loads_at(P, dr, xs, y=heights)
     vs = tuple(jnp.zeros_like(a) for a in xs)
     if v is not None:
         vs = tuple(v[..., i] for i in range(v.shape[-1]))
@@ -207,7 +207,7 @@ def probe(P: AbstractPhysics, contact: Contact, t: Array, y: State, target: num.
     For margins at a measured instant; not for the hot loop."""
     dtype = t.dtype
     dr = P.drive(jnp.cos(P.omega * t), jnp.sin(P.omega * t))
-    L = P.loads(dr, y.x, y=y.y)
+    L = loads_at(P, dr, y.x, y=y.y)
     F, N = motion.with_velocity(P, L.F, y.v), L.N
     n = motion.normal(contact, N)
     stuck = tuple((p >= 0) & (v == 0) for p, v in zip(motion.stick_margin(P, F, n), y.v))
@@ -242,7 +242,7 @@ def step(
     # negative switches: a stuck one slips in the direction of F_i; a slipping one (v_i = 0)
     # sticks if the static limits hold, else it slips the other way.
     dr0 = motion.kept(P, P.drive(st.cph, st.sph))
-    L0 = P.loads(dr0, yA.x, kp, y=yA.y)
+    L0 = loads_at(P, dr0, yA.x, kp, y=yA.y)
     N0 = L0.N
     nA = motion.normal(contact, N0)
     fly, n_land, zeno_now, st_stuck, st_sdir = st.fly, st.n_land, st.zeno, st.stuck, st.sdir
@@ -251,7 +251,7 @@ def step(
         assert st.fly is not None and st.n_land is not None, "contact='hop' needs a state from init(contact='hop')"
         yA, fly, rest, landed, zeno_hit = _impact(P, hop[0], hop[1], st, N0, kp)
         zeno_now = zeno_hit if st.zeno is None else st.zeno | zeno_hit
-        L0 = P.loads(dr0, yA.x, kp, y=yA.y)  # the impacts set heights to 0 exactly
+        L0 = loads_at(P, dr0, yA.x, kp, y=yA.y)  # the impacts set heights to 0 exactly
         N0 = L0.N
         n_land = st.n_land + landed
         nA = tuple(jnp.where(f, 0, q) for f, q in zip(fly, N0))
@@ -333,7 +333,7 @@ def step(
     # costs fewer kernels than it adds flops (benchmarks/NOTES.md).
     incr = k1.map(lambda a, b, c, d: (h / 6) * (a + 2 * (b + c) + d), k2, k3, k4)
     y1 = y0.map(lambda a, b: kp(a + b), incr)
-    D1 = motion.derivatives(P, contact, mode, target, dre, P.loads(dre, y1.x, y=y1.y), y1.x, y1.v, y1.y, y1.vy)
+    D1 = motion.derivatives(P, contact, mode, target, dre, loads_at(P, dre, y1.x, y=y1.y), y1.x, y1.v, y1.y, y1.vy)
 
     # -- first crossing: the earliest by the secant of each crossed function, located on its quintic.
     g0s, d0s, e0s, d1s, e1s = D0.g, D0.dg, D0.ddg, D1.dg, D1.ddg

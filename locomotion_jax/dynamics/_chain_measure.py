@@ -17,7 +17,7 @@ import jax.numpy as jnp
 
 from .._custom_types import Array
 from .._status import Regime, Status
-from ..model._physics import AbstractPhysics
+from ..model._physics import AbstractPhysics, loads_at
 from . import _chain_exact as engine
 from ._compile import engine_jit
 from ._margins import margin_fields
@@ -149,7 +149,7 @@ def _top(y0, w0, y1, w1, h):
 
 def _energy_at(P: AbstractPhysics, t, y):
     dr = P.drive(jnp.cos(P.omega * t), jnp.sin(P.omega * t))
-    return engine.energy(P, y, P.loads(dr, y.x, y=y.y))
+    return engine.energy(P, y, loads_at(P, dr, y.x, y=y.y))
 
 
 def _margin_z(f: _Fixed, a: _Acc, contact) -> jax.Array:

@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 
 from .._custom_types import Array, Contact
-from ..model._physics import AbstractPhysics, Loads, Scalars
+from ..model._physics import AbstractPhysics, load_rates_at, load_second_at, Loads, loads_at, Scalars
 
 
 class State(NamedTuple):
@@ -137,7 +137,7 @@ def _in_mode(P: AbstractPhysics, contact: Contact, mode: Mode, dr: Any, L: Loads
 
 def rates(P: AbstractPhysics, contact: Contact, mode: Mode, dr: Any, y: State) -> State:
     """The state's rate (an RK4 stage): see [`_in_mode`][]."""
-    return _in_mode(P, contact, mode, dr, P.loads(dr, y.x, y=y.y), y.v, y.vy)[3]
+    return _in_mode(P, contact, mode, dr, loads_at(P, dr, y.x, y=y.y), y.v, y.vy)[3]
 
 
 class Derivs(NamedTuple):
@@ -166,7 +166,7 @@ def derivatives(
     grounded = (lambda q: q) if fly is None else (lambda q: tuple(jnp.where(f, 0, r) for f, r in zip(fly, q)))
 
     # First derivatives: the loads along (xd, the actuation's rate), the kinetic coefficients.
-    R = P.load_rates(dr, L, xd, P.keep, yd=rate.y)
+    R = load_rates_at(P, dr, L, xd, P.keep, yd=rate.y)
     dF, dN = with_velocity(P, R.dF, a), R.dN
     dn = grounded(normal(contact, dN, mode.side))
     dspeed = tuple(sd * ai for sd, ai in zip(mode.sdir, a))
@@ -185,7 +185,7 @@ def derivatives(
         second = second._replace(y=rate.vy, vy=tuple(jnp.where(f, -q * im, 0) for f, q, im in zip(fly, dN, P.im)))
 
     # Second derivatives of the loads, for the events' curvature.
-    ddF, ddN = P.load_second(dr, L, R, xd, a, yd=rate.y, ya=rate.vy)
+    ddF, ddN = load_second_at(P, dr, L, R, xd, a, yd=rate.y, ya=rate.vy)
     ddF = with_velocity(P, ddF, jerk)
     ddn = grounded(normal(contact, ddN, mode.side))
 

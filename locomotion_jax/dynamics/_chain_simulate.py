@@ -12,6 +12,7 @@ import jax.numpy as jnp
 
 from ..model._bodies import Mechanism
 from ..model._chain import Chain
+from ..model._physics import loads_at
 from . import _chain_exact as engine
 from ._compile import engine_jit
 from ._margins import switch_gap
@@ -61,7 +62,7 @@ def _derived(C: Chain | Mechanism, contact, t, x, v, y=None, vy=None):
     P: Any = C.physics()  # a chain's or a mechanism's: both have `l0` per spring and `tension`
     dr = P.drive(jnp.cos(P.omega * t), jnp.sin(P.omega * t))
     heights = None if y is None else tuple(y[..., i] for i in range(y.shape[-1]))
-    L = P.loads(dr, tuple(x[..., i] for i in range(x.shape[-1])), y=heights)
+    L = loads_at(P, dr, tuple(x[..., i] for i in range(x.shape[-1])), y=heights)
     e = P.energy(L, tuple(v[..., i] for i in range(v.shape[-1])))
     if y is not None and vy is not None:
         e = e + jnp.sum(C.m * (y + 0.5 * vy * vy), -1)

@@ -96,31 +96,19 @@ class AbstractPhysics(eqx.Module):
         time derivatives: a pytree that [`loads`][] and the rates read (entries may be `None`)."""
 
     @abc.abstractmethod
-    def loads(self, drive: Any, x: Scalars, keep: Any = None, y: Scalars | None = None) -> Loads:
+    def loads(self, drive: Any, x: Scalars, keep: Any = None) -> Loads:
         """The loads at positions `x` under the actuation `drive`. `keep`, if given, is
-        [`keep`][] applied to the intermediates that several later stages share. `y`: the
-        bodies' heights (`contact="hop"` only; `None`: every body on the ground)."""
+        [`keep`][] applied to the intermediates that several later stages share."""
 
     @abc.abstractmethod
-    def load_rates(
-        self, drive: Any, loads: Loads, xd: Scalars, keep: Any = None, yd: Scalars | None = None
-    ) -> LoadRates:
-        """$\\dot F_i$, $\\dot N_i$ along the velocities `xd` (zero for a stuck body) and, under
-        `contact="hop"`, the vertical velocities `yd` (zero for a body on the ground)."""
+    def load_rates(self, drive: Any, loads: Loads, xd: Scalars, keep: Any = None) -> LoadRates:
+        """$\\dot F_i$, $\\dot N_i$ along the velocities `xd` (zero for a stuck body)."""
 
     @abc.abstractmethod
     def load_second(
-        self,
-        drive: Any,
-        loads: Loads,
-        rates: LoadRates,
-        xd: Scalars,
-        a: Scalars,
-        yd: Scalars | None = None,
-        ya: Scalars | None = None,
+        self, drive: Any, loads: Loads, rates: LoadRates, xd: Scalars, a: Scalars
     ) -> tuple[Scalars, Scalars]:
-        """$\\ddot F_i$, $\\ddot N_i$ along the velocities `xd` and accelerations `a` (and, under
-        `contact="hop"`, the vertical ones `yd`, `ya`)."""
+        """$\\ddot F_i$, $\\ddot N_i$ along the velocities `xd` and accelerations `a`."""
 
     @abc.abstractmethod
     def power(self, drive: Any, loads: Loads, v: Scalars) -> Array:
@@ -161,7 +149,11 @@ class AbstractPhysics(eqx.Module):
     def hop(self) -> tuple[Array, Array, Scalars, Array]:
         """What the hopping reading `contact="hop"` (SPEC §10) needs: the initial heights and
         vertical velocities (shape `(N,)` each), the restitution per body and the Zeno speed.
-        A mechanism whose loads do not yet depend on the heights raises `NotImplementedError`."""
+        A physics that implements it takes the bodies' heights as keyword arguments of its loads,
+        `loads(..., y=)`, `load_rates(..., yd=)` and `load_second(..., yd=, ya=)`, which the engines
+        pass under `"hop"` only ([`loads_at`][] and its siblings), so a physics without hopping
+        keeps the signatures above. A mechanism whose loads do not depend on the heights raises
+        `NotImplementedError`."""
         raise NotImplementedError(
             f"contact='hop' is not supported by {type(self).__name__} yet (its loads do not depend on the "
             "bodies' heights); use a Mechanism, or contact='strict' or 'paper'."
@@ -173,3 +165,30 @@ class AbstractPhysics(eqx.Module):
         one is. None by default (bodies on a line may pass each other, as a capsule's internal
         mass passes its rest point); a chain's are its neighbours' $x_{j+1} - x_j$."""
         return ()
+
+
+# -- the engines' calls: the heights only under contact="hop" -------------------------------------
+
+
+def loads_at(P: AbstractPhysics, drive: Any, x: Scalars, keep: Any = None, y: Scalars | None = None) -> Loads:
+    """`P.loads`, with the heights `y` passed only where there are some (`contact="hop"`)."""
+    return P.loads(drive, x, keep) if y is None else P.loads(drive, x, keep, y=y)  # type: ignore[call-arg]
+
+
+def load_rates_at(
+    P: AbstractPhysics, drive: Any, loads: Loads, xd: Scalars, keep: Any = None, yd: Scalars | None = None
+) -> LoadRates:
+    """`P.load_rates`, with the vertical velocities `yd` passed only under `contact="hop"`."""
+    if yd is None:
+        return P.load_rates(drive, loads, xd, keep)
+    return P.load_rates(drive, loads, xd, keep, yd=yd)  # type: ignore[call-arg]
+
+
+def load_second_at(
+    P: AbstractPhysics, drive: Any, loads: Loads, rates: LoadRates, xd: Scalars, a: Scalars,
+    yd: Scalars | None = None, ya: Scalars | None = None,
+) -> tuple[Scalars, Scalars]:  # fmt: skip
+    """`P.load_second`, with the vertical velocities and accelerations passed only under `contact="hop"`."""
+    if yd is None and ya is None:
+        return P.load_second(drive, loads, rates, xd, a)
+    return P.load_second(drive, loads, rates, xd, a, yd=yd, ya=ya)  # type: ignore[call-arg]
