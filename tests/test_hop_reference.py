@@ -19,6 +19,7 @@ from chain_cases import CASES as CHAIN_CASES
 from reference_chain import chain_config
 from reference_hop import paper_config, reference_hop_simulate
 from test_against_reference import CASES as TWO_MASS_CASES, GROUPS
+from test_chain_reference import to_chain
 
 
 T_END = 40.0
@@ -35,23 +36,6 @@ THREE = [([1.0] * 3, 6.0, 0.08, 2 * math.pi / 3), ([1.0] * 3, 8.0, 0.08, -2 * ma
          ([0.8, 1.2, 1.0], 6.0, 0.12, -2 * math.pi / 3), ([1.0] * 3, 10.0, 0.08, 2 * math.pi / 3)]  # fmt: skip
 
 
-def _to_chain(cfg: dict) -> lj.Chain:
-    """A reference configuration (isotropic Coulomb, rest-length actuator) as the package's `Chain`."""
-    aniso = not (np.array_equal(cfg["mu_s_fwd"], cfg["mu_s_bwd"]) and np.array_equal(cfg["mu_k_fwd"], cfg["mu_k_bwd"]))
-    if cfg["friction"] == "stribeck":
-        friction = lj.Stribeck(cfg["mu_s_fwd"], cfg["mu_k_fwd"], cfg["v_s"], mu_s_bwd=cfg["mu_s_bwd"],
-                               mu_k_bwd=cfg["mu_k_bwd"])  # fmt: skip
-    elif aniso:
-        friction = lj.AnisotropicCoulomb(cfg["mu_s_fwd"], cfg["mu_s_bwd"], cfg["mu_k_fwd"], cfg["mu_k_bwd"])
-    else:
-        friction = lj.Coulomb(cfg["mu_s_fwd"], cfg["mu_k_fwd"])
-    return lj.Chain(
-        masses=cfg["m"], k=cfg["k"], d=cfg["d"], lbar=cfg["lbar"], c=cfg["c"],
-        waveforms=lj.SpringFourier(cfg["A"], cfg["B"], cfg["omega"]), friction=friction,
-        actuator=lj.InternalForce() if cfg["actuator"] == "force" else lj.RestLength(),
-    )  # fmt: skip
-
-
 @pytest.mark.parametrize("family", ["paper", "three"])
 def test_hopping_chain_against_reference(family):
     """Positions, heights, e_d at 401 saves and the number of landings by t = 40, within 1e-6,
@@ -62,7 +46,7 @@ def test_hopping_chain_against_reference(family):
         chains = [lj.Chain.from_params(lj.Params(omega=w, a=a, d=d)) for w, a, d in PAPER]
     else:
         cfgs = [chain_config(m, omega=w, a=a, phi=phi) for m, w, a, phi in THREE]
-        chains = [_to_chain(c) for c in cfgs]
+        chains = [to_chain(c) for c in cfgs]
     ts = np.linspace(0.0, T_END, 401)
     tr = lj.simulate(lj.Chain.stack(chains), t_end=T_END, save_at=ts, contact="hop", dynamics=lj.Exact(dt=DT))
     assert tr.y is not None and tr.n_land is not None
@@ -115,7 +99,7 @@ def test_chain_reference_cases_hop_equals_strict():
     for case in CHAIN_CASES:
         if case["contact"] != "strict":
             continue
-        chain = _to_chain(chain_config(**case["config"]))
+        chain = to_chain(chain_config(**case["config"]))
         key = (chain.n_masses, type(chain.friction), type(chain.actuator), chain.waves.cos.shape, case["start"])
         groups.setdefault(key, []).append(chain)
     assert sum(len(g) for g in groups.values()) >= 10
