@@ -151,7 +151,7 @@ class AbstractPhysics(eqx.Module):
         vertical velocities (shape `(N,)` each), the restitution per body and the Zeno speed.
         A physics that implements it takes the bodies' heights as keyword arguments of its loads,
         `loads(..., y=)`, `load_rates(..., yd=)` and `load_second(..., yd=, ya=)`, which the engines
-        pass under `"hop"` only ([`loads_at`][] and its siblings), so a physics without hopping
+        pass under `"hop"` only (`model._physics.loads_at` and its siblings), so a physics without hopping
         keeps the signatures above. A mechanism whose loads do not depend on the heights raises
         `NotImplementedError`."""
         raise NotImplementedError(
