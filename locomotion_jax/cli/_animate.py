@@ -5,6 +5,7 @@
 array exists). Example: `locomotion-jax animate --omega 2 --t-from 30 --t-end 36 --out ssl.gif`.
 """
 
+import math
 from pathlib import Path
 from typing import Any
 
@@ -44,7 +45,6 @@ def register(app: typer.Typer) -> None:
         `kind = "mechanism"` file draws its bodies (carried ones grey, inside their carrier's row) and
         springs, and prints how many frames each body is stuck in.
         """
-        import math
 
         import numpy as np
 
@@ -68,18 +68,7 @@ def register(app: typer.Typer) -> None:
                 if kind_of(params) == "mechanism":
                     return _animate_mechanism(file, params, t_from, t_end, frames, fps, dpi, trace, run, out)
             w = float(params.omega if wave is None else wave.omega)
-            if not (math.isfinite(t_end) and t_end > 0):
-                raise ValueError(f"--t-end must be a finite number > 0, got {t_end!r}.")
-            if t_from is None:
-                t_from = max(0.0, t_end - 2 * (2 * math.pi / w)) if w > 0 else 0.0
-            if not (0 <= t_from < t_end):
-                raise ValueError(f"--t-from must satisfy 0 <= t_from < t_end, got {t_from!r} (t_end = {t_end!r}).")
-            if frames < 2:
-                raise ValueError(f"--frames must be >= 2, got {frames}.")
-            if not (math.isfinite(fps) and fps > 0 and math.isfinite(dpi) and dpi > 0):
-                raise ValueError(f"--fps and --dpi must be finite numbers > 0, got {fps!r} and {dpi!r}.")
-            if out.suffix.lower() != ".gif":
-                raise ValueError(f"--out must name a .gif file, got {str(out)!r}.")
+            t_from = _check_span(w, t_from, t_end, frames, fps, dpi, out)
             traj = simulate(
                 params,
                 t_end,
@@ -121,7 +110,6 @@ def _animate_mechanism(file: Path, mech: Any, t_from: float | None, t_end: float
                        dpi: float, trace: bool, run: Values, out: Path) -> None:  # fmt: skip
     """`animate FILE` for a `kind = "mechanism"` file: `lj.simulate` of the file's mechanism at the frame
     times, drawn by `run._mechanism_animation`."""
-    import math
 
     import numpy as np
 
@@ -132,18 +120,7 @@ def _animate_mechanism(file: Path, mech: Any, t_from: float | None, t_end: float
 
     try:
         w = float(np.asarray(mech.omega))
-        if not (math.isfinite(t_end) and t_end > 0):
-            raise ValueError(f"--t-end must be a finite number > 0, got {t_end!r}.")
-        if t_from is None:
-            t_from = max(0.0, t_end - 2 * (2 * math.pi / w)) if w > 0 else 0.0
-        if not (0 <= t_from < t_end):
-            raise ValueError(f"--t-from must satisfy 0 <= t_from < t_end, got {t_from!r} (t_end = {t_end!r}).")
-        if frames < 2:
-            raise ValueError(f"--frames must be >= 2, got {frames}.")
-        if not (math.isfinite(fps) and fps > 0 and math.isfinite(dpi) and dpi > 0):
-            raise ValueError(f"--fps and --dpi must be finite numbers > 0, got {fps!r} and {dpi!r}.")
-        if out.suffix.lower() != ".gif":
-            raise ValueError(f"--out must name a .gif file, got {str(out)!r}.")
+        t_from = _check_span(w, t_from, t_end, frames, fps, dpi, out)
         traj = simulate(mech, t_end, np.linspace(t_from, t_end, frames), dynamics=Exact(dt=run["dt"]),
                         contact=run["contact"], start=run["start"])  # fmt: skip
         if not np.asarray(traj.valid).any():
@@ -158,3 +135,20 @@ def _animate_mechanism(file: Path, mech: Any, t_from: float | None, t_end: float
     stuck = np.asarray(traj.stuck, bool)[valid]
     counts = ", ".join(f"body {i} stuck in {int(stuck[:, i].sum())}" for i in range(stuck.shape[-1]))
     typer.echo(f"wrote {path} ({int(valid.sum())} frames, t = {t_from:.4g}..{t_end:.4g}); {counts} frames")
+
+
+def _check_span(w: float, t_from: float | None, t_end: float, frames: int, fps: float, dpi: float, out: Path) -> float:
+    """Check the animation's options; return `t_from` (default: the last two periods of frequency `w`)."""
+    if not (math.isfinite(t_end) and t_end > 0):
+        raise ValueError(f"--t-end must be a finite number > 0, got {t_end!r}.")
+    if t_from is None:
+        t_from = max(0.0, t_end - 2 * (2 * math.pi / w)) if w > 0 else 0.0
+    if not (0 <= t_from < t_end):
+        raise ValueError(f"--t-from must satisfy 0 <= t_from < t_end, got {t_from!r} (t_end = {t_end!r}).")
+    if frames < 2:
+        raise ValueError(f"--frames must be >= 2, got {frames}.")
+    if not (math.isfinite(fps) and fps > 0 and math.isfinite(dpi) and dpi > 0):
+        raise ValueError(f"--fps and --dpi must be finite numbers > 0, got {fps!r} and {dpi!r}.")
+    if out.suffix.lower() != ".gif":
+        raise ValueError(f"--out must name a .gif file, got {str(out)!r}.")
+    return t_from
