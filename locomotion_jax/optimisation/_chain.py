@@ -157,10 +157,7 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     coefs = []
     cos_b, sin_b = screen.wave_coefficients(sc.a[best : best + 1], sc.phi[best : best + 1], S, H)
     coefs.append((cos_b[0], sin_b[0], float(sc.omega[best])))
-    for x in xs:
-        c, s, w = local.unpack(x, S, H)
-        scale = 1 / np.maximum(local.strokes(c, s), 1.0)
-        coefs.append((a_max * c * scale[:, None], a_max * s * scale[:, None], w))
+    coefs += [local.on_bound(x, S, H, a_max) for x in xs]
     cos = np.stack([c for c, _, _ in coefs])
     sin = np.stack([s for _, s, _ in coefs])
     om = np.array([w for _, _, w in coefs])

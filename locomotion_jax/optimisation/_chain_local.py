@@ -177,3 +177,11 @@ def local_solver(x0: np.ndarray, proj, stroke_ok, max_iter: int, trust_radius: f
         return best["x"]
 
     return solve
+
+
+def on_bound(x: np.ndarray, S: int, H: int, a_max: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """A refined point's coefficients and frequency, each spring's stroke rescaled onto the bound
+    `a_max` where it exceeds it (what the line search's tolerance let through)."""
+    c, s, w = unpack(x, S, H)
+    scale = 1 / np.maximum(strokes(c, s), 1.0)
+    return a_max * c * scale[:, None], a_max * s * scale[:, None], w

@@ -220,10 +220,7 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
 
     # 3. Verification: the baseline and the refined actuations, rescaled onto the exact bound.
     coefs = [(zero[best], sin[best], float(W[best]))]
-    for x in xs:
-        c, s, w = local.unpack(x, S, H)
-        scale = 1 / np.maximum(local.strokes(c, s), 1.0)
-        coefs.append((a_max * c * scale[:, None], a_max * s * scale[:, None], w))
+    coefs += [local.on_bound(x, S, H, a_max) for x in xs]
     cos_c = np.stack([c for c, _, _ in coefs])
     sin_c = np.stack([s for _, s, _ in coefs])
     om_c = np.array([w for _, _, w in coefs])
