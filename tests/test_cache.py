@@ -32,7 +32,7 @@ def _entries(cache: Path) -> set[str]:
 
 def test_second_process_reads_the_cache(tmp_path):
     cache = tmp_path / "cache"
-    args = ["simulate", "--omega", "2", "--horizon", "30", "--no-plot", "--json"]
+    args = ["measure", "--omega", "2", "--horizon", "30", "--json"]
     first = _cli(args, cache, tmp_path)
     assert first.returncode == 0, first.stderr
     written = _entries(cache)

@@ -32,13 +32,13 @@ def _strict_json(text: str):
 
 
 def _text_value(stdout: str, name: str) -> str:
-    """The value printed on the `  name  value` line of `simulate`'s text report."""
+    """The value printed on the `  name  value` line of `measure`'s text report."""
     (line,) = [ln for ln in stdout.splitlines() if ln.split()[:1] == [name]]
     return line.split()[1]
 
 
-def test_simulate_json_matches_measure_and_plots(tmp_path):
-    res = invoke("simulate", "--omega", "2", "--a", "0.05", "--t-end", "5", "--out", str(tmp_path), "--json", *FAST)
+def test_measure_json_matches_measure():
+    res = invoke("measure", "--omega", "2", "--a", "0.05", "--json", *FAST)
     assert res.exit_code == 0, res.output
     record = _strict_json(res.stdout)  # stdout is exactly one JSON object
     m = lj.measure(lj.Params(omega=2.0, a=0.05), 0.3, horizon=30.0, window=5.0, dynamics=lj.Exact(dt=0.02))
@@ -46,7 +46,19 @@ def test_simulate_json_matches_measure_and_plots(tmp_path):
     assert record["status_name"] == "OK" and record["regime_name"] == lj.Regime(int(m.regime)).name
     assert not np.isfinite(float(m.t_liftoff))  # inf (no lift-off) is encoded as null, like NaN
     assert record["t_liftoff"] is None and record["liftoff"] is False
-    assert record["params"]["omega"] == 2.0 and record["contact"] == "strict"
+    assert record["params"]["omega"] == 2.0 and record["contact"] == "strict" and record["kind"] == "paper"
+
+
+def test_simulate_json_matches_simulate_and_plots(tmp_path):
+    res = invoke("simulate", "--omega", "2", "--t-end", "5", "--saves", "6", "--dt", "0.02", "--out", str(tmp_path),
+                 "--json")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    record = _strict_json(res.stdout)
+    traj = lj.simulate(lj.Params(omega=2.0), 5.0, np.linspace(0, 5, 6), dynamics=lj.Exact(dt=0.02))
+    for name in ("x1", "x2", "v1", "X", "mode"):
+        np.testing.assert_allclose(record[name], np.asarray(getattr(traj, name)), rtol=1e-12, atol=0)
+    assert record["displacement"] == pytest.approx(float(traj.X[-1] - traj.X[0]), rel=1e-12)
+    assert record["status_name"] == "OK" and record["t_liftoff"] is None and record["params"]["omega"] == 2.0
     png = tmp_path / record["plot"].split("/")[-1]
     assert png.exists() and png.read_bytes()[:4] == b"\x89PNG"
 
@@ -54,7 +66,7 @@ def test_simulate_json_matches_measure_and_plots(tmp_path):
 def test_simulate_writes_nothing_without_out(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     for extra in ([], ["--json"]):
-        res = invoke("simulate", "--omega", "2", "--t-end", "2", *extra, *FAST)
+        res = invoke("simulate", "--omega", "2", "--t-end", "2", "--saves", "3", "--dt", "0.02", *extra)
         assert res.exit_code == 0, res.output
         assert "plot:" not in res.stdout
     assert _strict_json(res.stdout)["plot"] is None
@@ -63,13 +75,13 @@ def test_simulate_writes_nothing_without_out(tmp_path, monkeypatch):
 
 def test_simulate_text_and_not_reached_encoding():
     # omega = 0.1: far too slow to travel z in the horizon -> tau_z and e_z are inf.
-    res = invoke("simulate", "--omega", "0.1", *FAST)
+    res = invoke("measure", "--omega", "0.1", *FAST)
     assert res.exit_code == 0, res.output
     assert _text_value(res.stdout, "tau_z") == "inf" and _text_value(res.stdout, "e_z") == "inf"
     assert _text_value(res.stdout, "reached") == "False"
-    res = invoke("simulate", "--omega", "2", *FAST)  # reached: a finite tau_z in the same place
+    res = invoke("measure", "--omega", "2", *FAST)  # reached: a finite tau_z in the same place
     assert float(_text_value(res.stdout, "tau_z")) > 0 and _text_value(res.stdout, "reached") == "True"
-    res = invoke("simulate", "--omega", "0.1", "--json", *FAST)
+    res = invoke("measure", "--omega", "0.1", "--json", *FAST)
     record = _strict_json(res.stdout)
     assert record["tau_z"] is None and record["e_z"] is None and record["reached"] is False
 
@@ -220,9 +232,11 @@ def test_optimize_registered_when_module_exists(monkeypatch):
 def test_installed_plugins_are_registered():
     commands = {c.name or getattr(c.callback, "__name__", None) for c in _cli.app.registered_commands}
     assert {"simulate", "sweep", "figures"} <= commands
-    for module, command in (("_optimise", "optimize"), ("_animate", "animate"), ("_chain", "chain")):
+    for module, command in (("_optimise", "optimize"), ("_animate", "animate"), ("_commands", "measure")):
         if (Path(_cli.__file__).parent / f"{module}.py").exists():
             assert command in commands
+    hidden = {c.name for c in _cli.app.registered_commands if c.hidden}
+    assert hidden == {"chain", "chain-simulate", "chain-gait", "chain-sweep", "chain-optimize"}
 
 
 def test_chain_json_matches_measure():

@@ -1,4 +1,4 @@
-"""`locomotion-jax chain-simulate`, `chain-gait` and `chain-sweep` (typer's CliRunner; short runs).
+"""`locomotion-jax simulate`, `gait` and `sweep` of a chain, through the deprecated `chain-*` aliases (short runs).
 
 Each command's output equals the library call it wraps, made here with the same shapes (so the
 compilation is shared)."""
@@ -42,7 +42,7 @@ def test_chain_simulate_json_and_plot(tmp_path):
 
 @pytest.mark.slow  # a compilation of the chain's gait solver of its own (steady_gait is tested in test_chain_gait.py)
 def test_chain_gait_json_equals_steady_gait():
-    res = invoke("chain-gait", *MECH, *WAVE, "--transient", "10", "--dt", "0.02", "--json")
+    res = invoke("chain-gait", *MECH, *WAVE, "--transient", "10", "--dt", "0.02", "--start", "relaxed", "--json")
     assert res.exit_code == 0, res.output
     record = json.loads(res.stdout)
     g = lj.steady_gait(worm(), transient=10, dynamics=lj.Exact(dt=0.02), start="relaxed")

@@ -1,5 +1,5 @@
-"""Every command that describes a mechanism takes a mechanism file: `simulate`, `gait`, `optimize`, `sweep`,
-`chain-sweep` and `animate` give what the library gives on the loaded file, refuse mechanism options beside
+"""Every command that runs a mechanism takes a mechanism file: `measure`, `simulate`, `gait`, `optimize`, `sweep`
+and `animate` give what the library gives on the loaded file, refuse mechanism options beside
 it, and end a broken file with one line `Error: FILE, line N: [table] field: ...`, exit code 2.
 
 The long computations (optimisers, sweeps) are replaced by stand-ins that record what they receive: what
@@ -37,13 +37,13 @@ def capture(monkeypatch, module, name: str) -> dict:
     return seen
 
 
-def test_simulate_file_equals_the_library():
-    res = invoke("simulate", WORM, "--z", "1", "--horizon", "40", "--window", "10", "--dt", "0.02", "--json")
+def test_measure_file_equals_the_library():
+    res = invoke("measure", WORM, "--z", "1", "--horizon", "40", "--window", "10", "--dt", "0.02", "--json")
     assert res.exit_code == 0, res.output
     record = json.loads(res.stdout)
     m = lj.measure(lj.load_mechanism(WORM), z=1.0, horizon=40.0, window=10.0, dynamics=lj.Exact(dt=0.02))
     assert_record_equals(record, m)
-    assert record["kind"] == "chain" and record["mechanism"] == WORM and record["plot"] is None
+    assert record["kind"] == "chain" and record["mechanism"] == WORM
 
 
 def test_gait_file_equals_the_library():
@@ -82,9 +82,7 @@ def test_optimize_needs_a_max_without_a_file():
 
 
 def test_sweep_file_fixes_the_files_values(monkeypatch, tmp_path):
-    from locomotion_jax.maps import _sweep
-
-    seen = capture(monkeypatch, _sweep, "sweep")
+    seen = capture(monkeypatch, lj, "sweep")
     text = Path(PAPER).read_text().replace("a = 0.05", "a = 0.07")
     path = tmp_path / "paper.toml"
     path.write_text(text)
@@ -117,7 +115,6 @@ def test_chain_sweep_keeps_the_order_given(monkeypatch, tmp_path, order):
         ["gait"],
         ["optimize", "--v-min", "0.1"],
         ["sweep", "--omega", "1,2", "--out", "m.nc"],
-        ["chain-sweep", "--phi", "0,1", "--out", "m.nc"],
         ["animate"],
         ["measure"],
     ],  # fmt: skip
@@ -139,7 +136,8 @@ def test_broken_file_is_one_line_naming_line_and_field(tmp_path, command):
         (["gait", PAPER, "--d", "0.1"], "--d"),
         (["optimize", WORM, "--v-min", "0.1", "--k", "3"], "--k"),
         (["animate", PAPER, "--mhat", "0.4"], "--mhat"),
-        (["chain-sweep", WORM, "--masses", "1,1", "--phi", "0,1", "--out", "m.nc"], "--masses"),
+        (["sweep", WORM, "--masses", "1,1", "--phi", "0,1", "--out", "m.nc"], "--masses"),
+        (["measure", WORM, "--phi", "1"], "--phi"),
     ],  # fmt: skip
     ids=lambda a: a[0] if isinstance(a, list) else a,
 )
@@ -149,11 +147,10 @@ def test_mechanism_options_beside_a_file_are_refused(args, option):
 
 
 def test_animate_and_sweep_send_the_other_kind_to_its_command():
-    assert "animate draws the paper's two-mass model" in invoke("animate", WORM).output
-    res = invoke("sweep", WORM, "--omega", "1,2", "--out", "m.nc")
-    assert res.exit_code == 2 and "chain-sweep" in res.output
-    res = invoke("chain-sweep", PAPER, "--phi", "0,1", "--out", "m.nc")
-    assert res.exit_code == 2 and "the paper's model" in res.output
+    res = invoke("animate", WORM)
+    assert res.exit_code == 2 and f"`animate`: {WORM} is a chain; this command runs the paper's model" in res.output
+    res = invoke("sweep", PAPER, "--phi", "0,1", "--out", "m.nc")
+    assert res.exit_code == 2 and f"Error: --phi: the mechanism comes from {PAPER}" in res.output
 
 
 def test_chain_commands_default_to_flat_springs(monkeypatch, tmp_path):

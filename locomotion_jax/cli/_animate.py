@@ -12,7 +12,8 @@ from typing import Any
 import typer
 
 from ._errors import friendly
-from ._options import expand, model_options, run_options, to_params, Values
+from ._mechanism import build, mechanism_options
+from ._options import expand, run_options, Values
 
 
 def register(app: typer.Typer) -> None:
@@ -20,13 +21,13 @@ def register(app: typer.Typer) -> None:
 
     @app.command("animate")
     @friendly
-    @expand(model=model_options(), run=run_options(("contact", "start", "dt")))
+    @expand(mech=mechanism_options(), run=run_options(("contact", "start", "dt")))
     def animate(
         file: Path | None = typer.Argument(
             None, help='A mechanism file (TOML) of the paper\'s model or of bodies and links (kind = "mechanism").'
         ),
         *,
-        model: Values,
+        mech: Values,
         t_from: float | None = typer.Option(
             None, "--t-from", help="First animated time (default: two actuation periods before --t-end)."
         ),
@@ -53,20 +54,12 @@ def register(app: typer.Typer) -> None:
         from ..run._simulate import simulate
 
         try:
-            wave = None
-            if file is None:
-                params = to_params(model)
-            else:
-                from ._files import kind_of, load, refuse_options
-
-                refuse_options(file, model)
-                params, wave = load(file, mechanism_ok=True)
-                if kind_of(params) == "chain":
-                    raise ValueError(f"{file} is a chain; animate draws the paper's two-mass model or a mechanism "
-                                     f"of bodies and links. Plot the chain with `locomotion-jax simulate {file} "
-                                     "--out DIR`.")  # fmt: skip
-                if kind_of(params) == "mechanism":
-                    return _animate_mechanism(file, params, t_from, t_end, frames, fps, dpi, trace, run, out)
+            built = build(mech, file)
+            hint = f" Plot the chain with `locomotion-jax simulate {file or '--masses ...'} --out DIR`."
+            built.refuse("animate", ("paper", "mechanism"), hint)
+            params, wave = built.mechanism, built.extra.get("waveform")
+            if built.kind == "mechanism":
+                return _animate_mechanism(built.file, params, t_from, t_end, frames, fps, dpi, trace, run, out)
             w = float(params.omega if wave is None else wave.omega)
             t_from = _check_span(w, t_from, t_end, frames, fps, dpi, out)
             traj = simulate(
@@ -106,7 +99,7 @@ def register(app: typer.Typer) -> None:
             )
 
 
-def _animate_mechanism(file: Path, mech: Any, t_from: float | None, t_end: float, frames: int, fps: float,
+def _animate_mechanism(file: Any, mech: Any, t_from: float | None, t_end: float, frames: int, fps: float,
                        dpi: float, trace: bool, run: Values, out: Path) -> None:  # fmt: skip
     """`animate FILE` for a `kind = "mechanism"` file: `lj.simulate` of the file's mechanism at the frame
     times, drawn by `run._mechanism_animation`."""

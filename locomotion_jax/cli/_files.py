@@ -1,44 +1,32 @@
-"""`locomotion-jax measure FILE`, and what every command that takes a mechanism file shares.
+"""What the commands share about mechanism files and the click context.
 
-`register(app)` adds the `measure` subcommand to the main CLI (`_main.py`). The file is the paper's
-model or a chain (docs/mechanisms.md, "Mechanism files"); the run settings are the options of
-`simulate`. `simulate`, `gait`, `optimize`, `sweep`, `chain-sweep` and `animate` take the same FILE
-argument (`_file_commands.py`). A file that cannot be read, or that the schema check refuses, ends
-with one line `Error: FILE, line N: ...` and exit code 2.
+A file (docs/mechanisms.md, "Mechanism files") that cannot be read, or that the schema check refuses,
+ends with one line `Error: FILE, line N: ...` and exit code 2.
 """
 
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Any
 
 import numpy as np
 import typer
 
-from .._json import dumps
-from ._errors import friendly
-from ._options import expand, run_options, Values
 
-
-def _plain(v: Any) -> Any:
+def plain(v: Any) -> Any:
+    """A JSON-ready value: a list for an array, a Python number for a scalar."""
     v = np.asarray(v)
     return v.tolist() if v.ndim else v.item()
 
 
-def load(path: Path, mechanism_ok: bool = False) -> tuple[Any, Any]:
+def load(path: Path) -> tuple[Any, Any]:
     """The file's mechanism and the paper's model's waveform (or `None`); a file that cannot be read
-    is a `ValueError` naming it, and so is a `kind = "mechanism"` file unless `mechanism_ok` (the
-    commands that run one: `measure`, `simulate`, `gait`)."""
+    is a `ValueError` naming it."""
     from ..model._files import load_mechanism
 
     try:
         mech, wave = load_mechanism(path, with_waveform=True)
     except OSError as err:
         raise ValueError(f"{path}: cannot read the mechanism file ({err.strerror or err}).") from None
-    if not mechanism_ok and kind_of(mech) == "mechanism":
-        raise ValueError(
-            f'{path}: a mechanism of bodies and links (kind = "mechanism") runs in `measure`, `simulate` and '
-            "`gait`; this command takes the paper's model or a chain."
-        )
     return mech, wave
 
 
@@ -81,20 +69,6 @@ def kind_of(mech: Any) -> str:
     return "chain" if isinstance(mech, Chain) else "mechanism" if isinstance(mech, Mechanism) else "paper"
 
 
-def measure_record(mech: Any, wave: Any, run: Values, t_start: float | None = None) -> dict[str, Any]:
-    """The measurement of a loaded mechanism with the run settings `run`, as JSON-ready fields."""
-    import locomotion_jax as lj
-
-    extra = {} if wave is None else {"waveform": wave}
-    m = lj.measure(mech, run["z"], horizon=run["horizon"], window=run["window"], t_start=t_start,
-                   contact=run["contact"], start=run["start"], dynamics=lj.Exact(dt=run["dt"]),
-                   **extra)  # fmt: skip
-    fields = {name: _plain(v) for name, v in m.to_numpy().items()}
-    fields["regime_name"] = lj.Regime(int(m.regime)).name
-    fields["status_name"] = lj.Status(int(m.status)).name
-    return fields
-
-
 def echo_fields(fields: dict[str, Any]) -> None:
     """One line per field: numbers to 6 digits, lists to 4."""
     for name, v in fields.items():
@@ -110,37 +84,23 @@ def label(file: Path, mech: Any, wave: Any) -> str:
     return f"{file}: {describe(mech)}" + ("" if wave is None else f", {type(wave).__name__} waveform")
 
 
-RUN_SETTINGS: tuple[str, ...] = ("z", "horizon", "window", "contact", "start", "dt")
+def travelling_wave(file: Path) -> dict[str, float] | None:
+    """The file's `[waveform]` of type TravellingWave as `{a, omega, phi}`, else `None`.
+
+    Read from the text, because a [`Chain`][] keeps only the normal form of its waveforms; call it
+    after [`load`][], which has checked the file.
+    """
+    from ..model._files import tomllib
+
+    table = tomllib.loads(file.read_text("utf-8")).get("waveform")
+    if not (isinstance(table, dict) and table.get("type") == "TravellingWave"):
+        return None
+    return {"a": float(table["a"]), "omega": float(table["omega"]), "phi": float(table.get("phi", 0.0))}
 
 
-def register(app: typer.Typer) -> None:
-    """Add the `measure` subcommand to `app`."""
+def with_wave(chain: Any, wave: Any, check: bool = True) -> Any:
+    """The file's chain driven by the waveform(s) `wave` instead of its own."""
+    from ..model._chain import Chain
 
-    @app.command("measure")
-    @friendly
-    @expand(run=run_options())
-    def measure(
-        file: Annotated[Path, typer.Argument(help="A mechanism file (TOML): examples/paper.toml, examples/worm.toml.")],
-        *,
-        run: Values,
-        t_start: Annotated[
-            float | None,
-            typer.Option(help="Measurement start (default: 80 periods of the lowest natural frequency)."),
-        ] = None,
-        as_json: Annotated[bool, typer.Option("--json", help="Print the measurements as one JSON object.")] = False,
-    ) -> None:
-        """Measure the mechanism of a file: time and energy to travel z, speed, regime, stick fractions.
-
-        Example: `locomotion-jax measure examples/worm.toml --json`. With --json, stdout is one JSON
-        object: every measurement field (per-mass fields of a chain as lists), `regime_name`,
-        `status_name`, `mechanism` (the file), `kind` and the settings; non-finite numbers are null.
-        """
-        mech, wave = load(file, mechanism_ok=True)
-        settings = {n: run[n] for n in RUN_SETTINGS}
-        fields = measure_record(mech, wave, run, t_start)
-        if as_json:
-            typer.echo(dumps({**fields, "mechanism": str(file), "kind": kind_of(mech), **settings, "t_start": t_start}))
-            return
-        typer.echo(label(file, mech, wave))
-        typer.echo("settings: " + ", ".join(f"{n}={v}" for n, v in settings.items()))
-        echo_fields(fields)
+    return Chain(masses=chain.m, k=chain.k, d=chain.d, lbar=chain.lbar, c=chain.c, waveforms=wave,
+                 friction=chain.friction, actuator=chain.actuator, check=check)  # fmt: skip

@@ -1,5 +1,8 @@
 """`locomotion-jax gait` and `locomotion-jax continue`: steady gaits from the command line.
 
+`gait` runs any mechanism (`_mechanism.build`); `continue` the paper's model only (the library's
+continuation takes `Params`): another kind is a clear error naming the command and the kind.
+
 `register(app)` adds both subcommands to the main CLI (`_main.py`). `gait` solves the steady gait of
 one configuration ([`steady_gait`][]); `continue` follows it along one parameter ([`continuation`][]).
 With `--json` stdout is one JSON object; every non-finite number is `null` (`_json.py`), and a complex
@@ -15,15 +18,17 @@ import typer
 
 from .._json import dumps
 from ._errors import friendly
-from ._options import expand, model_options, run_options, to_params, Values
+from ._mechanism import build, mechanism_options, number
+from ._options import expand, run_options, Values
 
 
 GAIT_FIELDS: tuple[str, ...] = (
     "k", "period", "mean_speed", "cost_of_transport", "e_d", "work", "regime", "stick_fraction1",
-    "stick_fraction2", "n_switch", "u", "v1", "v2", "stable", "residual", "n_iter", "liftoff",
-    "slip_margin", "min_normal",
+    "stick_fraction2", "stick_fraction", "n_switch", "u", "v1", "v2", "state", "stable", "residual", "n_iter",
+    "liftoff", "slip_margin", "min_normal",
 )  # fmt: skip
-"""The [`Gait`][] fields `gait` prints (besides `status` and the multipliers)."""
+"""The gait's fields `gait` prints, those it has (a chain's: `stick_fraction`, `state`), besides
+`status` and the multipliers."""
 
 POINT_FIELDS: tuple[str, ...] = (
     "lam", "mean_speed", "cost_of_transport", "regime", "stable", "liftoff", "u", "v1", "v2",
@@ -49,12 +54,6 @@ def _pairs(z: Any) -> list:
     return np.stack([z.real, np.where(nan, np.nan, z.imag)], axis=-1).tolist()
 
 
-def _model_values(model: Values, params) -> dict[str, float]:
-    values = {n: v for n, v in model.items() if n != "omega_over_wn1"}
-    values["omega"] = float(params.omega)
-    return values
-
-
 def gait_omega(omega: float) -> None:
     """Refuse a forcing without a period: `ValueError` naming `--omega` unless it is finite and > 0."""
     if not (math.isfinite(omega) and omega > 0):
@@ -71,13 +70,13 @@ def register(app: typer.Typer) -> None:
 
     @app.command("gait")
     @friendly
-    @expand(model=model_options(), run=run_options(("contact", "start", "dt")))
+    @expand(mech=mechanism_options(), run=run_options(("contact", "start", "dt")))
     def gait(
         file: Annotated[
-            Path | None, typer.Argument(help="A mechanism file (TOML), instead of the model options.")
+            Path | None, typer.Argument(help="A mechanism file (TOML), instead of the mechanism options.")
         ] = None,
         *,
-        model: Values,
+        mech: Values,
         run: Values,
         periods: Annotated[
             str, typer.Option(help="Gait periods to try, in actuation periods (e.g. 1,2,3,4).")
@@ -85,67 +84,52 @@ def register(app: typer.Typer) -> None:
         transient: Annotated[int, typer.Option(help="Actuation periods integrated before Newton's method.")] = 30,
         as_json: Annotated[bool, typer.Option("--json", help="Print the gait as one JSON object.")] = False,
     ) -> None:
-        """Solve the steady gait of one configuration: speed, cost of transport, Floquet multipliers, status.
+        """Solve the steady gait of one mechanism: speed, cost of transport, Floquet multipliers, status.
 
         The gait is a periodic orbit (fixed point of the period map), found by Newton's method
         after a short transient; stable means every Floquet multiplier lies inside the unit circle.
-        With a mechanism FILE: a chain's gait, or a mechanism's of bodies and links (`kind = "mechanism"`,
-        from its own x0, v0 under the default start), is reported as by `chain-gait`; the paper's
-        model's with the file's waveform, and `--json` names the `mechanism` file.
+        The mechanism is the paper's model (its options), a chain (`--masses`) or a mechanism FILE.
+        With --json, stdout is one JSON object: the gait's fields (per-body ones as lists), the
+        mechanism and the settings; a complex multiplier is a pair [re, im].
         """
         import locomotion_jax as lj
 
-        from ._files import kind_of, label, load, note, refuse_options
+        from ._files import echo_fields, note, plain
 
         ks = _periods(periods)
-        wave = None
-        if file is None:
-            params = to_params(model)
-            values: dict[str, Any] = {"params": _model_values(model, params)}
-        else:
-            from ._chain_commands import chain_gait_report
-
-            refuse_options(file, model)
-            mech, wave = load(file, mechanism_ok=True)
-            if kind_of(mech) in ("chain", "mechanism"):
-                how = (run["contact"], run["start"], run["dt"])
-                return chain_gait_report(mech, ks, transient, *how, as_json, label(file, mech, None),
-                                         {"mechanism": str(file), "kind": kind_of(mech)})  # fmt: skip
-            params = mech
-            values = {"params": {n: float(v) for n, v in params.as_dict().items()}, "mechanism": str(file)}
-        gait_omega(float(params.omega if wave is None else wave.omega))
-        extra = {} if wave is None else {"waveform": wave}
+        if file is None and mech["omega"] is not None:  # before the wave's own check: a gait needs a period
+            gait_omega(number("omega", mech["omega"]))
+        built = build(mech, file)
+        gait_omega(built.omega)
         note(f"solving the steady gait, periods {','.join(map(str, ks))} (compiling the solver: first call only)...")
-        g = lj.steady_gait(params, periods=ks, transient=transient, contact=run["contact"], start=run["start"],
-                           dynamics=lj.Exact(dt=run["dt"]), **extra)  # fmt: skip
-        record: dict[str, Any] = {name: np.asarray(getattr(g, name)).item() for name in GAIT_FIELDS}
+        g = lj.steady_gait(built.mechanism, periods=ks, transient=transient, contact=run["contact"],
+                           start=run["start"], dynamics=lj.Exact(dt=run["dt"]), **built.extra)  # fmt: skip
+        record: dict[str, Any] = {n: plain(getattr(g, n)) for n in GAIT_FIELDS if getattr(g, n, None) is not None}
         record["regime_name"] = lj.Regime(int(g.regime)).name
         record["status"] = int(g.status)
-        record["status_name"] = _name(lj.GaitStatus, int(g.status))
+        record["status_name"] = lj.GaitStatus(int(g.status)).name
         record["multipliers"] = _pairs(g.multipliers)
-        record.update(values)
-        record.update(run)
+        settings = {"periods": list(ks), "transient": transient, **run}
         if as_json:
-            typer.echo(dumps(record))
+            typer.echo(dumps({**record, **built.record, **settings}))
             return
-        if file is not None:
-            typer.echo(label(file, params, wave))
-        typer.echo("parameters: " + ", ".join(f"{n}={v:g}" for n, v in record["params"].items()))
+        typer.echo(built.head)
         typer.echo(f"status:     {record['status_name']}")
-        for name in GAIT_FIELDS + ("regime_name",):
-            v = record[name]
-            typer.echo(f"  {name:<18} {v:.10g}" if isinstance(v, float) else f"  {name:<18} {v}")
+        echo_fields({n: v for n, v in record.items() if n not in ("status_name", "multipliers")})
         mult = ", ".join(_complex(z) for z in np.asarray(g.multipliers))
         typer.echo(f"  {'multipliers':<18} {mult}")
 
     @app.command("continue")
     @friendly
-    @expand(model=model_options(), run=run_options(("contact", "start", "dt")))
+    @expand(mech=mechanism_options(), run=run_options(("contact", "start", "dt")))
     def continue_(
+        file: Annotated[
+            Path | None, typer.Argument(help="A mechanism file of the paper's model, instead of its options.")
+        ] = None,
         *,
         parameter: Annotated[str, typer.Option(help="The parameter: omega, a, d, mhat, mu_s, mu_k, k, c, lbar.")],
         stop: Annotated[float, typer.Option(help="Its end value (the start is the model option's value).")],
-        model: Values,
+        mech: Values,
         run: Values,
         periods: Annotated[str, typer.Option(help="Gait periods to try at the start.")] = "1,2,3,4",
         max_points: Annotated[int, typer.Option(help="Points on the branch at most.")] = 200,
@@ -163,8 +147,13 @@ def register(app: typer.Typer) -> None:
 
         from ..gaits._bifurcation import NAMES
 
+        built = build(mech, file)
+        hint = " lj.continuation follows the paper's two-mass model's gait; map a chain with `sweep`."
+        built.refuse("continue", ("paper",), hint)
+        if built.extra:
+            raise ValueError(f"`continue`: {file} has a [waveform] table; continuation follows the paper's sinusoid.")
+        params = built.mechanism
         try:
-            params = to_params(model)
             gait_omega(float(params.omega))
             b = lj.continuation(params, parameter, stop, periods=_periods(periods), max_points=max_points,
                                 max_step=max_step, step=min(0.01, max_step), contact=run["contact"],
@@ -186,7 +175,7 @@ def register(app: typer.Typer) -> None:
             parameter=parameter, lam_start=float(b.lam[0]) if n else float("nan"), lam_stop=stop, k=int(b.k),
             status=int(b.status), status_name=_name(lj.BranchStatus, int(b.status)),
             start_status_name=_name(lj.GaitStatus, int(b.start_status)), n_points=n, points=points, events=events,
-            params=_model_values(model, params), **run,
+            params=built.record.get("params"), **run,
         )  # fmt: skip
         if out is not None:
             try:

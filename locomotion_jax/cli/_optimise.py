@@ -10,10 +10,16 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import typer
 
 from ._errors import friendly
-from ._options import expand, model_options, to_params, Values
+from ._mechanism import build, Built, mechanism_options, NAMES
+from ._options import expand, Values
+
+
+OPTIMISED: tuple[str, ...] = tuple(n for n in NAMES if n not in ("a", "omega", "omega_over_wn1", "phi"))
+"""The mechanism options of `optimize`: not the actuation's, which is what is optimised."""
 
 
 def _eps_schedule(text: str) -> tuple[float, ...]:
@@ -31,7 +37,7 @@ def register(app: typer.Typer) -> None:
 
     @app.command("optimize")
     @friendly
-    @expand(model=model_options(("k", "c", "d", "lbar", "mu_s", "mu_k", "mhat")))  # no a, omega: the waveform's
+    @expand(mech=mechanism_options(OPTIMISED))
     def optimize(
         file: Path | None = typer.Argument(
             None, help="A mechanism file (TOML), instead of the model options: the paper's model or a chain."
@@ -55,7 +61,12 @@ def register(app: typer.Typer) -> None:
             "spline", "--shape", help="Exact: 'spline' (periodic cubic B-spline stroke) or 'fourier'."
         ),
         knots: int = typer.Option(64, "--knots", help="Exact, spline: number of control values."),
-        model: Values,
+        mech: Values,
+        amplitudes: int = typer.Option(3, help="A chain or mechanism: travelling-wave screen, amplitudes."),
+        frequencies: int = typer.Option(12, help="A chain or mechanism: screen, log-spaced frequencies."),
+        phases: int = typer.Option(8, help="A chain or mechanism: screen, phase lags over [-pi, pi)."),
+        zoom_levels: int = typer.Option(2, help="A chain or mechanism: zoom levels around the screen's best."),
+        zoom_points: int = typer.Option(5, help="A chain or mechanism: zoom points per variable and level."),
         margin: float = typer.Option(0.05, "--margin", help="Normal-force margin (on the orbit, or smoothed)."),
         local: int = typer.Option(4, "--local", help="Exact: starts refined locally, in lockstep."),
         max_iter: int = typer.Option(150, "--max-iter", help="Exact: iterations of each local trust-region run."),
@@ -63,7 +74,12 @@ def register(app: typer.Typer) -> None:
         outer: int = typer.Option(3, "--outer", help="Smoothed: augmented-Lagrangian blocks per smoothing stage."),
         inner: int = typer.Option(30, "--inner", help="Smoothed: Adam steps per block."),
         eps: str = typer.Option("1e-2,3e-3,1e-3", "--eps", help="Smoothed: continuation in the smoothing scale."),
-        transient: float = typer.Option(12.0, "--transient", help="Smoothed rollout: transient (time units)."),
+        transient: float | None = typer.Option(
+            None,
+            "--transient",
+            help="Smoothed rollout: transient (time units, default 12); a chain or mechanism: "
+            "actuation periods before each orbit is solved (default 30).",
+        ),
         measured: float = typer.Option(6.0, "--measured", help="Smoothed rollout: measured time (time units)."),
         corrections: int = typer.Option(1, "--corrections", help="Smoothed: exact-feedback correction rounds."),
         sweep_omegas: int = typer.Option(32, "--sweep-omegas", help="Frequencies in the sinusoid sweep."),
@@ -82,42 +98,33 @@ def register(app: typer.Typer) -> None:
         --margin, --omega, --direction, --out, --json and --verbose apply); a `kind = "mechanism"` file's
         actuated elements as by `lj.optimise` of a Mechanism (--a-max required; --harmonics default 2;
         --local, --max-iter, --margin, --omega, --direction, --json and --verbose apply)."""
+        import locomotion_jax as lj
+
         from ..optimisation import _optimise, _pareto
         from ..optimisation._optimum import ExactSettings, Settings
 
         try:
             if method not in ("exact", "smoothed"):
                 raise ValueError(f"--method must be 'exact' or 'smoothed', got {method!r}.")
-            if file is None:
-                if a_max is None:
-                    raise ValueError("--a-max is required (without a mechanism file, whose amplitude it defaults to).")
-                params = to_params(model)
-            else:
-                from ._file_commands import amplitude
-                from ._files import given, kind_of, load, refuse_options
+            built = build(mech, file, wave=False)
+            if a_max is None and file is None:
+                raise ValueError("--a-max is required (without a mechanism file, whose amplitude it defaults to).")
+            if built.kind != "mechanism" and a_max is None:
+                a_max = amplitude(built)
+            if built.kind != "paper":
+                if method != "exact":
+                    raise ValueError(f"--method: {built.kind_name} is optimised by the exact method only.")
+                from ._files import given
 
-                refuse_options(file, model)
-                mech, wave = load(file, mechanism_ok=True)
-                if kind_of(mech) == "mechanism":
-                    steps = max_iter if given(["max_iter"]) else None  # the optimiser's own default otherwise
-                    return _optimise_mechanism(file, mech, v_min, a_max, direction, omega, harmonics, method, local,
-                                               margin, steps, verbose, json_out)  # fmt: skip
-                a_max = amplitude(file, mech, wave) if a_max is None else a_max
-                if kind_of(mech) == "chain":
-                    import locomotion_jax as lj
-
-                    from ._chain_optimise import optimise_chain
-
-                    if method != "exact":
-                        raise ValueError("--method: a chain is optimised by the exact method only.")
-                    chain_settings = lj.ChainOptimiseSettings(local=local, margin=margin, verbose=verbose)
-                    if given(["max_iter"]):  # the chain's own default otherwise
-                        chain_settings = lj.ChainOptimiseSettings(
-                            local=local, margin=margin, verbose=verbose, max_iter=max_iter
-                        )
-                    sign, n_harm = 1 if direction is None else direction, 3 if harmonics is None else harmonics
-                    return optimise_chain(mech, v_min, a_max, sign, omega, n_harm, chain_settings, out, json_out)
-                params = mech
+                screen: dict[str, Any] = dict(amplitudes=amplitudes, frequencies=frequencies, phases=phases,
+                                              zoom_levels=zoom_levels, zoom_points=zoom_points, local=local,
+                                              margin=margin, verbose=verbose)  # fmt: skip
+                screen |= {"max_iter": max_iter} if given(["max_iter"]) else {}  # else the optimiser's default
+                screen |= {"transient": int(transient)} if transient is not None else {}
+                chain_settings = lj.ChainOptimiseSettings(**screen)
+                return _optimise_bodies(built, v_min, a_max, direction, omega, harmonics, chain_settings, out, json_out)
+            params = built.mechanism
+            assert a_max is not None  # the paper's model: given, or its amplitude
             settings: ExactSettings | Settings
             if method == "exact":
                 settings = ExactSettings(
@@ -132,7 +139,7 @@ def register(app: typer.Typer) -> None:
                     margin=margin,
                     seed=seed,
                     verbose=verbose,
-                    transient=transient,
+                    transient=12.0 if transient is None else transient,
                     measured=measured,
                     corrections=corrections,
                 )
@@ -176,29 +183,77 @@ def register(app: typer.Typer) -> None:
             typer.echo(result.summary())
 
 
-def _optimise_mechanism(file: Path, mech: Any, v_min: float, a_max: float | None, direction: int | None,
-                        omega: float | None, harmonics: int | None, method: str, local: int, margin: float,
-                        max_iter: int | None, verbose: bool, json_out: bool) -> None:  # fmt: skip
-    """`optimize FILE` for a `kind = "mechanism"` file: `lj.optimise` of the file's mechanism, printed."""
+def amplitude(built: Built) -> float:
+    """The default `--a-max` of `optimize FILE`: the amplitude of the file's sinusoid or travelling wave."""
+    from ..model._waveform import Sinusoid
+    from ._files import travelling_wave
+
+    wave = built.extra.get("waveform")
+    if built.kind == "chain" and built.file is not None:
+        tw = travelling_wave(built.file)
+        if tw is not None:
+            return abs(tw["a"])
+    elif built.kind == "paper" and wave is None:
+        return float(built.mechanism.a)
+    elif isinstance(wave, Sinusoid):
+        return abs(float(wave.a))
+    raise ValueError(f"--a-max: {built.file}'s waveform has no single amplitude to default to; give --a-max.")
+
+
+def _plot(opt: Any, path: Path) -> None:
+    """A chain's optimal signals $s_j(t)$ over one period beside the best travelling wave's."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(8, 4.5), layout="constrained")
+    ax = fig.subplots()
+    phase = np.linspace(0, 2 * np.pi, 401)
+    n = np.arange(1, opt.cos.shape[1] + 1)
+    s = opt.cos @ np.cos(np.outer(n, phase)) + opt.sin @ np.sin(np.outer(n, phase))
+    for j, sj in enumerate(s):
+        ax.plot(phase / (2 * np.pi), sj, label=f"spring {j}")
+    w = opt.travelling_wave
+    if w is not None:
+        for j in range(s.shape[0]):
+            ax.plot(phase / (2 * np.pi), w["a"] * np.sin(phase - j * w["phi"]), color=f"C{j}", ls=":", lw=1)
+    ax.axhline(opt.a_max, color="grey", lw=0.8)
+    ax.axhline(-opt.a_max, color="grey", lw=0.8)
+    ax.set_xlabel("t / T (one actuation period)")
+    ax.set_ylabel("l0_j - lbar_j")
+    ax.legend(loc="upper right", fontsize="small")
+    ax.set_title(f"cost of transport {opt.cost_of_transport_exact:.4g} at speed {opt.mean_speed_exact:.4g} "
+                 f"(dotted: best travelling wave)")  # fmt: skip
+    fig.savefig(path, dpi=120)
+
+
+def _optimise_bodies(built: Built, v_min: float, a_max: float | None, direction: int | None, omega: float | None,
+                     harmonics: int | None, settings: Any, out: Path | None, json_out: bool) -> None:  # fmt: skip
+    """`optimize` of a chain or a mechanism of bodies and links: `lj.optimise`, printed; a chain's
+    optimum with `out` also saved (JSON) and plotted."""
     import locomotion_jax as lj
 
     from .._json import dumps
 
-    if method != "exact":
-        raise ValueError("--method: a mechanism is optimised by the exact method only.")
     if a_max is None:
-        raise ValueError(f"--a-max is required for {file} (a mechanism of bodies and links): the bound on every "
-                         "actuated signal's excursion about its mean.")  # fmt: skip
-    settings = lj.ChainOptimiseSettings(local=local, margin=margin, verbose=verbose)
-    if max_iter is not None:
-        settings = lj.ChainOptimiseSettings(local=local, margin=margin, verbose=verbose, max_iter=max_iter)
-    opt = lj.optimise(mech, v_min, a_max, direction=1 if direction is None else direction, omega=omega,
-                      harmonics=2 if harmonics is None else harmonics, settings=settings)  # fmt: skip
-    record = {**opt.to_dict(), "mechanism": str(file), "kind": "mechanism"}
+        raise ValueError(f"--a-max is required for {built.file} (a mechanism of bodies and links): the bound on "
+                         "every actuated signal's excursion about its mean.")  # fmt: skip
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+    default = 3 if built.kind == "chain" else 2
+    opt = lj.optimise(built.mechanism, v_min, a_max, direction=1 if direction is None else direction, omega=omega,
+                      harmonics=default if harmonics is None else harmonics, settings=settings)  # fmt: skip
+    if built.kind == "chain":
+        if out is not None:
+            (out / "chain_optimum.json").write_text(opt.to_json(full=True, indent=1))
+            _plot(opt, out / "chain_optimum.png")
+            if not json_out:
+                typer.echo(f"wrote {out / 'chain_optimum.json'}, {out / 'chain_optimum.png'}", err=True)
+        typer.echo(opt.to_json() if json_out else opt.summary())
+        return
+    record = {**opt.to_dict(), **built.record}
     if json_out:
         typer.echo(dumps(record))
         return
-    typer.echo(f"{file}: optimal actuation of links {opt.elements} ({opt.harmonics} harmonics)")
+    typer.echo(f"{built.file}: optimal actuation of links {opt.elements} ({opt.harmonics} harmonics)")
     for name in ("omega", "mean_speed_exact", "cost_of_transport_exact", "feasible_exact", "stable_exact",
                  "sinusoid", "improvement_vs_sinusoid", "mean_speed_simulated", "cost_of_transport_simulated",
                  "cos", "sin"):  # fmt: skip
