@@ -1,0 +1,130 @@
+"""One CLI over every kind of mechanism: each command on the paper's model (its options), a 3-mass chain
+(`--masses`) and a mechanism file (`examples/worm.toml`) prints what the library's front end gives on
+the same mechanism; a command that does not run a kind says so by name; the deprecated `chain-*`
+aliases run the new commands. Short horizons and few saves: the compilations are small."""
+
+import json
+from pathlib import Path
+
+import locomotion_jax as lj
+import numpy as np
+import pytest
+from cli_helpers import invoke
+
+
+pytestmark = pytest.mark.usefixtures("isolate_xla_flags")
+WORM = str(Path(__file__).resolve().parents[1] / "examples" / "worm.toml")
+CHAIN = ["--masses", "1,1,1", "--d", "0", "--friction", "anisotropic", "--mu-s-bwd", "0.9", "--mu-k-bwd", "0.7",
+         "--a", "0.08", "--omega", "3", "--phi", "2.0944"]  # fmt: skip
+KINDS = {"paper": ["--omega", "2"], "chain": CHAIN, "worm": [WORM]}
+FAST = ["--z", "0.3", "--horizon", "30", "--window", "5", "--dt", "0.02"]
+
+
+def mechanism(kind: str):
+    """The mechanism of `KINDS[kind]`, built here in Python."""
+    if kind == "paper":
+        return lj.Params(omega=2.0)
+    if kind == "chain":
+        return lj.Chain(masses=[1.0] * 3, d=0.0, waveforms=lj.TravellingWave(0.08, 3.0, 2.0944),
+                        friction=lj.AnisotropicCoulomb(0.7, 0.9, 0.5, 0.7))  # fmt: skip
+    return lj.load_mechanism(WORM)
+
+
+@pytest.mark.parametrize("kind", list(KINDS))
+def test_measure_equals_lj_measure(kind):
+    res = invoke("measure", *KINDS[kind], *FAST, "--json")
+    assert res.exit_code == 0, res.output
+    record = json.loads(res.stdout)
+    m = lj.measure(mechanism(kind), 0.3, horizon=30.0, window=5.0, dynamics=lj.Exact(dt=0.02))
+    for name, value in m.to_numpy().items():
+        expected = np.asarray(value, dtype=float)
+        expected = np.where(np.isfinite(expected), expected, np.nan)  # non-finite numbers are null in JSON
+        got = np.asarray([np.nan if v is None else v for v in np.ravel(record[name])], dtype=float)
+        np.testing.assert_array_equal(got, expected.ravel(), err_msg=name)
+    assert record["kind"] == ("chain" if kind == "worm" else kind)
+    assert record["status_name"] == lj.Status(int(m.status)).name
+
+
+@pytest.mark.parametrize("kind", list(KINDS))
+def test_simulate_equals_lj_simulate(kind):
+    res = invoke("simulate", *KINDS[kind], "--t-end", "2", "--saves", "5", "--dt", "0.02", "--json")
+    assert res.exit_code == 0, res.output
+    record = json.loads(res.stdout)
+    traj = lj.simulate(mechanism(kind), 2.0, np.linspace(0.0, 2.0, 5), dynamics=lj.Exact(dt=0.02))
+    np.testing.assert_array_equal(record["X"], np.asarray(traj.X))
+    np.testing.assert_array_equal(record["t"], np.asarray(traj.t))
+    assert record["displacement"] == float(traj.X[-1] - traj.X[0]) and record["n_switch"] == int(traj.n_switch)
+    positions = np.asarray(record["x"]) if kind != "paper" else np.stack([record["x1"], record["x2"]], -1)
+    assert positions.shape == (5, 2 if kind == "paper" else 3 if kind == "chain" else 4)
+
+
+@pytest.mark.slow  # the 4-mass chain's gait solver: a compilation of its own (about 2.5 min on 2 cores)
+def test_gait_of_the_worm_file_equals_lj_steady_gait():
+    res = invoke("gait", WORM, "--periods", "1", "--transient", "5", "--dt", "0.02", "--json")
+    assert res.exit_code == 0, res.output
+    record = json.loads(res.stdout)
+    g = lj.steady_gait(mechanism("worm"), periods=1, transient=5, dynamics=lj.Exact(dt=0.02))
+    assert record["status_name"] == lj.GaitStatus(int(g.status)).name and record["kind"] == "chain"
+    assert record["mean_speed"] == float(g.mean_speed) and record["state"] == np.asarray(g.state).tolist()
+    assert record["stick_fraction"] == np.asarray(g.stick_fraction).tolist()
+
+
+def test_sweep_of_a_chain_equals_lj_measure_of_the_batch(tmp_path):
+    out = tmp_path / "w.nc"
+    res = invoke("sweep", *CHAIN[:-6], "--a", "0.08", "--phi", "-1,2.0944", *FAST, "--no-progress", "--out", str(out))
+    assert res.exit_code == 0, res.output
+    assert "phi[2]" in res.stdout
+    import xarray as xr
+
+    ds = xr.open_dataset(out)
+    law = lj.AnisotropicCoulomb(0.7, 0.9, 0.5, 0.7)
+    chains = [lj.Chain(masses=[1.0] * 3, d=0.0, waveforms=lj.TravellingWave(0.08, 2.0, p), friction=law)
+              for p in (-1.0, 2.0944)]  # fmt: skip
+    batch = lj.Chain.stack(chains)
+    m = lj.measure(batch, 0.3, horizon=30.0, window=5.0, dynamics=lj.Exact(dt=0.02))
+    np.testing.assert_array_equal(ds.mean_speed.values, np.asarray(m.mean_speed))
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (
+            ["continue", *CHAIN, "--parameter", "a", "--stop", "0.1"],
+            "`continue`: the options give a chain; this command runs the paper's model.",
+        ),
+        (
+            ["continue", WORM, "--parameter", "a", "--stop", "0.1"],
+            f"`continue`: {WORM} is a chain; this command runs the paper's model.",
+        ),
+        (
+            ["animate", *CHAIN],
+            "`animate`: the options give a chain; this command runs the paper's model and a "
+            "mechanism of bodies and links",
+        ),
+        (["measure", "--phi", "1"], "--phi: these options describe a chain: give --masses."),
+        (["measure", "--masses", "1,1", "--mhat", "0.3"], "--mhat: these options describe the paper's model"),
+        (["measure", "--k", "50,60"], "--k must be a number (the paper's model takes one value)"),
+        (["sweep", "--masses", "1,1,1", "--k", "1:2:3", "--out", "x.nc"], "--k must be a number or a comma"),
+    ],  # fmt: skip
+)
+def test_a_kind_a_command_does_not_run_is_named(args, message):
+    res = invoke(*args)
+    assert res.exit_code == 2 and "Traceback" not in res.output
+    assert res.output.startswith(f"Error: {message}"), res.output
+
+
+@pytest.mark.parametrize(
+    "old, new, args",
+    [
+        ("chain", "measure", [*CHAIN, *FAST, "--json"]),
+        ("chain-simulate", "simulate", [*CHAIN, "--t-end", "1", "--saves", "3", "--dt", "0.02", "--json"]),
+        ("chain-gait", "gait", [*CHAIN, "--periods", "0"]),
+        ("chain-sweep", "sweep", [*CHAIN, "--out", "x.nc"]),
+        ("chain-optimize", "optimize", [*CHAIN[:-6], "--v-min", "0", "--a-max", "0.05"]),
+    ],
+)
+def test_every_alias_notes_its_deprecation_and_runs_the_new_command(old, new, args):
+    res, expected = invoke(old, *args), invoke(new, *args)
+    assert res.exit_code == expected.exit_code
+    assert res.stderr.splitlines()[0] == f"Note: `{old}` is deprecated and will be removed; use `locomotion-jax {new}`."
+    assert res.stdout == expected.stdout and res.stderr.splitlines()[1:] == expected.stderr.splitlines()
