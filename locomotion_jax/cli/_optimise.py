@@ -89,15 +89,16 @@ def register(app: typer.Typer) -> None:
         out: Path | None = typer.Option(None, "--out", help="Directory for the plots."),
         verbose: bool = typer.Option(False, "--verbose", help="Progress per block (stderr)."),
     ) -> None:
-        """Optimise the actuation waveform for least cost of transport at a required speed,
-        verify it on the exact model and compare it with the best sinusoid.
+        """Optimise the actuation for least cost of transport at a required speed, verify it on the
+        exact model and compare it with the best sinusoid (or travelling wave).
 
-        With a mechanism FILE the mechanism is the file's, and --a-max defaults to the amplitude of its
-        sinusoid or travelling wave (the waveform itself is what is optimised). A chain's file is
-        optimised as by `chain-optimize` (exact method; --harmonics default 3; --local, --max-iter,
-        --margin, --omega, --direction, --out, --json and --verbose apply); a `kind = "mechanism"` file's
-        actuated elements as by `lj.optimise` of a Mechanism (--a-max required; --harmonics default 2;
-        --local, --max-iter, --margin, --omega, --direction, --json and --verbose apply)."""
+        The mechanism is the paper's model (its options; --a-max required), a chain (`--masses` and
+        the chain options, without the wave's, which is what is optimised; --a-max required) or a
+        mechanism FILE (--a-max defaults to the amplitude of its sinusoid or travelling wave; a file
+        of bodies and links needs it). A chain or a mechanism of bodies and links is optimised by the
+        exact method (--harmonics default 3 for a chain, 2 for bodies and links; the travelling-wave
+        screen's --amplitudes, --frequencies, --phases, --zoom-levels, --zoom-points, and --local,
+        --max-iter, --margin, --transient, --omega, --direction apply; --out saves a chain's optimum)."""
         import locomotion_jax as lj
 
         from ..optimisation import _optimise, _pareto
