@@ -63,7 +63,9 @@ def test_gait_of_the_worm_file_equals_lj_steady_gait():
     res = invoke("gait", WORM, "--periods", "1", "--transient", "5", "--dt", "0.02", "--json")
     assert res.exit_code == 0, res.output
     record = json.loads(res.stdout)
-    g = lj.steady_gait(mechanism("worm"), periods=1, transient=5, dynamics=lj.Exact(dt=0.02))
+    worm = lj.load_mechanism(WORM)
+    assert isinstance(worm, lj.Chain)
+    g = lj.steady_gait(worm, periods=1, transient=5, dynamics=lj.Exact(dt=0.02))
     assert record["status_name"] == lj.GaitStatus(int(g.status)).name and record["kind"] == "chain"
     assert record["mean_speed"] == float(g.mean_speed) and record["state"] == np.asarray(g.state).tolist()
     assert record["stick_fraction"] == np.asarray(g.stick_fraction).tolist()
