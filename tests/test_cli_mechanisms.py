@@ -130,3 +130,26 @@ def test_every_alias_notes_its_deprecation_and_runs_the_new_command(old, new, ar
     assert res.exit_code == expected.exit_code
     assert res.stderr.splitlines()[0] == f"Note: `{old}` is deprecated and will be removed; use `locomotion-jax {new}`."
     assert res.stdout == expected.stdout and res.stderr.splitlines()[1:] == expected.stderr.splitlines()
+
+
+def test_optimize_of_a_chain_passes_the_options_chain(monkeypatch):
+    """`optimize --masses ...` hands `lj.optimise` the chain of the options (the optimiser is tested in
+    tests/test_chain_optimise.py) with the screen's options."""
+    import equinox as eqx
+
+    seen: dict = {}
+
+    def stand_in(*args, **kwargs):
+        seen.update(args=args, kwargs=kwargs)
+        raise ValueError("captured")
+
+    monkeypatch.setattr(lj, "optimise", stand_in)
+    res = invoke("optimize", *CHAIN[:-6], "--v-min", "0.1", "--a-max", "0.05", "--phases", "3", "--transient", "7")
+    assert res.exit_code == 2 and "captured" in res.output, res.output
+    chain, v_min, a_max = seen["args"]
+    expected = lj.Chain(masses=[1.0] * 3, d=0.0, friction=lj.AnisotropicCoulomb(0.7, 0.9, 0.5, 0.7))
+    assert bool(eqx.tree_equal(chain, expected)) and (v_min, a_max) == (0.1, 0.05)
+    settings = seen["kwargs"]["settings"]
+    assert (settings.phases, settings.transient, seen["kwargs"]["harmonics"]) == (3, 7, 3)
+    res = invoke("optimize", *CHAIN[:-6], "--v-min", "0.1")
+    assert res.exit_code == 2 and "--a-max is required" in res.output
