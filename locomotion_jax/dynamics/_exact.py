@@ -564,7 +564,7 @@ def _motion(P: Consts, contact: Contact, f: _F, geo, y: State, mode: _Mode, dl0,
     return _Motion(a1, a2, r, D, j, list(g), list(d), list(e))
 
 
-def _step_length(wave: AbstractWaveform, dt: float, st: "Hybrid", t_stop: Array, m0: _Motion, keep) -> _Length:
+def _step_length(wave: AbstractWaveform, dt: float | Array, st: "Hybrid", t_stop: Array, m0: _Motion, keep) -> _Length:
     """`dt`, or less to land on `t_stop`, or less to end just past the earliest event
     predicted by the Taylor quadratic of each event function. A crossing is then cut late in
     a short step, so the dense output there is as accurate as a step of that length (an
@@ -676,7 +676,7 @@ def step(
     params: Params,
     wave: AbstractWaveform,
     contact: Contact,
-    dt: float,
+    dt: float | Array,
     st: Hybrid,
     t_stop: Array,
     target: Target | None = None,

@@ -181,6 +181,6 @@ def _correct_batch(
     return jax.vmap(one, in_axes=(0, wave_axes) + (0,) * 7)(params, wave, k, lam0, scale, z0, zref, c, go)
 
 
-correct_batch = engine_jit(_correct_batch, ("wave_axes", "contact", "dt"))
+correct_batch = engine_jit(_correct_batch, ("wave_axes", "contact"))
 """The corrector, batched: one compilation per batch size, waveform type and settings, whatever the
 parameter (the selector is traced) and the gait period."""

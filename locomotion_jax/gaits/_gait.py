@@ -102,7 +102,7 @@ def _transient_batch(params, wave, wave_axes, contact, start, dt, transient, max
     return jax.vmap(one, in_axes=(0, wave_axes))(params, wave)
 
 
-_transient_batch = engine_jit(_transient_batch, ("wave_axes", "contact", "start", "dt"))
+_transient_batch = engine_jit(_transient_batch, ("wave_axes", "contact", "start"))
 
 
 def _transient_from_batch(params, wave, wave_axes, contact, y, dt, transient, max_steps):
@@ -110,7 +110,7 @@ def _transient_from_batch(params, wave, wave_axes, contact, y, dt, transient, ma
     return jax.vmap(one, in_axes=(0, wave_axes, 0))(params, wave, y)
 
 
-_transient_from_batch = engine_jit(_transient_from_batch, ("wave_axes", "contact", "dt"))
+_transient_from_batch = engine_jit(_transient_from_batch, ("wave_axes", "contact"))
 
 
 def _newton(flat, wave, axes, contact, dt, y0, go, k, tol, max_iter, max_steps) -> dict:

@@ -503,11 +503,13 @@ def _verify(params, speed, direction, a_max, shape, free, settings, candidates, 
     # Every candidate at each time origin the family offers, candidate-major.
     theta = np.stack([shape.shift(th, o) for th in thetas for o in origins])
     gait = gaits(theta, settings.dt)
+    # Every section again at dt/2: the same shapes, so the same compiled program (dt is traced).
+    half = gaits(theta, settings.dt / 2)
     pick = _best_sections(gait, rows, len(origins))
-    gait = jax.tree_util.tree_map(lambda x: x[pick] if np.ndim(x) else x, gait)
+    gait, half = (jax.tree_util.tree_map(lambda x: x[pick] if np.ndim(x) else x, g) for g in (gait, half))
     theta = theta[pick]
     fig = pareto.gait_figures(gait)
-    half = pareto.gait_figures(gaits(theta, settings.dt / 2))
+    half = pareto.gait_figures(half)
     agree = lambda a, b: np.abs(a - b) <= HALF_STEP_RTOL * np.abs(a)
     steady = fig.ok & half.ok & agree(fig.speed, half.speed) & agree(fig.cost, half.cost)
     fig = fig._replace(ok=steady)
