@@ -161,7 +161,12 @@ class Measurement(eqx.Module):
       $|X - X_0|$, relative to `tau_z`: about the relative change of a parameter at which
       `tau_z` and `e_z` change their switching structure (0 where `z` was not reached).
       Where the margins are small, a derivative may hold over a small range only or jump:
-      see `smooth`.
+      see `smooth`. The nearest switch is the last located one before $t_z$ (exact) or the next
+      one as estimated at $t_z$ from each event function approaching zero (its Taylor quadratic,
+      one Newton step: `_numerics.predict`). Under `contact="hop"` the switches include landings
+      and lift-offs: a body in flight at $t_z$ contributes its landing (its height's quadratic, so
+      a rising body's landing is not estimated) and no friction event, a grounded one its lift-off
+      ($N_i$) and its stick or slip events (tests/test_hop_margin.py).
 
     Under `contact="hop"` only (else `None`; SPEC §10), over the regime window like the stick
     fractions: `flight_fraction`, shape `batch_shape + (2,)`, the fraction of it each mass is in
