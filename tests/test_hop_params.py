@@ -151,3 +151,21 @@ def test_params_hop_batch_flags_bad_configuration_only():
                      contact="hop", dtype=jnp.float32)  # fmt: skip
     assert m32.flight_fraction is not None and m32.flight_fraction.dtype == jnp.float32
     assert int(m32.status) == lj.Status.OK and float(m32.flight_fraction[0]) > 0
+
+
+def test_params_sweep_hop_refused_with_the_chain_map_that_runs_it():
+    """`lj.sweep` of `Params` under "hop" names the map that runs it, a chain map of `Chain.from_params`,
+    whose values equal `lj.measure` of the same `Params` under "hop" bit for bit."""
+    axes = {"omega": np.asarray([9.0, 12.0]), "a": np.asarray([0.05, 0.08])}
+    with pytest.raises(NotImplementedError, match="Chain.from_params"):
+        lj.sweep(axes, z=1.0, contact="hop")
+    kw = dict(z=1.0, horizon=30.0, window=10.0, t_start=10.0)
+    ds = lj.sweep(axes, mechanism=lambda **v: lj.Chain.from_params(lj.Params(**v, d=0.25)), contact="hop",
+                  progress=False, **kw)  # type: ignore[arg-type]  # fmt: skip
+    W, A = np.meshgrid(axes["omega"], axes["a"], indexing="ij")
+    m = lj.measure(lj.Params(omega=W, a=A, d=0.25), contact="hop", **kw)  # type: ignore[arg-type]
+    assert m.flight_fraction is not None
+    assert np.array_equal(ds["tau_z"].values, np.asarray(m.tau_z))
+    assert np.array_equal(ds["flight_fraction"].values, np.asarray(m.flight_fraction))
+    assert np.array_equal(ds["stick_fraction"].values[..., 0], np.asarray(m.stick_fraction1))
+    assert np.all(ds["status"].values == lj.Status.OK) and ds["flight_fraction"].values.max() > 0
