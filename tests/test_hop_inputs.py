@@ -90,8 +90,8 @@ def test_hop_front_ends_refuse_clearly():
         lj.measure(ball(), contact="hop", dynamics=lj.Smoothed())
     with pytest.raises(NotImplementedError, match="contact='hop'.*Exact"):
         lj.simulate(lj.Params(), t_end=1.0, save_at=ts, contact="hop", dynamics=lj.Smoothed())
-    with pytest.raises(NotImplementedError, match="contact='hop'"):
-        lj.steady_gait(lj.Params(omega=2.0), contact="hop")
+    with pytest.raises(NotImplementedError, match="contact='hop' starts at rest"):
+        lj.steady_gait(lj.Chain.from_params(lj.Params(omega=2.0)), contact="hop", start=np.asarray([3.0, 0.0, 0.0]))
     with pytest.raises(ValueError, match="'strict', 'paper' or 'hop'"):
         lj.simulate(lj.Params(), t_end=1.0, save_at=ts, contact="bounce")  # type: ignore[arg-type]
 
