@@ -83,8 +83,8 @@ def simulate(
       or any other [`AbstractDynamics`][].
     - `waveform`: actuation $\\ell_0(t)$; default the sinusoid of eq. (13) from `params`.
     - `contact`: `"strict"` (default: stop at lift-off) or `"paper"` ($n_i = |N_i|$,
-      flagged), or `"hop"` (flight and landing, SPEC §10; a `Mechanism` without carried bodies
-      only, Exact dynamics; docs/model.md). `start`: `"paper"` (eq. 14, default) or `"relaxed"`.
+      flagged), or `"hop"` (flight and landing, SPEC §10; `Params`, a `Chain`, or a `Mechanism`
+      without carried bodies, Exact dynamics; docs/model.md). `start`: `"paper"` (eq. 14, default) or `"relaxed"`.
     - `initial`: instead of `start`, the state at $t = 0$: a tuple `(x1, v1, x2, v2)` of
       arrays broadcastable to the batch shape, with $x_1 < x_2$ (a mass at rest sticks if
       eq. (7) allows). Forward-mode derivatives with respect to it work as with respect
