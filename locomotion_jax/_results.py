@@ -52,6 +52,12 @@ class Trajectory(eqx.Module):
       switch. The positions and energies at a save time have derivatives through a switch
       at that time (the velocities are continuous), the velocities do not.
     - `start`, `contact`: the initial condition and contact reading used.
+    - `y`, `vy` (`contact="hop"` only, else `None`; SPEC §10): each mass's height and vertical
+      velocity, `batch_shape + (n_save, 2)`; `n_land`: the landings of both masses per configuration;
+      `zeno`: whether the Zeno rule made a rebound plastic. Under `"hop"`, `e` includes gravity
+      $m_i y_i$ and the vertical kinetic energy, `e_d` the impacts' losses, `N1`, `N2` are the
+      ground's reaction $m_i - V_i$ (on a mass in flight: $-m_i \\dot w_i$), `mode` counts a mass in
+      flight as slipping and `f_ex` has no friction from it.
     """
 
     t: Array
@@ -78,6 +84,10 @@ class Trajectory(eqx.Module):
     switch_gap: Array
     start: str = eqx.field(static=True)
     contact: str = eqx.field(static=True)
+    y: Array | None = None
+    vy: Array | None = None
+    n_land: Array | None = None
+    zeno: Array | None = None
 
     @property
     def smooth(self) -> Array:
@@ -97,7 +107,11 @@ class Trajectory(eqx.Module):
         return _stack(self.v1, self.v2)
 
     def to_numpy(self) -> dict[str, np.ndarray]:
-        return {k: np.asarray(getattr(self, k)) for k in self.__dataclass_fields__ if k not in ("start", "contact")}
+        """The array fields (the hopping ones only under `contact="hop"`) as numpy arrays."""
+        fields = (
+            k for k in self.__dataclass_fields__ if k not in ("start", "contact") and getattr(self, k) is not None
+        )
+        return {k: np.asarray(getattr(self, k)) for k in fields}
 
 
 def _stack(a: Array, b: Array) -> Array:
@@ -147,7 +161,20 @@ class Measurement(eqx.Module):
       $|X - X_0|$, relative to `tau_z`: about the relative change of a parameter at which
       `tau_z` and `e_z` change their switching structure (0 where `z` was not reached).
       Where the margins are small, a derivative may hold over a small range only or jump:
-      see `smooth`.
+      see `smooth`. The nearest switch is the last located one before $t_z$ (exact) or the next
+      one as estimated at $t_z$ from each event function approaching zero (its Taylor quadratic,
+      one Newton step: `_numerics.predict`). Under `contact="hop"` the switches include landings
+      and lift-offs: a body in flight at $t_z$ contributes its landing (its height's quadratic, so
+      a rising body's landing is not estimated) and no friction event, a grounded one its lift-off
+      ($N_i$) and its stick or slip events (tests/test_hop_margin.py).
+
+    Under `contact="hop"` only (else `None`; SPEC §10), over the regime window like the stick
+    fractions: `flight_fraction`, shape `batch_shape + (2,)`, the fraction of it each mass is in
+    flight; `landings_per_period`, the landings of both masses per actuation period $2\\pi/\\omega$;
+    `highest_hop`, shape `batch_shape + (2,)`, each mass's greatest height (0 for a mass that never
+    flies); `zeno`, whether the Zeno rule made a rebound plastic during the run. Under `"hop"` a
+    run goes on through lift-off (`liftoff` and `t_liftoff` record the first), `e_d` includes the
+    landings' losses and `delta_e` gravity's potential $m_i y_i$ and the vertical kinetic energy.
 
     Quantities that cannot be computed because the run stopped before
     $t_\\text{start}$ (lift-off, invalid input) are NaN, and `status` says why.
@@ -178,6 +205,10 @@ class Measurement(eqx.Module):
     z: float = eqx.field(static=True)
     start: str = eqx.field(static=True)
     contact: str = eqx.field(static=True)
+    flight_fraction: Array | None = None
+    landings_per_period: Array | None = None
+    highest_hop: Array | None = None
+    zeno: Array | None = None
 
     @property
     def smooth(self) -> Array:
@@ -193,8 +224,10 @@ class Measurement(eqx.Module):
         return _stack(self.stick_fraction1, self.stick_fraction2)
 
     def to_numpy(self) -> dict[str, np.ndarray]:
+        """The array fields (the hopping ones only under `contact="hop"`) as numpy arrays."""
         skip = ("z", "start", "contact")
-        return {k: np.asarray(getattr(self, k)) for k in self.__dataclass_fields__ if k not in skip}
+        fields = (k for k in self.__dataclass_fields__ if k not in skip and getattr(self, k) is not None)
+        return {k: np.asarray(getattr(self, k)) for k in fields}
 
 
 class ChainTrajectory(eqx.Module):

@@ -165,8 +165,8 @@ def test_float32():
 
 def test_paths_without_hop_refuse_clearly():
     ts = np.linspace(0.0, 1.0, 5)
-    with pytest.raises(NotImplementedError, match="contact='hop'"):
-        lj.steady_gait(lj.Chain(masses=[1.0, 1.0, 1.0]), contact="hop")
+    with pytest.raises(NotImplementedError, match="contact='hop' starts at rest"):  # runs from a start at rest
+        lj.steady_gait(lj.Chain(masses=[1.0, 1.0, 1.0]), contact="hop", start=np.asarray([3.0, 3.0, 0.0, 0.0, 0.0]))
     with pytest.raises(NotImplementedError, match="carried"):
         M = lj.Mechanism(masses=[1.0, 0.5], friction=[lj.Coulomb(0.5, 0.4), None], carried_by=[None, 0])
         lj.simulate(M, t_end=1.0, save_at=ts, contact="hop")

@@ -204,6 +204,8 @@ def probe(P: AbstractPhysics, contact: Contact, t: Array, y: State, target: num.
     """The event functions with their first and second time derivatives at time `t` and
     state `y`, in the mode the state implies (a mass at rest sticks where its static limits
     hold; compare `_exact.probe`): lists in the order of the module docstring (target last).
+    Under `contact="hop"` a body above the ground ($y_i > 0$, or $y_i = 0$ rising) is in flight
+    there, with its landing ($y_i$) as its event, and a grounded one has its lift-off ($N_i$).
     For margins at a measured instant; not for the hot loop."""
     dtype = t.dtype
     dr = P.drive(jnp.cos(P.omega * t), jnp.sin(P.omega * t))
@@ -214,8 +216,12 @@ def probe(P: AbstractPhysics, contact: Contact, t: Array, y: State, target: num.
     one = jnp.ones((), dtype)
     sdir = tuple(jnp.where(v > 0, one, jnp.where(v < 0, -one, jnp.where(f >= 0, one, -one))) for v, f in zip(y.v, F))
     side = tuple(jnp.where(q > 0, one, -one) for q in N)
+    fly = None
+    if contact == "hop" and y.y is not None and y.vy is not None:  # inside a step y_i stays 0 on the ground
+        fly = tuple((h > 0) | ((h == 0) & (w > 0)) for h, w in zip(y.y, y.vy))
+        stuck = tuple(s & ~f for s, f in zip(stuck, fly))
     v = tuple(jnp.where(s, 0, vi) for s, vi in zip(stuck, y.v))
-    D = motion.derivatives(P, contact, Mode(stuck, sdir, side), target, dr, L, y.x, v)
+    D = motion.derivatives(P, contact, Mode(stuck, sdir, side, fly), target, dr, L, y.x, v, y.y, y.vy)
     return D.g, D.dg, D.ddg
 
 

@@ -55,7 +55,9 @@ class ChainGait(eqx.Module):
       `liftoff`: as in [`Gait`][].
     - `stick_fraction`: fraction of the gait period each mass is stuck, shape `batch + (N,)`.
     - `state`: the orbit's reduced state at the section $\\omega t \\equiv 0$, shape
-      `batch + (2N - 1,)`, order $(u_1, \\dots, u_{N-1}, v_1, \\dots, v_N)$ (a mechanism anchored to
+      `batch + (2N - 1,)` (under `contact="hop"`: `batch + (4N - 1,)`, the heights and vertical
+      velocities $(y_1, \\dots, y_N, w_1, \\dots, w_N)$ appended), order
+      $(u_1, \\dots, u_{N-1}, v_1, \\dots, v_N)$ (a mechanism anchored to
       the wall: `batch + (2N,)`, $(x_1, \\dots, x_N, v_1, \\dots, v_N)$);
       `monodromy`: $M$ in that order, shape `batch + (2N - 1, 2N - 1)` (anchored: `(2N, 2N)`).
     """
@@ -106,10 +108,13 @@ def reduced_size(P: AbstractPhysics) -> int:
 
 
 def _reduced(st: engine.Hybrid, P: AbstractPhysics | None = None) -> Array:
+    """The section state of a hybrid state; under `contact="hop"` followed by the heights and
+    vertical velocities $(y_1, \\dots, y_N, w_1, \\dots, w_N)$."""
     x, v = st.y.x, st.y.v
+    vert = [] if st.y.y is None or st.y.vy is None else list(st.y.y) + list(st.y.vy)
     if P is not None and anchored(P):
-        return jnp.stack(list(x) + list(v))
-    return jnp.stack([b - a for a, b in zip(x[:-1], x[1:])] + list(v))
+        return jnp.stack(list(x) + list(v) + vert)
+    return jnp.stack([b - a for a, b in zip(x[:-1], x[1:])] + list(v) + vert)
 
 
 def _positions(P: AbstractPhysics, y: Array) -> Array:
@@ -123,8 +128,20 @@ def _positions(P: AbstractPhysics, y: Array) -> Array:
 def _section_state(P: AbstractPhysics, contact: Contact, y: Array) -> engine.Hybrid:
     """The hybrid state at phase 0 for a reduced state `y` (with $x_1 = 0$ unless anchored): a mass
     at rest sticks where its static limits hold (eq. 7 generalised), a moving one slips along $v_i$."""
-    n = P.n_bodies
-    return engine.init(P, contact, _positions(P, y), y[y.shape[-1] - n :])
+    n, base = P.n_bodies, reduced_size(P)
+    if contact != "hop":
+        return engine.init(P, contact, _positions(P, y), y[base - n : base])
+    # A body on the ground (y_i = 0, not rising) has no vertical tangent: its height and vertical
+    # velocity are set to the constant 0 there (`where`), so a grounded body adds a zero multiplier.
+    h, w = y[base : base + n], y[base + n : base + 2 * n]
+    up = (h > 0) | (w > 0)
+    h, w = jnp.where(up, h, 0), jnp.where(up, w, 0)
+    return engine.init(P, contact, _positions(P, y), y[base - n : base], h, w)
+
+
+def _step(P, contact, dt, st, t_end):
+    """One engine step (under `contact="hop"` with the physics' restitution and Zeno speed)."""
+    return engine.step(P, contact, dt, st, t_end, hop=P.hop()[2:] if contact == "hop" else None)
 
 
 def _advance(P, contact, dt, st, t_end, max_steps):
@@ -136,7 +153,7 @@ def _advance(P, contact, dt, st, t_end, max_steps):
 
     def body(c):
         s, stuck, n = c
-        new, info = engine.step(P, contact, dt, s, t_end)
+        new, info = _step(P, contact, dt, s, t_end)
         span = jnp.where(info.commit, info.t1 - info.t0, 0)
         return new, tuple(a + jnp.where(b, span, 0) for a, b in zip(stuck, info.stuck)), n + 1
 
@@ -239,8 +256,10 @@ def steady_gait_chain(
     states at phase 0: gaps then velocities $(u_0, \\dots, u_{N-2}, v_0, \\dots, v_{N-1})$, shape
     `batch + (2N - 1,)`, or for an anchored mechanism positions then velocities, `batch + (2N,)`)."""
     check_contact_start(contact, start if isinstance(start, str) else "paper", chain)
-    if contact == "hop":
-        raise NotImplementedError("steady_gait does not follow flight (contact='hop'); use 'strict' or 'paper'.")
+    if contact == "hop" and not isinstance(start, str):
+        raise NotImplementedError(
+            "steady_gait with contact='hop' starts at rest ('paper' or 'relaxed'), not from given section states."
+        )
     flat, valid, shape = prepare_chain(chain, dtype)
     valid, unresolved = guard_chain(dynamics, flat, valid, shape)  # refused alone, skipped in a batch
     y_start = None

@@ -201,6 +201,11 @@ def steady_gait(
       without a spring to the wall; an anchored mechanism: positions then velocities, `batch + (2N,)`;
       a mass given $v_i = 0$ starts stuck where eq. 7 allows). A mechanism's named start is its own
       `x0`, `v0`.
+    - Under `contact="hop"` (SPEC §10) the period map runs through lift-offs, flights and landings: a
+      `Params` is solved as `Chain.from_params(params)` and returns a `ChainGait`; a chain's section
+      state is followed by the heights and vertical velocities $(y_1, \\dots, y_N, w_1, \\dots, w_N)$
+      (`ChainGait.state`); a body on the ground at the section has no vertical tangent (a zero
+      multiplier), as a plastic landing has none. Starts at rest only.
     - `verbose`: print progress to stderr from the start: a line before the transient and before
       each period's Newton solve (each compiles on its first call), and one when done.
 
@@ -248,7 +253,14 @@ def _two_mass(params: Params, periods, transient, tol, max_iter, dynamics: Exact
               guarded: bool = True, say=lambda message: None):  # fmt: skip
     """`guarded=False` skips the resolution guard: only for a caller that checks the resolution
     itself by a convergence study (the exact optimiser's verification solves at `dt` and `dt/2`).
-    `say` reports each stage (`steady_gait(verbose=True)`)."""
+    `say` reports each stage (`steady_gait(verbose=True)`). Under `contact="hop"`: the gait of the
+    two-mass chain `Chain.from_params(params, waveform)` (a `ChainGait`, heights in its state)."""
+    if contact == "hop":  # flight and landing run on the N-body engine (as `measure` does)
+        from ._chain_gait import steady_gait_chain
+
+        chain = Chain.from_params(params, waveform)
+        kw = dict(periods=periods, transient=transient, tol=tol, max_iter=max_iter, start=start, dtype=dtype)
+        return steady_gait_chain(chain, dynamics=dynamics, contact=contact, **kw)
     model.check_contact(contact)
     flat, wave, axes, shape = prepare(params, waveform, dtype)
     unresolved = None

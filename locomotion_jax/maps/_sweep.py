@@ -262,6 +262,12 @@ def sweep(
                                 dtype, chunk_size, path, overwrite, progress, on_invalid, order)  # fmt: skip
     if t_start is not None:
         raise ValueError("t_start is for chain maps (mechanism=...); the paper's model starts at Params.t_start.")
+    if contact == "hop":
+        raise NotImplementedError(
+            "sweep of the paper's model (Params) with contact='hop' (SPEC section 10) is not implemented on its "
+            "sharded path; map it as the two-mass chain it runs as: lj.sweep(axes, mechanism=lambda **kw: "
+            "lj.Chain.from_params(lj.Params(**kw)), contact='hop') (the fields of a ChainMeasurement)."
+        )
     model.check_contact(contact)
     model.initial_gap(Params(), start)  # validates `start`
     check_measure_args(z, horizon, window)

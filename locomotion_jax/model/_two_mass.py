@@ -123,7 +123,7 @@ def check_contact(contact: str, hop: bool = False) -> None:
     if contact == "hop" and not hop:
         raise NotImplementedError(
             "contact='hop' (flight and landing, SPEC section 10) is not implemented yet for the paper's "
-            "model (Params) on this path (only lj.simulate of a Mechanism); use contact='strict' or 'paper'."
+            "model (Params) on this path (lj.simulate and lj.measure run it); use contact='strict' or 'paper'."
         )
     if contact not in ("strict", "paper", "hop"):
         raise ValueError(f"contact must be 'strict', 'paper' or 'hop', got {contact!r}.")

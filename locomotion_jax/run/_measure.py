@@ -144,7 +144,8 @@ def measure(
 
 def _two_mass(params: Params, dynamics: AbstractDynamics, z, horizon, window, t_start, waveform, contact, start,
               initial, dtype) -> Measurement:  # fmt: skip
-    model.check_contact(contact)
+    if contact == "hop" and not isinstance(dynamics, Exact):
+        raise NotImplementedError(f"contact='hop' runs with Exact dynamics only, got {type(dynamics).__name__}.")
     flat, wave, axes, shape = prepare(params, waveform, dtype)
     ts = _start_times(t_start, shape, flat.dtype)
     flat, unresolved = guard_two_mass(dynamics, flat, wave, shape, default_start=ts is None)

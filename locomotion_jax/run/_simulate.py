@@ -83,8 +83,8 @@ def simulate(
       or any other [`AbstractDynamics`][].
     - `waveform`: actuation $\\ell_0(t)$; default the sinusoid of eq. (13) from `params`.
     - `contact`: `"strict"` (default: stop at lift-off) or `"paper"` ($n_i = |N_i|$,
-      flagged), or `"hop"` (flight and landing, SPEC §10; a `Mechanism` without carried bodies
-      only, Exact dynamics; docs/model.md). `start`: `"paper"` (eq. 14, default) or `"relaxed"`.
+      flagged), or `"hop"` (flight and landing, SPEC §10; `Params`, a `Chain`, or a `Mechanism`
+      without carried bodies, Exact dynamics; docs/model.md). `start`: `"paper"` (eq. 14, default) or `"relaxed"`.
     - `initial`: instead of `start`, the state at $t = 0$: a tuple `(x1, v1, x2, v2)` of
       arrays broadcastable to the batch shape, with $x_1 < x_2$ (a mass at rest sticks if
       eq. (7) allows). Forward-mode derivatives with respect to it work as with respect
@@ -134,7 +134,8 @@ def simulate(
 
 
 def _two_mass(params: Params, dynamics: AbstractDynamics, t_end, save_np, waveform, contact, start, initial, dtype):
-    model.check_contact(contact)
+    if contact == "hop" and not isinstance(dynamics, Exact):
+        raise NotImplementedError(f"contact='hop' runs with Exact dynamics only, got {type(dynamics).__name__}.")
     flat, wave, axes, shape = prepare(params, waveform, dtype)
     flat, unresolved = guard_two_mass(dynamics, flat, wave, shape)
     y0 = prepare_initial(initial, shape, flat.dtype)
