@@ -17,8 +17,9 @@ while the internal mass's inertial force stays below the friction at rest, (M + 
 (P <= f+), forward slips only (f+ < P <= f-), slips both ways (P > f-). In the middle band the motion of
 each period has a closed form (derived in REPRODUCTION.md), which the engine is compared with.
 
-**The cheapest force waveform at one speed**: a batched search over internal forces of three harmonics
-under a force bound, for a capsule on isotropic ground, against the best sinusoid (`waveform_search`).
+**The cheapest force waveform at one speed**: `lj.optimise` of the capsule on isotropic ground over
+internal forces of three harmonics under a force bound (`optimal_force`), checked by a direct simulation,
+against a batched sweep of sinusoids and against the floor of the cost of transport.
 
 Writes `capsule.png`, `capsule_fang_xu.png`, `capsule_waveform.png` and `capsule.json` to the output folder.
 
@@ -30,7 +31,7 @@ import json
 import math
 import time
 from pathlib import Path
-from typing import cast
+from typing import Any, cast
 
 import jax
 
@@ -105,27 +106,36 @@ def capsule_map(n_omega: int, n_force: int) -> dict:
     return out
 
 
-# -- the cheapest force waveform at one speed: a batched search ---------------------------------------------------
+# -- the cheapest force waveform at one speed: lj.optimise ------------------------------------------------------
 
-SEARCH = dict(omega=3.0, f_max=2.0, harmonics=3, v_min=0.05, friction="isotropic Coulomb(0.5, 0.4)")
-"""The search's requirement: forward at `v_min` or faster with max_t |f(t)| <= `f_max`, on isotropic ground."""
+OPT: dict[str, Any] = dict(omega=3.0, f_max=2.0, harmonics=3, v_min=0.05, friction="isotropic Coulomb(0.5, 0.4)")
+"""The requirement: forward at `v_min` or faster with max_t |f(t)| <= `f_max` (the force bound, `a_max`), on
+isotropic ground, at a fixed omega."""
 
 
 def _force_capsules(cos: np.ndarray, sin: np.ndarray, omega: float) -> lj.Mechanism:
     wave = lj.Fourier(jnp.asarray(cos), jnp.asarray(sin), omega, 0.0)
-    return lj.Mechanism(masses=[M, m], friction=[GROUNDS[SEARCH["friction"]], None], carried_by=[None, 0],
+    return lj.Mechanism(masses=[M, m], friction=[GROUNDS[OPT["friction"]], None], carried_by=[None, 0],
                         links=[lj.Spring(0, 1, k=K, rest=0.0), lj.Force(0, 1, wave)])  # fmt: skip
 
 
 def _speed_cost(cos: np.ndarray, sin: np.ndarray, settle: int = 20, periods: int = 10) -> tuple[np.ndarray, ...]:
-    """Mean speed and cost of transport of a batch of force waveforms (rows), over whole periods."""
-    T = 2 * math.pi / SEARCH["omega"]
-    res = lj.measure(_force_capsules(cos, sin, SEARCH["omega"]), z=1e6, horizon=periods * T, window=periods * T,
-                     t_start=settle * T)  # fmt: skip
+    """Mean speed and cost of transport of a batch of force waveforms (rows) by a direct simulation
+    (`lj.measure`, one batched call), over whole periods after `settle` periods from rest; and the energy
+    dissipated per the body's own displacement in units of mu_k (M + m) g (`lj.simulate`: the centre of
+    mass also carries the internal mass's free oscillation, which whole forcing periods need not cancel)."""
+    T = 2 * math.pi / OPT["omega"]
+    capsules = _force_capsules(cos, sin, OPT["omega"])
+    res = lj.measure(capsules, z=1e6, horizon=periods * T, window=periods * T, t_start=settle * T)
     v, ed = np.asarray(res.mean_speed), np.asarray(res.e_d)
     ok = np.asarray(res.status) == lj.Status.OK
     cost = np.where(ok & (v > 0), ed / np.where(v > 0, v * periods * T, 1.0), np.inf)
-    return np.where(ok, v, np.nan), cost
+    traj = lj.simulate(capsules, t_end=(settle + periods) * T, save_at=jnp.array([settle, settle + periods]) * T)
+    body = np.abs(np.diff(np.asarray(traj.x)[..., 0], axis=-1)[..., 0])
+    e_body = np.diff(np.asarray(traj.e_d), axis=-1)[..., 0]
+    law = cast(lj.Coulomb, GROUNDS[OPT["friction"]])
+    per_floor = np.where(body > 1e-9, e_body / np.where(body > 1e-9, float(law.mu_k) * (M + m) * body, 1.0), np.nan)
+    return np.where(ok, v, np.nan), cost, per_floor
 
 
 def _peak(cos: np.ndarray, sin: np.ndarray) -> np.ndarray:
@@ -134,70 +144,60 @@ def _peak(cos: np.ndarray, sin: np.ndarray) -> np.ndarray:
     return np.abs(np.cos(np.outer(th, n)) @ cos.T + np.sin(np.outer(th, n)) @ sin.T).max(0)
 
 
-def waveform_search(samples: int, rounds: int, seed: int = 0) -> dict:
-    """The cheapest force waveform (H harmonics of omega, max |f| <= f_max) that drives the capsule forward at
-    v_min or faster: random waveforms scaled into the bound, then rounds of perturbations of the best 16
-    (the step halving each round), each round one batched `lj.measure`. A search, not `lj.optimise` (which
-    does not take a Mechanism yet); the best sinusoid under the same bound is the baseline."""
-    H, f_max, v_min = SEARCH["harmonics"], SEARCH["f_max"], SEARCH["v_min"]
-    rng = np.random.default_rng(seed)
+def optimal_force(quick: bool) -> dict:
+    """The cheapest internal force of `harmonics` harmonics of omega under the force bound that drives the
+    capsule forward at v_min or faster: `lj.optimise` of the capsule (its steady gaits, exact gradients),
+    checked by a direct simulation from rest (`lj.measure`, 100 periods of transient, 40 averaged), against
+    a batched sweep of sinusoids A sin(omega t + phi) under the same bound, and against the floor of the
+    cost of transport, mu_k (M + m) g (a body that never slides backward; backward slides cost more)."""
+    H, f_max, v_min, omega = OPT["harmonics"], OPT["f_max"], OPT["v_min"], OPT["omega"]
     t0 = time.perf_counter()
-
-    def bounded(c, s, level):
-        scale = f_max * level / _peak(c, s)
-        return c * scale[:, None], s * scale[:, None]
-
-    c, s = bounded(rng.normal(size=(samples, H)), rng.normal(size=(samples, H)), rng.uniform(0.3, 1.0, samples))
-    v, cost = _speed_cost(c, s)
-    pool = (c, s, v, cost)
-    step = 0.3 * f_max
-    for _ in range(rounds):
-        c, s, v, cost = pool
-        score = np.where(v >= v_min, cost, np.inf)
-        best = np.argsort(score)[:16]
-        best = best[np.isfinite(score[best])]
-        if best.size == 0:
-            break
-        reps = samples // best.size
-        pc = np.repeat(c[best], reps, 0) + step * rng.normal(size=(best.size * reps, H))
-        ps = np.repeat(s[best], reps, 0) + step * rng.normal(size=(best.size * reps, H))
-        level = np.minimum(_peak(pc, ps) / f_max, 1.0)  # inside the bound: kept; outside: scaled onto it
-        pc, ps = bounded(pc, ps, level)
-        pv, pcost = _speed_cost(pc, ps)
-        pool = tuple(np.concatenate([a, b]) for a, b in zip(pool, (pc, ps, pv, pcost)))
-        step *= 0.5
-    c, s, v, cost = pool
-    score = np.where(v >= v_min, cost, np.inf)
-    i = int(np.argmin(score))
-    # The winner again from a longer transient and over more periods: steady, and the figures to report.
-    v_check, cost_check = _speed_cost(c[i : i + 1], s[i : i + 1], settle=100, periods=40)
-    # Baseline: sinusoids f_max u sin(omega t + phi), u in (0, 1], phi over a period (the phase sets where the
-    # force starts, and on isotropic ground the start can pick the direction).
+    capsule = _force_capsules(np.zeros(1), np.zeros(1), omega)
+    settings = lj.MechanismOptimiseSettings(
+        amplitudes=4 if quick else 8, phases=4 if quick else 8, local=2 if quick else 4, max_iter=30 if quick else 40
+    )
+    opt = lj.optimise(capsule, v_min=v_min, a_max=f_max, omega=omega, harmonics=H, settings=settings)
+    wall = time.perf_counter() - t0
+    c, s = np.asarray(opt.cos)[0], np.asarray(opt.sin)[0]
+    v_check, cost_check, _ = _speed_cost(c[None], s[None], settle=100, periods=40)
+    # The baseline: sinusoids f_max u sin(omega t + phi), u in (0, 1], phi over a period (the phase sets where
+    # the force starts, and on isotropic ground the start can pick the direction).
     U, PHI = (
         q.ravel() for q in np.meshgrid(np.linspace(0.02, 1.0, 50), np.linspace(0, 2 * math.pi, 24, endpoint=False))
     )
     c1, s1 = np.zeros((U.size, H)), np.zeros((U.size, H))
     c1[:, 0], s1[:, 0] = f_max * U * np.sin(PHI), f_max * U * np.cos(PHI)
-    sv, scost = _speed_cost(c1, s1)
+    sv, scost, sfloor = _speed_cost(c1, s1)
     fast = int(np.nanargmax(sv))
     feasible = sv >= v_min
     cheapest = int(np.argmin(np.where(feasible, scost, np.inf)))
-    out = {**SEARCH, "evaluated": int(v.size), "wall_s": time.perf_counter() - t0,
-           "cos": c[i].tolist(), "sin": s[i].tolist(), "peak": float(_peak(c[i : i + 1], s[i : i + 1])[0]),
-           "mean_speed": float(v[i]), "cost_of_transport": float(cost[i]),
-           "mean_speed_check": float(v_check[0]), "cost_check": float(cost_check[0]),
+    law = cast(lj.Coulomb, GROUNDS[OPT["friction"]])
+    floor = float(law.mu_k) * (M + m)
+    moving = sv > MOVING  # forward faster than the map's threshold (a stuck capsule creeps at round-off)
+    out = {**OPT, "optimise_wall_s": wall, "runtime_s": opt.runtime_s, "screened": opt.screened,
+           "evaluations": opt.evaluations, "feasible": opt.feasible_exact, "stable": opt.stable_exact,
+           "cos": c.tolist(), "sin": s.tolist(), "peak": float(_peak(c[None], s[None])[0]),
+           "stroke_exact": float(np.max(opt.stroke_exact)), "mean_speed": opt.mean_speed_exact,
+           "cost_of_transport": opt.cost_of_transport_exact, "spectral_radius": opt.spectral_radius_exact,
+           "simulation_agreement": opt.simulation_agreement, "screen_sinusoid": opt.sinusoid,
+           "mean_speed_check": float(v_check[0]), "cost_check": float(cost_check[0]), "cost_floor": floor,
            "sinusoid_fastest": float(sv[fast]), "sinusoid_fastest_amplitude": float(f_max * U[fast]),
            "sinusoid_fastest_phase": float(PHI[fast]), "sinusoid_feasible": int(feasible.sum()),
-           "sinusoid_count": int(U.size),
+           "sinusoid_count": int(U.size), "sinusoid_moving": int(moving.sum()),
+           "sinusoid_min_cost_moving": float(scost[moving].min()) if moving.any() else None,
+           "sinusoid_min_dissipation_per_body_distance": float(np.nanmin(sfloor)),
            "sinusoid_cheapest_cost": float(scost[cheapest]) if feasible.any() else None,
            "sinusoid_cheapest_speed": float(sv[cheapest]) if feasible.any() else None}  # fmt: skip
-    print(f"waveform search ({SEARCH['friction']}, omega={SEARCH['omega']}, |f| <= {f_max}, v >= {v_min}): "
-          f"{v.size} waveforms in {out['wall_s']:.0f} s; best: speed {v[i]:.4g}, cost of transport {cost[i]:.4g} "
-          f"(longer run: {v_check[0]:.4g}, {cost_check[0]:.4g}), cos {np.round(c[i], 3).tolist()}, "
-          f"sin {np.round(s[i], 3).tolist()}; sinusoids A sin(omega t + phi) under the bound: the fastest "
-          f"{sv[fast]:.3g} (A {f_max * U[fast]:.3g}, phi {PHI[fast]:.3g}), {out['sinusoid_feasible']} of {U.size} "
-          f"meet v_min, the cheapest of them: cost {out['sinusoid_cheapest_cost']}, speed "
-          f"{out['sinusoid_cheapest_speed']}")  # fmt: skip
+    print(f"lj.optimise ({OPT['friction']}, omega={omega}, |f| <= {f_max}, v >= {v_min}, {H} harmonics): "
+          f"{wall:.0f} s, {opt.screened} sinusoids screened, {opt.evaluations} orbit evaluations; optimum: "
+          f"feasible {opt.feasible_exact}, speed {opt.mean_speed_exact:.6g}, cost of transport "
+          f"{opt.cost_of_transport_exact:.10g} (floor mu_k (M + m) g = {floor:.6g}), peak force {out['peak']:.4g}, "
+          f"cos {np.round(c, 4).tolist()}, sin {np.round(s, 4).tolist()}; direct simulation from rest "
+          f"(lj.measure, 100 periods + 40): speed {v_check[0]:.6g}, cost {cost_check[0]:.10g}; sinusoids "
+          f"A sin(omega t + phi) under the bound: the fastest {sv[fast]:.3g} (A {f_max * U[fast]:.3g}, "
+          f"phi {PHI[fast]:.3g}), {out['sinusoid_feasible']} of {U.size} meet v_min, {int(moving.sum())} move forward "
+          f"(> {MOVING}), the cheapest of those costs {out['sinusoid_min_cost_moving']}; every sinusoid dissipates "
+          f"at least {np.nanmin(sfloor):.10g} times the floor per distance its body slides")  # fmt: skip
     return out
 
 
@@ -305,7 +305,7 @@ def plot(res: dict, rep: dict, path: Path) -> None:
 
 
 def plot_waveform(best: dict, path: Path) -> None:
-    """The search's cheapest force waveform over one period."""
+    """The optimal force waveform over one period."""
     th = np.linspace(0.0, 2 * math.pi, 400)
     n = np.arange(1, len(best["cos"]) + 1)
     f = np.cos(np.outer(th, n)) @ np.asarray(best["cos"]) + np.sin(np.outer(th, n)) @ np.asarray(best["sin"])
@@ -315,9 +315,10 @@ def plot_waveform(best: dict, path: Path) -> None:
     for y in (-best["f_max"], best["f_max"]):
         ax.axhline(y, color="tab:red", ls="--", lw=0.8)
     ax.set(xlabel="t / T", ylabel="internal force f(t) (+ on the internal mass)",
-           title=f"cheapest force found at speed >= {best['v_min']}, {best['friction']}, omega = {best['omega']}\n"
-                 f"speed {best['mean_speed_check']:.3g}, cost of transport {best['cost_check']:.3g}; "
-                 f"fastest sinusoid (any phase): {best['sinusoid_fastest']:.3g}")  # fmt: skip
+           title=f"lj.optimise: cheapest force at speed >= {best['v_min']}, {best['friction']}, "
+                 f"omega = {best['omega']}\nspeed {best['mean_speed_check']:.3g}, cost of transport "
+                 f"{best['cost_check']:.4g} (floor {best['cost_floor']:.3g}); fastest sinusoid (any phase): "
+                 f"{best['sinusoid_fastest']:.3g}")  # fmt: skip
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
@@ -342,8 +343,8 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     res = capsule_map(*((22, 16) if args.quick else (86, 60)))
     rep = reproduction(12 if args.quick else 56)
-    best = waveform_search(*((512, 2) if args.quick else (2048, 5)))
-    (out / "capsule.json").write_text(json.dumps(_rounded({"map": res, "fang_xu": rep, "waveform_search": best})))
+    best = optimal_force(args.quick)
+    (out / "capsule.json").write_text(json.dumps(_rounded({"map": res, "fang_xu": rep, "optimal_force": best})))
     plot(res, rep, out / "capsule.png")
     plot_waveform(best, out / "capsule_waveform.png")
     print(

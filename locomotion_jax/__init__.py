@@ -64,7 +64,10 @@ from .optimisation._chain_optimum import (
     ChainOptimiseSettings as ChainOptimiseSettings,
     ChainOptimum as ChainOptimum,
 )
-from .optimisation._mechanism import MechanismOptimum as MechanismOptimum
+from .optimisation._mechanism import (
+    MechanismOptimiseSettings as MechanismOptimiseSettings,
+    MechanismOptimum as MechanismOptimum,
+)
 from .optimisation._optimum import (
     ExactOptimiseSettings as ExactOptimiseSettings,
     OptimiseSettings as OptimiseSettings,

@@ -139,6 +139,33 @@ def test_batches_and_an_invalid_configuration():
         M.validate()
 
 
+def test_a_batch_flags_one_bad_wall_spring_and_runs_the_others():
+    """A wall spring's stiffness per configuration, one `k <= 0` (`check=False`): `measure` flags it
+    INVALID with NaN figures and the others equal their runs alone."""
+    k = jnp.array([1.0, 0.0, 2.0])
+    M = lj.Mechanism(masses=[1.0], friction=lj.Coulomb(1.0, 1.0), links=[lj.Spring(0, lj.WALL, k=k, rest=0.0),
+                     lj.ExternalForce(0, lj.Sinusoid(2.5, 1.5, 0.0))], x0=[1.0], check=False)  # fmt: skip
+    assert np.asarray(M.is_valid()).tolist() == [True, False, True]
+    with pytest.raises(ValueError, match=r"'k' of links\[0\] Spring\(0, WALL\) at batch index \(1,\)"):
+        M.validate()
+    m = lj.measure(M, z=1.0, t_start=5.0, horizon=10.0, window=10.0)
+    assert [int(s) for s in m.status] == [lj.Status.OK, lj.Status.INVALID, lj.Status.OK]
+    assert np.isnan(float(m.e_d[1])) and np.isfinite(np.asarray(m.e_d)[[0, 2]]).all()
+    for i in (0, 2):
+        alone = lj.measure(M[i], z=1.0, t_start=5.0, horizon=10.0, window=10.0)
+        assert float(m.e_d[i]) == pytest.approx(float(alone.e_d), rel=1e-12, abs=1e-14)
+        assert float(m.mean_speed[i]) == pytest.approx(float(alone.mean_speed), rel=1e-12, abs=1e-14)
+
+
+@pytest.mark.parametrize("initial", [([0.0], [0.0, 0.0]), ([0.0, 0.0], [0.0, 0.0, 0.0]), ([0.0, 0.0, 1.0], 0.0)])
+def test_an_initial_state_of_the_wrong_length_is_refused(initial):
+    """`initial=(x, v)` of a mechanism: one value per body (or a scalar for all), in `simulate` and `measure`."""
+    with pytest.raises(ValueError, match=r"initial [xv] has shape \(\d,\).*its last axis must have length 2"):
+        lj.simulate(_capsule(), t_end=1.0, initial=initial)
+    with pytest.raises(ValueError, match=r"initial [xv] has shape \(\d,\).*its last axis must have length 2"):
+        lj.measure(_capsule(), z=1.0, initial=initial)
+
+
 def test_chain_path_unchanged_for_a_chain():
     """`Chain` still runs (its `gaps` are its neighbours': an initial state out of order is refused)."""
     C = lj.Chain(masses=[1.0, 1.0], waveforms=lj.TravellingWave(0.05, 2.0, 0.0))
@@ -159,6 +186,12 @@ def test_chain_path_unchanged_for_a_chain():
         (dict(masses=[1.0, 1.0], friction=[None, None], carried_by=[None, 0]),
          "body 1 is carried by body 0, which does not touch the ground"),
         (dict(masses=[1.0, 1.0], links=[lj.Spring(0, 2, k=1.0)]), r"links\[0\] Spring\(0, 2\): body 2 does not exist"),
+        (dict(masses=[1.0, 1.0], links=[lj.Force(0, 3, lj.Sinusoid(1.0, 2.0, 0.0))]),
+         r"links\[0\] Force\(0, 3\): body 3 does not exist \(the mechanism has bodies 0 to 1\)"),
+        (dict(masses=[1.0, 1.0], links=[lj.ExternalForce(4, 0.5)]),
+         r"links\[0\] ExternalForce\(4\): body 4 does not exist"),
+        (dict(masses=[1.0, 1.0], friction=[lj.Coulomb(), None], carried_by=[None, 0, 1]),
+         r"carried_by: one entry per body \(2\), got 3"),
         (dict(masses=[1.0], links=[lj.Spring(0, lj.WALL, k=0.0)]),
          r"Invalid parameter 'k' of links\[0\] Spring\(0, WALL\): got k=0.0; the valid range is k > 0"),
         (dict(masses=[1.0], links=[lj.Spring(0, lj.WALL, k=-2.0)]), r"'k' of links\[0\] Spring\(0, WALL\)"),

@@ -1,8 +1,17 @@
-"""`lj.optimise` of a `lj.Mechanism` (`optimisation._mechanism`): a capsule whose internal mass sits on a
-spring and a damper, driven by an internal force, on anisotropic ground, backwards. The optimum's gait is
-checked by a direct `simulate` and by the independent reference (`tests/reference_mechanism.py`, with the
-optimum's Fourier force; within the step's truncation error, which shrinks with the step), and it beats
-the best sinusoid of a small batched sweep of the test's own. Slow (about 2 to 5 minutes)."""
+"""`lj.optimise` of a `lj.Mechanism` (`optimisation._mechanism`, `lj.MechanismOptimiseSettings`).
+
+1. A capsule whose internal mass sits on a spring and a damper, driven by an internal force, on
+   anisotropic ground, backwards: the optimum's gait is checked by a direct `simulate` and by the
+   independent reference (`tests/reference_mechanism.py`, with the optimum's Fourier force; within the
+   step's truncation error, which shrinks with the step), and it beats the best sinusoid of a small
+   batched sweep of the test's own.
+2. The capsule of `experiments/capsule.py` on isotropic Coulomb ground at a fixed frequency, forward,
+   under a force bound the optimum does not reach: its cost of transport is the physical floor
+   mu_k (M + m) g (a body that never slides backward dissipates exactly mu_k N per distance;
+   any backward slide costs more), checked by a direct simulation from rest (`lj.measure`), and no
+   sinusoid under the same bound is as fast (a batched sweep of amplitudes and phases).
+
+Slow (about 2 to 5 minutes each)."""
 
 import jax.numpy as jnp
 import locomotion_jax as lj
@@ -24,7 +33,7 @@ def _capsule(force=None, check=True):
 
 @pytest.fixture(scope="module")
 def optimum():
-    s = lj.ChainOptimiseSettings(
+    s = lj.MechanismOptimiseSettings(
         amplitudes=4, frequencies=8, local=2, max_iter=15, transient=20, dt=0.01, omega_min=0.15, omega_max=2.0
     )
     return lj.optimise(_capsule(), v_min=V_MIN, a_max=A_MAX, direction=-1, settings=s)
@@ -85,6 +94,98 @@ def test_mechanism_optimum_beats_the_best_sinusoid_of_a_sweep(optimum):
     print(f"best sinusoid of the sweep: {best:.6f} ({int(ok.sum())} of {ok.size} fast enough); optimum "
           f"{optimum.cost_of_transport_exact:.6f}; the optimiser's own screen: {optimum.sinusoid}")  # fmt: skip
     assert ok.any() and optimum.cost_of_transport_exact < best
+
+
+ISO = lj.Coulomb(0.5, 0.4)
+M_BODY, M_IN, K_ISO = 1.0, 0.5, 10.0
+OMEGA, F_MAX, V_ISO = 3.0, 2.0, 0.05
+FLOOR = 0.4 * (M_BODY + M_IN)  # mu_k (M + m) g, g = 1
+
+
+def _iso_capsule(cos, sin):
+    """The capsule of experiments/capsule.py driven by a Fourier force of omega = 3 (rows: a batch)."""
+    wave = lj.Fourier(jnp.asarray(cos), jnp.asarray(sin), OMEGA, 0.0)
+    return lj.Mechanism(masses=[M_BODY, M_IN], friction=[ISO, None], carried_by=[None, 0],
+                        links=[lj.Spring(0, 1, k=K_ISO, rest=0.0), lj.Force(0, 1, wave)])  # fmt: skip
+
+
+def _measured(mech, settle=100, periods=40):
+    T = 2 * np.pi / OMEGA
+    res = lj.measure(mech, z=1e6, horizon=periods * T, window=periods * T, t_start=settle * T)
+    v, ed = np.asarray(res.mean_speed), np.asarray(res.e_d)
+    return np.asarray(res.status), v, np.where(v > 0, ed / np.where(v > 0, v * periods * T, 1.0), np.inf)
+
+
+@pytest.fixture(scope="module")
+def iso_optimum():
+    s = lj.MechanismOptimiseSettings(amplitudes=4, phases=4, local=2, max_iter=30)
+    return lj.optimise(_iso_capsule(np.zeros(1), np.zeros(1)), v_min=V_ISO, a_max=F_MAX, omega=OMEGA, harmonics=3,
+                       settings=s)  # fmt: skip
+
+
+@pytest.mark.slow
+def test_isotropic_capsule_optimum_sits_on_the_physical_floor(iso_optimum):
+    opt = iso_optimum
+    print({k: v for k, v in opt.to_dict().items() if k not in ("candidates",)})
+    assert opt.feasible_exact and opt.stable_exact and opt.elements == [1] and opt.omega == pytest.approx(OMEGA)
+    assert opt.mean_speed_exact >= V_ISO
+    # Interior in the force: the bound does not bind (the speed constraint and the floor do).
+    peak = float(np.max(opt.stroke_exact))
+    assert peak < 0.75 * F_MAX
+    # The floor: e_d >= mu_k N |distance|, equal only if the body never slides backward.
+    assert FLOOR * (1 - 1e-9) <= opt.cost_of_transport_exact <= FLOOR * (1 + 1e-6)
+    # A direct simulation from rest with the optimum's force: the same speed and cost.
+    status, v, cost = _measured(opt.mechanism)
+    print(f"optimum: speed {opt.mean_speed_exact:.10f}, measured {float(v):.10f}; cost "
+          f"{opt.cost_of_transport_exact:.12f}, measured {float(cost):.12f}; peak force {peak:.4f}")  # fmt: skip
+    assert int(status) == lj.Status.OK
+    assert abs(float(v) / opt.mean_speed_exact - 1) < 1e-8 and abs(float(cost) / opt.cost_of_transport_exact - 1) < 1e-8
+    T = 2 * np.pi / OMEGA
+    traj = lj.simulate(opt.mechanism, t_end=110 * T, save_at=jnp.linspace(100 * T, 110 * T, 2001))
+    assert float(np.min(np.asarray(traj.v)[:, 0])) >= -1e-12  # the body never slides backward
+    assert float(np.max(np.asarray(traj.v)[:, 0])) > 0.1
+
+
+@pytest.mark.slow
+def test_isotropic_capsule_no_sinusoid_under_the_bound_is_as_good(iso_optimum):
+    """Sinusoids A sin(omega t + phi), 25 amplitudes up to the bound times 12 phases, one batched
+    `lj.simulate` over 10 periods after 20: none meets the speed at a lower cost, and every one pays
+    at least the floor on its body's own displacement, e_d >= mu_k (M + m) g |x_0(t1) - x_0(t0)| (the
+    centre of mass also carries the internal mass's free oscillation, which need not be periodic)."""
+    U, PHI = (q.ravel() for q in np.meshgrid(np.linspace(0.04, 1.0, 25), np.linspace(0, 2 * np.pi, 12, endpoint=False)))
+    cos, sin = np.zeros((U.size, 3)), np.zeros((U.size, 3))
+    cos[:, 0], sin[:, 0] = F_MAX * U * np.sin(PHI), F_MAX * U * np.cos(PHI)
+    T = 2 * np.pi / OMEGA
+    traj = lj.simulate(_iso_capsule(cos, sin), t_end=30 * T, save_at=jnp.array([20 * T, 30 * T]))
+    assert (np.asarray(traj.status) == lj.Status.OK).all()
+    x, ed = np.asarray(traj.x), np.asarray(traj.e_d)
+    body = x[:, 1, 0] - x[:, 0, 0]
+    com = (M_BODY * body + M_IN * (x[:, 1, 1] - x[:, 0, 1])) / (M_BODY + M_IN)
+    e_d = ed[:, 1] - ed[:, 0]
+    v = com / (10 * T)
+    slides = np.abs(body) > 1e-9
+    print(f"sinusoids: {int(slides.sum())} of {U.size} displace the body, the fastest forward {v.max():.4f}, "
+          f"{int((v >= V_ISO).sum())} meet v_min")  # fmt: skip
+    assert slides.any() and (e_d >= FLOOR * np.abs(body) * (1 - 1e-9) - 1e-12).all()
+    fast = v >= V_ISO
+    cost = np.where(fast, e_d / np.where(fast, com, 1.0), np.inf)
+    assert not (cost < iso_optimum.cost_of_transport_exact * (1 - 1e-9)).any()
+
+
+def test_mechanism_optimise_settings():
+    """The settings' checks name the field; a ChainOptimiseSettings is taken field for field (one phase)."""
+    from locomotion_jax.optimisation._mechanism import MechanismOptimiseSettings
+
+    with pytest.raises(ValueError, match="MechanismOptimiseSettings.phases must be an int >= 1, got 0"):
+        lj.MechanismOptimiseSettings(phases=0)
+    with pytest.raises(ValueError, match="need 0 < omega_min < omega_max"):
+        lj.MechanismOptimiseSettings(omega_min=2.0, omega_max=1.0)
+    with pytest.raises(ValueError, match="dt, trust_radius, newton_tol and check_tol must be > 0"):
+        lj.MechanismOptimiseSettings(dt=0.0)
+    s = MechanismOptimiseSettings.from_chain(lj.ChainOptimiseSettings(local=3, max_iter=7, omega_max=1.5))
+    assert (s.local, s.max_iter, s.omega_max, s.phases) == (3, 7, 1.5, 1)
+    with pytest.raises(TypeError, match="must be a MechanismOptimiseSettings, got ExactSettings"):
+        lj.optimise(_capsule(), v_min=0.01, a_max=0.5, settings=lj.ExactOptimiseSettings())
 
 
 def test_mechanism_optimise_bad_input():

@@ -14,9 +14,11 @@ on the periodic orbits of the exact model ([`steady_gait`][] of a mechanism).
 
 Method (as `optimisation._chain`, with sinusoids in place of travelling waves):
 
-1. **Sinusoids**: every actuated element driven by $a\\sin\\omega t$ about its mean, on a grid of
-   `amplitudes` $\\times$ `frequencies` ([`ChainOptimiseSettings`][]), solved in one batched
-   [`steady_gait`][]; the cheapest that meets the speed is the baseline.
+1. **Sinusoids**: every actuated element driven by $a\\sin(\\omega t + \\varphi)$ about its mean, on a
+   grid of `amplitudes` $\\times$ `frequencies` $\\times$ `phases` ([`MechanismOptimiseSettings`][]),
+   solved in one batched [`steady_gait`][]; the cheapest that meets the speed is the baseline. The
+   phase matters where the ground is symmetric: a sinusoid's steady gait then has a mirror image
+   (x -> -x, t -> t + T/2) going the other way, and the phase of the start picks one.
 2. **Local refinement** of the harmonics of every element from the best `local` sinusoids: the
    chain's monotone L-BFGS descent on an exact penalty (`_chain_local`), with exact gradients
    through the periodic orbit (`gaits._chain_orbit.ChainOracle`, which takes a mechanism).
@@ -48,6 +50,85 @@ from ._chain_optimum import ChainOptimiseSettings
 from ._lockstep import run_lockstep
 
 
+class MechanismOptimiseSettings(eqx.Module):
+    """Settings of [`optimise`][locomotion_jax.optimisation._optimise.optimise] for a
+    [`Mechanism`][locomotion_jax.Mechanism] (module `optimisation._mechanism`). Python numbers:
+    changing `local`, `dt` or `newton_iter` (or the harmonics) recompiles; the others do not.
+
+    The actuators are the mechanism's elements driven by a waveform (a spring's rest length, an
+    internal `Force`, an `ExternalForce`); `optimise`'s `a_max` bounds each one's excursion about its
+    mean, in the element's own units: a length for a spring's rest, a force for a force (the force
+    bound); `optimise`'s `harmonics` sets the Fourier series' length (default 2).
+
+    - `amplitudes`, `frequencies`, `phases`: the sinusoid screen, $a$ on `amplitudes` equal steps
+      up to $a_\\max$, $\\omega$ log-spaced over its range (one value for a fixed `omega`), the
+      phase $\\varphi$ on `phases` equal steps of $[0, 2\\pi)$.
+    - `local`: starts refined locally in lockstep (the best sinusoids of the screen);
+      `max_iter`: iterations of each local descent; `trust_radius`: the largest first step of a
+      line search (coefficients in units of $a_\\max$, $\\log\\omega$).
+    - `margin`: required $\\min_{i,t} N_i$ on the orbit during the refinement (units of weight).
+    - `speed_slack`: the refinement targets $v_\\min (1 + \\text{slack})$.
+    - `omega_min`, `omega_max`: range of a free base frequency, in units of the highest natural
+      frequency of the mechanism's bodies and springs (or of its own base frequency where it has
+      no spring).
+    - `dt`: the exact engine's step; `transient`: actuation periods from the mechanism's start
+      before an orbit is solved; `newton_tol`, `newton_iter`: the periodic-orbit solve.
+    - `check_tol`, `check_periods`: the direct simulation of the optimum runs until the largest
+      Floquet multiplier's modulus to the power of the periods run falls below `check_tol` (at
+      least `check_periods[0]`, at most `check_periods[1]` gait periods), then averages over 10.
+    - `verbose`: progress on stderr.
+
+    A [`ChainOptimiseSettings`][] is accepted in its place: its fields of the same names are used,
+    and one phase.
+    """
+
+    amplitudes: int = 4
+    frequencies: int = 8
+    phases: int = 1
+    local: int = 2
+    max_iter: int = 40
+    trust_radius: float = 0.1
+    margin: float = 0.05
+    speed_slack: float = 1e-3
+    omega_min: float = 0.15
+    omega_max: float = 2.0
+    dt: float = 0.01
+    transient: int = 30
+    newton_tol: float = 1e-10
+    newton_iter: int = 12
+    check_tol: float = 1e-12
+    check_periods: tuple[int, int] = (40, 1500)
+    verbose: bool = False
+
+    def __check_init__(self):
+        counts = dict(amplitudes=self.amplitudes, frequencies=self.frequencies, phases=self.phases, local=self.local,
+                      max_iter=self.max_iter, transient=self.transient, newton_iter=self.newton_iter)  # fmt: skip
+        for name, v in counts.items():
+            if isinstance(v, bool) or not (isinstance(v, int) and v >= 1):
+                raise ValueError(f"MechanismOptimiseSettings.{name} must be an int >= 1, got {v!r}.")
+        if not (0 < self.omega_min < self.omega_max):
+            raise ValueError(
+                f"MechanismOptimiseSettings: need 0 < omega_min < omega_max, got {self.omega_min!r}, "
+                f"{self.omega_max!r}."
+            )
+        if not (self.dt > 0 and self.trust_radius > 0 and self.newton_tol > 0 and self.check_tol > 0):
+            raise ValueError("MechanismOptimiseSettings: dt, trust_radius, newton_tol and check_tol must be > 0.")
+        if not (self.margin >= 0 and self.speed_slack >= 0):
+            raise ValueError(
+                f"MechanismOptimiseSettings: margin and speed_slack must be >= 0, got {self.margin!r}, "
+                f"{self.speed_slack!r}."
+            )
+        lo, hi = self.check_periods
+        if not (1 <= lo <= hi):
+            raise ValueError(f"MechanismOptimiseSettings.check_periods must be (lo, hi), 1 <= lo <= hi, got {lo, hi}.")
+
+    @classmethod
+    def from_chain(cls, s: ChainOptimiseSettings) -> "MechanismOptimiseSettings":
+        """The fields of a chain's settings that a mechanism's optimiser shares (one phase)."""
+        names = [n for n in cls.__dataclass_fields__ if n != "phases"]
+        return cls(**{n: getattr(s, n) for n in names})
+
+
 class MechanismOptimum(eqx.Module):
     """The optimum of [`optimise`][locomotion_jax.optimisation._optimise.optimise] for a
     [`Mechanism`][locomotion_jax.Mechanism] (module `optimisation._mechanism`).
@@ -58,7 +139,7 @@ class MechanismOptimum(eqx.Module):
     - `mean_speed_exact`, `cost_of_transport_exact`, `gait_period_exact`, `stable_exact`,
       `spectral_radius_exact`, `stroke_exact` (per element, $\\max_t |s_j - \\bar s_j|$), `feasible_exact`:
       of its steady gait.
-    - `sinusoid`: the best sinusoid of the screen (a dict: `a`, `omega`, `mean_speed`,
+    - `sinusoid`: the best sinusoid of the screen (a dict: `a`, `omega`, `phase`, `mean_speed`,
       `cost_of_transport`; `None` if none meets the speed); `improvement_vs_sinusoid`: $1 -$ the
       ratio of the costs of transport.
     - `mean_speed_simulated`, `cost_of_transport_simulated`, `simulated_periods`: a direct
@@ -118,7 +199,7 @@ def _natural(mech: Mechanism) -> float:
     return float(np.sqrt(max(np.linalg.eigvalsh(K * s[:, None] * s[None, :]).max(), 0.0)))
 
 
-def _gaits(mech: Mechanism, cos: np.ndarray, sin: np.ndarray, omega: np.ndarray, settings: ChainOptimiseSettings):
+def _gaits(mech: Mechanism, cos: np.ndarray, sin: np.ndarray, omega: np.ndarray, settings: MechanismOptimiseSettings):
     """Steady gaits (periods 1 and 2) of `mech` driven by each row's coefficients, as host arrays."""
     from ..gaits._gait import steady_gait
 
@@ -160,11 +241,15 @@ def check_inputs(mech: Any, v_min: Any, a_max: Any, direction: Any, harmonics: A
 
 def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction: int = 1,
                        omega: float | None = None, harmonics: int = 2,
-                       settings: ChainOptimiseSettings | None = None) -> MechanismOptimum:  # fmt: skip
-    """`optimise(mechanism, v_min, a_max, ...)`: the method of the module docstring."""
-    settings = ChainOptimiseSettings() if settings is None else settings
-    if not isinstance(settings, ChainOptimiseSettings):
-        raise TypeError(f"settings for a Mechanism must be a ChainOptimiseSettings, got {type(settings).__name__}.")
+                       settings: Any = None) -> MechanismOptimum:  # fmt: skip
+    """`optimise(mechanism, v_min, a_max, ...)`: the method of the module docstring. `settings`: a
+    `MechanismOptimiseSettings`, a `ChainOptimiseSettings` (its shared fields) or `None` (the defaults);
+    anything else is refused here with a `TypeError` naming both."""
+    if isinstance(settings, ChainOptimiseSettings):
+        settings = MechanismOptimiseSettings.from_chain(settings)
+    settings = MechanismOptimiseSettings() if settings is None else settings
+    if not isinstance(settings, MechanismOptimiseSettings):
+        raise TypeError(f"settings for a Mechanism must be a MechanismOptimiseSettings, got {type(settings).__name__}.")
     elements = check_inputs(mech, v_min, a_max, direction, harmonics, omega)
     t0 = time.perf_counter()
     say = (lambda m: print(m, file=sys.stderr, flush=True)) if settings.verbose else (lambda m: None)
@@ -177,21 +262,23 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
         lo, hi = settings.omega_min * w, settings.omega_max * w
     free = hi > lo
 
-    # 1. Sinusoids a sin(omega t) on every actuated element.
+    # 1. Sinusoids a sin(omega t + phi) on every actuated element.
     amps = a_max * np.arange(1, settings.amplitudes + 1) / settings.amplitudes
     oms = np.geomspace(lo, hi, settings.frequencies) if free else np.array([lo])
-    A, W = (x.ravel() for x in np.meshgrid(amps, oms, indexing="ij"))
+    phis = 2 * np.pi * np.arange(settings.phases) / settings.phases
+    A, W, PHI = (x.ravel() for x in np.meshgrid(amps, oms, phis, indexing="ij"))
     zero = np.zeros((A.size, S, H))
-    sin = zero.copy()
-    sin[:, :, 0] = A[:, None]
+    cos, sin = zero.copy(), zero.copy()
+    cos[:, :, 0], sin[:, :, 0] = (A * np.sin(PHI))[:, None], (A * np.cos(PHI))[:, None]
     say(f"screening {A.size} sinusoids (compiling the steady-gait solver: first call only)...")
-    sc = _gaits(base, zero, sin, W, settings)
+    sc = _gaits(base, cos, sin, W, settings)
     fast = np.asarray(sc["ok"], bool) & (direction * np.nan_to_num(sc["speed"], nan=-np.inf) >= v_min)
     order = np.lexsort((-direction * np.nan_to_num(sc["speed"], nan=-np.inf), np.where(fast, sc["cost"], np.inf),
                         ~fast))  # fmt: skip
     best = int(order[0])
-    sinusoid = (dict(a=float(A[best]), omega=float(W[best]), mean_speed=float(sc["speed"][best]),
-                     cost_of_transport=float(sc["cost"][best])) if fast[best] else None)  # fmt: skip
+    sinusoid = (dict(a=float(A[best]), omega=float(W[best]), phase=float(PHI[best]),
+                     mean_speed=float(sc["speed"][best]), cost_of_transport=float(sc["cost"][best]))
+                if fast[best] else None)  # fmt: skip
 
     # 2. Local refinement of every element's harmonics from the best sinusoids.
     starts = [int(i) for i in order if sc["ok"][i]][: settings.local] or [best]
@@ -206,7 +293,7 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
     ev = local.Evaluator(oracle, settings.local, settings.transient, make)
     x0 = []
     for lane, i in enumerate(starts):
-        x0.append(local.pack(zero[i] / a_max, sin[i] / a_max, float(W[i])))
+        x0.append(local.pack(cos[i] / a_max, sin[i] / a_max, float(W[i])))
         ev.y[lane], ev.k[lane] = sc["y"][i], int(max(sc["k"][i], 1))
     bounds = (math.log(lo), math.log(hi))
     proj = lambda x: local.project(x, S, H, *bounds)
@@ -219,7 +306,7 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
     xs = run_lockstep(solvers, ev)
 
     # 3. Verification: the baseline and the refined actuations, rescaled onto the exact bound.
-    coefs = [(zero[best], sin[best], float(W[best]))]
+    coefs = [(cos[best], sin[best], float(W[best]))]
     coefs += [local.on_bound(x, S, H, a_max) for x in xs]
     cos_c = np.stack([c for c, _, _ in coefs])
     sin_c = np.stack([s for _, s, _ in coefs])
@@ -258,7 +345,7 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
     )  # fmt: skip
 
 
-def _simulate_check(mech: Mechanism, rho: float, period: float, settings: ChainOptimiseSettings):
+def _simulate_check(mech: Mechanism, rho: float, period: float, settings: MechanismOptimiseSettings):
     """Mean speed and cost of transport of a direct simulation from the mechanism's own start, over 10
     whole gait periods after enough periods for the slowest Floquet mode to decay to `check_tol`."""
     from ..run._simulate import simulate

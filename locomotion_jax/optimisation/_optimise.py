@@ -58,7 +58,7 @@ from ..run._batch import mechanism_arg
 from ..run._resolution import refuse_search
 from . import _constraints as cons, _pareto as pareto
 from ._chain_optimum import ChainOptimiseSettings, ChainOptimum
-from ._mechanism import MechanismOptimum
+from ._mechanism import MechanismOptimiseSettings, MechanismOptimum
 from ._objective import make_plan, Plan, rollout
 from ._optimum import ExactSettings, Optimum, Settings, verified
 from ._shapes import FourierShape, SplineShape
@@ -296,7 +296,8 @@ def optimise(
 @overload
 def optimise(
     params: Mechanism, v_min: float, a_max: float, *, method: str = ..., direction: int | None = ...,
-    omega: float | None = ..., harmonics: int | None = ..., settings: "ChainOptimiseSettings | None" = ...,
+    omega: float | None = ..., harmonics: int | None = ...,
+    settings: "MechanismOptimiseSettings | ChainOptimiseSettings | None" = ...,
     sweep: None = ..., start: None = ...,
 ) -> MechanismOptimum: ...  # fmt: skip
 
@@ -310,7 +311,7 @@ def optimise(
     direction: int | None = None,
     omega: float | None = None,
     harmonics: int | None = None,
-    settings: "Settings | ExactSettings | ChainOptimiseSettings | None" = None,
+    settings: "Settings | ExactSettings | ChainOptimiseSettings | MechanismOptimiseSettings | None" = None,
     sweep: "pareto.SinusoidSweep | None" = None,
     start: Any = None,
 ) -> Optimum | ChainOptimum | MechanismOptimum:
@@ -321,7 +322,9 @@ def optimise(
     module `optimisation._chain`, [`ChainOptimiseSettings`][], default 3 harmonics) and the
     result a [`ChainOptimum`][]; a [`Mechanism`][locomotion_jax.Mechanism] (SPEC §9): the same method
     over the Fourier coefficients of its actuated elements' waveforms (sinusoids screened; module
-    `optimisation._mechanism`, default 2 harmonics), the result a `MechanismOptimum`.
+    `optimisation._mechanism`, [`MechanismOptimiseSettings`][], default 2 harmonics; `a_max` bounds
+    each actuated element's excursion in its own units, a force bound for a force), the result a
+    `MechanismOptimum`.
 
     Two methods:
 

@@ -129,8 +129,9 @@ def _known_finite(state: jax.Array) -> np.ndarray | None:
 def prepare_chain_initial(
     initial: Any, shape: tuple[int, ...], n_bodies: int, dtype: Any, mechanism: Any = None
 ) -> jax.Array | None:
-    """A chain's or a mechanism's initial state `(x, v)` (positions and velocities, each
-    broadcastable to `shape + (N,)`) as a flat `(size, 2N)` array, or `None`. Raises a
+    """A chain's or a mechanism's initial state `(x, v)` (positions and velocities, each a
+    scalar or an array whose last axis has length N, broadcastable to `shape + (N,)`) as a flat
+    `(size, 2N)` array, or `None`. Raises a
     `ValueError` where its values are known here (not under `jit`) and one is not finite or a
     gap that must stay positive is not (`AbstractPhysics.gaps` of the flat `mechanism`'s
     physics; a chain's: its positions in increasing order; `mechanism=None`: a chain's); under
@@ -145,6 +146,11 @@ def prepare_chain_initial(
     flat = []
     for name, value in zip(("x", "v"), initial):
         arr = jnp.asarray(value, dtype)
+        if arr.ndim >= 1 and arr.shape[-1] != n_bodies:  # one value for all is a scalar, not a length-1 axis
+            raise ValueError(
+                f"initial {name} has shape {arr.shape}, which does not broadcast to one value per mass: its last "
+                f"axis must have length {n_bodies} (or give a scalar for all)."
+            )
         try:
             arr = jnp.broadcast_to(arr, shape + (n_bodies,))
         except ValueError:
