@@ -17,7 +17,7 @@ from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform, Sinusoid
-from . import _chain_measure, _chain_simulate, _exact_measure, _exact_simulate
+from . import _chain_measure, _chain_simulate, _exact_simulate, _paper
 from ._base import AbstractDynamics
 from ._forward import check_static
 from ._runs import default_max_steps
@@ -75,7 +75,7 @@ class Exact(AbstractDynamics):
         t_start: Array | None,
         initial: Array | None,
     ) -> dict[str, Array]:
-        return _exact_measure._exact_batch(
+        return _paper._measure_batch(
             params,
             wave,
             wave_axes,
@@ -137,7 +137,7 @@ class Exact(AbstractDynamics):
             # done takes the next one. Each configuration's cap comes from its own span
             # (`_own_cap`), not from the sweep's `max_steps`, so that it is the same as a
             # `measure` of that configuration alone.
-            return _exact_measure.exact_batch(
+            return _paper.measure_batch(
                 p, wave, 0, z, horizon, window, contact, start, dyn.dt, dyn._own_cap(), lanes=lanes
             )
 
