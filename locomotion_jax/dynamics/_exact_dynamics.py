@@ -17,7 +17,7 @@ from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform, Sinusoid
-from . import _chain_measure, _chain_simulate, _exact_simulate, _paper
+from . import _chain_measure, _chain_simulate, _paper
 from ._base import AbstractDynamics
 from ._forward import check_static
 from ._runs import default_max_steps
@@ -58,9 +58,7 @@ class Exact(AbstractDynamics):
     ) -> dict[str, Array]:
         # Room for the steps to t_end, plus the iterations that save a state.
         max_steps = self.max_steps or default_max_steps(t_end, self.dt) + 4 * save_at.shape[0]
-        return _exact_simulate.simulate_batch(
-            params, wave, wave_axes, save_at, contact, start, self.dt, max_steps, initial
-        )
+        return _paper.simulate_batch(params, wave, wave_axes, save_at, contact, start, self.dt, max_steps, initial)
 
     def measure_two_mass(
         self,

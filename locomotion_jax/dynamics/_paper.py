@@ -10,13 +10,18 @@ fields of [`Measurement`][locomotion_jax.Measurement] and [`Trajectory`][locomot
 import jax
 import jax.numpy as jnp
 
-from .._custom_types import Array
+from .._custom_types import Array, Contact
+from .._status import mode_code
+from ..model import _two_mass as model
 from ..model._params import Params, safe_params
 from ..model._waveform import AbstractWaveform
-from . import _chain_measure as chain_measure
+from . import _chain_exact as engine, _chain_measure as chain_measure, _exact as exact
+from ._chain_simulate import _row
 from ._compile import engine_jit
+from ._margins import switch_gap
 from ._queue import run_queue
-from ._runs import default_lanes
+from ._runs import chain_initial_state, default_lanes
+from ._saves import BUFFER, run_saves
 
 
 # A two-mass state (x1, v1, x2, v2) as the N-body engine's (x1, x2, v1, v2).
@@ -92,3 +97,72 @@ def measure_one(params: Params, wave: AbstractWaveform, z, horizon, window, cont
     advance = lambda d: chain_measure._advance(f, d, contact, dt)
     d = jax.lax.while_loop(lambda d: chain_measure._running(f, d), advance, d)
     return _measurement(chain_measure._results(f, d, contact))
+
+
+def _simulate_rows(params, wave, wave_axes, save_at, contact, start, dt, max_steps, lanes, buffer=BUFFER, initial=None):
+    """The saved rows of a flat batch ([`_saves.run_saves`][]: a work queue over `lanes` lanes,
+    highest frequencies first): the N-body engine's rows (`_chain_simulate._row`), reordered to
+    $(x_1, v_1, x_2, v_2, e_d, w)$, the stick flags, the slip directions and the margins' records."""
+    take = _picker(params, wave, wave_axes, None, initial)
+
+    def init(i):
+        P, valid, _, row = take(i)
+        return P, chain_initial_state(P, valid, contact, start, row)
+
+    step = lambda P, s, t_stop: engine.step(P, contact, dt, s, t_stop)[0]
+    rows, *rest = run_saves(init, step, _row, params.omega.shape[0], save_at, max_steps, lanes, _order(params), buffer)
+    return (rows[..., jnp.asarray(_TO_CHAIN + tuple(range(4, 13)))], *rest)
+
+
+_simulate_rows = engine_jit(_simulate_rows, ("wave_axes", "contact", "start", "dt", "lanes", "buffer"))
+
+
+def derived_fields(params: Params, wave: AbstractWaveform, contact: Contact, t, y, stuck, sdir) -> dict:
+    """Energy (eq. 10), normal forces (eq. 5) and $F_{ex}$ (eq. 17) at saved states."""
+    f = model.forces(params, wave, t, y[0], y[2], contact)
+    r = exact.rates(params, f, y, stuck, sdir)
+    return {
+        "e": model.total_energy(params, f.l0, y[0], y[1], y[2], y[3]),
+        "l0": f.l0,
+        "N1": f.N1,
+        "N2": f.N2,
+        "f_ex": params.m1 * r[1] + params.m2 * r[3],
+        "X": model.centre_of_mass(params, y[0], y[2]),
+    }
+
+
+def _trajectory(params, wave, wave_axes, contact, save_at, rows, valid, status, t_lift, n_switch):
+    y = jnp.moveaxis(rows[..., :6], -1, 0)  # (6, B, n)
+    stuck = jnp.moveaxis(rows[..., 6:8] > 0.5, -1, 0)
+    sdir = jnp.moveaxis(rows[..., 8:10], -1, 0)
+    t = jnp.broadcast_to(save_at, rows.shape[:-1])
+
+    def one(p, w, t, y, stuck, sdir):
+        return jax.vmap(lambda t, y, s, d: derived_fields(p, w, contact, t, y, s, d), in_axes=(0, 1, 1, 1))(
+            t, y, stuck, sdir
+        )
+
+    der = jax.vmap(one, in_axes=(0, wave_axes, 0, 1, 1, 1))(params, wave, t, y, stuck, sdir)
+    omega = jnp.broadcast_to(wave.omega, rows.shape[:1])
+    return dict(
+        t=t, x1=y[0], v1=y[1], x2=y[2], v2=y[3], e_d=y[4], w=y[5], mode=mode_code(stuck[0], stuck[1]), valid=valid,
+        status=status, liftoff=jnp.isfinite(t_lift), t_liftoff=t_lift, n_switch=n_switch,
+        transversality=jnp.sqrt(rows[..., 10]), near_miss=jnp.sqrt(rows[..., 11]),
+        switch_gap=switch_gap(omega, t, rows[..., 12]), **der,
+    )  # fmt: skip
+
+
+# One compiled computation rather than dozens of small ones run op by op: each of
+# those is a compilation (or a compilation-cache read) of its own in a new process.
+_trajectory = jax.jit(_trajectory, static_argnames=("wave_axes", "contact"))
+
+
+def simulate_batch(params, wave, wave_axes, save_at, contact, start, dt, max_steps: int, initial=None) -> dict:
+    """The fields of a [`Trajectory`][locomotion_jax.Trajectory] of a flat batch (leading axis: the
+    configurations); `max_steps` caps each configuration's iterations, saves included."""
+    lanes = default_lanes(params.omega.shape[0])
+    cap = jnp.asarray(max_steps, jnp.int32)
+    rows, valid, status, t_lift, n_switch = _simulate_rows(
+        params, wave, wave_axes, save_at, contact, start, dt, cap, lanes, initial=initial
+    )
+    return _trajectory(params, wave, wave_axes, contact, save_at, rows, valid, status, t_lift, n_switch)
