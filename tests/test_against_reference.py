@@ -33,7 +33,7 @@ import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
-from locomotion_jax.dynamics import _exact_measure
+from locomotion_jax.dynamics import _paper
 from locomotion_jax.dynamics._runs import default_max_steps, horizon_bound
 from locomotion_jax.run._batch import prepare
 from reference import reference_measure, reference_natural_frequencies, reference_simulate
@@ -161,7 +161,7 @@ def _package(group: str, dtype=jnp.float64) -> dict:
         max_steps = default_max_steps(horizon_bound(flat, g.horizon), 0.01)
         values = (jnp.asarray(v, flat.dtype) for v in (g.z, g.horizon, g.window))
         args = (flat, wave, axes, *values, g.contact, g.start, 0.01, jnp.asarray(max_steps, jnp.int32))
-        m = {k: np.asarray(v) for k, v in _exact_measure._exact_batch(*args, lanes=g.lanes).items()}
+        m = {k: np.asarray(v) for k, v in _paper._measure_batch(*args, lanes=g.lanes).items()}
     return {_key(c): {k: v[i] for k, v in m.items()} for i, c in enumerate(cases)}
 
 

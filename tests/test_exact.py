@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
-from locomotion_jax.dynamics import _exact_measure
+from locomotion_jax.dynamics import _paper
 
 
 def test_energy_balance_along_trajectory():
@@ -189,7 +189,7 @@ def test_float32_runs_and_preserves_dtype():
 
 
 def test_one_compilation_for_new_values():
-    f = _exact_measure._exact_batch
+    f = _paper._measure_batch
     p1 = lj.Params.grid(omega=jnp.array([2.0, 3.0]))
     p2 = lj.Params.grid(omega=jnp.array([5.0, 7.0]), a=0.06, d=0.4)
     lj.measure(p1, z=0.2, horizon=20.0)

@@ -1,8 +1,8 @@
 """`Exact`: the hybrid stick/slip dynamics with located switches, as an `AbstractDynamics`.
 
 Its settings are Python numbers, static under `jit` (changing them recompiles). The
-two-mass runs are `_exact_simulate` and `_exact_measure`, the chains' `_chain_simulate`
-and `_chain_measure`: each a flat batch through the work queue (`_queue`).
+paper's model runs on the N-body engine (`_paper`), as the chains do (`_chain_simulate`,
+`_chain_measure`): each a flat batch through the work queue (`_queue`).
 """
 
 from typing import Any

@@ -7,6 +7,8 @@ only translates: the paper's parameters, waveform and states $(x_1, v_1, x_2, v_
 fields of [`Measurement`][locomotion_jax.Measurement] and [`Trajectory`][locomotion_jax.Trajectory] out.
 """
 
+from typing import Any
+
 import jax
 import jax.numpy as jnp
 
@@ -28,16 +30,26 @@ from ._saves import BUFFER, run_saves
 _TO_CHAIN = (0, 2, 1, 3)
 
 
+def physics(params: Params, wave: AbstractWaveform) -> tuple[Params, Any, Array]:
+    """`(safe, P, valid)` of one configuration: its parameters with an invalid set replaced by the
+    defaults (`safe_params`), their physics (`Params.physics`) in the parameters' dtype, and the
+    validity of parameters and waveform."""
+    safe, valid = safe_params(params, wave)
+    # A sinusoid's Fourier coefficients come out in the default float: cast to the configuration's.
+    cast = lambda x: x.astype(safe.dtype) if jnp.issubdtype(x.dtype, jnp.floating) else x
+    return safe, jax.tree_util.tree_map(cast, safe.physics(wave)), valid
+
+
 def _picker(params: Params, wave: AbstractWaveform, wave_axes: int | None, t_start, initial):
     """`take(i)`: configuration `i`'s `(physics, valid, t_start, initial row)` (for the engine)."""
     wave_at = (lambda i: wave) if wave_axes is None else (lambda i: jax.tree_util.tree_map(lambda x: x[i], wave))
 
     def take(i):
         p, w = jax.tree_util.tree_map(lambda x: x[i], params), wave_at(i)
-        safe, valid = safe_params(p, w)
+        safe, P, valid = physics(p, w)
         row = None if initial is None else initial[i][jnp.asarray(_TO_CHAIN)]
-        ts = None if t_start is None else jnp.where(jnp.isnan(t_start[i]), safe.t_start, t_start[i])
-        return safe.physics(w), valid, ts if ts is not None else safe.t_start, row
+        ts = safe.t_start if t_start is None else jnp.where(jnp.isnan(t_start[i]), safe.t_start, t_start[i])
+        return P, valid, ts, row
 
     return take
 
