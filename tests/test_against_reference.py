@@ -301,3 +301,15 @@ def test_step_cap_in_measure():
     assert np.all(np.asarray(m.status) == lj.Status.MAX_STEPS) and not np.any(np.asarray(m.liftoff))
     assert not np.any(np.asarray(m.reached)) and np.all(np.asarray(m.regime) == lj.Regime.UNDETERMINED)
     assert np.all(np.asarray(m.n_steps) == 600) and np.all(np.isnan(np.asarray(m.mean_speed)))
+
+
+@pytest.mark.parametrize("start", ["paper", "relaxed"])
+def test_start_from_relaxed_springs_matches_reference(start):
+    # d = 0: both starts at rest with F = 0 (the stick margin's kink at t = 0). X at t_start
+    # (after 1,072 switches) is the transient's record of the located breakaways: 8e-8 from the
+    # reference at dt = 0.01 (1.2e-4 with the first breakaway mislocated at t = 5.5e-3, not 4.2e-3).
+    p: dict[str, Any] = dict(omega=20.0, a=0.1, d=0.0, mhat=0.3)
+    ref = reference_measure(p, 5.0, horizon=1.0, contact="paper", start=start)
+    m = lj.measure(lj.Params(**p), z=5.0, horizon=1.0, contact="paper", start=start)
+    assert float(m.t_start) == pytest.approx(ref["t_start"], rel=1e-12)
+    assert abs(float(m.X_start) - ref["X_start"]) < 1e-6
