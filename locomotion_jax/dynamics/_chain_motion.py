@@ -196,7 +196,7 @@ def derivatives(
     # A stuck body's $|F_i|$ has a kink where $F_i = 0$ (a start from rest with its springs relaxed):
     # its rates are those of the side $F_i$ moves to over the step, the sign of its first nonzero
     # derivative, so that the margin's quintic follows the one-sided motion (the breakaway located
-    # where $\\mu n_i = |F_i|$, not where a two-sided rate of 0 puts it).
+    # where $\mu n_i = |F_i|$, not where a two-sided rate of 0 puts it).
     sgn = jnp.sign
     lead = tuple(jnp.where(f != 0, sgn(f), jnp.where(df != 0, sgn(df), sgn(ddf))) for f, df, ddf in zip(F, dF, ddF))
     stick = (
