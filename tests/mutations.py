@@ -43,7 +43,7 @@ class Mutation(NamedTuple):
 EXACT = "locomotion_jax/dynamics/_exact.py"
 CHAIN = "locomotion_jax/dynamics/_chain_exact.py"
 CHAIN_MOTION = "locomotion_jax/dynamics/_chain_motion.py"
-MEASURE = "locomotion_jax/dynamics/_exact_measure.py"
+MEASURE = "locomotion_jax/dynamics/_chain_measure.py"
 NUMERICS = "locomotion_jax/dynamics/_numerics.py"
 PARAMS = "locomotion_jax/model/_params.py"
 CHAIN_MODEL = "locomotion_jax/model/_chain.py"
@@ -162,14 +162,14 @@ MUTATIONS = [
         "regime_window_length",
         "the regime window is 25 whatever `window` says",
         MEASURE,
-        (("P, ws, ws + window, te", "P, ws, ws + 25.0, te"),),
+        (("ws, ws + window, te", "ws, ws + 25.0, te"),),
         (REF,),
     ),
     Mutation(
         "regime_window_start",
         "stick time counted from t = 0, not from t_start",
         MEASURE,
-        (("inside = info.commit & started & (info.t1 <= we)", "inside = info.commit & (info.t1 <= we)"),),
+        (("inside = info.commit & started & (info.t1 <= f.we)", "inside = info.commit & (info.t1 <= f.we)"),),
         (REF,),
     ),
     Mutation(

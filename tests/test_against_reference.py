@@ -33,7 +33,7 @@ import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
-from locomotion_jax.dynamics import _exact_measure
+from locomotion_jax.dynamics import _paper
 from locomotion_jax.dynamics._runs import default_max_steps, horizon_bound
 from locomotion_jax.run._batch import prepare
 from reference import reference_measure, reference_natural_frequencies, reference_simulate
@@ -161,7 +161,7 @@ def _package(group: str, dtype=jnp.float64) -> dict:
         max_steps = default_max_steps(horizon_bound(flat, g.horizon), 0.01)
         values = (jnp.asarray(v, flat.dtype) for v in (g.z, g.horizon, g.window))
         args = (flat, wave, axes, *values, g.contact, g.start, 0.01, jnp.asarray(max_steps, jnp.int32))
-        m = {k: np.asarray(v) for k, v in _exact_measure._exact_batch(*args, lanes=g.lanes).items()}
+        m = {k: np.asarray(v) for k, v in _paper._measure_batch(*args, lanes=g.lanes).items()}
     return {_key(c): {k: v[i] for k, v in m.items()} for i, c in enumerate(cases)}
 
 
@@ -301,3 +301,15 @@ def test_step_cap_in_measure():
     assert np.all(np.asarray(m.status) == lj.Status.MAX_STEPS) and not np.any(np.asarray(m.liftoff))
     assert not np.any(np.asarray(m.reached)) and np.all(np.asarray(m.regime) == lj.Regime.UNDETERMINED)
     assert np.all(np.asarray(m.n_steps) == 600) and np.all(np.isnan(np.asarray(m.mean_speed)))
+
+
+@pytest.mark.parametrize("start", ["paper", "relaxed"])
+def test_start_from_relaxed_springs_matches_reference(start):
+    # d = 0: both starts at rest with F = 0 (the stick margin's kink at t = 0). X at t_start
+    # (after 1,072 switches) is the transient's record of the located breakaways: 8e-8 from the
+    # reference at dt = 0.01 (1.2e-4 with the first breakaway mislocated at t = 5.5e-3, not 4.2e-3).
+    p: dict[str, Any] = dict(omega=20.0, a=0.1, d=0.0, mhat=0.3)
+    ref = reference_measure(p, 5.0, horizon=1.0, contact="paper", start=start)
+    m = lj.measure(lj.Params(**p), z=5.0, horizon=1.0, contact="paper", start=start)
+    assert float(m.t_start) == pytest.approx(ref["t_start"], rel=1e-12)
+    assert abs(float(m.X_start) - ref["X_start"]) < 1e-6

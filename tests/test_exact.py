@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
-from locomotion_jax.dynamics import _exact_measure
+from locomotion_jax.dynamics import _paper
 
 
 def test_energy_balance_along_trajectory():
@@ -189,7 +189,7 @@ def test_float32_runs_and_preserves_dtype():
 
 
 def test_one_compilation_for_new_values():
-    f = _exact_measure._exact_batch
+    f = _paper._measure_batch
     p1 = lj.Params.grid(omega=jnp.array([2.0, 3.0]))
     p2 = lj.Params.grid(omega=jnp.array([5.0, 7.0]), a=0.06, d=0.4)
     lj.measure(p1, z=0.2, horizon=20.0)
@@ -261,3 +261,25 @@ def test_waveform_frequency_is_the_waveforms_own():
     ma = lj.measure(lj.Params(omega=2.0), z=0.3, horizon=30.0, waveform=wave)
     mb = lj.measure(lj.Params(omega=6.0), z=0.3, horizon=30.0)
     np.testing.assert_allclose(ma.tau_z, mb.tau_z, rtol=1e-12)
+
+
+@pytest.mark.parametrize("contact", ["strict", "paper"])
+@pytest.mark.parametrize("omega, a, mhat", [(20.0, 0.1, 0.3), (6.0, 0.05, 0.5), (2.0, 0.09, 0.2)])
+def test_breakaway_from_relaxed_springs_is_located_exactly(contact, omega, a, mhat):
+    # d = 0, at rest at l = lbar = l0(0): F_1 = -k a sin(omega t) and N_1 = m_1 = 2 mhat while both
+    # masses stick, so the lighter one (both at mhat = 0.5) breaks away at sin(omega t*) = mu_s m_1 / (k a). |F_1| has a
+    # kink at t = 0 (F_1 = 0); the first iteration must end on t*, not where a two-sided rate puts it.
+    from locomotion_jax.dynamics import _chain_exact
+    from locomotion_jax.dynamics._runs import chain_initial_state
+    from locomotion_jax.model._waveform import Sinusoid
+
+    p = lj.Params(omega=omega, a=a, d=0.0, mhat=mhat).astype(jnp.float64)
+    _, P, valid = _paper.physics(p, Sinusoid.from_params(p))
+    st = chain_initial_state(P, valid, contact, "paper", None)
+    assert all(bool(s) for s in st.stuck)
+    t_star = math.asin(p.mu_s * 2 * mhat / (p.k * a)) / omega
+    while float(st.t) < t_star * (1 - 1e-6):  # steps shortened on the predicted event
+        st, _ = _chain_exact.step(P, contact, 0.01, st, jnp.asarray(1.0))
+        assert all(bool(s) for s in st.stuck)
+    assert float(st.t) == pytest.approx(t_star, rel=1e-10, abs=1e-13)
+    assert bool(st.pend[0]) and bool(st.pend[1]) == (mhat == 0.5)  # equal masses break away together

@@ -1,6 +1,5 @@
 """The work queue (`_queue.run_queue`) and the exact engine run through it."""
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import locomotion_jax as lj
@@ -9,14 +8,10 @@ import pytest
 from locomotion_jax.dynamics import (
     _chain_exact as chain_engine,
     _chain_simulate,
-    _exact as exact,
-    _exact_measure,
-    _exact_simulate,
+    _paper,
 )
 from locomotion_jax.dynamics._queue import run_queue, Stream
 from locomotion_jax.dynamics._runs import chain_initial_state
-from locomotion_jax.model import _two_mass as model
-from locomotion_jax.model._params import safe_params
 from locomotion_jax.run._batch import prepare, prepare_chain
 
 
@@ -80,8 +75,8 @@ def test_queue_matches_one_loop_per_configuration():
         0.02,
         jnp.asarray(40_000, jnp.int32),
     )
-    queued = _exact_measure.exact_batch(*args, lanes=3)
-    alone = jax.vmap(lambda p, w: _exact_measure._exact_one(p, w, *args[3:]))(flat, wave)
+    queued = _paper.measure_batch(*args, lanes=3)
+    alone = jax.vmap(lambda p, w: _paper.measure_one(p, w, *args[3:]))(flat, wave)
     assert int(queued["status"][3]) == lj.Status.INVALID
     assert len(set(np.asarray(queued["status"]).tolist())) >= 3  # OK, INVALID and LIFTOFF all present
     # Equal to rounding (a lane's position in a SIMD vector can change the last bit);
@@ -120,12 +115,11 @@ def _plain_saves(s, step, row, save_at, max_steps):
 
 
 def _saves_alone(p, w, save_at, contact, start, dt, max_steps):
-    params, ok = safe_params(p)
-    s = exact.init(params, w, contact, jnp.zeros((), params.dtype), model.initial_gap(params, start))
-    s = eqx.tree_at(lambda s: s.status, s, jnp.where(ok, s.status, lj.Status.INVALID).astype(jnp.int32))
-    row = _exact_simulate._row  # the state, modes, slip directions and the margins' records
-    P = exact.consts(params, w)
-    step = lambda s, t_stop: exact.step(params, w, contact, dt, s, t_stop, None, P)[0]
+    _, P, ok = _paper.physics(p, w)
+    s = chain_initial_state(P, ok, contact, start)
+    # The state in the two-mass order (x1, v1, x2, v2), modes, slip directions, the margins' records.
+    row = lambda s: _chain_simulate._row(s)[jnp.asarray([0, 2, 1, 3, *range(4, 13)])]
+    step = lambda s, t_stop: chain_engine.step(P, contact, dt, s, t_stop)[0]
     return _plain_saves(s, step, row, save_at, max_steps)
 
 
@@ -142,7 +136,7 @@ def test_simulate_queue_matches_one_loop_per_configuration(dtype, max_steps):
     flat, wave, axes, _ = prepare(lj.Params(omega=om, a=a, check=False), None, dtype)
     save_at = jnp.asarray(np.concatenate([[0.0, 0.0], np.linspace(0.1, 12.0, 22), [12.0, 12.0]]), dtype)
     args = ("strict", "paper", 0.02, jnp.asarray(max_steps, jnp.int32))
-    queued = _exact_simulate._exact_batch(flat, wave, axes, save_at, *args, lanes=3, buffer=4)
+    queued = _paper._simulate_rows(flat, wave, axes, save_at, *args, lanes=3, buffer=4)
     alone = jax.vmap(lambda p, w: _saves_alone(p, w, save_at, *args))(flat, wave)
     status, valid = np.asarray(alone[2]), np.asarray(alone[1])
     lifted = status == lj.Status.LIFTOFF

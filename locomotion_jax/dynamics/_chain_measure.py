@@ -1,8 +1,8 @@
 """The N-mass exact engine's measurements (SPEC §5 and §8), accumulated on the fly.
 
-The same loop as the two-mass engine's (`_exact_measure`): a flat batch through the
-work queue (`_queue.run_queue`), each configuration stopping on its own, with running
-sums only, so memory does not grow with the number of steps.
+A flat batch through the work queue (`_queue.run_queue`; the paper's model too, through
+`_paper`), each configuration stopping on its own, with running sums only, so memory does
+not grow with the number of steps.
 
 Under `contact="hop"` (SPEC §10) also, over the window like the stick fractions: each body's
 time in flight, the landings, and the highest height (each step's top in flight from the

@@ -81,13 +81,17 @@ def stick_margin(P: AbstractPhysics, F: Scalars, n: Scalars) -> list:
             for mf, mb, q, f in zip(P.mu_f, P.mu_b, n, F)]  # fmt: skip
 
 
-def stick_margin_rate(P: AbstractPhysics, F: Scalars, n: Scalars, dF: Scalars, dn: Scalars) -> list:
+def stick_margin_rate(
+    P: AbstractPhysics, F: Scalars, n: Scalars, dF: Scalars, dn: Scalars, sgn: Scalars | None = None
+) -> list:
     """A time derivative of [`stick_margin`][] given those of $F_i$ and $n_i$: the smaller
-    branch's, their mean at a tie (as `jax.jvp` of `jnp.minimum`; isotropic: $\\operatorname{sgn} F_i = 0$)."""
+    branch's, their mean at a tie (as `jax.jvp` of `jnp.minimum`). Isotropic: $\\mu n_i - s_i F_i$
+    with $s_i$ the sign `sgn` of $F_i$ over the step (default $\\operatorname{sgn} F_i$, 0 at $F_i = 0$)."""
+    sgn = tuple(jnp.sign(f) for f in F) if sgn is None else sgn
     out = []
-    for mf, mb, q, f, df, dq in zip(P.mu_f, P.mu_b, n, F, dF, dn):
+    for mf, mb, q, f, df, dq, s in zip(P.mu_f, P.mu_b, n, F, dF, dn, sgn):
         if mb is None:
-            out.append(mf * dq - jnp.sign(f) * df)
+            out.append(mf * dq - s * df)
         else:
             a, b = mf * q - f, f + mb * q
             da, db = mf * dq - df, df + mb * dq
@@ -189,7 +193,17 @@ def derivatives(
     ddF = with_velocity(P, ddF, jerk)
     ddn = grounded(normal(contact, ddN, mode.side))
 
-    stick = (stick_margin(P, F, n), stick_margin_rate(P, F, n, dF, dn), stick_margin_rate(P, F, n, ddF, ddn))
+    # A stuck body's $|F_i|$ has a kink where $F_i = 0$ (a start from rest with its springs relaxed):
+    # its rates are those of the side $F_i$ moves to over the step, the sign of its first nonzero
+    # derivative, so that the margin's quintic follows the one-sided motion (the breakaway located
+    # where $\mu n_i = |F_i|$, not where a two-sided rate of 0 puts it).
+    sgn = jnp.sign
+    lead = tuple(jnp.where(f != 0, sgn(f), jnp.where(df != 0, sgn(df), sgn(ddf))) for f, df, ddf in zip(F, dF, ddF))
+    stick = (
+        stick_margin(P, F, n),
+        stick_margin_rate(P, F, n, dF, dn, lead),
+        stick_margin_rate(P, F, n, ddF, ddn, lead),
+    )
     g, dg, ddg = (
         [jnp.where(st, p, sd * q) for st, p, sd, q in zip(mode.stuck, margin, mode.sdir, slip)]
         for margin, slip in zip(stick, (v, a, jerk))

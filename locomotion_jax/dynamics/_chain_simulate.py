@@ -1,8 +1,8 @@
 """The N-mass exact engine's trajectories (SPEC §8): states saved at requested times.
 
-As for two masses (`_exact_simulate`): a flat batch through the work queue
-([`_saves.run_saves`][]), highest frequencies first, so memory grows with the saves
-only; energy, normal forces, rest lengths and tensions follow from the saved states.
+A flat batch through the work queue ([`_saves.run_saves`][]), highest frequencies first
+(the paper's model too, through `_paper`), so memory grows with the saves only; energy,
+normal forces, rest lengths and tensions follow from the saved states.
 """
 
 from typing import Any

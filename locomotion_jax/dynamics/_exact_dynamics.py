@@ -1,8 +1,8 @@
 """`Exact`: the hybrid stick/slip dynamics with located switches, as an `AbstractDynamics`.
 
 Its settings are Python numbers, static under `jit` (changing them recompiles). The
-two-mass runs are `_exact_simulate` and `_exact_measure`, the chains' `_chain_simulate`
-and `_chain_measure`: each a flat batch through the work queue (`_queue`).
+paper's model runs on the N-body engine (`_paper`), as the chains do (`_chain_simulate`,
+`_chain_measure`): each a flat batch through the work queue (`_queue`).
 """
 
 from typing import Any
@@ -17,7 +17,7 @@ from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform, Sinusoid
-from . import _chain_measure, _chain_simulate, _exact_measure, _exact_simulate, _paper_hop
+from . import _chain_measure, _chain_simulate, _paper, _paper_hop
 from ._base import AbstractDynamics
 from ._forward import check_static
 from ._runs import default_max_steps
@@ -58,11 +58,9 @@ class Exact(AbstractDynamics):
     ) -> dict[str, Array]:
         # Room for the steps to t_end, plus the iterations that save a state.
         max_steps = self.max_steps or default_max_steps(t_end, self.dt) + 4 * save_at.shape[0]
-        if contact == "hop":  # flight and landing: the N-body engine (`_paper_hop`)
+        if contact == "hop":  # flight and landing (`_paper_hop`)
             return _paper_hop.simulate_batch(params, wave, wave_axes, save_at, start, self.dt, max_steps, initial)
-        return _exact_simulate.simulate_batch(
-            params, wave, wave_axes, save_at, contact, start, self.dt, max_steps, initial
-        )
+        return _paper.simulate_batch(params, wave, wave_axes, save_at, contact, start, self.dt, max_steps, initial)
 
     def measure_two_mass(
         self,
@@ -77,12 +75,12 @@ class Exact(AbstractDynamics):
         t_start: Array | None,
         initial: Array | None,
     ) -> dict[str, Array]:
-        if contact == "hop":  # flight and landing: the N-body engine (`_paper_hop`)
+        if contact == "hop":  # flight and landing (`_paper_hop`)
             zhw = (z, horizon, window)
             return _paper_hop.measure_batch(
                 params, wave, wave_axes, *zhw, start, self.dt, self._own_cap(), t_start, initial
             )
-        return _exact_measure._exact_batch(
+        return _paper._measure_batch(
             params,
             wave,
             wave_axes,
@@ -144,7 +142,7 @@ class Exact(AbstractDynamics):
             # done takes the next one. Each configuration's cap comes from its own span
             # (`_own_cap`), not from the sweep's `max_steps`, so that it is the same as a
             # `measure` of that configuration alone.
-            return _exact_measure.exact_batch(
+            return _paper.measure_batch(
                 p, wave, 0, z, horizon, window, contact, start, dyn.dt, dyn._own_cap(), lanes=lanes
             )
 

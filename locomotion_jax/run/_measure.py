@@ -3,7 +3,7 @@
 The front end checks the arguments and prepares the batch; the dynamics measure it
 (`AbstractDynamics.measure_two_mass` or `measure_chain`, as the mechanism chooses):
 the exact engines accumulate the measurements on the fly, so memory does not grow
-with the number of steps (`dynamics._exact_measure`, `dynamics._chain_measure`).
+with the number of steps (`dynamics._chain_measure`, the paper's model through `dynamics._paper`).
 """
 
 from typing import Any, overload

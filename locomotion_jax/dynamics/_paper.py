@@ -1,0 +1,180 @@
+"""The paper's two-mass model on the N-body engine (`_chain_exact`): `measure` and `simulate` runs.
+
+Each configuration's physics is [`Params.physics`][locomotion_jax.Params.physics] (the two-mass
+chain, SPEC §8 at $N = 2$), built inside the work queue when a lane takes the configuration;
+the loops are the N-body engine's (`_chain_measure`, `_chain_simulate`'s rows). This module
+only translates: the paper's parameters, waveform and states $(x_1, v_1, x_2, v_2)$ in, the
+fields of [`Measurement`][locomotion_jax.Measurement] and [`Trajectory`][locomotion_jax.Trajectory] out.
+"""
+
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+
+from .._custom_types import Array, Contact
+from .._status import mode_code
+from ..model import _two_mass as model
+from ..model._params import Params, safe_params
+from ..model._waveform import AbstractWaveform
+from . import _chain_exact as engine, _chain_measure as chain_measure, _exact as exact
+from ._chain_simulate import _row
+from ._compile import engine_jit
+from ._margins import switch_gap
+from ._queue import run_queue
+from ._runs import chain_initial_state, default_lanes
+from ._saves import BUFFER, run_saves
+
+
+# A two-mass state (x1, v1, x2, v2) as the N-body engine's (x1, x2, v1, v2).
+_TO_CHAIN = (0, 2, 1, 3)
+
+
+def physics(params: Params, wave: AbstractWaveform) -> tuple[Params, Any, Array]:
+    """`(safe, P, valid)` of one configuration: its parameters with an invalid set replaced by the
+    defaults (`safe_params`), their physics (`Params.physics`) in the parameters' dtype, and the
+    validity of parameters and waveform."""
+    safe, valid = safe_params(params, wave)
+    # A sinusoid's Fourier coefficients come out in the default float: cast to the configuration's.
+    cast = lambda x: x.astype(safe.dtype) if jnp.issubdtype(x.dtype, jnp.floating) else x
+    return safe, jax.tree_util.tree_map(cast, safe.physics(wave)), valid
+
+
+def _picker(params: Params, wave: AbstractWaveform, wave_axes: int | None, t_start, initial):
+    """`take(i)`: configuration `i`'s `(physics, valid, t_start, initial row)` (for the engine)."""
+    wave_at = (lambda i: wave) if wave_axes is None else (lambda i: jax.tree_util.tree_map(lambda x: x[i], wave))
+
+    def take(i):
+        p, w = jax.tree_util.tree_map(lambda x: x[i], params), wave_at(i)
+        safe, P, valid = physics(p, w)
+        row = None if initial is None else initial[i][jnp.asarray(_TO_CHAIN)]
+        ts = safe.t_start if t_start is None else jnp.where(jnp.isnan(t_start[i]), safe.t_start, t_start[i])
+        return P, valid, ts, row
+
+    return take
+
+
+def _order(params: Params) -> Array:
+    """The queue's order: the highest frequencies (most mode switches per time unit) first."""
+    return jnp.argsort(-jnp.where(jnp.isfinite(params.omega), params.omega, -jnp.inf))
+
+
+def _measurement(out: dict) -> dict:
+    """The N-body engine's fields as a two-mass `Measurement`'s (`stick_fraction` per mass)."""
+    frac = out.pop("stick_fraction")
+    return out | {"stick_fraction1": frac[..., 0], "stick_fraction2": frac[..., 1]}
+
+
+def measure_batch(
+    params: Params,
+    wave: AbstractWaveform,
+    wave_axes: int | None,
+    z,
+    horizon,
+    window,
+    contact: str,
+    start: str,
+    dt: float,
+    max_steps,
+    lanes: int | None = None,
+    t_start: Array | None = None,
+    initial: Array | None = None,
+) -> dict[str, Array]:
+    """`measure` of the paper's model on a flat batch (not jitted): a work queue over `lanes`
+    lanes ([`_queue.run_queue`][]), highest frequencies first.
+
+    `lanes=None` takes `_runs.default_lanes`. `t_start`: per-configuration measurement starts
+    (NaN: the paper's `Params.t_start`), default all the paper's. `initial`: per-configuration
+    states $(x_1, v_1, x_2, v_2)$ at $t = 0$, shape `(n, 4)` (default: at rest in the `start`
+    position). `max_steps`: an explicit cap on each configuration's iterations, or 0 for each
+    one's own default from its span (`_runs.step_cap`).
+    """
+    n = params.omega.shape[0]
+    lanes = default_lanes(n) if lanes is None else lanes
+    take = _picker(params, wave, wave_axes, t_start, initial)
+    setup = lambda i: chain_measure._setup(*take(i), z, horizon, window, contact, start, dt, max_steps)
+    advance = lambda f, d: chain_measure._advance(f, d, contact, dt)
+    results = lambda f, d: chain_measure._results(f, d, contact)
+    return _measurement(run_queue(setup, chain_measure._running, advance, results, n, lanes, _order(params)))
+
+
+_measure_batch = engine_jit(measure_batch, ("wave_axes", "contact", "start", "dt", "lanes"))
+
+
+def measure_one(params: Params, wave: AbstractWaveform, z, horizon, window, contact, start, dt, max_steps) -> dict:
+    """One configuration in a plain loop of its own (no queue): what the queue must reproduce."""
+    add = lambda tree: jax.tree_util.tree_map(lambda x: x[None], tree)
+    take = _picker(add(params), add(wave), 0, None, None)
+    f, d = chain_measure._setup(*take(0), z, horizon, window, contact, start, dt, max_steps)
+    advance = lambda d: chain_measure._advance(f, d, contact, dt)
+    d = jax.lax.while_loop(lambda d: chain_measure._running(f, d), advance, d)
+    return _measurement(chain_measure._results(f, d, contact))
+
+
+def _simulate_rows(params, wave, wave_axes, save_at, contact, start, dt, max_steps, lanes, buffer=BUFFER, initial=None):
+    """The saved rows of a flat batch ([`_saves.run_saves`][]: a work queue over `lanes` lanes,
+    highest frequencies first): the N-body engine's rows (`_chain_simulate._row`), reordered to
+    $(x_1, v_1, x_2, v_2, e_d, w)$, the stick flags, the slip directions and the margins' records."""
+    take = _picker(params, wave, wave_axes, None, initial)
+
+    def init(i):
+        P, valid, _, row = take(i)
+        return P, chain_initial_state(P, valid, contact, start, row)
+
+    step = lambda P, s, t_stop: engine.step(P, contact, dt, s, t_stop)[0]
+    rows, *rest = run_saves(init, step, _row, params.omega.shape[0], save_at, max_steps, lanes, _order(params), buffer)
+    return (rows[..., jnp.asarray(_TO_CHAIN + tuple(range(4, 13)))], *rest)
+
+
+_simulate_rows = engine_jit(_simulate_rows, ("wave_axes", "contact", "start", "dt", "lanes", "buffer"))
+
+
+def derived_fields(params: Params, wave: AbstractWaveform, contact: Contact, t, y, stuck, sdir) -> dict:
+    """Energy (eq. 10), normal forces (eq. 5) and $F_{ex}$ (eq. 17) at saved states."""
+    f = model.forces(params, wave, t, y[0], y[2], contact)
+    r = exact.rates(params, f, y, stuck, sdir)
+    return {
+        "e": model.total_energy(params, f.l0, y[0], y[1], y[2], y[3]),
+        "l0": f.l0,
+        "N1": f.N1,
+        "N2": f.N2,
+        "f_ex": params.m1 * r[1] + params.m2 * r[3],
+        "X": model.centre_of_mass(params, y[0], y[2]),
+    }
+
+
+def _trajectory(params, wave, wave_axes, contact, save_at, rows, valid, status, t_lift, n_switch):
+    y = jnp.moveaxis(rows[..., :6], -1, 0)  # (6, B, n)
+    stuck = jnp.moveaxis(rows[..., 6:8] > 0.5, -1, 0)
+    sdir = jnp.moveaxis(rows[..., 8:10], -1, 0)
+    t = jnp.broadcast_to(save_at, rows.shape[:-1])
+
+    def one(p, w, t, y, stuck, sdir):
+        return jax.vmap(lambda t, y, s, d: derived_fields(p, w, contact, t, y, s, d), in_axes=(0, 1, 1, 1))(
+            t, y, stuck, sdir
+        )
+
+    der = jax.vmap(one, in_axes=(0, wave_axes, 0, 1, 1, 1))(params, wave, t, y, stuck, sdir)
+    omega = jnp.broadcast_to(wave.omega, rows.shape[:1])
+    return dict(
+        t=t, x1=y[0], v1=y[1], x2=y[2], v2=y[3], e_d=y[4], w=y[5], mode=mode_code(stuck[0], stuck[1]), valid=valid,
+        status=status, liftoff=jnp.isfinite(t_lift), t_liftoff=t_lift, n_switch=n_switch,
+        transversality=jnp.sqrt(rows[..., 10]), near_miss=jnp.sqrt(rows[..., 11]),
+        switch_gap=switch_gap(omega, t, rows[..., 12]), **der,
+    )  # fmt: skip
+
+
+# One compiled computation rather than dozens of small ones run op by op: each of
+# those is a compilation (or a compilation-cache read) of its own in a new process.
+_trajectory = jax.jit(_trajectory, static_argnames=("wave_axes", "contact"))
+
+
+def simulate_batch(params, wave, wave_axes, save_at, contact, start, dt, max_steps: int, initial=None) -> dict:
+    """The fields of a [`Trajectory`][locomotion_jax.Trajectory] of a flat batch (leading axis: the
+    configurations); `max_steps` caps each configuration's iterations, saves included."""
+    lanes = default_lanes(params.omega.shape[0])
+    cap = jnp.asarray(max_steps, jnp.int32)
+    rows, valid, status, t_lift, n_switch = _simulate_rows(
+        params, wave, wave_axes, save_at, contact, start, dt, cap, lanes, initial=initial
+    )
+    return _trajectory(params, wave, wave_axes, contact, save_at, rows, valid, status, t_lift, n_switch)
