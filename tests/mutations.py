@@ -271,8 +271,13 @@ MUTATIONS = [
     Mutation(
         "cli_omega_over_wn1",
         "--omega-over-wn1 multiplies the default wn1 (10), not the configuration's",
-        "locomotion_jax/cli/_options.py",
-        (("params.replace(omega=ratio * float(params.wn1))", "params.replace(omega=ratio * 10.0)"),),
+        "locomotion_jax/cli/_mechanism.py",
+        (
+            (
+                'params.replace(omega=number("omega_over_wn1", ratio) * float(params.wn1))',
+                'params.replace(omega=number("omega_over_wn1", ratio) * 10.0)',
+            ),
+        ),
         ("tests/test_cli_options.py",),
     ),
     # -- the N-mass engine ----------------------------------------------------------------------

@@ -12,9 +12,12 @@ from ._grid import Grid
 
 
 MEASURE_FIELDS: tuple[str, ...] = tuple(
-    f for f in Measurement.__dataclass_fields__ if f not in ("z", "start", "contact")
+    f
+    for f, field in Measurement.__dataclass_fields__.items()
+    if f not in ("z", "start", "contact") and field.default is not None
 )
-"""The dataset's variables: every array field of [`Measurement`][]."""
+"""The dataset's variables: every array field of [`Measurement`][] that every contact reading has (the
+hopping fields, `None` outside `contact="hop"`, are left out: sweeps of the paper's model do not hop)."""
 
 DESCRIPTIONS = {
     "tau_z": "time to travel z after t_start (inf: not reached)",
