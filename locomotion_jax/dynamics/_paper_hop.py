@@ -25,14 +25,12 @@ from ._chain_motion import Mode, rates, State
 from ._chain_simulate import _row as chain_row
 from ._compile import engine_jit
 from ._margins import switch_gap
+from ._paper import _measurement, _TO_CHAIN
 from ._runs import chain_initial_state, default_lanes
 from ._saves import BUFFER, run_saves
 
 
 CONTACT = "hop"
-
-# A two-mass state (x1, v1, x2, v2) in the N-body engine's order (x1, x2, v1, v2).
-_TO_CHAIN = (0, 2, 1, 3)
 
 
 def physics_batch(params: Params, wave: AbstractWaveform, wave_axes: int | None) -> tuple[Any, Params, Array]:
@@ -47,12 +45,6 @@ def physics_batch(params: Params, wave: AbstractWaveform, wave_axes: int | None)
         return jax.tree_util.tree_map(cast, safe.physics(w)), safe, valid
 
     return jax.vmap(one, in_axes=(0, wave_axes))(params, wave)
-
-
-def _measurement(out: dict) -> dict:
-    """The N-body engine's measurement fields as a two-mass `Measurement`'s (`stick_fraction` per mass)."""
-    frac = out.pop("stick_fraction")
-    return out | {"stick_fraction1": frac[..., 0], "stick_fraction2": frac[..., 1]}
 
 
 def measure_batch(
