@@ -17,7 +17,7 @@ from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform, Sinusoid
-from . import _chain_measure, _chain_simulate, _paper, _paper_hop
+from . import _chain_measure, _chain_simulate, _paper
 from ._base import AbstractDynamics
 from ._forward import check_static
 from ._runs import default_max_steps
@@ -58,8 +58,6 @@ class Exact(AbstractDynamics):
     ) -> dict[str, Array]:
         # Room for the steps to t_end, plus the iterations that save a state.
         max_steps = self.max_steps or default_max_steps(t_end, self.dt) + 4 * save_at.shape[0]
-        if contact == "hop":  # flight and landing (`_paper_hop`)
-            return _paper_hop.simulate_batch(params, wave, wave_axes, save_at, start, self.dt, max_steps, initial)
         return _paper.simulate_batch(params, wave, wave_axes, save_at, contact, start, self.dt, max_steps, initial)
 
     def measure_two_mass(
@@ -75,11 +73,6 @@ class Exact(AbstractDynamics):
         t_start: Array | None,
         initial: Array | None,
     ) -> dict[str, Array]:
-        if contact == "hop":  # flight and landing (`_paper_hop`)
-            zhw = (z, horizon, window)
-            return _paper_hop.measure_batch(
-                params, wave, wave_axes, *zhw, start, self.dt, self._own_cap(), t_start, initial
-            )
         return _paper._measure_batch(
             params,
             wave,

@@ -5,6 +5,9 @@ chain, SPEC §8 at $N = 2$), built inside the work queue when a lane takes the c
 the loops are the N-body engine's (`_chain_measure`, `_chain_simulate`'s rows). This module
 only translates: the paper's parameters, waveform and states $(x_1, v_1, x_2, v_2)$ in, the
 fields of [`Measurement`][locomotion_jax.Measurement] and [`Trajectory`][locomotion_jax.Trajectory] out.
+Under `contact="hop"` (SPEC §10) the same runs carry the hopping fields (heights, flight fractions,
+landings) per mass; a configuration lands plastically (restitution 0, SPEC's default) and starts on
+the ground at rest vertically (`ChainPhysics.hop`).
 """
 
 from typing import Any
@@ -16,8 +19,10 @@ from .._custom_types import Array, Contact
 from .._status import mode_code
 from ..model import _two_mass as model
 from ..model._params import Params, safe_params
+from ..model._physics import loads_at
 from ..model._waveform import AbstractWaveform
 from . import _chain_exact as engine, _chain_measure as chain_measure, _exact as exact
+from ._chain_motion import Mode, rates, State
 from ._chain_simulate import _row
 from ._compile import engine_jit
 from ._margins import switch_gap
@@ -111,19 +116,30 @@ def measure_one(params: Params, wave: AbstractWaveform, z, horizon, window, cont
     return _measurement(chain_measure._results(f, d, contact))
 
 
+def _hop_row(s: engine.Hybrid) -> Array:
+    """A saved row under `contact="hop"`: the N-body engine's (`_chain_simulate._row`: heights,
+    vertical velocities, landings and the Zeno flag included), then the in-flight flags."""
+    assert s.fly is not None
+    return jnp.concatenate([_row(s), jnp.stack([f.astype(s.t.dtype) for f in s.fly])])
+
+
 def _simulate_rows(params, wave, wave_axes, save_at, contact, start, dt, max_steps, lanes, buffer=BUFFER, initial=None):
     """The saved rows of a flat batch ([`_saves.run_saves`][]: a work queue over `lanes` lanes,
     highest frequencies first): the N-body engine's rows (`_chain_simulate._row`), reordered to
-    $(x_1, v_1, x_2, v_2, e_d, w)$, the stick flags, the slip directions and the margins' records."""
+    $(x_1, v_1, x_2, v_2, e_d, w)$, the stick flags, the slip directions and the margins' records
+    (columns 0 to 12); under `contact="hop"` then $(y_1, y_2, \\dot y_1, \\dot y_2)$, the landings,
+    the Zeno flag and the in-flight flags (columns 13 to 20)."""
     take = _picker(params, wave, wave_axes, None, initial)
 
     def init(i):
         P, valid, _, row = take(i)
         return P, chain_initial_state(P, valid, contact, start, row)
 
-    step = lambda P, s, t_stop: engine.step(P, contact, dt, s, t_stop)[0]
-    rows, *rest = run_saves(init, step, _row, params.omega.shape[0], save_at, max_steps, lanes, _order(params), buffer)
-    return (rows[..., jnp.asarray(_TO_CHAIN + tuple(range(4, 13)))], *rest)
+    hop = (lambda P: P.hop()[2:]) if contact == "hop" else (lambda P: None)
+    step = lambda P, s, t_stop: engine.step(P, contact, dt, s, t_stop, hop=hop(P))[0]
+    row = _hop_row if contact == "hop" else _row
+    rows, *rest = run_saves(init, step, row, params.omega.shape[0], save_at, max_steps, lanes, _order(params), buffer)
+    return (rows[..., jnp.asarray(_TO_CHAIN + tuple(range(4, rows.shape[-1])))], *rest)
 
 
 _simulate_rows = engine_jit(_simulate_rows, ("wave_axes", "contact", "start", "dt", "lanes", "buffer"))
@@ -143,19 +159,48 @@ def derived_fields(params: Params, wave: AbstractWaveform, contact: Contact, t, 
     }
 
 
+def hop_derived_fields(P: Any, t, x, v, y, vy, stuck, sdir, fly) -> dict:
+    """Under `contact="hop"`, at one saved state of one configuration (`P`: its physics; per-mass pairs
+    `x`, `v`, heights `y`, vertical velocities `vy`, flags): energy with gravity $m_i y_i$ and the
+    vertical kinetic energy, signed normal forces, rest length, centre of mass and $F_{ex}$ (the
+    horizontal friction plus damping on the system, $\\sum_i m_i \\dot v_i$: zero from a body in flight
+    but for its damping)."""
+    tup = lambda a: tuple(a[i] for i in range(2))
+    dr = P.drive(jnp.cos(P.omega * t), jnp.sin(P.omega * t))
+    L = loads_at(P, dr, tup(x), y=tup(y))
+    e = P.energy(L, tup(v)) + jnp.sum(jnp.stack(P.m) * (y + 0.5 * vy * vy))
+    zero = jnp.zeros_like(t)
+    mode = Mode(stuck=tup(stuck), sdir=tup(sdir), side=(zero + 1, zero + 1), fly=tup(fly))
+    acc = rates(P, "hop", mode, dr, State(tup(x), tup(v), zero, zero, tup(y), tup(vy))).v
+    return dict(
+        e=e, l0=dr.l0[0], N1=L.N[0], N2=L.N[1], f_ex=P.m[0] * acc[0] + P.m[1] * acc[1],
+        X=P.centre_of_mass(tup(x)),
+    )  # fmt: skip
+
+
 def _trajectory(params, wave, wave_axes, contact, save_at, rows, valid, status, t_lift, n_switch):
     y = jnp.moveaxis(rows[..., :6], -1, 0)  # (6, B, n)
     stuck = jnp.moveaxis(rows[..., 6:8] > 0.5, -1, 0)
     sdir = jnp.moveaxis(rows[..., 8:10], -1, 0)
     t = jnp.broadcast_to(save_at, rows.shape[:-1])
 
-    def one(p, w, t, y, stuck, sdir):
-        return jax.vmap(lambda t, y, s, d: derived_fields(p, w, contact, t, y, s, d), in_axes=(0, 1, 1, 1))(
-            t, y, stuck, sdir
-        )
+    if contact == "hop":
+        P = jax.vmap(lambda p, w: physics(p, w)[1], in_axes=(0, wave_axes))(params, wave)
+        x, v, hy, hvy = rows[..., (0, 2)], rows[..., (1, 3)], rows[..., 13:15], rows[..., 15:17]
+        fly = rows[..., 19:21] > 0.5
+        one_hop = lambda Pi, *a: jax.vmap(lambda *b: hop_derived_fields(Pi, *b))(*a)
+        der = jax.vmap(one_hop)(P, t, x, v, hy, hvy, rows[..., 6:8] > 0.5, rows[..., 8:10], fly)
+        der |= dict(y=hy, vy=hvy, n_land=rows[..., -1, 17].astype(jnp.int32), zeno=rows[..., -1, 18] > 0.5)
+        omega = P.omega
+    else:
 
-    der = jax.vmap(one, in_axes=(0, wave_axes, 0, 1, 1, 1))(params, wave, t, y, stuck, sdir)
-    omega = jnp.broadcast_to(wave.omega, rows.shape[:1])
+        def one(p, w, t, y, stuck, sdir):
+            return jax.vmap(lambda t, y, s, d: derived_fields(p, w, contact, t, y, s, d), in_axes=(0, 1, 1, 1))(
+                t, y, stuck, sdir
+            )
+
+        der = jax.vmap(one, in_axes=(0, wave_axes, 0, 1, 1, 1))(params, wave, t, y, stuck, sdir)
+        omega = jnp.broadcast_to(wave.omega, rows.shape[:1])
     return dict(
         t=t, x1=y[0], v1=y[1], x2=y[2], v2=y[3], e_d=y[4], w=y[5], mode=mode_code(stuck[0], stuck[1]), valid=valid,
         status=status, liftoff=jnp.isfinite(t_lift), t_liftoff=t_lift, n_switch=n_switch,

@@ -174,6 +174,13 @@ def prepare_chain_initial(
     return state
 
 
+def check_hop_dynamics(contact: str, dynamics: AbstractDynamics) -> None:
+    """`contact="hop"` runs on the dynamics that locate lift-off and landing ([`Exact`][]); elsewhere
+    it raises `NotImplementedError`."""
+    if contact == "hop" and not isinstance(dynamics, Exact):
+        raise NotImplementedError(f"contact='hop' runs with Exact dynamics only, got {type(dynamics).__name__}.")
+
+
 def check_contact_start(contact: str, start: str, mechanism: Any = None) -> None:
     """Validate `contact` and `start`. `contact="hop"` runs only for a [`Chain`][locomotion_jax.Chain] or a
     [`Mechanism`][locomotion_jax.Mechanism] without carried bodies (passed as `mechanism`); elsewhere it

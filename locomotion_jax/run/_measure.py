@@ -15,7 +15,6 @@ import numpy as np
 from .._custom_types import ArrayLike
 from .._results import ChainMeasurement, Measurement
 from ..dynamics._base import AbstractDynamics
-from ..dynamics._exact_dynamics import Exact
 from ..dynamics._forward import check_static
 from ..model import _two_mass as model
 from ..model._bodies import Mechanism
@@ -24,6 +23,7 @@ from ..model._params import Params
 from ..model._waveform import AbstractWaveform
 from ._batch import (
     check_contact_start,
+    check_hop_dynamics,
     dynamics_arg,
     mechanism_arg,
     prepare,
@@ -135,6 +135,7 @@ def measure(
     """
     dynamics = dynamics_arg(dynamics)
     model.check_contact(contact, hop=True)  # each path below refuses "hop" where it does not support it
+    check_hop_dynamics(contact, dynamics)
     model.initial_gap(Params(), start)
     check_measure_args(z, horizon, window)
     # The mechanism picks its path (double dispatch); each path runs the dynamics' method for it.
@@ -144,8 +145,6 @@ def measure(
 
 def _two_mass(params: Params, dynamics: AbstractDynamics, z, horizon, window, t_start, waveform, contact, start,
               initial, dtype) -> Measurement:  # fmt: skip
-    if contact == "hop" and not isinstance(dynamics, Exact):
-        raise NotImplementedError(f"contact='hop' runs with Exact dynamics only, got {type(dynamics).__name__}.")
     flat, wave, axes, shape = prepare(params, waveform, dtype)
     ts = _start_times(t_start, shape, flat.dtype)
     flat, unresolved = guard_two_mass(dynamics, flat, wave, shape, default_start=ts is None)
@@ -169,8 +168,7 @@ def measure_chain(chain: Chain | Mechanism, dynamics: AbstractDynamics, z: float
     """`measure` for a [`Chain`][] or a [`Mechanism`][locomotion_jax.Mechanism] (arguments as there; also the
     chunks of a chain sweep)."""
     check_contact_start(contact, start, chain)
-    if contact == "hop" and not isinstance(dynamics, Exact):
-        raise NotImplementedError(f"contact='hop' runs with Exact dynamics only, got {type(dynamics).__name__}.")
+    check_hop_dynamics(contact, dynamics)  # measure_chain is also the chain sweeps' entry
     flat, valid, shape = prepare_chain(chain, dtype)
     ts = _start_times(t_start, shape, flat.dtype)  # checked on the host, as for the two-mass model
     valid, unresolved = guard_chain(dynamics, flat, valid, shape, default_start=ts is None)

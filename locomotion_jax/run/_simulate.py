@@ -8,7 +8,6 @@ import numpy as np
 from .._custom_types import ArrayLike
 from .._results import ChainTrajectory, Trajectory
 from ..dynamics._base import AbstractDynamics
-from ..dynamics._exact_dynamics import Exact
 from ..dynamics._forward import check_static
 from ..model import _two_mass as model
 from ..model._bodies import Mechanism
@@ -17,6 +16,7 @@ from ..model._params import Params
 from ..model._waveform import AbstractWaveform
 from ._batch import (
     check_contact_start,
+    check_hop_dynamics,
     dynamics_arg,
     mechanism_arg,
     prepare,
@@ -116,6 +116,7 @@ def simulate(
     """
     dynamics = dynamics_arg(dynamics)
     model.check_contact(contact, hop=True)  # each path below refuses "hop" where it does not support it
+    check_hop_dynamics(contact, dynamics)
     model.initial_gap(Params(), start)  # validates `start`
     check_static("t_end", t_end)
     check_static("save_at", save_at)
@@ -134,8 +135,6 @@ def simulate(
 
 
 def _two_mass(params: Params, dynamics: AbstractDynamics, t_end, save_np, waveform, contact, start, initial, dtype):
-    if contact == "hop" and not isinstance(dynamics, Exact):
-        raise NotImplementedError(f"contact='hop' runs with Exact dynamics only, got {type(dynamics).__name__}.")
     flat, wave, axes, shape = prepare(params, waveform, dtype)
     flat, unresolved = guard_two_mass(dynamics, flat, wave, shape)
     y0 = prepare_initial(initial, shape, flat.dtype)
@@ -152,8 +151,6 @@ def _chain(
             f"waveform= applies to Params; a {type(chain).__name__} carries its own waveforms (springs or links)."
         )
     check_contact_start(contact, start, chain)
-    if contact == "hop" and not isinstance(dynamics, Exact):
-        raise NotImplementedError(f"contact='hop' runs with Exact dynamics only, got {type(dynamics).__name__}.")
     flat, valid, shape = prepare_chain(chain, dtype)
     valid, unresolved = guard_chain(dynamics, flat, valid, shape)
     y0 = prepare_chain_initial(initial, shape, flat.n_masses, flat.dtype, flat)
