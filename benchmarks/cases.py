@@ -482,7 +482,7 @@ def case_chain(spec: dict) -> dict:
     om, a = configs(spec["B"])
     n = spec["N"]
     dtype = jnp.float32 if spec["dtype"] == "float32" else jnp.float64
-    if spec.get("params"):  # the two-mass model on its own engine, for comparison
+    if spec.get("params"):  # the paper's model through `lj.measure`, for comparison
         mech = lj.Params(omega=om, a=a).astype(dtype)
     else:
         phi = np.linspace(0, np.pi, om.size)

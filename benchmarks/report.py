@@ -492,7 +492,7 @@ def report(res: dict, meta: dict) -> str:
         L.append("|---|---|---|---|---|---|---|---|")
         for r in chains:
             w, c = r["B"] * r["t_sim"] / r["wall"], r["B"] * r["t_sim"] / r["cpu"]
-            name = "Params (two-mass engine)" if r.get("params") else "Chain (N-mass engine)"
+            name = "Params (`lj.measure`)" if r.get("params") else "Chain (N-mass engine)"
             L.append(
                 f"| {name} | {r['N']} | {r['B']} | {r['compile']:.1f} | {r['wall']:.3g} | {fmt(w)} | {fmt(c)} | "
                 f"{fmt(w / r['N'])} |"
