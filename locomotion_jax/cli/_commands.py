@@ -17,7 +17,7 @@ import typer
 from .._json import dumps
 from ._errors import friendly
 from ._files import context, echo_fields, plain
-from ._mechanism import build, Built, kind_of_options, mechanism_options, ORDER, to_chain, wave_text
+from ._mechanism import build, Built, KIND_NAMES, kind_of_options, mechanism_options, ORDER, to_chain, wave_text
 from ._options import expand, run_options, Values
 
 
@@ -89,12 +89,12 @@ def _plot(traj: Any, path: Path, title: str) -> None:
     fig.savefig(path, dpi=120)
 
 
-def parse_axis(name: str, text: str) -> float | np.ndarray:
+def parse_axis(name: str, text: str, option: str | None = None) -> float | np.ndarray:
     """Read `--NAME` of `sweep`: `start:stop:count` (linspace), `v1,v2,...`, or one fixed value.
 
-    **Raises:** `ValueError` naming the option for unreadable text or an empty range.
+    **Raises:** `ValueError` naming the option (`option`, else `--NAME`) for unreadable text or an empty range.
     """
-    opt = "--" + name.replace("_", "-")
+    opt = option or "--" + name.replace("_", "-")
     form = "expected a value, 'start:stop:count' or 'v1,v2,...'"
     try:
         if ":" in text:
@@ -114,15 +114,38 @@ def parse_axis(name: str, text: str) -> float | np.ndarray:
         raise ValueError(str(err) if str(err).startswith(opt) else f"{opt}: cannot read {text!r}; {form}.") from None
 
 
-def _sweep_plan(mech: Values, file: Path | None, on_invalid: str) -> tuple[dict[str, str], Any]:
-    """`sweep`'s texts of the swept names (in the order given) and the `mechanism` argument of `lj.sweep`
-    (`None`: the paper's model, whose parameters are the names)."""
+def _sweep_plan(
+    mech: Values, file: Path | None, on_invalid: str, vary: list[str] | None = None
+) -> tuple[dict[str, Any], Any]:
+    """`sweep`'s swept names (in the order given), each with its text (or, for `--vary`, its values),
+    and the `mechanism` argument of `lj.sweep` (`None`: the paper's model, whose parameters are the names)."""
     import locomotion_jax as lj
 
     from ._files import kind_of, load, refuse_options
 
     order = context().meta.get(ORDER, []) if context() is not None else []
     check = on_invalid == "raise"
+    loaded = None if file is None else load(file)[0]
+    if vary and (loaded is None or kind_of(loaded) != "mechanism"):
+        what = "the paper's model" if loaded is None and mech["masses"] is None else "a chain"
+        what = f"{file} holds {KIND_NAMES[kind_of(loaded)]}" if loaded is not None else f"the options give {what}"
+        raise ValueError(f"--vary names the numbers of a mechanism file of bodies and links (kind = \"mechanism\"); "
+                         f"{what}: sweep its options instead (--omega, --a, ...; see sweep --help).")  # fmt: skip
+    if loaded is not None and kind_of(loaded) == "mechanism":
+        assert file is not None
+        from ._files import given
+
+        named = given(mech)
+        if named:
+            options = ", ".join("--" + n.replace("_", "-") for n in named)
+            raise ValueError(f"{options}: {file} describes the mechanism (bodies and links); name the numbers of it to "
+                             "sweep with --vary PATH=VALUES, e.g. --vary links.1.waveform.a=0.2:1:5.")  # fmt: skip
+        if not vary:
+            raise ValueError(f"nothing to sweep: name the numbers of {file} to map with --vary PATH=VALUES, e.g. "
+                             "--vary links.1.k=5:20:4 (`locomotion-jax sweep --help`).")  # fmt: skip
+        from ._vary import plan
+
+        return plan(file, vary)
     if file is None and mech["masses"] is None:  # the paper's model: its parameters given
         kind_of_options(mech)
         names = [n for n in order if n in PAPER_AXES and mech.get(n) is not None]
@@ -139,7 +162,7 @@ def _sweep_plan(mech: Values, file: Path | None, on_invalid: str) -> tuple[dict[
 
         chain_build = build_options
     else:
-        loaded, waveform = load(file)
+        loaded, waveform = load(file)  # read again: the paper's [waveform] with it
         if kind_of(loaded) == "paper":
             if waveform is not None:
                 raise ValueError(f"{file}: sweep maps the paper's sinusoid (eq. 13); its [waveform] table cannot be "
@@ -150,10 +173,6 @@ def _sweep_plan(mech: Values, file: Path | None, on_invalid: str) -> tuple[dict[
             if "omega_over_wn1" in given:
                 values.pop("omega")
             return {**given, **{n: v for n, v in values.items() if n not in given}}, None
-        if kind_of(loaded) == "mechanism":
-            raise ValueError(f"`sweep`: {file} is a mechanism of bodies and links (kind = \"mechanism\"); the CLI "
-                             "sweeps the paper's model's parameters and a chain's travelling wave (a, omega, phi). "
-                             "Map it in Python: lj.sweep(axes, mechanism=build).")  # fmt: skip
         refuse_options(file, [n for n in mech if n not in wave])
         from ._files import travelling_wave
 
@@ -278,6 +297,16 @@ def register(app: typer.Typer) -> None:
             ),
         ],  # fmt: skip
         mech: Values,
+        vary: Annotated[
+            list[str] | None,
+            typer.Option(
+                metavar="PATH=VALUES",
+                help='A mechanism FILE of bodies and links (kind = "mechanism"): a number of the file to map, '
+                "named by its tables, indices (from 0) and field, with its values: --vary bodies.0.mass=0.5,1,2, "
+                "--vary links.1.waveform.a=0.2:1:5, --vary links.2.waveform.cos.1=0.1. Repeat it for more "
+                "dimensions; several paths joined by commas take the same values (one dimension).",
+            ),
+        ] = None,
         mode: Annotated[
             Literal["grid", "list"], typer.Option(help="'grid' (outer product) or 'list' (zip axes of equal length).")
         ] = "grid",
@@ -303,19 +332,23 @@ def register(app: typer.Typer) -> None:
         The paper's model: any of its parameters, e.g. `locomotion-jax sweep --omega 1:25:256 --a
         0.01:0.1:256 --out maps/ssl.nc`. A chain (`--masses`, or a chain's FILE): the travelling wave's
         a, omega and phi (its other options fixed; a file's wave gives the values not given). A paper
-        FILE: the parameters not given take the file's values. Each option is a range start:stop:count,
+        FILE: the parameters not given take the file's values. A FILE of bodies and links (kind =
+        "mechanism"): any of its numbers, named with --vary PATH=VALUES (`locomotion-jax sweep
+        examples/capsule.toml --vary links.1.waveform.a=0.2:1:5 --vary bodies.0.mass=0.5,1 --out
+        capsule.nc`; the dimensions are named by the paths). Each option is a range start:stop:count,
         a list v1,v2,... or one value; the dimensions follow the order of the options on the command
         line. An interrupted sweep of the paper's model resumes from its finished chunks when rerun
         with the same arguments; a finished one is read back.
         """
         import locomotion_jax as lj
 
-        texts, chain_build = _sweep_plan(mech, file, on_invalid)
-        parsed = {n: parse_axis(n, text) for n, text in texts.items()}
+        texts, chain_build = _sweep_plan(mech, file, on_invalid, vary)
+        parsed = {n: parse_axis(n, text) if isinstance(text, str) else text for n, text in texts.items()}
         axes = {n: v for n, v in parsed.items() if isinstance(v, np.ndarray)}
         fixed = {n: v for n, v in parsed.items() if not isinstance(v, np.ndarray)}
         if not axes:
-            raise ValueError("nothing to sweep: give at least one range or list, e.g. --omega 1:25:256.")
+            e_g = "--vary links.1.k=5:20:4" if vary else "--omega 1:25:256"
+            raise ValueError(f"nothing to sweep: give at least one range or list, e.g. {e_g}.")
         how: dict[str, Any] = dict(mode=mode, z=run["z"], horizon=run["horizon"], window=run["window"], **exact(run),
                    chunk_size=chunk_size, path=out, progress=progress, on_invalid=on_invalid)  # fmt: skip
         if chain_build is None:

@@ -55,6 +55,31 @@ class MechanismFileError(ValueError):
     where known, the table and the field (`worm.toml, line 12: [friction] mu_k: expected ...`)."""
 
 
+class Swept:
+    """A number of a parsed file replaced by one value per configuration (`values`, 1-D): the reader
+    passes it where it would pass the number, so the mechanism it builds is a batch (`sweep` of a file)."""
+
+    def __init__(self, values: Any):
+        self.values = np.asarray(values, float)
+
+    def __repr__(self) -> str:
+        return f"<{self.values.size} swept values>"
+
+
+def value_of(x: Any) -> float | np.ndarray:
+    """A number of a parsed file as the reader passes it on: a float, or a [`Swept`][]'s values."""
+    return x.values if isinstance(x, Swept) else float(x)
+
+
+def stacked(items: Sequence[Any]) -> Any:
+    """Numbers (one per body, spring or harmonic), along a last axis: the list itself, unless a
+    [`Swept`][] among them makes it a batch (configurations, len(items))."""
+    if not any(isinstance(x, (Swept, np.ndarray)) for x in items):
+        return list(items)
+    return np.stack(np.broadcast_arrays(*(np.asarray(value_of(x) if isinstance(x, Swept) else x, float)
+                                          for x in items)), axis=-1)  # fmt: skip
+
+
 # -- reading: one table at a time ------------------------------------------------------------------------------
 
 
@@ -93,30 +118,30 @@ class _Table:
             self.fail(None, f"missing field '{key}'")
         return self.data[key]
 
-    def number(self, key: str, default: float | None = None) -> float:
+    def number(self, key: str, default: float | None = None) -> float | np.ndarray:
         if key not in self.data and default is not None:
             return default
         value = self.required(key)
         if not _is_number(value):
             self.fail(key, f"expected a number, got {_shown(value)}")
-        return float(value)
+        return value_of(value)
 
-    def numbers(self, key: str, n: int, what: str, default: float | None = None) -> float | list[float]:
+    def numbers(self, key: str, n: int, what: str, default: float | None = None) -> float | list[float] | np.ndarray:
         """A number (broadcast) or a list of `n` numbers (one per `what`); a list of one is broadcast too."""
         if key not in self.data and default is not None:
             return default
         value = self.required(key)
         if _is_number(value):
-            return float(value)
+            return value_of(value)
         if isinstance(value, list) and len(value) in (1, n) and all(_is_number(v) for v in value):
-            return [float(v) for v in value]
+            return stacked([value_of(v) for v in value])
         self.fail(key, f"expected a number or a list of {n} numbers (one per {what}), got {_shown(value)}")
 
     def vector(self, key: str, at_least: int = 1) -> np.ndarray:
         value = self.required(key)
         if not (isinstance(value, list) and len(value) >= at_least and all(_is_number(v) for v in value)):
             self.fail(key, f"expected a list of at least {at_least} number(s), got {_shown(value)}")
-        return np.asarray(value, float)
+        return np.asarray(stacked(value), float)
 
     def matrix(self, key: str, rows: int, what: str) -> np.ndarray:
         value = self.required(key)
@@ -174,7 +199,7 @@ _HEADER = re.compile(r"^\s*\[\[?\s*[A-Za-z_\"][\w.\"-]*\s*\]\]?\s*(#.*)?$")
 
 
 def _is_number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
+    return isinstance(value, (int, float, Swept)) and not isinstance(value, bool)
 
 
 def _shown(value: Any) -> str:
@@ -205,7 +230,7 @@ def _waveform_of_paper(t: _Table, params: Params) -> AbstractWaveform:
 def _paper(doc: _Table) -> tuple[Params, AbstractWaveform | None]:
     doc.only(("schema", "kind", "description", "params", "waveform"))
     table = doc.sub("params")
-    values: dict[str, float] = {}
+    values: dict[str, Any] = {}
     if table is not None:
         table.only(PARAM_NAMES)
         values = {n: table.number(n) for n in PARAM_NAMES if table.has(n)}
@@ -228,7 +253,7 @@ def _spring_waveform(t: _Table, lbar: float) -> AbstractWaveform:
     return Fourier(cos, sin, t.number("omega"), lbar)
 
 
-def _chain_waveforms(doc: _Table, springs: int, lbar: float | list[float]) -> Any:
+def _chain_waveforms(doc: _Table, springs: int, lbar: Any) -> Any:
     lbars = np.broadcast_to(np.asarray(lbar, float), (springs,)).tolist()
     if doc.has("waveform") and doc.has("waveforms"):
         doc.fail("[[waveforms]]", "give either [waveform] (one for the chain) or [[waveforms]] (one per spring)")
@@ -298,6 +323,12 @@ def _read(source: _Source, text: str) -> tuple[Any, AbstractWaveform | None]:
         found = re.search(r"\(at line (\d+), column (\d+)\)", message)
         line = int(found.group(1)) if found else None
         source.fail(f"not valid TOML: {message}", line)
+    return read_document(source, data)
+
+
+def read_document(source: _Source, data: dict[str, Any], check: bool = True) -> tuple[Any, AbstractWaveform | None]:
+    """The mechanism (and paper's waveform) of a parsed file `data`, whose text `source` holds;
+    `check=False`: a `kind = "mechanism"` is built unchecked (its invalid values are flagged where it runs)."""
     doc = _Table(source, "", data)
     schema = doc.number("schema", float(SCHEMA))
     if schema != SCHEMA:
@@ -311,7 +342,7 @@ def _read(source: _Source, text: str) -> tuple[Any, AbstractWaveform | None]:
         if kind == "mechanism":
             from ._files_mechanism import read_mechanism
 
-            return read_mechanism(doc, _friction), None
+            return read_mechanism(doc, _friction, check), None
         return _chain(doc), None
     except MechanismFileError:
         raise

@@ -33,7 +33,7 @@ import numpy as np
 
 from ._bodies import Mechanism
 from ._elements import AbstractElement, Damper, End, ExternalForce, Force, Spring, WALL
-from ._files import _Source, _Table
+from ._files import _Source, _Table, stacked, Swept
 from ._waveform import AbstractWaveform, Fourier, Sinusoid, Spline
 
 
@@ -126,7 +126,7 @@ class _Item(_Table):
         where = f"{self.label}{key}: " if key else f"{self.label.rstrip('.').rstrip()}: "
         self.source.fail(f"{where}{message}".rstrip(), self.line(key))
 
-    def numbers(self, key: str, n: int, what: str, default: float | None = None) -> float:
+    def numbers(self, key: str, n: int, what: str, default: float | None = None) -> float | np.ndarray:
         """One body's coefficient (the friction reader's call; a body's law has one value per field)."""
         return self.number(key, default)
 
@@ -144,7 +144,7 @@ class _Item(_Table):
 
 
 def _is_number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
+    return isinstance(value, (int, float, Swept)) and not isinstance(value, bool)
 
 
 def _shown(value: Any) -> str:
@@ -161,13 +161,13 @@ def _wave(t: _Item) -> AbstractWaveform:
         return Sinusoid(t.number("a"), omega, lbar)
     if kind == "Fourier":
         cos, sin = t.vector("cos"), t.vector("sin")
-        if len(cos) != len(sin):
-            t.fail("sin", f"expected as many numbers as 'cos' ({len(cos)}, one per harmonic), got {len(sin)}")
+        if cos.shape[-1] != sin.shape[-1]:  # the last axis: harmonics (a swept coefficient adds a batch axis)
+            t.fail("sin", f"expected as many numbers as 'cos' ({cos.shape[-1]}, one per harmonic), got {sin.shape[-1]}")
         return Fourier(cos, sin, omega, lbar)
     return Spline(t.vector("control", 4), omega, lbar)
 
 
-def _signal(t: _Item, key: str, default: float | None = None) -> float | AbstractWaveform:
+def _signal(t: _Item, key: str, default: float | None = None) -> float | np.ndarray | AbstractWaveform:
     if key not in t.data and default is not None:
         return default
     value = t.required(key)
@@ -175,7 +175,7 @@ def _signal(t: _Item, key: str, default: float | None = None) -> float | Abstrac
         return _wave(t.inner(key))
     if not _is_number(value):
         t.fail(key, f'expected a number or a waveform table (type = "Sinusoid", ...), got {_shown(value)}')
-    return float(value)
+    return t.number(key)
 
 
 def line_of_message(source: Any, message: str) -> int | None:
@@ -197,9 +197,10 @@ def line_of_message(source: Any, message: str) -> int | None:
     return block[0] + 1
 
 
-def read_mechanism(doc: Any, friction_of: Any) -> Mechanism:
+def read_mechanism(doc: Any, friction_of: Any, check: bool = True) -> Mechanism:
     """The `Mechanism` of a parsed file (`doc`: the top-level `_Table`); `friction_of(table, n)` reads a
-    friction law (`_files._friction`)."""
+    friction law (`_files._friction`); `check` as `Mechanism`'s. A [`Swept`][locomotion_jax.model._files.Swept]
+    number makes the mechanism a batch, one configuration per swept value."""
     doc.only(("schema", "kind", "description", "bodies", "links"))
     items = doc.data.get("bodies")
     if not (isinstance(items, list) and items):
@@ -247,7 +248,8 @@ def read_mechanism(doc: Any, friction_of: Any) -> Mechanism:
             if i == WALL:
                 t.fail("i", 'expected a body index, not "wall"')
             links.append(ExternalForce(int(i), _signal(t, "waveform")))
-    return Mechanism(masses=masses, friction=laws, carried_by=carried, links=links, c=c, x0=x0, v0=v0)
+    per_body = {name: stacked(values) for name, values in (("masses", masses), ("c", c), ("x0", x0), ("v0", v0))}
+    return Mechanism(friction=laws, carried_by=carried, links=links, check=check, **per_body)
 
 
 # -- writing ---------------------------------------------------------------------------------------------------
