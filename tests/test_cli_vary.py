@@ -101,7 +101,7 @@ def test_list_sweep_with_joined_paths_equals_lj_sweep_bit_for_bit(tmp_path):
 def test_an_invalid_value_is_refused_by_name_or_flagged_in_its_own_row(tmp_path):
     res = invoke("sweep", CAPSULE, "--vary", f"{M0}=-1,1,1.5,2", *FLAGS, "--out", str(tmp_path / "x.nc"))
     assert res.exit_code == 2 and "Traceback" not in res.output
-    assert res.output.startswith(f"Error: Invalid configuration at grid index (0,) ({M0}=")
+    assert res.output.startswith(f"Error: Invalid configuration at grid index (0,) ({M0}=-1.0): ")
     assert "masses" in res.output and "body 0" in res.output, res.output
     assert not (tmp_path / "x.nc").exists()
     ds = sweep_cli(tmp_path, "--vary", f"{M0}=-1,1,1.5,2", "--on-invalid", "flag")
@@ -111,6 +111,11 @@ def test_an_invalid_value_is_refused_by_name_or_flagged_in_its_own_row(tmp_path)
     for name in ("mean_speed", "e_d", "cost_of_transport", "regime"):
         np.testing.assert_array_equal(ds[name].values[1:], good[name].values[1:], err_msg=name)
     assert np.isnan(ds.mean_speed.values[0])
+    again = ["sweep", CAPSULE, "--vary", f"{M0}=1,2", *FLAGS, "--out", str(tmp_path / "capsule.nc")]
+    res = invoke(*again)  # a map of a file is not resumed: --overwrite replaces it
+    assert res.exit_code == 2 and res.output.startswith(f"Error: --out {tmp_path / 'capsule.nc'}: exists;"), res.output
+    assert invoke(*again, "--overwrite").exit_code == 0
+    assert xr.load_dataset(tmp_path / "capsule.nc").sizes[M0] == 2
 
 
 @pytest.mark.parametrize(

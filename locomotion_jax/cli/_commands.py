@@ -356,7 +356,10 @@ def register(app: typer.Typer) -> None:
                 raise ValueError("--t-start: a sweep of the paper's model starts each measurement at its own t_start.")
             ds = lj.sweep(axes, fixed=fixed, overwrite=overwrite, order=order, **how)
         else:
-            ds = lj.sweep(axes, fixed=fixed, mechanism=chain_build, t_start=t_start, **how)
+            if out.exists() and not overwrite:
+                raise ValueError(f"--out {out}: exists; a map of a chain or a mechanism file is not resumed: give "
+                                 "--overwrite, or another path.")  # fmt: skip
+            ds = lj.sweep(axes, fixed=fixed, mechanism=chain_build, t_start=t_start, overwrite=overwrite, **how)
         typer.echo(f"wrote {out}: " + " x ".join(f"{n}[{s}]" for n, s in ds.sizes.items() if n != "mass"))
         status = np.asarray(ds.status).ravel()
         regime = np.asarray(ds.regime).ravel()
@@ -366,7 +369,7 @@ def register(app: typer.Typer) -> None:
                                           if (regime == r).any()))  # fmt: skip
         speed = np.asarray(ds.mean_speed)
         if np.isfinite(speed).any():
-            i = np.unravel_index(int(np.nanargmax(speed)), speed.shape)
+            i = np.unravel_index(int(np.nanargmax(np.abs(speed))), speed.shape)  # forward or backward
             index = dict(zip(axes, i)) if mode == "grid" else dict.fromkeys(axes, i[0])
             at = ", ".join(f"{n}={float(v[index[n]]):.4g}" for n, v in axes.items())
             typer.echo(f"fastest: mean speed {float(speed[i]):.4g} at {at}")

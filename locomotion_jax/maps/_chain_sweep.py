@@ -111,7 +111,7 @@ def sweep_chain(
             if bad.size:
                 j = int(bad[0])
                 where = np.unravel_index(i * chunk + j, shape) if mode == "grid" else (i * chunk + j,)
-                at = ", ".join(f"{name}={values[name][k]!r}" for name, k in zip(values, where))
+                at = ", ".join(f"{name}={float(values[name][k])!r}" for name, k in zip(values, where))
                 try:
                     chain[j].validate()
                 except ValueError as e:
