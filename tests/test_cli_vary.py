@@ -9,6 +9,7 @@ import re
 from pathlib import Path
 from typing import Any
 
+import jax
 import locomotion_jax as lj
 import numpy as np
 import pytest
@@ -189,3 +190,20 @@ def test_vary_belongs_to_mechanism_files_and_they_need_it(tmp_path, args, messag
     res = invoke("sweep", *args, "--out", str(tmp_path / "x.nc"))
     assert res.exit_code == 2 and "Traceback" not in res.output, res.output
     assert res.output.startswith("Error: " + message), res.output
+
+
+def test_float32_sweep_equals_lj_sweep_in_float32_and_float64_within_its_precision(tmp_path):
+    a = np.linspace(0.3, 1.2, 4)  # as the CLI reads 0.3:1.2:4
+    expected64 = lj.sweep({A: a}, mechanism=capsule, **RUN)
+    out = tmp_path / "f32.nc"
+    try:
+        res = invoke("--no-x64", "sweep", CAPSULE, "--vary", f"{A}=0.3:1.2:4", *FLAGS, "--out", str(out))
+        assert res.exit_code == 0, res.output
+        expected32 = lj.sweep({A: a}, mechanism=capsule, **RUN)  # still in 32-bit mode
+    finally:
+        jax.config.update("jax_enable_x64", True)
+    ds = xr.load_dataset(out)
+    assert ds.attrs["dtype"] == "float32" and ds.mean_speed.dtype == np.float32
+    assert_same(ds, expected32)
+    assert (ds.status.values == lj.Status.OK).all()
+    np.testing.assert_allclose(ds.mean_speed.values, expected64.mean_speed.values, rtol=1e-3)
