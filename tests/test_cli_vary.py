@@ -207,3 +207,13 @@ def test_float32_sweep_equals_lj_sweep_in_float32_and_float64_within_its_precisi
     assert_same(ds, expected32)
     assert (ds.status.values == lj.Status.OK).all()
     np.testing.assert_allclose(ds.mean_speed.values, expected64.mean_speed.values, rtol=1e-3)
+
+
+@pytest.mark.parametrize("command", [["measure"], ["sweep", "--vary", f"{M0}=1,2", "--no-progress", "--out", "h.nc"]])
+def test_a_combination_the_library_refuses_is_one_line(tmp_path, monkeypatch, command):
+    """`--contact hop` with a carried body: the library's `NotImplementedError`, one line, no traceback."""
+    monkeypatch.chdir(tmp_path)
+    res = invoke(command[0], CAPSULE, *command[1:], "--contact", "hop")
+    assert res.exit_code == 2 and "Traceback" not in res.output and res.output.count("\n") == 1, res.output
+    assert res.output.startswith("Error: contact='hop' does not support carried bodies yet (carried_by)"), res.output
+    assert not (tmp_path / "h.nc").exists()

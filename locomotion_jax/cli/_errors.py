@@ -1,9 +1,10 @@
 """Expected failures of a command end with one line `Error: ...` on stderr and exit code 2, never a traceback.
 
 Expected are a `ValueError` from the library or the command (bad arguments; its message names
-the option or the parameter) and an `OSError` (an output path that cannot be created or written,
-an input that cannot be read), which [`os_error_message`][] attributes to the path option it
-concerns.
+the option or the parameter), a `NotImplementedError` (a combination the library refuses by name,
+e.g. `--contact hop` with a carried body) and an `OSError` (an output path that cannot be created
+or written, an input that cannot be read), which [`os_error_message`][] attributes to the path
+option it concerns.
 """
 
 import functools
@@ -36,7 +37,8 @@ def os_error_message(err: OSError, options: Mapping[str, Any]) -> str:
 
 
 def friendly(fn: F) -> F:
-    """Decorator of a command: a `ValueError` or an `OSError` ends with `Error: ...` and exit code 2.
+    """Decorator of a command: a `ValueError`, a `NotImplementedError` or an `OSError` ends with `Error: ...`
+    and exit code 2.
 
     Apply it below `@app.command()` and above `_options.expand`, so that it sees every option by name.
     """
@@ -45,7 +47,7 @@ def friendly(fn: F) -> F:
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         try:
             return fn(*args, **kwargs)
-        except ValueError as err:
+        except (ValueError, NotImplementedError) as err:
             message = str(err)
         except OSError as err:
             message = os_error_message(err, kwargs)
