@@ -2,8 +2,9 @@
 the map equals `lj.sweep(axes, mechanism=build)` of the same mechanism built by hand in Python, bit for bit
 (grid and list mode, a fixed value, paths joined by commas); an invalid swept value is refused naming
 its grid index and path, or flagged in its own row with the others unchanged; a bad path or value ends
-with one `Error:` line naming the option, the path and what the file has there. Short runs (t_start 5,
-horizon 6, dt 0.02) and one chunk shape (4 configurations): one compilation serves the module."""
+with one `Error:` line naming the option, the path and what the file has there. A chain file
+(`examples/worm.toml`) is swept the same way. Short runs (t_start 5, horizon 6, dt 0.02) and one
+chunk shape (4 configurations): one compilation per mechanism and dtype serves the module."""
 
 import re
 from pathlib import Path
@@ -179,9 +180,9 @@ def test_a_bad_vary_names_the_option_and_the_path(tmp_path, args, message):
 @pytest.mark.parametrize(
     "args, message",
     [
-        (["--vary", f"{M0}=1,2"], "--vary names the numbers of a mechanism file of bodies and links"),
+        (["--vary", f"{M0}=1,2"], "--vary names the numbers of a mechanism file (a chain, or bodies and links); the"),
         (["--masses", "1,1", "--vary", "chain.k=1,2"], "--vary names the numbers of a mechanism file"),
-        ([str(EXAMPLES / "worm.toml"), "--vary", "chain.k=1,2"], "--vary names the numbers of a mechanism file"),
+        ([str(EXAMPLES / "paper.toml"), "--vary", "params.k=1,2"], "--vary names the numbers of a mechanism file"),
         ([CAPSULE], "nothing to sweep: name the numbers of"),
         ([CAPSULE, "--omega", "1,2"], "--omega: " + CAPSULE + " describes the mechanism (bodies and links); name"),
     ],
@@ -217,3 +218,30 @@ def test_a_combination_the_library_refuses_is_one_line(tmp_path, monkeypatch, co
     assert res.exit_code == 2 and "Traceback" not in res.output and res.output.count("\n") == 1, res.output
     assert res.output.startswith("Error: contact='hop' does not support carried bodies yet (carried_by)"), res.output
     assert not (tmp_path / "h.nc").exists()
+
+
+def worm(**v: Any) -> lj.Chain:
+    """examples/worm.toml written out in Python, its spring stiffness, wave phase and backward static
+    coefficient replaced by `v` (keyed by path)."""
+    k = np.asarray(v.get("chain.k", 50.0), float)[..., None]  # per spring: one value for all three
+    mu_s_bwd = np.asarray(v.get("friction.mu_s_bwd", 0.9), float)[..., None]  # per mass
+    phi = np.asarray(v.get("waveform.phi", 0.785), float)
+    law = lj.AnisotropicCoulomb(0.5, mu_s_bwd, 0.3, 0.7)
+    return lj.Chain(masses=[1.0] * 4, k=k, d=0.0, lbar=3.0, c=0.01, waveforms=lj.TravellingWave(0.1, 2.0, phi),
+                    friction=law, actuator=lj.RestLength(), check=False)  # fmt: skip
+
+
+def test_vary_sweeps_a_chain_file_as_lj_sweep_does_bit_for_bit(tmp_path):
+    k, phi = np.array([20.0, 50.0, 80.0]), np.array([0.0, 0.785])
+    out = tmp_path / "worm.nc"
+    args = ["--vary", "chain.k=20,50,80", "--vary", "waveform.phi=0,0.785", "--vary", "friction.mu_s_bwd=0.8"]
+    res = invoke("sweep", str(EXAMPLES / "worm.toml"), *args, *FLAGS, "--out", str(out))
+    assert res.exit_code == 0, res.output
+    ds = xr.load_dataset(out)
+    expected = lj.sweep({"chain.k": k, "waveform.phi": phi}, mechanism=worm, fixed={"friction.mu_s_bwd": 0.8}, **RUN)
+    assert ds.mean_speed.dims == ("chain.k", "waveform.phi")
+    assert_same(ds, expected)
+    speed = ds.mean_speed.values
+    assert (ds.status.values == lj.Status.OK).all() and np.ptp(speed[:, 0]) > 1e-3 and np.ptp(speed[0]) > 1e-3
+    res = invoke("sweep", str(EXAMPLES / "worm.toml"), "--a", "0.1", *args, "--out", str(tmp_path / "x.nc"))
+    assert res.exit_code == 2 and res.output.startswith("Error: --a: ") and "is swept with --vary" in res.output

@@ -126,20 +126,23 @@ def _sweep_plan(
     order = context().meta.get(ORDER, []) if context() is not None else []
     check = on_invalid == "raise"
     loaded = None if file is None else load(file)[0]
-    if vary and (loaded is None or kind_of(loaded) != "mechanism"):
+    kind = None if loaded is None else kind_of(loaded)
+    if vary and kind not in ("mechanism", "chain"):
         what = "the paper's model" if loaded is None and mech["masses"] is None else "a chain"
-        what = f"{file} holds {KIND_NAMES[kind_of(loaded)]}" if loaded is not None else f"the options give {what}"
-        raise ValueError(f"--vary names the numbers of a mechanism file of bodies and links (kind = \"mechanism\"); "
-                         f"{what}: sweep its options instead (--omega, --a, ...; see sweep --help).")  # fmt: skip
-    if loaded is not None and kind_of(loaded) == "mechanism":
+        what = f"{file} holds {KIND_NAMES[kind]}" if kind is not None else f"the options give {what}"
+        raise ValueError(f"--vary names the numbers of a mechanism file (a chain, or bodies and links); {what}: "
+                         "sweep its options instead (--omega, --a, ...; see sweep --help).")  # fmt: skip
+    if kind == "mechanism" or (kind == "chain" and vary):
         assert file is not None
         from ._files import given
 
         named = given(mech)
+        e_g = "links.1.waveform.a=0.2:1:5" if kind == "mechanism" else "chain.k=20:80:4"
         if named:
             options = ", ".join("--" + n.replace("_", "-") for n in named)
-            raise ValueError(f"{options}: {file} describes the mechanism (bodies and links); name the numbers of it to "
-                             "sweep with --vary PATH=VALUES, e.g. --vary links.1.waveform.a=0.2:1:5.")  # fmt: skip
+            what = "describes the mechanism (bodies and links)" if kind == "mechanism" else "is swept with --vary"
+            raise ValueError(f"{options}: {file} {what}; name the numbers of it to sweep with --vary PATH=VALUES, "
+                             f"e.g. --vary {e_g}.")  # fmt: skip
         if not vary:
             raise ValueError(f"nothing to sweep: name the numbers of {file} to map with --vary PATH=VALUES, e.g. "
                              "--vary links.1.k=5:20:4 (`locomotion-jax sweep --help`).")  # fmt: skip
@@ -301,9 +304,10 @@ def register(app: typer.Typer) -> None:
             list[str] | None,
             typer.Option(
                 metavar="PATH=VALUES",
-                help='A mechanism FILE of bodies and links (kind = "mechanism"): a number of the file to map, '
-                "named by its tables, indices (from 0) and field, with its values: --vary bodies.0.mass=0.5,1,2, "
-                "--vary links.1.waveform.a=0.2:1:5, --vary links.2.waveform.cos.1=0.1. Repeat it for more "
+                help='A mechanism FILE of bodies and links (kind = "mechanism") or of a chain: a number of the file '
+                "to map, named by its tables, indices (from 0) and field, with its values: --vary "
+                "bodies.0.mass=0.5,1,2, --vary links.1.waveform.a=0.2:1:5, --vary links.2.waveform.cos.1=0.1; "
+                "a chain's: --vary chain.k=20:80:4, --vary friction.mu_s_bwd=0.6:1:5. Repeat it for more "
                 "dimensions; several paths joined by commas take the same values (one dimension).",
             ),
         ] = None,
@@ -333,7 +337,7 @@ def register(app: typer.Typer) -> None:
         0.01:0.1:256 --out maps/ssl.nc`. A chain (`--masses`, or a chain's FILE): the travelling wave's
         a, omega and phi (its other options fixed; a file's wave gives the values not given). A paper
         FILE: the parameters not given take the file's values. A FILE of bodies and links (kind =
-        "mechanism"): any of its numbers, named with --vary PATH=VALUES (`locomotion-jax sweep
+        "mechanism"), or a chain's FILE: any of its numbers, named with --vary PATH=VALUES (`locomotion-jax sweep
         examples/capsule.toml --vary links.1.waveform.a=0.2:1:5 --vary bodies.0.mass=0.5,1 --out
         capsule.nc`; the dimensions are named by the paths). Each option is a range start:stop:count,
         a list v1,v2,... or one value; the dimensions follow the order of the options on the command

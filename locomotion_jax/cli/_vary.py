@@ -1,8 +1,11 @@
-"""`sweep FILE --vary PATH=VALUES`: the numbers of a mechanism file (`kind = "mechanism"`) that a sweep maps.
+"""`sweep FILE --vary PATH=VALUES`: the numbers of a mechanism file (`kind = "mechanism"` or `"chain"`) that a
+sweep maps.
 
 A PATH names one number of the file as its tables and arrays nest, keys and (0-based) indices
 joined by dots: `bodies.0.mass`, `bodies.0.friction.mu_s_fwd`, `links.1.k`, `links.1.waveform.omega`,
-`links.2.waveform.cos.1`. A field the file leaves at its default may be named too (`bodies.1.c`,
+`links.2.waveform.cos.1`; in a chain file `chain.k`, `chain.masses.3`, `friction.mu_s_bwd`,
+`waveform.phi` (a chain's per-spring or per-mass number swept alone is one value for every spring
+or mass). A field the file leaves at its default may be named too (`bodies.1.c`,
 `links.0.rest`). Several paths joined by commas take the same values (one dimension): the
 waveforms of one mechanism share their base frequency, so `links.1.waveform.omega,links.2.waveform.omega`
 sweeps it. VALUES is read as the other axes of `sweep` (`parse_axis`): `start:stop:count`, `v1,v2,...`

@@ -132,7 +132,8 @@ class _Table:
             return default
         value = self.required(key)
         if _is_number(value):
-            return value_of(value)
+            v = value_of(value)
+            return v[:, None] if isinstance(v, np.ndarray) else v  # swept: (configurations, 1), broadcast
         if isinstance(value, list) and len(value) in (1, n) and all(_is_number(v) for v in value):
             return stacked([value_of(v) for v in value])
         self.fail(key, f"expected a number or a list of {n} numbers (one per {what}), got {_shown(value)}")
@@ -149,7 +150,8 @@ class _Table:
         ok = ok and len({len(r) for r in value}) == 1 and all(_is_number(v) for r in value for v in r)
         if not ok:
             self.fail(key, f"expected a list of {rows} lists (one per {what}) of as many numbers, got {_shown(value)}")
-        return np.asarray(value, float)
+        lines = [np.asarray(stacked(r), float) for r in value]
+        return np.stack(np.broadcast_arrays(*lines), axis=-2)
 
     def choice(self, key: str, choices: Sequence[str]) -> str:
         value = self.required(key)
@@ -239,7 +241,7 @@ def _paper(doc: _Table) -> tuple[Params, AbstractWaveform | None]:
     return params, None if wave is None else _waveform_of_paper(wave, params)
 
 
-def _spring_waveform(t: _Table, lbar: float) -> AbstractWaveform:
+def _spring_waveform(t: _Table, lbar: Any) -> AbstractWaveform:
     """One spring's waveform: its mean rest length is the spring's (`[chain] lbar`)."""
     kind = t.choice("type", ("Sinusoid", "Fourier"))
     hint = " ('lbar' is the spring's: give it in [chain] lbar)" if t.has("lbar") else ""
@@ -248,13 +250,15 @@ def _spring_waveform(t: _Table, lbar: float) -> AbstractWaveform:
         return Sinusoid(t.number("a"), t.number("omega"), lbar)
     t.only(("type", "cos", "sin", "omega"), hint)
     cos, sin = t.vector("cos"), t.vector("sin")
-    if len(cos) != len(sin):
-        t.fail("sin", f"expected as many numbers as 'cos' ({len(cos)}, one per harmonic), got {len(sin)}")
+    if cos.shape[-1] != sin.shape[-1]:  # the last axis: harmonics (a swept coefficient adds a batch axis)
+        t.fail("sin", f"expected as many numbers as 'cos' ({cos.shape[-1]}, one per harmonic), got {sin.shape[-1]}")
     return Fourier(cos, sin, t.number("omega"), lbar)
 
 
 def _chain_waveforms(doc: _Table, springs: int, lbar: Any) -> Any:
-    lbars = np.broadcast_to(np.asarray(lbar, float), (springs,)).tolist()
+    lb = np.asarray(lbar, float)  # a number, one per spring, or swept: (configurations, 1 or springs)
+    lbars = np.broadcast_to(lb, lb.shape[:-1] + (springs,)) if lb.ndim > 1 else np.broadcast_to(lb, (springs,))
+    lbars = [lbars[..., j] if lb.ndim > 1 else float(lbars[j]) for j in range(springs)]
     if doc.has("waveform") and doc.has("waveforms"):
         doc.fail("[[waveforms]]", "give either [waveform] (one for the chain) or [[waveforms]] (one per spring)")
     if doc.has("waveforms"):
@@ -273,8 +277,8 @@ def _chain_waveforms(doc: _Table, springs: int, lbar: Any) -> Any:
     if kind == "SpringFourier":
         t.only(("type", "cos", "sin", "omega"))
         cos, sin = t.matrix("cos", springs, "spring"), t.matrix("sin", springs, "spring")
-        if len(sin[0]) != len(cos[0]):
-            t.fail("sin", f"expected {len(cos[0])} harmonics per spring, as 'cos' has, got {len(sin[0])}")
+        if sin.shape[-1] != cos.shape[-1]:
+            t.fail("sin", f"expected {cos.shape[-1]} harmonics per spring, as 'cos' has, got {sin.shape[-1]}")
         return SpringFourier(cos, sin, t.number("omega"))
     return [_spring_waveform(t, lbars[j]) for j in range(springs)]  # every spring in phase
 
@@ -287,14 +291,14 @@ def _friction(t: _Table, n: int) -> AbstractFriction:
     return cls(**values)
 
 
-def _chain(doc: _Table) -> Chain:
+def _chain(doc: _Table, check: bool = True) -> Chain:
     doc.only(("schema", "kind", "description", "chain", "friction", "actuator", "waveform", "waveforms"))
     if not doc.has("chain"):
         doc.fail(None, "missing table [chain] (masses, k, d, lbar, c)")
     t = _Table(doc.source, "chain", doc.data["chain"])
     t.only(("masses", "k", "d", "lbar", "c"))
     masses = t.vector("masses", 2)
-    n = len(masses)
+    n = masses.shape[-1]
     k, d, lbar = (
         t.numbers(name, n - 1, "spring", default) for name, default in (("k", 50.0), ("d", 0.5), ("lbar", 3.0))
     )
@@ -307,7 +311,7 @@ def _chain(doc: _Table) -> Chain:
     return Chain(
         masses=masses, k=k, d=d, lbar=lbar, c=c, waveforms=waves,
         friction=None if friction is None else _friction(friction, n),
-        actuator=None if actuator is None else ACTUATORS[actuator.choice("type", tuple(ACTUATORS))](),
+        actuator=None if actuator is None else ACTUATORS[actuator.choice("type", tuple(ACTUATORS))](), check=check,
     )  # fmt: skip
 
 
@@ -328,7 +332,8 @@ def _read(source: _Source, text: str) -> tuple[Any, AbstractWaveform | None]:
 
 def read_document(source: _Source, data: dict[str, Any], check: bool = True) -> tuple[Any, AbstractWaveform | None]:
     """The mechanism (and paper's waveform) of a parsed file `data`, whose text `source` holds;
-    `check=False`: a `kind = "mechanism"` is built unchecked (its invalid values are flagged where it runs)."""
+    `check=False`: a chain or a `kind = "mechanism"` is built unchecked (its invalid values are flagged
+    where it runs)."""
     doc = _Table(source, "", data)
     schema = doc.number("schema", float(SCHEMA))
     if schema != SCHEMA:
@@ -343,7 +348,7 @@ def read_document(source: _Source, data: dict[str, Any], check: bool = True) -> 
             from ._files_mechanism import read_mechanism
 
             return read_mechanism(doc, _friction, check), None
-        return _chain(doc), None
+        return _chain(doc, check), None
     except MechanismFileError:
         raise
     except (ValueError, TypeError) as err:  # the constructors' checks of the values
