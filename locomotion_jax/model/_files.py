@@ -10,6 +10,10 @@ reuses them in its own tables. Unknown kinds, tables, fields and types are refus
 Reading checks the file's structure and types first (an error names the file, the line where it can
 be found, the table and the field), then the constructors check the values (their messages come
 through with the file's name in front). Every error is a [`MechanismFileError`][], a `ValueError`.
+
+`sweep FILE --vary PATH=VALUES` (`cli/_vary.py`) reads a parsed file again with some of its numbers
+replaced by [`Swept`][] values ([`read_document`][]): the same reader then builds a batch of chains or
+mechanisms, one per configuration.
 """
 
 import re
