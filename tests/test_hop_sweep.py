@@ -170,3 +170,18 @@ def test_cli_sweep_contact_hop_writes_the_hopping_variables(tmp_path, memory):
     assert ds.attrs["contact"] == "hop"
     for name in memory.data_vars:
         assert np.array_equal(ds[name].values, memory[name].values, equal_nan=True), name
+
+
+def test_hop_sweep_float32_equals_measure():
+    """`dtype=float32`: the hopping variables come out in float32 and equal `lj.measure(...,
+    dtype=float32)` of the same configurations bit for bit (a list of two that fly)."""
+    axes = {"omega": [9.0, 12.0], "a": [0.08, 0.08]}
+    ds = lj.sweep(axes, mode="list", fixed=FIXED, contact="hop", chunk_size=4, dtype=np.float32, **FAST)
+    kw = {k: v for k, v in FAST.items() if k != "progress"}
+    p = lj.Params(omega=np.asarray(axes["omega"]), a=np.asarray(axes["a"]), **FIXED)
+    m = lj.measure(p, contact="hop", dtype=np.float32, **kw)  # type: ignore[arg-type]
+    want = _as_dataset_fields(m)
+    assert ds.flight_fraction1.dtype == np.float32 and ds.highest_hop2.dtype == np.float32
+    assert np.all(ds.status.values == lj.Status.OK) and np.all(ds.flight_fraction2.values > 0.05)
+    for name in map(str, ds.data_vars):
+        assert np.array_equal(ds[name].values, want[name], equal_nan=True), name
