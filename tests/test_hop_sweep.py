@@ -178,7 +178,7 @@ def test_hop_sweep_float32_equals_measure():
     axes = {"omega": [9.0, 12.0], "a": [0.08, 0.08]}
     ds = lj.sweep(axes, mode="list", fixed=FIXED, contact="hop", chunk_size=4, dtype=np.float32, **FAST)
     kw = {k: v for k, v in FAST.items() if k != "progress"}
-    p = lj.Params(omega=np.asarray(axes["omega"]), a=np.asarray(axes["a"]), **FIXED)
+    p = lj.Params(omega=np.asarray(axes["omega"]), a=np.asarray(axes["a"]), d=0.25)
     m = lj.measure(p, contact="hop", dtype=np.float32, **kw)  # type: ignore[arg-type]
     want = _as_dataset_fields(m)
     assert ds.flight_fraction1.dtype == np.float32 and ds.highest_hop2.dtype == np.float32
