@@ -64,6 +64,8 @@ def test_hop_sweep_equals_measure_bit_for_bit(memory, measured):
     for name in HOP_VARS:
         assert ds[name].dims == ("omega", "a") and "contact='hop'" in ds[name].attrs["description"]
     assert ds.attrs["contact"] == "hop" and np.all(ds.status.values == lj.Status.OK)
+    for name in map(str, ds.data_vars):  # every run is OK: no NaN anywhere
+        assert not np.any(np.isnan(ds[name].values.astype(float))), name
     ff1, ff2 = ds.flight_fraction1.values, ds.flight_fraction2.values
     print("flight fractions", ff1.round(4).tolist(), ff2.round(4).tolist(), "tau_z", ds.tau_z.values.round(3).tolist())
     assert np.all(ff1[0] == 0) and np.all(ff2[0] == 0) and np.all(ds.highest_hop2.values[0] == 0)  # omega = 2
