@@ -29,7 +29,9 @@ class Status(enum.IntEnum):
       through each other). The exact engines check every committed step's end and stop
       the run there (not located in time: the step that closed the gap is kept, so the
       last state has a gap $\\le 0$); the smoothed dynamics locate the gap's zero as a
-      terminating event. Results cover the part that was integrated.
+      terminating event. Results cover the part that was integrated. Under `contact="hop"`
+      the same holds for bodies in flight, whatever their heights: SPEC §10 gives the bodies
+      heights but no shape, so their order on the line stays part of the model (docs/model.md).
     - `UNRESOLVED`: the fixed step of [`Exact`][locomotion_jax.Exact] dynamics is too long for
       one of the configuration's time scales (the forcing's highest harmonic, a natural
       period, a damping or Stribeck time; docs/engines.md, "Resolution guards"); nothing

@@ -74,6 +74,24 @@ def test_rebound_heights():
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-10)
 
 
+def test_landing_times_as_the_closed_form():
+    """Landing times $t_1 = \\sqrt{2h}$, then every $2 e^k \\sqrt{2h}$, to 1e-10: each landing time is
+    read off the height a time $s$ after the closed form's landing (the rebound at $w_k = e^k\\sqrt{2h}$
+    has reached $y = w_k \\tau - \\tau^2/2$ a time $\\tau$ after the landing), for the first 8 landings."""
+    h, e, s = 1.0, 0.5, 1e-3
+    w = math.sqrt(2 * h) * e ** np.arange(9)  # w[k]: the speed after the k-th landing (w[0]: the first impact)
+    t_land = math.sqrt(2 * h) + np.concatenate([[0.0], np.cumsum(2 * w[1:8])])  # landings 1 to 8
+    ts = t_land + s
+    traj = lj.simulate(_ball(), t_end=4.5, save_at=ts, contact="hop")
+    assert traj.y is not None
+    y = np.asarray(traj.y[:, 0])
+    rebound = w[1:9]
+    tau = rebound - np.sqrt(rebound * rebound - 2 * y)  # the root of w tau - tau^2 / 2 = y before the apex
+    err = np.abs(ts - tau - t_land).max()
+    print("landing times", ts - tau, "closed form", t_land, "max error", err)
+    assert err < 1e-10
+
+
 def test_landing_while_sliding_follows_the_impulse_law():
     """A body thrown sideways lands with $v^- = 1$, $w^- = -\\sqrt 2$: $P_n = m(1+e)|w^-|$,
     $P_t = \\min(m|v^-|, \\mu_k P_n)$ against $v^-$; no friction in flight, so $x$ is linear

@@ -153,12 +153,11 @@ def test_params_hop_batch_flags_bad_configuration_only():
     assert int(m32.status) == lj.Status.OK and float(m32.flight_fraction[0]) > 0
 
 
-def test_params_sweep_hop_refused_with_the_chain_map_that_runs_it():
-    """`lj.sweep` of `Params` under "hop" names the map that runs it, a chain map of `Chain.from_params`,
-    whose values equal `lj.measure` of the same `Params` under "hop" bit for bit."""
+def test_chain_map_of_params_under_hop_equals_measure():
+    """A chain map of `Chain.from_params` under "hop" (which, unlike a sweep of `Params`, takes an explicit
+    `t_start`) equals `lj.measure` of the same `Params` under "hop" bit for bit (the sweep of `Params`
+    itself: tests/test_hop_sweep.py)."""
     axes = {"omega": np.asarray([9.0, 12.0]), "a": np.asarray([0.05, 0.08])}
-    with pytest.raises(NotImplementedError, match="Chain.from_params"):
-        lj.sweep(axes, z=1.0, contact="hop")
     kw = dict(z=1.0, horizon=30.0, window=10.0, t_start=10.0)
     ds = lj.sweep(axes, mechanism=lambda **v: lj.Chain.from_params(lj.Params(**v, d=0.25)), contact="hop",
                   progress=False, **kw)  # type: ignore[arg-type]  # fmt: skip

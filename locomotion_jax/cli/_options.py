@@ -39,7 +39,8 @@ _RUN = {
             str,
             "strict",
             "Contact reading: 'strict' (stop at lift-off), 'paper' (n_i = |N_i|, "
-            "flagged), or another the engine knows (passed to it as given).",
+            "flagged), 'hop' (flight and landing, SPEC section 10), or another the engine knows (passed to it "
+            "as given).",
         ),
         option("start", str, "paper", "'paper' (eq. 14) or 'relaxed' (spring at rest length)."),
         option("dt", float, 0.01, "RK4 step of the exact hybrid integrator."),

@@ -16,8 +16,41 @@ MEASURE_FIELDS: tuple[str, ...] = tuple(
     for f, field in Measurement.__dataclass_fields__.items()
     if f not in ("z", "start", "contact") and field.default is not None
 )
-"""The dataset's variables: every array field of [`Measurement`][] that every contact reading has (the
-hopping fields, `None` outside `contact="hop"`, are left out: sweeps of the paper's model do not hop)."""
+"""The dataset's variables under every contact reading: every array field of [`Measurement`][] that
+every reading has (the hopping fields, `None` outside `contact="hop"`, are [`HOP_FIELDS`][])."""
+
+HOP_FIELDS: tuple[str, ...] = (
+    "flight_fraction1",
+    "flight_fraction2",
+    "highest_hop1",
+    "highest_hop2",
+    "landings_per_period",
+    "zeno",
+)
+"""The dataset's extra variables under `contact="hop"` (SPEC §10): `Measurement`'s hopping fields, the
+per-mass ones (`flight_fraction`, `highest_hop`, a trailing axis of 2) as one variable per mass, as
+`stick_fraction1`, `stick_fraction2` are, so that every variable has the grid's dimensions."""
+
+_PER_MASS: tuple[str, ...] = ("flight_fraction", "highest_hop")
+
+
+def dataset_fields(contact: str) -> tuple[str, ...]:
+    """The variables of a sweep's dataset under `contact`: [`MEASURE_FIELDS`][], and [`HOP_FIELDS`][]
+    under `"hop"` (a strict or paper sweep's dataset has no hopping variable)."""
+    return MEASURE_FIELDS + (HOP_FIELDS if contact == "hop" else ())
+
+
+def per_mass_columns(out: dict) -> dict:
+    """A chunk's measurements with each per-mass hopping field (`flight_fraction`, `highest_hop`,
+    shape `(n, 2)`) split into one field per mass (`flight_fraction1`, `flight_fraction2`, ...);
+    unchanged without them (strict and paper)."""
+    out = dict(out)
+    for name in _PER_MASS:
+        if name in out:
+            both = out.pop(name)
+            out |= {f"{name}1": both[..., 0], f"{name}2": both[..., 1]}
+    return out
+
 
 DESCRIPTIONS = {
     "tau_z": "time to travel z after t_start (inf: not reached)",
@@ -43,6 +76,13 @@ DESCRIPTIONS = {
     "near_miss": "smallest margin (rad of drive phase) at a near miss of an event function",
     "margin_z": "margin (rad of drive phase) of the target |X - X0| = z: its crossing, near misses, nearest switch",
     "omega": "actuation frequency derived from omega_over_wn1",
+    "flight_fraction1": "fraction of the regime window mass 1 is in flight (contact='hop')",
+    "flight_fraction2": "fraction of the regime window mass 2 is in flight (contact='hop')",
+    "highest_hop1": "greatest height of mass 1 during the run (0: never flew; contact='hop')",
+    "highest_hop2": "greatest height of mass 2 during the run (0: never flew; contact='hop')",
+    "landings_per_period": "landings of both masses per actuation period 2 pi / omega over the regime window "
+    "(contact='hop')",
+    "zeno": "the Zeno rule made a rebound plastic during the run (contact='hop')",
 }
 
 

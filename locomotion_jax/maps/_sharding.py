@@ -24,6 +24,7 @@ from ..dynamics._base import AbstractDynamics
 from ..dynamics._compile import engine_jit
 from ..model._params import PARAM_NAMES, Params
 from ..run._resolution import flag, guard_values
+from ._dataset import per_mass_columns
 
 
 BATCH_AXIS = "batch"
@@ -84,7 +85,8 @@ def _run_chunk(
 ) -> dict[str, jax.Array]:
     # Runs only while tracing: counts compilations, not calls.
     TRACES["run_chunk"] += 1
-    return dynamics.measure_chunk(flat, zhw, contact, start, max_steps, mesh, micro_batch)
+    # Under contact="hop" the per-mass hopping fields come back as one array per mass (the dataset's variables).
+    return per_mass_columns(dynamics.measure_chunk(flat, zhw, contact, start, max_steps, mesh, micro_batch))
 
 
 _run_chunk = engine_jit(_run_chunk, ("contact", "start", "max_steps", "mesh", "micro_batch"))
@@ -134,7 +136,8 @@ def dispatch_chunk(
     more than `MAX_START_STEPS` steps (`run._resolution`), is run as an invalid one (not
     integrated) and [`fetch`][] flags it `Status.UNRESOLVED`.
 
-    **Returns:** a dict of sharded arrays (one per `Measurement` field); read them with [`fetch`][].
+    **Returns:** a dict of sharded arrays (one per `Measurement` field; under `contact="hop"` the per-mass
+    hopping fields one per mass, `_dataset.HOP_FIELDS`); read them with [`fetch`][].
     """
     values, unresolved = guard_values(values, dtype, dynamics, default_start=True)  # a sweep starts at Params.t_start
     out = _run_chunk(

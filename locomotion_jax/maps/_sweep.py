@@ -39,10 +39,10 @@ from ..dynamics._exact_dynamics import Exact
 from ..dynamics._runs import horizon_bound
 from ..model import _two_mass as model
 from ..model._params import DEFAULTS, Params
-from ..run._batch import dynamics_arg
+from ..run._batch import check_hop_dynamics, dynamics_arg
 from ..run._measure import check_measure_args
 from . import _sharding as sharding
-from ._dataset import MEASURE_FIELDS, sweep_attrs, to_dataset
+from ._dataset import dataset_fields, MEASURE_FIELDS as MEASURE_FIELDS, sweep_attrs, to_dataset  # re-exported
 from ._grid import check_valid, Grid, RATIO
 from ._store import ChunkOrder, ChunkStore, read_finished
 
@@ -239,7 +239,9 @@ def sweep(
       default `Chain.t_start`).
 
     **Returns:** an `xarray.Dataset` (read lazily from a Zarr store): one dimension and coordinate per swept axis, one
-    variable per [`Measurement`][] field (plus `omega` when `omega_over_wn1` is swept),
+    variable per [`Measurement`][] field (plus `omega` when `omega_over_wn1` is swept; under `contact="hop"`
+    the hopping fields `flight_fraction1`, `flight_fraction2`, `highest_hop1`, `highest_hop2`,
+    `landings_per_period` and `zeno`, `_dataset.HOP_FIELDS`),
     and attributes recording the fixed parameters, dynamics, dtype, contact, start,
     z, horizon, window, order, step cap, package version and the specification (`sweep_spec`, JSON).
 
@@ -262,13 +264,8 @@ def sweep(
                                 dtype, chunk_size, path, overwrite, progress, on_invalid, order)  # fmt: skip
     if t_start is not None:
         raise ValueError("t_start is for chain maps (mechanism=...); the paper's model starts at Params.t_start.")
-    if contact == "hop":
-        raise NotImplementedError(
-            "sweep of the paper's model (Params) with contact='hop' (SPEC section 10) is not implemented on its "
-            "sharded path; map it as the two-mass chain it runs as: lj.sweep(axes, mechanism=lambda **kw: "
-            "lj.Chain.from_params(lj.Params(**kw)), contact='hop') (the fields of a ChainMeasurement)."
-        )
-    model.check_contact(contact)
+    model.check_contact(contact, hop=True)
+    check_hop_dynamics(contact, dynamics)  # "hop" runs on the exact engine only
     model.initial_gap(Params(), start)  # validates `start`
     check_measure_args(z, horizon, window)
     if on_invalid not in ("raise", "flag"):
@@ -407,7 +404,8 @@ def sweep(
         results[i] = store.load(i)
         STATS["chunks_loaded"] += 1
     flat_res = {
-        k: _in_grid_order(np.concatenate([results[i][k] for i in range(n_chunks)]), perm) for k in MEASURE_FIELDS
+        k: _in_grid_order(np.concatenate([results[i][k] for i in range(n_chunks)]), perm)
+        for k in dataset_fields(contact)
     }
     if RATIO in grid.values or RATIO in grid.fixed:
         flat_res["omega"] = grid.config_values(np.arange(grid.size))["omega"]

@@ -26,7 +26,7 @@ import numpy as np
 from ..dynamics._base import AbstractDynamics
 from ..model._params import PARAM_NAMES
 from . import _peers, _sharding as sharding
-from ._dataset import DESCRIPTIONS, MEASURE_FIELDS, sweep_attrs
+from ._dataset import dataset_fields, DESCRIPTIONS, sweep_attrs
 from ._grid import RATIO
 from ._zarr_store import block_shape, Blocks, ZarrStore
 
@@ -81,7 +81,7 @@ def sweep_to_zarr(
     def create() -> ZarrStore:
         if path.exists() and not overwrite:
             return ZarrStore.open(path, spec)
-        variables = {k: (dtypes[k], {"description": DESCRIPTIONS.get(k, k)}) for k in MEASURE_FIELDS}
+        variables = {k: (dtypes[k], {"description": DESCRIPTIONS.get(k, k)}) for k in dataset_fields(contact)}
         variables |= {k: (np.dtype(np.float64), {"description": DESCRIPTIONS[k]}) for k in derived}
         dims = grid.names if grid.mode == "grid" else ("config",)
         coords = {n: (n if grid.mode == "grid" else "config", grid.values[n]) for n in grid.names}

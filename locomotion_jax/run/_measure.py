@@ -131,6 +131,10 @@ def measure(
         ```python
         m = measure(Params(omega=2.0), z=5.0)
         float(m.tau_z), float(m.e_z), Regime(int(m.regime))
+        # Flight and landing (SPEC §10): Status.OK through lift-off, both masses in flight 90 % of the
+        # window. At omega = 10 the hops grow until the masses cross (Status.COLLISION; docs/model.md).
+        h = measure(Params(omega=9.0, a=0.1), contact="hop")
+        h.flight_fraction, h.highest_hop, h.landings_per_period
         ```
     """
     dynamics = dynamics_arg(dynamics)
