@@ -10,7 +10,10 @@ and ``-f`` on ``b`` (``x = 0`` for the wall ``-1``); an internal force ``(a, b, 
 ``b`` and ``-s(t)`` on ``a``; an external force ``(i, s)`` exerts ``s(t)`` on ``i``; a damper ``(a, b, c)``
 exerts ``f = c (v_b - v_a)``, ``+f`` on ``a`` and ``-f`` on ``b`` (``v = 0`` for the wall), and dissipates
 ``c (v_b - v_a)^2``. A signal is
-``s(t) = mean + sum_n A_n cos(n w t) + B_n sin(n w t)``. A body in contact has the normal load
+``s(t) = mean + sum_n A_n cos(n w t) + B_n sin(n w t)``, or a periodic uniform cubic B-spline in the
+phase, ``s(t) = mean + sum_j c_j beta(M w t / (2 pi) - j)`` over the ``M`` control values ``c_j`` repeated
+with period ``M``, with the centred cubic B-spline ``beta(u) = 2/3 - u^2 + |u|^3/2`` for ``|u| < 1``,
+``(2 - |u|)^3/6`` for ``1 <= |u| < 2`` and 0 beyond. A body in contact has the normal load
 ``N_i = m_i + sum of the masses it carries`` (constant: the springs are horizontal) and anisotropic
 Coulomb friction; a body without contact feels no friction. Ground damping ``c_i v_i``.
 
@@ -26,17 +29,39 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 
+def _beta(u: float) -> tuple[float, float]:
+    """The centred cubic B-spline and its derivative at ``u``."""
+    a = abs(u)
+    if a < 1:
+        return 2 / 3 - a * a + a**3 / 2, float(np.sign(u)) * (-2 * a + 1.5 * a * a)
+    if a < 2:
+        return (2 - a) ** 3 / 6, -float(np.sign(u)) * (2 - a) ** 2 / 2
+    return 0.0, 0.0
+
+
 @dataclass
 class Sig:
-    """``mean + sum_n A[n] cos((n+1) w t) + B[n] sin((n+1) w t)``."""
+    """``mean + sum_n A[n] cos((n+1) w t) + B[n] sin((n+1) w t)``, or with ``control`` (M >= 4
+    values) ``mean + sum_j control[j] beta(M w t / (2 pi) - j)``, periodic in ``j`` (module docstring)."""
 
     mean: float = 0.0
     A: tuple = ()
     B: tuple = ()
     w: float = 0.0
+    control: tuple = ()
 
     def at(self, t: float) -> tuple[float, float]:
         """Value and time derivative."""
+        if self.control:
+            M = len(self.control)
+            s = (M * self.w * t / (2 * np.pi)) % M
+            val, rate = self.mean, 0.0
+            for j, c in enumerate(self.control):
+                d = (s - j + M / 2) % M - M / 2  # the nearest periodic copy of knot j
+                b, db = _beta(d)
+                val += c * b
+                rate += c * db * M * self.w / (2 * np.pi)
+            return val, rate
         val, rate = self.mean, 0.0
         for n, (a, b) in enumerate(zip(self.A, self.B), start=1):
             p = n * self.w * t

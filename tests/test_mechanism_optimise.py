@@ -11,8 +11,18 @@
    any backward slide costs more), checked by a direct simulation from rest (`lj.measure`), and no
    sinusoid under the same bound is as fast (a batched sweep of amplitudes and phases).
 
+3. The same capsule with splines (`MechanismOptimiseSettings(shape="spline")`) under a force bound at
+   which no sinusoid of the screen moves it: the optimum's control values are within the bound, its
+   exact stroke matches a dense sampling, its cost is at or above the physical floor, and its gait
+   from rest agrees with the independent reference (which has its own B-spline).
+4. float32: the optimiser keeps the mechanism's dtype, and the float32 optimum's gait agrees with
+   the float64 reference to float32's resolution.
+
 Slow (about 2 to 5 minutes each)."""
 
+from typing import Any
+
+import jax
 import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
@@ -186,6 +196,14 @@ def test_mechanism_optimise_settings():
     assert (s.local, s.max_iter, s.omega_max, s.phases) == (3, 7, 1.5, 1)
     with pytest.raises(TypeError, match="must be a MechanismOptimiseSettings, got ExactSettings"):
         lj.optimise(_capsule(), v_min=0.01, a_max=0.5, settings=lj.ExactOptimiseSettings())
+    with pytest.raises(ValueError, match="shape must be 'fourier' or 'spline', got 'square'"):
+        lj.MechanismOptimiseSettings(shape="square")
+    with pytest.raises(ValueError, match="knots must be an int >= 4, got 3"):
+        lj.MechanismOptimiseSettings(knots=3)
+    with pytest.raises(ValueError, match=r"harmonics applies to Fourier series.*got harmonics=3"):
+        lj.optimise(
+            _capsule(), v_min=0.01, a_max=0.5, harmonics=3, settings=lj.MechanismOptimiseSettings(shape="spline")
+        )
 
 
 def test_mechanism_optimise_bad_input():
@@ -197,3 +215,91 @@ def test_mechanism_optimise_bad_input():
         lj.optimise(_capsule(lj.Sinusoid(a=jnp.array([0.3, 0.4]), omega=3.0, lbar=0.0)), v_min=0.01, a_max=0.5)
     with pytest.raises(ValueError, match="exact method only"):
         lj.optimise(_capsule(), v_min=0.01, a_max=0.5, method="smoothed")
+
+
+def _reference_gait(opt):
+    """Mean speed and cost of transport of the optimum's isotropic capsule from rest in the
+    independent reference, over 10 periods of its force once the slowest Floquet mode has decayed
+    to 1e-9 of its start (at least 30 periods)."""
+    w = float(opt.omega)
+    start = int(np.clip(np.ceil(np.log(1e-9) / np.log(opt.spectral_radius_exact)), 30, 400))
+    periods = (start, start + 10)
+    if opt.shape == "spline":
+        force = Sig(0.0, w=w, control=tuple(float(c) for c in opt.control[0]))
+    else:
+        force = Sig(0.0, tuple(float(c) for c in opt.cos[0]), tuple(float(c) for c in opt.sin[0]), w)
+    S = System([Body(M_BODY, (0.5, 0.5, 0.4, 0.4)), Body(M_IN, None, carrier=0)], springs=[(0, 1, K_ISO, 0.0)],
+               forces=[(0, 1, force)])  # fmt: skip
+    t = np.array(periods, float) * 2 * np.pi / w
+    ref = run(S, float(t[1]), t)
+    dX = ref["com"][1] - ref["com"][0]
+    return dX / (t[1] - t[0]), (ref["ed"][1] - ref["ed"][0]) / abs(dX)
+
+
+def test_reference_spline_is_the_packages_spline():
+    """The reference's B-spline signal (its own formula) equals `lj.Spline` and its rate."""
+    c = np.random.default_rng(3).normal(size=7)
+    wave = lj.Spline(jnp.asarray(c), 2.3, 0.4)
+    t = np.linspace(-3.0, 9.0, 501)
+    val, rate = (np.asarray(q) for q in wave(jnp.asarray(t)))
+    ref = np.array([Sig(0.4, w=2.3, control=tuple(c)).at(x) for x in t])
+    assert np.abs(ref[:, 0] - val).max() < 1e-12 and np.abs(ref[:, 1] - rate).max() < 1e-11
+
+
+SPLINE: dict[str, Any] = dict(amplitudes=3, phases=2, local=1, max_iter=8, transient=15, shape="spline", knots=8)
+
+
+@pytest.fixture(scope="module")
+def spline_optimum():
+    s = lj.MechanismOptimiseSettings(**SPLINE)
+    return lj.optimise(_iso_capsule(np.zeros(1), np.zeros(1)), v_min=V_ISO, a_max=F_MAX, omega=OMEGA, settings=s)
+
+
+@pytest.mark.slow
+def test_spline_optimum_of_the_isotropic_capsule(spline_optimum):
+    opt = spline_optimum
+    print({k: v for k, v in opt.to_dict().items() if k not in ("candidates",)}, opt.candidates)
+    assert opt.shape == "spline" and opt.harmonics == 0 and opt.cos.shape == (1, 0)
+    assert opt.control is not None and opt.control.shape == (1, 8)
+    wave = opt.mechanism.links[1].waveform
+    assert isinstance(wave, lj.Spline) and np.array_equal(np.asarray(wave.control), opt.control[0])
+    # The bound: a box on the control values; the exact stroke against a dense sampling of the force.
+    T = 2 * np.pi / OMEGA
+    sampled = float(np.abs(np.asarray(wave(jnp.linspace(0.0, T, 40001))[0])).max())
+    stroke = float(opt.stroke_exact[0])
+    assert np.abs(opt.control).max() <= F_MAX and stroke <= F_MAX * (1 + 1e-12)
+    assert sampled <= stroke + 1e-12 and stroke - sampled < 1e-6
+    # No sinusoid of the screen under the bound moves the capsule at v_min; the spline does.
+    assert opt.sinusoid is None and opt.candidates[0]["feasible_exact"] is False
+    assert opt.feasible_exact and opt.stable_exact and opt.mean_speed_exact >= V_ISO
+    # The floor e_d >= mu_k (M + m) g |distance| holds; a direct simulation agrees.
+    assert opt.cost_of_transport_exact >= FLOOR * (1 - 1e-9)
+    assert opt.simulation_agreement < 1e-6
+    # The independent reference from rest, once the transient has decayed.
+    speed, cost = _reference_gait(opt)
+    err = max(abs(speed / opt.mean_speed_exact - 1), abs(cost / opt.cost_of_transport_exact - 1))
+    print(f"spline optimum: speed {opt.mean_speed_exact:.10f} (reference {speed:.10f}), cost "
+          f"{opt.cost_of_transport_exact:.10f} (reference {cost:.10f}, floor {FLOOR}); diff {err:.1e}")  # fmt: skip
+    assert err < 1e-4
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("shape", ["fourier", "spline"])
+def test_mechanism_optimise_float32(shape):
+    """The isotropic capsule in float32 (Fourier series of 2 harmonics, or splines of 8 knots): the
+    optimiser keeps the dtype, meets the requirement and the floor, and its optimum's gait agrees
+    with the float64 reference within 1e-3 (float32's resolution of the orbit, Newton tolerance 1e-5)."""
+    mech = _iso_capsule(np.zeros(1), np.zeros(1)).astype(jnp.float32)
+    s = lj.MechanismOptimiseSettings(**(SPLINE | dict(shape=shape)))
+    opt = lj.optimise(mech, v_min=V_ISO, a_max=F_MAX, omega=OMEGA, harmonics=2 if shape == "fourier" else None,
+                      settings=s)  # fmt: skip
+    print({k: v for k, v in opt.to_dict().items() if k not in ("candidates",)})
+    assert opt.mechanism.dtype == jnp.float32 and opt.shape == shape
+    assert all(x.dtype == jnp.float32 for x in jax.tree_util.tree_leaves(opt.mechanism))
+    assert opt.feasible_exact and opt.stable_exact and opt.mean_speed_exact >= V_ISO
+    assert opt.cost_of_transport_exact >= FLOOR * (1 - 1e-6) and float(np.max(opt.stroke_exact)) <= F_MAX * (1 + 1e-6)
+    speed, cost = _reference_gait(opt)
+    err = max(abs(speed / opt.mean_speed_exact - 1), abs(cost / opt.cost_of_transport_exact - 1))
+    print(f"float32 {shape} optimum: speed {opt.mean_speed_exact:.8f} (reference {speed:.8f}), cost "
+          f"{opt.cost_of_transport_exact:.8f} (reference {cost:.8f}); relative difference {err:.1e}")  # fmt: skip
+    assert err < 1e-3

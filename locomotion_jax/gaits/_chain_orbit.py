@@ -20,6 +20,12 @@ theorem, $dy^*/d\\theta = (I - M)^{-1}\\partial\\Phi/\\partial\\theta$ and
 $dF/d\\theta = \\partial F/\\partial\\theta + (\\partial F/\\partial y)\\,dy^*/d\\theta$: one forward
 pass over the gait period in the $2N - 1 + p$ directions $(y, \\theta)$ gives every gradient,
 located events entering with their implicit-function times (the saltation of each switch).
+
+A [`Mechanism`][locomotion_jax.Mechanism] takes one signal per actuated element ([`actuated`][]) in
+place of one per spring, and, with `knots` $M > 0$, the decision vector
+$\\theta = (c_{0,0}, \\dots, c_{0,M-1}, c_{1,0}, \\dots, c_{S-1,M-1}, \\log\\omega)$ of the control
+values of a periodic cubic B-spline per element ([`Spline`][], units of $a_\\max$; no phase is
+fixed) instead of Fourier coefficients.
 """
 
 from collections import Counter
@@ -38,7 +44,7 @@ from ..model._chain import Chain
 from ..model._elements import Spring
 from ..model._physics import AbstractPhysics
 from ..model._springwaves import SpringFourier
-from ..model._waveform import AbstractWaveform, Fourier
+from ..model._waveform import AbstractWaveform, Fourier, Spline
 from ._chain_gait import _reduced, _section_state
 from ._orbit import newton_orbit, Orbit, Period
 
@@ -82,9 +88,26 @@ def with_fourier(mechanism: Mechanism, cos: Array, sin: Array, omega: Array) -> 
     return eqx.tree_at(lambda m: m.links, mechanism, tuple(links))
 
 
-def with_waves(chain: Chain | Mechanism, theta: Array, a_max: Array, harmonics: int) -> Chain | Mechanism:
+def with_spline(mechanism: Mechanism, control: Array, omega: Array) -> Mechanism:
+    """`mechanism` with each actuated element's waveform replaced by the periodic cubic B-spline of
+    control values `control[..., j, :]` (absolute units) and base frequency `omega`, its mean (the
+    old waveform's `lbar`) kept. Leading axes of the control values are batch axes."""
+    links = list(mechanism.links)
+    for j, i in enumerate(actuated(mechanism)):
+        el = links[i]
+        name = "rest" if isinstance(el, Spring) else "waveform"
+        old = getattr(el, name)
+        links[i] = eqx.tree_at(lambda e: getattr(e, name), el, Spline(control[..., j, :], omega, old.lbar))
+    return eqx.tree_at(lambda m: m.links, mechanism, tuple(links))
+
+
+def with_waves(chain: Chain | Mechanism, theta: Array, a_max: Array, harmonics: int,
+               knots: int = 0) -> Chain | Mechanism:  # fmt: skip
     """One chain or mechanism (broadcast, unbatched) with the actuation of the decision vector `theta`
-    (a mechanism: one signal per actuated element, [`actuated`][])."""
+    (a mechanism: one signal per actuated element, [`actuated`][]; with `knots > 0` a spline per element)."""
+    if isinstance(chain, Mechanism) and knots > 0:
+        S = len(actuated(chain))
+        return with_spline(chain, a_max * theta[:-1].reshape(S, knots), jnp.exp(theta[-1]))
     if isinstance(chain, Mechanism):
         cos, sin = coefficients(theta, len(actuated(chain)), harmonics)
         return with_fourier(chain, a_max * cos, a_max * sin, jnp.exp(theta[-1]))
@@ -120,29 +143,29 @@ def period(C: Chain | Mechanism, contact: Contact, dt: float, max_steps: Array, 
     return Period(_reduced(st, P), jnp.stack([dX, st.y.ed, low]), ok)
 
 
-def _orbit_one(C, a_max, theta, y0, k, harmonics, contact, dt, max_steps, tol, max_iter) -> Orbit:
+def _orbit_one(C, a_max, theta, y0, k, harmonics, knots, contact, dt, max_steps, tol, max_iter) -> Orbit:
     ny = y0.shape[0]
 
     def run(z):
-        out = period(with_waves(C, z[ny:], a_max, harmonics), contact, dt, max_steps, z[:ny], k)
+        out = period(with_waves(C, z[ny:], a_max, harmonics, knots), contact, dt, max_steps, z[:ny], k)
         return jnp.concatenate([out.y, out.figures]), out.ok
 
     return newton_orbit(run, y0, theta, tol, max_iter)
 
 
-def _evaluate(C, a_max, theta, y0, k, harmonics, contact, dt, max_steps, tol, max_iter):
+def _evaluate(C, a_max, theta, y0, k, harmonics, knots, contact, dt, max_steps, tol, max_iter):
     TRACES["evaluate"] += 1  # runs only while tracing
-    one = lambda th, y, kk: _orbit_one(C, a_max, th, y, kk, harmonics, contact, dt, max_steps, tol, max_iter)
+    one = lambda th, y, kk: _orbit_one(C, a_max, th, y, kk, harmonics, knots, contact, dt, max_steps, tol, max_iter)
     return jax.vmap(one)(theta, y0, k)
 
 
-def _relax(C, a_max, theta, y0, fresh, periods, harmonics, contact, dt, max_steps):
+def _relax(C, a_max, theta, y0, fresh, periods, harmonics, knots, contact, dt, max_steps):
     """`periods` actuation periods from the section state `y0`, or from the relaxed springs at
     rest where `fresh`: the reduced state at the end (a start for Newton's method)."""
     TRACES["relax"] += 1
 
     def one(th, y, new):
-        c = with_waves(C, th, a_max, harmonics)
+        c = with_waves(C, th, a_max, harmonics, knots)
         P = c.physics()
         rest = engine.init(P, contact, P.initial_positions("relaxed"))
         sec = _section_state(P, contact, y)
@@ -163,15 +186,16 @@ def _relax(C, a_max, theta, y0, fresh, periods, harmonics, contact, dt, max_step
     return jax.vmap(one)(theta, y0, fresh)
 
 
-evaluate = engine_jit(_evaluate, ("harmonics", "contact", "dt", "max_iter"))
-relax = engine_jit(_relax, ("harmonics", "contact", "dt"))
+evaluate = engine_jit(_evaluate, ("harmonics", "knots", "contact", "dt", "max_iter"))
+relax = engine_jit(_relax, ("harmonics", "knots", "contact", "dt"))
 
 
 class ChainOracle(eqx.Module):
     """The compiled evaluations of one chain problem (static: harmonics, contact, step, iterations).
 
     `chain` is one configuration, broadcast (its waveforms are replaced by the decision vector's): a
-    chain, or a [`Mechanism`][locomotion_jax.Mechanism] (one signal per actuated element).
+    chain, or a [`Mechanism`][locomotion_jax.Mechanism] (one signal per actuated element; with
+    `knots > 0` a spline of `knots` control values per element, `harmonics` unused).
     """
 
     chain: Chain | Mechanism
@@ -182,14 +206,15 @@ class ChainOracle(eqx.Module):
     contact: Contact = eqx.field(static=True)
     dt: float = eqx.field(static=True)
     max_iter: int = eqx.field(static=True)
+    knots: int = eqx.field(static=True, default=0)
 
     def orbits(self, theta: Array, y0: Array, k: Array) -> Orbit:
         """Steady gaits of `k` actuation periods (int32, per row) and their sensitivities, for a
         batch of decision vectors, from warm starts `y0`."""
-        return evaluate(self.chain, self.a_max, theta, y0, k, self.harmonics, self.contact, self.dt,
+        return evaluate(self.chain, self.a_max, theta, y0, k, self.harmonics, self.knots, self.contact, self.dt,
                         self.max_steps, self.tol, self.max_iter)  # fmt: skip
 
     def transient(self, theta: Array, y0: Array, fresh: Array, periods: Array) -> Array:
         """The reduced state after `periods` periods (from `y0`, or from rest where `fresh`)."""
-        return relax(self.chain, self.a_max, theta, y0, fresh, periods, self.harmonics, self.contact, self.dt,
-                     self.max_steps)  # fmt: skip
+        return relax(self.chain, self.a_max, theta, y0, fresh, periods, self.harmonics, self.knots, self.contact,
+                     self.dt, self.max_steps)  # fmt: skip

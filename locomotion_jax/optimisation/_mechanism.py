@@ -2,10 +2,15 @@
 method over the waveforms of the mechanism's actuated elements.
 
 Problem, for one mechanism, a required speed $v_\\min > 0$ in the direction $\\sigma = \\pm 1$ and a
-bound $a_\\max$ on every actuated signal: over Fourier series of $H$ harmonics of a common base
-frequency for each element driven by a waveform (a spring's rest length, an internal force, an
-external force; `gaits._chain_orbit.actuated`), $s_j(t) = \\bar s_j + \\sum_n A_{jn}\\cos n\\omega t +
-B_{jn}\\sin n\\omega t$ with the element's own mean $\\bar s_j$ kept,
+bound $a_\\max$ on every actuated signal: over periodic signals of a common base frequency for each
+element driven by a waveform (a spring's rest length, an internal force, an external force;
+`gaits._chain_orbit.actuated`), each about the element's own mean $\\bar s_j$, of one of the two
+families of the exact optimiser (`_shapes`, [`MechanismOptimiseSettings`][]`.shape`):
+
+- `"fourier"` (default): Fourier series of $H$ harmonics, $s_j(t) = \\bar s_j + \\sum_n A_{jn}\\cos
+  n\\omega t + B_{jn}\\sin n\\omega t$;
+- `"spline"`: periodic cubic B-splines of $M$ = `knots` control values $c_{jm}$ in the phase
+  ([`Spline`][]), whose excursion is bounded by $\\max_m |c_{jm}|$, so that the bound is a box.
 
 $$\\min\\ \\frac{e_d}{\\sigma\\Delta X}\\quad\\text{s.t.}\\quad \\frac{\\sigma\\Delta X}{kT} \\ge v_\\min,\\quad
 \\max_t |s_j(t) - \\bar s_j| \\le a_\\max\\ \\forall j,\\quad\\text{a stable gait},$$
@@ -19,13 +24,17 @@ Method (as `optimisation._chain`, with sinusoids in place of travelling waves):
    solved in one batched [`steady_gait`][]; the cheapest that meets the speed is the baseline. The
    phase matters where the ground is symmetric: a sinusoid's steady gait then has a mirror image
    (x -> -x, t -> t + T/2) going the other way, and the phase of the start picks one.
-2. **Local refinement** of the harmonics of every element from the best `local` sinusoids: the
-   chain's monotone L-BFGS descent on an exact penalty (`_chain_local`), with exact gradients
-   through the periodic orbit (`gaits._chain_orbit.ChainOracle`, which takes a mechanism).
-3. **Verification**: the refined actuations (rescaled onto the exact bound) and the baseline are
-   solved again by [`steady_gait`][]; the reported optimum is the cheapest converged, stable and
-   fast enough one, so never costlier than the baseline, and it is checked by a direct
-   [`simulate`][] averaged over whole gait periods once its transient has decayed.
+2. **Local refinement** of every element's harmonics (or control values, started from the
+   sinusoid's interpolating spline) from the best `local` sinusoids: the chain's monotone L-BFGS
+   descent on an exact penalty (`_chain_local`), with exact gradients through the periodic orbit
+   (`gaits._chain_orbit.ChainOracle`, which takes a mechanism). The bound is kept by radial
+   rescaling of each element's Fourier coefficients onto its exact stroke, or by clipping the
+   control values.
+3. **Verification**: the refined actuations (on the exact bound) and the baseline are solved
+   again by [`steady_gait`][] (a spline's baseline: its row of the screen); the reported optimum
+   is the cheapest converged, stable and fast enough one, so never costlier than the baseline,
+   and it is checked by a direct [`simulate`][] averaged over whole gait periods once its
+   transient has decayed.
 
 The frequency range, for a free `omega`, is `omega_min` to `omega_max` times the highest natural
 frequency of the mechanism's free bodies and springs (its resolution guard's scale), or the
@@ -43,22 +52,33 @@ import numpy as np
 
 from .._json import jsonable
 from ..dynamics._exact_dynamics import Exact
-from ..gaits._chain_orbit import actuated, ChainOracle, with_fourier
+from ..gaits._chain_orbit import actuated, ChainOracle, with_fourier, with_spline
 from ..model._bodies import Mechanism
 from . import _chain_local as local
 from ._chain_optimum import ChainOptimiseSettings
 from ._lockstep import run_lockstep
+from ._shapes import spline_stroke, SplineShape
 
 
 class MechanismOptimiseSettings(eqx.Module):
     """Settings of [`optimise`][locomotion_jax.optimisation._optimise.optimise] for a
     [`Mechanism`][locomotion_jax.Mechanism] (module `optimisation._mechanism`). Python numbers:
-    changing `local`, `dt` or `newton_iter` (or the harmonics) recompiles; the others do not.
+    changing `local`, `dt`, `newton_iter`, `shape` or `knots` (or the harmonics) recompiles; the
+    others do not.
 
     The actuators are the mechanism's elements driven by a waveform (a spring's rest length, an
     internal `Force`, an `ExternalForce`); `optimise`'s `a_max` bounds each one's excursion about its
     mean, in the element's own units: a length for a spring's rest, a force for a force (the force
-    bound); `optimise`'s `harmonics` sets the Fourier series' length (default 2).
+    bound).
+
+    - `shape`: the family of signals searched (as [`ExactSettings`][locomotion_jax.optimisation._optimum.ExactSettings]
+      `.shape`): `"fourier"` (default), a Fourier series of `optimise`'s `harmonics` (default 2) per
+      element; or `"spline"`, a periodic cubic B-spline of `knots` control values per element (then
+      `harmonics` is not taken), whose bound is a box on the control values, so a step-like signal
+      carries no overshoot.
+    - `knots`: control values per element of a spline (>= 4; default 16: every control value is a
+      forward-mode direction of the orbit's gradient, so the refinement's cost grows with
+      `knots` times the number of actuated elements).
 
     - `amplitudes`, `frequencies`, `phases`: the sinusoid screen, $a$ on `amplitudes` equal steps
       up to $a_\\max$, $\\omega$ log-spaced over its range (one value for a fixed `omega`), the
@@ -98,6 +118,8 @@ class MechanismOptimiseSettings(eqx.Module):
     newton_iter: int = 12
     check_tol: float = 1e-12
     check_periods: tuple[int, int] = (40, 1500)
+    shape: str = "fourier"
+    knots: int = 16
     verbose: bool = False
 
     def __check_init__(self):
@@ -106,6 +128,10 @@ class MechanismOptimiseSettings(eqx.Module):
         for name, v in counts.items():
             if isinstance(v, bool) or not (isinstance(v, int) and v >= 1):
                 raise ValueError(f"MechanismOptimiseSettings.{name} must be an int >= 1, got {v!r}.")
+        if self.shape not in ("fourier", "spline"):
+            raise ValueError(f"MechanismOptimiseSettings.shape must be 'fourier' or 'spline', got {self.shape!r}.")
+        if isinstance(self.knots, bool) or not (isinstance(self.knots, int) and self.knots >= 4):
+            raise ValueError(f"MechanismOptimiseSettings.knots must be an int >= 4, got {self.knots!r}.")
         if not (0 < self.omega_min < self.omega_max):
             raise ValueError(
                 f"MechanismOptimiseSettings: need 0 < omega_min < omega_max, got {self.omega_min!r}, "
@@ -124,8 +150,8 @@ class MechanismOptimiseSettings(eqx.Module):
 
     @classmethod
     def from_chain(cls, s: ChainOptimiseSettings) -> "MechanismOptimiseSettings":
-        """The fields of a chain's settings that a mechanism's optimiser shares (one phase)."""
-        names = [n for n in cls.__dataclass_fields__ if n != "phases"]
+        """The fields of a chain's settings that a mechanism's optimiser shares (one phase, Fourier series)."""
+        names = [n for n in cls.__dataclass_fields__ if n in type(s).__dataclass_fields__ and n != "phases"]
         return cls(**{n: getattr(s, n) for n in names})
 
 
@@ -133,9 +159,13 @@ class MechanismOptimum(eqx.Module):
     """The optimum of [`optimise`][locomotion_jax.optimisation._optimise.optimise] for a
     [`Mechanism`][locomotion_jax.Mechanism] (module `optimisation._mechanism`).
 
+    - `shape`: the family of the reported signals, `"fourier"` or `"spline"` (a spline search reports
+      its sinusoid baseline, `"fourier"`, where no refined spline is cheaper).
     - `cos`, `sin`: shape `(S, H)`, the Fourier coefficients of the `S` actuated elements' signals
-      about their means (absolute units), in the order of `elements` (indices into `links`);
-      `omega`: the base frequency; `mechanism`: the mechanism driven by them.
+      about their means (absolute units), in the order of `elements` (indices into `links`); shape
+      `(S, 0)` and `harmonics` 0 for a spline; `control`: shape `(S, M)`, a spline's control values
+      about the means (absolute units), `None` for a Fourier series; `omega`: the base frequency;
+      `mechanism`: the mechanism driven by them.
     - `mean_speed_exact`, `cost_of_transport_exact`, `gait_period_exact`, `stable_exact`,
       `spectral_radius_exact`, `stroke_exact` (per element, $\\max_t |s_j - \\bar s_j|$), `feasible_exact`:
       of its steady gait.
@@ -153,8 +183,10 @@ class MechanismOptimum(eqx.Module):
     a_max: float
     harmonics: int
     elements: list[int]
+    shape: str
     cos: np.ndarray
     sin: np.ndarray
+    control: np.ndarray | None
     omega: float
     mean_speed_exact: float
     cost_of_transport_exact: float
@@ -199,18 +231,55 @@ def _natural(mech: Mechanism) -> float:
     return float(np.sqrt(max(np.linalg.eigvalsh(K * s[:, None] * s[None, :]).max(), 0.0)))
 
 
-def _gaits(mech: Mechanism, cos: np.ndarray, sin: np.ndarray, omega: np.ndarray, settings: MechanismOptimiseSettings):
-    """Steady gaits (periods 1 and 2) of `mech` driven by each row's coefficients, as host arrays."""
+def _gaits(batch: Mechanism, settings: MechanismOptimiseSettings) -> dict[str, np.ndarray]:
+    """Steady gaits (periods 1 and 2) of a batch of mechanisms, as host arrays."""
     from ..gaits._gait import steady_gait
 
-    dtype = mech.dtype
-    batch = with_fourier(mech, jnp.asarray(cos, dtype), jnp.asarray(sin, dtype), jnp.asarray(omega, dtype))
     g = steady_gait(batch, periods=(1, 2), transient=settings.transient, dynamics=Exact(dt=settings.dt))
     radius = np.max(np.abs(np.asarray(g.multipliers)), axis=-1)
     ok = np.asarray(g.converged) & np.asarray(g.stable) & ~np.asarray(g.liftoff)
     return dict(speed=np.asarray(g.mean_speed, np.float64), cost=np.asarray(g.cost_of_transport, np.float64), ok=ok,
                 k=np.asarray(g.k), period=np.asarray(g.period, np.float64), radius=radius,
                 y=np.asarray(g.state, np.float64))  # fmt: skip
+
+
+def _fourier(mech: Mechanism, cos: np.ndarray, sin: np.ndarray, omega: Any) -> Mechanism:
+    """`mech` driven by Fourier series (absolute units; leading axes: a batch)."""
+    dtype = mech.dtype
+    return with_fourier(mech, jnp.asarray(cos, dtype), jnp.asarray(sin, dtype), jnp.asarray(omega, dtype))
+
+
+def _spline(mech: Mechanism, control: np.ndarray, omega: Any) -> Mechanism:
+    """`mech` driven by splines of these control values (absolute units; leading axes: a batch)."""
+    return with_spline(mech, jnp.asarray(control, mech.dtype), jnp.asarray(omega, mech.dtype))
+
+
+# -- splines: decision vectors (each element's control values in units of a_max, then log omega) --
+
+
+def spline_start(cos: np.ndarray, sin: np.ndarray, omega: float, a_max: float, knots: int) -> np.ndarray:
+    """The decision vector of the splines that interpolate each element's Fourier signal (`cos`,
+    `sin`: `(S, H)`, absolute units) at the knots ([`SplineShape.fit`][]), control values clipped
+    to the bound."""
+    grid = 64 * knots
+    phase = np.arange(grid) * 2 * np.pi / grid
+    n = np.arange(1, cos.shape[1] + 1)
+    values = (cos @ np.cos(np.outer(n, phase)) + sin @ np.sin(np.outer(n, phase))) / a_max
+    shape = SplineShape(knots=knots)
+    return np.concatenate([*(shape.fit(v, omega)[:-1] for v in values), [math.log(omega)]])
+
+
+def spline_project(theta: np.ndarray, log_lo: float, log_hi: float) -> np.ndarray:
+    """Control values clipped to the box $|c| \\le 1$ (units of $a_\\max$), $\\log\\omega$ to its range."""
+    out = np.array(theta, float)
+    out[:-1] = np.clip(out[:-1], -1.0, 1.0)
+    out[-1] = np.clip(out[-1], log_lo, log_hi)
+    return out
+
+
+def spline_strokes(control: np.ndarray) -> np.ndarray:
+    """Exact $\\max_\\phi |s_j - \\bar s_j|$ per element of the control values `(S, M)`."""
+    return np.array([spline_stroke(row) for row in control])
 
 
 def check_inputs(mech: Any, v_min: Any, a_max: Any, direction: Any, harmonics: Any, omega: Any) -> list[int]:
@@ -240,21 +309,30 @@ def check_inputs(mech: Any, v_min: Any, a_max: Any, direction: Any, harmonics: A
 
 
 def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction: int = 1,
-                       omega: float | None = None, harmonics: int = 2,
+                       omega: float | None = None, harmonics: int | None = None,
                        settings: Any = None) -> MechanismOptimum:  # fmt: skip
     """`optimise(mechanism, v_min, a_max, ...)`: the method of the module docstring. `settings`: a
     `MechanismOptimiseSettings`, a `ChainOptimiseSettings` (its shared fields) or `None` (the defaults);
-    anything else is refused here with a `TypeError` naming both."""
+    anything else is refused here with a `TypeError` naming both. `harmonics`: the Fourier series'
+    length (default 2); a spline search (`settings.shape == "spline"`) refuses one."""
     if isinstance(settings, ChainOptimiseSettings):
         settings = MechanismOptimiseSettings.from_chain(settings)
     settings = MechanismOptimiseSettings() if settings is None else settings
     if not isinstance(settings, MechanismOptimiseSettings):
         raise TypeError(f"settings for a Mechanism must be a MechanismOptimiseSettings, got {type(settings).__name__}.")
-    elements = check_inputs(mech, v_min, a_max, direction, harmonics, omega)
+    spline = settings.shape == "spline"
+    if spline and harmonics is not None:
+        raise ValueError(
+            "harmonics applies to Fourier series; MechanismOptimiseSettings(shape='spline') searches splines of "
+            f"MechanismOptimiseSettings.knots control values (got harmonics={harmonics!r})."
+        )
+    # A spline search screens plain sinusoids (one harmonic) for its baseline and starts.
+    H = 1 if spline else (2 if harmonics is None else harmonics)
+    elements = check_inputs(mech, v_min, a_max, direction, H, omega)
     t0 = time.perf_counter()
     say = (lambda m: print(m, file=sys.stderr, flush=True)) if settings.verbose else (lambda m: None)
     base = mech.broadcast()
-    S, H = len(elements), int(harmonics)
+    S, H, M = len(elements), int(H), settings.knots
     if omega is not None:
         lo = hi = float(omega)
     else:
@@ -271,7 +349,7 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
     cos, sin = zero.copy(), zero.copy()
     cos[:, :, 0], sin[:, :, 0] = (A * np.sin(PHI))[:, None], (A * np.cos(PHI))[:, None]
     say(f"screening {A.size} sinusoids (compiling the steady-gait solver: first call only)...")
-    sc = _gaits(base, cos, sin, W, settings)
+    sc = _gaits(_fourier(base, cos, sin, W), settings)
     fast = np.asarray(sc["ok"], bool) & (direction * np.nan_to_num(sc["speed"], nan=-np.inf) >= v_min)
     order = np.lexsort((-direction * np.nan_to_num(sc["speed"], nan=-np.inf), np.where(fast, sc["cost"], np.inf),
                         ~fast))  # fmt: skip
@@ -280,24 +358,32 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
                      mean_speed=float(sc["speed"][best]), cost_of_transport=float(sc["cost"][best]))
                 if fast[best] else None)  # fmt: skip
 
-    # 2. Local refinement of every element's harmonics from the best sinusoids.
+    # 2. Local refinement of every element's harmonics (or control values) from the best sinusoids.
     starts = [int(i) for i in order if sc["ok"][i]][: settings.local] or [best]
     starts += starts[:1] * (settings.local - len(starts))
     dtype = base.dtype
     steps = int(math.ceil(2 * math.pi / lo / settings.dt)) * 3 + 200
     oracle = ChainOracle(chain=base, a_max=jnp.asarray(a_max, dtype), max_steps=jnp.asarray(steps, jnp.int32),
                          tol=jnp.asarray(settings.newton_tol if jnp.finfo(dtype).bits == 64 else 1e-5, dtype),
-                         harmonics=H, contact="paper", dt=settings.dt, max_iter=settings.newton_iter)  # fmt: skip
+                         harmonics=H, contact="paper", dt=settings.dt, max_iter=settings.newton_iter,
+                         knots=M if spline else 0)  # fmt: skip
     v_target = v_min * (1 + settings.speed_slack)
     make = lambda th, orb, k: local.Figures(th, orb, v_target, k, direction, settings.margin, free)
     ev = local.Evaluator(oracle, settings.local, settings.transient, make)
     x0 = []
     for lane, i in enumerate(starts):
-        x0.append(local.pack(cos[i] / a_max, sin[i] / a_max, float(W[i])))
+        if spline:
+            x0.append(spline_start(cos[i], sin[i], float(W[i]), a_max, M))
+        else:
+            x0.append(local.pack(cos[i] / a_max, sin[i] / a_max, float(W[i])))
         ev.y[lane], ev.k[lane] = sc["y"][i], int(max(sc["k"][i], 1))
     bounds = (math.log(lo), math.log(hi))
-    proj = lambda x: local.project(x, S, H, *bounds)
-    stroke_ok = lambda x: float(np.max(local.strokes(*local.unpack(x, S, H)[:2]))) <= 1 + 1e-9
+    if spline:
+        proj = lambda x: spline_project(x, *bounds)
+        stroke_ok = lambda x: float(np.max(spline_strokes(x[:-1].reshape(S, M)))) <= 1 + 1e-9
+    else:
+        proj = lambda x: local.project(x, S, H, *bounds)
+        stroke_ok = lambda x: float(np.max(local.strokes(*local.unpack(x, S, H)[:2]))) <= 1 + 1e-9
     costs = [c for c in sc["cost"][starts] if np.isfinite(c)]
     rho = local.PENALTY * max(1.0, max(costs, default=1.0))
     log: list[dict] = []
@@ -305,15 +391,23 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
     say(f"refining {len(solvers)} starts locally, in lockstep (compiling the orbit solver: first call only)...")
     xs = run_lockstep(solvers, ev)
 
-    # 3. Verification: the baseline and the refined actuations, rescaled onto the exact bound.
-    coefs = [(cos[best], sin[best], float(W[best]))]
-    coefs += [local.on_bound(x, S, H, a_max) for x in xs]
-    cos_c = np.stack([c for c, _, _ in coefs])
-    sin_c = np.stack([s for _, s, _ in coefs])
-    om_c = np.array([w for _, _, w in coefs])
-    say(f"verifying {len(coefs)} candidates on their steady gaits...")
-    g = _gaits(base, cos_c, sin_c, om_c, settings)
-    strokes = np.stack([local.strokes(c, s) for c, s in zip(cos_c, sin_c)])
+    # 3. Verification: the baseline and the refined actuations (on the exact bound).
+    names = ["sinusoid"] + [f"local {lane}" for lane in range(len(xs))]
+    om_c = np.array([float(W[best])] + [math.exp(float(x[-1])) for x in xs])
+    say(f"verifying {len(names)} candidates on their steady gaits...")
+    if spline:
+        # The baseline's figures are its row of the screen; the splines are solved in one batch.
+        control = np.stack([a_max * spline_project(x, -np.inf, np.inf)[:-1].reshape(S, M) for x in xs])
+        refined = _gaits(_spline(base, control, om_c[1:]), settings)
+        g = {name: np.concatenate([sc[name][best : best + 1], refined[name]]) for name in sc}
+        strokes = np.concatenate([local.strokes(cos[best], sin[best])[None], [spline_strokes(c) for c in control]])
+        empty = np.zeros((S, 0))
+        waves = [(cos[best], sin[best], None)] + [(empty, empty, c) for c in control]
+    else:
+        coefs = [(cos[best], sin[best])] + [local.on_bound(x, S, H, a_max)[:2] for x in xs]
+        g = _gaits(_fourier(base, np.stack([c for c, _ in coefs]), np.stack([s for _, s in coefs]), om_c), settings)
+        strokes = np.stack([local.strokes(c, s) for c, s in coefs])
+        waves = [(c, s, None) for c, s in coefs]
     eps = float(jnp.finfo(dtype).eps)
     feasible = (np.asarray(g["ok"], bool) & (direction * np.nan_to_num(g["speed"], nan=-np.inf) >= v_min)
                 & (strokes.max(axis=1) <= a_max * (1 + 8 * eps)))  # fmt: skip
@@ -321,20 +415,21 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
         k = int(np.argmin(np.where(feasible, g["cost"], np.inf)))
     else:
         k = int(np.argmax(np.where(g["ok"], direction * np.nan_to_num(g["speed"], nan=-np.inf), -np.inf)))
-    names = ["sinusoid"] + [f"local {lane}" for lane in range(len(xs))]
     table = [dict(candidate=names[i], omega=float(om_c[i]), mean_speed_exact=float(g["speed"][i]),
                   cost_of_transport_exact=float(g["cost"][i]), stable_exact=bool(g["ok"][i]),
                   stroke=float(strokes[i].max()), feasible_exact=bool(feasible[i]))
              for i in range(len(names))]  # fmt: skip
-    chosen = with_fourier(base, jnp.asarray(cos_c[k], dtype), jnp.asarray(sin_c[k], dtype), jnp.asarray(om_c[k], dtype))
+    cos_k, sin_k, control_k = waves[k]
+    chosen = _fourier(base, cos_k, sin_k, om_c[k]) if control_k is None else _spline(base, control_k, om_c[k])
     sim = _simulate_check(chosen, float(g["radius"][k]), float(g["period"][k]), settings) if g["ok"][k] else None
     speed_s, cost_s, n = sim if sim is not None else (math.nan, math.nan, 0)
     rel = max(abs(speed_s / g["speed"][k] - 1), abs(cost_s / g["cost"][k] - 1)) if sim is not None else math.nan
     cost_sin = sinusoid["cost_of_transport"] if sinusoid else math.nan
     say(f"verified ({time.perf_counter() - t0:.0f} s): {names[k]}, cost of transport {g['cost'][k]:.6g}")
     return MechanismOptimum(
-        v_min=float(v_min), direction=int(direction), a_max=float(a_max), harmonics=H, elements=elements,
-        cos=cos_c[k], sin=sin_c[k], omega=float(om_c[k]), mean_speed_exact=float(g["speed"][k]),
+        v_min=float(v_min), direction=int(direction), a_max=float(a_max), elements=elements,
+        shape="fourier" if control_k is None else "spline", harmonics=H if control_k is None else 0, cos=cos_k,
+        sin=sin_k, control=control_k, omega=float(om_c[k]), mean_speed_exact=float(g["speed"][k]),
         cost_of_transport_exact=float(g["cost"][k]), gait_period_exact=float(g["period"][k]),
         stable_exact=bool(g["ok"][k]), spectral_radius_exact=float(g["radius"][k]), stroke_exact=strokes[k],
         feasible_exact=bool(feasible[k]), sinusoid=sinusoid,

@@ -321,10 +321,11 @@ def optimise(
     (travelling waves screened, then per-spring harmonics refined on the exact steady gaits;
     module `optimisation._chain`, [`ChainOptimiseSettings`][], default 3 harmonics) and the
     result a [`ChainOptimum`][]; a [`Mechanism`][locomotion_jax.Mechanism] (SPEC §9): the same method
-    over the Fourier coefficients of its actuated elements' waveforms (sinusoids screened; module
-    `optimisation._mechanism`, [`MechanismOptimiseSettings`][], default 2 harmonics; `a_max` bounds
-    each actuated element's excursion in its own units, a force bound for a force), the result a
-    `MechanismOptimum`.
+    over the Fourier coefficients (default 2 harmonics) or, with
+    `MechanismOptimiseSettings(shape="spline")`, the spline control values (`knots`) of its actuated
+    elements' waveforms (sinusoids screened; module `optimisation._mechanism`,
+    [`MechanismOptimiseSettings`][]; `a_max` bounds each actuated element's excursion in its own
+    units, a force bound for a force), the result a `MechanismOptimum`.
 
     Two methods:
 
@@ -444,7 +445,7 @@ def _optimise_chain(chain, v_min, a_max, method, direction, omega, harmonics, se
         if method != "exact" or sweep is not None or start is not None:
             raise ValueError("a Mechanism is optimised by the exact method only, without sweep= or start=.")
         return optimise_mechanism(chain, v_min, a_max, direction=1 if direction is None else direction, omega=omega,
-                                  harmonics=2 if harmonics is None else harmonics, settings=settings)  # fmt: skip
+                                  harmonics=harmonics, settings=settings)  # fmt: skip
     if not isinstance(chain, Chain):
         raise NotImplementedError(f"optimise takes Params, a Chain or a Mechanism, got {type(chain).__name__}.")
     if method != "exact":
