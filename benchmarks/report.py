@@ -1,4 +1,4 @@
-"""The benchmark's report: the targets table (quoted in the README and the performance page) and
+"""The benchmark's report: the targets table (quoted on the documentation's performance page) and
 `benchmarks/RESULTS.md`, from one run's results."""
 
 import math
@@ -9,25 +9,25 @@ from pathlib import Path
 from harness import AMPL, fmt, MAP_HORIZON, OMEGA, rel, ROOT, SEED, TARGETS
 
 
-README_MARKS = ("<!-- benchmark-targets: start (written by benchmarks/run.py) -->", "<!-- benchmark-targets: end -->")
-QUOTED_IN = (ROOT / "README.md", ROOT / "docs" / "performance.md")
-"""The pages that quote the targets table between `README_MARKS`: the README (a summary) and
-the documentation's performance page (beside the benchmark's description)."""
+TABLE_MARKS = ("<!-- benchmark-targets: start (written by benchmarks/run.py) -->", "<!-- benchmark-targets: end -->")
+QUOTED_IN = (ROOT / "docs" / "performance.md",)
+"""The pages that quote the targets table between `TABLE_MARKS`: the documentation's performance
+page, beside the benchmark's description (the README links to it and quotes no number of its own)."""
 
 
 def quote_everywhere(res: dict, meta: dict) -> None:
     """Put this run's targets table into every page of `QUOTED_IN`."""
     for page in QUOTED_IN:
-        quote_in_readme(res, meta, readme=page)
+        quote_in(res, meta, page)
 
 
-def quote_in_readme(res: dict, meta: dict, readme: Path = ROOT / "README.md") -> None:
-    """Put this run's targets table between the markers of `readme` (the README by default;
-    any page of `QUOTED_IN`), so the page quotes `RESULTS.md` instead of hand-typed numbers."""
-    text = readme.read_text()
-    start, end = README_MARKS
+def quote_in(res: dict, meta: dict, page: Path) -> None:
+    """Put this run's targets table between the markers of `page` (a page of `QUOTED_IN`), so the
+    page quotes `RESULTS.md` instead of hand-typed numbers."""
+    text = page.read_text()
+    start, end = TABLE_MARKS
     if start not in text or end not in text:
-        print(f"README markers not found; {readme} left unchanged", file=sys.stderr)
+        print(f"benchmark table markers not found; {page} left unchanged", file=sys.stderr)
         return
     sc = res["scipy"][0] if res["scipy"] and "error" not in res["scipy"][0] else None
     base = None
@@ -41,7 +41,7 @@ def quote_in_readme(res: dict, meta: dict, readme: Path = ROOT / "README.md") ->
     )
     head, rest = text.split(start, 1)
     tail = rest.split(end, 1)[1]
-    readme.write_text(head + start + "\n" + src + "\n\n" + "\n".join(table).rstrip() + "\n" + end + tail)
+    page.write_text(head + start + "\n" + src + "\n\n" + "\n".join(table).rstrip() + "\n" + end + tail)
 
 
 def _memory_mb(meta: dict) -> float:

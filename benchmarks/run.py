@@ -49,10 +49,10 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from cases import CASES, ZARR_MAP  # noqa: E402
 from harness import DT, HERE, machine, MAP_HORIZON, spawn  # noqa: E402
-from report import quote_everywhere, quote_in_readme, QUOTED_IN, README_MARKS, report  # noqa: E402
+from report import quote_everywhere, quote_in, QUOTED_IN, report, TABLE_MARKS  # noqa: E402
 
 
-__all__ = ["CASES", "QUOTED_IN", "README_MARKS", "ZARR_MAP", "main", "quote_in_readme", "report", "spawn"]
+__all__ = ["CASES", "QUOTED_IN", "TABLE_MARKS", "ZARR_MAP", "main", "quote_in", "report", "spawn"]
 
 
 def main():

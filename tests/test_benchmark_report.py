@@ -1,7 +1,7 @@
 """The committed benchmark report is what `benchmarks/run.py` renders from its saved
-results, and every page that quotes its targets table (`run.py` `QUOTED_IN`: the README and
-the documentation's performance page) quotes what `--render` writes (numbers generated, never
-hand-typed)."""
+results, and the page that quotes its targets table (`run.py` `QUOTED_IN`: the documentation's
+performance page) quotes what `--render` writes (numbers generated, never hand-typed); the README
+quotes none of it."""
 
 import importlib.util
 import json
@@ -34,27 +34,23 @@ def test_results_md_is_rendered_from_results_json(run, saved):
     assert run.report(*saved) == (ROOT / "benchmarks" / "RESULTS.md").read_text()
 
 
-def test_readme_quotes_the_targets_table(run, saved, tmp_path):
-    copy = tmp_path / "README.md"
-    shutil.copy(ROOT / "README.md", copy)
-    run.quote_in_readme(*saved, readme=copy)
-    assert copy.read_text() == (ROOT / "README.md").read_text(), "README out of date: run benchmarks/run.py --render"
-    start, end = run.README_MARKS
-    quoted = copy.read_text().split(start)[1].split(end)[0]
-    rows = [ln for ln in quoted.splitlines() if ln.startswith("| ") and ("met" in ln or "reported" in ln)]
-    assert len(rows) >= 8 and all(ln.rstrip().endswith(("| **met** |", "| reported |")) for ln in rows)
+def test_readme_quotes_no_benchmark_number(run):
+    readme = (ROOT / "README.md").read_text()
+    start, end = run.TABLE_MARKS
+    assert start not in readme and end not in readme
+    assert "docs/performance.md" in readme and "benchmarks/RESULTS.md" in readme
 
 
 def test_every_page_quotes_the_rendered_targets_table(run, tmp_path):
     data = json.loads((ROOT / "benchmarks" / "RESULTS.json").read_text())
     data["meta"]["load"] = [tuple(x) for x in data["meta"]["load"]]  # as `--render` reads it
-    assert {p.relative_to(ROOT).as_posix() for p in run.QUOTED_IN} == {"README.md", "docs/performance.md"}
+    assert {p.relative_to(ROOT).as_posix() for p in run.QUOTED_IN} == {"docs/performance.md"}
     for page in run.QUOTED_IN:
         copy = tmp_path / page.name
         shutil.copy(page, copy)
-        run.quote_in_readme(data["results"], data["meta"], readme=copy)
+        run.quote_in(data["results"], data["meta"], copy)
         assert copy.read_text() == page.read_text(), f"{page} out of date: run benchmarks/run.py --render"
-        start, end = run.README_MARKS
+        start, end = run.TABLE_MARKS
         assert page.read_text().count(start) == 1 and page.read_text().count(end) == 1
 
 
