@@ -43,7 +43,8 @@ class Tee:
 sys.stderr = Tee()
 def stages(t0, t1):
     # Stage boundaries from the verbose progress lines of the exact optimiser.
-    keys = [("baseline", "the sinusoid baseline"), ("screen", "screening"), ("local", "starts screened ("),
+    # (The screen's own progress lines read "b of n starts screened": the local stage starts at "; refining".)
+    keys = [("baseline", "the sinusoid baseline"), ("screen", "screening"), ("local", "s); refining"),
             ("verify", "local runs done")]
     at = {}
     for t, line in marks:
@@ -94,7 +95,7 @@ def main(argv: list[str]) -> None:
                 r = json.loads(line)
                 stages = ", ".join(f"{k} {v}" for k, v in r["stages_s"].items())
                 print(f"| {label} `{commit}` | {r['run']} | {r['wall_s']} | {r['cpu_s']} | {r['compilations']} "
-                      f"| {r['compile_s']} | {stages} | {r['speed']:.6f} | {r['cost_of_transport']:.6f} "
+                      f"| {r['compile_s']} | {stages} | {r['speed']:.16g} | {r['cost_of_transport']:.16g} "
                       f"| {r['feasible']} |")  # fmt: skip
             subprocess.call(["git", "-C", root, "worktree", "remove", "--force", tree])
         print(f"\nload average at the end: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")

@@ -1,6 +1,7 @@
 """Steady gaits (periodic orbits): against long direct simulations averaged over whole
 periods, and the monodromy matrix against finite differences of the independent reference."""
 
+import dataclasses
 from typing import Any
 
 import jax.numpy as jnp
@@ -193,3 +194,28 @@ def test_jit_free_of_recompilation():
     sizes = _gait._transient_batch._cache_size(), _corrector.correct_batch._cache_size()  # pyright: ignore[reportFunctionMemberAccess]
     steady_gait(lj.Params(omega=5.0, mu_s=0.9), periods=2, transient=10)
     assert (_gait._transient_batch._cache_size(), _corrector.correct_batch._cache_size()) == sizes  # pyright: ignore[reportFunctionMemberAccess]
+
+
+def test_compact_batch_for_the_longer_periods(monkeypatch):
+    """With `compact=True` (the exact optimiser's sinusoid sweep) a gait period tried on fewer
+    than a quarter of the batch runs on a quarter-size batch: the same gaits as the full batch,
+    the period-2 gait past a period doubling included, and every other row as before."""
+    from locomotion_jax.gaits import _corrector, _gait
+
+    p = _batch(CASES[:9] + BAD + [UNSTABLE])
+    args = ((1, 2, 3, 4), 30, None, 12, lj.Exact(), None, "strict", "paper", None)
+    full = _gait._two_mass(p, *args)
+    sizes: list[int] = []
+    solve = _corrector.correct_batch
+    monkeypatch.setattr(_corrector, "correct_batch", lambda *a: sizes.append(int(a[9].shape[0])) or solve(*a))
+    small = _gait._two_mass(p, *args, compact=True)
+    assert sizes[0] == 12 and set(sizes[1:]) == {3}, sizes  # period 1 on the batch, the others on 3 rows
+    assert int(small.k[-1]) == 2 and bool(small.stable[-1]) and int(full.k[-1]) == 2
+    for name in (f.name for f in dataclasses.fields(full)):
+        a, b = getattr(full, name), getattr(small, name)
+        if name == "contact":
+            assert a == b
+        elif np.issubdtype(np.asarray(a).dtype, np.inexact):
+            np.testing.assert_allclose(np.asarray(b), np.asarray(a), rtol=1e-12, atol=1e-15, err_msg=name)
+        else:
+            np.testing.assert_array_equal(np.asarray(b), np.asarray(a), err_msg=name)

@@ -337,6 +337,38 @@ def test_orbit_gradients_match_finite_differences():
     assert np.all(np.asarray(orb.residual) < 1e-10)
 
 
+@pytest.mark.parametrize("monodromy_only", [False, True])
+def test_newton_orbit_on_an_affine_map(monodromy_only):
+    # Phi(y, theta) = A y + B theta**2 + c has the fixed point y* = (I - A)^-1 (B theta**2 + c);
+    # the figures F = (w . y + theta . theta) give dF/dtheta = w^T (I - A)^-1 B diag(2 theta) + 2 theta.
+    # Newton from far off takes several iterations; with monodromy_only they push the y directions
+    # alone and the full Jacobian comes from one pass at the last iterate: the same result.
+    rng = np.random.default_rng(5)
+    A = 0.3 * rng.normal(size=(3, 3))
+    B = rng.normal(size=(3, 4))
+    c, w = rng.normal(size=3), rng.normal(size=3)
+    theta = rng.normal(size=4)
+
+    def run(z):
+        y, th = z[:3], z[3:]
+        phi = jnp.asarray(A) @ y + jnp.asarray(B) @ th**2 + jnp.asarray(c)
+        # A mildly nonlinear term: Newton needs more than one step.
+        phi = phi + 0.05 * jnp.sin(y)
+        return jnp.concatenate([phi, (jnp.asarray(w) @ y + th @ th)[None]]), jnp.asarray(True)
+
+    orb = jax.jit(lambda y0, th: _orbit.newton_orbit(run, y0, th, 1e-13, 30, monodromy_only=monodromy_only))(
+        jnp.full(3, 10.0), jnp.asarray(theta)
+    )
+    assert bool(orb.ok) and int(orb.n_iter) >= 3
+    y = np.asarray(orb.y)
+    np.testing.assert_allclose(A @ y + B @ theta**2 + c + 0.05 * np.sin(y), y, rtol=0, atol=1e-12)
+    M = A + 0.05 * np.diag(np.cos(y))
+    np.testing.assert_allclose(np.asarray(orb.monodromy), M, rtol=1e-12, atol=1e-14)
+    grad = w @ np.linalg.solve(np.eye(3) - M, B * (2 * theta)) + 2 * theta
+    np.testing.assert_allclose(np.asarray(orb.gradient)[0], grad, rtol=1e-10)
+    np.testing.assert_allclose(np.asarray(orb.figures)[0], w @ y + theta @ theta, rtol=1e-12)
+
+
 @pytest.fixture(scope="module")
 def exact_run(tiny_sweep):
     jax.clear_caches()

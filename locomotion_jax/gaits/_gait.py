@@ -113,10 +113,32 @@ def _transient_from_batch(params, wave, wave_axes, contact, y, dt, transient, ma
 _transient_from_batch = engine_jit(_transient_from_batch, ("wave_axes", "contact"))
 
 
-def _newton(flat, wave, axes, contact, dt, y0, go, k, tol, max_iter, max_steps) -> dict:
+COMPACT = 4
+"""`_two_mass(compact=True)`: a gait period tried on at most `1 / COMPACT` of the batch (fewer than
+that many configurations still open) runs on a batch of that size."""
+
+
+def _newton(flat, wave, axes, contact, dt, y0, go, k, tol, max_iter, max_steps, compact: bool = False) -> dict:
     """Newton's method on $\\Phi_k(y) = y$ from `y0` where `go`: the continuation's corrector
-    ([`_corrector`][]) with the parameter held (no parameter selected, arclength scale 0)."""
+    ([`_corrector`][]) with the parameter held (no parameter selected, arclength scale 0).
+
+    The batch runs in lockstep (every row costs what the slowest one does), so with `compact`
+    the rows to solve, when fewer than `B // COMPACT`, are gathered into a batch of
+    `B // COMPACT` rows (one more compiled program per batch size; each row's result is the
+    same, the rows being independent) and the rest take a padding row's unsolved result."""
     B = y0.shape[0]
+    go_rows = np.flatnonzero(np.asarray(go))
+    part = B // COMPACT
+    if compact and 0 < go_rows.size < part:
+        n = go_rows.size
+        rows = np.concatenate([go_rows, np.full(part - n, go_rows[0])])
+        pick = lambda x: x[rows] if np.ndim(x) else x
+        sub = _newton(jax.tree_util.tree_map(pick, flat), wave if axes is None else jax.tree_util.tree_map(pick, wave),
+                      axes, contact, dt, jnp.asarray(y0)[rows], jnp.asarray(np.arange(part) < n), k, tol, max_iter,
+                      max_steps)  # fmt: skip
+        back = np.full(B, part - 1)  # a padding row: not solved (`done` False)
+        back[go_rows] = np.arange(n)
+        return jax.tree_util.tree_map(lambda x: x[back] if np.ndim(x) else x, sub)
     dtype = flat.dtype
     real = lambda v: jnp.asarray(v, dtype)
     z0 = jnp.concatenate([jnp.asarray(y0, dtype), jnp.zeros((B, 1), dtype)], axis=1)
@@ -250,9 +272,11 @@ def _chain(chain: Chain | Mechanism, periods, transient, tol, max_iter, dynamics
 
 
 def _two_mass(params: Params, periods, transient, tol, max_iter, dynamics: Exact, waveform, contact, start, dtype,
-              guarded: bool = True, say=lambda message: None):  # fmt: skip
+              guarded: bool = True, say=lambda message: None, compact: bool = False):  # fmt: skip
     """`guarded=False` skips the resolution guard: only for a caller that checks the resolution
     itself by a convergence study (the exact optimiser's verification solves at `dt` and `dt/2`).
+    `compact=True`: the longer gait periods, tried on the few configurations still open, run on a
+    smaller batch (`_newton`; for a caller that solves many batches of one size).
     `say` reports each stage (`steady_gait(verbose=True)`). Under `contact="hop"`: the gait of the
     two-mass chain `Chain.from_params(params, waveform)` (a `ChainGait`, heights in its state)."""
     if contact == "hop":  # flight and landing run on the N-body engine (as `measure` does)
@@ -295,7 +319,7 @@ def _two_mass(params: Params, periods, transient, tol, max_iter, dynamics: Exact
         msp = jnp.asarray(dynamics.max_steps or default_max_steps(k * T_max, dynamics.dt), jnp.int32)
         go = jnp.asarray((base < 0) & (True if best is None else select.still_open(best)))
         say(f"gait period {k}: Newton on {int(np.sum(go))} configuration(s)")
-        r = _newton(flat, wave, axes, contact, dynamics.dt, y0, go, k, tol, max_iter, msp)
+        r = _newton(flat, wave, axes, contact, dynamics.dt, y0, go, k, tol, max_iter, msp, compact)
         r = select.judge(r, base, k, valid & (np.asarray(trans_lift) | r["out"].lifted))
         best = select.better(best, r)
         if not np.any(select.still_open(best)):

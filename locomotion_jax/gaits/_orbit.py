@@ -16,10 +16,11 @@ from the implicit function theorem,
 $$\\frac{dy^*}{d\\theta} = (I - M)^{-1}\\frac{\\partial\\Phi}{\\partial\\theta},\\qquad
 \\frac{dF}{d\\theta} = \\frac{\\partial F}{\\partial\\theta} + \\frac{\\partial F}{\\partial y}\\frac{dy^*}{d\\theta},$$
 
-so one forward-mode pass over one period in the $3 + p$ directions $(y, \\theta)$ gives
-every gradient; located events enter with their implicit-function times (the
-saltation of each switch). Whole-period averages of the orbit are exact: no
-transient, no window.
+so one forward-mode pass over one period in the $3 + p$ directions $(y, \\theta)$ at the
+converged orbit gives every gradient (Newton's iterations before it push the 3 directions
+of $y$ alone: `newton_orbit(monodromy_only=True)`); located events enter with their
+implicit-function times (the saltation of each switch). Whole-period averages of the orbit
+are exact: no transient, no window.
 """
 
 from collections import Counter
@@ -104,23 +105,37 @@ class Orbit(NamedTuple):
     residual: Array
 
 
-def newton_orbit(run, y0: Array, theta: Array, tol: Array | float, max_iter: Array | int) -> Orbit:
+def newton_orbit(
+    run, y0: Array, theta: Array, tol: Array | float, max_iter: Array | int, *, monodromy_only: bool = False
+) -> Orbit:
     """The fixed point of a period map and the figures' implicit-function gradient.
 
     `run(z)`, with `z` the section state `y` followed by the decision vector `theta`, returns
     the state after the gait's periods followed by its figures, and whether the period
-    completed. Newton's method on $\\Phi(y) - y$ from `y0`; every iterate linearises `run` in
-    all directions at once (forward mode), so the converged Jacobian gives both the
-    monodromy $M = \\partial\\Phi/\\partial y$ and, by the implicit function theorem,
-    $d\\,\\text{figures}/d\\theta = J_{f\\theta} + J_{fy} (I - M)^{-1} J_{y\\theta}$."""
+    completed. Newton's method on $\\Phi(y) - y$ from `y0`, each iterate linearised by
+    forward mode; the Jacobian at the last iterate gives the monodromy
+    $M = \\partial\\Phi/\\partial y$ and, by the implicit function theorem,
+    $d\\,\\text{figures}/d\\theta = J_{f\\theta} + J_{fy} (I - M)^{-1} J_{y\\theta}$.
+
+    Newton's steps need only the `ny` directions of `y`. With `monodromy_only`, each iterate
+    pushes those alone and one pass in all `ny + p` directions follows at the last iterate:
+    `(iterations + 1) ny + (ny + p)` directions in all instead of `(iterations + 1)(ny + p)`,
+    for a second differentiated copy of `run` in the compiled program (its compile time).
+    Without it, every iterate pushes all `ny + p` directions (one differentiated copy)."""
     ny = y0.shape[0]
     eye = jnp.eye(ny, dtype=theta.dtype)
 
     def linearise(y):
-        # One forward pass in all ny + p directions: Newton needs only M, the result all of J,
-        # and a single differentiated program halves the compile time.
+        # One forward pass in all ny + p directions (the gradient needs all of J).
         J, (val, ok) = jax.jacfwd(lambda z: (lambda r: (r[0], r))(run(z)), has_aux=True)(jnp.concatenate([y, theta]))
         return val, J, ok & jnp.all(jnp.isfinite(val)) & jnp.all(jnp.isfinite(J))
+
+    def linearise_y(y):
+        # One forward pass in the ny directions of y: (Phi, figures) and their y-Jacobian.
+        J, (val, ok) = jax.jacfwd(lambda u: (lambda r: (r[0], r))(run(jnp.concatenate([u, theta]))), has_aux=True)(y)
+        return val, J, ok & jnp.all(jnp.isfinite(val)) & jnp.all(jnp.isfinite(J))
+
+    step_pass = linearise_y if monodromy_only else linearise
 
     def small(y, val):
         return jnp.max(jnp.abs(val[:ny] - y)) <= tol * (1 + jnp.max(jnp.abs(y)))
@@ -132,12 +147,16 @@ def newton_orbit(run, y0: Array, theta: Array, tol: Array | float, max_iter: Arr
     def body(c):
         y, val, J, _, it, _ = c
         y1 = y + jnp.linalg.solve(J[:ny, :ny] - eye, y - val[:ny])
-        val1, J1, ok1 = linearise(y1)
+        val1, J1, ok1 = step_pass(y1)
         return y1, val1, J1, ok1, it + 1, small(y1, val1)
 
-    val0, J0, ok0 = linearise(y0)
+    val0, J0, ok0 = step_pass(y0)
     init = (y0, val0, J0, ok0, jnp.zeros((), jnp.int32), small(y0, val0))
     y, val, J, ok, it, done = jax.lax.while_loop(cond, body, init)
+    if monodromy_only:
+        # The full Jacobian once, at the last iterate (the same point: the same values).
+        val, J, ok_full = linearise(y)
+        ok = ok & ok_full
     M = J[:ny, :ny]
     dy = jnp.linalg.solve(eye - M, J[:ny, ny:])
     grad = J[ny:, ny:] + J[ny:, :ny] @ dy
@@ -150,7 +169,7 @@ def _orbit_one(params, a_max, theta, y0, k, shape, contact, dt, max_steps, tol, 
         out = period(params, shape.waveform(z[3:], a_max, params.lbar), contact, dt, max_steps, z[:3], k)
         return jnp.concatenate([out.y, out.figures]), out.ok
 
-    return newton_orbit(run, y0, theta, tol, max_iter)
+    return newton_orbit(run, y0, theta, tol, max_iter, monodromy_only=True)
 
 
 def _evaluate(params, a_max, theta, y0, k, shape, contact, dt, max_steps, tol, max_iter):

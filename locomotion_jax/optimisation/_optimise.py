@@ -363,9 +363,18 @@ def optimise(
     **Raises:** `ValueError` for a bad requirement (see `_constraints.check_inputs`) or
     method; `TypeError` for settings of the other method.
 
+    **Compilation.** A first call in a process compiles the engine's programs (the sinusoid
+    baseline's steady gaits, the orbit oracle, the verification: most of a cold call's time);
+    later calls with the same settings, in the same process, reuse them. Across processes,
+    [`enable_compilation_cache`][locomotion_jax.enable_compilation_cache] (once, at start-up)
+    keeps them on disk: a later process reads them back instead of compiling. The library
+    leaves that switch (JAX's process-wide `jax_compilation_cache_dir`) to the caller; the
+    command line turns it on by default.
+
     !!! Example
 
         ```python
+        enable_compilation_cache()  # optional: compiled programs kept across processes
         opt = optimise(Params(), v_min=0.05, a_max=0.05)
         opt.cost_of_transport_exact, opt.improvement_vs_sinusoid
         ```
