@@ -127,7 +127,7 @@ ARGS: list = []
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     ap.add_argument("--B", type=int, default=1024)
     ap.add_argument("--rep", type=int, default=3)
     ap.add_argument("--hlo", help="write the optimised HLO here")
@@ -149,7 +149,7 @@ def main() -> int:
 
         fn, engine = mod._measure_batch, "n-body"
     except ImportError:
-        from locomotion_jax.dynamics import _exact_measure as mod
+        from locomotion_jax.dynamics import _exact_measure as mod  # pyright: ignore  # (older trees)
 
         fn, engine = mod._exact_batch, "two-mass"
     om, a = configs(args.B)
@@ -168,7 +168,7 @@ def main() -> int:
     if args.hot_only:
         print(json.dumps(dict(engine=engine, hot_loop=hot)))
         return 0
-    lowered = fn.lower(*dyn, z=rest[0], horizon=rest[1], window=rest[2], max_steps=cap, **kw)
+    lowered = fn.lower(*dyn, z=rest[0], horizon=rest[1], window=rest[2], max_steps=cap, **kw)  # pyright: ignore[reportFunctionMemberAccess]
     compiled = lowered.compile()
     cost = compiled.cost_analysis()
     cost = cost[0] if isinstance(cost, list) else cost
