@@ -2,7 +2,9 @@
 
 Each revision is checked out into a temporary git worktree; every case of `run.py`
 (this file's copy) runs in a fresh process with that tree first on `PYTHONPATH`,
-alternating between the revisions, and the median of the repeats is compared.
+alternating between the revisions, and the median of the rounds is compared: the wall-clock
+rate, and the rate per CPU-second of the process (the case's `cpu`), which a shared machine's
+other load disturbs less.
 
     python benchmarks/compare.py OLD NEW [--case JSON ...] [--rounds 3]
 
@@ -52,17 +54,21 @@ def main() -> int:
             subprocess.run(["git", "worktree", "add", "--detach", "-q", str(tree), rev], cwd=ROOT, check=True)
             trees[rev] = tree
         try:
-            print(f"| case | {args.old} cfg-tu/s | {args.new} cfg-tu/s | new / old |")
-            print("|---|---|---|---|")
+            print(f"| case | {args.old} cfg-tu/s | {args.new} cfg-tu/s | new / old | per CPU-s: new / old |")
+            print("|---|---|---|---|---|")
             for spec in cases:
                 rates = {rev: [] for rev in trees}
+                per_cpu = {rev: [] for rev in trees}
                 for _ in range(args.rounds):
                     for rev, tree in trees.items():
                         r = run_case(tree, spec)
                         rates[rev].append(r["B"] * r["t_sim"] / r["wall"])
+                        per_cpu[rev].append(r["B"] * r["t_sim"] / r["cpu"])
                 old, new = (statistics.median(rates[rev]) for rev in (args.old, args.new))
+                cpu_old, cpu_new = (statistics.median(per_cpu[rev]) for rev in (args.old, args.new))
                 label = ", ".join(f"{k}={v}" for k, v in spec.items() if k != "repeats")
-                print(f"| {label} | {old:,.0f} | {new:,.0f} | {new / old:.3f} |", flush=True)
+                row = f"| {label} | {old:,.0f} | {new:,.0f} | {new / old:.3f} | {cpu_new / cpu_old:.3f} |"
+                print(row, flush=True)
         finally:
             for tree in trees.values():
                 subprocess.run(["git", "worktree", "remove", "--force", str(tree)], cwd=ROOT, check=False)

@@ -335,8 +335,9 @@ def step(
     k2 = stage(drm, y0.map(lambda a, b: a + (0.5 * h) * b, k1))
     k3 = stage(drm, y0.map(lambda a, b: a + (0.5 * h) * b, k2))
     k4 = stage(dre, y0.map(lambda a, b: a + h * b, k3))
-    # The increment and (below) the Hermite basis are not kept: recomputing them where used
-    # costs fewer kernels than it adds flops (benchmarks/NOTES.md).
+    # The increment and (below) the Hermite basis are not kept: they feed the committed state
+    # only (kept), and pinning them changes the rounding (a kept factor is not contracted into
+    # the fused multiply-adds of its consumers) for no measurable gain (benchmarks/NOTES.md).
     incr = k1.map(lambda a, b, c, d: (h / 6) * (a + 2 * (b + c) + d), k2, k3, k4)
     y1 = y0.map(lambda a, b: kp(a + b), incr)
     D1 = motion.derivatives(P, contact, mode, target, dre, loads_at(P, dre, y1.x, y=y1.y), y1.x, y1.v, y1.y, y1.vy)
@@ -397,12 +398,16 @@ def step(
     cph, sph = jnp.where(cut, cph, ce), jnp.where(cut, sph, se)
     norm = 1.5 - 0.5 * (cph * cph + sph * sph)  # keeps the carried phase on the unit circle
     cph, sph = cph * norm, sph * norm
+    # The committed state is pinned: it feeds the new state, the caller's records (a
+    # measurement's target state, its sums) and the gaps, and XLA would otherwise recompute
+    # the dense output (the Hermite basis and the RK4 increment) in each of those kernels:
+    # 13 of them at N = 2 (benchmarks/NOTES.md, "Where the paper's model lost its 10 %").
     if comp is None:
-        yc = y0.map(lambda a, b: a + b, delta)
+        yc = y0.map(lambda a, b: kp(a + b), delta)
         comp_new = None
     else:  # compensated (Kahan) sums in float32, as in the two-mass engine
         corr = delta.map(lambda a, b: a - b, comp)
-        yc = y0.map(lambda a, b: a + b, corr)
+        yc = y0.map(lambda a, b: kp(a + b), corr)
         comp_new = yc.map(lambda tot, a, b: (tot - a) - b, y0, corr)
 
     # A normal force's crossing: the first one is a lift-off (from above: no earlier one),
