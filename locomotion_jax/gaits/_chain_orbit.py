@@ -21,7 +21,7 @@ $dF/d\\theta = \\partial F/\\partial\\theta + (\\partial F/\\partial y)\\,dy^*/d
 pass over the gait period in the $2N - 1 + p$ directions $(y, \\theta)$ gives every gradient,
 located events entering with their implicit-function times (the saltation of each switch).
 
-A [`Mechanism`][locomotion_jax.Mechanism] takes one signal per actuated element ([`actuated`][]) in
+A [`Mechanism`][locomotion_jax.Mechanism] takes one signal per actuated element (`actuated` below) in
 place of one per spring, and, with `knots` $M > 0$, the decision vector
 $\\theta = (c_{0,0}, \\dots, c_{0,M-1}, c_{1,0}, \\dots, c_{S-1,M-1}, \\log\\omega)$ of the control
 values of a periodic cubic B-spline per element ([`Spline`][], units of $a_\\max$; no phase is
@@ -104,7 +104,7 @@ def with_spline(mechanism: Mechanism, control: Array, omega: Array) -> Mechanism
 def with_waves(chain: Chain | Mechanism, theta: Array, a_max: Array, harmonics: int,
                knots: int = 0) -> Chain | Mechanism:  # fmt: skip
     """One chain or mechanism (broadcast, unbatched) with the actuation of the decision vector `theta`
-    (a mechanism: one signal per actuated element, [`actuated`][]; with `knots > 0` a spline per element)."""
+    (a mechanism: one signal per actuated element, `actuated`; with `knots > 0` a spline per element)."""
     if isinstance(chain, Mechanism) and knots > 0:
         S = len(actuated(chain))
         return with_spline(chain, a_max * theta[:-1].reshape(S, knots), jnp.exp(theta[-1]))
