@@ -9,8 +9,6 @@ from importlib.metadata import PackageNotFoundError, version as _version
 
 from ._cache import enable_compilation_cache as enable_compilation_cache
 from ._results import (
-    ChainMeasurement as ChainMeasurement,
-    ChainTrajectory as ChainTrajectory,
     Measurement as Measurement,
     SMOOTH_MARGIN as SMOOTH_MARGIN,
     SMOOTH_MARGIN_Z as SMOOTH_MARGIN_Z,
@@ -100,7 +98,18 @@ _LAZY = {
 """Public names imported on first use, so that `import locomotion_jax` stays quick."""
 
 
+_DEPRECATED = {"ChainTrajectory": "Trajectory", "ChainMeasurement": "Measurement"}
+"""Deprecated names (for one release) and the classes they name: one `Trajectory` and one
+`Measurement` serve every mechanism."""
+
+
 def __getattr__(name: str):
+    if name in _DEPRECATED:
+        import warnings
+
+        new = _DEPRECATED[name]
+        warnings.warn(f"locomotion_jax.{name} is deprecated: use locomotion_jax.{new}.", DeprecationWarning, 2)
+        return globals()[new]
     if name in _LAZY:
         from importlib import import_module
 

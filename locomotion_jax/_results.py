@@ -5,6 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._custom_types import Array
+from ._status import mode_code
 
 
 SMOOTH_MARGIN = 0.05
@@ -27,19 +28,65 @@ long transient typically has `margin_z` between 1e-4 and 3e-3: a switch every fe
 tenths of a time unit, against `tau_5` of a few hundred."""
 
 
+PAPER = "paper"
+"""`names` of a result of the paper's model ([`Params`][locomotion_jax.Params]): `to_numpy` names its
+arrays as the paper does (`x1`, `v1`, `x2`, `v2`, `N1`, `N2`, `mode`, `l0`, `stick_fraction1`, ...)."""
+
+BODIES = "bodies"
+"""`names` of a result of any other mechanism: `to_numpy` names its arrays as the fields are."""
+
+_TRAJECTORY_PAPER_KEYS = (
+    "t", "x1", "v1", "x2", "v2", "X", "e_d", "w", "e", "mode", "l0", "N1", "N2", "f_ex", "valid", "status",
+    "liftoff", "t_liftoff", "n_switch", "transversality", "near_miss", "switch_gap", "y", "vy", "n_land", "zeno",
+)  # fmt: skip
+_TRAJECTORY_BODIES_KEYS = (
+    "t", "x", "v", "stuck", "X", "e_d", "w", "e", "N", "l0", "tension", "valid", "status", "liftoff",
+    "t_liftoff", "n_switch", "transversality", "near_miss", "switch_gap", "y", "vy", "n_land", "zeno",
+)  # fmt: skip
+_MEASUREMENT_KEYS = (
+    "tau_z", "e_z", "reached", "regime", "mean_speed", "cost_of_transport", "stick_fraction", "e_d", "work",
+    "delta_e", "balance", "liftoff", "t_liftoff", "status", "t_start", "X_start", "n_steps", "n_switch",
+    "transversality", "near_miss", "margin_z", "flight_fraction", "landings_per_period", "highest_hop", "zeno",
+)  # fmt: skip
+MEASUREMENT_PAPER_KEYS: tuple[str, ...] = tuple(
+    k for name in _MEASUREMENT_KEYS for k in ((name + "1", name + "2") if name == "stick_fraction" else (name,))
+)
+"""The keys of `Measurement.to_numpy()` for the paper's model, in order (the hopping ones only under
+`contact="hop"`): the fields, with `stick_fraction` as `stick_fraction1`, `stick_fraction2`."""
+
+
+def _two_bodies(result, name: str) -> None:
+    """Refuse a paper's name (`x1`, `N2`, `mode`, ...) on a result that has not two bodies."""
+    n = result.n_bodies
+    if n != 2:
+        raise ValueError(
+            f"`{name}` is the paper's name for the two-mass model; this result has {n} bodies "
+            "(read the fields with a trailing body axis, as `x[..., 0]`, `stick_fraction[..., 1]`)."
+        )
+
+
+def _arrays(result, keys: tuple[str, ...]) -> dict[str, np.ndarray]:
+    """`keys` read from `result` as numpy arrays, without those that are `None` (the hopping ones
+    outside `contact="hop"`, a chain's `f_ex`, the paper's model's `tension`)."""
+    values = ((k, getattr(result, k)) for k in keys)
+    return {k: np.asarray(v) for k, v in values if v is not None}
+
+
 class Trajectory(eqx.Module):
-    """States saved at the requested times (one configuration or a batch).
+    """States of a mechanism saved at the requested times (one configuration or a batch):
+    the paper's two-mass model, a chain of N masses or any other mechanism.
 
-    Array fields have shape `batch_shape + (n_save,)` (per-time fields) or
-    `batch_shape` (per-configuration fields).
+    Per-time fields have shape `batch_shape + (n_save,)`, per-body ones a trailing body axis
+    `batch_shape + (n_save, N)`, per-spring ones a trailing spring axis `(..., n_save, N - 1)`;
+    per-configuration fields have shape `batch_shape`.
 
-    - `t`: save times; `x1, v1, x2, v2`: positions and velocities.
-    - `X`: centre of mass (eq. 4). `e_d`: dissipated energy since $t=0$ (eq. 15).
-      `w`: actuator work since $t=0$ (eq. 16). `e`: total energy (eq. 10).
-    - `mode`: contact mode (Sect. 2.2; `Mode`): 0 both stick, 1 both slip,
-      2 $m_1$ slips, 3 $m_2$ slips.
-    - `l0`: rest length; `N1, N2`: signed normal forces (eq. 5); `f_ex`: the
-      horizontal friction plus damping force on the system (eq. 17).
+    - `t`: save times; `x`, `v`: positions and velocities; `stuck`: whether each body is stuck.
+    - `X`: centre of mass $\\sum m_i x_i / \\sum m_i$ (eq. 4). `e_d`: dissipated energy since
+      $t=0$ (eq. 15). `w`: actuator work since $t=0$ (eq. 16). `e`: total energy (eq. 10).
+    - `N`: signed normal forces (eq. 5); `rest_length`: each spring's rest length $\\ell_0$;
+      `tension`: each spring's tension (`None` for the paper's model).
+    - `f_ex`: the horizontal friction plus damping force on the system (eq. 17; the paper's
+      model only, else `None`).
     - `valid`: False for save times after the run stopped (lift-off, collision or step
       cap); those entries repeat the last state reached, never NaN.
     - `status`: `Status` code; `liftoff`: a normal force reached zero
@@ -51,29 +98,31 @@ class Trajectory(eqx.Module):
       `switch_gap`: the drive phase between each save time and the nearest located
       switch. The positions and energies at a save time have derivatives through a switch
       at that time (the velocities are continuous), the velocities do not.
-    - `start`, `contact`: the initial condition and contact reading used.
-    - `y`, `vy` (`contact="hop"` only, else `None`; SPEC §10): each mass's height and vertical
-      velocity, `batch_shape + (n_save, 2)`; `n_land`: the landings of both masses per configuration;
-      `zeno`: whether the Zeno rule made a rebound plastic. Under `"hop"`, `e` includes gravity
-      $m_i y_i$ and the vertical kinetic energy, `e_d` the impacts' losses, `N1`, `N2` are the
-      ground's reaction $m_i - V_i$ (on a mass in flight: $-m_i \\dot w_i$), `mode` counts a mass in
-      flight as slipping and `f_ex` has no friction from it.
+    - `start`, `contact`: the initial condition and contact reading used. `names`: how
+      `to_numpy` names the arrays ([`PAPER`][locomotion_jax._results.PAPER] for the paper's model).
+    - `y`, `vy` (`contact="hop"` only, else `None`; SPEC §10): each body's height and vertical
+      velocity, `(..., n_save, N)`; `n_land`: the landings of all bodies per configuration;
+      `zeno`: whether the Zeno rule made a rebound plastic (a bouncing sequence that would not
+      end). Under `"hop"`, `e` includes gravity $m_i y_i$ and the vertical kinetic energy, `e_d`
+      the impacts' losses, `N` the ground's reaction $m_i - V_i$ (on a body in flight:
+      $-m_i \\dot w_i$), a body in flight is not `stuck` and `f_ex` has no friction from it.
+
+    The paper's names of the two-mass model (two bodies only; `ValueError` otherwise):
+    `x1`, `v1`, `x2`, `v2`, `N1`, `N2`, `l0` (the one spring's rest length) and `mode`
+    (the contact mode of Sect. 2.2, `Mode`: 0 both stick, 1 both slip, 2 $m_1$ slips,
+    3 $m_2$ slips; a body in flight counts as slipping).
     """
 
     t: Array
-    x1: Array
-    v1: Array
-    x2: Array
-    v2: Array
+    x: Array
+    v: Array
+    stuck: Array
     X: Array
     e_d: Array
     w: Array
     e: Array
-    mode: Array
-    l0: Array
-    N1: Array
-    N2: Array
-    f_ex: Array
+    N: Array
+    rest_length: Array
     valid: Array
     status: Array
     liftoff: Array
@@ -84,10 +133,18 @@ class Trajectory(eqx.Module):
     switch_gap: Array
     start: str = eqx.field(static=True)
     contact: str = eqx.field(static=True)
+    names: str = eqx.field(static=True, default=BODIES)
+    tension: Array | None = None
+    f_ex: Array | None = None
     y: Array | None = None
     vy: Array | None = None
     n_land: Array | None = None
     zeno: Array | None = None
+
+    @property
+    def n_bodies(self) -> int:
+        """The number of bodies $N$ (the length of the trailing body axis)."""
+        return self.x.shape[-1]
 
     @property
     def smooth(self) -> Array:
@@ -97,25 +154,61 @@ class Trajectory(eqx.Module):
         return _smooth_rows(self)
 
     @property
-    def x(self) -> Array:
-        """Positions with a trailing mass axis, `(..., n_save, 2)` (as a chain's)."""
-        return _stack(self.x1, self.x2)
+    def x1(self) -> Array:
+        """The paper's $x_1$: `x[..., 0]` (two bodies only)."""
+        _two_bodies(self, "x1")
+        return self.x[..., 0]
 
     @property
-    def v(self) -> Array:
-        """Velocities with a trailing mass axis, `(..., n_save, 2)`."""
-        return _stack(self.v1, self.v2)
+    def v1(self) -> Array:
+        """The paper's $v_1$: `v[..., 0]` (two bodies only)."""
+        _two_bodies(self, "v1")
+        return self.v[..., 0]
+
+    @property
+    def x2(self) -> Array:
+        """The paper's $x_2$: `x[..., 1]` (two bodies only)."""
+        _two_bodies(self, "x2")
+        return self.x[..., 1]
+
+    @property
+    def v2(self) -> Array:
+        """The paper's $v_2$: `v[..., 1]` (two bodies only)."""
+        _two_bodies(self, "v2")
+        return self.v[..., 1]
+
+    @property
+    def N1(self) -> Array:
+        """The paper's $N_1$: `N[..., 0]` (two bodies only)."""
+        _two_bodies(self, "N1")
+        return self.N[..., 0]
+
+    @property
+    def N2(self) -> Array:
+        """The paper's $N_2$: `N[..., 1]` (two bodies only)."""
+        _two_bodies(self, "N2")
+        return self.N[..., 1]
+
+    @property
+    def l0(self) -> Array:
+        """The paper's $\\ell_0(t)$, the one spring's rest length: `rest_length[..., 0]` (two bodies only)."""
+        _two_bodies(self, "l0")
+        return self.rest_length[..., 0]
+
+    @property
+    def mode(self) -> Array:
+        """The contact mode of Sect. 2.2 (`Mode`) from the two bodies' `stuck` flags (two bodies only)."""
+        _two_bodies(self, "mode")
+        return mode_code(self.stuck[..., 0], self.stuck[..., 1])
 
     def to_numpy(self) -> dict[str, np.ndarray]:
-        """The array fields (the hopping ones only under `contact="hop"`) as numpy arrays."""
-        fields = (
-            k for k in self.__dataclass_fields__ if k not in ("start", "contact") and getattr(self, k) is not None
-        )
-        return {k: np.asarray(getattr(self, k)) for k in fields}
-
-
-def _stack(a: Array, b: Array) -> Array:
-    return jnp.stack([a, b], -1)
+        """The array fields as numpy arrays (the hopping ones only under `contact="hop"`), named as
+        the paper does for the paper's model (`x1`, `v1`, `x2`, `v2`, `mode`, `l0`, `N1`, `N2`,
+        `f_ex`, ...), else as the fields (with the rest lengths as `l0`)."""
+        if self.names == PAPER:
+            return _arrays(self, _TRAJECTORY_PAPER_KEYS)
+        out = _arrays(self, tuple("rest_length" if k == "l0" else k for k in _TRAJECTORY_BODIES_KEYS))
+        return {("l0" if k == "rest_length" else k): v for k, v in out.items()}
 
 
 def _smooth_rows(r) -> Array:
@@ -129,10 +222,12 @@ def _smooth(r) -> Array:
 
 
 class Measurement(eqx.Module):
-    """The paper's measurements (Sect. 3-5; SPEC §5), per configuration.
+    """The paper's measurements (Sects. 3-5; SPEC §5), per configuration, of any mechanism.
 
     The measurement starts at $t_\\text{start}$ = 80 periods of the lowest
     natural frequency and runs until $|X - X(t_\\text{start})| = z$ or the horizon.
+    Per-configuration fields have shape `batch_shape`, per-body ones a trailing body axis
+    `batch_shape + (N,)`.
 
     - `tau_z`: time to travel `z` after $t_\\text{start}$; **`inf` when not
       reached** (then `reached` is False).
@@ -143,7 +238,8 @@ class Measurement(eqx.Module):
     - `mean_speed`: signed $\\Delta X / \\Delta t$ over the measured interval
       (to `tau_z`, or to the horizon/stop when not reached).
     - `cost_of_transport`: `e_z / z` (`inf` when not reached).
-    - `stick_fraction1`, `stick_fraction2`: fraction of the window each mass is stuck.
+    - `stick_fraction`: per body, the fraction of the window it is stuck (the paper's
+      `stick_fraction1`, `stick_fraction2` for two bodies).
     - `e_d`, `work`, `delta_e`: dissipated energy, actuator work and change of
       total energy over the measured interval; `balance` $= w - e_d - \\Delta e$
       (eq. 16; zero up to the integration error).
@@ -167,134 +263,21 @@ class Measurement(eqx.Module):
       and lift-offs: a body in flight at $t_z$ contributes its landing (its height's quadratic, so
       a rising body's landing is not estimated) and no friction event, a grounded one its lift-off
       ($N_i$) and its stick or slip events (tests/test_hop_margin.py).
+    - `z`, `start`, `contact`: as measured. `names`: how `to_numpy` names the arrays
+      ([`PAPER`][locomotion_jax._results.PAPER] for the paper's model).
 
     Under `contact="hop"` only (else `None`; SPEC §10), over the regime window like the stick
-    fractions: `flight_fraction`, shape `batch_shape + (2,)`, the fraction of it each mass is in
-    flight; `landings_per_period`, the landings of both masses per actuation period $2\\pi/\\omega$;
-    `highest_hop`, shape `batch_shape + (2,)`, each mass's greatest height (0 for a mass that never
-    flies); `zeno`, whether the Zeno rule made a rebound plastic during the run. Under `"hop"` a
-    run goes on through lift-off (`liftoff` and `t_liftoff` record the first), `e_d` includes the
-    landings' losses and `delta_e` gravity's potential $m_i y_i$ and the vertical kinetic energy.
+    fractions: `flight_fraction`, per body, the fraction of it each body is in flight;
+    `landings_per_period`, the landings of all bodies per actuation period $2\\pi/\\omega$;
+    `highest_hop`, per body, its greatest height (0 for a body that never flies); `zeno`, whether
+    the Zeno rule made a rebound plastic during the run (a bouncing sequence that would not end;
+    the run goes on with the body on the ground). Under `"hop"` a run goes on through lift-off
+    (`liftoff` and `t_liftoff` record the first), `e_d` includes the landings' losses and
+    `delta_e` gravity's potential $m_i y_i$ and the vertical kinetic energy.
 
     Quantities that cannot be computed because the run stopped before
     $t_\\text{start}$ (lift-off, invalid input) are NaN, and `status` says why.
     """
-
-    tau_z: Array
-    e_z: Array
-    reached: Array
-    regime: Array
-    mean_speed: Array
-    cost_of_transport: Array
-    stick_fraction1: Array
-    stick_fraction2: Array
-    e_d: Array
-    work: Array
-    delta_e: Array
-    balance: Array
-    liftoff: Array
-    t_liftoff: Array
-    status: Array
-    t_start: Array
-    X_start: Array
-    n_steps: Array
-    n_switch: Array
-    transversality: Array
-    near_miss: Array
-    margin_z: Array
-    z: float = eqx.field(static=True)
-    start: str = eqx.field(static=True)
-    contact: str = eqx.field(static=True)
-    flight_fraction: Array | None = None
-    landings_per_period: Array | None = None
-    highest_hop: Array | None = None
-    zeno: Array | None = None
-
-    @property
-    def smooth(self) -> Array:
-        """Whether the results are smooth functions of the parameters here, so that their
-        derivatives are derivatives: `transversality` and `near_miss` at least
-        `SMOOTH_MARGIN`, `margin_z` at least `SMOOTH_MARGIN_Z`, `status` OK and no lift-off
-        (False where the margins are NaN)."""
-        return _smooth(self)
-
-    @property
-    def stick_fraction(self) -> Array:
-        """Stick fractions with a trailing mass axis, `(..., 2)` (as a chain's)."""
-        return _stack(self.stick_fraction1, self.stick_fraction2)
-
-    def to_numpy(self) -> dict[str, np.ndarray]:
-        """The array fields (the hopping ones only under `contact="hop"`) as numpy arrays."""
-        skip = ("z", "start", "contact")
-        fields = (k for k in self.__dataclass_fields__ if k not in skip and getattr(self, k) is not None)
-        return {k: np.asarray(getattr(self, k)) for k in fields}
-
-
-class ChainTrajectory(eqx.Module):
-    """States of a chain of N masses saved at the requested times (compare [`Trajectory`][]).
-
-    Per-time fields have shape `batch_shape + (n_save,)`, per-mass ones a trailing
-    mass axis `(..., n_save, N)`, per-spring ones a trailing spring axis `(..., n_save, N-1)`.
-
-    - `t`; `x`, `v`: positions and velocities; `stuck`: whether each mass is stuck.
-    - `X`: centre of mass $\\sum m_i x_i / \\sum m_i$; `e_d`, `w`, `e`: dissipated energy and
-      actuator work since $t = 0$, total energy (SPEC §8).
-    - `N`: signed normal forces; `l0`: rest lengths; `tension`: spring tensions.
-    - `valid`, `status`, `liftoff`, `t_liftoff`, `n_switch`, `transversality`, `near_miss`,
-      `switch_gap`, `smooth`, `start`, `contact`: as in [`Trajectory`][].
-    - `y`, `vy` (`contact="hop"` only, else `None`): each body's height and vertical velocity,
-      `(..., n_save, N)`; `n_land`: the number of landings per configuration; `zeno`: whether the
-      Zeno rule made a rebound plastic (a bouncing sequence that would not end). Under `"hop"`,
-      `e` includes gravity $m_i y_i$ and the vertical kinetic energy, and `e_d` the impacts' losses.
-    """
-
-    t: Array
-    x: Array
-    v: Array
-    stuck: Array
-    X: Array
-    e_d: Array
-    w: Array
-    e: Array
-    N: Array
-    l0: Array
-    tension: Array
-    valid: Array
-    status: Array
-    liftoff: Array
-    t_liftoff: Array
-    n_switch: Array
-    transversality: Array
-    near_miss: Array
-    switch_gap: Array
-    start: str = eqx.field(static=True)
-    contact: str = eqx.field(static=True)
-    y: Array | None = None
-    vy: Array | None = None
-    n_land: Array | None = None
-    zeno: Array | None = None
-
-    @property
-    def smooth(self) -> Array:
-        """As [`Trajectory.smooth`][locomotion_jax.Trajectory.smooth]."""
-        return _smooth_rows(self)
-
-    def to_numpy(self) -> dict[str, np.ndarray]:
-        skip = ("start", "contact")
-        fields = self.__dataclass_fields__
-        return {k: np.asarray(getattr(self, k)) for k in fields if k not in skip and getattr(self, k) is not None}
-
-
-class ChainMeasurement(eqx.Module):
-    """The steady-state measurements of a chain (compare [`Measurement`][], whose fields these are),
-    with `stick_fraction` of shape `batch_shape + (N,)`: the fraction of the window each mass is stuck.
-
-    Under `contact="hop"` only (else `None`), over the same window: `flight_fraction`, shape
-    `batch_shape + (N,)`, the fraction of it each body is in flight; `landings_per_period`, the
-    landings of all bodies per actuation period $2\\pi/\\omega$; `highest_hop`, shape
-    `batch_shape + (N,)`, each body's greatest height $y_i$ (0 for a body that never flies); `zeno`,
-    whether the Zeno rule made a rebound plastic during the run (a bouncing sequence that would
-    not end; the run goes on with the body on the ground)."""
 
     tau_z: Array
     e_z: Array
@@ -320,18 +303,38 @@ class ChainMeasurement(eqx.Module):
     z: float = eqx.field(static=True)
     start: str = eqx.field(static=True)
     contact: str = eqx.field(static=True)
+    names: str = eqx.field(static=True, default=BODIES)
     flight_fraction: Array | None = None
     landings_per_period: Array | None = None
     highest_hop: Array | None = None
     zeno: Array | None = None
 
     @property
+    def n_bodies(self) -> int:
+        """The number of bodies $N$ (the length of `stick_fraction`'s trailing axis)."""
+        return self.stick_fraction.shape[-1]
+
+    @property
     def smooth(self) -> Array:
-        """As [`Measurement.smooth`][locomotion_jax.Measurement.smooth]."""
+        """Whether the results are smooth functions of the parameters here, so that their
+        derivatives are derivatives: `transversality` and `near_miss` at least
+        `SMOOTH_MARGIN`, `margin_z` at least `SMOOTH_MARGIN_Z`, `status` OK and no lift-off
+        (False where the margins are NaN)."""
         return _smooth(self)
 
+    @property
+    def stick_fraction1(self) -> Array:
+        """The paper's stick fraction of mass 1: `stick_fraction[..., 0]` (two bodies only)."""
+        _two_bodies(self, "stick_fraction1")
+        return self.stick_fraction[..., 0]
+
+    @property
+    def stick_fraction2(self) -> Array:
+        """The paper's stick fraction of mass 2: `stick_fraction[..., 1]` (two bodies only)."""
+        _two_bodies(self, "stick_fraction2")
+        return self.stick_fraction[..., 1]
+
     def to_numpy(self) -> dict[str, np.ndarray]:
-        """The array fields (the hopping ones only under `contact="hop"`) as numpy arrays."""
-        skip = ("z", "start", "contact")
-        fields = (k for k in self.__dataclass_fields__ if k not in skip and getattr(self, k) is not None)
-        return {k: np.asarray(getattr(self, k)) for k in fields}
+        """The array fields as numpy arrays (the hopping ones only under `contact="hop"`), with the
+        stick fractions of the paper's model as `stick_fraction1`, `stick_fraction2`."""
+        return _arrays(self, MEASUREMENT_PAPER_KEYS if self.names == PAPER else _MEASUREMENT_KEYS)

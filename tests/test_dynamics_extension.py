@@ -62,7 +62,7 @@ def test_simulate():
         _close(getattr(new, field), getattr(ref, field), atol=1e-6)
     np.testing.assert_array_equal(new.status, ref.status)
     new, ref = (lj.simulate(CHAIN, 20.0, save, dynamics=d) for d in (HalfStep(), lj.Exact()))
-    assert isinstance(new, lj.ChainTrajectory)
+    assert isinstance(new, lj.Trajectory)
     _close(new.x, ref.x, atol=1e-6)
     _close(new.e_d, ref.e_d, atol=1e-6)
 
@@ -77,7 +77,7 @@ def test_measure():
     # The step is the new class's: about twice the iterations.
     assert np.all(np.asarray(new.n_steps) > 1.5 * np.asarray(ref.n_steps))
     new, ref = (lj.measure(CHAIN, **kw, t_start=20.0, dynamics=d) for d in (HalfStep(), lj.Exact()))
-    assert isinstance(new, lj.ChainMeasurement) and bool(new.reached)
+    assert isinstance(new, lj.Measurement) and bool(new.reached)
     for field in ("tau_z", "e_z", "mean_speed", "stick_fraction"):
         _close(getattr(new, field), getattr(ref, field))
 

@@ -33,7 +33,8 @@ def test_params_hop_equals_chain_from_params_exactly():
     assert a.y is not None and b.y is not None and a.n_land is not None and b.n_land is not None
     assert a.y.shape == (2, 3, 81, 2) and a.n_land.shape == (2, 3)
     pairs = {"x1": b.x[..., 0], "v1": b.v[..., 0], "x2": b.x[..., 1], "v2": b.v[..., 1], "y": b.y, "vy": b.vy,
-             "e_d": b.e_d, "w": b.w, "e": b.e, "X": b.X, "N1": b.N[..., 0], "N2": b.N[..., 1], "l0": b.l0[..., 0],
+             "e_d": b.e_d, "w": b.w, "e": b.e, "X": b.X, "N1": b.N[..., 0], "N2": b.N[..., 1],
+             "l0": b.rest_length[..., 0],
              "status": b.status, "n_land": b.n_land, "zeno": b.zeno, "t_liftoff": b.t_liftoff}  # fmt: skip
     for k, want in pairs.items():  # the engine's states bit for bit; the derived fields to rounding
         if k in ("e", "X", "N1", "N2", "l0"):

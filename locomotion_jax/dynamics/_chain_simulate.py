@@ -66,11 +66,11 @@ def _derived(C: Chain | Mechanism, contact, t, x, v, y=None, vy=None):
     e = P.energy(L, tuple(v[..., i] for i in range(v.shape[-1])))
     if y is not None and vy is not None:
         e = e + jnp.sum(C.m * (y + 0.5 * vy * vy), -1)
-    return dict(e=e, N=jnp.stack(L.N, -1), l0=_stack(dr.l0, e), tension=_stack(L.aux.tension, e))
+    return dict(e=e, N=jnp.stack(L.N, -1), rest_length=_stack(dr.l0, e), tension=_stack(L.aux.tension, e))
 
 
 def simulate_batch(flat: Chain | Mechanism, valid, save, contact, start, dt, max_steps: int, initial=None) -> dict:
-    """The fields of a [`ChainTrajectory`][locomotion_jax.ChainTrajectory] of a flat batch of chains
+    """The fields of a [`Trajectory`][locomotion_jax.Trajectory] of a flat batch of chains
     (leading axis: the configurations); `max_steps` caps each one's iterations, saves included;
     `initial`: the states at $t = 0$, shape `(n, 2N)`, or `None` for `start`'s."""
     N = flat.n_masses

@@ -16,7 +16,6 @@ import jax
 import jax.numpy as jnp
 
 from .._custom_types import Array, Contact
-from .._status import mode_code
 from ..model import _two_mass as model
 from ..model._params import Params, safe_params
 from ..model._physics import loads_at
@@ -64,12 +63,6 @@ def _order(params: Params) -> Array:
     return jnp.argsort(-jnp.where(jnp.isfinite(params.omega), params.omega, -jnp.inf))
 
 
-def _measurement(out: dict) -> dict:
-    """The N-body engine's fields as a two-mass `Measurement`'s (`stick_fraction` per mass)."""
-    frac = out.pop("stick_fraction")
-    return out | {"stick_fraction1": frac[..., 0], "stick_fraction2": frac[..., 1]}
-
-
 def measure_batch(
     params: Params,
     wave: AbstractWaveform,
@@ -100,7 +93,7 @@ def measure_batch(
     setup = lambda i: chain_measure._setup(*take(i), z, horizon, window, contact, start, dt, max_steps)
     advance = lambda f, d: chain_measure._advance(f, d, contact, dt)
     results = lambda f, d: chain_measure._results(f, d, contact)
-    return _measurement(run_queue(setup, chain_measure._running, advance, results, n, lanes, _order(params)))
+    return run_queue(setup, chain_measure._running, advance, results, n, lanes, _order(params))
 
 
 _measure_batch = engine_jit(measure_batch, ("wave_axes", "contact", "start", "dt", "lanes"))
@@ -113,7 +106,7 @@ def measure_one(params: Params, wave: AbstractWaveform, z, horizon, window, cont
     f, d = chain_measure._setup(*take(0), z, horizon, window, contact, start, dt, max_steps)
     advance = lambda d: chain_measure._advance(f, d, contact, dt)
     d = jax.lax.while_loop(lambda d: chain_measure._running(f, d), advance, d)
-    return _measurement(chain_measure._results(f, d, contact))
+    return chain_measure._results(f, d, contact)
 
 
 def _hop_row(s: engine.Hybrid) -> Array:
@@ -201,9 +194,10 @@ def _trajectory(params, wave, wave_axes, contact, save_at, rows, valid, status, 
 
         der = jax.vmap(one, in_axes=(0, wave_axes, 0, 1, 1, 1))(params, wave, t, y, stuck, sdir)
         omega = jnp.broadcast_to(wave.omega, rows.shape[:1])
+    N, l0 = jnp.stack([der.pop("N1"), der.pop("N2")], -1), der.pop("l0")
     return dict(
-        t=t, x1=y[0], v1=y[1], x2=y[2], v2=y[3], e_d=y[4], w=y[5], mode=mode_code(stuck[0], stuck[1]), valid=valid,
-        status=status, liftoff=jnp.isfinite(t_lift), t_liftoff=t_lift, n_switch=n_switch,
+        t=t, x=rows[..., (0, 2)], v=rows[..., (1, 3)], stuck=rows[..., 6:8] > 0.5, N=N, rest_length=l0[..., None],
+        e_d=y[4], w=y[5], valid=valid, status=status, liftoff=jnp.isfinite(t_lift), t_liftoff=t_lift, n_switch=n_switch,
         transversality=jnp.sqrt(rows[..., 10]), near_miss=jnp.sqrt(rows[..., 11]),
         switch_gap=switch_gap(omega, t, rows[..., 12]), **der,
     )  # fmt: skip

@@ -16,7 +16,6 @@ import jax.numpy as jnp
 from jax.sharding import Mesh
 
 from .._custom_types import Array, ArrayLike
-from .._status import mode_code
 from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._params import Params, safe_params
@@ -106,8 +105,7 @@ class Smoothed(AbstractDynamics):
     ) -> dict[str, Array]:
         z_, h_, w_ = (jnp.asarray(v, params.dtype) for v in (z, horizon, window))
         dyn = self.astype(params.dtype)
-        out = _measure_two_mass(params, wave, wave_axes, z_, h_, w_, contact, start, t_start, initial, dyn)
-        return two_mass_measurement(out)
+        return _measure_two_mass(params, wave, wave_axes, z_, h_, w_, contact, start, t_start, initial, dyn)
 
     def simulate_chain(
         self,
@@ -159,7 +157,7 @@ class Smoothed(AbstractDynamics):
             # Sub-batches in sequence, each vmapped: a sub-batch's while_loop stops with
             # its own slowest configuration, and its state stays in cache.
             out = jax.lax.map(lambda args: one(*args), (params, wave), batch_size=lanes)
-        return two_mass_measurement(out)
+        return out
 
     def step_cap(self, t_total: float) -> int:
         return 0  # each diffrax solve is capped by `max_steps`
@@ -227,22 +225,12 @@ def _measure_two_mass(flat, wave, axes, z, horizon, window, contact, start, t_st
 
 
 def two_mass_trajectory(out: dict[str, Array]) -> dict[str, Array]:
-    """The engine's N-body trajectory fields as a `Trajectory`'s: `x1`, `v1`, `x2`, `v2`, `N1`,
-    `N2`, the rest length `l0` and the `mode` of Sect. 2.2 from the bodies' stuck flags."""
+    """The engine's N-body trajectory fields as the paper's model's `Trajectory`: the rest lengths
+    as `rest_length`, no `tension` (the exact engine's paper runs have none)."""
     out = dict(out)
-    x, v, stuck, N = out.pop("x"), out.pop("v"), out.pop("stuck"), out.pop("N")
     del out["tension"]
-    out["l0"] = out["l0"][..., 0]
-    out.update(x1=x[..., 0], v1=v[..., 0], x2=x[..., 1], v2=v[..., 1], N1=N[..., 0], N2=N[..., 1])
-    out["mode"] = mode_code(stuck[..., 0], stuck[..., 1])
+    out["rest_length"] = out.pop("l0")
     return out
-
-
-def two_mass_measurement(out: dict[str, Array]) -> dict[str, Array]:
-    """The engine's N-body measurement fields as a `Measurement`'s (`stick_fraction1`, `stick_fraction2`)."""
-    out = dict(out)
-    frac = out.pop("stick_fraction")
-    return out | dict(stick_fraction1=frac[..., 0], stick_fraction2=frac[..., 1])
 
 
 # -- chains and mechanisms: their own physics ---------------------------------------------------
@@ -255,7 +243,8 @@ def _simulate_bodies(M, valid, save, contact, start, initial, dyn):
         return _engine.simulate_one(P, ok, save, contact, _engine.initial_state(P, start, y), dyn)
 
     out = jax.vmap(one)(M, valid, initial)
-    del out["f_ex"]  # a `ChainTrajectory` has none
+    del out["f_ex"]  # the paper's model's only
+    out["rest_length"] = out.pop("l0")
     return out
 
 

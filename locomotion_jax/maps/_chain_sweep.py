@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from .._results import ChainMeasurement
+from .._results import Measurement
 from ..model._bodies import Mechanism
 from ..model._chain import Chain
 
@@ -74,7 +74,7 @@ def sweep_chain(
     """The chain sweep behind `sweep(axes, mechanism=build)`; arguments as there.
 
     Returns an `xarray.Dataset` with one dimension per axis (`"config"` for a list),
-    one variable per [`ChainMeasurement`][] field (`stick_fraction` with a trailing
+    one variable per [`Measurement`][] field (`stick_fraction` with a trailing
     `mass` dimension), the axes as coordinates and the settings as attributes.
     """
     import jax
@@ -134,8 +134,8 @@ def sweep_chain(
     dims = tuple(values) if mode == "grid" else ("config",)
     coords = {n: (n if mode == "grid" else "config", v) for n, v in values.items()}
     data = {}
-    for name in ChainMeasurement.__dataclass_fields__:
-        if name in ("z", "start", "contact") or name not in parts[0]:  # the hopping fields outside "hop"
+    for name in Measurement.__dataclass_fields__:
+        if name in ("z", "start", "contact", "names") or name not in parts[0]:  # the hopping fields outside "hop"
             continue
         arr = np.concatenate([p[name] for p in parts])
         extra = arr.shape[1:]

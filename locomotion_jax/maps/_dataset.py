@@ -5,19 +5,18 @@ from typing import Any
 import jax
 import numpy as np
 
-from .._results import Measurement
+from .._results import MEASUREMENT_PAPER_KEYS
 from .._status import Regime, Status
 from ..dynamics._base import AbstractDynamics
 from ._grid import Grid
 
 
 MEASURE_FIELDS: tuple[str, ...] = tuple(
-    f
-    for f, field in Measurement.__dataclass_fields__.items()
-    if f not in ("z", "start", "contact") and field.default is not None
+    f for f in MEASUREMENT_PAPER_KEYS if f not in ("flight_fraction", "landings_per_period", "highest_hop", "zeno")
 )
-"""The dataset's variables under every contact reading: every array field of [`Measurement`][] that
-every reading has (the hopping fields, `None` outside `contact="hop"`, are [`HOP_FIELDS`][])."""
+"""The dataset's variables under every contact reading: every array of a [`Measurement`][] of the
+paper's model that every reading has, named as its `to_numpy` names them (`stick_fraction1`,
+`stick_fraction2`; the hopping fields, `None` outside `contact="hop"`, are [`HOP_FIELDS`][])."""
 
 HOP_FIELDS: tuple[str, ...] = (
     "flight_fraction1",
@@ -41,11 +40,11 @@ def dataset_fields(contact: str) -> tuple[str, ...]:
 
 
 def per_mass_columns(out: dict) -> dict:
-    """A chunk's measurements with each per-mass hopping field (`flight_fraction`, `highest_hop`,
-    shape `(n, 2)`) split into one field per mass (`flight_fraction1`, `flight_fraction2`, ...);
-    unchanged without them (strict and paper)."""
+    """A chunk's measurements with each per-mass field (`stick_fraction`, and the hopping ones
+    `flight_fraction`, `highest_hop`; shape `(n, 2)`) split into one field per mass
+    (`stick_fraction1`, `stick_fraction2`, `flight_fraction1`, ...)."""
     out = dict(out)
-    for name in _PER_MASS:
+    for name in ("stick_fraction",) + _PER_MASS:
         if name in out:
             both = out.pop(name)
             out |= {f"{name}1": both[..., 0], f"{name}2": both[..., 1]}

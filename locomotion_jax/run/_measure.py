@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import ArrayLike
-from .._results import ChainMeasurement, Measurement
+from .._results import Measurement, PAPER
 from ..dynamics._base import AbstractDynamics
 from ..dynamics._forward import check_static
 from ..model import _two_mass as model
@@ -84,7 +84,7 @@ def measure(
     start: str = "paper",
     initial: tuple | None = None,
     dtype: Any = None,
-) -> ChainMeasurement: ...
+) -> Measurement: ...
 
 
 def measure(
@@ -100,7 +100,7 @@ def measure(
     start: str = "paper",
     initial: tuple | None = None,
     dtype: Any = None,
-) -> "Measurement | ChainMeasurement":
+) -> Measurement:
     """Measure $\\tau_z$, $e_z$, the regime and more (Sects. 3-5; SPEC §5).
 
     One configuration or a batch: the batch runs under `vmap` in one compiled
@@ -120,8 +120,8 @@ def measure(
     - `dynamics`, `waveform`, `contact`, `start`, `initial`, `dtype`: as in [`simulate`][]
       (a chain carries its own waveforms).
 
-    **Returns:** a [`Measurement`][] with batch shape `params.batch_shape`, or a
-    [`ChainMeasurement`][] for a chain.
+    **Returns:** a [`Measurement`][] with batch shape `params.batch_shape`, for the paper's model as for a
+    chain or any other mechanism (one class: per-body fields have a trailing body axis).
 
     **Raises:** `TypeError` for a `params` or `dynamics` of the wrong type; `ValueError` for
     invalid arguments (before any computation).
@@ -154,11 +154,12 @@ def _two_mass(params: Params, dynamics: AbstractDynamics, z, horizon, window, t_
     flat, unresolved = guard_two_mass(dynamics, flat, wave, shape, default_start=ts is None)
     y0 = prepare_initial(initial, shape, flat.dtype)
     out = flag(dynamics.measure_two_mass(flat, wave, axes, z, horizon, window, contact, start, ts, y0), unresolved)
-    return Measurement(**unflatten(out, shape), z=z, start="initial" if initial is not None else start, contact=contact)
+    start = "initial" if initial is not None else start
+    return Measurement(**unflatten(out, shape), z=z, start=start, contact=contact, names=PAPER)
 
 
 def _chain(chain: Chain | Mechanism, dynamics: AbstractDynamics, z, horizon, window, t_start, waveform, contact,
-           start, initial, dtype) -> ChainMeasurement:  # fmt: skip
+           start, initial, dtype) -> Measurement:  # fmt: skip
     if waveform is not None:
         raise ValueError(
             f"waveform= applies to Params; a {type(chain).__name__} carries its own waveforms (springs or links)."
@@ -168,7 +169,7 @@ def _chain(chain: Chain | Mechanism, dynamics: AbstractDynamics, z, horizon, win
 
 def measure_chain(chain: Chain | Mechanism, dynamics: AbstractDynamics, z: float, horizon: float, window: float,
                   t_start: Any, contact: str, start: str, dtype: Any,
-                  initial: Any = None) -> ChainMeasurement:  # fmt: skip
+                  initial: Any = None) -> Measurement:  # fmt: skip
     """`measure` for a [`Chain`][] or a [`Mechanism`][locomotion_jax.Mechanism] (arguments as there; also the
     chunks of a chain sweep)."""
     check_contact_start(contact, start, chain)
@@ -182,4 +183,4 @@ def measure_chain(chain: Chain | Mechanism, dynamics: AbstractDynamics, z: float
         ts = jnp.full((n,), jnp.inf, flat.dtype)  # the chains' own, `Chain.t_start`
     out = flag(dynamics.measure_chain(flat, valid, ts, z, horizon, window, contact, start, y0), unresolved)
     start = "initial" if initial is not None else start
-    return ChainMeasurement(**unflatten(out, shape), z=z, start=start, contact=contact)
+    return Measurement(**unflatten(out, shape), z=z, start=start, contact=contact)

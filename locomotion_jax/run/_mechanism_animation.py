@@ -1,5 +1,5 @@
 """Animation of a [`Mechanism`][locomotion_jax.Mechanism]'s bodies on their line (SPEC §9), from a
-`ChainTrajectory` of one configuration.
+`Trajectory` of one configuration.
 
 Each body is a block centred on $x_i$: a body in ground contact stands on the ground, a carried body
 is drawn smaller inside its carrier's row, a free body above the ground. A stuck body (the
@@ -48,7 +48,7 @@ def animate_mechanism(
 ) -> FuncAnimation:
     """A matplotlib animation of one mechanism's bodies (module docstring).
 
-    **Arguments:** `traj`, a `ChainTrajectory` of `mechanism` (one configuration: batch shape `()`);
+    **Arguments:** `traj`, a `Trajectory` of `mechanism` (one configuration: batch shape `()`);
     `max_frames`: at most this many frames (a stride over the valid saved states); `interval`: ms
     between frames; `trace`: add the displacement panel; `title`: of the figure.
 

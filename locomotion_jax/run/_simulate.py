@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import ArrayLike
-from .._results import ChainTrajectory, Trajectory
+from .._results import PAPER, Trajectory
 from ..dynamics._base import AbstractDynamics
 from ..dynamics._forward import check_static
 from ..model import _two_mass as model
@@ -55,7 +55,7 @@ def simulate(
     start: str = "paper",
     initial: tuple | None = None,
     dtype: Any = None,
-) -> ChainTrajectory: ...
+) -> Trajectory: ...
 
 
 def simulate(
@@ -69,7 +69,7 @@ def simulate(
     start: str = "paper",
     initial: tuple | None = None,
     dtype: Any = None,
-) -> "Trajectory | ChainTrajectory":
+) -> Trajectory:
     """Integrate the two-mass model or a chain from $t = 0$ to `t_end`, saving at `save_at`.
 
     **Arguments:**
@@ -93,8 +93,8 @@ def simulate(
       the chain.
     - `dtype`: cast parameters to this floating dtype (default: theirs).
 
-    **Returns:** a [`Trajectory`][] with batch shape `params.batch_shape`, or a
-    [`ChainTrajectory`][] for a chain.
+    **Returns:** a [`Trajectory`][] with batch shape `params.batch_shape`, for the paper's model as for a
+    chain or any other mechanism (one class: the fields have a trailing body axis).
 
     With [`Exact`][locomotion_jax.Exact] dynamics (both engines) the batch runs through the work queue of
     `measure` (`_saves.run_saves`), at about `measure`'s cost over the same run plus
@@ -140,7 +140,8 @@ def _two_mass(params: Params, dynamics: AbstractDynamics, t_end, save_np, wavefo
     y0 = prepare_initial(initial, shape, flat.dtype)
     save = jnp.asarray(save_np, flat.dtype)
     out = flag(dynamics.simulate_two_mass(flat, wave, axes, save, t_end, contact, start, y0), unresolved)
-    return Trajectory(**unflatten(out, shape), start="initial" if initial is not None else start, contact=contact)
+    start = "initial" if initial is not None else start
+    return Trajectory(**unflatten(out, shape), start=start, contact=contact, names=PAPER)
 
 
 def _chain(
@@ -157,4 +158,4 @@ def _chain(
     save = jnp.asarray(save_np, flat.dtype)
     out = flag(dynamics.simulate_chain(flat, valid, save, t_end, contact, start, y0), unresolved)
     start = "initial" if initial is not None else start
-    return ChainTrajectory(**unflatten(out, shape), start=start, contact=contact)
+    return Trajectory(**unflatten(out, shape), start=start, contact=contact)
