@@ -17,6 +17,7 @@ used to break it:
 import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
+from locomotion_jax.dynamics._flat import FlatBatch
 from locomotion_jax.dynamics._runs import CAP_EXTRA, CAP_STEPS_PER_DT
 from locomotion_jax.run._batch import prepare, unflatten
 
@@ -38,7 +39,8 @@ def _capped(params, t_start, dynamics=None):
     dynamics = lj.Exact() if dynamics is None else dynamics
     flat, wave, axes, shape = prepare(params, None, None)
     ts = jnp.broadcast_to(jnp.asarray(t_start, flat.dtype), shape).reshape((-1,))
-    out = dynamics.measure_two_mass(flat, wave, axes, 100.0, 20.0, 2.0, "strict", "paper", ts, None)
+    batch = FlatBatch(flat, flat.is_valid(), wave=wave, t_start=ts, wave_axes=axes)
+    out = dynamics.measure(batch, 100.0, 20.0, 2.0, "strict", "paper")
     return lj.Measurement(**unflatten(out, shape), z=100.0, start="paper", contact="strict")
 
 

@@ -9,6 +9,7 @@ import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
+from locomotion_jax.dynamics._flat import FlatBatch
 from locomotion_jax.run._batch import prepare_chain
 
 
@@ -351,12 +352,13 @@ def test_chain_initial_state_checks():
     # dynamics flag the configuration whose positions are out of order, and only that one.
     flat, valid, _ = prepare_chain(lj.Chain.stack([worm, worm]), None)
     rows = jnp.asarray([[0.0, 3.0, 6.0, 0.0, 0.0, 0.0], [0.0, 3.0, 2.0, 0.0, 0.0, 0.0]])
-    out = lj.Exact().measure_chain(flat, valid, jnp.zeros(2), 0.1, 5.0, 2.0, "strict", "paper", rows)
+    batch = FlatBatch(flat, valid, t_start=jnp.zeros(2), initial=rows)
+    out = lj.Exact().measure(batch, 0.1, 5.0, 2.0, "strict", "paper")
     alone = lj.measure(worm, z=0.1, horizon=5.0, window=2.0, t_start=0.0, initial=(x, np.zeros(3)))
     assert [int(s) for s in np.asarray(out["status"])] == [lj.Status.OK, lj.Status.INVALID]
     np.testing.assert_allclose(float(out["tau_z"][0]), float(alone.tau_z), rtol=1e-12)
     smooth = lj.Smoothed(eps=1e-2)
-    out = smooth.measure_chain(flat, valid, jnp.zeros(2), 0.1, 5.0, 2.0, "strict", "paper", rows)
+    out = smooth.measure(batch, 0.1, 5.0, 2.0, "strict", "paper")
     alone = lj.measure(worm, z=0.1, horizon=5.0, window=2.0, t_start=0.0, initial=(x, np.zeros(3)), dynamics=smooth)
     assert [int(s) for s in np.asarray(out["status"])] == [lj.Status.OK, lj.Status.INVALID]
     np.testing.assert_allclose(float(out["tau_z"][0]), float(alone.tau_z), rtol=1e-12)

@@ -14,17 +14,11 @@ class HalfStep(lj.AbstractDynamics):
 
     inner: lj.Exact = lj.Exact(dt=0.005)
 
-    def simulate_two_mass(self, *args, **kwargs):
-        return self.inner.simulate_two_mass(*args, **kwargs)
+    def simulate(self, *args, **kwargs):
+        return self.inner.simulate(*args, **kwargs)
 
-    def measure_two_mass(self, *args, **kwargs):
-        return self.inner.measure_two_mass(*args, **kwargs)
-
-    def simulate_chain(self, *args, **kwargs):
-        return self.inner.simulate_chain(*args, **kwargs)
-
-    def measure_chain(self, *args, **kwargs):
-        return self.inner.measure_chain(*args, **kwargs)
+    def measure(self, *args, **kwargs):
+        return self.inner.measure(*args, **kwargs)
 
     def measure_chunk(self, *args, **kwargs):
         return self.inner.measure_chunk(*args, **kwargs)
@@ -120,3 +114,17 @@ def test_not_a_mechanism_is_refused():
     for run in (lambda p: lj.simulate(p, 1.0), lambda p: lj.measure(p)):
         with pytest.raises(TypeError, match="params"):
             run({"omega": 2.0})
+
+
+def test_the_interface_names_no_kind_of_mechanism():
+    """`AbstractDynamics` has one `simulate` and one `measure` for every mechanism, and the front ends
+    (run/, maps/, cli/) hand them a mechanism's flat batch without choosing a path by its kind."""
+    from pathlib import Path
+
+    abstract = sorted(lj.AbstractDynamics.__abstractmethods__)
+    assert abstract == ["describe", "measure", "measure_chunk", "nominal_step", "simulate", "spec", "step_cap"]
+    assert not [n for n in dir(lj.AbstractDynamics) if "two_mass" in n or "chain" in n]
+    root = Path(lj.__file__).parent
+    for part in ("run", "maps", "cli"):
+        for src in (root / part).glob("*.py"):
+            assert ".dispatch(" not in src.read_text(), src

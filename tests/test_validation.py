@@ -9,6 +9,7 @@ import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
+from locomotion_jax.dynamics._flat import FlatBatch
 from locomotion_jax.model._params import safe_params
 
 
@@ -59,7 +60,8 @@ def test_invalid_waveform_in_the_engine_is_flagged():
     flat = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (3,)), lj.Params().broadcast())
     wave = lj.Sinusoid(jnp.asarray([0.05, math.nan, 5.0]), jnp.full(3, 2.0), jnp.full(3, 3.0))
     ts = jnp.full(3, SHORT["t_start"])
-    out = lj.Exact().measure_two_mass(flat, wave, 0, 0.1, 5.0, 2.0, "strict", "paper", ts, None)
+    batch = FlatBatch(flat, jnp.ones(3, bool), wave=wave, t_start=ts, wave_axes=0)
+    out = lj.Exact().measure(batch, 0.1, 5.0, 2.0, "strict", "paper")
     assert list(np.asarray(out["status"])) == [lj.Status.OK, lj.Status.INVALID, lj.Status.INVALID]
     alone = lj.measure(lj.Params(), waveform=lj.Sinusoid(0.05, 2.0, 3.0), **SHORT)
     np.testing.assert_allclose(out["mean_speed"][0], alone.mean_speed, rtol=1e-9)

@@ -14,11 +14,8 @@ import jax
 import jax.numpy as jnp
 from jax.sharding import Mesh
 
-from .._custom_types import Array
-from ..model._bodies import Mechanism
-from ..model._chain import Chain
-from ..model._params import Params
-from ..model._waveform import AbstractWaveform
+from .._custom_types import Array, ArrayLike
+from ._flat import FlatBatch
 
 
 class AbstractDynamics(eqx.Module):
@@ -27,13 +24,13 @@ class AbstractDynamics(eqx.Module):
 
     [`Exact`][locomotion_jax.Exact] and [`Smoothed`][locomotion_jax.Smoothed] are final subclasses; a
     new integrator is one more, implementing the methods below (none has a default). The front ends
-    call only these methods. They check the arguments first, then cast, broadcast and flatten the
-    mechanism, so every run method gets a *flat* batch (one leading axis of `n` configurations) and
-    returns a dict of arrays with that leading axis, one per array field of the result
-    ([`Trajectory`][locomotion_jax.Trajectory], [`Measurement`][locomotion_jax.Measurement],
-    [`ChainTrajectory`][locomotion_jax.ChainTrajectory] or [`ChainMeasurement`][locomotion_jax.ChainMeasurement]);
-    the front end restores the batch shape. The mechanism chooses between the two-mass and the chain
-    methods: a [`Params`][locomotion_jax.Params] runs on `*_two_mass`, a [`Chain`][locomotion_jax.Chain] on `*_chain`.
+    call only these methods, with any mechanism: they check the arguments first, then the mechanism
+    casts, broadcasts and flattens itself into a [`FlatBatch`][locomotion_jax.dynamics._flat.FlatBatch]
+    (one leading axis of `n` configurations, with its validity, its actuation where it is given apart,
+    its starts and initial states). Each run method returns a dict of arrays with that leading axis,
+    one per array field of the result ([`Trajectory`][locomotion_jax.Trajectory] or
+    [`Measurement`][locomotion_jax.Measurement]: per-body fields with a trailing body axis); the front
+    end restores the batch shape.
 
     A configuration that fails (invalid parameters, lift-off, the step cap) is flagged in its own
     `status`, never raised; an option a dynamics does not support raises `ValueError`.
@@ -44,95 +41,32 @@ class AbstractDynamics(eqx.Module):
         class HalfStep(lj.AbstractDynamics):  # the exact engine at half its step
             inner: lj.Exact = lj.Exact(dt=0.005)
 
-            def simulate_two_mass(self, *args):
-                return self.inner.simulate_two_mass(*args)
+            def simulate(self, batch, *args):
+                return self.inner.simulate(batch, *args)
 
             ...  # and so on for every method
         ```
     """
 
-    # -- the paper's two-mass model -------------------------------------------------------------
-
     @abc.abstractmethod
-    def simulate_two_mass(
-        self,
-        params: Params,
-        wave: AbstractWaveform,
-        wave_axes: int | None,
-        save_at: Array,
-        t_end: float,
-        contact: str,
-        start: str,
-        initial: Array | None,
-    ) -> dict[str, Array]:
-        """The states of the two-mass model at the times `save_at` (the fields of a `Trajectory`).
+    def simulate(self, batch: FlatBatch, save_at: Array, t_end: float, contact: str, start: str) -> dict[str, Array]:
+        """The states at the times `save_at` (the fields of a `Trajectory`) of a flat batch of any mechanism.
 
-        - `params`: a flat batch of `n` configurations (invalid ones are flagged `INVALID`).
-        - `wave`: the actuation $\\ell_0(t)$, batched along its leading axis if `wave_axes == 0`,
-          shared by every configuration if `None`.
-        - `save_at`: increasing times in $[0, t_\\text{end}]$, in the parameters' dtype.
-        - `contact`, `start`: as in `simulate`; `initial`: states $(x_1, v_1, x_2, v_2)$ at
-          $t = 0$, shape `(n, 4)`, or `None` for `start`'s.
+        - `batch`: the configurations ([`FlatBatch`][locomotion_jax.dynamics._flat.FlatBatch]; flag
+          the invalid ones `INVALID`).
+        - `save_at`: increasing times in $[0, t_\\text{end}]$, in the batch's dtype.
+        - `contact`, `start`: as in `simulate`; `batch.initial` replaces `start`'s states where given.
         """
 
     @abc.abstractmethod
-    def measure_two_mass(
-        self,
-        params: Params,
-        wave: AbstractWaveform,
-        wave_axes: int | None,
-        z: float,
-        horizon: float,
-        window: float,
-        contact: str,
-        start: str,
-        t_start: Array | None,
-        initial: Array | None,
+    def measure(
+        self, batch: FlatBatch, z: ArrayLike, horizon: ArrayLike, window: ArrayLike, contact: str, start: str
     ) -> dict[str, Array]:
-        """The measurements of SPEC §5 on the two-mass model (the fields of a `Measurement`).
+        """The measurements of SPEC §5 (the fields of a `Measurement`) of a flat batch of any mechanism.
 
-        `z`, `horizon`, `window`: as in `measure`; `t_start`: the measurement's start per
-        configuration, shape `(n,)`, or `None` for `Params.t_start`; the rest as in
-        `simulate_two_mass`.
-        """
-
-    # -- chains of N masses ---------------------------------------------------------------------
-
-    @abc.abstractmethod
-    def simulate_chain(
-        self,
-        chain: Chain | Mechanism,
-        valid: Array,
-        save_at: Array,
-        t_end: float,
-        contact: str,
-        start: str,
-        initial: Array | None = None,
-    ) -> dict[str, Array]:
-        """The states of a flat batch of chains at the times `save_at` (the fields of a `ChainTrajectory`).
-
-        `valid`: which configurations are valid, shape `(n,)` (the front end has replaced the
-        invalid ones by a valid one of the batch; flag them `INVALID`). `initial`: the states
-        at $t = 0$, shape `(n, 2N)` (positions, then velocities), or `None` for `start`'s.
-        """
-
-    @abc.abstractmethod
-    def measure_chain(
-        self,
-        chain: Chain | Mechanism,
-        valid: Array,
-        t_start: Array,
-        z: float,
-        horizon: float,
-        window: float,
-        contact: str,
-        start: str,
-        initial: Array | None = None,
-    ) -> dict[str, Array]:
-        """The measurements of SPEC §5 on a flat batch of chains (the fields of a `ChainMeasurement`).
-
-        `t_start`: the measurement's start per configuration, shape `(n,)`, `inf` for the
-        chain's own (`Chain.t_start`); `valid` and `initial` as in `simulate_chain`.
+        `z`, `horizon`, `window`: as in `measure`; the measurement starts at `batch.t_start`, or
+        where `None` at each configuration's own (`Params.t_start`, `Chain.t_start`); the rest as
+        in `simulate`.
         """
 
     # -- sweeps ---------------------------------------------------------------------------------
@@ -140,7 +74,7 @@ class AbstractDynamics(eqx.Module):
     @abc.abstractmethod
     def measure_chunk(
         self,
-        params: Params,
+        batch: FlatBatch,
         zhw: Array,
         contact: str,
         start: str,
@@ -148,15 +82,16 @@ class AbstractDynamics(eqx.Module):
         mesh: Mesh,
         lanes: int | None,
     ) -> dict[str, Array]:
-        """One chunk of a sweep of the two-mass model, split over the devices of `mesh`.
+        """`measure` of one chunk of a sweep, split over the devices of `mesh`.
 
         Called while the sweep traces its chunk program (once per sweep, inside `jax.jit`),
-        so it must be traceable. `params`: the chunk, sharded along the mesh's one axis, with
-        the sinusoid of eq. (13); `zhw`: the array $(z, \\text{horizon}, \\text{window})$;
-        `max_steps`: `step_cap` of the sweep's longest run (recorded with its results; a
-        dynamics may cap each configuration by its own span instead, as `Exact` does, so that
-        a configuration's result does not depend on its chunk); `lanes`: configurations that
-        each device runs together (`None`: the dynamics' own choice).
+        so it must be traceable. `batch`: the chunk, sharded along the mesh's one axis (a
+        sweep of the paper's model: `Params` with the sinusoid of eq. (13)); `zhw`: the array
+        $(z, \\text{horizon}, \\text{window})$; `max_steps`: `step_cap` of the sweep's longest run
+        (recorded with its results; a dynamics may cap each configuration by its own span
+        instead, as `Exact` does, so that a configuration's result does not depend on its
+        chunk); `lanes`: configurations that each device runs together (`None`: the dynamics'
+        own choice).
         """
 
     @abc.abstractmethod

@@ -12,15 +12,12 @@ import jax
 import jax.numpy as jnp
 from jax.sharding import Mesh, PartitionSpec
 
-from .._custom_types import Array
-from ..model._bodies import Mechanism
-from ..model._chain import Chain
-from ..model._params import Params
-from ..model._waveform import AbstractWaveform, Sinusoid
+from .._custom_types import Array, ArrayLike
 from . import _chain_measure, _chain_simulate, _paper
 from ._base import AbstractDynamics
+from ._flat import FlatBatch
 from ._forward import check_static
-from ._runs import default_max_steps
+from ._runs import default_lanes, default_max_steps
 
 
 class Exact(AbstractDynamics):
@@ -45,82 +42,44 @@ class Exact(AbstractDynamics):
         if self.max_steps is not None and not (isinstance(self.max_steps, int) and self.max_steps > 0):
             raise ValueError(f"Exact.max_steps must be a positive int or None, got {self.max_steps!r}.")
 
-    def simulate_two_mass(
-        self,
-        params: Params,
-        wave: AbstractWaveform,
-        wave_axes: int | None,
-        save_at: Array,
-        t_end: float,
-        contact: str,
-        start: str,
-        initial: Array | None,
-    ) -> dict[str, Array]:
+    def simulate(self, batch: FlatBatch, save_at: Array, t_end: float, contact: str, start: str) -> dict[str, Array]:
         # Room for the steps to t_end, plus the iterations that save a state.
         max_steps = self.max_steps or default_max_steps(t_end, self.dt) + 4 * save_at.shape[0]
-        return _paper.simulate_batch(params, wave, wave_axes, save_at, contact, start, self.dt, max_steps, initial)
+        if batch.wave is not None:  # the paper's model: its physics from parameters and waveform (`_paper`)
+            args = (batch.mechanism, batch.wave, batch.wave_axes, save_at, contact, start, self.dt, max_steps)
+            return _paper.simulate_batch(*args, batch.initial)
+        args = (batch.mechanism, batch.valid, save_at, contact, start, self.dt, max_steps)
+        return _chain_simulate.simulate_batch(*args, batch.initial)
 
-    def measure_two_mass(
-        self,
-        params: Params,
-        wave: AbstractWaveform,
-        wave_axes: int | None,
-        z: float,
-        horizon: float,
-        window: float,
-        contact: str,
-        start: str,
-        t_start: Array | None,
-        initial: Array | None,
+    def measure(
+        self, batch: FlatBatch, z: ArrayLike, horizon: ArrayLike, window: ArrayLike, contact: str, start: str
     ) -> dict[str, Array]:
-        return _paper._measure_batch(
-            params,
-            wave,
-            wave_axes,
-            *(jnp.asarray(v, params.dtype) for v in (z, horizon, window)),
-            contact,
-            start,
-            self.dt,
-            self._own_cap(),
-            t_start=t_start,
-            initial=initial,
-        )
+        return self._measure(batch, z, horizon, window, contact, start, None)
 
-    def simulate_chain(
-        self,
-        chain: Chain | Mechanism,
-        valid: Array,
-        save_at: Array,
-        t_end: float,
-        contact: str,
-        start: str,
-        initial: Array | None = None,
-    ) -> dict[str, Array]:
-        max_steps = self.max_steps or default_max_steps(t_end, self.dt) + 4 * save_at.shape[0]
-        return _chain_simulate.simulate_batch(chain, valid, save_at, contact, start, self.dt, max_steps, initial)
-
-    def measure_chain(
-        self,
-        chain: Chain | Mechanism,
-        valid: Array,
-        t_start: Array,
-        z: float,
-        horizon: float,
-        window: float,
-        contact: str,
-        start: str,
-        initial: Array | None = None,
-    ) -> dict[str, Array]:
+    def _measure(self, batch: FlatBatch, z, horizon, window, contact: str, start: str, lanes: int | None):
+        """`measure`, over `lanes` lanes of the work queue (`None`: the engine's choice)."""
+        if batch.wave is not None:  # the paper's model: its physics from parameters and waveform (`_paper`)
+            z_, h_, w_ = (jnp.asarray(v, batch.dtype) for v in (z, horizon, window))
+            p, wave, axes, cap = batch.mechanism, batch.wave, batch.wave_axes, self._own_cap()
+            if lanes:
+                return _paper.measure_batch(
+                    p, wave, axes, z_, h_, w_, contact, start, self.dt, cap, lanes, batch.t_start, batch.initial
+                )
+            return _paper._measure_batch(
+                p, wave, axes, z_, h_, w_, contact, start, self.dt, cap, t_start=batch.t_start, initial=batch.initial
+            )
         # The default start (eigenvalues of the linearised chain) outside the engine's program: a
         # batched eigensolver inside it can deadlock XLA's CPU thread pool (seen at N = 8, batch 1024).
-        ts = jnp.where(jnp.isfinite(t_start), t_start, chain.t_start)
+        chain = batch.mechanism
+        ts = chain.t_start if batch.t_start is None else batch.t_start
         return _chain_measure.measure_batch(
-            chain.physics(), valid, ts, z, horizon, window, contact, start, self.dt, self._own_cap(), initial
-        )
+            chain.physics(), batch.valid, ts, z, horizon, window, contact, start, self.dt, self._own_cap(),
+            batch.initial,
+        )  # fmt: skip
 
     def measure_chunk(
         self,
-        params: Params,
+        batch: FlatBatch,
         zhw: Array,
         contact: str,
         start: str,
@@ -128,26 +87,22 @@ class Exact(AbstractDynamics):
         mesh: Mesh,
         lanes: int | None,
     ) -> dict[str, Array]:
-        def local(p: Params, zhw: Array, dyn: Exact) -> dict[str, Array]:
-            z, horizon, window = zhw[0], zhw[1], zhw[2]
-            wave = Sinusoid.from_params(p)
+        def local(b: FlatBatch, zhw: Array, dyn: Exact) -> dict[str, Array]:
             # A work queue over `lanes` lanes (`_queue`): a lane whose configuration is
             # done takes the next one. Each configuration's cap comes from its own span
             # (`_own_cap`), not from the sweep's `max_steps`, so that it is the same as a
             # `measure` of that configuration alone.
-            return _paper.measure_batch(
-                p, wave, 0, z, horizon, window, contact, start, dyn.dt, dyn._own_cap(), lanes=lanes
-            )
+            return dyn._measure(b, zhw[0], zhw[1], zhw[2], contact, start, lanes or default_lanes(b.size))
 
         # shard_map, not jit's partitioning of a sharded batch: each device's loop ends
         # with its own slowest configuration, not with the slowest of all devices.
         # check_vma=False: the integrator's while_loop carries mix per-shard and
         # replicated values, which the varying-manual-axes checker rejects.
-        batch = PartitionSpec(mesh.axis_names[0])
+        spec = PartitionSpec(mesh.axis_names[0])
         sharded = jax.shard_map(
-            local, mesh=mesh, in_specs=(batch, PartitionSpec(), PartitionSpec()), out_specs=batch, check_vma=False
+            local, mesh=mesh, in_specs=(spec, PartitionSpec(), PartitionSpec()), out_specs=spec, check_vma=False
         )
-        return sharded(params, zhw, self)
+        return sharded(batch, zhw, self)
 
     def step_cap(self, t_total: float) -> int:
         return self.max_steps or default_max_steps(t_total, self.dt)

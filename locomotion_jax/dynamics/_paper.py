@@ -30,7 +30,7 @@ from ._runs import chain_initial_state, default_lanes
 from ._saves import BUFFER, run_saves
 
 
-# A two-mass state (x1, v1, x2, v2) as the N-body engine's (x1, x2, v1, v2).
+# The N-body engine's saved columns (x1, x2, v1, v2) in the order (x1, v1, x2, v2).
 _TO_CHAIN = (0, 2, 1, 3)
 
 
@@ -51,7 +51,7 @@ def _picker(params: Params, wave: AbstractWaveform, wave_axes: int | None, t_sta
     def take(i):
         p, w = jax.tree_util.tree_map(lambda x: x[i], params), wave_at(i)
         safe, P, valid = physics(p, w)
-        row = None if initial is None else initial[i][jnp.asarray(_TO_CHAIN)]
+        row = None if initial is None else initial[i]
         ts = safe.t_start if t_start is None else jnp.where(jnp.isnan(t_start[i]), safe.t_start, t_start[i])
         return P, valid, ts, row
 
@@ -83,9 +83,9 @@ def measure_batch(
 
     `lanes=None` takes `_runs.default_lanes`. `t_start`: per-configuration measurement starts
     (NaN: the paper's `Params.t_start`), default all the paper's. `initial`: per-configuration
-    states $(x_1, v_1, x_2, v_2)$ at $t = 0$, shape `(n, 4)` (default: at rest in the `start`
-    position). `max_steps`: an explicit cap on each configuration's iterations, or 0 for each
-    one's own default from its span (`_runs.step_cap`).
+    states $(x_1, x_2, v_1, v_2)$ at $t = 0$ (positions, then velocities, as the N-body engine's),
+    shape `(n, 4)` (default: at rest in the `start` position). `max_steps`: an explicit cap on
+    each configuration's iterations, or 0 for each one's own default from its span (`_runs.step_cap`).
     """
     n = params.omega.shape[0]
     lanes = default_lanes(n) if lanes is None else lanes

@@ -16,14 +16,14 @@ import jax.numpy as jnp
 from jax.sharding import Mesh
 
 from .._custom_types import Array, ArrayLike
-from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._params import Params, safe_params
 from ..model._physics import AbstractPhysics
 from ..model._two_mass import initial_gap
-from ..model._waveform import AbstractWaveform, Sinusoid
+from ..model._waveform import AbstractWaveform
 from . import _smoothed as _engine
 from ._base import AbstractDynamics
+from ._flat import FlatBatch
 
 
 class Smoothed(AbstractDynamics):
@@ -76,68 +76,27 @@ class Smoothed(AbstractDynamics):
         if bad:
             raise ValueError(f"Smoothed.eps must be > 0, got {eps!r}.")
 
-    def simulate_two_mass(
-        self,
-        params: Params,
-        wave: AbstractWaveform,
-        wave_axes: int | None,
-        save_at: Array,
-        t_end: float,
-        contact: str,
-        start: str,
-        initial: Array | None,
-    ) -> dict[str, Array]:
-        out = _simulate_two_mass(params, wave, wave_axes, save_at, contact, start, initial, self.astype(params.dtype))
-        return two_mass_trajectory(out)
+    def simulate(self, batch: FlatBatch, save_at: Array, t_end: float, contact: str, start: str) -> dict[str, Array]:
+        dyn = self.astype(batch.dtype)
+        if batch.wave is not None:  # the paper's model: its physics from parameters and waveform
+            args = (batch.mechanism, batch.wave, batch.wave_axes, save_at, contact, start, batch.initial, dyn)
+            return two_mass_trajectory(_simulate_two_mass(*args))
+        return _simulate_bodies(batch.mechanism, batch.valid, save_at, contact, start, batch.initial, dyn)
 
-    def measure_two_mass(
-        self,
-        params: Params,
-        wave: AbstractWaveform,
-        wave_axes: int | None,
-        z: float,
-        horizon: float,
-        window: float,
-        contact: str,
-        start: str,
-        t_start: Array | None,
-        initial: Array | None,
+    def measure(
+        self, batch: FlatBatch, z: ArrayLike, horizon: ArrayLike, window: ArrayLike, contact: str, start: str
     ) -> dict[str, Array]:
-        z_, h_, w_ = (jnp.asarray(v, params.dtype) for v in (z, horizon, window))
-        dyn = self.astype(params.dtype)
-        return _measure_two_mass(params, wave, wave_axes, z_, h_, w_, contact, start, t_start, initial, dyn)
-
-    def simulate_chain(
-        self,
-        chain: Chain | Mechanism,
-        valid: Array,
-        save_at: Array,
-        t_end: float,
-        contact: str,
-        start: str,
-        initial: Array | None = None,
-    ) -> dict[str, Array]:
-        return _simulate_bodies(chain, valid, save_at, contact, start, initial, self.astype(chain.dtype))
-
-    def measure_chain(
-        self,
-        chain: Chain | Mechanism,
-        valid: Array,
-        t_start: Array,
-        z: float,
-        horizon: float,
-        window: float,
-        contact: str,
-        start: str,
-        initial: Array | None = None,
-    ) -> dict[str, Array]:
-        z_, h_, w_ = (jnp.asarray(v, chain.dtype) for v in (z, horizon, window))
-        dyn = self.astype(chain.dtype)
-        return _measure_bodies(chain, valid, t_start, z_, h_, w_, contact, start, initial, dyn)
+        z_, h_, w_ = (jnp.asarray(v, batch.dtype) for v in (z, horizon, window))
+        dyn = self.astype(batch.dtype)
+        if batch.wave is not None:  # the paper's model: its physics from parameters and waveform
+            p, wave, axes = batch.mechanism, batch.wave, batch.wave_axes
+            return _measure_two_mass(p, wave, axes, z_, h_, w_, contact, start, batch.t_start, batch.initial, dyn)
+        ts = jnp.full((batch.size,), jnp.inf, batch.dtype) if batch.t_start is None else batch.t_start
+        return _measure_bodies(batch.mechanism, batch.valid, ts, z_, h_, w_, contact, start, batch.initial, dyn)
 
     def measure_chunk(
         self,
-        params: Params,
+        batch: FlatBatch,
         zhw: Array,
         contact: str,
         start: str,
@@ -149,15 +108,15 @@ class Smoothed(AbstractDynamics):
         # smoothed model is left to jit's automatic partitioning of the sharded batch
         # (correct, but every device iterates until the slowest configuration is done).
         z, horizon, window = zhw[0], zhw[1], zhw[2]
-        wave = Sinusoid.from_params(params)
+        if batch.wave is None or batch.wave_axes is None:  # a mechanism with its own actuation, or one shared
+            return self.measure(batch, z, horizon, window, contact, start)
+        params, wave = batch.mechanism, batch.wave
         one = lambda q, w: _measure_params(q, w, z, horizon, window, contact, start, None, None, self)
-        if not lanes or lanes >= params.omega.shape[0]:
-            out = jax.vmap(one)(params, wave)
-        else:
-            # Sub-batches in sequence, each vmapped: a sub-batch's while_loop stops with
-            # its own slowest configuration, and its state stays in cache.
-            out = jax.lax.map(lambda args: one(*args), (params, wave), batch_size=lanes)
-        return out
+        if not lanes or lanes >= batch.size:
+            return jax.vmap(one)(params, wave)
+        # Sub-batches in sequence, each vmapped: a sub-batch's while_loop stops with
+        # its own slowest configuration, and its state stays in cache.
+        return jax.lax.map(lambda args: one(*args), (params, wave), batch_size=lanes)
 
     def step_cap(self, t_total: float) -> int:
         return 0  # each diffrax solve is capped by `max_steps`
@@ -190,10 +149,10 @@ def params_physics(params: Params, wave: AbstractWaveform) -> AbstractPhysics:
 
 
 def params_state(params: Params, start: str, initial: Array | None) -> Array:
-    """The flat state $(x_1, x_2, v_1, v_2, e_d, w)$ at $t = 0$: `initial` $(x_1, v_1, x_2, v_2)$, or
+    """The flat state $(x_1, x_2, v_1, v_2, e_d, w)$ at $t = 0$: `initial` $(x_1, x_2, v_1, v_2)$, or
     $x_1 = 0$ and the gap of eq. (14) or of the relaxed spring (`initial_gap`), at rest."""
     if initial is not None:
-        return jnp.concatenate([initial[jnp.array([0, 2, 1, 3])], jnp.zeros((2,), initial.dtype)])
+        return jnp.concatenate([initial, jnp.zeros((2,), initial.dtype)])
     gap = initial_gap(params, start)
     zero = 0 * gap
     return jnp.stack([zero, gap, zero, zero, zero, zero]).astype(params.dtype)

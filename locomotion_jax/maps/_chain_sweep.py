@@ -5,7 +5,7 @@ its waveform and friction law are classes), so the sweep asks the user for a bui
 a function from the swept values (1-D arrays, one entry per configuration) to a
 batched [`Chain`][] or [`Mechanism`][locomotion_jax.Mechanism] (SPEC §9). The configurations are
 cut into chunks of one shape, the last one padded with repeats of its last configuration, so one
-compilation serves the map; each chunk is measured by `measure_chain` (the dynamics' N-mass engine).
+compilation serves the map; each chunk is measured by `measure` (the dynamics' N-mass engine).
 """
 
 import math
@@ -83,7 +83,7 @@ def sweep_chain(
 
     from .. import __version__
     from .._status import Regime, Status
-    from ..run._measure import measure_chain
+    from ..run._measure import measure
 
     values, shape = _axes(axes, mode)
     fixed = dict(fixed or {})
@@ -124,7 +124,8 @@ def sweep_chain(
     try:
         for i in range(n_chunks):
             chain, n = chunk_chain(i)
-            m = measure_chain(chain, dynamics, float(z), float(horizon), float(window), t_start, contact, start, dtype)
+            m = measure(chain, float(z), horizon=float(horizon), window=float(window), t_start=t_start,
+                        dynamics=dynamics, contact=contact, start=start, dtype=dtype)  # fmt: skip
             parts.append({k: v[:n] for k, v in m.to_numpy().items()})
             bar.update(n)
             bar.set_postfix_str("")

@@ -86,7 +86,8 @@ def _run_chunk(
     # Runs only while tracing: counts compilations, not calls.
     TRACES["run_chunk"] += 1
     # Under contact="hop" the per-mass hopping fields come back as one array per mass (the dataset's variables).
-    return per_mass_columns(dynamics.measure_chunk(flat, zhw, contact, start, max_steps, mesh, micro_batch))
+    batch = flat.own_batch()  # the chunk with its sinusoid of eq. (13)
+    return per_mass_columns(dynamics.measure_chunk(batch, zhw, contact, start, max_steps, mesh, micro_batch))
 
 
 _run_chunk = engine_jit(_run_chunk, ("contact", "start", "max_steps", "mesh", "micro_batch"))

@@ -233,7 +233,7 @@ def sweep(
       `fixed`, each a 1-D array with one entry per configuration) to a batched
       [`Chain`][] or [`Mechanism`][locomotion_jax.Mechanism] of that batch shape (build it with `check=False` and let
       `on_invalid` decide). The axes' names are then free. Chain maps run chunk by
-      chunk on the dynamics' N-mass engine (`AbstractDynamics.measure_chain`), in memory or
+      chunk on the dynamics' N-mass engine (`AbstractDynamics.measure`), in memory or
       written to a NetCDF `path` when done (no resume, no Zarr store, grid order).
     - `t_start`: an explicit measurement start for every configuration (chains only;
       default `Chain.t_start`).

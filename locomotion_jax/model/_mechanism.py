@@ -14,14 +14,14 @@ M = TypeVar("M", bound="AbstractMechanism")
 
 
 class AbstractMechanism(eqx.Module):
-    """Base class of [`Params`][locomotion_jax.Params] (the paper's two-mass model) and
-    [`Chain`][locomotion_jax.Chain] (N masses).
+    """Base class of [`Params`][locomotion_jax.Params] (the paper's two-mass model),
+    [`Chain`][locomotion_jax.Chain] (N masses) and [`Mechanism`][locomotion_jax.Mechanism].
 
-    The front ends (`simulate`, `measure`, `steady_gait`) do not test which of the two
-    they were given: they pass one function per kind of mechanism to `dispatch`, and the
-    mechanism calls its own with itself (double dispatch). Each function then runs the
-    dynamics' method for that kind (`AbstractDynamics.simulate_two_mass` or
-    `simulate_chain`, and so on), so that neither the front ends nor the dynamics test a class.
+    The front ends (`simulate`, `measure`, `sweep`) do not test which they were given: the
+    mechanism flattens itself into a `FlatBatch` (`flat_batch`, `own_batch`: what differs between
+    mechanisms, their actuation, starts and initial states, travels in it; their physics is
+    `physics()`), and the dynamics' `simulate` and `measure` take it whatever the mechanism.
+    (`steady_gait` and `optimise` still choose their solver by `dispatch`.)
     """
 
     @property
@@ -64,5 +64,32 @@ class AbstractMechanism(eqx.Module):
         `MAX_START_STEPS` steps."""
 
     @abc.abstractmethod
+    def flat_batch(
+        self,
+        dynamics: Any,
+        *,
+        waveform: Any = None,
+        dtype: Any = None,
+        t_start: Any = None,
+        initial: Any = None,
+        measuring: bool = False,
+        contact: str = "strict",
+        start: str = "paper",
+    ) -> tuple[Any, Any, tuple[int, ...]]:
+        """`(batch, unresolved, shape)`: this mechanism cast to `dtype`, broadcast and flattened into
+        a `FlatBatch` for `dynamics` (`dynamics._flat`), the mask of the configurations whose step
+        does not resolve their forcing (flagged `UNRESOLVED` by the front end; `None`: none), and the
+        batch shape. The arguments are the front ends' (`simulate`, `measure`: `waveform` for the
+        paper's model only, `initial` in the mechanism's own form); `measuring`: the run measures
+        from the default start, whose span is guarded too. Raises `ValueError` or `TypeError` on
+        bad input, before any computation."""
+
+    @abc.abstractmethod
+    def own_batch(self) -> Any:
+        """This flat batch (batch shape `(n,)`) as a `FlatBatch` as it stands, with its own actuation,
+        starts and validity and no front-end checks: what a sweep's chunk hands `measure_chunk`."""
+
+    @abc.abstractmethod
     def dispatch(self, *, two_mass: Callable[[Any], R], chain: Callable[[Any], R]) -> R:
-        """`two_mass(self)` for a `Params`, `chain(self)` for a `Chain`."""
+        """`two_mass(self)` for a `Params`, `chain(self)` for a `Chain` (the solvers of
+        `steady_gait` and `optimise`; the front ends of `simulate`, `measure` and `sweep` use none)."""

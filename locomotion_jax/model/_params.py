@@ -333,8 +333,25 @@ class Params(AbstractMechanism):
         rest = Chain.from_params(self, Sinusoid(jnp.zeros_like(self.a), wave.omega, self.lbar)).physics()
         return eqx.tree_at(lambda P: P.waveforms, rest, (wave,), is_leaf=lambda x: x is None)
 
+    def flat_batch(self, dynamics, *, waveform=None, dtype=None, t_start=None, initial=None, measuring=False,
+                   contact="strict", start="paper"):  # fmt: skip
+        """As [`AbstractMechanism.flat_batch`][locomotion_jax.model._mechanism.AbstractMechanism.flat_batch]:
+        actuated by `waveform` (default the sinusoid of eq. 13), `initial` a tuple `(x1, v1, x2, v2)`."""
+        from ..run._batch import params_batch
+
+        return params_batch(self, dynamics, waveform, dtype, t_start, initial, measuring)
+
+    def own_batch(self):
+        """As [`AbstractMechanism.own_batch`][locomotion_jax.model._mechanism.AbstractMechanism.own_batch]:
+        actuated by the sinusoid of eq. (13)."""
+        from .._results import PAPER
+        from ..dynamics._flat import FlatBatch
+        from ._waveform import Sinusoid
+
+        return FlatBatch(self, self.is_valid(), wave=Sinusoid.from_params(self), wave_axes=0, names=PAPER)
+
     def dispatch(self, *, two_mass: Callable[[Any], R], chain: Callable[[Any], R]) -> R:
-        """`two_mass(self)`: the front ends' path for the two-mass model (`AbstractMechanism`)."""
+        """`two_mass(self)`: the solvers' path for the two-mass model (`AbstractMechanism`)."""
         return two_mass(self)
 
 

@@ -11,9 +11,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._results import PAPER
 from ..dynamics._base import AbstractDynamics
 from ..dynamics._exact_dynamics import Exact
-from ..dynamics._forward import concrete_value
+from ..dynamics._flat import FlatBatch
+from ..dynamics._forward import check_static, concrete_value
 from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._checks import is_concrete
@@ -230,3 +232,49 @@ def prepare_chain(chain: Any, dtype: Any) -> tuple[Any, jax.Array, tuple[int, ..
         fallback = 0  # under `jit`: the first configuration (an invalid one only runs flagged)
     pick = lambda x: jnp.where(valid.reshape((size,) + (1,) * (x.ndim - 1)), x, x[fallback])
     return jax.tree_util.tree_map(pick, flat), valid, shape
+
+
+def start_times(t_start: Any, shape: tuple[int, ...], dtype: Any) -> jax.Array | None:
+    """Explicit measurement starts, broadcast to the batch and flattened (`None`: each configuration's own)."""
+    if t_start is None:
+        return None
+    check_static("t_start", t_start)
+    ts = np.broadcast_to(np.asarray(t_start, float), shape)
+    if not np.all(np.isfinite(ts)) or np.any(ts < 0):
+        raise ValueError(f"t_start must be finite and >= 0, got {t_start!r}.")
+    return jnp.asarray(ts.reshape((-1,)), dtype)
+
+
+def params_batch(params: Params, dynamics: AbstractDynamics, waveform: Any, dtype: Any, t_start: Any,
+                 initial: Any, measuring: bool) -> tuple[FlatBatch, Any, tuple[int, ...]]:  # fmt: skip
+    """[`Params.flat_batch`][locomotion_jax.Params.flat_batch]: the paper's model, actuated by
+    `waveform` (default the sinusoid of eq. 13), with its initial states `(x1, v1, x2, v2)`."""
+    from ._resolution import guard_two_mass
+
+    flat, wave, axes, shape = prepare(params, waveform, dtype)
+    ts = start_times(t_start, shape, flat.dtype)
+    flat, unresolved = guard_two_mass(dynamics, flat, wave, shape, default_start=measuring and ts is None)
+    y0 = prepare_initial(initial, shape, flat.dtype)
+    y0 = None if y0 is None else y0[:, jnp.asarray((0, 2, 1, 3))]  # positions, then velocities
+    valid = flat.is_valid() & jnp.broadcast_to(wave.is_valid(), flat.batch_shape)
+    batch = FlatBatch(flat, valid, wave=wave, t_start=ts, initial=y0, wave_axes=axes, names=PAPER)
+    return batch, unresolved, shape
+
+
+def bodies_batch(mechanism: Any, dynamics: AbstractDynamics, waveform: Any, dtype: Any, t_start: Any,
+                 initial: Any, measuring: bool, contact: str, start: str
+                 ) -> tuple[FlatBatch, Any, tuple[int, ...]]:  # fmt: skip
+    """`flat_batch` of a mechanism of the N-body path ([`Chain`][], [`Mechanism`][locomotion_jax.Mechanism]),
+    which carries its own waveforms, with its initial states `(x, v)`."""
+    from ._resolution import guard_chain
+
+    if waveform is not None:
+        raise ValueError(
+            f"waveform= applies to Params; a {type(mechanism).__name__} carries its own waveforms (springs or links)."
+        )
+    check_contact_start(contact, start, mechanism)
+    flat, valid, shape = prepare_chain(mechanism, dtype)
+    ts = start_times(t_start, shape, flat.dtype)  # checked on the host, as for the paper's model
+    valid, unresolved = guard_chain(dynamics, flat, valid, shape, default_start=measuring and ts is None)
+    y0 = prepare_chain_initial(initial, shape, flat.n_masses, flat.dtype, flat)
+    return FlatBatch(flat, valid, t_start=ts, initial=y0), unresolved, shape

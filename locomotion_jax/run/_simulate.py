@@ -1,12 +1,12 @@
 """`simulate`: trajectories saved at requested times (memory grows with the saves only)."""
 
-from typing import Any, overload
+from typing import Any
 
 import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import ArrayLike
-from .._results import PAPER, Trajectory
+from .._results import Trajectory
 from ..dynamics._base import AbstractDynamics
 from ..dynamics._forward import check_static
 from ..model import _two_mass as model
@@ -14,48 +14,8 @@ from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform
-from ._batch import (
-    check_contact_start,
-    check_hop_dynamics,
-    dynamics_arg,
-    mechanism_arg,
-    prepare,
-    prepare_chain,
-    prepare_chain_initial,
-    prepare_initial,
-    unflatten,
-)
-from ._resolution import flag, guard_chain, guard_two_mass
-
-
-@overload
-def simulate(
-    params: Params,
-    t_end: float,
-    save_at: ArrayLike | None = None,
-    *,
-    dynamics: AbstractDynamics | None = None,
-    waveform: AbstractWaveform | None = None,
-    contact: str = "strict",
-    start: str = "paper",
-    initial: tuple | None = None,
-    dtype: Any = None,
-) -> Trajectory: ...
-
-
-@overload
-def simulate(
-    params: Chain | Mechanism,
-    t_end: float,
-    save_at: ArrayLike | None = None,
-    *,
-    dynamics: AbstractDynamics | None = None,
-    waveform: AbstractWaveform | None = None,
-    contact: str = "strict",
-    start: str = "paper",
-    initial: tuple | None = None,
-    dtype: Any = None,
-) -> Trajectory: ...
+from ._batch import check_hop_dynamics, dynamics_arg, mechanism_arg, unflatten
+from ._resolution import flag
 
 
 def simulate(
@@ -115,7 +75,7 @@ def simulate(
         ```
     """
     dynamics = dynamics_arg(dynamics)
-    model.check_contact(contact, hop=True)  # each path below refuses "hop" where it does not support it
+    model.check_contact(contact, hop=True)  # the mechanism refuses "hop" where it does not support it
     check_hop_dynamics(contact, dynamics)
     model.initial_gap(Params(), start)  # validates `start`
     check_static("t_end", t_end)
@@ -129,33 +89,11 @@ def simulate(
         raise ValueError(f"save_at must be a non-empty 1-D array, got shape {save_np.shape}.")
     if np.any(np.diff(save_np) < 0) or save_np[0] < 0 or save_np[-1] > t_end or not np.all(np.isfinite(save_np)):
         raise ValueError("save_at must be finite, non-decreasing and inside [0, t_end].")
-    # The mechanism picks its path (double dispatch); each path runs the dynamics' method for it.
-    args = (dynamics, float(t_end), save_np, waveform, contact, start, initial, dtype)
-    return mechanism_arg(params).dispatch(two_mass=lambda p: _two_mass(p, *args), chain=lambda c: _chain(c, *args))
-
-
-def _two_mass(params: Params, dynamics: AbstractDynamics, t_end, save_np, waveform, contact, start, initial, dtype):
-    flat, wave, axes, shape = prepare(params, waveform, dtype)
-    flat, unresolved = guard_two_mass(dynamics, flat, wave, shape)
-    y0 = prepare_initial(initial, shape, flat.dtype)
-    save = jnp.asarray(save_np, flat.dtype)
-    out = flag(dynamics.simulate_two_mass(flat, wave, axes, save, t_end, contact, start, y0), unresolved)
+    # The mechanism flattens itself (what differs between mechanisms travels in the batch).
+    batch, unresolved, shape = mechanism_arg(params).flat_batch(
+        dynamics, waveform=waveform, dtype=dtype, initial=initial, contact=contact, start=start
+    )
+    save = jnp.asarray(save_np, batch.dtype)
+    out = flag(dynamics.simulate(batch, save, float(t_end), contact, start), unresolved)
     start = "initial" if initial is not None else start
-    return Trajectory(**unflatten(out, shape), start=start, contact=contact, names=PAPER)
-
-
-def _chain(
-    chain: Chain | Mechanism, dynamics: AbstractDynamics, t_end, save_np, waveform, contact, start, initial, dtype
-):
-    if waveform is not None:
-        raise ValueError(
-            f"waveform= applies to Params; a {type(chain).__name__} carries its own waveforms (springs or links)."
-        )
-    check_contact_start(contact, start, chain)
-    flat, valid, shape = prepare_chain(chain, dtype)
-    valid, unresolved = guard_chain(dynamics, flat, valid, shape)
-    y0 = prepare_chain_initial(initial, shape, flat.n_masses, flat.dtype, flat)
-    save = jnp.asarray(save_np, flat.dtype)
-    out = flag(dynamics.simulate_chain(flat, valid, save, t_end, contact, start, y0), unresolved)
-    start = "initial" if initial is not None else start
-    return Trajectory(**unflatten(out, shape), start=start, contact=contact)
+    return Trajectory(**unflatten(out, shape), start=start, contact=contact, names=batch.names)
