@@ -7,7 +7,6 @@ non-finite numbers are `null` (`_json.py`).
 """
 
 import math
-from dataclasses import fields as dc_fields
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -51,12 +50,7 @@ def report(built: Built, fields: dict[str, Any], settings: dict[str, Any], as_js
 
 def _positions(traj: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Positions, velocities and stuck flags over the bodies (a trailing body axis) of a trajectory."""
-    if hasattr(traj, "stuck"):
-        return np.asarray(traj.x), np.asarray(traj.v), np.asarray(traj.stuck)
-    from ..run._animation import stuck_masks
-
-    stuck = np.stack([np.asarray(s) for s in stuck_masks(traj.mode)], axis=-1)
-    return np.stack([traj.x1, traj.x2], -1), np.stack([traj.v1, traj.v2], -1), stuck
+    return np.asarray(traj.x), np.asarray(traj.v), np.asarray(traj.stuck)
 
 
 def _plot(traj: Any, path: Path, title: str) -> None:
@@ -275,9 +269,7 @@ def register(app: typer.Typer) -> None:
                        liftoff=bool(traj.liftoff), t_liftoff=float(traj.t_liftoff))  # fmt: skip
         settings = {"t_end": t_end, "saves": saves, **run}
         if as_json:
-            series = {
-                f.name: plain(v) for f in dc_fields(traj) if hasattr(v := getattr(traj, f.name), "shape") and np.ndim(v)
-            }
+            series = {name: plain(v) for name, v in traj.to_numpy().items() if np.ndim(v)}
             typer.echo(
                 dumps({**summary, **series, **built.record, **settings, "plot": None if png is None else str(png)})
             )
