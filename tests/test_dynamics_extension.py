@@ -1,5 +1,6 @@
-"""A new integrator is one subclass of `AbstractDynamics`: `simulate`, `measure` and `sweep` run it
-(on the two-mass model and on chains) without knowing its class, and refuse what is not a dynamics."""
+"""A new integrator is one subclass of `AbstractDynamics` (docs/index.md's `HalfStep`): `simulate`,
+`measure` and `sweep` run it (on the paper's model and on chains, through the same methods) without
+knowing its class, and refuse what is not a dynamics."""
 
 from typing import Any
 
@@ -128,3 +129,14 @@ def test_the_interface_names_no_kind_of_mechanism():
     for part in ("run", "maps", "cli"):
         for src in (root / part).glob("*.py"):
             assert ".dispatch(" not in src.read_text(), src
+
+
+def test_smoothed_sweep_equals_measure():
+    """`Smoothed.measure_chunk` takes a sweep's chunk as any other batch: the map equals `measure`."""
+    smooth = lj.Smoothed(eps=1e-2)
+    kw: dict[str, Any] = dict(z=0.5, horizon=40.0)
+    ds = lj.sweep({"omega": [2.0, 6.0]}, **kw, dynamics=smooth, progress=False, chunk_size=2)
+    alone = lj.measure(lj.Params(omega=jnp.array([2.0, 6.0])), **kw, dynamics=smooth)
+    assert np.all(np.asarray(alone.reached))
+    for field in ("tau_z", "e_z", "stick_fraction1", "stick_fraction2"):
+        _close(ds[field].values, getattr(alone, field), rtol=1e-9, atol=0)

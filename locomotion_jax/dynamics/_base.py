@@ -41,8 +41,8 @@ class AbstractDynamics(eqx.Module):
         class HalfStep(lj.AbstractDynamics):  # the exact engine at half its step
             inner: lj.Exact = lj.Exact(dt=0.005)
 
-            def simulate(self, batch, *args):
-                return self.inner.simulate(batch, *args)
+            def simulate(self, *args, **kwargs):
+                return self.inner.simulate(*args, **kwargs)
 
             ...  # and so on for every method
         ```

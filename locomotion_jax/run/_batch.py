@@ -249,14 +249,14 @@ def params_batch(params: Params, dynamics: AbstractDynamics, waveform: Any, dtyp
                  initial: Any, measuring: bool) -> tuple[FlatBatch, Any, tuple[int, ...]]:  # fmt: skip
     """[`Params.flat_batch`][locomotion_jax.Params.flat_batch]: the paper's model, actuated by
     `waveform` (default the sinusoid of eq. 13), with its initial states `(x1, v1, x2, v2)`."""
-    from ._resolution import guard_two_mass
+    from ._resolution import _flat, guard_two_mass
 
     flat, wave, axes, shape = prepare(params, waveform, dtype)
     ts = start_times(t_start, shape, flat.dtype)
     flat, unresolved = guard_two_mass(dynamics, flat, wave, shape, default_start=measuring and ts is None)
     y0 = prepare_initial(initial, shape, flat.dtype)
     y0 = None if y0 is None else y0[:, jnp.asarray((0, 2, 1, 3))]  # positions, then velocities
-    valid = flat.is_valid() & jnp.broadcast_to(wave.is_valid(), flat.batch_shape)
+    valid = flat.is_valid() & _flat(wave.is_valid(), flat.batch_shape[0])
     batch = FlatBatch(flat, valid, wave=wave, t_start=ts, initial=y0, wave_axes=axes, names=PAPER)
     return batch, unresolved, shape
 
