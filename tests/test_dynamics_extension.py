@@ -138,5 +138,7 @@ def test_smoothed_sweep_equals_measure():
     ds = lj.sweep({"omega": [2.0, 6.0]}, **kw, dynamics=smooth, progress=False, chunk_size=2)
     alone = lj.measure(lj.Params(omega=jnp.array([2.0, 6.0])), **kw, dynamics=smooth)
     assert np.all(np.asarray(alone.reached))
+    # To the solver's tolerance (rtol 1e-7): the chunk program and `measure`'s are compiled apart, and the
+    # adaptive steps follow their roundings (measured: 8e-9 relative on tau_z at omega = 6).
     for field in ("tau_z", "e_z", "stick_fraction1", "stick_fraction2"):
-        _close(ds[field].values, getattr(alone, field), rtol=1e-9, atol=0)
+        _close(ds[field].values, getattr(alone, field), rtol=1e-6, atol=0)
