@@ -99,7 +99,7 @@ class Trajectory(eqx.Module):
       switch. The positions and energies at a save time have derivatives through a switch
       at that time (the velocities are continuous), the velocities do not.
     - `start`, `contact`: the initial condition and contact reading used. `names`: how
-      `to_numpy` names the arrays ([`PAPER`][locomotion_jax._results.PAPER] for the paper's model).
+      `to_numpy` names the arrays (`PAPER` for the paper's model).
     - `y`, `vy` (`contact="hop"` only, else `None`; SPEC §10): each body's height and vertical
       velocity, `(..., n_save, N)`; `n_land`: the landings of all bodies per configuration;
       `zeno`: whether the Zeno rule made a rebound plastic (a bouncing sequence that would not
@@ -264,7 +264,7 @@ class Measurement(eqx.Module):
       a rising body's landing is not estimated) and no friction event, a grounded one its lift-off
       ($N_i$) and its stick or slip events (tests/test_hop_margin.py).
     - `z`, `start`, `contact`: as measured. `names`: how `to_numpy` names the arrays
-      ([`PAPER`][locomotion_jax._results.PAPER] for the paper's model).
+      (`PAPER` for the paper's model).
 
     Under `contact="hop"` only (else `None`; SPEC §10), over the regime window like the stick
     fractions: `flight_fraction`, per body, the fraction of it each body is in flight;

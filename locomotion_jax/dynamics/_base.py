@@ -25,7 +25,7 @@ class AbstractDynamics(eqx.Module):
     [`Exact`][locomotion_jax.Exact] and [`Smoothed`][locomotion_jax.Smoothed] are final subclasses; a
     new integrator is one more, implementing the methods below (none has a default). The front ends
     call only these methods, with any mechanism: they check the arguments first, then the mechanism
-    casts, broadcasts and flattens itself into a [`FlatBatch`][locomotion_jax.dynamics._flat.FlatBatch]
+    casts, broadcasts and flattens itself into a `FlatBatch`
     (one leading axis of `n` configurations, with its validity, its actuation where it is given apart,
     its starts and initial states). Each run method returns a dict of arrays with that leading axis,
     one per array field of the result ([`Trajectory`][locomotion_jax.Trajectory] or
@@ -52,7 +52,7 @@ class AbstractDynamics(eqx.Module):
     def simulate(self, batch: FlatBatch, save_at: Array, t_end: float, contact: str, start: str) -> dict[str, Array]:
         """The states at the times `save_at` (the fields of a `Trajectory`) of a flat batch of any mechanism.
 
-        - `batch`: the configurations ([`FlatBatch`][locomotion_jax.dynamics._flat.FlatBatch]; flag
+        - `batch`: the configurations (`FlatBatch`; flag
           the invalid ones `INVALID`).
         - `save_at`: increasing times in $[0, t_\\text{end}]$, in the batch's dtype.
         - `contact`, `start`: as in `simulate`; `batch.initial` replaces `start`'s states where given.

@@ -469,7 +469,7 @@ class Mechanism(AbstractMechanism):
 
     def flat_batch(self, dynamics, *, waveform=None, dtype=None, t_start=None, initial=None, measuring=False,
                    contact="strict", start="paper"):  # fmt: skip
-        """As [`AbstractMechanism.flat_batch`][locomotion_jax.model._mechanism.AbstractMechanism.flat_batch]:
+        """As `AbstractMechanism.flat_batch`:
         `waveform` must be `None` (the mechanism carries its own), `initial` a tuple `(x, v)` of
         positions and velocities per body."""
         from ..run._batch import bodies_batch
@@ -477,7 +477,7 @@ class Mechanism(AbstractMechanism):
         return bodies_batch(self, dynamics, waveform, dtype, t_start, initial, measuring, contact, start)
 
     def own_batch(self):
-        """As [`AbstractMechanism.own_batch`][locomotion_jax.model._mechanism.AbstractMechanism.own_batch]."""
+        """As `AbstractMechanism.own_batch`."""
         from ..dynamics._flat import FlatBatch
 
         return FlatBatch(self, self.is_valid())

@@ -335,14 +335,14 @@ class Params(AbstractMechanism):
 
     def flat_batch(self, dynamics, *, waveform=None, dtype=None, t_start=None, initial=None, measuring=False,
                    contact="strict", start="paper"):  # fmt: skip
-        """As [`AbstractMechanism.flat_batch`][locomotion_jax.model._mechanism.AbstractMechanism.flat_batch]:
+        """As `AbstractMechanism.flat_batch`:
         actuated by `waveform` (default the sinusoid of eq. 13), `initial` a tuple `(x1, v1, x2, v2)`."""
         from ..run._batch import params_batch
 
         return params_batch(self, dynamics, waveform, dtype, t_start, initial, measuring)
 
     def own_batch(self):
-        """As [`AbstractMechanism.own_batch`][locomotion_jax.model._mechanism.AbstractMechanism.own_batch]:
+        """As `AbstractMechanism.own_batch`:
         actuated by the sinusoid of eq. (13)."""
         from .._results import PAPER
         from ..dynamics._flat import FlatBatch
