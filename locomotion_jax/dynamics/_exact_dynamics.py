@@ -15,6 +15,7 @@ from jax.sharding import Mesh, PartitionSpec
 from .._custom_types import Array
 from ..model._bodies import Mechanism
 from ..model._chain import Chain
+from ..model._chain_array import engine_physics
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform, Sinusoid
 from . import _chain_measure, _chain_simulate, _paper
@@ -114,8 +115,9 @@ class Exact(AbstractDynamics):
         # The default start (eigenvalues of the linearised chain) outside the engine's program: a
         # batched eigensolver inside it can deadlock XLA's CPU thread pool (seen at N = 8, batch 1024).
         ts = jnp.where(jnp.isfinite(t_start), t_start, chain.t_start)
+        P = engine_physics(chain, contact)  # the chain's layout (`_chain_array`)
         return _chain_measure.measure_batch(
-            chain.physics(), valid, ts, z, horizon, window, contact, start, self.dt, self._own_cap(), initial
+            P, valid, ts, z, horizon, window, contact, start, self.dt, self._own_cap(), initial
         )
 
     def measure_chunk(
