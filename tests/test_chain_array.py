@@ -64,6 +64,24 @@ def test_array_layout_equals_unrolled(n, contact):
     assert got["stick_fraction"].shape == (2, n)
 
 
+def test_array_layout_stribeck_and_force_actuator_equal_unrolled():
+    """The other friction law and actuator: Stribeck friction (a kinetic coefficient with its own rate)
+    under the internal-force actuator (power through the force terms), paper contact."""
+    fr = lj.Stribeck(0.7, 0.5, 0.1, mu_s_bwd=0.9, mu_k_bwd=0.7)
+    waves = lj.TravellingWave(a=3.0, omega=2.0, phi=2 * np.pi / 3)
+    kw: dict[str, Any] = dict(z=0.3, t_start=4.0, horizon=40.0, contact="paper")
+    out = {}
+    for layout in ("array", "unrolled"):
+        C = lj.Chain(masses=[[1.0, 1.1, 0.9], [0.9, 1.0, 1.2]], d=0.0, lbar=3.0, waveforms=waves, friction=fr,
+                     actuator=lj.InternalForce(), layout=layout)  # fmt: skip
+        out[layout] = lj.measure(C, **kw).to_numpy()
+    got, ref = out["array"], out["unrolled"]
+    assert np.all(ref["status"] == lj.Status.OK) and np.all(ref["reached"])
+    assert np.all(ref["stick_fraction"].max(-1) > 0.01) and np.all(ref["work"] > 0)
+    for key in MEASURED:
+        _close(got[key], ref[key], RTOL)
+
+
 def test_array_layout_simulate_equals_unrolled():
     """`simulate`: positions, velocities, X, e_d, w, modes, normal forces and tensions at the saves."""
     ts = np.linspace(0.0, 20.0, 41)
@@ -166,3 +184,20 @@ def test_layout_choice_and_refusals():
     auto = lj.Chain(masses=[1.0] * ARRAY_FROM, waveforms=[lj.Spline(np.array([0.05, -0.05, 0.05, -0.05]), 2.0, 3.0)]
                     * (ARRAY_FROM - 1))  # fmt: skip
     assert isinstance(engine_physics(auto, "strict"), ChainPhysics)  # splines: unrolled
+
+
+def test_array_layout_sweep_equals_measure():
+    """`sweep` of chains in the array layout: each point equals `measure` of its own chain (chunks of
+    2, the last one padded): the lanes of the array layout do not depend on the batch."""
+
+    def worm(phi):
+        return lj.Chain(masses=np.ones(np.shape(phi) + (4,)), d=0.3, waveforms=lj.TravellingWave(0.06, 3.0, phi),
+                        friction=lj.AnisotropicCoulomb(0.7, 0.9, 0.5, 0.7), layout="array")  # fmt: skip
+
+    phi = np.array([-1.0, 1.0, 2.0])
+    kw: dict[str, Any] = dict(z=0.5, horizon=40.0, t_start=4.0)
+    ds = lj.sweep({"phi": phi}, mechanism=worm, chunk_size=2, progress=False, **kw)
+    ref = lj.measure(worm(phi), **kw)
+    assert np.all(np.asarray(ref.status) == lj.Status.OK)
+    for name in ("tau_z", "e_z", "mean_speed", "stick_fraction", "n_steps"):
+        np.testing.assert_array_equal(ds[name].values, np.asarray(getattr(ref, name)), err_msg=name)

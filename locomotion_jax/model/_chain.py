@@ -68,7 +68,7 @@ class Chain(AbstractMechanism):
       scalar per mass: fastest for a few masses, but compile time and cost per mass grow with N),
       `"array"` (one array over the masses: compile time independent of N; Sinusoid, Fourier and
       travelling-wave actuation, `contact="strict"` or `"paper"`), or `"auto"` (default): the array
-      layout from 8 masses on where it applies (docs/performance.md, "Long chains").
+      layout from 16 masses on where it applies (docs/performance.md, "Long chains").
     - `check`: validate concrete values (default); invalid values raise `ValueError` naming the
       parameter, the mass or spring index and the valid range. With `check=False` an invalid
       configuration is flagged `Status.INVALID` in its own result instead.

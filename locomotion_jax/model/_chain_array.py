@@ -29,7 +29,7 @@ from ._friction import AbstractFriction
 from ._physics import AbstractPhysics, LoadRates, Loads, Scalars
 
 
-ARRAY_FROM = 8
+ARRAY_FROM = 16
 """`layout="auto"` runs a chain of this many masses or more in the array layout, fewer unrolled
 (the crossover of `benchmarks/chain_scaling.py`, benchmarks/NOTES.md "Chains in the array layout")."""
 
