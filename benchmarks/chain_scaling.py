@@ -45,14 +45,14 @@ def worms(n: int, B: int, layout: str) -> lj.Chain:
                     friction=lj.AnisotropicCoulomb(0.7, 0.9, 0.5, 0.7), layout=layout)  # fmt: skip
 
 
-def row(n: int, B: int, layout: str) -> dict:
+def row(n: int, B: int, layout: str, lanes: int = 0) -> dict:
     chain = worms(n, B, layout).broadcast()  # as the front ends hand it to the engine
     P = engine_physics(chain, CONTACT)
     valid = chain.is_valid()
     ts = jnp.full((B,), T_START)
     dyn = (P, valid, ts, None, jnp.asarray(1e30), jnp.asarray(HORIZON), jnp.asarray(HORIZON))
     cap = jnp.asarray(0, jnp.int32)
-    lanes = default_lanes(B, lane_width(P))
+    lanes = lanes or default_lanes(B, lane_width(P))
     t0 = time.perf_counter()
     exe = _chain_measure._measure_batch.lower(*dyn, CONTACT, "paper", DT, cap, lanes).compile()  # pyright: ignore[reportFunctionMemberAccess]
     compile_s = time.perf_counter() - t0
@@ -76,6 +76,7 @@ def main() -> int:
     ap.add_argument("--max-unrolled", type=int, default=8)
     ap.add_argument("--batch", type=int, default=256)
     ap.add_argument("--layouts", default="unrolled,array")
+    ap.add_argument("--lanes", type=int, default=0, help="the queue's lanes (default: `_runs.default_lanes`)")
     args = ap.parse_args()
     sizes = [int(s) for s in args.sizes.split(",")]
     layouts = args.layouts.split(",")
@@ -87,7 +88,7 @@ def main() -> int:
         for layout in layouts:
             if layout == "unrolled" and n > args.max_unrolled:
                 continue
-            r = row(n, args.batch, layout)
+            r = row(n, args.batch, layout, args.lanes)
             rows[n, layout] = r
             print(f"| {n} | {layout} | {r['compile']:.1f} | {r['per_cpu']:,.0f} | {r['per_wall']:,.0f} | "
                   f"{r['steps']:.0f} |", flush=True)  # fmt: skip
