@@ -170,7 +170,7 @@ class Chain(AbstractMechanism):
 
     @classmethod
     def stack(cls, items: "list[Chain]") -> "Chain":
-        """Stack chains of the same N, friction law and actuator along a new leading batch axis."""
+        """Stack chains of the same N, friction law, actuator and layout along a new leading batch axis."""
         if len(items) == 0:
             raise ValueError("Chain.stack needs at least one Chain.")
         items = [c.broadcast() for c in items]
@@ -181,7 +181,7 @@ class Chain(AbstractMechanism):
         structures = {jax.tree_util.tree_structure(c) for c in items}
         shapes = {tuple(x.shape for x in jax.tree_util.tree_leaves(c)) for c in items}
         if len(structures) > 1 or len(shapes) > 1:
-            raise ValueError("Chain.stack: the chains differ in N, friction law, actuator or batch shape.")
+            raise ValueError("Chain.stack: the chains differ in N, friction law, actuator, layout or batch shape.")
         return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *items)
 
     # -- shapes ------------------------------------------------------------------
