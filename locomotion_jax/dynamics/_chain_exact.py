@@ -119,7 +119,7 @@ def init(
     above the ground, moving up, or with $N_i < 0$ starts in flight."""
     dtype = x.dtype
     zero = jnp.zeros((), dtype)
-    xs = tuple(x[..., i] for i in range(x.shape[-1]))
+    xs = P.bodies(x)
     cph, sph = jnp.ones((), dtype), zero
     dr = P.drive(cph, sph)
     heights = None
@@ -128,7 +128,7 @@ def init(
     L = loads_at(P, dr, xs, y=heights)
     vs = tuple(jnp.zeros_like(a) for a in xs)
     if v is not None:
-        vs = tuple(v[..., i] for i in range(v.shape[-1]))
+        vs = P.bodies(v)
     F, N = motion.with_velocity(P, L.F, vs), L.N
     n = motion.normal(contact, N)
     fly = None
@@ -316,7 +316,7 @@ def step(
     h_nom = jnp.minimum(jnp.asarray(dt, dtype), span)
     s_pred = jnp.asarray(jnp.inf, dtype)
     for g, d, e in zip(D0.g, D0.dg, D0.ddg):
-        s_pred = jnp.minimum(s_pred, num.predict(g, d, e))
+        s_pred = jnp.minimum(s_pred, num.within(num.predict(g, d, e), jnp.min))
     h_pred = jnp.maximum(num.PREDICT_MARGIN * s_pred, 64 * jnp.finfo(dtype).eps * jnp.maximum(jnp.abs(t0), 1))
     short = h_pred < h_nom
     lands = (span <= dt) & ~short
@@ -354,14 +354,10 @@ def step(
         a0 = jnp.where(g0 == 0, h * d0, g0)  # deflated when starting on the surface
         den = a0 - g1
         thl.append(jnp.where(c, a0 / jnp.where(den > 0, den, 1), inf))
-    th_min = thl[0]
-    for q in thl[1:]:
-        th_min = jnp.minimum(th_min, q)
+    th_min = num.least(thl)
     first = [kp(c & (q <= th_min)) for c, q in zip(crossed, thl)]
-    pick = [g0s[-1], d0s[-1], e0s[-1], g1s[-1], d1s[-1], e1s[-1]]  # the lowest index among the first
-    for i in reversed(range(len(g1s) - 1)):
-        vals = (g0s[i], d0s[i], e0s[i], g1s[i], d1s[i], e1s[i])
-        pick = [jnp.where(first[i], v, p) for v, p in zip(vals, pick)]
+    # The lowest index among the first (bodies in order within an array layout's entry).
+    pick = num.lowest_first(first, list(zip(g0s, d0s, e0s, g1s, d1s, e1s)))
     # Pinned: the event quintic's coefficients feed the root and the located margin, and XLA
     # would recompute the picks (a `where` chain over every event) in each (benchmarks/NOTES.md).
     cg0, cd0, ce0, cg1, cd1, ce1 = (kp(q) for q in pick)

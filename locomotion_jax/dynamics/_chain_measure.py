@@ -17,6 +17,7 @@ import jax.numpy as jnp
 
 from .._custom_types import Array
 from .._status import Regime, Status
+from ..model._chain_array import lane_width
 from ..model._physics import AbstractPhysics, loads_at
 from . import _chain_exact as engine
 from ._compile import engine_jit
@@ -165,7 +166,7 @@ def _results(f: _Fixed, dyn, contact) -> dict:
     dtype = ws.dtype
     status = jnp.where((s.status == Status.OK) & ~_finished(f, s, a), Status.MAX_STEPS, s.status).astype(jnp.int32)
     nan, inf = jnp.asarray(jnp.nan, dtype), jnp.asarray(jnp.inf, dtype)
-    stuck = jnp.stack(a.stuck)
+    stuck = f.P.stacked(a.stuck)
     regime = jnp.where(s.t >= we, jnp.where(jnp.max(stuck) > STICK_TOL, Regime.SSL, Regime.SL), Regime.UNDETERMINED)
     t_end = jnp.where(a.reached, a.t_z, s.t)
     y_end = a.y_z.map(lambda zv, sv: jnp.where(a.reached, zv, sv), s.y)
@@ -233,7 +234,7 @@ def measure_batch(
     n = valid.shape[0]
     dtype = physics.one.dtype
     z_, h_, w_ = (jnp.asarray(v, dtype) for v in (z, horizon, window))
-    lanes = default_lanes(n)
+    lanes = default_lanes(n, lane_width(physics))
     return _measure_batch(
         physics, valid, t_start, initial, z_, h_, w_, contact, start, dt, jnp.asarray(max_steps, jnp.int32), lanes
     )

@@ -16,6 +16,7 @@ import jax.numpy as jnp
 
 from .._custom_types import Array, Contact
 from ..model._physics import AbstractPhysics, load_rates_at, load_second_at, Loads, loads_at, Scalars
+from . import _numerics as num
 
 
 class State(NamedTuple):
@@ -51,7 +52,8 @@ def kept(P: AbstractPhysics, dr: Any) -> Any:
 
 
 def _sum(terms: list) -> Array:
-    return sum(terms[1:], terms[0])
+    """The sum over per-body terms (and over an array layout's body axis: `_numerics.total`)."""
+    return num.total(terms)
 
 
 def normal(contact: Contact, N: Scalars, side: Scalars | None = None) -> Scalars:
@@ -214,9 +216,7 @@ def derivatives(
         dg = [jnp.where(f, 0, q) for f, q in zip(fly, dg)]
         ddg = [jnp.where(f, 0, q) for f, q in zip(fly, ddg)]
     if contact == "strict":  # min_i N_i, its rates averaged over ties (as `jax.jvp` of `jnp.min`)
-        low = N[0]
-        for q in N[1:]:
-            low = jnp.minimum(low, q)
+        low = num.least(N)
         at = [q == low for q in N]
         count = _sum([w.astype(low.dtype) for w in at])
         g.append(low)

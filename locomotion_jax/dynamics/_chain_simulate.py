@@ -12,6 +12,7 @@ import jax.numpy as jnp
 
 from ..model._bodies import Mechanism
 from ..model._chain import Chain
+from ..model._chain_array import engine_physics, uses_array
 from ..model._physics import loads_at
 from . import _chain_exact as engine
 from ._compile import engine_jit
@@ -31,7 +32,10 @@ def _row(s: engine.Hybrid) -> jax.Array:
     hop = []
     if s.y.y is not None and s.y.vy is not None and s.n_land is not None and s.zeno is not None:
         hop = [*s.y.y, *s.y.vy, s.n_land.astype(dt), s.zeno.astype(dt)]
-    return jnp.stack([*s.y.x, *s.y.v, s.y.ed, s.y.w, *stuck, *s.sdir, s.cross, s.near, s.t_switch, *hop])
+    parts = [*s.y.x, *s.y.v, s.y.ed, s.y.w, *stuck, *s.sdir, s.cross, s.near, s.t_switch, *hop]
+    if all(jnp.ndim(q) == 0 for q in parts):
+        return jnp.stack(parts)
+    return jnp.concatenate([jnp.atleast_1d(q) for q in parts])  # the array layout: entries over the bodies
 
 
 def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps, lanes, buffer=BUFFER, initial=None):
@@ -39,7 +43,7 @@ def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps, lanes, buf
     take = lambda i: jax.tree_util.tree_map(lambda x: x[i], C)
 
     def init(i):
-        P = take(i).physics()
+        P = engine_physics(take(i), contact)
         return P, chain_initial_state(P, valid[i], contact, start, None if initial is None else initial[i])
 
     hop = (lambda P: P.hop()[2:]) if contact == "hop" else (lambda P: None)
@@ -51,22 +55,22 @@ def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps, lanes, buf
 _simulate_batch = engine_jit(_simulate_batch, ("contact", "start", "dt", "lanes", "buffer"))
 
 
-def _stack(a: tuple, like: jax.Array) -> jax.Array:
+def _stack(P: Any, a: tuple, like: jax.Array) -> jax.Array:
     """A per-spring tuple as an array (a mechanism without springs: an empty last axis)."""
-    return jnp.stack(a, -1) if a else jnp.zeros(jnp.shape(like) + (0,), like.dtype)
+    return P.stacked(a) if a else jnp.zeros(jnp.shape(like) + (0,), like.dtype)
 
 
 def _derived(C: Chain | Mechanism, contact, t, x, v, y=None, vy=None):
     """Energy, normal forces, rest lengths and tensions (per spring) at one saved state (under
     `contact="hop"`, the energy with each body's gravity $m_i y_i$ and vertical kinetic energy)."""
-    P: Any = C.physics()  # a chain's or a mechanism's: both have `l0` per spring and `tension`
+    P: Any = engine_physics(C, contact)  # a chain's or a mechanism's: both have `l0` per spring and `tension`
     dr = P.drive(jnp.cos(P.omega * t), jnp.sin(P.omega * t))
-    heights = None if y is None else tuple(y[..., i] for i in range(y.shape[-1]))
-    L = loads_at(P, dr, tuple(x[..., i] for i in range(x.shape[-1])), y=heights)
-    e = P.energy(L, tuple(v[..., i] for i in range(v.shape[-1])))
+    heights = None if y is None else P.bodies(y)
+    L = loads_at(P, dr, P.bodies(x), y=heights)
+    e = P.energy(L, P.bodies(v))
     if y is not None and vy is not None:
         e = e + jnp.sum(C.m * (y + 0.5 * vy * vy), -1)
-    return dict(e=e, N=jnp.stack(L.N, -1), rest_length=_stack(dr.l0, e), tension=_stack(L.aux.tension, e))
+    return dict(e=e, N=P.stacked(L.N), rest_length=_stack(P, dr.l0, e), tension=_stack(P, L.aux.tension, e))
 
 
 def simulate_batch(flat: Chain | Mechanism, valid, save, contact, start, dt, max_steps: int, initial=None) -> dict:
@@ -75,7 +79,7 @@ def simulate_batch(flat: Chain | Mechanism, valid, save, contact, start, dt, max
     `initial`: the states at $t = 0$, shape `(n, 2N)`, or `None` for `start`'s."""
     N = flat.n_masses
     n = valid.shape[0]
-    lanes = default_lanes(n)
+    lanes = default_lanes(n, N if uses_array(flat, contact) else 1)
     rows, ok, status, t_lift, n_switch = _simulate_batch(
         flat, valid, save, contact, start, dt, jnp.asarray(max_steps, jnp.int32), lanes, initial=initial
     )

@@ -13,6 +13,7 @@ import jax.numpy as jnp
 from jax.sharding import Mesh, PartitionSpec
 
 from .._custom_types import Array, ArrayLike
+from ..model._chain_array import engine_physics
 from . import _chain_measure, _chain_simulate, _paper
 from ._base import AbstractDynamics
 from ._flat import FlatBatch
@@ -72,10 +73,10 @@ class Exact(AbstractDynamics):
         # batched eigensolver inside it can deadlock XLA's CPU thread pool (seen at N = 8, batch 1024).
         chain = batch.mechanism
         ts = chain.t_start if batch.t_start is None else batch.t_start
+        P = engine_physics(chain, contact)  # the chain's layout (`_chain_array`)
         return _chain_measure.measure_batch(
-            chain.physics(), batch.valid, ts, z, horizon, window, contact, start, self.dt, self._own_cap(),
-            batch.initial,
-        )  # fmt: skip
+            P, batch.valid, ts, z, horizon, window, contact, start, self.dt, self._own_cap(), batch.initial
+        )
 
     def measure_chunk(
         self,

@@ -192,11 +192,22 @@ def _smallest_ratio(pairs: list) -> Array:
     """$\\min_i a_i / b_i$ over pairs with $a_i \\ge 0$, $b_i \\ge 0$ (none: $a_i > 0 = b_i$, `inf`),
     chosen by cross-multiplied comparisons, so that one division serves them all (XLA
     makes a kernel of each division, and fuses their operands into every one of them)."""
+    pairs = [_least_pair(a, b) for a, b in pairs]
     a, b = pairs[0]
     for ai, bi in pairs[1:]:
         smaller = ai * b < a * bi
         a, b = jnp.where(smaller, ai, a), jnp.where(smaller, bi, b)
     return jnp.where(b > 0, a / jnp.where(b > 0, b, 1), jnp.inf)
+
+
+def _least_pair(a: Array, b: Array) -> tuple[Array, Array]:
+    """A pair $(a, b)$ of [`_smallest_ratio`][] as it is for a scalar entry; for an entry with a body
+    axis (the array layout) the smallest ratio over the bodies as $(r, 1)$ (none: $(1, 0)$)."""
+    if jnp.ndim(a) == 0 and jnp.ndim(b) == 0:
+        return a, b
+    r = jnp.min(jnp.where(b > 0, a / jnp.where(b > 0, b, 1), jnp.inf))
+    ok = r < jnp.inf
+    return jnp.where(ok, r, 1), jnp.where(ok, 1, 0).astype(r.dtype)
 
 
 def target_margin(before: Array, gs: list, ds: list, es: list) -> Array:
@@ -211,19 +222,60 @@ def target_margin(before: Array, gs: list, ds: list, es: list) -> Array:
     vertex = jnp.where(es[-1] != 0, ds[-1] / jnp.where(es[-1] != 0, es[-1], 1), inf)
     after = inf
     for g, d, e in zip(gs[:-1], ds[:-1], es[:-1]):
-        after = jnp.minimum(after, predict(g, d, e))
+        after = jnp.minimum(after, within(predict(g, d, e), jnp.min))
     return jax.lax.stop_gradient(jnp.minimum(jnp.minimum(before, after), jnp.abs(vertex)))
 
 
 def union(flags: Sequence[Array]) -> Array:
-    """The elementwise `or` of a list of boolean arrays (one per event or per body); `False` for
-    none (a one-body mechanism has no gaps between neighbours)."""
+    """The `or` of a list of boolean entries (one per event or per body); `False` for none (a
+    one-body mechanism has no gaps between neighbours). An entry with a body axis (the array
+    layout, `_chain_array`: one entry holds every body) counts as the `or` over it."""
     if not flags:
         return jnp.asarray(False)
+    flags = [within(f, jnp.any) for f in flags]
     out = flags[0]
     for f in flags[1:]:
         out = out | f
     return out
+
+
+def within(x: Array, reduce) -> Array:
+    """`reduce(x)` over an entry's body axis, `x` itself for a scalar entry. The engine runs one
+    configuration at a time (under `vmap`), so an entry is a scalar (one body: the unrolled
+    layout) or a vector over bodies (the array layout); the unrolled layout's program is unchanged."""
+    return x if jnp.ndim(x) == 0 else reduce(x)
+
+
+def least(values: Sequence[Array]) -> Array:
+    """The smallest value over a list of entries (and over the bodies of an array entry)."""
+    out = within(values[0], jnp.min)
+    for q in values[1:]:
+        out = jnp.minimum(out, within(q, jnp.min))
+    return out
+
+
+def total(terms: Sequence[Array]) -> Array:
+    """The sum over a list of entries (and over the bodies of an array entry), left to right."""
+    terms = [within(q, jnp.sum) for q in terms]
+    return sum(terms[1:], terms[0])
+
+
+def lowest_first(first: Sequence[Array], values: Sequence[Sequence[Array]]) -> list[Array]:
+    """Of the events flagged `first` (a list of entries), the `values` (per event, a tuple of
+    arrays shaped like its entry) of the lowest index, bodies ordered within an entry; the last
+    event's (its first body's) where none is flagged."""
+
+    def at(flag: Array, vals: Sequence[Array]) -> tuple[Array, list[Array]]:
+        if jnp.ndim(flag) == 0:
+            return flag, list(vals)
+        i = jnp.argmax(flag)  # the first flagged body, or 0
+        return jnp.any(flag), [v[i] for v in vals]
+
+    pick = at(first[-1], values[-1])[1]
+    for i in reversed(range(len(first) - 1)):
+        hit, vals = at(first[i], values[i])
+        pick = [jnp.where(hit, v, p) for v, p in zip(vals, pick)]
+    return pick
 
 
 def rotate(c: Array, s: Array, ca: Array, sa: Array) -> tuple[Array, Array]:

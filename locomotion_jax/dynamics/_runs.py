@@ -37,7 +37,7 @@ LANE_QUANTUM = 16
 """The CPU queues' lanes are a multiple of this (16 float32 or 8 float64 fill an AVX-512 vector)."""
 
 
-def default_lanes(n: int) -> int:
+def default_lanes(n: int, width: int = 1) -> int:
     """The lanes of the exact engine's work queue for a flat batch of `n` configurations.
 
     On a CPU, `MICRO_BATCH_CPU`, or fewer for a small batch, rounded *up* to a multiple of
@@ -47,9 +47,15 @@ def default_lanes(n: int) -> int:
     and a different trajectory where the forcing is not resolved). With every lane inside
     full vectors a configuration gets bitwise the same result alone and in any batch, on the
     same machine (tests/test_batch_independence.py). Elsewhere, the whole batch in one `vmap`.
+
+    `width`: elements per configuration in each kernel (a chain's masses in the array layout,
+    `model._chain_array`): then `MICRO_BATCH_CPU // width` lanes (at least 1) whatever `n`, so that
+    a kernel stays within 64 elements and a configuration's result does not depend on its batch.
     """
     if jax.default_backend() != "cpu":
         return n
+    if width > 1:
+        return max(1, MICRO_BATCH_CPU // width)
     return min(MICRO_BATCH_CPU, -(-n // LANE_QUANTUM) * LANE_QUANTUM)
 
 
@@ -119,8 +125,8 @@ def chain_initial_state(P: AbstractPhysics, valid, contact, start, row=None) -> 
         st = chain_engine.init(P, contact, x, P.initial_velocities(start), *vert)
     else:
         n = x.shape[-1]
-        gaps = P.gaps(tuple(row[i] for i in range(n)))
-        ok = jnp.all(jnp.isfinite(row)) & jnp.all(jnp.stack([g > 0 for g in gaps] or [jnp.asarray(True)]))
+        gaps = P.gaps(P.bodies(row[:n]))
+        ok = jnp.all(jnp.isfinite(row)) & jnp.all(jnp.stack([jnp.all(g > 0) for g in gaps] or [jnp.asarray(True)]))
         st = chain_engine.init(P, contact, jnp.where(ok, row[:n], x), jnp.where(ok, row[n:], 0), *vert)
         valid = valid & ok
     return eqx.tree_at(lambda s: s.status, st, jnp.where(valid, st.status, Status.INVALID).astype(jnp.int32))

@@ -12,6 +12,7 @@ import numpy as np
 
 from .._custom_types import Array, ValuesLike
 from ._actuator import AbstractActuator, RestLength
+from ._chain_array import array_unsupported, LAYOUTS
 from ._chain_physics import chain_physics, ChainPhysics
 from ._checks import broadcast_shape, real_array, related
 from ._friction import AbstractFriction, Coulomb
@@ -63,6 +64,11 @@ class Chain(AbstractMechanism):
       list of them (one per spring, a common base frequency). Default: no actuation.
     - `friction`: an [`AbstractFriction`][] with per-mass coefficients; default `Coulomb(0.7, 0.5)`.
     - `actuator`: [`RestLength`][] (default) or [`InternalForce`][].
+    - `layout`: how `measure` and `simulate` lay the masses out in the engine: `"unrolled"` (one
+      scalar per mass: fastest for a few masses, but compile time and cost per mass grow with N),
+      `"array"` (one array over the masses: compile time independent of N; Sinusoid, Fourier and
+      travelling-wave actuation, `contact="strict"` or `"paper"`), or `"auto"` (default): the array
+      layout from 16 masses on where it applies (docs/performance.md, "Long chains").
     - `check`: validate concrete values (default); invalid values raise `ValueError` naming the
       parameter, the mass or spring index and the valid range. With `check=False` an invalid
       configuration is flagged `Status.INVALID` in its own result instead.
@@ -88,6 +94,8 @@ class Chain(AbstractMechanism):
     # Each spring's waveform where one is neither a Sinusoid nor a Fourier (a Spline): it drives
     # the spring itself and `waves` keeps only the base frequency; `None`: `waves` holds the actuation.
     signals: tuple[AbstractWaveform, ...] | None = None
+    # How `measure` and `simulate` lay the masses out in the engine (`_chain_array.engine_physics`).
+    layout: str = eqx.field(static=True, default="auto")
 
     def __init__(
         self,
@@ -101,6 +109,7 @@ class Chain(AbstractMechanism):
         actuator: AbstractActuator | None = None,
         *,
         check: bool = True,
+        layout: str = "auto",
     ):
         m = real_array("masses", masses)
         if m.ndim == 0 or m.shape[-1] < 2:
@@ -137,6 +146,12 @@ class Chain(AbstractMechanism):
         if not isinstance(actuator, AbstractActuator):
             raise TypeError(f"actuator must be an AbstractActuator, got {type(actuator).__name__}.")
         self.actuator = actuator
+        if layout not in LAYOUTS:
+            raise ValueError(f"Invalid parameter 'layout': expected one of {LAYOUTS}, got {layout!r}.")
+        self.layout = layout
+        if layout == "array" and array_unsupported(self) is not None:
+            raise ValueError(f"Invalid parameter 'layout': 'array' is not available for this chain: "
+                             f"{array_unsupported(self)}; use layout='unrolled' or 'auto'.")  # fmt: skip
         _ = self.batch_shape  # fields whose batch axes do not broadcast are refused here, named
         if check and all(_concrete(x) for x in jax.tree_util.tree_leaves(self)):
             self.validate()
@@ -155,7 +170,7 @@ class Chain(AbstractMechanism):
 
     @classmethod
     def stack(cls, items: "list[Chain]") -> "Chain":
-        """Stack chains of the same N, friction law and actuator along a new leading batch axis."""
+        """Stack chains of the same N, friction law, actuator and layout along a new leading batch axis."""
         if len(items) == 0:
             raise ValueError("Chain.stack needs at least one Chain.")
         items = [c.broadcast() for c in items]
@@ -166,7 +181,7 @@ class Chain(AbstractMechanism):
         structures = {jax.tree_util.tree_structure(c) for c in items}
         shapes = {tuple(x.shape for x in jax.tree_util.tree_leaves(c)) for c in items}
         if len(structures) > 1 or len(shapes) > 1:
-            raise ValueError("Chain.stack: the chains differ in N, friction law, actuator or batch shape.")
+            raise ValueError("Chain.stack: the chains differ in N, friction law, actuator, layout or batch shape.")
         return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *items)
 
     # -- shapes ------------------------------------------------------------------

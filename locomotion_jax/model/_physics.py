@@ -82,6 +82,16 @@ class AbstractPhysics(eqx.Module):
     def n_bodies(self) -> int:
         return len(self.m)
 
+    def bodies(self, x: Array) -> Scalars:
+        """An array whose last axis runs over the bodies (or the springs) as the engines carry it:
+        one entry per body (this default), or one entry holding them all (the array layout,
+        `model._chain_array`, whose reductions over bodies the engine does within the entry)."""
+        return tuple(x[..., i] for i in range(x.shape[-1]))
+
+    def stacked(self, xs: Scalars) -> Array:
+        """The inverse of [`bodies`][]: the entries as one array with the bodies on its last axis."""
+        return jnp.stack(xs, -1)
+
     def keep(self, x: Array) -> Array:
         """Materialise `x` once per iteration: XLA on the CPU recomputes a cheap value inside
         every kernel that consumes it, but never duplicates a division, so dividing by the

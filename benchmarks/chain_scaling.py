@@ -1,0 +1,113 @@
+"""Chains of N = 2 ... 64 masses in the engine's two layouts, side by side in one run: compile time and
+throughput per mass of `measure` (batch 256, float64), the array layout (`Chain(layout="array")`) for
+every N and the unrolled one (`layout="unrolled"`) up to `--max-unrolled` (its compile time grows
+with N: about 10 minutes at N = 32 on the 2-core machine).
+
+    python benchmarks/chain_scaling.py [--sizes 2,4,8,16,32,64] [--max-unrolled 8] [--batch 256]
+
+Each row compiles the measurement's program once (`time.perf_counter` around `.lower().compile()`)
+and runs the compiled program twice; throughput is mass-time-units per CPU-second of this process
+(`time.process_time`, which a shared machine's other load disturbs less than the wall clock), and
+per wall-second. The worms: travelling waves of omega in [1.5, 4], a in [0.03, 0.08] and phase lags
+in [0.3, 2.5] over the batch, anisotropic Coulomb friction (bristles), paper contact, dt = 0.03,
+measured over t = 5 ... 25. Prints one Markdown table, the load average before and after, and
+the ratios of issue 28: compile time at N = 64 over N = 4 and throughput per mass at N = 64 over
+N = 2 (each layout's own, and the array layout's at 64 against the unrolled at 2).
+"""
+
+import argparse
+import os
+import time
+
+import jax
+
+
+jax.config.update("jax_enable_x64", True)
+
+import jax.numpy as jnp  # noqa: E402
+import locomotion_jax as lj  # noqa: E402
+import numpy as np  # noqa: E402
+from locomotion_jax.dynamics import _chain_measure  # noqa: E402
+from locomotion_jax.dynamics._runs import default_lanes  # noqa: E402
+from locomotion_jax.model._chain_array import engine_physics, lane_width  # noqa: E402
+
+
+DT, T_START, HORIZON, CONTACT = 0.03, 5.0, 20.0, "paper"
+
+
+def worms(n: int, B: int, layout: str) -> lj.Chain:
+    rng = np.random.default_rng(0)
+    omega, a, phi = rng.uniform(1.5, 4.0, B), rng.uniform(0.03, 0.08, B), rng.uniform(0.3, 2.5, B)
+    j = np.arange(n - 1)[None, :, None]
+    waves = lj.SpringFourier(-a[:, None, None] * np.sin(phi[:, None, None] * j),
+                             a[:, None, None] * np.cos(phi[:, None, None] * j), omega)  # fmt: skip
+    return lj.Chain(masses=np.ones((B, n)), k=50.0, d=0.5, lbar=3.0, c=0.01, waveforms=waves,
+                    friction=lj.AnisotropicCoulomb(0.7, 0.9, 0.5, 0.7), layout=layout)  # fmt: skip
+
+
+def row(n: int, B: int, layout: str, lanes: int = 0) -> dict:
+    chain = worms(n, B, layout).broadcast()  # as the front ends hand it to the engine
+    P = engine_physics(chain, CONTACT)
+    valid = chain.is_valid()
+    ts = jnp.full((B,), T_START)
+    dyn = (P, valid, ts, None, jnp.asarray(1e30), jnp.asarray(HORIZON), jnp.asarray(HORIZON))
+    cap = jnp.asarray(0, jnp.int32)
+    lanes = lanes or default_lanes(B, lane_width(P))
+    t0 = time.perf_counter()
+    exe = _chain_measure._measure_batch.lower(*dyn, CONTACT, "paper", DT, cap, lanes).compile()  # pyright: ignore[reportFunctionMemberAccess]
+    compile_s = time.perf_counter() - t0
+    cpus, walls, out = [], [], {}
+    for _ in range(2):
+        c0, w0 = time.process_time(), time.perf_counter()
+        out = exe(*dyn, cap)
+        jax.block_until_ready(out)
+        cpus.append(time.process_time() - c0)
+        walls.append(time.perf_counter() - w0)
+    status = np.asarray(out["status"])
+    assert np.all(status == lj.Status.OK), f"N={n} {layout}: statuses {np.unique(status)}"
+    work = B * n * (T_START + HORIZON)  # mass-time-units
+    return dict(N=n, layout=layout, compile=compile_s, per_cpu=work / min(cpus), per_wall=work / min(walls),
+                steps=float(np.mean(np.asarray(out["n_steps"]))))  # fmt: skip
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    ap.add_argument("--sizes", default="2,4,8,16,32,64")
+    ap.add_argument("--max-unrolled", type=int, default=8)
+    ap.add_argument("--batch", type=int, default=256)
+    ap.add_argument("--layouts", default="unrolled,array")
+    ap.add_argument("--lanes", type=int, default=0, help="the queue's lanes (default: `_runs.default_lanes`)")
+    args = ap.parse_args()
+    sizes = [int(s) for s in args.sizes.split(",")]
+    layouts = args.layouts.split(",")
+    print(f"load average before: {os.getloadavg()}; CPUs: {os.cpu_count()}; jax {jax.__version__}", flush=True)
+    rows = {}
+    print("| N | layout | compile (s) | mass-tu per CPU-s | mass-tu per wall-s | steps per config |")
+    print("|---|---|---|---|---|---|", flush=True)
+    for n in sizes:
+        for layout in layouts:
+            if layout == "unrolled" and n > args.max_unrolled:
+                continue
+            r = row(n, args.batch, layout, args.lanes)
+            rows[n, layout] = r
+            print(f"| {n} | {layout} | {r['compile']:.1f} | {r['per_cpu']:,.0f} | {r['per_wall']:,.0f} | "
+                  f"{r['steps']:.0f} |", flush=True)  # fmt: skip
+    print(f"load average after: {os.getloadavg()}")
+    lo, hi = min(sizes), max(sizes)
+    for layout in layouts:
+        if (4, layout) in rows and (hi, layout) in rows:
+            print(f"{layout}: compile N={hi} / N=4: {rows[hi, layout]['compile'] / rows[4, layout]['compile']:.2f}")
+        if (lo, layout) in rows and (hi, layout) in rows:
+            ratio = rows[hi, layout]["per_cpu"] / rows[lo, layout]["per_cpu"]
+            print(f"{layout}: throughput per mass per CPU-s, N={hi} / N={lo}: {ratio:.2f}")
+    if (hi, "array") in rows and (lo, "unrolled") in rows:
+        ratio = rows[hi, "array"]["per_cpu"] / rows[lo, "unrolled"]["per_cpu"]
+        print(f"array N={hi} / unrolled N={lo}, throughput per mass per CPU-s: {ratio:.2f}")
+        if (4, "unrolled") in rows:
+            ratio = rows[hi, "array"]["compile"] / rows[4, "unrolled"]["compile"]
+            print(f"compile array N={hi} / unrolled N=4: {ratio:.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,272 @@
+"""A chain's physics in the array layout: every per-mass and per-spring quantity one array with a
+body axis, so that a chain of 64 masses is a program of the size of a chain of 4.
+
+[`ChainPhysics`][locomotion_jax.model._chain_physics.ChainPhysics] hands the engine one scalar
+per mass (the unrolled layout): the fastest on a CPU for a few masses, but the program, its
+compile time and its cost per mass grow with N. [`ArrayChainPhysics`][] hands it *one* entry
+holding all N masses (shape `(N,)` per configuration) in each per-body tuple of the interface
+([`AbstractPhysics`][locomotion_jax.AbstractPhysics]). The engine's per-body code is elementwise,
+so it runs unchanged on those entries; where it reduces over bodies (the earliest event, the
+lowest normal force, sums of powers, a collision, a switch) it reduces within the entry too
+(`dynamics._numerics.union`, `least`, `total`, `lowest_first`). Springs are shifted slices:
+$u = x_{1:} - x_{:-1}$, and a mass's load is $a_{i} - a_{i-1}$ of a per-spring array padded
+with zeros. The same formulas as the unrolled physics, term by term (module docstring of
+`_chain_physics`); only sums over bodies are summed in another order.
+
+Which layout a run uses: [`engine_physics`][], from the chain's `layout` (`"auto"`: the array
+layout from [`ARRAY_FROM`][] masses on, where it supports the chain).
+"""
+
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+
+from .._custom_types import Array
+from ._actuator import AbstractActuator
+from ._chain_physics import Drive, SpringRates, Springs
+from ._friction import AbstractFriction
+from ._physics import AbstractPhysics, LoadRates, Loads, Scalars
+
+
+ARRAY_FROM = 16
+"""`layout="auto"` runs a chain of this many masses or more in the array layout, fewer unrolled
+(the crossover of `benchmarks/chain_scaling.py`, benchmarks/NOTES.md "Chains in the array layout")."""
+
+LAYOUTS = ("auto", "unrolled", "array")
+
+
+class ArrayChainPhysics(AbstractPhysics):
+    """The physics of one chain in the array layout (module docstring). The interface's per-body
+    tuples (`m`, `im`, `c`, `mu_f`, `mu_b`, `friction`) have one entry each, over all masses; the
+    springs' fields are arrays over the springs (`cos`, `sin`: springs by harmonics). Drives,
+    springs and their rates are the unrolled physics' named tuples with one entry per field."""
+
+    m: Scalars
+    im: Scalars
+    c: Scalars
+    mu_f: Scalars
+    mu_b: tuple[Array | None, ...]
+    friction: tuple[AbstractFriction, ...]
+    k: Array
+    d: Array
+    dd: Array
+    lbar: Array
+    cos: Array
+    sin: Array
+    omega: Array
+    nw: Array  # n omega and (n omega)^2, harmonics on the last axis
+    nw2: Array
+    inv_mass: Array
+    one: Array
+    actuator: AbstractActuator
+
+    @property
+    def n_bodies(self) -> int:
+        return self.m[0].shape[-1]
+
+    def bodies(self, x: Array) -> Scalars:
+        return (x,)
+
+    def stacked(self, xs: Scalars) -> Array:
+        return jnp.concatenate(xs, -1)
+
+    def drive(self, c1: Array, s1: Array) -> Drive:
+        """Each spring's Fourier signal with its first two rates (the harmonics by the angle-addition
+        recurrence, summed in the unrolled physics' order), split by the actuator."""
+        H = self.cos.shape[-1]
+        A, B = self.cos, self.sin
+        cn, sn = c1, s1
+        val = rate = acc = None
+        for n in range(H):
+            if n > 0:
+                cn, sn = cn * c1 - sn * s1, sn * c1 + cn * s1
+            vn = A[..., n] * cn + B[..., n] * sn
+            rn = self.nw[..., n] * (B[..., n] * cn - A[..., n] * sn)
+            if val is None or rate is None or acc is None:
+                val, rate, acc = vn, rn, -(self.nw2[..., 0] * vn)
+            else:
+                val, rate, acc = (val + A[..., n] * cn) + B[..., n] * sn, rate + rn, acc - self.nw2[..., n] * vn
+        if val is None or rate is None or acc is None:  # no harmonics: no actuation
+            val = rate = acc = jnp.zeros_like(self.lbar) * c1
+        act = self.actuator
+        l0, f = act.split(self.lbar, val)
+        dl0, df = act.split(jnp.zeros_like(rate), rate)
+        ddl0, ddf = act.split(jnp.zeros_like(acc), acc)
+        length, force = act.varies_rest_length, act.applies_force
+        one = lambda q, used: (q,) if used else None
+        return Drive(
+            l0=(l0,) if length else (self.lbar,), dl0=one(dl0, length), ddl0=one(ddl0, length),
+            f=one(f, force), df=one(df, force), ddf=one(ddf, force),
+        )  # fmt: skip
+
+    def loads(self, drive: Drive, x: Scalars, keep: Any = None) -> Loads:
+        (xa,) = x
+        kp = (lambda q: q) if keep is None else keep
+        u = xa[1:] - xa[:-1]
+        length = jnp.sqrt(u * u + self.dd)
+        il = 1 / length
+        tension = kp(self.k * (length - drive.l0[0]))
+        p = tension * il
+        fx, fy = kp(p * u), kp(p * self.d)
+        F, N = _loads(self.m[0], fx, fy, drive.f)
+        return Loads((F,), (N,), Springs((u,), (il,), (p,), (tension,), (fx,), (fy,)))
+
+    def load_rates(self, drive: Drive, loads: Loads, xd: Scalars, keep: Any = None) -> LoadRates:
+        (v,) = xd
+        kp = (lambda q: q) if keep is None else keep
+        sp = loads.aux
+        u, il, p = sp.u[0], sp.il[0], sp.p[0]
+        du = v[1:] - v[:-1]
+        dl = kp(u * du * il)
+        dT = self.k * (dl if drive.dl0 is None else dl - drive.dl0[0])
+        dp = kp((dT - p * dl) * il)
+        dfx, dfy = kp(dp * u + p * du), kp(dp * self.d)
+        dF, dN = _load_rates(dfx, dfy, drive.df)
+        return LoadRates((dF,), (dN,), (du, SpringRates((dl,), (dT,), (dp,), (dfx,), (dfy,))))
+
+    def load_second(
+        self, drive: Drive, loads: Loads, rates: LoadRates, xd: Scalars, a: Scalars
+    ) -> tuple[Scalars, Scalars]:
+        du, sr = rates.aux
+        sp = loads.aux
+        u, il, p = sp.u[0], sp.il[0], sp.p[0]
+        dl, dp = sr.dl[0], sr.dp[0]
+        ddu = a[0][1:] - a[0][:-1]
+        ddl = (du * du + u * ddu - dl * dl) * il
+        ddT = self.k * (ddl if drive.ddl0 is None else ddl - drive.ddl0[0])
+        ddp = (ddT - 2 * dp * dl - p * ddl) * il
+        ddF, ddN = _load_rates(ddp * u + 2 * dp * du + p * ddu, ddp * self.d, drive.ddf)
+        return (ddF,), (ddN,)
+
+    def power(self, drive: Drive, loads: Loads, v: Scalars) -> Array:
+        T = loads.aux.tension[0]
+        pick = lambda q: None if q is None else q[0]
+        return _power(self.actuator, T, pick(drive.dl0), pick(drive.f), v[0])
+
+    def power_rate(self, drive: Drive, loads: Loads, rates: LoadRates, v: Scalars, a: Scalars) -> Array:
+        T, dT = loads.aux.tension[0], rates.aux[1].dtension[0]
+        if type(self.actuator).power is not AbstractActuator.power:  # a user's own: its derivative
+            zeros = jnp.zeros_like(T)
+            fill = lambda q: zeros if q is None else q[0]
+            args = (T, fill(drive.dl0), fill(drive.f), v[0])
+            rates_ = (dT, fill(drive.ddl0), fill(drive.df), a[0])
+            return jax.jvp(lambda *xs: _power(self.actuator, *xs), args, rates_)[1]
+        pick = lambda q: None if q is None else q[0]
+        dl0, ddl0, f, df = pick(drive.dl0), pick(drive.ddl0), pick(drive.f), pick(drive.df)
+        va, aa = v[0], a[0]
+        out = jnp.zeros_like(va[0])
+        if dl0 is not None and ddl0 is not None:
+            out = out + jnp.sum(-(dT * dl0 + T * ddl0))
+        if f is not None and df is not None:
+            out = out + jnp.sum(df * (va[:-1] - va[1:]) + f * (aa[:-1] - aa[1:]))
+        return out
+
+    def energy(self, loads: Loads, v: Scalars) -> Array:
+        T, va = loads.aux.tension[0], v[0]
+        return 0.5 * (jnp.sum(self.m[0] * va * va) + jnp.sum(T * T / self.k))
+
+    def centre_of_mass(self, x: Scalars) -> Array:
+        return jnp.sum(self.m[0] * x[0]) * self.inv_mass
+
+    def gaps(self, x: Scalars) -> Scalars:
+        """Neighbours' gaps $x_{j+1} - x_j$, one entry over the springs."""
+        return (x[0][1:] - x[0][:-1],)
+
+    def hop(self) -> tuple[Array, Array, Scalars, Array]:
+        raise NotImplementedError(
+            "contact='hop' is not supported by a chain in the array layout; use Chain(..., layout='unrolled') "
+            "(or 'auto', which runs hopping chains unrolled)."
+        )
+
+    def initial_positions(self, start: str) -> Array:
+        """As the unrolled physics: gaps $\\bar\\ell_j$ (`"paper"`) or the relaxed springs, $x_0 = 0$."""
+        if start == "paper":
+            gaps = self.lbar
+        elif start == "relaxed":
+            l0 = self.drive(jnp.ones_like(self.omega), jnp.zeros_like(self.omega)).l0[0]
+            gaps = jnp.sqrt(jnp.maximum(l0 * l0 - self.dd, 0))
+        else:
+            raise ValueError(f"start must be 'paper' (eq. 14) or 'relaxed', got {start!r}.")
+        return jnp.concatenate([jnp.zeros_like(gaps[..., :1]), jnp.cumsum(gaps, -1)], -1)
+
+
+def _per_mass(a: Array) -> Array:
+    """$a_i - a_{i-1}$ per mass of a per-spring array (missing springs count zero)."""
+    zero = jnp.zeros_like(a[..., :1])
+    return jnp.concatenate([a, zero], -1) - jnp.concatenate([zero, a], -1)
+
+
+def _loads(m: Array, fx: Array, fy: Array, f: Scalars | None) -> tuple[Array, Array]:
+    return _per_mass(fx if f is None else fx + f[0]), m - _per_mass(fy)
+
+
+def _load_rates(dfx: Array, dfy: Array, df: Scalars | None) -> tuple[Array, Array]:
+    return _per_mass(dfx if df is None else dfx + df[0]), -_per_mass(dfy)
+
+
+def _power(act: AbstractActuator, T: Array, dl0: Array | None, f: Array | None, v: Array) -> Array:
+    """The actuator's power: a user's own `power` on the arrays, else $-\\sum_j T_j\\dot\\ell_{0,j}
+    + \\sum_j f_j (v_j - v_{j+1})$ (the terms it drives)."""
+    if type(act).power is not AbstractActuator.power:
+        zeros = jnp.zeros_like(T)
+        return act.power(T, zeros if dl0 is None else dl0, zeros if f is None else f, v)
+    out = jnp.zeros_like(v[0])
+    if dl0 is not None:
+        out = out + jnp.sum(-(T * dl0))
+    if f is not None:
+        out = out + jnp.sum(f * (v[:-1] - v[1:]))
+    return out
+
+
+def array_unsupported(C: Any, contact: str | None = None) -> str | None:
+    """Why a chain cannot run in the array layout (`None`: it can): a waveform other than Fourier
+    coefficients on a spring (a Spline), or `contact="hop"`."""
+    if C.signals is not None:
+        return "its springs have waveforms other than Sinusoid/Fourier/TravellingWave (a Spline)"
+    if contact == "hop":
+        return "contact='hop' is unrolled only"
+    return None
+
+
+def array_physics(C: Any) -> ArrayChainPhysics:
+    """The physics of a [`Chain`][locomotion_jax.Chain] in the array layout (every field broadcast
+    to the chain's batch shape, with its mass or spring axis)."""
+    why = array_unsupported(C)
+    if why is not None:
+        raise ValueError(f"A chain in layout='array': {why}; use layout='unrolled' or 'auto'.")
+    C = C.broadcast()
+    law = C.friction
+    f, b = law.static_limits()
+    nw = jnp.stack([(h + 1) * C.waves.omega for h in range(C.waves.cos.shape[-1])], -1)
+    return ArrayChainPhysics(
+        m=(C.m,), im=(1 / C.m,), c=(C.c,), mu_f=(f,), mu_b=(None if b is f else b,), friction=(law,),
+        k=C.k, d=C.d, dd=C.d * C.d, lbar=C.lbar, cos=C.waves.cos, sin=C.waves.sin, omega=C.waves.omega,
+        nw=nw, nw2=nw * nw, inv_mass=1 / C.m.sum(-1), one=C.m[..., 0] / C.m[..., 0], actuator=C.actuator,
+    )  # fmt: skip
+
+
+def uses_array(mechanism: Any, contact: str | None = None) -> bool:
+    """Whether `measure` and `simulate` run a mechanism in the array layout: a
+    [`Chain`][locomotion_jax.Chain] with `layout="array"` (refused with a clear error where
+    [`array_unsupported`][] finds a reason), or `"auto"` from [`ARRAY_FROM`][] masses on where it
+    finds none; any other mechanism, or `layout="unrolled"`: no."""
+    layout = getattr(mechanism, "layout", "unrolled")
+    if layout == "unrolled":
+        return False
+    why = array_unsupported(mechanism, contact)
+    if layout == "array" and why is not None:
+        raise ValueError(f"A chain in layout='array': {why}; use layout='unrolled' or 'auto'.")
+    return layout == "array" or (why is None and mechanism.n_masses >= ARRAY_FROM)
+
+
+def engine_physics(mechanism: Any, contact: str | None = None) -> AbstractPhysics:
+    """The physics that `measure` and `simulate` integrate a mechanism with ([`uses_array`][]):
+    a chain's in the array layout, else the mechanism's own `physics()`."""
+    return array_physics(mechanism) if uses_array(mechanism, contact) else mechanism.physics()
+
+
+def lane_width(physics: AbstractPhysics) -> int:
+    """Elements per configuration in the engine's kernels: the masses in the array layout, else 1
+    (`dynamics._runs.default_lanes`)."""
+    return physics.n_bodies if isinstance(physics, ArrayChainPhysics) else 1

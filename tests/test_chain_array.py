@@ -1,0 +1,223 @@
+"""The array layout of a chain (`Chain(..., layout="array")`, `model._chain_array`) against the unrolled
+one (the same engine on one scalar per mass), against the independent chain reference
+(`tests/reference_chain.py`, an event-driven scipy solver sharing no code with the package), and
+its error paths: a bad configuration in a batch, forward-mode derivatives through the events, what
+the array layout refuses, and what `layout="auto"` picks."""
+
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import locomotion_jax as lj
+import numpy as np
+import pytest
+from chain_cases import ANISO
+from locomotion_jax.model._chain_array import ARRAY_FROM, ArrayChainPhysics, engine_physics
+from locomotion_jax.model._chain_physics import ChainPhysics
+from reference_chain import chain_config, reference_chain_simulate
+
+
+RTOL = 1e-10
+"""The layouts run the same formulas; sums over masses are summed in another order (float64)."""
+
+RTOL32 = 2e-4
+"""float32: the same runs agree to its rounding accumulated over a few thousand steps."""
+
+
+def _worm(n: int, layout: str, dtype=jnp.float64, **kw) -> lj.Chain:
+    """Two worms of `n` masses on bristles (anisotropic Coulomb), a travelling wave towards the head,
+    unequal masses and offsets of both signs, so that every mass and spring differs."""
+    base = np.linspace(0.9, 1.2, n)
+    masses = np.stack([base, base[::-1]]).astype(dtype)
+    d = np.where(np.arange(n - 1) % 2 == 0, 0.4, -0.3).astype(dtype)
+    return lj.Chain(
+        masses=masses, k=np.linspace(40.0, 60.0, n - 1).astype(dtype), d=d, lbar=3.0, c=0.02,
+        waveforms=lj.TravellingWave(a=0.06, omega=3.0, phi=2 * np.pi / 3),
+        friction=lj.AnisotropicCoulomb(0.7, 0.9, 0.5, 0.7), layout=layout, **kw,
+    )  # fmt: skip
+
+
+def _close(a, b, rtol):
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    assert a.shape == b.shape
+    scale = np.maximum(np.abs(a), 1e-12)
+    same = a == b  # an infinite value (a target not reached) equal in both
+    with np.errstate(invalid="ignore"):
+        err = np.where(same, 0.0, np.abs(a - b) / scale)
+    np.testing.assert_array_less(err, rtol)
+
+
+MEASURED = ("tau_z", "e_z", "e_d", "work", "mean_speed", "X_start", "stick_fraction")
+
+
+@pytest.mark.parametrize("contact", ["strict", "paper"])
+@pytest.mark.parametrize("n", [2, 3, 5])
+def test_array_layout_equals_unrolled(n, contact):
+    """`measure`: the centre of mass (X at the start, the time to z, the mean speed), e_d, w and the
+    stick fractions of both layouts agree to 1e-10 relative, with the same step and switch counts."""
+    kw: dict[str, Any] = dict(z=0.5, t_start=4.0, horizon=40.0, contact=contact)
+    got = lj.measure(_worm(n, "array"), **kw).to_numpy()
+    ref = lj.measure(_worm(n, "unrolled"), **kw).to_numpy()
+    assert np.all(ref["status"] == lj.Status.OK) and np.all(got["status"] == lj.Status.OK)
+    assert np.all(ref["reached"]) and np.all(ref["stick_fraction"] > 0.01)  # the runs stick and slip
+    for key in MEASURED:
+        _close(got[key], ref[key], RTOL)
+    np.testing.assert_array_equal(got["n_steps"], ref["n_steps"])
+    np.testing.assert_array_equal(got["n_switch"], ref["n_switch"])
+    assert got["stick_fraction"].shape == (2, n)
+
+
+def test_array_layout_stribeck_and_force_actuator_equal_unrolled():
+    """The other friction law and actuator: Stribeck friction (a kinetic coefficient with its own rate)
+    under the internal-force actuator (power through the force terms), paper contact."""
+    fr = lj.Stribeck(0.7, 0.5, 0.1, mu_s_bwd=0.9, mu_k_bwd=0.7)
+    waves = lj.TravellingWave(a=3.0, omega=2.0, phi=2 * np.pi / 3)
+    kw: dict[str, Any] = dict(z=0.3, t_start=4.0, horizon=40.0, contact="paper")
+    out = {}
+    for layout in ("array", "unrolled"):
+        C = lj.Chain(masses=[[1.0, 1.1, 0.9], [0.9, 1.0, 1.2]], d=0.0, lbar=3.0, waveforms=waves, friction=fr,
+                     actuator=lj.InternalForce(), layout=layout)  # fmt: skip
+        out[layout] = lj.measure(C, **kw).to_numpy()
+    got, ref = out["array"], out["unrolled"]
+    assert np.all(ref["status"] == lj.Status.OK) and np.all(ref["reached"])
+    assert np.all(ref["stick_fraction"].max(-1) > 0.01) and np.all(ref["work"] > 0)
+    for key in MEASURED:
+        _close(got[key], ref[key], RTOL)
+
+
+def test_array_layout_simulate_equals_unrolled():
+    """`simulate`: positions, velocities, X, e_d, w, modes, normal forces and tensions at the saves."""
+    ts = np.linspace(0.0, 20.0, 41)
+    got = lj.simulate(_worm(5, "array"), 20.0, ts, contact="paper")
+    ref = lj.simulate(_worm(5, "unrolled"), 20.0, ts, contact="paper")
+    for key in ("x", "v", "X", "e_d", "w", "e", "N", "tension", "l0"):
+        a, b = np.asarray(getattr(ref, key)), np.asarray(getattr(got, key))
+        np.testing.assert_allclose(b, a, rtol=RTOL, atol=RTOL * np.abs(a).max(), err_msg=key)
+    np.testing.assert_array_equal(np.asarray(got.stuck), np.asarray(ref.stuck))
+    assert np.asarray(got.stuck).any() and not np.asarray(got.stuck).all()
+
+
+def test_array_layout_float32_equals_unrolled():
+    kw: dict[str, Any] = dict(z=0.5, t_start=4.0, horizon=40.0, dtype=jnp.float32)
+    got = lj.measure(_worm(3, "array", jnp.float32), **kw).to_numpy()
+    ref = lj.measure(_worm(3, "unrolled", jnp.float32), **kw).to_numpy()
+    assert got["e_d"].dtype == np.float32 and np.all(got["status"] == lj.Status.OK)
+    for key in ("tau_z", "e_d", "work", "mean_speed"):
+        _close(got[key], ref[key], RTOL32)
+    np.testing.assert_allclose(got["stick_fraction"], ref["stick_fraction"], atol=RTOL32)
+
+
+def test_array_layout_eight_mass_worm_against_reference():
+    """An 8-mass worm on bristles in the array layout against the independent reference: positions,
+    e_d and w over time. At dt = 0.01 the positions differ by up to 6e-6 (RK4's error, that of the unrolled
+    layout); at dt = 0.005 by 16x less, within 1e-6."""
+    n, omega, a, phi = 8, 3.0, 0.05, 2 * np.pi / 3
+    fr: dict[str, Any] = dict(ANISO)
+    cfg = chain_config([1.0] * n, k=50.0, d=0.5, lbar=3.0, c=0.01, omega=omega, a=a, phi=phi, **fr)
+    chain = lj.Chain(masses=[1.0] * n, k=50.0, d=0.5, lbar=3.0, c=0.01,
+                     waveforms=lj.SpringFourier(cfg["A"], cfg["B"], cfg["omega"]),
+                     friction=lj.AnisotropicCoulomb(**ANISO), layout="array")  # fmt: skip
+    assert isinstance(engine_physics(chain, "strict"), ArrayChainPhysics)
+    ts = np.linspace(0.0, 30.0, 61)
+    ref = reference_chain_simulate(cfg, 30.0, ts)
+    tr = lj.simulate(chain, 30.0, ts, dynamics=lj.Exact(dt=0.005))
+    assert int(tr.status) == lj.Status.OK and ref["status"] == "ok"
+    np.testing.assert_allclose(np.asarray(tr.x), ref["x"], atol=1e-6)
+    np.testing.assert_allclose(np.asarray(tr.e_d), ref["e_d"], rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(np.asarray(tr.w), ref["w"], rtol=1e-5, atol=1e-7)
+    assert float(np.ptp(np.asarray(tr.X))) > 0.01 and np.asarray(tr.stuck).any()  # it crawls, sticking
+
+
+def test_array_layout_bad_configuration_flagged_others_unchanged():
+    masses = np.ones((3, 4))
+    masses[1, 2] = -1.0
+    masses[2] = [1.2, 0.9, 1.0, 1.1]
+    wave = lj.TravellingWave(0.06, 3.0, np.pi / 3)
+    fr = lj.AnisotropicCoulomb(0.7, 0.9, 0.5, 0.7)
+    batch = lj.Chain(masses=masses, waveforms=wave, friction=fr, check=False, layout="array")
+    m = lj.measure(batch, z=0.5, t_start=4.0, horizon=40.0)
+    assert list(np.asarray(m.status)) == [lj.Status.OK, lj.Status.INVALID, lj.Status.OK]
+    assert not np.any(np.isnan(np.asarray(m.tau_z)))
+    alone = lj.measure(lj.Chain(masses=masses[2], waveforms=wave, friction=fr, layout="array"), z=0.5,
+                       t_start=4.0, horizon=40.0)  # fmt: skip
+    assert bool(alone.reached)
+    np.testing.assert_allclose(m.tau_z[2], alone.tau_z, rtol=1e-12)
+    np.testing.assert_allclose(m.e_d[2], alone.e_d, rtol=1e-12)
+
+
+def test_array_layout_jacfwd_through_events():
+    """Forward mode through the stick/slip events: `jacfwd` of tau_z and e_z in the stiffness and the
+    amplitude equals the unrolled layout's and central differences of the array layout itself."""
+
+    def run(theta, layout):
+        k, a = theta
+        C = lj.Chain(masses=[1.0, 1.1, 0.9, 1.0], k=k, d=0.3, lbar=3.0, c=0.02,
+                     waveforms=lj.TravellingWave(a, 3.0, 2 * np.pi / 3),
+                     friction=lj.AnisotropicCoulomb(0.7, 0.9, 0.5, 0.7), layout=layout)  # fmt: skip
+        m = lj.measure(C, z=0.3, t_start=4.0, horizon=40.0)
+        return jnp.stack([m.tau_z, m.e_z]), (m.smooth, m.n_switch)
+
+    theta = jnp.array([50.0, 0.06])
+    jac, (smooth, n_switch) = jax.jacfwd(lambda t: run(t, "array"), has_aux=True)(theta)
+    jac_u = jax.jacfwd(lambda t: run(t, "unrolled")[0])(theta)
+    assert bool(smooth) and int(n_switch) > 10  # a run through many switches, flagged differentiable
+    np.testing.assert_allclose(np.asarray(jac), np.asarray(jac_u), rtol=1e-8)
+    fd = []
+    for i in range(2):
+        h = 1e-6 * float(theta[i])
+        e = jnp.zeros(2).at[i].set(h)
+        fd.append((run(theta + e, "array")[0] - run(theta - e, "array")[0]) / (2 * h))
+    fd = np.stack([np.asarray(q) for q in fd], -1)
+    assert np.all(np.isfinite(np.asarray(jac)))
+    np.testing.assert_allclose(np.asarray(jac), fd, rtol=1e-4, atol=1e-6 * np.abs(fd).max())
+
+
+def test_layout_choice_and_refusals():
+    assert isinstance(engine_physics(_worm(ARRAY_FROM, "auto"), "strict"), ArrayChainPhysics)
+    assert isinstance(engine_physics(_worm(ARRAY_FROM - 1, "auto"), "strict"), ChainPhysics)
+    assert isinstance(engine_physics(_worm(ARRAY_FROM, "auto"), "hop"), ChainPhysics)  # hop: unrolled only
+    assert isinstance(engine_physics(_worm(ARRAY_FROM, "unrolled"), "strict"), ChainPhysics)
+    with pytest.raises(ValueError, match="'layout'.*'auto', 'unrolled', 'array'"):
+        _worm(3, "arrays")
+    with pytest.raises(ValueError, match="contact='hop'.*layout='unrolled'"):
+        engine_physics(_worm(3, "array"), "hop")
+    spline = [lj.Spline(np.array([0.05, -0.05, 0.05, -0.05]), 2.0, 3.0)] * 2
+    with pytest.raises(ValueError, match="layout.*Spline"):
+        lj.Chain(masses=[1.0] * 3, waveforms=spline, layout="array")
+    auto = lj.Chain(masses=[1.0] * ARRAY_FROM, waveforms=[lj.Spline(np.array([0.05, -0.05, 0.05, -0.05]), 2.0, 3.0)]
+                    * (ARRAY_FROM - 1))  # fmt: skip
+    assert isinstance(engine_physics(auto, "strict"), ChainPhysics)  # splines: unrolled
+
+
+def test_array_layout_sweep_equals_measure():
+    """`sweep` of chains in the array layout: each point equals `measure` of its own chain (chunks of
+    2, the last one padded): the lanes of the array layout do not depend on the batch."""
+
+    def worm(phi):
+        return lj.Chain(masses=np.ones(np.shape(phi) + (4,)), d=0.3, waveforms=lj.TravellingWave(0.06, 3.0, phi),
+                        friction=lj.AnisotropicCoulomb(0.7, 0.9, 0.5, 0.7), layout="array")  # fmt: skip
+
+    phi = np.array([-1.0, 1.0, 2.0])
+    kw: dict[str, Any] = dict(z=0.5, horizon=40.0, t_start=4.0)
+    ds = lj.sweep({"phi": phi}, mechanism=worm, chunk_size=2, progress=False, **kw)
+    ref = lj.measure(worm(phi), **kw)
+    assert np.all(np.asarray(ref.status) == lj.Status.OK)
+    for name in ("tau_z", "e_z", "mean_speed", "stick_fraction", "n_steps"):
+        np.testing.assert_array_equal(ds[name].values, np.asarray(getattr(ref, name)), err_msg=name)
+
+
+def test_array_layout_initial_states_checked_per_configuration():
+    """Initial states in the array layout: past the front end's check (as under `jit`) a row whose
+    masses are out of order is flagged INVALID in its own result; the other row runs as in the
+    unrolled layout."""
+    from locomotion_jax.run._batch import prepare_chain
+
+    rows = jnp.asarray([[0.0, 3.0, 6.0, 9.0, 0.0, 0.1, 0.0, -0.1], [0.0, 3.0, 2.0, 9.0, 0.0, 0.0, 0.0, 0.0]])
+    out = {}
+    for layout in ("array", "unrolled"):
+        worm = lj.Chain(masses=[1.0] * 4, waveforms=lj.TravellingWave(0.05, 2.0, 1.0), layout=layout)
+        flat, valid, _ = prepare_chain(lj.Chain.stack([worm, worm]), None)
+        out[layout] = lj.Exact().measure_chain(flat, valid, jnp.zeros(2), 0.1, 5.0, 2.0, "strict", "paper", rows)
+    assert [int(s) for s in np.asarray(out["array"]["status"])] == [lj.Status.OK, lj.Status.INVALID]
+    for key in ("tau_z", "e_d", "work", "mean_speed"):
+        _close(np.asarray(out["array"][key])[0], np.asarray(out["unrolled"][key])[0], RTOL)
