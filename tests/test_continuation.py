@@ -216,3 +216,43 @@ def test_no_recompilation_and_parameter_leaving_its_range():
 def test_bad_arguments(kwargs, match):
     with pytest.raises((ValueError, TypeError), match=match):
         lj.continuation(lj.Params(omega=2.0), **kwargs)
+
+
+# -- Every mechanism: a 3-mass chain with anisotropic friction on the same period map and corrector.
+
+
+def _worm(omega) -> lj.Chain:
+    """A 3-mass worm (travelling wave, d = 0) with anisotropic Coulomb friction: the pure-slip and
+    stick-slip gaits of `tests/test_chain_gait.py`'s anisotropic worms."""
+    omega = jnp.asarray(omega, float)
+    friction = lj.AnisotropicCoulomb(0.7, 0.9, 0.5, 0.7)
+    return lj.Chain(masses=np.ones(3), d=0.0, waveforms=lj.TravellingWave(0.05 + 0 * omega, omega, 2 * np.pi / 3),
+                    friction=friction)  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def worm_branch() -> tuple[lj.Chain, lj.Branch]:
+    """The worm continued in omega between 6 and 12, from either end."""
+    chain = _worm([6.0, 12.0])
+    return chain, lj.continuation(chain, "omega", jnp.asarray([12.0, 6.0]), max_points=40)
+
+
+def test_chain_points_are_steady_gaits(worm_branch):
+    """Points of a chain's branch are steady gaits: `steady_gait` of the chain at each point's
+    omega, started on the point's section state, converges at once to the same orbit (state to
+    1e-9, speed and cost of transport to 1e-8, multipliers to 1e-8), and the regimes agree."""
+    _, b = worm_branch
+    assert b.u is None and b.state.shape[-1] == 5 and b.stick_fraction.shape[-1] == 3
+    for i in range(2):
+        n = int(b.n_points[i])
+        assert n >= 3 and int(b.status[i]) in (BranchStatus.REACHED, BranchStatus.MAX_POINTS), (i, int(b.status[i]))
+        j = np.unique([1, n // 2, n - 1])
+        lam = np.asarray(b.lam[i, j])
+        g = lj.steady_gait(_worm(lam), start=np.asarray(b.state[i, j]), periods=int(b.k[i]), transient=0)
+        assert np.all(np.asarray(g.status) == GaitStatus.CONVERGED)
+        np.testing.assert_allclose(np.asarray(g.state), np.asarray(b.state[i, j]), atol=1e-9)
+        for name in ("mean_speed", "cost_of_transport", "e_d"):
+            np.testing.assert_allclose(np.asarray(getattr(g, name)), np.asarray(getattr(b, name)[i, j]), rtol=1e-8)
+        np.testing.assert_allclose(np.abs(np.asarray(g.multipliers)), np.abs(np.asarray(b.multipliers[i, j])),
+                                   atol=1e-8)  # fmt: skip
+        np.testing.assert_array_equal(np.asarray(g.regime), np.asarray(b.regime[i, j]))
