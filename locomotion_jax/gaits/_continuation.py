@@ -327,7 +327,7 @@ def continuation(
     solve = Solver(C, setup.physics_of, setup.sel, contact, dynamics.dt, k, lam0, scale, tol, max_iter, max_steps,
                    setup.omega, setup.sets_omega)  # fmt: skip
 
-    y = fl(np.stack([g.u, g.v1, g.v2], axis=-1)) if setup.paper else fl(g.state)
+    y = fl(g.state)
     n = y.shape[-1]
     z = np.concatenate([y, np.zeros((B, 1))], axis=-1)
     z = np.where(ok[:, None], z, 0.0)

@@ -10,6 +10,11 @@ from forward-mode differentiation through the exact engine: located events enter
 their implicit-function times, so $M$ includes the saltation of every switch. The
 eigenvalues of $M$ are the Floquet multipliers.
 
+Every mechanism runs on one period map and one solver (`_chain_gait`, `_corrector`) over the
+N-body engine: the paper's model as the two-mass chain of
+[`Params.physics`][locomotion_jax.Params.physics], whose section state $(u, v_1, v_2)$ is the
+chain's (gap, then velocities); this module keeps the paper's names for its results.
+
 A mass stuck at the section has $v_i = 0$ held by friction: its velocity is not a free
 unknown (its column of $M$ is zero, and so is its row when it is stuck again one
 period later), which makes the multiplier 0 that sticking contributes.
@@ -94,6 +99,11 @@ class Gait(eqx.Module):
     slip_margin: Array
     min_normal: Array
     contact: str = eqx.field(static=True)
+
+    @property
+    def state(self) -> Array:
+        """The section state $(u, v_1, v_2)$ as one array, `batch + (3,)` (as `ChainGait.state`)."""
+        return jnp.stack([self.u, self.v1, self.v2], axis=-1)
 
 
 _transient_batch = chain_gait._transient_batch
