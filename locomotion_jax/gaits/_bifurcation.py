@@ -159,6 +159,8 @@ def _surface(solve, rows: list[tuple | None], lam_tol: float) -> list[dict | Non
     too). `None` where it does not converge within the bracket (the caller then brackets)."""
     B = len(rows)
     go = np.array([r is not None for r in rows])
+    if not go.any():
+        return [None] * B
     S = _size(rows)
     pad = (EventKind.SSL_SL, 0, np.zeros(S + 1), np.ones(S + 1), 1.0, -1.0, np.zeros((S + 2, S + 1)),
            np.zeros((S + 2, S + 1)))  # fmt: skip
