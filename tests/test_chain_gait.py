@@ -75,7 +75,7 @@ def test_chain_monodromy_against_finite_differences(worms):
     one = jax.tree_util.tree_map(lambda x: x[i], chain.broadcast())
     Pc = one.physics()
     y = jnp.asarray(g.state[i])
-    phi = jax.jit(lambda y: cg._period_map(Pc, "strict", 0.01, 100_000, 1.0, y).y)
+    phi = jax.jit(lambda y: cg.period_map(Pc, "strict", 0.01, 100_000, 1.0, y).y)
     h = 1e-6
     cols = [(phi(y + h * e) - phi(y - h * e)) / (2 * h) for e in jnp.eye(y.shape[0], dtype=y.dtype)]
     M_fd = np.stack([np.asarray(c) for c in cols], axis=1)

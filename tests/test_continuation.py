@@ -24,7 +24,7 @@ def _events(b: lj.Branch, i: int, kind: int) -> list[dict[str, Any]]:
     out = [{key: np.asarray(getattr(e, key)[i, q]).item() for key in keys} for q in rows]
     for q, row in zip(rows, out):
         row["multipliers"] = np.asarray(e.multipliers[i, q])
-        row["y"] = np.asarray([float(e.u[i, q]), float(e.v1[i, q]), float(e.v2[i, q])])
+        row["y"] = np.asarray(e.state[i, q])
     return out
 
 
@@ -139,7 +139,7 @@ def test_folds_and_a_corner():
         cand = np.flatnonzero((reg == regime) & stable & (np.abs(lam - mid) < 0.03))
         assert len(cand) > 0, regime
         j = cand[np.argmin(np.abs(lam[cand] - mid))]
-        y = np.asarray([float(b.u[0, j]), float(b.v1[0, j]), float(b.v2[0, j])])
+        y = np.asarray(b.state[0, j])
         r = _reference_period(dict(omega=float(lam[j])), y)
         assert any("slip->stick" in kind for _, kind in r["events"]) == sticks
         np.testing.assert_allclose(_end(r), y, atol=1e-6)
@@ -185,7 +185,7 @@ def test_waveform_coefficient():
     w2 = lj.Fourier(omega=2.0, lbar=3.0, cos=jnp.asarray([0.0, 0.1]), sin=jnp.asarray([0.2, float(b.lam[j])]))
     g = lj.steady_gait(p, waveform=w2, periods=int(b.k))
     assert abs(float(b.mean_speed[j]) / float(g.mean_speed) - 1) < 1e-8
-    assert abs(float(b.u[j]) - float(g.u)) < 1e-9
+    assert abs(float(b.state[j, 0]) - float(g.u)) < 1e-9
 
 
 def test_no_recompilation_and_parameter_leaving_its_range():
@@ -216,3 +216,46 @@ def test_no_recompilation_and_parameter_leaving_its_range():
 def test_bad_arguments(kwargs, match):
     with pytest.raises((ValueError, TypeError), match=match):
         lj.continuation(lj.Params(omega=2.0), **kwargs)
+
+
+# -- Every mechanism: a 3-mass chain with anisotropic friction on the same period map and corrector.
+
+
+def _worm(omega) -> lj.Chain:
+    """A 3-mass worm (travelling wave, d = 0) with anisotropic Coulomb friction: the pure-slip and
+    stick-slip gaits of `tests/test_chain_gait.py`'s anisotropic worms."""
+    omega = jnp.asarray(omega, float)
+    friction = lj.AnisotropicCoulomb(0.7, 0.9, 0.5, 0.7)
+    return lj.Chain(masses=np.ones(3), d=0.0, waveforms=lj.TravellingWave(0.05 + 0 * omega, omega, 2 * np.pi / 3),
+                    friction=friction)  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def worm_branch() -> tuple[lj.Chain, lj.Branch]:
+    """The worm continued in omega, 6 -> 6.6 and 12 -> 11.4 (a stick-slip and a pure-slip gait)."""
+    chain = _worm([6.0, 12.0])
+    return chain, lj.continuation(chain, "omega", jnp.asarray([6.6, 11.4]), max_points=6, step=0.25, max_step=0.5)
+
+
+def test_chain_points_are_steady_gaits(worm_branch):
+    """Points of a chain's branch are steady gaits: `steady_gait` of the chain at two points' omega
+    (a batch of two, the branch's compiled solver), started on the points' section states, converges
+    to the same orbits (state to 1e-9, speed, cost of transport and dissipation to 1e-8, multipliers
+    to 1e-8), with the same regimes."""
+    _, b = worm_branch
+    assert b.u is None and b.state.shape[-1] == 5 and b.stick_fraction.shape[-1] == 3
+    n = [int(q) for q in np.asarray(b.n_points)]
+    assert min(n) >= 3 and set(np.asarray(b.status).tolist()) <= {BranchStatus.REACHED, BranchStatus.MAX_POINTS}
+    for i, (start, stop) in enumerate(((6.0, 6.6), (12.0, 11.4))):
+        lam = np.asarray(b.lam[i, : n[i]])
+        assert lam[0] == start and np.all(np.diff(lam) * (stop - start) > 0), lam  # towards stop
+        assert (lam[-1] == stop) == (int(b.status[i]) == BranchStatus.REACHED)
+    rows = [(0, n[0] // 2), (1, n[1] - 1)]
+    pick = lambda x: np.stack([np.asarray(x[i, j]) for i, j in rows])
+    g = lj.steady_gait(_worm(pick(b.lam)), start=pick(b.state), periods=1, transient=0)
+    assert np.all(np.asarray(g.status) == GaitStatus.CONVERGED) and list(np.asarray(b.k)) == [1, 1]
+    np.testing.assert_allclose(np.asarray(g.state), pick(b.state), atol=1e-9)
+    for name in ("mean_speed", "cost_of_transport", "e_d", "slip_margin"):
+        np.testing.assert_allclose(np.asarray(getattr(g, name)), pick(getattr(b, name)), rtol=1e-8, err_msg=name)
+    np.testing.assert_allclose(np.abs(np.asarray(g.multipliers)), np.abs(pick(b.multipliers)), atol=1e-8)
+    np.testing.assert_array_equal(np.asarray(g.regime), pick(b.regime))

@@ -207,7 +207,7 @@ def test_compact_batch_for_the_longer_periods(monkeypatch):
     full = _gait._two_mass(p, *args)
     sizes: list[int] = []
     solve = _corrector.correct_batch
-    monkeypatch.setattr(_corrector, "correct_batch", lambda *a: sizes.append(int(a[9].shape[0])) or solve(*a))
+    monkeypatch.setattr(_corrector, "correct_batch", lambda *a: sizes.append(int(a[8].shape[0])) or solve(*a))
     small = _gait._two_mass(p, *args, compact=True)
     assert sizes[0] == 12 and set(sizes[1:]) == {3}, sizes  # period 1 on the batch, the others on 3 rows
     assert int(small.k[-1]) == 2 and bool(small.stable[-1]) and int(full.k[-1]) == 2

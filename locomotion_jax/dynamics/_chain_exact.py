@@ -90,7 +90,14 @@ class Hybrid(eqx.Module):
 
 
 class StepInfo(NamedTuple):
-    """What one iteration did (compare `_exact.StepInfo`); `stuck` is the mode during `[t0, t1]`."""
+    """What one iteration did (compare `_exact.StepInfo`); `stuck` is the mode during `[t0, t1]`.
+
+    For the steady gaits' switching test functions (`gaits._chain_gait`): `vel`, per mass, a slipping
+    mass whose velocity reached zero at `t0` (re-decided there); `hold`, per mass, its stick margin at
+    `t0` (eq. 7 generalised, $\\ge 0$ where the static limits hold); `h`, the step's full length;
+    `normal`, per body, the signed normal load $N_i$ with its first two time derivatives at `t0` and
+    at the full step's end, `(N0, dN0, ddN0, N1, dN1, ddN1)`. Unused by a measurement (XLA drops them).
+    """
 
     commit: Array
     t0: Array
@@ -102,6 +109,10 @@ class StepInfo(NamedTuple):
     target_fired: Array
     t_target: Array
     y_target: State
+    vel: Scalars
+    hold: list
+    h: Array
+    normal: tuple
 
 
 def init(
@@ -340,7 +351,9 @@ def step(
     # the fused multiply-adds of its consumers) for no measurable gain (benchmarks/NOTES.md).
     incr = k1.map(lambda a, b, c, d: (h / 6) * (a + 2 * (b + c) + d), k2, k3, k4)
     y1 = y0.map(lambda a, b: kp(a + b), incr)
-    D1 = motion.derivatives(P, contact, mode, target, dre, loads_at(P, dre, y1.x, y=y1.y), y1.x, y1.v, y1.y, y1.vy)
+    L1 = loads_at(P, dre, y1.x, y=y1.y)
+    D1_N = L1.N
+    D1 = motion.derivatives(P, contact, mode, target, dre, L1, y1.x, y1.v, y1.y, y1.vy)
 
     # -- first crossing: the earliest by the secant of each crossed function, located on its quintic.
     g0s, d0s, e0s, d1s, e1s = D0.g, D0.dg, D0.ddg, D1.dg, D1.ddg
@@ -444,6 +457,7 @@ def step(
     info = StepInfo(
         commit=commit, t0=t0, y0=y0, loads0=L0, t1=tc, y1=yc, stuck=stuck,
         target_fired=target_now | (commit & target_cut), t_target=jnp.where(target_now, t0, tc),
-        y_target=yc.map(lambda a, b: jnp.where(target_now, b, a), yA),
+        y_target=yc.map(lambda a, b: jnp.where(target_now, b, a), yA), vel=vel, hold=margin, h=h,
+        normal=(N0, D0.dN, D0.ddN, D1_N, D1.dN, D1.ddN),
     )  # fmt: skip
     return new, info

@@ -148,7 +148,7 @@ def rates(P: AbstractPhysics, contact: Contact, mode: Mode, dr: Any, y: State) -
 
 class Derivs(NamedTuple):
     """The state's rate and second time derivative; the events' values and first two time
-    derivatives; the loads' first time derivatives $\\dot F_i$, $\\dot N_i$."""
+    derivatives; the loads' first time derivatives $\\dot F_i$, $\\dot N_i$, and $\\ddot N_i$."""
 
     rate: State
     second: State
@@ -157,6 +157,7 @@ class Derivs(NamedTuple):
     ddg: list
     dF: Scalars
     dN: Scalars
+    ddN: Scalars
 
 
 def derivatives(
@@ -238,7 +239,7 @@ def derivatives(
         g.append(jnp.where(target.active, target.z - jnp.abs(rel), inf))
         dg.append(jnp.where(target.active, -sgn * P.centre_of_mass(xd), 0))
         ddg.append(jnp.where(target.active, -sgn * P.centre_of_mass(a), 0))
-    return Derivs(rate, second, g, dg, ddg, dF, dN)
+    return Derivs(rate, second, g, dg, ddg, dF, dN, ddN)
 
 
 def energy(P: AbstractPhysics, y: State, L: Loads) -> Array:

@@ -69,36 +69,39 @@ class BranchEvents(eqx.Module):
 
     - `kind`: [`EventKind`][]; `index`: the branch point before the event.
     - `lam`: the parameter at the event; `lam_error`: the width of the final bracket.
-    - `u, v1, v2`: the orbit there; `multipliers`: its Floquet multipliers `(m, 3)`.
+    - `state`: the orbit's section state there, `(m, S)`; `multipliers`: its Floquet multipliers `(m, S)`.
     - `value`: the test function there (near 0 for a smooth crossing).
     - `smooth`: the test function crossed zero continuously (False: it jumped across).
     - `located`: the root solve converged to `LAM_TOL` (`SWITCH` events are not located: `lam` is
       the middle of the two points and `lam_error` half their distance).
     - `turn`: the branch reverses its direction in $\\lambda$ across the event (at a switching
       event: a non-smooth fold, where two pieces of the branch meet at a corner).
+    - The paper's model only (else `None`): `u, v1, v2`, the columns of `state`.
     """
 
     kind: Array
     index: Array
     lam: Array
     lam_error: Array
-    u: Array
-    v1: Array
-    v2: Array
+    state: Array
     multipliers: Array
     value: Array
     smooth: Array
     located: Array
     turn: Array
+    u: Array | None = None
+    v1: Array | None = None
+    v2: Array | None = None
 
 
 def _functional(kind: int, r, contact: str) -> np.ndarray:
     """The test function of `kind` at the corrector's result `r` (NaN where it failed)."""
-    M = r.J[:, :3, :3]
+    S = r.z.shape[-1] - 1
+    M = r.J[:, :S, :S]
     if kind in (EventKind.FOLD, EventKind.BRANCH_POINT):
-        g = np.linalg.det(M - np.eye(3))
+        g = np.linalg.det(M - np.eye(S))
     elif kind == EventKind.PERIOD_DOUBLING:
-        g = np.linalg.det(M + np.eye(3))
+        g = np.linalg.det(M + np.eye(S))
     elif kind == EventKind.SSL_SL:
         g = r.out.margin
     else:
@@ -138,7 +141,7 @@ def _brackets(d: dict, status: np.ndarray, failed_at: np.ndarray) -> list[list[t
             if (dp[0] > 0) != (dp[1] > 0):
                 out[i].append(row(EventKind.PERIOD_DOUBLING, dp))
             if (dm[0] > 0) != (dm[1] > 0):
-                fold = (d["t"][i, j, 3] > 0) != (d["t"][i, j + 1, 3] > 0)
+                fold = (d["t"][i, j, -1] > 0) != (d["t"][i, j + 1, -1] > 0)
                 out[i].append(row(EventKind.FOLD if fold else EventKind.BRANCH_POINT, dm))
         if status[i] == 4 and n > 0:  # BranchStatus.LIFTOFF: the failed step is beyond the lift-off
             Jn = d["J"][i, n - 1]
@@ -156,9 +159,13 @@ def _surface(solve, rows: list[tuple | None], lam_tol: float) -> list[dict | Non
     too). `None` where it does not converge within the bracket (the caller then brackets)."""
     B = len(rows)
     go = np.array([r is not None for r in rows])
-    pad = (EventKind.SSL_SL, 0, np.zeros(4), np.ones(4), 1.0, -1.0, np.zeros((5, 4)), np.zeros((5, 4)))
+    if not go.any():
+        return [None] * B
+    S = _size(rows)
+    pad = (EventKind.SSL_SL, 0, np.zeros(S + 1), np.ones(S + 1), 1.0, -1.0, np.zeros((S + 2, S + 1)),
+           np.zeros((S + 2, S + 1)))  # fmt: skip
     kind, j, za, zb, ga, gb, Ja, Jb = (np.array(x) for x in zip(*[r if r is not None else pad for r in rows]))
-    row = np.where(kind == EventKind.SSL_SL, 3, 4)
+    row = np.where(kind == EventKind.SSL_SL, S, S + 1)
     first = (np.abs(ga) <= np.abs(np.where(np.isfinite(gb), gb, np.inf))) | ~np.all(np.isfinite(Jb), axis=(1, 2))
     z = np.where(first[:, None], za, zb)
     J = np.where(first[:, None, None], Ja, Jb)
@@ -177,32 +184,30 @@ def _surface(solve, rows: list[tuple | None], lam_tol: float) -> list[dict | Non
             zref = z - (g / np.where(norm > 0, norm, 1))[:, None] * c
         zref = np.where(active[:, None], zref, z)
         r = solve(zref, zref, c, active)
-        g_new = np.where(row == 3, r.out.margin, r.out.n_min)
+        g_new = np.where(row == S, r.out.margin, r.out.n_min)
         good = active & r.done & np.isfinite(g_new) & (np.linalg.norm(r.z - za, axis=-1) <= 2 * span)
         ok &= ~(active & ~good)
-        dlam = np.where(good, np.abs(solve.scale * (r.z[:, 3] - z[:, 3])), dlam)
+        dlam = np.where(good, np.abs(solve.scale * (r.z[:, S] - z[:, S])), dlam)
         z = np.where(good[:, None], r.z, z)
         J = np.where(good[:, None, None], r.J, J)
         g = np.where(good, g_new, g)
         grad = J[np.arange(B), row]
-        lam = solve.lam0 + solve.scale * z[:, 3]
+        lam = solve.lam0 + solve.scale * z[:, S]
         conv |= good & (dlam <= lam_tol * np.maximum(1, np.abs(lam))) & (np.abs(g) <= 1e-9)
     out: list[dict | None] = []
     for i in range(B):
         if not (go[i] and ok[i] and conv[i]):
             out.append(None)
             continue
-        M = J[i, :3, :3]
+        M = J[i, :S, :S]
         mult = np.linalg.eigvals(M)
         out.append(
             dict(
                 kind=int(kind[i]),
                 index=int(j[i]),
-                lam=float(solve.lam0[i] + solve.scale[i] * z[i, 3]),
+                lam=float(solve.lam0[i] + solve.scale[i] * z[i, S]),
                 lam_error=float(dlam[i]),
-                u=z[i, 0],
-                v1=z[i, 1],
-                v2=z[i, 2],
+                state=z[i, :S],
                 multipliers=mult[np.argsort(-np.abs(mult))],
                 value=float(abs(g[i])),
                 smooth=True,
@@ -216,7 +221,8 @@ def _locate(solve, rows: list[tuple | None], contact: str, lam_tol: float) -> li
     """Illinois regula falsi on the chord of each lane's bracket, all lanes per corrector call."""
     B = len(rows)
     go = np.array([r is not None for r in rows])
-    pad = (0, 0, np.zeros(4), np.ones(4), 1.0, -1.0, np.zeros((5, 4)), np.zeros((5, 4)))
+    S = _size(rows)
+    pad = (0, 0, np.zeros(S + 1), np.ones(S + 1), 1.0, -1.0, np.zeros((S + 2, S + 1)), np.zeros((S + 2, S + 1)))
     kind, j, za, zb, ga, gb, _, _ = (np.array(x) for x in zip(*[r if r is not None else pad for r in rows]))
     L = np.linalg.norm(zb - za, axis=-1)
     e = (zb - za) / np.where(L > 0, L, 1)[:, None]
@@ -224,10 +230,10 @@ def _locate(solve, rows: list[tuple | None], contact: str, lam_tol: float) -> li
     glo, ghi = ga.astype(float), gb.astype(float)
     last = np.zeros(B, int)  # which end the previous step replaced (Illinois)
     best_z = np.where((np.abs(ga) <= np.abs(gb))[:, None], za, zb)
-    best_J = np.full((B, 5, 4), np.nan)
+    best_J = np.full((B, S + 2, S + 1), np.nan)
     best_g = np.minimum(np.abs(ga), np.abs(gb))
-    width = lambda: np.abs(solve.scale * e[:, 3]) * (hi - lo)
-    lam_at = lambda zz: solve.lam0 + solve.scale * zz[:, 3]
+    width = lambda: np.abs(solve.scale * e[:, S]) * (hi - lo)
+    lam_at = lambda zz: solve.lam0 + solve.scale * zz[:, S]
     ok = go.copy()
     for _ in range(MAX_ITER):
         active = ok & (width() > lam_tol * np.maximum(1, np.abs(lam_at(best_z))))
@@ -265,17 +271,15 @@ def _locate(solve, rows: list[tuple | None], contact: str, lam_tol: float) -> li
         if rows[i] is None:
             out.append(None)
             continue
-        M = best_J[i, :3, :3]
-        mult = np.linalg.eigvals(M) if np.all(np.isfinite(M)) else np.full(3, np.nan + 0j)
+        M = best_J[i, :S, :S]
+        mult = np.linalg.eigvals(M) if np.all(np.isfinite(M)) else np.full(S, np.nan + 0j)
         out.append(
             dict(
                 kind=int(kind[i]),
                 index=int(j[i]),
                 lam=float(lam_at(best_z)[i]),
                 lam_error=float(width()[i]),
-                u=best_z[i, 0],
-                v1=best_z[i, 1],
-                v2=best_z[i, 2],
+                state=best_z[i, :S],
                 multipliers=mult[np.argsort(-np.abs(mult))],
                 value=float(best_g[i]),
                 smooth=bool(best_g[i] <= SMOOTH),
@@ -300,9 +304,11 @@ def kinds(locate: bool | Sequence[str]) -> frozenset[int]:
     return frozenset(codes[name] for name in locate)
 
 
-def find_events(d: dict, status: np.ndarray, failed_at: np.ndarray, solve, contact: str, locate: frozenset[int]):
+def find_events(d: dict, status: np.ndarray, failed_at: np.ndarray, solve, contact: str, locate: frozenset[int],
+                paper: bool = False):  # fmt: skip
     """The events of each branch (module docstring); those of the kinds `locate` located, all branches'
-    root solves advancing together."""
+    root solves advancing together. `paper`: also the paper's names `u, v1, v2` of the state."""
+    S = d["z"].shape[-1] - 1
     rows = _brackets(d, status, failed_at)
     B = len(rows)
     lam_tol = LAM_TOL if np.dtype(solve.dtype).itemsize == 8 else 1e-5
@@ -325,24 +331,27 @@ def find_events(d: dict, status: np.ndarray, failed_at: np.ndarray, solve, conta
         for x in branch:
             ev = done[i].get(id(x)) or _unlocated(x, solve, i)
             j = x[1]
-            t = d["t"][i, j : j + 2, 3]
+            t = d["t"][i, j : j + 2, -1]
             ev["turn"] = bool(j + 1 < d["count"][i] and (t[0] > 0) != (t[1] > 0))
             found[i].append(ev)
     m = max(1, max(len(f) for f in found))
-    fill = dict(kind=-1, index=-1, lam=np.nan, lam_error=np.nan, u=np.nan, v1=np.nan, v2=np.nan,
-                multipliers=np.full(3, np.nan + 0j), value=np.nan, smooth=False, located=False, turn=False)  # fmt: skip
+    fill = dict(kind=-1, index=-1, lam=np.nan, lam_error=np.nan, state=np.full(S, np.nan),
+                multipliers=np.full(S, np.nan + 0j), value=np.nan, smooth=False, located=False, turn=False)  # fmt: skip
     table = {key: [[(f[q] if q < len(f) else fill)[key] for q in range(m)] for f in found] for key in fill}
+    state = np.asarray(table["state"], float)
+    named = {name: jnp.asarray(state[..., i], solve.dtype) for i, name in enumerate(("u", "v1", "v2"))} if paper else {}
     return BranchEvents(
         kind=jnp.asarray(table["kind"], jnp.int32),
         index=jnp.asarray(table["index"], jnp.int32),
         **{
             key: jnp.asarray(np.asarray(table[key], float), solve.dtype)
-            for key in ("lam", "lam_error", "u", "v1", "v2", "value")
+            for key in ("lam", "lam_error", "state", "value")
         },
         multipliers=jnp.asarray(np.asarray(table["multipliers"])),
         smooth=jnp.asarray(table["smooth"], bool),
         located=jnp.asarray(table["located"], bool),
         turn=jnp.asarray(table["turn"], bool),
+        **named,
     )
 
 
@@ -352,7 +361,13 @@ def _unlocated(row: tuple, solve, i: int) -> dict:
     kind, j, za, zb, ga, gb, _, _ = row
     w = ga / (ga - gb) if np.isfinite(ga) and np.isfinite(gb) and ga != gb else 0.5
     z = za + w * (zb - za)
-    lam = solve.lam0[i] + solve.scale[i] * z[3]
-    err = abs(solve.scale[i] * (zb[3] - za[3])) * max(w, 1 - w)
-    return dict(kind=kind, index=j, lam=lam, lam_error=err, u=z[0], v1=z[1], v2=z[2],
-                multipliers=np.full(3, np.nan + 0j), value=np.nan, smooth=False, located=False)  # fmt: skip
+    lam = solve.lam0[i] + solve.scale[i] * z[-1]
+    S = len(z) - 1
+    err = abs(solve.scale[i] * (zb[S] - za[S])) * max(w, 1 - w)
+    return dict(kind=kind, index=j, lam=lam, lam_error=err, state=z[:S],
+                multipliers=np.full(S, np.nan + 0j), value=np.nan, smooth=False, located=False)  # fmt: skip
+
+
+def _size(rows: list[tuple | None]) -> int:
+    """The section state's length $S$ of the brackets `rows` (their points have $S + 1$ unknowns)."""
+    return next(len(r[2]) for r in rows if r is not None) - 1

@@ -32,7 +32,7 @@ import numpy as np
 
 from .._custom_types import Array, ArrayLike, Contact
 from .._status import Regime, Status
-from ..dynamics import _chain_exact as engine
+from ..dynamics import _chain_exact as engine, _numerics as num, _paper as paper
 from ..dynamics._compile import engine_jit
 from ..dynamics._exact_dynamics import Exact
 from ..dynamics._runs import chain_initial_state, default_max_steps, STICK_TOL
@@ -60,6 +60,9 @@ class ChainGait(eqx.Module):
       $(u_1, \\dots, u_{N-1}, v_1, \\dots, v_N)$ (a mechanism anchored to
       the wall: `batch + (2N,)`, $(x_1, \\dots, x_N, v_1, \\dots, v_N)$);
       `monodromy`: $M$ in that order, shape `batch + (2N - 1, 2N - 1)` (anchored: `(2N, 2N)`).
+    - `slip_margin`, `min_normal`: as in [`Gait`][], over every mass (the slip margin is the
+      smallest negated stick margin, $\\max(F_i - \\mu_{s,\\mathrm{fwd}} n_i, -F_i - \\mu_{s,\\mathrm{bwd}} n_i)$,
+      where a slipping mass's velocity reaches zero; the normal loads are the signed $N_i$).
     """
 
     status: Array
@@ -80,11 +83,14 @@ class ChainGait(eqx.Module):
     residual: Array
     n_iter: Array
     liftoff: Array
+    slip_margin: Array
+    min_normal: Array
     contact: str = eqx.field(static=True)
 
 
 class _Period(NamedTuple):
-    """One application of the period map: the end state and what the period accumulated."""
+    """One application of the period map: the end state and what the period accumulated (the
+    slip margin and the smallest normal force: [`Gait`][]`.slip_margin`, `.min_normal`)."""
 
     y: Array
     dX: Array
@@ -94,6 +100,8 @@ class _Period(NamedTuple):
     n_switch: Array
     status: Array
     lifted: Array
+    margin: Array
+    n_min: Array
 
 
 def anchored(P: AbstractPhysics) -> bool:
@@ -139,104 +147,180 @@ def _section_state(P: AbstractPhysics, contact: Contact, y: Array) -> engine.Hyb
     return engine.init(P, contact, _positions(P, y), y[base - n : base], h, w)
 
 
+def _range(q: tuple, h: Array, t0: Array, t1: Array) -> tuple[Array, Array]:
+    """Smallest and largest value over a committed step `[t0, t1]` of a quantity given by its value
+    and first two time derivatives at the step's start and at the full step's end (`q`, length `h`),
+    on their quintic Hermite interpolant (an interior extremum polished by Newton's method)."""
+    g0, d0, e0, g1, d1, e1 = q
+    c = num.quintic(g0, h * d0, h * h * e0, g1, h * d1, h * h * e1)
+    end = jnp.clip((t1 - t0) / jnp.where(h > 0, h, 1), 0, 1)
+    p = lambda th: c[0] + th * (c[1] + th * (c[2] + th * (c[3] + th * (c[4] + th * c[5]))))
+    dp = lambda th: c[1] + th * (2 * c[2] + th * (3 * c[3] + th * (4 * c[4] + th * 5 * c[5])))
+    ddp = lambda th: 2 * c[2] + th * (6 * c[3] + th * (12 * c[4] + th * 20 * c[5]))
+    pe = p(end)
+    lo, hi = jnp.minimum(g0, pe), jnp.maximum(g0, pe)
+    dp0, dpe = c[1], dp(end)
+    inside = dp0 * dpe < 0
+    th = end * dp0 / jnp.where(inside, dp0 - dpe, 1)
+    for _ in range(3):
+        curv = ddp(th)
+        th = jnp.clip(th - dp(th) / jnp.where(curv != 0, curv, 1), 0, end)
+    pm = p(th)
+    return jnp.where(inside, jnp.minimum(lo, pm), lo), jnp.where(inside, jnp.maximum(hi, pm), hi)
+
+
+class _Acc(NamedTuple):
+    """What `_advance` accumulates besides the state."""
+
+    stuck: tuple  # time each mass was stuck
+    margin: Array  # smallest -(stick margin) at a slipping mass's velocity zero (inf: none)
+    n_min: Array  # smallest normal load over the committed steps
+    slid: tuple  # whether each mass slipped at all
+
+
 def _step(P, contact, dt, st, t_end):
     """One engine step (under `contact="hop"` with the physics' restitution and Zeno speed)."""
     return engine.step(P, contact, dt, st, t_end, hop=P.hop()[2:] if contact == "hop" else None)
 
 
 def _advance(P, contact, dt, st, t_end, max_steps):
-    """Integrate to `t_end` (or a strict lift-off, or the step cap); also the time each mass was stuck."""
+    """Integrate to `t_end` (or a strict lift-off, or the step cap); also what [`_Acc`][] holds."""
+    inf = jnp.asarray(jnp.inf, st.t.dtype)
 
     def cond(c):
         s, _, n = c
         return (s.t < t_end) & (s.status == Status.OK) & (n < max_steps)
 
     def body(c):
-        s, stuck, n = c
+        s, a, n = c
         new, info = _step(P, contact, dt, s, t_end)
         span = jnp.where(info.commit, info.t1 - info.t0, 0)
-        return new, tuple(a + jnp.where(b, span, 0) for a, b in zip(stuck, info.stuck)), n + 1
+        # eq. (7) generalised: a slipping mass whose velocity reached zero sticks where its stick
+        # margin is >= 0; the slip margin is its negative ($|F_i| - \\mu_s n_i$ for Coulomb friction).
+        margin = a.margin
+        for zero, hold in zip(info.vel, info.hold):
+            margin = jnp.minimum(margin, jnp.where(info.commit & zero, -hold, inf))
+        low = inf
+        for q in zip(*info.normal):
+            low = jnp.minimum(low, _range(q, info.h, info.t0, info.t1)[0])
+        a = _Acc(
+            stuck=tuple(q + jnp.where(b, span, 0) for q, b in zip(a.stuck, info.stuck)),
+            margin=margin,
+            n_min=jnp.minimum(a.n_min, jnp.where(info.commit, low, inf)),
+            slid=tuple(q | (~b & (span > 0)) for q, b in zip(a.slid, info.stuck)),
+        )
+        return new, a, n + 1
 
     zero = tuple(jnp.zeros_like(a) for a in st.y.x)
-    st, stuck, _ = jax.lax.while_loop(cond, body, (st, zero, jnp.zeros((), jnp.int32)))
-    return st, jnp.stack(stuck)
+    init = _Acc(zero, inf, inf, tuple(jnp.zeros(jnp.shape(a), bool) for a in st.y.x))
+    st, acc, _ = jax.lax.while_loop(cond, body, (st, init, jnp.zeros((), jnp.int32)))
+    return st, acc
 
 
-def _period_map(P, contact, dt, max_steps, k, y) -> _Period:
-    """$\\Phi_k(y)$ and what the $k$ periods accumulate."""
+def period_map(P, contact, dt, max_steps, k, y) -> _Period:
+    """$\\Phi_k(y)$ and what the $k$ periods accumulate ([`_Period`][]).
+
+    A normal load that dips below zero between two step ends (a grazing excursion shorter than
+    the step, which the engine does not locate) still counts: under the strict reading such a
+    period ends with `Status.LIFTOFF` like a located one, so that lift-off does not depend on the
+    step."""
     t_end = k * (2 * jnp.pi) / P.omega
     st0 = _section_state(P, contact, y)
-    st, stuck = _advance(P, contact, dt, st0, t_end, max_steps)
+    st, a = _advance(P, contact, dt, st0, t_end, max_steps)
     ok = (st.status == Status.OK) & (st.t >= t_end)
     status = jnp.where(ok, Status.OK, jnp.where(st.status == Status.OK, Status.MAX_STEPS, st.status))
+    lifted = jnp.isfinite(st.t_liftoff)
+    if contact == "strict":
+        status = jnp.where(a.n_min < 0, Status.LIFTOFF, status)
+    if contact != "hop":
+        lifted = lifted | (a.n_min < 0)
+    slid = a.slid[0]
+    for q in a.slid[1:]:
+        slid = slid & q
     return _Period(
         y=_reduced(st, P),
         dX=P.centre_of_mass(st.y.x) - P.centre_of_mass(st0.y.x),
         ed=st.y.ed,
         w=st.y.w,
-        stuck=stuck,
+        stuck=jnp.stack(a.stuck),
         n_switch=st.n_switch,
         status=status.astype(jnp.int32),
-        lifted=jnp.isfinite(st.t_liftoff),
+        lifted=lifted,
+        # A mass that never slips is stuck throughout: a stick interval without a velocity zero.
+        margin=jnp.where(slid, a.margin, -jnp.inf),
+        n_min=a.n_min,
     )
 
 
-def _transient_batch(C, valid, contact, start, dt, transient, max_steps, y_start=None):
+def mechanism_physics(c) -> tuple[AbstractPhysics, Array]:
+    """`(physics, valid)` of one configuration of a mechanism of the N-body path (a [`Chain`][], a
+    [`Mechanism`][locomotion_jax.Mechanism])."""
+    return c.physics(), c.is_valid()
+
+
+def paper_physics(c) -> tuple[AbstractPhysics, Array]:
+    """`(physics, valid)` of one configuration `(params, waveform)` of the paper's model: the
+    two-mass chain ([`Params.physics`][locomotion_jax.Params.physics]) of its parameters, an
+    invalid set replaced by the defaults (`safe_params`), and their validity."""
+    _, P, valid = paper.physics(*c)
+    return P, valid
+
+
+def _transient_batch(C, physics_of, valid, contact, start, dt, transient, max_steps, y_start=None):
     """The reduced states after `transient` actuation periods from the start at rest `start`, or
-    from the section states `y_start` (flat, `(n, 2N - 1)`) where given."""
+    from the section states `y_start` (flat, `(n, 2N - 1)`) where given; each configuration of
+    the flat batch `C` has the physics `physics_of(c)`."""
 
     def one(c, ok, y):
-        P = c.physics()
+        P, ok_c = physics_of(c)
         row = None if y is None else jnp.concatenate([_positions(P, y), y[y.shape[-1] - P.n_bodies :]])
-        st = chain_initial_state(P, ok, contact, start, row)
+        st = chain_initial_state(P, ok & ok_c, contact, start, row)
         st, _ = _advance(P, contact, dt, st, transient * (2 * jnp.pi) / P.omega, max_steps)
         return _reduced(st, P), st.status, jnp.isfinite(st.t_liftoff)
 
     return jax.vmap(one)(C, valid, y_start)
 
 
-_transient_batch = engine_jit(_transient_batch, ("contact", "start", "dt"))
+_transient_batch = engine_jit(_transient_batch, ("physics_of", "contact", "start", "dt"))
 
 
-def _solve_batch(C, contact, dt, k, y0, go, tol, max_iter, max_steps):
-    """Newton's method on $\\Phi_k(y) = y$ from `y0` where `go` (elsewhere nothing is integrated)."""
-
-    def one(c, y_start, g):
-        P = c.physics()
-        kk = jnp.where(g, k, 0)
-        eye = jnp.eye(y_start.shape[0], dtype=y_start.dtype)
-
-        def phi(y):
-            out = _period_map(P, contact, dt, max_steps, kk, y)
-            return out.y, out
-
-        def evaluate(y):
-            J, out = jax.jacfwd(phi, has_aux=True)(y)
-            bad = (out.status != Status.OK) | ~jnp.all(jnp.isfinite(y)) | ~jnp.all(jnp.isfinite(J))
-            return J, out, bad
-
-        def small(y, out):
-            return jnp.max(jnp.abs(out.y - y)) <= tol * (1 + jnp.max(jnp.abs(y)))
-
-        def cond(s):
-            _, _, _, it, done, failed = s
-            return ~done & ~failed & (it < max_iter)
-
-        def body(s):
-            y, J, out, it, _, _ = s
-            y1 = y - jnp.linalg.solve(J - eye, out.y - y)
-            J1, out1, bad = evaluate(y1)
-            return y1, J1, out1, it + 1, small(y1, out1) & ~bad, bad
-
-        J0, out0, bad0 = evaluate(y_start)
-        init = (y_start, J0, out0, jnp.zeros((), jnp.int32), g & small(y_start, out0) & ~bad0, ~g | bad0)
-        y, J, out, it, done, _ = jax.lax.while_loop(cond, body, init)
-        return y, J, out, it, done & g
-
-    return jax.vmap(one)(C, y0, go)
+COMPACT = 4
+"""`solve(compact=True)`: a gait period tried on at most `1 / COMPACT` of the batch (fewer than
+that many configurations still open) runs on a batch of that size."""
 
 
-_solve_batch = engine_jit(_solve_batch, ("contact", "dt"))
+def newton(C, physics_of, contact, dt, y0, go, k, tol, max_iter, max_steps, compact: bool = False) -> dict:
+    """Newton's method on $\\Phi_k(y) = y$ from `y0` where `go`: the continuation's corrector
+    ([`_corrector`][]) with the parameter held (no parameter selected, arclength scale 0).
+
+    The batch runs in lockstep (every row costs what the slowest one does), so with `compact`
+    the rows to solve, when fewer than `B // COMPACT`, are gathered into a batch of
+    `B // COMPACT` rows (one more compiled program per batch size; each row's result is the
+    same, the rows being independent) and the rest take a padding row's unsolved result."""
+    from . import _corrector as corrector
+
+    B, n = y0.shape
+    go_rows = np.flatnonzero(np.asarray(go))
+    part = B // COMPACT
+    if compact and 0 < go_rows.size < part:
+        m = go_rows.size
+        rows = np.concatenate([go_rows, np.full(part - m, go_rows[0])])
+        sub = newton(jax.tree_util.tree_map(lambda x: x[rows], C), physics_of, contact, dt, jnp.asarray(y0)[rows],
+                     jnp.asarray(np.arange(part) < m), k, tol, max_iter, max_steps)  # fmt: skip
+        back = np.full(B, part - 1)  # a padding row: not solved (`done` False)
+        back[go_rows] = np.arange(m)
+        return jax.tree_util.tree_map(lambda x: x[back] if np.ndim(x) else x, sub)
+    dtype = y0.dtype
+    z0 = jnp.concatenate([jnp.asarray(y0, dtype), jnp.zeros((B, 1), dtype)], axis=1)
+    c = jnp.zeros((B, n + 1), dtype).at[:, n].set(1)
+    zero = jnp.zeros((B,), dtype)
+    sel = corrector.no_selection(C)
+    r = corrector.correct_batch(C, physics_of, sel, contact, dt, jnp.full((B,), k, dtype), zero, zero, z0, z0, c,
+                                jnp.asarray(go), jnp.asarray(tol, dtype), jnp.asarray(max_iter, jnp.int32),
+                                jnp.asarray(max_steps, jnp.int32))  # fmt: skip
+    r = jax.tree_util.tree_map(np.asarray, r)
+    y = r.z[:, :n]
+    return dict(y=y, M=r.J[:, :n, :n], out=r.out, it=r.it, done=r.done, residual=np.max(np.abs(r.out.y - y), axis=1))
 
 
 def steady_gait_chain(
@@ -250,6 +334,7 @@ def steady_gait_chain(
     contact: str = "strict",
     start: str | ArrayLike = "paper",
     dtype: Any = None,
+    say=lambda message: None,
 ) -> ChainGait:
     """[`steady_gait`][] for a [`Chain`][] or a [`Mechanism`][locomotion_jax.Mechanism] (its
     arguments; `start` names a start at rest (a mechanism: its own `x0`, `v0`), or gives section
@@ -279,17 +364,33 @@ def steady_gait_chain(
             )
         y_start = jnp.asarray(y.reshape(-1, n_red), flat.m.dtype)
         start = "paper"
-    valid = valid & jnp.asarray(select.periodic(np.asarray(flat.omega, np.float64), shape))
-    dtype_ = flat.m.dtype
+    best = solve(flat, mechanism_physics, valid, unresolved, shape, np.asarray(flat.omega, np.float64), periods=periods,
+                 transient=transient, tol=tol, max_iter=max_iter, dynamics=dynamics, contact=contact, start=start,
+                 y_start=y_start, say=say)  # fmt: skip
+    return unflatten(_chain_gait(best, best["omega"], flat.m.dtype, contact), shape)
+
+
+def solve(C, physics_of, valid, unresolved, shape, omega, *, periods, transient, tol, max_iter, dynamics: Exact,
+          contact, start, y_start=None, say=lambda message: None, compact: bool = False) -> dict:  # fmt: skip
+    """The steady gaits of the flat batch `C` of configurations (physics `physics_of(c)`; `valid`,
+    the resolution guard's `unresolved` mask or `None`, batch `shape`, forcing frequencies `omega`):
+    the transient, then Newton's method for each gait period in turn ([`steady_gait`][]). Returns the
+    host results of [`_select.judge`][] of the best period per configuration, and `omega`.
+    `compact`: see [`newton`][]; `say` reports each stage (`steady_gait(verbose=True)`)."""
+    omega = np.broadcast_to(omega, valid.shape)
+    valid = valid & jnp.asarray(select.periodic(omega, shape))
+    dtype_ = jax.tree_util.tree_leaves(C)[0].dtype
     f32 = jnp.finfo(dtype_).bits < 64
     tol = (1e-5 if f32 else 1e-11) if tol is None else float(tol)
     ks = select.check(periods, transient, tol, max_iter)
-    omega = np.asarray(flat.omega, np.float64)
     T_max = float(np.max(2 * np.pi / omega[np.isfinite(omega) & (omega > 0)], initial=1.0))
     real = lambda v: jnp.asarray(v, dtype_)
     mst = jnp.asarray(dynamics.max_steps or default_max_steps(transient * T_max, dynamics.dt), jnp.int32)
-    y0, trans, trans_lift = _transient_batch(flat, valid, contact, start, dynamics.dt, real(transient), mst, y_start)
+    say(f"transient: {transient} periods")
+    y0, trans, trans_lift = _transient_batch(C, physics_of, valid, contact, start, dynamics.dt, real(transient), mst,
+                                             y_start)  # fmt: skip
     trans = np.asarray(trans)
+    # -1: to be solved; else the final status (invalid, a strict lift-off, a collision, the step cap).
     base = np.select(
         [trans == Status.INVALID, trans == Status.LIFTOFF, trans == Status.COLLISION, trans != Status.OK],
         [GaitStatus.INVALID, GaitStatus.LIFTOFF, GaitStatus.COLLISION, GaitStatus.NOT_CONVERGED],
@@ -298,19 +399,16 @@ def steady_gait_chain(
     base = select.unresolved(base, unresolved)
     best = None
     for k in ks:
-        msp = jnp.asarray(dynamics.max_steps or default_max_steps(k * T_max, dynamics.dt), jnp.int32)
-        go = jnp.asarray((base < 0) & (True if best is None else select.still_open(best)))
-        y, M, out, it, done = jax.tree_util.tree_map(
-            np.asarray,
-            _solve_batch(flat, contact, dynamics.dt, real(k), y0, go, real(tol), jnp.asarray(max_iter, jnp.int32), msp),
-        )
-        r = dict(y=y, M=M, out=out, it=it, done=done, residual=np.max(np.abs(out.y - y), axis=1))
-        r = select.judge(r, base, k, (base != GaitStatus.INVALID) & (np.asarray(trans_lift) | out.lifted))
+        msp = dynamics.max_steps or default_max_steps(k * T_max, dynamics.dt)
+        go = (base < 0) & (True if best is None else select.still_open(best))
+        say(f"gait period {k}: Newton on {int(np.sum(go))} configuration(s)")
+        r = newton(C, physics_of, contact, dynamics.dt, y0, go, k, tol, max_iter, msp, compact)
+        r = select.judge(r, base, k, (base != GaitStatus.INVALID) & (np.asarray(trans_lift) | r["out"].lifted))
         best = select.better(best, r)
         if not np.any(select.still_open(best)):
             break
     assert best is not None
-    return unflatten(_chain_gait(best, omega, dtype_, contact), shape)
+    return dict(best, omega=omega)
 
 
 def _chain_gait(r: dict, omega: np.ndarray, dtype: Any, contact: str) -> ChainGait:
@@ -339,5 +437,7 @@ def _chain_gait(r: dict, omega: np.ndarray, dtype: Any, contact: str) -> ChainGa
         residual=jnp.asarray(r["residual"], dtype),
         n_iter=jnp.asarray(r["it"]),
         liftoff=jnp.asarray(r["lifted"]),
+        slip_margin=nan(out.margin),
+        min_normal=nan(out.n_min),
         contact=contact,
     )

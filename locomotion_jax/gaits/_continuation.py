@@ -1,7 +1,8 @@
 """Continuation of steady gaits along one parameter (pseudo-arclength on the period map).
 
 A steady gait of period $kT$ is a fixed point of $\\Phi_k(\\,\\cdot\\,; \\lambda)$ ([`steady_gait`][]). As the
-parameter $\\lambda$ varies, the fixed points form a curve in $(u, v_1, v_2, \\lambda)$; it is followed
+parameter $\\lambda$ varies, the fixed points form a curve in $(y, \\lambda)$ (the section state $y$:
+$(u, v_1, v_2)$ for the paper's model, a chain's gaps and velocities); it is followed
 by pseudo-arclength continuation, which passes folds: from a point $z$ with unit tangent $t$ the
 predictor is $z + h\\,t$, and the corrector ([`_corrector`][]) solves the fixed point on the
 hyperplane through it normal to $t$. The new tangent is the null vector of
@@ -10,7 +11,9 @@ after quick corrections and halves after a failed or too distant one, or a turn 
 more than `MAX_TURN`. Arclength is measured with $\\lambda$ in units of the range
 $|\\lambda_\\text{stop} - \\lambda_\\text{start}|$.
 
-Every configuration of the batch is a branch; all of them advance together, one batched corrector
+The period map and the corrector are the same for every mechanism (the N-body engine; [`_corrector`][]):
+[`Params`][], a [`Chain`][] or a [`Mechanism`][locomotion_jax.Mechanism]. Every configuration of the
+batch is a branch; all of them advance together, one batched corrector
 call per step (one compilation for the whole continuation), and each ends on its own
 ([`BranchStatus`][]). Along each branch, [`_bifurcation`][] then finds and locates folds, period
 doublings, and the changes of switching structure (SSL/SL, lift-off).
@@ -18,7 +21,7 @@ doublings, and the changes of switching structure (SSL/SL, lift-off).
 
 import math
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import equinox as eqx
 import jax
@@ -30,13 +33,15 @@ from .._status import Regime, Status
 from ..dynamics._base import AbstractDynamics
 from ..dynamics._exact_dynamics import Exact
 from ..dynamics._runs import default_max_steps, STICK_TOL
+from ..model._bodies import Mechanism
+from ..model._chain import Chain
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform
-from ..run._batch import prepare
-from ..run._resolution import guard_two_mass
-from . import _corrector as corrector, _progress as progress
+from ..run._batch import mechanism_arg, prepare, prepare_chain
+from ..run._resolution import guard_chain, guard_two_mass
+from . import _chain_gait as chain_gait, _corrector as corrector, _progress as progress
 from ._bifurcation import BranchEvents, find_events, kinds
-from ._gait import GaitStatus, steady_gait
+from ._gait import configs, GaitStatus, steady_gait
 
 
 MAX_TURN = 0.5
@@ -75,11 +80,12 @@ class Branch(eqx.Module):
     """Branches of steady gaits, one per configuration; per point, arrays of shape `batch + (n,)`
     with NaN (or the sentinels below) past each branch's `n_points`.
 
-    - `lam`: the parameter; `u, v1, v2`: the orbit's section state (as in [`Gait`][]).
-    - `mean_speed`, `cost_of_transport`, `e_d`, `work`, `stick_fraction1`, `stick_fraction2`,
-      `n_switch`, `slip_margin`, `min_normal`: as in [`Gait`][], of each point's orbit; `regime`:
+    - `lam`: the parameter; `state`: the orbit's section state, `batch + (n, S)` (as [`Gait`][]'s
+      `(u, v1, v2)` for the paper's model, `ChainGait.state` for a chain or a mechanism).
+    - `mean_speed`, `cost_of_transport`, `e_d`, `work`, `n_switch`, `slip_margin`, `min_normal`: as in
+      [`Gait`][], of each point's orbit; `stick_fraction`: per mass, `batch + (n, N)`; `regime`:
       [`Regime`][] (UNDETERMINED past the end).
-    - `multipliers`: Floquet multipliers, `batch + (n, 3)`, by decreasing modulus; `stable`: all inside
+    - `multipliers`: Floquet multipliers, `batch + (n, S)`, by decreasing modulus; `stable`: all inside
       the unit circle.
     - `liftoff`: a normal force of the orbit reaches zero (`min_normal <= 0`; paper reading).
     - `tangent`: $d\\lambda/ds$ of the unit tangent (sign change: a fold).
@@ -88,18 +94,17 @@ class Branch(eqx.Module):
     - `n_points`, `status` ([`BranchStatus`][]), `k` (the gait period followed, in actuation
       periods), `start_status` (the start's [`GaitStatus`][]): per branch.
     - `events`: [`BranchEvents`][], the located bifurcations and switching changes.
+    - The paper's model only (else `None`): `u`, `v1`, `v2` (the columns of `state`) and
+      `stick_fraction1`, `stick_fraction2` (those of `stick_fraction`).
     """
 
     lam: Array
-    u: Array
-    v1: Array
-    v2: Array
+    state: Array
     mean_speed: Array
     cost_of_transport: Array
     e_d: Array
     work: Array
-    stick_fraction1: Array
-    stick_fraction2: Array
+    stick_fraction: Array
     regime: Array
     n_switch: Array
     slip_margin: Array
@@ -117,20 +122,25 @@ class Branch(eqx.Module):
     events: BranchEvents
     parameter: str = eqx.field(static=True)
     contact: str = eqx.field(static=True)
+    u: Array | None = None
+    v1: Array | None = None
+    v2: Array | None = None
+    stick_fraction1: Array | None = None
+    stick_fraction2: Array | None = None
 
 
 class Solver:
     """The batched corrector with everything but the unknowns fixed; calls return numpy arrays."""
 
-    def __init__(self, flat, wave, axes, spec, contact, dt, k, lam0, scale, tol, max_iter, max_steps):
-        self.args = (flat, wave, axes, corrector.selector(spec, wave), contact, dt)
-        dtype = flat.dtype
+    def __init__(self, C, physics_of, sel, contact, dt, k, lam0, scale, tol, max_iter, max_steps, omega, sets_omega):
+        self.args = (C, physics_of, sel, contact, dt)
+        dtype = jax.tree_util.tree_leaves(C)[0].dtype
         self.dtype = dtype
         self.const = tuple(jnp.asarray(x, dtype) for x in (lam0, scale))
         self.k = jnp.asarray(k, dtype)
         self.opts = (jnp.asarray(tol, dtype), jnp.asarray(max_iter, jnp.int32), jnp.asarray(max_steps, jnp.int32))
-        self.lam0, self.scale, self.spec = np.asarray(lam0), np.asarray(scale), spec
-        self.omega = np.broadcast_to(np.asarray(wave.omega, np.float64), np.shape(lam0))
+        self.lam0, self.scale, self.sets_omega = np.asarray(lam0), np.asarray(scale), sets_omega
+        self.omega = np.broadcast_to(np.asarray(omega, np.float64), np.shape(lam0))
 
     def __call__(self, z0, zref, c, go, max_iter: int | None = None) -> corrector.Solved:
         arr = lambda x: jnp.asarray(x, self.dtype)
@@ -144,15 +154,16 @@ class Solver:
 
     def period(self, zeta, k):
         """The gait period $kT$ at `zeta` (shape `(B, n)`)."""
-        omega = self.lam(zeta.T).T if self.spec.name == "omega" else self.omega[:, None] + 0 * zeta
+        omega = self.lam(zeta.T).T if self.sets_omega else self.omega[:, None] + 0 * zeta
         return k[:, None] * 2 * np.pi / omega
 
 
 def tangent(J: np.ndarray, prev: np.ndarray) -> np.ndarray:
     """Unit null vectors of $[M - I, \\partial\\Phi/\\partial\\zeta]$ (the last right singular
     vector), oriented along `prev`; NaN where the Jacobian is not finite."""
-    A = J[:, :3].copy()
-    A[:, :, :3] -= np.eye(3)
+    n = J.shape[-1] - 1
+    A = J[:, :n].copy()
+    A[:, :, :n] -= np.eye(n)
     bad = ~np.all(np.isfinite(A), axis=(1, 2))
     A[bad] = 0
     t = np.linalg.svd(A)[2][:, -1]
@@ -161,8 +172,59 @@ def tangent(J: np.ndarray, prev: np.ndarray) -> np.ndarray:
     return t
 
 
+class _Setup(NamedTuple):
+    """A mechanism's configurations for the corrector (`_corrector`)."""
+
+    C: Any
+    physics_of: Any
+    sel: Any
+    shape: tuple
+    label: str
+    far: np.ndarray  # the configuration at `stop` is not resolved
+    omega: np.ndarray
+    sets_omega: bool
+    paper: bool
+
+
+def _paper_setup(params: Params, parameter, stops_of, dynamics, waveform, dtype) -> _Setup:
+    spec = corrector.parse(parameter, waveform)
+    flat, wave, axes, shape = prepare(params, waveform, dtype)
+    C = configs(flat, wave, axes)
+    sel = corrector.paper_selector(spec, C)
+    B = math.prod(shape)
+    stops = stops_of(shape, corrector.value(C, sel, parameter))
+    # The far end of the range must be resolved too (the start is checked by `steady_gait`).
+    # (A Fourier coefficient sets no time scale: the forcing's harmonics are counted, not weighed.)
+    far = None
+    if spec.harmonic < 0:
+        end, end_wave = jax.vmap(lambda c, lam: corrector.with_value(c, sel, lam))(C, jnp.asarray(stops, flat.dtype))
+        _, far = guard_two_mass(dynamics, end, end_wave, shape)
+    omega = np.broadcast_to(np.asarray(wave.omega, np.float64), (B,))
+    return _Setup(C, chain_gait.paper_physics, sel, shape, spec.label, _mask(far, B), omega,
+                  spec.name == "omega" and spec.harmonic < 0, True)  # fmt: skip
+
+
+def _mechanism_setup(mech, parameter, stops_of, dynamics, waveform, dtype) -> _Setup:
+    if waveform is not None:
+        raise ValueError(f"waveform= applies to Params; a {type(mech).__name__} carries its own waveforms.")
+    flat, valid, shape = prepare_chain(mech, dtype)
+    sel = corrector.parse_leaf(parameter, flat, type(mech).__name__)
+    stops = stops_of(shape, corrector.value(flat, sel, parameter))
+    end = jax.vmap(lambda c, lam: corrector.with_value(c, sel, lam))(flat, jnp.asarray(stops, flat.m.dtype))
+    _, far = guard_chain(dynamics, end, valid & end.is_valid(), shape)
+    B = math.prod(shape)
+    omega = np.broadcast_to(np.asarray(flat.omega, np.float64), (B,))
+    sets_omega = any(bool(np.any(np.asarray(m))) and corrector._leaf_names(p).endswith(".omega")
+                     for p, m in jax.tree_util.tree_flatten_with_path(sel)[0])  # fmt: skip
+    return _Setup(flat, chain_gait.mechanism_physics, sel, shape, parameter, _mask(far, B), omega, sets_omega, False)
+
+
+def _mask(far, B: int) -> np.ndarray:
+    return np.zeros(B, bool) if far is None else np.asarray(far).reshape(B)
+
+
 def continuation(
-    params: Params,
+    params: Params | Chain | Mechanism,
     parameter: str,
     stop: float | Sequence[float] | np.ndarray | Array,
     *,
@@ -190,9 +252,12 @@ def continuation(
 
     **Arguments:**
 
-    - `params`: [`Params`][] (any batch shape: one branch per configuration).
-    - `parameter`: a field of [`Params`][] (`"omega"`, `"a"`, `"d"`, `"mhat"`, `"mu_s"`, ...), or
-      `"cosN"`/`"sinN"`, the coefficient of harmonic `N` of a [`Fourier`][] `waveform`.
+    - `params`: [`Params`][], a [`Chain`][] or a [`Mechanism`][locomotion_jax.Mechanism] (any batch
+      shape: one branch per configuration).
+    - `parameter`: for [`Params`][], a field (`"omega"`, `"a"`, `"d"`, `"mhat"`, `"mu_s"`, ...), or
+      `"cosN"`/`"sinN"`, the coefficient of harmonic `N` of a [`Fourier`][] `waveform`; for a chain or a
+      mechanism, a leaf named by its attribute (`"omega"`, `"mu_s"`, `"c"`), every entry of it (they
+      must be equal at the start), or one entry with an index (`"m[1]"`, `"mu_s_fwd[0]"`).
     - `stop`: the parameter's end value (a number, or one per configuration).
     - `periods`: as in [`steady_gait`][], for the start.
     - `max_points`: points per branch, the start included.
@@ -218,50 +283,57 @@ def continuation(
     dynamics = Exact() if dynamics is None else dynamics
     if not isinstance(dynamics, Exact):
         raise TypeError(f"continuation needs Exact dynamics, got {type(dynamics).__name__}.")
-    spec = corrector.parse(parameter, waveform)
+    if contact == "hop":
+        raise NotImplementedError("continuation runs under contact='strict' or 'paper', not 'hop'.")
     _check(max_points, step, max_step, min_step, max_iter)
     to_locate = kinds(locate)
-    flat, wave, axes, shape = prepare(params, waveform, dtype)
+
+    def stops_of(shape, lam0):
+        B = math.prod(shape)
+        try:
+            stops = np.broadcast_to(np.asarray(stop, np.float64), shape).reshape(B)
+        except ValueError:
+            raise ValueError(f"stop must be a number or broadcast to the batch shape {shape}.") from None
+        if not np.all(np.isfinite(stops)) or np.any(stops == lam0):
+            raise ValueError(f"stop must be finite and differ from the start value of {parameter!r}, got {stop!r}.")
+        return stops
+
+    args = (parameter, stops_of, dynamics, waveform, dtype)
+    setup: _Setup = mechanism_arg(params).dispatch(two_mass=lambda p: _paper_setup(p, *args),
+                                                   chain=lambda c: _mechanism_setup(c, *args))  # fmt: skip
+    C, shape = setup.C, setup.shape
     B = math.prod(shape)
-    lam0 = np.broadcast_to(np.asarray(corrector.value(flat, wave, spec), np.float64), (B,))
-    try:
-        stops = np.broadcast_to(np.asarray(stop, np.float64), shape).reshape(B)
-    except ValueError:
-        raise ValueError(f"stop must be a number or broadcast to the batch shape {shape}.") from None
-    if not np.all(np.isfinite(stops)) or np.any(stops == lam0):
-        raise ValueError(f"stop must be finite and differ from the start value of {parameter!r}, got {stop!r}.")
-    f32 = jnp.finfo(flat.dtype).bits < 64
+    lam0 = corrector.value(C, setup.sel, parameter)
+    stops = stops_of(shape, lam0)
+    dtype_ = jax.tree_util.tree_leaves(C)[0].dtype
+    f32 = jnp.finfo(dtype_).bits < 64
     tol = (1e-5 if f32 else 1e-11) if tol is None else float(tol)
 
     say = progress.reporter(verbose, "continuation")
     say(f"{B} branch(es) in {parameter!r}: the start gaits first")
-    # The far end of the range must be resolved too (the start is checked by `steady_gait`).
-    # (A Fourier coefficient sets no time scale: the forcing's harmonics are counted, not weighed.)
-    far = None
-    if spec.harmonic < 0:
-        lam = jnp.asarray(stops, flat.dtype)
-        end, end_wave = corrector.with_value(flat, wave, corrector.selector(spec, wave), lam)
-        _, far = guard_two_mass(dynamics, end, end_wave, shape)
-    far = np.zeros(B, bool) if far is None else np.asarray(far)
     g = steady_gait(params, periods=periods, transient=transient, tol=tol, dynamics=dynamics,
                     waveform=waveform, contact=contact, start=start, dtype=dtype, verbose=verbose)  # fmt: skip
     fl = lambda x: np.asarray(x).reshape(B, *np.shape(x)[len(shape) :])
-    unresolved = far | (fl(g.status) == GaitStatus.UNRESOLVED)
+    unresolved = setup.far | (fl(g.status) == GaitStatus.UNRESOLVED)
     ok = fl(g.converged) & ~unresolved
     k = np.where(ok, fl(g.k), 1)
     scale = stops - lam0
-    omega = np.broadcast_to(np.asarray(wave.omega, np.float64), (B,))
-    if spec.name == "omega":
+    omega = setup.omega
+    if setup.sets_omega:
         omega = np.minimum(lam0, stops)
     omega_min = float(np.min(omega[ok & (omega > 0)], initial=np.inf))
     T_max = 2 * np.pi / omega_min if np.isfinite(omega_min) else 1.0
     max_steps = dynamics.max_steps or default_max_steps(float(np.max(k)) * T_max, dynamics.dt)
-    solve = Solver(flat, wave, axes, spec, contact, dynamics.dt, k, lam0, scale, tol, max_iter, max_steps)
+    solve = Solver(C, setup.physics_of, setup.sel, contact, dynamics.dt, k, lam0, scale, tol, max_iter, max_steps,
+                   setup.omega, setup.sets_omega)  # fmt: skip
 
-    z = np.stack([fl(g.u), fl(g.v1), fl(g.v2), np.zeros(B)], axis=-1)
+    y = fl(g.state)
+    n = y.shape[-1]
+    z = np.concatenate([y, np.zeros((B, 1))], axis=-1)
     z = np.where(ok[:, None], z, 0.0)
+    e = _last(n + 1)
     say("the corrector: compiling (first call only) and correcting the start points")
-    r = solve(z, z, _E4[None].repeat(B, 0), ok)
+    r = solve(z, z, e[None].repeat(B, 0), ok)
     ok = ok & r.done
     status = np.where(ok, BranchStatus.MAX_POINTS, np.where(fl(g.status) == GaitStatus.INVALID,
                       BranchStatus.INVALID, BranchStatus.NO_START))  # fmt: skip
@@ -271,12 +343,15 @@ def continuation(
     walk.run(status)
     data = _pack(walk.points, solve, k)
     say(f"{sum(len(p) for p in walk.points)} points; locating the events")
-    events = find_events(data, status, walk.failed_at, solve, contact, to_locate)
+    events = find_events(data, status, walk.failed_at, solve, contact, to_locate, setup.paper)
     say("done")
-    return _branch(data, status, k, fl(g.status), events, shape, flat.dtype, spec.label, contact)
+    return _branch(data, status, k, fl(g.status), events, shape, dtype_, setup.label, contact, setup.paper)
 
 
-_E4 = np.eye(4)[3]
+def _last(n: int) -> np.ndarray:
+    """The unit vector along $\\zeta$ (the last unknown) of `n` unknowns."""
+    return np.eye(n)[n - 1]
+
 
 SWITCH_STEP = 1e-3
 """Largest step across a change of switching structure (switch count, or the sign of the slip margin
@@ -306,12 +381,12 @@ class _Walk:
         self.solve, self.B = solve, B
         self.step, self.max_step, self.min_step, self.max_points = step, max_step, min_step, max_points
         self.z, self.J = r0.z.copy(), r0.J.copy()
-        self.t = tangent(r0.J, np.broadcast_to(_E4, (B, 4)))
+        self.t = tangent(r0.J, np.broadcast_to(_last(r0.z.shape[-1]), r0.z.shape))
         self.sig = _signature(r0.out)
         self.active = ok.copy()
         self.h = np.full(B, float(step))
         self.corners = np.zeros(B, int)
-        self.failed_at = np.full((B, 4), np.nan)
+        self.failed_at = np.full(r0.z.shape, np.nan)
         self.points: list[list[dict]] = [[] for _ in range(B)]
         for i in np.flatnonzero(ok):
             self.points[i].append(_record(r0, self.t, int(i)))
@@ -325,14 +400,14 @@ class _Walk:
         self.sig = tuple(np.where(good, new, old) for new, old in zip(_signature(r.out), self.sig))
 
     def run(self, status):
-        solve, B, small = self.solve, self.B, 16 * self.min_step
-        e4 = np.broadcast_to(_E4, (B, 4))
+        solve, small = self.solve, 16 * self.min_step
+        e4 = np.broadcast_to(_last(self.z.shape[-1]), self.z.shape)
         while np.any(self.active):
             z, t, h, active = self.z, self.t, self.h, self.active
             zp = z + h[:, None] * t
-            land = active & (zp[:, 3] >= 1)
+            land = active & (zp[:, -1] >= 1)
             with np.errstate(all="ignore"):
-                hl = (1 - z[:, 3]) / t[:, 3]
+                hl = (1 - z[:, -1]) / t[:, -1]
             zp = np.where(land[:, None], z + hl[:, None] * t, zp)
             r = solve(zp, zp, np.where(land[:, None], e4, t), active)
             tn = tangent(r.J, t)
@@ -346,7 +421,7 @@ class _Walk:
             self.h = np.where(good, np.minimum(grow * h, self.max_step), h / 2)
             counts = np.array([len(p) for p in self.points])
             reached = good & land
-            left = good & ~land & ((self.z[:, 3] < 0) | (self.z[:, 3] > 1))
+            left = good & ~land & ((self.z[:, -1] < 0) | (self.z[:, -1] > 1))
             full = good & (counts >= self.max_points)
             dead = active & ~good & (self.h < self.min_step)
             lifted = dead & (r.out.status == Status.LIFTOFF)
@@ -373,7 +448,7 @@ class _Walk:
         if not np.any(lanes):
             return lanes
         solve, B = self.solve, self.B
-        e4 = np.broadcast_to(_E4, (B, 4))
+        e4 = np.broadcast_to(_last(self.z.shape[-1]), self.z.shape)
         zq = self.z + CORNER_PROBE * self.t
         rq = solve(zq, zq, e4, lanes, max_iter=0)
         tq = tangent(rq.J, self.t)
@@ -403,7 +478,7 @@ def _check(max_points, step, max_step, min_step, max_iter) -> None:
         raise ValueError(f"need 0 < min_step <= step <= max_step (finite), got {min_step!r}, {step!r}, {max_step!r}.")
 
 
-_FIELDS = ("dX", "ed", "w", "stuck1", "stuck2", "margin", "n_min", "n_switch", "lifted")
+_FIELDS = ("dX", "ed", "w", "stuck", "margin", "n_min", "n_switch", "lifted")
 
 
 def _record(r: corrector.Solved, t: np.ndarray, i: int) -> dict:
@@ -415,10 +490,14 @@ def _pack(points: list[list[dict]], solve: Solver, k: np.ndarray) -> dict[str, n
     """Per-point arrays `(B, n)` padded with NaN; derived quantities per point."""
     B = len(points)
     n = max(2, max(len(p) for p in points))
+    like = next(p[0] for p in points if p) if any(points) else None
+    S = like["z"].shape[0] - 1 if like is not None else 3
+    N = like["stuck"].shape[0] if like is not None else 2
     out: dict[str, np.ndarray] = {}
-    template = {"z": np.zeros(4), "J": np.zeros((5, 4)), "t": np.zeros(4), **{f: 0.0 for f in _FIELDS}}
-    for name, like in template.items():
-        arr = np.full((B, n) + np.shape(like), np.nan)
+    template = {"z": np.zeros(S + 1), "J": np.zeros((S + 2, S + 1)), "t": np.zeros(S + 1), "stuck": np.zeros(N),
+                **{f: 0.0 for f in _FIELDS if f != "stuck"}}  # fmt: skip
+    for name, shape_of in template.items():
+        arr = np.full((B, n) + np.shape(shape_of), np.nan)
         for i, p in enumerate(points):
             for j, rec in enumerate(p):
                 arr[i, j] = rec[name]
@@ -426,48 +505,51 @@ def _pack(points: list[list[dict]], solve: Solver, k: np.ndarray) -> dict[str, n
     count = np.array([len(p) for p in points])
     valid = np.arange(n)[None, :] < count[:, None]
     out["valid"], out["count"] = valid, count
-    zeta = out["z"][..., 3]
+    zeta = out["z"][..., S]
     out["lam"] = solve.lam0[:, None] + solve.scale[:, None] * zeta
     out["period"] = solve.period(zeta, k)
-    M = np.where(valid[..., None, None], out["J"][..., :3, :3], 0.0)
+    M = np.where(valid[..., None, None], out["J"][..., :S, :S], 0.0)
     ev = np.linalg.eigvals(M)
     ev = np.take_along_axis(ev, np.argsort(-np.abs(ev), axis=-1), -1)
     out["multipliers"] = np.where(valid[..., None], ev, np.nan)
-    out["det_minus"] = np.where(valid, np.linalg.det(M - np.eye(3)), np.nan)
-    out["det_plus"] = np.where(valid, np.linalg.det(M + np.eye(3)), np.nan)
+    out["det_minus"] = np.where(valid, np.linalg.det(M - np.eye(S)), np.nan)
+    out["det_plus"] = np.where(valid, np.linalg.det(M + np.eye(S)), np.nan)
     return out
 
 
-def _branch(d, status, k, start_status, events, shape, dtype, label, contact) -> Branch:
+def _branch(d, status, k, start_status, events, shape, dtype, label, contact, paper: bool) -> Branch:
     valid = d["valid"]
     dX = d["dX"]
     with np.errstate(divide="ignore", invalid="ignore"):
         cot = np.where(valid & (dX == 0), np.inf, d["ed"] / np.abs(dX))
-        stuck = np.stack([d["stuck1"], d["stuck2"]]) / d["period"]
-    ssl = np.maximum(d["stuck1"], d["stuck2"]) > STICK_TOL
+        stuck = d["stuck"] / d["period"][..., None]
+    ssl = np.max(d["stuck"], axis=-1) > STICK_TOL
     regime = np.where(valid, np.where(ssl, Regime.SSL, Regime.SL), Regime.UNDETERMINED)
     n = valid.shape[1]
     re = lambda x, dt=dtype: jnp.asarray(x, dt).reshape(shape + (n,) + np.shape(x)[2:])
     mult = np.abs(np.nan_to_num(d["multipliers"], nan=np.inf))
+    S = d["z"].shape[-1] - 1
+    state = d["z"][..., :S]
+    named = {}
+    if paper:
+        named = dict(u=re(state[..., 0]), v1=re(state[..., 1]), v2=re(state[..., 2]),
+                     stick_fraction1=re(stuck[..., 0]), stick_fraction2=re(stuck[..., 1]))  # fmt: skip
     return Branch(
         lam=re(d["lam"]),
-        u=re(d["z"][..., 0]),
-        v1=re(d["z"][..., 1]),
-        v2=re(d["z"][..., 2]),
+        state=re(state),
         mean_speed=re(dX / d["period"]),
         cost_of_transport=re(cot),
         e_d=re(d["ed"]),
         work=re(d["w"]),
-        stick_fraction1=re(stuck[0]),
-        stick_fraction2=re(stuck[1]),
+        stick_fraction=re(stuck),
         regime=re(regime, jnp.int32),
         n_switch=re(np.nan_to_num(d["n_switch"]), jnp.int32),
         slip_margin=re(d["margin"]),
         min_normal=re(d["n_min"]),
-        multipliers=jnp.asarray(d["multipliers"]).reshape(shape + (n, 3)),
+        multipliers=jnp.asarray(d["multipliers"]).reshape(shape + (n, S)),
         stable=re(valid & (np.max(mult, axis=-1) < 1), bool),
         liftoff=re(valid & (d["n_min"] <= 0), bool),
-        tangent=re(d["t"][..., 3]),
+        tangent=re(d["t"][..., S]),
         det_minus=re(d["det_minus"]),
         det_plus=re(d["det_plus"]),
         n_points=jnp.asarray(d["count"], jnp.int32).reshape(shape),
@@ -477,4 +559,5 @@ def _branch(d, status, k, start_status, events, shape, dtype, label, contact) ->
         events=jax.tree_util.tree_map(lambda x: x.reshape(shape + x.shape[1:]), events),
         parameter=label,
         contact=contact,
+        **named,
     )

@@ -1,44 +1,53 @@
 """Newton's method on the period map with the parameter as an unknown (continuation's corrector).
 
-For a gait of period $kT$ the unknowns are $z = (u, v_1, v_2, \\zeta)$: the section state of
-[`steady_gait`][] and the parameter $\\lambda = \\lambda_0 + s\\,\\zeta$ in units of a scale $s$.
-The corrector solves
+For a gait of period $kT$ the unknowns are $z = (y, \\zeta)$: the section state $y$ of
+[`steady_gait`][] (length $S$: $(u, v_1, v_2)$ for the paper's model, a chain's gaps and velocities)
+and the parameter $\\lambda = \\lambda_0 + s\\,\\zeta$ in units of a scale $s$. The corrector solves
 
 $$\\Phi_k(y; \\lambda) - y = 0, \\qquad c \\cdot (z - z_\\text{ref}) = 0,$$
 
 the fixed point on the hyperplane through $z_\\text{ref}$ normal to $c$: with $c$ the tangent of
 the branch this is pseudo-arclength continuation's corrector; with $c = e_\\zeta$ it solves at a
-fixed parameter. The Jacobian $[\\,\\partial\\Phi_k/\\partial y,\\ \\partial\\Phi_k/\\partial\\zeta\\,]$
-comes from one forward-mode pass (four tangents) through the exact engine, event times by the
-implicit function theorem as in [`steady_gait`][]: its first three columns are the monodromy
-matrix. The same pass differentiates the switching test functions of the period (the slip
-margin and the smallest normal force, [`Gait`][]), whose gradients say on which side of a
-switching surface a point lies.
+fixed parameter ([`steady_gait`][]).
+The Jacobian $[\\,\\partial\\Phi_k/\\partial y,\\ \\partial\\Phi_k/\\partial\\zeta\\,]$
+comes from one forward-mode pass ($S + 1$ tangents) through the N-body exact engine, event times by
+the implicit function theorem: its first $S$ columns are the monodromy matrix. The same pass
+differentiates the switching test functions of the period (the slip margin and the smallest normal
+force, [`Gait`][]), whose gradients say on which side of a switching surface a point lies.
 
-A parameter is a field of [`Params`][] or, for a [`Fourier`][] waveform, a coefficient
-`"cosN"`/`"sinN"` of harmonic `N` (from 1).
+The period map is the same for every mechanism (`_chain_gait.period_map` of the configuration's
+physics); what a mechanism supplies is a flat batch of configurations (a pytree with a leading
+batch axis) and `physics_of(c) -> (physics, valid)` for one configuration. The parameter is a
+[`Selector`][]: a boolean mask over the leaves of one configuration, traced, so that one
+compilation serves every parameter. For [`Params`][] it is a field or, for a [`Fourier`][]
+waveform, a coefficient `"cosN"`/`"sinN"` of harmonic `N` (from 1); for a [`Chain`][] or a
+[`Mechanism`][locomotion_jax.Mechanism], any scalar entry of its leaves, named by the leaf's
+attribute (`"omega"`, `"mu_s"`, `"m[1]"`: see [`parse_leaf`][]).
 """
 
 import re
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array
 from .._status import Status
-from ..dynamics import _exact as exact
 from ..dynamics._compile import engine_jit
-from ..model._params import PARAM_NAMES, Params, safe_params
+from ..model._params import PARAM_NAMES, Params
 from ..model._waveform import AbstractWaveform, Fourier, Sinusoid
-from . import _period as period
+from ._chain_gait import _Period, period_map
+
+
+Selector = Any
+"""A pytree like one configuration, with a boolean array of the leaf's shape at each leaf: the
+entries that the parameter sets."""
 
 
 class Spec(NamedTuple):
-    """A continuation parameter: a `Params` field (`harmonic` -1) or a waveform coefficient
-    (`name` "cos" or "sin", `harmonic` from 0)."""
+    """A continuation parameter of the paper's model: a `Params` field (`harmonic` -1) or a waveform
+    coefficient (`name` "cos" or "sin", `harmonic` from 0)."""
 
     name: str
     harmonic: int
@@ -49,7 +58,7 @@ class Spec(NamedTuple):
 
 
 def parse(parameter: str, waveform: AbstractWaveform | None) -> Spec:
-    """The [`Spec`][] of `parameter`; `ValueError` naming the valid choices."""
+    """The [`Spec`][] of `parameter` for [`Params`][]; `ValueError` naming the valid choices."""
     if not isinstance(parameter, str):
         raise TypeError(f"parameter must be a str, got {type(parameter).__name__}.")
     m = re.fullmatch(r"(cos|sin)(\d+)", parameter)
@@ -69,88 +78,137 @@ def parse(parameter: str, waveform: AbstractWaveform | None) -> Spec:
     return Spec(parameter, -1)
 
 
-def value(params: Params, wave: AbstractWaveform, spec: Spec) -> Array:
-    """The parameter's value (the waveform's, where it has one); not broadcast to the batch."""
-    if spec.harmonic >= 0:
-        return getattr(wave, spec.name)[..., spec.harmonic]
-    if spec.name in _WAVE_FIELDS and hasattr(wave, spec.name):
-        return getattr(wave, spec.name)
-    return getattr(params, spec.name)
-
-
 _WAVE_FIELDS = ("omega", "lbar", "a")
 
 
-class Selector(eqx.Module):
-    """Which entries of the parameters and the waveform the parameter sets, as masks: a traced value,
-    so that one compilation serves every parameter (and none, for [`steady_gait`][])."""
-
-    params: Array  # (len(PARAM_NAMES),) bool
-    wave: Array  # (3,) bool: the waveform's omega, lbar, a (where it has them)
-    cos: Array | None  # (N,) bool: a Fourier waveform's coefficients
-    sin: Array | None
+def _one(C: Any) -> Any:
+    """One configuration's leaves (the flat batch's without its leading axis), as shapes."""
+    return jax.tree_util.tree_map(lambda x: np.zeros(np.shape(x)[1:], bool), C)
 
 
-def selector(spec: Spec | None, wave: AbstractWaveform) -> Selector:
-    """The masks of `spec` for waveforms like `wave` (all False for `None`)."""
-    fourier = isinstance(wave, Fourier)
-    n = wave.harmonics if isinstance(wave, Fourier) else 0
-    onehot = lambda size, i: np.arange(size) == i
-    name = None if spec is None else spec.name
-    h = -1 if spec is None else spec.harmonic
-    coef = h >= 0
-    return Selector(
-        params=jnp.asarray(onehot(len(PARAM_NAMES), PARAM_NAMES.index(name) if name in PARAM_NAMES else -1)),
-        wave=jnp.asarray([f == name and not coef for f in _WAVE_FIELDS]),
-        cos=jnp.asarray(onehot(n, h if name == "cos" else -1)) if fourier else None,
-        sin=jnp.asarray(onehot(n, h if name == "sin" else -1)) if fourier else None,
-    )
+def no_selection(C: Any) -> Selector:
+    """The selector of no parameter (every mask False) for configurations like the flat batch `C`."""
+    return jax.tree_util.tree_map(jnp.asarray, _one(C))
 
 
-def with_value(params: Params, wave: AbstractWaveform, sel: Selector, lam: Array):
-    """`params` and `wave` of one configuration with the selected entries set to `lam`."""
-    params = Params(**{n: jnp.where(sel.params[i], lam, getattr(params, n)) for i, n in enumerate(PARAM_NAMES)},
-                    check=False)  # fmt: skip
-    for i, name in enumerate(_WAVE_FIELDS):
-        if hasattr(wave, name):
-            wave = eqx.tree_at(lambda w: getattr(w, name), wave, jnp.where(sel.wave[i], lam, getattr(wave, name)))
-    if sel.cos is not None and sel.sin is not None and isinstance(wave, Fourier):
-        wave = eqx.tree_at(lambda w: (w.cos, w.sin), wave,
-                           (jnp.where(sel.cos, lam, wave.cos), jnp.where(sel.sin, lam, wave.sin)))  # fmt: skip
-    return params, wave
+def paper_selector(spec: Spec, C: tuple[Params, AbstractWaveform]) -> Selector:
+    """The masks of `spec` over a configuration `(params, waveform)` of the paper's model: the
+    `Params` field and the waveform's field of that name where it has one (`omega`, `lbar`, `a`),
+    or the Fourier coefficient."""
+    params, wave = _one(C)
+    if spec.harmonic >= 0:
+        coef = getattr(wave, spec.name).copy()
+        coef[..., spec.harmonic] = True
+        wave = _replace(wave, spec.name, coef)
+    else:
+        params = _replace(params, spec.name, np.ones((), bool))
+        if spec.name in _WAVE_FIELDS and hasattr(wave, spec.name):
+            wave = _replace(wave, spec.name, np.ones((), bool))
+    return jax.tree_util.tree_map(jnp.asarray, (params, wave))
+
+
+def _replace(tree: Any, name: str, value: Any) -> Any:
+    import equinox as eqx
+
+    return eqx.tree_at(lambda t: getattr(t, name), tree, value)
+
+
+def _leaf_names(path) -> str:
+    """A leaf's attribute path, `".waves.omega"`."""
+    return "".join(f".{k.name}" if isinstance(k, jax.tree_util.GetAttrKey) else "" for k in path)
+
+
+def parse_leaf(parameter: str, C: Any, kind: str) -> Selector:
+    """The selector of `parameter` over the configurations `C` of a mechanism (a flat batch).
+
+    `parameter` names the leaves whose attribute path ends with it (`"omega"`, `"mu_s"`,
+    `"friction.mu_s"`), every entry of them; or, with an index, `"m[1]"`, the entry of that index
+    along their last axis. Every selected entry takes the parameter's value, so where several are
+    selected they must be equal at the start ([`value`][] checks)."""
+    if not isinstance(parameter, str):
+        raise TypeError(f"parameter must be a str, got {type(parameter).__name__}.")
+    leaves, tree = jax.tree_util.tree_flatten_with_path(_one(C))
+    names = [_leaf_names(p) for p, _ in leaves]
+    m = re.fullmatch(r"([A-Za-z_][\w.]*)(?:\[(\d+)\])?", parameter)
+    hit = [] if m is None else [i for i, n in enumerate(names) if n.endswith("." + m.group(1))]
+    if not hit:
+        valid = ", ".join(sorted({n.rsplit(".", 1)[-1] for n in names if n}))
+        raise ValueError(
+            f"unknown parameter {parameter!r} of a {kind}; valid: a leaf ({valid}), with [i] for one entry of "
+            "a per-body or per-spring array (e.g. 'm[1]')."
+        )
+    assert m is not None
+    masks = [x for _, x in leaves]
+    for i in hit:
+        mask = np.zeros_like(masks[i])
+        if m.group(2) is None:
+            mask[...] = True
+        else:
+            j = int(m.group(2))
+            if mask.ndim == 0 or not 0 <= j < mask.shape[-1]:
+                size = "is a scalar" if mask.ndim == 0 else f"has entries 0..{mask.shape[-1] - 1}"
+                raise ValueError(f"parameter {parameter!r}: the leaf {names[i].lstrip('.')!r} {size}.")
+            mask[..., j] = True
+        masks[i] = mask
+    return jax.tree_util.tree_unflatten(tree, [jnp.asarray(x) for x in masks])
+
+
+def value(C: Any, sel: Selector, parameter: str) -> np.ndarray:
+    """The parameter's value per configuration of the flat batch `C` (host, float64); `ValueError`
+    where the entries it selects differ in a configuration (name one with an index)."""
+    vals = []
+    for x, mask in zip(jax.tree_util.tree_leaves(C), jax.tree_util.tree_leaves(sel)):
+        mask = np.asarray(mask)
+        if mask.any():
+            x = np.asarray(x, np.float64)
+            vals.append(np.broadcast_to(x, (x.shape[0],) + mask.shape)[:, mask])
+    allv = np.concatenate(vals, axis=1)
+    if np.any(allv != allv[:, :1]):
+        raise ValueError(
+            f"parameter {parameter!r} selects entries of different values ({allv[0].tolist()} in the first "
+            "configuration): name one with an index, e.g. 'm[1]'."
+        )
+    return allv[:, 0]
+
+
+def with_value(c: Any, sel: Selector, lam: Array) -> Any:
+    """One configuration `c` with the entries selected by `sel` set to `lam`."""
+    return jax.tree_util.tree_map(lambda x, m: jnp.where(m, lam.astype(x.dtype), x), c, sel)
 
 
 class Solved(NamedTuple):
     """The corrector's result for one configuration."""
 
-    z: Array  # (u, v1, v2, zeta)
-    J: Array  # (5, 4): the derivatives of (Phi, margin, n_min) in (y, zeta)
-    out: period.Period
+    z: Array  # (y, zeta)
+    J: Array  # (S + 2, S + 1): the derivatives of (Phi, margin, n_min) in (y, zeta)
+    out: _Period
     done: Array  # converged
     valid: Array  # the parameters at z are valid
     it: Array
 
 
-def _correct_one(params, wave, sel, contact, dt, k, lam0, scale, z0, zref, c, go, tol, max_iter, max_steps) -> Solved:
+def _correct_one(
+    c, physics_of, sel, contact, dt, k, lam0, scale, z0, zref, cvec, go, tol, max_iter, max_steps
+) -> Solved:
     """Newton's method on the module docstring's system from `z0` (skipped where `go` is False)."""
-    dtype = params.dtype
+    dtype = z0.dtype
+    n = z0.shape[0] - 1
     k = jnp.where(go, k, 0)  # a configuration not solved here integrates nothing
-    shift = jnp.concatenate([jnp.eye(3, dtype=dtype), jnp.zeros((3, 1), dtype)], axis=1)
+    shift = jnp.concatenate([jnp.eye(n, dtype=dtype), jnp.zeros((n, 1), dtype)], axis=1)
 
     def phi(z):
-        p, w = with_value(params, wave, sel, lam0 + scale * z[3])
-        p, valid = safe_params(p, w)
-        out = period.period_map(p, w, exact.consts(p, w), contact, dt, max_steps, k, z[:3])
+        P, valid = physics_of(with_value(c, sel, lam0 + scale * z[n]))
+        out = period_map(P, contact, dt, max_steps, k, z[:n])
         # The switching test functions' gradients come with the monodromy (to cross a switching surface).
         return jnp.concatenate([out.y, jnp.stack([out.margin, out.n_min])]), (out, valid)
 
     def evaluate(z):
         J, (out, valid) = jax.jacfwd(phi, has_aux=True)(z)
-        bad = (out.status != Status.OK) | ~valid | ~jnp.all(jnp.isfinite(z)) | ~jnp.all(jnp.isfinite(J[:3]))
+        bad = (out.status != Status.OK) | ~valid | ~jnp.all(jnp.isfinite(z)) | ~jnp.all(jnp.isfinite(J[:n]))
         return J, out, valid, bad
 
     def small(z, out):
-        return jnp.max(jnp.abs(out.y - z[:3])) <= tol * (1 + jnp.max(jnp.abs(z[:3])))
+        return jnp.max(jnp.abs(out.y - z[:n])) <= tol * (1 + jnp.max(jnp.abs(z[:n])))
 
     def cond(s):
         _, _, _, _, it, done, failed = s
@@ -158,29 +216,27 @@ def _correct_one(params, wave, sel, contact, dt, k, lam0, scale, z0, zref, c, go
 
     def body(s):
         z, J, out, _, it, _, _ = s
-        A = jnp.concatenate([J[:3] - shift, c[None]], axis=0)
-        F = jnp.concatenate([out.y - z[:3], (c @ (z - zref))[None]])
+        A = jnp.concatenate([J[:n] - shift, cvec[None]], axis=0)
+        F = jnp.concatenate([out.y - z[:n], (cvec @ (z - zref))[None]])
         z1 = z - jnp.linalg.solve(A, F)
         J1, out1, valid1, bad = evaluate(z1)
         return z1, J1, out1, valid1, it + 1, small(z1, out1) & ~bad, bad
 
     J0, out0, valid0, bad0 = evaluate(z0)
     # A start off the hyperplane is a valid point only after a step onto it.
-    on = jnp.abs(c @ (z0 - zref)) <= tol * (1 + jnp.max(jnp.abs(z0)))
+    on = jnp.abs(cvec @ (z0 - zref)) <= tol * (1 + jnp.max(jnp.abs(z0)))
     init = (z0, J0, out0, valid0, jnp.zeros((), jnp.int32), go & on & small(z0, out0) & ~bad0, ~go | bad0)
     z, J, out, valid, it, done, _ = jax.lax.while_loop(cond, body, init)
     return Solved(z=z, J=J, out=out, done=done & go, valid=valid, it=it)
 
 
-def _correct_batch(
-    params, wave, wave_axes, sel, contact, dt, k, lam0, scale, z0, zref, c, go, tol, max_iter, max_steps
-):
-    def one(p, w, k1, l1, s1, z1, r1, c1, g1):
-        return _correct_one(p, w, sel, contact, dt, k1, l1, s1, z1, r1, c1, g1, tol, max_iter, max_steps)
+def _correct_batch(C, physics_of, sel, contact, dt, k, lam0, scale, z0, zref, c, go, tol, max_iter, max_steps):
+    def one(c1, k1, l1, s1, z1, r1, v1, g1):
+        return _correct_one(c1, physics_of, sel, contact, dt, k1, l1, s1, z1, r1, v1, g1, tol, max_iter, max_steps)
 
-    return jax.vmap(one, in_axes=(0, wave_axes) + (0,) * 7)(params, wave, k, lam0, scale, z0, zref, c, go)
+    return jax.vmap(one)(C, k, lam0, scale, z0, zref, c, go)
 
 
-correct_batch = engine_jit(_correct_batch, ("wave_axes", "contact"))
-"""The corrector, batched: one compilation per batch size, waveform type and settings, whatever the
-parameter (the selector is traced) and the gait period."""
+correct_batch = engine_jit(_correct_batch, ("physics_of", "contact", "dt"))
+"""The corrector, batched: one compilation per batch size, kind of configuration and settings,
+whatever the parameter (the selector is traced) and the gait period."""

@@ -10,6 +10,11 @@ from forward-mode differentiation through the exact engine: located events enter
 their implicit-function times, so $M$ includes the saltation of every switch. The
 eigenvalues of $M$ are the Floquet multipliers.
 
+Every mechanism runs on one period map and one solver (`_chain_gait`, `_corrector`) over the
+N-body engine: the paper's model as the two-mass chain of
+[`Params.physics`][locomotion_jax.Params.physics], whose section state $(u, v_1, v_2)$ is the
+chain's (gap, then velocities); this module keeps the paper's names for its results.
+
 A mass stuck at the section has $v_i = 0$ held by friction: its velocity is not a free
 unknown (its column of $M$ is zero, and so is its row when it is stuck again one
 period later), which makes the multiplier 0 that sticking contributes.
@@ -24,11 +29,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array, ArrayLike
-from .._status import Regime, Status
+from .._status import Regime
 from ..dynamics._base import AbstractDynamics
-from ..dynamics._compile import engine_jit
 from ..dynamics._exact_dynamics import Exact
-from ..dynamics._runs import default_max_steps, STICK_TOL
+from ..dynamics._runs import STICK_TOL
 from ..model import _two_mass as model
 from ..model._bodies import Mechanism
 from ..model._chain import Chain
@@ -36,7 +40,7 @@ from ..model._params import Params
 from ..model._waveform import AbstractWaveform
 from ..run._batch import mechanism_arg, prepare, unflatten
 from ..run._resolution import guard_two_mass
-from . import _corrector as corrector, _period as period, _progress as progress, _select as select
+from . import _chain_gait as chain_gait, _progress as progress, _select as select
 from ._chain_gait import ChainGait
 from ._select import GaitStatus as GaitStatus
 
@@ -96,60 +100,14 @@ class Gait(eqx.Module):
     min_normal: Array
     contact: str = eqx.field(static=True)
 
-
-def _transient_batch(params, wave, wave_axes, contact, start, dt, transient, max_steps):
-    one = lambda p, w: period.transient_one(p, w, contact, start, dt, transient, max_steps)
-    return jax.vmap(one, in_axes=(0, wave_axes))(params, wave)
-
-
-_transient_batch = engine_jit(_transient_batch, ("wave_axes", "contact", "start"))
+    @property
+    def state(self) -> Array:
+        """The section state $(u, v_1, v_2)$ as one array, `batch + (3,)` (as `ChainGait.state`)."""
+        return jnp.stack([self.u, self.v1, self.v2], axis=-1)
 
 
-def _transient_from_batch(params, wave, wave_axes, contact, y, dt, transient, max_steps):
-    one = lambda p, w, s: period.transient_one(p, w, contact, s, dt, transient, max_steps)
-    return jax.vmap(one, in_axes=(0, wave_axes, 0))(params, wave, y)
-
-
-_transient_from_batch = engine_jit(_transient_from_batch, ("wave_axes", "contact"))
-
-
-COMPACT = 4
-"""`_two_mass(compact=True)`: a gait period tried on at most `1 / COMPACT` of the batch (fewer than
-that many configurations still open) runs on a batch of that size."""
-
-
-def _newton(flat, wave, axes, contact, dt, y0, go, k, tol, max_iter, max_steps, compact: bool = False) -> dict:
-    """Newton's method on $\\Phi_k(y) = y$ from `y0` where `go`: the continuation's corrector
-    ([`_corrector`][]) with the parameter held (no parameter selected, arclength scale 0).
-
-    The batch runs in lockstep (every row costs what the slowest one does), so with `compact`
-    the rows to solve, when fewer than `B // COMPACT`, are gathered into a batch of
-    `B // COMPACT` rows (one more compiled program per batch size; each row's result is the
-    same, the rows being independent) and the rest take a padding row's unsolved result."""
-    B = y0.shape[0]
-    go_rows = np.flatnonzero(np.asarray(go))
-    part = B // COMPACT
-    if compact and 0 < go_rows.size < part:
-        n = go_rows.size
-        rows = np.concatenate([go_rows, np.full(part - n, go_rows[0])])
-        pick = lambda x: x[rows] if np.ndim(x) else x
-        sub = _newton(jax.tree_util.tree_map(pick, flat), wave if axes is None else jax.tree_util.tree_map(pick, wave),
-                      axes, contact, dt, jnp.asarray(y0)[rows], jnp.asarray(np.arange(part) < n), k, tol, max_iter,
-                      max_steps)  # fmt: skip
-        back = np.full(B, part - 1)  # a padding row: not solved (`done` False)
-        back[go_rows] = np.arange(n)
-        return jax.tree_util.tree_map(lambda x: x[back] if np.ndim(x) else x, sub)
-    dtype = flat.dtype
-    real = lambda v: jnp.asarray(v, dtype)
-    z0 = jnp.concatenate([jnp.asarray(y0, dtype), jnp.zeros((B, 1), dtype)], axis=1)
-    c = jnp.zeros((B, 4), dtype).at[:, 3].set(1)
-    zero = jnp.zeros((B,), dtype)
-    r = corrector.correct_batch(flat, wave, axes, corrector.selector(None, wave), contact, dt,
-                                jnp.full((B,), k, dtype), zero, zero, z0, z0, c, go, real(tol),
-                                jnp.asarray(max_iter, jnp.int32), max_steps)  # fmt: skip
-    r = jax.tree_util.tree_map(np.asarray, r)
-    y = r.z[:, :3]
-    return dict(y=y, M=r.J[:, :3, :3], out=r.out, it=r.it, done=r.done, residual=np.max(np.abs(r.out.y - y), axis=1))
+_transient_batch = chain_gait._transient_batch
+"""The transient of every mechanism (`_chain_gait`), shared by every gait period tried."""
 
 
 @overload
@@ -249,14 +207,15 @@ def steady_gait(
     say(f"{int(np.prod(mechanism.batch_shape))} configuration(s): compiling (first call only) and solving, "
         f"transient {transient} periods, gait periods {periods}")  # fmt: skip
     args = (periods, transient, tol, max_iter, dynamics, waveform, contact, start, dtype)
-    # The mechanism picks its solver (double dispatch).
-    gait = mechanism.dispatch(two_mass=lambda p: _two_mass(p, *args, say=say), chain=lambda c: _chain(c, *args))
+    # The mechanism supplies its configurations (double dispatch); the period map and the solver are one.
+    two_mass = lambda p: _two_mass(p, *args, say=say)
+    gait = mechanism.dispatch(two_mass=two_mass, chain=lambda c: _chain(c, *args, say=say))
     say(f"done: {int(np.sum(np.asarray(gait.converged)))} of {np.size(np.asarray(gait.converged))} converged")
     return gait
 
 
 def _chain(chain: Chain | Mechanism, periods, transient, tol, max_iter, dynamics: Exact, waveform, contact, start,
-           dtype):  # fmt: skip
+           dtype, say=lambda message: None):  # fmt: skip
     if not isinstance(chain, (Chain, Mechanism)):
         raise NotImplementedError(
             f"steady_gait takes Params, a Chain or a Mechanism; a {type(chain).__name__} is not solved for its "
@@ -268,64 +227,46 @@ def _chain(chain: Chain | Mechanism, periods, transient, tol, max_iter, dynamics
     from ._chain_gait import steady_gait_chain
 
     return steady_gait_chain(chain, periods=periods, transient=transient, tol=tol, max_iter=max_iter,
-                             dynamics=dynamics, contact=contact, start=start, dtype=dtype)  # fmt: skip
+                             dynamics=dynamics, contact=contact, start=start, dtype=dtype, say=say)  # fmt: skip
 
 
 def _two_mass(params: Params, periods, transient, tol, max_iter, dynamics: Exact, waveform, contact, start, dtype,
               guarded: bool = True, say=lambda message: None, compact: bool = False):  # fmt: skip
-    """`guarded=False` skips the resolution guard: only for a caller that checks the resolution
+    """The paper's model on the N-body period map: each configuration's physics is the two-mass
+    chain of its parameters and waveform ([`Params.physics`][locomotion_jax.Params.physics]).
+
+    `guarded=False` skips the resolution guard: only for a caller that checks the resolution
     itself by a convergence study (the exact optimiser's verification solves at `dt` and `dt/2`).
     `compact=True`: the longer gait periods, tried on the few configurations still open, run on a
-    smaller batch (`_newton`; for a caller that solves many batches of one size).
+    smaller batch (`_chain_gait.newton`; for a caller that solves many batches of one size).
     `say` reports each stage (`steady_gait(verbose=True)`). Under `contact="hop"`: the gait of the
     two-mass chain `Chain.from_params(params, waveform)` (a `ChainGait`, heights in its state)."""
-    if contact == "hop":  # flight and landing run on the N-body engine (as `measure` does)
-        from ._chain_gait import steady_gait_chain
-
+    if contact == "hop":  # flight and landing: the chain's section state carries the heights
         chain = Chain.from_params(params, waveform)
         kw = dict(periods=periods, transient=transient, tol=tol, max_iter=max_iter, start=start, dtype=dtype)
-        return steady_gait_chain(chain, dynamics=dynamics, contact=contact, **kw)
+        return chain_gait.steady_gait_chain(chain, dynamics=dynamics, contact=contact, **kw)
     model.check_contact(contact)
     flat, wave, axes, shape = prepare(params, waveform, dtype)
     unresolved = None
     if guarded:
         flat, unresolved = guard_two_mass(dynamics, flat, wave, shape)  # refused alone, skipped in a batch
     y_start = _start_states(start, shape, flat.dtype)
-    f32 = jnp.finfo(flat.dtype).bits < 64
-    tol = (1e-5 if f32 else 1e-11) if tol is None else float(tol)
-    ks = select.check(periods, transient, tol, max_iter)
-    omega = np.asarray(wave.omega, np.float64)
-    T_max = float(np.max(2 * np.pi / omega[np.isfinite(omega) & (omega > 0)], initial=1.0))
-    mst = jnp.asarray(dynamics.max_steps or default_max_steps(transient * T_max, dynamics.dt), jnp.int32)
-    real = lambda v: jnp.asarray(v, flat.dtype)
-
-    # The transient is shared by every period tried.
-    say(f"transient: {transient} periods")
-    if y_start is None:
-        run = _transient_batch(flat, wave, axes, contact, start, dynamics.dt, real(transient), mst)
-    else:
-        run = _transient_from_batch(flat, wave, axes, contact, y_start, dynamics.dt, real(transient), mst)
-    y0, valid, trans, trans_lift = run
-    valid, trans = np.asarray(valid) & select.periodic(omega, shape), np.asarray(trans)
-    # -1: to be solved; else the final status (invalid, a strict lift-off, the step cap).
-    base = np.select(
-        [~valid, trans == Status.LIFTOFF, trans == Status.COLLISION, trans != Status.OK],
-        [GaitStatus.INVALID, GaitStatus.LIFTOFF, GaitStatus.COLLISION, GaitStatus.NOT_CONVERGED],
-        -1,
-    )
-    base = select.unresolved(base, unresolved)
-    best = None
-    for k in ks:
-        msp = jnp.asarray(dynamics.max_steps or default_max_steps(k * T_max, dynamics.dt), jnp.int32)
-        go = jnp.asarray((base < 0) & (True if best is None else select.still_open(best)))
-        say(f"gait period {k}: Newton on {int(np.sum(go))} configuration(s)")
-        r = _newton(flat, wave, axes, contact, dynamics.dt, y0, go, k, tol, max_iter, msp, compact)
-        r = select.judge(r, base, k, valid & (np.asarray(trans_lift) | r["out"].lifted))
-        best = select.better(best, r)
-        if not np.any(select.still_open(best)):
-            break
-    assert best is not None
+    start = start if isinstance(start, str) else "paper"
+    C = configs(flat, wave, axes)
+    B = flat.omega.shape[0]
+    omega = np.broadcast_to(np.asarray(wave.omega, np.float64), (B,))
+    best = chain_gait.solve(C, chain_gait.paper_physics, jnp.ones((B,), bool), unresolved, shape, omega,
+                            periods=periods, transient=transient, tol=tol, max_iter=max_iter, dynamics=dynamics,
+                            contact=contact, start=start, y_start=y_start, say=say, compact=compact)  # fmt: skip
     return unflatten(_gait(best, omega, flat, contact), shape)
+
+
+def configs(flat: Params, wave: AbstractWaveform, axes: int | None) -> tuple[Params, AbstractWaveform]:
+    """The paper's configurations as one flat batch `(params, waveform)` (a shared waveform repeated)."""
+    B = flat.omega.shape[0]
+    if axes is None:
+        wave = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (B,) + jnp.shape(x)), wave)
+    return flat, wave
 
 
 def _start_states(start: Any, shape: tuple[int, ...], dtype: Any) -> Array | None:
@@ -344,13 +285,13 @@ def _gait(r: dict, omega: np.ndarray, flat: Params, contact: str) -> Gait:
     ok = r["status"] == GaitStatus.CONVERGED
     dtype = flat.dtype
     nan = lambda x: jnp.asarray(np.where(select.expand(ok, x), x, np.nan), dtype)
-    out: period.Period = r["out"]
+    out = r["out"]
     k = r["k"]
     kT = np.where(ok, k * 2 * np.pi / np.where(ok, omega, 1), np.nan)
     dX = out.dX
     M = np.where(ok[:, None, None], r["M"], np.nan)
-    stuck = np.stack([out.stuck1, out.stuck2]) / np.where(ok, kT, 1)
-    ssl = np.max(np.stack([out.stuck1, out.stuck2]), axis=0) > STICK_TOL
+    stuck = np.moveaxis(out.stuck, -1, 0) / np.where(ok, kT, 1)
+    ssl = np.max(out.stuck, axis=-1) > STICK_TOL
     return Gait(
         status=jnp.asarray(r["status"]),
         converged=jnp.asarray(ok),
