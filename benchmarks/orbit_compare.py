@@ -79,8 +79,10 @@ def main(argv: list[str]) -> None:
     for shape in ("spline", "fourier"):
         g = lambda d, k: d[f"{shape}_{k}"]
         for i in range(g(old, "y").shape[0]):
-            cols = [rel(g(old, k)[i], g(new, k)[i], None) for k in ("transient", "y", "figures", "gradient", "monodromy")]
-            print(f"| {shape} | {i} | {g(old, 'ok')[i]}/{g(new, 'ok')[i]} | {g(old, 'n_iter')[i]}/{g(new, 'n_iter')[i]} "
+            keys = ("transient", "y", "figures", "gradient", "monodromy")
+            cols = [rel(g(old, k)[i], g(new, k)[i], None) for k in keys]
+            print(f"| {shape} | {i} | {g(old, 'ok')[i]}/{g(new, 'ok')[i]} "
+                  f"| {g(old, 'n_iter')[i]}/{g(new, 'n_iter')[i]} "
                   f"| {g(old, 'residual')[i]:.1e}/{g(new, 'residual')[i]:.1e} | "
                   + " | ".join(f"{c:.1e}" for c in cols) + " |")  # fmt: skip
         figs = [rel(g(old, "figures")[:, j], g(new, "figures")[:, j], None) for j in range(3)]

@@ -163,7 +163,6 @@ def newton_orbit(
     return Orbit(y, val[ny:], grad, M, good, it, jnp.max(jnp.abs(val[:ny] - y)))
 
 
-
 class AbstractActuation(eqx.Module):
     """How a decision vector actuates a model (static: hashed into the compiled oracle).
 
