@@ -7,7 +7,7 @@ a periodic [`Spline`][]; [`ShapeActuation`][locomotion_jax.gaits._orbit.ShapeAct
 chain or a mechanism, one such signal per actuated element (`_chain_orbit`). Either way the
 actuated model is a physics ([`AbstractPhysics`][locomotion_jax.AbstractPhysics]) and the
 period map is the N-body exact engine's (`dynamics._chain_exact`): the paper's model is the
-two-mass chain of [`Params.physics`][locomotion_jax.Params.physics].
+two-mass chain of `Params.physics`.
 
 For a given $\\theta$ the steady gait is the fixed point $y^*$ of the $k$-period map
 $\\Phi_k(y, \\theta)$ of the reduced state $y = (u_1, \\dots, u_{N-1}, v_1, \\dots, v_N)$ at the
@@ -105,7 +105,14 @@ class Orbit(NamedTuple):
 
 
 def newton_orbit(
-    run, y0: Array, theta: Array, tol: Array | float, max_iter: Array | int, *, monodromy_only: bool = False
+    run,
+    y0: Array,
+    theta: Array,
+    tol: Array | float,
+    max_iter: Array | int,
+    *,
+    monodromy_only: bool = False,
+    gradient: Array | bool = True,
 ) -> Orbit:
     """The fixed point of a period map and the figures' implicit-function gradient.
 
@@ -120,7 +127,13 @@ def newton_orbit(
     pushes those alone and one pass in all `ny + p` directions follows at the last iterate:
     `(iterations + 1) ny + (ny + p)` directions in all instead of `(iterations + 1)(ny + p)`,
     for a second differentiated copy of `run` in the compiled program (its compile time).
-    Without it, every iterate pushes all `ny + p` directions (one differentiated copy)."""
+    Without it, every iterate pushes all `ny + p` directions (one differentiated copy).
+
+    `gradient` (with `monodromy_only`; a bool, or a traced boolean scalar that is not batched):
+    where false, the pass in all directions is skipped and the gradient returned is zero, the
+    rest as with it (a screen that ranks orbits by their figures alone). Traced, it picks the
+    branch at run time (`lax.cond`; under `vmap` an unbatched predicate runs one branch), so
+    both uses share one compiled program."""
     ny = y0.shape[0]
     eye = jnp.eye(ny, dtype=theta.dtype)
 
@@ -154,7 +167,13 @@ def newton_orbit(
     y, val, J, ok, it, done = jax.lax.while_loop(cond, body, init)
     if monodromy_only:
         # The full Jacobian once, at the last iterate (the same point: the same values).
-        val, J, ok_full = linearise(y)
+        full = lambda y, val, J: linearise(y)
+        # Or none: the y-columns alone, the theta-columns zero.
+        skip = lambda y, val, J: (val, jnp.pad(J, ((0, 0), (0, theta.shape[0]))), jnp.asarray(True))
+        if isinstance(gradient, bool):
+            val, J, ok_full = (full if gradient else skip)(y, val, J)
+        else:
+            val, J, ok_full = jax.lax.cond(gradient, full, skip, y, val, J)
         ok = ok & ok_full
     M = J[:ny, :ny]
     dy = jnp.linalg.solve(eye - M, J[:ny, ny:])
@@ -200,7 +219,9 @@ class ShapeActuation(AbstractActuation):
         return jnp.stack([jnp.zeros_like(gap), gap])
 
 
-def _orbit_one(model, a_max, theta, y0, k, actuation, contact, dt, max_steps, tol, max_iter, monodromy_only) -> Orbit:
+def _orbit_one(
+    model, a_max, theta, y0, k, actuation, contact, dt, max_steps, tol, max_iter, monodromy_only, gradient
+) -> Orbit:
     ny = y0.shape[0]
 
     def run(z):
@@ -208,13 +229,14 @@ def _orbit_one(model, a_max, theta, y0, k, actuation, contact, dt, max_steps, to
         out = period(P, contact, dt, max_steps, z[:ny], k)
         return jnp.concatenate([out.y, out.figures]), out.ok
 
-    return newton_orbit(run, y0, theta, tol, max_iter, monodromy_only=monodromy_only)
+    return newton_orbit(run, y0, theta, tol, max_iter, monodromy_only=monodromy_only, gradient=gradient)
 
 
-def _evaluate(model, a_max, theta, y0, k, actuation, contact, dt, max_steps, tol, max_iter, monodromy_only):
+def _evaluate(model, a_max, theta, y0, k, actuation, contact, dt, max_steps, tol, max_iter, monodromy_only, gradient):
     actuation.traces["evaluate"] += 1  # runs only while tracing
+    # `gradient` stays outside the vmap: one branch runs for the whole batch.
     one = lambda th, y, kk: _orbit_one(
-        model, a_max, th, y, kk, actuation, contact, dt, max_steps, tol, max_iter, monodromy_only
+        model, a_max, th, y, kk, actuation, contact, dt, max_steps, tol, max_iter, monodromy_only, gradient
     )
     return jax.vmap(one)(theta, y0, k)
 
@@ -262,11 +284,12 @@ class Oracle(eqx.Module):
     dt: float = eqx.field(static=True)
     max_iter: int = eqx.field(static=True)
 
-    def orbits(self, theta: Array, y0: Array, k: Array) -> Orbit:
+    def orbits(self, theta: Array, y0: Array, k: Array, gradient: bool = True) -> Orbit:
         """Steady gaits of period `k` actuation periods (int32, per row) and their sensitivities,
-        for a batch of decision vectors, from warm starts `y0`."""
+        for a batch of decision vectors, from warm starts `y0`; without `gradient`, the same orbits
+        with a zero gradient, at a fraction of the cost (the same compiled program)."""
         return evaluate(self.params, self.a_max, theta, y0, k, ShapeActuation(self.shape), self.contact, self.dt,
-                        self.max_steps, self.tol, self.max_iter, True)  # fmt: skip
+                        self.max_steps, self.tol, self.max_iter, True, jnp.asarray(gradient))  # fmt: skip
 
     def transient(self, theta: Array, y0: Array, fresh: Array, periods: Array) -> Array:
         """The reduced state after `periods` periods (from `y0`, or from rest where `fresh`)."""
