@@ -335,6 +335,11 @@ def test_orbit_gradients_match_finite_differences():
     assert np.all(np.abs(ad[:, :2]) > 1e-3)  # not a vanishing derivative
     # The orbit is a fixed point of the period map, which the dynamics alone decide.
     assert np.all(np.asarray(orb.residual) < 1e-10)
+    # Without the gradient (the screen's call, the same compiled program): the same orbits.
+    bare = oracle.orbits(jnp.asarray(theta), y, one, gradient=False)
+    for name in ("y", "figures", "monodromy", "ok", "n_iter", "residual"):
+        np.testing.assert_array_equal(np.asarray(getattr(bare, name)), np.asarray(getattr(orb, name)), err_msg=name)
+    assert np.all(np.asarray(bare.gradient) == 0)
 
 
 @pytest.mark.parametrize("monodromy_only", [False, True])

@@ -1,5 +1,6 @@
 """Steady gaits of a chain under per-spring Fourier actuation, with exact sensitivities
-(the chain optimiser's oracle; the N-mass counterpart of `_orbit`).
+(the chain optimiser's oracle): the decision vectors of chains and mechanisms, on the one
+oracle of `_orbit` (its period map, Newton's method and implicit-function gradients).
 
 The decision vector is
 $\\theta = (A_{0,2}, \\dots, A_{0,H}, A_{1,1}, \\dots, A_{S-1,H}, B_{0,1}, \\dots, B_{S-1,H}, \\log\\omega)$:
@@ -29,24 +30,20 @@ fixed) instead of Fourier coefficients.
 """
 
 from collections import Counter
-from typing import cast
+from typing import cast, ClassVar
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 
 from .._custom_types import Array, Contact
-from .._status import Status
-from ..dynamics import _chain_exact as engine
-from ..dynamics._compile import engine_jit
 from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._elements import Spring
 from ..model._physics import AbstractPhysics
 from ..model._springwaves import SpringFourier
 from ..model._waveform import AbstractWaveform, Fourier, Spline
-from ._chain_gait import _reduced, _section_state
-from ._orbit import newton_orbit, Orbit, Period
+from . import _orbit as orbit
+from ._orbit import Orbit, Period
 
 
 TRACES: Counter = Counter()
@@ -118,76 +115,37 @@ def with_waves(chain: Chain | Mechanism, theta: Array, a_max: Array, harmonics: 
 
 
 def period(C: Chain | Mechanism, contact: Contact, dt: float, max_steps: Array, y: Array, k: Array) -> Period:
-    """The `k`-period map $\\Phi_k$ from the reduced state `y`, with the figures the optimiser
-    needs (`max_steps` per actuation period)."""
-    P = cast(AbstractPhysics, C.physics())
-    t_end = k.astype(y.dtype) * 2 * jnp.pi / P.omega
-    st0 = _section_state(P, contact, y)
-
-    def normal(s):
-        # Eq. (5) generalised (SPEC §8), at a step's end: N_i = m_i - fy_i + fy_{i-1}.
-        return jnp.min(jnp.stack(P.loads(P.drive(s.cph, s.sph), s.y.x).N))
-
-    def cond(c):
-        s, _, n = c
-        return (s.t < t_end) & (s.status == Status.OK) & (n < k * max_steps)
-
-    def body(c):
-        s, low, n = c
-        s, _ = engine.step(P, contact, dt, s, t_end)
-        return s, jnp.minimum(low, normal(s)), n + 1
-
-    st, low, _ = jax.lax.while_loop(cond, body, (st0, normal(st0), jnp.zeros((), jnp.int32)))
-    ok = (st.status == Status.OK) & (st.t >= t_end)
-    dX = P.centre_of_mass(st.y.x) - P.centre_of_mass(st0.y.x)
-    return Period(_reduced(st, P), jnp.stack([dX, st.y.ed, low]), ok)
+    """The `k`-period map $\\Phi_k$ of one chain or mechanism from the reduced state `y`, with the
+    figures the optimiser needs (`max_steps` per actuation period): `_orbit.period` of its physics."""
+    return orbit.period(cast(AbstractPhysics, C.physics()), contact, dt, max_steps, y, k)
 
 
-def _orbit_one(C, a_max, theta, y0, k, harmonics, knots, contact, dt, max_steps, tol, max_iter) -> Orbit:
-    ny = y0.shape[0]
+class ChainActuation(orbit.AbstractActuation):
+    """A chain or mechanism driven by the decision vector's signals (`with_waves`: Fourier series of
+    `harmonics` harmonics, or with `knots > 0` a mechanism's periodic splines)."""
 
-    def run(z):
-        out = period(with_waves(C, z[ny:], a_max, harmonics, knots), contact, dt, max_steps, z[:ny], k)
-        return jnp.concatenate([out.y, out.figures]), out.ok
+    harmonics: int
+    knots: int = 0
+    traces: ClassVar[Counter] = TRACES
 
-    return newton_orbit(run, y0, theta, tol, max_iter)
+    def physics(self, model: Chain | Mechanism, theta: Array, a_max: Array) -> AbstractPhysics:
+        return cast(AbstractPhysics, with_waves(model, theta, a_max, self.harmonics, self.knots).physics())
 
-
-def _evaluate(C, a_max, theta, y0, k, harmonics, knots, contact, dt, max_steps, tol, max_iter):
-    TRACES["evaluate"] += 1  # runs only while tracing
-    one = lambda th, y, kk: _orbit_one(C, a_max, th, y, kk, harmonics, knots, contact, dt, max_steps, tol, max_iter)
-    return jax.vmap(one)(theta, y0, k)
-
-
-def _relax(C, a_max, theta, y0, fresh, periods, harmonics, knots, contact, dt, max_steps):
-    """`periods` actuation periods from the section state `y0`, or from the relaxed springs at
-    rest where `fresh`: the reduced state at the end (a start for Newton's method)."""
-    TRACES["relax"] += 1
-
-    def one(th, y, new):
-        c = with_waves(C, th, a_max, harmonics, knots)
-        P = c.physics()
-        rest = engine.init(P, contact, P.initial_positions("relaxed"))
-        sec = _section_state(P, contact, y)
-        st = jax.tree_util.tree_map(lambda a, b: jnp.where(new, a, b), rest, sec)
-        t_end = periods.astype(y.dtype) * 2 * jnp.pi / P.omega
-
-        def cond(s_n):
-            s, n = s_n
-            return (s.t < t_end) & (n < periods * max_steps)
-
-        def body(s_n):
-            s, n = s_n
-            return engine.step(P, contact, dt, s, t_end)[0], n + 1
-
-        st, _ = jax.lax.while_loop(cond, body, (st, jnp.zeros((), jnp.int32)))
-        return _reduced(st, P)
-
-    return jax.vmap(one)(theta, y0, fresh)
+    def rest(self, model: Chain | Mechanism, P: AbstractPhysics) -> Array:
+        return P.initial_positions("relaxed")
 
 
-evaluate = engine_jit(_evaluate, ("harmonics", "knots", "contact", "dt", "max_iter"))
-relax = engine_jit(_relax, ("harmonics", "knots", "contact", "dt"))
+def evaluate(C, a_max, theta, y0, k, harmonics, knots, contact, dt, max_steps, tol, max_iter) -> Orbit:
+    """Orbits and sensitivities of a batch of decision vectors (`_orbit.evaluate`, compiled once
+    per chain structure, batch size and static choice)."""
+    return orbit.evaluate(C, a_max, theta, y0, k, ChainActuation(harmonics, knots), contact, dt, max_steps, tol,
+                          max_iter, False, True)  # fmt: skip
+
+
+def relax(C, a_max, theta, y0, fresh, periods, harmonics, knots, contact, dt, max_steps) -> Array:
+    """`periods` actuation periods from the section states `y0`, or from the relaxed springs at
+    rest where `fresh` (`_orbit.relax`): the reduced states at the end."""
+    return orbit.relax(C, a_max, theta, y0, fresh, periods, ChainActuation(harmonics, knots), contact, dt, max_steps)
 
 
 class ChainOracle(eqx.Module):

@@ -1,30 +1,36 @@
-"""Periodic gaits of a parametrised actuation and their exact sensitivities (the exact optimiser's oracle).
+"""Periodic gaits of a parametrised actuation and their exact sensitivities: the exact
+optimisers' oracle, for the paper's model and for chains and mechanisms alike.
 
-The decision vector $\\theta$ holds the stroke's shape in units of $a_\\max$ and $\\log\\omega$
-(a family of `_shapes`: a [`Fourier`][] series or a periodic [`Spline`][]); the family maps it
-to the waveform $\\ell_0(t)$.
+A decision vector $\\theta$ sets a model's actuation: for the paper's model, the stroke's
+shape in units of $a_\\max$ and $\\log\\omega$ (a family of `_shapes`: a [`Fourier`][] series or
+a periodic [`Spline`][]; [`ShapeActuation`][locomotion_jax.gaits._orbit.ShapeActuation]); for a
+chain or a mechanism, one such signal per actuated element (`_chain_orbit`). Either way the
+actuated model is a physics ([`AbstractPhysics`][locomotion_jax.AbstractPhysics]) and the
+period map is the N-body exact engine's (`dynamics._chain_exact`): the paper's model is the
+two-mass chain of `Params.physics`.
 
-For a given $\\theta$ the steady gait is the fixed point $y^*$ of the period map
-$\\Phi(y, \\theta)$ of the reduced state $y = (u, v_1, v_2)$ at the phase
-$\\omega t \\equiv 0$ (as in [`steady_gait`][]), found by Newton's method from a warm
-start with the monodromy $M = \\partial\\Phi/\\partial y$ by forward mode through the
-exact engine. Over one period the engine also accumulates the drift of the centre of
-mass $\\Delta X$ (eq. 4), the dissipated energy $e_d$ (eq. 15) and the smallest normal
-force $\\min(N_1, N_2)$ (eq. 5, at the step ends). Their total derivatives follow
-from the implicit function theorem,
+For a given $\\theta$ the steady gait is the fixed point $y^*$ of the $k$-period map
+$\\Phi_k(y, \\theta)$ of the reduced state $y = (u_1, \\dots, u_{N-1}, v_1, \\dots, v_N)$ at the
+phase $\\omega t \\equiv 0$ (for the paper's model $(u, v_1, v_2)$, as in [`steady_gait`][]),
+found by Newton's method from a warm start with the monodromy $M = \\partial\\Phi/\\partial y$ by
+forward mode through the engine. Over the $k$ periods the engine also accumulates the drift of
+the centre of mass $\\Delta X$ (eq. 4), the dissipated energy $e_d$ (eq. 15, SPEC §8) and the
+smallest normal force $\\min_{i,t} N_i$ (eq. 5 generalised, at the step ends). Their total
+derivatives follow from the implicit function theorem,
 
 $$\\frac{dy^*}{d\\theta} = (I - M)^{-1}\\frac{\\partial\\Phi}{\\partial\\theta},\\qquad
 \\frac{dF}{d\\theta} = \\frac{\\partial F}{\\partial\\theta} + \\frac{\\partial F}{\\partial y}\\frac{dy^*}{d\\theta},$$
 
-so one forward-mode pass over one period in the $3 + p$ directions $(y, \\theta)$ at the
-converged orbit gives every gradient (Newton's iterations before it push the 3 directions
-of $y$ alone: `newton_orbit(monodromy_only=True)`); located events enter with their
-implicit-function times (the saltation of each switch). Whole-period averages of the orbit
-are exact: no transient, no window.
+so one forward-mode pass over the gait period in the $\\dim y + p$ directions $(y, \\theta)$ at
+the converged orbit gives every gradient (with `monodromy_only`, Newton's iterations before it
+push the directions of $y$ alone: [`newton_orbit`][locomotion_jax.gaits._orbit.newton_orbit]);
+located events enter with their implicit-function times (the saltation of each switch).
+Whole-period averages of the orbit are exact: no transient, no window.
 """
 
+import abc
 from collections import Counter
-from typing import NamedTuple
+from typing import Any, ClassVar, NamedTuple
 
 import equinox as eqx
 import jax
@@ -32,18 +38,18 @@ import jax.numpy as jnp
 
 from .._custom_types import Array, Contact
 from .._status import Status
-from ..dynamics import _exact as exact
+from ..dynamics import _chain_exact as engine
 from ..dynamics._compile import engine_jit
 from ..model._params import Params
+from ..model._physics import AbstractPhysics
 from ..model._two_mass import initial_gap
-from ..model._waveform import AbstractWaveform
 from ..optimisation._shapes import AbstractShape
-from ._period import reduced as _reduced, section_state as _section_state
+from ._chain_gait import _reduced, _section_state
 
 
 TRACES: Counter = Counter()
-"""Python-level traces of the compiled functions (keys `"evaluate"`, `"relax"`); a test
-checks that a whole optimisation traces each once."""
+"""Python-level traces of the compiled functions for the paper's model (keys `"evaluate"`,
+`"relax"`); a test checks that a whole optimisation traces each once."""
 
 
 class Period(NamedTuple):
@@ -54,22 +60,15 @@ class Period(NamedTuple):
     ok: Array
 
 
-def period(
-    params: Params, wave: AbstractWaveform, contact: Contact, dt: float, max_steps: Array, y: Array, k: Array
-) -> Period:
-    """The `k`-period map $\\Phi_k$ from the reduced state `y`, with the figures the optimiser needs
-    (`max_steps` per actuation period)."""
-    P = exact.consts(params, wave)
-    t_end = k.astype(y.dtype) * 2 * jnp.pi / wave.omega
-    st0 = _section_state(params, wave, contact, y)
+def period(P: AbstractPhysics, contact: Contact, dt: float, max_steps: Array, y: Array, k: Array) -> Period:
+    """The `k`-period map $\\Phi_k$ of the physics `P` from the reduced state `y`, with the figures
+    the optimisers need (`max_steps` per actuation period)."""
+    t_end = k.astype(y.dtype) * 2 * jnp.pi / P.omega
+    st0 = _section_state(P, contact, y)
 
     def normal(s):
-        # Eq. (5) at a step's end: N1 = m1 - fy, N2 = m2 + fy, fy = T d / l.
-        l0, _, _ = wave.at_phase(s.cph, s.sph)
-        u = s.y.x2 - s.y.x1
-        length = jnp.sqrt(u * u + P.dd)
-        fy = P.k * (length - l0) / length * P.d
-        return jnp.minimum(P.m1 - fy, P.m2 + fy)
+        # Eq. (5) generalised (SPEC §8), at a step's end: N_i = m_i - fy_i + fy_{i-1}.
+        return jnp.min(jnp.stack(P.loads(P.drive(s.cph, s.sph), s.y.x).N))
 
     def cond(c):
         s, _, n = c
@@ -77,20 +76,20 @@ def period(
 
     def body(c):
         s, low, n = c
-        s, _ = exact.step(params, wave, contact, dt, s, t_end, None, P)
+        s, _ = engine.step(P, contact, dt, s, t_end)
         return s, jnp.minimum(low, normal(s)), n + 1
 
     st, low, _ = jax.lax.while_loop(cond, body, (st0, normal(st0), jnp.zeros((), jnp.int32)))
-    com = lambda s: P.mhat * s.y.x1 + (1 - P.mhat) * s.y.x2
     ok = (st.status == Status.OK) & (st.t >= t_end)
-    return Period(_reduced(st), jnp.stack([com(st) - com(st0), st.y.ed, low]), ok)
+    dX = P.centre_of_mass(st.y.x) - P.centre_of_mass(st0.y.x)
+    return Period(_reduced(st, P), jnp.stack([dX, st.y.ed, low]), ok)
 
 
 class Orbit(NamedTuple):
     """The steady gait of one decision vector and its sensitivities.
 
-    - `y`: the fixed point $(u, v_1, v_2)$ of $\\Phi_k$; `figures`: $(\\Delta X, e_d, \\min N)$ over
-      the gait's `k` actuation periods;
+    - `y`: the fixed point of $\\Phi_k$ (the reduced state); `figures`: $(\\Delta X, e_d, \\min N)$
+      over the gait's `k` actuation periods;
     - `gradient`: $d\\,\\text{figures}/d\\theta$, shape `(3, p)`;
     - `monodromy`: $M$ at the fixed point; `ok`: Newton converged and the period completed;
     - `n_iter`, `residual`: Newton iterations and $\\|\\Phi(y) - y\\|_\\infty$.
@@ -106,7 +105,14 @@ class Orbit(NamedTuple):
 
 
 def newton_orbit(
-    run, y0: Array, theta: Array, tol: Array | float, max_iter: Array | int, *, monodromy_only: bool = False
+    run,
+    y0: Array,
+    theta: Array,
+    tol: Array | float,
+    max_iter: Array | int,
+    *,
+    monodromy_only: bool = False,
+    gradient: Array | bool = True,
 ) -> Orbit:
     """The fixed point of a period map and the figures' implicit-function gradient.
 
@@ -121,7 +127,13 @@ def newton_orbit(
     pushes those alone and one pass in all `ny + p` directions follows at the last iterate:
     `(iterations + 1) ny + (ny + p)` directions in all instead of `(iterations + 1)(ny + p)`,
     for a second differentiated copy of `run` in the compiled program (its compile time).
-    Without it, every iterate pushes all `ny + p` directions (one differentiated copy)."""
+    Without it, every iterate pushes all `ny + p` directions (one differentiated copy).
+
+    `gradient` (with `monodromy_only`; a bool, or a traced boolean scalar that is not batched):
+    where false, the pass in all directions is skipped and the gradient returned is zero, the
+    rest as with it (a screen that ranks orbits by their figures alone). Traced, it picks the
+    branch at run time (`lax.cond`; under `vmap` an unbatched predicate runs one branch), so
+    both uses share one compiled program."""
     ny = y0.shape[0]
     eye = jnp.eye(ny, dtype=theta.dtype)
 
@@ -155,7 +167,13 @@ def newton_orbit(
     y, val, J, ok, it, done = jax.lax.while_loop(cond, body, init)
     if monodromy_only:
         # The full Jacobian once, at the last iterate (the same point: the same values).
-        val, J, ok_full = linearise(y)
+        full = lambda y, val, J: linearise(y)
+        # Or none: the y-columns alone, the theta-columns zero.
+        skip = lambda y, val, J: (val, jnp.pad(J, ((0, 0), (0, theta.shape[0]))), jnp.asarray(True))
+        if isinstance(gradient, bool):
+            val, J, ok_full = (full if gradient else skip)(y, val, J)
+        else:
+            val, J, ok_full = jax.lax.cond(gradient, full, skip, y, val, J)
         ok = ok & ok_full
     M = J[:ny, :ny]
     dy = jnp.linalg.solve(eye - M, J[:ny, ny:])
@@ -164,55 +182,98 @@ def newton_orbit(
     return Orbit(y, val[ny:], grad, M, good, it, jnp.max(jnp.abs(val[:ny] - y)))
 
 
-def _orbit_one(params, a_max, theta, y0, k, shape, contact, dt, max_steps, tol, max_iter) -> Orbit:
+class AbstractActuation(eqx.Module):
+    """How a decision vector actuates a model (static: hashed into the compiled oracle).
+
+    `physics(model, theta, a_max)` is the model driven by the actuation of `theta` (one
+    configuration, traced); `rest(model, P)` the positions at rest with relaxed springs, from
+    which a fresh transient starts; `traces` the counter of the compiled functions' traces."""
+
+    traces: ClassVar[Counter]
+
+    @abc.abstractmethod
+    def physics(self, model: Any, theta: Array, a_max: Array) -> AbstractPhysics:
+        """The physics of `model` under the actuation of `theta`."""
+
+    @abc.abstractmethod
+    def rest(self, model: Any, P: AbstractPhysics) -> Array:
+        """Positions at $t = 0$, shape `(N,)`, at rest with relaxed springs."""
+
+
+class ShapeActuation(AbstractActuation):
+    """The paper's model ([`Params`][locomotion_jax.Params]) with its rest length $\\ell_0(t)$ the
+    waveform of a shape family's decision vector (`_shapes`), about $\\bar\\ell$."""
+
+    shape: AbstractShape
+    traces: ClassVar[Counter] = TRACES
+
+    def physics(self, model: Params, theta: Array, a_max: Array) -> AbstractPhysics:
+        P = model.physics(self.shape.waveform(theta, a_max, model.lbar))
+        # Coefficients built in the default float (a zero sinusoid's) take the decision vector's.
+        cast = lambda x: x.astype(theta.dtype) if jnp.issubdtype(x.dtype, jnp.floating) else x
+        return jax.tree_util.tree_map(cast, P)
+
+    def rest(self, model: Params, P: AbstractPhysics) -> Array:
+        # The relaxed spring at its mean rest length, eq. (14) with x2 - x1 = sqrt(lbar^2 - d^2).
+        gap = initial_gap(model, "relaxed")
+        return jnp.stack([jnp.zeros_like(gap), gap])
+
+
+def _orbit_one(
+    model, a_max, theta, y0, k, actuation, contact, dt, max_steps, tol, max_iter, monodromy_only, gradient
+) -> Orbit:
+    ny = y0.shape[0]
+
     def run(z):
-        out = period(params, shape.waveform(z[3:], a_max, params.lbar), contact, dt, max_steps, z[:3], k)
+        P = actuation.physics(model, z[ny:], a_max)
+        out = period(P, contact, dt, max_steps, z[:ny], k)
         return jnp.concatenate([out.y, out.figures]), out.ok
 
-    return newton_orbit(run, y0, theta, tol, max_iter, monodromy_only=True)
+    return newton_orbit(run, y0, theta, tol, max_iter, monodromy_only=monodromy_only, gradient=gradient)
 
 
-def _evaluate(params, a_max, theta, y0, k, shape, contact, dt, max_steps, tol, max_iter):
-    TRACES["evaluate"] += 1  # runs only while tracing
-    one = lambda th, y, kk: _orbit_one(params, a_max, th, y, kk, shape, contact, dt, max_steps, tol, max_iter)
+def _evaluate(model, a_max, theta, y0, k, actuation, contact, dt, max_steps, tol, max_iter, monodromy_only, gradient):
+    actuation.traces["evaluate"] += 1  # runs only while tracing
+    # `gradient` stays outside the vmap: one branch runs for the whole batch.
+    one = lambda th, y, kk: _orbit_one(
+        model, a_max, th, y, kk, actuation, contact, dt, max_steps, tol, max_iter, monodromy_only, gradient
+    )
     return jax.vmap(one)(theta, y0, k)
 
 
-def _relax(params, a_max, theta, y0, fresh, periods, shape, contact, dt, max_steps):
-    """`periods` actuation periods from the section state `y0`, or from the relaxed spring
-    at rest where `fresh`: the reduced state at the end (a start for Newton's method)."""
-    TRACES["relax"] += 1
+def _relax(model, a_max, theta, y0, fresh, periods, actuation, contact, dt, max_steps):
+    """`periods` actuation periods from the section state `y0`, or from rest with relaxed
+    springs where `fresh`: the reduced state at the end (a start for Newton's method)."""
+    actuation.traces["relax"] += 1
 
     def one(th, y, new):
-        wave = shape.waveform(th, a_max, params.lbar)
-        P = exact.consts(params, wave)
-        gap = initial_gap(params, "relaxed")
-        rest = exact.init(params, wave, contact, jnp.zeros_like(gap), gap)
-        sec = _section_state(params, wave, contact, y)
+        P = actuation.physics(model, th, a_max)
+        rest = engine.init(P, contact, actuation.rest(model, P))
+        sec = _section_state(P, contact, y)
         st = jax.tree_util.tree_map(lambda a, b: jnp.where(new, a, b), rest, sec)
-        t_end = periods.astype(gap.dtype) * 2 * jnp.pi / wave.omega
-        steps = periods * max_steps
+        t_end = periods.astype(y.dtype) * 2 * jnp.pi / P.omega
 
         def cond(c):
             s, n = c
-            return (s.t < t_end) & (n < steps)
+            return (s.t < t_end) & (n < periods * max_steps)
 
         def body(c):
             s, n = c
-            return exact.step(params, wave, contact, dt, s, t_end, None, P)[0], n + 1
+            return engine.step(P, contact, dt, s, t_end)[0], n + 1
 
         st, _ = jax.lax.while_loop(cond, body, (st, jnp.zeros((), jnp.int32)))
-        return _reduced(st)
+        return _reduced(st, P)
 
     return jax.vmap(one)(theta, y0, fresh)
 
 
-evaluate = engine_jit(_evaluate, ("shape", "contact", "dt", "max_iter"))
-relax = engine_jit(_relax, ("shape", "contact", "dt"))
+evaluate = engine_jit(_evaluate, ("actuation", "contact", "dt", "max_iter", "monodromy_only"))
+relax = engine_jit(_relax, ("actuation", "contact", "dt"))
 
 
 class Oracle(eqx.Module):
-    """The compiled evaluations of one problem (static: the shape family, contact, step, iterations)."""
+    """The compiled evaluations of one problem of the paper's model (static: the shape family,
+    contact, step, iterations)."""
 
     params: Params
     a_max: Array
@@ -223,13 +284,14 @@ class Oracle(eqx.Module):
     dt: float = eqx.field(static=True)
     max_iter: int = eqx.field(static=True)
 
-    def orbits(self, theta: Array, y0: Array, k: Array) -> Orbit:
+    def orbits(self, theta: Array, y0: Array, k: Array, gradient: bool = True) -> Orbit:
         """Steady gaits of period `k` actuation periods (int32, per row) and their sensitivities,
-        for a batch of decision vectors, from warm starts `y0`."""
-        return evaluate(self.params, self.a_max, theta, y0, k, self.shape, self.contact, self.dt,
-                        self.max_steps, self.tol, self.max_iter)  # fmt: skip
+        for a batch of decision vectors, from warm starts `y0`; without `gradient`, the same orbits
+        with a zero gradient, at a fraction of the cost (the same compiled program)."""
+        return evaluate(self.params, self.a_max, theta, y0, k, ShapeActuation(self.shape), self.contact, self.dt,
+                        self.max_steps, self.tol, self.max_iter, True, jnp.asarray(gradient))  # fmt: skip
 
     def transient(self, theta: Array, y0: Array, fresh: Array, periods: Array) -> Array:
         """The reduced state after `periods` periods (from `y0`, or from rest where `fresh`)."""
-        return relax(self.params, self.a_max, theta, y0, fresh, periods, self.shape, self.contact, self.dt,
-                     self.max_steps)  # fmt: skip
+        return relax(self.params, self.a_max, theta, y0, fresh, periods, ShapeActuation(self.shape), self.contact,
+                     self.dt, self.max_steps)  # fmt: skip

@@ -126,8 +126,11 @@ class _Evaluator:
         self.last: dict[int, Any] = {}
         self.calls = 0
 
-    def solve(self, theta: np.ndarray, y0: np.ndarray, fresh: np.ndarray, k: np.ndarray) -> tuple[Any, np.ndarray]:
-        """Orbits of a full batch (`lanes` rows; numpy arrays in an `Orbit`) and their periods `k`.
+    def solve(
+        self, theta: np.ndarray, y0: np.ndarray, fresh: np.ndarray, k: np.ndarray, gradient: bool = True
+    ) -> tuple[Any, np.ndarray]:
+        """Orbits of a full batch (`lanes` rows; numpy arrays in an `Orbit`) and their periods `k`
+        (without `gradient`: a zero gradient, for the screen, which ranks by the figures alone).
 
         From the warm starts with the given periods first; where Newton fails, again after
         a transient, as a period-1 gait and then as a period-2 gait (past a period doubling
@@ -135,7 +138,7 @@ class _Evaluator:
         dtype = self.oracle.params.dtype
         th = jnp.asarray(theta, dtype)
         run = lambda y, kk: jax.tree_util.tree_map(
-            np.asarray, self.oracle.orbits(th, jnp.asarray(y, dtype), jnp.asarray(kk, jnp.int32))
+            np.asarray, self.oracle.orbits(th, jnp.asarray(y, dtype), jnp.asarray(kk, jnp.int32), gradient)
         )
         orb: Any = run(y0, k)
         k = np.array(k)
@@ -394,7 +397,8 @@ def optimise_exact(
             rest = oracle.transient(
                 jnp.asarray(th, dtype), jnp.zeros((lanes, 3), dtype), jnp.ones(lanes, bool), periods
             )
-            orb, kk = ev.solve(th, np.asarray(rest), np.zeros(lanes, bool), np.ones(lanes, int))
+            # The screen ranks by the figures alone: no gradients (the local runs compute their own).
+            orb, kk = ev.solve(th, np.asarray(rest), np.zeros(lanes, bool), np.ones(lanes, int), gradient=False)
             for k in range(lanes):
                 one = jax.tree_util.tree_map(lambda x: x[k], orb)
                 figs.append(make(th[k], one, v_target, int(kk[k])) if one.ok else _Bad(th[k], None))
