@@ -117,9 +117,12 @@ def with_waves(chain: Chain | Mechanism, theta: Array, a_max: Array, harmonics: 
     return chain.with_waves(waves)
 
 
-def period(C: Chain | Mechanism, contact: Contact, dt: float, max_steps: Array, y: Array, k: Array) -> Period:
+def period(
+    C: Chain | Mechanism, contact: Contact, dt: float, max_steps: Array, y: Array, k: Array, loop=jax.lax.while_loop
+) -> Period:
     """The `k`-period map $\\Phi_k$ from the reduced state `y`, with the figures the optimiser
-    needs (`max_steps` per actuation period)."""
+    needs (`max_steps` per actuation period). `loop`: the time loop, `lax.while_loop`'s signature
+    (`gaits._adjoint` passes one that reverse mode traverses)."""
     P = cast(AbstractPhysics, C.physics())
     t_end = k.astype(y.dtype) * 2 * jnp.pi / P.omega
     st0 = _section_state(P, contact, y)
@@ -137,7 +140,7 @@ def period(C: Chain | Mechanism, contact: Contact, dt: float, max_steps: Array, 
         s, _ = engine.step(P, contact, dt, s, t_end)
         return s, jnp.minimum(low, normal(s)), n + 1
 
-    st, low, _ = jax.lax.while_loop(cond, body, (st0, normal(st0), jnp.zeros((), jnp.int32)))
+    st, low, _ = loop(cond, body, (st0, normal(st0), jnp.zeros((), jnp.int32)))
     ok = (st.status == Status.OK) & (st.t >= t_end)
     dX = P.centre_of_mass(st.y.x) - P.centre_of_mass(st0.y.x)
     return Period(_reduced(st, P), jnp.stack([dX, st.y.ed, low]), ok)
