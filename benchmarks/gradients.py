@@ -1,14 +1,25 @@
-"""Cost of forward-mode derivatives of the exact engine, relative to plain runs.
+"""Cost of derivatives of the exact engine, relative to plain runs.
 
-For a batch of `B` configurations and `p` parameters, `jax.jacfwd` of `measure`
-(one compiled call carrying `p` tangents) against the `p + 1` plain runs that a
-one-sided finite difference needs, in one process, compilation excluded (each
-timed call runs once to compile, then `REPEAT` times). Prints a Markdown table.
+1. `measure`: for a batch of `B` configurations and `p` parameters, `jax.jacfwd` (one
+   compiled call carrying `p` tangents) against the `p + 1` plain runs that a one-sided finite
+   difference needs, and `jax.grad` of the batch's summed `tau_z` (one reverse pass) against one
+   plain run, with its largest relative difference from the `jacfwd` row.
+2. A chain's steady gait (`--gait`): a 4-mass worm with 32 Fourier harmonics per spring
+   (3 springs x 64 coefficients: 192 parameters with log omega and without the fixed phase):
+   one steady-gait solve (Newton's method, forward mode in the 7 state directions), the
+   forward-mode oracle (`ChainOracle.orbits`: `jacfwd` through the period map in all 7 + 192
+   directions) and `jax.grad` of the cost of transport by the adjoint solve
+   (`gaits._adjoint`), with their ratios and the largest relative difference of the two gradients.
 
-    python benchmarks/gradients.py [--batch 256] [--params 1 5]
+In one process, compilation excluded (each timed call runs once to compile, then `REPEAT`
+times; the best is printed). Prints Markdown tables and the load average.
+
+    python benchmarks/gradients.py [--batch 256] [--params 1 5] [--gait] [--no-measure]
 """
 
 import argparse
+import math
+import os
 import time
 
 import jax
@@ -35,12 +46,67 @@ def best_of(fn) -> float:
     return min(times)
 
 
+def gait_benchmark(harmonics: int) -> None:
+    from locomotion_jax.gaits import _adjoint as adj
+    from locomotion_jax.gaits._chain_orbit import ChainOracle, size
+
+    N, omega, dt = 4, 3.0, 0.05
+    S = N - 1
+    chain = lj.Chain(masses=[1.0] * N, d=0.0, friction=lj.AnisotropicCoulomb(0.5, 0.9, 0.3, 0.7)).broadcast()
+    steps = int(math.ceil(2 * math.pi / omega / dt)) * 3 + 200
+    oracle = ChainOracle(chain=chain, a_max=jnp.asarray(0.1), max_steps=jnp.asarray(steps, jnp.int32),
+                         tol=jnp.asarray(1e-11), harmonics=harmonics, contact="paper", dt=dt, max_iter=30)  # fmt: skip
+    phi = 2 * math.pi / 3
+    A, B = np.zeros((S, harmonics)), np.zeros((S, harmonics))
+    for j in range(S):  # a travelling wave with a second harmonic; the others 0
+        A[j, :2] = -0.8 * math.sin(j * phi), 0.2 * math.sin(1 - 2 * j * phi)
+        B[j, :2] = 0.8 * math.cos(j * phi), 0.2 * math.cos(1 - 2 * j * phi)
+    theta = jnp.asarray(np.concatenate([A.ravel()[1:], B.ravel(), [math.log(omega)]]))
+    p, ny = size(S, harmonics), 2 * N - 1
+    one = jnp.ones(1, jnp.int32)
+    y0 = oracle.transient(theta[None], jnp.zeros((1, ny)), jnp.ones(1, bool), jnp.asarray(30))
+    orb = jax.tree_util.tree_map(lambda x: x[0], oracle.orbits(theta[None], y0, one))
+    ys = orb.y  # every timed call starts from the fixed point (Newton: one iteration)
+
+    solve = best_of(lambda: adj.steady_gait(oracle, theta, ys).figures)
+    fwd = best_of(lambda: oracle.orbits(theta[None], ys[None], one).gradient)
+    cot = lambda th: adj.cost_of_transport(adj.steady_gait(oracle, th, ys))
+    grad_fn = jax.grad(cot)
+    rev = best_of(lambda: grad_fn(theta))
+    F, G = orb.figures, orb.gradient
+    expect = G[1] / abs(F[0]) - F[1] * np.sign(F[0]) * G[0] / F[0] ** 2
+    diff = float(np.max(np.abs(grad_fn(theta) - expect)) / np.max(np.abs(expect)))
+    cost = float(F[1] / abs(F[0]))
+    print(f"steady gait of a {N}-mass worm, {harmonics} harmonics per spring: p = {p} parameters, float64, "
+          f"{jax.default_backend()}, converged {bool(orb.ok)}, cost of transport {cost:.6f}")  # fmt: skip
+    print()
+    print("| steady-gait solve (s) | jacfwd: oracle, 7 + p directions (s) | grad: adjoint (s) | jacfwd / solve "
+          "| grad / solve | max rel. difference grad vs jacfwd |")  # fmt: skip
+    print("|---|---|---|---|---|---|")
+    print(f"| {solve:.3f} | {fwd:.3f} | {rev:.3f} | {fwd / solve:.2f} | {rev / solve:.2f} | {diff:.1e} |")
+
+
+def total(tau: jax.Array) -> jax.Array:
+    """The sum of the finite entries (z not reached: `inf`, left out)."""
+    return jnp.sum(jnp.where(jnp.isfinite(tau), tau, 0))
+
+
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     ap.add_argument("--batch", type=int, default=256)
     ap.add_argument("--params", type=int, nargs="+", default=[1, 5])
     ap.add_argument("--horizon", type=float, default=100.0)
+    ap.add_argument("--gait", action="store_true", help="also the steady-gait benchmark")
+    ap.add_argument("--harmonics", type=int, default=32)
+    ap.add_argument("--no-measure", action="store_true", help="skip the measure benchmark")
     args = ap.parse_args()
+    print(f"load average at start: {os.getloadavg()}")
+    if args.gait:
+        gait_benchmark(args.harmonics)
+        print()
+    if args.no_measure:
+        print(f"load average at end: {os.getloadavg()}")
+        return
     rng = np.random.default_rng(0)
     omega = jnp.asarray(rng.uniform(1.0, 12.0, args.batch))
     a = jnp.asarray(rng.uniform(0.02, 0.08, args.batch))
@@ -55,12 +121,20 @@ def main() -> None:
     plain = best_of(lambda: run(jnp.zeros(1), 0))
     print(f"batch {args.batch}, measure(z=1, horizon={args.horizon:g}), float64, {jax.default_backend()}")
     print()
-    print("| p | plain run (s) | jacfwd (s) | jacfwd / (p + 1) plain runs | derivatives per second |")
-    print("|---|---|---|---|---|")
+    print("| p | plain run (s) | jacfwd (s) | jacfwd / (p + 1) plain runs | grad of sum tau_z (s) | grad / plain run "
+          "| max rel. difference |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|")
     for p in args.params:
-        jac = best_of(lambda p=p: jax.jacfwd(lambda d: run(d, p))(jnp.zeros(p)))
+        f = lambda d, p=p: run(d, p)
+        g = jax.grad(lambda d, f=f: total(f(d)[0]))
+        jac = best_of(lambda f=f, p=p: jax.jacfwd(f)(jnp.zeros(p)))
+        rev = best_of(lambda g=g, p=p: g(jnp.zeros(p)))
+        J = np.asarray(jax.jacfwd(f)(jnp.zeros(p)))[0]
+        expect = np.sum(np.where(np.isfinite(J), J, 0), axis=0)
+        diff = float(np.max(np.abs(np.asarray(g(jnp.zeros(p))) - expect)) / np.max(np.abs(expect)))
         ratio = jac / ((p + 1) * plain)
-        print(f"| {p} | {plain:.2f} | {jac:.2f} | {ratio:.2f} | {args.batch * p * 3 / jac:.0f} |")
+        print(f"| {p} | {plain:.2f} | {jac:.2f} | {ratio:.2f} | {rev:.2f} | {rev / plain:.1f} | {diff:.1e} |")
+    print(f"load average at end: {os.getloadavg()}")
 
 
 if __name__ == "__main__":

@@ -209,7 +209,7 @@ def _measure_batch(P, valid, t_start, initial, z, horizon, window, contact, star
     return run_queue(setup, _running, advance, results, n, lanes, order)
 
 
-_measure_batch = engine_jit(_measure_batch, ("contact", "start", "dt", "lanes"))
+_measure_batch = engine_jit(_measure_batch, ("contact", "start", "dt", "lanes"), reverse=True)
 
 
 def measure_batch(

@@ -52,7 +52,7 @@ def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps, lanes, buf
     return run_saves(init, step, _row, valid.shape[0], save_at, max_steps, lanes, order, buffer)
 
 
-_simulate_batch = engine_jit(_simulate_batch, ("contact", "start", "dt", "lanes", "buffer"))
+_simulate_batch = engine_jit(_simulate_batch, ("contact", "start", "dt", "lanes", "buffer"), reverse=True)
 
 
 def _stack(P: Any, a: tuple, like: jax.Array) -> jax.Array:

@@ -5,9 +5,11 @@
 dispatched, so a caller can prepare the next chunk while a device computes.
 
 Called under a transformation (`jax.jvp`, `jax.jacfwd`, `vmap`), the engine is
-compiled without the options (JAX accepts them on a top-level `jit` only) and its
-outputs pass through [`_forward.forward_only`][], so reverse mode is refused with
-a clear message.
+compiled without the options (JAX accepts them on a top-level `jit` only). With
+`reverse=True` (a function whose loops are `_queue.run_queue`'s: `measure`,
+`simulate`) reverse mode differentiates it: the backward pass traces the function
+again inside `_queue.reverse_loops`. Otherwise its outputs pass through
+[`_forward.forward_only`][], so reverse mode is refused with a clear message.
 """
 
 import functools
@@ -17,6 +19,7 @@ from collections.abc import Callable, Sequence
 import jax
 
 from ._forward import forward_only, is_traced, jvp_leaves, one_direction_at_a_time
+from ._queue import reverse_loops
 
 
 COMPILER_OPTIONS: dict[str, str] = {"xla_cpu_prefer_vector_width": "512"}
@@ -29,9 +32,10 @@ It is a preference: LLVM keeps to the vector width the CPU has, and backends
 other than the CPU do not read `xla_cpu_*` options."""
 
 
-def engine_jit(fn: Callable, static_argnames: Sequence[str]) -> Callable:
+def engine_jit(fn: Callable, static_argnames: Sequence[str], reverse: bool = False) -> Callable:
     """`jax.jit(fn)` with [`COMPILER_OPTIONS`][] and the given static arguments (module
-    docstring: under a transformation, a plain `jit` with forward-mode-only outputs).
+    docstring: under a transformation, a plain `jit`; reverse mode with `reverse`, refused
+    without).
     The returned function has the jitted one's `lower`, `eval_shape` and `_cache_size`."""
     static = tuple(static_argnames)
     top = jax.jit(fn, static_argnames=static, compiler_options=COMPILER_OPTIONS)
@@ -53,7 +57,16 @@ def engine_jit(fn: Callable, static_argnames: Sequence[str]) -> Callable:
         fixed = tuple((k, v) for k, v in bound.arguments.items() if k in static)
         dyn = {k: v for k, v in bound.arguments.items() if k not in static}
         compiled = lambda tree, active: compiled_jvp(fixed, tree, active)
-        return forward_only(one_direction_at_a_time(lambda d: nested(**dict(fixed), **d), dyn, compiled))
+        run = lambda d: nested(**dict(fixed), **d)
+        if not reverse:
+            return forward_only(one_direction_at_a_time(run, dyn, compiled))
+
+        def traversable(d):
+            # Traced anew under the flag (not through `nested`, whose cache would return the queue).
+            with reverse_loops():
+                return fn(**dict(fixed), **d)
+
+        return one_direction_at_a_time(run, dyn, compiled, traversable)
 
     call.lower = top.lower  # pyright: ignore[reportAttributeAccessIssue]
     call.eval_shape = top.eval_shape  # pyright: ignore[reportAttributeAccessIssue]

@@ -1,12 +1,18 @@
-"""Forward-mode differentiation only: a clear refusal of reverse mode.
+"""Differentiation of the exact engine: forward mode everywhere, reverse mode where a loop allows.
 
-The exact engine runs each configuration in a `lax.while_loop` whose length
-depends on the run (events cut steps). JAX differentiates such a loop in forward
-mode (`jax.jvp`, `jax.jacfwd`), not in reverse mode (`jax.grad`, `jax.vjp`,
-`jax.jacrev`): that would need every iteration stored. [`forward_only`][] is the
-identity, and linear, so forward mode passes through it; transposing it (the
-first thing reverse mode does with an output) raises a `TypeError` that says
-what to use instead.
+The exact engine runs each configuration in a `lax.while_loop` whose length depends on the
+run (events cut steps). JAX differentiates such a loop in forward mode (`jax.jvp`,
+`jax.jacfwd`) but not in reverse mode (`jax.grad`, `jax.vjp`, `jax.jacrev`), which needs the
+iterations stored. Two ways out:
+
+- [`one_direction_at_a_time`][] with a `reverse` function: the engine's forward-mode
+  derivative is wrapped in `jax.custom_derivatives.linear_call`, whose transpose (what reverse
+  mode evaluates) is a `jax.vjp` of `reverse`, the same computation traced with loops that
+  reverse mode traverses (`_queue.reverse_loops`: `measure` and `simulate`). The forward pass
+  stays the fast work queue; the backward pass re-runs each configuration in a checkpointed loop.
+- Elsewhere (steady gaits' Newton loops, sweeps' chunks) [`forward_only`][], the identity and
+  linear, so that forward mode passes through it; transposing it (the first thing reverse mode
+  does with an output) raises a `TypeError` that says what to use instead.
 """
 
 import functools
@@ -18,7 +24,9 @@ import jax.core  # (jax.core.Tracer) for type checkers
 import jax.custom_batching
 import jax.numpy as jnp
 import numpy as np
-from jax.interpreters import ad, batching, mlir
+from jax._src import core as _core  # eval_jaxpr, for linear_call's batching rule
+from jax._src.custom_derivatives import linear_call_p as _linear_call_p
+from jax.interpreters import ad, batching, mlir, partial_eval as pe
 
 
 try:
@@ -28,10 +36,17 @@ except ImportError:  # older JAX
 
 
 REVERSE_MODE_MESSAGE = (
-    "locomotion_jax's exact engine supports forward-mode differentiation only: use "
+    "this computation of locomotion_jax's exact engine supports forward-mode differentiation only: use "
     "jax.jvp or jax.jacfwd (one forward pass per input direction), not jax.grad, jax.vjp "
-    "or jax.jacrev. Its time loop has a length decided while it runs (located stick/slip "
-    "events), which reverse mode cannot traverse without storing every step."
+    "or jax.jacrev. Its loops (steady gaits' Newton iterations, sweeps' chunks) have lengths decided "
+    "while they run, which reverse mode cannot traverse. Reverse mode works through measure and "
+    "simulate, and through a chain's steady gait by locomotion_jax.gaits._adjoint.steady_gait."
+)
+
+VMAP_REVERSE_MESSAGE = (
+    "reverse mode (jax.grad, jax.vjp) through locomotion_jax's measure or simulate under jax.vmap is not "
+    "supported: pass the configurations as one batch (the engine runs batches itself) and differentiate "
+    "a function of the whole batch, or use jax.jacfwd."
 )
 
 
@@ -105,7 +120,68 @@ def jvp_leaves(fn: Callable[[Any], Any], tree: Any, primals: list, tangents: lis
     return jax.jvp(f_active, (xs,), (ts,))
 
 
-def one_direction_at_a_time(fn: Callable[[Any], Any], dyn: Any, compiled: Callable[[Any, tuple], Callable]) -> Any:
+def _reverse_linear(fn: Callable[[Any], Any], reverse: Callable[[Any], Any], tree, primals: list, ts: list,
+                    active: tuple) -> Any:  # fmt: skip
+    """The tangent of `fn` at `primals` as a `linear_call`: evaluated, forward mode through `fn`;
+    transposed, `jax.vjp` of `reverse` (the same function traced with reverse-traversable loops)
+    with respect to the active inputs. Integer outputs get `float0` tangents outside it."""
+    shapes = jax.eval_shape(lambda ps: fn(jax.tree_util.tree_unflatten(tree, ps)), primals)
+    out_leaves, out_tree = jax.tree_util.tree_flatten(shapes)
+    inexact = [jnp.issubdtype(o.dtype, jnp.inexact) for o in out_leaves]
+
+    def with_active(ps, xs):
+        it = iter(xs)
+        return jax.tree_util.tree_unflatten(tree, [next(it) if a else p for p, a in zip(ps, active)])
+
+    def floats(tree_out):
+        return [x for x, f in zip(jax.tree_util.tree_leaves(tree_out), inexact) if f]
+
+    def forward(ps, lin):
+        full = [t if a else None for t, a in zip(_expand(lin, active), active)]
+        _, tangent = jvp_leaves(fn, tree, ps, full, active)
+        return floats(tangent)
+
+    def transpose(ps, cts):
+        xs = [p for p, a in zip(ps, active) if a]
+        _, vjp = jax.vjp(lambda xs: floats(reverse(with_active(ps, xs))), xs)
+        return vjp(list(cts))[0]
+
+    lin = [t for t, a in zip(ts, active) if a]
+    tangents = iter(jax.custom_derivatives.linear_call(forward, transpose, list(primals), lin))
+    zeros = lambda o: np.zeros(o.shape, jax.dtypes.float0)
+    return jax.tree_util.tree_unflatten(
+        out_tree, [next(tangents) if f else zeros(o) for o, f in zip(out_leaves, inexact)]
+    )
+
+
+def _batch_linear_call(args, dims, *, callee, transpose_thunk, num_callee_consts, num_res):
+    """A batching rule for `linear_call` (JAX defines none): `vmap` of its callee's evaluation.
+
+    Reverse mode's `jax.jacrev` maps the transposed call (`_reverse_linear`'s `transpose`) over
+    cotangent directions; this evaluates it per direction as one vectorised computation. The
+    result is no longer a `linear_call`: a transposition after a `vmap` (`vmap` of `grad`) is
+    refused earlier with [`VMAP_REVERSE_MESSAGE`][]."""
+    del transpose_thunk, num_callee_consts, num_res
+    fun = lambda *a: _core.eval_jaxpr(callee.jaxpr, (), *a)
+    outs = jax.vmap(fun, in_axes=list(dims))(*args)  # None: not mapped
+    return outs, [0] * len(outs)
+
+
+if _linear_call_p not in getattr(batching, "fancy_primitive_batchers", {}):  # a JAX with its own rule keeps it
+    batching.primitive_batchers[_linear_call_p] = _batch_linear_call
+
+
+def _expand(lin: list, active: tuple) -> list:
+    it = iter(lin)
+    return [next(it) if a else None for a in active]
+
+
+def one_direction_at_a_time(
+    fn: Callable[[Any], Any],
+    dyn: Any,
+    compiled: Callable[[Any, tuple], Callable],
+    reverse: Callable[[Any], Any] | None = None,
+) -> Any:
     """`fn(dyn)`, differentiated in forward mode one input direction at a time.
 
     `jax.jacfwd` pushes all `p` directions through at once (a `vmap` of `jvp`): every
@@ -120,6 +196,10 @@ def one_direction_at_a_time(fn: Callable[[Any], Any], dyn: Any, compiled: Callab
     (called eagerly: one compilation serves every direction and call); under `jit` several
     directions run in a `lax.map` of `fn`'s `jvp` (slower than eagerly: measured, not
     understood), one as usual.
+
+    `reverse`: `fn` traced with loops that reverse mode traverses, or `None`. With it, reverse
+    mode's linearisation (tangents that are partial-evaluation tracers) gets the tangent as a
+    `linear_call` whose transpose is `reverse`'s `jax.vjp` (module docstring).
     """
     leaves, tree = jax.tree_util.tree_flatten(dyn)
 
@@ -131,6 +211,11 @@ def one_direction_at_a_time(fn: Callable[[Any], Any], dyn: Any, compiled: Callab
     def _f_jvp(primals, tangents):
         active = tuple(not isinstance(t, jax.custom_derivatives.SymbolicZero) for t in tangents)
         ts = [t if a else None for t, a in zip(tangents, active)]
+        if reverse is not None and any(isinstance(t, pe.JaxprTracer) for t in ts):
+            if any(getattr(p, "batch_dim", None) is not None for p in primals):
+                raise TypeError(VMAP_REVERSE_MESSAGE)
+            out = fn(jax.tree_util.tree_unflatten(tree, list(primals)))
+            return out, _reverse_linear(fn, reverse, tree, list(primals), ts, active)
         run = lambda ps, ts: jvp_leaves(fn, tree, ps, ts, active)
         if not is_traced((primals, ts)):
             return compiled(tree, active)(list(primals), ts)

@@ -111,17 +111,21 @@ def _root_jvp(primals, tangents):
     $\\dot\\theta^* = -\\sum_k \\dot c_k \\theta^{*k} / p'(\\theta^*)$ (implicit function theorem;
     the root's tangent does not depend on the Newton iterations that found it). The
     state committed at $\\theta^*$ then moves with it, which is the saltation of the
-    switch. A grazing crossing ($p'(\\theta^*) = 0$) has no derivative: its tangent is 0."""
+    switch. A grazing crossing ($p'(\\theta^*) = 0$) has no derivative: its tangent is 0, as
+    where the quintic is not finite (the engine's pick of an event that did not cross, whose
+    root it discards). The tangent is linear in `dcoef` with finite factors only, so that its
+    transpose (reverse mode) multiplies no zero cotangent by `inf`."""
     coef, g1 = primals
     dcoef, _ = tangents
     th = root(coef, g1)
-    dp = jnp.zeros_like(th)
     slope = jnp.zeros_like(th)
+    for k in reversed(range(1, 6)):
+        slope = slope * th + k * coef[k]
+    ok = (slope != 0) & jnp.isfinite(slope) & jnp.isfinite(th)
+    ths = jnp.where(ok, th, 0)
+    dp = jnp.zeros_like(th)
     for k in reversed(range(6)):
-        dp = dp * th + dcoef[k]
-        if k > 0:
-            slope = slope * th + k * coef[k]
-    ok = slope != 0
+        dp = dp * ths + dcoef[k]
     return th, jnp.where(ok, -dp / jnp.where(ok, slope, 1), 0)
 
 

@@ -96,7 +96,7 @@ def measure_batch(
     return run_queue(setup, chain_measure._running, advance, results, n, lanes, _order(params))
 
 
-_measure_batch = engine_jit(measure_batch, ("wave_axes", "contact", "start", "dt", "lanes"))
+_measure_batch = engine_jit(measure_batch, ("wave_axes", "contact", "start", "dt", "lanes"), reverse=True)
 
 
 def measure_one(params: Params, wave: AbstractWaveform, z, horizon, window, contact, start, dt, max_steps) -> dict:
@@ -135,7 +135,7 @@ def _simulate_rows(params, wave, wave_axes, save_at, contact, start, dt, max_ste
     return (rows[..., jnp.asarray(_TO_CHAIN + tuple(range(4, rows.shape[-1])))], *rest)
 
 
-_simulate_rows = engine_jit(_simulate_rows, ("wave_axes", "contact", "start", "dt", "lanes", "buffer"))
+_simulate_rows = engine_jit(_simulate_rows, ("wave_axes", "contact", "start", "dt", "lanes", "buffer"), reverse=True)
 
 
 def derived_fields(params: Params, wave: AbstractWaveform, contact: Contact, t, y, stuck, sdir) -> dict:

@@ -22,13 +22,44 @@ loop also stops when a buffer is full; the outer loop then copies every lane's
 buffered rows into its configuration's rows of the output. A row is written once,
 by one scatter per outer iteration: a write into the output inside the hot loop
 (a scatter per lane and iteration) would cost more than the step itself.
+
+**Reverse mode.** Traced inside [`reverse_loops`][], [`run_queue`][] builds instead one loop
+per configuration (a `vmap` over all of them, no queue, no lanes) that reverse mode can
+traverse: `equinox.internal.while_loop(kind="checkpointed")` with [`CHECKPOINTS`][] stored
+states (online binomial checkpointing: the backward pass recomputes the steps between two
+checkpoints). The same steps in the same order per configuration, so the same values; the
+rows of a [`Stream`][] are scattered into the configuration's own rows as they are drained.
+`_compile.engine_jit` traces it for the backward pass of `jax.grad`/`jax.vjp`.
 """
 
-from collections.abc import Callable
+import contextlib
+import contextvars
+from collections.abc import Callable, Iterator
 from typing import Any, NamedTuple
 
+import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
+
+
+CHECKPOINTS = 256
+"""States a configuration's reverse-mode loop stores: with $c$ of them the backward pass of a run
+of up to about $c^2/2$ steps recomputes each step about twice (Stumm and Walther's online
+checkpointing, in `equinox.internal`); longer runs recompute more."""
+
+_REVERSE: contextvars.ContextVar[bool] = contextvars.ContextVar("lj_reverse_loops", default=False)
+
+
+@contextlib.contextmanager
+def reverse_loops() -> Iterator[None]:
+    """While tracing inside this context, [`run_queue`][] builds loops that reverse mode traverses
+    (module docstring). The flag is read at trace time: trace a function that is not itself
+    cached by `jax.jit` under the other setting."""
+    token = _REVERSE.set(True)
+    try:
+        yield
+    finally:
+        _REVERSE.reset(token)
 
 
 class Stream(NamedTuple):
@@ -84,6 +115,8 @@ def run_queue(
     `stream`, also `"stream"`: the rows, shape `(n, stream.size) + row shape` (zeros
     where no row was written).
     """
+    if _REVERSE.get():
+        return _run_each(setup, running, advance, results, n, stream)
     lanes = max(1, lanes)  # more lanes than configurations: the extra ones idle throughout
     order = jnp.arange(n, dtype=jnp.int32) if order is None else order.astype(jnp.int32)
     config = lambda pos: order[jnp.minimum(pos, n - 1)]
@@ -134,3 +167,49 @@ def run_queue(
     carry = (pos, jnp.asarray(lanes, jnp.int32), fixed, dyn, out)
     *_, out = jax.lax.while_loop(lambda c: jnp.any(c[0] < n), refill, carry)
     return out
+
+
+def _run_each(
+    setup: Callable[[jax.Array], tuple[Any, Any]],
+    running: Callable[[Any, Any], jax.Array],
+    advance: Callable[[Any, Any], Any],
+    results: Callable[[Any, Any], dict[str, jax.Array]],
+    n: int,
+    stream: Stream | None,
+) -> dict[str, jax.Array]:
+    """[`run_queue`][]'s outputs by one checkpointed loop per configuration (module docstring).
+
+    An iteration first drains a full buffer (as the queue's outer loop does), then advances a
+    configuration that is still running and not full; the rows left in the buffer at the end are
+    drained last."""
+
+    def one(i):
+        fixed, dyn = setup(i)
+        if stream is None:
+            loop = lambda d: advance(fixed, d)
+            dyn = eqxi.while_loop(lambda d: running(fixed, d), loop, dyn, kind="checkpointed",
+                                  checkpoints=CHECKPOINTS)  # fmt: skip
+            return results(fixed, dyn)
+        sm: Stream = stream
+        rows_shape = jax.eval_shape(lambda d: sm.drain(fixed, d)[1], dyn)
+        out = jnp.zeros((sm.size,) + rows_shape.shape[1:], rows_shape.dtype)
+
+        def put(d, out, when):
+            drained, rows, slots = sm.drain(fixed, d)
+            slots = jnp.where(when, slots, sm.size)  # past the end: dropped
+            d = jax.tree_util.tree_map(lambda a, b: jnp.where(when, a, b), drained, d)
+            return d, out.at[slots].set(rows, mode="drop")
+
+        def body(c):
+            d, out = c
+            d, out = put(d, out, sm.full(fixed, d))
+            go = running(fixed, d) & ~sm.full(fixed, d)
+            d = jax.tree_util.tree_map(lambda a, b: jnp.where(go, a, b), advance(fixed, d), d)
+            return d, out
+
+        cond = lambda c: running(fixed, c[0])
+        dyn, out = eqxi.while_loop(cond, body, (dyn, out), kind="checkpointed", checkpoints=CHECKPOINTS)
+        dyn, out = put(dyn, out, jnp.asarray(True))
+        return {**results(fixed, dyn), "stream": out}
+
+    return jax.vmap(one)(jnp.arange(n, dtype=jnp.int32))

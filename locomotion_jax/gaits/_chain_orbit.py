@@ -33,6 +33,7 @@ from collections import Counter
 from typing import cast, ClassVar
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 
 from .._custom_types import Array, Contact
@@ -114,10 +115,14 @@ def with_waves(chain: Chain | Mechanism, theta: Array, a_max: Array, harmonics: 
     return chain.with_waves(waves)
 
 
-def period(C: Chain | Mechanism, contact: Contact, dt: float, max_steps: Array, y: Array, k: Array) -> Period:
+def period(
+    C: Chain | Mechanism, contact: Contact, dt: float, max_steps: Array, y: Array, k: Array, loop=jax.lax.while_loop
+) -> Period:
     """The `k`-period map $\\Phi_k$ of one chain or mechanism from the reduced state `y`, with the
-    figures the optimiser needs (`max_steps` per actuation period): `_orbit.period` of its physics."""
-    return orbit.period(cast(AbstractPhysics, C.physics()), contact, dt, max_steps, y, k)
+    figures the optimiser needs (`max_steps` per actuation period): `_orbit.period` of its physics.
+    `loop`: the time loop, `lax.while_loop`'s signature (`gaits._adjoint` passes one that reverse
+    mode traverses)."""
+    return orbit.period(cast(AbstractPhysics, C.physics()), contact, dt, max_steps, y, k, loop)
 
 
 class ChainActuation(orbit.AbstractActuation):

@@ -60,9 +60,12 @@ class Period(NamedTuple):
     ok: Array
 
 
-def period(P: AbstractPhysics, contact: Contact, dt: float, max_steps: Array, y: Array, k: Array) -> Period:
+def period(
+    P: AbstractPhysics, contact: Contact, dt: float, max_steps: Array, y: Array, k: Array, loop=jax.lax.while_loop
+) -> Period:
     """The `k`-period map $\\Phi_k$ of the physics `P` from the reduced state `y`, with the figures
-    the optimisers need (`max_steps` per actuation period)."""
+    the optimisers need (`max_steps` per actuation period). `loop`: the time loop, with
+    `lax.while_loop`'s signature (`gaits._adjoint` passes one that reverse mode traverses)."""
     t_end = k.astype(y.dtype) * 2 * jnp.pi / P.omega
     st0 = _section_state(P, contact, y)
 
@@ -79,7 +82,7 @@ def period(P: AbstractPhysics, contact: Contact, dt: float, max_steps: Array, y:
         s, _ = engine.step(P, contact, dt, s, t_end)
         return s, jnp.minimum(low, normal(s)), n + 1
 
-    st, low, _ = jax.lax.while_loop(cond, body, (st0, normal(st0), jnp.zeros((), jnp.int32)))
+    st, low, _ = loop(cond, body, (st0, normal(st0), jnp.zeros((), jnp.int32)))
     ok = (st.status == Status.OK) & (st.t >= t_end)
     dX = P.centre_of_mass(st.y.x) - P.centre_of_mass(st0.y.x)
     return Period(_reduced(st, P), jnp.stack([dX, st.y.ed, low]), ok)
