@@ -210,6 +210,7 @@ def test_array_layout_initial_states_checked_per_configuration():
     """Initial states in the array layout: past the front end's check (as under `jit`) a row whose
     masses are out of order is flagged INVALID in its own result; the other row runs as in the
     unrolled layout."""
+    from locomotion_jax.dynamics._flat import FlatBatch
     from locomotion_jax.run._batch import prepare_chain
 
     rows = jnp.asarray([[0.0, 3.0, 6.0, 9.0, 0.0, 0.1, 0.0, -0.1], [0.0, 3.0, 2.0, 9.0, 0.0, 0.0, 0.0, 0.0]])
@@ -217,7 +218,8 @@ def test_array_layout_initial_states_checked_per_configuration():
     for layout in ("array", "unrolled"):
         worm = lj.Chain(masses=[1.0] * 4, waveforms=lj.TravellingWave(0.05, 2.0, 1.0), layout=layout)
         flat, valid, _ = prepare_chain(lj.Chain.stack([worm, worm]), None)
-        out[layout] = lj.Exact().measure_chain(flat, valid, jnp.zeros(2), 0.1, 5.0, 2.0, "strict", "paper", rows)
+        batch = FlatBatch(flat, valid, t_start=jnp.zeros(2), initial=rows)
+        out[layout] = lj.Exact().measure(batch, 0.1, 5.0, 2.0, "strict", "paper")
     assert [int(s) for s in np.asarray(out["array"]["status"])] == [lj.Status.OK, lj.Status.INVALID]
     for key in ("tau_z", "e_d", "work", "mean_speed"):
         _close(np.asarray(out["array"][key])[0], np.asarray(out["unrolled"][key])[0], RTOL)

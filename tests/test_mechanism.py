@@ -66,7 +66,7 @@ def test_the_issues_calls():
     traj = lj.simulate(osc, t_end=30.0, save_at=jnp.linspace(0.0, 30.0, 3001))
     assert traj.x.shape == (3001, 1) and int(traj.status) == lj.Status.OK
     assert float(traj.x[-1, 0]) == pytest.approx(15 - math.sqrt(205), abs=1e-8)
-    assert bool(traj.stuck[-1, 0]) and traj.tension.shape == (3001, 1)
+    assert bool(traj.stuck[-1, 0]) and traj.tension is not None and traj.tension.shape == (3001, 1)
     capsule = _capsule()
     ts = jnp.linspace(0.0, 40.0, 81)
     traj = lj.simulate(capsule, t_end=40.0, save_at=ts)

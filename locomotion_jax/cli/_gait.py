@@ -164,11 +164,12 @@ def register(app: typer.Typer) -> None:
         points = {name: np.asarray(getattr(b, name))[:n].tolist() for name in POINT_FIELDS}
         points["multipliers"] = _pairs(np.asarray(b.multipliers)[:n])
         e = b.events
-        kinds = np.asarray(e.kind)
+        kinds, state = np.asarray(e.kind), np.asarray(e.state)  # state: (u, v1, v2) per event
         events = [
             dict(kind=NAMES[int(kinds[q])], lam=float(e.lam[q]), lam_error=float(e.lam_error[q]),
                  located=bool(e.located[q]), smooth=bool(e.smooth[q]), turn=bool(e.turn[q]),
-                 u=float(e.u[q]), v1=float(e.v1[q]), v2=float(e.v2[q]), multipliers=_pairs(e.multipliers[q]))
+                 u=float(state[q, 0]), v1=float(state[q, 1]), v2=float(state[q, 2]),
+                 multipliers=_pairs(e.multipliers[q]))
             for q in np.flatnonzero(kinds >= 0)
         ]  # fmt: skip
         record = dict(
