@@ -98,10 +98,11 @@ def main() -> int:
     never = jnp.asarray(1e9)
 
     def two(pp, w):
-        assert two_mass is not None
-        P = two_mass.consts(pp, w)
-        s = two_mass.init(pp, w, contact, jnp.zeros(()), pp.lbar)
-        s = jax.lax.fori_loop(0, iters, lambda i, s: two_mass.step(pp, w, contact, dt, s, never, None, P)[0], s)
+        eng = two_mass
+        assert eng is not None
+        P = eng.consts(pp, w)
+        s = eng.init(pp, w, contact, jnp.zeros(()), pp.lbar)
+        s = jax.lax.fori_loop(0, iters, lambda i, s: eng.step(pp, w, contact, dt, s, never, None, P)[0], s)
         return s.y.x2, s.y.ed, s.cross, s.near
 
     def chain(eng, tuples):
