@@ -1,4 +1,5 @@
-"""Cost of one iteration of the N-mass exact engine: this tree's, another revision's, and the two-mass engine's.
+"""Cost of one iteration of the N-mass exact engine: this tree's, another revision's, and the two-mass engine's
+(`locomotion_jax/dynamics/_exact.py`, in trees that still have it).
 
 A `vmap` over B configurations of a `fori_loop` of ITERS engine steps (no queue, no saves: the
 step alone; the loop returns the last mass's position, e_d and both margins, so that XLA keeps
@@ -17,7 +18,7 @@ The configurations: omega in [1, 25], a in [0.01, 0.1]; N = 2 is `Chain.from_par
 two-mass model), N > 2 a travelling wave on unit masses with Coulomb(0.7, 0.5); float64,
 dt = 0.03, paper contact, z unreachable. The other revision's engine module
 (`locomotion_jax/dynamics/_chain_exact.py` there) is loaded from git into this tree's package,
-so it must use this tree's `_exact` helpers (as `main` and this branch do).
+so it must use this tree's helpers (`_numerics`, `_chain_motion`).
 """
 
 import argparse
@@ -39,12 +40,15 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 import locomotion_jax as lj  # noqa: E402
-from locomotion_jax.dynamics import (
-    _chain_exact as new_engine,  # noqa: E402
-    _exact as two_mass,  # noqa: E402
-)
+from locomotion_jax.dynamics import _chain_exact as new_engine  # noqa: E402
 from locomotion_jax.dynamics._compile import COMPILER_OPTIONS  # noqa: E402
 from locomotion_jax.run._batch import prepare, prepare_chain  # noqa: E402
+
+
+try:  # the two-mass engine, in older trees only
+    from locomotion_jax.dynamics import _exact as two_mass  # pyright: ignore  # noqa: E402
+except ImportError:
+    two_mass = None
 
 
 def load_engine(rev: str) -> types.ModuleType:
@@ -94,9 +98,11 @@ def main() -> int:
     never = jnp.asarray(1e9)
 
     def two(pp, w):
-        P = two_mass.consts(pp, w)
-        s = two_mass.init(pp, w, contact, jnp.zeros(()), pp.lbar)
-        s = jax.lax.fori_loop(0, iters, lambda i, s: two_mass.step(pp, w, contact, dt, s, never, None, P)[0], s)
+        eng = two_mass
+        assert eng is not None
+        P = eng.consts(pp, w)
+        s = eng.init(pp, w, contact, jnp.zeros(()), pp.lbar)
+        s = jax.lax.fori_loop(0, iters, lambda i, s: eng.step(pp, w, contact, dt, s, never, None, P)[0], s)
         return s.y.x2, s.y.ed, s.cross, s.near
 
     def chain(eng, tuples):
@@ -118,7 +124,7 @@ def main() -> int:
         return run
 
     programs = {}
-    if 2 in ns:
+    if 2 in ns and two_mass is not None:
         flat, wave, axes, _ = prepare(lj.Params(omega=om, a=a), None, None)
         programs["two-mass"] = (jax.vmap(two, in_axes=(0, axes)), (flat, wave))
     for n in ns:
@@ -155,7 +161,7 @@ def main() -> int:
 
     print("\nbusiest-thread CPU ratios, median over rounds:")
     for n in ns:
-        if n == 2:
+        if n == 2 and "two-mass" in cpu:
             print(f"  this N=2 / two-mass: {ratio('this N=2', 'two-mass')}")
             print(f"  {args.old} N=2 / two-mass: {ratio(f'{args.old} N=2', 'two-mass')}")
         print(f"  this N={n} / {args.old} N={n}: {ratio(f'this N={n}', f'{args.old} N={n}')}")

@@ -40,7 +40,6 @@ class Mutation(NamedTuple):
     equivalent: str | None = None  # why no test can kill it (its results are the unmutated ones)
 
 
-EXACT = "locomotion_jax/dynamics/_exact.py"
 CHAIN = "locomotion_jax/dynamics/_chain_exact.py"
 CHAIN_MOTION = "locomotion_jax/dynamics/_chain_motion.py"
 MEASURE = "locomotion_jax/dynamics/_chain_measure.py"
@@ -73,79 +72,6 @@ BODIES = "locomotion_jax/model/_bodies.py"
 
 MUTATIONS = [
     # -- the bugs an outside audit found uncaught ----------------------------------------------
-    Mutation(
-        "paper_n_signed",
-        "paper reading: friction uses n = N instead of |N|",
-        EXACT,
-        (
-            ("n1, n2 = jnp.abs(N1), jnp.abs(N2)", "n1, n2 = N1, N2"),
-            ("n1, n2 = sides[0] * N1, sides[1] * N2", "n1, n2 = N1, N2"),
-            ("f0._replace(n1=jnp.abs(f0.N1), n2=jnp.abs(f0.N2))", "f0._replace(n1=f0.N1, n2=f0.N2)"),
-        ),
-        (REF,),
-    ),
-    Mutation(
-        "paper_kink_not_located",
-        "paper reading: a sign change of N is not an event (RK4 steps across the kink of |N|)",
-        EXACT,
-        (
-            ("n1, n2 = sides[0] * N1, sides[1] * N2", "n1, n2 = jnp.abs(N1), jnp.abs(N2)"),
-            ("gs.append(jnp.minimum(q1, q2))", "gs.append(jnp.abs(jnp.minimum(q1, q2)) + 1)"),
-        ),
-        (REF,),
-    ),
-    Mutation(
-        "no_recheck",
-        "after a switch only the located mass switches (no re-check of the other)",
-        EXACT,
-        (
-            ("fire1 = keep(st.pend1 | (gA1 < 0))", "fire1 = keep(st.pend1)"),
-            ("fire2 = keep(st.pend2 | (gA2 < 0))", "fire2 = keep(st.pend2)"),
-        ),
-        (REF,),
-        "a mass whose event function is negative at a step's start without a located event is then "
-        "located at that same instant (its crossing is the earliest, at theta = 0), so it switches one "
-        "iteration later at the same time and state: bit-identical results on 512 random configurations, "
-        "20 of them ones where the re-check fires",
-    ),
-    Mutation(
-        "no_recheck_one_event",
-        "no re-check and one event located per step (simultaneous switches lost)",
-        EXACT,
-        (
-            ("fire1 = keep(st.pend1 | (gA1 < 0))", "fire1 = keep(st.pend1)"),
-            ("fire2 = keep(st.pend2 | (gA2 < 0))", "fire2 = keep(st.pend2)"),
-            (
-                "first = [keep(c & (x <= th_min)) for c, x in zip(crossed, thl)]",
-                "first = [keep(c & (x <= th_min)) for c, x in zip(crossed, thl)]\n"
-                "    first = [f & ~_any([jnp.asarray(False)] + first[:i]) for i, f in enumerate(first)]",
-            ),
-        ),
-        (REF,),
-    ),
-    Mutation(
-        "one_event_per_step",
-        "one event located per step (of simultaneous crossings only the first flagged)",
-        EXACT,
-        (
-            (
-                "first = [keep(c & (x <= th_min)) for c, x in zip(crossed, thl)]",
-                "first = [keep(c & (x <= th_min)) for c, x in zip(crossed, thl)]\n"
-                "    first = [f & ~_any([jnp.asarray(False)] + first[:i]) for i, f in enumerate(first)]",
-            ),
-        ),
-        (REF,),
-    ),
-    Mutation(
-        "liftoff_not_stopping",
-        "strict reading: lift-off is flagged but does not stop the run",
-        EXACT,
-        (
-            ('stop0 = lifted0 if contact == "strict" else jnp.asarray(False)', "stop0 = jnp.asarray(False)"),
-            ('lift = stop0 | lift_cut if contact == "strict" else stop0', "lift = stop0"),
-        ),
-        (REF,),
-    ),
     Mutation(
         "wrong_wn1",
         "wn1 = sqrt(2 k / m1) (right only for m1 = m2)",
@@ -181,77 +107,10 @@ MUTATIONS = [
     ),
     # -- more of the same kind ------------------------------------------------------------------
     Mutation(
-        "friction_sign_in_jerk",
-        "sign of the friction term in the second derivative (the dense output's curvature)",
-        EXACT,
-        (
-            (
-                "j1 = jnp.where(st1, zero, (D.fx - P.c * a1 - P.mu_k * n1d * s1) * P.im1)",
-                "j1 = jnp.where(st1, zero, (D.fx - P.c * a1 + P.mu_k * n1d * s1) * P.im1)",
-            ),
-        ),
-        (REF,),
-    ),
-    Mutation(
-        "event_slope_sign",
-        "sign of |F_i|'s rate in a stuck mass's event slope (prediction and location)",
-        EXACT,
-        (
-            (
-                "jnp.where(st1, P.mu_s * n1d - sg * D.fx, s1 * r.v1)",
-                "jnp.where(st1, P.mu_s * n1d + sg * D.fx, s1 * r.v1)",
-            ),
-        ),
-        (REF,),
-    ),
-    Mutation(
-        "reversal_keeps_direction",
-        "jump at v_i = 0: a slipping mass that does not stick keeps its old friction direction",
-        EXACT,
-        (("s1 = jnp.where(fire1, to1, st.s1)", "s1 = jnp.where(fire1 & st.stuck1, to1, st.s1)"),),
-        (REF,),
-    ),
-    Mutation(
-        "stick_test_kinetic",
-        "jump at v_i = 0: the stick test uses mu_k instead of mu_s",
-        EXACT,
-        (
-            (
-                "st2 = jnp.where(fire2, vel2 & (absF <= P.mu_s * f0.n2), st.stuck2)",
-                "st2 = jnp.where(fire2, vel2 & (absF <= P.mu_k * f0.n2), st.stuck2)",
-            ),
-        ),
-        (REF,),
-    ),
-    Mutation(
-        "energy_integrand",
-        "e_d integrand misses mass 2's damping",
-        EXACT,
-        (
-            (
-                "+ P.c * (y.v1 * y.v1 + y.v2 * y.v2)\n    return State(",
-                "+ P.c * (y.v1 * y.v1)\n    return State(",
-            ),
-        ),
-        (REF,),
-    ),
-    Mutation(
         "dense_output_basis",
         "a coefficient of the quintic Hermite basis",
         NUMERICS,
         (("H4 = -4 * t3 + 7 * t4 - 3 * t5", "H4 = -4 * t3 + 7 * t4 - 2.9 * t5"),),
-        (REF,),
-    ),
-    Mutation(
-        "target_com_weights",
-        "the target event uses the unweighted midpoint instead of the centre of mass",
-        EXACT,
-        (
-            (
-                "rel = P.mhat * y.x1 + (1 - P.mhat) * y.x2 - X0",
-                "rel = 0.5 * y.x1 + 0.5 * y.x2 - X0",
-            ),
-        ),
         (REF,),
     ),
     Mutation(
@@ -329,6 +188,94 @@ MUTATIONS = [
             ),
         ),
         ("tests/test_margins.py::test_chain_margins_equal_the_two_mass_engines",),
+    ),
+    Mutation(
+        "chain_no_recheck_one_event",
+        "chain: no re-check and one event located per step (simultaneous switches lost)",
+        CHAIN,
+        (
+            ("fire = tuple(kp(pe | (g < 0)) for pe, g in zip(st.pend, gA))", "fire = tuple(kp(pe) for pe in st.pend)"),
+            (
+                "first = [kp(c & (q <= th_min)) for c, q in zip(crossed, thl)]",
+                "first = [kp(c & (q <= th_min)) for c, q in zip(crossed, thl)]\n"
+                "    first = [f & ~num.union([jnp.asarray(False)] + first[:i]) for i, f in enumerate(first)]",
+            ),
+        ),
+        (REF, CHAIN_REF),
+    ),
+    Mutation(
+        "chain_one_event_per_step",
+        "chain: one event located per step (of simultaneous crossings only the first flagged)",
+        CHAIN,
+        (
+            (
+                "first = [kp(c & (q <= th_min)) for c, q in zip(crossed, thl)]",
+                "first = [kp(c & (q <= th_min)) for c, q in zip(crossed, thl)]\n"
+                "    first = [f & ~num.union([jnp.asarray(False)] + first[:i]) for i, f in enumerate(first)]",
+            ),
+        ),
+        (REF, CHAIN_REF),
+    ),
+    Mutation(
+        "chain_friction_sign_in_jerk",
+        "chain: sign of the friction term in the second derivative (the dense output's curvature)",
+        CHAIN_MOTION,
+        (("jnp.where(st, 0, (f - c * ai - sd * fr) * im)", "jnp.where(st, 0, (f - c * ai + sd * fr) * im)"),),
+        (REF, CHAIN_REF),
+    ),
+    Mutation(
+        "chain_event_slope_sign",
+        "chain: sign of |F_i|'s rate in a stuck mass's event slope (prediction, location, margins)",
+        CHAIN_MOTION,
+        (("out.append(mf * dq - s * df)", "out.append(mf * dq + s * df)"),),
+        (REF, CHAIN_REF),
+    ),
+    Mutation(
+        "chain_reversal_keeps_direction",
+        "chain, jump at v_i = 0: a slipping mass that does not stick keeps its old friction direction",
+        CHAIN,
+        (
+            (
+                "sdir = tuple(jnp.where(fi, jnp.where(f >= 0, 1.0, -1.0).astype(dtype), s) for fi, f, s in zip("
+                "fire, F0, st_sdir))",
+                "sdir = tuple(jnp.where(fi & ss, jnp.where(f >= 0, 1.0, -1.0).astype(dtype), s)\n"
+                "                 for fi, f, s, ss in zip(fire, F0, st_sdir, st_stuck))",
+            ),
+        ),
+        (REF, CHAIN_REF),
+    ),
+    Mutation(
+        "chain_stick_test_kinetic",
+        "chain, jump at v_i = 0: the stick test uses mu_k instead of mu_s",
+        CHAIN,
+        (
+            (
+                "holds = [p >= 0 for p in margin]",
+                "holds = [law.kinetic(jnp.zeros_like(f), jnp.sign(f)) * q - jnp.abs(f) >= 0\n"
+                "             for law, f, q in zip(P.friction, F0, nA)]",
+            ),
+        ),
+        (REF, CHAIN_REF),
+    ),
+    Mutation(
+        "chain_energy_integrand",
+        "chain: the e_d integrand misses the damping of every mass but the first",
+        CHAIN_MOTION,
+        (
+            (
+                "_sum([m * q * s + c * vi * vi for m, q, s, c, vi in zip(mu, n, speed, P.c, v)])",
+                "_sum([m * q * s + c * vi * vi * (i == 0)\n"
+                "        for i, (m, q, s, c, vi) in enumerate(zip(mu, n, speed, P.c, v))])",
+            ),
+        ),
+        (REF, CHAIN_REF),
+    ),
+    Mutation(
+        "chain_target_com_weights",
+        "chain: the target event uses the unweighted midpoint of the end masses, not the centre of mass",
+        CHAIN_MOTION,
+        (("rel = P.centre_of_mass(x) - target.X0", "rel = 0.5 * (x[0] + x[-1]) - target.X0"),),
+        (REF, CHAIN_REF),
     ),
     # -- derivatives -------------------------------------------------------------------------------------
     Mutation(
@@ -440,9 +387,10 @@ MUTATIONS = [
     ),
     Mutation(
         "gait_unresolved_not_flagged",
-        "steady_gait (two masses): an unresolved configuration of a batch reported INVALID",
+        "steady_gait (two masses): the resolution guard's mask is not passed on (an unresolved "
+        "configuration of a batch not flagged)",
         "locomotion_jax/gaits/_gait.py",
-        (("base = select.unresolved(base, unresolved)", "base = base"),),
+        (("jnp.ones((B,), bool), unresolved, shape", "jnp.ones((B,), bool), None, shape"),),
         GAIT_GUARDS,
     ),
     Mutation(
@@ -483,10 +431,10 @@ MUTATIONS = [
     Mutation(
         "default_start_unbounded",
         "measure: the default t_start of the paper's model is not bounded",
-        "locomotion_jax/run/_measure.py",
+        "locomotion_jax/run/_batch.py",
         (
             (
-                "guard_two_mass(dynamics, flat, wave, shape, default_start=ts is None)",
+                "guard_two_mass(dynamics, flat, wave, shape, default_start=measuring and ts is None)",
                 "guard_two_mass(dynamics, flat, wave, shape, default_start=False)",
             ),
         ),  # fmt: skip

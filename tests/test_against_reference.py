@@ -162,6 +162,8 @@ def _package(group: str, dtype=jnp.float64) -> dict:
         values = (jnp.asarray(v, flat.dtype) for v in (g.z, g.horizon, g.window))
         args = (flat, wave, axes, *values, g.contact, g.start, 0.01, jnp.asarray(max_steps, jnp.int32))
         m = {k: np.asarray(v) for k, v in _paper._measure_batch(*args, lanes=g.lanes).items()}
+        sf = m.pop("stick_fraction")  # per mass on the last axis, as `to_numpy` names them
+        m["stick_fraction1"], m["stick_fraction2"] = sf[..., 0], sf[..., 1]
     return {_key(c): {k: v[i] for k, v in m.items()} for i, c in enumerate(cases)}
 
 

@@ -19,8 +19,7 @@ import locomotion_jax as lj
 import numpy as np
 import pytest
 from locomotion_jax._custom_types import Contact
-from locomotion_jax.dynamics import _chain_exact as engine, _chain_measure, _exact as exact
-from locomotion_jax.model import _two_mass as two_mass
+from locomotion_jax.dynamics import _chain_exact as engine, _chain_measure
 from locomotion_jax.model._physics import Scalars
 
 
@@ -165,15 +164,6 @@ def test_chain_physics_is_what_the_engine_integrates_a_chain_with():
     assert eqx.is_array(P.omega)
 
 
-def _end_two_mass(p, wave, contact, start, t_end, dt):
-    """The two-mass engine from the `start` position at rest to `t_end`."""
-    P = exact.consts(p, wave)
-    st = exact.init(p, wave, contact, jnp.zeros((), p.dtype), two_mass.initial_gap(p, start))
-    cond = lambda s: (s.t < t_end) & (s.status == lj.Status.OK)
-    st = jax.lax.while_loop(cond, lambda s: exact.step(p, wave, contact, dt, s, jnp.asarray(t_end), None, P)[0], st)
-    return jnp.stack([st.t, st.y.x1, st.y.v1, st.y.x2, st.y.v2, st.y.ed, st.y.w, st.t_liftoff]), st.status, st.n_switch
-
-
 def _end_n_body(p, wave, contact, start, t_end, dt):
     """The N-body engine on the paper's model (`Params.physics`), the same run."""
     P = p.physics(wave)
@@ -186,48 +176,54 @@ def _end_n_body(p, wave, contact, start, t_end, dt):
 
 @pytest.mark.parametrize("kind", ["sinusoid", "fourier", "spline"])
 @pytest.mark.parametrize("contact", ["strict", "paper"])
-def test_the_papers_model_on_the_n_body_engine_equals_the_two_mass_engine(kind, contact):
-    """`Params.physics(waveform)` on the N-body engine against the two-mass engine: the end states
-    (positions, velocities, e_d, w, lift-off time) to 1e-10 relative (1e-9 past a lift-off under
-    the paper's reading), status and switch counts equal, over SSL, SL and lift-off configurations
-    with any waveform (a Spline included)."""
+def test_the_papers_model_on_the_n_body_engine_against_the_reference(kind, contact):
+    """`Params.physics(waveform)` on the N-body engine against the independent event-driven
+    reference (`tests/reference.py`, its own eq. 13, Fourier series and periodic B-spline): the
+    state at t = 40 (or at a strict lift-off, where both stop), e_d and w, and the lift-off flag,
+    over SSL, SL and lift-off configurations with any waveform (a Spline included)."""
+    from reference import reference_simulate
+
     omega = np.array([1.0, 3.0, 8.0, 12.0, 20.0, 9.0])
     a = np.array([0.05, 0.02, 0.08, 0.1, 0.03, 0.06])
     d, mhat = np.array([0.5, 0.0, 0.5, 1.0, 0.5, 0.2]), np.array([0.5, 0.3, 0.6, 0.5, 0.5, 0.4])
-    p = lj.Params(omega=omega, a=a, d=d, mhat=mhat).broadcast()
-    lbar = np.full(omega.shape, 3.0)
+    p = lj.Params(omega=omega, a=a, d=d, mhat=mhat, lbar=3.0).broadcast()
     if kind == "sinusoid":
-        wave = lj.Sinusoid(p.a, p.omega, p.lbar)
+        wave, ref_wave = lj.Sinusoid(p.a, p.omega, p.lbar), [None] * omega.size
     elif kind == "fourier":
-        wave = lj.Fourier(np.stack([0.2 * a, -0.1 * a], -1), np.stack([a, 0.3 * a], -1), omega, lbar)
+        cos, sin = np.stack([0.2 * a, -0.1 * a], -1), np.stack([a, 0.3 * a], -1)
+        wave, ref_wave = lj.Fourier(cos, sin, omega, np.full(omega.shape, 3.0)), list(zip(cos, sin))
     else:
         phase = np.linspace(0, 2 * np.pi, 12, endpoint=False)
-        wave = lj.Spline(a[:, None] * np.sin(phase + 0.3) ** 3, omega, lbar)
+        ctrl = a[:, None] * np.sin(phase + 0.3) ** 3
+        wave, ref_wave = lj.Spline(ctrl, omega, np.full(omega.shape, 3.0)), [("spline", c) for c in ctrl]
     starts = ("paper", "relaxed") if kind == "sinusoid" else ("paper",)
+    run = jax.jit(jax.vmap(_end_n_body, in_axes=(0, 0, None, None, None, None)), static_argnums=(2, 3, 4, 5))
     for start in starts:
-        runs = [jax.jit(jax.vmap(f, in_axes=(0, 0, None, None, None, None)), static_argnums=(2, 3, 4, 5))
-                for f in (_end_two_mass, _end_n_body)]  # fmt: skip
-        (ya, sa, na), (yb, sb, nb) = (run(p, wave, contact, start, 40.0, 0.01) for run in runs)
-        assert np.array_equal(np.asarray(sa), np.asarray(sb)) and np.array_equal(np.asarray(na), np.asarray(nb))
-        ya, yb = np.asarray(ya), np.asarray(yb)
-        scale = np.maximum(np.abs(ya), 1.0)
-        assert np.all(np.isfinite(ya) == np.isfinite(yb))
-        both = np.isfinite(ya) & np.isfinite(yb)
-        err = np.abs(np.where(both, ya, 0) - np.where(both, yb, 0)) / scale
-        err = err.max(axis=1)
-        # Integrated through a lift-off (the paper's reading, outside the model's validity, where
-        # the kink of |N| makes the results converge erratically): 1e-9 (7e-10 seen, a Spline).
-        lifted = np.isfinite(ya[:, -1])
-        assert np.all(err < np.where(lifted, 1e-9, 1e-10)), (start, err)
-        assert {int(s) for s in np.asarray(sa)} <= {lj.Status.OK, lj.Status.LIFTOFF}
+        y, status, _ = run(p, wave, contact, start, 40.0, 0.01)
+        y, status = np.asarray(y), np.asarray(status)
+        for i in range(omega.size):
+            cfg = dict(omega=omega[i], a=a[i], d=d[i], mhat=mhat[i], lbar=3.0)
+            r = reference_simulate(cfg, 40.0, np.array([40.0]), contact=contact, start=start, wave=ref_wave[i],
+                                   rtol=1e-10, atol=1e-12)  # fmt: skip
+            stopped = contact == "strict" and r["liftoff"]
+            assert int(status[i]) == (lj.Status.LIFTOFF if stopped else lj.Status.OK), (start, i)
+            assert np.isfinite(y[i, -1]) == r["liftoff"], (start, i)
+            want = np.array([r[k][-1] for k in ("x1", "v1", "x2", "v2", "e_d", "w")])
+            err = np.abs(y[i, 1:7] - want) / np.maximum(np.abs(want), 1.0)
+            # Past a lift-off under the paper's reading (outside the model's validity) the kink of
+            # |N| makes the results converge erratically; a spline's third derivative jumps at its
+            # knots, which the fixed step does not resolve (measured: 1.5e-4 past such a lift-off,
+            # 4.9e-5 in w at omega = 20, 12 knots; else 7e-6).
+            tol = 1e-3 if r["liftoff"] and not stopped else 1e-4 if kind == "spline" else 1e-5
+            print(kind, contact, start, i, "lift-off" if r["liftoff"] else "", err.max())
+            assert err.max() < tol, (start, i, err)
 
 
 @pytest.mark.parametrize("contact, start", [("strict", "paper"), ("paper", "relaxed")])
 def test_measure_of_the_papers_model_on_the_n_body_engine(contact, start):
-    """The N-body engine's measurement loop on `Params.physics()` against `lj.measure` (the
-    two-mass engine): every field to 1e-10 relative (1e-9 past a paper-reading lift-off), the
-    statuses, regimes and step counts equal. What the front ends need to run the paper's model
-    on the one engine."""
+    """The N-body engine's measurement loop on `Params.physics()` against `lj.measure` (the same
+    engine behind the front end's batching, casting and queue): every field to 1e-10 relative
+    (1e-9 past a paper-reading lift-off), the statuses, regimes and step counts equal."""
     om, a = np.meshgrid(np.linspace(0.5, 20.0, 8), np.array([0.02, 0.1]))
     p = lj.Params(omega=om.ravel(), a=a.ravel(), d=0.5).broadcast()
     ts = np.asarray(p.t_start)

@@ -2,10 +2,18 @@
 written once against the physics interface ([`AbstractPhysics`][locomotion_jax.AbstractPhysics]):
 chains of N masses, and the paper's model as the two-mass chain.
 
-The scheme of the two-mass engine (`locomotion_jax.dynamics._exact`, whose docstring states
-it in full): one RK4 step per iteration, cut at the earliest located event; a
-quintic Hermite dense output from the state's first and second time derivatives at
-both ends of the step; every mass re-decided at the start of the next iteration.
+**Scheme.** One configuration advances one iteration at a time (`step`; callers run it in a
+`lax.while_loop` and batch with `vmap`). Inside a mode the motion is a smooth ODE, integrated
+with classical RK4 at the nominal step `dt`; every iteration commits one step and none is
+retried. The state's rate and its second time derivative are known at both ends of the step
+(the loads and their time derivatives are analytic), so the quintic Hermite interpolant over the
+step (the dense output) is accurate to $O(h^5)$, like the step. When an event function changes
+sign over the step, its crossing is found on its own quintic Hermite interpolant (safeguarded
+Newton), the step is cut there and the interpolated state committed; the switch itself is made
+at the start of the next iteration, where every mass is re-decided (SPEC §2), so an event costs
+one extra iteration and results converge at fourth order in `dt`
+(tests/test_against_reference.py, tests/test_chain_reference.py). Of several crossings in one
+step, the earliest by each function's secant is located.
 
 The mechanism supplies its loads and their first two time derivatives along the motion
 (its physics); the engine owns the rest. The loads on each body depend only on positions,
@@ -29,17 +37,26 @@ Not an event but a check: a committed step whose end has a gap of the physics'
 [`gaps`][locomotion_jax.AbstractPhysics.gaps] $\\le 0$ (a chain's neighbours $x_{j+1} - x_j$:
 bodies met or passed through each other, outside the model) stops the run with `Status.COLLISION`.
 
-**Margins** to a change of switching structure, as in the two-mass engine (`_numerics.margins`):
-a located crossing's from the rate and curvature of its event quintic at the root; where a
-slipping mass stops, from its stick margin and that margin's rate, both from the loads and
-their rates that the step's start computes anyway; near misses from the event functions'
-Taylor parabolas there.
+**Margins** (`_numerics.margins`). A result is smooth in the
+parameters only while its switching structure (which events happen, in which order, with which
+outcome) stays the same; the engine records how close the run came to changing it, as drive
+phases $\\omega\\,\\delta t$ (radians, scale-free, so events of every kind compare). At a located
+crossing of an event function $g$: the phase $\\omega|\\dot g/\\ddot g|$ to the vertex of $g$'s
+local parabola, from the rate and curvature of its event quintic at the root (0 at a grazing
+crossing). Where $g$ turns without reaching zero (a near miss): $\\omega\\sqrt{2 g_{\\min}/\\ddot g}$
+from its Taylor parabola at the step's start (0 when it touches zero). Where a slipping mass
+stops: $\\omega|s/\\dot s|$, with $s$ its stick margin (which decides between sticking and
+reversing) and $\\dot s$ that margin's rate, from the loads and their rates that the step's start
+computes anyway. A margin below `SMOOTH_MARGIN` (in `_results`) flags a result whose derivative
+may not be one.
 
-**Speed.** As in the two-mass engine (its docstring, benchmarks/NOTES.md): the state is a
-flat set of scalars (tuples over masses, so that under `vmap` every kernel is a vector
-over the configurations), shared intermediates are pinned with `AbstractPhysics.keep`, the phase
-$(\\cos\\omega t, \\sin\\omega t)$ is carried and rotated, and the earliest event is picked
-by `where` over the event list (no gather).
+**Speed** (benchmarks/NOTES.md). XLA on the CPU duplicates cheap shared subexpressions into
+every kernel that uses them, and its float64 `sin` costs more than a force evaluation, so the
+state is a flat set of scalars (tuples over masses, so that under `vmap` every kernel is a
+vector over the configurations), shared intermediates are pinned with `AbstractPhysics.keep`,
+the phase $(\\cos\\omega t, \\sin\\omega t)$ is carried and rotated with a short polynomial
+(`_numerics.sincos`) of the step angle, and the earliest event is picked by `where` over the
+event list (no gather).
 """
 
 from typing import NamedTuple
@@ -56,13 +73,13 @@ from ._chain_motion import energy as energy, Mode, State
 
 
 class Hybrid(eqx.Module):
-    """Integrator state of one configuration (compare `_exact.Hybrid`): a flat pytree of scalars.
+    """Integrator state of one configuration: a flat pytree of scalars.
 
     `stuck`, `sdir`, `pend`, `side` have one entry per mass: the mode, slip direction, a
     flag for an event located at `t` (the mass is re-decided at the next iteration), and the
     side ($\\pm 1$) of its normal force (paper contact: flipped where a crossing is located,
     so that $n_i = \\nu_i N_i$ over a step). `cross`, `near`, `t_switch`: the margins to a
-    change of switching structure so far and the time of the last switch (as in `_exact.Hybrid`).
+    change of switching structure so far and the time of the last switch.
     Under `contact="hop"` only (else `None`): `fly` per body (in flight), `vpend` (a landing or
     lift-off located at `t`), `n_land`, the number of landings so far, and `zeno`, whether the
     Zeno rule has made a rebound plastic (`restitution > 0` but $e_i |w^-| <$ `zeno_speed`).
@@ -90,7 +107,7 @@ class Hybrid(eqx.Module):
 
 
 class StepInfo(NamedTuple):
-    """What one iteration did (compare `_exact.StepInfo`); `stuck` is the mode during `[t0, t1]`.
+    """What one iteration did ; `stuck` is the mode during `[t0, t1]`.
 
     For the steady gaits' switching test functions (`gaits._chain_gait`): `vel`, per mass, a slipping
     mass whose velocity reached zero at `t0` (re-decided there); `hold`, per mass, its stick margin at
@@ -214,7 +231,7 @@ def _impact(P: AbstractPhysics, restitution: Scalars, zeno: Array, st: Hybrid, N
 def probe(P: AbstractPhysics, contact: Contact, t: Array, y: State, target: num.Target) -> tuple[list, list, list]:
     """The event functions with their first and second time derivatives at time `t` and
     state `y`, in the mode the state implies (a mass at rest sticks where its static limits
-    hold; compare `_exact.probe`): lists in the order of the module docstring (target last).
+    hold): lists in the order of the module docstring (target last).
     Under `contact="hop"` a body above the ground ($y_i > 0$, or $y_i = 0$ rising) is in flight
     there, with its landing ($y_i$) as its event, and a grounded one has its lift-off ($N_i$).
     For margins at a measured instant; not for the hot loop."""
@@ -245,7 +262,7 @@ def step(
     target: num.Target | None = None,
     hop: tuple[Scalars, Array] | None = None,
 ) -> tuple[Hybrid, StepInfo]:
-    """One iteration: re-decide the bodies, one RK4 step, cut at the first event (see `_exact.step`).
+    """One iteration: re-decide the bodies, one RK4 step, cut at the first event (module docstring).
 
     `P` is the mechanism's physics (its `physics()`, computed once per run); `hop`, under
     `contact="hop"` only: the restitution per body and the Zeno speed."""
@@ -414,7 +431,7 @@ def step(
     if comp is None:
         yc = y0.map(lambda a, b: kp(a + b), delta)
         comp_new = None
-    else:  # compensated (Kahan) sums in float32, as in the two-mass engine
+    else:  # compensated (Kahan) sums in float32
         corr = delta.map(lambda a, b: a - b, comp)
         yc = y0.map(lambda a, b: kp(a + b), corr)
         comp_new = yc.map(lambda tot, a, b: (tot - a) - b, y0, corr)

@@ -20,7 +20,7 @@ from ..model import _two_mass as model
 from ..model._params import Params, safe_params
 from ..model._physics import loads_at
 from ..model._waveform import AbstractWaveform
-from . import _chain_exact as engine, _chain_measure as chain_measure, _exact as exact
+from . import _chain_exact as engine, _chain_measure as chain_measure
 from ._chain_motion import Mode, rates, State
 from ._chain_simulate import _row
 from ._compile import engine_jit
@@ -141,13 +141,17 @@ _simulate_rows = engine_jit(_simulate_rows, ("wave_axes", "contact", "start", "d
 def derived_fields(params: Params, wave: AbstractWaveform, contact: Contact, t, y, stuck, sdir) -> dict:
     """Energy (eq. 10), normal forces (eq. 5) and $F_{ex}$ (eq. 17) at saved states."""
     f = model.forces(params, wave, t, y[0], y[2], contact)
-    r = exact.rates(params, f, y, stuck, sdir)
+    # The accelerations in the saved mode (eq. 9 corrected per SPEC §2; zero while stuck).
+    a1 = (f.fx - params.c * y[1] - params.mu_k * f.n1 * sdir[0]) / params.m1
+    a2 = (-f.fx - params.c * y[3] - params.mu_k * f.n2 * sdir[1]) / params.m2
+    zero = jnp.zeros_like(a1)
+    a1, a2 = jnp.where(stuck[0], zero, a1), jnp.where(stuck[1], zero, a2)
     return {
         "e": model.total_energy(params, f.l0, y[0], y[1], y[2], y[3]),
         "l0": f.l0,
         "N1": f.N1,
         "N2": f.N2,
-        "f_ex": params.m1 * r[1] + params.m2 * r[3],
+        "f_ex": params.m1 * a1 + params.m2 * a2,
         "X": model.centre_of_mass(params, y[0], y[2]),
     }
 

@@ -1,8 +1,7 @@
 """What the exact engines' batched runs share: lanes, step caps, initial states.
 
-The two-mass and the N-mass exact engines run a flat batch through the same work
-queue (`_queue`, `_saves`); these are the settings and the start of each configuration
-that both `simulate` and `measure` use.
+The exact engine runs a flat batch through a work queue (`_queue`, `_saves`); these are
+the settings and the start of each configuration that both `simulate` and `measure` use.
 """
 
 import math
@@ -12,13 +11,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import Contact
 from .._status import Status
-from ..model import _two_mass as model
 from ..model._params import Params
 from ..model._physics import AbstractPhysics
-from ..model._waveform import AbstractWaveform
-from . import _chain_exact as chain_engine, _exact as exact
+from . import _chain_exact as chain_engine
 from ._forward import concrete_value
 
 
@@ -96,20 +92,6 @@ def horizon_bound(params: Params, t_extra: float) -> float:
     except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
         tmax = 80 * 2 * math.pi / 5.0
     return tmax + t_extra
-
-
-def initial_state(params: Params, wave: AbstractWaveform, contact: Contact, start: str, row: jax.Array | None):
-    """The engine's state at $t = 0$ of one configuration: at rest in the `start` position,
-    or the given `row` $(x_1, v_1, x_2, v_2)$; with the validity of `row` (an invalid one is
-    replaced by the start, so that nothing turns NaN)."""
-    dtype = params.dtype
-    gap = model.initial_gap(params, start)
-    if row is None:
-        return exact.init(params, wave, contact, jnp.zeros((), dtype), gap), jnp.asarray(True)
-    ok = jnp.all(jnp.isfinite(row)) & (row[0] < row[2])
-    zero = jnp.zeros((), dtype)
-    x1, v1, x2, v2 = (jnp.where(ok, r, d) for r, d in zip(row, (zero, zero, gap, zero)))
-    return exact.init(params, wave, contact, x1, x2, v1, v2), ok
 
 
 def chain_initial_state(P: AbstractPhysics, valid, contact, start, row=None) -> chain_engine.Hybrid:

@@ -91,7 +91,7 @@ def prepare_initial(initial: Any, shape: tuple[int, ...], dtype: Any) -> jax.Arr
     """An initial state `(x1, v1, x2, v2)` (each broadcastable to the batch `shape`) as a
     flat `(size, 4)` array, or `None`. Raises a `ValueError` where its values are known
     here (not under `jit`) and a position or velocity is not finite or `x1 >= x2`; under
-    `jit` such a configuration is flagged `INVALID` in its own result (`_runs.initial_state`)."""
+    `jit` such a configuration is flagged `INVALID` in its own result (`_runs.chain_initial_state`)."""
     if initial is None:
         return None
     if not isinstance(initial, (tuple, list)) or len(initial) != 4:
