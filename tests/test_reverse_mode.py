@@ -101,6 +101,7 @@ def test_chain_measure_grad_equals_jacfwd():
     np.testing.assert_allclose(R, J, rtol=1e-8, atol=1e-8 * np.max(np.abs(J)))
 
 
+@pytest.mark.slow  # compiles simulate's checkpointed backward pass (minutes on 2 cores)
 def test_chain_simulate_vjp_equals_jacfwd_and_reference():
     from reference_chain import chain_config, reference_chain_simulate
 
@@ -128,6 +129,7 @@ def test_chain_simulate_vjp_equals_jacfwd_and_reference():
     assert np.max(np.abs(R - fd)) <= 1e-3 * np.max(np.abs(fd)) + 1e-9
 
 
+@pytest.mark.slow  # compiles simulate's checkpointed backward pass (minutes on 2 cores)
 def test_params_simulate_grad_equals_jacfwd():
     def run(w):
         traj = lj.simulate(lj.Params(omega=w), t_end=12.0, save_at=SAVE)
