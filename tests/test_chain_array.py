@@ -90,7 +90,7 @@ def test_array_layout_simulate_equals_unrolled():
     ts = np.linspace(0.0, 20.0, 41)
     got = lj.simulate(_worm(5, "array"), 20.0, ts, contact="paper")
     ref = lj.simulate(_worm(5, "unrolled"), 20.0, ts, contact="paper")
-    for key in ("x", "v", "X", "e_d", "w", "e", "N", "tension", "l0"):
+    for key in ("x", "v", "X", "e_d", "w", "e", "N", "tension", "rest_length"):
         a, b = np.asarray(getattr(ref, key)), np.asarray(getattr(got, key))
         np.testing.assert_allclose(b, a, rtol=RTOL, atol=RTOL * np.abs(a).max(), err_msg=key)
     np.testing.assert_array_equal(np.asarray(got.stuck), np.asarray(ref.stuck))
