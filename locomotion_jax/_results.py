@@ -65,6 +65,17 @@ def _two_bodies(result, name: str) -> None:
         )
 
 
+def _paper_name(name: str, field: str, index: int, doc: str) -> property:
+    """A paper's name for one column of a per-body or per-spring field (`x1` is `x[..., 0]`),
+    refused on a result that has not two bodies."""
+
+    def get(result) -> Array:
+        _two_bodies(result, name)
+        return getattr(result, field)[..., index]
+
+    return property(get, doc=doc)
+
+
 def _arrays(result, keys: tuple[str, ...]) -> dict[str, np.ndarray]:
     """`keys` read from `result` as numpy arrays, without those that are `None` (the hopping ones
     outside `contact="hop"`, a chain's `f_ex`, the paper's model's `tension`)."""
@@ -153,47 +164,13 @@ class Trajectory(eqx.Module):
         velocities' sake `switch_gap` too; `valid`, and no lift-off)."""
         return _smooth_rows(self)
 
-    @property
-    def x1(self) -> Array:
-        """The paper's $x_1$: `x[..., 0]` (two bodies only)."""
-        _two_bodies(self, "x1")
-        return self.x[..., 0]
-
-    @property
-    def v1(self) -> Array:
-        """The paper's $v_1$: `v[..., 0]` (two bodies only)."""
-        _two_bodies(self, "v1")
-        return self.v[..., 0]
-
-    @property
-    def x2(self) -> Array:
-        """The paper's $x_2$: `x[..., 1]` (two bodies only)."""
-        _two_bodies(self, "x2")
-        return self.x[..., 1]
-
-    @property
-    def v2(self) -> Array:
-        """The paper's $v_2$: `v[..., 1]` (two bodies only)."""
-        _two_bodies(self, "v2")
-        return self.v[..., 1]
-
-    @property
-    def N1(self) -> Array:
-        """The paper's $N_1$: `N[..., 0]` (two bodies only)."""
-        _two_bodies(self, "N1")
-        return self.N[..., 0]
-
-    @property
-    def N2(self) -> Array:
-        """The paper's $N_2$: `N[..., 1]` (two bodies only)."""
-        _two_bodies(self, "N2")
-        return self.N[..., 1]
-
-    @property
-    def l0(self) -> Array:
-        """The paper's $\\ell_0(t)$, the one spring's rest length: `rest_length[..., 0]` (two bodies only)."""
-        _two_bodies(self, "l0")
-        return self.rest_length[..., 0]
+    x1 = _paper_name("x1", "x", 0, "The paper's $x_1$: `x[..., 0]` (two bodies only).")
+    v1 = _paper_name("v1", "v", 0, "The paper's $v_1$: `v[..., 0]` (two bodies only).")
+    x2 = _paper_name("x2", "x", 1, "The paper's $x_2$: `x[..., 1]` (two bodies only).")
+    v2 = _paper_name("v2", "v", 1, "The paper's $v_2$: `v[..., 1]` (two bodies only).")
+    N1 = _paper_name("N1", "N", 0, "The paper's $N_1$: `N[..., 0]` (two bodies only).")
+    N2 = _paper_name("N2", "N", 1, "The paper's $N_2$: `N[..., 1]` (two bodies only).")
+    l0 = _paper_name("l0", "rest_length", 0, "The paper's $\\ell_0(t)$: `rest_length[..., 0]` (two bodies only).")
 
     @property
     def mode(self) -> Array:
@@ -322,17 +299,12 @@ class Measurement(eqx.Module):
         (False where the margins are NaN)."""
         return _smooth(self)
 
-    @property
-    def stick_fraction1(self) -> Array:
-        """The paper's stick fraction of mass 1: `stick_fraction[..., 0]` (two bodies only)."""
-        _two_bodies(self, "stick_fraction1")
-        return self.stick_fraction[..., 0]
-
-    @property
-    def stick_fraction2(self) -> Array:
-        """The paper's stick fraction of mass 2: `stick_fraction[..., 1]` (two bodies only)."""
-        _two_bodies(self, "stick_fraction2")
-        return self.stick_fraction[..., 1]
+    stick_fraction1 = _paper_name(
+        "stick_fraction1", "stick_fraction", 0, "Mass 1's stick fraction: `stick_fraction[..., 0]` (two bodies only)."
+    )
+    stick_fraction2 = _paper_name(
+        "stick_fraction2", "stick_fraction", 1, "Mass 2's stick fraction: `stick_fraction[..., 1]` (two bodies only)."
+    )
 
     def to_numpy(self) -> dict[str, np.ndarray]:
         """The array fields as numpy arrays (the hopping ones only under `contact="hop"`), with the

@@ -387,21 +387,6 @@ class Chain(AbstractMechanism):
                 )
         return self
 
-    def flat_batch(self, dynamics, *, waveform=None, dtype=None, t_start=None, initial=None, measuring=False,
-                   contact="strict", start="paper"):  # fmt: skip
-        """As `AbstractMechanism.flat_batch`:
-        `waveform` must be `None` (the chain carries its own), `initial` a tuple `(x, v)` of
-        positions and velocities per body."""
-        from ..run._batch import bodies_batch
-
-        return bodies_batch(self, dynamics, waveform, dtype, t_start, initial, measuring, contact, start)
-
-    def own_batch(self):
-        """As `AbstractMechanism.own_batch`."""
-        from ..dynamics._flat import FlatBatch
-
-        return FlatBatch(self, self.is_valid())
-
     def dispatch(self, *, two_mass: Callable[[Any], R], chain: Callable[[Any], R]) -> R:
         """`chain(self)`: the front ends' path for chains (`AbstractMechanism`)."""
         return chain(self)

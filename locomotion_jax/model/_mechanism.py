@@ -64,6 +64,10 @@ class AbstractMechanism(eqx.Module):
         `MAX_START_STEPS` steps."""
 
     @abc.abstractmethod
+    def is_valid(self) -> Any:
+        """Per configuration, whether its values are in their valid ranges (the others run flagged
+        `Status.INVALID`)."""
+
     def flat_batch(
         self,
         dynamics: Any,
@@ -82,12 +86,22 @@ class AbstractMechanism(eqx.Module):
         batch shape. The arguments are the front ends' (`simulate`, `measure`: `waveform` for the
         paper's model only, `initial` in the mechanism's own form); `measuring`: the run measures
         from the default start, whose span is guarded too. Raises `ValueError` or `TypeError` on
-        bad input, before any computation."""
+        bad input, before any computation.
 
-    @abc.abstractmethod
+        This default serves a mechanism that carries its own actuation ([`Chain`][locomotion_jax.Chain],
+        [`Mechanism`][locomotion_jax.Mechanism]): `waveform` must be `None`, `initial` a tuple `(x, v)`
+        of positions and velocities per body. `Params` has its own."""
+        from ..run._batch import bodies_batch
+
+        return bodies_batch(self, dynamics, waveform, dtype, t_start, initial, measuring, contact, start)
+
     def own_batch(self) -> Any:
         """This flat batch (batch shape `(n,)`) as a `FlatBatch` as it stands, with its own actuation,
-        starts and validity and no front-end checks: what a sweep's chunk hands `measure_chunk`."""
+        starts and validity and no front-end checks: what a sweep's chunk hands `measure_chunk`.
+        The default: a mechanism that carries its own actuation; `Params` has its own."""
+        from ..dynamics._flat import FlatBatch
+
+        return FlatBatch(self, self.is_valid())
 
     @abc.abstractmethod
     def dispatch(self, *, two_mass: Callable[[Any], R], chain: Callable[[Any], R]) -> R:
