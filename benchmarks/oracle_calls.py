@@ -48,24 +48,25 @@ oracle = _orbit.Oracle(
 )
 theta = jnp.asarray(np.stack([shape.fit(v / a_max, w) for v, w in strokes]))
 n = 4
-c0 = cpu()
-y = oracle.transient(theta, jnp.zeros((n, 3)), jnp.ones(n, bool), jnp.asarray(20, jnp.int32)).block_until_ready()
-c1 = cpu()
-orb = oracle.orbits(theta, y, jnp.ones(n, jnp.int32))
-orb.y.block_until_ready()
-c2 = cpu()
-print(f"cold: transient {c1 - c0:.1f} CPU s, orbits {c2 - c1:.1f}")
-for rep in range(2):
+
+
+def timed():
+    """One transient and one `orbits` call: their results and CPU seconds."""
     c0 = cpu()
     y = oracle.transient(theta, jnp.zeros((n, 3)), jnp.ones(n, bool), jnp.asarray(20, jnp.int32)).block_until_ready()
     c1 = cpu()
-    orb = oracle.orbits(theta, y, jnp.ones(n, jnp.int32))
-    orb.y.block_until_ready()
-    c2 = cpu()
-    line = f"warm: transient {c1 - c0:.2f} CPU s, orbits {c2 - c1:.2f}"
+    orb = jax.block_until_ready(oracle.orbits(theta, y, jnp.ones(n, jnp.int32)))
+    return y, orb, c1 - c0, cpu() - c1
+
+
+_, _, tt, to = timed()
+print(f"cold: transient {tt:.1f} CPU s, orbits {to:.1f}")
+for rep in range(2):
+    y, orb, tt, to = timed()
+    line = f"warm: transient {tt:.2f} CPU s, orbits {to:.2f}"
     if "nograd" in sys.argv:
-        o2 = oracle.orbits(theta, y, jnp.ones(n, jnp.int32), False)
-        o2.y.block_until_ready()
+        c2 = cpu()
+        o2 = jax.block_until_ready(oracle.orbits(theta, y, jnp.ones(n, jnp.int32), False))
         c3 = cpu()
         dy = float(jnp.max(jnp.abs(o2.y - orb.y)))
         dfig = float(jnp.max(jnp.abs(o2.figures - orb.figures)))

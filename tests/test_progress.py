@@ -51,13 +51,13 @@ def test_gait_commands_say_they_compile_before_solving(monkeypatch, args):
 
 
 def test_steady_gait_says_what_it_does_before_compiling(monkeypatch, capsys):
-    from locomotion_jax.gaits import _gait
+    from locomotion_jax.gaits import _chain_gait
 
     def transient(*args, **kwargs):
         assert "compiling (first call only)" in capsys.readouterr().err  # printed before the long work
         raise Stop
 
-    monkeypatch.setattr(_gait, "_transient_batch", transient)
+    monkeypatch.setattr(_chain_gait, "_transient_batch", transient)
     with pytest.raises(Stop):
         lj.steady_gait(lj.Params(omega=2.0), verbose=True)
 
@@ -76,7 +76,7 @@ def test_chain_steady_gait_says_what_it_does_before_compiling(monkeypatch, capsy
 
 @pytest.mark.parametrize("call", ["continuation", "basins"])
 def test_continuation_and_basins_say_what_they_do_before_compiling(monkeypatch, capsys, call):
-    from locomotion_jax.gaits import _gait
+    from locomotion_jax.gaits import _chain_gait
 
     def transient(*args, **kwargs):
         err = capsys.readouterr().err
@@ -84,8 +84,7 @@ def test_continuation_and_basins_say_what_they_do_before_compiling(monkeypatch, 
         assert "[steady_gait " in err and "compiling (first call only)" in err, err
         raise Stop
 
-    monkeypatch.setattr(_gait, "_transient_batch", transient)
-    monkeypatch.setattr(_gait, "_transient_from_batch", transient)
+    monkeypatch.setattr(_chain_gait, "_transient_batch", transient)
     with pytest.raises(Stop):
         if call == "continuation":
             lj.continuation(lj.Params(omega=4.0), "omega", 6.0, verbose=True)

@@ -3,6 +3,7 @@ engine: equal to forward mode (`jax.jacfwd`, an independent code path through th
 1e-8 relative, and to central differences of the scipy references (`tests/reference.py`,
 `tests/reference_chain.py`) to the accuracy those allow; float32 runs; the refusals that remain."""
 
+import logging
 import sys
 from pathlib import Path
 from typing import Any
@@ -101,7 +102,6 @@ def test_chain_measure_grad_equals_jacfwd():
     np.testing.assert_allclose(R, J, rtol=1e-8, atol=1e-8 * np.max(np.abs(J)))
 
 
-@pytest.mark.slow  # compiles simulate's checkpointed backward pass (minutes on 2 cores)
 def test_chain_simulate_vjp_equals_jacfwd_and_reference():
     from reference_chain import chain_config, reference_chain_simulate
 
@@ -129,7 +129,6 @@ def test_chain_simulate_vjp_equals_jacfwd_and_reference():
     assert np.max(np.abs(R - fd)) <= 1e-3 * np.max(np.abs(fd)) + 1e-9
 
 
-@pytest.mark.slow  # compiles simulate's checkpointed backward pass (minutes on 2 cores)
 def test_params_simulate_grad_equals_jacfwd():
     def run(w):
         traj = lj.simulate(lj.Params(omega=w), t_end=12.0, save_at=SAVE)
@@ -153,3 +152,19 @@ def test_forward_only_computations_still_refuse_reverse_mode():
     with pytest.raises(TypeError, match="jax.jacfwd"):
         jax.grad(lambda x: forward_only(x * x))(2.0)
     assert float(jax.jvp(lambda x: forward_only(x * x), (2.0,), (1.0,))[1]) == 4.0
+
+
+def test_a_second_grad_compiles_nothing(caplog):
+    """The backward pass is one cached program: a second eager `jax.grad` of the same run reuses it
+    (a transposition traced anew would compile the checkpointed loops on every call)."""
+
+    def run(d):
+        return lj.measure(lj.Params(omega=2.0 + d[0], a=0.08 + d[1]), z=1.0, t_start=30.0, horizon=100.0).tau_z
+
+    grad = jax.grad(run)
+    first = np.asarray(grad(jnp.zeros(2)))
+    with jax.log_compiles(True), caplog.at_level(logging.WARNING):
+        second = np.asarray(grad(jnp.zeros(2)))
+    compiles = [r.getMessage() for r in caplog.records if "ompil" in r.getMessage()]
+    assert compiles == [], compiles[:3]
+    np.testing.assert_array_equal(second, first)

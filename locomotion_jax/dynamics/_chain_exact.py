@@ -107,7 +107,7 @@ class Hybrid(eqx.Module):
 
 
 class StepInfo(NamedTuple):
-    """What one iteration did ; `stuck` is the mode during `[t0, t1]`.
+    """What one iteration did; `stuck` is the mode during `[t0, t1]`.
 
     For the steady gaits' switching test functions (`gaits._chain_gait`): `vel`, per mass, a slipping
     mass whose velocity reached zero at `t0` (re-decided there); `hold`, per mass, its stick margin at
@@ -256,7 +256,7 @@ def probe(P: AbstractPhysics, contact: Contact, t: Array, y: State, target: num.
 def step(
     P: AbstractPhysics,
     contact: Contact,
-    dt: float,
+    dt: float | Array,
     st: Hybrid,
     t_stop: Array,
     target: num.Target | None = None,

@@ -41,6 +41,14 @@ def engine_jit(fn: Callable, static_argnames: Sequence[str], reverse: bool = Fal
     top = jax.jit(fn, static_argnames=static, compiler_options=COMPILER_OPTIONS)
     nested = jax.jit(fn, static_argnames=static)
 
+    @functools.wraps(fn)  # the signature, for `static_argnames`
+    def traced_reversible(*args, **kwargs):
+        with reverse_loops():  # read while tracing: this `jit`'s cache only ever holds these loops
+            return fn(*args, **kwargs)
+
+    # Compiled once and cached like `nested`, so that repeated reverse-mode calls reuse the program.
+    reversible = jax.jit(traced_reversible, static_argnames=static)
+
     signature = inspect.signature(fn)
 
     @functools.cache
@@ -61,11 +69,7 @@ def engine_jit(fn: Callable, static_argnames: Sequence[str], reverse: bool = Fal
         if not reverse:
             return forward_only(one_direction_at_a_time(run, dyn, compiled))
 
-        def traversable(d):
-            # Traced anew under the flag (not through `nested`, whose cache would return the queue).
-            with reverse_loops():
-                return fn(**dict(fixed), **d)
-
+        traversable = lambda d: reversible(**dict(fixed), **d)
         return one_direction_at_a_time(run, dyn, compiled, traversable)
 
     call.lower = top.lower  # pyright: ignore[reportAttributeAccessIssue]

@@ -246,7 +246,7 @@ def union(flags: Sequence[Array]) -> Array:
 def within(x: Array, reduce) -> Array:
     """`reduce(x)` over an entry's body axis, `x` itself for a scalar entry. The engine runs one
     configuration at a time (under `vmap`), so an entry is a scalar (one body: the unrolled
-    layout) or a vector over bodies (the array layout); the unrolled layout's program is unchanged."""
+    layout) or a vector over bodies (the array layout); a scalar entry is returned as it is."""
     return x if jnp.ndim(x) == 0 else reduce(x)
 
 

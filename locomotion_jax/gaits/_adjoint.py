@@ -27,7 +27,6 @@ JAX's error for a `custom_vjp` function; forward-mode sensitivities come from th
 `Orbit.gradient`.
 """
 
-import math
 from typing import NamedTuple
 
 import equinox as eqx
@@ -45,8 +44,7 @@ class AdjointGait(NamedTuple):
 
     - `y`: the fixed point of the $k$-period map (the reduced state at phase 0);
     - `figures`: $(\\Delta X, e_d, \\min N)$ over the gait's $k$ actuation periods;
-    - `ok`: Newton's method converged and the periods completed (not differentiable);
-    - `k`: the number of actuation periods.
+    - `ok`: Newton's method converged and the periods completed (not differentiable).
     """
 
     y: Array
@@ -89,7 +87,7 @@ def _pullback(theta: Array, oracle: ChainOracle, y: Array, k: Array, cot: Array,
         return eqxi.while_loop(cond, body, init, max_steps=step_cap, kind="checkpointed")
 
     run = _run(oracle, theta, k, loop)
-    _, vjp = jax.vjp(lambda th: run(jax.lax.stop_gradient(y), th)[0], theta)
+    _, vjp = jax.vjp(lambda th: run(y, th)[0], theta)
     return vjp(cot)[0]
 
 
@@ -118,9 +116,9 @@ def _gait_bwd(residuals, grad_obj, perturbed, theta, oracle, y0, k, step_cap):
     return _pullback(theta, oracle, y, k, jnp.concatenate([lam, f_bar]), step_cap)
 
 
-def step_cap(oracle: ChainOracle, k: int) -> int:
+def _backward_cap(oracle: ChainOracle, k: int) -> int:
     """The checkpointed loop's bound: the oracle's step cap per period times `k` periods (concrete)."""
-    return int(math.ceil(float(oracle.max_steps) * int(k)))
+    return int(oracle.max_steps) * k
 
 
 def steady_gait(oracle: ChainOracle, theta: Array, y0: Array, k: int = 1, cap: int | None = None) -> AdjointGait:
@@ -137,7 +135,7 @@ def steady_gait(oracle: ChainOracle, theta: Array, y0: Array, k: int = 1, cap: i
         raise ValueError(f"k (actuation periods) must be an int >= 1, got {k!r}")
     if cap is None:
         try:
-            cap = step_cap(oracle, k)
+            cap = _backward_cap(oracle, k)
         except jax.errors.ConcretizationTypeError:
             raise TypeError(
                 "steady_gait: oracle.max_steps is traced; pass cap= (an int bound on engine steps over the k periods)"
@@ -150,8 +148,3 @@ def steady_gait(oracle: ChainOracle, theta: Array, y0: Array, k: int = 1, cap: i
 def cost_of_transport(gait: AdjointGait) -> Array:
     """$e_d / |\\Delta X|$ over the gait's periods (as the chain optimiser's)."""
     return gait.figures[1] / jnp.abs(gait.figures[0])
-
-
-def mean_speed(gait: AdjointGait, theta: Array, k: int = 1) -> Array:
-    """$\\Delta X$ over the $k$ periods divided by their duration $2\\pi k/\\omega$, $\\omega = e^{\\theta_{-1}}$."""
-    return gait.figures[0] * jnp.exp(theta[-1]) / (2 * jnp.pi * k)

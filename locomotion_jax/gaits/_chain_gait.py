@@ -1,11 +1,12 @@
-"""Steady gaits of chains of N masses as periodic orbits (the N-mass counterpart of `_gait`).
+"""Steady gaits as periodic orbits: the one period map and Newton solver of every mechanism (a
+chain of N masses, a `Mechanism`, and the paper's model as the two-mass chain, through `_gait`).
 
 Every waveform of a [`Chain`][] shares the base frequency $\\omega$, so the forcing is
 $T$-periodic ($T = 2\\pi/\\omega$), and the loads depend on the positions only through the
 gaps $u_j = x_{j+1} - x_j$ (SPEC §8). A steady gait is then a fixed point of the $k$-period
 map $\\Phi_k$ of the reduced state $y = (u_1, \\dots, u_{N-1}, v_1, \\dots, v_N)$ at the phase
 $\\omega t \\equiv 0$, while the centre of mass drifts by $\\Delta X$ per gait period $kT$.
-As for two masses: a transient from the start, then Newton's method on $\\Phi_k(y) = y$ with
+A transient from the start, then Newton's method on $\\Phi_k(y) = y$ with
 the monodromy matrix $M = \\partial\\Phi_k/\\partial y$ from forward-mode differentiation through
 the N-mass exact engine (located events enter with their implicit-function times, so $M$
 includes the saltation of every switch); the Floquet multipliers are the eigenvalues of $M$.
@@ -281,7 +282,8 @@ def _transient_batch(C, physics_of, valid, contact, start, dt, transient, max_st
     return jax.vmap(one)(C, valid, y_start)
 
 
-_transient_batch = engine_jit(_transient_batch, ("physics_of", "contact", "start", "dt"))
+# `dt` traced: a solve at another step (the optimiser's check at dt/2) reuses the program.
+_transient_batch = engine_jit(_transient_batch, ("physics_of", "contact", "start"))
 
 
 COMPACT = 4

@@ -144,7 +144,7 @@ def evaluate(C, a_max, theta, y0, k, harmonics, knots, contact, dt, max_steps, t
     """Orbits and sensitivities of a batch of decision vectors (`_orbit.evaluate`, compiled once
     per chain structure, batch size and static choice)."""
     return orbit.evaluate(C, a_max, theta, y0, k, ChainActuation(harmonics, knots), contact, dt, max_steps, tol,
-                          max_iter, False, True)  # fmt: skip
+                          max_iter, monodromy_only=False, gradient=True)  # fmt: skip
 
 
 def relax(C, a_max, theta, y0, fresh, periods, harmonics, knots, contact, dt, max_steps) -> Array:

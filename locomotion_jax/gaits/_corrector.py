@@ -237,6 +237,6 @@ def _correct_batch(C, physics_of, sel, contact, dt, k, lam0, scale, z0, zref, c,
     return jax.vmap(one)(C, k, lam0, scale, z0, zref, c, go)
 
 
-correct_batch = engine_jit(_correct_batch, ("physics_of", "contact", "dt"))
+correct_batch = engine_jit(_correct_batch, ("physics_of", "contact"))
 """The corrector, batched: one compilation per batch size, kind of configuration and settings,
-whatever the parameter (the selector is traced) and the gait period."""
+whatever the parameter (the selector is traced), the gait period and the step `dt`."""

@@ -29,10 +29,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array, ArrayLike
-from .._status import Regime
 from ..dynamics._base import AbstractDynamics
 from ..dynamics._exact_dynamics import Exact
-from ..dynamics._runs import STICK_TOL
 from ..model import _two_mass as model
 from ..model._bodies import Mechanism
 from ..model._chain import Chain
@@ -40,7 +38,7 @@ from ..model._params import Params
 from ..model._waveform import AbstractWaveform
 from ..run._batch import mechanism_arg, prepare, unflatten
 from ..run._resolution import guard_two_mass
-from . import _chain_gait as chain_gait, _progress as progress, _select as select
+from . import _chain_gait as chain_gait, _progress as progress
 from ._chain_gait import ChainGait
 from ._select import GaitStatus as GaitStatus
 
@@ -104,10 +102,6 @@ class Gait(eqx.Module):
     def state(self) -> Array:
         """The section state $(u, v_1, v_2)$ as one array, `batch + (3,)` (as `ChainGait.state`)."""
         return jnp.stack([self.u, self.v1, self.v2], axis=-1)
-
-
-_transient_batch = chain_gait._transient_batch
-"""The transient of every mechanism (`_chain_gait`), shared by every gait period tried."""
 
 
 @overload
@@ -224,9 +218,7 @@ def _chain(chain: Chain | Mechanism, periods, transient, tol, max_iter, dynamics
     if waveform is not None:
         name = type(chain).__name__
         raise ValueError(f"waveform= applies to Params; a {name} carries its own waveforms (in its elements).")
-    from ._chain_gait import steady_gait_chain
-
-    return steady_gait_chain(chain, periods=periods, transient=transient, tol=tol, max_iter=max_iter,
+    return chain_gait.steady_gait_chain(chain, periods=periods, transient=transient, tol=tol, max_iter=max_iter,
                              dynamics=dynamics, contact=contact, start=start, dtype=dtype, say=say)  # fmt: skip
 
 
@@ -282,39 +274,9 @@ def _start_states(start: Any, shape: tuple[int, ...], dtype: Any) -> Array | Non
 
 
 def _gait(r: dict, omega: np.ndarray, flat: Params, contact: str) -> Gait:
-    ok = r["status"] == GaitStatus.CONVERGED
-    dtype = flat.dtype
-    nan = lambda x: jnp.asarray(np.where(select.expand(ok, x), x, np.nan), dtype)
-    out = r["out"]
-    k = r["k"]
-    kT = np.where(ok, k * 2 * np.pi / np.where(ok, omega, 1), np.nan)
-    dX = out.dX
-    M = np.where(ok[:, None, None], r["M"], np.nan)
-    stuck = np.moveaxis(out.stuck, -1, 0) / np.where(ok, kT, 1)
-    ssl = np.max(out.stuck, axis=-1) > STICK_TOL
-    return Gait(
-        status=jnp.asarray(r["status"]),
-        converged=jnp.asarray(ok),
-        k=jnp.asarray(k, jnp.int32),
-        period=jnp.asarray(kT, dtype),
-        mean_speed=nan(dX / np.where(ok, kT, 1)),
-        e_d=nan(out.ed),
-        work=nan(out.w),
-        cost_of_transport=nan(select.ratio(out.ed, np.abs(dX), ok)),
-        stick_fraction1=nan(stuck[0]),
-        stick_fraction2=nan(stuck[1]),
-        regime=jnp.asarray(np.where(ok, np.where(ssl, Regime.SSL, Regime.SL), Regime.UNDETERMINED), jnp.int32),
-        n_switch=jnp.asarray(np.where(ok, out.n_switch, 0), jnp.int32),
-        u=nan(r["y"][:, 0]),
-        v1=nan(r["y"][:, 1]),
-        v2=nan(r["y"][:, 2]),
-        monodromy=jnp.asarray(M, dtype),
-        multipliers=jnp.asarray(r["multipliers"]),
-        stable=jnp.asarray(r["stable"]),
-        residual=jnp.asarray(r["residual"], dtype),
-        n_iter=jnp.asarray(r["it"]),
-        liftoff=jnp.asarray(r["lifted"]),
-        slip_margin=nan(out.margin),
-        min_normal=nan(out.n_min),
-        contact=contact,
-    )
+    """The solver's result as a `Gait`: the `ChainGait` of the two-mass chain, under the paper's names."""
+    g = chain_gait._chain_gait(r, omega, flat.dtype, contact)
+    sf = g.stick_fraction
+    paper: dict[str, Any] = dict(u=g.state[:, 0], v1=g.state[:, 1], v2=g.state[:, 2], contact=contact,
+                                 stick_fraction1=sf[:, 0], stick_fraction2=sf[:, 1])  # fmt: skip
+    return Gait(**{k: getattr(g, k) for k in Gait.__dataclass_fields__ if k not in paper}, **paper)

@@ -68,7 +68,7 @@ class Chain(AbstractMechanism):
       scalar per mass: fastest for a few masses, but compile time and cost per mass grow with N),
       `"array"` (one array over the masses: compile time independent of N; Sinusoid, Fourier and
       travelling-wave actuation, `contact="strict"` or `"paper"`), or `"auto"` (default): the array
-      layout from 16 masses on where it applies (docs/performance.md, "Long chains").
+      layout from `ARRAY_FROM` (16) masses on where it applies (docs/performance.md, "Long chains").
     - `check`: validate concrete values (default); invalid values raise `ValueError` naming the
       parameter, the mass or spring index and the valid range. With `check=False` an invalid
       configuration is flagged `Status.INVALID` in its own result instead.
@@ -149,9 +149,10 @@ class Chain(AbstractMechanism):
         if layout not in LAYOUTS:
             raise ValueError(f"Invalid parameter 'layout': expected one of {LAYOUTS}, got {layout!r}.")
         self.layout = layout
-        if layout == "array" and array_unsupported(self) is not None:
-            raise ValueError(f"Invalid parameter 'layout': 'array' is not available for this chain: "
-                             f"{array_unsupported(self)}; use layout='unrolled' or 'auto'.")  # fmt: skip
+        why = array_unsupported(self) if layout == "array" else None
+        if why is not None:
+            raise ValueError(f"Invalid parameter 'layout': 'array' is not available for this chain: {why}; "
+                             "use layout='unrolled' or 'auto'.")  # fmt: skip
         _ = self.batch_shape  # fields whose batch axes do not broadcast are refused here, named
         if check and all(_concrete(x) for x in jax.tree_util.tree_leaves(self)):
             self.validate()
