@@ -20,7 +20,6 @@ from .dynamics._exact_dynamics import Exact as Exact
 from .dynamics._smoothed_dynamics import Smoothed as Smoothed
 from .gaits._basins import Basins as Basins, basins as basins
 from .gaits._bifurcation import BranchEvents as BranchEvents, EventKind as EventKind
-from .gaits._chain_gait import ChainGait as ChainGait
 from .gaits._continuation import Branch as Branch, BranchStatus as BranchStatus, continuation as continuation
 from .gaits._gait import Gait as Gait, GaitStatus as GaitStatus, steady_gait as steady_gait
 from .maps._sweep import sweep as sweep
@@ -98,9 +97,9 @@ _LAZY = {
 """Public names imported on first use, so that `import locomotion_jax` stays quick."""
 
 
-_DEPRECATED = {"ChainTrajectory": "Trajectory", "ChainMeasurement": "Measurement"}
-"""Deprecated names (for one release) and the classes they name: one `Trajectory` and one
-`Measurement` serve every mechanism."""
+_DEPRECATED = {"ChainTrajectory": "Trajectory", "ChainMeasurement": "Measurement", "ChainGait": "Gait"}
+"""Deprecated names (for one release) and the classes they name: one `Trajectory`, one
+`Measurement` and one `Gait` serve every mechanism."""
 
 
 def __getattr__(name: str):

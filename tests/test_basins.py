@@ -32,7 +32,7 @@ def test_two_coexisting_gaits_and_the_reference():
         other = 1 - lab
         end = np.array([r["x2"][1] - r["x1"][1], r["v1"][1], r["v2"][1]])
         g = b.gaits
-        assert isinstance(g, lj.Gait)  # the paper's model's gaits (a chain's are a ChainGait)
+        assert isinstance(g, lj.Gait) and g.names == "paper"  # the paper's model's gaits, under its names
         u, v1, v2 = np.asarray(g.u), np.asarray(g.v1), np.asarray(g.v2)
         gait = lambda i: np.array([u[i], v1[i], v2[i]])
         assert np.linalg.norm(end - gait(lab)) < 0.1 * np.linalg.norm(end - gait(other))

@@ -30,6 +30,9 @@ def test_gait_json_matches_steady_gait_and_text():
     mult = np.asarray(rec["multipliers"])  # [re, im] pairs
     np.testing.assert_allclose(mult[:, 0] + 1j * mult[:, 1], np.asarray(g.multipliers), atol=1e-12)
     assert rec["params"]["omega"] == 16.0 and rec["contact"] == "strict" and rec["stable"] is True
+    # The paper's names, as the paper's model's gait has always printed them.
+    assert {"u", "v1", "v2", "stick_fraction1", "stick_fraction2", "state"} <= set(rec) and "stick_fraction" not in rec
+    assert rec["v2"] == pytest.approx(float(g.v2), rel=1e-12) and rec["state"][2] == rec["v2"]
     text = invoke("gait", "--omega", "16")
     assert text.exit_code == 0 and "CONVERGED" in text.stdout and "multipliers" in text.stdout
 

@@ -49,6 +49,7 @@ def test_points_equal_independent_solves(boundary):
     """Continued points (an SL and an SSL one) equal `steady_gait` solves at the same parameter."""
     n = int(boundary.n_points[0])
     lam = np.asarray(boundary.lam[0, :n])
+    assert boundary.names == "paper" and boundary.n_bodies == 2
     assert int(boundary.status[0]) == BranchStatus.REACHED and lam[0] == 0.05 and lam[-1] == 0.02
     regime = np.asarray(boundary.regime[0, :n])
     j = [int(np.argmin(np.abs(lam - 0.04))), int(np.argmin(np.abs(lam - 0.022)))]
@@ -243,7 +244,9 @@ def test_chain_points_are_steady_gaits(worm_branch):
     to the same orbits (state to 1e-9, speed, cost of transport and dissipation to 1e-8, multipliers
     to 1e-8), with the same regimes."""
     _, b = worm_branch
-    assert b.u is None and b.state.shape[-1] == 5 and b.stick_fraction.shape[-1] == 3
+    assert b.names == "bodies" and b.state.shape[-1] == 5 and b.stick_fraction.shape[-1] == 3
+    with pytest.raises(ValueError, match="`u` is the paper's name .* 3 bodies"):
+        _ = b.u
     n = [int(q) for q in np.asarray(b.n_points)]
     assert min(n) >= 3 and set(np.asarray(b.status).tolist()) <= {BranchStatus.REACHED, BranchStatus.MAX_POINTS}
     for i, (start, stop) in enumerate(((6.0, 6.6), (12.0, 11.4))):

@@ -220,3 +220,26 @@ def test_compact_batch_for_the_longer_periods(monkeypatch):
             np.testing.assert_allclose(np.asarray(b), np.asarray(a), rtol=1e-12, atol=1e-15, err_msg=name)
         else:
             np.testing.assert_array_equal(np.asarray(b), np.asarray(a), err_msg=name)
+
+
+def test_one_gait_class_under_the_paper_names():
+    import warnings
+
+    import equinox as eqx
+
+    g = steady_gait(lj.Params(omega=16.0))
+    assert type(g) is lj.Gait and g.names == "paper" and g.n_bodies == 2 and g.state.shape == (3,)
+    for name, i in (("u", 0), ("v1", 1), ("v2", 2)):
+        np.testing.assert_array_equal(np.asarray(getattr(g, name)), np.asarray(g.state)[i])
+    np.testing.assert_array_equal(np.asarray(g.stick_fraction2), np.asarray(g.stick_fraction)[1])
+    # Three bodies: the paper's names are refused; an anchored two-body state holds positions.
+    three = eqx.tree_at(lambda r: (r.stick_fraction, r.state), g, (jnp.zeros(3), jnp.zeros(5)))
+    for name in ("u", "v2", "stick_fraction1"):
+        with pytest.raises(ValueError, match=rf"`{name}` is the paper's name .* this result has 3 bodies"):
+            getattr(three, name)
+    with pytest.raises(ValueError, match="positions then velocities"):
+        _ = eqx.tree_at(lambda r: r.state, g, jnp.zeros(4)).v1
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert lj.ChainGait is lj.Gait
+    assert any(issubclass(w.category, DeprecationWarning) for w in caught)

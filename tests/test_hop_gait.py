@@ -17,7 +17,7 @@ def test_hopping_gait_is_the_limit_of_a_long_simulation():
     omega = np.asarray([15.0, 20.0])
     p = lj.Params(omega=jnp.asarray(omega), a=0.1)
     g = lj.steady_gait(p, contact="hop")
-    assert isinstance(g, lj.ChainGait) and g.state.shape == (2, 7)
+    assert isinstance(g, lj.Gait) and g.state.shape == (2, 7)
     print("gait", g.status, g.mean_speed, np.abs(np.asarray(g.multipliers)).round(4), np.asarray(g.state))
     assert np.all(np.asarray(g.status) == lj.GaitStatus.CONVERGED) and np.all(np.asarray(g.stable))
     mult = np.abs(np.asarray(g.multipliers))

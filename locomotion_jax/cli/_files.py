@@ -103,4 +103,4 @@ def with_wave(chain: Any, wave: Any, check: bool = True) -> Any:
     from ..model._chain import Chain
 
     return Chain(masses=chain.m, k=chain.k, d=chain.d, lbar=chain.lbar, c=chain.c, waveforms=wave,
-                 friction=chain.friction, actuator=chain.actuator, check=check)  # fmt: skip
+                 friction=chain.friction, actuator=chain.actuator, layout=chain.layout, check=check)  # fmt: skip

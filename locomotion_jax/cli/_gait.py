@@ -17,6 +17,7 @@ import numpy as np
 import typer
 
 from .._json import dumps
+from .._results import PAPER
 from ._errors import friendly
 from ._mechanism import build, mechanism_options, number
 from ._options import expand, run_options, Values
@@ -27,8 +28,10 @@ GAIT_FIELDS: tuple[str, ...] = (
     "stick_fraction2", "stick_fraction", "n_switch", "u", "v1", "v2", "state", "stable", "residual", "n_iter",
     "liftoff", "slip_margin", "min_normal",
 )  # fmt: skip
-"""The gait's fields `gait` prints, those it has (a chain's: `stick_fraction`, `state`), besides
-`status` and the multipliers."""
+"""The gait's fields `gait` prints, besides `status` and the multipliers: under the paper's names
+for the paper's model, else the bodies' (`stick_fraction`, `state`; `_PAPER_ONLY` left out)."""
+
+_PAPER_ONLY = ("stick_fraction1", "stick_fraction2", "u", "v1", "v2")
 
 POINT_FIELDS: tuple[str, ...] = (
     "lam", "mean_speed", "cost_of_transport", "regime", "stable", "liftoff", "u", "v1", "v2",
@@ -104,7 +107,8 @@ def register(app: typer.Typer) -> None:
         note(f"solving the steady gait, periods {','.join(map(str, ks))} (compiling the solver: first call only)...")
         g = lj.steady_gait(built.mechanism, periods=ks, transient=transient, contact=run["contact"],
                            start=run["start"], dynamics=lj.Exact(dt=run["dt"]), **built.extra)  # fmt: skip
-        record: dict[str, Any] = {n: plain(getattr(g, n)) for n in GAIT_FIELDS if getattr(g, n, None) is not None}
+        skip = ("stick_fraction",) if g.names == PAPER else _PAPER_ONLY
+        record: dict[str, Any] = {n: plain(getattr(g, n)) for n in GAIT_FIELDS if n not in skip}
         record["regime_name"] = lj.Regime(int(g.regime)).name
         record["status"] = int(g.status)
         record["status_name"] = lj.GaitStatus(int(g.status)).name

@@ -19,7 +19,6 @@ from .._custom_types import Array, ArrayLike
 from ..dynamics._base import AbstractDynamics
 from ..model._mechanism import AbstractMechanism
 from ..model._waveform import AbstractWaveform
-from ._chain_gait import ChainGait
 from ._gait import Gait, steady_gait
 
 
@@ -28,16 +27,16 @@ class Basins(eqx.Module):
 
     - `label`: shape `G`: the index into `gaits` of the gait each start ends on; -1 where none
       converged (chaos, a long transient, lift-off: `per_start.status` says which).
-    - `gaits`: the distinct gaits ([`Gait`][], or a chain's `ChainGait`; batch `(n,)`), by
+    - `gaits`: the distinct gaits ([`Gait`][]; batch `(n,)`), by
       increasing mean speed.
     - `count`: shape `(n,)`: the starts in each basin.
     - `per_start`: the [`Gait`][] of every start, shape `G`.
     """
 
     label: Array
-    gaits: Gait | ChainGait
+    gaits: Gait
     count: Array
-    per_start: Gait | ChainGait
+    per_start: Gait
 
 
 def basins(

@@ -36,6 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array
+from .._results import BODIES, PAPER
 
 
 LAM_TOL = 1e-10
@@ -64,6 +65,17 @@ class EventKind:
 NAMES = {0: "FOLD", 1: "PERIOD_DOUBLING", 2: "BRANCH_POINT", 3: "SSL_SL", 4: "LIFTOFF", 5: "SWITCH"}
 
 
+def _column(name: str, index: int) -> property:
+    """The paper's name of one column of the events' `state`, refused on another mechanism."""
+
+    def get(events: "BranchEvents") -> Array:
+        if events.names != PAPER:
+            raise ValueError(f"`{name}` is the paper's name for the two-mass model; read `state[..., {index}]`.")
+        return events.state[..., index]
+
+    return property(get, doc=f"The paper's `{name}` at each event: `state[..., {index}]` (the paper's model only).")
+
+
 class BranchEvents(eqx.Module):
     """Located events per branch, `batch + (m,)`, padded with `kind` -1 (NaN numbers).
 
@@ -76,7 +88,8 @@ class BranchEvents(eqx.Module):
       the middle of the two points and `lam_error` half their distance).
     - `turn`: the branch reverses its direction in $\\lambda$ across the event (at a switching
       event: a non-smooth fold, where two pieces of the branch meet at a corner).
-    - The paper's model only (else `None`): `u, v1, v2`, the columns of `state`.
+    - `names`: `"paper"` for the paper's model (then `u`, `v1`, `v2` name the columns of `state`;
+      they raise a `ValueError` on other mechanisms), else `"bodies"`.
     """
 
     kind: Array
@@ -89,9 +102,11 @@ class BranchEvents(eqx.Module):
     smooth: Array
     located: Array
     turn: Array
-    u: Array | None = None
-    v1: Array | None = None
-    v2: Array | None = None
+    names: str = eqx.field(static=True, default=BODIES)
+
+    u = _column("u", 0)
+    v1 = _column("v1", 1)
+    v2 = _column("v2", 2)
 
 
 def _functional(kind: int, r, contact: str) -> np.ndarray:
@@ -338,8 +353,6 @@ def find_events(d: dict, status: np.ndarray, failed_at: np.ndarray, solve, conta
     fill = dict(kind=-1, index=-1, lam=np.nan, lam_error=np.nan, state=np.full(S, np.nan),
                 multipliers=np.full(S, np.nan + 0j), value=np.nan, smooth=False, located=False, turn=False)  # fmt: skip
     table = {key: [[(f[q] if q < len(f) else fill)[key] for q in range(m)] for f in found] for key in fill}
-    state = np.asarray(table["state"], float)
-    named = {name: jnp.asarray(state[..., i], solve.dtype) for i, name in enumerate(("u", "v1", "v2"))} if paper else {}
     return BranchEvents(
         kind=jnp.asarray(table["kind"], jnp.int32),
         index=jnp.asarray(table["index"], jnp.int32),
@@ -351,7 +364,7 @@ def find_events(d: dict, status: np.ndarray, failed_at: np.ndarray, solve, conta
         smooth=jnp.asarray(table["smooth"], bool),
         located=jnp.asarray(table["located"], bool),
         turn=jnp.asarray(table["turn"], bool),
-        **named,
+        names=PAPER if paper else BODIES,
     )
 
 

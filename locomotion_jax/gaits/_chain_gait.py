@@ -26,12 +26,12 @@ $(x_1, \\dots, x_N, v_1, \\dots, v_N)$, and its centre of mass returns to where 
 from collections.abc import Sequence
 from typing import Any, NamedTuple
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array, ArrayLike, Contact
+from .._results import BODIES
 from .._status import Regime, Status
 from ..dynamics import _chain_exact as engine, _numerics as num, _paper as paper
 from ..dynamics._compile import engine_jit
@@ -45,48 +45,8 @@ from ..model._physics import AbstractPhysics
 from ..run._batch import check_contact_start, prepare_chain, unflatten
 from ..run._resolution import guard_chain
 from . import _select as select
+from ._result import Gait
 from ._select import GaitStatus
-
-
-class ChainGait(eqx.Module):
-    """Steady gaits of chains, per configuration (compare [`Gait`][], whose fields these are).
-
-    - `status` ([`GaitStatus`][]), `converged`, `k`, `period`, `mean_speed`, `e_d`, `work`,
-      `cost_of_transport`, `regime`, `n_switch`, `multipliers`, `stable`, `residual`, `n_iter`,
-      `liftoff`: as in [`Gait`][].
-    - `stick_fraction`: fraction of the gait period each mass is stuck, shape `batch + (N,)`.
-    - `state`: the orbit's reduced state at the section $\\omega t \\equiv 0$, shape
-      `batch + (2N - 1,)` (under `contact="hop"`: `batch + (4N - 1,)`, the heights and vertical
-      velocities $(y_1, \\dots, y_N, w_1, \\dots, w_N)$ appended), order
-      $(u_1, \\dots, u_{N-1}, v_1, \\dots, v_N)$ (a mechanism anchored to
-      the wall: `batch + (2N,)`, $(x_1, \\dots, x_N, v_1, \\dots, v_N)$);
-      `monodromy`: $M$ in that order, shape `batch + (2N - 1, 2N - 1)` (anchored: `(2N, 2N)`).
-    - `slip_margin`, `min_normal`: as in [`Gait`][], over every mass (the slip margin is the
-      smallest negated stick margin, $\\max(F_i - \\mu_{s,\\mathrm{fwd}} n_i, -F_i - \\mu_{s,\\mathrm{bwd}} n_i)$,
-      where a slipping mass's velocity reaches zero; the normal loads are the signed $N_i$).
-    """
-
-    status: Array
-    converged: Array
-    k: Array
-    period: Array
-    mean_speed: Array
-    e_d: Array
-    work: Array
-    cost_of_transport: Array
-    stick_fraction: Array
-    regime: Array
-    n_switch: Array
-    state: Array
-    monodromy: Array
-    multipliers: Array
-    stable: Array
-    residual: Array
-    n_iter: Array
-    liftoff: Array
-    slip_margin: Array
-    min_normal: Array
-    contact: str = eqx.field(static=True)
 
 
 class _Period(NamedTuple):
@@ -337,7 +297,7 @@ def steady_gait_chain(
     start: str | ArrayLike = "paper",
     dtype: Any = None,
     say=lambda message: None,
-) -> ChainGait:
+) -> Gait:
     """[`steady_gait`][] for a [`Chain`][] or a [`Mechanism`][locomotion_jax.Mechanism] (its
     arguments; `start` names a start at rest (a mechanism: its own `x0`, `v0`), or gives section
     states at phase 0: gaps then velocities $(u_0, \\dots, u_{N-2}, v_0, \\dots, v_{N-1})$, shape
@@ -413,14 +373,15 @@ def solve(C, physics_of, valid, unresolved, shape, omega, *, periods, transient,
     return dict(best, omega=omega)
 
 
-def _chain_gait(r: dict, omega: np.ndarray, dtype: Any, contact: str) -> ChainGait:
+def _chain_gait(r: dict, omega: np.ndarray, dtype: Any, contact: str, names: str = BODIES) -> Gait:
+    """The solver's host results `r` (of [`solve`][]) as a [`Gait`][] (NaN where not converged)."""
     ok = r["status"] == GaitStatus.CONVERGED
     nan = lambda x: jnp.asarray(np.where(select.expand(ok, x), x, np.nan), dtype)
     out: _Period = r["out"]
     kT = np.where(ok, r["k"] * 2 * np.pi / np.where(ok, omega, 1), np.nan)
     dX = out.dX
     ssl = np.max(out.stuck, axis=-1) > STICK_TOL
-    return ChainGait(
+    return Gait(
         status=jnp.asarray(r["status"]),
         converged=jnp.asarray(ok),
         k=jnp.asarray(r["k"], jnp.int32),
@@ -442,4 +403,5 @@ def _chain_gait(r: dict, omega: np.ndarray, dtype: Any, contact: str) -> ChainGa
         slip_margin=nan(out.margin),
         min_normal=nan(out.n_min),
         contact=contact,
+        names=names,
     )

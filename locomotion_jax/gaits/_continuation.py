@@ -29,6 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array
+from .._results import _paper_name, BODIES, PAPER
 from .._status import Regime, Status
 from ..dynamics._base import AbstractDynamics
 from ..dynamics._exact_dynamics import Exact
@@ -42,6 +43,7 @@ from ..run._resolution import guard_chain, guard_two_mass
 from . import _chain_gait as chain_gait, _corrector as corrector, _progress as progress
 from ._bifurcation import BranchEvents, find_events, kinds
 from ._gait import configs, GaitStatus, steady_gait
+from ._result import _section_name
 
 
 MAX_TURN = 0.5
@@ -81,7 +83,7 @@ class Branch(eqx.Module):
     with NaN (or the sentinels below) past each branch's `n_points`.
 
     - `lam`: the parameter; `state`: the orbit's section state, `batch + (n, S)` (as [`Gait`][]'s
-      `(u, v1, v2)` for the paper's model, `ChainGait.state` for a chain or a mechanism).
+      `(u, v1, v2)` for the paper's model, `Gait.state` for a chain or a mechanism).
     - `mean_speed`, `cost_of_transport`, `e_d`, `work`, `n_switch`, `slip_margin`, `min_normal`: as in
       [`Gait`][], of each point's orbit; `stick_fraction`: per mass, `batch + (n, N)`; `regime`:
       [`Regime`][] (UNDETERMINED past the end).
@@ -94,8 +96,9 @@ class Branch(eqx.Module):
     - `n_points`, `status` ([`BranchStatus`][]), `k` (the gait period followed, in actuation
       periods), `start_status` (the start's [`GaitStatus`][]): per branch.
     - `events`: [`BranchEvents`][], the located bifurcations and switching changes.
-    - The paper's model only (else `None`): `u`, `v1`, `v2` (the columns of `state`) and
-      `stick_fraction1`, `stick_fraction2` (those of `stick_fraction`).
+    - `names`: `"paper"` for the paper's model, else `"bodies"`. The paper's names of two bodies are
+      properties, as on [`Gait`][]: `u`, `v1`, `v2` (the columns of `state`) and `stick_fraction1`,
+      `stick_fraction2` (those of `stick_fraction`); they raise a `ValueError` for other than two bodies.
     """
 
     lam: Array
@@ -122,11 +125,18 @@ class Branch(eqx.Module):
     events: BranchEvents
     parameter: str = eqx.field(static=True)
     contact: str = eqx.field(static=True)
-    u: Array | None = None
-    v1: Array | None = None
-    v2: Array | None = None
-    stick_fraction1: Array | None = None
-    stick_fraction2: Array | None = None
+    names: str = eqx.field(static=True, default=BODIES)
+
+    @property
+    def n_bodies(self) -> int:
+        """The number of bodies $N$ (the length of the trailing body axis)."""
+        return self.stick_fraction.shape[-1]
+
+    u = _section_name("u", 0, "The paper's gap $u$ of each point: `state[..., 0]` (two bodies only).")
+    v1 = _section_name("v1", 1, "The paper's $v_1$ of each point: `state[..., 1]` (two bodies only).")
+    v2 = _section_name("v2", 2, "The paper's $v_2$ of each point: `state[..., 2]` (two bodies only).")
+    stick_fraction1 = _paper_name("stick_fraction1", "stick_fraction", 0, "`stick_fraction[..., 0]` (two bodies only).")
+    stick_fraction2 = _paper_name("stick_fraction2", "stick_fraction", 1, "`stick_fraction[..., 1]` (two bodies only).")
 
 
 class Solver:
@@ -530,10 +540,6 @@ def _branch(d, status, k, start_status, events, shape, dtype, label, contact, pa
     mult = np.abs(np.nan_to_num(d["multipliers"], nan=np.inf))
     S = d["z"].shape[-1] - 1
     state = d["z"][..., :S]
-    named = {}
-    if paper:
-        named = dict(u=re(state[..., 0]), v1=re(state[..., 1]), v2=re(state[..., 2]),
-                     stick_fraction1=re(stuck[..., 0]), stick_fraction2=re(stuck[..., 1]))  # fmt: skip
     return Branch(
         lam=re(d["lam"]),
         state=re(state),
@@ -559,5 +565,5 @@ def _branch(d, status, k, start_status, events, shape, dtype, label, contact, pa
         events=jax.tree_util.tree_map(lambda x: x.reshape(shape + x.shape[1:]), events),
         parameter=label,
         contact=contact,
-        **named,
+        names=PAPER if paper else BODIES,
     )

@@ -13,7 +13,7 @@ eigenvalues of $M$ are the Floquet multipliers.
 Every mechanism runs on one period map and one solver (`_chain_gait`, `_corrector`) over the
 N-body engine: the paper's model as the two-mass chain of
 [`Params.physics`][locomotion_jax.Params.physics], whose section state $(u, v_1, v_2)$ is the
-chain's (gap, then velocities); this module keeps the paper's names for its results.
+chain's (gap, then velocities); its [`Gait`][] is named as the paper names it (`names="paper"`).
 
 A mass stuck at the section has $v_i = 0$ held by friction: its velocity is not a free
 unknown (its column of $M$ is zero, and so is its row when it is stuck again one
@@ -21,14 +21,14 @@ period later), which makes the multiplier 0 that sticking contributes.
 """
 
 from collections.abc import Sequence
-from typing import Any, overload
+from typing import Any
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array, ArrayLike
+from .._results import PAPER
 from ..dynamics._base import AbstractDynamics
 from ..dynamics._exact_dynamics import Exact
 from ..model import _two_mass as model
@@ -39,103 +39,8 @@ from ..model._waveform import AbstractWaveform
 from ..run._batch import mechanism_arg, prepare, unflatten
 from ..run._resolution import guard_two_mass
 from . import _chain_gait as chain_gait, _progress as progress
-from ._chain_gait import ChainGait
+from ._result import Gait as Gait
 from ._select import GaitStatus as GaitStatus
-
-
-class Gait(eqx.Module):
-    """Steady gaits, per configuration (batch shape of the parameters).
-
-    - `status`: [`GaitStatus`][] code; `converged`: `status == CONVERGED`.
-    - `k`: the gait's period in actuation periods (0 when none converged); `period`: $kT$.
-    - `mean_speed`: $\\Delta X / (kT)$ over one gait period (eq. 4), exact for the orbit.
-    - `e_d`, `work`: dissipated energy (eq. 15) and actuator work (eq. 16) per gait
-      period (equal on the orbit: the energy (eq. 10) is periodic).
-    - `cost_of_transport`: $e_d / |\\Delta X|$, energy per unit distance (as `Measurement`'s $e_z/z$;
-      `inf` for a gait that does not move).
-    - `stick_fraction1`, `stick_fraction2`: fraction of the period each mass is stuck;
-      `regime`: [`Regime`][] SSL if either is stuck longer than `STICK_TOL`, else SL.
-    - `n_switch`: switches per gait period.
-    - `u, v1, v2`: the orbit's state at the section $\\omega t \\equiv 0$.
-    - `monodromy`: $M$, shape `batch + (3, 3)`, order $(u, v_1, v_2)$;
-      `multipliers`: its eigenvalues (complex, by decreasing modulus);
-      `stable`: all moduli below 1.
-    - `residual`: $\\|\\Phi_k(y) - y\\|_\\infty$ at the last iterate (NaN where nothing was
-      solved: invalid parameters, a lift-off in the transient); `n_iter`: Newton iterations.
-    - `liftoff`: a normal force reached zero on the orbit or the transient (paper
-      reading: flagged, the orbit is still computed).
-    - `slip_margin`: the smallest $|F_i| - \\mu_s n_i$ (eq. 7) at the instants where a
-      slipping mass's velocity reaches zero on the orbit: $> 0$, every such mass
-      reverses (SL); $< 0$, one sticks (SSL); `inf` if no velocity reaches zero, `-inf`
-      if a mass is stuck all period. It is continuous where a stick interval shrinks to
-      nothing, so that its zero is the SSL/SL boundary.
-    - `min_normal`: the smallest normal force $\\min_t \\min(N_1, N_2)$ (eq. 5) on the
-      orbit (its zero is the onset of lift-off).
-    """
-
-    status: Array
-    converged: Array
-    k: Array
-    period: Array
-    mean_speed: Array
-    e_d: Array
-    work: Array
-    cost_of_transport: Array
-    stick_fraction1: Array
-    stick_fraction2: Array
-    regime: Array
-    n_switch: Array
-    u: Array
-    v1: Array
-    v2: Array
-    monodromy: Array
-    multipliers: Array
-    stable: Array
-    residual: Array
-    n_iter: Array
-    liftoff: Array
-    slip_margin: Array
-    min_normal: Array
-    contact: str = eqx.field(static=True)
-
-    @property
-    def state(self) -> Array:
-        """The section state $(u, v_1, v_2)$ as one array, `batch + (3,)` (as `ChainGait.state`)."""
-        return jnp.stack([self.u, self.v1, self.v2], axis=-1)
-
-
-@overload
-def steady_gait(
-    params: Params,
-    *,
-    periods: int | Sequence[int] = ...,
-    transient: int = ...,
-    tol: float | None = ...,
-    max_iter: int = ...,
-    dynamics: AbstractDynamics | None = ...,
-    waveform: AbstractWaveform | None = ...,
-    contact: str = ...,
-    start: str | ArrayLike = ...,
-    dtype: Any = ...,
-    verbose: bool = ...,
-) -> Gait: ...
-
-
-@overload
-def steady_gait(
-    params: Chain | Mechanism,
-    *,
-    periods: int | Sequence[int] = ...,
-    transient: int = ...,
-    tol: float | None = ...,
-    max_iter: int = ...,
-    dynamics: AbstractDynamics | None = ...,
-    waveform: AbstractWaveform | None = ...,
-    contact: str = ...,
-    start: str | ArrayLike = ...,
-    dtype: Any = ...,
-    verbose: bool = ...,
-) -> ChainGait: ...
 
 
 def steady_gait(
@@ -151,7 +56,7 @@ def steady_gait(
     start: str | ArrayLike = "paper",
     dtype: Any = None,
     verbose: bool = False,
-) -> Gait | ChainGait:
+) -> Gait:
     """Solve the steady gait of each configuration as a periodic orbit (module docstring).
 
     After `transient` actuation periods from the start `start`, Newton's method on the
@@ -162,7 +67,7 @@ def steady_gait(
     **Arguments:**
 
     - `params`: [`Params`][], a [`Chain`][] or a [`Mechanism`][locomotion_jax.Mechanism] (any batch
-      shape; a mechanism's section state: `ChainGait` and the `_chain_gait` module).
+      shape; a mechanism's section state: [`Gait`][] and the `_chain_gait` module).
     - `periods`: gait periods to try, in actuation periods.
     - `transient`: actuation periods integrated before the Newton iteration.
     - `tol`: Newton tolerance on $\\|\\Phi_k(y) - y\\|_\\infty / (1 + \\|y\\|_\\infty)$ (default 1e-11
@@ -176,9 +81,9 @@ def steady_gait(
       a mass given $v_i = 0$ starts stuck where eq. 7 allows). A mechanism's named start is its own
       `x0`, `v0`.
     - Under `contact="hop"` (SPEC §10) the period map runs through lift-offs, flights and landings: a
-      `Params` is solved as `Chain.from_params(params)` and returns a `ChainGait`; a chain's section
+      `Params` is solved as `Chain.from_params(params)` (a gait under the bodies' names); a chain's section
       state is followed by the heights and vertical velocities $(y_1, \\dots, y_N, w_1, \\dots, w_N)$
-      (`ChainGait.state`); a body on the ground at the section has no vertical tangent (a zero
+      (`Gait.state`); a body on the ground at the section has no vertical tangent (a zero
       multiplier), as a plastic landing has none. Starts at rest only.
     - `verbose`: print progress to stderr from the start: a line before the transient and before
       each period's Newton solve (each compiles on its first call), and one when done.
@@ -232,7 +137,7 @@ def _two_mass(params: Params, periods, transient, tol, max_iter, dynamics: Exact
     `compact=True`: the longer gait periods, tried on the few configurations still open, run on a
     smaller batch (`_chain_gait.newton`; for a caller that solves many batches of one size).
     `say` reports each stage (`steady_gait(verbose=True)`). Under `contact="hop"`: the gait of the
-    two-mass chain `Chain.from_params(params, waveform)` (a `ChainGait`, heights in its state)."""
+    two-mass chain `Chain.from_params(params, waveform)` (under the bodies' names, heights in its state)."""
     if contact == "hop":  # flight and landing: the chain's section state carries the heights
         chain = Chain.from_params(params, waveform)
         kw = dict(periods=periods, transient=transient, tol=tol, max_iter=max_iter, start=start, dtype=dtype)
@@ -250,7 +155,7 @@ def _two_mass(params: Params, periods, transient, tol, max_iter, dynamics: Exact
     best = chain_gait.solve(C, chain_gait.paper_physics, jnp.ones((B,), bool), unresolved, shape, omega,
                             periods=periods, transient=transient, tol=tol, max_iter=max_iter, dynamics=dynamics,
                             contact=contact, start=start, y_start=y_start, say=say, compact=compact)  # fmt: skip
-    return unflatten(_gait(best, omega, flat, contact), shape)
+    return unflatten(chain_gait._chain_gait(best, omega, flat.dtype, contact, PAPER), shape)
 
 
 def configs(flat: Params, wave: AbstractWaveform, axes: int | None) -> tuple[Params, AbstractWaveform]:
@@ -271,12 +176,3 @@ def _start_states(start: Any, shape: tuple[int, ...], dtype: Any) -> Array | Non
         raise ValueError(f"start must be 'paper', 'relaxed' or finite section states (u, v1, v2) of shape "
                          f"{shape + (3,)}, got shape {y.shape}.")  # fmt: skip
     return jnp.asarray(y.reshape(-1, 3), dtype)
-
-
-def _gait(r: dict, omega: np.ndarray, flat: Params, contact: str) -> Gait:
-    """The solver's result as a `Gait`: the `ChainGait` of the two-mass chain, under the paper's names."""
-    g = chain_gait._chain_gait(r, omega, flat.dtype, contact)
-    sf = g.stick_fraction
-    paper: dict[str, Any] = dict(u=g.state[:, 0], v1=g.state[:, 1], v2=g.state[:, 2], contact=contact,
-                                 stick_fraction1=sf[:, 0], stick_fraction2=sf[:, 1])  # fmt: skip
-    return Gait(**{k: getattr(g, k) for k in Gait.__dataclass_fields__ if k not in paper}, **paper)
