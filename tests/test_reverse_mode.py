@@ -34,6 +34,14 @@ def _close(got, want, rtol: float) -> None:
     assert np.max(np.abs(got - want)) <= rtol * np.max(np.abs(want)), (got, want)
 
 
+def _reverse_equals_forward(run, x, floor: float) -> None:
+    """jacrev of `run` at `x` equals its jacfwd to 1e-8 (relative to the largest entry, at least `floor`)."""
+    J = np.asarray(jax.jacfwd(run)(x))
+    R = np.asarray(jax.jacrev(run)(x))
+    assert np.all(np.isfinite(J)) and np.max(np.abs(J)) > floor
+    np.testing.assert_allclose(R, J, rtol=1e-8, atol=1e-8 * np.max(np.abs(J)))
+
+
 def _measure_pair(dtype=jnp.float64):
     base = {k: jnp.asarray(v, dtype) for k, v in PAIR.items()}
 
@@ -47,12 +55,7 @@ def _measure_pair(dtype=jnp.float64):
 
 
 def test_measure_jacrev_equals_jacfwd():
-    run = _measure_pair()
-    zero = jnp.zeros(4)
-    J = np.asarray(jax.jacfwd(run)(zero))
-    R = np.asarray(jax.jacrev(run)(zero))
-    assert np.all(np.isfinite(J)) and np.max(np.abs(J)) > 1
-    np.testing.assert_allclose(R, J, rtol=1e-8, atol=1e-8 * np.max(np.abs(J)))
+    _reverse_equals_forward(_measure_pair(), jnp.zeros(4), floor=1.0)
 
 
 def test_measure_grad_matches_reference_differences():
@@ -95,11 +98,7 @@ def test_chain_measure_grad_equals_jacfwd():
         m = lj.measure(c, z=0.5, t_start=10.0, horizon=60.0, start="relaxed")
         return jnp.stack([m.tau_z, m.e_z]).reshape(-1)
 
-    zero = jnp.zeros(2)
-    J = np.asarray(jax.jacfwd(run)(zero))
-    R = np.asarray(jax.jacrev(run)(zero))
-    assert np.all(np.isfinite(J)) and np.max(np.abs(J)) > 0.1
-    np.testing.assert_allclose(R, J, rtol=1e-8, atol=1e-8 * np.max(np.abs(J)))
+    _reverse_equals_forward(run, jnp.zeros(2), floor=0.1)
 
 
 def test_chain_simulate_vjp_equals_jacfwd_and_reference():
@@ -134,10 +133,7 @@ def test_params_simulate_grad_equals_jacfwd():
         traj = lj.simulate(lj.Params(omega=w), t_end=12.0, save_at=SAVE)
         return jnp.concatenate([traj.x1.reshape(-1), traj.x2.reshape(-1)])
 
-    J = np.asarray(jax.jacfwd(run)(2.0))
-    R = np.asarray(jax.jacrev(run)(2.0))
-    assert np.max(np.abs(J)) > 0.01
-    np.testing.assert_allclose(R, J, rtol=1e-8, atol=1e-8 * np.max(np.abs(J)))
+    _reverse_equals_forward(run, 2.0, floor=0.01)
 
 
 def test_reverse_mode_under_vmap_is_refused():

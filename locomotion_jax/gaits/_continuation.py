@@ -29,7 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array
-from .._results import _paper_name, BODIES, PAPER
+from .._results import BODIES, PAPER
 from .._status import Regime, Status
 from ..dynamics._base import AbstractDynamics
 from ..dynamics._exact_dynamics import Exact
@@ -43,7 +43,7 @@ from ..run._resolution import guard_chain, guard_two_mass
 from . import _chain_gait as chain_gait, _corrector as corrector, _progress as progress
 from ._bifurcation import BranchEvents, find_events, kinds
 from ._gait import configs, GaitStatus, steady_gait
-from ._result import _section_name
+from ._result import PaperNames
 
 
 MAX_TURN = 0.5
@@ -78,7 +78,7 @@ class BranchStatus:
     UNRESOLVED = 7
 
 
-class Branch(eqx.Module):
+class Branch(PaperNames):
     """Branches of steady gaits, one per configuration; per point, arrays of shape `batch + (n,)`
     with NaN (or the sentinels below) past each branch's `n_points`.
 
@@ -126,17 +126,6 @@ class Branch(eqx.Module):
     parameter: str = eqx.field(static=True)
     contact: str = eqx.field(static=True)
     names: str = eqx.field(static=True, default=BODIES)
-
-    @property
-    def n_bodies(self) -> int:
-        """The number of bodies $N$ (the length of the trailing body axis)."""
-        return self.stick_fraction.shape[-1]
-
-    u = _section_name("u", 0, "The paper's gap $u$ of each point: `state[..., 0]` (two bodies only).")
-    v1 = _section_name("v1", 1, "The paper's $v_1$ of each point: `state[..., 1]` (two bodies only).")
-    v2 = _section_name("v2", 2, "The paper's $v_2$ of each point: `state[..., 2]` (two bodies only).")
-    stick_fraction1 = _paper_name("stick_fraction1", "stick_fraction", 0, "`stick_fraction[..., 0]` (two bodies only).")
-    stick_fraction2 = _paper_name("stick_fraction2", "stick_fraction", 1, "`stick_fraction[..., 1]` (two bodies only).")
 
 
 class Solver:

@@ -1,4 +1,5 @@
-"""The one result class of a steady-gait solve, [`Gait`][], for every mechanism."""
+"""The one result class of a steady-gait solve, [`Gait`][], for every mechanism, and the paper's names
+it shares with [`Branch`][] (`PaperNames`)."""
 
 from typing import Any
 
@@ -24,7 +25,31 @@ def _section_name(name: str, index: int, doc: str) -> property:
     return property(get, doc=doc)
 
 
-class Gait(eqx.Module):
+class PaperNames(eqx.Module):
+    """The paper's names of the two-mass model on a result with a section `state` and a per-body
+    `stick_fraction` ([`Gait`][], [`Branch`][]): `u`, `v1`, `v2` (the state's columns) and
+    `stick_fraction1`, `stick_fraction2`, refused with a `ValueError` for other than two bodies."""
+
+    state: eqx.AbstractVar[Array]
+    stick_fraction: eqx.AbstractVar[Array]
+
+    @property
+    def n_bodies(self) -> int:
+        """The number of bodies $N$ (the length of the trailing body axis)."""
+        return self.stick_fraction.shape[-1]
+
+    u = _section_name("u", 0, "The paper's gap $u = x_2 - x_1$ at the section: `state[..., 0]` (two bodies only).")
+    v1 = _section_name("v1", 1, "The paper's $v_1$ at the section: `state[..., 1]` (two bodies only).")
+    v2 = _section_name("v2", 2, "The paper's $v_2$ at the section: `state[..., 2]` (two bodies only).")
+    stick_fraction1 = _paper_name(
+        "stick_fraction1", "stick_fraction", 0, "Fraction of the period mass 1 is stuck (two bodies only)."
+    )
+    stick_fraction2 = _paper_name(
+        "stick_fraction2", "stick_fraction", 1, "Fraction of the period mass 2 is stuck (two bodies only)."
+    )
+
+
+class Gait(PaperNames):
     """Steady gaits (periodic orbits) per configuration, of any mechanism ([`steady_gait`][]).
 
     Per-configuration fields have shape `batch`; per-body ones a trailing body axis `batch + (N,)`.
@@ -86,18 +111,3 @@ class Gait(eqx.Module):
     min_normal: Array
     contact: str = eqx.field(static=True)
     names: str = eqx.field(static=True, default=BODIES)
-
-    @property
-    def n_bodies(self) -> int:
-        """The number of bodies $N$ (the length of the trailing body axis)."""
-        return self.stick_fraction.shape[-1]
-
-    u = _section_name("u", 0, "The paper's gap $u = x_2 - x_1$ at the section: `state[..., 0]` (two bodies only).")
-    v1 = _section_name("v1", 1, "The paper's $v_1$ at the section: `state[..., 1]` (two bodies only).")
-    v2 = _section_name("v2", 2, "The paper's $v_2$ at the section: `state[..., 2]` (two bodies only).")
-    stick_fraction1 = _paper_name(
-        "stick_fraction1", "stick_fraction", 0, "Fraction of the period mass 1 is stuck (two bodies only)."
-    )
-    stick_fraction2 = _paper_name(
-        "stick_fraction2", "stick_fraction", 1, "Fraction of the period mass 2 is stuck (two bodies only)."
-    )
