@@ -111,22 +111,30 @@ def _section_state(P: AbstractPhysics, contact: Contact, y: Array) -> engine.Hyb
 def _range(q: tuple, h: Array, t0: Array, t1: Array) -> tuple[Array, Array]:
     """Smallest and largest value over a committed step `[t0, t1]` of a quantity given by its value
     and first two time derivatives at the step's start and at the full step's end (`q`, length `h`),
-    on their quintic Hermite interpolant (an interior extremum polished by Newton's method)."""
+    on their quintic Hermite interpolant (an interior extremum polished by Newton's method).
+
+    An interior extremum is differentiated at its location held fixed: $p'(\\theta^*) = 0$ there,
+    so its value's derivative is $\\partial p/\\partial c$ alone (the envelope theorem), as the
+    event roots are differentiated by the implicit function theorem rather than through their
+    iterations. Tangents carried through the polish would add nothing at convergence, and XLA's
+    CPU fusion recomputes them so often that the corrector ran 260 times slower
+    (benchmarks/NOTES.md)."""
     g0, d0, e0, g1, d1, e1 = q
     c = num.quintic(g0, h * d0, h * h * e0, g1, h * d1, h * h * e1)
     end = jnp.clip((t1 - t0) / jnp.where(h > 0, h, 1), 0, 1)
-    p = lambda th: c[0] + th * (c[1] + th * (c[2] + th * (c[3] + th * (c[4] + th * c[5]))))
-    dp = lambda th: c[1] + th * (2 * c[2] + th * (3 * c[3] + th * (4 * c[4] + th * 5 * c[5])))
-    ddp = lambda th: 2 * c[2] + th * (6 * c[3] + th * (12 * c[4] + th * 20 * c[5]))
-    pe = p(end)
+    p = lambda th, c: c[0] + th * (c[1] + th * (c[2] + th * (c[3] + th * (c[4] + th * c[5]))))
+    dp = lambda th, c: c[1] + th * (2 * c[2] + th * (3 * c[3] + th * (4 * c[4] + th * 5 * c[5])))
+    ddp = lambda th, c: 2 * c[2] + th * (6 * c[3] + th * (12 * c[4] + th * 20 * c[5]))
+    pe = p(end, c)
     lo, hi = jnp.minimum(g0, pe), jnp.maximum(g0, pe)
-    dp0, dpe = c[1], dp(end)
+    cs, ends = jax.lax.stop_gradient((c, end))
+    dp0, dpe = cs[1], dp(ends, cs)
     inside = dp0 * dpe < 0
-    th = end * dp0 / jnp.where(inside, dp0 - dpe, 1)
+    th = ends * dp0 / jnp.where(inside, dp0 - dpe, 1)
     for _ in range(3):
-        curv = ddp(th)
-        th = jnp.clip(th - dp(th) / jnp.where(curv != 0, curv, 1), 0, end)
-    pm = p(th)
+        curv = ddp(th, cs)
+        th = jnp.clip(th - dp(th, cs) / jnp.where(curv != 0, curv, 1), 0, ends)
+    pm = p(th, c)
     return jnp.where(inside, jnp.minimum(lo, pm), lo), jnp.where(inside, jnp.maximum(hi, pm), hi)
 
 
