@@ -117,7 +117,7 @@ def _range(q: tuple, h: Array, t0: Array, t1: Array) -> tuple[Array, Array]:
     so its value's derivative is $\\partial p/\\partial c$ alone (the envelope theorem), as the
     event roots are differentiated by the implicit function theorem rather than through their
     iterations. Tangents carried through the polish would add nothing at convergence, and XLA's
-    CPU fusion recomputes them so often that the corrector ran 260 times slower
+    CPU fusion recomputes them so often that they make the corrector hundreds of times slower
     (benchmarks/NOTES.md)."""
     g0, d0, e0, g1, d1, e1 = q
     c = num.quintic(g0, h * d0, h * h * e0, g1, h * d1, h * h * e1)
