@@ -1,8 +1,8 @@
 """The array layout of a chain (`Chain(..., layout="array")`, `model._chain_array`) against the unrolled
 one (the same engine on one scalar per mass), against the independent chain reference
 (`tests/reference_chain.py`, an event-driven scipy solver sharing no code with the package), and
-its error paths: a bad configuration in a batch, forward-mode derivatives through the events, what
-the array layout refuses, and what `layout="auto"` picks."""
+its error paths: a bad configuration in a batch, forward-mode derivatives through the events, steady
+gaits, what the array layout refuses, and what `layout="auto"` picks."""
 
 from typing import Any
 
@@ -12,7 +12,9 @@ import locomotion_jax as lj
 import numpy as np
 import pytest
 from chain_cases import ANISO
-from locomotion_jax.model._chain_array import ARRAY_FROM, ArrayChainPhysics, engine_physics
+from locomotion_jax.gaits import _chain_gait as cg
+from locomotion_jax.gaits._chain_orbit import gait_physics
+from locomotion_jax.model._chain_array import ARRAY_FROM, ArrayChainPhysics, engine_physics, GAIT_ARRAY_FROM
 from locomotion_jax.model._chain_physics import ChainPhysics
 from reference_chain import chain_config, reference_chain_simulate
 
@@ -170,6 +172,38 @@ def test_array_layout_jacfwd_through_events():
     fd = np.stack([np.asarray(q) for q in fd], -1)
     assert np.all(np.isfinite(np.asarray(jac)))
     np.testing.assert_allclose(np.asarray(jac), fd, rtol=1e-4, atol=1e-6 * np.abs(fd).max())
+
+
+GAIT_KEYS = ("state", "monodromy", "mean_speed", "cost_of_transport", "e_d", "work", "stick_fraction", "min_normal",
+             "slip_margin", "period")  # fmt: skip
+
+
+def test_array_layout_steady_gait_equals_unrolled():
+    """`steady_gait`: the fixed point, its monodromy (forward mode through the events), speed, cost of
+    transport, e_d, w, stick fractions, smallest normal force and slip margin of both layouts agree to
+    1e-9 relative (the monodromy's entries near zero: to 1e-9 of its largest), with the same gait
+    period, status and Newton iterations."""
+    got = lj.steady_gait(_worm(3, "array"), periods=(1, 2))
+    ref = lj.steady_gait(_worm(3, "unrolled"), periods=(1, 2))
+    assert np.all(np.asarray(ref.converged)) and np.all(np.asarray(ref.stick_fraction) > 0.01)
+    for key in ("status", "k", "n_iter", "regime", "n_switch", "stable", "liftoff"):
+        np.testing.assert_array_equal(np.asarray(getattr(got, key)), np.asarray(getattr(ref, key)), err_msg=key)
+    for key in GAIT_KEYS:
+        a, b = np.asarray(getattr(ref, key)), np.asarray(getattr(got, key))
+        np.testing.assert_allclose(b, a, rtol=1e-9, atol=1e-9 * np.abs(a).max(), err_msg=key)
+
+
+def test_gait_layout_choice():
+    """Steady gaits (and continuation and the optimiser's oracle) take the array layout from
+    `GAIT_ARRAY_FROM` masses on under `"auto"`; hopping, splines and `"unrolled"` stay unrolled."""
+    arr, unr = cg.array_mechanism_physics, cg.mechanism_physics
+    assert cg.physics_for(_worm(GAIT_ARRAY_FROM, "auto"), "strict") is arr
+    assert cg.physics_for(_worm(GAIT_ARRAY_FROM - 1, "auto"), "paper") is unr
+    assert cg.physics_for(_worm(GAIT_ARRAY_FROM, "auto"), "hop") is unr
+    assert cg.physics_for(_worm(GAIT_ARRAY_FROM, "unrolled"), "strict") is unr
+    assert cg.physics_for(_worm(2, "array"), "strict") is arr
+    assert isinstance(gait_physics(_worm(GAIT_ARRAY_FROM, "auto"), "paper"), ArrayChainPhysics)
+    assert isinstance(gait_physics(_worm(GAIT_ARRAY_FROM, "auto"), "hop"), ChainPhysics)
 
 
 def test_layout_choice_and_refusals():

@@ -39,6 +39,7 @@ from ..dynamics._exact_dynamics import Exact
 from ..dynamics._runs import chain_initial_state, default_max_steps, STICK_TOL
 from ..model._bodies import Mechanism
 from ..model._chain import Chain
+from ..model._chain_array import array_physics, GAIT_ARRAY_FROM, uses_array
 from ..model._elements import WALL
 from ..model._mechanism_physics import MechanismPhysics
 from ..model._physics import AbstractPhysics
@@ -79,11 +80,17 @@ def reduced_size(P: AbstractPhysics) -> int:
 def _reduced(st: engine.Hybrid, P: AbstractPhysics | None = None) -> Array:
     """The section state of a hybrid state; under `contact="hop"` followed by the heights and
     vertical velocities $(y_1, \\dots, y_N, w_1, \\dots, w_N)$."""
-    x, v = st.y.x, st.y.v
-    vert = [] if st.y.y is None or st.y.vy is None else list(st.y.y) + list(st.y.vy)
+    x, v = _flat(st.y.x), _flat(st.y.v)
+    vert = [] if st.y.y is None or st.y.vy is None else [_flat(st.y.y), _flat(st.y.vy)]
     if P is not None and anchored(P):
-        return jnp.stack(list(x) + list(v) + vert)
-    return jnp.stack([b - a for a, b in zip(x[:-1], x[1:])] + list(v) + vert)
+        return jnp.concatenate([x, v] + vert)
+    return jnp.concatenate([x[1:] - x[:-1], v] + vert)
+
+
+def _flat(entries: tuple) -> Array:
+    """Per-body entries as one vector over the bodies (an entry is one body's scalar, or every
+    body's vector in the array layout, `model._chain_array`)."""
+    return jnp.concatenate([jnp.atleast_1d(q) for q in entries])
 
 
 def _positions(P: AbstractPhysics, y: Array) -> Array:
@@ -166,12 +173,8 @@ def _advance(P, contact, dt, st, t_end, max_steps):
         span = jnp.where(info.commit, info.t1 - info.t0, 0)
         # eq. (7) generalised: a slipping mass whose velocity reached zero sticks where its stick
         # margin is >= 0; the slip margin is its negative ($|F_i| - \\mu_s n_i$ for Coulomb friction).
-        margin = a.margin
-        for zero, hold in zip(info.vel, info.hold):
-            margin = jnp.minimum(margin, jnp.where(info.commit & zero, -hold, inf))
-        low = inf
-        for q in zip(*info.normal):
-            low = jnp.minimum(low, _range(q, info.h, info.t0, info.t1)[0])
+        margin = num.least([a.margin] + [jnp.where(info.commit & z, -q, inf) for z, q in zip(info.vel, info.hold)])
+        low = num.least([inf] + [_range(q, info.h, info.t0, info.t1)[0] for q in zip(*info.normal)])
         a = _Acc(
             stuck=tuple(q + jnp.where(b, span, 0) for q, b in zip(a.stuck, info.stuck)),
             margin=margin,
@@ -203,15 +206,13 @@ def period_map(P, contact, dt, max_steps, k, y) -> _Period:
         status = jnp.where(a.n_min < 0, Status.LIFTOFF, status)
     if contact != "hop":
         lifted = lifted | (a.n_min < 0)
-    slid = a.slid[0]
-    for q in a.slid[1:]:
-        slid = slid & q
+    slid = jnp.all(_flat(a.slid))
     return _Period(
         y=_reduced(st, P),
         dX=P.centre_of_mass(st.y.x) - P.centre_of_mass(st0.y.x),
         ed=st.y.ed,
         w=st.y.w,
-        stuck=jnp.stack(a.stuck),
+        stuck=_flat(a.stuck),
         n_switch=st.n_switch,
         status=status.astype(jnp.int32),
         lifted=lifted,
@@ -225,6 +226,19 @@ def mechanism_physics(c) -> tuple[AbstractPhysics, Array]:
     """`(physics, valid)` of one configuration of a mechanism of the N-body path (a [`Chain`][], a
     [`Mechanism`][locomotion_jax.Mechanism])."""
     return c.physics(), c.is_valid()
+
+
+def array_mechanism_physics(c) -> tuple[AbstractPhysics, Array]:
+    """[`mechanism_physics`][] in the array layout (`model._chain_array`): a chain's masses as
+    one entry over the bodies, so that the corrector's program does not grow with N."""
+    return array_physics(c), c.is_valid()
+
+
+def physics_for(mechanism: Chain | Mechanism, contact: str):
+    """The `physics_of` of a mechanism's gaits: in the array layout for a chain's `layout="array"`,
+    or `"auto"` from `GAIT_ARRAY_FROM` masses on (`model._chain_array.uses_array`), else one entry
+    per body."""
+    return array_mechanism_physics if uses_array(mechanism, contact, GAIT_ARRAY_FROM) else mechanism_physics
 
 
 def paper_physics(c) -> tuple[AbstractPhysics, Array]:
@@ -334,9 +348,9 @@ def steady_gait_chain(
             )
         y_start = jnp.asarray(y.reshape(-1, n_red), flat.m.dtype)
         start = "paper"
-    best = solve(flat, mechanism_physics, valid, unresolved, shape, np.asarray(flat.omega, np.float64), periods=periods,
-                 transient=transient, tol=tol, max_iter=max_iter, dynamics=dynamics, contact=contact, start=start,
-                 y_start=y_start, say=say)  # fmt: skip
+    best = solve(flat, physics_for(flat, contact), valid, unresolved, shape, np.asarray(flat.omega, np.float64),
+                 periods=periods, transient=transient, tol=tol, max_iter=max_iter, dynamics=dynamics, contact=contact,
+                 start=start, y_start=y_start, say=say)  # fmt: skip
     return unflatten(_chain_gait(best, best["omega"], flat.m.dtype, contact), shape)
 
 

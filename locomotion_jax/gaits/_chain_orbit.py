@@ -30,7 +30,7 @@ fixed) instead of Fourier coefficients.
 """
 
 from collections import Counter
-from typing import cast, ClassVar
+from typing import ClassVar
 
 import equinox as eqx
 import jax
@@ -39,6 +39,7 @@ import jax.numpy as jnp
 from .._custom_types import Array, Contact
 from ..model._bodies import Mechanism
 from ..model._chain import Chain
+from ..model._chain_array import engine_physics, GAIT_ARRAY_FROM
 from ..model._elements import Spring
 from ..model._physics import AbstractPhysics
 from ..model._springwaves import SpringFourier
@@ -122,7 +123,13 @@ def period(
     figures the optimiser needs (`max_steps` per actuation period): `_orbit.period` of its physics.
     `loop`: the time loop, `lax.while_loop`'s signature (`gaits._adjoint` passes one that reverse
     mode traverses)."""
-    return orbit.period(cast(AbstractPhysics, C.physics()), contact, dt, max_steps, y, k, loop)
+    return orbit.period(gait_physics(C, contact), contact, dt, max_steps, y, k, loop)
+
+
+def gait_physics(C: Chain | Mechanism, contact: Contact) -> AbstractPhysics:
+    """The physics a gait integrates `C` with: a chain's in the array layout from
+    `GAIT_ARRAY_FROM` masses on (`model._chain_array`, as `steady_gait`), else its own."""
+    return engine_physics(C, contact, GAIT_ARRAY_FROM)
 
 
 class ChainActuation(orbit.AbstractActuation):
@@ -131,10 +138,11 @@ class ChainActuation(orbit.AbstractActuation):
 
     harmonics: int
     knots: int = 0
+    contact: Contact = "strict"  # the layout depends on it (`gait_physics`)
     traces: ClassVar[Counter] = TRACES
 
     def physics(self, model: Chain | Mechanism, theta: Array, a_max: Array) -> AbstractPhysics:
-        return cast(AbstractPhysics, with_waves(model, theta, a_max, self.harmonics, self.knots).physics())
+        return gait_physics(with_waves(model, theta, a_max, self.harmonics, self.knots), self.contact)
 
     def rest(self, model: Chain | Mechanism, P: AbstractPhysics) -> Array:
         return P.initial_positions("relaxed")
@@ -143,14 +151,17 @@ class ChainActuation(orbit.AbstractActuation):
 def evaluate(C, a_max, theta, y0, k, harmonics, knots, contact, dt, max_steps, tol, max_iter) -> Orbit:
     """Orbits and sensitivities of a batch of decision vectors (`_orbit.evaluate`, compiled once
     per chain structure, batch size and static choice)."""
-    return orbit.evaluate(C, a_max, theta, y0, k, ChainActuation(harmonics, knots), contact, dt, max_steps, tol,
-                          max_iter, monodromy_only=False, gradient=True)  # fmt: skip
+    act = ChainActuation(harmonics, knots, contact)
+    return orbit.evaluate(C, a_max, theta, y0, k, act, contact, dt, max_steps, tol, max_iter, monodromy_only=False,
+                          gradient=True)  # fmt: skip
 
 
 def relax(C, a_max, theta, y0, fresh, periods, harmonics, knots, contact, dt, max_steps) -> Array:
     """`periods` actuation periods from the section states `y0`, or from the relaxed springs at
     rest where `fresh` (`_orbit.relax`): the reduced states at the end."""
-    return orbit.relax(C, a_max, theta, y0, fresh, periods, ChainActuation(harmonics, knots), contact, dt, max_steps)
+    return orbit.relax(
+        C, a_max, theta, y0, fresh, periods, ChainActuation(harmonics, knots, contact), contact, dt, max_steps
+    )
 
 
 class ChainOracle(eqx.Module):

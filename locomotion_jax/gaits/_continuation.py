@@ -203,7 +203,7 @@ def _paper_setup(params: Params, parameter, stops_of, dynamics, waveform, dtype)
                   spec.name == "omega" and spec.harmonic < 0, True)  # fmt: skip
 
 
-def _mechanism_setup(mech, parameter, stops_of, dynamics, waveform, dtype) -> _Setup:
+def _mechanism_setup(mech, parameter, stops_of, dynamics, waveform, dtype, contact) -> _Setup:
     if waveform is not None:
         raise ValueError(f"waveform= applies to Params; a {type(mech).__name__} carries its own waveforms.")
     flat, valid, shape = prepare_chain(mech, dtype)
@@ -215,7 +215,8 @@ def _mechanism_setup(mech, parameter, stops_of, dynamics, waveform, dtype) -> _S
     omega = np.broadcast_to(np.asarray(flat.omega, np.float64), (B,))
     sets_omega = any(bool(np.any(np.asarray(m))) and corrector._leaf_names(p).endswith(".omega")
                      for p, m in jax.tree_util.tree_flatten_with_path(sel)[0])  # fmt: skip
-    return _Setup(flat, chain_gait.mechanism_physics, sel, shape, parameter, _mask(far, B), omega, sets_omega, False)
+    physics_of = chain_gait.physics_for(flat, contact)
+    return _Setup(flat, physics_of, sel, shape, parameter, _mask(far, B), omega, sets_omega, False)
 
 
 def _mask(far, B: int) -> np.ndarray:
@@ -299,7 +300,7 @@ def continuation(
 
     args = (parameter, stops_of, dynamics, waveform, dtype)
     setup: _Setup = mechanism_arg(params).dispatch(two_mass=lambda p: _paper_setup(p, *args),
-                                                   chain=lambda c: _mechanism_setup(c, *args))  # fmt: skip
+                                                   chain=lambda c: _mechanism_setup(c, *args, contact))  # fmt: skip
     C, shape = setup.C, setup.shape
     B = math.prod(shape)
     lam0 = corrector.value(C, setup.sel, parameter)

@@ -64,11 +64,13 @@ class Chain(AbstractMechanism):
       list of them (one per spring, a common base frequency). Default: no actuation.
     - `friction`: an [`AbstractFriction`][] with per-mass coefficients; default `Coulomb(0.7, 0.5)`.
     - `actuator`: [`RestLength`][] (default) or [`InternalForce`][].
-    - `layout`: how `measure` and `simulate` lay the masses out in the engine: `"unrolled"` (one
-      scalar per mass: fastest for a few masses, but compile time and cost per mass grow with N),
-      `"array"` (one array over the masses: compile time independent of N; Sinusoid, Fourier and
-      travelling-wave actuation, `contact="strict"` or `"paper"`), or `"auto"` (default): the array
-      layout from `ARRAY_FROM` (16) masses on where it applies (docs/performance.md, "Long chains").
+    - `layout`: how the exact engine lays the masses out: `"unrolled"` (one scalar per mass:
+      fastest for a few masses, but compile time and cost per mass grow with N), `"array"` (one
+      array over the masses: compile time independent of N; Sinusoid, Fourier and travelling-wave
+      actuation, `contact="strict"` or `"paper"`), or `"auto"` (default): where it applies, the
+      array layout from `ARRAY_FROM` (16) masses on for `measure` and `simulate`, and from
+      `GAIT_ARRAY_FROM` (3) on for steady gaits, continuation and the optimiser
+      (docs/performance.md, "Long chains").
     - `check`: validate concrete values (default); invalid values raise `ValueError` naming the
       parameter, the mass or spring index and the valid range. With `check=False` an invalid
       configuration is flagged `Status.INVALID` in its own result instead.
@@ -94,7 +96,7 @@ class Chain(AbstractMechanism):
     # Each spring's waveform where one is neither a Sinusoid nor a Fourier (a Spline): it drives
     # the spring itself and `waves` keeps only the base frequency; `None`: `waves` holds the actuation.
     signals: tuple[AbstractWaveform, ...] | None = None
-    # How `measure` and `simulate` lay the masses out in the engine (`_chain_array.engine_physics`).
+    # How the exact engine lays the masses out (`_chain_array.engine_physics`).
     layout: str = eqx.field(static=True, default="auto")
 
     def __init__(

@@ -33,6 +33,13 @@ ARRAY_FROM = 16
 """`layout="auto"` runs a chain of this many masses or more in the array layout, fewer unrolled
 (the crossover of `benchmarks/chain_scaling.py`, benchmarks/NOTES.md "Chains in the array layout")."""
 
+GAIT_ARRAY_FROM = 3
+"""`layout="auto"` finds the steady gaits of a chain of this many masses or more in the array
+layout. Their period maps run under forward-mode differentiation, whose unrolled program grows
+much faster with N than `measure`'s (a 4-mass worm's first `steady_gait`: 313 s and 9.7 GB
+unrolled, 32 s and 1.7 GB in the array layout; benchmarks/NOTES.md "Steady gaits in the array
+layout")."""
+
 LAYOUTS = ("auto", "unrolled", "array")
 
 
@@ -246,24 +253,26 @@ def array_physics(C: Any) -> ArrayChainPhysics:
     )  # fmt: skip
 
 
-def uses_array(mechanism: Any, contact: str | None = None) -> bool:
+def uses_array(mechanism: Any, contact: str | None = None, start: int = ARRAY_FROM) -> bool:
     """Whether `measure` and `simulate` run a mechanism in the array layout: a
     [`Chain`][locomotion_jax.Chain] with `layout="array"` (refused with a clear error where
-    [`array_unsupported`][] finds a reason), or `"auto"` from [`ARRAY_FROM`][] masses on where it
-    finds none; any other mechanism, or `layout="unrolled"`: no."""
+    [`array_unsupported`][] finds a reason), or `"auto"` from `start` masses on where it
+    finds none; any other mechanism, or `layout="unrolled"`: no. Steady gaits pass
+    `start=`[`GAIT_ARRAY_FROM`][]."""
     layout = getattr(mechanism, "layout", "unrolled")
     if layout == "unrolled":
         return False
     why = array_unsupported(mechanism, contact)
     if layout == "array" and why is not None:
         raise ValueError(f"A chain in layout='array': {why}; use layout='unrolled' or 'auto'.")
-    return layout == "array" or (why is None and mechanism.n_masses >= ARRAY_FROM)
+    return layout == "array" or (why is None and mechanism.n_masses >= start)
 
 
-def engine_physics(mechanism: Any, contact: str | None = None) -> AbstractPhysics:
-    """The physics that `measure` and `simulate` integrate a mechanism with ([`uses_array`][]):
-    a chain's in the array layout, else the mechanism's own `physics()`."""
-    return array_physics(mechanism) if uses_array(mechanism, contact) else mechanism.physics()
+def engine_physics(mechanism: Any, contact: str | None = None, start: int = ARRAY_FROM) -> AbstractPhysics:
+    """The physics that `measure` and `simulate` (and, with `start=GAIT_ARRAY_FROM`, steady gaits)
+    integrate a mechanism with ([`uses_array`][]): a chain's in the array layout, else the
+    mechanism's own `physics()`."""
+    return array_physics(mechanism) if uses_array(mechanism, contact, start) else mechanism.physics()
 
 
 def lane_width(physics: AbstractPhysics) -> int:
