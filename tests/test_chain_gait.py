@@ -86,6 +86,27 @@ def test_chain_monodromy_against_finite_differences(worms):
     assert np.all(np.asarray(g.state[i])[2:] != 0)  # no mass at rest at the section
 
 
+@pytest.mark.parametrize("layout", ["array", "unrolled"])
+def test_monodromy_through_coincident_events(layout):
+    """A symmetric worm (equal masses, springs in antiphase) whose end masses break away and stop at
+    the same instants: each switch is differentiated at its own time (`_chain_exact._retimed`), so
+    the monodromy equals central differences of the period map to 1e-5, as where the events are
+    apart; a mass at rest at the section has a zero column in both."""
+    fr = lj.AnisotropicCoulomb(0.5, 0.9, 0.3, 0.7)
+    chain = lj.Chain(masses=[1.0] * 3, d=0.0, waveforms=lj.TravellingWave(0.05, 3.5, P), friction=fr, layout=layout)
+    g = lj.steady_gait(chain, periods=(1,), start="relaxed")
+    y = jnp.asarray(g.state)
+    assert bool(g.converged) and float(y[2]) == 0.0 and float(y[4]) == 0.0  # the end masses stuck at phase 0
+    assert abs(float(y[0] + y[1]) - 6.0) < 1e-9  # x_3 - x_1 = 2 lbar: the end masses move (and switch) together
+    Pc = cg.physics_for(chain, "strict")(chain)[0]
+    phi = jax.jit(lambda y: cg.period_map(Pc, "strict", 0.01, 100_000, 1.0, y).y)
+    h = 1e-6
+    M_fd = np.stack([np.asarray((phi(y + h * e) - phi(y - h * e)) / (2 * h)) for e in jnp.eye(5, dtype=y.dtype)], 1)
+    M = np.asarray(g.monodromy)
+    assert np.max(np.abs(M)) > 0.1
+    np.testing.assert_allclose(M, M_fd, atol=1e-5 * np.max(np.abs(M)))
+
+
 def test_two_mass_chain_gait_equals_the_two_mass_solver():
     """`Chain.from_params` (the paper's model as N = 2) on the N-mass solver equals the two-mass
     `steady_gait`: a stick-slip and a pure-slip gait."""

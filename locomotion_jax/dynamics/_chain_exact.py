@@ -228,6 +228,41 @@ def _impact(P: AbstractPhysics, restitution: Scalars, zeno: Array, st: Hybrid, N
     return y, tuple(fly), tuple(rest), motion._sum(count), num.union(zeno_rule)
 
 
+@jax.custom_jvp
+def _shifted(v: Array, tau: Array, jump: Array) -> Array:
+    """`v` itself; its tangent gains `jump` times the tangent of `tau` (a switch time's offset)."""
+    return v
+
+
+@_shifted.defjvp
+def _shifted_jvp(primals, tangents):
+    v, _, jump = primals
+    dv, dtau, _ = tangents
+    return v, dv + jump * dtau
+
+
+def _retimed(P: AbstractPhysics, contact: Contact, old: Mode, new: Mode, fire: Scalars, dr, L: Loads, yA: State,
+             y0: State) -> State:  # fmt: skip
+    """The state after the switches `fire`, with the tangent of each switch at its own time.
+
+    A step commits at the time located for one event; another that ties it, or whose function is
+    already negative at the next start, switches at that time too, whose tangent is not its own.
+    Body $j$'s own switch time is $t + \\tau_j$, $\\tau_j = -g_j/\\dot g_j$ (its event function and
+    rate in the old mode: zero up to rounding in value, the true offset in its tangent), and until
+    then it moves in the old mode: its velocity's tangent gains $(a_j^{old} - a_j^{new})\\,\\delta\\tau_j$
+    (the saltation of the switch). Positions, $e_d$ and $w$ have no jump in rate ($v_j = 0$ at a
+    switch), and a body that sticks keeps $v_j = 0$ whatever the time. For the located event
+    $\\delta\\tau_j$ is about 0 (its time is already the root's). Only tangents change
+    ([`_shifted`][]): the primal program does not use `tau`, and XLA removes it."""
+    Do = motion.derivatives(P, contact, old, None, dr, L, yA.x, yA.v)
+    a_new = motion.rates(P, contact, new, dr, y0).v
+    v = []
+    for f, s, g, d, a0, a1, q in zip(fire, new.stuck, Do.g, Do.dg, Do.rate.v, a_new, y0.v):
+        tau = jnp.where(f & (d != 0), -g / jnp.where(d != 0, d, 1), 0)
+        v.append(_shifted(q, tau, jnp.where(s, 0, a0 - a1)))
+    return y0._replace(v=tuple(v))
+
+
 def probe(P: AbstractPhysics, contact: Contact, t: Array, y: State, target: num.Target) -> tuple[list, list, list]:
     """The event functions with their first and second time derivatives at time `t` and
     state `y`, in the mode the state implies (a mass at rest sticks where its static limits
@@ -311,6 +346,8 @@ def step(
     stuck = tuple(jnp.where(f, ve & ho, s) for f, ve, ho, s in zip(fire, vel, holds, st_stuck))
     sdir = tuple(jnp.where(fi, jnp.where(f >= 0, 1.0, -1.0).astype(dtype), s) for fi, f, s in zip(fire, F0, st_sdir))
     y0 = yA._replace(v=tuple(jnp.where(ve, zero, v) for ve, v in zip(vel, yA.v)))
+    if contact != "hop":
+        y0 = _retimed(P, contact, Mode(st_stuck, st_sdir, st.side), Mode(stuck, sdir, st.side), fire, dr0, L0, yA, y0)
     comp = st.comp
     if comp is not None:  # a switch sets velocities exactly (to 0): drop their compensation
         comp = comp._replace(v=tuple(jnp.where(ve, zero, v) for ve, v in zip(vel, comp.v)))
