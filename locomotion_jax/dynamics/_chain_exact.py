@@ -22,6 +22,12 @@ number of bodies may switch at one instant. A friction law's rate is its own
 [`kinetic_rate`][locomotion_jax.AbstractFriction.kinetic_rate] (by default a forward-mode
 derivative of `kinetic`), so a new law or actuator supplies values only.
 
+**Derivatives.** Forward and reverse mode go through the steps. A located crossing enters with its
+implicit-function time (`_numerics.root`); a switch made at another event's time (one that ties
+the located crossing, or fires at a step's start without one) gets its own time's tangent and
+the saltation it implies (`_retimed`), so several bodies may switch at one instant in the
+derivatives as well.
+
 **Events** (each fires when its function goes from $\\ge 0$ to $< 0$), in this order:
 
 - mass $i$ slipping in direction $\\sigma_i$: $\\sigma_i v_i$;
