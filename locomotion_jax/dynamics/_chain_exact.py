@@ -25,8 +25,8 @@ derivative of `kinetic`), so a new law or actuator supplies values only.
 **Derivatives.** Forward and reverse mode go through the steps. A located crossing enters with its
 implicit-function time (`_numerics.root`); a switch made at another event's time (one that ties
 the located crossing, or fires at a step's start without one) gets its own time's tangent and
-the saltation it implies (`_retimed`), so several bodies may switch at one instant in the
-derivatives as well.
+the saltation it implies (`_retimed`; not under `contact="hop"`, whose landings and lift-offs
+keep the located time), so several bodies may switch at one instant in the derivatives as well.
 
 **Events** (each fires when its function goes from $\\ge 0$ to $< 0$), in this order:
 

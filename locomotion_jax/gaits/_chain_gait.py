@@ -23,7 +23,7 @@ to body 0 (of any sign: a carried mass passes its carrier). A mechanism with a s
 $(x_1, \\dots, x_N, v_1, \\dots, v_N)$, and its centre of mass returns to where it was over a period.
 """
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
 
 import jax
@@ -234,7 +234,7 @@ def array_mechanism_physics(c) -> tuple[AbstractPhysics, Array]:
     return array_physics(c), c.is_valid()
 
 
-def physics_for(mechanism: Chain | Mechanism, contact: str):
+def physics_for(mechanism: Chain | Mechanism, contact: str) -> Callable[[Any], tuple[AbstractPhysics, Array]]:
     """The `physics_of` of a mechanism's gaits: in the array layout for a chain's `layout="array"`,
     or `"auto"` from `GAIT_ARRAY_FROM` masses on (`model._chain_array.uses_array`), else one entry
     per body."""
