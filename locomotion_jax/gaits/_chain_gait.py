@@ -273,9 +273,11 @@ COMPACT = 4
 that many configurations still open) runs on a batch of that size."""
 
 
-def newton(C, physics_of, contact, dt, y0, go, k, tol, max_iter, max_steps, compact: bool = False) -> dict:
+def newton(C, physics_of, contact, dt, y0, go, k, tol, max_iter, max_steps, compact: bool = False,
+           patience: int | None = None) -> dict:  # fmt: skip
     """Newton's method on $\\Phi_k(y) = y$ from `y0` where `go`: the continuation's corrector
-    ([`_corrector`][]) with the parameter held (no parameter selected, arclength scale 0).
+    ([`_corrector`][]) with the parameter held (no parameter selected, arclength scale 0),
+    a configuration stopped after `patience` iterations without progress (`None`: `max_iter`).
 
     The batch runs in lockstep (every row costs what the slowest one does), so with `compact`
     the rows to solve, when fewer than `B // COMPACT`, are gathered into a batch of
@@ -290,7 +292,7 @@ def newton(C, physics_of, contact, dt, y0, go, k, tol, max_iter, max_steps, comp
         m = go_rows.size
         rows = np.concatenate([go_rows, np.full(part - m, go_rows[0])])
         sub = newton(jax.tree_util.tree_map(lambda x: x[rows], C), physics_of, contact, dt, jnp.asarray(y0)[rows],
-                     jnp.asarray(np.arange(part) < m), k, tol, max_iter, max_steps)  # fmt: skip
+                     jnp.asarray(np.arange(part) < m), k, tol, max_iter, max_steps, patience=patience)  # fmt: skip
         back = np.full(B, part - 1)  # a padding row: not solved (`done` False)
         back[go_rows] = np.arange(m)
         return jax.tree_util.tree_map(lambda x: x[back] if np.ndim(x) else x, sub)
@@ -301,7 +303,8 @@ def newton(C, physics_of, contact, dt, y0, go, k, tol, max_iter, max_steps, comp
     sel = corrector.no_selection(C)
     r = corrector.correct_batch(C, physics_of, sel, contact, dt, jnp.full((B,), k, dtype), zero, zero, z0, z0, c,
                                 jnp.asarray(go), jnp.asarray(tol, dtype), jnp.asarray(max_iter, jnp.int32),
-                                jnp.asarray(max_steps, jnp.int32))  # fmt: skip
+                                jnp.asarray(max_steps, jnp.int32),
+                                jnp.asarray(max_iter if patience is None else patience, jnp.int32))  # fmt: skip
     r = jax.tree_util.tree_map(np.asarray, r)
     y = r.z[:, :n]
     return dict(y=y, M=r.J[:, :n, :n], out=r.out, it=r.it, done=r.done, residual=np.max(np.abs(r.out.y - y), axis=1))
@@ -319,6 +322,8 @@ def steady_gait_chain(
     start: str | ArrayLike = "paper",
     dtype: Any = None,
     say=lambda message: None,
+    patience: int | None = None,
+    compact: bool = False,
 ) -> Gait:
     """[`steady_gait`][] for a [`Chain`][] or a [`Mechanism`][locomotion_jax.Mechanism] (its
     arguments; `start` names a start at rest (a mechanism: its own `x0`, `v0`), or gives section
@@ -350,17 +355,18 @@ def steady_gait_chain(
         start = "paper"
     best = solve(flat, physics_for(flat, contact), valid, unresolved, shape, np.asarray(flat.omega, np.float64),
                  periods=periods, transient=transient, tol=tol, max_iter=max_iter, dynamics=dynamics, contact=contact,
-                 start=start, y_start=y_start, say=say)  # fmt: skip
+                 start=start, y_start=y_start, say=say, compact=compact, patience=patience)  # fmt: skip
     return unflatten(_chain_gait(best, best["omega"], flat.m.dtype, contact), shape)
 
 
 def solve(C, physics_of, valid, unresolved, shape, omega, *, periods, transient, tol, max_iter, dynamics: Exact,
-          contact, start, y_start=None, say=lambda message: None, compact: bool = False) -> dict:  # fmt: skip
+          contact, start, y_start=None, say=lambda message: None, compact: bool = False,
+          patience: int | None = None) -> dict:  # fmt: skip
     """The steady gaits of the flat batch `C` of configurations (physics `physics_of(c)`; `valid`,
     the resolution guard's `unresolved` mask or `None`, batch `shape`, forcing frequencies `omega`):
     the transient, then Newton's method for each gait period in turn ([`steady_gait`][]). Returns the
     host results of [`_select.judge`][] of the best period per configuration, and `omega`.
-    `compact`: see [`newton`][]; `say` reports each stage (`steady_gait(verbose=True)`)."""
+    `compact`, `patience`: see [`newton`][]; `say` reports each stage (`steady_gait(verbose=True)`)."""
     omega = np.broadcast_to(omega, valid.shape)
     valid = valid & jnp.asarray(select.periodic(omega, shape))
     dtype_ = jax.tree_util.tree_leaves(C)[0].dtype
@@ -386,7 +392,7 @@ def solve(C, physics_of, valid, unresolved, shape, omega, *, periods, transient,
         msp = dynamics.max_steps or default_max_steps(k * T_max, dynamics.dt)
         go = (base < 0) & (True if best is None else select.still_open(best))
         say(f"gait period {k}: Newton on {int(np.sum(go))} configuration(s)")
-        r = newton(C, physics_of, contact, dynamics.dt, y0, go, k, tol, max_iter, msp, compact)
+        r = newton(C, physics_of, contact, dynamics.dt, y0, go, k, tol, max_iter, msp, compact, patience)
         r = select.judge(r, base, k, (base != GaitStatus.INVALID) & (np.asarray(trans_lift) | r["out"].lifted))
         best = select.better(best, r)
         if not np.any(select.still_open(best)):

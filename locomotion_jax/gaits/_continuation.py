@@ -137,15 +137,16 @@ class Solver:
         self.dtype = dtype
         self.const = tuple(jnp.asarray(x, dtype) for x in (lam0, scale))
         self.k = jnp.asarray(k, dtype)
-        self.opts = (jnp.asarray(tol, dtype), jnp.asarray(max_iter, jnp.int32), jnp.asarray(max_steps, jnp.int32))
+        self.tol, self.max_iter, self.max_steps = jnp.asarray(tol, dtype), max_iter, jnp.asarray(max_steps, jnp.int32)
         self.lam0, self.scale, self.sets_omega = np.asarray(lam0), np.asarray(scale), sets_omega
         self.omega = np.broadcast_to(np.asarray(omega, np.float64), np.shape(lam0))
 
     def __call__(self, z0, zref, c, go, max_iter: int | None = None) -> corrector.Solved:
         arr = lambda x: jnp.asarray(x, self.dtype)
-        opts = self.opts if max_iter is None else (self.opts[0], jnp.asarray(max_iter, jnp.int32), self.opts[2])
+        it = jnp.asarray(self.max_iter if max_iter is None else max_iter, jnp.int32)
+        # `patience` = `max_iter`: no point of a branch is stopped before `max_iter` iterations.
         r = corrector.correct_batch(*self.args, self.k, *self.const, arr(z0), arr(zref), arr(c),
-                                    jnp.asarray(go), *opts)  # fmt: skip
+                                    jnp.asarray(go), self.tol, it, self.max_steps, it)  # fmt: skip
         return jax.tree_util.tree_map(np.asarray, r)
 
     def lam(self, zeta):

@@ -35,6 +35,7 @@ import numpy as np
 from .._custom_types import Array
 from .._status import Status
 from ..dynamics._compile import engine_jit
+from ..dynamics._forward import jacfwd_in_turn
 from ..model._params import PARAM_NAMES, Params
 from ..model._waveform import AbstractWaveform, Fourier, Sinusoid
 from ._chain_gait import _Period, period_map
@@ -188,9 +189,14 @@ class Solved(NamedTuple):
 
 
 def _correct_one(
-    c, physics_of, sel, contact, dt, k, lam0, scale, z0, zref, cvec, go, tol, max_iter, max_steps
+    c, physics_of, sel, contact, dt, k, lam0, scale, z0, zref, cvec, go, tol, max_iter, max_steps, patience
 ) -> Solved:
-    """Newton's method on the module docstring's system from `z0` (skipped where `go` is False)."""
+    """Newton's method on the module docstring's system from `z0` (skipped where `go` is False).
+
+    A configuration stops, unconverged, once `patience` iterations in a row have not halved the
+    smallest residual $\max|\Phi_k(y) - y|$ reached so far: in the superlinear phase every
+    iteration does, and in a batch that runs in lockstep a stalled configuration would hold the
+    others up to `max_iter`. `patience >= max_iter` never stops one early."""
     dtype = z0.dtype
     n = z0.shape[0] - 1
     k = jnp.where(go, k, 0)  # a configuration not solved here integrates nothing
@@ -203,40 +209,49 @@ def _correct_one(
         return jnp.concatenate([out.y, jnp.stack([out.margin, out.n_min])]), (out, valid)
 
     def evaluate(z):
-        J, (out, valid) = jax.jacfwd(phi, has_aux=True)(z)
+        J, (out, valid) = jacfwd_in_turn(phi, has_aux=True)(z)
         bad = (out.status != Status.OK) | ~valid | ~jnp.all(jnp.isfinite(z)) | ~jnp.all(jnp.isfinite(J[:n]))
         return J, out, valid, bad
 
+    def residual(z, out):
+        return jnp.max(jnp.abs(out.y - z[:n]))
+
     def small(z, out):
-        return jnp.max(jnp.abs(out.y - z[:n])) <= tol * (1 + jnp.max(jnp.abs(z[:n])))
+        return residual(z, out) <= tol * (1 + jnp.max(jnp.abs(z[:n])))
 
     def cond(s):
-        _, _, _, _, it, done, failed = s
-        return ~done & ~failed & (it < max_iter)
+        _, _, _, _, it, done, failed, _, since = s
+        return ~done & ~failed & (it < max_iter) & (since < patience)
 
     def body(s):
-        z, J, out, _, it, _, _ = s
+        z, J, out, _, it, _, _, best, since = s
         A = jnp.concatenate([J[:n] - shift, cvec[None]], axis=0)
         F = jnp.concatenate([out.y - z[:n], (cvec @ (z - zref))[None]])
         z1 = z - jnp.linalg.solve(A, F)
         J1, out1, valid1, bad = evaluate(z1)
-        return z1, J1, out1, valid1, it + 1, small(z1, out1) & ~bad, bad
+        r1 = residual(z1, out1)
+        since1 = jnp.where(r1 <= best / 2, 0, since + 1)
+        return z1, J1, out1, valid1, it + 1, small(z1, out1) & ~bad, bad, jnp.minimum(best, r1), since1
 
     J0, out0, valid0, bad0 = evaluate(z0)
     # A start off the hyperplane is a valid point only after a step onto it.
     on = jnp.abs(cvec @ (z0 - zref)) <= tol * (1 + jnp.max(jnp.abs(z0)))
-    init = (z0, J0, out0, valid0, jnp.zeros((), jnp.int32), go & on & small(z0, out0) & ~bad0, ~go | bad0)
-    z, J, out, valid, it, done, _ = jax.lax.while_loop(cond, body, init)
+    zero = jnp.zeros((), jnp.int32)
+    init = (z0, J0, out0, valid0, zero, go & on & small(z0, out0) & ~bad0, ~go | bad0, residual(z0, out0), zero)
+    z, J, out, valid, it, done, _, _, _ = jax.lax.while_loop(cond, body, init)
     return Solved(z=z, J=J, out=out, done=done & go, valid=valid, it=it)
 
 
-def _correct_batch(C, physics_of, sel, contact, dt, k, lam0, scale, z0, zref, c, go, tol, max_iter, max_steps):
+def _correct_batch(C, physics_of, sel, contact, dt, k, lam0, scale, z0, zref, c, go, tol, max_iter, max_steps,
+                   patience):  # fmt: skip
     def one(c1, k1, l1, s1, z1, r1, v1, g1):
-        return _correct_one(c1, physics_of, sel, contact, dt, k1, l1, s1, z1, r1, v1, g1, tol, max_iter, max_steps)
+        return _correct_one(c1, physics_of, sel, contact, dt, k1, l1, s1, z1, r1, v1, g1, tol, max_iter, max_steps,
+                            patience)  # fmt: skip
 
     return jax.vmap(one)(C, k, lam0, scale, z0, zref, c, go)
 
 
 correct_batch = engine_jit(_correct_batch, ("physics_of", "contact"))
 """The corrector, batched: one compilation per batch size, kind of configuration and settings,
-whatever the parameter (the selector is traced), the gait period and the step `dt`."""
+whatever the parameter (the selector is traced), the gait period, the step `dt` and the
+iteration limits."""

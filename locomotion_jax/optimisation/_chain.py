@@ -116,7 +116,7 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     size = settings.amplitudes * settings.frequencies * settings.phases
     say(f"screening {size} travelling waves, then {settings.zoom_levels} zoom level(s) (compiling the screen: "
         "first call only)...")  # fmt: skip
-    sc, best, steps = screen.screen(base, speed, direction, a_max, lo, hi, H, settings)
+    sc, best, steps = screen.screen(base, speed, direction, a_max, lo, hi, H, settings, say)
     say(f"{len(sc.a)} travelling waves solved ({time.perf_counter() - t0:.0f} s)")
     feas = screen.feasible(sc.gaits, speed, direction)
     baseline = screen.as_dict(sc, best) if feas[best] else None

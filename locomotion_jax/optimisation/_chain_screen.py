@@ -10,6 +10,8 @@ step either side of it, the step halved.
 """
 
 import math
+import time
+from collections.abc import Callable
 from typing import Any, NamedTuple
 
 import jax
@@ -67,15 +69,27 @@ def with_actuation(chain: Chain, cos: np.ndarray, sin: np.ndarray, omega: np.nda
     return batch.with_waves(waves)
 
 
-def solve(chain: Chain, cos: np.ndarray, sin: np.ndarray, omega: np.ndarray, settings: ChainOptimiseSettings) -> Gaits:
-    """Steady gaits (strict contact, relaxed start) of a batch of actuations, in chunks of `settings.chunk`."""
+PATIENCE = 3
+"""The screen's Newton iterations without progress before a wave is given up at a gait period
+(`_corrector`): a converging wave halves its residual at every iteration, one with no gait of
+that period cycles, and the chunk runs in lockstep."""
+
+
+def solve(chain: Chain, cos: np.ndarray, sin: np.ndarray, omega: np.ndarray, settings: ChainOptimiseSettings,
+          say: Callable[[str], None] = lambda message: None) -> Gaits:  # fmt: skip
+    """Steady gaits (strict contact, relaxed start) of a batch of actuations, in chunks of
+    `settings.chunk` in order of frequency (a chunk integrates as long as its lowest frequency's
+    periods), the longer gait periods on the waves still open only (`compact`); `say` reports
+    each chunk."""
     n, chunk = omega.shape[0], settings.chunk
+    order = np.argsort(omega, kind="stable")
     rows = []
+    t0 = time.perf_counter()
     for b in range(0, n, chunk):
-        idx = np.minimum(np.arange(b, b + chunk), n - 1)  # the last chunk padded by repeats: one shape
+        idx = order[np.minimum(np.arange(b, b + chunk), n - 1)]  # the last chunk padded by repeats: one shape
         g = steady_gait_chain(
             with_actuation(chain, cos[idx], sin[idx], omega[idx]), transient=settings.transient,
-            dynamics=Exact(dt=settings.dt), contact="strict", start="relaxed",
+            dynamics=Exact(dt=settings.dt), contact="strict", start="relaxed", patience=PATIENCE, compact=True,
         )  # fmt: skip
         take = slice(0, min(chunk, n - b))
         conv = np.asarray(g.status)[take] == GaitStatus.CONVERGED
@@ -92,7 +106,9 @@ def solve(chain: Chain, cos: np.ndarray, sin: np.ndarray, omega: np.ndarray, set
                 y=np.asarray(g.state, np.float64)[take],
             )
         )
-    return Gaits(*(np.concatenate(parts) for parts in zip(*rows)))
+        say(f"  {min(b + chunk, n)} of {n} waves ({time.perf_counter() - t0:.0f} s)")
+    back = np.argsort(order)
+    return Gaits(*(np.concatenate(parts)[back] for parts in zip(*rows)))
 
 
 def wave_coefficients(a, phi, springs: int, harmonics: int) -> tuple[np.ndarray, np.ndarray]:
@@ -131,29 +147,31 @@ def rank(g: Gaits, speed: float, direction: int) -> np.ndarray:
     return np.argsort(key, kind="stable")
 
 
-def _run(chain, a, omega, phi, harmonics, settings) -> Screen:
+def _run(chain, a, omega, phi, harmonics, settings, say) -> Screen:
     S = chain.n_masses - 1
     cos, sin = wave_coefficients(a, phi, S, harmonics)
-    return Screen(a, omega, phi, solve(chain, cos, sin, omega, settings))
+    return Screen(a, omega, phi, solve(chain, cos, sin, omega, settings, say))
 
 
 def screen(chain: Chain, speed: float, direction: int, a_max: float, lo: float, hi: float, harmonics: int,
-           settings: ChainOptimiseSettings) -> tuple[Screen, int, dict[str, float]]:  # fmt: skip
+           settings: ChainOptimiseSettings, say: Callable[[str], None] = lambda message: None,
+           ) -> tuple[Screen, int, dict[str, float]]:  # fmt: skip
     """The grid and its zoom (module docstring). Returns every wave solved, the index of the best
-    (feasible by cost, else the fastest stable gait) and the coarse grid's steps."""
+    (feasible by cost, else the fastest stable gait) and the coarse grid's steps; `say` reports
+    progress."""
     S = chain.n_masses - 1
     amps = a_max * np.arange(1, settings.amplitudes + 1) / settings.amplitudes
     omegas = np.geomspace(lo, hi, settings.frequencies) if hi > lo else np.array([lo])
     phases = -np.pi + 2 * np.pi * np.arange(settings.phases) / settings.phases if S > 1 else np.zeros(1)
     A, W, F = (x.ravel() for x in np.meshgrid(amps, omegas, phases, indexing="ij"))
-    out = _run(chain, A, W, F, harmonics, settings)
+    out = _run(chain, A, W, F, harmonics, settings, say)
     steps = {
         "a": a_max / settings.amplitudes,
         "log_omega": (math.log(hi / lo) / max(settings.frequencies - 1, 1)) if hi > lo else 0.0,
         "phi": 2 * np.pi / settings.phases if S > 1 else 0.0,
     }
     step = dict(steps)
-    for _ in range(settings.zoom_levels):
+    for level in range(settings.zoom_levels):
         best = int(rank(out.gaits, speed, direction)[0])
         if not out.gaits.ok[best]:
             break
@@ -163,7 +181,9 @@ def screen(chain: Chain, speed: float, direction: int, a_max: float, lo: float, 
         w_ = np.exp(np.clip(grid(math.log(out.omega[best]), step["log_omega"]), math.log(lo), math.log(hi)))
         p_ = grid(out.phi[best], step["phi"])
         A, W, F = (x.ravel() for x in np.meshgrid(np.unique(a_), np.unique(w_), p_, indexing="ij"))
-        out = out.join(_run(chain, A, W, F, harmonics, settings))
+        say(f"zoom level {level + 1}: {A.size} waves around a = {out.a[best]:.4g}, omega = {out.omega[best]:.4g}, "
+            f"phi = {out.phi[best]:.4g}")  # fmt: skip
+        out = out.join(_run(chain, A, W, F, harmonics, settings, say))
         step = {k: v / 2 for k, v in step.items()}
     return out, int(rank(out.gaits, speed, direction)[0]), steps
 
