@@ -194,7 +194,7 @@ def _correct_one(
     """Newton's method on the module docstring's system from `z0` (skipped where `go` is False).
 
     A configuration stops, unconverged, once `patience` iterations in a row have not halved the
-    smallest residual $\max|\Phi_k(y) - y|$ reached so far: in the superlinear phase every
+    smallest residual $\\max|\\Phi_k(y) - y|$ reached so far: in the superlinear phase every
     iteration does, and in a batch that runs in lockstep a stalled configuration would hold the
     others up to `max_iter`. `patience >= max_iter` never stops one early."""
     dtype = z0.dtype
