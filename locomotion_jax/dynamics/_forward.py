@@ -186,7 +186,9 @@ def jacfwd_in_turn(f: Callable[[Array], Any], has_aux: bool = False) -> Callable
     elements per kernel XLA's CPU runtime splits each kernel over its threads (as in
     [`one_direction_at_a_time`][]); in turn, a period map of a 4-mass chain and its 7 directions
     cost 2.8x (array layout) to 5.3x (one entry per body) less, and compile in half the time
-    (benchmarks/NOTES.md). Elsewhere `jax.jacfwd` itself."""
+    (benchmarks/NOTES.md). Elsewhere `jax.jacfwd` itself. Worth it where the directions are few
+    and the batch wide (the steady-gait corrector); the optimisers' orbit oracle, with many
+    directions on a few lanes, keeps `jax.jacfwd` (in turn it was 4x slower)."""
     if jax.default_backend() != "cpu":
         return jax.jacfwd(f, has_aux=has_aux)
 

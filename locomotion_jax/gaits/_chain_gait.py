@@ -328,7 +328,8 @@ def steady_gait_chain(
     """[`steady_gait`][] for a [`Chain`][] or a [`Mechanism`][locomotion_jax.Mechanism] (its
     arguments; `start` names a start at rest (a mechanism: its own `x0`, `v0`), or gives section
     states at phase 0: gaps then velocities $(u_0, \\dots, u_{N-2}, v_0, \\dots, v_{N-1})$, shape
-    `batch + (2N - 1,)`, or for an anchored mechanism positions then velocities, `batch + (2N,)`)."""
+    `batch + (2N - 1,)`, or for an anchored mechanism positions then velocities, `batch + (2N,)`);
+    `patience` and `compact` as in [`newton`][] (the chain optimiser's screen)."""
     check_contact_start(contact, start if isinstance(start, str) else "paper", chain)
     if contact == "hop" and not isinstance(start, str):
         raise NotImplementedError(

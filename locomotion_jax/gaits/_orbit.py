@@ -40,7 +40,6 @@ from .._custom_types import Array, Contact
 from .._status import Status
 from ..dynamics import _chain_exact as engine
 from ..dynamics._compile import engine_jit
-from ..dynamics._forward import jacfwd_in_turn
 from ..model._params import Params
 from ..model._physics import AbstractPhysics
 from ..model._two_mass import initial_gap
@@ -142,15 +141,13 @@ def newton_orbit(
     eye = jnp.eye(ny, dtype=theta.dtype)
 
     def linearise(y):
-        # Forward mode in all ny + p directions (the gradient needs all of J).
-        with_aux = lambda z: (lambda r: (r[0], r))(run(z))
-        J, (val, ok) = jacfwd_in_turn(with_aux, has_aux=True)(jnp.concatenate([y, theta]))
+        # One forward pass in all ny + p directions (the gradient needs all of J).
+        J, (val, ok) = jax.jacfwd(lambda z: (lambda r: (r[0], r))(run(z)), has_aux=True)(jnp.concatenate([y, theta]))
         return val, J, ok & jnp.all(jnp.isfinite(val)) & jnp.all(jnp.isfinite(J))
 
     def linearise_y(y):
-        # Forward mode in the ny directions of y: (Phi, figures) and their y-Jacobian.
-        with_aux = lambda u: (lambda r: (r[0], r))(run(jnp.concatenate([u, theta])))
-        J, (val, ok) = jacfwd_in_turn(with_aux, has_aux=True)(y)
+        # One forward pass in the ny directions of y: (Phi, figures) and their y-Jacobian.
+        J, (val, ok) = jax.jacfwd(lambda u: (lambda r: (r[0], r))(run(jnp.concatenate([u, theta]))), has_aux=True)(y)
         return val, J, ok & jnp.all(jnp.isfinite(val)) & jnp.all(jnp.isfinite(J))
 
     step_pass = linearise_y if monodromy_only else linearise
