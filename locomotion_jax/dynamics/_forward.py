@@ -188,7 +188,8 @@ def jacfwd_in_turn(f: Callable[[Array], Any], has_aux: bool = False) -> Callable
     cost 2.8x (array layout) to 5.3x (one entry per body) less, and compile in half the time
     (benchmarks/NOTES.md). Elsewhere `jax.jacfwd` itself. Worth it where the directions are few
     and the batch wide (the steady-gait corrector); the optimisers' orbit oracle, with many
-    directions on a few lanes, keeps `jax.jacfwd` (in turn it was 4x slower)."""
+    directions on a few lanes, keeps `jax.jacfwd` (in turn, the paper optimiser's local
+    refinement took 4x as long)."""
     if jax.default_backend() != "cpu":
         return jax.jacfwd(f, has_aux=has_aux)
 
