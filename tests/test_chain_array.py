@@ -14,7 +14,14 @@ import pytest
 from chain_cases import ANISO
 from locomotion_jax.gaits import _chain_gait as cg
 from locomotion_jax.gaits._chain_orbit import gait_physics
-from locomotion_jax.model._chain_array import ARRAY_FROM, ArrayChainPhysics, engine_physics, GAIT_ARRAY_FROM
+from locomotion_jax.model._chain_array import (
+    ARRAY_FROM,
+    array_from,
+    ARRAY_FROM_ACCELERATOR,
+    ArrayChainPhysics,
+    engine_physics,
+    GAIT_ARRAY_FROM,
+)
 from locomotion_jax.model._chain_physics import ChainPhysics
 from reference_chain import chain_config, reference_chain_simulate
 
@@ -206,13 +213,19 @@ def test_gait_layout_choice():
     assert isinstance(gait_physics(_worm(GAIT_ARRAY_FROM, "auto"), "hop"), ChainPhysics)
 
 
-def test_layout_choice_and_refusals():
+def test_layout_choice_and_refusals(monkeypatch):
+    assert jax.default_backend() != "cpu" or array_from() == ARRAY_FROM
     assert isinstance(engine_physics(_worm(ARRAY_FROM, "auto"), "strict"), ArrayChainPhysics)
     assert isinstance(engine_physics(_worm(ARRAY_FROM - 1, "auto"), "strict"), ChainPhysics)
     assert isinstance(engine_physics(_worm(ARRAY_FROM, "auto"), "hop"), ChainPhysics)  # hop: unrolled only
     assert isinstance(engine_physics(_worm(ARRAY_FROM, "unrolled"), "strict"), ChainPhysics)
     with pytest.raises(ValueError, match="'layout'.*'auto', 'unrolled', 'array'"):
         _worm(3, "arrays")
+    # On a GPU "auto" takes the array layout from ARRAY_FROM_ACCELERATOR masses on.
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    assert array_from() == ARRAY_FROM_ACCELERATOR < ARRAY_FROM
+    assert isinstance(engine_physics(_worm(ARRAY_FROM_ACCELERATOR, "auto"), "strict"), ArrayChainPhysics)
+    assert isinstance(engine_physics(_worm(ARRAY_FROM_ACCELERATOR - 1, "auto"), "strict"), ChainPhysics)
     with pytest.raises(ValueError, match="contact='hop'.*layout='unrolled'"):
         engine_physics(_worm(3, "array"), "hop")
     spline = [lj.Spline(np.array([0.05, -0.05, 0.05, -0.05]), 2.0, 3.0)] * 2

@@ -68,7 +68,8 @@ class Chain(AbstractMechanism):
       fastest for a few masses, but compile time and cost per mass grow with N), `"array"` (one
       array over the masses: compile time independent of N; Sinusoid, Fourier and travelling-wave
       actuation, `contact="strict"` or `"paper"`), or `"auto"` (default): where it applies, the
-      array layout from `ARRAY_FROM` (16) masses on for `measure` and `simulate`, and from
+      array layout from `ARRAY_FROM` (16) masses on for `measure` and `simulate` on a CPU
+      (`ARRAY_FROM_ACCELERATOR`, 4, on a GPU), and from
       `GAIT_ARRAY_FROM` (3) on for steady gaits, continuation and the optimiser
       (docs/performance.md, "Long chains").
     - `check`: validate concrete values (default); invalid values raise `ValueError` naming the

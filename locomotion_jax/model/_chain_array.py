@@ -14,7 +14,7 @@ with zeros. The same formulas as the unrolled physics, term by term (module docs
 `_chain_physics`); only sums over bodies are summed in another order.
 
 Which layout a run uses: [`engine_physics`][], from the chain's `layout` (`"auto"`: the array
-layout from [`ARRAY_FROM`][] masses on, where it supports the chain).
+layout from [`array_from`][]`()` masses on, where it supports the chain).
 """
 
 from typing import Any
@@ -30,8 +30,21 @@ from ._physics import AbstractPhysics, LoadRates, Loads, Scalars
 
 
 ARRAY_FROM = 16
-"""`layout="auto"` runs a chain of this many masses or more in the array layout, fewer unrolled
-(the crossover of `benchmarks/chain_scaling.py`, benchmarks/NOTES.md "Chains in the array layout")."""
+"""On a CPU, `layout="auto"` runs a chain of this many masses or more in the array layout, fewer
+unrolled (the crossover of `benchmarks/chain_scaling.py`, benchmarks/NOTES.md "Chains in the array
+layout")."""
+
+ARRAY_FROM_ACCELERATOR = 4
+"""On any other backend (a GPU), the same threshold: on one H200 at 4 masses the array layout ran
+1.5x faster than the unrolled one and compiled in 0.42 of its time, while at 2 the unrolled layout
+was 1.4x faster (benchmarks/NOTES.md "On a GPU")."""
+
+
+def array_from() -> int:
+    """`layout="auto"`'s threshold for `measure`, `simulate` and `sweep` on JAX's default backend:
+    [`ARRAY_FROM`][] on a CPU, [`ARRAY_FROM_ACCELERATOR`][] elsewhere."""
+    return ARRAY_FROM if jax.default_backend() == "cpu" else ARRAY_FROM_ACCELERATOR
+
 
 GAIT_ARRAY_FROM = 3
 """`layout="auto"` finds the steady gaits of a chain of this many masses or more in the array
@@ -253,22 +266,22 @@ def array_physics(C: Any) -> ArrayChainPhysics:
     )  # fmt: skip
 
 
-def uses_array(mechanism: Any, contact: str | None = None, start: int = ARRAY_FROM) -> bool:
+def uses_array(mechanism: Any, contact: str | None = None, start: int | None = None) -> bool:
     """Whether `measure` and `simulate` run a mechanism in the array layout: a
     [`Chain`][locomotion_jax.Chain] with `layout="array"` (refused with a clear error where
-    [`array_unsupported`][] finds a reason), or `"auto"` from `start` masses on where it
-    finds none; any other mechanism, or `layout="unrolled"`: no. Steady gaits pass
-    `start=`[`GAIT_ARRAY_FROM`][]."""
+    [`array_unsupported`][] finds a reason), or `"auto"` from `start` masses on (default
+    [`array_from`][]`()`) where it finds none; any other mechanism, or `layout="unrolled"`: no.
+    Steady gaits pass `start=`[`GAIT_ARRAY_FROM`][]."""
     layout = getattr(mechanism, "layout", "unrolled")
     if layout == "unrolled":
         return False
     why = array_unsupported(mechanism, contact)
     if layout == "array" and why is not None:
         raise ValueError(f"A chain in layout='array': {why}; use layout='unrolled' or 'auto'.")
-    return layout == "array" or (why is None and mechanism.n_masses >= start)
+    return layout == "array" or (why is None and mechanism.n_masses >= (array_from() if start is None else start))
 
 
-def engine_physics(mechanism: Any, contact: str | None = None, start: int = ARRAY_FROM) -> AbstractPhysics:
+def engine_physics(mechanism: Any, contact: str | None = None, start: int | None = None) -> AbstractPhysics:
     """The physics that `measure` and `simulate` (and, with `start=GAIT_ARRAY_FROM`, steady gaits)
     integrate a mechanism with ([`uses_array`][]): a chain's in the array layout, else the
     mechanism's own `physics()`."""
