@@ -67,6 +67,30 @@ def test_chain_gait_equals_long_direct_simulation(worms):
     assert status == [lj.Status.INVALID] * len(status)
 
 
+def test_transient_speed_equals_simulation_and_the_gait(worms):
+    """`transient_speed` (the chain optimiser's screen reads it before solving gaits): the centre
+    of mass's mean speed over periods 18 to 30 from the start at rest equals `simulate`'s, saved
+    at those times (where the steps restart, as in the transient), to 1e-9; it nears the steady
+    gait's speed as the transient decays; NaN for the invalid configuration."""
+    chain, g = worms
+    v = cg.transient_speed(chain, transient=30, last=12, dynamics=lj.Exact(), start="paper")
+    assert v.shape == (5,) and np.isnan(v[4]) and np.all(np.isfinite(v[:4]))
+    omega = np.asarray(chain.waves.omega)[:4]
+    direct = np.zeros(4)
+    for w in np.unique(omega):
+        T = 2 * P / w
+        X = np.asarray(lj.simulate(chain, 30 * T, save_at=np.array([18 * T, 30 * T])).X)[:4]
+        direct[omega == w] = ((X[:, 1] - X[:, 0]) / (12 * T))[omega == w]
+    np.testing.assert_allclose(v[:4], direct, rtol=1e-9)
+    # Its error against the gait decays like the transient, |mu|^n after n periods: 1e-5 (mu = 0.70)
+    # to 0.14 for the pure-slip worm (mu = 0.97), which the screen's margin (half of v_min) allows.
+    mu = np.max(np.abs(np.asarray(g.multipliers)[:4]), axis=-1)
+    gait = np.asarray(g.mean_speed)[:4]
+    assert np.all(np.abs(v[:4] - gait) <= (mu**18 + 1e-8) * np.abs(gait))  # 1e-8: the integration error
+    with pytest.raises(ValueError, match="1 <= last < transient"):
+        cg.transient_speed(chain, transient=10, last=10, dynamics=lj.Exact())
+
+
 def test_chain_monodromy_against_finite_differences(worms):
     """The monodromy of the pure-slip worm (every mass moving at the section) against central
     differences of the period map, and so its multipliers, to 1e-5."""

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from locomotion_jax.cli import _main as _cli
 from locomotion_jax.gaits import _chain_orbit
+from locomotion_jax.optimisation import _chain_screen as screen
 from typer.testing import CliRunner
 
 
@@ -89,6 +90,35 @@ def test_stroke_bound_holds_exactly(opt3):
     assert np.max(np.abs(s)) <= A_MAX * (1 + 1e-12)
     assert np.all(opt3.stroke_exact <= A_MAX * (1 + 1e-12))
     np.testing.assert_allclose(opt3.stroke_exact, np.max(np.abs(s), axis=1), rtol=1e-9)
+
+
+def test_screen_filter_keeps_the_fast_waves():
+    v = np.array([0.3, np.nan, -0.4, 0.05, 0.2, 0.01])
+    assert list(screen.fast_enough(v, 0.4, 1, 0.5, 2)) == [0, 4]  # 0.2 reaches half of 0.4; 0.3, 0.2 fastest
+    assert list(screen.fast_enough(v, 0.4, 1, 0.5, 3)) == [0, 3, 4]
+    assert list(screen.fast_enough(v, 0.4, -1, 0.5, 1)) == [2]  # backwards; NaN never
+    assert list(screen.fast_enough(v, 10.0, 1, 0.5, 0)) == []
+
+
+def test_screen_solves_the_fast_waves_as_it_would_without_the_filter(opt3):
+    """The screen with its filter (`screen_speed`): on 40 waves (two chunks), the waves it leaves
+    unsolved are the slowest at the end of their transient; every wave it solves has the gait the
+    unfiltered screen finds for it; and no wave whose gait meets the requirement is left out."""
+    base = worm().broadcast()
+    lo, hi = screen.frequency_range(base, None, SETTINGS)
+    amps, omegas, phases = A_MAX * np.array([0.5, 1.0]), np.geomspace(lo, hi, 5), np.pi * np.array([-1, -0.5, 0, 0.5])
+    A, W, F = (x.ravel() for x in np.meshgrid(amps, omegas, phases, indexing="ij"))
+    cos, sin = screen.wave_coefficients(A, F, 2, 2)
+    every = screen.solve(base, cos, sin, W, SETTINGS)
+    assert np.sum(every.ok) >= 20
+    v_min = 0.9 * np.nanmax(np.where(every.ok, every.speed, np.nan))
+    got = screen.solve(base, cos, sin, W, SETTINGS, need=(v_min, 1))
+    solved = np.isfinite(got.speed) | np.isfinite(got.y[:, 0])
+    assert SETTINGS.chunk <= np.sum(solved) < 40  # some left out: 40 waves, the 32 fastest kept
+    for a, b in zip(got, every):
+        np.testing.assert_allclose(a[solved], b[solved], rtol=1e-12, atol=0)
+    assert not np.any(got.ok[~solved]) and np.all(np.isnan(got.speed[~solved]))
+    assert np.all(solved[screen.feasible(every, v_min, 1)])
 
 
 @pytest.mark.slow

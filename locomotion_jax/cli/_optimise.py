@@ -67,6 +67,9 @@ def register(app: typer.Typer) -> None:
         phases: int = typer.Option(8, help="A chain or mechanism: screen, phase lags over [-pi, pi)."),
         zoom_levels: int = typer.Option(2, help="A chain or mechanism: zoom levels around the screen's best."),
         zoom_points: int = typer.Option(5, help="A chain or mechanism: zoom points per variable and level."),
+        screen_speed: float = typer.Option(
+            0.5, help="A chain: solve the gaits of the waves whose transient reaches this fraction of v_min."
+        ),
         margin: float = typer.Option(0.05, "--margin", help="Normal-force margin (on the orbit, or smoothed)."),
         local: int = typer.Option(4, "--local", help="Exact: starts refined locally, in lockstep."),
         max_iter: int = typer.Option(150, "--max-iter", help="Exact: iterations of each local trust-region run."),
@@ -97,8 +100,9 @@ def register(app: typer.Typer) -> None:
         mechanism FILE (--a-max defaults to the amplitude of its sinusoid or travelling wave; a file
         of bodies and links needs it). A chain or a mechanism of bodies and links is optimised by the
         exact method (--harmonics default 3 for a chain, 2 for bodies and links; the travelling-wave
-        screen's --amplitudes, --frequencies, --phases, --zoom-levels, --zoom-points, and --local,
-        --max-iter, --margin, --transient, --omega, --direction apply; --out saves a chain's optimum)."""
+        screen's --amplitudes, --frequencies, --phases, --zoom-levels, --zoom-points (a chain:
+        --screen-speed), and --local, --max-iter, --margin, --transient, --omega, --direction apply;
+        --out saves a chain's optimum)."""
         import locomotion_jax as lj
 
         from ..optimisation import _optimise, _pareto
@@ -119,7 +123,7 @@ def register(app: typer.Typer) -> None:
 
                 screen: dict[str, Any] = dict(amplitudes=amplitudes, frequencies=frequencies, phases=phases,
                                               zoom_levels=zoom_levels, zoom_points=zoom_points, local=local,
-                                              margin=margin, verbose=verbose)  # fmt: skip
+                                              screen_speed=screen_speed, margin=margin, verbose=verbose)  # fmt: skip
                 screen |= {"max_iter": max_iter} if given(["max_iter"]) else {}  # else the optimiser's default
                 screen |= {"transient": int(transient)} if transient is not None else {}
                 chain_settings = lj.ChainOptimiseSettings(**screen)

@@ -251,15 +251,17 @@ def paper_physics(c) -> tuple[AbstractPhysics, Array]:
 
 def _transient_batch(C, physics_of, valid, contact, start, dt, transient, max_steps, y_start=None):
     """The reduced states after `transient` actuation periods from the start at rest `start`, or
-    from the section states `y_start` (flat, `(n, 2N - 1)`) where given; each configuration of
+    from the section states `y_start` (flat, `(n, 2N - 1)`) where given, their statuses, whether
+    they lifted off, and the centre of mass's displacement over the periods; each configuration of
     the flat batch `C` has the physics `physics_of(c)`."""
 
     def one(c, ok, y):
         P, ok_c = physics_of(c)
         row = None if y is None else jnp.concatenate([_positions(P, y), y[y.shape[-1] - P.n_bodies :]])
-        st = chain_initial_state(P, ok & ok_c, contact, start, row)
-        st, _ = _advance(P, contact, dt, st, transient * (2 * jnp.pi) / P.omega, max_steps)
-        return _reduced(st, P), st.status, jnp.isfinite(st.t_liftoff)
+        st0 = chain_initial_state(P, ok & ok_c, contact, start, row)
+        st, _ = _advance(P, contact, dt, st0, transient * (2 * jnp.pi) / P.omega, max_steps)
+        dX = P.centre_of_mass(st.y.x) - P.centre_of_mass(st0.y.x)
+        return _reduced(st, P), st.status, jnp.isfinite(st.t_liftoff), dX
 
     return jax.vmap(one)(C, valid, y_start)
 
@@ -360,6 +362,34 @@ def steady_gait_chain(
     return unflatten(_chain_gait(best, best["omega"], flat.m.dtype, contact), shape)
 
 
+def transient_speed(chain: Chain, *, transient: int, last: int, dynamics: Exact, contact: str = "strict",
+                    start: str = "relaxed") -> np.ndarray:  # fmt: skip
+    """The centre of mass's mean speed over periods `transient - last` to `transient` of the
+    actuation from the start at rest `start`: the end of [`steady_gait`][]'s transient, whose first
+    `transient - last` periods this runs with the same compiled program. A host array of the batch
+    shape, NaN where the run stopped (invalid, unresolved, a strict lift-off, a collision, the step
+    cap). Over `last = 12` periods it is the mean speed of a converged gait of any period
+    $k \\le 4$ (12 periods are whole gait periods); the chain optimiser's screen compares it
+    with the required speed before solving the gait."""
+    if not (isinstance(last, int) and 1 <= last < transient):
+        raise ValueError(f"transient_speed: need 1 <= last < transient, got last={last!r}, transient={transient!r}.")
+    flat, valid, shape = prepare_chain(chain, None)
+    valid, unresolved = guard_chain(dynamics, flat, valid, shape)
+    omega = np.broadcast_to(np.asarray(flat.omega, np.float64), valid.shape)
+    valid = valid & jnp.asarray(select.periodic(omega, shape))
+    physics_of = physics_for(flat, contact)
+    real = lambda v: jnp.asarray(v, flat.m.dtype)
+    T_max = float(np.max(2 * np.pi / omega[np.isfinite(omega) & (omega > 0)], initial=1.0))
+    mst = jnp.asarray(dynamics.max_steps or default_max_steps(transient * T_max, dynamics.dt), jnp.int32)
+    y, st1, _, _ = _transient_batch(flat, physics_of, valid, contact, start, dynamics.dt, real(transient - last), mst)
+    _, st2, _, dX = _transient_batch(flat, physics_of, valid, contact, "paper", dynamics.dt, real(last), mst, y)
+    ok = (np.asarray(st1) == Status.OK) & (np.asarray(st2) == Status.OK)
+    if unresolved is not None:
+        ok &= ~np.asarray(unresolved)
+    speed = np.where(ok, np.asarray(dX, np.float64) * omega / (2 * np.pi * last), np.nan)
+    return speed.reshape(shape)
+
+
 def solve(C, physics_of, valid, unresolved, shape, omega, *, periods, transient, tol, max_iter, dynamics: Exact,
           contact, start, y_start=None, say=lambda message: None, compact: bool = False,
           patience: int | None = None) -> dict:  # fmt: skip
@@ -378,7 +408,7 @@ def solve(C, physics_of, valid, unresolved, shape, omega, *, periods, transient,
     real = lambda v: jnp.asarray(v, dtype_)
     mst = jnp.asarray(dynamics.max_steps or default_max_steps(transient * T_max, dynamics.dt), jnp.int32)
     say(f"transient: {transient} periods")
-    y0, trans, trans_lift = _transient_batch(C, physics_of, valid, contact, start, dynamics.dt, real(transient), mst,
+    y0, trans, trans_lift, _ = _transient_batch(C, physics_of, valid, contact, start, dynamics.dt, real(transient), mst,
                                              y_start)  # fmt: skip
     trans = np.asarray(trans)
     # -1: to be solved; else the final status (invalid, a strict lift-off, a collision, the step cap).

@@ -20,6 +20,11 @@ class ChainOptimiseSettings(eqx.Module):
     - `amplitudes`, `frequencies`, `phases`: the travelling-wave screen, $a$ on
       `amplitudes` equal steps up to $a_\\max$, $\\omega$ log-spaced over its range, the phase
       lag $\\varphi$ on `phases` equal steps of $[-\\pi, \\pi)$ (one phase for $N = 2$).
+    - `screen_speed`: the screen solves the steady gaits only of the waves whose speed over the
+      last 12 periods of their transient reaches this fraction of $v_\\min$ (and of the `chunk`
+      fastest, so that an infeasible requirement still has candidates); 0: of every wave. A
+      wave far slower than required where its transient ends is no start for the optimum, and
+      the slowest waves (the longest periods) cost the screen most.
     - `zoom_levels`, `zoom_points`: the zooming refinement of the best travelling wave: per
       level a grid of `zoom_points` per variable over one step either side, the step halved
       per level.
@@ -45,6 +50,7 @@ class ChainOptimiseSettings(eqx.Module):
     amplitudes: int = 3
     frequencies: int = 12
     phases: int = 8
+    screen_speed: float = 0.5
     zoom_levels: int = 2
     zoom_points: int = 5
     local: int = 4
@@ -72,6 +78,8 @@ class ChainOptimiseSettings(eqx.Module):
                 raise ValueError(f"ChainOptimiseSettings.{name} must be an int >= 1, got {v!r}.")
         if not (isinstance(self.zoom_levels, int) and self.zoom_levels >= 0):
             raise ValueError(f"ChainOptimiseSettings.zoom_levels must be an int >= 0, got {self.zoom_levels!r}.")
+        if not (0 <= self.screen_speed <= 1):
+            raise ValueError(f"ChainOptimiseSettings.screen_speed must be in [0, 1], got {self.screen_speed!r}.")
         if not (0 < self.omega_min < self.omega_max):
             raise ValueError(
                 f"ChainOptimiseSettings: need 0 < omega_min < omega_max, got {self.omega_min!r}, {self.omega_max!r}."

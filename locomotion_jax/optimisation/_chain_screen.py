@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..dynamics._exact_dynamics import Exact
-from ..gaits._chain_gait import steady_gait_chain
+from ..gaits._chain_gait import steady_gait_chain, transient_speed
 from ..gaits._select import GaitStatus
 from ..model._chain import Chain
 from ..model._springwaves import SpringFourier
@@ -75,40 +75,81 @@ PATIENCE = 3
 that period cycles, and the chunk runs in lockstep."""
 
 
+LAST = 12
+"""Periods at the end of the transient over which the screen measures a wave's speed
+([`transient_speed`][]): whole gait periods of every $k \\le 4$."""
+
+
+def fast_enough(v: np.ndarray, v_min: float, direction: int, fraction: float, count: int) -> np.ndarray:
+    """Rows, in order, of the waves whose transient speed `v` reaches `fraction` of `v_min` in
+    `direction`, and of the `count` fastest (a closest candidate when none is feasible); never one
+    whose speed is NaN (its transient stopped)."""
+    fast = direction * np.nan_to_num(v, nan=-np.inf)
+    keep = fast >= fraction * v_min
+    keep[np.argsort(-fast, kind="stable")[:count]] = True
+    return np.flatnonzero(keep & np.isfinite(v))
+
+
+def _unsolved(n: int, n_red: int) -> Gaits:
+    """Rows of waves whose gaits are not solved (each field its own array: the screen fills them in)."""
+    nan, no = lambda: np.full(n, np.nan), lambda: np.zeros(n, bool)
+    return Gaits(nan(), nan(), no(), no(), np.zeros(n, np.int32), nan(), nan(), np.full((n, n_red), np.nan))
+
+
+def _chunks(n: int, chunk: int, order: np.ndarray):
+    """`(rows, count)` per chunk of `chunk` rows in `order`; the last padded by repeats: one shape."""
+    for b in range(0, n, chunk):
+        yield order[np.minimum(np.arange(b, b + chunk), n - 1)], min(chunk, n - b)
+
+
 def solve(chain: Chain, cos: np.ndarray, sin: np.ndarray, omega: np.ndarray, settings: ChainOptimiseSettings,
-          say: Callable[[str], None] = lambda message: None) -> Gaits:  # fmt: skip
+          say: Callable[[str], None] = lambda message: None, need: tuple[float, int] | None = None,
+          ) -> Gaits:  # fmt: skip
     """Steady gaits (strict contact, relaxed start) of a batch of actuations, in chunks of
     `settings.chunk` in order of frequency (a chunk integrates as long as its lowest frequency's
     periods), the longer gait periods on the waves still open only (`compact`); `say` reports
-    each chunk."""
+    each chunk.
+
+    With `need = (v_min, direction)` and `settings.screen_speed > 0`, the transient's speed
+    ([`transient_speed`][], over its last [`LAST`][] periods) comes first, and only the waves that
+    reach `screen_speed` of `v_min` in `direction`, and the `chunk` fastest, have their gaits
+    solved; the others are left unsolved (not `ok`, NaN): a wave far slower than required
+    at the end of its transient is no start for the optimum."""
     n, chunk = omega.shape[0], settings.chunk
-    order = np.argsort(omega, kind="stable")
-    rows = []
+    gaits = lambda idx: with_actuation(chain, cos[idx], sin[idx], omega[idx])
     t0 = time.perf_counter()
-    for b in range(0, n, chunk):
-        idx = order[np.minimum(np.arange(b, b + chunk), n - 1)]  # the last chunk padded by repeats: one shape
+    solved = np.arange(n)
+    if need is not None and settings.screen_speed > 0 and n > chunk:  # else every wave is among the fastest
+        v_min, direction = need
+        v = np.full(n, np.nan)
+        for idx, m in _chunks(n, chunk, np.argsort(omega, kind="stable")):
+            last = min(LAST, settings.transient - 1)
+            v[idx[:m]] = transient_speed(gaits(idx), transient=settings.transient, last=last,
+                                         dynamics=Exact(dt=settings.dt), contact="strict")[:m]  # fmt: skip
+        solved = fast_enough(v, v_min, direction, settings.screen_speed, chunk)
+        say(f"  transient speeds of {n} waves ({time.perf_counter() - t0:.0f} s): {solved.size} reach "
+            f"{settings.screen_speed:g} v_min or are among the {chunk} fastest")  # fmt: skip
+    out = _unsolved(n, 2 * chain.n_masses - 1)
+    done = 0
+    for idx, m in _chunks(solved.size, chunk, solved[np.argsort(omega[solved], kind="stable")]):
         g = steady_gait_chain(
-            with_actuation(chain, cos[idx], sin[idx], omega[idx]), transient=settings.transient,
-            dynamics=Exact(dt=settings.dt), contact="strict", start="relaxed", patience=PATIENCE, compact=True,
+            gaits(idx), transient=settings.transient, dynamics=Exact(dt=settings.dt), contact="strict",
+            start="relaxed", patience=PATIENCE, compact=True,
         )  # fmt: skip
-        take = slice(0, min(chunk, n - b))
+        rows, take = idx[:m], slice(0, m)
         conv = np.asarray(g.status)[take] == GaitStatus.CONVERGED
         mult = np.abs(np.asarray(g.multipliers)[take])
-        rows.append(
-            Gaits(
-                speed=np.asarray(g.mean_speed, np.float64)[take],
-                cost=np.asarray(g.cost_of_transport, np.float64)[take],
-                ok=conv & np.asarray(g.stable)[take] & ~np.asarray(g.liftoff)[take],
-                liftoff=np.asarray(g.liftoff)[take],
-                k=np.asarray(g.k)[take],
-                period=np.asarray(g.period, np.float64)[take],
-                radius=np.where(conv, np.max(np.nan_to_num(mult, nan=np.inf), axis=-1), np.nan),
-                y=np.asarray(g.state, np.float64)[take],
-            )
-        )
-        say(f"  {min(b + chunk, n)} of {n} waves ({time.perf_counter() - t0:.0f} s)")
-    back = np.argsort(order)
-    return Gaits(*(np.concatenate(parts)[back] for parts in zip(*rows)))
+        out.speed[rows] = np.asarray(g.mean_speed, np.float64)[take]
+        out.cost[rows] = np.asarray(g.cost_of_transport, np.float64)[take]
+        out.ok[rows] = conv & np.asarray(g.stable)[take] & ~np.asarray(g.liftoff)[take]
+        out.liftoff[rows] = np.asarray(g.liftoff)[take]
+        out.k[rows] = np.asarray(g.k)[take]
+        out.period[rows] = np.asarray(g.period, np.float64)[take]
+        out.radius[rows] = np.where(conv, np.max(np.nan_to_num(mult, nan=np.inf), axis=-1), np.nan)
+        out.y[rows] = np.asarray(g.state, np.float64)[take]
+        done += m
+        say(f"  {done} of {solved.size} waves ({time.perf_counter() - t0:.0f} s)")
+    return out
 
 
 def wave_coefficients(a, phi, springs: int, harmonics: int) -> tuple[np.ndarray, np.ndarray]:
@@ -147,10 +188,10 @@ def rank(g: Gaits, speed: float, direction: int) -> np.ndarray:
     return np.argsort(key, kind="stable")
 
 
-def _run(chain, a, omega, phi, harmonics, settings, say) -> Screen:
+def _run(chain, a, omega, phi, harmonics, settings, say, need) -> Screen:
     S = chain.n_masses - 1
     cos, sin = wave_coefficients(a, phi, S, harmonics)
-    return Screen(a, omega, phi, solve(chain, cos, sin, omega, settings, say))
+    return Screen(a, omega, phi, solve(chain, cos, sin, omega, settings, say, need))
 
 
 def screen(chain: Chain, speed: float, direction: int, a_max: float, lo: float, hi: float, harmonics: int,
@@ -164,7 +205,7 @@ def screen(chain: Chain, speed: float, direction: int, a_max: float, lo: float, 
     omegas = np.geomspace(lo, hi, settings.frequencies) if hi > lo else np.array([lo])
     phases = -np.pi + 2 * np.pi * np.arange(settings.phases) / settings.phases if S > 1 else np.zeros(1)
     A, W, F = (x.ravel() for x in np.meshgrid(amps, omegas, phases, indexing="ij"))
-    out = _run(chain, A, W, F, harmonics, settings, say)
+    out = _run(chain, A, W, F, harmonics, settings, say, (speed, direction))
     steps = {
         "a": a_max / settings.amplitudes,
         "log_omega": (math.log(hi / lo) / max(settings.frequencies - 1, 1)) if hi > lo else 0.0,
@@ -183,7 +224,7 @@ def screen(chain: Chain, speed: float, direction: int, a_max: float, lo: float, 
         A, W, F = (x.ravel() for x in np.meshgrid(np.unique(a_), np.unique(w_), p_, indexing="ij"))
         say(f"zoom level {level + 1}: {A.size} waves around a = {out.a[best]:.4g}, omega = {out.omega[best]:.4g}, "
             f"phi = {out.phi[best]:.4g}")  # fmt: skip
-        out = out.join(_run(chain, A, W, F, harmonics, settings, say))
+        out = out.join(_run(chain, A, W, F, harmonics, settings, say, (speed, direction)))
         step = {k: v / 2 for k, v in step.items()}
     return out, int(rank(out.gaits, speed, direction)[0]), steps
 
