@@ -373,10 +373,10 @@ def transient_speed(chain: Chain, *, transient: int, last: int, dynamics: Exact,
     with the required speed before solving the gait."""
     if not (isinstance(last, int) and 1 <= last < transient):
         raise ValueError(f"transient_speed: need 1 <= last < transient, got last={last!r}, transient={transient!r}.")
-    flat, valid, shape = prepare_chain(chain, None)
-    valid, unresolved = guard_chain(dynamics, flat, valid, shape)
-    omega = np.broadcast_to(np.asarray(flat.omega, np.float64), valid.shape)
-    valid = valid & jnp.asarray(select.periodic(omega, shape))
+    flat, valid_input, shape = prepare_chain(chain, None)
+    guarded, unresolved = guard_chain(dynamics, flat, valid_input, shape)  # refused alone, skipped in a batch
+    omega = np.broadcast_to(np.asarray(flat.omega, np.float64), guarded.shape)
+    valid = guarded & jnp.asarray(select.periodic(omega, shape))
     physics_of = physics_for(flat, contact)
     real = lambda v: jnp.asarray(v, flat.m.dtype)
     T_max = float(np.max(2 * np.pi / omega[np.isfinite(omega) & (omega > 0)], initial=1.0))
