@@ -461,6 +461,20 @@ MUTATIONS = [
         (("refuse_search(fastest, None, settings.dt", "refuse_search(base, None, settings.dt"),),
         (GUARDS_TESTS + "::test_optimisers_refuse_a_step_that_does_not_resolve_the_mechanism",),
     ),
+    Mutation(
+        "chain_screen_keeps_every_wave",
+        "the chain optimiser's screen: its transient-speed threshold dropped (every wave solved)",
+        "locomotion_jax/optimisation/_chain_screen.py",
+        (("keep = fast >= fraction * v_min", "keep = fast >= -np.inf"),),
+        ("tests/test_chain_optimise.py::test_screen_filter_keeps_the_fast_waves",),
+    ),
+    Mutation(
+        "transient_speed_wrong_span",
+        "transient_speed: the displacement divided by the whole transient instead of its last periods",
+        "locomotion_jax/gaits/_chain_gait.py",
+        (("omega / (2 * np.pi * last)", "omega / (2 * np.pi * transient)"),),
+        ("tests/test_chain_gait.py::test_transient_speed_equals_simulation_and_the_gait",),
+    ),
 ]
 
 
