@@ -6,7 +6,8 @@ contact, from the relaxed springs) of every wave of a grid over $(a, \\omega, \\
 chunks of one shape (one compilation, shared with the verification of the refined
 actuations: the waves are padded to their number of harmonics), then zooms in around the
 best wave that meets the requirement: per level a grid of a few points per variable over one
-step either side of it, the step halved.
+step either side of it, the step halved. Only the waves whose transient ends at half the
+required speed or more (`screen_speed`), and the fastest, have their gaits solved.
 """
 
 import math
@@ -119,11 +120,12 @@ def solve(chain: Chain, cos: np.ndarray, sin: np.ndarray, omega: np.ndarray, set
     gaits = lambda idx: with_actuation(chain, cos[idx], sin[idx], omega[idx])
     t0 = time.perf_counter()
     solved = np.arange(n)
-    if need is not None and settings.screen_speed > 0 and n > chunk:  # else every wave is among the fastest
+    # Not with n <= chunk (every wave among the fastest), nor a transient too short to have an end.
+    if need is not None and settings.screen_speed > 0 and n > chunk and settings.transient >= 2:
         v_min, direction = need
         v = np.full(n, np.nan)
+        last = min(LAST, settings.transient - 1)
         for idx, m in _chunks(n, chunk, np.argsort(omega, kind="stable")):
-            last = min(LAST, settings.transient - 1)
             v[idx[:m]] = transient_speed(gaits(idx), transient=settings.transient, last=last,
                                          dynamics=Exact(dt=settings.dt), contact="strict")[:m]  # fmt: skip
         solved = fast_enough(v, v_min, direction, settings.screen_speed, chunk)
