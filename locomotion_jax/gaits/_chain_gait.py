@@ -362,6 +362,15 @@ def steady_gait_chain(
     return unflatten(_chain_gait(best, best["omega"], flat.m.dtype, contact), shape)
 
 
+def _transient_setup(valid, omega: np.ndarray, shape, transient: int, dynamics: Exact):
+    """`(valid, T_max, max_steps)` of a transient: `valid` without the configurations whose
+    actuation is not periodic, the longest period, and the transient's step cap."""
+    valid = valid & jnp.asarray(select.periodic(omega, shape))
+    T_max = float(np.max(2 * np.pi / omega[np.isfinite(omega) & (omega > 0)], initial=1.0))
+    mst = jnp.asarray(dynamics.max_steps or default_max_steps(transient * T_max, dynamics.dt), jnp.int32)
+    return valid, T_max, mst
+
+
 def transient_speed(chain: Chain, *, transient: int, last: int, dynamics: Exact, contact: str = "strict",
                     start: str = "relaxed") -> np.ndarray:  # fmt: skip
     """The centre of mass's mean speed over periods `transient - last` to `transient` of the
@@ -376,11 +385,9 @@ def transient_speed(chain: Chain, *, transient: int, last: int, dynamics: Exact,
     flat, valid_input, shape = prepare_chain(chain, None)
     guarded, unresolved = guard_chain(dynamics, flat, valid_input, shape)  # refused alone, skipped in a batch
     omega = np.broadcast_to(np.asarray(flat.omega, np.float64), guarded.shape)
-    valid = guarded & jnp.asarray(select.periodic(omega, shape))
+    valid, _, mst = _transient_setup(guarded, omega, shape, transient, dynamics)
     physics_of = physics_for(flat, contact)
     real = lambda v: jnp.asarray(v, flat.m.dtype)
-    T_max = float(np.max(2 * np.pi / omega[np.isfinite(omega) & (omega > 0)], initial=1.0))
-    mst = jnp.asarray(dynamics.max_steps or default_max_steps(transient * T_max, dynamics.dt), jnp.int32)
     y, st1, _, _ = _transient_batch(flat, physics_of, valid, contact, start, dynamics.dt, real(transient - last), mst)
     _, st2, _, dX = _transient_batch(flat, physics_of, valid, contact, "paper", dynamics.dt, real(last), mst, y)
     ok = (np.asarray(st1) == Status.OK) & (np.asarray(st2) == Status.OK)
@@ -399,14 +406,12 @@ def solve(C, physics_of, valid, unresolved, shape, omega, *, periods, transient,
     host results of [`_select.judge`][] of the best period per configuration, and `omega`.
     `compact`, `patience`: see [`newton`][]; `say` reports each stage (`steady_gait(verbose=True)`)."""
     omega = np.broadcast_to(omega, valid.shape)
-    valid = valid & jnp.asarray(select.periodic(omega, shape))
     dtype_ = jax.tree_util.tree_leaves(C)[0].dtype
     f32 = jnp.finfo(dtype_).bits < 64
     tol = (1e-5 if f32 else 1e-11) if tol is None else float(tol)
     ks = select.check(periods, transient, tol, max_iter)
-    T_max = float(np.max(2 * np.pi / omega[np.isfinite(omega) & (omega > 0)], initial=1.0))
+    valid, T_max, mst = _transient_setup(valid, omega, shape, transient, dynamics)
     real = lambda v: jnp.asarray(v, dtype_)
-    mst = jnp.asarray(dynamics.max_steps or default_max_steps(transient * T_max, dynamics.dt), jnp.int32)
     say(f"transient: {transient} periods")
     y0, trans, trans_lift, _ = _transient_batch(C, physics_of, valid, contact, start, dynamics.dt, real(transient), mst,
                                              y_start)  # fmt: skip
