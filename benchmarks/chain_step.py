@@ -17,8 +17,8 @@ configuration-iteration.
 The configurations: omega in [1, 25], a in [0.01, 0.1]; N = 2 is `Chain.from_params` (the
 two-mass model), N > 2 a travelling wave on unit masses with Coulomb(0.7, 0.5); float64,
 dt = 0.03, paper contact, z unreachable. The other revision's engine module
-(`locomotion_jax/dynamics/_chain_exact.py` there) is loaded from git into this tree's package,
-so it must use this tree's helpers (`_numerics`, `_chain_motion`).
+(`locomotion_jax/dynamics/_engine.py` there, `_chain_exact.py` in older trees) is loaded from git
+into this tree's package, so it must use this tree's helpers (`_numerics`, `_motion`).
 """
 
 import argparse
@@ -40,7 +40,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 import locomotion_jax as lj  # noqa: E402
-from locomotion_jax.dynamics import _chain_exact as new_engine  # noqa: E402
+from locomotion_jax.dynamics import _engine as new_engine  # noqa: E402
 from locomotion_jax.dynamics._compile import COMPILER_OPTIONS  # noqa: E402
 from locomotion_jax.run._batch import prepare, prepare_chain  # noqa: E402
 
@@ -52,10 +52,16 @@ except ImportError:
 
 
 def load_engine(rev: str) -> types.ModuleType:
-    """`_chain_exact` of revision `rev`, as a module inside this tree's `locomotion_jax.dynamics`."""
-    path = "locomotion_jax/dynamics/_chain_exact.py"
-    src = subprocess.run(["git", "show", f"{rev}:{path}"], cwd=ROOT, check=True, capture_output=True, text=True).stdout
-    name = "locomotion_jax.dynamics._chain_exact_old"
+    """The exact engine of revision `rev`, as a module inside this tree's `locomotion_jax.dynamics`
+    (older trees name the module `_chain_exact` and its helper `_chain_motion`)."""
+    for path in ("locomotion_jax/dynamics/_engine.py", "locomotion_jax/dynamics/_chain_exact.py"):
+        show = subprocess.run(["git", "show", f"{rev}:{path}"], cwd=ROOT, capture_output=True, text=True)
+        if show.returncode == 0:
+            break
+    else:
+        raise FileNotFoundError(f"no exact engine module in revision {rev}")
+    src = show.stdout.replace("._chain_motion ", "._motion ").replace("_chain_motion as motion", "_motion as motion")
+    name = "locomotion_jax.dynamics._engine_old"
     mod = types.ModuleType(name)
     mod.__package__ = "locomotion_jax.dynamics"
     sys.modules[name] = mod

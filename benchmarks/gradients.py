@@ -48,7 +48,7 @@ def best_of(fn) -> float:
 
 def gait_benchmark(harmonics: int) -> None:
     from locomotion_jax.gaits import _adjoint as adj
-    from locomotion_jax.gaits._chain_orbit import ChainOracle, size
+    from locomotion_jax.gaits._element_orbit import ChainOracle, size
 
     N, omega, dt = 4, 3.0, 0.05
     S = N - 1

@@ -9,7 +9,7 @@ from ._status import mode_code
 
 
 SMOOTH_MARGIN = 0.05
-"""The smallest `transversality` and `near_miss` (radians of drive phase; `_chain_exact` module
+"""The smallest `transversality` and `near_miss` (radians of drive phase; `_engine` module
 docstring, "Margins") at which a result counts as `smooth`. A relative change of a
 parameter moves the switches by a drive phase of its order (they are locked to the drive
 and to each other), so this is about the relative change that the switching structure is
@@ -225,7 +225,7 @@ class Measurement(eqx.Module):
     - `n_steps`: integrator iterations used; `n_switch`: mode switches.
     - `transversality`, `near_miss`: how close the measured interval (from
       $t_\\text{start}$ to the end of the run) came to a change of switching structure,
-      as drive phases in radians (`_chain_exact` module docstring, "Margins"): the smallest
+      as drive phases in radians (`_engine` module docstring, "Margins"): the smallest
       margin at a located switch or stick-or-reverse decision, and at a near miss of an
       event function (a stuck mass almost breaking away, a slipping one almost
       stopping, a normal force almost reaching zero, $|X - X_0|$ turning back short of

@@ -40,9 +40,9 @@ class Mutation(NamedTuple):
     equivalent: str | None = None  # why no test can kill it (its results are the unmutated ones)
 
 
-CHAIN = "locomotion_jax/dynamics/_chain_exact.py"
-CHAIN_MOTION = "locomotion_jax/dynamics/_chain_motion.py"
-MEASURE = "locomotion_jax/dynamics/_chain_measure.py"
+CHAIN = "locomotion_jax/dynamics/_engine.py"
+CHAIN_MOTION = "locomotion_jax/dynamics/_motion.py"
+MEASURE = "locomotion_jax/dynamics/_measure.py"
 NUMERICS = "locomotion_jax/dynamics/_numerics.py"
 PARAMS = "locomotion_jax/model/_params.py"
 CHAIN_MODEL = "locomotion_jax/model/_chain.py"
@@ -396,7 +396,7 @@ MUTATIONS = [
     Mutation(
         "chain_gait_guard_dropped",
         "steady_gait (chains): the resolution guard is not asked",
-        "locomotion_jax/gaits/_chain_gait.py",
+        "locomotion_jax/gaits/_shooting.py",
         (("valid, unresolved = guard_chain(dynamics, flat, valid, shape)", "unresolved = None"),),
         GAIT_GUARDS,
     ),
@@ -471,7 +471,7 @@ MUTATIONS = [
     Mutation(
         "transient_speed_wrong_span",
         "transient_speed: the displacement divided by the whole transient instead of its last periods",
-        "locomotion_jax/gaits/_chain_gait.py",
+        "locomotion_jax/gaits/_shooting.py",
         (("omega / (2 * np.pi * last)", "omega / (2 * np.pi * transient)"),),
         ("tests/test_chain_gait.py::test_transient_speed_equals_simulation_and_the_gait",),
     ),

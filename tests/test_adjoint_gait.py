@@ -10,7 +10,7 @@ import locomotion_jax as lj
 import numpy as np
 import pytest
 from locomotion_jax.gaits import _adjoint as adj
-from locomotion_jax.gaits._chain_orbit import ChainOracle
+from locomotion_jax.gaits._element_orbit import ChainOracle
 
 
 pytestmark = pytest.mark.xdist_group("adjoint_gait")

@@ -12,8 +12,8 @@ import locomotion_jax as lj
 import numpy as np
 import pytest
 from chain_cases import ANISO
-from locomotion_jax.gaits import _chain_gait as cg
-from locomotion_jax.gaits._chain_orbit import gait_physics
+from locomotion_jax.gaits import _shooting as cg
+from locomotion_jax.gaits._element_orbit import gait_physics
 from locomotion_jax.model._chain_array import (
     ARRAY_FROM,
     array_from,

@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
-from locomotion_jax.gaits import _chain_gait as cg
+from locomotion_jax.gaits import _shooting as cg
 
 
 P = np.pi
@@ -113,7 +113,7 @@ def test_chain_monodromy_against_finite_differences(worms):
 @pytest.mark.parametrize("layout", ["array", "unrolled"])
 def test_monodromy_through_coincident_events(layout):
     """A symmetric worm (equal masses, springs in antiphase) whose end masses break away and stop at
-    the same instants: each switch is differentiated at its own time (`_chain_exact._retimed`), so
+    the same instants: each switch is differentiated at its own time (`_engine._retimed`), so
     the monodromy equals central differences of the period map to 1e-5, as where the events are
     apart; a mass at rest at the section has a zero column in both."""
     fr = lj.AnisotropicCoulomb(0.5, 0.9, 0.3, 0.7)

@@ -15,7 +15,7 @@ import locomotion_jax as lj
 import numpy as np
 import pytest
 from locomotion_jax.cli import _main as _cli
-from locomotion_jax.gaits import _chain_orbit
+from locomotion_jax.gaits import _element_orbit
 from locomotion_jax.optimisation import _chain_screen as screen
 from typer.testing import CliRunner
 
@@ -134,7 +134,7 @@ def test_infeasible_requirement_is_flagged(infeasible):
 @pytest.mark.slow
 def test_one_compilation_serves_every_evaluation(opt3, infeasible):
     """Both optimisations (other requirements, other iterates, the fallbacks) share one compiled oracle."""
-    assert _chain_orbit.TRACES["evaluate"] == 1 and _chain_orbit.TRACES["relax"] <= 1
+    assert _element_orbit.TRACES["evaluate"] == 1 and _element_orbit.TRACES["relax"] <= 1
 
 
 @pytest.mark.slow

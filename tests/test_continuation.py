@@ -192,9 +192,9 @@ def test_waveform_coefficient():
 def test_no_recompilation_and_parameter_leaving_its_range():
     """Another parameter, other values and another gait period reuse the compiled corrector and
     transient; a branch whose parameter leaves its valid range (mu_s below mu_k) ends INVALID there."""
-    from locomotion_jax.gaits import _chain_gait, _corrector
+    from locomotion_jax.gaits import _corrector, _shooting
 
-    sizes = lambda: (_chain_gait._transient_batch._cache_size(), _corrector.correct_batch._cache_size())  # pyright: ignore[reportFunctionMemberAccess]
+    sizes = lambda: (_shooting._transient_batch._cache_size(), _corrector.correct_batch._cache_size())  # pyright: ignore[reportFunctionMemberAccess]
     lj.continuation(lj.Params(omega=jnp.asarray([2.0, 16.0])), "omega", jnp.asarray([2.1, 15.0]), max_points=3)
     before = sizes()
     b = lj.continuation(lj.Params(omega=jnp.asarray([2.0, 16.0])), "mu_s", 0.4, periods=2, max_points=60)

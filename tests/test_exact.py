@@ -269,7 +269,7 @@ def test_breakaway_from_relaxed_springs_is_located_exactly(contact, omega, a, mh
     # d = 0, at rest at l = lbar = l0(0): F_1 = -k a sin(omega t) and N_1 = m_1 = 2 mhat while both
     # masses stick, so the lighter one (both at mhat = 0.5) breaks away at sin(omega t*) = mu_s m_1 / (k a). |F_1| has a
     # kink at t = 0 (F_1 = 0); the first iteration must end on t*, not where a two-sided rate puts it.
-    from locomotion_jax.dynamics import _chain_exact
+    from locomotion_jax.dynamics import _engine
     from locomotion_jax.dynamics._runs import chain_initial_state
     from locomotion_jax.model._waveform import Sinusoid
 
@@ -279,7 +279,7 @@ def test_breakaway_from_relaxed_springs_is_located_exactly(contact, omega, a, mh
     assert all(bool(s) for s in st.stuck)
     t_star = math.asin(p.mu_s * 2 * mhat / (p.k * a)) / omega
     while float(st.t) < t_star * (1 - 1e-6):  # steps shortened on the predicted event
-        st, _ = _chain_exact.step(P, contact, 0.01, st, jnp.asarray(1.0))
+        st, _ = _engine.step(P, contact, 0.01, st, jnp.asarray(1.0))
         assert all(bool(s) for s in st.stuck)
     assert float(st.t) == pytest.approx(t_star, rel=1e-10, abs=1e-13)
     assert bool(st.pend[0]) and bool(st.pend[1]) == (mhat == 0.5)  # equal masses break away together

@@ -187,10 +187,10 @@ def test_bad_arguments(kwargs, match):
 def test_jit_free_of_recompilation():
     """Another configuration of the same batch size, another period or another step `dt` (the
     optimiser's check at dt/2) reuses the compiled solver."""
-    from locomotion_jax.gaits import _chain_gait, _corrector
+    from locomotion_jax.gaits import _corrector, _shooting
 
     steady_gait(lj.Params(omega=3.0), periods=1)
-    sizes = lambda: (_chain_gait._transient_batch._cache_size(), _corrector.correct_batch._cache_size())  # pyright: ignore[reportFunctionMemberAccess]
+    sizes = lambda: (_shooting._transient_batch._cache_size(), _corrector.correct_batch._cache_size())  # pyright: ignore[reportFunctionMemberAccess]
     before = sizes()
     steady_gait(lj.Params(omega=5.0, mu_s=0.9), periods=2, transient=10)
     steady_gait(lj.Params(omega=3.0), periods=1, dynamics=lj.Exact(dt=0.005))

@@ -1,7 +1,7 @@
 """Margins to a change of switching structure, and the `smooth` flag built on them.
 
 A measured quantity is only piecewise smooth in the parameters. The engines record how
-close each run came to a change of its switching structure (`_chain_exact` module docstring,
+close each run came to a change of its switching structure (`_engine` module docstring,
 "Margins"); these tests check that the margins vanish where the structure changes, that
 the flag is down where the reference's own finite differences are inconsistent, and up
 (with the derivative matching the reference) where they agree.

@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
-from locomotion_jax.dynamics import _chain_exact as engine
+from locomotion_jax.dynamics import _engine as engine
 from locomotion_jax.dynamics._runs import chain_initial_state
 
 

@@ -19,7 +19,7 @@ import locomotion_jax as lj
 import numpy as np
 import pytest
 from locomotion_jax._custom_types import Contact
-from locomotion_jax.dynamics import _chain_exact as engine, _chain_measure
+from locomotion_jax.dynamics import _engine as engine, _measure
 from locomotion_jax.model._physics import Scalars
 
 
@@ -230,7 +230,7 @@ def test_measure_of_the_papers_model_on_the_n_body_engine(contact, start):
     ref = lj.measure(p, z=5.0, horizon=300.0, t_start=ts, contact=contact, start=start)
     dyn = lj.Exact()
     cap = 0  # each configuration's own cap, from its own span (as `measure`)
-    out = _chain_measure.measure_batch(
+    out = _measure.measure_batch(
         p.physics(), jnp.ones(om.size, bool), jnp.asarray(ts), 5.0, 300.0, 25.0, contact, start, dyn.dt, cap
     )
     lifted = np.isfinite(np.asarray(ref.t_liftoff))

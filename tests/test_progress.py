@@ -51,32 +51,32 @@ def test_gait_commands_say_they_compile_before_solving(monkeypatch, args):
 
 
 def test_steady_gait_says_what_it_does_before_compiling(monkeypatch, capsys):
-    from locomotion_jax.gaits import _chain_gait
+    from locomotion_jax.gaits import _shooting
 
     def transient(*args, **kwargs):
         assert "compiling (first call only)" in capsys.readouterr().err  # printed before the long work
         raise Stop
 
-    monkeypatch.setattr(_chain_gait, "_transient_batch", transient)
+    monkeypatch.setattr(_shooting, "_transient_batch", transient)
     with pytest.raises(Stop):
         lj.steady_gait(lj.Params(omega=2.0), verbose=True)
 
 
 def test_chain_steady_gait_says_what_it_does_before_compiling(monkeypatch, capsys):
-    from locomotion_jax.gaits import _chain_gait
+    from locomotion_jax.gaits import _shooting
 
     def solver(*args, **kwargs):
         assert "compiling (first call only)" in capsys.readouterr().err
         raise Stop
 
-    monkeypatch.setattr(_chain_gait, "steady_gait_chain", solver)
+    monkeypatch.setattr(_shooting, "steady_gait_chain", solver)
     with pytest.raises(Stop):
         lj.steady_gait(lj.Chain(masses=[1.0] * 3, waveforms=lj.TravellingWave(0.06, 2.0, 1.0)), verbose=True)
 
 
 @pytest.mark.parametrize("call", ["continuation", "basins"])
 def test_continuation_and_basins_say_what_they_do_before_compiling(monkeypatch, capsys, call):
-    from locomotion_jax.gaits import _chain_gait
+    from locomotion_jax.gaits import _shooting
 
     def transient(*args, **kwargs):
         err = capsys.readouterr().err
@@ -84,7 +84,7 @@ def test_continuation_and_basins_say_what_they_do_before_compiling(monkeypatch, 
         assert "[steady_gait " in err and "compiling (first call only)" in err, err
         raise Stop
 
-    monkeypatch.setattr(_chain_gait, "_transient_batch", transient)
+    monkeypatch.setattr(_shooting, "_transient_batch", transient)
     with pytest.raises(Stop):
         if call == "continuation":
             lj.continuation(lj.Params(omega=4.0), "omega", 6.0, verbose=True)

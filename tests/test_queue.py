@@ -6,9 +6,9 @@ import locomotion_jax as lj
 import numpy as np
 import pytest
 from locomotion_jax.dynamics import (
-    _chain_exact as chain_engine,
-    _chain_simulate,
+    _engine as engine,
     _paper,
+    _simulate,
 )
 from locomotion_jax.dynamics._queue import run_queue, Stream
 from locomotion_jax.dynamics._runs import chain_initial_state
@@ -118,8 +118,8 @@ def _saves_alone(p, w, save_at, contact, start, dt, max_steps):
     _, P, ok = _paper.physics(p, w)
     s = chain_initial_state(P, ok, contact, start)
     # The state in the two-mass order (x1, v1, x2, v2), modes, slip directions, the margins' records.
-    row = lambda s: _chain_simulate._row(s)[jnp.asarray([0, 2, 1, 3, *range(4, 13)])]
-    step = lambda s, t_stop: chain_engine.step(P, contact, dt, s, t_stop)[0]
+    row = lambda s: _simulate._row(s)[jnp.asarray([0, 2, 1, 3, *range(4, 13)])]
+    step = lambda s, t_stop: engine.step(P, contact, dt, s, t_stop)[0]
     return _plain_saves(s, step, row, save_at, max_steps)
 
 
@@ -175,13 +175,13 @@ def test_chain_simulate_queue_matches_one_loop_per_configuration(max_steps):
     flat, ok, _ = prepare_chain(lj.Chain.stack(chains), None)
     save_at = jnp.asarray(np.concatenate([[0.0, 0.0], np.linspace(0.1, 12.0, 22), [12.0, 12.0]]))
     cap = jnp.asarray(max_steps, jnp.int32)
-    queued = _chain_simulate._simulate_batch(flat, ok, save_at, "strict", "paper", 0.02, cap, 3, 4)
+    queued = _simulate._simulate_batch(flat, ok, save_at, "strict", "paper", 0.02, cap, 3, 4)
 
     def alone(C, ok):
         P = C.physics()
         s = chain_initial_state(P, ok, "strict", "paper")
-        step = lambda s, t_stop: chain_engine.step(P, "strict", 0.02, s, t_stop)[0]
-        return _plain_saves(s, step, _chain_simulate._row, save_at, cap)
+        step = lambda s, t_stop: engine.step(P, "strict", 0.02, s, t_stop)[0]
+        return _plain_saves(s, step, _simulate._row, save_at, cap)
 
     ref = jax.vmap(alone)(flat, ok)
     S = lj.Status

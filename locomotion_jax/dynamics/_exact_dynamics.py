@@ -1,8 +1,8 @@
 """`Exact`: the hybrid stick/slip dynamics with located switches, as an `AbstractDynamics`.
 
 Its settings are Python numbers, static under `jit` (changing them recompiles). The
-paper's model runs on the N-body engine (`_paper`), as the chains do (`_chain_simulate`,
-`_chain_measure`): each a flat batch through the work queue (`_queue`).
+paper's model runs on the N-body engine (`_paper`), as the chains do (`_simulate`,
+`_measure`): each a flat batch through the work queue (`_queue`).
 """
 
 from typing import Any
@@ -14,7 +14,7 @@ from jax.sharding import Mesh, PartitionSpec
 
 from .._custom_types import Array, ArrayLike
 from ..model._chain_array import engine_physics
-from . import _chain_measure, _chain_simulate, _paper
+from . import _measure, _paper, _simulate
 from ._base import AbstractDynamics
 from ._flat import FlatBatch
 from ._forward import check_static
@@ -50,7 +50,7 @@ class Exact(AbstractDynamics):
             args = (batch.mechanism, batch.wave, batch.wave_axes, save_at, contact, start, self.dt, max_steps)
             return _paper.simulate_batch(*args, batch.initial)
         args = (batch.mechanism, batch.valid, save_at, contact, start, self.dt, max_steps)
-        return _chain_simulate.simulate_batch(*args, batch.initial)
+        return _simulate.simulate_batch(*args, batch.initial)
 
     def measure(
         self, batch: FlatBatch, z: ArrayLike, horizon: ArrayLike, window: ArrayLike, contact: str, start: str
@@ -74,7 +74,7 @@ class Exact(AbstractDynamics):
         chain = batch.mechanism
         ts = chain.t_start if batch.t_start is None else batch.t_start
         P = engine_physics(chain, contact)  # the chain's layout (`_chain_array`)
-        return _chain_measure.measure_batch(
+        return _measure.measure_batch(
             P, batch.valid, ts, z, horizon, window, contact, start, self.dt, self._own_cap(), batch.initial
         )
 

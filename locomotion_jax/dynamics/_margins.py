@@ -1,7 +1,7 @@
 """Margins to a change of switching structure, as the front ends report them.
 
 The engines record, in squared radians of drive phase, how close a run came to a
-change of its switching structure (`_chain_exact` module docstring, "Margins"); these
+change of its switching structure (`_engine` module docstring, "Margins"); these
 functions turn those records into the result fields of `measure` and `simulate`.
 The target's margin is relative to `tau_z` instead: a switch that meets $t_z$ is not
 locked to the drive as the switches are to each other, and $t_z$ moves by about

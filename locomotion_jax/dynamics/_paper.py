@@ -1,8 +1,8 @@
-"""The paper's two-mass model on the N-body engine (`_chain_exact`): `measure` and `simulate` runs.
+"""The paper's two-mass model on the N-body engine (`_engine`): `measure` and `simulate` runs.
 
 Each configuration's physics is [`Params.physics`][locomotion_jax.Params.physics] (the two-mass
 chain, SPEC §8 at $N = 2$), built inside the work queue when a lane takes the configuration;
-the loops are the N-body engine's (`_chain_measure`, `_chain_simulate`'s rows). This module
+the loops are the N-body engine's (`_measure`, `_simulate`'s rows). This module
 only translates: the paper's parameters, waveform and states $(x_1, v_1, x_2, v_2)$ in, the
 fields of [`Measurement`][locomotion_jax.Measurement] and [`Trajectory`][locomotion_jax.Trajectory] out.
 Under `contact="hop"` (SPEC §10) the same runs carry the hopping fields (heights, flight fractions,
@@ -20,14 +20,14 @@ from ..model import _two_mass as model
 from ..model._params import Params, safe_params
 from ..model._physics import loads_at
 from ..model._waveform import AbstractWaveform
-from . import _chain_exact as engine, _chain_measure as chain_measure
-from ._chain_motion import Mode, rates, State
-from ._chain_simulate import _row
+from . import _engine as engine, _measure as runs
 from ._compile import engine_jit
 from ._margins import switch_gap
+from ._motion import Mode, rates, State
 from ._queue import run_queue
 from ._runs import chain_initial_state, default_lanes
 from ._saves import BUFFER, run_saves
+from ._simulate import _row
 
 
 # The N-body engine's saved columns (x1, x2, v1, v2) in the order (x1, v1, x2, v2).
@@ -90,10 +90,10 @@ def measure_batch(
     n = params.omega.shape[0]
     lanes = default_lanes(n) if lanes is None else lanes
     take = _picker(params, wave, wave_axes, t_start, initial)
-    setup = lambda i: chain_measure._setup(*take(i), z, horizon, window, contact, start, dt, max_steps)
-    advance = lambda f, d: chain_measure._advance(f, d, contact, dt)
-    results = lambda f, d: chain_measure._results(f, d, contact)
-    return run_queue(setup, chain_measure._running, advance, results, n, lanes, _order(params))
+    setup = lambda i: runs._setup(*take(i), z, horizon, window, contact, start, dt, max_steps)
+    advance = lambda f, d: runs._advance(f, d, contact, dt)
+    results = lambda f, d: runs._results(f, d, contact)
+    return run_queue(setup, runs._running, advance, results, n, lanes, _order(params))
 
 
 _measure_batch = engine_jit(measure_batch, ("wave_axes", "contact", "start", "dt", "lanes"), reverse=True)
@@ -103,14 +103,14 @@ def measure_one(params: Params, wave: AbstractWaveform, z, horizon, window, cont
     """One configuration in a plain loop of its own (no queue): what the queue must reproduce."""
     add = lambda tree: jax.tree_util.tree_map(lambda x: x[None], tree)
     take = _picker(add(params), add(wave), 0, None, None)
-    f, d = chain_measure._setup(*take(0), z, horizon, window, contact, start, dt, max_steps)
-    advance = lambda d: chain_measure._advance(f, d, contact, dt)
-    d = jax.lax.while_loop(lambda d: chain_measure._running(f, d), advance, d)
-    return chain_measure._results(f, d, contact)
+    f, d = runs._setup(*take(0), z, horizon, window, contact, start, dt, max_steps)
+    advance = lambda d: runs._advance(f, d, contact, dt)
+    d = jax.lax.while_loop(lambda d: runs._running(f, d), advance, d)
+    return runs._results(f, d, contact)
 
 
 def _hop_row(s: engine.Hybrid) -> Array:
-    """A saved row under `contact="hop"`: the N-body engine's (`_chain_simulate._row`: heights,
+    """A saved row under `contact="hop"`: the N-body engine's (`_simulate._row`: heights,
     vertical velocities, landings and the Zeno flag included), then the in-flight flags."""
     assert s.fly is not None
     return jnp.concatenate([_row(s), jnp.stack([f.astype(s.t.dtype) for f in s.fly])])
@@ -118,7 +118,7 @@ def _hop_row(s: engine.Hybrid) -> Array:
 
 def _simulate_rows(params, wave, wave_axes, save_at, contact, start, dt, max_steps, lanes, buffer=BUFFER, initial=None):
     """The saved rows of a flat batch ([`_saves.run_saves`][]: a work queue over `lanes` lanes,
-    highest frequencies first): the N-body engine's rows (`_chain_simulate._row`), reordered to
+    highest frequencies first): the N-body engine's rows (`_simulate._row`), reordered to
     $(x_1, v_1, x_2, v_2, e_d, w)$, the stick flags, the slip directions and the margins' records
     (columns 0 to 12); under `contact="hop"` then $(y_1, y_2, \\dot y_1, \\dot y_2)$, the landings,
     the Zeno flag and the in-flight flags (columns 13 to 20)."""

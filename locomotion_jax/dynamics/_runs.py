@@ -14,7 +14,7 @@ import numpy as np
 from .._status import Status
 from ..model._params import Params
 from ..model._physics import AbstractPhysics
-from . import _chain_exact as chain_engine
+from . import _engine as engine
 from ._forward import concrete_value
 
 
@@ -94,7 +94,7 @@ def horizon_bound(params: Params, t_extra: float) -> float:
     return tmax + t_extra
 
 
-def chain_initial_state(P: AbstractPhysics, valid, contact, start, row=None) -> chain_engine.Hybrid:
+def chain_initial_state(P: AbstractPhysics, valid, contact, start, row=None) -> engine.Hybrid:
     """The N-body engine's state at $t = 0$ of one mechanism (its physics `P`): at rest in the
     `start` position, or the state `row` $(x_0, \\dots, x_{N-1}, v_0, \\dots, v_{N-1})$ if given;
     flagged `Status.INVALID` where the mechanism is not `valid` or `row` is not finite or one of
@@ -104,11 +104,11 @@ def chain_initial_state(P: AbstractPhysics, valid, contact, start, row=None) -> 
     x = P.initial_positions(start)
     vert = P.hop()[:2] if contact == "hop" else (None, None)
     if row is None:
-        st = chain_engine.init(P, contact, x, P.initial_velocities(start), *vert)
+        st = engine.init(P, contact, x, P.initial_velocities(start), *vert)
     else:
         n = x.shape[-1]
         gaps = P.gaps(P.bodies(row[:n]))
         ok = jnp.all(jnp.isfinite(row)) & jnp.all(jnp.stack([jnp.all(g > 0) for g in gaps] or [jnp.asarray(True)]))
-        st = chain_engine.init(P, contact, jnp.where(ok, row[:n], x), jnp.where(ok, row[n:], 0), *vert)
+        st = engine.init(P, contact, jnp.where(ok, row[:n], x), jnp.where(ok, row[n:], 0), *vert)
         valid = valid & ok
     return eqx.tree_at(lambda s: s.status, st, jnp.where(valid, st.status, Status.INVALID).astype(jnp.int32))

@@ -21,7 +21,7 @@ from ..model._params import Params, safe_params
 from ..model._physics import AbstractPhysics
 from ..model._two_mass import initial_gap
 from ..model._waveform import AbstractWaveform
-from . import _smoothed as _engine
+from . import _smoothed as smoothed
 from ._base import AbstractDynamics
 from ._flat import FlatBatch
 
@@ -161,14 +161,14 @@ def params_state(params: Params, start: str, initial: Array | None) -> Array:
 def _simulate_params(p, w, save, contact, start, initial, dyn):
     p, valid = safe_params(p, w)
     P = params_physics(p, w)
-    return _engine.simulate_one(P, valid, save, contact, params_state(p, start, initial), dyn)
+    return smoothed.simulate_one(P, valid, save, contact, params_state(p, start, initial), dyn)
 
 
 def _measure_params(p, w, z, horizon, window, contact, start, t_start, initial, dyn):
     p, valid = safe_params(p, w)
     ws = p.t_start if t_start is None else jnp.asarray(t_start, p.dtype)
     P = params_physics(p, w)
-    return _engine.measure_one(P, valid, ws, z, horizon, window, contact, params_state(p, start, initial), dyn)
+    return smoothed.measure_one(P, valid, ws, z, horizon, window, contact, params_state(p, start, initial), dyn)
 
 
 @eqx.filter_jit
@@ -199,7 +199,7 @@ def two_mass_trajectory(out: dict[str, Array]) -> dict[str, Array]:
 def _simulate_bodies(M, valid, save, contact, start, initial, dyn):
     def one(M, ok, y):
         P = M.physics()
-        return _engine.simulate_one(P, ok, save, contact, _engine.initial_state(P, start, y), dyn)
+        return smoothed.simulate_one(P, ok, save, contact, smoothed.initial_state(P, start, y), dyn)
 
     out = jax.vmap(one)(M, valid, initial)
     del out["f_ex"]  # the paper's model's only
@@ -213,6 +213,6 @@ def _measure_bodies(M, valid, t_start, z, horizon, window, contact, start, initi
 
     def one(M, ok, ws, y):
         P = M.physics()
-        return _engine.measure_one(P, ok, ws, z, horizon, window, contact, _engine.initial_state(P, start, y), dyn)
+        return smoothed.measure_one(P, ok, ws, z, horizon, window, contact, smoothed.initial_state(P, start, y), dyn)
 
     return jax.vmap(one)(M, valid, ws, initial)

@@ -1,6 +1,6 @@
 """Reverse-mode derivatives of a chain's steady gait by the implicit function theorem (an adjoint solve).
 
-The steady gait of a decision vector $\\theta$ (the chain optimiser's, `_chain_orbit`) is the fixed
+The steady gait of a decision vector $\\theta$ (the chain optimiser's, `_element_orbit`) is the fixed
 point $y^* = \\Phi(y^*, \\theta)$ of the $k$-period map, with figures $F = f(y^*, \\theta)$
 ($\\Delta X$, $e_d$, $\\min N$ over the $k$ periods). [`steady_gait`][] solves it by Newton's
 method with $M = \\partial\\Phi/\\partial y$ by forward mode in the $n_y = 2N - 1$ directions of
@@ -20,7 +20,7 @@ tangents, transposed here), which gives the saltation of each switch.
 So `jax.grad` of a scalar function of the gait (cost of transport, speed) with respect to all
 $p$ coefficients costs one gait solve, one forward pass in $n_y$ directions at $y^*$ and one
 reverse pass, against $n_y + p$ directions for the forward-mode oracle
-([`ChainOracle.orbits`][locomotion_jax.gaits._chain_orbit.ChainOracle.orbits]).
+([`ChainOracle.orbits`][locomotion_jax.gaits._element_orbit.ChainOracle.orbits]).
 
 Only reverse mode is defined (a `custom_vjp`): `jax.jvp`/`jax.jacfwd` of [`steady_gait`][] raise
 JAX's error for a `custom_vjp` function; forward-mode sensitivities come from the oracle's
@@ -35,7 +35,7 @@ import jax
 import jax.numpy as jnp
 
 from .._custom_types import Array
-from ._chain_orbit import ChainOracle, period, with_waves
+from ._element_orbit import ChainOracle, period, with_waves
 from ._orbit import newton_orbit
 
 

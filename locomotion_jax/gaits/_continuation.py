@@ -40,7 +40,7 @@ from ..model._params import Params
 from ..model._waveform import AbstractWaveform
 from ..run._batch import mechanism_arg, prepare, prepare_chain
 from ..run._resolution import guard_chain, guard_two_mass
-from . import _chain_gait as chain_gait, _corrector as corrector, _progress as progress
+from . import _corrector as corrector, _progress as progress, _shooting as shooting
 from ._bifurcation import BranchEvents, find_events, kinds
 from ._gait import configs, GaitStatus, steady_gait
 from ._result import PaperNames
@@ -200,7 +200,7 @@ def _paper_setup(params: Params, parameter, stops_of, dynamics, waveform, dtype)
         end, end_wave = jax.vmap(lambda c, lam: corrector.with_value(c, sel, lam))(C, jnp.asarray(stops, flat.dtype))
         _, far = guard_two_mass(dynamics, end, end_wave, shape)
     omega = np.broadcast_to(np.asarray(wave.omega, np.float64), (B,))
-    return _Setup(C, chain_gait.paper_physics, sel, shape, spec.label, _mask(far, B), omega,
+    return _Setup(C, shooting.paper_physics, sel, shape, spec.label, _mask(far, B), omega,
                   spec.name == "omega" and spec.harmonic < 0, True)  # fmt: skip
 
 
@@ -216,7 +216,7 @@ def _mechanism_setup(mech, parameter, stops_of, dynamics, waveform, dtype, conta
     omega = np.broadcast_to(np.asarray(flat.omega, np.float64), (B,))
     sets_omega = any(bool(np.any(np.asarray(m))) and corrector._leaf_names(p).endswith(".omega")
                      for p, m in jax.tree_util.tree_flatten_with_path(sel)[0])  # fmt: skip
-    physics_of = chain_gait.physics_for(flat, contact)
+    physics_of = shooting.physics_for(flat, contact)
     return _Setup(flat, physics_of, sel, shape, parameter, _mask(far, B), omega, sets_omega, False)
 
 

@@ -15,7 +15,7 @@ the implicit function theorem: its first $S$ columns are the monodromy matrix. T
 differentiates the switching test functions of the period (the slip margin and the smallest normal
 force, [`Gait`][]), whose gradients say on which side of a switching surface a point lies.
 
-The period map is the same for every mechanism (`_chain_gait.period_map` of the configuration's
+The period map is the same for every mechanism (`_shooting.period_map` of the configuration's
 physics); what a mechanism supplies is a flat batch of configurations (a pytree with a leading
 batch axis) and `physics_of(c) -> (physics, valid)` for one configuration. The parameter is a
 [`Selector`][]: a boolean mask over the leaves of one configuration, traced, so that one
@@ -38,7 +38,7 @@ from ..dynamics._compile import engine_jit
 from ..dynamics._forward import jacfwd_in_turn
 from ..model._params import PARAM_NAMES, Params
 from ..model._waveform import AbstractWaveform, Fourier, Sinusoid
-from ._chain_gait import _Period, period_map
+from ._shooting import _Period, period_map
 
 
 Selector = Any

@@ -10,7 +10,7 @@ from forward-mode differentiation through the exact engine: located events enter
 their implicit-function times, so $M$ includes the saltation of every switch. The
 eigenvalues of $M$ are the Floquet multipliers.
 
-Every mechanism runs on one period map and one solver (`_chain_gait`, `_corrector`) over the
+Every mechanism runs on one period map and one solver (`_shooting`, `_corrector`) over the
 N-body engine: the paper's model as the two-mass chain of
 [`Params.physics`][locomotion_jax.Params.physics], whose section state $(u, v_1, v_2)$ is the
 chain's (gap, then velocities); its [`Gait`][] is named as the paper names it (`names="paper"`).
@@ -38,7 +38,7 @@ from ..model._params import Params
 from ..model._waveform import AbstractWaveform
 from ..run._batch import mechanism_arg, prepare, unflatten
 from ..run._resolution import guard_two_mass
-from . import _chain_gait as chain_gait, _progress as progress
+from . import _progress as progress, _shooting as shooting
 from ._result import Gait as Gait
 from ._select import GaitStatus as GaitStatus
 
@@ -67,7 +67,7 @@ def steady_gait(
     **Arguments:**
 
     - `params`: [`Params`][], a [`Chain`][] or a [`Mechanism`][locomotion_jax.Mechanism] (any batch
-      shape; a mechanism's section state: [`Gait`][] and the `_chain_gait` module).
+      shape; a mechanism's section state: [`Gait`][] and the `_shooting` module).
     - `periods`: gait periods to try, in actuation periods.
     - `transient`: actuation periods integrated before the Newton iteration.
     - `tol`: Newton tolerance on $\\|\\Phi_k(y) - y\\|_\\infty / (1 + \\|y\\|_\\infty)$ (default 1e-11
@@ -123,7 +123,7 @@ def _chain(chain: Chain | Mechanism, periods, transient, tol, max_iter, dynamics
     if waveform is not None:
         name = type(chain).__name__
         raise ValueError(f"waveform= applies to Params; a {name} carries its own waveforms (in its elements).")
-    return chain_gait.steady_gait_chain(chain, periods=periods, transient=transient, tol=tol, max_iter=max_iter,
+    return shooting.steady_gait_chain(chain, periods=periods, transient=transient, tol=tol, max_iter=max_iter,
                              dynamics=dynamics, contact=contact, start=start, dtype=dtype, say=say)  # fmt: skip
 
 
@@ -135,13 +135,13 @@ def _two_mass(params: Params, periods, transient, tol, max_iter, dynamics: Exact
     `guarded=False` skips the resolution guard: only for a caller that checks the resolution
     itself by a convergence study (the exact optimiser's verification solves at `dt` and `dt/2`).
     `compact=True`: the longer gait periods, tried on the few configurations still open, run on a
-    smaller batch (`_chain_gait.newton`; for a caller that solves many batches of one size).
+    smaller batch (`_shooting.newton`; for a caller that solves many batches of one size).
     `say` reports each stage (`steady_gait(verbose=True)`). Under `contact="hop"`: the gait of the
     two-mass chain `Chain.from_params(params, waveform)` (under the bodies' names, heights in its state)."""
     if contact == "hop":  # flight and landing: the chain's section state carries the heights
         chain = Chain.from_params(params, waveform)
         kw = dict(periods=periods, transient=transient, tol=tol, max_iter=max_iter, start=start, dtype=dtype)
-        return chain_gait.steady_gait_chain(chain, dynamics=dynamics, contact=contact, **kw)
+        return shooting.steady_gait_chain(chain, dynamics=dynamics, contact=contact, **kw)
     model.check_contact(contact)
     flat, wave, axes, shape = prepare(params, waveform, dtype)
     unresolved = None
@@ -152,10 +152,10 @@ def _two_mass(params: Params, periods, transient, tol, max_iter, dynamics: Exact
     C = configs(flat, wave, axes)
     B = flat.omega.shape[0]
     omega = np.broadcast_to(np.asarray(wave.omega, np.float64), (B,))
-    best = chain_gait.solve(C, chain_gait.paper_physics, jnp.ones((B,), bool), unresolved, shape, omega,
+    best = shooting.solve(C, shooting.paper_physics, jnp.ones((B,), bool), unresolved, shape, omega,
                             periods=periods, transient=transient, tol=tol, max_iter=max_iter, dynamics=dynamics,
                             contact=contact, start=start, y_start=y_start, say=say, compact=compact)  # fmt: skip
-    return unflatten(chain_gait._chain_gait(best, omega, flat.dtype, contact, PAPER), shape)
+    return unflatten(shooting.as_gait(best, omega, flat.dtype, contact, PAPER), shape)
 
 
 def configs(flat: Params, wave: AbstractWaveform, axes: int | None) -> tuple[Params, AbstractWaveform]:

@@ -4,9 +4,9 @@ optimisers' oracle, for the paper's model and for chains and mechanisms alike.
 A decision vector $\\theta$ sets a model's actuation: for the paper's model, the stroke's
 shape in units of $a_\\max$ and $\\log\\omega$ (a family of `_shapes`: a [`Fourier`][] series or
 a periodic [`Spline`][]; [`ShapeActuation`][locomotion_jax.gaits._orbit.ShapeActuation]); for a
-chain or a mechanism, one such signal per actuated element (`_chain_orbit`). Either way the
+chain or a mechanism, one such signal per actuated element (`_element_orbit`). Either way the
 actuated model is a physics ([`AbstractPhysics`][locomotion_jax.AbstractPhysics]) and the
-period map is the N-body exact engine's (`dynamics._chain_exact`): the paper's model is the
+period map is the N-body exact engine's (`dynamics._engine`): the paper's model is the
 two-mass chain of `Params.physics`.
 
 For a given $\\theta$ the steady gait is the fixed point $y^*$ of the $k$-period map
@@ -38,13 +38,13 @@ import jax.numpy as jnp
 
 from .._custom_types import Array, Contact
 from .._status import Status
-from ..dynamics import _chain_exact as engine
+from ..dynamics import _engine as engine
 from ..dynamics._compile import engine_jit
 from ..model._params import Params
 from ..model._physics import AbstractPhysics
 from ..model._two_mass import initial_gap
 from ..optimisation._shapes import AbstractShape
-from ._chain_gait import _reduced, _section_state
+from ._shooting import _reduced, _section_state
 
 
 TRACES: Counter = Counter()

@@ -418,8 +418,8 @@ def sweep(
 def _sweep_mechanism(mechanism: "Callable[..., Chain | Mechanism]", axes, fixed, mode, z, horizon, window, t_start,
                      dynamics, contact, start, dtype, chunk_size, path, overwrite, progress, on_invalid,
                      order):  # fmt: skip
-    """`sweep` over chains built by `mechanism` (see `maps._chain_sweep`)."""
-    from ._chain_sweep import sweep_chain
+    """`sweep` over chains built by `mechanism` (see `maps._builder_sweep`)."""
+    from ._builder_sweep import sweep_chain
 
     if not callable(mechanism):
         raise TypeError(

@@ -18,7 +18,7 @@ Method:
 2. **Local refinement of per-spring harmonics** (`_chain_local`) from the refined best wave and
    the next best distinct waves of the grid: a monotone L-BFGS descent on an exact penalty,
    with exact gradients through the periodic orbit by the implicit function theorem
-   (`gaits._chain_orbit`), the starts in lockstep (one batched evaluation per step).
+   (`gaits._element_orbit`), the starts in lockstep (one batched evaluation per step).
 3. **Verification.** Every refined actuation and the baseline wave are solved again by
    [`steady_gait`][] (strict contact, from the relaxed springs, periods 1 to 4); the reported
    optimum is the cheapest that is converged, stable, without lift-off, fast enough and within
@@ -36,7 +36,7 @@ from typing import Any
 import jax.numpy as jnp
 import numpy as np
 
-from ..gaits._chain_orbit import ChainOracle
+from ..gaits._element_orbit import ChainOracle
 from ..model._actuator import RestLength
 from ..model._chain import Chain
 from ..model._springwaves import SpringFourier

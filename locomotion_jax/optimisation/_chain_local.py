@@ -1,7 +1,7 @@
 """The chain optimiser's local refinement: a monotone descent on an exact penalty, per start, in lockstep.
 
 Each start runs in its own thread (`_lockstep.run_lockstep`);
-its evaluations are batched into one call of the oracle (`_chain_orbit.ChainOracle`:
+its evaluations are batched into one call of the oracle (`_element_orbit.ChainOracle`:
 periodic orbit, figures and their exact gradients). The descent takes L-BFGS directions and
 a backtracking line search that accepts only a decrease of the merit, so that an iterate
 never walks into a costlier gait or a failed orbit; the stroke of every spring is kept by
@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..gaits import _chain_orbit as orbit
+from ..gaits import _element_orbit as orbit
 from ._descent import descent
 
 

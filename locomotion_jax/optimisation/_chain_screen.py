@@ -20,8 +20,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..dynamics._exact_dynamics import Exact
-from ..gaits._chain_gait import steady_gait_chain, transient_speed
 from ..gaits._select import GaitStatus
+from ..gaits._shooting import steady_gait_chain, transient_speed
 from ..model._chain import Chain
 from ..model._springwaves import SpringFourier
 from ._chain_optimum import ChainOptimiseSettings

@@ -4,7 +4,7 @@ method over the waveforms of the mechanism's actuated elements.
 Problem, for one mechanism, a required speed $v_\\min > 0$ in the direction $\\sigma = \\pm 1$ and a
 bound $a_\\max$ on every actuated signal: over periodic signals of a common base frequency for each
 element driven by a waveform (a spring's rest length, an internal force, an external force;
-`gaits._chain_orbit.actuated`), each about the element's own mean $\\bar s_j$, of one of the two
+`gaits._element_orbit.actuated`), each about the element's own mean $\\bar s_j$, of one of the two
 families of the exact optimiser (`_shapes`, [`MechanismOptimiseSettings`][]`.shape`):
 
 - `"fourier"` (default): Fourier series of $H$ harmonics, $s_j(t) = \\bar s_j + \\sum_n A_{jn}\\cos
@@ -27,7 +27,7 @@ Method (as `optimisation._chain`, with sinusoids in place of travelling waves):
 2. **Local refinement** of every element's harmonics (or control values, started from the
    sinusoid's interpolating spline) from the best `local` sinusoids: the chain's monotone L-BFGS
    descent on an exact penalty (`_chain_local`), with exact gradients through the periodic orbit
-   (`gaits._chain_orbit.ChainOracle`, which takes a mechanism). The bound is kept by radial
+   (`gaits._element_orbit.ChainOracle`, which takes a mechanism). The bound is kept by radial
    rescaling of each element's Fourier coefficients onto its exact stroke, or by clipping the
    control values.
 3. **Verification**: the refined actuations (on the exact bound) and the baseline are solved
@@ -52,7 +52,7 @@ import numpy as np
 
 from .._json import jsonable
 from ..dynamics._exact_dynamics import Exact
-from ..gaits._chain_orbit import actuated, ChainOracle, with_fourier, with_spline
+from ..gaits._element_orbit import actuated, ChainOracle, with_fourier, with_spline
 from ..model._bodies import Mechanism
 from . import _chain_local as local
 from ._chain_optimum import ChainOptimiseSettings

@@ -3,7 +3,7 @@
 The front end checks the arguments, the mechanism flattens itself into a batch
 (`AbstractMechanism.flat_batch`) and the dynamics measure it (`AbstractDynamics.measure`):
 the exact engines accumulate the measurements on the fly, so memory does not grow
-with the number of steps (`dynamics._chain_measure`, the paper's model through `dynamics._paper`).
+with the number of steps (`dynamics._measure`, the paper's model through `dynamics._paper`).
 """
 
 from typing import Any

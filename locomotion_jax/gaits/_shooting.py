@@ -33,7 +33,7 @@ import numpy as np
 from .._custom_types import Array, ArrayLike, Contact
 from .._results import BODIES
 from .._status import Regime, Status
-from ..dynamics import _chain_exact as engine, _numerics as num, _paper as paper
+from ..dynamics import _engine as engine, _numerics as num, _paper as paper
 from ..dynamics._compile import engine_jit
 from ..dynamics._exact_dynamics import Exact
 from ..dynamics._runs import chain_initial_state, default_max_steps, STICK_TOL
@@ -359,7 +359,7 @@ def steady_gait_chain(
     best = solve(flat, physics_for(flat, contact), valid, unresolved, shape, np.asarray(flat.omega, np.float64),
                  periods=periods, transient=transient, tol=tol, max_iter=max_iter, dynamics=dynamics, contact=contact,
                  start=start, y_start=y_start, say=say, compact=compact, patience=patience)  # fmt: skip
-    return unflatten(_chain_gait(best, best["omega"], flat.m.dtype, contact), shape)
+    return unflatten(as_gait(best, best["omega"], flat.m.dtype, contact), shape)
 
 
 def _transient_setup(valid, omega: np.ndarray, shape, transient: int, dynamics: Exact):
@@ -437,7 +437,7 @@ def solve(C, physics_of, valid, unresolved, shape, omega, *, periods, transient,
     return dict(best, omega=omega)
 
 
-def _chain_gait(r: dict, omega: np.ndarray, dtype: Any, contact: str, names: str = BODIES) -> Gait:
+def as_gait(r: dict, omega: np.ndarray, dtype: Any, contact: str, names: str = BODIES) -> Gait:
     """The solver's host results `r` (of [`solve`][]) as a [`Gait`][] (NaN where not converged)."""
     ok = r["status"] == GaitStatus.CONVERGED
     nan = lambda x: jnp.asarray(np.where(select.expand(ok, x), x, np.nan), dtype)

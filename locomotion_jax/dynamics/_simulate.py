@@ -14,7 +14,7 @@ from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._chain_array import engine_physics, uses_array
 from ..model._physics import loads_at
-from . import _chain_exact as engine
+from . import _engine as engine
 from ._compile import engine_jit
 from ._margins import switch_gap
 from ._runs import chain_initial_state, default_lanes

@@ -19,7 +19,7 @@ from .._custom_types import Array
 from .._status import Regime, Status
 from ..model._chain_array import lane_width
 from ..model._physics import AbstractPhysics, loads_at
-from . import _chain_exact as engine
+from . import _engine as engine
 from ._compile import engine_jit
 from ._margins import margin_fields
 from ._numerics import Target, target_margin

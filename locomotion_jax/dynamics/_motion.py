@@ -6,7 +6,7 @@ Everything is over tuples of per-body scalars. In a fixed mode the motion is smo
 body is stuck ($\\dot x_i = \\dot v_i = 0$) or slips in a fixed direction $\\sigma_i$, and each
 normal force enters friction as $n_i = N_i$ (strict contact) or $\\nu_i N_i$ with a fixed side
 $\\nu_i$ (paper contact, inside a step). The event functions are listed in the engine's
-docstring ([`_chain_exact`][locomotion_jax.dynamics._chain_exact]).
+docstring ([`_engine`][locomotion_jax.dynamics._engine]).
 """
 
 from typing import Any, NamedTuple

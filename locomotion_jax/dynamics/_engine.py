@@ -74,8 +74,8 @@ import jax.numpy as jnp
 from .._custom_types import Array, Contact
 from .._status import Status
 from ..model._physics import AbstractPhysics, Loads, loads_at, Scalars
-from . import _chain_motion as motion, _numerics as num
-from ._chain_motion import energy as energy, Mode, State
+from . import _motion as motion, _numerics as num
+from ._motion import energy as energy, Mode, State
 
 
 class Hybrid(eqx.Module):
@@ -115,7 +115,7 @@ class Hybrid(eqx.Module):
 class StepInfo(NamedTuple):
     """What one iteration did; `stuck` is the mode during `[t0, t1]`.
 
-    For the steady gaits' switching test functions (`gaits._chain_gait`): `vel`, per mass, a slipping
+    For the steady gaits' switching test functions (`gaits._shooting`): `vel`, per mass, a slipping
     mass whose velocity reached zero at `t0` (re-decided there); `hold`, per mass, its stick margin at
     `t0` (eq. 7 generalised, $\\ge 0$ where the static limits hold); `h`, the step's full length;
     `normal`, per body, the signed normal load $N_i$ with its first two time derivatives at `t0` and
