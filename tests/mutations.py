@@ -390,7 +390,7 @@ MUTATIONS = [
         "steady_gait (two masses): the resolution guard's mask is not passed on (an unresolved "
         "configuration of a batch not flagged)",
         "locomotion_jax/gaits/_gait.py",
-        (("jnp.ones((B,), bool), unresolved, shape", "jnp.ones((B,), bool), None, shape"),),
+        (("paper_physics, valid, unresolved, shape", "paper_physics, valid, None, shape"),),
         GAIT_GUARDS,
     ),
     Mutation(

@@ -192,7 +192,9 @@ def test_main_prints_error_and_exits_2(capsys):
     assert "Error: Invalid parameter 'a'" in capsys.readouterr().err
 
 
-def test_global_options_set_jax_config():
+def test_global_options_set_jax_config(monkeypatch):
+    # Every command run before in this process set the CPU device count (the default, one per core).
+    monkeypatch.setenv("XLA_FLAGS", "")
     try:
         res = invoke("--no-x64", "--cpu-devices", "3", "figures", "bad")
         assert res.exit_code == 2

@@ -118,17 +118,20 @@ def test_not_a_mechanism_is_refused():
 
 
 def test_the_interface_names_no_kind_of_mechanism():
-    """`AbstractDynamics` has one `simulate` and one `measure` for every mechanism, and the front ends
-    (run/, maps/, cli/) hand them a mechanism's flat batch without choosing a path by its kind."""
+    """`AbstractDynamics` has one `simulate` and one `measure` for every mechanism; the front ends
+    hand them a mechanism's flat batch, and the solvers (steady gaits, continuation, the optimisers)
+    ask the mechanism for its problem, without enumerating the kinds of mechanism."""
     from pathlib import Path
+
+    from locomotion_jax.model._mechanism import AbstractMechanism
 
     abstract = sorted(lj.AbstractDynamics.__abstractmethods__)
     assert abstract == ["describe", "measure", "measure_chunk", "nominal_step", "simulate", "spec", "step_cap"]
     assert not [n for n in dir(lj.AbstractDynamics) if "two_mass" in n or "chain" in n]
+    assert not [n for n in dir(AbstractMechanism) if "dispatch" in n or "two_mass" in n or "chain" in n]
     root = Path(lj.__file__).parent
-    for part in ("run", "maps", "cli"):
-        for src in (root / part).glob("*.py"):
-            assert ".dispatch(" not in src.read_text(), src
+    for src in root.rglob("*.py"):
+        assert ".dispatch(" not in src.read_text(), src
 
 
 def test_smoothed_sweep_equals_measure():

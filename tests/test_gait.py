@@ -204,12 +204,11 @@ def test_compact_batch_for_the_longer_periods(monkeypatch):
     from locomotion_jax.gaits import _corrector, _gait
 
     p = _batch(CASES[:9] + BAD + [UNSTABLE])
-    args = ((1, 2, 3, 4), 30, None, 12, lj.Exact(), None, "strict", "paper", None)
-    full = _gait._two_mass(p, *args)
+    full = _gait.paper_gait(p, dynamics=lj.Exact())
     sizes: list[int] = []
     solve = _corrector.correct_batch
     monkeypatch.setattr(_corrector, "correct_batch", lambda *a: sizes.append(int(a[8].shape[0])) or solve(*a))
-    small = _gait._two_mass(p, *args, compact=True)
+    small = _gait.paper_gait(p, dynamics=lj.Exact(), compact=True)
     assert sizes[0] == 12 and set(sizes[1:]) == {3}, sizes  # period 1 on the batch, the others on 3 rows
     assert int(small.k[-1]) == 2 and bool(small.stable[-1]) and int(full.k[-1]) == 2
     for name in (f.name for f in dataclasses.fields(full)):

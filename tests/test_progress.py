@@ -69,7 +69,7 @@ def test_chain_steady_gait_says_what_it_does_before_compiling(monkeypatch, capsy
         assert "compiling (first call only)" in capsys.readouterr().err
         raise Stop
 
-    monkeypatch.setattr(_shooting, "steady_gait_chain", solver)
+    monkeypatch.setattr(_shooting, "steady_gaits", solver)
     with pytest.raises(Stop):
         lj.steady_gait(lj.Chain(masses=[1.0] * 3, waveforms=lj.TravellingWave(0.06, 2.0, 1.0)), verbose=True)
 

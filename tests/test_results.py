@@ -81,3 +81,68 @@ def test_chain_names_are_deprecated_aliases():
             warnings.simplefilter("always")
             assert getattr(lj, old) is new
         assert any(issubclass(w.category, DeprecationWarning) and old in str(w.message) for w in caught)
+
+
+def _optimum_fields(cls, **given):
+    """Every field of an optimum class: `given`, else a number, a flag, a list or an array by its type."""
+    import dataclasses
+
+    by_type = {"float": 0.25, "int": 2, "bool": True, "str": "fourier", "list": [], "dict": {}}
+    out = {}
+    for f in dataclasses.fields(cls):
+        if f.name in given:
+            out[f.name] = given[f.name]
+            continue
+        t = str(f.type)
+        typed = (v for k, v in by_type.items() if t.startswith(k) or t == f"<class '{k}'>")
+        out[f.name] = np.array([[0.5, -0.25]]) if "ndarray" in t else next(typed, None)
+    return out
+
+
+def test_every_optimum_has_the_shared_interface():
+    """The three optimisers' results (`Optimum`, `ChainOptimum`, `MechanismOptimum`) share one interface
+    (`optimisation._optimum.AbstractOptimum`): `to_dict` leaves out the mechanism object and, unless
+    `full`, the candidates; `to_json` is that dict; `summary` reports the requirement, the cost and
+    the feasibility."""
+    import json
+
+    from locomotion_jax.optimisation._optimum import AbstractOptimum
+
+    links = [lj.Spring(0, 1, k=10.0, rest=0.0), lj.Force(0, 1, lj.Sinusoid(0.6, 3.0, 0.0))]
+    mech = lj.Mechanism(masses=[1.0, 0.5], friction=[lj.Coulomb(0.5, 0.4), None], carried_by=[None, 0], links=links)
+    cases = [
+        (
+            lj.Optimum,
+            dict(
+                constraints_exact={"speed": True},
+                sinusoid=None,
+                lbar=1.0,
+                method="exact",
+                control=None,
+                cos=np.array([0.5, 0.0]),
+                sin=np.array([0.0, -0.25]),
+            ),
+        ),  # fmt: skip
+        (
+            lj.ChainOptimum,
+            dict(
+                chain=CHAIN,
+                constraints_exact={"speed": True},
+                travelling_wave=None,
+                stroke_exact=np.array([0.05, 0.05]),
+            ),
+        ),  # fmt: skip
+        (
+            lj.MechanismOptimum,
+            dict(mechanism=mech, elements=[2], sinusoid=None, control=None, harmonics=2, stroke_exact=np.array([0.5])),
+        ),  # fmt: skip
+    ]
+    for cls, given in cases:
+        opt = cls(**_optimum_fields(cls, candidates=[{"cost": 1.0}], cost_of_transport_exact=1.2345, **given))
+        assert isinstance(opt, AbstractOptimum)
+        brief, full = opt.to_dict(), opt.to_dict(full=True)
+        assert "candidates" not in brief and full["candidates"] == [{"cost": 1.0}]
+        assert not {"chain", "mechanism"} & set(full), cls
+        assert json.loads(opt.to_json()) == brief
+        text = opt.summary()
+        assert "1.234" in text and "FEASIBLE" in text and "0.25" in text, text

@@ -246,20 +246,9 @@ def _optimise_bodies(built: Built, v_min: float, a_max: float | None, direction:
     default = 3 if built.kind == "chain" else 2
     opt = lj.optimise(built.mechanism, v_min, a_max, direction=1 if direction is None else direction, omega=omega,
                       harmonics=default if harmonics is None else harmonics, settings=settings)  # fmt: skip
-    if built.kind == "chain":
-        if out is not None:
-            (out / "chain_optimum.json").write_text(opt.to_json(full=True, indent=1))
-            _plot(opt, out / "chain_optimum.png")
-            if not json_out:
-                typer.echo(f"wrote {out / 'chain_optimum.json'}, {out / 'chain_optimum.png'}", err=True)
-        typer.echo(opt.to_json() if json_out else opt.summary())
-        return
-    record = {**opt.to_dict(), **built.record}
-    if json_out:
-        typer.echo(dumps(record))
-        return
-    typer.echo(f"{built.file}: optimal actuation of links {opt.elements} ({opt.harmonics} harmonics)")
-    for name in ("omega", "mean_speed_exact", "cost_of_transport_exact", "feasible_exact", "stable_exact",
-                 "sinusoid", "improvement_vs_sinusoid", "mean_speed_simulated", "cost_of_transport_simulated",
-                 "cos", "sin"):  # fmt: skip
-        typer.echo(f"  {name:<28} {record[name]}")
+    if built.kind == "chain" and out is not None:  # a chain's per-spring harmonics, saved and plotted
+        (out / "chain_optimum.json").write_text(opt.to_json(full=True, indent=1))
+        _plot(opt, out / "chain_optimum.png")
+        if not json_out:
+            typer.echo(f"wrote {out / 'chain_optimum.json'}, {out / 'chain_optimum.png'}", err=True)
+    typer.echo(dumps({**opt.to_dict(), **built.record}) if json_out else opt.summary())

@@ -172,8 +172,13 @@ def tangent(J: np.ndarray, prev: np.ndarray) -> np.ndarray:
     return t
 
 
-class _Setup(NamedTuple):
-    """A mechanism's configurations for the corrector (`_corrector`)."""
+class BranchSetup(NamedTuple):
+    """A mechanism's branches as the corrector (`_corrector`) takes them
+    ([`AbstractMechanism.branch_setup`][locomotion_jax.model._mechanism.AbstractMechanism.branch_setup]):
+    the flat configurations `C` and the physics of each, the parameter's selector `sel`, the batch
+    `shape`, the parameter's `label`, which branches' far end the step does not resolve (`far`), the
+    forcing frequencies, whether the parameter sets them, and whether the results take the paper's
+    names."""
 
     C: Any
     physics_of: Any
@@ -186,7 +191,8 @@ class _Setup(NamedTuple):
     paper: bool
 
 
-def _paper_setup(params: Params, parameter, stops_of, dynamics, waveform, dtype) -> _Setup:
+def paper_setup(params: Params, parameter, stops_of, dynamics, waveform, dtype) -> BranchSetup:
+    """The paper's model's [`BranchSetup`][]: `parameter` a field or a waveform's coefficient."""
     spec = corrector.parse(parameter, waveform)
     flat, wave, axes, shape = prepare(params, waveform, dtype)
     C = configs(flat, wave, axes)
@@ -200,11 +206,12 @@ def _paper_setup(params: Params, parameter, stops_of, dynamics, waveform, dtype)
         end, end_wave = jax.vmap(lambda c, lam: corrector.with_value(c, sel, lam))(C, jnp.asarray(stops, flat.dtype))
         _, far = guard_two_mass(dynamics, end, end_wave, shape)
     omega = np.broadcast_to(np.asarray(wave.omega, np.float64), (B,))
-    return _Setup(C, shooting.paper_physics, sel, shape, spec.label, _mask(far, B), omega,
-                  spec.name == "omega" and spec.harmonic < 0, True)  # fmt: skip
+    return BranchSetup(C, shooting.paper_physics, sel, shape, spec.label, _mask(far, B), omega,
+                       spec.name == "omega" and spec.harmonic < 0, True)  # fmt: skip
 
 
-def _mechanism_setup(mech, parameter, stops_of, dynamics, waveform, dtype, contact) -> _Setup:
+def bodies_setup(mech, parameter, stops_of, dynamics, waveform, dtype, contact) -> BranchSetup:
+    """The [`BranchSetup`][] of a chain or a mechanism: `parameter` a leaf named by its attribute."""
     if waveform is not None:
         raise ValueError(f"waveform= applies to Params; a {type(mech).__name__} carries its own waveforms.")
     flat, valid, shape = prepare_chain(mech, dtype)
@@ -217,7 +224,7 @@ def _mechanism_setup(mech, parameter, stops_of, dynamics, waveform, dtype, conta
     sets_omega = any(bool(np.any(np.asarray(m))) and corrector._leaf_names(p).endswith(".omega")
                      for p, m in jax.tree_util.tree_flatten_with_path(sel)[0])  # fmt: skip
     physics_of = shooting.physics_for(flat, contact)
-    return _Setup(flat, physics_of, sel, shape, parameter, _mask(far, B), omega, sets_omega, False)
+    return BranchSetup(flat, physics_of, sel, shape, parameter, _mask(far, B), omega, sets_omega, False)
 
 
 def _mask(far, B: int) -> np.ndarray:
@@ -299,9 +306,7 @@ def continuation(
             raise ValueError(f"stop must be finite and differ from the start value of {parameter!r}, got {stop!r}.")
         return stops
 
-    args = (parameter, stops_of, dynamics, waveform, dtype)
-    setup: _Setup = mechanism_arg(params).dispatch(two_mass=lambda p: _paper_setup(p, *args),
-                                                   chain=lambda c: _mechanism_setup(c, *args, contact))  # fmt: skip
+    setup: BranchSetup = mechanism_arg(params).branch_setup(parameter, stops_of, dynamics, waveform, dtype, contact)
     C, shape = setup.C, setup.shape
     B = math.prod(shape)
     lam0 = corrector.value(C, setup.sel, parameter)

@@ -36,7 +36,7 @@ from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform
-from ..run._batch import mechanism_arg, prepare, unflatten
+from ..run._batch import mechanism_arg, prepare
 from ..run._resolution import guard_two_mass
 from . import _progress as progress, _shooting as shooting
 from ._result import Gait as Gait
@@ -105,43 +105,26 @@ def steady_gait(
     mechanism = mechanism_arg(params)
     say(f"{int(np.prod(mechanism.batch_shape))} configuration(s): compiling (first call only) and solving, "
         f"transient {transient} periods, gait periods {periods}")  # fmt: skip
-    args = (periods, transient, tol, max_iter, dynamics, waveform, contact, start, dtype)
-    # The mechanism supplies its configurations (double dispatch); the period map and the solver are one.
-    two_mass = lambda p: _two_mass(p, *args, say=say)
-    gait = mechanism.dispatch(two_mass=two_mass, chain=lambda c: _chain(c, *args, say=say))
+    # The mechanism states its problem (configurations, physics, starts); the period map and the solver are one.
+    problem = mechanism.gait_problem(dynamics, waveform=waveform, contact=contact, start=start, dtype=dtype)
+    gait = shooting.steady_gaits(problem, periods=periods, transient=transient, tol=tol, max_iter=max_iter,
+                                 dynamics=dynamics, contact=contact, say=say)  # fmt: skip
     say(f"done: {int(np.sum(np.asarray(gait.converged)))} of {np.size(np.asarray(gait.converged))} converged")
     return gait
 
 
-def _chain(chain: Chain | Mechanism, periods, transient, tol, max_iter, dynamics: Exact, waveform, contact, start,
-           dtype, say=lambda message: None):  # fmt: skip
-    if not isinstance(chain, (Chain, Mechanism)):
-        raise NotImplementedError(
-            f"steady_gait takes Params, a Chain or a Mechanism; a {type(chain).__name__} is not solved for its "
-            "periodic gait. Run it with simulate or measure."
-        )
-    if waveform is not None:
-        name = type(chain).__name__
-        raise ValueError(f"waveform= applies to Params; a {name} carries its own waveforms (in its elements).")
-    return shooting.steady_gait_chain(chain, periods=periods, transient=transient, tol=tol, max_iter=max_iter,
-                             dynamics=dynamics, contact=contact, start=start, dtype=dtype, say=say)  # fmt: skip
-
-
-def _two_mass(params: Params, periods, transient, tol, max_iter, dynamics: Exact, waveform, contact, start, dtype,
-              guarded: bool = True, say=lambda message: None, compact: bool = False):  # fmt: skip
-    """The paper's model on the N-body period map: each configuration's physics is the two-mass
-    chain of its parameters and waveform ([`Params.physics`][locomotion_jax.Params.physics]).
+def paper_problem(params: Params, dynamics: Exact, waveform: AbstractWaveform | None, contact: str,
+                  start: str | ArrayLike, dtype: Any, guarded: bool = True) -> shooting.GaitProblem:  # fmt: skip
+    """The paper's model's [`GaitProblem`][locomotion_jax.gaits._shooting.GaitProblem] on the N-body
+    period map: each configuration's physics is the two-mass chain of its parameters and waveform
+    ([`Params.physics`][locomotion_jax.Params.physics]), its section state $(u, v_1, v_2)$, its
+    [`Gait`][] named as the paper names it. Under `contact="hop"`: the problem of the two-mass chain
+    `Chain.from_params(params, waveform)` (under the bodies' names, heights in its state).
 
     `guarded=False` skips the resolution guard: only for a caller that checks the resolution
-    itself by a convergence study (the exact optimiser's verification solves at `dt` and `dt/2`).
-    `compact=True`: the longer gait periods, tried on the few configurations still open, run on a
-    smaller batch (`_shooting.newton`; for a caller that solves many batches of one size).
-    `say` reports each stage (`steady_gait(verbose=True)`). Under `contact="hop"`: the gait of the
-    two-mass chain `Chain.from_params(params, waveform)` (under the bodies' names, heights in its state)."""
+    itself by a convergence study (the exact optimiser's verification solves at `dt` and `dt/2`)."""
     if contact == "hop":  # flight and landing: the chain's section state carries the heights
-        chain = Chain.from_params(params, waveform)
-        kw = dict(periods=periods, transient=transient, tol=tol, max_iter=max_iter, start=start, dtype=dtype)
-        return shooting.steady_gait_chain(chain, dynamics=dynamics, contact=contact, **kw)
+        return shooting.bodies_problem(Chain.from_params(params, waveform), dynamics, contact, start, dtype)
     model.check_contact(contact)
     flat, wave, axes, shape = prepare(params, waveform, dtype)
     unresolved = None
@@ -152,10 +135,18 @@ def _two_mass(params: Params, periods, transient, tol, max_iter, dynamics: Exact
     C = configs(flat, wave, axes)
     B = flat.omega.shape[0]
     omega = np.broadcast_to(np.asarray(wave.omega, np.float64), (B,))
-    best = shooting.solve(C, shooting.paper_physics, jnp.ones((B,), bool), unresolved, shape, omega,
-                            periods=periods, transient=transient, tol=tol, max_iter=max_iter, dynamics=dynamics,
-                            contact=contact, start=start, y_start=y_start, say=say, compact=compact)  # fmt: skip
-    return unflatten(shooting.as_gait(best, omega, flat.dtype, contact, PAPER), shape)
+    valid = jnp.ones((B,), bool)  # an invalid configuration's physics says so itself (`paper_physics`)
+    return shooting.GaitProblem(C, shooting.paper_physics, valid, unresolved, shape, omega, flat.dtype, start, y_start,
+                                PAPER)  # fmt: skip
+
+
+def paper_gait(params: Params, *, dynamics: Exact, transient: int = 30, waveform: AbstractWaveform | None = None,
+               start: str = "paper", guarded: bool = True, compact: bool = False) -> Gait:  # fmt: skip
+    """The exact optimiser's steady gaits of the paper's model: [`steady_gait`][]'s defaults under strict
+    contact, with the solver's options (`guarded`: [`paper_problem`][]; `compact`:
+    `_shooting.newton`, for a caller that solves many batches of one size)."""
+    problem = paper_problem(params, dynamics, waveform, "strict", start, None, guarded)
+    return shooting.steady_gaits(problem, transient=transient, dynamics=dynamics, contact="strict", compact=compact)
 
 
 def configs(flat: Params, wave: AbstractWaveform, axes: int | None) -> tuple[Params, AbstractWaveform]:

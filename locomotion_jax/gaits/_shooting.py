@@ -312,32 +312,45 @@ def newton(C, physics_of, contact, dt, y0, go, k, tol, max_iter, max_steps, comp
     return dict(y=y, M=r.J[:, :n, :n], out=r.out, it=r.it, done=r.done, residual=np.max(np.abs(r.out.y - y), axis=1))
 
 
-def steady_gait_chain(
-    chain: Chain | Mechanism,
-    *,
-    periods: int | Sequence[int] = (1, 2, 3, 4),
-    transient: int = 30,
-    tol: float | None = None,
-    max_iter: int = 12,
-    dynamics: Exact,
-    contact: str = "strict",
-    start: str | ArrayLike = "paper",
-    dtype: Any = None,
-    say=lambda message: None,
-    patience: int | None = None,
-    compact: bool = False,
-) -> Gait:
-    """[`steady_gait`][] for a [`Chain`][] or a [`Mechanism`][locomotion_jax.Mechanism] (its
-    arguments; `start` names a start at rest (a mechanism: its own `x0`, `v0`), or gives section
-    states at phase 0: gaps then velocities $(u_0, \\dots, u_{N-2}, v_0, \\dots, v_{N-1})$, shape
-    `batch + (2N - 1,)`, or for an anchored mechanism positions then velocities, `batch + (2N,)`);
-    `patience` and `compact` as in [`newton`][] (the chain optimiser's screen)."""
-    check_contact_start(contact, start if isinstance(start, str) else "paper", chain)
+class GaitProblem(NamedTuple):
+    """The steady gaits to solve, as a mechanism hands them to the solver
+    ([`AbstractMechanism.gait_problem`][locomotion_jax.model._mechanism.AbstractMechanism.gait_problem]):
+    a flat batch of configurations `configs`, each integrated with the physics
+    `physics_of(config) -> (physics, valid)`; which run (`valid`), which the resolution guard skips
+    (`unresolved`, or `None`), the batch `shape`, the forcing frequencies `omega` (host, flat), the
+    floating `dtype`, the start at rest `start` or the flat section states `y_start` to start from
+    instead, and how the [`Gait`][] names its arrays (`names`)."""
+
+    configs: Any
+    physics_of: Callable[[Any], tuple[AbstractPhysics, Array]]
+    valid: Array
+    unresolved: Array | None
+    shape: tuple[int, ...]
+    omega: np.ndarray
+    dtype: Any
+    start: str
+    y_start: Array | None = None
+    names: str = BODIES
+
+
+def bodies_problem(mechanism: Any, dynamics: Exact, contact: str, start: str | ArrayLike,
+                   dtype: Any) -> GaitProblem:  # fmt: skip
+    """The [`GaitProblem`][] of a [`Chain`][] or a [`Mechanism`][locomotion_jax.Mechanism]: `start` names a
+    start at rest (a mechanism: its own `x0`, `v0`), or gives section states at phase 0: gaps then
+    velocities $(u_0, \\dots, u_{N-2}, v_0, \\dots, v_{N-1})$, shape `batch + (2N - 1,)`, or for an
+    anchored mechanism positions then velocities, `batch + (2N,)`. Checks the input (`ValueError`,
+    `NotImplementedError`) and the step's resolution (refused alone, skipped in a batch)."""
+    if not isinstance(mechanism, (Chain, Mechanism)):
+        raise NotImplementedError(
+            f"steady_gait takes Params, a Chain or a Mechanism; a {type(mechanism).__name__} is not solved for its "
+            "periodic gait. Run it with simulate or measure."
+        )
+    check_contact_start(contact, start if isinstance(start, str) else "paper", mechanism)
     if contact == "hop" and not isinstance(start, str):
         raise NotImplementedError(
             "steady_gait with contact='hop' starts at rest ('paper' or 'relaxed'), not from given section states."
         )
-    flat, valid, shape = prepare_chain(chain, dtype)
+    flat, valid, shape = prepare_chain(mechanism, dtype)
     valid, unresolved = guard_chain(dynamics, flat, valid, shape)  # refused alone, skipped in a batch
     y_start = None
     if not isinstance(start, str):
@@ -350,16 +363,51 @@ def steady_gait_chain(
                 f"start must be 'paper', 'relaxed' or finite section states ({what}, velocities "
                 f"v_0..v_N-1) of shape {shape + (n_red,)}, got shape {y.shape}."
             )
-        if isinstance(chain, Chain) and shape == () and np.any(y[: flat.n_masses - 1] <= 0):  # refused alone
+        if isinstance(mechanism, Chain) and shape == () and np.any(y[: flat.n_masses - 1] <= 0):  # refused alone
             raise ValueError(
                 f"start: the gaps u_j must be > 0 (the masses in order along the chain), got {y[: flat.n_masses - 1]}."
             )
         y_start = jnp.asarray(y.reshape(-1, n_red), flat.m.dtype)
         start = "paper"
-    best = solve(flat, physics_for(flat, contact), valid, unresolved, shape, np.asarray(flat.omega, np.float64),
+    omega = np.asarray(flat.omega, np.float64)
+    return GaitProblem(flat, physics_for(flat, contact), valid, unresolved, shape, omega, flat.m.dtype, start, y_start)
+
+
+def steady_gaits(
+    problem: GaitProblem,
+    *,
+    periods: int | Sequence[int] = (1, 2, 3, 4),
+    transient: int = 30,
+    tol: float | None = None,
+    max_iter: int = 12,
+    dynamics: Exact,
+    contact: str = "strict",
+    say=lambda message: None,
+    patience: int | None = None,
+    compact: bool = False,
+) -> Gait:
+    """The [`Gait`][] of every configuration of `problem` ([`steady_gait`][]'s arguments; `patience` and
+    `compact` as in [`newton`][]: the optimisers' screens)."""
+    best = solve(problem.configs, problem.physics_of, problem.valid, problem.unresolved, problem.shape, problem.omega,
                  periods=periods, transient=transient, tol=tol, max_iter=max_iter, dynamics=dynamics, contact=contact,
-                 start=start, y_start=y_start, say=say, compact=compact, patience=patience)  # fmt: skip
-    return unflatten(as_gait(best, best["omega"], flat.m.dtype, contact), shape)
+                 start=problem.start, y_start=problem.y_start, say=say, compact=compact,
+                 patience=patience)  # fmt: skip
+    return unflatten(as_gait(best, best["omega"], problem.dtype, contact, problem.names), problem.shape)
+
+
+def steady_gait_chain(
+    chain: Chain | Mechanism,
+    *,
+    dynamics: Exact,
+    contact: str = "strict",
+    start: str | ArrayLike = "paper",
+    dtype: Any = None,
+    **kwargs: Any,
+) -> Gait:
+    """[`steady_gait`][] of a [`Chain`][] or a [`Mechanism`][locomotion_jax.Mechanism] with the solver's
+    own options (`patience`, `compact`: [`steady_gaits`][]; the chain optimiser's screen)."""
+    return steady_gaits(bodies_problem(chain, dynamics, contact, start, dtype), dynamics=dynamics, contact=contact,
+                        **kwargs)  # fmt: skip
 
 
 def _transient_setup(valid, omega: np.ndarray, shape, transient: int, dynamics: Exact):

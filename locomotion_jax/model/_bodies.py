@@ -9,7 +9,7 @@ exact engine as they run a [`Chain`][locomotion_jax.Chain].
 """
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import equinox as eqx
@@ -21,7 +21,7 @@ from .._custom_types import Array, ValuesLike
 from ._checks import broadcast_shape, is_concrete, real_array
 from ._elements import AbstractElement, Damper, signal_checks, signal_nodes, Spring, WALL
 from ._friction import AbstractFriction, Coulomb
-from ._mechanism import AbstractMechanism, R
+from ._mechanism import AbstractMechanism
 from ._mechanism_physics import ground_body, mechanism_physics, MechanismPhysics
 from ._waveform import AbstractWaveform
 
@@ -466,7 +466,3 @@ class Mechanism(AbstractMechanism):
                 raise ValueError(f"Invalid parameter {name!r} of {owner}{at}: got {name}={got!r}; the valid range is "
                                  f"{valid}.")  # fmt: skip
         return self
-
-    def dispatch(self, *, two_mass: Callable[[Any], R], chain: Callable[[Any], R]) -> R:
-        """`chain(self)`: a mechanism runs on the N-body path, as a chain does (`AbstractMechanism`)."""
-        return chain(self)

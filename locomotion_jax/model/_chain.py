@@ -1,7 +1,6 @@
 """A chain of N masses joined by N-1 actuated springs (SPEC §8); N = 2 is the paper's model."""
 
 import math
-from collections.abc import Callable
 from typing import Any
 
 import equinox as eqx
@@ -16,7 +15,7 @@ from ._chain_array import array_unsupported, LAYOUTS
 from ._chain_physics import chain_physics, ChainPhysics
 from ._checks import broadcast_shape, real_array, related
 from ._friction import AbstractFriction, Coulomb
-from ._mechanism import AbstractMechanism, R
+from ._mechanism import AbstractMechanism
 from ._params import normal_positive, Params
 from ._springwaves import check_waveforms, spring_signals, SpringFourier, to_spring_fourier, TravellingWave
 from ._waveform import AbstractWaveform
@@ -391,9 +390,11 @@ class Chain(AbstractMechanism):
                 )
         return self
 
-    def dispatch(self, *, two_mass: Callable[[Any], R], chain: Callable[[Any], R]) -> R:
-        """`chain(self)`: the front ends' path for chains (`AbstractMechanism`)."""
-        return chain(self)
+    def optimum(self, v_min, a_max, method, direction, omega, harmonics, settings, sweep, start):
+        """As `AbstractMechanism.optimum`: travelling waves, then per-spring harmonics (`optimisation._chain`)."""
+        from ..optimisation._optimise import chain_optimum
+
+        return chain_optimum(self, v_min, a_max, method, direction, omega, harmonics, settings, sweep, start)
 
 
 def _concrete(x: Any) -> bool:

@@ -1,7 +1,6 @@
 """The mechanisms that the front ends run: the paper's two-mass model and chains of N masses."""
 
 import abc
-from collections.abc import Callable
 from typing import Any, TypeVar
 
 import equinox as eqx
@@ -9,7 +8,6 @@ import jax
 import jax.numpy as jnp
 
 
-R = TypeVar("R")
 M = TypeVar("M", bound="AbstractMechanism")
 
 
@@ -21,7 +19,9 @@ class AbstractMechanism(eqx.Module):
     mechanism flattens itself into a `FlatBatch` (`flat_batch`, `own_batch`: what differs between
     mechanisms, their actuation, starts and initial states, travels in it; their physics is
     `physics()`), and the dynamics' `simulate` and `measure` take it whatever the mechanism.
-    (`steady_gait` and `optimise` still choose their solver by `dispatch`.)
+    The solvers ask it for their problem the same way: `gait_problem` (`steady_gait`),
+    `branch_setup` (`continuation`) and `optimum` (`optimise`, whose method depends on the kind of
+    mechanism); their defaults serve any mechanism that carries its own actuation.
     """
 
     @property
@@ -103,7 +103,37 @@ class AbstractMechanism(eqx.Module):
 
         return FlatBatch(self, self.is_valid())
 
-    @abc.abstractmethod
-    def dispatch(self, *, two_mass: Callable[[Any], R], chain: Callable[[Any], R]) -> R:
-        """`two_mass(self)` for a `Params`, `chain(self)` for a `Chain` (the solvers of
-        `steady_gait` and `optimise`; the front ends of `simulate`, `measure` and `sweep` use none)."""
+    def gait_problem(self, dynamics: Any, *, waveform: Any = None, contact: str = "strict", start: Any = "paper",
+                     dtype: Any = None) -> Any:  # fmt: skip
+        """The steady gaits of this mechanism as the one solver takes them (a `GaitProblem` of
+        `gaits._shooting`: flat configurations, the physics of each, validity, starts and names), for
+        [`steady_gait`][locomotion_jax.steady_gait]'s arguments. Raises `ValueError`,
+        `NotImplementedError` on bad input, before any computation.
+
+        This default serves a mechanism that carries its own actuation ([`Chain`][locomotion_jax.Chain],
+        [`Mechanism`][locomotion_jax.Mechanism]); `Params` has its own."""
+        from ..gaits._shooting import bodies_problem
+
+        if waveform is not None:
+            name = type(self).__name__
+            raise ValueError(f"waveform= applies to Params; a {name} carries its own waveforms (in its elements).")
+        return bodies_problem(self, dynamics, contact, start, dtype)
+
+    def branch_setup(self, parameter: str, stops_of: Any, dynamics: Any, waveform: Any, dtype: Any,
+                     contact: str) -> Any:  # fmt: skip
+        """The branches of [`continuation`][locomotion_jax.continuation] in `parameter` as its corrector
+        takes them (a `BranchSetup` of `gaits._continuation`); `stops_of(shape, start_values)` checks
+        and returns the end values. This default serves a mechanism that carries its own actuation
+        (`parameter` a leaf named by its attribute); `Params` has its own."""
+        from ..gaits._continuation import bodies_setup
+
+        return bodies_setup(self, parameter, stops_of, dynamics, waveform, dtype, contact)
+
+    def optimum(self, v_min: Any, a_max: Any, method: str, direction: int | None, omega: Any, harmonics: Any,
+                settings: Any, sweep: Any, start: Any) -> Any:  # fmt: skip
+        """[`optimise`][locomotion_jax.optimise] of this mechanism (one configuration), with its
+        arguments: each kind of mechanism names its optimiser. This default: the method of
+        `optimisation._mechanism` (a signal per actuated element); `Chain` and `Params` have their own."""
+        from ..optimisation._optimise import mechanism_optimum
+
+        return mechanism_optimum(self, v_min, a_max, method, direction, omega, harmonics, settings, sweep, start)

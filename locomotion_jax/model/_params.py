@@ -2,7 +2,7 @@
 
 import itertools
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import equinox as eqx
@@ -13,7 +13,7 @@ import numpy as np
 
 from .._custom_types import Array, ArrayLike
 from ._checks import broadcast_shape, real_array
-from ._mechanism import AbstractMechanism, R
+from ._mechanism import AbstractMechanism
 
 
 PARAM_NAMES: tuple[str, ...] = ("k", "c", "d", "lbar", "a", "omega", "mu_s", "mu_k", "mhat")
@@ -350,9 +350,24 @@ class Params(AbstractMechanism):
 
         return FlatBatch(self, self.is_valid(), wave=Sinusoid.from_params(self), wave_axes=0, names=PAPER)
 
-    def dispatch(self, *, two_mass: Callable[[Any], R], chain: Callable[[Any], R]) -> R:
-        """`two_mass(self)`: the solvers' path for the two-mass model (`AbstractMechanism`)."""
-        return two_mass(self)
+    def gait_problem(self, dynamics, *, waveform=None, contact="strict", start="paper", dtype=None):
+        """As `AbstractMechanism.gait_problem`: the two-mass chain of each configuration and its
+        waveform, section states $(u, v_1, v_2)$ (`gaits._gait.paper_problem`)."""
+        from ..gaits._gait import paper_problem
+
+        return paper_problem(self, dynamics, waveform, contact, start, dtype)
+
+    def branch_setup(self, parameter, stops_of, dynamics, waveform, dtype, contact):
+        """As `AbstractMechanism.branch_setup`: `parameter` a field or a waveform's coefficient."""
+        from ..gaits._continuation import paper_setup
+
+        return paper_setup(self, parameter, stops_of, dynamics, waveform, dtype)
+
+    def optimum(self, v_min, a_max, method, direction, omega, harmonics, settings, sweep, start):
+        """As `AbstractMechanism.optimum`: the exact (default) or smoothed optimiser of the paper's model."""
+        from ..optimisation._optimise import params_optimum
+
+        return params_optimum(self, v_min, a_max, method, direction, omega, harmonics, settings, sweep, start)
 
 
 def batch_indices(shape: tuple[int, ...]) -> list[tuple[int, ...]]:

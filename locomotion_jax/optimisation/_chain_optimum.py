@@ -1,15 +1,14 @@
 """Settings and result of the chain optimiser (`optimise(chain, ...)`, module `optimisation._chain`)."""
 
 import dataclasses
-import math
-from typing import Any
+from typing import Any, ClassVar
 
 import equinox as eqx
 import numpy as np
 
-from .._json import dumps, jsonable
 from ..model._chain import Chain
 from ..model._springwaves import SpringFourier
+from ._optimum import AbstractOptimum, constraints_line, fmt
 
 
 class ChainOptimiseSettings(eqx.Module):
@@ -92,7 +91,7 @@ class ChainOptimiseSettings(eqx.Module):
 
 
 @dataclasses.dataclass(frozen=True)
-class ChainOptimum:
+class ChainOptimum(AbstractOptimum):
     """Result of [`optimise`][locomotion_jax.optimisation._optimise.optimise] for a [`Chain`][]; every
     figure called `*_exact` is the steady gait's ([`steady_gait`][]: whole periods, exact model,
     strict contact, from the relaxed springs).
@@ -159,19 +158,14 @@ class ChainOptimum:
     def waveforms(self) -> SpringFourier:
         return SpringFourier(self.cos, self.sin, self.omega)
 
-    def to_dict(self, full: bool = False) -> dict[str, Any]:
-        """JSON-ready dict (`nan` and `inf` become `None`); `full` adds candidates and history."""
-        skip = ("chain",) + (() if full else ("candidates", "history"))
-        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in skip}
-        out["n_masses"] = int(self.cos.shape[0]) + 1
-        return jsonable(out)
+    objects: ClassVar[tuple[str, ...]] = ("chain",)
 
-    def to_json(self, full: bool = False, **kwargs) -> str:
-        return dumps(self.to_dict(full), **kwargs)
+    def extra(self) -> dict[str, Any]:
+        """`n_masses`."""
+        return {"n_masses": int(self.cos.shape[0]) + 1}
 
     def summary(self) -> str:
         """Human-readable report."""
-        fmt = lambda v: "n/a" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.4g}"
         S, H = self.cos.shape
         lines = [
             f"chain of {S + 1} masses: mean speed >= {self.v_min:g} in direction {self.direction:+d}, stroke <= "
@@ -192,9 +186,7 @@ class ChainOptimum:
             f"direct simulation ({self.simulated_periods} gait periods, then 10 averaged): mean speed "
             f"{fmt(self.mean_speed_simulated)}, cost of transport {fmt(self.cost_of_transport_simulated)} "
             f"(relative difference {fmt(self.simulation_agreement)})",
-            "constraints on the exact model: "
-            + ", ".join(f"{k} {'holds' if v else 'VIOLATED'}" for k, v in self.constraints_exact.items())
-            + f" -> {'FEASIBLE' if self.feasible_exact else 'INFEASIBLE'}",
+            constraints_line(self.constraints_exact, self.feasible_exact),
         ]
         w = self.travelling_wave
         if w is None:

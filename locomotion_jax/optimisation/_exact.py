@@ -51,7 +51,7 @@ import numpy as np
 import scipy.optimize
 
 from ..gaits import _orbit as orbit
-from ..gaits._gait import _two_mass as solve_gait, GaitStatus
+from ..gaits._gait import GaitStatus, paper_gait
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform
 from . import _pareto as pareto
@@ -501,8 +501,8 @@ def _verify(params, speed, direction, a_max, shape, free, settings, candidates, 
         batch = pareto.with_waveform_frequency(params, wave)
         # Unguarded: a spline's knot spacing is finer than the guard's 4 steps at the default
         # settings, and this verification checks the resolution itself (a solve at dt/2 must agree).
-        return solve_gait(batch, (1, 2, 3, 4), settings.transient, None, 12, _exact_dynamics(dt), wave, "strict",
-                          "relaxed", None, guarded=False)  # fmt: skip
+        return paper_gait(batch, dynamics=_exact_dynamics(dt), transient=settings.transient, waveform=wave,
+                          start="relaxed", guarded=False)  # fmt: skip
 
     # Every candidate at each time origin the family offers, candidate-major.
     theta = np.stack([shape.shift(th, o) for th in thetas for o in origins])

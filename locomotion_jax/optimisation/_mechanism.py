@@ -41,22 +41,23 @@ frequency of the mechanism's free bodies and springs (its resolution guard's sca
 mechanism's own base frequency where it has no spring between bodies.
 """
 
+import dataclasses
 import math
 import sys
 import time
-from typing import Any
+from typing import Any, ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._json import jsonable
 from ..dynamics._exact_dynamics import Exact
 from ..gaits._element_orbit import actuated, ChainOracle, with_fourier, with_spline
 from ..model._bodies import Mechanism
 from . import _chain_local as local
 from ._chain_optimum import ChainOptimiseSettings
 from ._lockstep import run_lockstep
+from ._optimum import AbstractOptimum, fmt
 from ._shapes import spline_stroke, SplineShape
 
 
@@ -155,7 +156,8 @@ class MechanismOptimiseSettings(eqx.Module):
         return cls(**{n: getattr(s, n) for n in names})
 
 
-class MechanismOptimum(eqx.Module):
+@dataclasses.dataclass(frozen=True)
+class MechanismOptimum(AbstractOptimum):
     """The optimum of [`optimise`][locomotion_jax.optimisation._optimise.optimise] for a
     [`Mechanism`][locomotion_jax.Mechanism] (module `optimisation._mechanism`).
 
@@ -205,12 +207,48 @@ class MechanismOptimum(eqx.Module):
     screened: int
     evaluations: int
     runtime_s: float
-    mechanism: Mechanism
+    mechanism: Mechanism = dataclasses.field(repr=False)
 
-    def to_dict(self) -> dict[str, Any]:
-        """Every field but the mechanism, JSON-ready."""
-        names = [n for n in self.__dataclass_fields__ if n != "mechanism"]
-        return {n: jsonable(getattr(self, n)) for n in names}
+    objects: ClassVar[tuple[str, ...]] = ("mechanism",)
+
+    def summary(self) -> str:
+        """Human-readable report."""
+        S = len(self.elements)
+        family = f"{self.harmonics} harmonics" if self.control is None else f"splines of {self.control.shape[-1]} knots"
+        lines = [
+            f"mechanism of {self.mechanism.n_bodies} bodies: mean speed >= {self.v_min:g} in direction "
+            f"{self.direction:+d}, excursion <= {self.a_max:g} per actuated link, stable steady gait (exact)",
+            f"base frequency omega = {self.omega:.6g}; links {self.elements} actuated by {family}",
+        ]
+        for j in range(S):
+            if self.control is None:
+                lines.append(f"link {self.elements[j]}: cos " + " ".join(f"{c:+.5f}" for c in self.cos[j])
+                             + "  sin " + " ".join(f"{s:+.5f}" for s in self.sin[j]))  # fmt: skip
+            else:
+                lines.append(f"link {self.elements[j]}: control " + " ".join(f"{c:+.5f}" for c in self.control[j]))
+        lines += [
+            f"steady gait (exact, whole periods): mean speed {fmt(self.mean_speed_exact)}, cost of transport "
+            f"{fmt(self.cost_of_transport_exact)}, period {fmt(self.gait_period_exact)}, stable {self.stable_exact} "
+            f"(largest multiplier modulus {fmt(self.spectral_radius_exact)})",
+            "excursion per link "
+            + " ".join(fmt(float(s)) for s in np.ravel(self.stroke_exact))
+            + f" (limit {self.a_max:g})",
+            f"direct simulation ({self.simulated_periods} gait periods, then 10 averaged): mean speed "
+            f"{fmt(self.mean_speed_simulated)}, cost of transport {fmt(self.cost_of_transport_simulated)} "
+            f"(relative difference {fmt(self.simulation_agreement)})",
+            f"speed, excursion, stable gait (exact) -> {'FEASIBLE' if self.feasible_exact else 'INFEASIBLE'}",
+        ]
+        w = self.sinusoid
+        if w is None:
+            lines.append("best sinusoid: none meets the requirement on the exact model")
+        else:
+            lines.append(f"best sinusoid: a = {w['a']:.4g}, omega = {w['omega']:.4g}, phase = {w['phase']:.4g}: mean "
+                         f"speed {w['mean_speed']:.4g}, cost of transport {w['cost_of_transport']:.4g}")  # fmt: skip
+        lines.append(
+            f"improvement vs sinusoid: {fmt(100 * self.improvement_vs_sinusoid)} %  ({self.screened} sinusoids "
+            f"screened, {self.evaluations} batched evaluations, {self.runtime_s:.0f} s)"
+        )
+        return "\n".join(lines)
 
 
 def _natural(mech: Mechanism) -> float:

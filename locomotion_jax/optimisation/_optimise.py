@@ -379,15 +379,12 @@ def optimise(
         opt.cost_of_transport_exact, opt.improvement_vs_sinusoid
         ```
     """
-    args = (v_min, a_max, method, direction, omega, harmonics, settings, sweep, start)
-    # The mechanism picks its optimiser (double dispatch).
-    return mechanism_arg(params).dispatch(
-        two_mass=lambda p: _optimise_params(p, *args), chain=lambda c: _optimise_chain(c, *args)
-    )
+    # The mechanism names its optimiser (`AbstractMechanism.optimum`).
+    return mechanism_arg(params).optimum(v_min, a_max, method, direction, omega, harmonics, settings, sweep, start)
 
 
-def _optimise_params(params: Params, v_min, a_max, method, direction, omega, harmonics, settings, sweep, start):
-    """The paper's two-mass model: the exact method (the default) or the smoothed one."""
+def params_optimum(params: Params, v_min, a_max, method, direction, omega, harmonics, settings, sweep, start):
+    """[`optimise`][] of the paper's two-mass model: the exact method (the default) or the smoothed one."""
     if method not in ("exact", "smoothed"):
         raise ValueError(f"method must be 'exact' or 'smoothed', got {method!r}.")
     exact = method == "exact"
@@ -444,19 +441,24 @@ def _guard_search(params: Params, omega: float | None, shape: Any, settings: Exa
                   skip=("omega",))  # fmt: skip
 
 
-def _optimise_chain(chain, v_min, a_max, method, direction, omega, harmonics, settings, sweep, start):
-    """A [`Chain`][]: the exact method of `optimisation._chain` (travelling waves, then harmonics)."""
+def mechanism_optimum(mech: Any, v_min, a_max, method, direction, omega, harmonics, settings, sweep, start):
+    """[`optimise`][] of a [`Mechanism`][locomotion_jax.Mechanism]: the method of `optimisation._mechanism`
+    (sinusoids per actuated element, then their harmonics or splines)."""
+    from ._mechanism import optimise_mechanism
+
+    if not isinstance(mech, Mechanism):
+        raise NotImplementedError(f"optimise takes Params, a Chain or a Mechanism, got {type(mech).__name__}.")
+    if method != "exact" or sweep is not None or start is not None:
+        raise ValueError("a Mechanism is optimised by the exact method only, without sweep= or start=.")
+    return optimise_mechanism(mech, v_min, a_max, direction=1 if direction is None else direction, omega=omega,
+                              harmonics=harmonics, settings=settings)  # fmt: skip
+
+
+def chain_optimum(chain: Chain, v_min, a_max, method, direction, omega, harmonics, settings, sweep, start):
+    """[`optimise`][] of a [`Chain`][]: the exact method of `optimisation._chain` (travelling waves, then
+    harmonics)."""
     from ._chain import optimise_chain
 
-    if isinstance(chain, Mechanism):
-        from ._mechanism import optimise_mechanism
-
-        if method != "exact" or sweep is not None or start is not None:
-            raise ValueError("a Mechanism is optimised by the exact method only, without sweep= or start=.")
-        return optimise_mechanism(chain, v_min, a_max, direction=1 if direction is None else direction, omega=omega,
-                                  harmonics=harmonics, settings=settings)  # fmt: skip
-    if not isinstance(chain, Chain):
-        raise NotImplementedError(f"optimise takes Params, a Chain or a Mechanism, got {type(chain).__name__}.")
     if method != "exact":
         raise ValueError(f"method: a Chain is optimised by the exact method only (method='exact'), got {method!r}.")
     if sweep is not None or start is not None:

@@ -1,8 +1,9 @@
-"""Settings and result of the actuation optimiser (SPEC §7)."""
+"""Settings and result of the actuation optimiser (SPEC §7), and what every optimiser's result has."""
 
+import abc
 import dataclasses
 import math
-from typing import Any
+from typing import Any, ClassVar
 
 import equinox as eqx
 import numpy as np
@@ -158,8 +159,59 @@ class ExactSettings(eqx.Module):
             )
 
 
+def fmt(v: Any) -> str:
+    """A figure of a summary: four significant digits, `n/a` for `None` or a non-finite number."""
+    return "n/a" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.4g}"
+
+
+class AbstractOptimum(abc.ABC):
+    """What every result of [`optimise`][locomotion_jax.optimisation._optimise.optimise] has, whatever the
+    mechanism ([`Optimum`][] of the paper's model, [`ChainOptimum`][] of a chain,
+    [`MechanismOptimum`][] of a mechanism; frozen dataclasses): the requirement (`v_min`, `direction`,
+    `a_max`), the base frequency `omega`, the optimum's steady gait on the exact model
+    (`mean_speed_exact`, `cost_of_transport_exact`, `feasible_exact`), the candidates verified
+    (`candidates`) and `runtime_s`; `to_dict`, `to_json` and a human-readable `summary`."""
+
+    v_min: float
+    direction: int
+    a_max: float
+    omega: float
+    mean_speed_exact: float
+    cost_of_transport_exact: float
+    feasible_exact: bool
+    candidates: list
+    runtime_s: float
+
+    objects: ClassVar[tuple[str, ...]] = ()
+    """Fields that hold objects, not figures (the mechanism driven): left out of `to_dict`."""
+
+    def to_dict(self, full: bool = False) -> dict[str, Any]:
+        """JSON-ready dict (`nan` and `inf` become `None`); `full` adds the candidates and the history."""
+        skip = self.objects + (() if full else ("candidates", "history"))
+        fields = dataclasses.fields(self)  # pyright: ignore[reportArgumentType]
+        return jsonable({f.name: getattr(self, f.name) for f in fields if f.name not in skip} | self.extra())
+
+    def extra(self) -> dict[str, Any]:
+        """Figures of `to_dict` that are not fields."""
+        return {}
+
+    def to_json(self, full: bool = False, **kwargs: Any) -> str:
+        """`to_dict` as JSON (`kwargs`: `json.dumps`'s)."""
+        return dumps(self.to_dict(full), **kwargs)
+
+    @abc.abstractmethod
+    def summary(self) -> str:
+        """Human-readable report."""
+
+
+def constraints_line(constraints: dict, feasible: bool) -> str:
+    """A summary's line of the constraints checked on the exact model."""
+    held = ", ".join(f"{k} {'holds' if v else 'VIOLATED'}" for k, v in constraints.items())
+    return f"constraints on the exact model: {held} -> {'FEASIBLE' if feasible else 'INFEASIBLE'}"
+
+
 @dataclasses.dataclass(frozen=True)
-class Optimum:
+class Optimum(AbstractOptimum):
     """Result of [`optimise`][locomotion_jax.optimisation._optimise.optimise]; every figure called `*_exact` is from
     the exact hybrid model.
 
@@ -232,18 +284,8 @@ class Optimum:
             return Spline(self.control, self.omega, self.lbar)
         return Fourier(self.cos, self.sin, self.omega, self.lbar)
 
-    def to_dict(self, full: bool = False) -> dict[str, Any]:
-        """JSON-ready dict (`nan` and `inf` become `None`); `full` adds candidates and history."""
-        skip = () if full else ("candidates", "history")
-        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in skip}
-        return jsonable(out)
-
-    def to_json(self, full: bool = False, **kwargs) -> str:
-        return dumps(self.to_dict(full), **kwargs)
-
     def summary(self) -> str:
         """Human-readable report."""
-        fmt = lambda v: "n/a" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.4g}"
         exact = self.method == "exact"
         lines = [
             f"requirement: mean speed >= {self.v_min:g} in direction {self.direction:+d}, stroke <= {self.a_max:g}, "
@@ -278,11 +320,7 @@ class Optimum:
                 f"stroke {fmt(self.stroke_exact)} (limit {self.a_max:g}); min normal force (smoothed) "
                 f"{fmt(self.min_normal_smoothed)}; lift-off on the exact model: {self.liftoff_exact}",
             ]
-        lines.append(
-            "constraints on the exact model: "
-            + ", ".join(f"{k} {'holds' if v else 'VIOLATED'}" for k, v in self.constraints_exact.items())
-            + f" -> {'FEASIBLE' if self.feasible_exact else 'INFEASIBLE'}"
-        )
+        lines.append(constraints_line(self.constraints_exact, self.feasible_exact))
         if self.sinusoid is None:
             lines.append("best sinusoid: none meets the requirement on the exact model")
         else:

@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..dynamics._exact_dynamics import Exact
-from ..gaits._gait import _two_mass, Gait, GaitStatus, steady_gait
+from ..gaits._gait import Gait, GaitStatus, paper_gait, steady_gait
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform
 
@@ -149,8 +149,7 @@ def _sinusoid_figures(params: Params, a: np.ndarray, omega: np.ndarray, dt: floa
         omega=jnp.asarray(np.pad(omega, (0, pad), mode="edge"), params.dtype),
         **values,
     )
-    gait = _two_mass(batch, (1, 2, 3, 4), transient, None, 12, Exact(dt=dt), None, "strict", "relaxed", None,
-                     compact=True)  # fmt: skip
+    gait = paper_gait(batch, dynamics=Exact(dt=dt), transient=transient, start="relaxed", compact=True)
     assert isinstance(gait, Gait)  # the strict reading: the two-mass solver's own result
     return ExactFigures(*(np.asarray(f)[:n] for f in gait_figures(gait)))
 
