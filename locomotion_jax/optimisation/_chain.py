@@ -15,7 +15,7 @@ Method:
 1. **Travelling waves** $a\\sin(\\omega t - j\\varphi)$ (`_chain_screen`): a grid over
    $(a, \\omega, \\varphi)$ solved as steady gaits in batches of one compiled shape, and a zooming
    refinement of the best that meets the requirement. The best one found is the baseline.
-2. **Local refinement of per-spring harmonics** (`_chain_local`) from the refined best wave and
+2. **Local refinement of per-spring harmonics** (`_element_local`) from the refined best wave and
    the next best distinct waves of the grid: a monotone L-BFGS descent on an exact penalty,
    with exact gradients through the periodic orbit by the implicit function theorem
    (`gaits._element_orbit`), the starts in lockstep (one batched evaluation per step).
@@ -41,7 +41,7 @@ from ..model._actuator import RestLength
 from ..model._chain import Chain
 from ..model._springwaves import SpringFourier
 from ..run._resolution import refuse_search
-from . import _chain_local as local, _chain_screen as screen
+from . import _chain_screen as screen, _element_local as local
 from ._chain_optimum import ChainOptimiseSettings, ChainOptimum
 from ._lockstep import run_lockstep
 

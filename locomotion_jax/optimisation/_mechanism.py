@@ -26,7 +26,7 @@ Method (as `optimisation._chain`, with sinusoids in place of travelling waves):
    (x -> -x, t -> t + T/2) going the other way, and the phase of the start picks one.
 2. **Local refinement** of every element's harmonics (or control values, started from the
    sinusoid's interpolating spline) from the best `local` sinusoids: the chain's monotone L-BFGS
-   descent on an exact penalty (`_chain_local`), with exact gradients through the periodic orbit
+   descent on an exact penalty (`_element_local`), with exact gradients through the periodic orbit
    (`gaits._element_orbit.ChainOracle`, which takes a mechanism). The bound is kept by radial
    rescaling of each element's Fourier coefficients onto its exact stroke, or by clipping the
    control values.
@@ -54,7 +54,7 @@ import numpy as np
 from ..dynamics._exact_dynamics import Exact
 from ..gaits._element_orbit import actuated, ChainOracle, with_fourier, with_spline
 from ..model._bodies import Mechanism
-from . import _chain_local as local
+from . import _element_local as local
 from ._chain_optimum import ChainOptimiseSettings
 from ._lockstep import run_lockstep
 from ._optimum import AbstractOptimum, fmt

@@ -1,4 +1,5 @@
-"""The chain optimiser's local refinement: a monotone descent on an exact penalty, per start, in lockstep.
+"""The local refinement of the chain and mechanism optimisers: a monotone descent on an exact penalty, per start,
+in lockstep (a signal per actuated element: `gaits._element_orbit`).
 
 Each start runs in its own thread (`_lockstep.run_lockstep`);
 its evaluations are batched into one call of the oracle (`_element_orbit.ChainOracle`:
