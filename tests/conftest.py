@@ -139,10 +139,10 @@ import sys
 sys.path.insert(0, str(Path(__file__).parent))
 
 
-@pytest.fixture
+@pytest.fixture(autouse=True)
 def isolate_xla_flags(monkeypatch):
-    """For the CLI tests (`cli_helpers`): the CLI sets XLA_FLAGS (--cpu-devices) for its own
-    process. Start JAX's backend first, so that this test process keeps its devices, and undo
-    the variable after."""
+    """Every test (the CLI's above all, `cli_helpers`): the CLI sets XLA_FLAGS (--cpu-devices) for its
+    own process. Start JAX's backend first, so that this test process keeps its devices, and undo
+    the variable after, so that no test sees another's (nor do the compilation cache's keys)."""
     jax.devices()
     monkeypatch.setenv("XLA_FLAGS", os.environ.get("XLA_FLAGS", ""))
