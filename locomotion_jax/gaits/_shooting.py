@@ -392,7 +392,7 @@ def steady_gaits(
                  periods=periods, transient=transient, tol=tol, max_iter=max_iter, dynamics=dynamics, contact=contact,
                  start=problem.start, y_start=problem.y_start, say=say, compact=compact,
                  patience=patience)  # fmt: skip
-    return unflatten(as_gait(best, best["omega"], problem.dtype, contact, problem.names), problem.shape)
+    return unflatten(as_gait(best, problem.dtype, contact, problem.names), problem.shape)
 
 
 def steady_gait_chain(
@@ -430,19 +430,18 @@ def transient_speed(chain: Chain, *, transient: int, last: int, dynamics: Exact,
     with the required speed before solving the gait."""
     if not (isinstance(last, int) and 1 <= last < transient):
         raise ValueError(f"transient_speed: need 1 <= last < transient, got last={last!r}, transient={transient!r}.")
-    flat, valid_input, shape = prepare_chain(chain, None)
-    guarded, unresolved = guard_chain(dynamics, flat, valid_input, shape)  # refused alone, skipped in a batch
-    omega = np.broadcast_to(np.asarray(flat.omega, np.float64), guarded.shape)
-    valid, _, mst = _transient_setup(guarded, omega, shape, transient, dynamics)
-    physics_of = physics_for(flat, contact)
-    real = lambda v: jnp.asarray(v, flat.m.dtype)
-    y, st1, _, _ = _transient_batch(flat, physics_of, valid, contact, start, dynamics.dt, real(transient - last), mst)
-    _, st2, _, dX = _transient_batch(flat, physics_of, valid, contact, "paper", dynamics.dt, real(last), mst, y)
+    pb = bodies_problem(chain, dynamics, contact, start, None)  # the steady gait's configurations and guard
+    omega = np.broadcast_to(pb.omega, pb.valid.shape)
+    valid, _, mst = _transient_setup(pb.valid, omega, pb.shape, transient, dynamics)
+    real = lambda v: jnp.asarray(v, pb.dtype)
+    C, physics_of, dt = pb.configs, pb.physics_of, dynamics.dt
+    y, st1, _, _ = _transient_batch(C, physics_of, valid, contact, start, dt, real(transient - last), mst)
+    _, st2, _, dX = _transient_batch(C, physics_of, valid, contact, "paper", dt, real(last), mst, y)
     ok = (np.asarray(st1) == Status.OK) & (np.asarray(st2) == Status.OK)
-    if unresolved is not None:
-        ok &= ~np.asarray(unresolved)
+    if pb.unresolved is not None:
+        ok &= ~np.asarray(pb.unresolved)
     speed = np.where(ok, np.asarray(dX, np.float64) * omega / (2 * np.pi * last), np.nan)
-    return speed.reshape(shape)
+    return speed.reshape(pb.shape)
 
 
 def solve(C, physics_of, valid, unresolved, shape, omega, *, periods, transient, tol, max_iter, dynamics: Exact,
@@ -485,9 +484,10 @@ def solve(C, physics_of, valid, unresolved, shape, omega, *, periods, transient,
     return dict(best, omega=omega)
 
 
-def as_gait(r: dict, omega: np.ndarray, dtype: Any, contact: str, names: str = BODIES) -> Gait:
-    """The solver's host results `r` (of [`solve`][]) as a [`Gait`][] (NaN where not converged)."""
-    ok = r["status"] == GaitStatus.CONVERGED
+def as_gait(r: dict, dtype: Any, contact: str, names: str = BODIES) -> Gait:
+    """The solver's host results `r` (of [`solve`][], its forcing frequencies `r["omega"]` included) as a
+    [`Gait`][] (NaN where not converged)."""
+    ok, omega = r["status"] == GaitStatus.CONVERGED, r["omega"]
     nan = lambda x: jnp.asarray(np.where(select.expand(ok, x), x, np.nan), dtype)
     out: _Period = r["out"]
     kT = np.where(ok, r["k"] * 2 * np.pi / np.where(ok, omega, 1), np.nan)
