@@ -22,6 +22,7 @@ import math
 import os
 import time
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -36,12 +37,12 @@ NAMES = ("omega", "a", "d", "mu_s", "mu_k")
 REPEAT = 3
 
 
-def best_of(fn) -> float:
-    jax.block_until_ready(fn())
+def best_of(fn, *args, repeat: int = REPEAT) -> float:
+    jax.block_until_ready(fn(*args))
     times = []
-    for _ in range(REPEAT):
+    for _ in range(repeat):
         t0 = time.perf_counter()
-        jax.block_until_ready(fn())
+        jax.block_until_ready(fn(*args))
         times.append(time.perf_counter() - t0)
     return min(times)
 
@@ -66,16 +67,23 @@ def gait_benchmark(harmonics: int) -> None:
     one = jnp.ones(1, jnp.int32)
     y0 = oracle.transient(theta[None], jnp.zeros((1, ny)), jnp.ones(1, bool), jnp.asarray(30))
     orb = jax.tree_util.tree_map(lambda x: x[0], oracle.orbits(theta[None], y0, one))
+    cap = steps  # the backward pass's bound (static; oracle.max_steps is traced here)
     ys = orb.y  # every timed call starts from the fixed point (Newton: one iteration)
 
-    solve = best_of(lambda: adj.steady_gait(oracle, theta, ys).figures)
-    fwd = best_of(lambda: oracle.orbits(theta[None], ys[None], one).gradient)
-    cot = lambda th: adj.cost_of_transport(adj.steady_gait(oracle, th, ys))
-    grad_fn = jax.grad(cot)
-    rev = best_of(lambda: grad_fn(theta))
+    # Each timed function one compiled program taking the oracle and the start as arguments, as
+    # a user's repeated call would be (unjitted, jax.grad retraces its Python on every call).
+    solve = best_of(
+        eqx.filter_jit(lambda th, o, y: adj.steady_gait(o, th, y, cap=cap).figures), theta, oracle, ys, repeat=20
+    )
+    fwd = best_of(
+        eqx.filter_jit(lambda th, o, y: o.orbits(th[None], y[None], one).gradient), theta, oracle, ys, repeat=20
+    )
+    cot = lambda th, o, y: adj.cost_of_transport(adj.steady_gait(o, th, y, cap=cap))
+    grad_fn = eqx.filter_jit(jax.grad(cot))
+    rev = best_of(grad_fn, theta, oracle, ys, repeat=20)
     F, G = orb.figures, orb.gradient
     expect = G[1] / abs(F[0]) - F[1] * np.sign(F[0]) * G[0] / F[0] ** 2
-    diff = float(np.max(np.abs(grad_fn(theta) - expect)) / np.max(np.abs(expect)))
+    diff = float(np.max(np.abs(grad_fn(theta, oracle, ys) - expect)) / np.max(np.abs(expect)))
     cost = float(F[1] / abs(F[0]))
     print(f"steady gait of a {N}-mass worm, {harmonics} harmonics per spring: p = {p} parameters, float64, "
           f"{jax.default_backend()}, converged {bool(orb.ok)}, cost of transport {cost:.6f}")  # fmt: skip

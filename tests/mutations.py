@@ -466,14 +466,14 @@ MUTATIONS = [
         "the chain optimiser's screen: its transient-speed threshold dropped (every wave solved)",
         "locomotion_jax/optimisation/_chain_screen.py",
         (("keep = fast >= fraction * v_min", "keep = fast >= -np.inf"),),
-        ("tests/test_chain_optimise.py::test_screen_filter_keeps_the_fast_waves",),
+        ("tests/test_optimise.py::test_screen_filter_keeps_the_fast_waves",),
     ),
     Mutation(
         "transient_speed_wrong_span",
         "transient_speed: the displacement divided by the whole transient instead of its last periods",
         "locomotion_jax/gaits/_shooting.py",
         (("omega / (2 * np.pi * last)", "omega / (2 * np.pi * transient)"),),
-        ("tests/test_chain_gait.py::test_transient_speed_equals_simulation_and_the_gait",),
+        ("tests/test_gait.py::test_transient_speed_equals_simulation_and_the_gait",),
     ),
 ]
 

@@ -63,6 +63,14 @@ def test_grad_of_cost_of_transport_equals_forward_mode():
     grad = jax.grad(lambda th: adj.cost_of_transport(adj.steady_gait(oracle, th, orb.y)))(theta)
     assert np.max(np.abs(grad - expect)) <= 1e-8 * np.max(np.abs(expect))
     assert np.max(np.abs(expect)) > 0.1  # a gradient that can fail
+    # From a start off the fixed point Newton iterates: the adjoint's M and f_y are its last
+    # linearisation, which must be at the fixed point returned, not at the iterate before.
+    y_off = orb.y + 1e-3
+    grad = jax.grad(lambda th: adj.cost_of_transport(adj.steady_gait(oracle, th, y_off)))(theta)
+    assert np.max(np.abs(grad - expect)) <= 1e-8 * np.max(np.abs(expect))
+    # Few checkpoints (the backward pass recomputes steps from them): the same gradient.
+    grad = jax.grad(lambda th: adj.cost_of_transport(adj.steady_gait(oracle, th, orb.y, checkpoints=8)))(theta)
+    assert np.max(np.abs(grad - expect)) <= 1e-8 * np.max(np.abs(expect))
 
 
 def test_grad_float32():
@@ -76,6 +84,8 @@ def test_grad_float32():
     assert np.max(np.abs(grad - expect)) <= 1e-3 * np.max(np.abs(expect))
 
 
-def test_bad_k_is_refused():
+def test_bad_k_and_checkpoints_are_refused():
     with pytest.raises(ValueError, match="k \\(actuation periods\\)"):
         adj.steady_gait(_oracle(jnp.float64), _theta(jnp.float64), jnp.zeros(2 * N - 1), k=0)
+    with pytest.raises(ValueError, match="checkpoints must be an int >= 1"):
+        adj.steady_gait(_oracle(jnp.float64), _theta(jnp.float64), jnp.zeros(2 * N - 1), checkpoints=0)

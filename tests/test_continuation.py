@@ -224,7 +224,7 @@ def test_bad_arguments(kwargs, match):
 
 def _worm(omega) -> lj.Chain:
     """A 3-mass worm (travelling wave, d = 0) with anisotropic Coulomb friction: the pure-slip and
-    stick-slip gaits of `tests/test_chain_gait.py`'s anisotropic worms."""
+    stick-slip gaits of `tests/test_gait.py`'s anisotropic worms."""
     omega = jnp.asarray(omega, float)
     friction = lj.AnisotropicCoulomb(0.7, 0.9, 0.5, 0.7)
     return lj.Chain(masses=np.ones(3), d=0.0, waveforms=lj.TravellingWave(0.05 + 0 * omega, omega, 2 * np.pi / 3),

@@ -211,7 +211,7 @@ def test_cli_animate_draws_the_capsule_files_simulation(tmp_path):
 
 def test_cli_optimize_passes_the_capsule_files_mechanism(monkeypatch):
     """`optimize capsule.toml` hands the loaded mechanism and the options to `lj.optimise` (the optimiser
-    itself is tested in tests/test_mechanism_optimise.py); without --a-max it says that it needs one."""
+    itself is tested in tests/test_optimise.py); without --a-max it says that it needs one."""
     import equinox as eqx
 
     seen: dict[str, Any] = {}

@@ -1,9 +1,35 @@
-"""The actuation optimiser (SPEC §7): both methods' gradients, constraints, verification, inputs, CLI.
+"""The actuation optimisers: gradients, constraints, verification, inputs and CLI, for the paper's
+model, chains and mechanisms.
 
-Problems are tiny (few harmonics, few iterations, one coarse smoothing stage) so the
-file stays well under the test budget; the real runs are in
+The paper's model (SPEC §7): problems are tiny (few harmonics, few iterations, one coarse
+smoothing stage) so the tests stay well under the test budget; the real runs are in
 `experiments/optimal_actuation.py`. Every reported exact figure is checked against the
 independent reference (`tests/reference.py`) over whole periods of the steady gait.
+
+Chains (`optimise(chain, ...)` and `locomotion-jax chain-optimize`): small problems (N = 3 and
+N = 2, a short transient, coarse screens, few iterations) whose fixtures share every compilation
+(the screen's and the verification's steady-gait solver, the orbit oracle, the direct
+simulation), in one xdist group.
+
+Mechanisms (`optimisation._mechanism`, `lj.MechanismOptimiseSettings`; slow, about 2 to 5 minutes
+each):
+
+1. A capsule whose internal mass sits on a spring and a damper, driven by an internal force, on
+   anisotropic ground, backwards: the optimum's gait is checked by a direct `simulate` and by the
+   independent reference (`tests/reference_mechanism.py`, with the optimum's Fourier force; within
+   the step's truncation error, which shrinks with the step), and it beats the best sinusoid of a
+   small batched sweep of the test's own.
+2. The capsule of `experiments/capsule.py` on isotropic Coulomb ground at a fixed frequency,
+   forward, under a force bound the optimum does not reach: its cost of transport is the physical
+   floor mu_k (M + m) g (a body that never slides backward dissipates exactly mu_k N per distance;
+   any backward slide costs more), checked by a direct simulation from rest (`lj.measure`), and no
+   sinusoid under the same bound is as fast (a batched sweep of amplitudes and phases).
+3. The same capsule with splines (`MechanismOptimiseSettings(shape="spline")`) under a force bound
+   at which no sinusoid of the screen moves it: the optimum's control values are within the bound,
+   its exact stroke matches a dense sampling, its cost is at or above the physical floor, and its
+   gait from rest agrees with the independent reference (which has its own B-spline).
+4. float32: the optimiser keeps the mechanism's dtype, and the float32 optimum's gait agrees with
+   the float64 reference to float32's resolution.
 """
 
 import json
@@ -16,12 +42,22 @@ import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
+from locomotion_jax.cli import _main as _cli
 from locomotion_jax.cli._optimise import register
-from locomotion_jax.gaits import _orbit
-from locomotion_jax.optimisation import _constraints, _exact as _exact_optimise, _objective, _optimise, _pareto, _shapes
+from locomotion_jax.gaits import _element_orbit, _orbit
+from locomotion_jax.optimisation import (
+    _chain_screen as screen,
+    _constraints,
+    _exact as _exact_optimise,
+    _objective,
+    _optimise,
+    _pareto,
+    _shapes,
+)
 from locomotion_jax.optimisation._optimum import ExactSettings, Settings
 from plugin_app import plugin_app
 from reference import reference_simulate
+from reference_mechanism import Body, run, Sig, System
 from typer.testing import CliRunner
 
 
@@ -442,11 +478,12 @@ def test_objective_and_constraint_gradients_compose():
         base = np.array([0.05, 0.05, 0.5]) + W @ np.sin(theta)
         grad = W * np.cos(theta)[None, :]
         a = jnp.asarray
-        return _orbit.Orbit(a(np.zeros(3)), a(base), a(grad), a(np.zeros((3, 3))), a(True), a(0), a(0.0))
+        zero = a(np.zeros((3, 3)))
+        return _orbit.Orbit(a(np.zeros(3)), a(base), a(grad), zero, a(True), a(0), a(0.0), zero)
 
     for speed in (0.01, 0.2):  # feasible, then short of the speed (deficit penalised)
         theta = rng.normal(size=p)
-        fig = lambda th: _exact_optimise._Figures(th, orbit_at(th), speed, 1, 1, 0.05, True)
+        fig = lambda th: _exact_optimise.Figures(th, orbit_at(th), speed, 1, 1, 0.05, True)
         f0 = fig(theta)
         h = 1e-6
         fd = np.array([(fig(theta + h * e).f - fig(theta - h * e).f) / (2 * h) for e in np.eye(p)])
@@ -474,3 +511,483 @@ def test_stroke_windows_bound_the_true_stroke():
         h = 1e-6
         fd = (peaks(theta + h * d)[0] - peaks(theta - h * d)[0]) / (2 * h)
         np.testing.assert_allclose(jac @ d, fd, atol=1e-6)
+
+
+# Chains of N masses.
+
+CHAIN_OPTIMISE = pytest.mark.xdist_group("chain_optimise")  # the fixtures' compilations are shared on one worker
+
+SMALL: dict[str, Any] = dict(amplitudes=2, frequencies=4, phases=4, zoom_levels=1, zoom_points=3, local=2, transient=10)
+# The screen's slowest waves take most of the steps (a period at omega_min is ~60 of the
+# fastest): the frequency range starts at 0.4 instead of 0.06 of the lowest natural frequency.
+SETTINGS = lj.ChainOptimiseSettings(**SMALL, max_iter=8, omega_min=0.4)
+A_MAX = 0.1
+
+
+def worm(n: int = 3) -> lj.Chain:
+    return lj.Chain(masses=[1.0] * n, d=0.0, friction=lj.AnisotropicCoulomb(0.5, 0.9, 0.3, 0.7))
+
+
+def _first(tree):
+    """Row 0 of a batched result."""
+    return jax.tree_util.tree_map(lambda x: x[0], tree)
+
+
+@pytest.fixture(scope="module")
+def opt3() -> lj.ChainOptimum:
+    return lj.optimise(worm(), 0.05, A_MAX, harmonics=2, settings=SETTINGS)
+
+
+@pytest.fixture(scope="module")
+def infeasible() -> lj.ChainOptimum:
+    quick: dict[str, Any] = SMALL | dict(zoom_levels=0, max_iter=1)
+    settings = lj.ChainOptimiseSettings(**quick)
+    return lj.optimise(worm(), 5.0, A_MAX, harmonics=2, settings=settings)
+
+
+@CHAIN_OPTIMISE
+def test_beats_its_best_travelling_wave(opt3):
+    wave = opt3.travelling_wave
+    assert opt3.feasible_exact and wave is not None
+    assert all(opt3.constraints_exact.values())
+    assert opt3.cost_of_transport_exact <= wave["cost_of_transport"] * (1 + 1e-12)
+    assert opt3.improvement_vs_travelling_wave >= 0
+    # The baseline is the best feasible wave the screen solved, and a candidate of the verification.
+    (cand,) = [c for c in opt3.candidates if c["candidate"] == "travelling wave"]
+    assert cand["cost_of_transport_exact"] == pytest.approx(wave["cost_of_transport"], rel=1e-10)
+    assert opt3.mean_speed_exact >= opt3.v_min
+
+
+@CHAIN_OPTIMISE
+def test_optimum_verifies_on_steady_gait_and_simulation(opt3):
+    g = _first(lj.steady_gait(lj.Chain.stack([opt3.chain] * SETTINGS.chunk), transient=SETTINGS.transient,
+                              dynamics=lj.Exact(dt=SETTINGS.dt), start="relaxed"))  # fmt: skip
+    assert bool(g.converged) and bool(g.stable) and not bool(g.liftoff)
+    assert float(g.mean_speed) == pytest.approx(opt3.mean_speed_exact, rel=1e-10)
+    assert float(g.cost_of_transport) == pytest.approx(opt3.cost_of_transport_exact, rel=1e-10)
+    assert float(g.mean_speed) >= opt3.v_min
+    # The chain carries the reported coefficients.
+    np.testing.assert_allclose(np.asarray(opt3.chain.waves.cos), opt3.cos, rtol=0, atol=0)
+    assert float(opt3.chain.waves.omega) == opt3.omega
+    # A direct simulation from the relaxed springs, averaged over whole gait periods.
+    assert opt3.simulation_agreement < 1e-6
+    n, T = opt3.simulated_periods, opt3.gait_period_exact
+    t = np.array([n * T, (n + 10) * T])
+    traj = lj.simulate(opt3.chain, float(t[-1]), t, start="relaxed")
+    X, ed = np.asarray(traj.X), np.asarray(traj.e_d)
+    assert (X[1] - X[0]) / (t[1] - t[0]) == pytest.approx(opt3.mean_speed_exact, rel=1e-6)
+    assert (ed[1] - ed[0]) / abs(X[1] - X[0]) == pytest.approx(opt3.cost_of_transport_exact, rel=1e-6)
+    assert opt3.min_normal >= opt3.margin
+
+
+@CHAIN_OPTIMISE
+def test_stroke_bound_holds_exactly(opt3):
+    phase = np.linspace(0, 2 * np.pi, 400_001)
+    n = np.arange(1, opt3.harmonics + 1)
+    s = opt3.cos @ np.cos(np.outer(n, phase)) + opt3.sin @ np.sin(np.outer(n, phase))
+    assert np.max(np.abs(s)) <= A_MAX * (1 + 1e-12)
+    assert np.all(opt3.stroke_exact <= A_MAX * (1 + 1e-12))
+    np.testing.assert_allclose(opt3.stroke_exact, np.max(np.abs(s), axis=1), rtol=1e-9)
+
+
+@CHAIN_OPTIMISE
+def test_screen_filter_keeps_the_fast_waves():
+    v = np.array([0.3, np.nan, -0.4, 0.05, 0.2, 0.01])
+    assert list(screen.fast_enough(v, 0.4, 1, 0.5, 2)) == [0, 4]  # 0.2 reaches half of 0.4; 0.3, 0.2 fastest
+    assert list(screen.fast_enough(v, 0.4, 1, 0.5, 3)) == [0, 3, 4]
+    assert list(screen.fast_enough(v, 0.4, -1, 0.5, 1)) == [2]  # backwards; NaN never
+    assert list(screen.fast_enough(v, 10.0, 1, 0.5, 0)) == []
+
+
+@CHAIN_OPTIMISE
+def test_screen_solves_the_fast_waves_as_it_would_without_the_filter(opt3):
+    """The screen with its filter (`screen_speed`): on 40 waves (two chunks), the waves it leaves
+    unsolved are the slowest at the end of their transient; every wave it solves has the gait the
+    unfiltered screen finds for it; and no wave whose gait meets the requirement is left out."""
+    base = worm().broadcast()
+    lo, hi = screen.frequency_range(base, None, SETTINGS)
+    amps, omegas, phases = A_MAX * np.array([0.5, 1.0]), np.geomspace(lo, hi, 5), np.pi * np.array([-1, -0.5, 0, 0.5])
+    A, W, F = (x.ravel() for x in np.meshgrid(amps, omegas, phases, indexing="ij"))
+    cos, sin = screen.wave_coefficients(A, F, 2, 2)
+    every = screen.solve(base, cos, sin, W, SETTINGS)
+    assert np.sum(every.ok) >= 20
+    v_min = 0.9 * np.nanmax(np.where(every.ok, every.speed, np.nan))
+    got = screen.solve(base, cos, sin, W, SETTINGS, need=(v_min, 1))
+    solved = np.isfinite(got.speed) | np.isfinite(got.y[:, 0])
+    assert SETTINGS.chunk <= np.sum(solved) < 40  # some left out: 40 waves, the 32 fastest kept
+    for a, b in zip(got, every):
+        np.testing.assert_allclose(a[solved], b[solved], rtol=1e-12, atol=0)
+    assert not np.any(got.ok[~solved]) and np.all(np.isnan(got.speed[~solved]))
+    assert np.all(solved[screen.feasible(every, v_min, 1)])
+
+
+@CHAIN_OPTIMISE
+@pytest.mark.slow
+def test_infeasible_requirement_is_flagged(infeasible):
+    assert not infeasible.feasible_exact
+    assert not infeasible.constraints_exact["speed"]
+    assert infeasible.travelling_wave is None and math.isnan(infeasible.improvement_vs_travelling_wave)
+    record = json.loads(infeasible.to_json())
+    assert record["feasible_exact"] is False and record["improvement_vs_travelling_wave"] is None
+    assert "INFEASIBLE" in infeasible.summary()
+
+
+@CHAIN_OPTIMISE
+@pytest.mark.slow
+def test_one_compilation_serves_every_evaluation(opt3, infeasible):
+    """Both optimisations (other requirements, other iterates, the fallbacks) share one compiled oracle."""
+    assert _element_orbit.TRACES["evaluate"] == 1 and _element_orbit.TRACES["relax"] <= 1
+
+
+@CHAIN_OPTIMISE
+@pytest.mark.slow
+def test_cli_chain_optimize_json_equals_optimise(infeasible):
+    args = ["chain-optimize", "--masses", "1,1,1", "--d", "0", "--friction", "anisotropic", "--mu-s", "0.5",
+            "--mu-k", "0.3", "--mu-s-bwd", "0.9", "--mu-k-bwd", "0.7", "--v-min", "5", "--a-max", str(A_MAX),
+            "--harmonics", "2", "--amplitudes", "2", "--frequencies", "4", "--phases", "4", "--zoom-levels", "0",
+            "--zoom-points", "3", "--local", "2", "--max-iter", "1", "--transient", "10", "--json"]  # fmt: skip
+    res = CliRunner().invoke(_cli.app, args)
+    assert res.exit_code == 0, res.output
+    record = json.loads(res.stdout)
+    assert record["feasible_exact"] is False and record["n_masses"] == 3
+    assert record["mean_speed_exact"] == pytest.approx(infeasible.mean_speed_exact, rel=1e-12)
+    bad = CliRunner().invoke(_cli.app, ["chain-optimize", "--masses", "1,1,1", "--v-min", "0", "--a-max", "0.05"])
+    assert bad.exit_code == 2 and "Error: v_min must be a finite speed > 0" in bad.output
+    bad = CliRunner().invoke(_cli.app, ["chain-optimize", "--masses", "1,1,1", "--v-min", "0.1", "--a-max", "3"])
+    assert bad.exit_code == 2 and "0 < a_max < min(lbar) = 3" in bad.output
+
+
+@CHAIN_OPTIMISE
+@pytest.mark.slow
+def test_two_masses_agree_with_the_two_mass_model():
+    """N = 2 built from the paper's Params: the optimum's steady gait under the two-mass model
+    (its one spring's coefficients as a Fourier waveform) has the same cost of transport."""
+    settings = lj.ChainOptimiseSettings(**SMALL, max_iter=6)
+    opt = lj.optimise(lj.Chain.from_params(lj.Params()), 0.02, 0.05, harmonics=2, settings=settings)
+    assert opt.feasible_exact
+    wave = lj.Fourier(jnp.asarray(opt.cos[0]), jnp.asarray(opt.sin[0]), opt.omega, 3.0)
+    g = lj.steady_gait(lj.Params(omega=opt.omega), waveform=wave, start="relaxed", transient=settings.transient,
+                       dynamics=lj.Exact(dt=settings.dt))  # fmt: skip
+    assert float(g.cost_of_transport) == pytest.approx(opt.cost_of_transport_exact, rel=1e-8)
+    assert float(g.mean_speed) == pytest.approx(opt.mean_speed_exact, rel=1e-8)
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(v_min=0.0), "v_min must be a finite speed > 0"),
+        (dict(v_min=-0.1), "v_min must be a finite speed > 0"),
+        (dict(v_min=math.nan), "v_min must be a finite speed > 0"),
+        (dict(a_max=0.0), "0 < a_max < min(lbar) = 3"),
+        (dict(a_max=3.0), "0 < a_max < min(lbar) = 3"),
+        (dict(direction=2), "direction must be +1"),
+        (dict(harmonics=0), "harmonics must be an integer >= 1"),
+        (dict(omega=-1.0), "omega must be a finite number > 0"),
+        (dict(method="smoothed"), "exact method only"),
+        (dict(chain=lj.Chain(masses=[1.0, 1.0, 1.0], d=0.5), a_max=0.07), "lifts a mass off at rest"),
+        (dict(chain=lj.Chain.stack([worm(), worm()])), "single configuration"),
+        (dict(chain=lj.Chain(masses=[1.0] * 3, actuator=lj.InternalForce())), "RestLength"),
+    ],
+)
+@CHAIN_OPTIMISE
+def test_bad_input_raises(kwargs, message):
+    args = dict(chain=worm(), v_min=0.05, a_max=0.05) | kwargs
+    chain, v_min, a_max = args.pop("chain"), args.pop("v_min"), args.pop("a_max")
+    with pytest.raises(ValueError, match=message.replace("(", r"\(").replace(")", r"\)").replace("+", r"\+")):
+        lj.optimise(chain, v_min, a_max, **args)
+
+
+@CHAIN_OPTIMISE
+def test_bad_settings_raise():
+    with pytest.raises(ValueError, match="local must be an int >= 1"):
+        lj.ChainOptimiseSettings(local=0)
+    with pytest.raises(TypeError, match="ChainOptimiseSettings"):
+        lj.optimise(worm(), 0.05, 0.05, settings=lj.ExactOptimiseSettings())
+
+
+# Mechanisms.
+
+MECHANISM_OPTIMISE = pytest.mark.xdist_group("mechanism_optimise")  # the module-scoped optima are found once
+
+MU = (0.5, 0.4, 0.4, 0.3)
+K, C, V_MIN, FORCE_MAX = 10.0, 0.5, 0.005, 0.8
+
+
+def _capsule(force=None, check=True):
+    force = lj.Sinusoid(a=0.6, omega=3.0, lbar=0.0) if force is None else force
+    links = [lj.Spring(0, 1, k=K, rest=0.0), lj.Damper(0, 1, c=C), lj.Force(0, 1, force)]
+    return lj.Mechanism(masses=[1.0, 0.5], friction=[lj.AnisotropicCoulomb(*MU), None], carried_by=[None, 0],
+                        links=links, check=check)  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def optimum():
+    s = lj.MechanismOptimiseSettings(
+        amplitudes=4, frequencies=8, local=2, max_iter=15, transient=20, dt=0.01, omega_min=0.15, omega_max=2.0
+    )
+    return lj.optimise(_capsule(), v_min=V_MIN, a_max=FORCE_MAX, direction=-1, settings=s)
+
+
+@MECHANISM_OPTIMISE
+@pytest.mark.slow
+def test_mechanism_optimum_verified_by_simulate_and_the_reference(optimum):
+    opt = optimum
+    print({k: v for k, v in opt.to_dict().items() if k not in ("candidates",)})
+    assert opt.feasible_exact and opt.stable_exact and opt.elements == [2]
+    assert -opt.mean_speed_exact >= V_MIN and float(np.max(opt.stroke_exact)) <= FORCE_MAX * (1 + 1e-12)
+    g = lj.steady_gait(opt.mechanism, periods=(1, 2), transient=20, dynamics=lj.Exact(dt=0.01))
+    assert int(g.status) == lj.GaitStatus.CONVERGED
+    assert abs(float(g.cost_of_transport) - opt.cost_of_transport_exact) < 1e-9
+    u, v = float(g.state[0]), np.asarray(g.state[1:], float)
+    T = float(g.period)
+    # A direct simulation from the orbit's section state, over one gait period.
+    M = lj.Mechanism(masses=[1.0, 0.5], friction=[lj.AnisotropicCoulomb(*MU), None], carried_by=[None, 0],
+                     links=opt.mechanism.links, x0=[0.0, u], v0=v)  # fmt: skip
+    traj = lj.simulate(M, T, jnp.array([0.0, T]), dynamics=lj.Exact(dt=0.01))
+    dX = float(traj.X[-1] - traj.X[0])
+    speed, cost = dX / T, float(traj.e_d[-1]) / abs(dX)
+    # The independent reference with the optimum's force, s(t) = sum A_n cos(n w t) + B_n sin(n w t).
+    H = opt.cos.shape[-1]
+    force = Sig(0.0, tuple(opt.cos[0]), tuple(opt.sin[0]), opt.omega)
+    S = System([Body(1.0, MU, x0=0.0, v0=v[0]), Body(0.5, None, carrier=0, x0=u, v0=v[1])],
+               springs=[(0, 1, K, 0.0)], forces=[(0, 1, force)], dampers=[(0, 1, C)])  # fmt: skip
+    ref = run(S, T, np.array([0.0, T]))
+    r_dX = ref["com"][1] - ref["com"][0]
+    r_speed, r_cost = r_dX / T, ref["ed"][1] / abs(r_dX)
+    print(f"optimum ({H} harmonics): speed {opt.mean_speed_exact:.10f}, simulate {speed:.10f}, reference "
+          f"{r_speed:.10f}; cost {opt.cost_of_transport_exact:.10f}, simulate {cost:.10f}, reference {r_cost:.10f}; "
+          f"simulated from its start: {opt.simulation_agreement:.1e}")  # fmt: skip
+    assert abs(speed / opt.mean_speed_exact - 1) < 1e-8 and abs(cost / opt.cost_of_transport_exact - 1) < 1e-8
+    assert opt.simulation_agreement < 1e-6
+    # Against the reference the difference is the engine's truncation error at the optimiser's step
+    # (dt = 0.01 against a period of the second harmonic of 0.29): it shrinks with the step.
+    fine = lj.simulate(M, T, jnp.array([0.0, T]), dynamics=lj.Exact(dt=0.0025))
+    f_dX = float(fine.X[-1] - fine.X[0])
+    f_speed, f_cost = f_dX / T, float(fine.e_d[-1]) / abs(f_dX)
+    err = max(abs(r_speed / speed - 1), abs(r_cost / cost - 1))
+    err_fine = max(abs(r_speed / f_speed - 1), abs(r_cost / f_cost - 1))
+    print(f"against the reference: {err:.1e} at dt = 0.01, {err_fine:.1e} at dt = 0.0025")
+    assert err < 2e-5 and err_fine < err / 8
+
+
+@MECHANISM_OPTIMISE
+@pytest.mark.slow
+def test_mechanism_optimum_beats_the_best_sinusoid_of_a_sweep(optimum):
+    """A batched sweep of 4 x 8 sinusoids a sin(w t) (a up to a_max, w over the optimiser's range):
+    the cheapest one fast enough costs more than the optimum."""
+    a = np.array([0.2, 0.4, 0.6, 0.8])
+    w = np.geomspace(1.0, 10.0, 8)
+    A, W = (x.ravel() for x in np.meshgrid(a, w, indexing="ij"))
+    batch = _capsule(lj.Sinusoid(a=jnp.asarray(A), omega=jnp.asarray(W), lbar=0.0))
+    g = lj.steady_gait(batch, periods=(1, 2), transient=20, dynamics=lj.Exact(dt=0.01))
+    ok = np.asarray(g.converged) & np.asarray(g.stable) & (-np.asarray(g.mean_speed) >= V_MIN)
+    best = float(np.min(np.where(ok, np.asarray(g.cost_of_transport), np.inf)))
+    print(f"best sinusoid of the sweep: {best:.6f} ({int(ok.sum())} of {ok.size} fast enough); optimum "
+          f"{optimum.cost_of_transport_exact:.6f}; the optimiser's own screen: {optimum.sinusoid}")  # fmt: skip
+    assert ok.any() and optimum.cost_of_transport_exact < best
+
+
+ISO = lj.Coulomb(0.5, 0.4)
+M_BODY, M_IN, K_ISO = 1.0, 0.5, 10.0
+OMEGA, F_MAX, V_ISO = 3.0, 2.0, 0.05
+FLOOR = 0.4 * (M_BODY + M_IN)  # mu_k (M + m) g, g = 1
+
+
+def _iso_capsule(cos, sin):
+    """The capsule of experiments/capsule.py driven by a Fourier force of omega = 3 (rows: a batch)."""
+    wave = lj.Fourier(jnp.asarray(cos), jnp.asarray(sin), OMEGA, 0.0)
+    return lj.Mechanism(masses=[M_BODY, M_IN], friction=[ISO, None], carried_by=[None, 0],
+                        links=[lj.Spring(0, 1, k=K_ISO, rest=0.0), lj.Force(0, 1, wave)])  # fmt: skip
+
+
+def _measured(mech, settle=100, periods=40):
+    T = 2 * np.pi / OMEGA
+    res = lj.measure(mech, z=1e6, horizon=periods * T, window=periods * T, t_start=settle * T)
+    v, ed = np.asarray(res.mean_speed), np.asarray(res.e_d)
+    return np.asarray(res.status), v, np.where(v > 0, ed / np.where(v > 0, v * periods * T, 1.0), np.inf)
+
+
+@pytest.fixture(scope="module")
+def iso_optimum():
+    s = lj.MechanismOptimiseSettings(amplitudes=4, phases=4, local=2, max_iter=30)
+    return lj.optimise(_iso_capsule(np.zeros(1), np.zeros(1)), v_min=V_ISO, a_max=F_MAX, omega=OMEGA, harmonics=3,
+                       settings=s)  # fmt: skip
+
+
+@MECHANISM_OPTIMISE
+@pytest.mark.slow
+def test_isotropic_capsule_optimum_sits_on_the_physical_floor(iso_optimum):
+    opt = iso_optimum
+    print({k: v for k, v in opt.to_dict().items() if k not in ("candidates",)})
+    assert opt.feasible_exact and opt.stable_exact and opt.elements == [1] and opt.omega == pytest.approx(OMEGA)
+    assert opt.mean_speed_exact >= V_ISO
+    # Interior in the force: the bound does not bind (the speed constraint and the floor do).
+    peak = float(np.max(opt.stroke_exact))
+    assert peak < 0.75 * F_MAX
+    # The floor: e_d >= mu_k N |distance|, equal only if the body never slides backward.
+    assert FLOOR * (1 - 1e-9) <= opt.cost_of_transport_exact <= FLOOR * (1 + 1e-6)
+    # A direct simulation from rest with the optimum's force: the same speed and cost.
+    status, v, cost = _measured(opt.mechanism)
+    print(f"optimum: speed {opt.mean_speed_exact:.10f}, measured {float(v):.10f}; cost "
+          f"{opt.cost_of_transport_exact:.12f}, measured {float(cost):.12f}; peak force {peak:.4f}")  # fmt: skip
+    assert int(status) == lj.Status.OK
+    assert abs(float(v) / opt.mean_speed_exact - 1) < 1e-8 and abs(float(cost) / opt.cost_of_transport_exact - 1) < 1e-8
+    T = 2 * np.pi / OMEGA
+    traj = lj.simulate(opt.mechanism, t_end=110 * T, save_at=jnp.linspace(100 * T, 110 * T, 2001))
+    assert float(np.min(np.asarray(traj.v)[:, 0])) >= -1e-12  # the body never slides backward
+    assert float(np.max(np.asarray(traj.v)[:, 0])) > 0.1
+
+
+@MECHANISM_OPTIMISE
+@pytest.mark.slow
+def test_isotropic_capsule_no_sinusoid_under_the_bound_is_as_good(iso_optimum):
+    """Sinusoids A sin(omega t + phi), 25 amplitudes up to the bound times 12 phases, one batched
+    `lj.simulate` over 10 periods after 20: none meets the speed at a lower cost, and every one pays
+    at least the floor on its body's own displacement, e_d >= mu_k (M + m) g |x_0(t1) - x_0(t0)| (the
+    centre of mass also carries the internal mass's free oscillation, which need not be periodic)."""
+    U, PHI = (q.ravel() for q in np.meshgrid(np.linspace(0.04, 1.0, 25), np.linspace(0, 2 * np.pi, 12, endpoint=False)))
+    cos, sin = np.zeros((U.size, 3)), np.zeros((U.size, 3))
+    cos[:, 0], sin[:, 0] = F_MAX * U * np.sin(PHI), F_MAX * U * np.cos(PHI)
+    T = 2 * np.pi / OMEGA
+    traj = lj.simulate(_iso_capsule(cos, sin), t_end=30 * T, save_at=jnp.array([20 * T, 30 * T]))
+    assert (np.asarray(traj.status) == lj.Status.OK).all()
+    x, ed = np.asarray(traj.x), np.asarray(traj.e_d)
+    body = x[:, 1, 0] - x[:, 0, 0]
+    com = (M_BODY * body + M_IN * (x[:, 1, 1] - x[:, 0, 1])) / (M_BODY + M_IN)
+    e_d = ed[:, 1] - ed[:, 0]
+    v = com / (10 * T)
+    slides = np.abs(body) > 1e-9
+    print(f"sinusoids: {int(slides.sum())} of {U.size} displace the body, the fastest forward {v.max():.4f}, "
+          f"{int((v >= V_ISO).sum())} meet v_min")  # fmt: skip
+    assert slides.any() and (e_d >= FLOOR * np.abs(body) * (1 - 1e-9) - 1e-12).all()
+    fast = v >= V_ISO
+    cost = np.where(fast, e_d / np.where(fast, com, 1.0), np.inf)
+    assert not (cost < iso_optimum.cost_of_transport_exact * (1 - 1e-9)).any()
+
+
+@MECHANISM_OPTIMISE
+def test_mechanism_optimise_settings():
+    """The settings' checks name the field; a ChainOptimiseSettings is taken field for field (one phase)."""
+    from locomotion_jax.optimisation._mechanism import MechanismOptimiseSettings
+
+    with pytest.raises(ValueError, match="MechanismOptimiseSettings.phases must be an int >= 1, got 0"):
+        lj.MechanismOptimiseSettings(phases=0)
+    with pytest.raises(ValueError, match="need 0 < omega_min < omega_max"):
+        lj.MechanismOptimiseSettings(omega_min=2.0, omega_max=1.0)
+    with pytest.raises(ValueError, match="dt, trust_radius, newton_tol and check_tol must be > 0"):
+        lj.MechanismOptimiseSettings(dt=0.0)
+    s = MechanismOptimiseSettings.from_chain(lj.ChainOptimiseSettings(local=3, max_iter=7, omega_max=1.5))
+    assert (s.local, s.max_iter, s.omega_max, s.phases) == (3, 7, 1.5, 1)
+    with pytest.raises(TypeError, match="must be a MechanismOptimiseSettings, got ExactSettings"):
+        lj.optimise(_capsule(), v_min=0.01, a_max=0.5, settings=lj.ExactOptimiseSettings())
+    with pytest.raises(ValueError, match="shape must be 'fourier' or 'spline', got 'square'"):
+        lj.MechanismOptimiseSettings(shape="square")
+    with pytest.raises(ValueError, match="knots must be an int >= 4, got 3"):
+        lj.MechanismOptimiseSettings(knots=3)
+    with pytest.raises(ValueError, match=r"harmonics applies to Fourier series.*got harmonics=3"):
+        lj.optimise(
+            _capsule(), v_min=0.01, a_max=0.5, harmonics=3, settings=lj.MechanismOptimiseSettings(shape="spline")
+        )
+
+
+@MECHANISM_OPTIMISE
+def test_mechanism_optimise_bad_input():
+    with pytest.raises(ValueError, match="no element driven by a waveform"):
+        lj.optimise(_capsule(force=0.3), v_min=0.01, a_max=0.5)
+    with pytest.raises(ValueError, match="a_max must be a finite bound > 0"):
+        lj.optimise(_capsule(), v_min=0.01, a_max=-1.0)
+    with pytest.raises(ValueError, match="single configuration"):
+        lj.optimise(_capsule(lj.Sinusoid(a=jnp.array([0.3, 0.4]), omega=3.0, lbar=0.0)), v_min=0.01, a_max=0.5)
+    with pytest.raises(ValueError, match="exact method only"):
+        lj.optimise(_capsule(), v_min=0.01, a_max=0.5, method="smoothed")
+
+
+def _reference_gait(opt):
+    """Mean speed and cost of transport of the optimum's isotropic capsule from rest in the
+    independent reference, over 10 periods of its force once the slowest Floquet mode has decayed
+    to 1e-9 of its start (at least 30 periods)."""
+    w = float(opt.omega)
+    start = int(np.clip(np.ceil(np.log(1e-9) / np.log(opt.spectral_radius_exact)), 30, 400))
+    periods = (start, start + 10)
+    if opt.shape == "spline":
+        force = Sig(0.0, w=w, control=tuple(float(c) for c in opt.control[0]))
+    else:
+        force = Sig(0.0, tuple(float(c) for c in opt.cos[0]), tuple(float(c) for c in opt.sin[0]), w)
+    S = System([Body(M_BODY, (0.5, 0.5, 0.4, 0.4)), Body(M_IN, None, carrier=0)], springs=[(0, 1, K_ISO, 0.0)],
+               forces=[(0, 1, force)])  # fmt: skip
+    t = np.array(periods, float) * 2 * np.pi / w
+    ref = run(S, float(t[1]), t)
+    dX = ref["com"][1] - ref["com"][0]
+    return dX / (t[1] - t[0]), (ref["ed"][1] - ref["ed"][0]) / abs(dX)
+
+
+@MECHANISM_OPTIMISE
+def test_reference_spline_is_the_packages_spline():
+    """The reference's B-spline signal (its own formula) equals `lj.Spline` and its rate."""
+    c = np.random.default_rng(3).normal(size=7)
+    wave = lj.Spline(jnp.asarray(c), 2.3, 0.4)
+    t = np.linspace(-3.0, 9.0, 501)
+    val, rate = (np.asarray(q) for q in wave(jnp.asarray(t)))
+    ref = np.array([Sig(0.4, w=2.3, control=tuple(c)).at(x) for x in t])
+    assert np.abs(ref[:, 0] - val).max() < 1e-12 and np.abs(ref[:, 1] - rate).max() < 1e-11
+
+
+SPLINE: dict[str, Any] = dict(amplitudes=3, phases=2, local=1, max_iter=8, transient=15, shape="spline", knots=8)
+
+
+@pytest.fixture(scope="module")
+def spline_optimum():
+    s = lj.MechanismOptimiseSettings(**SPLINE)
+    return lj.optimise(_iso_capsule(np.zeros(1), np.zeros(1)), v_min=V_ISO, a_max=F_MAX, omega=OMEGA, settings=s)
+
+
+@MECHANISM_OPTIMISE
+@pytest.mark.slow
+def test_spline_optimum_of_the_isotropic_capsule(spline_optimum):
+    opt = spline_optimum
+    print({k: v for k, v in opt.to_dict().items() if k not in ("candidates",)}, opt.candidates)
+    assert opt.shape == "spline" and opt.harmonics == 0 and opt.cos.shape == (1, 0)
+    assert opt.control is not None and opt.control.shape == (1, 8)
+    wave = opt.mechanism.links[1].waveform
+    assert isinstance(wave, lj.Spline) and np.array_equal(np.asarray(wave.control), opt.control[0])
+    # The bound: a box on the control values; the exact stroke against a dense sampling of the force.
+    T = 2 * np.pi / OMEGA
+    sampled = float(np.abs(np.asarray(wave(jnp.linspace(0.0, T, 40001))[0])).max())
+    stroke = float(opt.stroke_exact[0])
+    assert np.abs(opt.control).max() <= F_MAX and stroke <= F_MAX * (1 + 1e-12)
+    assert sampled <= stroke + 1e-12 and stroke - sampled < 1e-6
+    # No sinusoid of the screen under the bound moves the capsule at v_min; the spline does.
+    assert opt.sinusoid is None and opt.candidates[0]["feasible_exact"] is False
+    assert opt.feasible_exact and opt.stable_exact and opt.mean_speed_exact >= V_ISO
+    # The floor e_d >= mu_k (M + m) g |distance| holds; a direct simulation agrees.
+    assert opt.cost_of_transport_exact >= FLOOR * (1 - 1e-9)
+    assert opt.simulation_agreement < 1e-6
+    # The independent reference from rest, once the transient has decayed.
+    speed, cost = _reference_gait(opt)
+    err = max(abs(speed / opt.mean_speed_exact - 1), abs(cost / opt.cost_of_transport_exact - 1))
+    print(f"spline optimum: speed {opt.mean_speed_exact:.10f} (reference {speed:.10f}), cost "
+          f"{opt.cost_of_transport_exact:.10f} (reference {cost:.10f}, floor {FLOOR}); diff {err:.1e}")  # fmt: skip
+    assert err < 1e-4
+
+
+@MECHANISM_OPTIMISE
+@pytest.mark.slow
+@pytest.mark.parametrize("shape", ["fourier", "spline"])
+def test_mechanism_optimise_float32(shape):
+    """The isotropic capsule in float32 (Fourier series of 2 harmonics, or splines of 8 knots): the
+    optimiser keeps the dtype, meets the requirement and the floor, and its optimum's gait agrees
+    with the float64 reference within 1e-3 (float32's resolution of the orbit, Newton tolerance 1e-5)."""
+    mech = _iso_capsule(np.zeros(1), np.zeros(1)).astype(jnp.float32)
+    s = lj.MechanismOptimiseSettings(**(SPLINE | dict(shape=shape)))
+    opt = lj.optimise(mech, v_min=V_ISO, a_max=F_MAX, omega=OMEGA, harmonics=2 if shape == "fourier" else None,
+                      settings=s)  # fmt: skip
+    print({k: v for k, v in opt.to_dict().items() if k not in ("candidates",)})
+    assert opt.mechanism.dtype == jnp.float32 and opt.shape == shape
+    assert all(x.dtype == jnp.float32 for x in jax.tree_util.tree_leaves(opt.mechanism))
+    assert opt.feasible_exact and opt.stable_exact and opt.mean_speed_exact >= V_ISO
+    assert opt.cost_of_transport_exact >= FLOOR * (1 - 1e-6) and float(np.max(opt.stroke_exact)) <= F_MAX * (1 + 1e-6)
+    speed, cost = _reference_gait(opt)
+    err = max(abs(speed / opt.mean_speed_exact - 1), abs(cost / opt.cost_of_transport_exact - 1))
+    print(f"float32 {shape} optimum: speed {opt.mean_speed_exact:.8f} (reference {speed:.8f}), cost "
+          f"{opt.cost_of_transport_exact:.8f} (reference {cost:.8f}); relative difference {err:.1e}")  # fmt: skip
+    assert err < 1e-3

@@ -4,23 +4,24 @@ The steady gait of a decision vector $\\theta$ (the chain optimiser's, `_element
 point $y^* = \\Phi(y^*, \\theta)$ of the $k$-period map, with figures $F = f(y^*, \\theta)$
 ($\\Delta X$, $e_d$, $\\min N$ over the $k$ periods). [`steady_gait`][] solves it by Newton's
 method with $M = \\partial\\Phi/\\partial y$ by forward mode in the $n_y = 2N - 1$ directions of
-$y$ only, and defines its reverse-mode derivative: for output cotangents $(\\bar y, \\bar F)$,
+$y$ only (the last iterate's linearisation, at the fixed point returned, gives $M$ and $f_y$),
+and defines its reverse-mode derivative: for output cotangents $(\\bar y, \\bar F)$,
 
 $$\\lambda = (I - M)^{-T}(\\bar y + f_y^T \\bar F), \\qquad
 \\bar\\theta = \\Phi_\\theta^T \\lambda + f_\\theta^T \\bar F,$$
 
 one transposed linear solve of size $n_y$ and one vector-Jacobian product of $(\\Phi, f)$ over the
 gait's $k$ periods at $(y^*, \\theta)$. That product runs the same engine step in a
-checkpointed loop (`equinox.internal.while_loop(kind="checkpointed")`, binomial checkpointing:
-the backward pass recomputes steps from stored checkpoints instead of storing every step), so
-its cost does not grow with the number of parameters. Located events enter as in forward mode:
+checkpointed loop (`equinox.internal.while_loop(kind="checkpointed")`), so its cost does not grow
+with the number of parameters. By default it stores the state after every step (memory: the step
+cap times one engine state per gait), so that the backward pass recomputes no step; fewer
+checkpoints trade memory for recomputation (binomial checkpointing). Located events enter as in forward mode:
 their times by the implicit function theorem (`_numerics.root`'s derivative, linear in the
 tangents, transposed here), which gives the saltation of each switch.
 
 So `jax.grad` of a scalar function of the gait (cost of transport, speed) with respect to all
-$p$ coefficients costs one gait solve, one forward pass in $n_y$ directions at $y^*$ and one
-reverse pass, against $n_y + p$ directions for the forward-mode oracle
-([`ChainOracle.orbits`][locomotion_jax.gaits._element_orbit.ChainOracle.orbits]).
+$p$ coefficients costs one gait solve and one reverse pass, against $n_y + p$ directions for
+the forward-mode oracle ([`ChainOracle.orbits`][locomotion_jax.gaits._element_orbit.ChainOracle.orbits]).
 
 Only reverse mode is defined (a `custom_vjp`): `jax.jvp`/`jax.jacfwd` of [`steady_gait`][] raise
 JAX's error for a `custom_vjp` function; forward-mode sensitivities come from the oracle's
@@ -65,26 +66,19 @@ def _run(oracle: ChainOracle, theta: Array, k: Array, loop=jax.lax.while_loop):
 
 @eqx.filter_jit
 def _solve(theta: Array, oracle: ChainOracle, y0: Array, k: Array):
-    """Newton's method on $y$ alone ($\\theta$ a constant of the period map)."""
+    """Newton's method on $y$ alone ($\\theta$ a constant of the period map): the orbit, whose
+    last iterate's linearisation is at the returned fixed point (its $M$ and $f_y$)."""
     run = _run(oracle, theta, k)
     empty = jnp.zeros((0,), theta.dtype)
-    orb = newton_orbit(lambda z: run(z, theta), y0, empty, oracle.tol, oracle.max_iter)
-    return orb.y, orb.figures, orb.ok
+    return newton_orbit(lambda z: run(z, theta), y0, empty, oracle.tol, oracle.max_iter)
 
 
 @eqx.filter_jit
-def _linearise(theta: Array, oracle: ChainOracle, y: Array, k: Array):
-    """$M = \\partial\\Phi/\\partial y$ and $f_y$ at `y` (forward mode, $n_y$ directions)."""
-    run = _run(oracle, theta, k)
-    return jax.jacfwd(lambda u: run(u, theta)[0])(y)
-
-
-@eqx.filter_jit
-def _pullback(theta: Array, oracle: ChainOracle, y: Array, k: Array, cot: Array, step_cap: int):
+def _pullback(theta: Array, oracle: ChainOracle, y: Array, k: Array, cot: Array, step_cap: int, checkpoints: int):
     """$(\\Phi, f)_\\theta^T$ `cot` at `(y, theta)`: one reverse pass through the periods."""
 
     def loop(cond, body, init):
-        return eqxi.while_loop(cond, body, init, max_steps=step_cap, kind="checkpointed")
+        return eqxi.while_loop(cond, body, init, max_steps=step_cap, kind="checkpointed", checkpoints=checkpoints)
 
     run = _run(oracle, theta, k, loop)
     _, vjp = jax.vjp(lambda th: run(y, th)[0], theta)
@@ -92,28 +86,29 @@ def _pullback(theta: Array, oracle: ChainOracle, y: Array, k: Array, cot: Array,
 
 
 @eqx.filter_custom_vjp
-def _gait(theta: Array, oracle: ChainOracle, y0: Array, k: Array, step_cap: int):
-    return _solve(theta, oracle, y0, k)
+def _gait(theta: Array, oracle: ChainOracle, y0: Array, k: Array, step_cap: int, checkpoints: int):
+    orb = _solve(theta, oracle, y0, k)
+    return orb.y, orb.figures, orb.ok
 
 
 @_gait.def_fwd
-def _gait_fwd(perturbed, theta, oracle, y0, k, step_cap):
+def _gait_fwd(perturbed, theta, oracle, y0, k, step_cap, checkpoints):
     del perturbed
-    y, figures, ok = _solve(theta, oracle, y0, k)
-    return (y, figures, ok), (y, _linearise(theta, oracle, y, k))
+    orb = _solve(theta, oracle, y0, k)
+    # Newton's last linearisation is at the fixed point it returns: no second forward pass.
+    return (orb.y, orb.figures, orb.ok), (orb.y, orb.monodromy, orb.figures_y)
 
 
 @_gait.def_bwd
-def _gait_bwd(residuals, grad_obj, perturbed, theta, oracle, y0, k, step_cap):
+def _gait_bwd(residuals, grad_obj, perturbed, theta, oracle, y0, k, step_cap, checkpoints):
     del perturbed, y0
-    y, J = residuals
+    y, M, f_y = residuals
     ny = y.shape[0]
     y_bar, f_bar, _ = grad_obj
     y_bar = jnp.zeros_like(y) if y_bar is None else y_bar
-    f_bar = jnp.zeros((J.shape[0] - ny,), y.dtype) if f_bar is None else f_bar
-    M, f_y = J[:ny], J[ny:]
+    f_bar = jnp.zeros((f_y.shape[0],), y.dtype) if f_bar is None else f_bar
     lam = jnp.linalg.solve((jnp.eye(ny, dtype=y.dtype) - M).T, y_bar + f_y.T @ f_bar)
-    return _pullback(theta, oracle, y, k, jnp.concatenate([lam, f_bar]), step_cap)
+    return _pullback(theta, oracle, y, k, jnp.concatenate([lam, f_bar]), step_cap, checkpoints)
 
 
 def _backward_cap(oracle: ChainOracle, k: int) -> int:
@@ -121,7 +116,9 @@ def _backward_cap(oracle: ChainOracle, k: int) -> int:
     return int(oracle.max_steps) * k
 
 
-def steady_gait(oracle: ChainOracle, theta: Array, y0: Array, k: int = 1, cap: int | None = None) -> AdjointGait:
+def steady_gait(
+    oracle: ChainOracle, theta: Array, y0: Array, k: int = 1, cap: int | None = None, checkpoints: int | None = None
+) -> AdjointGait:
     """The steady gait of one decision vector `theta` (shape `(p,)`; the oracle's layout) from the
     warm start `y0` (a reduced state, shape `(2N - 1,)`) over `k` actuation periods, with a
     reverse-mode derivative by the adjoint method (module docstring): `jax.grad` and `jax.vjp` of
@@ -129,7 +126,9 @@ def steady_gait(oracle: ChainOracle, theta: Array, y0: Array, k: int = 1, cap: i
     iteration failed (`ok` false) is the last iterate's and its derivative is meaningless there.
 
     `cap`: the backward pass's bound on engine steps (static; default `oracle.max_steps * k`, which
-    needs `oracle.max_steps` concrete). Several decision vectors: `jax.vmap` over `theta` and `y0`.
+    needs `oracle.max_steps` concrete). `checkpoints`: the engine states the backward pass stores
+    (static; default `cap`, every step: no step recomputed; fewer save memory and recompute steps).
+    Several decision vectors: `jax.vmap` over `theta` and `y0`.
     """
     if not isinstance(k, int) or k < 1:
         raise ValueError(f"k (actuation periods) must be an int >= 1, got {k!r}")
@@ -140,8 +139,13 @@ def steady_gait(oracle: ChainOracle, theta: Array, y0: Array, k: int = 1, cap: i
             raise TypeError(
                 "steady_gait: oracle.max_steps is traced; pass cap= (an int bound on engine steps over the k periods)"
             ) from None
+    checkpoints = cap if checkpoints is None else checkpoints
+    if not isinstance(checkpoints, int) or checkpoints < 1:
+        raise ValueError(f"checkpoints must be an int >= 1, got {checkpoints!r}")
     theta = jnp.asarray(theta)
-    y, figures, ok = _gait(theta, oracle, jnp.asarray(y0, theta.dtype), jnp.asarray(k, jnp.int32), int(cap))
+    y, figures, ok = _gait(
+        theta, oracle, jnp.asarray(y0, theta.dtype), jnp.asarray(k, jnp.int32), int(cap), checkpoints
+    )
     return AdjointGait(y, figures, ok)
 
 

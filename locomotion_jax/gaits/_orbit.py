@@ -95,7 +95,9 @@ class Orbit(NamedTuple):
       over the gait's `k` actuation periods;
     - `gradient`: $d\\,\\text{figures}/d\\theta$, shape `(3, p)`;
     - `monodromy`: $M$ at the fixed point; `ok`: Newton converged and the period completed;
-    - `n_iter`, `residual`: Newton iterations and $\\|\\Phi(y) - y\\|_\\infty$.
+    - `n_iter`, `residual`: Newton iterations and $\\|\\Phi(y) - y\\|_\\infty$;
+    - `figures_y`: $\\partial\\,\\text{figures}/\\partial y$ at the fixed point, shape `(3, dim y)`
+      (with $M$, what an adjoint solve needs: `gaits._adjoint`).
     """
 
     y: Array
@@ -105,6 +107,7 @@ class Orbit(NamedTuple):
     ok: Array
     n_iter: Array
     residual: Array
+    figures_y: Array
 
 
 def newton_orbit(
@@ -182,7 +185,7 @@ def newton_orbit(
     dy = jnp.linalg.solve(eye - M, J[:ny, ny:])
     grad = J[ny:, ny:] + J[ny:, :ny] @ dy
     good = ok & done & jnp.all(jnp.isfinite(grad))
-    return Orbit(y, val[ny:], grad, M, good, it, jnp.max(jnp.abs(val[:ny] - y)))
+    return Orbit(y, val[ny:], grad, M, good, it, jnp.max(jnp.abs(val[:ny] - y)), J[ny:, :ny])
 
 
 class AbstractActuation(eqx.Module):

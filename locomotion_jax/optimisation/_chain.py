@@ -43,6 +43,7 @@ from ..model._springwaves import SpringFourier
 from ..run._resolution import refuse_search
 from . import _chain_screen as screen, _element_local as local
 from ._chain_optimum import ChainOptimiseSettings, ChainOptimum
+from ._figures import Figures, PENALTY
 from ._lockstep import run_lockstep
 
 
@@ -133,7 +134,7 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
         dt=settings.dt, max_iter=settings.newton_iter,
     )  # fmt: skip
     v_target = speed * (1 + settings.speed_slack)
-    make = lambda th, orb, k: local.Figures(th, orb, v_target, k, direction, settings.margin, free)
+    make = lambda th, orb, k: Figures(th, orb, v_target, k, direction, settings.margin, free)
     ev = local.Evaluator(oracle, settings.local, settings.transient, make)
     x0 = []
     for lane, i in enumerate(starts):
@@ -145,7 +146,7 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     stroke_ok = lambda x: float(np.max(local.strokes(*local.unpack(x, S, H)[:2]))) <= 1 + 1e-9
     log: list[dict] = []
     costs = [c for c in sc.gaits.cost[starts] if np.isfinite(c)]
-    rho = local.PENALTY * max(1.0, max(costs, default=1.0))
+    rho = PENALTY * max(1.0, max(costs, default=1.0))
     solvers = [local.local_solver(x, proj, stroke_ok, settings.max_iter, settings.trust_radius, rho, log) for x in x0]
     say(f"refining {len(solvers)} starts locally, in lockstep (compiling the orbit solver: first call only)...")
     xs = run_lockstep(solvers, ev)

@@ -21,11 +21,6 @@ from ..gaits import _element_orbit as orbit
 from ._descent import descent
 
 
-PENALTY = 10.0
-"""Weight of the squared relative speed deficit in the objective, and of the violations in the
-merit (costs of transport are O(1))."""
-
-
 def strokes(cos: np.ndarray, sin: np.ndarray) -> np.ndarray:
     """Exact $\\max_\\phi |s_j(\\phi)|$ per spring (`cos`, `sin`: `(S, H)`): the largest value on a
     grid of $64H + 64$ phases, polished by Newton's method on $s_j' = 0$ within its grid cell
@@ -64,43 +59,6 @@ def project(theta: np.ndarray, springs: int, harmonics: int, log_lo: float, log_
     c, s, w = unpack(theta, springs, harmonics)
     scale = 1 / np.maximum(strokes(c, s), 1.0)
     return pack(c * scale[:, None], s * scale[:, None], math.exp(float(np.clip(math.log(w), log_lo, log_hi))))
-
-
-class Figures:
-    """Objective, constraints and their gradients at one evaluated point.
-
-    $f = e_d / \\max_\\text{soft}(\\sigma\\Delta X, \\Delta_\\text{need}/4) + \\rho\\,\\delta^2$ with the
-    relative speed deficit $\\delta$ (the floor keeps $f$ finite for an iterate that stands
-    still, and the penalty stops a solver far from feasibility walking towards a cheap stop);
-    constraints $c = (\\sigma\\Delta X/\\Delta_\\text{need} - 1, \\min N - \\text{margin}) \\ge 0$.
-    """
-
-    def __init__(self, theta, orb, need_rate: float, k: int, direction: int, margin: float, free_omega: bool):
-        dX, ed, low = (float(x) for x in orb.figures)
-        g_dX, g_ed, g_low = (np.asarray(g, float) for g in orb.gradient)
-        need = need_rate * k * 2 * np.pi / math.exp(theta[-1])  # distance required per gait period
-        d_need = np.zeros_like(theta)
-        d_need[-1] = -need  # d need / d log omega
-        dist, g_dist = direction * dX, direction * g_dX
-        floor, width = 0.25 * need, 0.05 * need
-        z = (dist - floor) / width
-        den = floor + width * np.logaddexp(0, z)
-        sig = 0.5 * (1 + np.tanh(0.5 * z))
-        d_den = 0.25 * d_need + 0.05 * d_need * np.logaddexp(0, z) + sig * (g_dist - 0.25 * d_need - z * 0.05 * d_need)
-        self.f = ed / den
-        self.df = g_ed / den - ed / den**2 * d_den
-        self.cot = ed / dist if dist > 0 else math.inf
-        self.speed = dX / (k * 2 * np.pi / math.exp(theta[-1]))
-        self.min_normal = low
-        self.c = np.array([dist / need - 1, low - margin])
-        self.dc = np.stack([g_dist / need - dist / need**2 * d_need, g_low])
-        deficit = max(0.0, -self.c[0])
-        self.f += PENALTY * deficit**2
-        self.df = self.df - 2 * PENALTY * deficit * self.dc[0]
-        if not free_omega:
-            self.df[-1] = 0.0
-            self.dc[:, -1] = 0.0
-        self.ok = bool(orb.ok)
 
 
 class Evaluator:

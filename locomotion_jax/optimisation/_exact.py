@@ -56,49 +56,11 @@ from ..model._params import Params
 from ..model._waveform import AbstractWaveform
 from . import _pareto as pareto
 from ._descent import descent
+from ._figures import Figures, PENALTY
 from ._lockstep import run_lockstep
 from ._optimum import ExactSettings, Optimum, verified
 from ._shapes import AbstractShape
 from ._starts import start_shapes, tension_starts
-
-
-PENALTY = 10.0
-"""Weight of the squared relative speed deficit added to the objective (costs are O(1))."""
-
-
-class _Figures:
-    """Objective and constraints of one evaluated point, as the local solvers want them."""
-
-    def __init__(self, theta, orb, need_rate, k, direction, margin, free_omega):
-        dX, ed, low = (float(x) for x in orb.figures)
-        g_dX, g_ed, g_low = (np.asarray(g, float) for g in orb.gradient)
-        T = k * 2 * np.pi / math.exp(theta[-1])  # the gait's period: k actuation periods
-        need = need_rate * T  # required distance per period; d need / d log omega = -need
-        d_need = np.zeros_like(theta)
-        d_need[-1] = -need
-        dist, g_dist = direction * dX, direction * g_dX
-        # Cost of transport e_d / dist, the distance floored smoothly at a quarter of the
-        # required one, so that an iterate that stands still has a finite cost.
-        floor, width = 0.25 * need, 0.05 * need
-        z = (dist - floor) / width
-        den = floor + width * np.logaddexp(0, z)
-        sig = 0.5 * (1 + np.tanh(0.5 * z))
-        d_den = 0.25 * d_need + 0.05 * d_need * np.logaddexp(0, z) + sig * (g_dist - 0.25 * d_need - z * 0.05 * d_need)
-        self.f = ed / den
-        self.df = g_ed / den - ed / den**2 * d_den
-        self.cot = ed / dist if dist > 0 else math.inf  # the true cost of transport
-        self.c = np.array([dist / need - 1, low - margin])
-        self.dc = np.stack([g_dist / need - dist / need**2 * d_need, g_low])
-        # A quadratic penalty on the speed deficit, zero where the speed constraint holds:
-        # without it a waveform that stands still (e_d -> 0) would look cheap, and a local
-        # solver far from feasibility would walk there.
-        deficit = max(0.0, -self.c[0])
-        self.f = self.f + PENALTY * deficit**2
-        self.df = self.df - 2 * PENALTY * deficit * self.dc[0]
-        if not free_omega:
-            self.df[-1] = 0.0
-            self.dc[:, -1] = 0.0
-        self.ok = bool(orb.ok)
 
 
 class _Bad:
@@ -106,7 +68,7 @@ class _Bad:
     that the trust region shrinks, and the last good gradients, so that the quasi-Newton
     update skips it (a zero difference of gradients) instead of learning from it."""
 
-    def __init__(self, theta, last: "_Figures | None"):
+    def __init__(self, theta, last: "Figures | None"):
         self.ok = False
         self.cot = math.inf
         self.f = (last.f if last is not None else 0.0) + 1e3
@@ -210,7 +172,7 @@ RUNNERS_UP = (0.0, 0.25, 0.5, 0.75)
 
 
 def _local_solver(x0, shape: AbstractShape, bounds, settings: ExactSettings, log: list, max_iter: int):
-    """One local run (`settings.local_method`) from `x0`; `ask(x)` returns the `_Figures` at `x`.
+    """One local run (`settings.local_method`) from `x0`; `ask(x)` returns the `Figures` at `x`.
 
     Returns the cheapest point it evaluated that meets every constraint (the speed, the
     normal-force margin and the stroke, the last to 1e-9); if none does, the point with the
@@ -334,7 +296,7 @@ def _starts(params, a_max, shape: AbstractShape, lo, hi, baseline, start, settin
     return theta
 
 
-def _merit(fig: "_Figures | _Bad") -> float:
+def _merit(fig: "Figures | _Bad") -> float:
     """Ranking of the starts: the true cost of transport, penalised by the constraint violations
     (the objective's floored distance would favour a waveform that barely moves). A speed
     deficit is penalised mildly: the local solver closes it more easily than it lowers a cost."""
@@ -371,7 +333,7 @@ def optimise_exact(
         max_iter=settings.newton_iter,
     )
     v_target = speed * (1 + settings.speed_slack)
-    make = lambda th, orb, v, k: _Figures(th, orb, v, k, direction, settings.margin, free)
+    make = lambda th, orb, v, k: Figures(th, orb, v, k, direction, settings.margin, free)
     lanes = settings.local
     ev = _Evaluator(oracle, lanes, settings, make)
     log: dict[str, Any] = {}

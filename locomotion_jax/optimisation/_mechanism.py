@@ -56,6 +56,7 @@ from ..gaits._element_orbit import actuated, ChainOracle, with_fourier, with_spl
 from ..model._bodies import Mechanism
 from . import _element_local as local
 from ._chain_optimum import ChainOptimiseSettings
+from ._figures import Figures, PENALTY
 from ._lockstep import run_lockstep
 from ._optimum import AbstractOptimum, fmt
 from ._shapes import spline_stroke, SplineShape
@@ -406,7 +407,7 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
                          harmonics=H, contact="paper", dt=settings.dt, max_iter=settings.newton_iter,
                          knots=M if spline else 0)  # fmt: skip
     v_target = v_min * (1 + settings.speed_slack)
-    make = lambda th, orb, k: local.Figures(th, orb, v_target, k, direction, settings.margin, free)
+    make = lambda th, orb, k: Figures(th, orb, v_target, k, direction, settings.margin, free)
     ev = local.Evaluator(oracle, settings.local, settings.transient, make)
     x0 = []
     for lane, i in enumerate(starts):
@@ -423,7 +424,7 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
         proj = lambda x: local.project(x, S, H, *bounds)
         stroke_ok = lambda x: float(np.max(local.strokes(*local.unpack(x, S, H)[:2]))) <= 1 + 1e-9
     costs = [c for c in sc["cost"][starts] if np.isfinite(c)]
-    rho = local.PENALTY * max(1.0, max(costs, default=1.0))
+    rho = PENALTY * max(1.0, max(costs, default=1.0))
     log: list[dict] = []
     solvers = [local.local_solver(x, proj, stroke_ok, settings.max_iter, settings.trust_radius, rho, log) for x in x0]
     say(f"refining {len(solvers)} starts locally, in lockstep (compiling the orbit solver: first call only)...")
