@@ -4,7 +4,7 @@ Each revision is checked out into a temporary git worktree and, in a fresh proce
 that tree first on `PYTHONPATH`, runs (float64 unless said)
 
 * `measure` on every case of `tests/chain_cases.py` and `LIFTOFF_CASES` of
-  `tests/test_chain_reference.py` (N = 3, 4, 6; both contacts and starts; Coulomb,
+  `tests/test_against_reference.py` (N = 3, 4, 6; both contacts and starts; Coulomb,
   anisotropic, Stribeck; both actuators), and `simulate` on them to t = 60;
 * `measure` on the paper's configurations as N = 2 chains (`Chain.from_params`; the grid of
   `compare_results.py`: 4 x 14 (omega, a), d and mhat in 4 combinations, both contacts and
@@ -44,7 +44,7 @@ import locomotion_jax as lj
 sys.path.insert(0, sys.argv[2])
 from chain_cases import CASES, HORIZON, Z
 from reference_chain import chain_config
-from test_chain_reference import LIFTOFF_CASES, to_chain
+from test_against_reference import LIFTOFF_CASES, to_chain
 
 out = {}
 def put(prefix, m, j=None):

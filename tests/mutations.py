@@ -28,7 +28,6 @@ from typing import NamedTuple
 
 ROOT = Path(__file__).resolve().parent.parent
 REF = "tests/test_against_reference.py"
-CHAIN_REF = "tests/test_chain_reference.py"
 
 
 class Mutation(NamedTuple):
@@ -148,7 +147,7 @@ MUTATIONS = [
             ("return tuple(jnp.abs(q) for q in N)", "return N"),
             ("return tuple(s * q for s, q in zip(side, N))", "return N"),
         ),
-        (f"{CHAIN_REF}::test_chain_liftoff_against_reference", CHAIN_REF),
+        (f"{REF}::test_chain_liftoff_against_reference", REF),
     ),
     Mutation(
         "chain_paper_kink_not_located",
@@ -158,7 +157,7 @@ MUTATIONS = [
             ("return tuple(s * q for s, q in zip(side, N))", "return tuple(jnp.abs(q) for q in N)"),
             ("g += list(n)", "g += [jnp.abs(q) + 1 for q in n]"),
         ),
-        (f"{CHAIN_REF}::test_chain_liftoff_against_reference", CHAIN_REF),
+        (f"{REF}::test_chain_liftoff_against_reference", REF),
     ),
     Mutation(
         "chain_liftoff_not_stopping",
@@ -168,14 +167,14 @@ MUTATIONS = [
             ('stop0 = lifted0 if contact == "strict" else jnp.asarray(False)', "stop0 = jnp.asarray(False)"),
             ("lift = stop0 | lift_cut", "lift = stop0"),
         ),
-        (f"{CHAIN_REF}::test_chain_liftoff_against_reference", CHAIN_REF),
+        (f"{REF}::test_chain_liftoff_against_reference", REF),
     ),
     Mutation(
         "chain_no_recheck",
         "chain: after a switch only the located masses switch (no re-check)",
         CHAIN,
         (("fire = tuple(kp(pe | (g < 0)) for pe, g in zip(st.pend, gA))", "fire = tuple(kp(pe) for pe in st.pend)"),),
-        (CHAIN_REF,),
+        (REF,),
     ),
     Mutation(
         "chain_decision_rate_sign",
@@ -201,7 +200,7 @@ MUTATIONS = [
                 "    first = [f & ~num.union([jnp.asarray(False)] + first[:i]) for i, f in enumerate(first)]",
             ),
         ),
-        (REF, CHAIN_REF),
+        (REF,),
     ),
     Mutation(
         "chain_one_event_per_step",
@@ -214,21 +213,21 @@ MUTATIONS = [
                 "    first = [f & ~num.union([jnp.asarray(False)] + first[:i]) for i, f in enumerate(first)]",
             ),
         ),
-        (REF, CHAIN_REF),
+        (REF,),
     ),
     Mutation(
         "chain_friction_sign_in_jerk",
         "chain: sign of the friction term in the second derivative (the dense output's curvature)",
         CHAIN_MOTION,
         (("jnp.where(st, 0, (f - c * ai - sd * fr) * im)", "jnp.where(st, 0, (f - c * ai + sd * fr) * im)"),),
-        (REF, CHAIN_REF),
+        (REF,),
     ),
     Mutation(
         "chain_event_slope_sign",
         "chain: sign of |F_i|'s rate in a stuck mass's event slope (prediction, location, margins)",
         CHAIN_MOTION,
         (("out.append(mf * dq - s * df)", "out.append(mf * dq + s * df)"),),
-        (REF, CHAIN_REF),
+        (REF,),
     ),
     Mutation(
         "chain_reversal_keeps_direction",
@@ -242,7 +241,7 @@ MUTATIONS = [
                 "                 for fi, f, s, ss in zip(fire, F0, st_sdir, st_stuck))",
             ),
         ),
-        (REF, CHAIN_REF),
+        (REF,),
     ),
     Mutation(
         "chain_stick_test_kinetic",
@@ -255,7 +254,7 @@ MUTATIONS = [
                 "             for law, f, q in zip(P.friction, F0, nA)]",
             ),
         ),
-        (REF, CHAIN_REF),
+        (REF,),
     ),
     Mutation(
         "chain_energy_integrand",
@@ -268,14 +267,14 @@ MUTATIONS = [
                 "        for i, (m, q, s, c, vi) in enumerate(zip(mu, n, speed, P.c, v))])",
             ),
         ),
-        (REF, CHAIN_REF),
+        (REF,),
     ),
     Mutation(
         "chain_target_com_weights",
         "chain: the target event uses the unweighted midpoint of the end masses, not the centre of mass",
         CHAIN_MOTION,
         (("rel = P.centre_of_mass(x) - target.X0", "rel = 0.5 * (x[0] + x[-1]) - target.X0"),),
-        (REF, CHAIN_REF),
+        (REF,),
     ),
     # -- derivatives -------------------------------------------------------------------------------------
     Mutation(

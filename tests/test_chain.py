@@ -1,6 +1,8 @@
 """Chains of N masses: the N = 2 chain against the two-mass engine, symmetries, energy,
-a user-defined friction law, float32, and bad input. (The comparison with the independent
-N-mass reference is in `test_chain_reference.py`.)"""
+a user-defined friction law, float32, bad input, and the front ends under `jax.jit` (a chain built
+from traced values measures and simulates as it does eagerly; an invalid or unresolved one is
+flagged in its own result). (The comparison with the independent N-mass reference is in
+`test_against_reference.py`.)"""
 
 from typing import Any
 
@@ -368,7 +370,7 @@ def test_chain_driven_by_splines_batches_validates_and_refuses_a_file(tmp_path):
     """A chain takes any waveform per spring (here a `Spline`, batched along its control values):
     a batch equals its configurations run alone, a stroke beyond `lbar` or a NaN control value is
     refused naming the waveform, and a file refuses to hold it. (Against the reference:
-    `tests/test_chain_reference.py::test_chain_driven_by_splines_against_reference`.)"""
+    `tests/test_against_reference.py::test_chain_driven_by_splines_against_reference`.)"""
     ctrl = np.array([[0.05, 0.08, -0.02, -0.07, 0.0, 0.03], [0.02, 0.06, 0.01, -0.05, -0.02, 0.01]])
     mk = lambda c: lj.Chain(masses=[1.0, 1.0, 1.0], d=0.0, waveforms=lj.Spline(c, 3.0, 3.0),
                             friction=lj.AnisotropicCoulomb(0.5, 0.9, 0.3, 0.7))  # fmt: skip
@@ -392,3 +394,27 @@ def test_chain_driven_by_splines_batches_validates_and_refuses_a_file(tmp_path):
     assert [int(s) for s in flagged.status] == [lj.Status.OK, lj.Status.INVALID]
     with pytest.raises(lj.MechanismFileError, match="Spline"):
         lj.save_mechanism(mk(ctrl[0]), tmp_path / "spline.toml")
+
+
+# Under jax.jit.
+
+SHORT: dict[str, Any] = dict(z=0.1, horizon=5.0, window=2.0)
+
+
+def _chain(k, omega=2.0):
+    return lj.Chain(masses=[1.0, 1.0, 1.0], k=k, waveforms=lj.TravellingWave(0.05, omega, 1.0))
+
+
+def test_measure_and_simulate_of_a_traced_chain_equal_eager():
+    for t_start in (1.0, None):  # an explicit start (checked on the host) and the chain's own
+        run = lambda k: lj.measure(_chain(k), t_start=t_start, **SHORT).mean_speed  # noqa: B023
+        np.testing.assert_allclose(jax.jit(run)(50.0), run(50.0), rtol=1e-12, atol=1e-15)
+    sim = lambda k: lj.simulate(_chain(k), 2.0, np.linspace(0.0, 2.0, 5)).X
+    np.testing.assert_allclose(jax.jit(sim)(50.0), sim(50.0), rtol=1e-12, atol=1e-15)
+
+
+def test_traced_chain_flags_invalid_and_unresolved():
+    status = jax.jit(lambda k, om: lj.measure(_chain(k, om), t_start=1.0, **SHORT).status)
+    assert int(status(50.0, 2.0)) == lj.Status.OK
+    assert int(status(-1.0, 2.0)) == lj.Status.INVALID
+    assert int(status(50.0, 1e4)) == lj.Status.UNRESOLVED

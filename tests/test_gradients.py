@@ -186,7 +186,7 @@ def test_chain_derivatives_match_reference():
     # at the saved times, against tests/reference_chain.py.
     from chain_cases import ANISO
     from reference_chain import chain_config, reference_chain_simulate
-    from test_chain_reference import to_chain
+    from test_against_reference import to_chain
 
     kw: dict[str, Any] = dict(masses=[1.0] * 3, omega=3.0, a=0.08, phi=2 * np.pi / 3, **ANISO)
     chain = to_chain(chain_config(**kw))

@@ -18,8 +18,7 @@ import pytest
 from chain_cases import CASES as CHAIN_CASES
 from reference_chain import chain_config
 from reference_hop import paper_config, reference_hop_simulate
-from test_against_reference import CASES as TWO_MASS_CASES, GROUPS
-from test_chain_reference import to_chain
+from test_against_reference import CASES as TWO_MASS_CASES, GROUPS, to_chain
 
 
 T_END = 40.0

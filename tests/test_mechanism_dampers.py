@@ -1,6 +1,6 @@
 """`lj.Damper` (SPEC §9): a relative damper between two bodies or a body and a wall. Its force enters
 the stick and slip decisions and its dissipation enters e_d, so the energy balance holds; a damper to
-a wall is ground damping. (Against the independent reference: tests/test_mechanism_reference.py.)
+a wall is ground damping. (Against the independent reference: tests/test_against_reference.py.)
 Also: a waveform batched in its amplitude and frequency batches the mechanism."""
 
 import jax.numpy as jnp

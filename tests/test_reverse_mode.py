@@ -82,7 +82,7 @@ def test_measure_float32():
 def _chain():
     from chain_cases import ANISO
     from reference_chain import chain_config
-    from test_chain_reference import to_chain
+    from test_against_reference import to_chain
 
     kw: dict[str, Any] = dict(masses=[1.0] * 3, omega=3.0, a=0.08, phi=2 * np.pi / 3, **ANISO)
     return kw, to_chain(chain_config(**kw))
