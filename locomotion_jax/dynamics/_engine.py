@@ -12,7 +12,7 @@ sign over the step, its crossing is found on its own quintic Hermite interpolant
 Newton), the step is cut there and the interpolated state committed; the switch itself is made
 at the start of the next iteration, where every mass is re-decided (SPEC §2), so an event costs
 one extra iteration and results converge at fourth order in `dt`
-(tests/test_against_reference.py, tests/test_against_reference.py). Of several crossings in one
+(tests/test_against_reference.py: the paper's model and chains). Of several crossings in one
 step, the earliest by each function's secant is located.
 
 The mechanism supplies its loads and their first two time derivatives along the motion

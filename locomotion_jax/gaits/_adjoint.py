@@ -15,9 +15,9 @@ gait's $k$ periods at $(y^*, \\theta)$. That product runs the same engine step i
 checkpointed loop (`equinox.internal.while_loop(kind="checkpointed")`), so its cost does not grow
 with the number of parameters. By default it stores the state after every step (memory: the step
 cap times one engine state per gait), so that the backward pass recomputes no step; fewer
-checkpoints trade memory for recomputation (binomial checkpointing). Located events enter as in forward mode:
-their times by the implicit function theorem (`_numerics.root`'s derivative, linear in the
-tangents, transposed here), which gives the saltation of each switch.
+checkpoints trade memory for recomputation (binomial checkpointing). Located events enter as in
+forward mode: their times by the implicit function theorem (`_numerics.root`'s derivative, linear
+in the tangents, transposed here), which gives the saltation of each switch.
 
 So `jax.grad` of a scalar function of the gait (cost of transport, speed) with respect to all
 $p$ coefficients costs one gait solve and one reverse pass, against $n_y + p$ directions for
