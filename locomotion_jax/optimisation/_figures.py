@@ -1,9 +1,10 @@
 """The exact optimisers' objective and constraints at one evaluated gait, with their gradients.
 
-Shared by the paper's optimiser (`_exact`) and the chain and mechanism refinement
-(`_element_local`): both evaluate an [`Orbit`][locomotion_jax.gaits._orbit.Orbit] (figures
-$(\\Delta X, e_d, \\min N)$ over the gait's $k$ periods and their exact gradients with respect to
-the decision vector, whose last entry is $\\log\\omega$) and hand these figures to a local solver.
+Shared by the paper's optimiser (`_exact`) and the chain's and the mechanism's (`_chain`,
+`_mechanism`, whose local refinement is `_element_local`): each evaluates an
+[`Orbit`][locomotion_jax.gaits._orbit.Orbit] (figures $(\\Delta X, e_d, \\min N)$ over the gait's
+$k$ periods and their exact gradients with respect to the decision vector, whose last entry is
+$\\log\\omega$) and hands these figures to a local solver.
 """
 
 import math
