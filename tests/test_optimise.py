@@ -150,6 +150,31 @@ def test_stroke_is_exact_and_projection_lands_on_the_limit():
         assert float(_constraints.stroke(c2, s2)) == pytest.approx(0.05, rel=1e-12)
 
 
+def test_choose_takes_the_cheapest_feasible_else_the_fastest_stable_gait():
+    """The choice every exact optimiser makes among its verified candidates (`_optimum.choose`)."""
+    from locomotion_jax.optimisation._optimum import choose
+
+    eps = float(np.finfo(np.float64).eps)
+    ok = np.array([True, True, True, False, True])
+    speed = np.array([0.06, 0.05, 0.07, 0.09, np.nan])
+    cost = np.array([1.0, 0.8, 0.9, 0.1, 0.1])
+    strokes = np.array([0.05, 0.05, 0.05 * (1 + 4 * eps), 0.05, 0.05])
+    # Row 1 is the cheapest fast enough; row 3 is cheaper but not a stable gait, row 4 has no speed.
+    k, feasible, ok_speed, ok_stroke = choose(ok, speed, cost, strokes, 0.05, 1, 0.05, eps)
+    assert k == 1 and feasible.tolist() == [True, True, True, False, False]
+    assert ok_speed.tolist() == [True, True, True, False, False] and ok_stroke.all()
+    # A stroke over the limit by more than 8 eps is infeasible, whatever its cost.
+    k, feasible, _, ok_stroke = choose(ok, speed, cost, strokes * np.array([1, 1 + 1e-9, 1, 1, 1]), 0.05, 1, 0.05, eps)
+    assert k == 2 and not ok_stroke[1] and not feasible[1]
+    # None fast enough: the fastest stable gait, in the required direction.
+    k, feasible, _, _ = choose(ok, speed, cost, strokes, 0.5, 1, 0.05, eps)
+    assert k == 2 and not feasible.any()
+    k, _, _, _ = choose(ok, -speed, cost, strokes, 0.5, -1, 0.05, eps)
+    assert k == 2
+    # No stable gait at all: the first candidate.
+    assert choose(~ok & False, speed, cost, strokes, 0.05, 1, 0.05, eps)[0] == 0
+
+
 @pytest.mark.parametrize(
     "kwargs, match",
     [
@@ -596,6 +621,7 @@ def test_screen_filter_keeps_the_fast_waves():
     assert list(screen.fast_enough(v, 0.4, 1, 0.5, 2)) == [0, 4]  # 0.2 reaches half of 0.4; 0.3, 0.2 fastest
     assert list(screen.fast_enough(v, 0.4, 1, 0.5, 3)) == [0, 3, 4]
     assert list(screen.fast_enough(v, 0.4, -1, 0.5, 1)) == [2]  # backwards; NaN never
+    assert list(screen.fast_enough(v, 10.0, -1, 0.5, 1)) == [2]  # none fast enough: the fastest backwards, not NaN
     assert list(screen.fast_enough(v, 10.0, 1, 0.5, 0)) == []
 
 

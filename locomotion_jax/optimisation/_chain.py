@@ -36,15 +36,13 @@ from typing import Any
 import jax.numpy as jnp
 import numpy as np
 
-from ..gaits._element_orbit import ChainOracle
 from ..model._actuator import RestLength
 from ..model._chain import Chain
 from ..model._springwaves import SpringFourier
 from ..run._resolution import refuse_search
 from . import _chain_screen as screen, _element_local as local
 from ._chain_optimum import ChainOptimiseSettings, ChainOptimum
-from ._figures import Figures, PENALTY
-from ._lockstep import run_lockstep
+from ._optimum import choose
 
 
 def check_inputs(chain: Any, v_min: Any, a_max: Any, direction: Any, harmonics: Any, omega: Any,
@@ -123,34 +121,14 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     baseline = screen.as_dict(sc, best) if feas[best] else None
 
     # 2. Local refinement of per-spring harmonics.
-    starts = screen.distinct_starts(sc, best, settings.local, speed, direction, steps)
-    starts += starts[:1] * (settings.local - len(starts))
-    dtype = base.dtype
-    steps_per_period = int(math.ceil(2 * math.pi / lo / settings.dt)) * 3 + 200
-    oracle = ChainOracle(
-        chain=base, a_max=jnp.asarray(a_max, dtype), max_steps=jnp.asarray(steps_per_period, jnp.int32),
-        tol=jnp.asarray(settings.newton_tol if jnp.finfo(dtype).bits == 64 else 1e-5, dtype), harmonics=H,
-        contact="paper",  # iterates past a lift-off stay defined; the margin keeps N > 0
-        dt=settings.dt, max_iter=settings.newton_iter,
-    )  # fmt: skip
-    v_target = speed * (1 + settings.speed_slack)
-    make = lambda th, orb, k: Figures(th, orb, v_target, k, direction, settings.margin, free)
-    ev = local.Evaluator(oracle, settings.local, settings.transient, make)
-    x0 = []
-    for lane, i in enumerate(starts):
+    rows = screen.distinct_starts(sc, best, settings.local, speed, direction, steps)
+    rows += rows[:1] * (settings.local - len(rows))
+    starts = []
+    for i in rows:
         cos, sin = screen.wave_coefficients(sc.a[i : i + 1], sc.phi[i : i + 1], S, H)
-        x0.append(local.pack(cos[0] / a_max, sin[0] / a_max, float(sc.omega[i])))
-        ev.y[lane], ev.k[lane] = sc.gaits.y[i], int(max(sc.gaits.k[i], 1))
-    bounds = (math.log(lo), math.log(hi))
-    proj = lambda x: local.project(x, S, H, *bounds)
-    stroke_ok = lambda x: float(np.max(local.strokes(*local.unpack(x, S, H)[:2]))) <= 1 + 1e-9
-    log: list[dict] = []
-    costs = [c for c in sc.gaits.cost[starts] if np.isfinite(c)]
-    rho = PENALTY * max(1.0, max(costs, default=1.0))
-    solvers = [local.local_solver(x, proj, stroke_ok, settings.max_iter, settings.trust_radius, rho, log) for x in x0]
-    say(f"refining {len(solvers)} starts locally, in lockstep (compiling the orbit solver: first call only)...")
-    xs = run_lockstep(solvers, ev)
-    say(f"local refinement done ({time.perf_counter() - t0:.0f} s, {ev.calls} batched evaluations)")
+        starts.append(local.Start(cos[0], sin[0], float(sc.omega[i]), sc.gaits.y[i], int(sc.gaits.k[i]),
+                                  float(sc.gaits.cost[i])))  # fmt: skip
+    xs, ev, log = local.refine(base, starts, a_max, speed, direction, lo, hi, 0, settings, say)
 
     # 3. Verification of the candidates: the refined actuations, rescaled onto the exact
     # stroke limit (what the line search's tolerance let through), and the baseline wave.
@@ -165,15 +143,9 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     say(f"verifying {len(names)} candidates on their steady gaits...")
     g = screen.solve(base, cos, sin, om, settings)
     strokes = np.stack([local.strokes(c, s) for c, s in zip(cos, sin)])
-    eps = float(jnp.finfo(dtype).eps)
-    ok_speed = g.ok & (direction * np.nan_to_num(g.speed, nan=-np.inf) >= speed)
-    ok_stroke = strokes.max(axis=1) <= a_max * (1 + 8 * eps)
-    feasible = ok_speed & ok_stroke & g.ok
-    if feasible.any():
-        k = int(np.argmin(np.where(feasible, g.cost, np.inf)))
-    else:
-        v = direction * np.nan_to_num(g.speed, nan=-np.inf)
-        k = int(np.argmax(np.where(g.ok, v, -np.inf))) if g.ok.any() else 0
+    eps = float(jnp.finfo(base.dtype).eps)
+    k, feasible, ok_speed, ok_stroke = choose(g.ok, g.speed, g.cost, strokes.max(axis=1), speed, direction,
+                                              a_max, eps)  # fmt: skip
     table = [dict(candidate=names[i], omega=float(om[i]), mean_speed_exact=float(g.speed[i]),
                   cost_of_transport_exact=float(g.cost[i]), stable_exact=bool(g.ok[i]),
                   liftoff_exact=bool(g.liftoff[i]), stroke=float(strokes[i].max()), feasible_exact=bool(feasible[i]))
@@ -185,7 +157,8 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
                       np.full(settings.local, max(int(g.k[k]), 1)))  # fmt: skip
     min_normal = float(orb.figures[0, 2]) if orb.ok[0] else math.nan
     chosen = screen.with_actuation(base, cos[k : k + 1], sin[k : k + 1], om[k : k + 1])[0]
-    sim = _simulate_check(chosen, g, k, settings) if g.ok[k] else (math.nan, math.nan, 0)
+    sim = (local.simulate_check(chosen, float(g.radius[k]), float(g.period[k]), settings, start="relaxed")
+           if g.ok[k] else (math.nan, math.nan, 0))  # fmt: skip
     rel = max(abs(sim[0] / g.speed[k] - 1), abs(sim[1] / g.cost[k] - 1)) if g.ok[k] else math.nan
     say(f"verified ({time.perf_counter() - t0:.0f} s): {names[k]}, cost of transport {g.cost[k]:.6g}")
     wave_cost = baseline["cost_of_transport"] if baseline else math.nan
@@ -201,25 +174,6 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
         improvement_vs_travelling_wave=1 - float(g.cost[k]) / wave_cost if (feasible[k] and baseline) else math.nan,
         mean_speed_simulated=sim[0], cost_of_transport_simulated=sim[1], simulation_agreement=float(rel),
         simulated_periods=int(sim[2]), source=names[k], candidates=table,
-        history=[{"starts": [screen.as_dict(sc, i) for i in starts], "local": log}], screened=len(sc.a),
+        history=[{"starts": [screen.as_dict(sc, i) for i in rows], "local": log}], screened=len(sc.a),
         evaluations=ev.calls, runtime_s=time.perf_counter() - t0, chain=chosen,
     )  # fmt: skip
-
-
-def _simulate_check(chain: Chain, g: screen.Gaits, k: int, settings: ChainOptimiseSettings) -> tuple[float, float, int]:
-    """Mean speed and cost of transport of a direct simulation from the relaxed springs, over 10
-    whole gait periods after enough periods for the slowest Floquet mode to decay to `check_tol`."""
-    from ..dynamics._exact_dynamics import Exact
-    from ..run._simulate import simulate
-
-    rho = float(g.radius[k])
-    lo, hi = settings.check_periods
-    n = hi if not (0 < rho < 1) else int(np.clip(math.ceil(math.log(settings.check_tol) / math.log(rho)), lo, hi))
-    Tg = float(g.period[k])
-    t = np.array([n * Tg, (n + 10) * Tg])
-    traj = simulate(chain, float(t[-1]), t, dynamics=Exact(dt=settings.dt), contact="strict", start="relaxed")
-    X, ed = np.asarray(traj.X, np.float64), np.asarray(traj.e_d, np.float64)
-    if not np.all(np.asarray(traj.valid)):
-        return math.nan, math.nan, n
-    dX = X[1] - X[0]
-    return float(dX / (t[1] - t[0])), float((ed[1] - ed[0]) / abs(dX)), n

@@ -25,6 +25,7 @@ from ..gaits._shooting import steady_gait_chain, transient_speed
 from ..model._chain import Chain
 from ..model._springwaves import SpringFourier
 from ._chain_optimum import ChainOptimiseSettings
+from ._optimum import along
 
 
 def free_frequencies(chain: Chain) -> np.ndarray:
@@ -85,7 +86,7 @@ def fast_enough(v: np.ndarray, v_min: float, direction: int, fraction: float, co
     """Rows, in order, of the waves whose transient speed `v` reaches `fraction` of `v_min` in
     `direction`, and of the `count` fastest (a closest candidate when none is feasible); never one
     whose speed is NaN (its transient stopped)."""
-    fast = direction * np.nan_to_num(v, nan=-np.inf)
+    fast = along(v, direction)
     keep = fast >= fraction * v_min
     keep[np.argsort(-fast, kind="stable")[:count]] = True
     return np.flatnonzero(keep & np.isfinite(v))
@@ -179,13 +180,13 @@ class Screen(NamedTuple):
 
 
 def feasible(g: Gaits, speed: float, direction: int) -> np.ndarray:
-    return g.ok & (direction * np.nan_to_num(g.speed, nan=-np.inf) >= speed)
+    return g.ok & (along(g.speed, direction) >= speed)
 
 
 def rank(g: Gaits, speed: float, direction: int) -> np.ndarray:
     """Order of preference: feasible waves by cost, then the other stable gaits by speed in `direction`."""
     feas = feasible(g, speed, direction)
-    v = direction * np.nan_to_num(g.speed, nan=-np.inf)
+    v = along(g.speed, direction)
     key = np.where(feas, np.nan_to_num(g.cost, nan=np.inf), np.where(g.ok, 1e300 - v, np.inf))
     return np.argsort(key, kind="stable")
 

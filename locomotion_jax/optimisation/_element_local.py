@@ -1,24 +1,32 @@
-"""The local refinement of the chain and mechanism optimisers: a monotone descent on an exact penalty, per start,
-in lockstep (a signal per actuated element: `gaits._element_orbit`).
+"""The stages that the chain and mechanism optimisers share, after each one's own baseline (travelling
+waves of a chain, sinusoids of a mechanism): the local refinement, the choice among the verified
+candidates and the direct-simulation check. A signal per actuated element: `gaits._element_orbit`.
 
-Each start runs in its own thread (`_lockstep.run_lockstep`);
-its evaluations are batched into one call of the oracle (`_element_orbit.ChainOracle`:
-periodic orbit, figures and their exact gradients). The descent takes L-BFGS directions and
-a backtracking line search that accepts only a decrease of the merit, so that an iterate
-never walks into a costlier gait or a failed orbit; the stroke of every spring is kept by
-radial rescaling of that spring's coefficients onto its exact limit (the set
-$\\{\\max_t |s_j(t)| \\le a_\\max\\}$ is convex and contains 0), $\\log\\omega$ by clipping.
+The refinement (`refine`) runs a monotone descent on an exact penalty per start, the starts in
+lockstep (`_lockstep.run_lockstep`): each start runs in its own thread and their evaluations are
+batched into one call of the oracle (`_element_orbit.ChainOracle`: periodic orbit, figures and
+their exact gradients). The descent takes L-BFGS directions and a backtracking line search that
+accepts only a decrease of the merit, so that an iterate never walks into a costlier gait or a
+failed orbit. The bound on every signal is kept by radial rescaling of its Fourier coefficients
+onto its exact limit (the set $\\{\\max_t |s_j(t)| \\le a_\\max\\}$ is convex and contains 0), or by
+clipping a spline's control values (a box); $\\log\\omega$ by clipping.
 """
 
 import math
-from typing import Any
+import time
+from collections.abc import Callable
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..dynamics._exact_dynamics import Exact
 from ..gaits import _element_orbit as orbit
 from ._descent import descent
+from ._figures import Figures, PENALTY
+from ._lockstep import run_lockstep
+from ._shapes import spline_stroke, SplineShape
 
 
 def strokes(cos: np.ndarray, sin: np.ndarray) -> np.ndarray:
@@ -144,3 +152,109 @@ def on_bound(x: np.ndarray, S: int, H: int, a_max: float) -> tuple[np.ndarray, n
     c, s, w = unpack(x, S, H)
     scale = 1 / np.maximum(strokes(c, s), 1.0)
     return a_max * c * scale[:, None], a_max * s * scale[:, None], w
+
+
+# -- splines: decision vectors (each element's control values in units of a_max, then log omega) --
+
+
+def spline_start(cos: np.ndarray, sin: np.ndarray, omega: float, a_max: float, knots: int) -> np.ndarray:
+    """The decision vector of the splines that interpolate each element's Fourier signal (`cos`,
+    `sin`: `(S, H)`, absolute units) at the knots ([`SplineShape.fit`][]), control values clipped
+    to the bound."""
+    grid = 64 * knots
+    phase = np.arange(grid) * 2 * np.pi / grid
+    n = np.arange(1, cos.shape[1] + 1)
+    values = (cos @ np.cos(np.outer(n, phase)) + sin @ np.sin(np.outer(n, phase))) / a_max
+    shape = SplineShape(knots=knots)
+    return np.concatenate([*(shape.fit(v, omega)[:-1] for v in values), [math.log(omega)]])
+
+
+def spline_project(theta: np.ndarray, log_lo: float, log_hi: float) -> np.ndarray:
+    """Control values clipped to the box $|c| \\le 1$ (units of $a_\\max$), $\\log\\omega$ to its range."""
+    out = np.array(theta, float)
+    out[:-1] = np.clip(out[:-1], -1.0, 1.0)
+    out[-1] = np.clip(out[-1], log_lo, log_hi)
+    return out
+
+
+def spline_strokes(control: np.ndarray) -> np.ndarray:
+    """Exact $\\max_\\phi |s_j - \\bar s_j|$ per element of the control values `(S, M)`."""
+    return np.array([spline_stroke(row) for row in control])
+
+
+class Start(NamedTuple):
+    """A start of the refinement: the Fourier coefficients `(S, H)` of every actuated signal
+    (absolute units) and the base frequency of a baseline actuation, and its steady gait (the
+    section state `y`, the gait period `k` in actuation periods, the cost of transport)."""
+
+    cos: np.ndarray
+    sin: np.ndarray
+    omega: float
+    y: np.ndarray
+    k: int
+    cost: float
+
+
+def refine(base: Any, starts: list[Start], a_max: float, v_min: float, direction: int, lo: float, hi: float,
+           knots: int, settings: Any, say: Callable[[str], None],
+           ) -> tuple[list[np.ndarray], Evaluator, list[dict]]:  # fmt: skip
+    """Refine `starts` (one per lane, `settings.local` of them) locally in lockstep: Fourier series
+    of the starts' harmonics, or with `knots > 0` splines of `knots` control values per signal
+    (started from each start's interpolating spline), base frequency in `[lo, hi]`. `settings`:
+    a chain's or a mechanism's optimiser settings (the fields of the refinement and the orbit
+    solve). Returns each lane's result (the cheapest point that met every constraint, else
+    the one with the smallest violation), the evaluator (its oracle and warm starts) and the
+    descent's log."""
+    S, H = starts[0].cos.shape
+    dtype = base.dtype
+    steps = int(math.ceil(2 * math.pi / lo / settings.dt)) * 3 + 200
+    oracle = orbit.ChainOracle(
+        chain=base, a_max=jnp.asarray(a_max, dtype), max_steps=jnp.asarray(steps, jnp.int32),
+        tol=jnp.asarray(settings.newton_tol if jnp.finfo(dtype).bits == 64 else 1e-5, dtype), harmonics=H,
+        contact="paper",  # iterates past a lift-off stay defined; the margin keeps N > 0
+        dt=settings.dt, max_iter=settings.newton_iter, knots=knots,
+    )  # fmt: skip
+    v_target = v_min * (1 + settings.speed_slack)
+    free = hi > lo
+    make = lambda th, orb, k: Figures(th, orb, v_target, k, direction, settings.margin, free)
+    ev = Evaluator(oracle, settings.local, settings.transient, make)
+    x0 = []
+    for lane, st in enumerate(starts):
+        if knots:
+            x0.append(spline_start(st.cos, st.sin, st.omega, a_max, knots))
+        else:
+            x0.append(pack(st.cos / a_max, st.sin / a_max, st.omega))
+        ev.y[lane], ev.k[lane] = st.y, int(max(st.k, 1))
+    bounds = (math.log(lo), math.log(hi))
+    if knots:
+        proj = lambda x: spline_project(x, *bounds)
+        stroke_ok = lambda x: float(np.max(spline_strokes(x[:-1].reshape(S, knots)))) <= 1 + 1e-9
+    else:
+        proj = lambda x: project(x, S, H, *bounds)
+        stroke_ok = lambda x: float(np.max(strokes(*unpack(x, S, H)[:2]))) <= 1 + 1e-9
+    costs = [st.cost for st in starts if np.isfinite(st.cost)]
+    rho = PENALTY * max(1.0, max(costs, default=1.0))
+    log: list[dict] = []
+    solvers = [local_solver(x, proj, stroke_ok, settings.max_iter, settings.trust_radius, rho, log) for x in x0]
+    say(f"refining {len(solvers)} starts locally, in lockstep (compiling the orbit solver: first call only)...")
+    t0 = time.perf_counter()
+    xs = run_lockstep(solvers, ev)
+    say(f"local refinement done ({time.perf_counter() - t0:.0f} s, {ev.calls} batched evaluations)")
+    return xs, ev, log
+
+
+def simulate_check(model: Any, rho: float, period: float, settings: Any, **start: Any) -> tuple[float, float, int]:
+    """Mean speed and cost of transport of a direct simulation (`start`: `simulate`'s), over 10 whole
+    gait periods after enough periods for the slowest Floquet mode (multiplier modulus `rho`) to
+    decay to `settings.check_tol` (within `settings.check_periods`); NaN if the run stopped."""
+    from ..run._simulate import simulate
+
+    lo, hi = settings.check_periods
+    n = hi if not (0 < rho < 1) else int(np.clip(math.ceil(math.log(settings.check_tol) / math.log(rho)), lo, hi))
+    t = np.array([n * period, (n + 10) * period])
+    traj = simulate(model, float(t[-1]), t, dynamics=Exact(dt=settings.dt), contact="strict", **start)
+    if not np.all(np.asarray(traj.valid)):
+        return math.nan, math.nan, n
+    X, ed = np.asarray(traj.X, np.float64), np.asarray(traj.e_d, np.float64)
+    dX = X[1] - X[0]
+    return float(dX / (t[1] - t[0])), float((ed[1] - ed[0]) / abs(dX)), n

@@ -52,14 +52,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..dynamics._exact_dynamics import Exact
-from ..gaits._element_orbit import actuated, ChainOracle, with_fourier, with_spline
+from ..gaits._element_orbit import actuated, with_fourier, with_spline
 from ..model._bodies import Mechanism
 from . import _element_local as local
 from ._chain_optimum import ChainOptimiseSettings
-from ._figures import Figures, PENALTY
-from ._lockstep import run_lockstep
-from ._optimum import AbstractOptimum, fmt
-from ._shapes import spline_stroke, SplineShape
+from ._optimum import AbstractOptimum, along, choose, fmt
 
 
 class MechanismOptimiseSettings(eqx.Module):
@@ -293,34 +290,6 @@ def _spline(mech: Mechanism, control: np.ndarray, omega: Any) -> Mechanism:
     return with_spline(mech, jnp.asarray(control, mech.dtype), jnp.asarray(omega, mech.dtype))
 
 
-# -- splines: decision vectors (each element's control values in units of a_max, then log omega) --
-
-
-def spline_start(cos: np.ndarray, sin: np.ndarray, omega: float, a_max: float, knots: int) -> np.ndarray:
-    """The decision vector of the splines that interpolate each element's Fourier signal (`cos`,
-    `sin`: `(S, H)`, absolute units) at the knots ([`SplineShape.fit`][]), control values clipped
-    to the bound."""
-    grid = 64 * knots
-    phase = np.arange(grid) * 2 * np.pi / grid
-    n = np.arange(1, cos.shape[1] + 1)
-    values = (cos @ np.cos(np.outer(n, phase)) + sin @ np.sin(np.outer(n, phase))) / a_max
-    shape = SplineShape(knots=knots)
-    return np.concatenate([*(shape.fit(v, omega)[:-1] for v in values), [math.log(omega)]])
-
-
-def spline_project(theta: np.ndarray, log_lo: float, log_hi: float) -> np.ndarray:
-    """Control values clipped to the box $|c| \\le 1$ (units of $a_\\max$), $\\log\\omega$ to its range."""
-    out = np.array(theta, float)
-    out[:-1] = np.clip(out[:-1], -1.0, 1.0)
-    out[-1] = np.clip(out[-1], log_lo, log_hi)
-    return out
-
-
-def spline_strokes(control: np.ndarray) -> np.ndarray:
-    """Exact $\\max_\\phi |s_j - \\bar s_j|$ per element of the control values `(S, M)`."""
-    return np.array([spline_stroke(row) for row in control])
-
-
 def check_inputs(mech: Any, v_min: Any, a_max: Any, direction: Any, harmonics: Any, omega: Any) -> list[int]:
     """Validate a mechanism requirement; return the actuated elements' indices.
 
@@ -389,8 +358,8 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
     cos[:, :, 0], sin[:, :, 0] = (A * np.sin(PHI))[:, None], (A * np.cos(PHI))[:, None]
     say(f"screening {A.size} sinusoids (compiling the steady-gait solver: first call only)...")
     sc = _gaits(_fourier(base, cos, sin, W), settings)
-    fast = np.asarray(sc["ok"], bool) & (direction * np.nan_to_num(sc["speed"], nan=-np.inf) >= v_min)
-    order = np.lexsort((-direction * np.nan_to_num(sc["speed"], nan=-np.inf), np.where(fast, sc["cost"], np.inf),
+    fast = np.asarray(sc["ok"], bool) & (along(sc["speed"], direction) >= v_min)
+    order = np.lexsort((-along(sc["speed"], direction), np.where(fast, sc["cost"], np.inf),
                         ~fast))  # fmt: skip
     best = int(order[0])
     sinusoid = (dict(a=float(A[best]), omega=float(W[best]), phase=float(PHI[best]),
@@ -398,37 +367,10 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
                 if fast[best] else None)  # fmt: skip
 
     # 2. Local refinement of every element's harmonics (or control values) from the best sinusoids.
-    starts = [int(i) for i in order if sc["ok"][i]][: settings.local] or [best]
-    starts += starts[:1] * (settings.local - len(starts))
-    dtype = base.dtype
-    steps = int(math.ceil(2 * math.pi / lo / settings.dt)) * 3 + 200
-    oracle = ChainOracle(chain=base, a_max=jnp.asarray(a_max, dtype), max_steps=jnp.asarray(steps, jnp.int32),
-                         tol=jnp.asarray(settings.newton_tol if jnp.finfo(dtype).bits == 64 else 1e-5, dtype),
-                         harmonics=H, contact="paper", dt=settings.dt, max_iter=settings.newton_iter,
-                         knots=M if spline else 0)  # fmt: skip
-    v_target = v_min * (1 + settings.speed_slack)
-    make = lambda th, orb, k: Figures(th, orb, v_target, k, direction, settings.margin, free)
-    ev = local.Evaluator(oracle, settings.local, settings.transient, make)
-    x0 = []
-    for lane, i in enumerate(starts):
-        if spline:
-            x0.append(spline_start(cos[i], sin[i], float(W[i]), a_max, M))
-        else:
-            x0.append(local.pack(cos[i] / a_max, sin[i] / a_max, float(W[i])))
-        ev.y[lane], ev.k[lane] = sc["y"][i], int(max(sc["k"][i], 1))
-    bounds = (math.log(lo), math.log(hi))
-    if spline:
-        proj = lambda x: spline_project(x, *bounds)
-        stroke_ok = lambda x: float(np.max(spline_strokes(x[:-1].reshape(S, M)))) <= 1 + 1e-9
-    else:
-        proj = lambda x: local.project(x, S, H, *bounds)
-        stroke_ok = lambda x: float(np.max(local.strokes(*local.unpack(x, S, H)[:2]))) <= 1 + 1e-9
-    costs = [c for c in sc["cost"][starts] if np.isfinite(c)]
-    rho = PENALTY * max(1.0, max(costs, default=1.0))
-    log: list[dict] = []
-    solvers = [local.local_solver(x, proj, stroke_ok, settings.max_iter, settings.trust_radius, rho, log) for x in x0]
-    say(f"refining {len(solvers)} starts locally, in lockstep (compiling the orbit solver: first call only)...")
-    xs = run_lockstep(solvers, ev)
+    rows = [int(i) for i in order if sc["ok"][i]][: settings.local] or [best]
+    rows += rows[:1] * (settings.local - len(rows))
+    starts = [local.Start(cos[i], sin[i], float(W[i]), sc["y"][i], int(sc["k"][i]), float(sc["cost"][i])) for i in rows]
+    xs, ev, _ = local.refine(base, starts, a_max, v_min, direction, lo, hi, M if spline else 0, settings, say)
 
     # 3. Verification: the baseline and the refined actuations (on the exact bound).
     names = ["sinusoid"] + [f"local {lane}" for lane in range(len(xs))]
@@ -436,10 +378,11 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
     say(f"verifying {len(names)} candidates on their steady gaits...")
     if spline:
         # The baseline's figures are its row of the screen; the splines are solved in one batch.
-        control = np.stack([a_max * spline_project(x, -np.inf, np.inf)[:-1].reshape(S, M) for x in xs])
+        control = np.stack([a_max * local.spline_project(x, -np.inf, np.inf)[:-1].reshape(S, M) for x in xs])
         refined = _gaits(_spline(base, control, om_c[1:]), settings)
         g = {name: np.concatenate([sc[name][best : best + 1], refined[name]]) for name in sc}
-        strokes = np.concatenate([local.strokes(cos[best], sin[best])[None], [spline_strokes(c) for c in control]])
+        strokes = np.concatenate([local.strokes(cos[best], sin[best])[None],
+                                  [local.spline_strokes(c) for c in control]])  # fmt: skip
         empty = np.zeros((S, 0))
         waves = [(cos[best], sin[best], None)] + [(empty, empty, c) for c in control]
     else:
@@ -447,22 +390,18 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
         g = _gaits(_fourier(base, np.stack([c for c, _ in coefs]), np.stack([s for _, s in coefs]), om_c), settings)
         strokes = np.stack([local.strokes(c, s) for c, s in coefs])
         waves = [(c, s, None) for c, s in coefs]
-    eps = float(jnp.finfo(dtype).eps)
-    feasible = (np.asarray(g["ok"], bool) & (direction * np.nan_to_num(g["speed"], nan=-np.inf) >= v_min)
-                & (strokes.max(axis=1) <= a_max * (1 + 8 * eps)))  # fmt: skip
-    if feasible.any():
-        k = int(np.argmin(np.where(feasible, g["cost"], np.inf)))
-    else:
-        k = int(np.argmax(np.where(g["ok"], direction * np.nan_to_num(g["speed"], nan=-np.inf), -np.inf)))
+    eps = float(jnp.finfo(base.dtype).eps)
+    k, feasible, _, _ = choose(np.asarray(g["ok"], bool), g["speed"], g["cost"], strokes.max(axis=1), v_min,
+                               direction, a_max, eps)  # fmt: skip
     table = [dict(candidate=names[i], omega=float(om_c[i]), mean_speed_exact=float(g["speed"][i]),
                   cost_of_transport_exact=float(g["cost"][i]), stable_exact=bool(g["ok"][i]),
                   stroke=float(strokes[i].max()), feasible_exact=bool(feasible[i]))
              for i in range(len(names))]  # fmt: skip
     cos_k, sin_k, control_k = waves[k]
     chosen = _fourier(base, cos_k, sin_k, om_c[k]) if control_k is None else _spline(base, control_k, om_c[k])
-    sim = _simulate_check(chosen, float(g["radius"][k]), float(g["period"][k]), settings) if g["ok"][k] else None
-    speed_s, cost_s, n = sim if sim is not None else (math.nan, math.nan, 0)
-    rel = max(abs(speed_s / g["speed"][k] - 1), abs(cost_s / g["cost"][k] - 1)) if sim is not None else math.nan
+    speed_s, cost_s, n = (local.simulate_check(chosen, float(g["radius"][k]), float(g["period"][k]), settings)
+                          if g["ok"][k] else (math.nan, math.nan, 0))  # fmt: skip
+    rel = max(abs(speed_s / g["speed"][k] - 1), abs(cost_s / g["cost"][k] - 1)) if g["ok"][k] else math.nan
     cost_sin = sinusoid["cost_of_transport"] if sinusoid else math.nan
     say(f"verified ({time.perf_counter() - t0:.0f} s): {names[k]}, cost of transport {g['cost'][k]:.6g}")
     return MechanismOptimum(
@@ -477,19 +416,3 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
         simulated_periods=int(n), candidates=table, screened=int(A.size), evaluations=ev.calls,
         runtime_s=time.perf_counter() - t0, mechanism=chosen,
     )  # fmt: skip
-
-
-def _simulate_check(mech: Mechanism, rho: float, period: float, settings: MechanismOptimiseSettings):
-    """Mean speed and cost of transport of a direct simulation from the mechanism's own start, over 10
-    whole gait periods after enough periods for the slowest Floquet mode to decay to `check_tol`."""
-    from ..run._simulate import simulate
-
-    lo, hi = settings.check_periods
-    n = hi if not (0 < rho < 1) else int(np.clip(math.ceil(math.log(settings.check_tol) / math.log(rho)), lo, hi))
-    t = np.array([n * period, (n + 10) * period])
-    traj = simulate(mech, float(t[-1]), t, dynamics=Exact(dt=settings.dt), contact="strict")
-    if not np.all(np.asarray(traj.valid)):
-        return None
-    X, ed = np.asarray(traj.X, np.float64), np.asarray(traj.e_d, np.float64)
-    dX = X[1] - X[0]
-    return float(dX / (t[1] - t[0])), float((ed[1] - ed[0]) / abs(dX)), n

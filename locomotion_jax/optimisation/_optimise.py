@@ -60,7 +60,7 @@ from . import _constraints as cons, _pareto as pareto
 from ._chain_optimum import ChainOptimiseSettings, ChainOptimum
 from ._mechanism import MechanismOptimiseSettings, MechanismOptimum
 from ._objective import make_plan, Plan, rollout
-from ._optimum import ExactSettings, Optimum, Settings, verified
+from ._optimum import along, ExactSettings, Optimum, Settings, verified
 from ._shapes import FourierShape, SplineShape
 
 
@@ -615,7 +615,7 @@ def _start_omegas(params, sweep, speed, direction, a_max, omega, settings: Setti
     """Base frequencies of the starts: the given one, else the best feasible sinusoids' frequencies."""
     if omega is not None:
         return [float(omega)]
-    v = direction * np.nan_to_num(sweep.speed, nan=-np.inf)
+    v = along(sweep.speed, direction)
     feasible = sweep.ok & (v >= speed)
     if feasible.any():
         order = np.argsort(np.where(feasible, sweep.cost, np.inf))

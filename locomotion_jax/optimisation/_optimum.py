@@ -347,20 +347,10 @@ ExactOptimiseSettings = ExactSettings
 def verified(fig: Any, strokes: np.ndarray, speed: float, direction: int, a_max: float, eps: float,
              baseline: dict | None) -> tuple[int, np.ndarray, dict]:  # fmt: skip
     """Choose the reported candidate from the exact check of every candidate (`fig`: steady-gait
-    figures with `speed`, `cost`, `ok` (a stable gait), `liftoff`; `strokes`: true strokes).
-
-    The cheapest feasible one (speed `>= v_min` in `direction`, stroke within `a_max` up to 8
-    `eps` relative, a stable gait), else the closest miss: the fastest stable gait. Returns its
-    index, the feasibility of every candidate, and the chosen one's [`Optimum`][] fields of the
-    exact check and the comparison with the best sinusoid `baseline`."""
-    ok_speed = fig.ok & (direction * np.nan_to_num(fig.speed, nan=-np.inf) >= speed)
-    ok_stroke = strokes <= a_max * (1 + 8 * eps)
-    feasible = ok_speed & ok_stroke & fig.ok
-    if feasible.any():
-        k = int(np.argmin(np.where(feasible, fig.cost, np.inf)))
-    else:
-        v = direction * np.nan_to_num(fig.speed, nan=-np.inf)
-        k = int(np.argmax(np.where(fig.ok, v, -np.inf))) if fig.ok.any() else 0
+    figures with `speed`, `cost`, `ok` (a stable gait), `liftoff`; `strokes`: true strokes) by
+    [`choose`][]. Returns its index, the feasibility of every candidate, and the chosen one's
+    [`Optimum`][] fields of the exact check and the comparison with the best sinusoid `baseline`."""
+    k, feasible, ok_speed, ok_stroke = choose(fig.ok, fig.speed, fig.cost, strokes, speed, direction, a_max, eps)
     sin_cost = baseline["cost_of_transport"] if baseline else math.nan
     fields = dict(
         mean_speed_exact=float(fig.speed[k]),
@@ -379,3 +369,26 @@ def verified(fig: Any, strokes: np.ndarray, speed: float, direction: int, a_max:
         improvement_vs_sinusoid=1 - float(fig.cost[k]) / sin_cost if (feasible[k] and baseline) else math.nan,
     )
     return k, feasible, fields
+
+
+def along(speed: Any, direction: int) -> np.ndarray:
+    """Speeds in the required `direction` ($\\sigma \\bar v$), a NaN (no gait, a stopped run) as $-\\infty$:
+    never fast enough, and the slowest in either direction."""
+    return np.nan_to_num(direction * np.asarray(speed), nan=-np.inf)
+
+
+def choose(ok: np.ndarray, speed: np.ndarray, cost: np.ndarray, strokes: np.ndarray, v_min: float, direction: int,
+           a_max: float, eps: float) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """The reported candidate among the verified ones (`ok`: a converged, stable gait without
+    lift-off; `strokes`: each one's largest exact stroke): the cheapest feasible one (speed
+    `>= v_min` in `direction`, stroke within `a_max` up to 8 `eps` relative), else the closest
+    miss, the fastest stable gait. Returns its index, and per candidate whether it is feasible,
+    fast enough and within the stroke."""
+    ok_speed = ok & (along(speed, direction) >= v_min)
+    ok_stroke = strokes <= a_max * (1 + 8 * eps)
+    feasible = ok_speed & ok_stroke & ok
+    if feasible.any():
+        k = int(np.argmin(np.where(feasible, cost, np.inf)))
+    else:
+        k = int(np.argmax(np.where(ok, along(speed, direction), -np.inf))) if ok.any() else 0
+    return k, feasible, ok_speed, ok_stroke

@@ -21,6 +21,7 @@ from ..dynamics._exact_dynamics import Exact
 from ..gaits._gait import Gait, GaitStatus, paper_gait, steady_gait
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform
+from ._optimum import along
 
 
 class ExactFigures(NamedTuple):
@@ -156,7 +157,7 @@ def _sinusoid_figures(params: Params, a: np.ndarray, omega: np.ndarray, dt: floa
 
 def best_sinusoid(sweep: SinusoidSweep, v_min: float, direction: int) -> dict | None:
     """The feasible sinusoid (no lift-off, $\\sigma\\bar v \\ge v_\\min$) of least cost; `None` if none."""
-    feasible = sweep.ok & (direction * np.nan_to_num(sweep.speed, nan=-np.inf) >= v_min)
+    feasible = sweep.ok & (along(sweep.speed, direction) >= v_min)
     if not feasible.any():
         return None
     i = int(np.argmin(np.where(feasible, sweep.cost, np.inf)))
@@ -211,7 +212,7 @@ def refine_sinusoid(
     shrink = 2.0 / (points - 1)
     for _ in range(levels):
         every = SinusoidSweep(*(np.concatenate(x) for x in zip(*found)))
-        feasible = every.ok & (direction * np.nan_to_num(every.speed, nan=-np.inf) >= v_min)
+        feasible = every.ok & (along(every.speed, direction) >= v_min)
         ranked = np.argsort(np.where(feasible, every.cost, np.inf))[: min(top, int(feasible.sum()))]
         centres = [(every.a[i], every.omega[i]) for i in ranked]
         centres += centres[:1] * (top - len(centres))  # a fixed batch size: one compilation
