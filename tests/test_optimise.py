@@ -723,6 +723,67 @@ def test_bad_input_raises(kwargs, message):
         lj.optimise(chain, v_min, a_max, **args)
 
 
+CHAIN_SPLINE = lj.ChainOptimiseSettings(**SMALL, max_iter=8, omega_min=0.4, shape="spline", knots=8)
+
+
+@CHAIN_OPTIMISE
+@pytest.mark.slow
+def test_chain_spline_optimum_against_the_reference():
+    """A chain's springs driven by periodic splines (`ChainOptimiseSettings(shape="spline")`): the
+    optimum beats its travelling wave, keeps the box bound, carries its control values, and its
+    steady gait's speed and cost of transport agree with the independent reference's direct
+    simulation (its own B-spline actuation) from the relaxed springs, over whole gait periods."""
+    from reference_chain import chain_config, reference_chain_simulate
+
+    opt = lj.optimise(worm(), 0.05, A_MAX, settings=CHAIN_SPLINE)
+    print({k: v for k, v in opt.to_dict().items() if k not in ("candidates", "history")}, opt.candidates)
+    assert opt.shape == "spline" and opt.harmonics == 0 and opt.cos.shape == (2, 0)
+    assert opt.control is not None and opt.control.shape == (2, 8) and opt.source.startswith("local")
+    assert opt.feasible_exact and all(opt.constraints_exact.values()) and opt.mean_speed_exact >= opt.v_min
+    assert opt.travelling_wave is not None and opt.improvement_vs_travelling_wave > 0
+    assert np.abs(opt.control).max() <= A_MAX and np.all(opt.stroke_exact <= A_MAX * (1 + 1e-12))
+    waves = opt.waveforms
+    assert isinstance(waves, list) and all(isinstance(w, lj.Spline) for w in waves)
+    assert opt.chain.signals is not None
+    for w, got, row in zip(waves, opt.chain.signals, opt.control):
+        assert isinstance(got, lj.Spline) and np.array_equal(np.asarray(got.control), row)
+        assert float(got.omega) == opt.omega and np.array_equal(np.asarray(w.control), row)
+    # The exact stroke against a dense sampling of each spring's signal.
+    T = 2 * np.pi / opt.omega
+    t = jnp.linspace(0.0, T, 40001)
+    dense = np.array([float(np.abs(np.asarray(w(t)[0]) - float(w.lbar)).max()) for w in opt.chain.signals])
+    assert np.all(dense <= opt.stroke_exact + 1e-12) and np.all(opt.stroke_exact - dense < 1e-6)
+    assert opt.min_normal >= opt.margin and opt.simulation_agreement < 1e-6
+    # The reference, from the relaxed springs, over 10 gait periods after the package's settling time.
+    cfg = chain_config([1.0] * 3, k=50.0, d=0.0, lbar=float(opt.lbar[0]), c=0.01, omega=opt.omega,
+                       spline=opt.control, mu_s_fwd=0.5, mu_s_bwd=0.9, mu_k_fwd=0.3, mu_k_bwd=0.7)  # fmt: skip
+    n, Tg = opt.simulated_periods, opt.gait_period_exact
+    ref = reference_chain_simulate(cfg, (n + 10) * Tg, np.array([n * Tg, (n + 10) * Tg]), start="relaxed")
+    assert ref["status"] == "ok"
+    dX, ed = np.diff(ref["X"])[0], np.diff(ref["e_d"])[0]
+    err = max(abs(dX / (10 * Tg) / opt.mean_speed_exact - 1), abs(ed / abs(dX) / opt.cost_of_transport_exact - 1))
+    print(f"chain spline optimum: speed {opt.mean_speed_exact:.10f} (reference {dX / (10 * Tg):.10f}), cost "
+          f"{opt.cost_of_transport_exact:.10f} (reference {ed / abs(dX):.10f}); diff {err:.1e}")  # fmt: skip
+    assert err < 1e-4
+
+
+@CHAIN_OPTIMISE
+def test_chain_spline_search_refuses_harmonics():
+    with pytest.raises(ValueError, match="harmonics applies to Fourier series"):
+        lj.optimise(worm(), 0.05, A_MAX, harmonics=2, settings=CHAIN_SPLINE)
+    with pytest.raises(ValueError, match="shape must be 'fourier' or 'spline'"):
+        lj.ChainOptimiseSettings(shape="wave")
+    with pytest.raises(ValueError, match="knots must be an int >= 4"):
+        lj.ChainOptimiseSettings(knots=3)
+    # The command line passes --shape and --knots to a chain's settings.
+    args = ["optimize", "--masses", "1,1,1", "--v-min", "0.05", "--a-max", "0.1", "--shape", "spline", "--knots", "8",
+            "--harmonics", "2"]  # fmt: skip
+    bad = CliRunner().invoke(_cli.app, args)
+    assert bad.exit_code == 2 and "harmonics applies to Fourier series" in bad.output
+    bad = CliRunner().invoke(_cli.app, args[:-2] + ["--knots", "3"])
+    assert bad.exit_code == 2 and "knots must be an int >= 4" in bad.output
+
+
 @CHAIN_OPTIMISE
 def test_bad_settings_raise():
     with pytest.raises(ValueError, match="local must be an int >= 1"):

@@ -58,9 +58,14 @@ def register(app: typer.Typer) -> None:
             help="Number of Fourier harmonics N (smoothed: default 3; exact with --shape fourier: default 16).",
         ),
         shape: str = typer.Option(
-            "spline", "--shape", help="Exact: 'spline' (periodic cubic B-spline stroke) or 'fourier'."
+            "spline",
+            "--shape",
+            help="Exact: 'spline' (periodic cubic B-spline stroke) or 'fourier' (a chain or mechanism: "
+            "default 'fourier').",
         ),
-        knots: int = typer.Option(64, "--knots", help="Exact, spline: number of control values."),
+        knots: int = typer.Option(
+            64, "--knots", help="Exact, spline: number of control values (a chain or mechanism: default 16)."
+        ),
         mech: Values,
         amplitudes: int = typer.Option(3, help="A chain or mechanism: travelling-wave screen, amplitudes."),
         frequencies: int = typer.Option(12, help="A chain or mechanism: screen, log-spaced frequencies."),
@@ -99,10 +104,10 @@ def register(app: typer.Typer) -> None:
         the chain options, without the wave's, which is what is optimised; --a-max required) or a
         mechanism FILE (--a-max defaults to the amplitude of its sinusoid or travelling wave; a file
         of bodies and links needs it). A chain or a mechanism of bodies and links is optimised by the
-        exact method (--harmonics default 3 for a chain, 2 for bodies and links; the travelling-wave
-        screen's --amplitudes, --frequencies, --phases, --zoom-levels, --zoom-points (a chain:
-        --screen-speed), and --local, --max-iter, --margin, --transient, --omega, --direction apply;
-        --out saves a chain's optimum)."""
+        exact method (--harmonics default 3 for a chain, 2 for bodies and links, or --shape spline
+        with --knots; the travelling-wave screen's --amplitudes, --frequencies, --phases,
+        --zoom-levels, --zoom-points (a chain: --screen-speed), and --local, --max-iter, --margin,
+        --transient, --omega, --direction apply; --out saves a chain's optimum)."""
         import locomotion_jax as lj
 
         from ..optimisation import _optimise, _pareto
@@ -125,6 +130,7 @@ def register(app: typer.Typer) -> None:
                                               zoom_levels=zoom_levels, zoom_points=zoom_points, local=local,
                                               screen_speed=screen_speed, margin=margin, verbose=verbose)  # fmt: skip
                 screen |= {"max_iter": max_iter} if given(["max_iter"]) else {}  # else the optimiser's default
+                screen |= {name: v for name, v in (("shape", shape), ("knots", knots)) if given([name])}
                 screen |= {"transient": int(transient)} if transient is not None else {}
                 chain_settings = lj.ChainOptimiseSettings(**screen)
                 return _optimise_bodies(built, v_min, a_max, direction, omega, harmonics, chain_settings, out, json_out)
@@ -212,8 +218,11 @@ def _plot(opt: Any, path: Path) -> None:
     fig = Figure(figsize=(8, 4.5), layout="constrained")
     ax = fig.subplots()
     phase = np.linspace(0, 2 * np.pi, 401)
-    n = np.arange(1, opt.cos.shape[1] + 1)
-    s = opt.cos @ np.cos(np.outer(n, phase)) + opt.sin @ np.sin(np.outer(n, phase))
+    if opt.control is None:
+        n = np.arange(1, opt.cos.shape[1] + 1)
+        s = opt.cos @ np.cos(np.outer(n, phase)) + opt.sin @ np.sin(np.outer(n, phase))
+    else:
+        s = np.stack([np.asarray(w(phase / opt.omega)[0]) - float(w.lbar) for w in opt.waveforms])
     for j, sj in enumerate(s):
         ax.plot(phase / (2 * np.pi), sj, label=f"spring {j}")
     w = opt.travelling_wave
@@ -243,7 +252,7 @@ def _optimise_bodies(built: Built, v_min: float, a_max: float | None, direction:
                          "every actuated signal's excursion about its mean.")  # fmt: skip
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
-    default = 3 if built.kind == "chain" else 2
+    default = None if settings.shape == "spline" else 3 if built.kind == "chain" else 2
     opt = lj.optimise(built.mechanism, v_min, a_max, direction=1 if direction is None else direction, omega=omega,
                       harmonics=default if harmonics is None else harmonics, settings=settings)  # fmt: skip
     if built.kind == "chain" and out is not None:  # a chain's per-spring harmonics, saved and plotted

@@ -23,14 +23,14 @@ pass over the gait period in the $2N - 1 + p$ directions $(y, \\theta)$ gives ev
 located events entering with their implicit-function times (the saltation of each switch).
 
 A [`Mechanism`][locomotion_jax.Mechanism] takes one signal per actuated element (`actuated` below) in
-place of one per spring, and, with `knots` $M > 0$, the decision vector
-$\\theta = (c_{0,0}, \\dots, c_{0,M-1}, c_{1,0}, \\dots, c_{S-1,M-1}, \\log\\omega)$ of the control
-values of a periodic cubic B-spline per element ([`Spline`][], units of $a_\\max$; no phase is
-fixed) instead of Fourier coefficients.
+place of one per spring. With `knots` $M > 0$ (a chain or a mechanism), the decision vector is
+$\\theta = (c_{0,0}, \\dots, c_{0,M-1}, c_{1,0}, \\dots, c_{S-1,M-1}, \\log\\omega)$, the control
+values of a periodic cubic B-spline per signal ([`Spline`][], units of $a_\\max$; no phase is
+fixed), instead of Fourier coefficients.
 """
 
 from collections import Counter
-from typing import ClassVar
+from typing import ClassVar, TypeVar
 
 import equinox as eqx
 import jax
@@ -47,6 +47,8 @@ from ..model._waveform import AbstractWaveform, Fourier, Spline
 from . import _orbit as orbit
 from ._orbit import Orbit, Period
 
+
+_Model = TypeVar("_Model", Chain, Mechanism)
 
 TRACES: Counter = Counter()
 """Python-level traces of the compiled functions (keys `"evaluate"`, `"relax"`)."""
@@ -87,30 +89,40 @@ def with_fourier(mechanism: Mechanism, cos: Array, sin: Array, omega: Array) -> 
     return eqx.tree_at(lambda m: m.links, mechanism, tuple(links))
 
 
-def with_spline(mechanism: Mechanism, control: Array, omega: Array) -> Mechanism:
-    """`mechanism` with each actuated element's waveform replaced by the periodic cubic B-spline of
-    control values `control[..., j, :]` (absolute units) and base frequency `omega`, its mean (the
-    old waveform's `lbar`) kept. Leading axes of the control values are batch axes."""
-    links = list(mechanism.links)
-    for j, i in enumerate(actuated(mechanism)):
+def with_spline(model: _Model, control: Array, omega: Array) -> _Model:
+    """`model` with each actuated signal (a chain's springs; a mechanism's actuated elements) driven by
+    the periodic cubic B-spline of control values `control[..., j, :]` (absolute units, about the
+    signal's mean) and base frequency `omega`. Leading axes of the control values are batch axes."""
+    if isinstance(model, Chain):
+        # Each spring's rest length is lbar_j + s_j(t): the spline's own mean is the spring's lbar.
+        S = model.n_masses - 1
+        lbar = jnp.broadcast_to(jnp.asarray(model.lbar, control.dtype), (S,))
+        signals = tuple(Spline(control[..., j, :], omega, lbar[j]) for j in range(S))
+        zeros = jnp.zeros(jnp.shape(omega) + (S, 1), control.dtype)
+        out = model.with_waves(SpringFourier(zeros, zeros, omega))  # the normal form keeps omega only
+        return eqx.tree_at(lambda c: c.signals, out, signals, is_leaf=lambda x: x is None)
+    links = list(model.links)
+    for j, i in enumerate(actuated(model)):
         el = links[i]
         name = "rest" if isinstance(el, Spring) else "waveform"
         old = getattr(el, name)
         links[i] = eqx.tree_at(lambda e: getattr(e, name), el, Spline(control[..., j, :], omega, old.lbar))
-    return eqx.tree_at(lambda m: m.links, mechanism, tuple(links))
+    return eqx.tree_at(lambda m: m.links, model, tuple(links))
 
 
 def with_waves(chain: Chain | Mechanism, theta: Array, a_max: Array, harmonics: int,
                knots: int = 0) -> Chain | Mechanism:  # fmt: skip
     """One chain or mechanism (broadcast, unbatched) with the actuation of the decision vector `theta`
-    (a mechanism: one signal per actuated element, `actuated`; with `knots > 0` a spline per element)."""
-    if isinstance(chain, Mechanism) and knots > 0:
-        S = len(actuated(chain))
-        return with_spline(chain, a_max * theta[:-1].reshape(S, knots), jnp.exp(theta[-1]))
+    (a mechanism: one signal per actuated element, `actuated`; with `knots > 0` a spline per signal)."""
     if isinstance(chain, Mechanism):
-        cos, sin = coefficients(theta, len(actuated(chain)), harmonics)
+        S = len(actuated(chain))
+        if knots > 0:
+            return with_spline(chain, a_max * theta[:-1].reshape(S, knots), jnp.exp(theta[-1]))
+        cos, sin = coefficients(theta, S, harmonics)
         return with_fourier(chain, a_max * cos, a_max * sin, jnp.exp(theta[-1]))
     S = chain.n_masses - 1
+    if knots > 0:
+        return with_spline(chain, a_max * theta[:-1].reshape(S, knots), jnp.exp(theta[-1]))
     cos, sin = coefficients(theta, S, harmonics)
     waves = SpringFourier(a_max * cos, a_max * sin, jnp.exp(theta[-1]))
     return chain.with_waves(waves)
@@ -134,7 +146,7 @@ def gait_physics(C: Chain | Mechanism, contact: Contact) -> AbstractPhysics:
 
 class ChainActuation(orbit.AbstractActuation):
     """A chain or mechanism driven by the decision vector's signals (`with_waves`: Fourier series of
-    `harmonics` harmonics, or with `knots > 0` a mechanism's periodic splines)."""
+    `harmonics` harmonics, or with `knots > 0` periodic splines)."""
 
     harmonics: int
     knots: int = 0
@@ -168,8 +180,9 @@ class ChainOracle(eqx.Module):
     """The compiled evaluations of one chain problem (static: harmonics, contact, step, iterations).
 
     `chain` is one configuration, broadcast (its waveforms are replaced by the decision vector's): a
-    chain, or a [`Mechanism`][locomotion_jax.Mechanism] (one signal per actuated element; with
-    `knots > 0` a spline of `knots` control values per element, `harmonics` unused).
+    chain (one signal per spring), or a [`Mechanism`][locomotion_jax.Mechanism] (one signal per
+    actuated element); with `knots > 0` a spline of `knots` control values per signal, `harmonics`
+    unused.
     """
 
     chain: Chain | Mechanism

@@ -36,6 +36,7 @@ from typing import Any
 import jax.numpy as jnp
 import numpy as np
 
+from ..gaits._element_orbit import with_spline
 from ..model._actuator import RestLength
 from ..model._chain import Chain
 from ..model._springwaves import SpringFourier
@@ -94,21 +95,34 @@ def check_inputs(chain: Any, v_min: Any, a_max: Any, direction: Any, harmonics: 
 
 
 def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int = 1, omega: float | None = None,
-                   harmonics: int = 3, settings: ChainOptimiseSettings | None = None) -> ChainOptimum:  # fmt: skip
-    """`optimise(chain, v_min, a_max, ...)`: the method of the module docstring (arguments as there)."""
+                   harmonics: int | None = None,
+                   settings: ChainOptimiseSettings | None = None) -> ChainOptimum:  # fmt: skip
+    """`optimise(chain, v_min, a_max, ...)`: the method of the module docstring (arguments as there;
+    `harmonics`: the Fourier series' length, default 3; a spline search refuses one)."""
     settings = ChainOptimiseSettings() if settings is None else settings
     if not isinstance(settings, ChainOptimiseSettings):
         raise TypeError(f"settings for a Chain must be a ChainOptimiseSettings, got {type(settings).__name__}.")
-    speed, direction = check_inputs(chain, v_min, a_max, direction, harmonics, omega, settings)
+    spline = settings.shape == "spline"
+    if spline and harmonics is not None:
+        raise ValueError(
+            "harmonics applies to Fourier series; ChainOptimiseSettings(shape='spline') searches splines of "
+            f"ChainOptimiseSettings.knots control values (got harmonics={harmonics!r})."
+        )
+    # A spline search screens the travelling waves as single harmonics.
+    H = 1 if spline else (3 if harmonics is None else harmonics)
+    speed, direction = check_inputs(chain, v_min, a_max, direction, H, omega, settings)
     t0 = time.perf_counter()
     say = (lambda m: print(m, file=sys.stderr, flush=True)) if settings.verbose else (lambda m: None)
     base = chain.broadcast()
-    S, H = base.n_masses - 1, int(harmonics)
+    S, H, M = base.n_masses - 1, int(H), settings.knots
     lo, hi = screen.frequency_range(base, omega, settings)
     free = hi > lo
-    fastest = base.with_waves(SpringFourier(np.zeros((S, H)), np.zeros((S, H)), hi))
+    if spline:
+        fastest, family = with_spline(base, jnp.zeros((S, M), base.dtype), jnp.asarray(hi, base.dtype)), f"{M} knots"
+    else:
+        fastest, family = base.with_waves(SpringFourier(np.zeros((S, H)), np.zeros((S, H)), hi)), f"{H} harmonics"
     what = "given" if omega is not None else "ChainOptimiseSettings.omega_max times the highest natural frequency"
-    refuse_search(fastest, None, settings.dt, f"(optimise: omega = {hi:.6g} with {H} harmonics, {what}; the step "
+    refuse_search(fastest, None, settings.dt, f"(optimise: omega = {hi:.6g} with {family}, {what}; the step "
                   "is ChainOptimiseSettings.dt.)")  # fmt: skip
 
     # 1. Travelling waves. Progress from the first second: compiling the screen alone takes minutes.
@@ -120,7 +134,7 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     feas = screen.feasible(sc.gaits, speed, direction)
     baseline = screen.as_dict(sc, best) if feas[best] else None
 
-    # 2. Local refinement of per-spring harmonics.
+    # 2. Local refinement of per-spring harmonics (or control values).
     rows = screen.distinct_starts(sc, best, settings.local, speed, direction, steps)
     rows += rows[:1] * (settings.local - len(rows))
     starts = []
@@ -128,21 +142,29 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
         cos, sin = screen.wave_coefficients(sc.a[i : i + 1], sc.phi[i : i + 1], S, H)
         starts.append(local.Start(cos[0], sin[0], float(sc.omega[i]), sc.gaits.y[i], int(sc.gaits.k[i]),
                                   float(sc.gaits.cost[i])))  # fmt: skip
-    xs, ev, log = local.refine(base, starts, a_max, speed, direction, lo, hi, 0, settings, say)
+    xs, ev, log = local.refine(base, starts, a_max, speed, direction, lo, hi, M if spline else 0, settings, say)
 
     # 3. Verification of the candidates: the refined actuations, rescaled onto the exact
     # stroke limit (what the line search's tolerance let through), and the baseline wave.
     names = ["travelling wave"] + [f"local {lane}" for lane in range(len(xs))]
-    coefs = []
     cos_b, sin_b = screen.wave_coefficients(sc.a[best : best + 1], sc.phi[best : best + 1], S, H)
-    coefs.append((cos_b[0], sin_b[0], float(sc.omega[best])))
-    coefs += [local.on_bound(x, S, H, a_max) for x in xs]
-    cos = np.stack([c for c, _, _ in coefs])
-    sin = np.stack([s for _, s, _ in coefs])
-    om = np.array([w for _, _, w in coefs])
     say(f"verifying {len(names)} candidates on their steady gaits...")
-    g = screen.solve(base, cos, sin, om, settings)
-    strokes = np.stack([local.strokes(c, s) for c, s in zip(cos, sin)])
+    if spline:
+        # The wave's figures are its row of the screen; the splines are solved in one batch.
+        control = np.stack([a_max * local.spline_project(x, -np.inf, np.inf)[:-1].reshape(S, M) for x in xs])
+        om = np.array([float(sc.omega[best])] + [math.exp(float(x[-1])) for x in xs])
+        refined = screen.solve(base, None, None, om[1:], settings, control=control)
+        g = screen.Gaits(*(np.concatenate([w[best : best + 1], r]) for w, r in zip(sc.gaits, refined)))
+        strokes = np.concatenate([local.strokes(cos_b[0], sin_b[0])[None], [local.spline_strokes(c) for c in control]])
+        empty = np.zeros((S, 0))
+        waves = [(cos_b[0], sin_b[0], None)] + [(empty, empty, c) for c in control]
+    else:
+        coefs = [(cos_b[0], sin_b[0], float(sc.omega[best]))] + [local.on_bound(x, S, H, a_max) for x in xs]
+        om = np.array([w for _, _, w in coefs])
+        cos, sin = np.stack([c for c, _, _ in coefs]), np.stack([s for _, s, _ in coefs])
+        g = screen.solve(base, cos, sin, om, settings)
+        strokes = np.stack([local.strokes(c, s) for c, s in zip(cos, sin)])
+        waves = [(c, s, None) for c, s in zip(cos, sin)]
     eps = float(jnp.finfo(base.dtype).eps)
     k, feasible, ok_speed, ok_stroke = choose(g.ok, g.speed, g.cost, strokes.max(axis=1), speed, direction,
                                               a_max, eps)  # fmt: skip
@@ -150,21 +172,30 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
                   cost_of_transport_exact=float(g.cost[i]), stable_exact=bool(g.ok[i]),
                   liftoff_exact=bool(g.liftoff[i]), stroke=float(strokes[i].max()), feasible_exact=bool(feasible[i]))
              for i in range(len(names))]  # fmt: skip
-    # The smallest normal force of the reported orbit (the oracle's figure, paper reading).
-    th = local.pack(cos[k] / a_max, sin[k] / a_max, float(om[k]))
-    y0 = np.nan_to_num(g.y[k]) if g.ok[k] else sc.gaits.y[best]
-    orb, _ = ev.solve(np.stack([th] * settings.local), np.stack([y0] * settings.local),
-                      np.full(settings.local, max(int(g.k[k]), 1)))  # fmt: skip
-    min_normal = float(orb.figures[0, 2]) if orb.ok[0] else math.nan
-    chosen = screen.with_actuation(base, cos[k : k + 1], sin[k : k + 1], om[k : k + 1])[0]
+    cos_k, sin_k, control_k = waves[k]
+    # The smallest normal force of the reported orbit (the oracle's figure, paper reading); the
+    # oracle of a spline search solves splines only, not the travelling wave.
+    min_normal = math.nan
+    if control_k is not None or not spline:
+        th = (np.concatenate([control_k.ravel() / a_max, [math.log(om[k])]]) if control_k is not None
+              else local.pack(cos_k / a_max, sin_k / a_max, float(om[k])))  # fmt: skip
+        y0 = np.nan_to_num(g.y[k]) if g.ok[k] else sc.gaits.y[best]
+        orb, _ = ev.solve(np.stack([th] * settings.local), np.stack([y0] * settings.local),
+                          np.full(settings.local, max(int(g.k[k]), 1)))  # fmt: skip
+        min_normal = float(orb.figures[0, 2]) if orb.ok[0] else math.nan
+    if control_k is None:
+        chosen = screen.with_actuation(base, cos_k[None], sin_k[None], om[k : k + 1])[0]
+    else:
+        chosen = with_spline(base, jnp.asarray(control_k, base.dtype), jnp.asarray(om[k], base.dtype))
     sim = (local.simulate_check(chosen, float(g.radius[k]), float(g.period[k]), settings, start="relaxed")
            if g.ok[k] else (math.nan, math.nan, 0))  # fmt: skip
     rel = max(abs(sim[0] / g.speed[k] - 1), abs(sim[1] / g.cost[k] - 1)) if g.ok[k] else math.nan
     say(f"verified ({time.perf_counter() - t0:.0f} s): {names[k]}, cost of transport {g.cost[k]:.6g}")
     wave_cost = baseline["cost_of_transport"] if baseline else math.nan
     return ChainOptimum(
-        v_min=speed, direction=direction, a_max=float(a_max), margin=settings.margin, harmonics=H, free_omega=free,
-        cos=cos[k], sin=sin[k], omega=float(om[k]), lbar=np.asarray(base.lbar, np.float64),
+        v_min=speed, direction=direction, a_max=float(a_max), margin=settings.margin,
+        harmonics=H if control_k is None else 0, free_omega=free, cos=cos_k, sin=sin_k, omega=float(om[k]),
+        lbar=np.asarray(base.lbar, np.float64),
         mean_speed_exact=float(g.speed[k]), cost_of_transport_exact=float(g.cost[k]),
         gait_period_exact=float(g.period[k]), stable_exact=bool(g.ok[k]), spectral_radius_exact=float(g.radius[k]),
         liftoff_exact=bool(g.liftoff[k]), stroke_exact=strokes[k], min_normal=min_normal,
@@ -175,5 +206,6 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
         mean_speed_simulated=sim[0], cost_of_transport_simulated=sim[1], simulation_agreement=float(rel),
         simulated_periods=int(sim[2]), source=names[k], candidates=table,
         history=[{"starts": [screen.as_dict(sc, i) for i in rows], "local": log}], screened=len(sc.a),
-        evaluations=ev.calls, runtime_s=time.perf_counter() - t0, chain=chosen,
+        evaluations=ev.calls, runtime_s=time.perf_counter() - t0, shape="fourier" if control_k is None else "spline",
+        control=control_k, chain=chosen,
     )  # fmt: skip

@@ -8,13 +8,24 @@ import numpy as np
 
 from ..model._chain import Chain
 from ..model._springwaves import SpringFourier
+from ..model._waveform import Spline
 from ._optimum import AbstractOptimum, constraints_line, fmt
 
 
 class ChainOptimiseSettings(eqx.Module):
     """Settings of [`optimise`][locomotion_jax.optimisation._optimise.optimise] for a [`Chain`][]
-    (module `optimisation._chain`). Python numbers: changing `local`, `chunk`, `dt` or
-    `newton_iter` (or the harmonics) recompiles; the others do not.
+    (module `optimisation._chain`). Python numbers: changing `local`, `chunk`, `dt`,
+    `newton_iter`, `shape` or `knots` (or the harmonics) recompiles; the others do not.
+
+    - `shape`: the family of the springs' signals searched by the local refinement: `"fourier"`
+      (default), a Fourier series of `optimise`'s `harmonics` (default 3) per spring; or
+      `"spline"`, a periodic cubic B-spline of `knots` control values per spring (then
+      `harmonics` is not taken; the screen's travelling waves are single harmonics), whose
+      stroke bound is a box on the control values, so that a step-like stroke carries no
+      overshoot.
+    - `knots`: control values per spring of a spline (>= 4; default 16: every control value is a
+      forward-mode direction of the orbit's gradient, so the refinement's cost grows with
+      `knots` times the springs).
 
     - `amplitudes`, `frequencies`, `phases`: the travelling-wave screen, $a$ on
       `amplitudes` equal steps up to $a_\\max$, $\\omega$ log-spaced over its range, the phase
@@ -66,6 +77,8 @@ class ChainOptimiseSettings(eqx.Module):
     chunk: int = 32
     check_tol: float = 1e-12
     check_periods: tuple[int, int] = (40, 1500)
+    shape: str = "fourier"
+    knots: int = 16
     verbose: bool = False
 
     def __check_init__(self):
@@ -75,6 +88,10 @@ class ChainOptimiseSettings(eqx.Module):
         for name, v in counts.items():
             if not (isinstance(v, int) and v >= 1):
                 raise ValueError(f"ChainOptimiseSettings.{name} must be an int >= 1, got {v!r}.")
+        if self.shape not in ("fourier", "spline"):
+            raise ValueError(f"ChainOptimiseSettings.shape must be 'fourier' or 'spline', got {self.shape!r}.")
+        if isinstance(self.knots, bool) or not (isinstance(self.knots, int) and self.knots >= 4):
+            raise ValueError(f"ChainOptimiseSettings.knots must be an int >= 4, got {self.knots!r}.")
         if not (isinstance(self.zoom_levels, int) and self.zoom_levels >= 0):
             raise ValueError(f"ChainOptimiseSettings.zoom_levels must be an int >= 0, got {self.zoom_levels!r}.")
         if not (0 <= self.screen_speed <= 1):
@@ -96,13 +113,18 @@ class ChainOptimum(AbstractOptimum):
     figure called `*_exact` is the steady gait's ([`steady_gait`][]: whole periods, exact model,
     strict contact, from the relaxed springs).
 
+    - `shape`: the family of the reported signals, `"fourier"` or `"spline"` (a spline search
+      reports its travelling wave, `"fourier"`, where no refined spline is cheaper).
     - `cos`, `sin` (shape `(S, H)`: springs, harmonics), `omega`, `lbar` (per spring): the
       actuation $s_j(t) = \\sum_n A_{jn}\\cos n\\omega t + B_{jn}\\sin n\\omega t$
-      ([`SpringFourier`][], `waveforms`; `chain`: the input chain with it).
+      ([`SpringFourier`][], `waveforms`; `chain`: the input chain with it); shape `(S, 0)` and
+      `harmonics` 0 for a spline. `control`: shape `(S, M)`, a spline's control values about
+      `lbar` (absolute units; `waveforms`: one [`Spline`][] per spring), `None` for a Fourier series.
     - `mean_speed_exact`, `cost_of_transport_exact` ($e_d / |\\Delta X|$ over the gait period),
       `gait_period_exact`, `stable_exact`, `spectral_radius_exact` (largest Floquet multiplier
       modulus), `liftoff_exact`, `stroke_exact` (per spring, $\\max_t |s_j(t)|$ located exactly),
-      `min_normal` (smallest normal force on the orbit, at the step ends).
+      `min_normal` (smallest normal force on the orbit, at the step ends; NaN where the travelling
+      wave wins a spline search: the refinement's orbit oracle solves splines only).
     - `constraints_exact` (`speed`, `stroke`, `no_liftoff`, `stable`), `feasible_exact`: all hold.
       An infeasible requirement gives `feasible_exact = False` and the closest candidate (the
       fastest stable gait), never an optimum.
@@ -152,11 +174,16 @@ class ChainOptimum(AbstractOptimum):
     screened: int
     evaluations: int
     runtime_s: float
+    shape: str
+    control: np.ndarray | None
     chain: Chain = dataclasses.field(repr=False)
 
     @property
-    def waveforms(self) -> SpringFourier:
-        return SpringFourier(self.cos, self.sin, self.omega)
+    def waveforms(self) -> SpringFourier | list[Spline]:
+        """The actuation: a [`SpringFourier`][] of `cos`, `sin`, or one [`Spline`][] per spring."""
+        if self.control is None:
+            return SpringFourier(self.cos, self.sin, self.omega)
+        return [Spline(c, self.omega, lb) for c, lb in zip(self.control, self.lbar)]
 
     objects: ClassVar[tuple[str, ...]] = ("chain",)
 
@@ -167,15 +194,19 @@ class ChainOptimum(AbstractOptimum):
     def summary(self) -> str:
         """Human-readable report."""
         S, H = self.cos.shape
+        family = f"{H} harmonics" if self.control is None else f"a spline of {self.control.shape[-1]} knots"
         lines = [
             f"chain of {S + 1} masses: mean speed >= {self.v_min:g} in direction {self.direction:+d}, stroke <= "
             f"{self.a_max:g} per spring, normal forces >= {self.margin:g} on the orbit, stable steady gait (exact)",
             f"base frequency omega = {self.omega:.6g} ({'optimised' if self.free_omega else 'fixed'}), "
-            f"{H} harmonics per spring",
+            f"{family} per spring",
         ]
         for j in range(S):
-            lines.append(f"spring {j}: cos " + " ".join(f"{c:+.5f}" for c in self.cos[j])
-                         + "  sin " + " ".join(f"{s:+.5f}" for s in self.sin[j]))  # fmt: skip
+            if self.control is None:
+                lines.append(f"spring {j}: cos " + " ".join(f"{c:+.5f}" for c in self.cos[j])
+                             + "  sin " + " ".join(f"{s:+.5f}" for s in self.sin[j]))  # fmt: skip
+            else:
+                lines.append(f"spring {j}: control " + " ".join(f"{c:+.5f}" for c in self.control[j]))
         lines += [
             f"steady gait (exact, whole periods): mean speed {fmt(self.mean_speed_exact)}, cost of transport "
             f"{fmt(self.cost_of_transport_exact)}, period {fmt(self.gait_period_exact)}, stable {self.stable_exact} "

@@ -20,6 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..dynamics._exact_dynamics import Exact
+from ..gaits._element_orbit import with_spline
 from ..gaits._select import GaitStatus
 from ..gaits._shooting import steady_gait_chain, transient_speed
 from ..model._chain import Chain
@@ -104,10 +105,11 @@ def _chunks(n: int, chunk: int, order: np.ndarray):
         yield order[np.minimum(np.arange(b, b + chunk), n - 1)], min(chunk, n - b)
 
 
-def solve(chain: Chain, cos: np.ndarray, sin: np.ndarray, omega: np.ndarray, settings: ChainOptimiseSettings,
-          say: Callable[[str], None] = lambda message: None, need: tuple[float, int] | None = None,
-          ) -> Gaits:  # fmt: skip
-    """Steady gaits (strict contact, relaxed start) of a batch of actuations, in chunks of
+def solve(chain: Chain, cos: np.ndarray | None, sin: np.ndarray | None, omega: np.ndarray,
+          settings: ChainOptimiseSettings, say: Callable[[str], None] = lambda message: None,
+          need: tuple[float, int] | None = None, control: np.ndarray | None = None) -> Gaits:  # fmt: skip
+    """Steady gaits (strict contact, relaxed start) of a batch of actuations (Fourier coefficients
+    `cos`, `sin` `(B, S, H)`, or the splines of control values `control` `(B, S, M)`), in chunks of
     `settings.chunk` in order of frequency (a chunk integrates as long as its lowest frequency's
     periods), the longer gait periods on the waves still open only (`compact`); `say` reports
     each chunk.
@@ -118,7 +120,12 @@ def solve(chain: Chain, cos: np.ndarray, sin: np.ndarray, omega: np.ndarray, set
     solved; the others are left unsolved (not `ok`, NaN): a wave far slower than required
     at the end of its transient is no start for the optimum."""
     n, chunk = omega.shape[0], settings.chunk
-    gaits = lambda idx: with_actuation(chain, cos[idx], sin[idx], omega[idx])
+    if control is None:
+        assert cos is not None and sin is not None
+        gaits = lambda idx: with_actuation(chain, cos[idx], sin[idx], omega[idx])
+    else:
+        dtype = chain.dtype
+        gaits = lambda idx: with_spline(chain, jnp.asarray(control[idx], dtype), jnp.asarray(omega[idx], dtype))
     t0 = time.perf_counter()
     solved = np.arange(n)
     # Not with n <= chunk (every wave among the fastest), nor a transient too short to have an end.

@@ -464,7 +464,7 @@ def chain_optimum(chain: Chain, v_min, a_max, method, direction, omega, harmonic
     if sweep is not None or start is not None:
         raise ValueError("sweep= and start= apply to Params; a Chain's baseline is its own travelling-wave screen.")
     return optimise_chain(chain, v_min, a_max, direction=1 if direction is None else direction, omega=omega,
-                          harmonics=3 if harmonics is None else harmonics, settings=settings)  # fmt: skip
+                          harmonics=harmonics, settings=settings)  # fmt: skip
 
 
 def _baseline(params, a_max, speed, direction, sweep, refine: bool, dt: float) -> dict | None:
