@@ -30,7 +30,7 @@ fixed), instead of Fourier coefficients.
 """
 
 from collections import Counter
-from typing import ClassVar, TypeVar
+from typing import Any, ClassVar, TypeVar
 
 import equinox as eqx
 import jax
@@ -194,6 +194,10 @@ class ChainOracle(eqx.Module):
     dt: float = eqx.field(static=True)
     max_iter: int = eqx.field(static=True)
     knots: int = eqx.field(static=True, default=0)
+
+    @property
+    def dtype(self) -> Any:
+        return self.chain.dtype
 
     def orbits(self, theta: Array, y0: Array, k: Array) -> Orbit:
         """Steady gaits of `k` actuation periods (int32, per row) and their sensitivities, for a

@@ -290,6 +290,10 @@ class Oracle(eqx.Module):
     dt: float = eqx.field(static=True)
     max_iter: int = eqx.field(static=True)
 
+    @property
+    def dtype(self) -> Any:
+        return self.params.dtype
+
     def orbits(self, theta: Array, y0: Array, k: Array, gradient: bool = True) -> Orbit:
         """Steady gaits of period `k` actuation periods (int32, per row) and their sensitivities,
         for a batch of decision vectors, from warm starts `y0`; without `gradient`, the same orbits

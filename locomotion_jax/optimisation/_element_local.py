@@ -17,13 +17,13 @@ import time
 from collections.abc import Callable
 from typing import Any, NamedTuple
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
 from ..dynamics._exact_dynamics import Exact
 from ..gaits import _element_orbit as orbit
 from ._descent import descent
+from ._evaluator import Evaluator
 from ._figures import Figures, PENALTY
 from ._lockstep import run_lockstep
 from ._shapes import spline_stroke, SplineShape
@@ -67,53 +67,6 @@ def project(theta: np.ndarray, springs: int, harmonics: int, log_lo: float, log_
     c, s, w = unpack(theta, springs, harmonics)
     scale = 1 / np.maximum(strokes(c, s), 1.0)
     return pack(c * scale[:, None], s * scale[:, None], math.exp(float(np.clip(math.log(w), log_lo, log_hi))))
-
-
-class Evaluator:
-    """The batched oracle for the lockstep solvers: warm starts per solver, and where Newton fails
-    from them, a transient and period-1 then period-2 gaits."""
-
-    def __init__(self, oracle: orbit.ChainOracle, lanes: int, transient: int, make):
-        self.oracle, self.lanes, self.transient, self.make = oracle, lanes, transient, make
-        self.y: dict[int, np.ndarray] = {}
-        self.k: dict[int, int] = {}
-        self.calls = 0
-
-    def solve(self, theta: np.ndarray, y0: np.ndarray, k: np.ndarray) -> tuple[Any, np.ndarray]:
-        dtype = self.oracle.chain.dtype
-        th = jnp.asarray(theta, dtype)
-        run = lambda y, kk: jax.tree_util.tree_map(
-            np.asarray, self.oracle.orbits(th, jnp.asarray(y, dtype), jnp.asarray(kk, jnp.int32))
-        )
-        orb = run(y0, k)
-        k = np.array(k)
-        if not orb.ok.all():
-            periods = jnp.asarray(self.transient, jnp.int32)
-            y1 = np.asarray(self.oracle.transient(th, jnp.asarray(y0, dtype), jnp.asarray(~orb.ok), periods))
-            for kk in (1, 2):
-                if orb.ok.all():
-                    break
-                again = run(y1, np.full_like(k, kk))
-                take = ~orb.ok & again.ok
-                orb = jax.tree_util.tree_map(lambda a, b: np.where(take.reshape((-1,) + (1,) * (a.ndim - 1)), b, a),
-                                             orb, again)  # fmt: skip
-                k = np.where(take, kk, k)
-        self.calls += 1
-        return orb, k
-
-    def __call__(self, idx: list[int], xs: list[np.ndarray]) -> list[Any]:
-        pad = idx + [idx[0]] * (self.lanes - len(idx))
-        theta = np.stack([xs[idx.index(i)] for i in pad])
-        orb, ks = self.solve(theta, np.stack([self.y[i] for i in pad]), np.array([self.k[i] for i in pad]))
-        out = []
-        for r, i in enumerate(idx):
-            one = jax.tree_util.tree_map(lambda x: x[r], orb)
-            if one.ok:
-                self.y[i], self.k[i] = one.y, int(ks[r])
-                out.append(self.make(theta[r], one, int(ks[r])))
-            else:
-                out.append(None)
-        return out
 
 
 def local_solver(x0: np.ndarray, proj, stroke_ok, max_iter: int, trust_radius: float, rho: float, log: list):
@@ -216,7 +169,7 @@ def refine(base: Any, starts: list[Start], a_max: float, v_min: float, direction
     )  # fmt: skip
     v_target = v_min * (1 + settings.speed_slack)
     free = hi > lo
-    make = lambda th, orb, k: Figures(th, orb, v_target, k, direction, settings.margin, free)
+    make = lambda lane, th, orb, k: Figures(th, orb, v_target, k, direction, settings.margin, free)
     ev = Evaluator(oracle, settings.local, settings.transient, make)
     x0 = []
     for lane, st in enumerate(starts):

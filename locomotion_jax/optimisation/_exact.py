@@ -56,6 +56,7 @@ from ..model._params import Params
 from ..model._waveform import AbstractWaveform
 from . import _pareto as pareto
 from ._descent import descent
+from ._evaluator import Evaluator
 from ._figures import Figures, PENALTY
 from ._lockstep import run_lockstep
 from ._optimum import ExactSettings, Optimum, verified
@@ -75,79 +76,6 @@ class _Bad:
         self.df = last.df if last is not None else np.zeros_like(theta)
         self.c = last.c - 1.0 if last is not None else np.array([-1.0, -1.0])
         self.dc = last.dc if last is not None else np.zeros((2, len(theta)))
-
-
-class _Evaluator:
-    """Batched oracle for the lockstep solvers: warm starts per solver, a transient where Newton fails."""
-
-    def __init__(self, oracle: orbit.Oracle, lanes: int, settings: ExactSettings, make):
-        self.oracle, self.lanes, self.settings, self.make = oracle, lanes, settings, make
-        self.targets: dict[int, float] = {}
-        self.k: dict[int, int] = {}
-        self.y: dict[int, Any] = {}
-        self.last: dict[int, Any] = {}
-        self.calls = 0
-
-    def solve(
-        self, theta: np.ndarray, y0: np.ndarray, fresh: np.ndarray, k: np.ndarray, gradient: bool = True
-    ) -> tuple[Any, np.ndarray]:
-        """Orbits of a full batch (`lanes` rows; numpy arrays in an `Orbit`) and their periods `k`
-        (without `gradient`: a zero gradient, for the screen, which ranks by the figures alone).
-
-        From the warm starts with the given periods first; where Newton fails, again after
-        a transient, as a period-1 gait and then as a period-2 gait (past a period doubling
-        the steady gait repeats every second period, and its figures are those of two)."""
-        dtype = self.oracle.params.dtype
-        th = jnp.asarray(theta, dtype)
-        run = lambda y, kk: jax.tree_util.tree_map(
-            np.asarray, self.oracle.orbits(th, jnp.asarray(y, dtype), jnp.asarray(kk, jnp.int32), gradient)
-        )
-        orb: Any = run(y0, k)
-        k = np.array(k)
-        if not orb.ok.all():
-            periods = jnp.asarray(self.settings.transient, jnp.int32)
-            y1 = np.asarray(self.oracle.transient(th, jnp.asarray(y0, dtype), jnp.asarray(fresh | ~orb.ok), periods))
-            for kk in (1, 2):
-                if orb.ok.all():
-                    break
-                again = run(y1, np.full_like(k, kk))
-                take = ~orb.ok & again.ok
-                orb = jax.tree_util.tree_map(lambda a, b: np.where(_col(take, a), b, a), orb, again)
-                k = np.where(take, kk, k)
-        self.calls += 1
-        return orb, k
-
-    def report(self, message: str) -> None:
-        if self.settings.verbose:
-            print(message, file=sys.stderr, flush=True)
-
-    def __call__(self, idx: list[int], xs: list[np.ndarray]) -> list[Any]:
-        pad = idx + [idx[0]] * (self.lanes - len(idx))
-        theta = np.stack([xs[idx.index(i)] for i in pad])
-        y0 = np.stack([self.y[i] for i in pad])
-        orb, ks = self.solve(theta, y0, np.zeros(len(pad), bool), np.array([self.k[i] for i in pad]))
-        out = []
-        for k, i in enumerate(idx):
-            one = jax.tree_util.tree_map(lambda x: x[k], orb)
-            if one.ok:
-                self.y[i], self.k[i] = one.y, int(ks[k])
-                fig = self.make(theta[k], one, self.targets[i], int(ks[k]))
-                self.last[i] = fig
-            else:
-                fig = _Bad(theta[k], self.last.get(i))
-            out.append(fig)
-        if self.calls % 25 == 0:
-            self.report(
-                f"  evaluation {self.calls}: cost "
-                + " ".join(f"{f.f:.4f}" for f in out)
-                + " speed constraint "
-                + " ".join(f"{f.c[0]:+.4f}" for f in out)
-            )
-        return out
-
-
-def _col(flag: np.ndarray, like: Any) -> np.ndarray:
-    return flag.reshape(flag.shape + (1,) * (np.ndim(like) - 1))
 
 
 def _descent(x0, shape: AbstractShape, bounds, settings: ExactSettings, max_iter: int, at) -> None:
@@ -335,7 +263,20 @@ def optimise_exact(
     v_target = speed * (1 + settings.speed_slack)
     make = lambda th, orb, v, k: Figures(th, orb, v, k, direction, settings.margin, free)
     lanes = settings.local
-    ev = _Evaluator(oracle, lanes, settings, make)
+    targets: dict[int, float] = {}  # each lane's required speed, per stage of the continuation
+    last: dict[int, Figures] = {}  # each lane's last figures, for a point where no orbit is found
+
+    def figures(lane, th, orb, k):
+        fig = last[lane] = make(th, orb, targets[lane], k)
+        return fig
+
+    def report(figs):
+        if ev.calls % 25 == 0:
+            say(f"  evaluation {ev.calls}: cost " + " ".join(f"{f.f:.4f}" for f in figs) + " speed constraint "
+                + " ".join(f"{f.c[0]:+.4f}" for f in figs))  # fmt: skip
+
+    say = (lambda m: print(m, file=sys.stderr, flush=True)) if settings.verbose else (lambda m: None)
+    ev = Evaluator(oracle, lanes, settings.transient, figures, lambda lane, th: _Bad(th, last.get(lane)), report)
     log: dict[str, Any] = {}
 
     # -- starts, screened in batches of the same size as the local solves (one compilation).
@@ -346,21 +287,19 @@ def optimise_exact(
     theta0 = np.concatenate([theta0, theta0[:pad]])
     periods = jnp.asarray(settings.transient, jnp.int32)
 
-    ev.report(
-        f"screening {n0} starts in batches of {lanes} (the first batch compiles the orbit solver: first call only)..."
-    )
+    say(f"screening {n0} starts in batches of {lanes} (the first batch compiles the orbit solver: first call only)...")
 
     def screen(theta):
         figs, ys = [], []
         for b in range(0, len(theta), lanes):
             if b:
-                ev.report(f"  {b} of {len(theta)} starts screened ({time.perf_counter() - t0:.0f} s)")
+                say(f"  {b} of {len(theta)} starts screened ({time.perf_counter() - t0:.0f} s)")
             th = theta[b : b + lanes]
             rest = oracle.transient(
                 jnp.asarray(th, dtype), jnp.zeros((lanes, 3), dtype), jnp.ones(lanes, bool), periods
             )
             # The screen ranks by the figures alone: no gradients (the local runs compute their own).
-            orb, kk = ev.solve(th, np.asarray(rest), np.zeros(lanes, bool), np.ones(lanes, int), gradient=False)
+            orb, kk = ev.solve(th, np.asarray(rest), np.ones(lanes, int), np.zeros(lanes, bool), gradient=False)
             for k in range(lanes):
                 one = jax.tree_util.tree_map(lambda x: x[k], orb)
                 figs.append(make(th[k], one, v_target, int(kk[k])) if one.ok else _Bad(th[k], None))
@@ -398,7 +337,7 @@ def optimise_exact(
     if not order:
         order = [0]
     order += order[:1] * (lanes - len(order))
-    ev.report(
+    say(
         f"{n0} starts screened ({time.perf_counter() - t0:.0f} s); refining: "
         + ", ".join(f"omega {np.exp(theta0[i, -1]):.3g} merit {merit[i]:.3g}" for i in order)
     )
@@ -424,10 +363,10 @@ def optimise_exact(
     x = [theta0[i].copy() for i in order]
     runners: Any = [[] for _ in range(lanes)]
     for j, it in enumerate(iters):
-        ev.targets = {k: v0[k] * (v_target / v0[k]) ** ((j + 1) / len(iters)) for k in range(lanes)}
+        targets.update({k: v0[k] * (v_target / v0[k]) ** ((j + 1) / len(iters)) for k in range(lanes)})
         solvers = [_local_solver(x[k], shape, bounds, settings, log["local"], it) for k in range(lanes)]
         x, runners = zip(*run_lockstep(solvers, ev))
-    ev.report(
+    say(
         f"local runs done ({time.perf_counter() - t0:.0f} s); stroke / a_max "
         + " ".join(f"{shape.stroke(xi):.8f}" for xi in x)
     )
