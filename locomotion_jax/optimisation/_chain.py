@@ -1,8 +1,9 @@
 """Optimal actuation of a chain of N masses (SPEC §7 and §8): least cost of transport over steady gaits.
 
 Problem, for one [`Chain`][], a required speed $v_\\min > 0$ in the direction $\\sigma = \\pm 1$ and
-a stroke limit $a_\\max$, over per-spring Fourier actuations of $H$ harmonics and a common base
-frequency ([`SpringFourier`][]), $\\ell_{0,j}(t) = \\bar\\ell_j + s_j(t)$:
+a stroke limit $a_\\max$, over per-spring Fourier actuations of $H$ harmonics ([`SpringFourier`][])
+or per-spring periodic cubic B-splines of $M$ control values ([`Spline`][]) and a common base
+frequency, $\\ell_{0,j}(t) = \\bar\\ell_j + s_j(t)$:
 
 $$\\min\\ \\frac{e_d}{\\sigma\\Delta X}\\quad\\text{s.t.}\\quad \\frac{\\sigma\\Delta X}{kT} \\ge v_\\min,\\quad
 \\max_t |s_j(t)| \\le a_\\max\\ \\forall j,\\quad \\min_{i,t} N_i \\ge \\text{margin},\\quad\\text{a stable gait},$$
@@ -15,10 +16,12 @@ Method:
 1. **Travelling waves** $a\\sin(\\omega t - j\\varphi)$ (`_chain_screen`): a grid over
    $(a, \\omega, \\varphi)$ solved as steady gaits in batches of one compiled shape, and a zooming
    refinement of the best that meets the requirement. The best one found is the baseline.
-2. **Local refinement of per-spring harmonics** (`_element_local`) from the refined best wave and
-   the next best distinct waves of the grid: a monotone L-BFGS descent on an exact penalty,
-   with exact gradients through the periodic orbit by the implicit function theorem
-   (`gaits._element_orbit`), the starts in lockstep (one batched evaluation per step).
+2. **Local refinement of per-spring harmonics** (`_element_local`, shared with the mechanism
+   optimiser; with `ChainOptimiseSettings(shape="spline")` of per-spring periodic splines, started
+   from each wave's interpolating spline) from the refined best wave and the next best distinct
+   waves of the grid: a monotone L-BFGS descent on an exact penalty, with exact gradients through
+   the periodic orbit by the implicit function theorem (`gaits._element_orbit`), the starts in
+   lockstep (one batched evaluation per step).
 3. **Verification.** Every refined actuation and the baseline wave are solved again by
    [`steady_gait`][] (strict contact, from the relaxed springs, periods 1 to 4); the reported
    optimum is the cheapest that is converged, stable, without lift-off, fast enough and within

@@ -1,6 +1,7 @@
 """The stages that the chain and mechanism optimisers share, after each one's own baseline (travelling
-waves of a chain, sinusoids of a mechanism): the local refinement, the choice among the verified
-candidates and the direct-simulation check. A signal per actuated element: `gaits._element_orbit`.
+waves of a chain, sinusoids of a mechanism): the local refinement and the direct-simulation check
+of the optimum (the choice among the verified candidates, `_optimum.choose`, is every exact
+optimiser's). A signal per actuated element: `gaits._element_orbit`.
 
 The refinement (`refine`) runs a monotone descent on an exact penalty per start, the starts in
 lockstep (`_lockstep.run_lockstep`): each start runs in its own thread and their evaluations are
