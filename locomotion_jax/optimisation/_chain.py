@@ -106,13 +106,7 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     if not isinstance(settings, ChainOptimiseSettings):
         raise TypeError(f"settings for a Chain must be a ChainOptimiseSettings, got {type(settings).__name__}.")
     spline = settings.shape == "spline"
-    if spline and harmonics is not None:
-        raise ValueError(
-            "harmonics applies to Fourier series; ChainOptimiseSettings(shape='spline') searches splines of "
-            f"ChainOptimiseSettings.knots control values (got harmonics={harmonics!r})."
-        )
-    # A spline search screens the travelling waves as single harmonics.
-    H = 1 if spline else (3 if harmonics is None else harmonics)
+    H = local.family_harmonics(settings, harmonics, 3)  # a spline search screens single-harmonic waves
     speed, direction = check_inputs(chain, v_min, a_max, direction, H, omega, settings)
     t0 = time.perf_counter()
     say = (lambda m: print(m, file=sys.stderr, flush=True)) if settings.verbose else (lambda m: None)

@@ -136,6 +136,21 @@ def spline_strokes(control: np.ndarray) -> np.ndarray:
     return np.array([spline_stroke(row) for row in control])
 
 
+def family_harmonics(settings: Any, harmonics: int | None, default: int) -> int:
+    """The harmonics of a chain's or a mechanism's search: `harmonics` (`default` if `None`) for a
+    Fourier search; 1 for a spline search (`settings.shape == "spline"`: its baseline screens single
+    harmonics), which refuses a given `harmonics`.
+
+    **Raises:** `ValueError` naming `harmonics` and the settings' `knots`."""
+    if settings.shape != "spline":
+        return default if harmonics is None else harmonics
+    if harmonics is not None:
+        name = type(settings).__name__
+        raise ValueError(f"harmonics applies to Fourier series; {name}(shape='spline') searches splines of "
+                         f"{name}.knots control values (got harmonics={harmonics!r}).")  # fmt: skip
+    return 1
+
+
 class Start(NamedTuple):
     """A start of the refinement: the Fourier coefficients `(S, H)` of every actuated signal
     (absolute units) and the base frequency of a baseline actuation, and its steady gait (the

@@ -23,12 +23,12 @@ class Evaluator:
       `dtype`); `lanes`: its batch size; `transient`: actuation periods of the retry's transient.
     - `make(lane, theta, orbit, k)`: the figures a solver gets at a solved orbit (`k`: its gait
       period); `bad(lane, theta)`: what it gets where no orbit is found (default `None`).
-    - `report(figures)`: called after each batched call (progress).
+    - `report(calls, figures)`: called after each batched call with the number of calls so far (progress).
     """
 
     def __init__(self, oracle: Any, lanes: int, transient: int, make: Callable[[int, np.ndarray, Any, int], Any],
                  bad: Callable[[int, np.ndarray], Any] = lambda lane, theta: None,
-                 report: Callable[[list], None] = lambda figures: None):  # fmt: skip
+                 report: Callable[[int, list], None] = lambda calls, figures: None):  # fmt: skip
         self.oracle, self.lanes, self.transient = oracle, lanes, transient
         self.make, self.bad, self.report = make, bad, report
         self.y: dict[int, Any] = {}
@@ -75,5 +75,5 @@ class Evaluator:
                 out.append(self.make(i, theta[r], one, int(ks[r])))
             else:
                 out.append(self.bad(i, theta[r]))
-        self.report(out)
+        self.report(self.calls, out)
         return out

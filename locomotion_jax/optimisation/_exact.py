@@ -270,9 +270,9 @@ def optimise_exact(
         fig = last[lane] = make(th, orb, targets[lane], k)
         return fig
 
-    def report(figs):
-        if ev.calls % 25 == 0:
-            say(f"  evaluation {ev.calls}: cost " + " ".join(f"{f.f:.4f}" for f in figs) + " speed constraint "
+    def report(calls, figs):
+        if calls % 25 == 0:
+            say(f"  evaluation {calls}: cost " + " ".join(f"{f.f:.4f}" for f in figs) + " speed constraint "
                 + " ".join(f"{f.c[0]:+.4f}" for f in figs))  # fmt: skip
 
     say = (lambda m: print(m, file=sys.stderr, flush=True)) if settings.verbose else (lambda m: None)

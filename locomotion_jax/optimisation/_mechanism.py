@@ -329,13 +329,7 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
     if not isinstance(settings, MechanismOptimiseSettings):
         raise TypeError(f"settings for a Mechanism must be a MechanismOptimiseSettings, got {type(settings).__name__}.")
     spline = settings.shape == "spline"
-    if spline and harmonics is not None:
-        raise ValueError(
-            "harmonics applies to Fourier series; MechanismOptimiseSettings(shape='spline') searches splines of "
-            f"MechanismOptimiseSettings.knots control values (got harmonics={harmonics!r})."
-        )
-    # A spline search screens plain sinusoids (one harmonic) for its baseline and starts.
-    H = 1 if spline else (2 if harmonics is None else harmonics)
+    H = local.family_harmonics(settings, harmonics, 2)  # a spline search screens plain sinusoids
     elements = check_inputs(mech, v_min, a_max, direction, H, omega)
     t0 = time.perf_counter()
     say = (lambda m: print(m, file=sys.stderr, flush=True)) if settings.verbose else (lambda m: None)
