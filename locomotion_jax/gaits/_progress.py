@@ -9,10 +9,13 @@ import time
 from collections.abc import Callable
 
 
-def reporter(verbose: bool, name: str) -> Callable[[str], None]:
-    """A function that prints `"[name t s] message"` to stderr when `verbose`, else does nothing."""
+def reporter(verbose: bool, name: str | None = None) -> Callable[[str], None]:
+    """A function that prints `"[name t s] message"` (without a `name`: the message alone) to stderr
+    when `verbose`, else does nothing."""
     if not verbose:
         return lambda message: None
+    if name is None:
+        return lambda message: print(message, file=sys.stderr, flush=True)
     t0 = time.perf_counter()
 
     def say(message: str) -> None:

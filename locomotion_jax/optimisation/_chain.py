@@ -32,7 +32,6 @@ Method:
 """
 
 import math
-import sys
 import time
 from typing import Any
 
@@ -40,6 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..gaits._element_orbit import with_spline
+from ..gaits._progress import reporter
 from ..model._actuator import RestLength
 from ..model._chain import Chain
 from ..model._springwaves import SpringFourier
@@ -109,7 +109,7 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     H = local.family_harmonics(settings, harmonics, 3)  # a spline search screens single-harmonic waves
     speed, direction = check_inputs(chain, v_min, a_max, direction, H, omega, settings)
     t0 = time.perf_counter()
-    say = (lambda m: print(m, file=sys.stderr, flush=True)) if settings.verbose else (lambda m: None)
+    say = reporter(settings.verbose)
     base = chain.broadcast()
     S, H, M = base.n_masses - 1, int(H), settings.knots
     lo, hi = screen.frequency_range(base, omega, settings)

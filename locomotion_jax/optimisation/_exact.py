@@ -41,7 +41,6 @@ Method:
 """
 
 import math
-import sys
 import time
 from typing import Any, cast
 
@@ -52,6 +51,7 @@ import scipy.optimize
 
 from ..gaits import _orbit as orbit
 from ..gaits._gait import GaitStatus, paper_gait
+from ..gaits._progress import reporter
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform
 from . import _pareto as pareto
@@ -263,6 +263,7 @@ def optimise_exact(
     v_target = speed * (1 + settings.speed_slack)
     make = lambda th, orb, v, k: Figures(th, orb, v, k, direction, settings.margin, free)
     lanes = settings.local
+    say = reporter(settings.verbose)
     targets: dict[int, float] = {}  # each lane's required speed, per stage of the continuation
     last: dict[int, Figures] = {}  # each lane's last figures, for a point where no orbit is found
 
@@ -275,7 +276,6 @@ def optimise_exact(
             say(f"  evaluation {calls}: cost " + " ".join(f"{f.f:.4f}" for f in figs) + " speed constraint "
                 + " ".join(f"{f.c[0]:+.4f}" for f in figs))  # fmt: skip
 
-    say = (lambda m: print(m, file=sys.stderr, flush=True)) if settings.verbose else (lambda m: None)
     ev = Evaluator(oracle, lanes, settings.transient, figures, lambda lane, th: _Bad(th, last.get(lane)), report)
     log: dict[str, Any] = {}
 

@@ -43,7 +43,6 @@ mechanism's own base frequency where it has no spring between bodies.
 
 import dataclasses
 import math
-import sys
 import time
 from typing import Any, ClassVar
 
@@ -53,6 +52,7 @@ import numpy as np
 
 from ..dynamics._exact_dynamics import Exact
 from ..gaits._element_orbit import actuated, with_fourier, with_spline
+from ..gaits._progress import reporter
 from ..model._bodies import Mechanism
 from . import _element_local as local
 from ._chain_optimum import ChainOptimiseSettings
@@ -332,7 +332,7 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
     H = local.family_harmonics(settings, harmonics, 2)  # a spline search screens plain sinusoids
     elements = check_inputs(mech, v_min, a_max, direction, H, omega)
     t0 = time.perf_counter()
-    say = (lambda m: print(m, file=sys.stderr, flush=True)) if settings.verbose else (lambda m: None)
+    say = reporter(settings.verbose)
     base = mech.broadcast()
     S, H, M = len(elements), int(H), settings.knots
     if omega is not None:
