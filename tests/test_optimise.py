@@ -32,6 +32,7 @@ each):
    the float64 reference to float32's resolution.
 """
 
+import dataclasses
 import json
 import math
 from typing import Any
@@ -42,7 +43,7 @@ import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
-from locomotion_jax.cli import _main as _cli
+from locomotion_jax.cli import _main as _cli, _optimise as _cli_optimise
 from locomotion_jax.cli._optimise import register
 from locomotion_jax.gaits import _element_orbit, _orbit
 from locomotion_jax.optimisation import (
@@ -616,6 +617,24 @@ def test_stroke_bound_holds_exactly(opt3):
 
 
 @CHAIN_OPTIMISE
+def test_cli_plot_draws_a_chain_optimum_of_either_family(opt3, tmp_path):
+    """`optimize --out`'s plot of a chain: the Fourier signals, and a spline optimum's signals
+    against the reference's own B-spline formula (the optimum's fields replaced by a spline's)."""
+    phase = np.linspace(0, 2 * np.pi, 401)
+    n = np.arange(1, opt3.harmonics + 1)
+    fourier = opt3.cos @ np.cos(np.outer(n, phase)) + opt3.sin @ np.sin(np.outer(n, phase))
+    control = np.random.default_rng(5).uniform(-A_MAX, A_MAX, size=(2, 8))  # about the mean lbar
+    spline = dataclasses.replace(opt3, shape="spline", control=control)
+    ref = np.array([[Sig(lb, w=opt3.omega, control=tuple(c)).at(t)[0] - lb for t in phase / opt3.omega]
+                    for c, lb in zip(control, opt3.lbar)])  # fmt: skip
+    for opt, signals, name in ((opt3, fourier, "fourier.png"), (spline, ref, "spline.png")):
+        fig = _cli_optimise._plot(opt, tmp_path / name)
+        assert (tmp_path / name).stat().st_size > 0
+        drawn = np.array([line.get_ydata() for line in fig.axes[0].lines[: len(signals)]])
+        assert np.abs(drawn - signals).max() < 1e-12
+
+
+@CHAIN_OPTIMISE
 def test_screen_filter_keeps_the_fast_waves():
     v = np.array([0.3, np.nan, -0.4, 0.05, 0.2, 0.01])
     assert list(screen.fast_enough(v, 0.4, 1, 0.5, 2)) == [0, 4]  # 0.2 reaches half of 0.4; 0.3, 0.2 fastest
@@ -788,6 +807,13 @@ def test_chain_spline_search_refuses_harmonics():
 def test_bad_settings_raise():
     with pytest.raises(ValueError, match="local must be an int >= 1"):
         lj.ChainOptimiseSettings(local=0)
+    # The checks the chain's settings share with the mechanism's (check_search_settings).
+    for bad, match in ((dict(transient=0), "ChainOptimiseSettings.transient must be an int >= 1, got 0"),
+                       (dict(local=True), "ChainOptimiseSettings.local must be an int >= 1, got True"),
+                       (dict(margin=-0.1), "ChainOptimiseSettings: margin and speed_slack must be >= 0"),
+                       (dict(zoom_levels=False), "zoom_levels must be an int >= 0")):  # fmt: skip
+        with pytest.raises(ValueError, match=match):
+            lj.ChainOptimiseSettings(**bad)
     with pytest.raises(TypeError, match="ChainOptimiseSettings"):
         lj.optimise(worm(), 0.05, 0.05, settings=lj.ExactOptimiseSettings())
 

@@ -8,7 +8,7 @@ JSON object on stdout.
 
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, TYPE_CHECKING
 
 import numpy as np
 import typer
@@ -16,6 +16,10 @@ import typer
 from ._errors import friendly
 from ._mechanism import build, Built, mechanism_options, NAMES
 from ._options import expand, Values
+
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 
 OPTIMISED: tuple[str, ...] = tuple(n for n in NAMES if n not in ("a", "omega", "omega_over_wn1", "phi"))
@@ -211,8 +215,9 @@ def amplitude(built: Built) -> float:
     raise ValueError(f"--a-max: {built.file}'s waveform has no single amplitude to default to; give --a-max.")
 
 
-def _plot(opt: Any, path: Path) -> None:
-    """A chain's optimal signals $s_j(t)$ over one period beside the best travelling wave's."""
+def _plot(opt: Any, path: Path) -> "Figure":
+    """A chain's optimal signals $s_j(t)$ over one period beside the best travelling wave's, saved
+    to `path`; returns the figure (its first lines are the springs' signals, in order)."""
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(8, 4.5), layout="constrained")
@@ -237,6 +242,7 @@ def _plot(opt: Any, path: Path) -> None:
     ax.set_title(f"cost of transport {opt.cost_of_transport_exact:.4g} at speed {opt.mean_speed_exact:.4g} "
                  f"(dotted: best travelling wave)")  # fmt: skip
     fig.savefig(path, dpi=120)
+    return fig
 
 
 def _optimise_bodies(built: Built, v_min: float, a_max: float | None, direction: int | None, omega: float | None,

@@ -82,29 +82,36 @@ class ChainOptimiseSettings(eqx.Module):
     verbose: bool = False
 
     def __check_init__(self):
-        counts = dict(amplitudes=self.amplitudes, frequencies=self.frequencies, phases=self.phases,
-                      zoom_points=self.zoom_points, local=self.local, max_iter=self.max_iter, chunk=self.chunk,
-                      newton_iter=self.newton_iter)  # fmt: skip
-        for name, v in counts.items():
-            if not (isinstance(v, int) and v >= 1):
-                raise ValueError(f"ChainOptimiseSettings.{name} must be an int >= 1, got {v!r}.")
-        if self.shape not in ("fourier", "spline"):
-            raise ValueError(f"ChainOptimiseSettings.shape must be 'fourier' or 'spline', got {self.shape!r}.")
-        if isinstance(self.knots, bool) or not (isinstance(self.knots, int) and self.knots >= 4):
-            raise ValueError(f"ChainOptimiseSettings.knots must be an int >= 4, got {self.knots!r}.")
-        if not (isinstance(self.zoom_levels, int) and self.zoom_levels >= 0):
+        check_search_settings(self, ("zoom_points", "chunk"))
+        if isinstance(self.zoom_levels, bool) or not (isinstance(self.zoom_levels, int) and self.zoom_levels >= 0):
             raise ValueError(f"ChainOptimiseSettings.zoom_levels must be an int >= 0, got {self.zoom_levels!r}.")
         if not (0 <= self.screen_speed <= 1):
             raise ValueError(f"ChainOptimiseSettings.screen_speed must be in [0, 1], got {self.screen_speed!r}.")
-        if not (0 < self.omega_min < self.omega_max):
-            raise ValueError(
-                f"ChainOptimiseSettings: need 0 < omega_min < omega_max, got {self.omega_min!r}, {self.omega_max!r}."
-            )
-        if not (self.dt > 0 and self.trust_radius > 0 and self.newton_tol > 0 and self.check_tol > 0):
-            raise ValueError("ChainOptimiseSettings: dt, trust_radius, newton_tol and check_tol must be > 0.")
-        lo, hi = self.check_periods
-        if not (1 <= lo <= hi):
-            raise ValueError(f"ChainOptimiseSettings.check_periods must be (lo, hi), 1 <= lo <= hi, got {lo, hi}.")
+
+
+def check_search_settings(s: Any, counts: tuple[str, ...] = ()) -> None:
+    """The checks shared by the settings of the chain's and the mechanism's optimisers (each
+    error names the class and the field): the screen's and the local descent's counts (and
+    `counts`, the class's own) are ints >= 1, the family, the frequency range, the steps and
+    tolerances, the margins and the verification's periods."""
+    name = type(s).__name__
+    for f in ("amplitudes", "frequencies", "phases", "local", "max_iter", "transient", "newton_iter") + counts:
+        v = getattr(s, f)
+        if isinstance(v, bool) or not (isinstance(v, int) and v >= 1):
+            raise ValueError(f"{name}.{f} must be an int >= 1, got {v!r}.")
+    if s.shape not in ("fourier", "spline"):
+        raise ValueError(f"{name}.shape must be 'fourier' or 'spline', got {s.shape!r}.")
+    if isinstance(s.knots, bool) or not (isinstance(s.knots, int) and s.knots >= 4):
+        raise ValueError(f"{name}.knots must be an int >= 4, got {s.knots!r}.")
+    if not (0 < s.omega_min < s.omega_max):
+        raise ValueError(f"{name}: need 0 < omega_min < omega_max, got {s.omega_min!r}, {s.omega_max!r}.")
+    if not (s.dt > 0 and s.trust_radius > 0 and s.newton_tol > 0 and s.check_tol > 0):
+        raise ValueError(f"{name}: dt, trust_radius, newton_tol and check_tol must be > 0.")
+    if not (s.margin >= 0 and s.speed_slack >= 0):
+        raise ValueError(f"{name}: margin and speed_slack must be >= 0, got {s.margin!r}, {s.speed_slack!r}.")
+    lo, hi = s.check_periods
+    if not (1 <= lo <= hi):
+        raise ValueError(f"{name}.check_periods must be (lo, hi), 1 <= lo <= hi, got {lo, hi}.")
 
 
 @dataclasses.dataclass(frozen=True)

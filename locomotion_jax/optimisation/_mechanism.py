@@ -55,7 +55,7 @@ from ..gaits._element_orbit import actuated, with_fourier, with_spline
 from ..gaits._progress import reporter
 from ..model._bodies import Mechanism
 from . import _element_local as local
-from ._chain_optimum import ChainOptimiseSettings
+from ._chain_optimum import ChainOptimiseSettings, check_search_settings
 from ._optimum import AbstractOptimum, along, choose, fmt
 
 
@@ -122,30 +122,7 @@ class MechanismOptimiseSettings(eqx.Module):
     verbose: bool = False
 
     def __check_init__(self):
-        counts = dict(amplitudes=self.amplitudes, frequencies=self.frequencies, phases=self.phases, local=self.local,
-                      max_iter=self.max_iter, transient=self.transient, newton_iter=self.newton_iter)  # fmt: skip
-        for name, v in counts.items():
-            if isinstance(v, bool) or not (isinstance(v, int) and v >= 1):
-                raise ValueError(f"MechanismOptimiseSettings.{name} must be an int >= 1, got {v!r}.")
-        if self.shape not in ("fourier", "spline"):
-            raise ValueError(f"MechanismOptimiseSettings.shape must be 'fourier' or 'spline', got {self.shape!r}.")
-        if isinstance(self.knots, bool) or not (isinstance(self.knots, int) and self.knots >= 4):
-            raise ValueError(f"MechanismOptimiseSettings.knots must be an int >= 4, got {self.knots!r}.")
-        if not (0 < self.omega_min < self.omega_max):
-            raise ValueError(
-                f"MechanismOptimiseSettings: need 0 < omega_min < omega_max, got {self.omega_min!r}, "
-                f"{self.omega_max!r}."
-            )
-        if not (self.dt > 0 and self.trust_radius > 0 and self.newton_tol > 0 and self.check_tol > 0):
-            raise ValueError("MechanismOptimiseSettings: dt, trust_radius, newton_tol and check_tol must be > 0.")
-        if not (self.margin >= 0 and self.speed_slack >= 0):
-            raise ValueError(
-                f"MechanismOptimiseSettings: margin and speed_slack must be >= 0, got {self.margin!r}, "
-                f"{self.speed_slack!r}."
-            )
-        lo, hi = self.check_periods
-        if not (1 <= lo <= hi):
-            raise ValueError(f"MechanismOptimiseSettings.check_periods must be (lo, hi), 1 <= lo <= hi, got {lo, hi}.")
+        check_search_settings(self)
 
     @classmethod
     def from_chain(cls, s: ChainOptimiseSettings) -> "MechanismOptimiseSettings":
