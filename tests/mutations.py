@@ -474,6 +474,13 @@ MUTATIONS = [
         (("omega / (2 * np.pi * last)", "omega / (2 * np.pi * transient)"),),
         ("tests/test_gait.py::test_transient_speed_equals_simulation_and_the_gait",),
     ),
+    Mutation(
+        "search_settings_skip_transient",
+        "the optimisers' settings check: transient no longer checked (a chain's or a mechanism's)",
+        "locomotion_jax/optimisation/_chain_optimum.py",
+        (('"max_iter", "transient", "newton_iter"', '"max_iter", "newton_iter"'),),
+        ("tests/test_optimise.py::test_bad_settings_raise",),
+    ),
 ]
 
 
