@@ -65,12 +65,7 @@ def check_inputs(chain: Any, v_min: Any, a_max: Any, direction: Any, harmonics: 
     if not isinstance(chain.actuator, RestLength):
         raise ValueError(f"actuator: optimise needs the RestLength actuator, got {type(chain.actuator).__name__}.")
     chain.validate()
-    if isinstance(harmonics, bool) or not isinstance(harmonics, (int, np.integer)) or harmonics < 1:
-        raise ValueError(f"harmonics must be an integer >= 1, got {harmonics!r}.")
-    if direction not in (1, -1):
-        raise ValueError(f"direction must be +1 (forward) or -1 (backward), got {direction!r}.")
-    if not (isinstance(v_min, (int, float, np.floating, np.integer)) and np.isfinite(v_min) and v_min > 0):
-        raise ValueError(f"v_min must be a finite speed > 0 (the required mean speed in `direction`), got {v_min!r}.")
+    local.check_requirement(v_min, direction, harmonics, omega)
     c = chain.broadcast()
     lbar = np.asarray(c.lbar, np.float64)
     if not (isinstance(a_max, (int, float, np.floating, np.integer)) and np.isfinite(a_max)
@@ -92,8 +87,6 @@ def check_inputs(chain: Any, v_min: Any, a_max: Any, direction: Any, harmonics: 
             f"[lbar_j - a_max, lbar_j + a_max]); a_max must be below {a_lift:.4g} (min_i m_i / sum of "
             "k_j |d_j| / lbar_j over the springs of mass i) for this chain."
         )
-    if omega is not None and not (np.isfinite(omega) and omega > 0):
-        raise ValueError(f"omega must be a finite number > 0 (or None to optimise it), got {omega!r}.")
     return float(v_min), int(direction)
 
 

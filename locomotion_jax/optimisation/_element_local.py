@@ -136,6 +136,22 @@ def spline_strokes(control: np.ndarray) -> np.ndarray:
     return np.array([spline_stroke(row) for row in control])
 
 
+def check_requirement(v_min: Any, direction: Any, harmonics: Any, omega: Any) -> None:
+    """The checks of a chain's and a mechanism's requirement that do not depend on the mechanism:
+    `harmonics` an integer >= 1, `direction` +1 or -1, `v_min` a finite speed > 0 in `direction`,
+    `omega` `None` (optimised) or a finite frequency > 0.
+
+    **Raises:** `ValueError` naming the argument and its valid range."""
+    if isinstance(harmonics, bool) or not isinstance(harmonics, (int, np.integer)) or harmonics < 1:
+        raise ValueError(f"harmonics must be an integer >= 1, got {harmonics!r}.")
+    if direction not in (1, -1):
+        raise ValueError(f"direction must be +1 (forward) or -1 (backward), got {direction!r}.")
+    if not (isinstance(v_min, (int, float, np.floating, np.integer)) and np.isfinite(v_min) and v_min > 0):
+        raise ValueError(f"v_min must be a finite speed > 0 (the required mean speed in `direction`), got {v_min!r}.")
+    if omega is not None and not (np.isfinite(omega) and omega > 0):
+        raise ValueError(f"omega must be a finite number > 0 (or None to optimise it), got {omega!r}.")
+
+
 def family_harmonics(settings: Any, harmonics: int | None, default: int) -> int:
     """The harmonics of a chain's or a mechanism's search: `harmonics` (`default` if `None`) for a
     Fourier search; 1 for a spline search (`settings.shape == "spline"`: its baseline screens single

@@ -280,16 +280,9 @@ def check_inputs(mech: Any, v_min: Any, a_max: Any, direction: Any, harmonics: A
             "optimise: the mechanism has no element driven by a waveform (a Spring's rest, a Force or an "
             "ExternalForce with a Sinusoid, Fourier or Spline) whose waveform it could design."
         )
-    if isinstance(harmonics, bool) or not isinstance(harmonics, (int, np.integer)) or harmonics < 1:
-        raise ValueError(f"harmonics must be an integer >= 1, got {harmonics!r}.")
-    if direction not in (1, -1):
-        raise ValueError(f"direction must be +1 (forward) or -1 (backward), got {direction!r}.")
-    if not (isinstance(v_min, (int, float, np.floating, np.integer)) and np.isfinite(v_min) and v_min > 0):
-        raise ValueError(f"v_min must be a finite speed > 0 (the required mean speed in `direction`), got {v_min!r}.")
+    local.check_requirement(v_min, direction, harmonics, omega)
     if not (isinstance(a_max, (int, float, np.floating, np.integer)) and np.isfinite(a_max) and a_max > 0):
         raise ValueError(f"a_max must be a finite bound > 0 on every actuated signal's excursion, got {a_max!r}.")
-    if omega is not None and not (np.isfinite(omega) and omega > 0):
-        raise ValueError(f"omega must be a finite number > 0 (or None to optimise it), got {omega!r}.")
     return elements
 
 
