@@ -808,10 +808,13 @@ def test_bad_settings_raise():
     with pytest.raises(ValueError, match="local must be an int >= 1"):
         lj.ChainOptimiseSettings(local=0)
     # The checks the chain's settings share with the mechanism's (check_search_settings).
-    for bad, match in ((dict(transient=0), "ChainOptimiseSettings.transient must be an int >= 1, got 0"),
-                       (dict(local=True), "ChainOptimiseSettings.local must be an int >= 1, got True"),
-                       (dict(margin=-0.1), "ChainOptimiseSettings: margin and speed_slack must be >= 0"),
-                       (dict(zoom_levels=False), "zoom_levels must be an int >= 0")):  # fmt: skip
+    cases: list[tuple[dict[str, Any], str]] = [
+        (dict(transient=0), "ChainOptimiseSettings.transient must be an int >= 1, got 0"),
+        (dict(local=True), "ChainOptimiseSettings.local must be an int >= 1, got True"),
+        (dict(margin=-0.1), "ChainOptimiseSettings: margin and speed_slack must be >= 0"),
+        (dict(zoom_levels=False), "zoom_levels must be an int >= 0"),
+    ]
+    for bad, match in cases:
         with pytest.raises(ValueError, match=match):
             lj.ChainOptimiseSettings(**bad)
     with pytest.raises(TypeError, match="ChainOptimiseSettings"):
