@@ -9,6 +9,7 @@ import numpy as np
 from ..model._chain import Chain
 from ..model._springwaves import SpringFourier
 from ..model._waveform import Spline
+from ._element_local import check_search_settings
 from ._optimum import AbstractOptimum, constraints_line, fmt
 
 
@@ -87,31 +88,6 @@ class ChainOptimiseSettings(eqx.Module):
             raise ValueError(f"ChainOptimiseSettings.zoom_levels must be an int >= 0, got {self.zoom_levels!r}.")
         if not (0 <= self.screen_speed <= 1):
             raise ValueError(f"ChainOptimiseSettings.screen_speed must be in [0, 1], got {self.screen_speed!r}.")
-
-
-def check_search_settings(s: Any, counts: tuple[str, ...] = ()) -> None:
-    """The checks shared by the settings of the chain's and the mechanism's optimisers (each
-    error names the class and the field): the screen's and the local descent's counts (and
-    `counts`, the class's own) are ints >= 1, the family, the frequency range, the steps and
-    tolerances, the margins and the verification's periods."""
-    name = type(s).__name__
-    for f in ("amplitudes", "frequencies", "phases", "local", "max_iter", "transient", "newton_iter") + counts:
-        v = getattr(s, f)
-        if isinstance(v, bool) or not (isinstance(v, int) and v >= 1):
-            raise ValueError(f"{name}.{f} must be an int >= 1, got {v!r}.")
-    if s.shape not in ("fourier", "spline"):
-        raise ValueError(f"{name}.shape must be 'fourier' or 'spline', got {s.shape!r}.")
-    if isinstance(s.knots, bool) or not (isinstance(s.knots, int) and s.knots >= 4):
-        raise ValueError(f"{name}.knots must be an int >= 4, got {s.knots!r}.")
-    if not (0 < s.omega_min < s.omega_max):
-        raise ValueError(f"{name}: need 0 < omega_min < omega_max, got {s.omega_min!r}, {s.omega_max!r}.")
-    if not (s.dt > 0 and s.trust_radius > 0 and s.newton_tol > 0 and s.check_tol > 0):
-        raise ValueError(f"{name}: dt, trust_radius, newton_tol and check_tol must be > 0.")
-    if not (s.margin >= 0 and s.speed_slack >= 0):
-        raise ValueError(f"{name}: margin and speed_slack must be >= 0, got {s.margin!r}, {s.speed_slack!r}.")
-    lo, hi = s.check_periods
-    if not (1 <= lo <= hi):
-        raise ValueError(f"{name}.check_periods must be (lo, hi), 1 <= lo <= hi, got {lo, hi}.")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -55,7 +55,7 @@ from ..gaits._element_orbit import actuated, with_fourier, with_spline
 from ..gaits._progress import reporter
 from ..model._bodies import Mechanism
 from . import _element_local as local
-from ._chain_optimum import ChainOptimiseSettings, check_search_settings
+from ._chain_optimum import ChainOptimiseSettings
 from ._optimum import AbstractOptimum, along, choose, fmt
 
 
@@ -122,7 +122,7 @@ class MechanismOptimiseSettings(eqx.Module):
     verbose: bool = False
 
     def __check_init__(self):
-        check_search_settings(self)
+        local.check_search_settings(self)
 
     @classmethod
     def from_chain(cls, s: ChainOptimiseSettings) -> "MechanismOptimiseSettings":
