@@ -481,6 +481,13 @@ MUTATIONS = [
         (('"max_iter", "transient", "newton_iter"', '"max_iter", "newton_iter"'),),
         ("tests/test_optimise.py::test_bad_settings_raise",),
     ),
+    Mutation(
+        "sqp_step_ignores_the_multipliers",
+        "the SQP step of the local descent: the active constraints' correction dropped (the free step)",
+        "locomotion_jax/optimisation/_descent.py",
+        (("            d = free + HA @ lam_a\n", "            d = free\n"),),
+        ("tests/test_descent.py",),
+    ),
 ]
 
 

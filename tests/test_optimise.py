@@ -465,6 +465,22 @@ def test_exact_optimum_verified_on_the_reference(exact_run):
     json.dumps(opt.to_dict())
 
 
+def test_sqp_local_method_reaches_a_verified_optimum(exact_run, tiny_sweep):
+    """`local_method="sqp"` on the same problem and compiled programs: an optimum that holds
+    on the independent reference, within 1 % of the default descent's cost of transport."""
+    opt_d, _ = exact_run
+    before = dict(_orbit.TRACES)
+    settings = eqx.tree_at(lambda s: s.local_method, EXACT_TINY, "sqp")
+    opt = _optimise.optimise(lj.Params(), 0.02, 0.05, settings=settings, sweep=tiny_sweep)
+    assert dict(_orbit.TRACES) == before  # no new compilation
+    assert opt.feasible_exact and opt.stable_exact
+    speed, cost, lifted = _reference_figures(("spline", opt.control), None, opt.omega, rho=opt.spectral_radius_exact)
+    assert not lifted and speed >= 0.02
+    assert opt.mean_speed_exact == pytest.approx(speed, rel=5e-4)
+    assert opt.cost_of_transport_exact == pytest.approx(cost, rel=5e-4)
+    assert opt.cost_of_transport_exact <= 1.01 * opt_d.cost_of_transport_exact
+
+
 def test_exact_compilations(exact_run, tiny_sweep):
     # One optimisation traces the orbit evaluation and the transient once each (every
     # start, local iteration and batch shares them); another requirement traces nothing.
@@ -479,6 +495,8 @@ def test_exact_compilations(exact_run, tiny_sweep):
 def test_method_choice_is_checked():
     with pytest.raises(ValueError, match="method"):
         _optimise.optimise(lj.Params(), 0.02, 0.05, method="adam")
+    with pytest.raises(ValueError, match="local_method must be 'descent', 'sqp', 'trust-constr' or 'SLSQP'"):
+        ExactSettings(local_method="bfgs")
     with pytest.raises(TypeError, match="ExactSettings"):
         _optimise.optimise(lj.Params(), 0.02, 0.05, settings=TINY)
     with pytest.raises(ValueError, match="harmonics"):
@@ -582,6 +600,18 @@ def test_beats_its_best_travelling_wave(opt3):
     (cand,) = [c for c in opt3.candidates if c["candidate"] == "travelling wave"]
     assert cand["cost_of_transport_exact"] == pytest.approx(wave["cost_of_transport"], rel=1e-10)
     assert opt3.mean_speed_exact >= opt3.v_min
+
+
+@CHAIN_OPTIMISE
+def test_sqp_local_method_on_a_chain(opt3):
+    """`local_method="sqp"` on the same worm and compiled programs: a feasible optimum whose direct
+    simulation agrees with its steady gait, at least as cheap as its best travelling wave and
+    within 2 % of the default descent's."""
+    opt = lj.optimise(worm(), 0.05, A_MAX, harmonics=2, settings=eqx.tree_at(lambda s: s.local_method, SETTINGS, "sqp"))
+    assert opt.feasible_exact and all(opt.constraints_exact.values())
+    assert opt.cost_of_transport_exact <= opt.travelling_wave["cost_of_transport"] * (1 + 1e-12)
+    assert opt.cost_of_transport_exact <= 1.02 * opt3.cost_of_transport_exact
+    assert opt.simulation_agreement < 1e-6
 
 
 @CHAIN_OPTIMISE
@@ -813,6 +843,7 @@ def test_bad_settings_raise():
         (dict(local=True), "ChainOptimiseSettings.local must be an int >= 1, got True"),
         (dict(margin=-0.1), "ChainOptimiseSettings: margin and speed_slack must be >= 0"),
         (dict(zoom_levels=False), "zoom_levels must be an int >= 0"),
+        (dict(local_method="newton"), "ChainOptimiseSettings.local_method must be 'descent' or 'sqp', got 'newton'"),
     ]
     for bad, match in cases:
         with pytest.raises(ValueError, match=match):
@@ -992,8 +1023,11 @@ def test_mechanism_optimise_settings():
         lj.MechanismOptimiseSettings(omega_min=2.0, omega_max=1.0)
     with pytest.raises(ValueError, match="dt, trust_radius, newton_tol and check_tol must be > 0"):
         lj.MechanismOptimiseSettings(dt=0.0)
-    s = MechanismOptimiseSettings.from_chain(lj.ChainOptimiseSettings(local=3, max_iter=7, omega_max=1.5))
-    assert (s.local, s.max_iter, s.omega_max, s.phases) == (3, 7, 1.5, 1)
+    chain = lj.ChainOptimiseSettings(local=3, max_iter=7, omega_max=1.5, local_method="sqp")
+    s = MechanismOptimiseSettings.from_chain(chain)
+    assert (s.local, s.max_iter, s.omega_max, s.phases, s.local_method) == (3, 7, 1.5, 1, "sqp")
+    with pytest.raises(ValueError, match="MechanismOptimiseSettings.local_method must be 'descent' or 'sqp'"):
+        lj.MechanismOptimiseSettings(local_method="bfgs")
     with pytest.raises(TypeError, match="must be a MechanismOptimiseSettings, got ExactSettings"):
         lj.optimise(_capsule(), v_min=0.01, a_max=0.5, settings=lj.ExactOptimiseSettings())
     with pytest.raises(ValueError, match="shape must be 'fourier' or 'spline', got 'square'"):

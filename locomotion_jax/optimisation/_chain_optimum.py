@@ -42,7 +42,8 @@ class ChainOptimiseSettings(eqx.Module):
     - `local`: starts refined locally in lockstep (the refined best wave and the next best
       distinct waves of the screen); `max_iter`: iterations of each local descent;
       `trust_radius`: the largest first step of a line search (coefficients in units of
-      $a_\\max$, $\\log\\omega$).
+      $a_\\max$, $\\log\\omega$); `local_method`: `"descent"`
+      (default) or `"sqp"` (as [`ExactSettings`][locomotion_jax.optimisation._optimum.ExactSettings]'s).
     - `margin`: required $\\min_{i,t} N_i$ on the orbit during the refinement (units of weight).
     - `speed_slack`: the refinement targets $v_\\min (1 + \\text{slack})$.
     - `omega_min`, `omega_max`: range of a free base frequency, in units of the lowest
@@ -67,6 +68,7 @@ class ChainOptimiseSettings(eqx.Module):
     local: int = 4
     max_iter: int = 60
     trust_radius: float = 0.1
+    local_method: str = "descent"
     margin: float = 0.05
     speed_slack: float = 1e-3
     omega_min: float = 0.06

@@ -26,7 +26,7 @@ import numpy as np
 
 from ..dynamics._exact_dynamics import Exact
 from ..gaits import _element_orbit as orbit
-from ._descent import descent
+from ._descent import descent, sqp_descent
 from ._evaluator import Evaluator
 from ._figures import Figures, PENALTY
 from ._lockstep import run_lockstep
@@ -73,10 +73,13 @@ def project(theta: np.ndarray, springs: int, harmonics: int, log_lo: float, log_
     return pack(c * scale[:, None], s * scale[:, None], math.exp(float(np.clip(math.log(w), log_lo, log_hi))))
 
 
-def local_solver(x0: np.ndarray, proj, stroke_ok, max_iter: int, trust_radius: float, rho: float, log: list):
-    """One local run from `x0` for [`run_lockstep`][locomotion_jax.optimisation._lockstep.run_lockstep]:
-    returns the cheapest point evaluated that meets every constraint, else the one with the
-    smallest violation."""
+def local_solver(
+    x0: np.ndarray, proj, stroke_ok, max_iter: int, trust_radius: float, rho: float, log: list, method: str = "descent"
+):
+    """One local run from `x0` for [`run_lockstep`][locomotion_jax.optimisation._lockstep.run_lockstep]
+    (`method`: `"descent"` or `"sqp"`, `_descent`'s two descents): returns the cheapest point
+    evaluated that meets every constraint, else the one with the smallest violation."""
+    run = sqp_descent if method == "sqp" else descent
 
     def solve(ask):
         cache: dict[bytes, Any] = {}
@@ -96,7 +99,7 @@ def local_solver(x0: np.ndarray, proj, stroke_ok, max_iter: int, trust_radius: f
                         best["key"], best["x"] = key_, np.array(x, float)
             return cache[key]
 
-        descent(np.array(x0, float), at, proj, max_iter, trust_radius, rho, strict=True)
+        run(np.array(x0, float), at, proj, max_iter, trust_radius, rho, strict=True)
         log.append({"evaluations": len(trace), "trace": trace})
         return best["x"]
 
@@ -142,7 +145,7 @@ def spline_strokes(control: np.ndarray) -> np.ndarray:
 def check_search_settings(s: Any, counts: tuple[str, ...] = ()) -> None:
     """The checks shared by the settings of the chain's and the mechanism's optimisers (each
     error names the class and the field): the screen's and the local descent's counts (and
-    `counts`, the class's own) are ints >= 1, the family, the frequency range, the steps and
+    `counts`, the class's own) are ints >= 1, the family, the local method, the frequency range, the steps and
     tolerances, the margins and the verification's periods."""
     name = type(s).__name__
     for f in ("amplitudes", "frequencies", "phases", "local", "max_iter", "transient", "newton_iter") + counts:
@@ -151,6 +154,8 @@ def check_search_settings(s: Any, counts: tuple[str, ...] = ()) -> None:
             raise ValueError(f"{name}.{f} must be an int >= 1, got {v!r}.")
     if s.shape not in ("fourier", "spline"):
         raise ValueError(f"{name}.shape must be 'fourier' or 'spline', got {s.shape!r}.")
+    if s.local_method not in ("descent", "sqp"):
+        raise ValueError(f"{name}.local_method must be 'descent' or 'sqp', got {s.local_method!r}.")
     if isinstance(s.knots, bool) or not (isinstance(s.knots, int) and s.knots >= 4):
         raise ValueError(f"{name}.knots must be an int >= 4, got {s.knots!r}.")
     if not (0 < s.omega_min < s.omega_max):
@@ -248,7 +253,10 @@ def refine(base: Any, starts: list[Start], a_max: float, v_min: float, direction
     costs = [st.cost for st in starts if np.isfinite(st.cost)]
     rho = PENALTY * max(1.0, max(costs, default=1.0))
     log: list[dict] = []
-    solvers = [local_solver(x, proj, stroke_ok, settings.max_iter, settings.trust_radius, rho, log) for x in x0]
+    solvers = [
+        local_solver(x, proj, stroke_ok, settings.max_iter, settings.trust_radius, rho, log, settings.local_method)
+        for x in x0
+    ]
     say(f"refining {len(solvers)} starts locally, in lockstep (compiling the orbit solver: first call only)...")
     t0 = time.perf_counter()
     xs = run_lockstep(solvers, ev)

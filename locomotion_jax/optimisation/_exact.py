@@ -55,7 +55,7 @@ from ..gaits._progress import reporter
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform
 from . import _pareto as pareto
-from ._descent import descent
+from ._descent import descent, sqp_descent
 from ._evaluator import Evaluator
 from ._figures import Figures, PENALTY
 from ._lockstep import run_lockstep
@@ -79,16 +79,18 @@ class _Bad:
 
 
 def _descent(x0, shape: AbstractShape, bounds, settings: ExactSettings, max_iter: int, at) -> None:
-    """[`descent`][locomotion_jax.optimisation._descent.descent] on the exact penalty
-    $\\phi = f + \\rho\\,(\\max(0, -c_v) + \\max(0, -c_N))$, the stroke kept by the shape
-    family's projection onto its exact limit and $\\omega$ clipped to its bounds."""
+    """[`descent`][locomotion_jax.optimisation._descent.descent] (`local_method="descent"`) or
+    [`sqp_descent`][locomotion_jax.optimisation._descent.sqp_descent] (`"sqp"`) on the exact
+    penalty $\\phi = f + \\rho\\,(\\max(0, -c_v) + \\max(0, -c_N))$, the stroke kept by the
+    shape family's projection onto its exact limit and $\\omega$ clipped to its bounds."""
 
     def project(x):
         x = shape.project(x)
         x[-1] = np.clip(x[-1], bounds.lb[-1], bounds.ub[-1])
         return x
 
-    descent(x0, at, project, max_iter, settings.trust_radius, PENALTY)
+    method = sqp_descent if settings.local_method == "sqp" else descent
+    method(x0, at, project, max_iter, settings.trust_radius, PENALTY)
 
 
 HALF_STEP_RTOL = 1e-3
@@ -140,7 +142,7 @@ def _local_solver(x0, shape: AbstractShape, bounds, settings: ExactSettings, log
                         held_points.append((fig.cot, np.array(x, float)))
             return cache[key]
 
-        if settings.local_method == "descent":
+        if settings.local_method in ("descent", "sqp"):
             _descent(np.array(x0, float), shape, bounds, settings, max_iter, at)
             log.append({"message": "descent", "nit": len(trace), "trace": trace})
             return result()

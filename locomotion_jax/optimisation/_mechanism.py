@@ -84,7 +84,8 @@ class MechanismOptimiseSettings(eqx.Module):
       phase $\\varphi$ on `phases` equal steps of $[0, 2\\pi)$.
     - `local`: starts refined locally in lockstep (the best sinusoids of the screen);
       `max_iter`: iterations of each local descent; `trust_radius`: the largest first step of a
-      line search (coefficients in units of $a_\\max$, $\\log\\omega$).
+      line search (coefficients in units of $a_\\max$, $\\log\\omega$); `local_method`: `"descent"`
+      (default) or `"sqp"` (as [`ExactSettings`][locomotion_jax.optimisation._optimum.ExactSettings]'s).
     - `margin`: required $\\min_{i,t} N_i$ on the orbit during the refinement (units of weight).
     - `speed_slack`: the refinement targets $v_\\min (1 + \\text{slack})$.
     - `omega_min`, `omega_max`: range of a free base frequency, in units of the highest natural
@@ -107,6 +108,7 @@ class MechanismOptimiseSettings(eqx.Module):
     local: int = 2
     max_iter: int = 40
     trust_radius: float = 0.1
+    local_method: str = "descent"
     margin: float = 0.05
     speed_slack: float = 1e-3
     omega_min: float = 0.15

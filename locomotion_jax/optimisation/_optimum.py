@@ -102,7 +102,10 @@ class ExactSettings(eqx.Module):
       is too slow; the last run has half the iterations); `trust_radius`: the largest first step
       of a line search, or the initial trust region (decision variables: coefficients in units of
       $a_\\max$, $\\log\\omega$); `local_method`: `"descent"` (monotone L-BFGS descent on an exact
-      penalty, `_exact_optimise._descent`), `"trust-constr"` or `"SLSQP"` (scipy's).
+      penalty, `_descent.descent`), `"sqp"` (the same penalty and line search with SQP steps on
+      the linearised constraints, which follow an active speed constraint instead of crossing
+      it, and a stop where the merit stalls, `_descent.sqp_descent`: fewer evaluations, a
+      slightly costlier optimum; `benchmarks/NOTES.md`), `"trust-constr"` or `"SLSQP"` (scipy's).
     - `margin`: required $\\min_t N_{1,2}$ over the orbit (units of weight).
     - `speed_slack`: the orbit targets $v_\\min (1 + \\text{slack})$.
     - `omega_min`, `omega_max`: range of a free base frequency, in units of the smallest
@@ -140,9 +143,10 @@ class ExactSettings(eqx.Module):
     def __check_init__(self):
         if self.local < 1 or self.max_iter < 1 or self.start_frequencies < 1 or self.stages < 1:
             raise ValueError("ExactSettings: local, max_iter, stages and start_frequencies must be >= 1.")
-        if self.local_method not in ("descent", "trust-constr", "SLSQP"):
+        if self.local_method not in ("descent", "sqp", "trust-constr", "SLSQP"):
             raise ValueError(
-                f"ExactSettings.local_method must be 'descent', 'trust-constr' or 'SLSQP', got {self.local_method!r}."
+                "ExactSettings.local_method must be 'descent', 'sqp', 'trust-constr' or 'SLSQP', "
+                f"got {self.local_method!r}."
             )
         if self.shape not in ("spline", "fourier"):
             raise ValueError(f"ExactSettings.shape must be 'spline' or 'fourier', got {self.shape!r}.")
