@@ -334,6 +334,28 @@ def test_cli_bad_input_names_the_parameter():
     assert "v_min" in res.output and "direction" in res.output
     res = CliRunner().invoke(plugin_app(register), ["optimize", "--v-min", "0.02", "--a-max", "0.2"])
     assert res.exit_code == 2 and "a_max" in res.output
+    for model in ([], ["--masses", "1,1,1"]):
+        args = ["optimize", "--v-min", "0.02", "--a-max", "0.05", "--local-method", "bfgs", *model]
+        res = CliRunner().invoke(plugin_app(register), args)
+        assert res.exit_code == 2 and "local_method must be 'descent'" in res.output, res.output
+
+
+def test_cli_local_method_reaches_the_settings(monkeypatch):
+    """`--local-method sqp` is the settings' `local_method`, for the paper's model and for a chain."""
+    seen = []
+
+    def stop(mech, v_min, a_max, **kw):
+        seen.append(kw["settings"])
+        raise ValueError("stopped by the test")
+
+    monkeypatch.setattr(_optimise, "optimise", stop)  # the paper's model's path
+    monkeypatch.setattr(lj, "optimise", stop)  # a chain's
+    monkeypatch.setattr(_pareto, "sinusoid_sweep", lambda *a, **k: None)
+    for model in ([], ["--masses", "1,1,1"]):
+        args = ["optimize", "--v-min", "0.02", "--a-max", "0.05", "--local-method", "sqp", *model]
+        res = CliRunner().invoke(plugin_app(register), args)
+        assert "stopped by the test" in res.output, res.output
+    assert [s.local_method for s in seen] == ["sqp", "sqp"]
 
 
 # -- the exact method ---------------------------------------------------------------

@@ -81,7 +81,14 @@ def register(app: typer.Typer) -> None:
         ),
         margin: float = typer.Option(0.05, "--margin", help="Normal-force margin (on the orbit, or smoothed)."),
         local: int = typer.Option(4, "--local", help="Exact: starts refined locally, in lockstep."),
-        max_iter: int = typer.Option(150, "--max-iter", help="Exact: iterations of each local trust-region run."),
+        max_iter: int = typer.Option(150, "--max-iter", help="Exact: iterations of each local descent."),
+        local_method: str = typer.Option(
+            "descent",
+            "--local-method",
+            help="Exact: the local step, 'descent' (L-BFGS on the exact penalty) or 'sqp' (SQP steps on the "
+            "linearised constraints, stopped where the cost stalls: fewer evaluations, an optimum a little "
+            "costlier).",
+        ),
         starts: int = typer.Option(8, "--starts", help="Smoothed: starts optimised in parallel."),
         outer: int = typer.Option(3, "--outer", help="Smoothed: augmented-Lagrangian blocks per smoothing stage."),
         inner: int = typer.Option(30, "--inner", help="Smoothed: Adam steps per block."),
@@ -110,7 +117,7 @@ def register(app: typer.Typer) -> None:
         of bodies and links needs it). A chain or a mechanism of bodies and links is optimised by the
         exact method (--harmonics default 3 for a chain, 2 for bodies and links, or --shape spline
         with --knots; the travelling-wave screen's --amplitudes, --frequencies, --phases,
-        --zoom-levels, --zoom-points (a chain: --screen-speed), and --local, --max-iter, --margin,
+        --zoom-levels, --zoom-points (a chain: --screen-speed), and --local, --max-iter, --local-method, --margin,
         --transient, --omega, --direction apply; --out saves a chain's optimum)."""
         import locomotion_jax as lj
 
@@ -134,6 +141,7 @@ def register(app: typer.Typer) -> None:
                                               zoom_levels=zoom_levels, zoom_points=zoom_points, local=local,
                                               screen_speed=screen_speed, margin=margin, verbose=verbose)  # fmt: skip
                 screen |= {"max_iter": max_iter} if given(["max_iter"]) else {}  # else the optimiser's default
+                screen |= {"local_method": local_method}
                 screen |= {name: v for name, v in (("shape", shape), ("knots", knots)) if given([name])}
                 screen |= {"transient": int(transient)} if transient is not None else {}
                 chain_settings = lj.ChainOptimiseSettings(**screen)
@@ -143,8 +151,9 @@ def register(app: typer.Typer) -> None:
             settings: ExactSettings | Settings
             if method == "exact":
                 settings = ExactSettings(
-                    shape=shape, knots=knots, local=local, max_iter=max_iter, margin=margin, seed=seed, verbose=verbose
-                )
+                    shape=shape, knots=knots, local=local, max_iter=max_iter, local_method=local_method,
+                    margin=margin, seed=seed, verbose=verbose,
+                )  # fmt: skip
             else:
                 settings = Settings(
                     starts=starts,
