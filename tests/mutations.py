@@ -482,6 +482,13 @@ MUTATIONS = [
         ("tests/test_optimise.py::test_bad_settings_raise",),
     ),
     Mutation(
+        "compact_batches_unsorted",
+        "steady gaits with compact=True: the quarter-size batches of a period taken in the batch's order",
+        "locomotion_jax/gaits/_shooting.py",
+        (('        order = np.argsort(np.asarray(key, float), kind="stable")\n', "        order = np.arange(B)\n"),),
+        ("tests/test_gait.py::test_compact_batch_for_the_longer_periods",),
+    ),
+    Mutation(
         "sqp_step_ignores_the_multipliers",
         "the SQP step of the local descent: the active constraints' correction dropped (the free step)",
         "locomotion_jax/optimisation/_descent.py",

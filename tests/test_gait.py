@@ -214,7 +214,8 @@ def test_jit_free_of_recompilation():
 
 def test_compact_batch_for_the_longer_periods(monkeypatch):
     """With `compact=True` (the exact optimiser's sinusoid sweep) a gait period tried on fewer
-    than a quarter of the batch runs on a quarter-size batch: the same gaits as the full batch,
+    than a quarter of the batch runs on a quarter-size batch, and one tried on more runs as
+    quarter-size batches in the order of the forcing periods: the same gaits as the full batch,
     the period-2 gait past a period doubling included, and every other row as before."""
     from locomotion_jax.gaits import _corrector, _gait
 
@@ -222,9 +223,20 @@ def test_compact_batch_for_the_longer_periods(monkeypatch):
     full = _gait.paper_gait(p, dynamics=lj.Exact())
     sizes: list[int] = []
     solve = _corrector.correct_batch
-    monkeypatch.setattr(_corrector, "correct_batch", lambda *a: sizes.append(int(a[8].shape[0])) or solve(*a))
+    omegas: list[np.ndarray] = []
+
+    def spy(*a):
+        sizes.append(int(a[8].shape[0]))
+        omegas.append(np.asarray(a[0][0].omega))  # the configurations: (params, waveform)
+        return solve(*a)
+
+    monkeypatch.setattr(_corrector, "correct_batch", spy)
     small = _gait.paper_gait(p, dynamics=lj.Exact(), compact=True)
-    assert sizes[0] == 12 and set(sizes[1:]) == {3}, sizes  # period 1 on the batch, the others on 3 rows
+    assert set(sizes) == {3} and len(sizes) > 4, sizes  # period 1 as four batches of 3 rows, then the others
+    # Period 1's batches: every row once, the fastest forcing first.
+    first = np.concatenate(omegas[:4])
+    assert sorted(first.tolist()) == sorted(np.asarray(p.omega).tolist())
+    assert np.all(np.diff(first) <= 0), first
     assert int(small.k[-1]) == 2 and bool(small.stable[-1]) and int(full.k[-1]) == 2
     for name in (f.name for f in dataclasses.fields(full)):
         a, b = getattr(full, name), getattr(small, name)

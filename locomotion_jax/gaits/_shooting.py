@@ -276,7 +276,7 @@ that many configurations still open) runs on a batch of that size."""
 
 
 def newton(C, physics_of, contact, dt, y0, go, k, tol, max_iter, max_steps, compact: bool = False,
-           patience: int | None = None) -> dict:  # fmt: skip
+           patience: int | None = None, key: np.ndarray | None = None) -> dict:  # fmt: skip
     """Newton's method on $\\Phi_k(y) = y$ from `y0` where `go`: the continuation's corrector
     ([`_corrector`][]) with the parameter held (no parameter selected, arclength scale 0),
     a configuration stopped after `patience` iterations without progress (`None`: `max_iter`).
@@ -284,12 +284,29 @@ def newton(C, physics_of, contact, dt, y0, go, k, tol, max_iter, max_steps, comp
     The batch runs in lockstep (every row costs what the slowest one does), so with `compact`
     the rows to solve, when fewer than `B // COMPACT`, are gathered into a batch of
     `B // COMPACT` rows (one more compiled program per batch size; each row's result is the
-    same, the rows being independent) and the rest take a padding row's unsolved result."""
+    same, the rows being independent) and the rest take a padding row's unsolved result; when
+    more, the whole batch runs as batches of `B // COMPACT` rows in the order of `key` (host;
+    `solve` passes minus each row's forcing frequency), so that the long periods share batches
+    and the short ones do not wait for them: the same program, and the same result per row."""
     from . import _corrector as corrector
 
     B, n = y0.shape
     go_rows = np.flatnonzero(np.asarray(go))
     part = B // COMPACT
+    if compact and part > 0 and go_rows.size >= part and key is not None:
+        order = np.argsort(np.asarray(key, float), kind="stable")
+        order = np.concatenate([order, np.full((-B) % part, order[-1])])
+        go_np = np.asarray(go)
+        subs = []
+        for j in range(0, order.size, part):
+            rows = order[j : j + part]
+            sub_go = go_np[rows] & (np.arange(j, j + part) < B)  # a padding row is not solved
+            subs.append(newton(jax.tree_util.tree_map(lambda x: x[rows], C), physics_of, contact, dt,
+                               jnp.asarray(y0)[rows], jnp.asarray(sub_go), k, tol, max_iter, max_steps,
+                               patience=patience))  # fmt: skip
+        back = np.empty(B, int)
+        back[order[:B]] = np.arange(B)
+        return jax.tree_util.tree_map(lambda *xs: np.concatenate(xs)[back] if np.ndim(xs[0]) else xs[0], *subs)
     if compact and 0 < go_rows.size < part:
         m = go_rows.size
         rows = np.concatenate([go_rows, np.full(part - m, go_rows[0])])
@@ -475,7 +492,9 @@ def solve(C, physics_of, valid, unresolved, shape, omega, *, periods, transient,
         msp = dynamics.max_steps or default_max_steps(k * T_max, dynamics.dt)
         go = (base < 0) & (True if best is None else select.still_open(best))
         say(f"gait period {k}: Newton on {int(np.sum(go))} configuration(s)")
-        r = newton(C, physics_of, contact, dynamics.dt, y0, go, k, tol, max_iter, msp, compact, patience)
+        r = newton(
+            C, physics_of, contact, dynamics.dt, y0, go, k, tol, max_iter, msp, compact, patience, 1 / omega.ravel()
+        )
         r = select.judge(r, base, k, (base != GaitStatus.INVALID) & (np.asarray(trans_lift) | r["out"].lifted))
         best = select.better(best, r)
         if not np.any(select.still_open(best)):

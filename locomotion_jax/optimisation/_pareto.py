@@ -139,9 +139,10 @@ def bucket(n: int) -> int:
 def _sinusoid_figures(params: Params, a: np.ndarray, omega: np.ndarray, dt: float, transient: int) -> ExactFigures:
     """[`exact_figures`][] of the sinusoids `(a, omega)` (flat arrays), the batch padded to
     [`bucket`][locomotion_jax.optimisation._pareto.bucket] rows with copies of the last (each row's
-    gait is solved on its own; the padding is dropped). The gait periods after the first, tried on
-    the few sinusoids still open, run on a quarter of the batch (`steady_gait`'s solver with
-    `compact=True`): the same gaits."""
+    gait is solved on its own; the padding is dropped). Newton's method runs on quarter-size
+    batches (`steady_gait`'s solver with `compact=True`): the first gait period on all of them in
+    the order of the sinusoids' periods, so that a fast sinusoid does not wait for a slow one's
+    long period, and the later periods on the few sinusoids still open: the same gaits."""
     n = len(a)
     pad = bucket(n) - n
     values: dict[str, Any] = {k: v for k, v in params.as_dict().items() if k not in ("a", "omega")}
