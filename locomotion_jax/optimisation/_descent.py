@@ -9,8 +9,8 @@ projection that the caller supplies.
 
 - [`descent`][locomotion_jax.optimisation._descent.descent] takes L-BFGS directions on $\\phi$
   itself. Where the speed constraint is active (the optimum of every requirement the cost would
-  rather undercut), its steps cross the constraint's kink and backtrack, a dozen evaluations an
-  iteration.
+  rather undercut), its steps cross the constraint's kink and backtrack (7 or 8 evaluations an
+  iteration in the paper's optimiser, `benchmarks/NOTES.md`).
 - [`sqp_descent`][locomotion_jax.optimisation._descent.sqp_descent] takes the step of a
   quadratic model of $f$ (its inverse Hessian from L-BFGS pairs of the Lagrangian's gradient)
   subject to the constraints linearised, $c_j + \\nabla c_j^\\top d \\ge 0$ (an SQP step), starts
@@ -188,7 +188,7 @@ def _lagrangian_gradient(fig: Any, lam: np.ndarray) -> np.ndarray:
 GROW = 4.0
 """A line search starts at most `GROW` times the last accepted step (in its largest coordinate)
 from the point, and at most at `trust_radius`: where the constraints' linearisation holds only
-over short steps, the first trial lands near the last accepted one instead of a dozen
+over short steps, the first trial lands near the last accepted one instead of several
 backtracks away."""
 
 STALL_WINDOW = 20
