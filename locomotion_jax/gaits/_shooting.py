@@ -286,8 +286,9 @@ def newton(C, physics_of, contact, dt, y0, go, k, tol, max_iter, max_steps, comp
     `B // COMPACT` rows (one more compiled program per batch size; each row's result is the
     same, the rows being independent) and the rest take a padding row's unsolved result; when
     more, the whole batch runs as batches of `B // COMPACT` rows in the order of `key` (host;
-    `solve` passes minus each row's forcing frequency), so that the long periods share batches
-    and the short ones do not wait for them: the same program, and the same result per row."""
+    `solve` passes each row's forcing period over $2\\pi$, $1/\\omega$), so that the long periods
+    share batches and the short ones do not wait for them: the same program, and the same result
+    per row."""
     from . import _corrector as corrector
 
     B, n = y0.shape
