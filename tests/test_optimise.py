@@ -348,8 +348,10 @@ def test_cli_local_method_reaches_the_settings(monkeypatch):
         seen.append(kw["settings"])
         raise ValueError("stopped by the test")
 
-    monkeypatch.setattr(_optimise, "optimise", stop)  # the paper's model's path
-    monkeypatch.setattr(lj, "optimise", stop)  # a chain's
+    # `lj` first: its lazy attribute resolves to `_optimise`'s, which must still be the real one
+    # when monkeypatch records what to restore.
+    monkeypatch.setattr(lj, "optimise", stop)  # a chain's path
+    monkeypatch.setattr(_optimise, "optimise", stop)  # the paper's model's
     monkeypatch.setattr(_pareto, "sinusoid_sweep", lambda *a, **k: None)
     for model in ([], ["--masses", "1,1,1"]):
         args = ["optimize", "--v-min", "0.02", "--a-max", "0.05", "--local-method", "sqp", *model]
