@@ -489,6 +489,18 @@ MUTATIONS = [
         ("tests/test_gait.py::test_compact_batch_for_the_longer_periods",),
     ),
     Mutation(
+        "runners_up_only_of_failed_runs",
+        "the exact optimiser's verification: a runner-up of a run that passed is never verified, however cheap",
+        "locomotion_jax/optimisation/_exact.py",
+        (
+            (
+                "    go = [not held[f[3]] or f[2] < cheapest * (1 - FALLBACK_RTOL) for f in fallbacks]\n",
+                "    go = [not held[f[3]] for f in fallbacks]\n",
+            ),
+        ),
+        ("tests/test_optimise.py::test_runners_up_are_verified_where_their_run_fails_or_might_be_cheaper",),
+    ),
+    Mutation(
         "sqp_step_ignores_the_multipliers",
         "the SQP step of the local descent: the active constraints' correction dropped (the free step)",
         "locomotion_jax/optimisation/_descent.py",

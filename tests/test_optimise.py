@@ -35,6 +35,7 @@ each):
 import dataclasses
 import json
 import math
+import types
 from typing import Any
 
 import equinox as eqx
@@ -503,6 +504,37 @@ def test_sqp_local_method_reaches_a_verified_optimum(exact_run, tiny_sweep):
     assert opt.mean_speed_exact == pytest.approx(speed, rel=5e-4)
     assert opt.cost_of_transport_exact == pytest.approx(cost, rel=5e-4)
     assert opt.cost_of_transport_exact <= 1.01 * opt_d.cost_of_transport_exact
+
+
+def test_runners_up_are_verified_where_their_run_fails_or_might_be_cheaper(exact_run):
+    """`_exact._verify`: the candidates first, then only the runners-up of a run whose candidate
+    is not feasible or whose cost in the descent is below the cheapest feasible candidate's by
+    more than `FALLBACK_RTOL`; those of the later batch get the figures they get in the first."""
+    opt, _ = exact_run
+    best = np.r_[opt.control / 0.05, math.log(opt.omega)]
+    slow = np.r_[best[:-1], best[-1] - math.log(2)]  # half the frequency: too slow
+    c, rtol = opt.cost_of_transport_exact, _exact_optimise.FALLBACK_RTOL
+    candidates = [("start", best), ("local 0", slow), ("local 1", EXACT_SHAPE.shift(best, 1 / EXACT_TINY.knots))]
+    fallbacks = [
+        ("local 0 runner-up 0", best, 0.99 * c, 1),  # its run failed: verified
+        ("local 1 runner-up 0", np.r_[0.8 * best[:-1], best[-1]], (1 - 0.5 * rtol) * c, 2),  # not verified
+        ("local 1 runner-up 1", slow, (1 - 2 * rtol) * c, 2),  # cheaper in the descent: verified
+    ]
+    log: dict = {}
+    found, _ = _exact_optimise._verify(lj.Params(), 0.02, 1, 0.05, EXACT_SHAPE, True, EXACT_TINY, candidates, fallbacks,
+                              None, log, 0.0, types.SimpleNamespace(calls=0))  # fmt: skip
+    table = {row["candidate"]: row for row in found.candidates}
+    assert list(table) == ["start", "local 0", "local 1", "local 0 runner-up 0", "local 1 runner-up 1"]
+    assert log["unverified"] == ["local 1 runner-up 0"]
+    assert table["start"]["feasible_exact"] and table["local 1"]["feasible_exact"]
+    assert not table["local 0"]["feasible_exact"]
+    assert table["start"]["cost_of_transport_exact"] == pytest.approx(c, rel=1e-8)
+    # The second batch's rows: the figures of the same waveforms in the first.
+    for again, first in (("local 0 runner-up 0", "start"), ("local 1 runner-up 1", "local 0")):
+        for key in ("omega", "mean_speed_exact", "cost_of_transport_exact", "half_step_cost", "feasible_exact"):
+            assert table[again][key] == pytest.approx(table[first][key], rel=1e-12), (again, key)
+    cheapest = min(r["cost_of_transport_exact"] for r in table.values() if r["feasible_exact"])
+    assert found.feasible_exact and found.cost_of_transport_exact == cheapest
 
 
 def test_exact_compilations(exact_run, tiny_sweep):

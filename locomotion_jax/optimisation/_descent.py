@@ -264,3 +264,7 @@ def sqp_descent(
             mem.append((sv, yv))
             mem[:] = mem[-8:]
         x, phi, fig = xn, phin, fign
+
+
+METHODS: dict[str, Callable[..., None]] = {"descent": descent, "sqp": sqp_descent}
+"""The local steps by the name that the optimisers' `local_method` setting gives them."""

@@ -26,7 +26,7 @@ import numpy as np
 
 from ..dynamics._exact_dynamics import Exact
 from ..gaits import _element_orbit as orbit
-from ._descent import descent, sqp_descent
+from ._descent import METHODS
 from ._evaluator import Evaluator
 from ._figures import Figures, PENALTY
 from ._lockstep import run_lockstep
@@ -79,7 +79,7 @@ def local_solver(
     """One local run from `x0` for [`run_lockstep`][locomotion_jax.optimisation._lockstep.run_lockstep]
     (`method`: `"descent"` or `"sqp"`, `_descent`'s two descents): returns the cheapest point
     evaluated that meets every constraint, else the one with the smallest violation."""
-    run = sqp_descent if method == "sqp" else descent
+    run = METHODS[method]
 
     def solve(ask):
         cache: dict[bytes, Any] = {}
@@ -154,7 +154,7 @@ def check_search_settings(s: Any, counts: tuple[str, ...] = ()) -> None:
             raise ValueError(f"{name}.{f} must be an int >= 1, got {v!r}.")
     if s.shape not in ("fourier", "spline"):
         raise ValueError(f"{name}.shape must be 'fourier' or 'spline', got {s.shape!r}.")
-    if s.local_method not in ("descent", "sqp"):
+    if s.local_method not in METHODS:
         raise ValueError(f"{name}.local_method must be 'descent' or 'sqp', got {s.local_method!r}.")
     if isinstance(s.knots, bool) or not (isinstance(s.knots, int) and s.knots >= 4):
         raise ValueError(f"{name}.knots must be an int >= 4, got {s.knots!r}.")

@@ -37,7 +37,9 @@ Method:
   [`steady_gait`][] under the strict contact reading from the relaxed spring (periods 1
   to 4 tried, stability from the Floquet multipliers); the reported optimum is the
   cheapest one that is converged, stable, without lift-off, at least as fast as
-  required and within the stroke.
+  required and within the stroke. The runners-up of each local run (earlier points of its
+  descent) are solved in a second batch, only where their run's waveform fails or where the
+  descent found them cheaper than the cheapest that passed.
 """
 
 import math
@@ -55,11 +57,11 @@ from ..gaits._progress import reporter
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform
 from . import _pareto as pareto
-from ._descent import descent, sqp_descent
+from ._descent import METHODS
 from ._evaluator import Evaluator
 from ._figures import Figures, PENALTY
 from ._lockstep import run_lockstep
-from ._optimum import ExactSettings, Optimum, verified
+from ._optimum import choose, ExactSettings, Optimum, verified
 from ._shapes import AbstractShape
 from ._starts import start_shapes, tension_starts
 
@@ -89,8 +91,7 @@ def _descent(x0, shape: AbstractShape, bounds, settings: ExactSettings, max_iter
         x[-1] = np.clip(x[-1], bounds.lb[-1], bounds.ub[-1])
         return x
 
-    method = sqp_descent if settings.local_method == "sqp" else descent
-    method(x0, at, project, max_iter, settings.trust_radius, PENALTY)
+    METHODS[settings.local_method](x0, at, project, max_iter, settings.trust_radius, PENALTY)
 
 
 HALF_STEP_RTOL = 1e-3
@@ -107,8 +108,9 @@ def _local_solver(x0, shape: AbstractShape, bounds, settings: ExactSettings, log
     Returns the cheapest point it evaluated that meets every constraint (the speed, the
     normal-force margin and the stroke, the last to 1e-9); if none does, the point with the
     smallest speed deficit. A trust-region or line-search iterate may wander after it: the
-    objective has jumps where a held mass starts to slip. Also returns runners-up: the points
-    at the fractions `RUNNERS_UP` of its sequence of points that meet every constraint. The
+    objective has jumps where a held mass starts to slip. Also returns runners-up, each as its
+    cost of transport and point: the points at the fractions `RUNNERS_UP` of its sequence of
+    points that meet every constraint. The
     cheapest point often lies at such a jump, where the gait is fragile (a held mass's force
     grazes its static limit, so that the engine's step or a perturbation decides when it
     slips); an earlier point, further from the jump the descent was drawn to, is a fallback
@@ -124,7 +126,7 @@ def _local_solver(x0, shape: AbstractShape, bounds, settings: ExactSettings, log
             if best["key"][0] != 0.0:
                 return best["x"], []
             picks = sorted({int(f * len(held_points)) for f in RUNNERS_UP})
-            runners = [held_points[i][1] for i in picks if held_points[i][1].tobytes() != best["x"].tobytes()]
+            runners = [held_points[i] for i in picks if held_points[i][1].tobytes() != best["x"].tobytes()]
             return best["x"], runners
 
         def at(x):
@@ -142,7 +144,7 @@ def _local_solver(x0, shape: AbstractShape, bounds, settings: ExactSettings, log
                         held_points.append((fig.cot, np.array(x, float)))
             return cache[key]
 
-        if settings.local_method in ("descent", "sqp"):
+        if settings.local_method in METHODS:
             _descent(np.array(x0, float), shape, bounds, settings, max_iter, at)
             log.append({"message": "descent", "nit": len(trace), "trace": trace})
             return result()
@@ -378,26 +380,39 @@ def optimise_exact(
     if given is not None:
         candidates.append(("given start", theta0[given]))
     candidates += [(f"local {k}", x[k]) for k in range(lanes)]
-    for k in range(lanes):
-        candidates += [(f"local {k} runner-up {j}", shape.project(r)) for j, r in enumerate(runners[k])]
-    return _verify(params, speed, direction, a_max, shape, free, settings, candidates, baseline, log, t0, ev)
+    fallbacks = [
+        (f"local {k} runner-up {j}", shape.project(r), cot, len(candidates) - lanes + k)
+        for k in range(lanes)
+        for j, (cot, r) in enumerate(runners[k])
+    ]
+    return _verify(params, speed, direction, a_max, shape, free, settings, candidates, fallbacks, baseline, log, t0, ev)
 
 
-def _verify(params, speed, direction, a_max, shape, free, settings, candidates, baseline, log, t0, ev):
+FALLBACK_RTOL = 1e-6
+"""A runner-up of a local run whose candidate passed the verification is verified too only if
+its cost of transport in the descent is below the cheapest feasible candidate's by more than
+this (relative; `_verify`). A runner-up is an earlier point of the same descent, so it costs
+at least the run's candidate there; it can be the cheaper in the verification only if the
+verification found another gait than the descent did, not by the figures' rounding."""
+
+
+def _verify(params, speed, direction, a_max, shape, free, settings, candidates, fallbacks, baseline, log, t0, ev):
     """Solve each candidate's steady gait (strict contact, relaxed start) and keep the cheapest feasible one.
 
     A candidate counts as feasible only if its gait is also converged, stable and without
     lift-off with half the engine's step, with the same speed and cost of transport to
-    `HALF_STEP_RTOL` (the figures reported are those at the full step)."""
+    `HALF_STEP_RTOL` (the figures reported are those at the full step). `candidates` (the
+    start, a given start and the local runs' points) are verified first; the `fallbacks`
+    (the local runs' runners-up: name, point, cost of transport in the descent and the index
+    of their run's candidate) then where their run's candidate is not feasible, or where the
+    descent found them cheaper than the cheapest feasible candidate (`FALLBACK_RTOL`)."""
     dtype = params.dtype
-    n = len(candidates)
-    # A fixed number of rows (padded with the first candidate), so that every optimisation
-    # with the same settings runs the same compiled verification.
-    rows = 3 + settings.local * (1 + len(RUNNERS_UP))
-    names = [name for name, _ in candidates]
-    thetas = [th for _, th in candidates] + [candidates[0][1]] * (rows - n)
+    # Batches of a fixed number of rows (padded with their first candidate), so that every
+    # optimisation with the same settings runs the same compiled verification.
+    rows = 2 + settings.local
     origins = shape.origins
     lbar, amax = jnp.asarray(params.lbar, dtype), jnp.asarray(a_max, dtype)
+    eps = float(jnp.finfo(dtype).eps)
 
     def gaits(theta, dt):
         wave = shape.waveform(jnp.asarray(theta, dtype), amax, lbar)
@@ -407,25 +422,43 @@ def _verify(params, speed, direction, a_max, shape, free, settings, candidates, 
         return paper_gait(batch, dynamics=_exact_dynamics(dt), transient=settings.transient, waveform=wave,
                           start="relaxed", guarded=False)  # fmt: skip
 
-    # Every candidate at each time origin the family offers, candidate-major.
-    theta = np.stack([shape.shift(th, o) for th in thetas for o in origins])
-    gait = gaits(theta, settings.dt)
-    # Every section again at dt/2: the same shapes, so the same compiled program (dt is traced).
-    half = gaits(theta, settings.dt / 2)
-    pick = _best_sections(gait, rows, len(origins))
-    gait, half = (jax.tree_util.tree_map(lambda x: x[pick] if np.ndim(x) else x, g) for g in (gait, half))
-    theta = theta[pick]
-    fig = pareto.gait_figures(gait)
-    half = pareto.gait_figures(half)
-    agree = lambda a, b: np.abs(a - b) <= HALF_STEP_RTOL * np.abs(a)
-    steady = fig.ok & half.ok & agree(fig.speed, half.speed) & agree(fig.cost, half.cost)
-    fig = fig._replace(ok=steady)
-    gait = jax.tree_util.tree_map(lambda x: x[:n] if np.ndim(x) else x, gait)
-    fig = pareto.ExactFigures(*(np.asarray(f)[:n] for f in fig))
-    half = pareto.ExactFigures(*(np.asarray(f)[:n] for f in half))
-    theta = theta[:n]
+    def check(thetas):
+        """The gaits of up to `rows` candidates at the better of their time origins, with the
+        figures at `dt` (`ok` only if `dt/2` agrees) and at `dt/2`."""
+        m = len(thetas)
+        padded = list(thetas) + [thetas[0]] * (rows - m)
+        # Every candidate at each time origin the family offers, candidate-major.
+        theta = np.stack([shape.shift(th, o) for th in padded for o in origins])
+        gait = gaits(theta, settings.dt)
+        # Every section again at dt/2: the same shapes, so the same compiled program (dt is traced).
+        half = gaits(theta, settings.dt / 2)
+        pick = _best_sections(gait, rows, len(origins))[:m]
+        gait, half = (jax.tree_util.tree_map(lambda x: x[pick] if np.ndim(x) else x, g) for g in (gait, half))
+        fig, half = pareto.gait_figures(gait), pareto.gait_figures(half)
+        agree = lambda a, b: np.abs(a - b) <= HALF_STEP_RTOL * np.abs(a)
+        steady = fig.ok & half.ok & agree(fig.speed, half.speed) & agree(fig.cost, half.cost)
+        return theta[pick], gait, fig._replace(ok=steady), half
+
+    names = [name for name, _ in candidates]
+    parts = [check([th for _, th in candidates])]
+    theta, _, fig, _ = parts[0]
     strokes = np.array([a_max * shape.stroke(th) for th in theta])
-    k, feasible, exact = verified(fig, strokes, speed, direction, a_max, float(jnp.finfo(dtype).eps), baseline)
+    held = choose(fig.ok, fig.speed, fig.cost, strokes, speed, direction, a_max, eps)[1]
+    cheapest = float(np.min(np.where(held, fig.cost, np.inf)))
+    go = [not held[f[3]] or f[2] < cheapest * (1 - FALLBACK_RTOL) for f in fallbacks]
+    wanted = [f for f, g in zip(fallbacks, go) if g]
+    log["unverified"] = [f[0] for f, g in zip(fallbacks, go) if not g]
+    for b in range(0, len(wanted), rows):
+        parts.append(check([f[1] for f in wanted[b : b + rows]]))
+        names += [f[0] for f in wanted[b : b + rows]]
+    join = lambda *xs: np.concatenate([np.asarray(x) for x in xs]) if np.ndim(xs[0]) else xs[0]
+    theta = np.concatenate([p[0] for p in parts])
+    gait = jax.tree_util.tree_map(join, *(p[1] for p in parts))
+    fig = pareto.ExactFigures(*(join(*f) for f in zip(*(p[2] for p in parts))))
+    half = pareto.ExactFigures(*(join(*f) for f in zip(*(p[3] for p in parts))))
+    n = len(names)
+    strokes = np.array([a_max * shape.stroke(th) for th in theta])
+    k, feasible, exact = verified(fig, strokes, speed, direction, a_max, eps, baseline)
     table = [
         {
             "candidate": names[i],
