@@ -10,7 +10,8 @@ projection that the caller supplies.
 - [`descent`][locomotion_jax.optimisation._descent.descent] takes L-BFGS directions on $\\phi$
   itself. Where the speed constraint is active (the optimum of every requirement the cost would
   rather undercut), its steps cross the constraint's kink and backtrack (7 or 8 evaluations an
-  iteration in the paper's optimiser, `benchmarks/NOTES.md`).
+  iteration in the paper's optimiser, `benchmarks/NOTES.md`); it stops where the merit stalls
+  at 1e-6.
 - [`sqp_descent`][locomotion_jax.optimisation._descent.sqp_descent] takes the step of a
   quadratic model of $f$ (its inverse Hessian from L-BFGS pairs of the Lagrangian's gradient)
   subject to the constraints linearised, $c_j + \\nabla c_j^\\top d \\ge 0$ (an SQP step), starts
@@ -61,6 +62,38 @@ def _inverse_hessian(mem: list[tuple[np.ndarray, np.ndarray]]) -> Callable[[np.n
     return apply
 
 
+STALL_WINDOW = 20
+STALL_RTOL = 1e-5
+"""`sqp_descent` stops where its merit fell by at most `STALL_RTOL` (relative) over its last
+`STALL_WINDOW` evaluations: the cost of transport's last digits do not pay for the lockstep
+rounds that the slowest run holds the others in."""
+
+DESCENT_STALL_RTOL = 1e-6
+"""`descent` stops where its merit fell by at most `DESCENT_STALL_RTOL` over its last
+`STALL_WINDOW` evaluations. Its steps cross an active constraint and backtrack, so that it
+creeps along the constraint: in the paper's default optimisation, 393 lockstep rounds for
+the last 1e-6 of the cost of transport, 210 with this stop (`benchmarks/NOTES.md`)."""
+
+
+def _stalled(best: list[float], rtol: float) -> bool:
+    """Whether the merit accepted so far (`best`: after each evaluation) fell by at most `rtol`
+    (relative) over the last `STALL_WINDOW` evaluations."""
+    return len(best) > STALL_WINDOW and bool(best[-STALL_WINDOW - 1] - best[-1] <= rtol * abs(best[-1]))
+
+
+def _recorder(at: Callable[[np.ndarray], Any], rho: float, best: list[float]) -> Callable[[np.ndarray], Any]:
+    """`at` that also appends the merit accepted so far to `best` after each evaluation; returns
+    the figures, their merit and its gradient."""
+
+    def ask(z):
+        fig = at(z)
+        value, grad = merit(fig, rho)
+        best.append(min(value, best[-1]) if best else value)
+        return fig, value, grad
+
+    return ask
+
+
 def descent(
     x0: np.ndarray,
     at: Callable[[np.ndarray], Any],
@@ -76,15 +109,20 @@ def descent(
     step is at most `trust_radius` in its largest coordinate; a trial point is accepted on
     Armijo's condition (and, if `strict`, only if the merit falls). The history keeps the last
     8 curvature pairs and is dropped where a direction does not descend or no step is
-    accepted; the descent stops after `max_iter` iterations or where steepest descent finds
-    no decrease (a local, possibly nonsmooth, minimum). The caller records what it wants from
-    the points `at` is asked for."""
+    accepted; the descent stops after `max_iter` iterations, where steepest descent finds
+    no decrease (a local, possibly nonsmooth, minimum) or where the merit stalled
+    (`DESCENT_STALL_RTOL` over `STALL_WINDOW` evaluations). The caller records what it wants
+    from the points `at` is asked for."""
+    best: list[float] = []
+    ask = _recorder(at, rho, best)
     x = proj(x0)
-    phi, g = merit(at(x), rho)
+    _, phi, g = ask(x)
     if g is None:
         return
     mem: list[tuple[np.ndarray, np.ndarray]] = []
     for _ in range(max_iter):
+        if _stalled(best, DESCENT_STALL_RTOL):
+            return
         d = -_inverse_hessian(mem)(g)
         if g @ d >= 0:  # not a descent direction: restart from steepest descent
             mem.clear()
@@ -93,7 +131,7 @@ def descent(
         accepted, xn, phin, gn = False, x, phi, None
         for _ in range(12):
             xn = proj(x + step * d)
-            phin, gn = merit(at(xn), rho)
+            _, phin, gn = ask(xn)
             if gn is not None and phin <= phi + 1e-4 * float(g @ (xn - x)) and (phin < phi or not strict):
                 accepted = True
                 break
@@ -191,12 +229,6 @@ from the point, and at most at `trust_radius`: where the constraints' linearisat
 over short steps, the first trial lands near the last accepted one instead of several
 backtracks away."""
 
-STALL_WINDOW = 20
-STALL_RTOL = 1e-5
-"""The descent stops where its merit fell by at most `STALL_RTOL` (relative) over its last
-`STALL_WINDOW` evaluations: the cost of transport's last digits do not pay for the lockstep
-rounds that the slowest run holds the others in."""
-
 
 def sqp_descent(
     x0: np.ndarray,
@@ -220,21 +252,15 @@ def sqp_descent(
     predicts none beyond rounding (a local, possibly nonsmooth, minimum), or where the merit
     stalled (`STALL_RTOL` over `STALL_WINDOW` evaluations)."""
     best: list[float] = []  # the merit accepted so far, after each evaluation
-
-    def ask(z):
-        fig = at(z)
-        value = merit(fig, rho)[0]
-        best.append(min(value, best[-1]) if best else value)
-        return fig, value
-
+    ask = _recorder(at, rho, best)
     x = proj(x0)
-    fig, phi = ask(x)
+    fig, phi, _ = ask(x)
     if not math.isfinite(phi):
         return
     mem: list[tuple[np.ndarray, np.ndarray]] = []
     radius = trust_radius
     for _ in range(max_iter):
-        if len(best) > STALL_WINDOW and best[-STALL_WINDOW - 1] - best[-1] <= STALL_RTOL * abs(best[-1]):
+        if _stalled(best, STALL_RTOL):
             return
         d, lam = _step(fig, x, proj, _inverse_hessian(mem))
         if _slope(fig, d, rho) >= 0 and mem:  # not a descent direction: restart without pairs
@@ -246,7 +272,7 @@ def sqp_descent(
         accepted, xn, phin, fign = False, x, phi, fig
         for _ in range(12):
             xn = proj(x + step * d)
-            fign, phin = ask(xn)
+            fign, phin, _ = ask(xn)
             if math.isfinite(phin) and phin <= phi + 1e-4 * _slope(fig, xn - x, rho) and (phin < phi or not strict):
                 accepted = True
                 break
