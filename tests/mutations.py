@@ -501,6 +501,13 @@ MUTATIONS = [
         ("tests/test_optimise.py::test_runners_up_are_verified_where_their_run_fails_or_might_be_cheaper",),
     ),
     Mutation(
+        "descent_never_stalls",
+        "the local descent: no stop where its merit stalls, whatever its stall_rtol",
+        "locomotion_jax/optimisation/_descent.py",
+        (("        if stall_rtol > 0 and _stalled(best, stall_rtol):\n            return\n", ""),),
+        ("tests/test_descent.py",),
+    ),
+    Mutation(
         "sqp_step_ignores_the_multipliers",
         "the SQP step of the local descent: the active constraints' correction dropped (the free step)",
         "locomotion_jax/optimisation/_descent.py",

@@ -10,6 +10,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from locomotion_jax.optimisation import _descent
 from locomotion_jax.optimisation._descent import descent, direction, sqp_descent
 
 
@@ -31,7 +32,7 @@ def _tangent_problem():
     return at, np.array([x1**2, x1]), x1**2 + 0.1 * (x1 - 1) ** 2
 
 
-def _run(at, x0, strict, max_iter=600, proj=lambda x: x, method=sqp_descent):
+def _run(at, x0, strict, max_iter=600, proj=lambda x: x, method=sqp_descent, **options):
     points = []
 
     def ask(x):
@@ -39,7 +40,7 @@ def _run(at, x0, strict, max_iter=600, proj=lambda x: x, method=sqp_descent):
         points.append((x.copy(), fig))
         return fig
 
-    method(x0, ask, proj, max_iter, trust_radius=0.1, rho=10.0, strict=strict)
+    method(x0, ask, proj, max_iter, trust_radius=0.1, rho=10.0, strict=strict, **options)
     held = [(fig.f, x) for x, fig in points if fig.ok and min(fig.c) >= 0]
     return points, min(held, key=lambda t: t[0]) if held else None
 
@@ -67,6 +68,26 @@ def test_penalty_descent_zigzags_across_the_active_constraint():
     assert best is not None
     assert best[0] > f_star * (1 + 1e-3)
     assert len(points) > 2 * len(sqp_points)
+
+
+def test_descent_stops_where_the_merit_stalls():
+    """With `stall_rtol`, `descent` stops within one iteration (at most 13 evaluations: a step
+    and its 12 trials) of the first evaluation after which its merit fell by at most `stall_rtol`
+    over the last `STALL_WINDOW` evaluations, and not before; without it, it goes on."""
+    rtol = 1e-6
+    at, _, _ = _tangent_problem()
+    # A slow creep: the cost's slope along the constraint is small against its value.
+    creep = lambda x: SimpleNamespace(**{**vars(at(x)), "f": 1e3 + at(x).f})
+    points, _ = _run(creep, np.array([2.0, 2.0]), strict=True, method=descent, stall_rtol=rtol)
+    longer, _ = _run(creep, np.array([2.0, 2.0]), strict=True, method=descent)
+    phi = [fig.f + 10.0 * np.sum(np.maximum(0.0, -fig.c)) for _, fig in points]
+    best = np.minimum.accumulate(phi)
+    w = _descent.STALL_WINDOW
+    stalled = [e for e in range(w, len(best)) if best[e - w] - best[e] <= rtol * abs(best[e])]
+    assert stalled, "the merit never stalled: no test of the stop"
+    assert stalled[0] + 1 <= len(points) <= stalled[0] + 1 + 13, (len(points), stalled[0])
+    assert len(longer) > len(points) + 13
+    assert all(np.array_equal(x, y) for (x, _), (y, _) in zip(points, longer))  # the same path until the stop
 
 
 def test_descent_steps_around_failed_orbits_and_never_takes_their_figures():

@@ -548,11 +548,28 @@ def test_exact_compilations(exact_run, tiny_sweep):
     assert dict(_orbit.TRACES) == before
 
 
+def test_stall_rtol_reaches_the_descent(exact_run, tiny_sweep, monkeypatch):
+    """`ExactSettings.stall_rtol` is the local descent's (`_descent.local_step`), in every local run."""
+    seen = []
+    real = _exact_optimise.local_step
+
+    def spy(method, *args, **options):
+        seen.append((method, options["stall_rtol"]))
+        return real(method, *args, **options)
+
+    monkeypatch.setattr(_exact_optimise, "local_step", spy)
+    settings = eqx.tree_at(lambda s: (s.max_iter, s.stall_rtol), EXACT_TINY, (3, 3e-6))
+    _optimise.optimise(lj.Params(), 0.025, 0.05, settings=settings, sweep=tiny_sweep)
+    assert seen and set(seen) == {("descent", 3e-6)}
+
+
 def test_method_choice_is_checked():
     with pytest.raises(ValueError, match="method"):
         _optimise.optimise(lj.Params(), 0.02, 0.05, method="adam")
     with pytest.raises(ValueError, match="local_method must be 'descent', 'sqp', 'trust-constr' or 'SLSQP'"):
         ExactSettings(local_method="bfgs")
+    with pytest.raises(ValueError, match=r"ExactSettings.stall_rtol must be in \[0, 1\), got -1e-06"):
+        ExactSettings(stall_rtol=-1e-6)
     with pytest.raises(TypeError, match="ExactSettings"):
         _optimise.optimise(lj.Params(), 0.02, 0.05, settings=TINY)
     with pytest.raises(ValueError, match="harmonics"):
@@ -900,6 +917,7 @@ def test_bad_settings_raise():
         (dict(margin=-0.1), "ChainOptimiseSettings: margin and speed_slack must be >= 0"),
         (dict(zoom_levels=False), "zoom_levels must be an int >= 0"),
         (dict(local_method="newton"), "ChainOptimiseSettings.local_method must be 'descent' or 'sqp', got 'newton'"),
+        (dict(stall_rtol=1.0), r"ChainOptimiseSettings.stall_rtol must be in \[0, 1\), got 1.0"),
     ]
     for bad, match in cases:
         with pytest.raises(ValueError, match=match):
@@ -1079,9 +1097,9 @@ def test_mechanism_optimise_settings():
         lj.MechanismOptimiseSettings(omega_min=2.0, omega_max=1.0)
     with pytest.raises(ValueError, match="dt, trust_radius, newton_tol and check_tol must be > 0"):
         lj.MechanismOptimiseSettings(dt=0.0)
-    chain = lj.ChainOptimiseSettings(local=3, max_iter=7, omega_max=1.5, local_method="sqp")
+    chain = lj.ChainOptimiseSettings(local=3, max_iter=7, omega_max=1.5, local_method="sqp", stall_rtol=1e-5)
     s = MechanismOptimiseSettings.from_chain(chain)
-    assert (s.local, s.max_iter, s.omega_max, s.phases, s.local_method) == (3, 7, 1.5, 1, "sqp")
+    assert (s.local, s.max_iter, s.omega_max, s.phases, s.local_method, s.stall_rtol) == (3, 7, 1.5, 1, "sqp", 1e-5)
     with pytest.raises(ValueError, match="MechanismOptimiseSettings.local_method must be 'descent' or 'sqp'"):
         lj.MechanismOptimiseSettings(local_method="bfgs")
     with pytest.raises(TypeError, match="must be a MechanismOptimiseSettings, got ExactSettings"):

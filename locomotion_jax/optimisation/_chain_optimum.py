@@ -42,8 +42,10 @@ class ChainOptimiseSettings(eqx.Module):
     - `local`: starts refined locally in lockstep (the refined best wave and the next best
       distinct waves of the screen); `max_iter`: iterations of each local descent;
       `trust_radius`: the largest first step of a line search (coefficients in units of
-      $a_\\max$, $\\log\\omega$); `local_method`: `"descent"`
-      (default) or `"sqp"` (as [`ExactSettings`][locomotion_jax.optimisation._optimum.ExactSettings]'s).
+      $a_\\max$, $\\log\\omega$); `local_method`: `"descent"` (default) or `"sqp"`, and
+      `stall_rtol` (as [`ExactSettings`][locomotion_jax.optimisation._optimum.ExactSettings]'s;
+      0 by default: on the README's 4-mass worm, 1e-6 stopped the descent at a speed 10 % above
+      `v_min`, 0.09 % costlier, `benchmarks/NOTES.md`).
     - `margin`: required $\\min_{i,t} N_i$ on the orbit during the refinement (units of weight).
     - `speed_slack`: the refinement targets $v_\\min (1 + \\text{slack})$.
     - `omega_min`, `omega_max`: range of a free base frequency, in units of the lowest
@@ -69,6 +71,7 @@ class ChainOptimiseSettings(eqx.Module):
     max_iter: int = 60
     trust_radius: float = 0.1
     local_method: str = "descent"
+    stall_rtol: float = 0.0
     margin: float = 0.05
     speed_slack: float = 1e-3
     omega_min: float = 0.06

@@ -10,8 +10,8 @@ projection that the caller supplies.
 - [`descent`][locomotion_jax.optimisation._descent.descent] takes L-BFGS directions on $\\phi$
   itself. Where the speed constraint is active (the optimum of every requirement the cost would
   rather undercut), its steps cross the constraint's kink and backtrack (7 or 8 evaluations an
-  iteration in the paper's optimiser, `benchmarks/NOTES.md`); it stops where the merit stalls
-  at 1e-6.
+  iteration in the paper's optimiser, `benchmarks/NOTES.md`); it may stop where the merit
+  stalls.
 - [`sqp_descent`][locomotion_jax.optimisation._descent.sqp_descent] takes the step of a
   quadratic model of $f$ (its inverse Hessian from L-BFGS pairs of the Lagrangian's gradient)
   subject to the constraints linearised, $c_j + \\nabla c_j^\\top d \\ge 0$ (an SQP step), starts
@@ -68,12 +68,6 @@ STALL_RTOL = 1e-5
 `STALL_WINDOW` evaluations: the cost of transport's last digits do not pay for the lockstep
 rounds that the slowest run holds the others in."""
 
-DESCENT_STALL_RTOL = 1e-6
-"""`descent` stops where its merit fell by at most `DESCENT_STALL_RTOL` over its last
-`STALL_WINDOW` evaluations. Its steps cross an active constraint and backtrack, so that it
-creeps along the constraint: in the paper's default optimisation, 393 lockstep rounds for
-the last 1e-6 of the cost of transport, 210 with this stop (`benchmarks/NOTES.md`)."""
-
 
 def _stalled(best: list[float], rtol: float) -> bool:
     """Whether the merit accepted so far (`best`: after each evaluation) fell by at most `rtol`
@@ -102,6 +96,7 @@ def descent(
     trust_radius: float,
     rho: float,
     strict: bool = False,
+    stall_rtol: float = 0.0,
 ) -> None:
     """Monotone L-BFGS descent on [`merit`][locomotion_jax.optimisation._descent.merit] from `x0`.
 
@@ -110,9 +105,11 @@ def descent(
     Armijo's condition (and, if `strict`, only if the merit falls). The history keeps the last
     8 curvature pairs and is dropped where a direction does not descend or no step is
     accepted; the descent stops after `max_iter` iterations, where steepest descent finds
-    no decrease (a local, possibly nonsmooth, minimum) or where the merit stalled
-    (`DESCENT_STALL_RTOL` over `STALL_WINDOW` evaluations). The caller records what it wants
-    from the points `at` is asked for."""
+    no decrease (a local, possibly nonsmooth, minimum) or, if `stall_rtol > 0`, where the merit
+    fell by at most `stall_rtol` (relative) over its last `STALL_WINDOW` evaluations: its steps
+    cross an active constraint and backtrack, so that it can creep along the constraint for
+    digits that do not pay for the lockstep rounds. The caller records what it wants from the
+    points `at` is asked for."""
     best: list[float] = []
     ask = _recorder(at, rho, best)
     x = proj(x0)
@@ -121,7 +118,7 @@ def descent(
         return
     mem: list[tuple[np.ndarray, np.ndarray]] = []
     for _ in range(max_iter):
-        if _stalled(best, DESCENT_STALL_RTOL):
+        if stall_rtol > 0 and _stalled(best, stall_rtol):
             return
         d = -_inverse_hessian(mem)(g)
         if g @ d >= 0:  # not a descent direction: restart from steepest descent
@@ -292,5 +289,27 @@ def sqp_descent(
         x, phi, fig = xn, phin, fign
 
 
-METHODS: dict[str, Callable[..., None]] = {"descent": descent, "sqp": sqp_descent}
-"""The local steps by the name that the optimisers' `local_method` setting gives them."""
+METHODS = ("descent", "sqp")
+"""The local steps by the names that the optimisers' `local_method` setting gives them."""
+
+
+def local_step(
+    method: str,
+    x0: np.ndarray,
+    at: Callable[[np.ndarray], Any],
+    proj: Callable[[np.ndarray], np.ndarray],
+    max_iter: int,
+    trust_radius: float,
+    rho: float,
+    strict: bool = False,
+    stall_rtol: float = 0.0,
+) -> None:
+    """The local step named `method` (of `METHODS`) from `x0`, arguments as
+    [`descent`][locomotion_jax.optimisation._descent.descent]'s; `stall_rtol` is the descent's
+    (`sqp_descent` stops at its own `STALL_RTOL`)."""
+    if method == "sqp":
+        sqp_descent(x0, at, proj, max_iter, trust_radius, rho, strict)
+    elif method == "descent":
+        descent(x0, at, proj, max_iter, trust_radius, rho, strict, stall_rtol)
+    else:
+        raise ValueError(f"local_method must be one of {METHODS}, got {method!r}.")

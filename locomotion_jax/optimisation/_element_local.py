@@ -26,7 +26,7 @@ import numpy as np
 
 from ..dynamics._exact_dynamics import Exact
 from ..gaits import _element_orbit as orbit
-from ._descent import METHODS
+from ._descent import local_step, METHODS
 from ._evaluator import Evaluator
 from ._figures import Figures, PENALTY
 from ._lockstep import run_lockstep
@@ -74,12 +74,20 @@ def project(theta: np.ndarray, springs: int, harmonics: int, log_lo: float, log_
 
 
 def local_solver(
-    x0: np.ndarray, proj, stroke_ok, max_iter: int, trust_radius: float, rho: float, log: list, method: str = "descent"
+    x0: np.ndarray,
+    proj,
+    stroke_ok,
+    max_iter: int,
+    trust_radius: float,
+    rho: float,
+    log: list,
+    method: str = "descent",
+    stall_rtol: float = 0.0,
 ):
     """One local run from `x0` for [`run_lockstep`][locomotion_jax.optimisation._lockstep.run_lockstep]
-    (`method`: `"descent"` or `"sqp"`, `_descent`'s two descents): returns the cheapest point
+    (`method`: `"descent"` or `"sqp"`, `_descent`'s two descents; `stall_rtol`: the descent's
+    stop where its merit stalls, 0 for none): returns the cheapest point
     evaluated that meets every constraint, else the one with the smallest violation."""
-    run = METHODS[method]
 
     def solve(ask):
         cache: dict[bytes, Any] = {}
@@ -99,7 +107,7 @@ def local_solver(
                         best["key"], best["x"] = key_, np.array(x, float)
             return cache[key]
 
-        run(np.array(x0, float), at, proj, max_iter, trust_radius, rho, strict=True)
+        local_step(method, np.array(x0, float), at, proj, max_iter, trust_radius, rho, True, stall_rtol)
         log.append({"evaluations": len(trace), "trace": trace})
         return best["x"]
 
@@ -156,6 +164,8 @@ def check_search_settings(s: Any, counts: tuple[str, ...] = ()) -> None:
         raise ValueError(f"{name}.shape must be 'fourier' or 'spline', got {s.shape!r}.")
     if s.local_method not in METHODS:
         raise ValueError(f"{name}.local_method must be 'descent' or 'sqp', got {s.local_method!r}.")
+    if not (0 <= s.stall_rtol < 1):
+        raise ValueError(f"{name}.stall_rtol must be in [0, 1), got {s.stall_rtol!r}.")
     if isinstance(s.knots, bool) or not (isinstance(s.knots, int) and s.knots >= 4):
         raise ValueError(f"{name}.knots must be an int >= 4, got {s.knots!r}.")
     if not (0 < s.omega_min < s.omega_max):
@@ -254,7 +264,17 @@ def refine(base: Any, starts: list[Start], a_max: float, v_min: float, direction
     rho = PENALTY * max(1.0, max(costs, default=1.0))
     log: list[dict] = []
     solvers = [
-        local_solver(x, proj, stroke_ok, settings.max_iter, settings.trust_radius, rho, log, settings.local_method)
+        local_solver(
+            x,
+            proj,
+            stroke_ok,
+            settings.max_iter,
+            settings.trust_radius,
+            rho,
+            log,
+            settings.local_method,
+            settings.stall_rtol,
+        )
         for x in x0
     ]
     say(f"refining {len(solvers)} starts locally, in lockstep (compiling the orbit solver: first call only)...")

@@ -57,7 +57,7 @@ from ..gaits._progress import reporter
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform
 from . import _pareto as pareto
-from ._descent import METHODS
+from ._descent import local_step, METHODS
 from ._evaluator import Evaluator
 from ._figures import Figures, PENALTY
 from ._lockstep import run_lockstep
@@ -91,7 +91,8 @@ def _descent(x0, shape: AbstractShape, bounds, settings: ExactSettings, max_iter
         x[-1] = np.clip(x[-1], bounds.lb[-1], bounds.ub[-1])
         return x
 
-    METHODS[settings.local_method](x0, at, project, max_iter, settings.trust_radius, PENALTY)
+    local_step(settings.local_method, x0, at, project, max_iter, settings.trust_radius, PENALTY,
+               stall_rtol=settings.stall_rtol)  # fmt: skip
 
 
 HALF_STEP_RTOL = 1e-3

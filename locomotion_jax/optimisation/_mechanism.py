@@ -85,7 +85,7 @@ class MechanismOptimiseSettings(eqx.Module):
     - `local`: starts refined locally in lockstep (the best sinusoids of the screen);
       `max_iter`: iterations of each local descent; `trust_radius`: the largest first step of a
       line search (coefficients in units of $a_\\max$, $\\log\\omega$); `local_method`: `"descent"`
-      (default) or `"sqp"` (as [`ExactSettings`][locomotion_jax.optimisation._optimum.ExactSettings]'s).
+      (default) or `"sqp"`, and `stall_rtol` (as [`ChainOptimiseSettings`][]'s).
     - `margin`: required $\\min_{i,t} N_i$ on the orbit during the refinement (units of weight).
     - `speed_slack`: the refinement targets $v_\\min (1 + \\text{slack})$.
     - `omega_min`, `omega_max`: range of a free base frequency, in units of the highest natural
@@ -109,6 +109,7 @@ class MechanismOptimiseSettings(eqx.Module):
     max_iter: int = 40
     trust_radius: float = 0.1
     local_method: str = "descent"
+    stall_rtol: float = 0.0
     margin: float = 0.05
     speed_slack: float = 1e-3
     omega_min: float = 0.15

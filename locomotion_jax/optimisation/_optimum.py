@@ -102,10 +102,14 @@ class ExactSettings(eqx.Module):
       is too slow; the last run has half the iterations); `trust_radius`: the largest first step
       of a line search, or the initial trust region (decision variables: coefficients in units of
       $a_\\max$, $\\log\\omega$); `local_method`: `"descent"` (monotone L-BFGS descent on an exact
-      penalty, `_descent.descent`), `"sqp"` (the same penalty and line search with SQP steps on
-      the linearised constraints, which follow an active speed constraint instead of crossing
-      it, and a stop where the merit stalls, `_descent.sqp_descent`: fewer evaluations, a
-      slightly costlier optimum; `benchmarks/NOTES.md`), `"trust-constr"` or `"SLSQP"` (scipy's).
+      penalty, `_descent.descent`), `"sqp"` (the same
+      penalty and line search with SQP steps on the linearised constraints, which follow an
+      active speed constraint instead of crossing it, and a stop where the merit stalls at
+      1e-5, `_descent.sqp_descent`: fewer evaluations, a slightly costlier optimum;
+      `benchmarks/NOTES.md`), `"trust-constr"` or `"SLSQP"` (scipy's); `stall_rtol`: the
+      descent stops where its merit fell by at most this (relative) over its last 20
+      evaluations, 0 for never (1e-6: in the default problem 210 lockstep rounds instead of
+      393 for an optimum 1.6e-8 costlier, `benchmarks/NOTES.md`).
     - `margin`: required $\\min_t N_{1,2}$ over the orbit (units of weight).
     - `speed_slack`: the orbit targets $v_\\min (1 + \\text{slack})$.
     - `omega_min`, `omega_max`: range of a free base frequency, in units of the smallest
@@ -128,6 +132,7 @@ class ExactSettings(eqx.Module):
     stages: int = 3
     trust_radius: float = 0.1
     local_method: str = "descent"
+    stall_rtol: float = 1e-6
     margin: float = 0.05
     speed_slack: float = 1e-3
     omega_min: float = 0.06
@@ -148,6 +153,8 @@ class ExactSettings(eqx.Module):
                 "ExactSettings.local_method must be 'descent', 'sqp', 'trust-constr' or 'SLSQP', "
                 f"got {self.local_method!r}."
             )
+        if not (0 <= self.stall_rtol < 1):
+            raise ValueError(f"ExactSettings.stall_rtol must be in [0, 1), got {self.stall_rtol!r}.")
         if self.shape not in ("spline", "fourier"):
             raise ValueError(f"ExactSettings.shape must be 'spline' or 'fourier', got {self.shape!r}.")
         if self.knots < 4:
@@ -234,7 +241,7 @@ class Optimum(AbstractOptimum):
       $= 1 - \\text{cost}/\\text{cost}_\\text{sin}$ (negative when the sinusoid is
       better; `nan` when either is infeasible).
     - `initial_cost_of_transport_exact`: exact cost of the best feasible initial guess.
-    - `source`: which candidate won; `candidates`: every candidate's figures.
+    - `source`: which candidate won; `candidates`: every verified candidate's figures.
     - `history`: per block costs and constraint values; `runtime_s`.
     - `method`: `"exact"` or `"smoothed"`. Exact method only (else `None`/NaN):
       `stable_exact` (a converged steady gait without lift-off whose Floquet multipliers all lie
