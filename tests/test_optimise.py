@@ -54,6 +54,7 @@ from locomotion_jax.optimisation import (
     _objective,
     _optimise,
     _pareto,
+    _plots,
     _shapes,
 )
 from locomotion_jax.optimisation._optimum import ExactSettings, Settings
@@ -561,6 +562,18 @@ def test_stall_rtol_reaches_the_descent(exact_run, tiny_sweep, monkeypatch):
     settings = eqx.tree_at(lambda s: (s.max_iter, s.stall_rtol), EXACT_TINY, (3, 3e-6))
     _optimise.optimise(lj.Params(), 0.025, 0.05, settings=settings, sweep=tiny_sweep)
     assert seen and set(seen) == {("descent", 3e-6)}
+
+
+def test_period_plot_of_a_spline_the_default_step_does_not_resolve(exact_run, tmp_path):
+    """`_plots.plot_period` (the CLI's `optimize --plot`, the experiment's figures) simulates an
+    optimum whose spline the default step does not resolve (the guard would refuse it) at a step
+    that does."""
+    opt, _ = exact_run
+    fast = dataclasses.replace(opt, omega=40.0)  # knots 2*pi/(8*40) = 0.0196 apart: dt <= 0.0049
+    with pytest.raises(ValueError, match="does not resolve"):
+        lj.simulate(lj.Params(omega=40.0), 1.0, waveform=fast.waveform)
+    path = _plots.plot_period(fast, lj.Params(), tmp_path / "period.png", periods=20)
+    assert path.exists() and path.stat().st_size > 0
 
 
 def test_method_choice_is_checked():

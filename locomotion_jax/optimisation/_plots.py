@@ -7,7 +7,9 @@ from pathlib import Path
 import jax.numpy as jnp
 import numpy as np
 
+from ..dynamics._exact_dynamics import Exact
 from ..model._params import Params
+from ..model._scales import harmonics, STEPS_PER_PERIOD
 from ..run._simulate import simulate
 from ._optimum import Optimum
 from ._pareto import pareto_front, SinusoidSweep, with_waveform_frequency
@@ -52,13 +54,18 @@ def plot_waveform(opt: Optimum, path: Path) -> Path:
 
 def plot_period(opt: Optimum, params: Params, path: Path, periods: int = 200) -> Path:
     """$x_1, x_2$ (relative to the period's start) and the contact modes over the last of
-    `periods` actuation periods simulated on the exact model from the relaxed spring."""
+    `periods` actuation periods simulated on the exact model from the relaxed spring, at a step
+    that resolves the waveform."""
     plt = _plt()
     period = 2 * math.pi / opt.omega
     t_end = period * periods
     save = np.linspace(t_end - period, t_end, 600)
     wave = opt.waveform
-    tr = simulate(with_waveform_frequency(params, wave), t_end, save, waveform=wave, start="relaxed", contact="strict")
+    # The optimiser checks its gait at its step and half of it; a run of many periods takes a
+    # step that the resolution guard accepts for the waveform's shortest piece (a spline's knots).
+    dt = min(Exact().dt, 0.9 * period / (harmonics(wave) * STEPS_PER_PERIOD))
+    tr = simulate(with_waveform_frequency(params, wave), t_end, save, dynamics=Exact(dt=dt), waveform=wave,
+                  start="relaxed", contact="strict")  # fmt: skip
     x1, x2, mode = (np.asarray(v) for v in (tr.x1, tr.x2, tr.mode))
     fig, (ax, axm) = plt.subplots(2, 1, figsize=(6, 4.6), sharex=True, gridspec_kw={"height_ratios": [3, 1]})
     ph = (save - save[0]) / period
