@@ -86,8 +86,8 @@ def local_solver(
 ):
     """One local run from `x0` for [`run_lockstep`][locomotion_jax.optimisation._lockstep.run_lockstep]
     (`method`: `"descent"` or `"sqp"`, `_descent`'s two descents; `stall_rtol`: the descent's
-    stop where its merit stalls, 0 for none): returns the cheapest point
-    evaluated that meets every constraint, else the one with the smallest violation."""
+    stop where its merit stalls, 0 for none): returns the cheapest point evaluated that meets
+    every constraint, else the one with the smallest violation."""
 
     def solve(ask):
         cache: dict[bytes, Any] = {}

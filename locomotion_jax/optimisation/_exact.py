@@ -111,11 +111,10 @@ def _local_solver(x0, shape: AbstractShape, bounds, settings: ExactSettings, log
     smallest speed deficit. A trust-region or line-search iterate may wander after it: the
     objective has jumps where a held mass starts to slip. Also returns runners-up, each as its
     cost of transport and point: the points at the fractions `RUNNERS_UP` of its sequence of
-    points that meet every constraint. The
-    cheapest point often lies at such a jump, where the gait is fragile (a held mass's force
-    grazes its static limit, so that the engine's step or a perturbation decides when it
-    slips); an earlier point, further from the jump the descent was drawn to, is a fallback
-    for the verification."""
+    points that meet every constraint. The cheapest point often lies at such a jump, where the
+    gait is fragile (a held mass's force grazes its static limit, so that the engine's step or
+    a perturbation decides when it slips); an earlier point, further from the jump the descent
+    was drawn to, is a fallback for the verification."""
 
     def solve(ask):
         cache: dict[bytes, Any] = {}
