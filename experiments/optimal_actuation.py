@@ -28,6 +28,7 @@ jax.config.update("jax_enable_x64", True)
 import locomotion_jax as lj  # noqa: E402
 import numpy as np  # noqa: E402
 from locomotion_jax._json import jsonable  # noqa: E402
+from locomotion_jax.model._scales import forcing_step  # noqa: E402
 from locomotion_jax.optimisation import _optimise, _pareto, _plots as plots  # noqa: E402
 from locomotion_jax.optimisation._constraints import stroke  # noqa: E402
 from locomotion_jax.optimisation._optimum import ExactSettings, Settings  # noqa: E402
@@ -43,9 +44,11 @@ on an exact stick-slip model with mu_s = 0.7 (issue tracker, "Exact-model gradie
 
 
 def recheck(params, opt, dt=0.005):
-    """Independent re-run of the winner: the steady gait with half the step."""
+    """Independent re-run of the winner: the steady gait with half the step, or less where the
+    resolution guard asks for less (4 steps per knot interval of a fast spline)."""
+    dt = forcing_step(opt.waveform, dt)
     fig = _pareto.exact_figures(params, opt.waveform, dt=dt)
-    return {"mean_speed": float(fig.speed), "cost_of_transport": float(fig.cost), "ok": bool(fig.ok)}
+    return {"mean_speed": float(fig.speed), "cost_of_transport": float(fig.cost), "ok": bool(fig.ok), "dt": dt}
 
 
 def run_speeds(params, method, settings, sweep, speeds, harmonics):
@@ -63,7 +66,7 @@ def run_speeds(params, method, settings, sweep, speeds, harmonics):
         if opt.feasible_exact:
             previous = opt
         check = recheck(params, opt)
-        print(f"\n=== {method}, v_min = {v} ===\n{opt.summary()}\nrecheck (dt=0.005): {check}", flush=True)
+        print(f"\n=== {method}, v_min = {v} ===\n{opt.summary()}\nrecheck: {check}", flush=True)
         sub = OUT / method / f"v{v:g}"
         plots.save_all(opt, params, sweep, sub)
         (sub / "optimum.json").write_text(opt.to_json(full=True, indent=1))

@@ -86,6 +86,13 @@ def forcing(wave: Any, omega: jax.Array) -> TimeScale:
     return TimeScale("omega", what, 2 * math.pi / (K * omega), STEPS_PER_PERIOD, "period", {"omega": omega})
 
 
+def forcing_step(wave: Any, dt: float) -> float:
+    """`dt`, or a tenth less than the longest step that resolves the forcing of `wave` (one
+    waveform) where that is shorter: a step that the resolution guards accept for it."""
+    limit = 2 * math.pi / (harmonics(wave) * float(wave.omega)) / STEPS_PER_PERIOD
+    return min(dt, 0.9 * limit)
+
+
 def free_frequency(m: jax.Array, K: jax.Array) -> jax.Array:
     """Highest natural frequency of the free linearised bodies: masses `m` (..., N), stiffness
     matrix `K` (..., N, N); batch shape."""

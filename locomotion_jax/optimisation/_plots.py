@@ -9,7 +9,7 @@ import numpy as np
 
 from ..dynamics._exact_dynamics import Exact
 from ..model._params import Params
-from ..model._scales import harmonics, STEPS_PER_PERIOD
+from ..model._scales import forcing_step
 from ..run._simulate import simulate
 from ._optimum import Optimum
 from ._pareto import pareto_front, SinusoidSweep, with_waveform_frequency
@@ -63,8 +63,8 @@ def plot_period(opt: Optimum, params: Params, path: Path, periods: int = 200) ->
     wave = opt.waveform
     # The optimiser checks its gait at its step and half of it; a run of many periods takes a
     # step that the resolution guard accepts for the waveform's shortest piece (a spline's knots).
-    dt = min(Exact().dt, 0.9 * period / (harmonics(wave) * STEPS_PER_PERIOD))
-    tr = simulate(with_waveform_frequency(params, wave), t_end, save, dynamics=Exact(dt=dt), waveform=wave,
+    dynamics = Exact(dt=forcing_step(wave, Exact().dt))
+    tr = simulate(with_waveform_frequency(params, wave), t_end, save, dynamics=dynamics, waveform=wave,
                   start="relaxed", contact="strict")  # fmt: skip
     x1, x2, mode = (np.asarray(v) for v in (tr.x1, tr.x2, tr.mode))
     fig, (ax, axm) = plt.subplots(2, 1, figsize=(6, 4.6), sharex=True, gridspec_kw={"height_ratios": [3, 1]})
