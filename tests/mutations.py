@@ -508,6 +508,18 @@ MUTATIONS = [
         ("tests/test_descent.py",),
     ),
     Mutation(
+        "newton_orbit_never_gives_up",
+        "the orbit oracle's Newton method: no stop on a stalled residual, whatever its patience",
+        "locomotion_jax/gaits/_orbit.py",
+        (
+            (
+                "        return ~done & ok & (it < max_iter) & (since < patience)\n",
+                "        return ~done & ok & (it < max_iter)\n",
+            ),
+        ),
+        ("tests/test_optimise.py::test_newton_orbit_gives_up_a_cycle",),
+    ),
+    Mutation(
         "sqp_step_ignores_the_multipliers",
         "the SQP step of the local descent: the active constraints' correction dropped (the free step)",
         "locomotion_jax/optimisation/_descent.py",

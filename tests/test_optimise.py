@@ -430,8 +430,8 @@ def test_orbit_gradients_match_finite_differences():
     assert np.all(np.asarray(bare.gradient) == 0)
 
 
-@pytest.mark.parametrize("monodromy_only", [False, True])
-def test_newton_orbit_on_an_affine_map(monodromy_only):
+@pytest.mark.parametrize("monodromy_only, patience", [(False, None), (True, None), (True, 3)])
+def test_newton_orbit_on_an_affine_map(monodromy_only, patience):
     # Phi(y, theta) = A y + B theta**2 + c has the fixed point y* = (I - A)^-1 (B theta**2 + c);
     # the figures F = (w . y + theta . theta) give dF/dtheta = w^T (I - A)^-1 B diag(2 theta) + 2 theta.
     # Newton from far off takes several iterations; with monodromy_only they push the y directions
@@ -449,9 +449,8 @@ def test_newton_orbit_on_an_affine_map(monodromy_only):
         phi = phi + 0.05 * jnp.sin(y)
         return jnp.concatenate([phi, (jnp.asarray(w) @ y + th @ th)[None]]), jnp.asarray(True)
 
-    orb = jax.jit(lambda y0, th: _orbit.newton_orbit(run, y0, th, 1e-13, 30, monodromy_only=monodromy_only))(
-        jnp.full(3, 10.0), jnp.asarray(theta)
-    )
+    solve = lambda y0, th: _orbit.newton_orbit(run, y0, th, 1e-13, 30, monodromy_only=monodromy_only, patience=patience)
+    orb = jax.jit(solve)(jnp.full(3, 10.0), jnp.asarray(theta))
     assert bool(orb.ok) and int(orb.n_iter) >= 3
     y = np.asarray(orb.y)
     np.testing.assert_allclose(A @ y + B @ theta**2 + c + 0.05 * np.sin(y), y, rtol=0, atol=1e-12)
@@ -460,6 +459,24 @@ def test_newton_orbit_on_an_affine_map(monodromy_only):
     grad = w @ np.linalg.solve(np.eye(3) - M, B * (2 * theta)) + 2 * theta
     np.testing.assert_allclose(np.asarray(orb.gradient)[0], grad, rtol=1e-10)
     np.testing.assert_allclose(np.asarray(orb.figures)[0], w @ y + theta @ theta, rtol=1e-12)
+
+
+def test_newton_orbit_gives_up_a_cycle():
+    # Newton's method on f(y) = y^3 - 2y + 2 from y = 0 cycles 0, 1, 0, ... (residuals 2, 1, 2, 1):
+    # the period map y + f(y) has no fixed point near the start. With `patience` 3 it stops,
+    # unconverged, at the third iteration in a row that did not halve the smallest residual (1);
+    # without, at max_iter.
+    def run(z):
+        y = z[:1]
+        return jnp.concatenate([y + y**3 - 2 * y + 2, z[1:]]), jnp.asarray(True)
+
+    def solve(patience):
+        fn = jax.jit(lambda y0, th: _orbit.newton_orbit(run, y0, th, 1e-12, 30, patience=patience))
+        return fn(jnp.zeros(1), jnp.ones(1))
+
+    stopped, held = solve(3), solve(None)
+    assert not bool(stopped.ok) and int(stopped.n_iter) == 4
+    assert not bool(held.ok) and int(held.n_iter) == 30
 
 
 @pytest.fixture(scope="module")

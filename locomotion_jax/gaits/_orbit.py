@@ -119,6 +119,7 @@ def newton_orbit(
     *,
     monodromy_only: bool = False,
     gradient: Array | bool = True,
+    patience: Array | int | None = None,
 ) -> Orbit:
     """The fixed point of a period map and the figures' implicit-function gradient.
 
@@ -139,7 +140,13 @@ def newton_orbit(
     where false, the pass in all directions is skipped and the gradient returned is zero, the
     rest as with it (a screen that ranks orbits by their figures alone). Traced, it picks the
     branch at run time (`lax.cond`; under `vmap` an unbatched predicate runs one branch), so
-    both uses share one compiled program."""
+    both uses share one compiled program.
+
+    `patience` (`None`: `max_iter`, never early): Newton's method stops, unconverged, once
+    `patience` iterations in a row have not halved the smallest residual reached so far. Where
+    the period map has no fixed point near the start (a jump of the gait's contact sequence),
+    the iterates cycle instead of converging, and in a vmapped batch such a row would hold the
+    others for `max_iter` iterations."""
     ny = y0.shape[0]
     eye = jnp.eye(ny, dtype=theta.dtype)
 
@@ -154,23 +161,30 @@ def newton_orbit(
         return val, J, ok & jnp.all(jnp.isfinite(val)) & jnp.all(jnp.isfinite(J))
 
     step_pass = linearise_y if monodromy_only else linearise
+    patience = max_iter if patience is None else patience
+
+    def residual(y, val):
+        return jnp.max(jnp.abs(val[:ny] - y))
 
     def small(y, val):
-        return jnp.max(jnp.abs(val[:ny] - y)) <= tol * (1 + jnp.max(jnp.abs(y)))
+        return residual(y, val) <= tol * (1 + jnp.max(jnp.abs(y)))
 
     def cond(c):
-        _, _, _, ok, it, done = c
-        return ~done & ok & (it < max_iter)
+        _, _, _, ok, it, done, _, since = c
+        return ~done & ok & (it < max_iter) & (since < patience)
 
     def body(c):
-        y, val, J, _, it, _ = c
+        y, val, J, _, it, _, best, since = c
         y1 = y + jnp.linalg.solve(J[:ny, :ny] - eye, y - val[:ny])
         val1, J1, ok1 = step_pass(y1)
-        return y1, val1, J1, ok1, it + 1, small(y1, val1)
+        r1 = residual(y1, val1)
+        since1 = jnp.where(r1 <= best / 2, 0, since + 1)
+        return y1, val1, J1, ok1, it + 1, small(y1, val1), jnp.minimum(best, r1), since1
 
     val0, J0, ok0 = step_pass(y0)
-    init = (y0, val0, J0, ok0, jnp.zeros((), jnp.int32), small(y0, val0))
-    y, val, J, ok, it, done = jax.lax.while_loop(cond, body, init)
+    zero = jnp.zeros((), jnp.int32)
+    init = (y0, val0, J0, ok0, zero, small(y0, val0), residual(y0, val0), zero)
+    y, val, J, ok, it, done, _, _ = jax.lax.while_loop(cond, body, init)
     if monodromy_only:
         # The full Jacobian once, at the last iterate (the same point: the same values).
         full = lambda y, val, J: linearise(y)
@@ -226,7 +240,7 @@ class ShapeActuation(AbstractActuation):
 
 
 def _orbit_one(
-    model, a_max, theta, y0, k, actuation, contact, dt, max_steps, tol, max_iter, monodromy_only, gradient
+    model, a_max, theta, y0, k, actuation, contact, dt, max_steps, tol, max_iter, monodromy_only, gradient, patience
 ) -> Orbit:
     ny = y0.shape[0]
 
@@ -235,14 +249,16 @@ def _orbit_one(
         out = period(P, contact, dt, max_steps, z[:ny], k)
         return jnp.concatenate([out.y, out.figures]), out.ok
 
-    return newton_orbit(run, y0, theta, tol, max_iter, monodromy_only=monodromy_only, gradient=gradient)
+    return newton_orbit(run, y0, theta, tol, max_iter, monodromy_only=monodromy_only, gradient=gradient,
+                        patience=patience)  # fmt: skip
 
 
-def _evaluate(model, a_max, theta, y0, k, actuation, contact, dt, max_steps, tol, max_iter, monodromy_only, gradient):
+def _evaluate(model, a_max, theta, y0, k, actuation, contact, dt, max_steps, tol, max_iter, monodromy_only, gradient,
+              patience=None):  # fmt: skip
     actuation.traces["evaluate"] += 1  # runs only while tracing
     # `gradient` stays outside the vmap: one branch runs for the whole batch.
     one = lambda th, y, kk: _orbit_one(
-        model, a_max, th, y, kk, actuation, contact, dt, max_steps, tol, max_iter, monodromy_only, gradient
+        model, a_max, th, y, kk, actuation, contact, dt, max_steps, tol, max_iter, monodromy_only, gradient, patience
     )
     return jax.vmap(one)(theta, y0, k)
 
@@ -279,7 +295,8 @@ relax = engine_jit(_relax, ("actuation", "contact", "dt"))
 
 class Oracle(eqx.Module):
     """The compiled evaluations of one problem of the paper's model (static: the shape family,
-    contact, step, iterations)."""
+    contact, step, iterations; `patience`: [`newton_orbit`][locomotion_jax.gaits._orbit.newton_orbit]'s,
+    traced, `None` for `max_iter`)."""
 
     params: Params
     a_max: Array
@@ -289,6 +306,7 @@ class Oracle(eqx.Module):
     contact: Contact = eqx.field(static=True)
     dt: float = eqx.field(static=True)
     max_iter: int = eqx.field(static=True)
+    patience: Array | None = None
 
     @property
     def dtype(self) -> Any:
@@ -299,7 +317,8 @@ class Oracle(eqx.Module):
         for a batch of decision vectors, from warm starts `y0`; without `gradient`, the same orbits
         with a zero gradient, at a fraction of the cost (the same compiled program)."""
         return evaluate(self.params, self.a_max, theta, y0, k, ShapeActuation(self.shape), self.contact, self.dt,
-                        self.max_steps, self.tol, self.max_iter, True, jnp.asarray(gradient))  # fmt: skip
+                        self.max_steps, self.tol, self.max_iter, True, jnp.asarray(gradient),
+                        self.patience)  # fmt: skip
 
     def transient(self, theta: Array, y0: Array, fresh: Array, periods: Array) -> Array:
         """The reduced state after `periods` periods (from `y0`, or from rest where `fresh`)."""
