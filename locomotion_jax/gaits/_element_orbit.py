@@ -160,12 +160,12 @@ class ChainActuation(orbit.AbstractActuation):
         return P.initial_positions("relaxed")
 
 
-def evaluate(C, a_max, theta, y0, k, harmonics, knots, contact, dt, max_steps, tol, max_iter) -> Orbit:
+def evaluate(C, a_max, theta, y0, k, harmonics, knots, contact, dt, max_steps, tol, max_iter, patience=None) -> Orbit:
     """Orbits and sensitivities of a batch of decision vectors (`_orbit.evaluate`, compiled once
     per chain structure, batch size and static choice)."""
     act = ChainActuation(harmonics, knots, contact)
     return orbit.evaluate(C, a_max, theta, y0, k, act, contact, dt, max_steps, tol, max_iter, monodromy_only=False,
-                          gradient=True)  # fmt: skip
+                          gradient=True, patience=patience)  # fmt: skip
 
 
 def relax(C, a_max, theta, y0, fresh, periods, harmonics, knots, contact, dt, max_steps) -> Array:
@@ -194,6 +194,7 @@ class ChainOracle(eqx.Module):
     dt: float = eqx.field(static=True)
     max_iter: int = eqx.field(static=True)
     knots: int = eqx.field(static=True, default=0)
+    patience: Array | None = None
 
     @property
     def dtype(self) -> Any:
@@ -203,7 +204,7 @@ class ChainOracle(eqx.Module):
         """Steady gaits of `k` actuation periods (int32, per row) and their sensitivities, for a
         batch of decision vectors, from warm starts `y0`."""
         return evaluate(self.chain, self.a_max, theta, y0, k, self.harmonics, self.knots, self.contact, self.dt,
-                        self.max_steps, self.tol, self.max_iter)  # fmt: skip
+                        self.max_steps, self.tol, self.max_iter, self.patience)  # fmt: skip
 
     def transient(self, theta: Array, y0: Array, fresh: Array, periods: Array) -> Array:
         """The reduced state after `periods` periods (from `y0`, or from rest where `fresh`)."""

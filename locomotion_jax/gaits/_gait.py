@@ -141,12 +141,14 @@ def paper_problem(params: Params, dynamics: Exact, waveform: AbstractWaveform | 
 
 
 def paper_gait(params: Params, *, dynamics: Exact, transient: int = 30, waveform: AbstractWaveform | None = None,
-               start: str = "paper", guarded: bool = True, compact: bool = False) -> Gait:  # fmt: skip
+               start: str = "paper", guarded: bool = True, compact: bool = False,
+               patience: int | None = None) -> Gait:  # fmt: skip
     """The exact optimiser's steady gaits of the paper's model: [`steady_gait`][]'s defaults under strict
-    contact, with the solver's options (`guarded`: [`paper_problem`][]; `compact`:
+    contact, with the solver's options (`guarded`: [`paper_problem`][]; `compact`, `patience`:
     `_shooting.newton`, for a caller that solves many batches of one size)."""
     problem = paper_problem(params, dynamics, waveform, "strict", start, None, guarded)
-    return shooting.steady_gaits(problem, transient=transient, dynamics=dynamics, contact="strict", compact=compact)
+    return shooting.steady_gaits(problem, transient=transient, dynamics=dynamics, contact="strict", compact=compact,
+                                 patience=patience)  # fmt: skip
 
 
 def configs(flat: Params, wave: AbstractWaveform, axes: int | None) -> tuple[Params, AbstractWaveform]:

@@ -52,6 +52,13 @@ TRACES: Counter = Counter()
 `"relax"`); a test checks that a whole optimisation traces each once."""
 
 
+PATIENCE = 3
+"""The exact optimisers' oracles' Newton iterations without halving the smallest residual before an
+orbit is given up ([`newton_orbit`][locomotion_jax.gaits._orbit.newton_orbit]'s `patience`): a
+converging solve halves it at nearly every iteration, and one from a point past a jump of the
+objective, where a line search often probes, cycles."""
+
+
 class Period(NamedTuple):
     """`k` periods from a section state: the end's reduced state, $(\\Delta X, e_d, \\min N)$, success."""
 

@@ -26,6 +26,7 @@ import numpy as np
 
 from ..dynamics._exact_dynamics import Exact
 from ..gaits import _element_orbit as orbit
+from ..gaits._orbit import PATIENCE
 from ._descent import local_step, METHODS
 from ._evaluator import Evaluator
 from ._figures import Figures, PENALTY
@@ -240,7 +241,7 @@ def refine(base: Any, starts: list[Start], a_max: float, v_min: float, direction
         chain=base, a_max=jnp.asarray(a_max, dtype), max_steps=jnp.asarray(steps, jnp.int32),
         tol=jnp.asarray(settings.newton_tol if jnp.finfo(dtype).bits == 64 else 1e-5, dtype), harmonics=H,
         contact="paper",  # iterates past a lift-off stay defined; the margin keeps N > 0
-        dt=settings.dt, max_iter=settings.newton_iter, knots=knots,
+        dt=settings.dt, max_iter=settings.newton_iter, knots=knots, patience=jnp.asarray(PATIENCE, jnp.int32),
     )  # fmt: skip
     v_target = v_min * (1 + settings.speed_slack)
     free = hi > lo

@@ -95,11 +95,6 @@ def _descent(x0, shape: AbstractShape, bounds, settings: ExactSettings, max_iter
                stall_rtol=settings.stall_rtol)  # fmt: skip
 
 
-NEWTON_PATIENCE = 3
-"""Newton iterations of an orbit solve without halving its smallest residual before the orbit is
-given up (`gaits._orbit.newton_orbit`): a converging solve halves it at nearly every iteration,
-and one from a point past a jump of the objective (where the line search often probes) cycles."""
-
 HALF_STEP_RTOL = 1e-3
 """Largest relative change of a candidate's speed or cost of transport with half the step (`_verify`)."""
 
@@ -268,7 +263,7 @@ def optimise_exact(
         contact="paper",  # iterates past a lift-off stay defined; the margin constraint keeps N > 0
         dt=settings.dt,
         max_iter=settings.newton_iter,
-        patience=jnp.asarray(NEWTON_PATIENCE, jnp.int32),
+        patience=jnp.asarray(orbit.PATIENCE, jnp.int32),
     )
     v_target = speed * (1 + settings.speed_slack)
     make = lambda th, orb, v, k: Figures(th, orb, v, k, direction, settings.margin, free)

@@ -19,6 +19,7 @@ import numpy as np
 
 from ..dynamics._exact_dynamics import Exact
 from ..gaits._gait import Gait, GaitStatus, paper_gait, steady_gait
+from ..gaits._orbit import PATIENCE
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform
 from ._optimum import along
@@ -142,7 +143,10 @@ def _sinusoid_figures(params: Params, a: np.ndarray, omega: np.ndarray, dt: floa
     gait is solved on its own; the padding is dropped). Newton's method runs on quarter-size
     batches (`steady_gait`'s solver with `compact=True`): the first gait period on all of them in
     the order of the sinusoids' periods, so that a fast sinusoid does not wait for a slow one's
-    long period, and the later periods on the few sinusoids still open: the same gaits."""
+    long period, and the later periods on the few sinusoids still open: the same gaits. A
+    sinusoid whose Newton iterations stop halving their residual is given up at a gait period after
+    [`PATIENCE`][locomotion_jax.gaits._orbit.PATIENCE] of them (it cycles: no gait of that period
+    near its start) instead of holding its batch to the iteration limit."""
     n = len(a)
     pad = bucket(n) - n
     values: dict[str, Any] = {k: v for k, v in params.as_dict().items() if k not in ("a", "omega")}
@@ -151,7 +155,8 @@ def _sinusoid_figures(params: Params, a: np.ndarray, omega: np.ndarray, dt: floa
         omega=jnp.asarray(np.pad(omega, (0, pad), mode="edge"), params.dtype),
         **values,
     )
-    gait = paper_gait(batch, dynamics=Exact(dt=dt), transient=transient, start="relaxed", compact=True)
+    gait = paper_gait(batch, dynamics=Exact(dt=dt), transient=transient, start="relaxed", compact=True,
+                      patience=PATIENCE)  # fmt: skip
     assert isinstance(gait, Gait)  # the strict reading: the two-mass solver's own result
     return ExactFigures(*(np.asarray(f)[:n] for f in gait_figures(gait)))
 
