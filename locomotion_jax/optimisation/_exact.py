@@ -452,11 +452,9 @@ def _verify(params, speed, direction, a_max, shape, free, settings, candidates, 
     for b in range(0, len(wanted), rows):
         parts.append(check([f[1] for f in wanted[b : b + rows]]))
         names += [f[0] for f in wanted[b : b + rows]]
+    # The batches' rows in order: every array of each part (theta, gait, figures, half-step figures).
     join = lambda *xs: np.concatenate([np.asarray(x) for x in xs]) if np.ndim(xs[0]) else xs[0]
-    theta = np.concatenate([p[0] for p in parts])
-    gait = jax.tree_util.tree_map(join, *(p[1] for p in parts))
-    fig = pareto.ExactFigures(*(join(*f) for f in zip(*(p[2] for p in parts))))
-    half = pareto.ExactFigures(*(join(*f) for f in zip(*(p[3] for p in parts))))
+    theta, gait, fig, half = (jax.tree_util.tree_map(join, *column) for column in zip(*parts))
     n = len(names)
     strokes = np.array([a_max * shape.stroke(th) for th in theta])
     k, feasible, exact = verified(fig, strokes, speed, direction, a_max, eps, baseline)
