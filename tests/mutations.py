@@ -520,6 +520,13 @@ MUTATIONS = [
         ("tests/test_optimise.py::test_newton_orbit_gives_up_a_cycle",),
     ),
     Mutation(
+        "rested_batch_repeats_its_transient",
+        "the orbit evaluator's retry of a batch already rested: the transient from rest and the period-1 solve again",
+        "locomotion_jax/optimisation/_evaluator.py",
+        (("            if rested:\n", "            if False:\n"),),
+        ("tests/test_optimise.py::test_a_rested_batch_retries_its_failures_as_period_2_gaits_alone",),
+    ),
+    Mutation(
         "sqp_step_ignores_the_multipliers",
         "the SQP step of the local descent: the active constraints' correction dropped (the free step)",
         "locomotion_jax/optimisation/_descent.py",

@@ -36,7 +36,7 @@ import dataclasses
 import json
 import math
 import types
-from typing import Any
+from typing import Any, NamedTuple
 
 import equinox as eqx
 import jax
@@ -50,6 +50,7 @@ from locomotion_jax.gaits import _element_orbit, _orbit
 from locomotion_jax.optimisation import (
     _chain_screen as screen,
     _constraints,
+    _evaluator,
     _exact as _exact_optimise,
     _objective,
     _optimise,
@@ -477,6 +478,51 @@ def test_newton_orbit_gives_up_a_cycle():
     stopped, held = solve(3), solve(None)
     assert not bool(stopped.ok) and int(stopped.n_iter) == 4
     assert not bool(held.ok) and int(held.n_iter) == 30
+
+
+class _LadderOrbit(NamedTuple):
+    y: np.ndarray
+    ok: np.ndarray
+
+
+class _LadderOracle:
+    """An orbit oracle whose outcome is a function of its inputs alone: the transient from rest
+    settles at 10 + theta, one from a warm start adds 1; an orbit converges from a settled state
+    as a period-1 gait where theta > 0, as a period-2 gait where theta > -1. Records its calls."""
+
+    dtype = jnp.float64
+
+    def __init__(self):
+        self.calls: list[tuple] = []
+
+    def orbits(self, theta, y0, k, gradient=True):
+        self.calls.append(("orbits", np.asarray(k).tolist()))
+        settled = np.asarray(y0)[:, 0] == 10 + np.asarray(theta)[:, 0]
+        ok = settled & (np.asarray(theta)[:, 0] > np.where(np.asarray(k) == 1, 0.0, -1.0))
+        return _LadderOrbit(y=np.asarray(y0) + 100 * np.asarray(k)[:, None], ok=ok)
+
+    def transient(self, theta, y0, fresh, periods):
+        self.calls.append(("transient", np.asarray(fresh).tolist()))
+        return np.where(np.asarray(fresh)[:, None], 10 + np.asarray(theta), np.asarray(y0) + 1)
+
+
+def test_a_rested_batch_retries_its_failures_as_period_2_gaits_alone():
+    # The exact optimiser's screen solves period-1 gaits from the transient from rest. Where one
+    # fails, the retry's transient from rest and period-1 solve would repeat that attempt bit for
+    # bit: `rested=True` goes straight to the period-2 gait, with the same outcome.
+    theta = np.array([[0.5], [-0.5], [-2.0], [1.0]])
+    rest = 10 + theta
+    plain, rested = _LadderOracle(), _LadderOracle()
+    ev_plain = _evaluator.Evaluator(plain, 4, 30, make=lambda *a: None)
+    ev_rested = _evaluator.Evaluator(rested, 4, 30, make=lambda *a: None)
+    orb_p, k_p = ev_plain.solve(theta, rest, np.ones(4, int), np.zeros(4, bool))
+    orb_r, k_r = ev_rested.solve(theta, rest, np.ones(4, int), rested=True)
+    assert orb_r.ok.tolist() == [True, True, False, True] and k_r.tolist() == [1, 2, 1, 1]
+    np.testing.assert_array_equal(k_p, k_r)
+    np.testing.assert_array_equal(orb_p.ok, orb_r.ok)
+    np.testing.assert_array_equal(orb_p.y, orb_r.y)
+    assert [c[0] for c in plain.calls] == ["orbits", "transient", "orbits", "orbits"]
+    assert rested.calls == [("orbits", [1, 1, 1, 1]), ("orbits", [2, 2, 2, 2])]
 
 
 @pytest.fixture(scope="module")

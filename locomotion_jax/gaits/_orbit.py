@@ -53,10 +53,12 @@ TRACES: Counter = Counter()
 
 
 PATIENCE = 3
-"""The exact optimisers' oracles' Newton iterations without halving the smallest residual before an
-orbit is given up ([`newton_orbit`][locomotion_jax.gaits._orbit.newton_orbit]'s `patience`): a
-converging solve halves it at nearly every iteration, and one from a point past a jump of the
-objective, where a line search often probes, cycles."""
+"""Newton iterations without halving the smallest residual before an orbit is given up
+([`newton_orbit`][locomotion_jax.gaits._orbit.newton_orbit]'s `patience`, and the steady-gait
+corrector's): in the exact optimisers' oracles, the steady gaits of the paper's sinusoid baseline
+and the chain optimiser's screen. A converging solve halves it at nearly every iteration; one
+without an orbit near its start cycles (from a point past a jump of the objective, where a line
+search often probes, or a wave with no gait of that period), and a batch runs in lockstep."""
 
 
 class Period(NamedTuple):

@@ -21,6 +21,7 @@ import numpy as np
 
 from ..dynamics._exact_dynamics import Exact
 from ..gaits._element_orbit import with_spline
+from ..gaits._orbit import PATIENCE
 from ..gaits._select import GaitStatus
 from ..gaits._shooting import steady_gait_chain, transient_speed
 from ..model._chain import Chain
@@ -70,12 +71,6 @@ def with_actuation(chain: Chain, cos: np.ndarray, sin: np.ndarray, omega: np.nda
     batch = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (B,) + x.shape), chain)
     waves = SpringFourier(jnp.asarray(cos, dtype), jnp.asarray(sin, dtype), jnp.asarray(omega, dtype))
     return batch.with_waves(waves)
-
-
-PATIENCE = 3
-"""The screen's Newton iterations without progress before a wave is given up at a gait period
-(`_corrector`): a converging wave halves its residual at every iteration, one with no gait of
-that period cycles, and the chunk runs in lockstep."""
 
 
 LAST = 12

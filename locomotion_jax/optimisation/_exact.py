@@ -304,7 +304,7 @@ def optimise_exact(
                 jnp.asarray(th, dtype), jnp.zeros((lanes, 3), dtype), jnp.ones(lanes, bool), periods
             )
             # The screen ranks by the figures alone: no gradients (the local runs compute their own).
-            orb, kk = ev.solve(th, np.asarray(rest), np.ones(lanes, int), np.zeros(lanes, bool), gradient=False)
+            orb, kk = ev.solve(th, np.asarray(rest), np.ones(lanes, int), rested=True, gradient=False)
             for k in range(lanes):
                 one = jax.tree_util.tree_map(lambda x: x[k], orb)
                 figs.append(make(th[k], one, v_target, int(kk[k])) if one.ok else _Bad(th[k], None))
