@@ -520,6 +520,13 @@ MUTATIONS = [
         ("tests/test_optimise.py::test_newton_orbit_gives_up_a_cycle",),
     ),
     Mutation(
+        "verification_never_gives_up",
+        "the exact optimiser's verification: Newton's method runs every iteration of each gait period, cycling or not",
+        "locomotion_jax/optimisation/_exact.py",
+        (("guarded=False, patience=orbit.PATIENCE)", "guarded=False, patience=None)"),),
+        ("tests/test_optimise.py::test_runners_up_are_verified_where_their_run_fails_or_might_be_cheaper",),
+    ),
+    Mutation(
         "rested_batch_repeats_its_transient",
         "the orbit evaluator's retry of a batch already rested: the transient from rest and the period-1 solve again",
         "locomotion_jax/optimisation/_evaluator.py",

@@ -570,11 +570,20 @@ def test_sqp_local_method_reaches_a_verified_optimum(exact_run, tiny_sweep):
     assert opt.cost_of_transport_exact <= 1.01 * opt_d.cost_of_transport_exact
 
 
-def test_runners_up_are_verified_where_their_run_fails_or_might_be_cheaper(exact_run):
+def test_runners_up_are_verified_where_their_run_fails_or_might_be_cheaper(exact_run, monkeypatch):
     """`_exact._verify`: the candidates first, then only the runners-up of a run whose candidate
     is not feasible or whose cost in the descent is below the cheapest feasible candidate's by
-    more than `FALLBACK_RTOL`; those of the later batch get the figures they get in the first."""
+    more than `FALLBACK_RTOL`; those of the later batch get the figures they get in the first.
+    Its steady gaits give up a cycling Newton solve (`PATIENCE`)."""
     opt, _ = exact_run
+    patience = []
+    real = _exact_optimise.paper_gait
+
+    def spy(*args, **options):
+        patience.append(options["patience"])
+        return real(*args, **options)
+
+    monkeypatch.setattr(_exact_optimise, "paper_gait", spy)
     best = np.r_[opt.control / 0.05, math.log(opt.omega)]
     slow = np.r_[best[:-1], best[-1] - math.log(2)]  # half the frequency: too slow
     c, rtol = opt.cost_of_transport_exact, _exact_optimise.FALLBACK_RTOL
@@ -599,6 +608,7 @@ def test_runners_up_are_verified_where_their_run_fails_or_might_be_cheaper(exact
             assert table[again][key] == pytest.approx(table[first][key], rel=1e-12), (again, key)
     cheapest = min(r["cost_of_transport_exact"] for r in table.values() if r["feasible_exact"])
     assert found.feasible_exact and found.cost_of_transport_exact == cheapest
+    assert patience == [_orbit.PATIENCE] * 4  # two batches, each at dt and dt/2
 
 
 def test_exact_compilations(exact_run, tiny_sweep):

@@ -35,7 +35,8 @@ Method:
   evaluations is one batched (vmapped) call of the engine.
 - **Verification.** Every refined waveform (and the best and the given start) is solved again by
   [`steady_gait`][] under the strict contact reading from the relaxed spring (periods 1
-  to 4 tried, stability from the Floquet multipliers); the reported optimum is the
+  to 4 tried, a period given up where Newton's iterations cycle, stability from the Floquet
+  multipliers); the reported optimum is the
   cheapest one that is converged, stable, without lift-off, at least as fast as
   required and within the stroke. The runners-up of each local run (earlier points of its
   descent) are solved in a second batch, only where their run's waveform fails or where the
@@ -420,8 +421,9 @@ def _verify(params, speed, direction, a_max, shape, free, settings, candidates, 
         batch = pareto.with_waveform_frequency(params, wave)
         # Unguarded: a spline's knot spacing is finer than the guard's 4 steps at the default
         # settings, and this verification checks the resolution itself (a solve at dt/2 must agree).
+        # Newton's patience: a row that cycles would hold the batch for every iteration of each period.
         return paper_gait(batch, dynamics=_exact_dynamics(dt), transient=settings.transient, waveform=wave,
-                          start="relaxed", guarded=False)  # fmt: skip
+                          start="relaxed", guarded=False, patience=orbit.PATIENCE)  # fmt: skip
 
     def check(thetas):
         """The gaits of up to `rows` candidates at the better of their time origins, with the
