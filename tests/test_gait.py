@@ -171,6 +171,37 @@ def test_unstable_orbit_and_period_two_gait():
     assert min(u[0], u[1]) < float(g1.u) < max(u[0], u[1])
 
 
+def test_a_stuck_gait_is_not_tried_at_longer_periods(monkeypatch):
+    """A sinusoid too small to overcome static friction leaves both masses stuck: the transient
+    ends on the orbit (no Newton iteration), unstable by its multiplier 1. That state is a fixed
+    point of every longer period's map, no more stable there, so periods 2 to 4 are not tried for
+    it; they are for an unstable orbit Newton's method iterated to (a period doubling, a gait of
+    period 3). Every field of the result is what trying them gives."""
+    cases = [dict(a=0.05 / 6, omega=0.5), UNSTABLE, dict(a=0.05, omega=4.253), dict(omega=2.0)]
+    tried: list[tuple[int, list[int]]] = []
+    newton = cg.newton
+
+    def spy(C, physics_of, contact, dt, y0, go, k, *args):
+        tried.append((k, np.flatnonzero(np.asarray(go)).tolist()))
+        return newton(C, physics_of, contact, dt, y0, go, k, *args)
+
+    monkeypatch.setattr(cg, "newton", spy)
+    g = steady_gait(_batch(cases))
+    assert tried == [(1, [0, 1, 2, 3]), (2, [1, 2]), (3, [2])]
+    assert np.asarray(g.k).tolist() == [1, 2, 3, 1] and np.asarray(g.stable).tolist() == [False, True, True, True]
+    assert int(g.n_iter[0]) == 0 and float(np.abs(g.multipliers[0, 0])) == pytest.approx(1.0, abs=1e-9)
+    assert float(g.mean_speed[0]) == 0.0
+    # Periods 2 to 4 tried for the stuck gait too (every unstable orbit still open): the same result.
+    tried.clear()
+    monkeypatch.setattr(_select, "still_open", lambda r: (r["status"] == GaitStatus.NOT_CONVERGED)
+                        | ((r["status"] == GaitStatus.CONVERGED) & ~r["stable"]))  # fmt: skip
+    every = steady_gait(_batch(cases))
+    assert tried == [(1, [0, 1, 2, 3]), (2, [0, 1, 2]), (3, [0, 2]), (4, [0])]
+    for name in (f.name for f in dataclasses.fields(g)):
+        a, b = np.asarray(getattr(g, name)), np.asarray(getattr(every, name))
+        np.testing.assert_array_equal(a, b, err_msg=name)
+
+
 @pytest.mark.slow  # a second compilation of the solver; float32 engines are tested in the default run
 def test_float32():
     """float32: Newton to 1e-5, speeds within 1e-4 of float64 (SL gait, complex multipliers)."""

@@ -62,7 +62,10 @@ def steady_gait(
     After `transient` actuation periods from the start `start`, Newton's method on the
     period map $\\Phi_k$ is tried for each `k` in `periods` in turn, for the configurations
     that no smaller `k` solved with a stable orbit: a period-2 gait is reported with
-    `k = 2`, while `periods=1` returns the (unstable) period-1 orbit it doubled from.
+    `k = 2`, while `periods=1` returns the (unstable) period-1 orbit it doubled from. An
+    unstable orbit that the transient itself ended on (no Newton iteration: a gait whose masses
+    stay stuck, its multiplier 1) is reported as it is: that state is a fixed point of every
+    longer period's map too, no more stable there.
 
     **Arguments:**
 

@@ -80,8 +80,13 @@ def multipliers(r: dict) -> np.ndarray:
 
 
 def still_open(r: dict) -> np.ndarray:
-    """Configurations a longer period may still improve: not converged, or unstable."""
-    return (r["status"] == GaitStatus.NOT_CONVERGED) | ((r["status"] == GaitStatus.CONVERGED) & ~r["stable"])
+    """Configurations a longer period may still improve: not converged, or unstable on an orbit
+    that Newton's method reached by iterating. Where it took none (the transient ended on the
+    orbit, as a gait whose masses stay stuck does), the start is a fixed point of every longer
+    period's map as well, there with the powers of the same multipliers: no more stable, and
+    `better` would keep the orbit found."""
+    unstable = (r["status"] == GaitStatus.CONVERGED) & ~r["stable"] & (np.asarray(r["it"]) > 0)
+    return (r["status"] == GaitStatus.NOT_CONVERGED) | unstable
 
 
 def ratio(e: Any, dist: Any, ok: np.ndarray) -> np.ndarray:
