@@ -520,6 +520,13 @@ MUTATIONS = [
         ("tests/test_optimise.py::test_newton_orbit_gives_up_a_cycle",),
     ),
     Mutation(
+        "stuck_gait_tried_at_longer_periods",
+        "steady gaits: every unstable orbit is tried at the longer periods, one the transient ended on too",
+        "locomotion_jax/gaits/_select.py",
+        (('~r["stable"] & (np.asarray(r["it"]) > 0)', '~r["stable"]'),),
+        ("tests/test_gait.py::test_a_stuck_gait_is_not_tried_at_longer_periods",),
+    ),
+    Mutation(
         "verification_never_gives_up",
         "the exact optimiser's verification: Newton's method runs every iteration of each gait period, cycling or not",
         "locomotion_jax/optimisation/_exact.py",
