@@ -56,9 +56,10 @@ PATIENCE = 3
 """Newton iterations without halving the smallest residual before an orbit is given up
 ([`newton_orbit`][locomotion_jax.gaits._orbit.newton_orbit]'s `patience`, and the steady-gait
 corrector's): in the exact optimisers' oracles, the steady gaits of the paper's sinusoid baseline
-and of its verification, and the chain optimiser's screen. A converging solve halves it at nearly every iteration; one
-without an orbit near its start cycles (from a point past a jump of the objective, where a line
-search often probes, or a wave with no gait of that period), and a batch runs in lockstep."""
+and of its verification, and the chain optimiser's screen. A converging solve halves it at nearly
+every iteration; one without an orbit near its start cycles (from a point past a jump of the
+objective, where a line search often probes, or a wave with no gait of that period), and a batch
+runs in lockstep."""
 
 
 class Period(NamedTuple):

@@ -34,11 +34,10 @@ Method:
   windows, `_shapes.StrokePeaks`). The local solvers run in lockstep, so that each of their
   evaluations is one batched (vmapped) call of the engine.
 - **Verification.** Every refined waveform (and the best and the given start) is solved again by
-  [`steady_gait`][] under the strict contact reading from the relaxed spring (periods 1
-  to 4 tried, a period given up where Newton's iterations cycle, stability from the Floquet
-  multipliers); the reported optimum is the
-  cheapest one that is converged, stable, without lift-off, at least as fast as
-  required and within the stroke. The runners-up of each local run (earlier points of its
+  [`steady_gait`][] under the strict contact reading from the relaxed spring (periods 1 to 4
+  tried, a period given up where Newton's iterations cycle, stability from the Floquet
+  multipliers); the reported optimum is the cheapest one that is converged, stable, without
+  lift-off, at least as fast as required and within the stroke. The runners-up of each local run (earlier points of its
   descent) are solved in a second batch, only where their run's waveform fails or where the
   descent found them cheaper than the cheapest that passed.
 """
