@@ -527,6 +527,13 @@ MUTATIONS = [
         ("tests/test_gait.py::test_a_stuck_gait_is_not_tried_at_longer_periods",),
     ),
     Mutation(
+        "lane_loop_batched_by_fixpoint",
+        "lane_while_loop: the initial carry left as it is, so that vmap batches the loop's body by a fixpoint again",
+        "locomotion_jax/_loops.py",
+        (("    if not firsts:\n        return tree", "    if True:\n        return tree"),),
+        ("tests/test_loops.py::test_lane_while_loop_batches_its_body_once",),
+    ),
+    Mutation(
         "verification_never_gives_up",
         "the exact optimiser's verification: Newton's method runs every iteration of each gait period, cycling or not",
         "locomotion_jax/optimisation/_exact.py",

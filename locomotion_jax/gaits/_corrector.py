@@ -33,6 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array
+from .._loops import lane_while_loop
 from .._status import Status
 from ..dynamics._compile import engine_jit
 from ..dynamics._forward import jacfwd_in_turn
@@ -238,7 +239,7 @@ def _correct_one(
     on = jnp.abs(cvec @ (z0 - zref)) <= tol * (1 + jnp.max(jnp.abs(z0)))
     zero = jnp.zeros((), jnp.int32)
     init = (z0, J0, out0, valid0, zero, go & on & small(z0, out0) & ~bad0, ~go | bad0, residual(z0, out0), zero)
-    z, J, out, valid, it, done, _, _, _ = jax.lax.while_loop(cond, body, init)
+    z, J, out, valid, it, done, _, _, _ = lane_while_loop(cond, body, init)
     return Solved(z=z, J=J, out=out, done=done & go, valid=valid, it=it)
 
 

@@ -33,10 +33,10 @@ from collections import Counter
 from typing import Any, ClassVar, TypeVar
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 
 from .._custom_types import Array, Contact
+from .._loops import lane_while_loop
 from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._chain_array import engine_physics, GAIT_ARRAY_FROM
@@ -129,7 +129,7 @@ def with_waves(chain: Chain | Mechanism, theta: Array, a_max: Array, harmonics: 
 
 
 def period(
-    C: Chain | Mechanism, contact: Contact, dt: float, max_steps: Array, y: Array, k: Array, loop=jax.lax.while_loop
+    C: Chain | Mechanism, contact: Contact, dt: float, max_steps: Array, y: Array, k: Array, loop=lane_while_loop
 ) -> Period:
     """The `k`-period map $\\Phi_k$ of one chain or mechanism from the reduced state `y`, with the
     figures the optimiser needs (`max_steps` per actuation period): `_orbit.period` of its physics.

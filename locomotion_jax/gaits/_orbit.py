@@ -37,6 +37,7 @@ import jax
 import jax.numpy as jnp
 
 from .._custom_types import Array, Contact
+from .._loops import lane_while_loop
 from .._status import Status
 from ..dynamics import _engine as engine
 from ..dynamics._compile import engine_jit
@@ -71,11 +72,12 @@ class Period(NamedTuple):
 
 
 def period(
-    P: AbstractPhysics, contact: Contact, dt: float, max_steps: Array, y: Array, k: Array, loop=jax.lax.while_loop
+    P: AbstractPhysics, contact: Contact, dt: float, max_steps: Array, y: Array, k: Array, loop=lane_while_loop
 ) -> Period:
     """The `k`-period map $\\Phi_k$ of the physics `P` from the reduced state `y`, with the figures
     the optimisers need (`max_steps` per actuation period). `loop`: the time loop, with
-    `lax.while_loop`'s signature (`gaits._adjoint` passes one that reverse mode traverses)."""
+    `lax.while_loop`'s signature (default [`lane_while_loop`][locomotion_jax._loops.lane_while_loop];
+    `gaits._adjoint` passes one that reverse mode traverses)."""
     t_end = k.astype(y.dtype) * 2 * jnp.pi / P.omega
     st0 = _section_state(P, contact, y)
 
@@ -194,7 +196,7 @@ def newton_orbit(
     val0, J0, ok0 = step_pass(y0)
     zero = jnp.zeros((), jnp.int32)
     init = (y0, val0, J0, ok0, zero, small(y0, val0), residual(y0, val0), zero)
-    y, val, J, ok, it, done, _, _ = jax.lax.while_loop(cond, body, init)
+    y, val, J, ok, it, done, _, _ = lane_while_loop(cond, body, init)
     if monodromy_only:
         # The full Jacobian once, at the last iterate (the same point: the same values).
         full = lambda y, val, J: linearise(y)
@@ -293,7 +295,7 @@ def _relax(model, a_max, theta, y0, fresh, periods, actuation, contact, dt, max_
             s, n = c
             return engine.step(P, contact, dt, s, t_end)[0], n + 1
 
-        st, _ = jax.lax.while_loop(cond, body, (st, jnp.zeros((), jnp.int32)))
+        st, _ = lane_while_loop(cond, body, (st, jnp.zeros((), jnp.int32)))
         return _reduced(st, P)
 
     return jax.vmap(one)(theta, y0, fresh)

@@ -31,6 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array, ArrayLike, Contact
+from .._loops import lane_while_loop
 from .._results import BODIES
 from .._status import Regime, Status
 from ..dynamics import _engine as engine, _numerics as num, _paper as paper
@@ -185,7 +186,7 @@ def _advance(P, contact, dt, st, t_end, max_steps):
 
     zero = tuple(jnp.zeros_like(a) for a in st.y.x)
     init = _Acc(zero, inf, inf, tuple(jnp.zeros(jnp.shape(a), bool) for a in st.y.x))
-    st, acc, _ = jax.lax.while_loop(cond, body, (st, init, jnp.zeros((), jnp.int32)))
+    st, acc, _ = lane_while_loop(cond, body, (st, init, jnp.zeros((), jnp.int32)))
     return st, acc
 
 
