@@ -4,9 +4,10 @@ Each commit is checked out into a temporary git worktree and run in its own fres
 (float64, no persistent compilation cache): the call twice, cold (compilation included) and
 again in the same process (warm). Per call it prints the wall time, the process's CPU time (less
 sensitive to other work on the machine than the wall time), the compilations XLA ran
-(count and backend seconds, from `jax.monitoring`), the wall time of each stage (from the
-optimiser's verbose progress lines: sinusoid baseline, screen, local refinement, verification
-at `dt` and `dt/2`) and the optimum's speed and cost of transport.
+(count and backend seconds, from `jax.monitoring`), the seconds spent tracing (jaxprs, from
+`jax.monitoring` too), the wall time of each stage (from the optimiser's verbose progress lines:
+sinusoid baseline, screen, local refinement, verification at `dt` and `dt/2`) and the optimum's
+speed and cost of transport.
 
     python benchmarks/optimise_speed.py OLD NEW [--parallel]
 
@@ -29,7 +30,8 @@ jax.config.update("jax_enable_x64", True)
 import jax.monitoring as mon
 events = []
 mon.register_event_duration_secs_listener(
-    lambda name, dur, **kw: events.append((time.perf_counter(), name, dur)) if "backend_compile" in name else None
+    lambda name, dur, **kw: events.append((time.perf_counter(), name, dur))
+    if "backend_compile" in name or "jaxpr_trace" in name else None
 )
 import locomotion_jax as lj
 marks = []
@@ -60,9 +62,10 @@ for run in ("cold", "warm"):
     opt = lj.optimise(lj.Params(), v_min=0.05, a_max=0.05, settings=lj.ExactOptimiseSettings(verbose=True))
     t1, c1 = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
     cpu = c1.ru_utime + c1.ru_stime - c0.ru_utime - c0.ru_stime
-    comp = [d for t, n, d in events if t0 <= t <= t1]
+    comp = [d for t, n, d in events if t0 <= t <= t1 and "backend_compile" in n]
+    trace = sum(d for t, n, d in events if t0 <= t <= t1 and "jaxpr_trace" in n)
     print(json.dumps({"run": run, "wall_s": round(t1 - t0, 1), "cpu_s": round(cpu, 1), "compilations": len(comp),
-                      "compile_s": round(sum(comp), 1), "stages_s": stages(t0, t1),
+                      "compile_s": round(sum(comp), 1), "trace_s": round(trace, 1), "stages_s": stages(t0, t1),
                       "speed": opt.mean_speed_exact, "cost_of_transport": opt.cost_of_transport_exact,
                       "feasible": opt.feasible_exact}), flush=True)
 """
@@ -86,17 +89,17 @@ def main(argv: list[str]) -> None:
             procs.append((label, commit, p, start, tree))
             if not parallel:
                 p.wait()
-        print("| commit | call | wall s | CPU s | compilations | compile s | stages s | speed | cost of transport "
-              "| feasible |")  # fmt: skip
-        print("|---|---|---|---|---|---|---|---|---|---|")
+        print("| commit | call | wall s | CPU s | compilations | compile s | tracing s | stages s | speed "
+              "| cost of transport | feasible |")  # fmt: skip
+        print("|---|---|---|---|---|---|---|---|---|---|---|")
         for label, commit, p, start, tree in procs:
             out, _ = p.communicate()
             for line in out.splitlines():
                 r = json.loads(line)
                 stages = ", ".join(f"{k} {v}" for k, v in r["stages_s"].items())
                 print(f"| {label} `{commit}` | {r['run']} | {r['wall_s']} | {r['cpu_s']} | {r['compilations']} "
-                      f"| {r['compile_s']} | {stages} | {r['speed']:.16g} | {r['cost_of_transport']:.16g} "
-                      f"| {r['feasible']} |")  # fmt: skip
+                      f"| {r['compile_s']} | {r.get('trace_s', '')} | {stages} | {r['speed']:.16g} "
+                      f"| {r['cost_of_transport']:.16g} | {r['feasible']} |")  # fmt: skip
             subprocess.call(["git", "-C", root, "worktree", "remove", "--force", tree])
         print(f"\nload average at the end: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
 
