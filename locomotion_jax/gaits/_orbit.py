@@ -76,7 +76,7 @@ def period(
 ) -> Period:
     """The `k`-period map $\\Phi_k$ of the physics `P` from the reduced state `y`, with the figures
     the optimisers need (`max_steps` per actuation period). `loop`: the time loop, with
-    `lax.while_loop`'s signature (default [`lane_while_loop`][locomotion_jax._loops.lane_while_loop];
+    `lax.while_loop`'s signature (default `_loops.lane_while_loop`;
     `gaits._adjoint` passes one that reverse mode traverses)."""
     t_end = k.astype(y.dtype) * 2 * jnp.pi / P.omega
     st0 = _section_state(P, contact, y)
