@@ -6,8 +6,8 @@ are batched by a fixpoint: it batches the loop's body once for the batched value
 carry, again wherever the body made more of them batched, and then once more with all of them
 batched. Nested loops multiply these passes (the engine's step loop inside a gait's period loop
 inside Newton's method), and they were about half of the tracing time of the steady-gait and orbit
-programs. `lane_while_loop` makes every initial value
-batched wherever one is, so that the first pass is the last: the same batched program, traced once.
+programs. `lane_while_loop` makes every initial value batched wherever one is, so that the first
+pass is the last: the same batched program, traced once.
 """
 
 from collections.abc import Callable
