@@ -98,7 +98,7 @@ def main(argv: list[str]) -> None:
                 r = json.loads(line)
                 stages = ", ".join(f"{k} {v}" for k, v in r["stages_s"].items())
                 print(f"| {label} `{commit}` | {r['run']} | {r['wall_s']} | {r['cpu_s']} | {r['compilations']} "
-                      f"| {r['compile_s']} | {r.get('trace_s', '')} | {stages} | {r['speed']:.16g} "
+                      f"| {r['compile_s']} | {r['trace_s']} | {stages} | {r['speed']:.16g} "
                       f"| {r['cost_of_transport']:.16g} | {r['feasible']} |")  # fmt: skip
             subprocess.call(["git", "-C", root, "worktree", "remove", "--force", tree])
         print(f"\nload average at the end: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")

@@ -5,9 +5,10 @@ has ended keeps its values while the others run). JAX's batching rule finds whic
 are batched by a fixpoint: it batches the loop's body once for the batched values of the initial
 carry, again wherever the body made more of them batched, and then once more with all of them
 batched. Nested loops multiply these passes (the engine's step loop inside a gait's period loop
-inside Newton's method), and they were about half of the tracing time of the steady-gait and orbit
-programs. `lane_while_loop` makes every initial value batched wherever one is, so that the first
-pass is the last: the same batched program, traced once.
+inside Newton's method): skipping them took the tracing of the paper optimiser's sinusoid baseline
+and first orbit batch from 51.5 to 28.0 s (`benchmarks/NOTES.md`). `lane_while_loop` makes every
+initial value batched wherever one is, so that the first pass is the last: the same batched
+program, traced once.
 """
 
 from collections.abc import Callable
@@ -20,7 +21,8 @@ import jax.numpy as jnp
 
 def along_lanes(tree: Any) -> Any:
     """`tree`'s values unchanged, each made to depend on all of them: under `vmap` every leaf is
-    batched if any is (outside `vmap` an identity that XLA removes)."""
+    batched if any is (outside `vmap` the same values, for a compare and a select per leaf at the
+    loop's entry, which XLA keeps)."""
     leaves, treedef = jax.tree_util.tree_flatten(tree)
     arrays = [jnp.asarray(x) for x in leaves]
     firsts = [jnp.ravel(x)[0] for x in arrays if x.size]
