@@ -5,8 +5,8 @@ has ended keeps its values while the others run). JAX's batching rule finds whic
 are batched by a fixpoint: it batches the loop's body once for the batched values of the initial
 carry, again wherever the body made more of them batched, and then once more with all of them
 batched. Nested loops multiply these passes (the engine's step loop inside a gait's period loop
-inside Newton's method): skipping them took the tracing of the paper optimiser's sinusoid baseline
-and first orbit batch from 51.5 to 28.0 s (`benchmarks/NOTES.md`). `lane_while_loop` makes every
+inside Newton's method): with this loop the tracing of the paper optimiser's sinusoid baseline
+and first orbit batch took 34.1 s instead of 51.5 (`benchmarks/NOTES.md`). `lane_while_loop` makes every
 initial value batched wherever one is, so that the first pass is the last: the same batched
 program, traced once.
 """
