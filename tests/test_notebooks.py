@@ -99,6 +99,18 @@ finally:
 """
 
 
+def _share_test_cache(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The kernel reads and writes the tests' compilation cache (`conftest._shared_compilation_cache`:
+    the directory in `LJ_TEST_CACHE_DIR`) through JAX's own environment variables: a program a
+    notebook shares with a test, or with another notebook, is compiled once per run."""
+    path = os.environ.get("LJ_TEST_CACHE_DIR")
+    if not path or path == "off":
+        return
+    monkeypatch.setenv("JAX_COMPILATION_CACHE_DIR", path)
+    monkeypatch.setenv("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0")  # as `lj.enable_compilation_cache`
+    monkeypatch.setenv("JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES", "-1")
+
+
 def _execute(name: str, out_dir: Path, source: Path | None = None) -> tuple[nbformat.NotebookNode, float]:
     """Run one notebook (`source`, default the committed one) in a fresh client process;
     raise with the kernel's traceback if a cell fails."""
@@ -124,6 +136,7 @@ def _execute(name: str, out_dir: Path, source: Path | None = None) -> tuple[nbfo
 def test_notebook_runs(name, tmp_path, monkeypatch):
     monkeypatch.setenv("LOCOMOTION_NB_SMALL", "1")  # inherited by the client and its kernel
     monkeypatch.delenv("LOCOMOTION_NB_IMAGES", raising=False)  # never write docs/images from a test
+    _share_test_cache(monkeypatch)
     nb, seconds = _execute(name, tmp_path)  # raises with a failed cell's traceback
     errors = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs if o.output_type == "error"]
     assert not errors, f"{name}: {errors[0].ename}: {errors[0].evalue}"
@@ -142,6 +155,7 @@ def test_model_tour_runs_without_ipywidgets(tmp_path, monkeypatch):
     monkeypatch.setenv("PYTHONPATH", os.pathsep.join(path))
     monkeypatch.setenv("LOCOMOTION_NB_SMALL", "1")
     monkeypatch.delenv("LOCOMOTION_NB_IMAGES", raising=False)
+    _share_test_cache(monkeypatch)
     # Only what the panel needs (the whole notebook runs in `test_notebook_runs`): the setup
     # cell, the two example configurations, the plotting helpers, and the panel's cells.
     nb = nbformat.read(NOTEBOOKS / "01_model_tour.ipynb", as_version=4)
