@@ -83,7 +83,7 @@ def report(log: str, top: int = 25) -> None:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description="Where the test suite's time goes to XLA, by test and program.")
     ap.add_argument("--cache", default="fresh", help="the tests' compilation cache: fresh (default) or a directory")
     ap.add_argument("--log", default=None, help="directory for the event logs (default: a temporary one)")
     ap.add_argument("--report", default=None, help="print the tables of the logs in this directory, run nothing")
