@@ -30,7 +30,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 PLUGIN = """
-import json, os, time
+import json, os
 import jax.monitoring as mon
 import pytest
 
@@ -45,8 +45,7 @@ def _record(name, dur, **kw):
         worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
         _out.append(open(os.path.join(os.environ["LJ_COMPILE_LOG"], f"{worker}.jsonl"), "a"))
     event = "compile" if "backend_compile" in name else "trace"
-    _out[0].write(json.dumps({"t": time.time(), "test": _test[0], "event": event,
-                              "fun": kw.get("fun_name", ""), "s": dur}) + "\\n")
+    _out[0].write(json.dumps({"test": _test[0], "event": event, "fun": kw.get("fun_name", ""), "s": dur}) + "\\n")
     _out[0].flush()
 
 

@@ -23,6 +23,14 @@ ENV_SWITCH = "LOCOMOTION_JAX_CACHE"
 """Environment variable read by the command line: `0`, `false`, `no` or `off` turn the cache off."""
 
 
+WRITE_EVERY_ENTRY: dict[str, float | int] = {
+    "jax_persistent_cache_min_compile_time_secs": 0.0,
+    "jax_persistent_cache_min_entry_size_bytes": -1,
+}
+"""JAX settings with which every compilation is written to the cache ([`enable_compilation_cache`][]);
+JAX also reads each from the environment variable of its name in upper case."""
+
+
 def user_cache_root() -> Path:
     """The platform's per-user cache directory: `$XDG_CACHE_HOME` (default `~/.cache`)
     on Linux, `~/Library/Caches` on macOS, `%LOCALAPPDATA%` on Windows."""
@@ -90,8 +98,8 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> Path:
     except OSError as err:
         raise ValueError(f"Cannot create the compilation cache directory {directory}: {err.strerror or err}.") from None
     jax.config.update("jax_compilation_cache_dir", str(directory))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-    jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
+    for name, value in WRITE_EVERY_ENTRY.items():
+        jax.config.update(name, value)
     # JAX opens its cache once per process, at the first compilation: reset it so a
     # cache already opened (in another directory, or found missing) takes this one.
     compilation_cache.reset_cache()

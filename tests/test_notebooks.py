@@ -27,6 +27,7 @@ from pathlib import Path
 import jupytext
 import nbformat
 import pytest
+from locomotion_jax._cache import WRITE_EVERY_ENTRY
 
 
 NOTEBOOKS = Path(__file__).resolve().parents[1] / "notebooks"
@@ -107,8 +108,8 @@ def _share_test_cache(monkeypatch: pytest.MonkeyPatch) -> None:
     if not path or path == "off":
         return
     monkeypatch.setenv("JAX_COMPILATION_CACHE_DIR", path)
-    monkeypatch.setenv("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0")  # as `lj.enable_compilation_cache`
-    monkeypatch.setenv("JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES", "-1")
+    for name, value in WRITE_EVERY_ENTRY.items():  # as `lj.enable_compilation_cache`
+        monkeypatch.setenv(name.upper(), str(value))
 
 
 def _execute(name: str, out_dir: Path, source: Path | None = None) -> tuple[nbformat.NotebookNode, float]:
