@@ -17,6 +17,7 @@ used to break it:
 import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
+from locomotion_jax.dynamics import _measure, _paper, _simulate
 from locomotion_jax.dynamics._flat import FlatBatch
 from locomotion_jax.dynamics._runs import CAP_EXTRA, CAP_STEPS_PER_DT
 from locomotion_jax.run._batch import prepare, unflatten
@@ -98,3 +99,41 @@ def test_random_chains_alone_and_batched_are_bitwise_equal():
     for i in range(n):
         alone = run(chains(slice(i, i + 1)))
         _assert_same(batch, alone, i, FIELDS_CHAIN)
+
+
+def _same_rows(part, full, k, fields):
+    for f in fields:
+        np.testing.assert_array_equal(np.asarray(getattr(part, f)), np.asarray(getattr(full, f))[:k], err_msg=f)
+
+
+def _programs():
+    # The engine's `jax.jit` wrappers have `_cache_size` (pyright sees the functions they wrap).
+    fns = (_measure._measure_batch, _simulate._simulate_batch, _paper._measure_batch, _paper._simulate_rows)
+    return tuple(f._cache_size() for f in fns)  # pyright: ignore[reportFunctionMemberAccess]
+
+
+def test_batch_sizes_of_one_bucket_share_a_program_and_padding_changes_nothing():
+    # 3 and 5 configurations run padded to 16 rows (`_runs.batch_rows`) through the program that 16
+    # run unpadded: no new compilation, and each one's fields bitwise those of the unpadded batch.
+    rng = np.random.default_rng(31)
+    n = 16
+    a, omega, phi = rng.uniform(0.02, 0.08, n), rng.uniform(1.5, 12.0, n), rng.uniform(-2.0, 2.0, n)
+
+    def chains(k):
+        w = lj.TravellingWave(jnp.asarray(a[:k]), jnp.asarray(omega[:k]), jnp.asarray(phi[:k]))
+        return lj.Chain(masses=np.ones((k, 3)), waveforms=w)
+
+    params = lambda k: lj.Params(omega=jnp.asarray(omega[:k]), a=jnp.asarray(a[:k]))
+    save_at = jnp.linspace(0.0, 6.0, 4)
+    runs = [
+        (chains, lambda c: lj.measure(c, z=0.3, horizon=10.0, window=5.0, t_start=2.0), FIELDS_CHAIN),
+        (params, lambda p: lj.measure(p, z=0.3, horizon=10.0, window=5.0, t_start=2.0), FIELDS_TWO_MASS),
+        (chains, lambda c: lj.simulate(c, 6.0, save_at=save_at), ("x", "v", "e", "status", "n_switch")),
+        (params, lambda p: lj.simulate(p, 6.0, save_at=save_at), ("x", "v", "e", "status", "n_switch")),
+    ]
+    full = [run(make(n)) for make, run, _ in runs]
+    before = _programs()
+    for k in (3, 5):
+        for (make, run, fields), whole in zip(runs, full):
+            _same_rows(run(make(k)), whole, k, fields)
+    assert _programs() == before

@@ -197,3 +197,20 @@ def test_chain_simulate_queue_matches_one_loop_per_configuration(max_steps):
             np.testing.assert_allclose(np.asarray(q), np.asarray(r), rtol=1e-12, atol=1e-15, err_msg=name)
         else:
             np.testing.assert_array_equal(np.asarray(q), np.asarray(r), err_msg=name)
+
+
+def test_only_the_first_count_configurations_run():
+    # A program for 23 configurations run on the first 17: those get what a queue of 17 gives
+    # them, in any order of the queue; the padding past them never runs (zero results).
+    n, count = 23, 17
+    setup = lambda i: (i, jnp.zeros((), jnp.int32))
+    running = lambda f, d: d < 3 * (f % 4)
+    advance = lambda f, d: d + 1
+    results = lambda f, d: {"index": f + 1, "iterations": d}
+    want = np.where(np.arange(n) < count, 3 * (np.arange(n) % 4), 0)
+    order = jnp.asarray(np.random.default_rng(1).permutation(n))
+    for lanes, o in ((4, None), (5, order), (32, order)):
+        run = lambda o, c: run_queue(setup, running, advance, results, n, lanes, o, count=c)
+        out = jax.jit(run)(o, jnp.asarray(count, jnp.int32))
+        np.testing.assert_array_equal(out["index"], np.where(np.arange(n) < count, np.arange(n) + 1, 0))
+        np.testing.assert_array_equal(out["iterations"], want)

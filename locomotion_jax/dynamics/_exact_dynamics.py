@@ -66,7 +66,7 @@ class Exact(AbstractDynamics):
                 return _paper.measure_batch(
                     p, wave, axes, z_, h_, w_, contact, start, self.dt, cap, lanes, batch.t_start, batch.initial
                 )
-            return _paper._measure_batch(
+            return _paper.measure(
                 p, wave, axes, z_, h_, w_, contact, start, self.dt, cap, t_start=batch.t_start, initial=batch.initial
             )
         # The default start (eigenvalues of the linearised chain) outside the engine's program: a

@@ -24,7 +24,7 @@ from ._compile import engine_jit
 from ._margins import margin_fields
 from ._numerics import Target, target_margin
 from ._queue import run_queue
-from ._runs import chain_initial_state, default_lanes, step_cap, STICK_TOL
+from ._runs import BatchRows, chain_initial_state, default_lanes, step_cap, STICK_TOL
 
 
 class _Acc(eqx.Module):
@@ -198,7 +198,7 @@ def _results(f: _Fixed, dyn, contact) -> dict:
     )  # fmt: skip
 
 
-def _measure_batch(P, valid, t_start, initial, z, horizon, window, contact, start, dt, max_steps, lanes):
+def _measure_batch(P, valid, t_start, initial, z, horizon, window, contact, start, dt, max_steps, lanes, count=None):
     n = valid.shape[0]
     row = lambda i: None if initial is None else initial[i]
     take = lambda i: (jax.tree_util.tree_map(lambda x: x[i], P), valid[i], t_start[i], row(i))
@@ -206,7 +206,7 @@ def _measure_batch(P, valid, t_start, initial, z, horizon, window, contact, star
     advance = lambda f, d: _advance(f, d, contact, dt)
     results = lambda f, d: _results(f, d, contact)
     order = jnp.argsort(-jnp.where(jnp.isfinite(P.omega), P.omega, -jnp.inf))
-    return run_queue(setup, _running, advance, results, n, lanes, order)
+    return run_queue(setup, _running, advance, results, n, lanes, order, count=count)
 
 
 _measure_batch = engine_jit(_measure_batch, ("contact", "start", "dt", "lanes"), reverse=True)
@@ -230,11 +230,12 @@ def measure_batch(
     chain's `physics()`, or the paper's model's), measured from `t_start` (one per
     configuration); `max_steps` caps each one's iterations (0: each one's own default from its
     span, `_runs.step_cap`); `initial`: the states at $t = 0$, shape `(n, 2N)` (positions, then
-    velocities), or `None` for `start`'s."""
-    n = valid.shape[0]
+    velocities), or `None` for `start`'s. Compiled for the batch's bucket (`_runs.BatchRows`)."""
     dtype = physics.one.dtype
     z_, h_, w_ = (jnp.asarray(v, dtype) for v in (z, horizon, window))
-    lanes = default_lanes(n, lane_width(physics))
-    return _measure_batch(
-        physics, valid, t_start, initial, z_, h_, w_, contact, start, dt, jnp.asarray(max_steps, jnp.int32), lanes
-    )
+    rows = BatchRows.of(valid.shape[0], physics, valid, t_start, initial, z_, h_, w_)
+    P, valid, t_start, initial = rows.pad((physics, valid, t_start, initial))
+    lanes = default_lanes(rows.m, lane_width(physics))
+    cap = jnp.asarray(max_steps, jnp.int32)
+    out = _measure_batch(P, valid, t_start, initial, z_, h_, w_, contact, start, dt, cap, lanes, rows.count)
+    return rows.cut(out)

@@ -25,7 +25,7 @@ from ._compile import engine_jit
 from ._margins import switch_gap
 from ._motion import Mode, rates, State
 from ._queue import run_queue
-from ._runs import chain_initial_state, default_lanes
+from ._runs import BatchRows, chain_initial_state, default_lanes
 from ._saves import BUFFER, run_saves
 from ._simulate import _row
 
@@ -77,9 +77,10 @@ def measure_batch(
     lanes: int | None = None,
     t_start: Array | None = None,
     initial: Array | None = None,
+    count: Array | None = None,
 ) -> dict[str, Array]:
     """`measure` of the paper's model on a flat batch (not jitted): a work queue over `lanes`
-    lanes ([`_queue.run_queue`][]), highest frequencies first.
+    lanes ([`_queue.run_queue`][]; the first `count` configurations), highest frequencies first.
 
     `lanes=None` takes `_runs.default_lanes`. `t_start`: per-configuration measurement starts
     (NaN: the paper's `Params.t_start`), default all the paper's. `initial`: per-configuration
@@ -93,10 +94,34 @@ def measure_batch(
     setup = lambda i: runs._setup(*take(i), z, horizon, window, contact, start, dt, max_steps)
     advance = lambda f, d: runs._advance(f, d, contact, dt)
     results = lambda f, d: runs._results(f, d, contact)
-    return run_queue(setup, runs._running, advance, results, n, lanes, _order(params))
+    return run_queue(setup, runs._running, advance, results, n, lanes, _order(params), count=count)
 
 
 _measure_batch = engine_jit(measure_batch, ("wave_axes", "contact", "start", "dt", "lanes"), reverse=True)
+
+
+def measure(
+    params: Params,
+    wave: AbstractWaveform,
+    wave_axes: int | None,
+    z,
+    horizon,
+    window,
+    contact: str,
+    start: str,
+    dt: float,
+    max_steps,
+    t_start: Array | None = None,
+    initial: Array | None = None,
+) -> dict[str, Array]:
+    """[`measure_batch`][locomotion_jax.dynamics._paper.measure_batch], compiled for the batch's
+    bucket (`_runs.BatchRows`) with the engine's lanes."""
+    n = params.omega.shape[0]
+    rows = BatchRows.of(n, params, wave, t_start, initial, z, horizon, window, max_steps)
+    params, t_start, initial = rows.pad((params, t_start, initial))
+    wave = wave if wave_axes is None else rows.pad(wave)
+    args = (params, wave, wave_axes, z, horizon, window, contact, start, dt, max_steps, default_lanes(rows.m))
+    return rows.cut(_measure_batch(*args, t_start=t_start, initial=initial, count=rows.count))
 
 
 def measure_one(params: Params, wave: AbstractWaveform, z, horizon, window, contact, start, dt, max_steps) -> dict:
@@ -116,7 +141,9 @@ def _hop_row(s: engine.Hybrid) -> Array:
     return jnp.concatenate([_row(s), jnp.stack([f.astype(s.t.dtype) for f in s.fly])])
 
 
-def _simulate_rows(params, wave, wave_axes, save_at, contact, start, dt, max_steps, lanes, buffer=BUFFER, initial=None):
+def _simulate_rows(
+    params, wave, wave_axes, save_at, contact, start, dt, max_steps, lanes, buffer=BUFFER, initial=None, count=None
+):
     """The saved rows of a flat batch ([`_saves.run_saves`][]: a work queue over `lanes` lanes,
     highest frequencies first): the N-body engine's rows (`_simulate._row`), reordered to
     $(x_1, v_1, x_2, v_2, e_d, w)$, the stick flags, the slip directions and the margins' records
@@ -131,7 +158,8 @@ def _simulate_rows(params, wave, wave_axes, save_at, contact, start, dt, max_ste
     hop = (lambda P: P.hop()[2:]) if contact == "hop" else (lambda P: None)
     step = lambda P, s, t_stop: engine.step(P, contact, dt, s, t_stop, hop=hop(P))[0]
     row = _hop_row if contact == "hop" else _row
-    rows, *rest = run_saves(init, step, row, params.omega.shape[0], save_at, max_steps, lanes, _order(params), buffer)
+    n = params.omega.shape[0]
+    rows, *rest = run_saves(init, step, row, n, save_at, max_steps, lanes, _order(params), buffer, count)
     return (rows[..., jnp.asarray(_TO_CHAIN + tuple(range(4, rows.shape[-1])))], *rest)
 
 
@@ -214,10 +242,12 @@ _trajectory = jax.jit(_trajectory, static_argnames=("wave_axes", "contact"))
 
 def simulate_batch(params, wave, wave_axes, save_at, contact, start, dt, max_steps: int, initial=None) -> dict:
     """The fields of a [`Trajectory`][locomotion_jax.Trajectory] of a flat batch (leading axis: the
-    configurations); `max_steps` caps each configuration's iterations, saves included."""
-    lanes = default_lanes(params.omega.shape[0])
+    configurations); `max_steps` caps each configuration's iterations, saves included. Compiled for
+    the batch's bucket (`_runs.BatchRows`)."""
+    batch = BatchRows.of(params.omega.shape[0], params, wave, save_at, initial)
+    p, init = batch.pad((params, initial))
+    w = wave if wave_axes is None else batch.pad(wave)
     cap = jnp.asarray(max_steps, jnp.int32)
-    rows, valid, status, t_lift, n_switch = _simulate_rows(
-        params, wave, wave_axes, save_at, contact, start, dt, cap, lanes, initial=initial
-    )
+    args = (p, w, wave_axes, save_at, contact, start, dt, cap, default_lanes(batch.m))
+    rows, valid, status, t_lift, n_switch = batch.cut(_simulate_rows(*args, initial=init, count=batch.count))
     return _trajectory(params, wave, wave_axes, contact, save_at, rows, valid, status, t_lift, n_switch)

@@ -95,6 +95,7 @@ def run_queue(
     lanes: int,
     order: jax.Array | None = None,
     stream: Stream | None = None,
+    count: jax.Array | None = None,
 ) -> dict[str, jax.Array]:
     """Run `n` configurations to completion on `lanes` lanes.
 
@@ -110,16 +111,23 @@ def run_queue(
     - `order`: the queue's order (a permutation of `range(n)`; default: as given).
       Longest first shortens the tail, where lanes run out of work.
     - `stream`: rows produced during the run ([`Stream`][]), if any.
+    - `count`: how many of the `n` configurations run (a traced int32, default `n`): the first
+      `count`. The others are padding: they do not run, and their results are to be dropped. A
+      program compiled for `n` rows then serves every smaller batch (`_runs.BatchRows`).
 
     **Returns:** the dict of `results`, each with a leading axis of length `n`; with a
     `stream`, also `"stream"`: the rows, shape `(n, stream.size) + row shape` (zeros
     where no row was written).
     """
     if _REVERSE.get():
-        return _run_each(setup, running, advance, results, n, stream)
+        return _run_each(setup, running, advance, results, n, stream, count)
     lanes = max(1, lanes)  # more lanes than configurations: the extra ones idle throughout
     order = jnp.arange(n, dtype=jnp.int32) if order is None else order.astype(jnp.int32)
-    config = lambda pos: order[jnp.minimum(pos, n - 1)]
+    if count is None:
+        count = jnp.asarray(n, jnp.int32)
+    else:  # the padding last in the queue, the others in their order
+        order = order[jnp.argsort(order >= count, stable=True)]
+    config = lambda pos: order[jnp.minimum(pos, count - 1)]
     setup_all = jax.vmap(setup)
     running_all = jax.vmap(running)
     results_all = jax.vmap(results)
@@ -142,7 +150,7 @@ def run_queue(
     def until_one_finishes(pos, fixed, dyn):
         # The hot loop carries only `dyn`: `fixed` and the lanes' positions are
         # loop-invariant here, and no output buffer passes through it.
-        active = pos < n
+        active = pos < count
         # Every active lane is running inside the loop: the select needs only `active`.
         cond = lambda d: jnp.all(needs_outer(fixed, d) | ~active) & jnp.any(active)
         return jax.lax.while_loop(cond, lambda d: _select(active, advance_all(fixed, d), d), dyn)
@@ -152,9 +160,9 @@ def run_queue(
         dyn = until_one_finishes(pos, fixed, dyn)
         if stream is not None:  # every lane's buffered rows, into its configuration's rows
             dyn, rows, slots = drain_all(fixed, dyn)  # pyright: ignore[reportPossiblyUnboundVariable]  # set with `stream`
-            cfg = jnp.where(pos < n, config(pos), n)[:, None]  # n: out of bounds, dropped
+            cfg = jnp.where(pos < count, config(pos), n)[:, None]  # n: out of bounds, dropped
             out = {**out, "stream": out["stream"].at[cfg, slots].set(rows, mode="drop")}
-        done = (pos < n) & ~running_all(fixed, dyn)
+        done = (pos < count) & ~running_all(fixed, dyn)
         at = jnp.where(done, config(pos), n)  # n: out of bounds, dropped
         results = results_all(fixed, dyn)
         out = {**out, **{k: out[k].at[at].set(r, mode="drop") for k, r in results.items()}}
@@ -165,7 +173,7 @@ def run_queue(
         return pos, nxt, _select(done, new_fixed, fixed), _select(done, new_dyn, dyn), out
 
     carry = (pos, jnp.asarray(lanes, jnp.int32), fixed, dyn, out)
-    *_, out = jax.lax.while_loop(lambda c: jnp.any(c[0] < n), refill, carry)
+    *_, out = jax.lax.while_loop(lambda c: jnp.any(c[0] < count), refill, carry)
     return out
 
 
@@ -176,18 +184,21 @@ def _run_each(
     results: Callable[[Any, Any], dict[str, jax.Array]],
     n: int,
     stream: Stream | None,
+    count: jax.Array | None,
 ) -> dict[str, jax.Array]:
     """[`run_queue`][]'s outputs by one checkpointed loop per configuration (module docstring).
 
     An iteration first drains a full buffer (as the queue's outer loop does), then advances a
     configuration that is still running and not full; the rows left in the buffer at the end are
-    drained last."""
+    drained last. Configurations from `count` on are set up but do not run."""
 
     def one(i):
         fixed, dyn = setup(i)
+        live = jnp.asarray(True) if count is None else i < count
+        running_ = lambda f, d: live & running(f, d)
         if stream is None:
             loop = lambda d: advance(fixed, d)
-            dyn = eqxi.while_loop(lambda d: running(fixed, d), loop, dyn, kind="checkpointed",
+            dyn = eqxi.while_loop(lambda d: running_(fixed, d), loop, dyn, kind="checkpointed",
                                   checkpoints=CHECKPOINTS)  # fmt: skip
             return results(fixed, dyn)
         sm: Stream = stream
@@ -203,11 +214,11 @@ def _run_each(
         def body(c):
             d, out = c
             d, out = put(d, out, sm.full(fixed, d))
-            go = running(fixed, d) & ~sm.full(fixed, d)
+            go = running_(fixed, d) & ~sm.full(fixed, d)
             d = jax.tree_util.tree_map(lambda a, b: jnp.where(go, a, b), advance(fixed, d), d)
             return d, out
 
-        cond = lambda c: running(fixed, c[0])
+        cond = lambda c: running_(fixed, c[0])
         dyn, out = eqxi.while_loop(cond, body, (dyn, out), kind="checkpointed", checkpoints=CHECKPOINTS)
         dyn, out = put(dyn, out, jnp.asarray(True))
         return {**results(fixed, dyn), "stream": out}

@@ -4,7 +4,9 @@ The exact engine runs a flat batch through a work queue (`_queue`, `_saves`); th
 the settings and the start of each configuration that both `simulate` and `measure` use.
 """
 
+import functools
 import math
+from typing import Any, NamedTuple
 
 import equinox as eqx
 import jax
@@ -15,7 +17,7 @@ from .._status import Status
 from ..model._params import Params
 from ..model._physics import AbstractPhysics
 from . import _engine as engine
-from ._forward import concrete_value
+from ._forward import concrete_value, is_traced
 
 
 STICK_TOL = 1e-6
@@ -53,6 +55,64 @@ def default_lanes(n: int, width: int = 1) -> int:
     if width > 1:
         return max(1, MICRO_BATCH_CPU // width)
     return min(MICRO_BATCH_CPU, -(-n // LANE_QUANTUM) * LANE_QUANTUM)
+
+
+def batch_rows(n: int) -> int:
+    """The rows that the exact engine's programs are compiled for, for a flat batch of `n`
+    configurations: a multiple of `LANE_QUANTUM` up to `MICRO_BATCH_CPU` (so the CPU's lanes are
+    those of `n`), then the next of $2^k \\cdot \\{4, 5, 6, 7\\}$ (four sizes per octave, at most a
+    quarter of padding; on a CPU the padding never runs). The batch sizes of one bucket share one
+    compiled program ([`BatchRows`][]); 0 stays 0."""
+    if n <= MICRO_BATCH_CPU:
+        return -(-n // LANE_QUANTUM) * LANE_QUANTUM
+    step = 1 << max(0, n.bit_length() - 3)
+    return -(-n // step) * step
+
+
+@functools.partial(jax.jit, static_argnums=1)
+def _pad(tree: Any, m: int) -> Any:
+    def one(x):
+        return jnp.concatenate([x, jnp.broadcast_to(x[-1:], (m - x.shape[0],) + x.shape[1:])])
+
+    return jax.tree_util.tree_map(one, tree)
+
+
+@functools.partial(jax.jit, static_argnums=1)
+def _cut(tree: Any, n: int) -> Any:
+    return jax.tree_util.tree_map(lambda x: x[:n], tree)
+
+
+class BatchRows(NamedTuple):
+    """A flat batch of `n` configurations laid out as `m` rows for the engine's programs: called
+    eagerly, `m` is [`batch_rows`][]`(n)`, the configurations padded with copies of the last one
+    ([`pad`][locomotion_jax.dynamics._runs.BatchRows.pad]), which the work queue does not run
+    ([`count`][locomotion_jax.dynamics._runs.BatchRows.count]; `_queue.run_queue`), and the
+    results cut back to `n` ([`cut`][locomotion_jax.dynamics._runs.BatchRows.cut]). Under a
+    transformation (`jit`, `vmap`, `jvp`, ...) the enclosing program is compiled anyway: `m = n`.
+
+    A configuration's result is the same in any batch (`default_lanes`), so in a padded one too,
+    bitwise on a CPU."""
+
+    n: int
+    m: int
+
+    @classmethod
+    def of(cls, n: int, *args: Any) -> "BatchRows":
+        """The rows of `n` configurations given by `args` (any pytrees)."""
+        return cls(n, n if is_traced(args) else batch_rows(n))
+
+    @property
+    def count(self) -> jax.Array:
+        """The number of configurations, as the work queue's traced `count`."""
+        return jnp.asarray(self.n, jnp.int32)
+
+    def pad(self, tree: Any) -> Any:
+        """`tree` (every leaf with a leading axis of `n`) with `m` rows."""
+        return tree if self.m == self.n else _pad(tree, self.m)
+
+    def cut(self, tree: Any) -> Any:
+        """`tree` (every leaf with a leading axis of `m`) with its first `n` rows."""
+        return tree if self.m == self.n else _cut(tree, self.n)
 
 
 CAP_STEPS_PER_DT = 3

@@ -63,6 +63,7 @@ def run_saves(
     lanes: int,
     order: Array | None = None,
     buffer: int = BUFFER,
+    count: Array | None = None,
 ) -> tuple[Array, Array, Array, Array, Array]:
     """The states of `n` configurations at the times `save_at`.
 
@@ -75,7 +76,7 @@ def run_saves(
     - `row(s)`: the saved values of a state (1-D, the state's dtype).
     - `save_at`: non-decreasing save times; `max_steps`: cap on the iterations of
       one configuration (a save counts as one).
-    - `lanes`, `order`: as in [`_queue.run_queue`][]; `buffer`: rows per lane.
+    - `lanes`, `order`, `count`: as in [`_queue.run_queue`][]; `buffer`: rows per lane.
 
     **Returns:** `(rows, valid, status, t_liftoff, n_switch)`: `rows` of shape
     `(n, len(save_at), row size)`; a configuration that stopped early (lift-off
@@ -85,7 +86,7 @@ def run_saves(
     """
     n_save = save_at.shape[0]
     if n_save <= FEW_SAVES:
-        return _run_few_saves(init, step, row, n, save_at, max_steps, lanes, order)
+        return _run_few_saves(init, step, row, n, save_at, max_steps, lanes, order, count)
     buffer = max(1, min(buffer, n_save))
     zi = jnp.zeros((), jnp.int32)
 
@@ -118,7 +119,7 @@ def run_saves(
 
     results = lambda fixed, d: _results(d, row, n_save)
     full = lambda fixed, d: d.n_buffered >= buffer
-    out = run_queue(setup, running, advance, results, n, lanes, order, Stream(full, drain, n_save))
+    out = run_queue(setup, running, advance, results, n, lanes, order, Stream(full, drain, n_save), count)
     return _assemble(out, n_save)
 
 
@@ -145,7 +146,9 @@ class _Few(NamedTuple):
     target: Array
 
 
-def _run_few_saves(init, step, row, n, save_at, max_steps, lanes, order) -> tuple[Array, Array, Array, Array, Array]:
+def _run_few_saves(
+    init, step, row, n, save_at, max_steps, lanes, order, count
+) -> tuple[Array, Array, Array, Array, Array]:
     """[`run_saves`][] for at most `FEW_SAVES` saves: the hot loop only steps (landing on each save
     time); reaching a save time ends the inner loop, and the queue's outer loop writes the row
     ([`_queue.Stream`][] with a one-row buffer that is full exactly then). The same steps as the
@@ -177,5 +180,5 @@ def _run_few_saves(init, step, row, n, save_at, max_steps, lanes, order) -> tupl
 
     # The inner loop ends where a lane is due: `running` stays true there (its save is pending),
     # so the queue drains before it decides which lanes are done.
-    out = run_queue(setup, running, advance, results, n, lanes, order, Stream(due, drain, n_save))
+    out = run_queue(setup, running, advance, results, n, lanes, order, Stream(due, drain, n_save), count)
     return _assemble(out, n_save)

@@ -17,7 +17,7 @@ from ..model._physics import loads_at
 from . import _engine as engine
 from ._compile import engine_jit
 from ._margins import switch_gap
-from ._runs import chain_initial_state, default_lanes
+from ._runs import BatchRows, chain_initial_state, default_lanes
 from ._saves import BUFFER, run_saves
 
 
@@ -38,7 +38,7 @@ def _row(s: engine.Hybrid) -> jax.Array:
     return jnp.concatenate([jnp.atleast_1d(q) for q in parts])  # the array layout: entries over the bodies
 
 
-def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps, lanes, buffer=BUFFER, initial=None):
+def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps, lanes, buffer=BUFFER, initial=None, count=None):
     """The saved rows of a flat batch: the work queue of [`_saves.run_saves`][], highest frequencies first."""
     take = lambda i: jax.tree_util.tree_map(lambda x: x[i], C)
 
@@ -49,7 +49,7 @@ def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps, lanes, buf
     hop = (lambda P: P.hop()[2:]) if contact == "hop" else (lambda P: None)
     step = lambda P, s, t_stop: engine.step(P, contact, dt, s, t_stop, hop=hop(P))[0]
     order = jnp.argsort(-jnp.where(jnp.isfinite(C.omega), C.omega, -jnp.inf))
-    return run_saves(init, step, _row, valid.shape[0], save_at, max_steps, lanes, order, buffer)
+    return run_saves(init, step, _row, valid.shape[0], save_at, max_steps, lanes, order, buffer, count)
 
 
 _simulate_batch = engine_jit(_simulate_batch, ("contact", "start", "dt", "lanes", "buffer"), reverse=True)
@@ -76,13 +76,15 @@ def _derived(C: Chain | Mechanism, contact, t, x, v, y=None, vy=None):
 def simulate_batch(flat: Chain | Mechanism, valid, save, contact, start, dt, max_steps: int, initial=None) -> dict:
     """The fields of a [`Trajectory`][locomotion_jax.Trajectory] of a flat batch of chains
     (leading axis: the configurations); `max_steps` caps each one's iterations, saves included;
-    `initial`: the states at $t = 0$, shape `(n, 2N)`, or `None` for `start`'s."""
+    `initial`: the states at $t = 0$, shape `(n, 2N)`, or `None` for `start`'s. Compiled for the
+    batch's bucket (`_runs.BatchRows`)."""
     N = flat.n_masses
-    n = valid.shape[0]
-    lanes = default_lanes(n, N if uses_array(flat, contact) else 1)
-    rows, ok, status, t_lift, n_switch = _simulate_batch(
-        flat, valid, save, contact, start, dt, jnp.asarray(max_steps, jnp.int32), lanes, initial=initial
-    )
+    batch = BatchRows.of(valid.shape[0], flat, valid, save, initial)
+    lanes = default_lanes(batch.m, N if uses_array(flat, contact) else 1)
+    C, ok, init = batch.pad((flat, valid, initial))
+    cap = jnp.asarray(max_steps, jnp.int32)
+    out = _simulate_batch(C, ok, save, contact, start, dt, cap, lanes, initial=init, count=batch.count)
+    rows, ok, status, t_lift, n_switch = batch.cut(out)
     x, v = rows[..., :N], rows[..., N : 2 * N]
     t = jnp.broadcast_to(save, rows.shape[:-1])
     if contact == "hop":
