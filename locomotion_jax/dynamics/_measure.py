@@ -237,5 +237,5 @@ def measure_batch(
     P, valid, t_start, initial = rows.pad((physics, valid, t_start, initial))
     lanes = default_lanes(rows.m, lane_width(physics))
     cap = jnp.asarray(max_steps, jnp.int32)
-    out = _measure_batch(P, valid, t_start, initial, z_, h_, w_, contact, start, dt, cap, lanes, rows.count)
+    out = _measure_batch(P, valid, t_start, initial, z_, h_, w_, contact, start, dt, cap, lanes, rows.queue_count)
     return rows.cut(out)

@@ -121,7 +121,7 @@ def measure(
     params, t_start, initial = rows.pad((params, t_start, initial))
     wave = wave if wave_axes is None else rows.pad(wave)
     args = (params, wave, wave_axes, z, horizon, window, contact, start, dt, max_steps, default_lanes(rows.m))
-    return rows.cut(_measure_batch(*args, t_start=t_start, initial=initial, count=rows.count))
+    return rows.cut(_measure_batch(*args, t_start=t_start, initial=initial, count=rows.queue_count))
 
 
 def measure_one(params: Params, wave: AbstractWaveform, z, horizon, window, contact, start, dt, max_steps) -> dict:
@@ -249,5 +249,5 @@ def simulate_batch(params, wave, wave_axes, save_at, contact, start, dt, max_ste
     w = wave if wave_axes is None else batch.pad(wave)
     cap = jnp.asarray(max_steps, jnp.int32)
     args = (p, w, wave_axes, save_at, contact, start, dt, cap, default_lanes(batch.m))
-    rows, valid, status, t_lift, n_switch = batch.cut(_simulate_rows(*args, initial=init, count=batch.count))
+    rows, valid, status, t_lift, n_switch = batch.cut(_simulate_rows(*args, initial=init, count=batch.queue_count))
     return _trajectory(params, wave, wave_axes, contact, save_at, rows, valid, status, t_lift, n_switch)

@@ -62,7 +62,7 @@ def batch_rows(n: int) -> int:
     configurations: a multiple of `LANE_QUANTUM` up to `MICRO_BATCH_CPU` (so the CPU's lanes are
     those of `n`), then the next of $2^k \\cdot \\{4, 5, 6, 7\\}$ (four sizes per octave, at most a
     quarter of padding; on a CPU the padding never runs). The batch sizes of one bucket share one
-    compiled program ([`BatchRows`][]); 0 stays 0."""
+    compiled program (`BatchRows`); 0 stays 0."""
     if n <= MICRO_BATCH_CPU:
         return -(-n // LANE_QUANTUM) * LANE_QUANTUM
     step = 1 << max(0, n.bit_length() - 3)
@@ -83,12 +83,11 @@ def _cut(tree: Any, n: int) -> Any:
 
 
 class BatchRows(NamedTuple):
-    """A flat batch of `n` configurations laid out as `m` rows for the engine's programs: called
-    eagerly, `m` is [`batch_rows`][]`(n)`, the configurations padded with copies of the last one
-    ([`pad`][locomotion_jax.dynamics._runs.BatchRows.pad]), which the work queue does not run
-    ([`count`][locomotion_jax.dynamics._runs.BatchRows.count]; `_queue.run_queue`), and the
-    results cut back to `n` ([`cut`][locomotion_jax.dynamics._runs.BatchRows.cut]). Under a
-    transformation (`jit`, `vmap`, `jvp`, ...) the enclosing program is compiled anyway: `m = n`.
+    """A flat batch of `n` configurations laid out as `m` rows for the engine's programs. Called
+    eagerly, `m` is `batch_rows(n)`: the configurations are padded with copies of the last one
+    (`pad`), which the work queue does not run (`queue_count`, `_queue.run_queue`'s `count`), and
+    the results are cut back to `n` (`cut`). Under a transformation (`jit`, `vmap`, `jvp`, ...) the
+    enclosing program is compiled anyway: `m = n`.
 
     A configuration's result is the same in any batch (`default_lanes`), so in a padded one too,
     bitwise on a CPU."""
@@ -102,7 +101,7 @@ class BatchRows(NamedTuple):
         return cls(n, n if is_traced(args) else batch_rows(n))
 
     @property
-    def count(self) -> jax.Array:
+    def queue_count(self) -> jax.Array:
         """The number of configurations, as the work queue's traced `count`."""
         return jnp.asarray(self.n, jnp.int32)
 

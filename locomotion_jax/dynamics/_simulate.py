@@ -83,7 +83,7 @@ def simulate_batch(flat: Chain | Mechanism, valid, save, contact, start, dt, max
     lanes = default_lanes(batch.m, N if uses_array(flat, contact) else 1)
     C, ok, init = batch.pad((flat, valid, initial))
     cap = jnp.asarray(max_steps, jnp.int32)
-    out = _simulate_batch(C, ok, save, contact, start, dt, cap, lanes, initial=init, count=batch.count)
+    out = _simulate_batch(C, ok, save, contact, start, dt, cap, lanes, initial=init, count=batch.queue_count)
     rows, ok, status, t_lift, n_switch = batch.cut(out)
     x, v = rows[..., :N], rows[..., N : 2 * N]
     t = jnp.broadcast_to(save, rows.shape[:-1])
