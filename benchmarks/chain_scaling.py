@@ -28,7 +28,7 @@ import jax.numpy as jnp  # noqa: E402
 import locomotion_jax as lj  # noqa: E402
 import numpy as np  # noqa: E402
 from locomotion_jax.dynamics import _measure  # noqa: E402
-from locomotion_jax.dynamics._runs import default_lanes  # noqa: E402
+from locomotion_jax.dynamics._runs import default_lanes, start_code  # noqa: E402
 from locomotion_jax.model._chain_array import engine_physics, lane_width  # noqa: E402
 
 
@@ -54,7 +54,7 @@ def row(n: int, B: int, layout: str, lanes: int = 0) -> dict:
     cap = jnp.asarray(0, jnp.int32)
     lanes = lanes or default_lanes(B, lane_width(P))
     t0 = time.perf_counter()
-    exe = _measure._measure_batch.lower(*dyn, CONTACT, "paper", DT, cap, lanes).compile()  # pyright: ignore[reportFunctionMemberAccess]
+    exe = _measure._measure_batch.lower(*dyn, CONTACT, start_code("paper"), DT, cap, lanes).compile()  # pyright: ignore[reportFunctionMemberAccess]
     compile_s = time.perf_counter() - t0
     cpus, walls, out = [], [], {}
     for _ in range(2):

@@ -157,9 +157,11 @@ def main() -> int:
 
     p, wave, axes, _ = prepare(lj.Params(omega=om, a=a), None, jnp.float64)
     f64 = lambda v: jnp.asarray(v, jnp.float64)
-    from locomotion_jax.dynamics._runs import default_lanes
+    from locomotion_jax.dynamics import _runs
 
-    kw = dict(wave_axes=axes, contact="paper", start="paper", dt=0.03, lanes=default_lanes(args.B))
+    # A traced start code where the engine takes one (a named start, static, in older trees).
+    start = _runs.start_code("paper") if hasattr(_runs, "start_code") else "paper"
+    kw = dict(wave_axes=axes, contact="paper", start=start, dt=0.03, lanes=_runs.default_lanes(args.B))
     dyn = (p, wave)
     rest = (f64(1e30), f64(100.0), f64(25.0))
     cap = jnp.asarray(0, jnp.int32)

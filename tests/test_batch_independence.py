@@ -14,6 +14,7 @@ used to break it:
   `_runs.LANE_QUANTUM` lanes, idle past the batch (`_runs.default_lanes`).
 """
 
+import jax
 import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
@@ -137,3 +138,22 @@ def test_batch_sizes_of_one_bucket_share_a_program_and_padding_changes_nothing()
         for (make, run, fields), whole in zip(runs, full):
             _same_rows(run(make(k)), whole, k, fields)
     assert _programs() == before
+
+
+def test_both_named_starts_share_a_program():
+    # The engine takes the start as a traced code (`_runs.start_code`): the second start compiles
+    # nothing, and a chain starts where its physics' `initial_positions` puts it for that start.
+    w = lj.TravellingWave(jnp.asarray([0.05, 0.08]), jnp.asarray([3.0, 7.0]), jnp.asarray([1.0, -1.0]))
+    chains = lj.Chain(masses=np.ones((2, 3)), d=jnp.asarray([[0.3, -0.2], [0.0, 0.4]]), waveforms=w)
+    params = lj.Params(omega=jnp.asarray([3.0, 7.0]), d=jnp.asarray([0.0, 0.5]))
+    save_at = jnp.asarray([0.0, 1.0])
+    runs = lambda mech, start: (lj.simulate(mech, 1.0, save_at=save_at, start=start),
+                                lj.measure(mech, z=0.1, horizon=2.0, start=start))  # fmt: skip
+    for first, second in (("paper", "relaxed"), ("relaxed", "paper")):
+        runs(chains, first), runs(params, first)
+        before = _programs()
+        traj, _ = runs(chains, second)
+        runs(params, second)
+        assert _programs() == before
+        want = jax.vmap(lambda c: c.physics().initial_positions(second))(chains.broadcast())
+        np.testing.assert_array_equal(np.asarray(traj.x)[:, 0], np.asarray(want))

@@ -11,7 +11,7 @@ from locomotion_jax.dynamics import (
     _simulate,
 )
 from locomotion_jax.dynamics._queue import run_queue, Stream
-from locomotion_jax.dynamics._runs import chain_initial_state
+from locomotion_jax.dynamics._runs import chain_initial_state, start_code
 from locomotion_jax.run._batch import prepare, prepare_chain
 
 
@@ -136,7 +136,8 @@ def test_simulate_queue_matches_one_loop_per_configuration(dtype, max_steps):
     flat, wave, axes, _ = prepare(lj.Params(omega=om, a=a, check=False), None, dtype)
     save_at = jnp.asarray(np.concatenate([[0.0, 0.0], np.linspace(0.1, 12.0, 22), [12.0, 12.0]]), dtype)
     args = ("strict", "paper", 0.02, jnp.asarray(max_steps, jnp.int32))
-    queued = _paper._simulate_rows(flat, wave, axes, save_at, *args, lanes=3, buffer=4)
+    engine_args = (args[0], start_code(args[1]), *args[2:])  # the engine takes the start's code
+    queued = _paper._simulate_rows(flat, wave, axes, save_at, *engine_args, lanes=3, buffer=4)
     alone = jax.vmap(lambda p, w: _saves_alone(p, w, save_at, *args))(flat, wave)
     status, valid = np.asarray(alone[2]), np.asarray(alone[1])
     lifted = status == lj.Status.LIFTOFF
@@ -175,7 +176,7 @@ def test_chain_simulate_queue_matches_one_loop_per_configuration(max_steps):
     flat, ok, _ = prepare_chain(lj.Chain.stack(chains), None)
     save_at = jnp.asarray(np.concatenate([[0.0, 0.0], np.linspace(0.1, 12.0, 22), [12.0, 12.0]]))
     cap = jnp.asarray(max_steps, jnp.int32)
-    queued = _simulate._simulate_batch(flat, ok, save_at, "strict", "paper", 0.02, cap, 3, 4)
+    queued = _simulate._simulate_batch(flat, ok, save_at, "strict", start_code("paper"), 0.02, cap, 3, 4)
 
     def alone(C, ok):
         P = C.physics()

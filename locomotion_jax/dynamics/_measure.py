@@ -24,7 +24,7 @@ from ._compile import engine_jit
 from ._margins import margin_fields
 from ._numerics import Target, target_margin
 from ._queue import run_queue
-from ._runs import BatchRows, chain_initial_state, default_lanes, step_cap, STICK_TOL
+from ._runs import BatchRows, chain_initial_state, default_lanes, start_code, step_cap, STICK_TOL
 
 
 class _Acc(eqx.Module):
@@ -209,7 +209,7 @@ def _measure_batch(P, valid, t_start, initial, z, horizon, window, contact, star
     return run_queue(setup, _running, advance, results, n, lanes, order, count=count)
 
 
-_measure_batch = engine_jit(_measure_batch, ("contact", "start", "dt", "lanes"), reverse=True)
+_measure_batch = engine_jit(_measure_batch, ("contact", "dt", "lanes"), reverse=True)
 
 
 def measure_batch(
@@ -237,5 +237,6 @@ def measure_batch(
     P, valid, t_start, initial = rows.pad((physics, valid, t_start, initial))
     lanes = default_lanes(rows.m, lane_width(physics))
     cap = jnp.asarray(max_steps, jnp.int32)
-    out = _measure_batch(P, valid, t_start, initial, z_, h_, w_, contact, start, dt, cap, lanes, rows.queue_count)
+    code = start_code(start)
+    out = _measure_batch(P, valid, t_start, initial, z_, h_, w_, contact, code, dt, cap, lanes, rows.queue_count)
     return rows.cut(out)

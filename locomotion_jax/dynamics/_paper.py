@@ -25,7 +25,7 @@ from ._compile import engine_jit
 from ._margins import switch_gap
 from ._motion import Mode, rates, State
 from ._queue import run_queue
-from ._runs import BatchRows, chain_initial_state, default_lanes
+from ._runs import BatchRows, chain_initial_state, default_lanes, start_code
 from ._saves import BUFFER, run_saves
 from ._simulate import _row
 
@@ -71,7 +71,7 @@ def measure_batch(
     horizon,
     window,
     contact: str,
-    start: str,
+    start: str | Array,
     dt: float,
     max_steps,
     lanes: int | None = None,
@@ -97,7 +97,7 @@ def measure_batch(
     return run_queue(setup, runs._running, advance, results, n, lanes, _order(params), count=count)
 
 
-_measure_batch = engine_jit(measure_batch, ("wave_axes", "contact", "start", "dt", "lanes"), reverse=True)
+_measure_batch = engine_jit(measure_batch, ("wave_axes", "contact", "dt", "lanes"), reverse=True)
 
 
 def measure(
@@ -120,7 +120,8 @@ def measure(
     rows = BatchRows.of(n, params, wave, t_start, initial, z, horizon, window, max_steps)
     params, t_start, initial = rows.pad((params, t_start, initial))
     wave = wave if wave_axes is None else rows.pad(wave)
-    args = (params, wave, wave_axes, z, horizon, window, contact, start, dt, max_steps, default_lanes(rows.m))
+    code = start_code(start)
+    args = (params, wave, wave_axes, z, horizon, window, contact, code, dt, max_steps, default_lanes(rows.m))
     return rows.cut(_measure_batch(*args, t_start=t_start, initial=initial, count=rows.queue_count))
 
 
@@ -163,7 +164,7 @@ def _simulate_rows(
     return (rows[..., jnp.asarray(_TO_CHAIN + tuple(range(4, rows.shape[-1])))], *rest)
 
 
-_simulate_rows = engine_jit(_simulate_rows, ("wave_axes", "contact", "start", "dt", "lanes", "buffer"), reverse=True)
+_simulate_rows = engine_jit(_simulate_rows, ("wave_axes", "contact", "dt", "lanes", "buffer"), reverse=True)
 
 
 def derived_fields(params: Params, wave: AbstractWaveform, contact: Contact, t, y, stuck, sdir) -> dict:
@@ -248,6 +249,6 @@ def simulate_batch(params, wave, wave_axes, save_at, contact, start, dt, max_ste
     p, init = batch.pad((params, initial))
     w = wave if wave_axes is None else batch.pad(wave)
     cap = jnp.asarray(max_steps, jnp.int32)
-    args = (p, w, wave_axes, save_at, contact, start, dt, cap, default_lanes(batch.m))
+    args = (p, w, wave_axes, save_at, contact, start_code(start), dt, cap, default_lanes(batch.m))
     rows, valid, status, t_lift, n_switch = batch.cut(_simulate_rows(*args, initial=init, count=batch.queue_count))
     return _trajectory(params, wave, wave_axes, contact, save_at, rows, valid, status, t_lift, n_switch)

@@ -6,6 +6,7 @@ the settings and the start of each configuration that both `simulate` and `measu
 
 import functools
 import math
+from collections.abc import Callable
 from typing import Any, NamedTuple
 
 import equinox as eqx
@@ -153,17 +154,41 @@ def horizon_bound(params: Params, t_extra: float) -> float:
     return tmax + t_extra
 
 
-def chain_initial_state(P: AbstractPhysics, valid, contact, start, row=None) -> engine.Hybrid:
+STARTS = ("paper", "relaxed")
+"""The named starts, in the order of [`start_code`][locomotion_jax.dynamics._runs.start_code]."""
+
+
+def start_code(start: str) -> jax.Array:
+    """A named start as the engine's traced index into `STARTS`: both starts then run one
+    compiled program (`chain_initial_state` selects the positions)."""
+    return jnp.asarray(STARTS.index(start), jnp.int32)
+
+
+def _by_start(at: Callable[[str], Any], start: str | jax.Array) -> Any:
+    """`at(start)` for a named start; for a `start_code`, the entries of `at` of each named start
+    selected by the code (`None` where every start gives `None`)."""
+    if isinstance(start, str):
+        return at(start)
+    each = [at(s) for s in STARTS]
+    if all(e is None for e in each):
+        return None
+    like = next(e for e in each if e is not None)
+    each = [jnp.zeros_like(like) if e is None else e for e in each]
+    return functools.reduce(lambda acc, k: jnp.where(start == k, each[k], acc), range(1, len(STARTS)), each[0])
+
+
+def chain_initial_state(P: AbstractPhysics, valid, contact, start: str | jax.Array, row=None) -> engine.Hybrid:
     """The N-body engine's state at $t = 0$ of one mechanism (its physics `P`): at rest in the
-    `start` position, or the state `row` $(x_0, \\dots, x_{N-1}, v_0, \\dots, v_{N-1})$ if given;
+    `start` position (a name of `STARTS` or its traced `start_code`), or the state `row`
+    $(x_0, \\dots, x_{N-1}, v_0, \\dots, v_{N-1})$ if given;
     flagged `Status.INVALID` where the mechanism is not `valid` or `row` is not finite or one of
     its [`gaps`][locomotion_jax.AbstractPhysics.gaps] is not positive (a chain's positions not in
     increasing order; then it starts from `start`, so that nothing turns NaN). Without `row`, a
     mechanism's own initial velocities (`AbstractPhysics.initial_velocities`) if it has them."""
-    x = P.initial_positions(start)
+    x = _by_start(P.initial_positions, start)
     vert = P.hop()[:2] if contact == "hop" else (None, None)
     if row is None:
-        st = engine.init(P, contact, x, P.initial_velocities(start), *vert)
+        st = engine.init(P, contact, x, _by_start(P.initial_velocities, start), *vert)
     else:
         n = x.shape[-1]
         gaps = P.gaps(P.bodies(row[:n]))

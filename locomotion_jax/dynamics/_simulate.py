@@ -17,7 +17,7 @@ from ..model._physics import loads_at
 from . import _engine as engine
 from ._compile import engine_jit
 from ._margins import switch_gap
-from ._runs import BatchRows, chain_initial_state, default_lanes
+from ._runs import BatchRows, chain_initial_state, default_lanes, start_code
 from ._saves import BUFFER, run_saves
 
 
@@ -52,7 +52,7 @@ def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps, lanes, buf
     return run_saves(init, step, _row, valid.shape[0], save_at, max_steps, lanes, order, buffer, count)
 
 
-_simulate_batch = engine_jit(_simulate_batch, ("contact", "start", "dt", "lanes", "buffer"), reverse=True)
+_simulate_batch = engine_jit(_simulate_batch, ("contact", "dt", "lanes", "buffer"), reverse=True)
 
 
 def _stack(P: Any, a: tuple, like: jax.Array) -> jax.Array:
@@ -83,7 +83,8 @@ def simulate_batch(flat: Chain | Mechanism, valid, save, contact, start, dt, max
     lanes = default_lanes(batch.m, N if uses_array(flat, contact) else 1)
     C, ok, init = batch.pad((flat, valid, initial))
     cap = jnp.asarray(max_steps, jnp.int32)
-    out = _simulate_batch(C, ok, save, contact, start, dt, cap, lanes, initial=init, count=batch.queue_count)
+    code = start_code(start)
+    out = _simulate_batch(C, ok, save, contact, code, dt, cap, lanes, initial=init, count=batch.queue_count)
     rows, ok, status, t_lift, n_switch = batch.cut(out)
     x, v = rows[..., :N], rows[..., N : 2 * N]
     t = jnp.broadcast_to(save, rows.shape[:-1])
