@@ -49,8 +49,8 @@ import locomotion_jax as lj
 import numpy as np
 import pytest
 from chain_cases import ANISO as CHAIN_ANISO, CASES as CHAIN_CASES, HORIZON, Z
-from locomotion_jax.dynamics import _paper
-from locomotion_jax.dynamics._runs import default_max_steps, horizon_bound, start_code
+from locomotion_jax.dynamics import _paper, _runs
+from locomotion_jax.dynamics._runs import default_max_steps, horizon_bound
 from locomotion_jax.run._batch import prepare
 from reference import reference_measure, reference_natural_frequencies, reference_simulate
 from reference_chain import chain_config, reference_chain_measure
@@ -178,7 +178,9 @@ def _package(group: str, dtype=jnp.float64) -> dict:
         flat, wave, axes, _ = prepare(p, None, None)
         max_steps = default_max_steps(horizon_bound(flat, g.horizon), 0.01)
         values = (jnp.asarray(v, flat.dtype) for v in (g.z, g.horizon, g.window))
-        args = (flat, wave, axes, *values, g.contact, start_code(g.start), 0.01, jnp.asarray(max_steps, jnp.int32))
+        # `_runs` by attribute: benchmarks/compare_chain_results.py imports this file beside older trees.
+        start = _runs.start_code(g.start)
+        args = (flat, wave, axes, *values, g.contact, start, 0.01, jnp.asarray(max_steps, jnp.int32))
         m = {k: np.asarray(v) for k, v in _paper._measure_batch(*args, lanes=g.lanes).items()}
         sf = m.pop("stick_fraction")  # per mass on the last axis, as `to_numpy` names them
         m["stick_fraction1"], m["stick_fraction2"] = sf[..., 0], sf[..., 1]
