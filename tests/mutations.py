@@ -101,7 +101,7 @@ MUTATIONS = [
         "queue_done_mask",
         "work queue: every active lane is taken as done when one finishes",
         "locomotion_jax/dynamics/_queue.py",
-        (("done = (pos < n) & ~running_all(fixed, dyn)", "done = pos < n"),),
+        (("done = (pos < count) & ~running_all(fixed, dyn)", "done = pos < count"),),
         (REF,),
     ),
     # -- more of the same kind ------------------------------------------------------------------
