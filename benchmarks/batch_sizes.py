@@ -20,7 +20,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-import numpy as np
+from compare_results import rel_diff, variables
 
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -70,18 +70,11 @@ print(json.dumps({"wall_s": t1 - t0, "cpu_s": c1.ru_utime + c1.ru_stime - c0.ru_
 
 
 def _largest_difference(old: Path, new: Path) -> float:
-    """The largest relative difference over every array of the two files (NaN equal to NaN)."""
-    a, b = np.load(old), np.load(new)
-    if sorted(a.files) != sorted(b.files):
+    """The largest relative difference over every array of the two files (`compare_results.rel_diff`)."""
+    a, b = variables(old), variables(new)
+    if sorted(a) != sorted(b):
         return float("inf")
-    worst = 0.0
-    for k in a.files:
-        x, y = a[k].astype(float), b[k].astype(float)
-        same = (x == y) | (np.isnan(x) & np.isnan(y))
-        with np.errstate(invalid="ignore"):  # inf - inf where both are infinite: `same` covers it
-            err = np.where(same, 0.0, np.abs(x - y) / np.maximum(np.abs(x), 1e-300))
-        worst = max(worst, float(np.max(err, initial=0.0)))
-    return worst
+    return max((rel_diff(b[k], a[k]) for k in a), default=0.0)
 
 
 def main(argv: list[str]) -> int:

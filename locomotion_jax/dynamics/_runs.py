@@ -165,16 +165,16 @@ def start_code(start: str) -> jax.Array:
 
 
 def _by_start(at: Callable[[str], Any], start: str | jax.Array) -> Any:
-    """`at(start)` for a named start; for a `start_code`, the entries of `at` of each named start
-    selected by the code (`None` where every start gives `None`)."""
+    """`at(start)` for a named start; for a `start_code`, `at` of both named starts, selected by the
+    code (`None` where both give `None`; zeros stand for one `None`)."""
     if isinstance(start, str):
         return at(start)
-    each = [at(s) for s in STARTS]
-    if all(e is None for e in each):
+    paper, relaxed = (at(s) for s in STARTS)
+    if paper is None and relaxed is None:
         return None
-    like = next(e for e in each if e is not None)
-    each = [jnp.zeros_like(like) if e is None else e for e in each]
-    return functools.reduce(lambda acc, k: jnp.where(start == k, each[k], acc), range(1, len(STARTS)), each[0])
+    paper = jnp.zeros_like(relaxed) if paper is None else paper
+    relaxed = jnp.zeros_like(paper) if relaxed is None else relaxed
+    return jnp.where(start == 0, paper, relaxed)
 
 
 def chain_initial_state(P: AbstractPhysics, valid, contact, start: str | jax.Array, row=None) -> engine.Hybrid:
