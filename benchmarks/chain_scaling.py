@@ -54,12 +54,13 @@ def row(n: int, B: int, layout: str, lanes: int = 0) -> dict:
     cap = jnp.asarray(0, jnp.int32)
     lanes = lanes or default_lanes(B, lane_width(P))
     t0 = time.perf_counter()
-    exe = _measure._measure_batch.lower(*dyn, CONTACT, start_code("paper"), DT, cap, lanes).compile()  # pyright: ignore[reportFunctionMemberAccess]
+    start = start_code("paper")
+    exe = _measure._measure_batch.lower(*dyn, CONTACT, start, DT, cap, lanes).compile()  # pyright: ignore[reportFunctionMemberAccess]
     compile_s = time.perf_counter() - t0
     cpus, walls, out = [], [], {}
     for _ in range(2):
         c0, w0 = time.process_time(), time.perf_counter()
-        out = exe(*dyn, cap)
+        out = exe(*dyn, start, cap)
         jax.block_until_ready(out)
         cpus.append(time.process_time() - c0)
         walls.append(time.perf_counter() - w0)

@@ -6,6 +6,8 @@ quotes none of it."""
 import importlib.util
 import json
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -64,3 +66,29 @@ def test_zarr_map_case_runs_at_a_small_size(run):
     assert r["regimes"]["UNDETERMINED"] == 256 - r["n_ok"]  # only runs that stopped early lack a regime
     assert r["regimes"]["SSL"] > 0 and r["regimes"]["SL"] > 0  # the map crosses the boundary
     assert r["store_mb"] > 0 and r["n_files"] > 1 and r["wall"] > 0 and r["rss"] > 0
+
+
+def _script(name: str, *args: str) -> str:
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / name), *args], capture_output=True, text=True, timeout=600
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return proc.stdout
+
+
+def test_chain_scaling_runs_at_a_small_size():
+    # The script calls the engine's compiled program directly, so a change of its arguments shows here.
+    out = _script("chain_scaling.py", "--sizes", "2", "--batch", "16", "--layouts", "array")
+    assert any(line.startswith("| 2 | array | ") for line in out.splitlines()), out
+
+
+def test_padding_benchmark_finds_padded_and_unpadded_runs_equal():
+    out = _script("padding.py", "--small", "--sizes", "17", "--repeats", "1")
+    row = [line for line in out.splitlines() if line.startswith("| 17 | 32 | ")]
+    assert len(row) == 1 and row[0].rstrip().endswith("| 0.0e+00 |"), out
+
+
+def test_loop_cost_reads_the_engine_hot_loop():
+    # As chain_scaling.py, this script compiles the engine's program itself (and replaces its queue).
+    out = json.loads(_script("loop_cost.py", "--B", "16", "--rep", "1").splitlines()[-1])
+    assert out["engine"] == "n-body" and out["hot_loop"]["flops"] > 0 and out["iterations"]["sum"] > 0
