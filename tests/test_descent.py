@@ -1,4 +1,5 @@
-"""The exact optimisers' local steps (`optimisation._descent`) on problems with known optima.
+"""The exact optimisers' local steps (`optimisation._descent`) on problems with known optima, and one local
+run's bookkeeping around them (`optimisation._local`).
 
 The optimisers' problems have the cost falling where the speed constraint would be broken, so
 that the optimum lies on it; these analytic problems have the same shape and closed-form optima.
@@ -12,6 +13,7 @@ import numpy as np
 import pytest
 from locomotion_jax.optimisation import _descent
 from locomotion_jax.optimisation._descent import descent, direction, sqp_descent
+from locomotion_jax.optimisation._local import local_run
 
 
 def _tangent_problem():
@@ -142,3 +144,53 @@ def test_direction_solves_the_linearised_problem():
     d, lam = direction(g, np.array([0.5, 0.2]), a2, lambda v: v)
     np.testing.assert_allclose(d, [-0.5, -0.5, 0.0], atol=1e-12)
     assert math.isclose(lam[0], 0.5) and lam[1] == 0.0
+
+
+# -- one local run's bookkeeping (`optimisation._local.local_run`) ----------------------------------
+
+
+def _figure(cot, c_speed, ok=True):
+    return SimpleNamespace(f=cot, cot=cot, c=np.array([c_speed, 1.0]), ok=ok)
+
+
+def test_local_run_reports_its_cheapest_feasible_point_and_runners_up():
+    # A search that wanders: its points (x = its index) with the figures below, asked twice each.
+    # Feasible points 0, 2, 3, 5 (costs 5, 3, 4, 2); point 1 too slow; point 4 without an orbit;
+    # point 6 cheaper still but outside the stroke; point 7 no orbit at all (`None`).
+    figs = [_figure(5.0, 0.1), _figure(1.0, -0.2), _figure(3.0, 0.0), _figure(4.0, 0.3),
+            _figure(math.inf, -1.0, ok=False), _figure(2.0, 0.2), _figure(0.5, 0.1), None]  # fmt: skip
+    asked = []
+
+    def ask(x):
+        asked.append(int(x[0]))
+        return figs[int(x[0])]
+
+    def search(at, x0):
+        assert x0[0] == 0.0
+        for i in range(len(figs)):
+            at(np.array([float(i)]))
+            at(np.array([float(i)]))  # the same point again: answered from the cache
+        return {"message": "wandered"}
+
+    log: list = []
+    run = local_run(np.zeros(1), search, lambda x: x[0] != 6, log, runners_up=True)
+    best, runners = run(ask)
+    assert asked == list(range(len(figs)))
+    assert best[0] == 5.0
+    # The feasible points in order are 0, 2, 3, 5: the fractions 0, 1/4, 1/2, 3/4 pick 0, 2, 3, 5; 5 is the best.
+    assert [(c, x[0]) for c, x in runners] == [(5.0, 0.0), (3.0, 2.0), (4.0, 3.0)]
+    assert log[0]["message"] == "wandered" and log[0]["evaluations"] == 7  # `None` is not traced
+    assert [t["ok"] for t in log[0]["trace"]] == [True] * 4 + [False] + [True] * 2
+    assert local_run(np.zeros(1), search, lambda x: x[0] != 6, [])(ask)[0] == 5.0  # without runners-up
+
+
+def test_local_run_without_a_feasible_point_reports_the_smallest_violation():
+    figs = [_figure(1.0, -0.5), _figure(2.0, -0.1), _figure(0.5, -0.3)]
+
+    def search(at, x0):
+        for i in range(len(figs)):
+            at(np.array([float(i)]))
+        return {}
+
+    best, runners = local_run(np.zeros(1), search, lambda x: True, [], runners_up=True)(lambda x: figs[int(x[0])])
+    assert best[0] == 1.0 and runners == []

@@ -3,10 +3,10 @@ waves of a chain, sinusoids of a mechanism): the local refinement and the direct
 of the optimum (the choice among the verified candidates, `_optimum.choose`, is every exact
 optimiser's). A signal per actuated element: `gaits._element_orbit`.
 
-The refinement (`refine`) runs a monotone descent on an exact penalty per start, the starts in
-lockstep (`_lockstep.run_lockstep`): each start runs in its own thread and their evaluations are
-batched into one call of the oracle (`_element_orbit.ChainOracle`: periodic orbit, figures and
-their exact gradients). The descent takes L-BFGS directions and a backtracking line search that
+The refinement (`refine`) runs a monotone descent on an exact penalty per start (`_local.local_run`),
+the starts in lockstep (`_lockstep.run_lockstep`): each start runs in its own thread and their
+evaluations are batched into one call of the oracle (`_element_orbit.ChainOracle`: periodic
+orbit, figures and their exact gradients). The descent takes L-BFGS directions and a backtracking line search that
 accepts only a decrease of the merit, so that an iterate never walks into a costlier gait or a
 failed orbit. The bound on every signal is kept by radial rescaling of its Fourier coefficients
 onto its exact limit (the set $\\{\\max_t |s_j(t)| \\le a_\\max\\}$ is convex and contains 0), or by
@@ -30,6 +30,7 @@ from ..gaits._orbit import PATIENCE
 from ._descent import local_step, METHODS
 from ._evaluator import Evaluator
 from ._figures import Figures, PENALTY
+from ._local import local_run
 from ._lockstep import run_lockstep
 from ._shapes import spline_stroke, SplineShape
 
@@ -72,47 +73,6 @@ def project(theta: np.ndarray, springs: int, harmonics: int, log_lo: float, log_
     c, s, w = unpack(theta, springs, harmonics)
     scale = 1 / np.maximum(strokes(c, s), 1.0)
     return pack(c * scale[:, None], s * scale[:, None], math.exp(float(np.clip(math.log(w), log_lo, log_hi))))
-
-
-def local_solver(
-    x0: np.ndarray,
-    proj,
-    stroke_ok,
-    max_iter: int,
-    trust_radius: float,
-    rho: float,
-    log: list,
-    method: str = "descent",
-    stall_rtol: float = 0.0,
-):
-    """One local run from `x0` for [`run_lockstep`][locomotion_jax.optimisation._lockstep.run_lockstep]
-    (`method`: `"descent"` or `"sqp"`, `_descent`'s two descents; `stall_rtol`: the descent's
-    stop where its merit stalls, 0 for none): returns the cheapest point evaluated that meets
-    every constraint, else the one with the smallest violation."""
-
-    def solve(ask):
-        cache: dict[bytes, Any] = {}
-        trace: list[dict] = []
-        best: dict[str, Any] = {"key": (math.inf, math.inf), "x": np.array(x0, float)}
-
-        def at(x):
-            key = np.asarray(x).tobytes()
-            if key not in cache:
-                cache.clear()
-                fig = cache[key] = ask(np.array(x, float))
-                if fig is not None:
-                    trace.append({"f": fig.f, "cot": fig.cot, "c_speed": float(fig.c[0]), "c_normal": float(fig.c[1])})
-                    held = min(fig.c[0], fig.c[1]) >= 0 and stroke_ok(x)
-                    key_ = (0.0, fig.cot) if held else (1.0, -min(fig.c[0], 0.0) - min(fig.c[1], 0.0))
-                    if key_ < best["key"]:
-                        best["key"], best["x"] = key_, np.array(x, float)
-            return cache[key]
-
-        local_step(method, np.array(x0, float), at, proj, max_iter, trust_radius, rho, True, stall_rtol)
-        log.append({"evaluations": len(trace), "trace": trace})
-        return best["x"]
-
-    return solve
 
 
 def on_bound(x: np.ndarray, S: int, H: int, a_max: float) -> tuple[np.ndarray, np.ndarray, float]:
@@ -264,20 +224,13 @@ def refine(base: Any, starts: list[Start], a_max: float, v_min: float, direction
     costs = [st.cost for st in starts if np.isfinite(st.cost)]
     rho = PENALTY * max(1.0, max(costs, default=1.0))
     log: list[dict] = []
-    solvers = [
-        local_solver(
-            x,
-            proj,
-            stroke_ok,
-            settings.max_iter,
-            settings.trust_radius,
-            rho,
-            log,
-            settings.local_method,
-            settings.stall_rtol,
-        )
-        for x in x0
-    ]
+
+    def search(at, x):
+        local_step(settings.local_method, x, at, proj, settings.max_iter, settings.trust_radius, rho, True,
+                   settings.stall_rtol)  # fmt: skip
+        return {"message": settings.local_method}
+
+    solvers = [local_run(x, search, stroke_ok, log) for x in x0]
     say(f"refining {len(solvers)} starts locally, in lockstep (compiling the orbit solver: first call only)...")
     t0 = time.perf_counter()
     xs = run_lockstep(solvers, ev)

@@ -60,6 +60,7 @@ from . import _pareto as pareto
 from ._descent import local_step, METHODS
 from ._evaluator import Evaluator
 from ._figures import Figures, PENALTY
+from ._local import local_run
 from ._lockstep import run_lockstep
 from ._optimum import choose, ExactSettings, Optimum, verified
 from ._shapes import AbstractShape
@@ -98,60 +99,20 @@ def _descent(x0, shape: AbstractShape, bounds, settings: ExactSettings, max_iter
 HALF_STEP_RTOL = 1e-3
 """Largest relative change of a candidate's speed or cost of transport with half the step (`_verify`)."""
 
-RUNNERS_UP = (0.0, 0.25, 0.5, 0.75)
-"""Where a local run's runners-up lie in its sequence of points that meet every constraint
-(fractions of it, in the order of evaluation; `_local_solver`)."""
-
 
 def _local_solver(x0, shape: AbstractShape, bounds, settings: ExactSettings, log: list, max_iter: int):
-    """One local run (`settings.local_method`) from `x0`; `ask(x)` returns the `Figures` at `x`.
+    """One local run (`settings.local_method`) from `x0`, with its runners-up
+    ([`local_run`][locomotion_jax.optimisation._local.local_run]): a descent, or a scipy method on
+    the exact values and gradients with the stroke as constraints (`shape.constraint`)."""
 
-    Returns the cheapest point it evaluated that meets every constraint (the speed, the
-    normal-force margin and the stroke, the last to 1e-9); if none does, the point with the
-    smallest speed deficit. A trust-region or line-search iterate may wander after it: the
-    objective has jumps where a held mass starts to slip. Also returns runners-up, each as its
-    cost of transport and point: the points at the fractions `RUNNERS_UP` of its sequence of
-    points that meet every constraint. The cheapest point often lies at such a jump, where the
-    gait is fragile (a held mass's force grazes its static limit, so that the engine's step or
-    a perturbation decides when it slips); an earlier point, further from the jump the descent
-    was drawn to, is a fallback for the verification."""
-
-    def solve(ask):
-        cache: dict[bytes, Any] = {}
-        trace: list[dict] = []
-        best: dict[str, Any] = {"key": (math.inf, math.inf), "x": np.array(x0, float)}
-        held_points: list[tuple[float, np.ndarray]] = []
-
-        def result():
-            if best["key"][0] != 0.0:
-                return best["x"], []
-            picks = sorted({int(f * len(held_points)) for f in RUNNERS_UP})
-            runners = [held_points[i] for i in picks if held_points[i][1].tobytes() != best["x"].tobytes()]
-            return best["x"], runners
-
-        def at(x):
-            key = np.asarray(x).tobytes()
-            if key not in cache:
-                cache.clear()
-                fig = cache[key] = ask(np.array(x, float))
-                trace.append({"f": float(fig.f), "c_speed": float(fig.c[0]), "c_normal": float(fig.c[1]), "ok": fig.ok})
-                if fig.ok:
-                    held = min(fig.c[0], fig.c[1]) >= 0 and shape.stroke(np.asarray(x)) <= 1 + 1e-9
-                    rank = (0.0, fig.cot) if held else (1.0, -min(fig.c[0], 0.0) - min(fig.c[1], 0.0))
-                    if rank < best["key"]:
-                        best["key"], best["x"] = rank, np.array(x, float)
-                    if held:
-                        held_points.append((fig.cot, np.array(x, float)))
-            return cache[key]
-
+    def search(at, x):
         if settings.local_method in METHODS:
-            _descent(np.array(x0, float), shape, bounds, settings, max_iter, at)
-            log.append({"message": "descent", "nit": len(trace), "trace": trace})
-            return result()
+            _descent(x, shape, bounds, settings, max_iter, at)
+            return {"message": settings.local_method}
         if settings.local_method == "SLSQP":
             res = scipy.optimize.minimize(
                 lambda x: at(x).f,
-                x0,
+                x,
                 jac=lambda x: at(x).df,
                 method="SLSQP",
                 constraints=[
@@ -164,7 +125,7 @@ def _local_solver(x0, shape: AbstractShape, bounds, settings: ExactSettings, log
         else:
             res = scipy.optimize.minimize(
                 lambda x: at(x).f,
-                x0,
+                x,
                 jac=lambda x: at(x).df,
                 method="trust-constr",
                 constraints=[
@@ -182,10 +143,10 @@ def _local_solver(x0, shape: AbstractShape, bounds, settings: ExactSettings, log
                 bounds=bounds,
                 options={"maxiter": max_iter, "initial_tr_radius": settings.trust_radius, "verbose": 0},
             )
-        log.append({"message": str(res.message), "nit": int(res.nit), "trace": trace})
-        return result()
+        return {"message": str(res.message), "nit": int(res.nit)}
 
-    return solve
+    stroke_ok = lambda x: shape.stroke(np.asarray(x)) <= 1 + 1e-9
+    return local_run(x0, search, stroke_ok, log, runners_up=True)
 
 
 def _zero_hessian(x, v):
