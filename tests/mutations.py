@@ -511,7 +511,7 @@ MUTATIONS = [
         "local_run_reports_its_last_point",
         "an optimiser's local run: its last point with an orbit reported, not the cheapest feasible one",
         "locomotion_jax/optimisation/_local.py",
-        (('                    if rank < best["key"]:\n', '                    if True:\n'),),
+        (('                    if rank < best["key"]:\n', "                    if True:\n"),),
         ("tests/test_descent.py::test_local_run_reports_its_cheapest_feasible_point_and_runners_up",),
     ),
     Mutation(
