@@ -46,7 +46,6 @@ from ..model._springwaves import SpringFourier
 from ..run._resolution import refuse_search
 from . import _chain_screen as screen, _element_local as local
 from ._chain_optimum import ChainOptimiseSettings, ChainOptimum
-from ._optimum import choose
 
 
 def check_inputs(chain: Any, v_min: Any, a_max: Any, direction: Any, harmonics: Any, omega: Any,
@@ -139,30 +138,14 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     names = ["travelling wave"] + [f"local {lane}" for lane in range(len(xs))]
     cos_b, sin_b = screen.wave_coefficients(sc.a[best : best + 1], sc.phi[best : best + 1], S, H)
     say(f"verifying {len(names)} candidates on their steady gaits...")
-    if spline:
-        # The wave's figures are its row of the screen; the splines are solved in one batch.
-        control = np.stack([a_max * local.spline_project(x, -np.inf, np.inf)[:-1].reshape(S, M) for x in xs])
-        om = np.array([float(sc.omega[best])] + [math.exp(float(x[-1])) for x in xs])
-        refined = screen.solve(base, None, None, om[1:], settings, control=control)
-        g = screen.Gaits(*(np.concatenate([w[best : best + 1], r]) for w, r in zip(sc.gaits, refined)))
-        strokes = np.concatenate([local.strokes(cos_b[0], sin_b[0])[None], [local.spline_strokes(c) for c in control]])
-        empty = np.zeros((S, 0))
-        waves = [(cos_b[0], sin_b[0], None)] + [(empty, empty, c) for c in control]
-    else:
-        coefs = [(cos_b[0], sin_b[0], float(sc.omega[best]))] + [local.on_bound(x, S, H, a_max) for x in xs]
-        om = np.array([w for _, _, w in coefs])
-        cos, sin = np.stack([c for c, _, _ in coefs]), np.stack([s for _, s, _ in coefs])
-        g = screen.solve(base, cos, sin, om, settings)
-        strokes = np.stack([local.strokes(c, s) for c, s in zip(cos, sin)])
-        waves = [(c, s, None) for c, s in zip(cos, sin)]
+    solve = lambda cos, sin, om, control=None: screen.solve(base, cos, sin, om, settings, control=control)._asdict()
+    row = {name: x[best : best + 1] for name, x in sc.gaits._asdict().items()}
     eps = float(jnp.finfo(base.dtype).eps)
-    k, feasible, ok_speed, ok_stroke = choose(g.ok, g.speed, g.cost, strokes.max(axis=1), speed, direction,
-                                              a_max, eps)  # fmt: skip
-    table = [dict(candidate=names[i], omega=float(om[i]), mean_speed_exact=float(g.speed[i]),
-                  cost_of_transport_exact=float(g.cost[i]), stable_exact=bool(g.ok[i]),
-                  liftoff_exact=bool(g.liftoff[i]), stroke=float(strokes[i].max()), feasible_exact=bool(feasible[i]))
-             for i in range(len(names))]  # fmt: skip
-    cos_k, sin_k, control_k = waves[k]
+    v = local.verify(xs, (cos_b[0], sin_b[0], float(sc.omega[best])), row, names, solve, a_max, speed, direction, H,
+                     M if spline else 0, eps)  # fmt: skip
+    g, om, strokes, k, feasible, table = screen.Gaits(**v.gaits), v.omega, v.strokes, v.k, v.feasible, v.table
+    ok_speed, ok_stroke = v.ok_speed, v.ok_stroke
+    cos_k, sin_k, control_k = v.waves[k]
     # The smallest normal force of the reported orbit (the oracle's figure, paper reading); the
     # oracle of a spline search solves splines only, not the travelling wave.
     min_normal = math.nan

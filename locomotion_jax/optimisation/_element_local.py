@@ -1,7 +1,8 @@
 """The stages that the chain and mechanism optimisers share, after each one's own baseline (travelling
-waves of a chain, sinusoids of a mechanism): the local refinement and the direct-simulation check
-of the optimum (the choice among the verified candidates, `_optimum.choose`, is every exact
-optimiser's). A signal per actuated element: `gaits._element_orbit`.
+waves of a chain, sinusoids of a mechanism): the local refinement, the verification of the
+candidates on their steady gaits (`verify`; the choice among them, `_optimum.choose`, is every
+exact optimiser's) and the direct-simulation check of the optimum. A signal per actuated element:
+`gaits._element_orbit`.
 
 The refinement (`refine`) runs a monotone descent on an exact penalty per start (`_local.local_run`),
 the starts in lockstep (`_lockstep.run_lockstep`): each start runs in its own thread and their
@@ -32,6 +33,7 @@ from ._evaluator import Evaluator
 from ._figures import Figures, PENALTY
 from ._local import local_run
 from ._lockstep import run_lockstep
+from ._optimum import choose
 from ._shapes import spline_stroke, SplineShape
 
 
@@ -236,6 +238,61 @@ def refine(base: Any, starts: list[Start], a_max: float, v_min: float, direction
     xs = run_lockstep(solvers, ev)
     say(f"local refinement done ({time.perf_counter() - t0:.0f} s, {ev.calls} batched evaluations)")
     return xs, ev, log
+
+
+class Verified(NamedTuple):
+    """The candidates' steady gaits (the baseline first, then one per local run; [`verify`][]) and
+    the choice among them (`_optimum.choose`)."""
+
+    gaits: dict[str, np.ndarray]  # each figure of the gait solver, one row per candidate
+    omega: np.ndarray
+    strokes: np.ndarray  # (candidates, S): each signal's exact largest excursion
+    waves: list[tuple[np.ndarray, np.ndarray, np.ndarray | None]]  # cos, sin (absolute units), control or None
+    k: int  # the reported candidate
+    feasible: np.ndarray
+    ok_speed: np.ndarray
+    ok_stroke: np.ndarray
+    table: list[dict]  # each candidate's figures, as the optimum's `candidates`
+
+
+def verify(xs: list[np.ndarray], baseline: tuple[np.ndarray, np.ndarray, float], baseline_gait: dict[str, np.ndarray],
+           names: list[str], solve: Callable[..., dict[str, np.ndarray]], a_max: float, v_min: float,
+           direction: int, harmonics: int, knots: int, eps: float) -> Verified:  # fmt: skip
+    """The verification of a chain's or a mechanism's candidates: the baseline (`baseline`: its
+    Fourier coefficients `(S, H)` in absolute units and its frequency; `baseline_gait`: its steady
+    gait's row, each figure of shape `(1, ...)`) and the local runs' points `xs`, rescaled onto the
+    exact bound (what the line search's tolerance let through). `solve(cos, sin, omega, control=None)`:
+    the steady gaits (strict contact, relaxed start) of a batch of Fourier series, or of splines of
+    `knots` control values (absolute units), as host arrays with at least `ok` (converged, stable,
+    no lift-off), `speed`, `cost`; a `liftoff` figure goes into the table too. The baseline's gait
+    is not solved again in a spline search (its row is the screen's)."""
+    cos_b, sin_b, om_b = baseline
+    S = cos_b.shape[0]
+    waves: list[tuple[np.ndarray, np.ndarray, np.ndarray | None]]
+    if knots:
+        control = np.stack([a_max * spline_project(x, -np.inf, np.inf)[:-1].reshape(S, knots) for x in xs])
+        om = np.array([om_b] + [math.exp(float(x[-1])) for x in xs])
+        refined = solve(None, None, om[1:], control=control)
+        g = {name: np.concatenate([baseline_gait[name], refined[name]]) for name in refined}
+        strokes_ = np.concatenate([strokes(cos_b, sin_b)[None], [spline_strokes(c) for c in control]])
+        empty = np.zeros((S, 0))
+        waves = [(cos_b, sin_b, None), *((empty, empty, c) for c in control)]
+    else:
+        coefs = [(cos_b, sin_b, om_b)] + [on_bound(x, S, harmonics, a_max) for x in xs]
+        om = np.array([w for _, _, w in coefs])
+        cos, sin = np.stack([c for c, _, _ in coefs]), np.stack([s for _, s, _ in coefs])
+        g = solve(cos, sin, om)
+        strokes_ = np.stack([strokes(c, s) for c, s in zip(cos, sin)])
+        waves = [(c, s, None) for c, s in zip(cos, sin)]
+    ok = np.asarray(g["ok"], bool)
+    k, feasible, ok_speed, ok_stroke = choose(ok, g["speed"], g["cost"], strokes_.max(axis=1), v_min, direction,
+                                              a_max, eps)  # fmt: skip
+    lift = lambda i: {"liftoff_exact": bool(g["liftoff"][i])} if "liftoff" in g else {}
+    table = [dict(candidate=names[i], omega=float(om[i]), mean_speed_exact=float(g["speed"][i]),
+                  cost_of_transport_exact=float(g["cost"][i]), stable_exact=bool(ok[i]), **lift(i),
+                  stroke=float(strokes_[i].max()), feasible_exact=bool(feasible[i]))
+             for i in range(len(names))]  # fmt: skip
+    return Verified(g, om, strokes_, waves, k, feasible, ok_speed, ok_stroke, table)
 
 
 def simulate_check(model: Any, rho: float, period: float, settings: Any, **start: Any) -> tuple[float, float, int]:

@@ -56,7 +56,7 @@ from ..gaits._progress import reporter
 from ..model._bodies import Mechanism
 from . import _element_local as local
 from ._chain_optimum import ChainOptimiseSettings
-from ._optimum import AbstractOptimum, along, choose, fmt
+from ._optimum import AbstractOptimum, along, fmt
 
 
 class MechanismOptimiseSettings(eqx.Module):
@@ -341,30 +341,17 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
 
     # 3. Verification: the baseline and the refined actuations (on the exact bound).
     names = ["sinusoid"] + [f"local {lane}" for lane in range(len(xs))]
-    om_c = np.array([float(W[best])] + [math.exp(float(x[-1])) for x in xs])
     say(f"verifying {len(names)} candidates on their steady gaits...")
-    if spline:
-        # The baseline's figures are its row of the screen; the splines are solved in one batch.
-        control = np.stack([a_max * local.spline_project(x, -np.inf, np.inf)[:-1].reshape(S, M) for x in xs])
-        refined = _gaits(_spline(base, control, om_c[1:]), settings)
-        g = {name: np.concatenate([sc[name][best : best + 1], refined[name]]) for name in sc}
-        strokes = np.concatenate([local.strokes(cos[best], sin[best])[None],
-                                  [local.spline_strokes(c) for c in control]])  # fmt: skip
-        empty = np.zeros((S, 0))
-        waves = [(cos[best], sin[best], None)] + [(empty, empty, c) for c in control]
-    else:
-        coefs = [(cos[best], sin[best])] + [local.on_bound(x, S, H, a_max)[:2] for x in xs]
-        g = _gaits(_fourier(base, np.stack([c for c, _ in coefs]), np.stack([s for _, s in coefs]), om_c), settings)
-        strokes = np.stack([local.strokes(c, s) for c, s in coefs])
-        waves = [(c, s, None) for c, s in coefs]
+
+    def solve(cos, sin, om, control=None):
+        return _gaits(_fourier(base, cos, sin, om) if control is None else _spline(base, control, om), settings)
+
+    row = {name: x[best : best + 1] for name, x in sc.items()}
     eps = float(jnp.finfo(base.dtype).eps)
-    k, feasible, _, _ = choose(np.asarray(g["ok"], bool), g["speed"], g["cost"], strokes.max(axis=1), v_min,
-                               direction, a_max, eps)  # fmt: skip
-    table = [dict(candidate=names[i], omega=float(om_c[i]), mean_speed_exact=float(g["speed"][i]),
-                  cost_of_transport_exact=float(g["cost"][i]), stable_exact=bool(g["ok"][i]),
-                  stroke=float(strokes[i].max()), feasible_exact=bool(feasible[i]))
-             for i in range(len(names))]  # fmt: skip
-    cos_k, sin_k, control_k = waves[k]
+    v = local.verify(xs, (cos[best], sin[best], float(W[best])), row, names, solve, a_max, v_min, direction, H,
+                     M if spline else 0, eps)  # fmt: skip
+    g, om_c, strokes, k, feasible, table = v.gaits, v.omega, v.strokes, v.k, v.feasible, v.table
+    cos_k, sin_k, control_k = v.waves[k]
     chosen = _fourier(base, cos_k, sin_k, om_c[k]) if control_k is None else _spline(base, control_k, om_c[k])
     speed_s, cost_s, n = (local.simulate_check(chosen, float(g["radius"][k]), float(g["period"][k]), settings)
                           if g["ok"][k] else (math.nan, math.nan, 0))  # fmt: skip
