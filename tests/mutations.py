@@ -515,6 +515,18 @@ MUTATIONS = [
         ("tests/test_descent.py::test_local_run_reports_its_cheapest_feasible_point_and_runners_up",),
     ),
     Mutation(
+        "precompile_wrong_verification_batch",
+        "the exact optimiser's background compilation: the verification's placeholder batch of the wrong size",
+        "locomotion_jax/optimisation/_exact.py",
+        (
+            (
+                "th = np.zeros(((2 + settings.local) * len(shape.origins)",
+                "th = np.zeros(((3 + settings.local) * len(shape.origins)",
+            ),
+        ),
+        ("tests/test_optimise.py::test_precompiled_verification_is_the_verifications_program",),
+    ),
+    Mutation(
         "newton_orbit_never_gives_up",
         "the orbit oracle's Newton method: no stop on a stalled residual, whatever its patience",
         "locomotion_jax/gaits/_orbit.py",

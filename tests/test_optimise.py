@@ -46,7 +46,7 @@ import numpy as np
 import pytest
 from locomotion_jax.cli import _main as _cli, _optimise as _cli_optimise
 from locomotion_jax.cli._optimise import register
-from locomotion_jax.gaits import _element_orbit, _orbit
+from locomotion_jax.gaits import _element_orbit, _orbit, _shooting
 from locomotion_jax.optimisation import (
     _chain_screen as screen,
     _constraints,
@@ -620,6 +620,23 @@ def test_exact_compilations(exact_run, tiny_sweep):
     before = dict(_orbit.TRACES)
     _optimise.optimise(lj.Params(), 0.025, 0.05, settings=settings, sweep=tiny_sweep)
     assert dict(_orbit.TRACES) == before
+
+
+def test_precompiled_verification_is_the_verifications_program():
+    """`_exact.Precompile` compiles the verification's steady-gait programs on placeholders at 4
+    times the step (traced): the verification's own first call at the step compiles no new
+    transient program. (The oracle's programs: `test_exact_compilations`, one trace each.)"""
+    pre = _exact_optimise.Precompile(lj.Params(), 0.05, None, EXACT_SHAPE, EXACT_TINY)
+    pre.wait()
+    assert pre.oracle.is_set() and not pre.thread.is_alive()
+    size = _shooting._transient_batch._cache_size  # pyright: ignore[reportFunctionMemberAccess]
+    before = size()
+    phase = np.arange(256) * 2 * np.pi / 256
+    rows = (2 + EXACT_TINY.local) * len(EXACT_SHAPE.origins)  # the verification's batch (`_exact._verify`)
+    theta = np.stack([EXACT_SHAPE.fit(np.sin(phase + j), 4.0) for j in range(rows)])
+    gait = _exact_optimise._verify_gaits(lj.Params(), EXACT_SHAPE, 0.05, EXACT_TINY, theta, EXACT_TINY.dt)
+    assert size() == before
+    assert np.asarray(gait.converged).any()
 
 
 def test_stall_rtol_reaches_the_descent(exact_run, tiny_sweep, monkeypatch):

@@ -40,9 +40,13 @@ Method:
   lift-off, at least as fast as required and within the stroke. The runners-up of each local run (earlier points of its
   descent) are solved in a second batch, only where their run's waveform fails or where the
   descent found them cheaper than the cheapest that passed.
+- **Compilation** of the orbit oracle's and the verification's programs starts in a background
+  thread before the sinusoid baseline ([`Precompile`][]), so that on a machine of two cores or
+  more it overlaps the baseline's and the local runs' work.
 """
 
 import math
+import threading
 import time
 from typing import Any, cast
 
@@ -198,24 +202,11 @@ def _merit(fig: "Figures | _Bad") -> float:
     return fig.cot * (1 + 3 * max(0.0, -fig.c[0])) + 10 * max(0.0, -fig.c[1])
 
 
-def optimise_exact(
-    params: Params,
-    speed: float,
-    direction: int,
-    a_max: float,
-    omega: float | None,
-    shape: AbstractShape,
-    settings: ExactSettings,
-    baseline: dict | None,
-    start: Any,
-) -> tuple[Optimum, dict]:
-    """The exact method (module docstring); inputs already checked by `optimise`."""
-    t0 = time.perf_counter()
+def _oracle(params: Params, a_max: float, lo: float, shape: AbstractShape, settings: ExactSettings) -> orbit.Oracle:
+    """The orbit oracle of the screen and the local runs (step cap: three periods at the lowest frequency)."""
     dtype = params.dtype
-    lo, hi = _omega_bounds(params, omega, settings)
-    free = lo != hi
     max_steps = int(math.ceil(2 * math.pi / lo / settings.dt)) * 3 + 200
-    oracle = orbit.Oracle(
+    return orbit.Oracle(
         params=params,
         a_max=jnp.asarray(a_max, dtype),
         max_steps=jnp.asarray(max_steps, jnp.int32),
@@ -226,6 +217,87 @@ def optimise_exact(
         max_iter=settings.newton_iter,
         patience=jnp.asarray(orbit.PATIENCE, jnp.int32),
     )
+
+
+def _verify_gaits(params: Params, shape: AbstractShape, a_max: float, settings: ExactSettings, theta: np.ndarray,
+                  dt: float) -> Any:  # fmt: skip
+    """The verification's steady gaits of the decision vectors `theta` (strict contact, relaxed start)."""
+    dtype = params.dtype
+    wave = shape.waveform(jnp.asarray(theta, dtype), jnp.asarray(a_max, dtype), jnp.asarray(params.lbar, dtype))
+    batch = pareto.with_waveform_frequency(params, wave)
+    # Unguarded: a spline's knot spacing is finer than the guard's 4 steps at the default
+    # settings, and this verification checks the resolution itself (a solve at dt/2 must agree).
+    # Newton's patience: a row that cycles would hold the batch for every iteration of each period.
+    return paper_gait(batch, dynamics=_exact_dynamics(dt), transient=settings.transient, waveform=wave,
+                      start="relaxed", guarded=False, patience=orbit.PATIENCE)  # fmt: skip
+
+
+class Precompile:
+    """The exact optimiser's own programs compiled in a background thread, started before the
+    sinusoid baseline: the orbit oracle's (the screen's and the local runs': `oracle` is set once
+    they are compiled), then the verification's. Each is compiled by a call on placeholder
+    decision vectors (zero strokes at the highest frequency, no transient periods, the
+    verification at 4 times the step: the step and the periods are traced, so the programs are
+    those of the real calls). The baseline and the optimiser's stages compile and run in the
+    calling thread meanwhile; a compilation waits on its own mostly one core, so on a machine
+    with two or more the two overlap. The optimiser waits for `oracle` before its screen and
+    for the thread before its verification, so that no program is compiled twice at once.
+
+    A placeholder call that fails is left to the real call, which raises its error there."""
+
+    def __init__(self, params: Params, a_max: float, omega: float | None, shape: AbstractShape,
+                 settings: ExactSettings):  # fmt: skip
+        self.oracle = threading.Event()
+        self.thread = threading.Thread(target=self._run, args=(params, a_max, omega, shape, settings), daemon=True)
+        self.thread.start()
+
+    def _run(self, params, a_max, omega, shape, settings) -> None:
+        dtype = params.dtype
+        lo, hi = _omega_bounds(params, omega, settings)
+        try:
+            lanes = settings.local
+            th = np.zeros((lanes, shape.size))
+            th[:, -1] = math.log(hi)
+            oracle = _oracle(params, a_max, lo, shape, settings)
+            rest = oracle.transient(jnp.asarray(th, dtype), jnp.zeros((lanes, 3), dtype), jnp.ones(lanes, bool),
+                                    jnp.asarray(0, jnp.int32))  # fmt: skip
+            y, k = jnp.asarray(np.asarray(rest), dtype), jnp.asarray(np.ones(lanes, int), jnp.int32)
+            jax.block_until_ready(oracle.orbits(jnp.asarray(th, dtype), y, k, gradient=False))
+        except Exception:  # the real call raises it
+            pass
+        finally:
+            self.oracle.set()
+        try:
+            th = np.zeros(((2 + settings.local) * len(shape.origins), shape.size))
+            th[:, -1] = math.log(hi)
+            _verify_gaits(params, shape, a_max, settings, th, 4 * settings.dt)
+        except Exception:  # the real call raises it
+            pass
+
+    def wait(self) -> None:
+        """Until the verification's programs are compiled too."""
+        self.thread.join()
+
+
+def optimise_exact(
+    params: Params,
+    speed: float,
+    direction: int,
+    a_max: float,
+    omega: float | None,
+    shape: AbstractShape,
+    settings: ExactSettings,
+    baseline: dict | None,
+    start: Any,
+    precompiled: Precompile | None = None,
+) -> tuple[Optimum, dict]:
+    """The exact method (module docstring); inputs already checked by `optimise`. `precompiled`:
+    the programs compiling in the background since before the baseline ([`Precompile`][])."""
+    t0 = time.perf_counter()
+    dtype = params.dtype
+    lo, hi = _omega_bounds(params, omega, settings)
+    free = lo != hi
+    oracle = _oracle(params, a_max, lo, shape, settings)
     v_target = speed * (1 + settings.speed_slack)
     make = lambda th, orb, v, k: Figures(th, orb, v, k, direction, settings.margin, free)
     lanes = settings.local
@@ -272,6 +344,8 @@ def optimise_exact(
                 ys.append((one.y, int(kk[k])))
         return figs, ys
 
+    if precompiled is not None:
+        precompiled.oracle.wait()
     figs, ys = screen(theta0)
     if free:
         # A good shape at too low a frequency: the same shape run faster, in proportion to
@@ -347,6 +421,8 @@ def optimise_exact(
         for k in range(lanes)
         for j, (cot, r) in enumerate(runners[k])
     ]
+    if precompiled is not None:
+        precompiled.wait()
     return _verify(params, speed, direction, a_max, shape, free, settings, candidates, fallbacks, baseline, log, t0, ev)
 
 
@@ -373,17 +449,8 @@ def _verify(params, speed, direction, a_max, shape, free, settings, candidates, 
     # optimisation with the same settings runs the same compiled verification.
     rows = 2 + settings.local
     origins = shape.origins
-    lbar, amax = jnp.asarray(params.lbar, dtype), jnp.asarray(a_max, dtype)
     eps = float(jnp.finfo(dtype).eps)
-
-    def gaits(theta, dt):
-        wave = shape.waveform(jnp.asarray(theta, dtype), amax, lbar)
-        batch = pareto.with_waveform_frequency(params, wave)
-        # Unguarded: a spline's knot spacing is finer than the guard's 4 steps at the default
-        # settings, and this verification checks the resolution itself (a solve at dt/2 must agree).
-        # Newton's patience: a row that cycles would hold the batch for every iteration of each period.
-        return paper_gait(batch, dynamics=_exact_dynamics(dt), transient=settings.transient, waveform=wave,
-                          start="relaxed", guarded=False, patience=orbit.PATIENCE)  # fmt: skip
+    gaits = lambda theta, dt: _verify_gaits(params, shape, a_max, settings, theta, dt)
 
     def check(thetas):
         """The gaits of up to `rows` candidates at the better of their time origins, with the

@@ -406,8 +406,12 @@ def params_optimum(params: Params, v_min, a_max, method, direction, omega, harmo
         raise ValueError(f"harmonics must be an integer >= 2 for method='exact', got {harmonics!r}.")
     speed, direction = cons.check_inputs(params, v_min, a_max, direction, harmonics, omega, settings.margin)
     shape = SplineShape(knots=cast(ExactSettings, settings).knots) if spline else FourierShape(harmonics=harmonics)
+    precompiled = None
     if exact:
         _guard_search(params, omega, shape, cast(ExactSettings, settings))
+        from ._exact import Precompile
+
+        precompiled = Precompile(params, a_max, omega, shape, cast(ExactSettings, settings))
     if settings.verbose:  # the baseline compiles and solves before the optimiser's own progress
         what = "sweeping the sinusoids, then " if sweep is None else ""
         refine = "refining " if settings.refine_baseline else "picking "
@@ -422,7 +426,7 @@ def params_optimum(params: Params, v_min, a_max, method, direction, omega, harmo
     baseline = _baseline(params, a_max, speed, direction, sweep, s.refine_baseline, s.dt)
     from ._exact import optimise_exact
 
-    opt, _ = optimise_exact(params, speed, direction, a_max, omega, shape, s, baseline, start)
+    opt, _ = optimise_exact(params, speed, direction, a_max, omega, shape, s, baseline, start, precompiled)
     return opt
 
 
