@@ -239,8 +239,8 @@ class Precompile:
     decision vectors (zero strokes at the highest frequency, no transient periods, the
     verification at 4 times the step: the step and the periods are traced, so the programs are
     those of the real calls). The baseline and the optimiser's stages compile and run in the
-    calling thread meanwhile; a compilation waits on its own mostly one core, so on a machine
-    with two or more the two overlap. The optimiser waits for `oracle` before its screen and
+    calling thread meanwhile: XLA compiles a program on mostly one core, so on a machine of two
+    cores or more the two overlap. The optimiser waits for `oracle` before its screen and
     for the thread before its verification, so that no program is compiled twice at once.
 
     A placeholder call that fails is left to the real call, which raises its error there."""
@@ -253,8 +253,8 @@ class Precompile:
 
     def _run(self, params, a_max, omega, shape, settings) -> None:
         dtype = params.dtype
-        lo, hi = _omega_bounds(params, omega, settings)
         try:
+            lo, hi = _omega_bounds(params, omega, settings)
             lanes = settings.local
             th = np.zeros((lanes, shape.size))
             th[:, -1] = math.log(hi)
@@ -263,16 +263,14 @@ class Precompile:
                                     jnp.asarray(0, jnp.int32))  # fmt: skip
             y, k = jnp.asarray(np.asarray(rest), dtype), jnp.asarray(np.ones(lanes, int), jnp.int32)
             jax.block_until_ready(oracle.orbits(jnp.asarray(th, dtype), y, k, gradient=False))
-        except Exception:  # the real call raises it
-            pass
-        finally:
-            self.oracle.set()
-        try:
             th = np.zeros(((2 + settings.local) * len(shape.origins), shape.size))
             th[:, -1] = math.log(hi)
+            self.oracle.set()
             _verify_gaits(params, shape, a_max, settings, th, 4 * settings.dt)
         except Exception:  # the real call raises it
             pass
+        finally:
+            self.oracle.set()  # never left waiting
 
     def wait(self) -> None:
         """Until the verification's programs are compiled too."""
