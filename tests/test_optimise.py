@@ -44,6 +44,7 @@ import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
+import scipy.optimize
 from locomotion_jax.cli import _main as _cli, _optimise as _cli_optimise
 from locomotion_jax.cli._optimise import register
 from locomotion_jax.gaits import _element_orbit, _orbit, _shooting
@@ -620,6 +621,27 @@ def test_exact_compilations(exact_run, tiny_sweep):
     before = dict(_orbit.TRACES)
     _optimise.optimise(lj.Params(), 0.025, 0.05, settings=settings, sweep=tiny_sweep)
     assert dict(_orbit.TRACES) == before
+
+
+@pytest.mark.parametrize("method", ["SLSQP", "trust-constr"])
+def test_scipy_local_methods_report_their_cheapest_point(method):
+    """The exact optimiser's scipy local methods (`_exact._local_solver`) on a quadratic with a known
+    minimum inside the stroke limit: they reach it, and their log holds scipy's iterations and
+    every evaluation."""
+    settings = eqx.tree_at(lambda s: s.local_method, EXACT_TINY, method)
+    n = EXACT_SHAPE.size
+    target = np.r_[np.full(n - 1, 0.1), 0.3]
+
+    def ask(x):
+        d = x - target
+        return types.SimpleNamespace(f=float(d @ d), df=2 * d, c=np.ones(2), dc=np.zeros((2, n)), ok=True,
+                                     cot=float(d @ d))  # fmt: skip
+
+    bounds = scipy.optimize.Bounds(np.full(n, -np.inf), np.full(n, np.inf))
+    log: list = []
+    best, _ = _exact_optimise._local_solver(np.zeros(n), EXACT_SHAPE, bounds, settings, log, 100)(ask)
+    np.testing.assert_allclose(best, target, atol=1e-4)
+    assert log[0]["nit"] >= 1 and log[0]["evaluations"] == len(log[0]["trace"]) >= 2
 
 
 def test_precompiled_verification_is_the_verifications_program():
