@@ -637,7 +637,7 @@ def test_scipy_local_methods_report_their_cheapest_point(method):
         return types.SimpleNamespace(f=float(d @ d), df=2 * d, c=np.ones(2), dc=np.zeros((2, n)), ok=True,
                                      cot=float(d @ d))  # fmt: skip
 
-    bounds = scipy.optimize.Bounds(np.full(n, -np.inf), np.full(n, np.inf))
+    bounds = scipy.optimize.Bounds(-np.inf, np.inf)
     log: list = []
     best, _ = _exact_optimise._local_solver(np.zeros(n), EXACT_SHAPE, bounds, settings, log, 100)(ask)
     np.testing.assert_allclose(best, target, atol=1e-4)
