@@ -1,4 +1,6 @@
-"""The paper's optimiser, old commit against new: `lj.optimise(lj.Params(), v_min=0.05, a_max=0.05)`.
+"""An optimiser, old commit against new: the paper's, `lj.optimise(lj.Params(), v_min=0.05, a_max=0.05)`,
+or with `--worm N` the README's worm of N masses on bristles, `lj.optimise(worm, v_min=0.1, a_max=0.05)`
+(default settings).
 
 Each commit is checked out into a temporary git worktree and run in its own fresh process
 (float64, no persistent compilation cache): the call twice, cold (compilation included) and
@@ -9,7 +11,7 @@ sensitive to other work on the machine than the wall time), the compilations XLA
 sinusoid baseline, screen, local refinement, verification at `dt` and `dt/2`) and the optimum's
 speed and cost of transport.
 
-    python benchmarks/optimise_speed.py OLD NEW [--parallel]
+    python benchmarks/optimise_speed.py OLD NEW [--parallel] [--worm N]
 
 `--parallel` runs the two processes at once (only on a machine with cores to spare: on a
 loaded machine the two compete and both times grow).
@@ -43,11 +45,13 @@ class Tee:
     def flush(self):
         pass
 sys.stderr = Tee()
+WORM = int(sys.argv[1])
 def stages(t0, t1):
-    # Stage boundaries from the verbose progress lines of the exact optimiser.
-    # (The screen's own progress lines read "b of n starts screened": the local stage starts at "; refining".)
-    keys = [("baseline", "the sinusoid baseline"), ("screen", "screening"), ("local", "s); refining"),
-            ("verify", "local runs done")]
+    # Stage boundaries from the verbose progress lines of the exact optimisers.
+    # (The paper's screen's own progress lines read "b of n starts screened": its local stage starts at "; refining".)
+    keys = ([("screen", "screening"), ("local", "refining"), ("verify", "verifying")] if WORM else
+            [("baseline", "the sinusoid baseline"), ("screen", "screening"), ("local", "s); refining"),
+             ("verify", "local runs done")])
     at = {}
     for t, line in marks:
         if t0 <= t <= t1:
@@ -59,7 +63,11 @@ def stages(t0, t1):
     return {n: round(e - at[n], 1) for n, e in zip(names, ends)}
 for run in ("cold", "warm"):
     t0, c0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
-    opt = lj.optimise(lj.Params(), v_min=0.05, a_max=0.05, settings=lj.ExactOptimiseSettings(verbose=True))
+    if WORM:
+        worm = lj.Chain(masses=[1.0] * WORM, d=0.0, friction=lj.AnisotropicCoulomb(0.5, 0.9, 0.3, 0.7))
+        opt = lj.optimise(worm, v_min=0.1, a_max=0.05, settings=lj.ChainOptimiseSettings(verbose=True))
+    else:
+        opt = lj.optimise(lj.Params(), v_min=0.05, a_max=0.05, settings=lj.ExactOptimiseSettings(verbose=True))
     t1, c1 = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
     cpu = c1.ru_utime + c1.ru_stime - c0.ru_utime - c0.ru_stime
     comp = [d for t, n, d in events if t0 <= t <= t1 and "backend_compile" in n]
@@ -72,6 +80,13 @@ for run in ("cold", "warm"):
 
 
 def main(argv: list[str]) -> None:
+    worm = "0"
+    if "--worm" in argv:
+        i = argv.index("--worm")
+        if i + 1 == len(argv) or not argv[i + 1].isdigit():
+            sys.exit(__doc__)
+        worm = argv[i + 1]
+        argv = argv[:i] + argv[i + 2 :]
     args = [a for a in argv if not a.startswith("--")]
     if len(args) != 2:
         sys.exit(__doc__)
@@ -85,7 +100,9 @@ def main(argv: list[str]) -> None:
             env = dict(os.environ, PYTHONPATH=tree, JAX_ENABLE_COMPILATION_CACHE="false")
             env.pop("LJ_CACHE_DIR", None)
             start = time.perf_counter()
-            p = subprocess.Popen([sys.executable, "-c", CHILD], cwd=tree, env=env, stdout=subprocess.PIPE, text=True)
+            p = subprocess.Popen(
+                [sys.executable, "-c", CHILD, worm], cwd=tree, env=env, stdout=subprocess.PIPE, text=True
+            )
             procs.append((label, commit, p, start, tree))
             if not parallel:
                 p.wait()
