@@ -520,18 +520,11 @@ MUTATIONS = [
         "locomotion_jax/optimisation/_exact.py",
         (
             (
-                "th = placeholders((2 + settings.local) * len(shape.origins))",
-                "th = placeholders((3 + settings.local) * len(shape.origins))",
+                "th = np.zeros(((2 + settings.local) * len(shape.origins)",
+                "th = np.zeros(((3 + settings.local) * len(shape.origins)",
             ),
         ),
         ("tests/test_optimise.py::test_precompiled_verification_is_the_verifications_program",),
-    ),
-    Mutation(
-        "precompile_chain_wrong_lanes",
-        "the chain optimiser's background compilation: a placeholder batch of one lane more than the refinement's",
-        "locomotion_jax/optimisation/_element_local.py",
-        (("    dtype, lanes = base.dtype, settings.local\n", "    dtype, lanes = base.dtype, settings.local + 1\n"),),
-        ("tests/test_optimise.py::test_precompiled_oracle_is_the_refinements_program",),
     ),
     Mutation(
         "newton_orbit_never_gives_up",

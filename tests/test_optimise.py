@@ -51,7 +51,6 @@ from locomotion_jax.gaits import _element_orbit, _orbit, _shooting
 from locomotion_jax.optimisation import (
     _chain_screen as screen,
     _constraints,
-    _element_local,
     _evaluator,
     _exact as _exact_optimise,
     _objective,
@@ -904,31 +903,6 @@ def test_infeasible_requirement_is_flagged(infeasible):
     record = json.loads(infeasible.to_json())
     assert record["feasible_exact"] is False and record["improvement_vs_travelling_wave"] is None
     assert "INFEASIBLE" in infeasible.summary()
-
-
-@CHAIN_OPTIMISE
-def test_precompiled_oracle_is_the_refinements_program():
-    """`_element_local.precompile` compiles the programs that the refinement's evaluator calls:
-    after the real calls (a transient from rest and the orbits of real decision vectors, as
-    `Evaluator.solve` makes them), its placeholder calls compile nothing new. (A batch of 3
-    lanes, which no other test compiles, so that the real calls come first whatever the order.)"""
-    options: dict[str, Any] = SMALL | dict(local=3)
-    settings = lj.ChainOptimiseSettings(**options, omega_min=0.4)
-    base = worm(2).broadcast()
-    lo, hi = screen.frequency_range(base, None, settings)
-    ev = _evaluator.Evaluator(_element_local.chain_oracle(base, A_MAX, lo, 1, 0, settings), 3, settings.transient,
-                              lambda lane, th, orb, k: orb)  # fmt: skip
-    theta = np.stack([_element_local.pack(np.zeros((1, 1)), np.full((1, 1), 0.5), w) for w in (lo, hi, hi)])
-    fresh = np.ones(3, bool)
-    rest = ev.oracle.transient(jnp.asarray(theta), jnp.zeros((3, 3)), jnp.asarray(fresh), jnp.asarray(2, jnp.int32))
-    orb, _ = ev.solve(theta, np.asarray(rest), np.ones(3, int))
-    assert orb.ok.any()
-    sizes = lambda: (_orbit.evaluate._cache_size(), _orbit.relax._cache_size())  # pyright: ignore[reportFunctionMemberAccess]
-    before = sizes()
-    pre = _element_local.precompile(base, A_MAX, lo, hi, 1, 1, 0, settings)
-    pre.wait()
-    assert all(r.is_set() for r in pre.ready) and not pre.thread.is_alive()
-    assert sizes() == before
 
 
 @CHAIN_OPTIMISE

@@ -114,8 +114,6 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     refuse_search(fastest, None, settings.dt, f"(optimise: omega = {hi:.6g} with {family}, {what}; the step "
                   "is ChainOptimiseSettings.dt.)")  # fmt: skip
 
-    compiled = local.precompile(base, a_max, lo, hi, S, H, M if spline else 0, settings)  # during the screen
-
     # 1. Travelling waves. Progress from the first second: compiling the screen alone takes minutes.
     size = settings.amplitudes * settings.frequencies * settings.phases
     say(f"screening {size} travelling waves, then {settings.zoom_levels} zoom level(s) (compiling the screen: "
@@ -133,8 +131,7 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
         cos, sin = screen.wave_coefficients(sc.a[i : i + 1], sc.phi[i : i + 1], S, H)
         starts.append(local.Start(cos[0], sin[0], float(sc.omega[i]), sc.gaits.y[i], int(sc.gaits.k[i]),
                                   float(sc.gaits.cost[i])))  # fmt: skip
-    xs, ev, log = local.refine(base, starts, a_max, speed, direction, lo, hi, M if spline else 0, settings, say,
-                               compiled)  # fmt: skip
+    xs, ev, log = local.refine(base, starts, a_max, speed, direction, lo, hi, M if spline else 0, settings, say)
 
     # 3. Verification of the candidates: the refined actuations, rescaled onto the exact
     # stroke limit (what the line search's tolerance let through), and the baseline wave.

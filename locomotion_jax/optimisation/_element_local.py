@@ -22,15 +22,12 @@ import time
 from collections.abc import Callable
 from typing import Any, NamedTuple
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
 from ..dynamics._exact_dynamics import Exact
 from ..gaits import _element_orbit as orbit
 from ..gaits._orbit import PATIENCE
-from ..gaits._shooting import reduced_size
-from ._background import Background
 from ._descent import local_step, METHODS
 from ._evaluator import Evaluator
 from ._figures import Figures, PENALTY
@@ -189,53 +186,25 @@ class Start(NamedTuple):
     cost: float
 
 
-def chain_oracle(base: Any, a_max: float, lo: float, harmonics: int, knots: int, settings: Any) -> orbit.ChainOracle:
-    """The orbit oracle of the local refinement (step cap: three periods at the lowest frequency
-    `lo`); arguments as [`refine`][]'s."""
-    dtype = base.dtype
-    steps = int(math.ceil(2 * math.pi / lo / settings.dt)) * 3 + 200
-    return orbit.ChainOracle(
-        chain=base, a_max=jnp.asarray(a_max, dtype), max_steps=jnp.asarray(steps, jnp.int32),
-        tol=jnp.asarray(settings.newton_tol if jnp.finfo(dtype).bits == 64 else 1e-5, dtype), harmonics=harmonics,
-        contact="paper",  # iterates past a lift-off stay defined; the margin keeps N > 0
-        dt=settings.dt, max_iter=settings.newton_iter, knots=knots, patience=jnp.asarray(PATIENCE, jnp.int32),
-    )  # fmt: skip
-
-
-def precompile(base: Any, a_max: float, lo: float, hi: float, signals: int, harmonics: int, knots: int,
-               settings: Any) -> Background:  # fmt: skip
-    """The refinement's oracle programs (its transient's and its orbits') compiled in the background
-    ([`Background`][]) while the optimiser's baseline runs: calls on placeholder decision vectors
-    (`signals` zero signals at the highest frequency `hi`) from rest, with no transient periods (the
-    periods are traced). Arguments as [`refine`][]'s, which waits for it."""
-    dtype, lanes = base.dtype, settings.local
-
-    def compile_oracle() -> None:
-        oracle = chain_oracle(base, a_max, lo, harmonics, knots, settings)
-        zero = np.zeros((signals, harmonics))
-        x = np.r_[np.zeros(signals * knots), math.log(hi)] if knots else pack(zero, zero, hi)
-        th = jnp.asarray(np.stack([x] * lanes), dtype)
-        y0 = jnp.zeros((lanes, reduced_size(orbit.gait_physics(base, oracle.contact))), dtype)
-        rest = oracle.transient(th, y0, jnp.ones(lanes, bool), jnp.asarray(0, jnp.int32))
-        k = jnp.asarray(np.ones(lanes, int), jnp.int32)
-        jax.block_until_ready(oracle.orbits(th, jnp.asarray(np.asarray(rest), dtype), k))
-
-    return Background(compile_oracle)
-
-
 def refine(base: Any, starts: list[Start], a_max: float, v_min: float, direction: int, lo: float, hi: float,
-           knots: int, settings: Any, say: Callable[[str], None], compiled: Background | None = None,
+           knots: int, settings: Any, say: Callable[[str], None],
            ) -> tuple[list[np.ndarray], Evaluator, list[dict]]:  # fmt: skip
     """Refine `starts` (one per lane, `settings.local` of them) locally in lockstep: Fourier series
     of the starts' harmonics, or with `knots > 0` splines of `knots` control values per signal
     (started from each start's interpolating spline), base frequency in `[lo, hi]`. `settings`:
     a chain's or a mechanism's optimiser settings (the fields of the refinement and the orbit
-    solve); `compiled`: the oracle's programs compiling in the background ([`precompile`][]),
-    waited for before the first evaluation. Returns each lane's result (the cheapest point that
-    met every constraint, else the one with the smallest violation), the evaluator (its oracle and
-    warm starts) and the descent's log."""
+    solve). Returns each lane's result (the cheapest point that met every constraint, else
+    the one with the smallest violation), the evaluator (its oracle and warm starts) and the
+    descent's log."""
     S, H = starts[0].cos.shape
-    oracle = chain_oracle(base, a_max, lo, H, knots, settings)
+    dtype = base.dtype
+    steps = int(math.ceil(2 * math.pi / lo / settings.dt)) * 3 + 200
+    oracle = orbit.ChainOracle(
+        chain=base, a_max=jnp.asarray(a_max, dtype), max_steps=jnp.asarray(steps, jnp.int32),
+        tol=jnp.asarray(settings.newton_tol if jnp.finfo(dtype).bits == 64 else 1e-5, dtype), harmonics=H,
+        contact="paper",  # iterates past a lift-off stay defined; the margin keeps N > 0
+        dt=settings.dt, max_iter=settings.newton_iter, knots=knots, patience=jnp.asarray(PATIENCE, jnp.int32),
+    )  # fmt: skip
     v_target = v_min * (1 + settings.speed_slack)
     free = hi > lo
     make = lambda lane, th, orb, k: Figures(th, orb, v_target, k, direction, settings.margin, free)
@@ -266,8 +235,6 @@ def refine(base: Any, starts: list[Start], a_max: float, v_min: float, direction
     solvers = [local_run(x, search, stroke_ok, log) for x in x0]
     say(f"refining {len(solvers)} starts locally, in lockstep (compiling the orbit solver: first call only)...")
     t0 = time.perf_counter()
-    if compiled is not None:
-        compiled.wait()
     xs = run_lockstep(solvers, ev)
     say(f"local refinement done ({time.perf_counter() - t0:.0f} s, {ev.calls} batched evaluations)")
     return xs, ev, log

@@ -41,8 +41,8 @@ Method:
   descent) are solved in a second batch, only where their run's waveform fails or where the
   descent found them cheaper than the cheapest that passed.
 - **Compilation** of the orbit oracle's and the verification's programs starts in a background
-  thread before the sinusoid baseline ([`Precompile`][], `_background`), so that on a machine of
-  two cores or more it overlaps the baseline's and the local runs' work.
+  thread before the sinusoid baseline ([`Precompile`][]), so that on a machine of two cores or
+  more it overlaps the baseline's and the local runs' work.
 """
 
 import math
@@ -61,7 +61,6 @@ from ..gaits._progress import reporter
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform
 from . import _pareto as pareto
-from ._background import Background
 from ._descent import local_step, METHODS
 from ._evaluator import Evaluator
 from ._figures import Figures, PENALTY
@@ -233,43 +232,49 @@ def _verify_gaits(params: Params, shape: AbstractShape, a_max: float, settings: 
                       start="relaxed", guarded=False, patience=orbit.PATIENCE)  # fmt: skip
 
 
-class Precompile(Background):
-    """The exact optimiser's own programs compiled in the background ([`Background`][]), started
-    before the sinusoid baseline: the orbit oracle's (the screen's and the local runs'; step 0,
-    `oracle` is set once they are compiled), then the verification's (step 1). Each is compiled by
-    a call on placeholder decision vectors (zero strokes at the highest frequency, no transient
-    periods, the verification at 4 times the step: the step and the periods are traced, so the
-    programs are those of the real calls). The optimiser waits for `oracle` before its screen and
-    for the thread before its verification, so that no program is compiled twice at once."""
+class Precompile:
+    """The exact optimiser's own programs compiled in a background thread, started before the
+    sinusoid baseline: the orbit oracle's (the screen's and the local runs': `oracle` is set once
+    they are compiled), then the verification's. Each is compiled by a call on placeholder
+    decision vectors (zero strokes at the highest frequency, no transient periods, the
+    verification at 4 times the step: the step and the periods are traced, so the programs are
+    those of the real calls). The baseline and the optimiser's stages compile and run in the
+    calling thread meanwhile: XLA compiles a program on mostly one core, so on a machine of two
+    cores or more the two overlap. The optimiser waits for `oracle` before its screen and
+    for the thread before its verification, so that no program is compiled twice at once.
+
+    A placeholder call that fails is left to the real call, which raises its error there."""
 
     def __init__(self, params: Params, a_max: float, omega: float | None, shape: AbstractShape,
                  settings: ExactSettings):  # fmt: skip
+        self.oracle = threading.Event()
+        self.thread = threading.Thread(target=self._run, args=(params, a_max, omega, shape, settings), daemon=True)
+        self.thread.start()
+
+    def _run(self, params, a_max, omega, shape, settings) -> None:
         dtype = params.dtype
-        lo, hi = _omega_bounds(params, omega, settings)
-
-        def placeholders(rows: int) -> np.ndarray:
-            th = np.zeros((rows, shape.size))
-            th[:, -1] = math.log(hi)
-            return th
-
-        def compile_oracle() -> None:
+        try:
+            lo, hi = _omega_bounds(params, omega, settings)
             lanes = settings.local
-            th = jnp.asarray(placeholders(lanes), dtype)
+            th = np.zeros((lanes, shape.size))
+            th[:, -1] = math.log(hi)
             oracle = _oracle(params, a_max, lo, shape, settings)
-            rest = oracle.transient(th, jnp.zeros((lanes, 3), dtype), jnp.ones(lanes, bool), jnp.asarray(0, jnp.int32))
-            k = jnp.asarray(np.ones(lanes, int), jnp.int32)
-            jax.block_until_ready(oracle.orbits(th, jnp.asarray(np.asarray(rest), dtype), k, gradient=False))
-
-        def compile_verification() -> None:
-            th = placeholders((2 + settings.local) * len(shape.origins))
+            rest = oracle.transient(jnp.asarray(th, dtype), jnp.zeros((lanes, 3), dtype), jnp.ones(lanes, bool),
+                                    jnp.asarray(0, jnp.int32))  # fmt: skip
+            y, k = jnp.asarray(np.asarray(rest), dtype), jnp.asarray(np.ones(lanes, int), jnp.int32)
+            jax.block_until_ready(oracle.orbits(jnp.asarray(th, dtype), y, k, gradient=False))
+            th = np.zeros(((2 + settings.local) * len(shape.origins), shape.size))
+            th[:, -1] = math.log(hi)
+            self.oracle.set()
             _verify_gaits(params, shape, a_max, settings, th, 4 * settings.dt)
+        except Exception:  # the real call raises it
+            pass
+        finally:
+            self.oracle.set()  # never left waiting
 
-        super().__init__(compile_oracle, compile_verification)
-
-    @property
-    def oracle(self) -> threading.Event:
-        """Set once the orbit oracle's programs are compiled."""
-        return self.ready[0]
+    def wait(self) -> None:
+        """Until the verification's programs are compiled too."""
+        self.thread.join()
 
 
 def optimise_exact(

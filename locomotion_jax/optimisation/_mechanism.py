@@ -315,8 +315,6 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
         lo, hi = settings.omega_min * w, settings.omega_max * w
     free = hi > lo
 
-    compiled = local.precompile(base, a_max, lo, hi, S, H, M if spline else 0, settings)  # during the screen
-
     # 1. Sinusoids a sin(omega t + phi) on every actuated element.
     amps = a_max * np.arange(1, settings.amplitudes + 1) / settings.amplitudes
     oms = np.geomspace(lo, hi, settings.frequencies) if free else np.array([lo])
@@ -339,8 +337,7 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
     rows = [int(i) for i in order if sc["ok"][i]][: settings.local] or [best]
     rows += rows[:1] * (settings.local - len(rows))
     starts = [local.Start(cos[i], sin[i], float(W[i]), sc["y"][i], int(sc["k"][i]), float(sc["cost"][i])) for i in rows]
-    xs, ev, _ = local.refine(base, starts, a_max, v_min, direction, lo, hi, M if spline else 0, settings, say,
-                             compiled)  # fmt: skip
+    xs, ev, _ = local.refine(base, starts, a_max, v_min, direction, lo, hi, M if spline else 0, settings, say)
 
     # 3. Verification: the baseline and the refined actuations (on the exact bound).
     names = ["sinusoid"] + [f"local {lane}" for lane in range(len(xs))]
