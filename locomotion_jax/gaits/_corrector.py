@@ -220,26 +220,33 @@ def _correct_one(
     def small(z, out):
         return residual(z, out) <= tol * (1 + jnp.max(jnp.abs(z[:n])))
 
-    def cond(s):
-        _, _, _, _, it, done, failed, _, since = s
-        return ~done & ~failed & (it < max_iter) & (since < patience)
-
-    def body(s):
-        z, J, out, _, it, _, _, best, since = s
-        A = jnp.concatenate([J[:n] - shift, cvec[None]], axis=0)
-        F = jnp.concatenate([out.y - z[:n], (cvec @ (z - zref))[None]])
-        z1 = z - jnp.linalg.solve(A, F)
-        J1, out1, valid1, bad = evaluate(z1)
-        r1 = residual(z1, out1)
-        since1 = jnp.where(r1 <= best / 2, 0, since + 1)
-        return z1, J1, out1, valid1, it + 1, small(z1, out1) & ~bad, bad, jnp.minimum(best, r1), since1
-
-    J0, out0, valid0, bad0 = evaluate(z0)
     # A start off the hyperplane is a valid point only after a step onto it.
     on = jnp.abs(cvec @ (z0 - zref)) <= tol * (1 + jnp.max(jnp.abs(z0)))
-    zero = jnp.zeros((), jnp.int32)
-    init = (z0, J0, out0, valid0, zero, go & on & small(z0, out0) & ~bad0, ~go | bad0, residual(z0, out0), zero)
-    z, J, out, valid, it, done, _, _, _ = lane_while_loop(cond, body, init)
+
+    def cond(s):
+        _, _, _, _, it, done, failed, _, since, started = s
+        return ~started | (~done & ~failed & (it < max_iter) & (since < patience))
+
+    def body(s):
+        # The first pass evaluates the start; each later one takes a Newton step first. One call
+        # site of the differentiated period map: it is traced and compiled once.
+        z, J, out, _, it, _, _, best, since, started = s
+        A = jnp.concatenate([J[:n] - shift, cvec[None]], axis=0)
+        F = jnp.concatenate([out.y - z[:n], (cvec @ (z - zref))[None]])
+        z1 = jnp.where(started, z - jnp.linalg.solve(A, F), z)
+        J1, out1, valid1, bad = step(z1)
+        r1 = residual(z1, out1)
+        since1 = jnp.where(started, jnp.where(r1 <= best / 2, 0, since + 1), 0)
+        done1 = small(z1, out1) & ~bad & (started | (go & on))
+        failed1 = bad | (~started & ~go)
+        return (z1, J1, out1, valid1, jnp.where(started, it + 1, it), done1, failed1, jnp.minimum(best, r1), since1,
+                jnp.asarray(True))  # fmt: skip
+
+    step = jax.jit(evaluate)  # traced once: `eval_shape` below and the loop's body share its trace
+    J0, out0, valid0, _ = jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), jax.eval_shape(step, z0))
+    zero, no = jnp.zeros((), jnp.int32), jnp.asarray(False)
+    init = (z0, J0, out0, valid0, zero, no, no, jnp.asarray(jnp.inf, dtype), zero, no)
+    z, J, out, valid, it, done, _, _, _, _ = lane_while_loop(cond, body, init)
     return Solved(z=z, J=J, out=out, done=done & go, valid=valid, it=it)
 
 

@@ -182,21 +182,25 @@ def newton_orbit(
         return residual(y, val) <= tol * (1 + jnp.max(jnp.abs(y)))
 
     def cond(c):
-        _, _, _, ok, it, done, _, since = c
-        return ~done & ok & (it < max_iter) & (since < patience)
+        _, _, _, ok, it, done, _, since, started = c
+        return ~started | (~done & ok & (it < max_iter) & (since < patience))
 
     def body(c):
-        y, val, J, _, it, _, best, since = c
-        y1 = y + jnp.linalg.solve(J[:ny, :ny] - eye, y - val[:ny])
-        val1, J1, ok1 = step_pass(y1)
+        # The first pass linearises the start; each later one takes a Newton step first. One
+        # call site of the differentiated period map: it is traced and compiled once.
+        y, val, J, _, it, _, best, since, started = c
+        y1 = jnp.where(started, y + jnp.linalg.solve(J[:ny, :ny] - eye, y - val[:ny]), y)
+        val1, J1, ok1 = step(y1)
         r1 = residual(y1, val1)
-        since1 = jnp.where(r1 <= best / 2, 0, since + 1)
-        return y1, val1, J1, ok1, it + 1, small(y1, val1), jnp.minimum(best, r1), since1
+        since1 = jnp.where(started, jnp.where(r1 <= best / 2, 0, since + 1), 0)
+        it1 = jnp.where(started, it + 1, it)
+        return y1, val1, J1, ok1, it1, small(y1, val1), jnp.minimum(best, r1), since1, jnp.asarray(True)
 
-    val0, J0, ok0 = step_pass(y0)
+    step = jax.jit(step_pass)  # traced once: `eval_shape` below and the loop's body share its trace
+    val0, J0, ok0 = jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), jax.eval_shape(step, y0))
     zero = jnp.zeros((), jnp.int32)
-    init = (y0, val0, J0, ok0, zero, small(y0, val0), residual(y0, val0), zero)
-    y, val, J, ok, it, done, _, _ = lane_while_loop(cond, body, init)
+    init = (y0, val0, J0, ok0, zero, jnp.asarray(False), jnp.asarray(jnp.inf, y0.dtype), zero, jnp.asarray(False))
+    y, val, J, ok, it, done, _, _, _ = lane_while_loop(cond, body, init)
     if monodromy_only:
         # The full Jacobian once, at the last iterate (the same point: the same values).
         full = lambda y, val, J: linearise(y)
