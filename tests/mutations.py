@@ -532,8 +532,8 @@ MUTATIONS = [
         "locomotion_jax/gaits/_orbit.py",
         (
             (
-                "        return ~done & ok & (it < max_iter) & (since < patience)\n",
-                "        return ~done & ok & (it < max_iter)\n",
+                "        return ~started | (~done & ok & (it < max_iter) & (since < patience))\n",
+                "        return ~started | (~done & ok & (it < max_iter))\n",
             ),
         ),
         ("tests/test_optimise.py::test_newton_orbit_gives_up_a_cycle",),
