@@ -12,9 +12,12 @@ sinusoid baseline, screen, local refinement, verification at `dt` and `dt/2`) an
 speed and cost of transport.
 
     python benchmarks/optimise_speed.py OLD NEW [--parallel] [--worm N]
+    python benchmarks/optimise_speed.py --here [--worm N] [--device cpu]
 
 `--parallel` runs the two processes at once (only on a machine with cores to spare: on a
-loaded machine the two compete and both times grow).
+loaded machine the two compete and both times grow). `--here` runs the working tree alone, in one
+fresh process (a machine without git, such as the GPU machine's copy of the tree). `--device
+cpu` runs the optimiser under `jax.default_device` of the CPU (on a machine whose default is a GPU).
 """
 
 import json
@@ -46,6 +49,7 @@ class Tee:
         pass
 sys.stderr = Tee()
 WORM = int(sys.argv[1])
+DEVICE = sys.argv[2] if len(sys.argv) > 2 else ""
 def stages(t0, t1):
     # Stage boundaries from the verbose progress lines of the exact optimisers.
     # (The paper's screen's own progress lines read "b of n starts screened": its local stage starts at "; refining".)
@@ -63,11 +67,12 @@ def stages(t0, t1):
     return {n: round(e - at[n], 1) for n, e in zip(names, ends)}
 for run in ("cold", "warm"):
     t0, c0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
-    if WORM:
-        worm = lj.Chain(masses=[1.0] * WORM, d=0.0, friction=lj.AnisotropicCoulomb(0.5, 0.9, 0.3, 0.7))
-        opt = lj.optimise(worm, v_min=0.1, a_max=0.05, settings=lj.ChainOptimiseSettings(verbose=True))
-    else:
-        opt = lj.optimise(lj.Params(), v_min=0.05, a_max=0.05, settings=lj.ExactOptimiseSettings(verbose=True))
+    with jax.default_device(jax.devices(DEVICE)[0] if DEVICE else None):
+        if WORM:
+            worm = lj.Chain(masses=[1.0] * WORM, d=0.0, friction=lj.AnisotropicCoulomb(0.5, 0.9, 0.3, 0.7))
+            opt = lj.optimise(worm, v_min=0.1, a_max=0.05, settings=lj.ChainOptimiseSettings(verbose=True))
+        else:
+            opt = lj.optimise(lj.Params(), v_min=0.05, a_max=0.05, settings=lj.ExactOptimiseSettings(verbose=True))
     t1, c1 = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
     cpu = c1.ru_utime + c1.ru_stime - c0.ru_utime - c0.ru_stime
     comp = [d for t, n, d in events if t0 <= t <= t1 and "backend_compile" in n]
@@ -75,33 +80,44 @@ for run in ("cold", "warm"):
     print(json.dumps({"run": run, "wall_s": round(t1 - t0, 1), "cpu_s": round(cpu, 1), "compilations": len(comp),
                       "compile_s": round(sum(comp), 1), "trace_s": round(trace, 1), "stages_s": stages(t0, t1),
                       "speed": opt.mean_speed_exact, "cost_of_transport": opt.cost_of_transport_exact,
-                      "feasible": opt.feasible_exact}), flush=True)
+                      "feasible": opt.feasible_exact,
+                      "device": (jax.devices(DEVICE) if DEVICE else jax.devices())[0].device_kind}), flush=True)
 """
 
 
 def main(argv: list[str]) -> None:
-    worm = "0"
+    worm, device = "0", ""
     if "--worm" in argv:
         i = argv.index("--worm")
         if i + 1 == len(argv) or not argv[i + 1].isdigit():
             sys.exit(__doc__)
         worm = argv[i + 1]
         argv = argv[:i] + argv[i + 2 :]
+    if "--device" in argv:
+        i = argv.index("--device")
+        if i + 1 == len(argv):
+            sys.exit(__doc__)
+        device = argv[i + 1]
+        argv = argv[:i] + argv[i + 2 :]
     args = [a for a in argv if not a.startswith("--")]
-    if len(args) != 2:
+    here = "--here" in argv
+    if len(args) != (0 if here else 2):
         sys.exit(__doc__)
     parallel = "--parallel" in argv
-    root = subprocess.check_output(["git", "rev-parse", "--show-toplevel"], text=True).strip()
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    if not here:
+        root = subprocess.check_output(["git", "rev-parse", "--show-toplevel"], text=True).strip()
     with tempfile.TemporaryDirectory() as tmp:
         procs = []
-        for label, commit in zip(("old", "new"), args):
-            tree = os.path.join(tmp, label)
-            subprocess.check_call(["git", "-C", root, "worktree", "add", "--detach", "-q", tree, commit])
+        for label, commit in [("here", "working tree")] if here else zip(("old", "new"), args):
+            tree = root if here else os.path.join(tmp, label)
+            if not here:
+                subprocess.check_call(["git", "-C", root, "worktree", "add", "--detach", "-q", tree, commit])
             env = dict(os.environ, PYTHONPATH=tree, JAX_ENABLE_COMPILATION_CACHE="false")
             env.pop("LJ_CACHE_DIR", None)
             start = time.perf_counter()
             p = subprocess.Popen(
-                [sys.executable, "-c", CHILD, worm], cwd=tree, env=env, stdout=subprocess.PIPE, text=True
+                [sys.executable, "-c", CHILD, worm, device], cwd=tree, env=env, stdout=subprocess.PIPE, text=True
             )
             procs.append((label, commit, p, start, tree))
             if not parallel:
@@ -109,16 +125,19 @@ def main(argv: list[str]) -> None:
         print("| commit | call | wall s | CPU s | compilations | compile s | tracing s | stages s | speed "
               "| cost of transport | feasible |")  # fmt: skip
         print("|---|---|---|---|---|---|---|---|---|---|---|")
+        kind = "?"
         for label, commit, p, start, tree in procs:
             out, _ = p.communicate()
             for line in out.splitlines():
                 r = json.loads(line)
+                kind = r["device"]
                 stages = ", ".join(f"{k} {v}" for k, v in r["stages_s"].items())
                 print(f"| {label} `{commit}` | {r['run']} | {r['wall_s']} | {r['cpu_s']} | {r['compilations']} "
                       f"| {r['compile_s']} | {r['trace_s']} | {stages} | {r['speed']:.16g} "
                       f"| {r['cost_of_transport']:.16g} | {r['feasible']} |")  # fmt: skip
-            subprocess.call(["git", "-C", root, "worktree", "remove", "--force", tree])
-        print(f"\nload average at the end: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+            if not here:
+                subprocess.call(["git", "-C", root, "worktree", "remove", "--force", tree])
+        print(f"\nload average at the end: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; JAX device: {kind}")
 
 
 if __name__ == "__main__":

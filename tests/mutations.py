@@ -515,6 +515,13 @@ MUTATIONS = [
         ("tests/test_descent.py::test_local_run_reports_its_cheapest_feasible_point_and_runners_up",),
     ),
     Mutation(
+        "precompile_process_default_device",
+        "the exact optimiser's background compilation ignores the caller's default device",
+        "locomotion_jax/optimisation/_exact.py",
+        (("with jax.default_device(self.device):", "with jax.default_device(None):"),),
+        ("tests/test_optimise.py::test_precompile_compiles_for_the_callers_default_device",),
+    ),
+    Mutation(
         "precompile_wrong_verification_batch",
         "the exact optimiser's background compilation: the verification's placeholder batch of the wrong size",
         "locomotion_jax/optimisation/_exact.py",

@@ -661,6 +661,20 @@ def test_precompiled_verification_is_the_verifications_program():
     assert np.asarray(gait.converged).any()
 
 
+def test_precompile_compiles_for_the_callers_default_device(monkeypatch):
+    """`_exact.Precompile`'s thread compiles under the caller's `jax.default_device` (a per-thread
+    setting: a thread of its own would compile for the process's default device, not the one the
+    optimiser's own calls run on)."""
+    seen = []
+    record = lambda self, *args: seen.append(jax.config.jax_default_device)  # pyright: ignore[reportAttributeAccessIssue]
+    monkeypatch.setattr(_exact_optimise.Precompile, "_compile", record)
+    cpu = jax.devices("cpu")[0]
+    with jax.default_device(cpu):
+        _exact_optimise.Precompile(lj.Params(), 0.05, None, EXACT_SHAPE, EXACT_TINY).wait()
+    _exact_optimise.Precompile(lj.Params(), 0.05, None, EXACT_SHAPE, EXACT_TINY).wait()
+    assert seen == [cpu, None]
+
+
 def test_stall_rtol_reaches_the_descent(exact_run, tiny_sweep, monkeypatch):
     """`ExactSettings.stall_rtol` is the local descent's (`_descent.local_step`), in every local run."""
     seen = []

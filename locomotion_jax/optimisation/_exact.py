@@ -242,16 +242,23 @@ class Precompile:
     calling thread meanwhile: XLA compiles a program on mostly one core, so on a machine of two
     cores or more the two overlap. The optimiser waits for `oracle` before its screen and
     for the thread before its verification, so that no program is compiled twice at once.
+    The thread compiles for the caller's default device (`jax.default_device` is set per
+    thread): a program compiled for another device would not be the real calls'.
 
     A placeholder call that fails is left to the real call, which raises its error there."""
 
     def __init__(self, params: Params, a_max: float, omega: float | None, shape: AbstractShape,
                  settings: ExactSettings):  # fmt: skip
         self.oracle = threading.Event()
+        self.device = jax.config.jax_default_device  # pyright: ignore[reportAttributeAccessIssue]
         self.thread = threading.Thread(target=self._run, args=(params, a_max, omega, shape, settings), daemon=True)
         self.thread.start()
 
     def _run(self, params, a_max, omega, shape, settings) -> None:
+        with jax.default_device(self.device):
+            self._compile(params, a_max, omega, shape, settings)
+
+    def _compile(self, params, a_max, omega, shape, settings) -> None:
         dtype = params.dtype
         try:
             lo, hi = _omega_bounds(params, omega, settings)
