@@ -389,8 +389,3 @@ def centre_of_mass(P: ChainPhysics, x: Scalars) -> Array:
     """$X = \\sum_i m_i x_i / \\sum_i m_i$."""
     terms = [m * a for m, a in zip(P.m, x)]
     return sum(terms[1:], terms[0]) * P.inv_mass
-
-
-def unstack(a: Array) -> Scalars:
-    """The entries of the last axis as a tuple."""
-    return tuple(a[..., i] for i in range(a.shape[-1]))

@@ -1,6 +1,5 @@
 """Model parameters as a pytree of floating arrays (paper Sect. 2.1, eq. 6)."""
 
-import itertools
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -368,11 +367,6 @@ class Params(AbstractMechanism):
         from ..optimisation._optimise import params_optimum
 
         return params_optimum(self, v_min, a_max, method, direction, omega, harmonics, settings, sweep, start)
-
-
-def batch_indices(shape: tuple[int, ...]) -> list[tuple[int, ...]]:
-    """All multi-indices of a batch shape (for tests and reports)."""
-    return list(itertools.product(*(range(s) for s in shape)))
 
 
 def safe_params(params: Params, wave: Any = None) -> tuple[Params, jax.Array]:

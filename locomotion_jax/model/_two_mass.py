@@ -77,11 +77,6 @@ def total_energy(params: Params, l0: ArrayLike, x1, v1, x2, v2) -> Array:
     return 0.5 * (params.m1 * v1 * v1 + params.m2 * v2 * v2 + params.k * stretch * stretch)
 
 
-def dissipation_power(params: Params, f: Forces, v1: ArrayLike, v2: ArrayLike) -> Array:
-    """Integrand of eq. (15): $\\mu_k n_1 |v_1| + \\mu_k n_2 |v_2| + c v_1^2 + c v_2^2$."""
-    return params.mu_k * (f.n1 * jnp.abs(v1) + f.n2 * jnp.abs(v2)) + params.c * (v1 * v1 + v2 * v2)
-
-
 def smoothed_rates(
     params: Params, f: Forces, v1: Array, v2: Array, mu: Callable[[Array], Array]
 ) -> tuple[Array, Array, Array]:
@@ -97,15 +92,6 @@ def smoothed_rates(
     a2 = (-f.fx - params.c * v2 - fr2) / params.m2
     p_d = fr1 * v1 + fr2 * v2 + params.c * (v1 * v1 + v2 * v2)
     return a1, a2, p_d
-
-
-def actuator_power(f: Forces) -> Array:
-    """Power delivered by the actuator, $-T\\,\\dot\\ell_0$.
-
-    Its integral is the work $w$ of eq. (16). It is computed from the actuator's
-    rate, not from $e$ and $e_d$, so $w = e_d + e(t_2) - e(t_1)$ is a real check.
-    """
-    return -f.tension * f.dl0
 
 
 def initial_gap(params: Params, start: str) -> Array:
