@@ -255,8 +255,11 @@ class Precompile:
         self.thread.start()
 
     def _run(self, params, a_max, omega, shape, settings) -> None:
-        with jax.default_device(self.device):
-            self._compile(params, a_max, omega, shape, settings)
+        try:
+            with jax.default_device(self.device):
+                self._compile(params, a_max, omega, shape, settings)
+        finally:
+            self.oracle.set()  # never left waiting
 
     def _compile(self, params, a_max, omega, shape, settings) -> None:
         dtype = params.dtype
@@ -276,8 +279,6 @@ class Precompile:
             _verify_gaits(params, shape, a_max, settings, th, 4 * settings.dt)
         except Exception:  # the real call raises it
             pass
-        finally:
-            self.oracle.set()  # never left waiting
 
     def wait(self) -> None:
         """Until the verification's programs are compiled too."""
