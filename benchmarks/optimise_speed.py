@@ -50,6 +50,7 @@ class Tee:
 sys.stderr = Tee()
 WORM = int(sys.argv[1])
 DEVICE = sys.argv[2] if len(sys.argv) > 2 else ""
+DEV = jax.devices(DEVICE or None)[0]  # the named platform's first device, else the default one
 def stages(t0, t1):
     # Stage boundaries from the verbose progress lines of the exact optimisers.
     # (The paper's screen's own progress lines read "b of n starts screened": its local stage starts at "; refining".)
@@ -67,7 +68,7 @@ def stages(t0, t1):
     return {n: round(e - at[n], 1) for n, e in zip(names, ends)}
 for run in ("cold", "warm"):
     t0, c0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
-    with jax.default_device(jax.devices(DEVICE)[0] if DEVICE else None):
+    with jax.default_device(DEV if DEVICE else None):
         if WORM:
             worm = lj.Chain(masses=[1.0] * WORM, d=0.0, friction=lj.AnisotropicCoulomb(0.5, 0.9, 0.3, 0.7))
             opt = lj.optimise(worm, v_min=0.1, a_max=0.05, settings=lj.ChainOptimiseSettings(verbose=True))
@@ -81,7 +82,7 @@ for run in ("cold", "warm"):
                       "compile_s": round(sum(comp), 1), "trace_s": round(trace, 1), "stages_s": stages(t0, t1),
                       "speed": opt.mean_speed_exact, "cost_of_transport": opt.cost_of_transport_exact,
                       "feasible": opt.feasible_exact,
-                      "device": (jax.devices(DEVICE) if DEVICE else jax.devices())[0].device_kind}), flush=True)
+                      "device": DEV.device_kind}), flush=True)
 """
 
 
@@ -104,8 +105,9 @@ def main(argv: list[str]) -> None:
     if len(args) != (0 if here else 2):
         sys.exit(__doc__)
     parallel = "--parallel" in argv
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    if not here:
+    if here:
+        root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    else:
         root = subprocess.check_output(["git", "rev-parse", "--show-toplevel"], text=True).strip()
     with tempfile.TemporaryDirectory() as tmp:
         procs = []
