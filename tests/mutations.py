@@ -454,6 +454,27 @@ MUTATIONS = [
         (GUARDS_TESTS + "::test_optimisers_refuse_a_step_that_does_not_resolve_the_mechanism",),
     ),
     Mutation(
+        "search_at_dt",
+        "optimise (the paper's model): the screen and the local runs step at dt, not at search_dt",
+        "locomotion_jax/optimisation/_exact.py",
+        (("return settings.dt if settings.search_dt is None else settings.search_dt", "return settings.dt"),),
+        ("tests/test_optimise.py::test_the_search_steps_at_search_dt_which_the_guard_checks",),
+    ),
+    Mutation(
+        "verify_at_search_dt",
+        "optimise (the paper's model): the verification steps at the search's step, not at dt",
+        "locomotion_jax/optimisation/_exact.py",
+        (("gait = gaits(theta, settings.dt)", "gait = gaits(theta, search_step(settings))"),),
+        ("tests/test_optimise.py::test_the_verification_steps_at_dt_whatever_the_search_step",),
+    ),
+    Mutation(
+        "search_step_unguarded",
+        "optimise (the paper's model): the entry guard does not check search_dt",
+        "locomotion_jax/optimisation/_optimise.py",
+        (('for name in ("dt", "search_dt"):', 'for name in ("dt",):'),),
+        ("tests/test_optimise.py::test_the_search_steps_at_search_dt_which_the_guard_checks",),
+    ),
+    Mutation(
         "chain_optimise_guards_its_own_waves",
         "optimise (a chain): the guard checks the chain's own actuation, not the fastest stroke the search reaches",
         "locomotion_jax/optimisation/_chain.py",

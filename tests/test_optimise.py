@@ -555,6 +555,37 @@ def test_exact_optimum_verified_on_the_reference(exact_run):
     json.dumps(opt.to_dict())
 
 
+def test_the_verification_steps_at_dt_whatever_the_search_step(exact_run):
+    """The screen and the local runs may step at `ExactSettings.search_dt`; the verification, and
+    so every figure reported, steps at `dt`: given a search step of `2 dt`, `_exact._verify`
+    reports the optimum's figures at `dt` (to Newton's tolerance), which differ from those at
+    `2 dt` by the search's RK4 error."""
+    opt, _ = exact_run
+    best = np.r_[opt.control / 0.05, math.log(opt.omega)]
+    settings = dataclasses.replace(EXACT_TINY, search_dt=2 * EXACT_TINY.dt)
+    found, _ = _exact_optimise._verify(lj.Params(), 0.02, 1, 0.05, EXACT_SHAPE, True, settings, [("start", best)], [],
+                                       None, {}, 0.0, types.SimpleNamespace(calls=0))  # fmt: skip
+    assert found.cost_of_transport_exact == pytest.approx(opt.cost_of_transport_exact, rel=1e-9)
+    rows = (2 + EXACT_TINY.local) * len(EXACT_SHAPE.origins)  # the verification's batch: its program
+    coarse = _exact_optimise._verify_gaits(lj.Params(), EXACT_SHAPE, 0.05, EXACT_TINY, np.tile(best, (rows, 1)),
+                                           2 * EXACT_TINY.dt)  # fmt: skip
+    assert abs(float(np.asarray(coarse.cost_of_transport)[0]) / opt.cost_of_transport_exact - 1) > 1e-8
+
+
+def test_the_search_steps_at_search_dt_which_the_guard_checks():
+    """`ExactSettings.search_dt` is the orbit oracle's step (the screen's and the local runs'),
+    `None` for `dt`; `optimise` refuses one that does not resolve the model, naming it (at
+    mhat = 0.001 the natural period 0.0397 needs dt <= 0.0099)."""
+    assert _exact_optimise._oracle(lj.Params(), 0.05, 1.0, EXACT_SHAPE, EXACT_TINY).dt == EXACT_TINY.dt
+    assert _exact_optimise._oracle(lj.Params(), 0.05, 1.0, EXACT_SHAPE, ExactSettings(search_dt=0.015)).dt == 0.015
+    stiff = lj.Params(mhat=0.001)
+    _optimise._guard_search(stiff, None, EXACT_SHAPE, ExactSettings(dt=0.008, margin=0.001))
+    with pytest.raises(ValueError, match=r"natural period.*\(optimise: .*ExactSettings.search_dt"):
+        _optimise._guard_search(stiff, None, EXACT_SHAPE, ExactSettings(dt=0.008, search_dt=0.016, margin=0.001))
+    with pytest.raises(ValueError, match=r"ExactSettings.search_dt must be a finite step > 0, got 0.0"):
+        ExactSettings(search_dt=0.0)
+
+
 def test_sqp_local_method_reaches_a_verified_optimum(exact_run, tiny_sweep):
     """`local_method="sqp"` on the same problem and compiled programs: an optimum that holds
     on the independent reference, within 1 % of the default descent's cost of transport."""

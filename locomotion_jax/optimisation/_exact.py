@@ -40,6 +40,9 @@ Method:
   lift-off, at least as fast as required and within the stroke. The runners-up of each local run (earlier points of its
   descent) are solved in a second batch, only where their run's waveform fails or where the
   descent found them cheaper than the cheapest that passed.
+- **Two steps** (optional): the screen and the local runs may step the exact engine at a coarser
+  `search_dt` than the sinusoid baseline and the verification (`dt`): the search's figures only
+  rank and steer, and every figure reported is the verification's.
 - **Compilation** of the orbit oracle's and the verification's programs starts in a background
   thread before the sinusoid baseline ([`Precompile`][]), so that on a machine of two cores or
   more it overlaps the baseline's and the local runs' work.
@@ -202,10 +205,16 @@ def _merit(fig: "Figures | _Bad") -> float:
     return fig.cot * (1 + 3 * max(0.0, -fig.c[0])) + 10 * max(0.0, -fig.c[1])
 
 
+def search_step(settings: ExactSettings) -> float:
+    """The exact engine's step in the screen and the local runs: `settings.search_dt`, `None` for `dt`."""
+    return settings.dt if settings.search_dt is None else settings.search_dt
+
+
 def _oracle(params: Params, a_max: float, lo: float, shape: AbstractShape, settings: ExactSettings) -> orbit.Oracle:
     """The orbit oracle of the screen and the local runs (step cap: three periods at the lowest frequency)."""
     dtype = params.dtype
-    max_steps = int(math.ceil(2 * math.pi / lo / settings.dt)) * 3 + 200
+    dt = search_step(settings)
+    max_steps = int(math.ceil(2 * math.pi / lo / dt)) * 3 + 200
     return orbit.Oracle(
         params=params,
         a_max=jnp.asarray(a_max, dtype),
@@ -213,7 +222,7 @@ def _oracle(params: Params, a_max: float, lo: float, shape: AbstractShape, setti
         tol=jnp.asarray(settings.newton_tol if jnp.finfo(dtype).bits == 64 else 1e-5, dtype),
         shape=shape,
         contact="paper",  # iterates past a lift-off stay defined; the margin constraint keeps N > 0
-        dt=settings.dt,
+        dt=dt,
         max_iter=settings.newton_iter,
         patience=jnp.asarray(orbit.PATIENCE, jnp.int32),
     )

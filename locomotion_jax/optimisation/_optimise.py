@@ -431,18 +431,22 @@ def params_optimum(params: Params, v_min, a_max, method, direction, omega, harmo
 
 
 def _guard_search(params: Params, omega: float | None, shape: Any, settings: ExactSettings) -> None:
-    """Refuse a search whose step `settings.dt` does not resolve the mechanism's own scales
-    (natural period, damping; `run._resolution`). The stroke's harmonics or knots at the highest
-    frequency the search reaches are not guarded here: the verification solves each candidate at
-    `dt` and `dt/2` and keeps only those that agree (`HALF_STEP_RTOL`), a convergence check."""
+    """Refuse a search whose steps (`settings.dt`, and `settings.search_dt` where given) do not
+    resolve the mechanism's own scales (natural period, damping; `run._resolution`). The stroke's
+    harmonics or knots at the highest frequency the search reaches are not guarded here: the
+    verification solves each candidate at `dt` and `dt/2` and keeps only those that agree
+    (`HALF_STEP_RTOL`), a convergence check."""
     from ._exact import _omega_bounds, GRID
 
     _, hi = _omega_bounds(params, omega, settings)
     one = jnp.asarray(1.0, params.dtype)
     wave = shape.waveform(jnp.asarray(shape.fit(np.zeros(GRID), hi), params.dtype), one, jnp.asarray(params.lbar))
     what = "given" if omega is not None else "ExactSettings.omega_max * wn1, the highest the search reaches"
-    refuse_search(params, wave, settings.dt, f"(optimise: omega = {hi:.6g}, {what}; the step is ExactSettings.dt.)",
-                  skip=("omega",))  # fmt: skip
+    for name in ("dt", "search_dt"):
+        dt = getattr(settings, name)
+        if dt is not None:
+            refuse_search(params, wave, dt, f"(optimise: omega = {hi:.6g}, {what}; the step is ExactSettings.{name}.)",
+                          skip=("omega",))  # fmt: skip
 
 
 def mechanism_optimum(mech: Any, v_min, a_max, method, direction, omega, harmonics, settings, sweep, start):

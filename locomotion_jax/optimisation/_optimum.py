@@ -83,7 +83,7 @@ class Settings(eqx.Module):
 class ExactSettings(eqx.Module):
     """Settings of the exact method of [`optimise`][locomotion_jax.optimisation._optimise.optimise]
     (`method="exact"`, module `_exact_optimise`). Python numbers: changing `local`,
-    `dt`, `newton_iter` or the harmonics recompiles; the others do not.
+    `dt`, `search_dt`, `newton_iter` or the harmonics recompiles; the others do not.
 
     - `shape`: the family of strokes searched (`_shapes`): `"spline"` (default), a periodic cubic
       B-spline of `knots` control values, whose stroke bound is a box on them and which
@@ -114,9 +114,16 @@ class ExactSettings(eqx.Module):
     - `speed_slack`: the orbit targets $v_\\min (1 + \\text{slack})$.
     - `omega_min`, `omega_max`: range of a free base frequency, in units of the smallest
       natural frequency and of $\\omega_{n1}$.
-    - `dt`: the exact engine's step; `transient`: actuation periods run from the relaxed
-      spring before an orbit is first solved (also the verification's, [`steady_gait`][]);
-      `newton_tol`, `newton_iter`: the periodic-orbit solve.
+    - `dt`: the exact engine's step of the sinusoid baseline, of the verification and so of every
+      figure reported; `search_dt`: its step in the screen and the local runs, whose figures only
+      rank and steer (`None`: `dt`). A coarser search step differs from `dt` by the RK4 error
+      (fourth order in `search_dt`; at `2 dt` 6.7e-6 relative in the speed at the default problem's
+      optimum, inside `speed_slack`) and moves the descent's path: over the required speeds 0.01
+      to 0.06, `search_dt = 0.02` took 0.4 to 0.9 of the time at five of the six and 2.8 times
+      at 0.06 (a lane that crept for 1,300 evaluations), its optima within 2.2e-4 either way
+      (`benchmarks/NOTES.md`). `transient`: actuation periods run from the relaxed spring before
+      an orbit is first solved (also the verification's, [`steady_gait`][]); `newton_tol`,
+      `newton_iter`: the periodic-orbit solve.
     - `refine_baseline`: refine the best sinusoids of the sweep (`_pareto.refine_sinusoid`).
     - `seed`: for the random shapes; `verbose`: progress on stderr.
     """
@@ -138,6 +145,7 @@ class ExactSettings(eqx.Module):
     omega_min: float = 0.06
     omega_max: float = 1.2
     dt: float = 0.01
+    search_dt: float | None = None
     transient: int = 30
     newton_tol: float = 1e-10
     newton_iter: int = 12
@@ -168,6 +176,10 @@ class ExactSettings(eqx.Module):
             raise ValueError(
                 f"ExactSettings: need 0 < omega_min < omega_max, got {self.omega_min!r}, {self.omega_max!r}."
             )
+        for name in ("dt", "search_dt"):
+            value = getattr(self, name)
+            if value is not None and not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise ValueError(f"ExactSettings.{name} must be a finite step > 0, got {value!r}.")
 
 
 def fmt(v: Any) -> str:
