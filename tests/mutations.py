@@ -525,7 +525,21 @@ MUTATIONS = [
         "descent_never_stalls",
         "the local descent: no stop where its merit stalls, whatever its stall_rtol",
         "locomotion_jax/optimisation/_descent.py",
-        (("        if stall_rtol > 0 and _stalled(best, stall_rtol):\n            return\n", ""),),
+        (("        if stall_rtol > 0 and _stalled(best, rtol):\n            return\n", ""),),
+        ("tests/test_descent.py",),
+    ),
+    Mutation(
+        "descent_far_stall_dropped",
+        "the local descent: a run far from feasible stalls at the caller's tolerance alone",
+        "locomotion_jax/optimisation/_descent.py",
+        (("rtol = max(stall_rtol, FAR_STALL_RTOL) if _far(fig) else stall_rtol", "rtol = stall_rtol"),),
+        ("tests/test_descent.py::test_descent_far_from_feasible_stops_at_the_looser_stall",),
+    ),
+    Mutation(
+        "descent_far_means_any_violation",
+        "the local descent: any violation, however small, counts as far from feasible",
+        "locomotion_jax/optimisation/_descent.py",
+        (("np.max(-np.asarray(fig.c, float)) > FAR)", "np.max(-np.asarray(fig.c, float)) > 0)"),),
         ("tests/test_descent.py",),
     ),
     Mutation(

@@ -92,6 +92,36 @@ def test_descent_stops_where_the_merit_stalls():
     assert all(np.array_equal(x, y) for (x, _), (y, _) in zip(points, longer))  # the same path until the stop
 
 
+def test_descent_far_from_feasible_stops_at_the_looser_stall(monkeypatch):
+    """From accepted points `FAR` from feasible, `descent`'s stall tolerance is at least
+    `FAR_STALL_RTOL`: a run that creeps while it misses its constraint by 5 % stops within one
+    iteration of the first evaluation after which its merit fell by at most that over
+    `STALL_WINDOW` evaluations, where the caller's 1e-6 alone lets it run to its last iteration."""
+
+    def at(x):
+        # The violation shrinks by 1e-6 per unit of x0: the merit falls by ~1e-5 relative over
+        # 20 steps of the trust radius, between the two tolerances.
+        return SimpleNamespace(
+            f=1.0 + 0.1 * (x[1] - 1) ** 2,
+            df=np.array([0.0, 0.2 * (x[1] - 1)]),
+            c=np.array([-0.05 + 1e-6 * x[0], 5.0]),
+            dc=np.array([[1e-6, 0.0], [0.0, 0.0]]),
+            ok=True,
+        )
+
+    points, _ = _run(at, np.array([0.0, 2.0]), strict=True, max_iter=300, method=descent, stall_rtol=1e-6)
+    phi = [fig.f + 10.0 * np.sum(np.maximum(0.0, -fig.c)) for _, fig in points]
+    best = np.minimum.accumulate(phi)
+    w, rtol = _descent.STALL_WINDOW, _descent.FAR_STALL_RTOL
+    assert all(max(-fig.c) > _descent.FAR for _, fig in points)
+    stalled = [e for e in range(w, len(best)) if best[e - w] - best[e] <= rtol * abs(best[e])]
+    assert stalled and all(best[e - w] - best[e] > 1e-6 * abs(best[e]) for e in range(w, len(best)))
+    assert stalled[0] + 1 <= len(points) <= stalled[0] + 1 + 13, (len(points), stalled[0])
+    monkeypatch.setattr(_descent, "FAR_STALL_RTOL", 0.0)
+    longer, _ = _run(at, np.array([0.0, 2.0]), strict=True, max_iter=300, method=descent, stall_rtol=1e-6)
+    assert len(longer) >= 300 > len(points) + 13
+
+
 def test_descent_steps_around_failed_orbits_and_never_takes_their_figures():
     at, x_star, f_star = _tangent_problem()
 

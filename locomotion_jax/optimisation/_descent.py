@@ -69,6 +69,22 @@ STALL_RTOL = 1e-5
 rounds that the slowest run holds the others in."""
 
 
+FAR = 1e-2
+"""A violation (in the constraints' units: relative speed, normal force in weights) beyond which
+an accepted point counts as far from feasible in `descent`'s stall test; a descent along an
+active constraint crosses it by far less."""
+
+FAR_STALL_RTOL = 1e-4
+"""`descent`'s stall tolerance, at least, from an accepted point `FAR` from feasible (where it
+stops on stalls at all): a run whose merit falls by 1e-4 over 20 evaluations cannot close a
+violation of several per cent in its budget, and the lockstep rounds wait on it
+(`benchmarks/NOTES.md`)."""
+
+
+def _far(fig: Any) -> bool:
+    return bool(np.max(-np.asarray(fig.c, float)) > FAR)
+
+
 def _stalled(best: list[float], rtol: float) -> bool:
     """Whether the merit accepted so far (`best`: after each evaluation) fell by at most `rtol`
     (relative) over the last `STALL_WINDOW` evaluations."""
@@ -108,27 +124,29 @@ def descent(
     no decrease (a local, possibly nonsmooth, minimum) or, if `stall_rtol > 0`, where the merit
     fell by at most `stall_rtol` (relative) over its last `STALL_WINDOW` evaluations: its steps
     cross an active constraint and backtrack, so that it can creep along the constraint for
-    digits that do not pay for the lockstep rounds. The caller records what it wants from the
+    digits that do not pay for the lockstep rounds. From a point `FAR` from feasible the
+    tolerance is at least `FAR_STALL_RTOL`. The caller records what it wants from the
     points `at` is asked for."""
     best: list[float] = []
     ask = _recorder(at, rho, best)
     x = proj(x0)
-    _, phi, g = ask(x)
+    fig, phi, g = ask(x)
     if g is None:
         return
     mem: list[tuple[np.ndarray, np.ndarray]] = []
     for _ in range(max_iter):
-        if stall_rtol > 0 and _stalled(best, stall_rtol):
+        rtol = max(stall_rtol, FAR_STALL_RTOL) if _far(fig) else stall_rtol
+        if stall_rtol > 0 and _stalled(best, rtol):
             return
         d = -_inverse_hessian(mem)(g)
         if g @ d >= 0:  # not a descent direction: restart from steepest descent
             mem.clear()
             d = -g
         step = min(1.0, trust_radius / max(float(np.max(np.abs(d))), 1e-300))
-        accepted, xn, phin, gn = False, x, phi, None
+        accepted, xn, phin, gn, fign = False, x, phi, None, fig
         for _ in range(12):
             xn = proj(x + step * d)
-            _, phin, gn = ask(xn)
+            fign, phin, gn = ask(xn)
             if gn is not None and phin <= phi + 1e-4 * float(g @ (xn - x)) and (phin < phi or not strict):
                 accepted = True
                 break
@@ -142,7 +160,7 @@ def descent(
         if sv @ yv > 1e-12 * np.linalg.norm(sv) * np.linalg.norm(yv):
             mem.append((sv, yv))
             mem[:] = mem[-8:]
-        x, phi, g = xn, phin, gn
+        x, phi, g, fig = xn, phin, gn, fign
 
 
 def direction(

@@ -109,7 +109,8 @@ class ExactSettings(eqx.Module):
       `benchmarks/NOTES.md`), `"trust-constr"` or `"SLSQP"` (scipy's); `stall_rtol`: the
       descent stops where its merit fell by at most this (relative) over its last 20
       evaluations, 0 for never (1e-6: in the default problem 210 lockstep rounds instead of
-      393 for an optimum 1.6e-8 costlier, `benchmarks/NOTES.md`).
+      393 for an optimum 1.6e-8 costlier, `benchmarks/NOTES.md`), and by at most 1e-4 where it
+      misses a constraint by more than 1e-2 (`_descent.FAR_STALL_RTOL`).
     - `margin`: required $\\min_t N_{1,2}$ over the orbit (units of weight).
     - `speed_slack`: the orbit targets $v_\\min (1 + \\text{slack})$.
     - `omega_min`, `omega_max`: range of a free base frequency, in units of the smallest
@@ -119,11 +120,11 @@ class ExactSettings(eqx.Module):
       rank and steer (`None`: `dt`). A coarser search step differs from `dt` by the RK4 error
       (fourth order in `search_dt`; at `2 dt` 6.7e-6 relative in the speed at the default problem's
       optimum, inside `speed_slack`) and moves the descent's path: over the required speeds 0.01
-      to 0.06, `search_dt = 0.02` took 0.4 to 0.9 of the time at five of the six and 2.8 times
-      at 0.06 (a lane that crept for 1,300 evaluations), its optima within 2.2e-4 either way
-      (`benchmarks/NOTES.md`). `transient`: actuation periods run from the relaxed spring before
-      an orbit is first solved (also the verification's, [`steady_gait`][]); `newton_tol`,
-      `newton_iter`: the periodic-orbit solve.
+      to 0.06, `search_dt = 0.02` took 0.70 of the time in all, 0.39 to 0.75 at five of the six
+      but 1.5 times at 0.06, its optima within 2.2e-4 either way (`benchmarks/NOTES.md`).
+      `transient`: actuation periods run from the relaxed spring before an orbit is first solved
+      (also the verification's, [`steady_gait`][]); `newton_tol`, `newton_iter`: the
+      periodic-orbit solve.
     - `refine_baseline`: refine the best sinusoids of the sweep (`_pareto.refine_sinusoid`).
     - `seed`: for the random shapes; `verbose`: progress on stderr.
     """
