@@ -179,7 +179,8 @@ class ExactSettings(eqx.Module):
             )
         for name in ("dt", "search_dt"):
             value = getattr(self, name)
-            if value is not None and not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            step = isinstance(value, (int, float, np.number)) and math.isfinite(value) and value > 0
+            if value is not None and not step:
                 raise ValueError(f"ExactSettings.{name} must be a finite step > 0, got {value!r}.")
 
 
