@@ -57,11 +57,9 @@ from .model._waveform import (
     Sinusoid as Sinusoid,
     Spline as Spline,
 )
-from .optimisation._chain_optimum import (
+from .optimisation._element_optimum import (
     ChainOptimiseSettings as ChainOptimiseSettings,
     ChainOptimum as ChainOptimum,
-)
-from .optimisation._mechanism import (
     MechanismOptimiseSettings as MechanismOptimiseSettings,
     MechanismOptimum as MechanismOptimum,
 )

@@ -498,7 +498,7 @@ MUTATIONS = [
     Mutation(
         "search_settings_skip_transient",
         "the optimisers' settings check: transient no longer checked (a chain's or a mechanism's)",
-        "locomotion_jax/optimisation/_element_local.py",
+        "locomotion_jax/optimisation/_element_optimum.py",
         (('"max_iter", "transient", "newton_iter"', '"max_iter", "newton_iter"'),),
         ("tests/test_optimise.py::test_bad_settings_raise",),
     ),

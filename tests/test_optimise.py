@@ -1080,7 +1080,7 @@ def test_chain_spline_search_refuses_harmonics():
 def test_bad_settings_raise():
     with pytest.raises(ValueError, match="local must be an int >= 1"):
         lj.ChainOptimiseSettings(local=0)
-    # The checks the chain's settings share with the mechanism's (check_search_settings).
+    # The checks the chain's settings share with the mechanism's (MechanismOptimiseSettings.__check_init__).
     cases: list[tuple[dict[str, Any], str]] = [
         (dict(transient=0), "ChainOptimiseSettings.transient must be an int >= 1, got 0"),
         (dict(local=True), "ChainOptimiseSettings.local must be an int >= 1, got True"),
@@ -1259,7 +1259,7 @@ def test_isotropic_capsule_no_sinusoid_under_the_bound_is_as_good(iso_optimum):
 @MECHANISM_OPTIMISE
 def test_mechanism_optimise_settings():
     """The settings' checks name the field; a ChainOptimiseSettings is taken field for field (one phase)."""
-    from locomotion_jax.optimisation._mechanism import MechanismOptimiseSettings
+    from locomotion_jax.optimisation._element_optimum import MechanismOptimiseSettings
 
     with pytest.raises(ValueError, match="MechanismOptimiseSettings.phases must be an int >= 1, got 0"):
         lj.MechanismOptimiseSettings(phases=0)

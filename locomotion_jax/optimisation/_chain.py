@@ -45,7 +45,7 @@ from ..model._chain import Chain
 from ..model._springwaves import SpringFourier
 from ..run._resolution import refuse_search
 from . import _chain_screen as screen, _element_local as local
-from ._chain_optimum import ChainOptimiseSettings, ChainOptimum
+from ._element_optimum import ChainOptimiseSettings, ChainOptimum
 
 
 def check_inputs(chain: Any, v_min: Any, a_max: Any, direction: Any, harmonics: Any, omega: Any,

@@ -26,7 +26,7 @@ from ..gaits._select import GaitStatus
 from ..gaits._shooting import steady_gait_chain, transient_speed
 from ..model._chain import Chain
 from ..model._springwaves import SpringFourier
-from ._chain_optimum import ChainOptimiseSettings
+from ._element_optimum import ChainOptimiseSettings
 from ._optimum import along
 
 

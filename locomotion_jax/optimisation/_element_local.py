@@ -13,8 +13,7 @@ failed orbit. The bound on every signal is kept by radial rescaling of its Fouri
 onto its exact limit (the set $\\{\\max_t |s_j(t)| \\le a_\\max\\}$ is convex and contains 0), or by
 clipping a spline's control values (a box); $\\log\\omega$ by clipping.
 
-Both optimisers check their settings (`check_search_settings`) and the mechanism-free part of
-their requirement (`check_requirement`) here too.
+Both optimisers check the mechanism-free part of their requirement here too (`check_requirement`).
 """
 
 import math
@@ -28,7 +27,7 @@ import numpy as np
 from ..dynamics._exact_dynamics import Exact
 from ..gaits import _element_orbit as orbit
 from ..gaits._orbit import PATIENCE
-from ._descent import local_step, METHODS
+from ._descent import local_step
 from ._evaluator import Evaluator
 from ._figures import Figures, PENALTY
 from ._local import local_run
@@ -111,35 +110,6 @@ def spline_project(theta: np.ndarray, log_lo: float, log_hi: float) -> np.ndarra
 def spline_strokes(control: np.ndarray) -> np.ndarray:
     """Exact $\\max_\\phi |s_j - \\bar s_j|$ per element of the control values `(S, M)`."""
     return np.array([spline_stroke(row) for row in control])
-
-
-def check_search_settings(s: Any, counts: tuple[str, ...] = ()) -> None:
-    """The checks shared by the settings of the chain's and the mechanism's optimisers (each
-    error names the class and the field): the screen's and the local descent's counts (and
-    `counts`, the class's own) are ints >= 1, the family, the local method, the frequency range, the steps and
-    tolerances, the margins and the verification's periods."""
-    name = type(s).__name__
-    for f in ("amplitudes", "frequencies", "phases", "local", "max_iter", "transient", "newton_iter") + counts:
-        v = getattr(s, f)
-        if isinstance(v, bool) or not (isinstance(v, int) and v >= 1):
-            raise ValueError(f"{name}.{f} must be an int >= 1, got {v!r}.")
-    if s.shape not in ("fourier", "spline"):
-        raise ValueError(f"{name}.shape must be 'fourier' or 'spline', got {s.shape!r}.")
-    if s.local_method not in METHODS:
-        raise ValueError(f"{name}.local_method must be 'descent' or 'sqp', got {s.local_method!r}.")
-    if not (0 <= s.stall_rtol < 1):
-        raise ValueError(f"{name}.stall_rtol must be in [0, 1), got {s.stall_rtol!r}.")
-    if isinstance(s.knots, bool) or not (isinstance(s.knots, int) and s.knots >= 4):
-        raise ValueError(f"{name}.knots must be an int >= 4, got {s.knots!r}.")
-    if not (0 < s.omega_min < s.omega_max):
-        raise ValueError(f"{name}: need 0 < omega_min < omega_max, got {s.omega_min!r}, {s.omega_max!r}.")
-    if not (s.dt > 0 and s.trust_radius > 0 and s.newton_tol > 0 and s.check_tol > 0):
-        raise ValueError(f"{name}: dt, trust_radius, newton_tol and check_tol must be > 0.")
-    if not (s.margin >= 0 and s.speed_slack >= 0):
-        raise ValueError(f"{name}: margin and speed_slack must be >= 0, got {s.margin!r}, {s.speed_slack!r}.")
-    lo, hi = s.check_periods
-    if not (1 <= lo <= hi):
-        raise ValueError(f"{name}.check_periods must be (lo, hi), 1 <= lo <= hi, got {lo, hi}.")
 
 
 def check_requirement(v_min: Any, direction: Any, harmonics: Any, omega: Any) -> None:

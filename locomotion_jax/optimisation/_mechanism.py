@@ -41,12 +41,10 @@ frequency of the mechanism's free bodies and springs (its resolution guard's sca
 mechanism's own base frequency where it has no spring between bodies.
 """
 
-import dataclasses
 import math
 import time
-from typing import Any, ClassVar
+from typing import Any
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
@@ -55,178 +53,8 @@ from ..gaits._element_orbit import actuated, with_fourier, with_spline
 from ..gaits._progress import reporter
 from ..model._bodies import Mechanism
 from . import _element_local as local
-from ._chain_optimum import ChainOptimiseSettings
-from ._optimum import AbstractOptimum, along, fmt
-
-
-class MechanismOptimiseSettings(eqx.Module):
-    """Settings of [`optimise`][locomotion_jax.optimisation._optimise.optimise] for a
-    [`Mechanism`][locomotion_jax.Mechanism] (module `optimisation._mechanism`). Python numbers:
-    changing `local`, `dt`, `newton_iter`, `shape` or `knots` (or the harmonics) recompiles; the
-    others do not.
-
-    The actuators are the mechanism's elements driven by a waveform (a spring's rest length, an
-    internal `Force`, an `ExternalForce`); `optimise`'s `a_max` bounds each one's excursion about its
-    mean, in the element's own units: a length for a spring's rest, a force for a force (the force
-    bound).
-
-    - `shape`: the family of signals searched (as [`ExactSettings`][locomotion_jax.optimisation._optimum.ExactSettings]
-      `.shape`): `"fourier"` (default), a Fourier series of `optimise`'s `harmonics` (default 2) per
-      element; or `"spline"`, a periodic cubic B-spline of `knots` control values per element (then
-      `harmonics` is not taken), whose bound is a box on the control values, so a step-like signal
-      carries no overshoot.
-    - `knots`: control values per element of a spline (>= 4; default 16: every control value is a
-      forward-mode direction of the orbit's gradient, so the refinement's cost grows with
-      `knots` times the number of actuated elements).
-
-    - `amplitudes`, `frequencies`, `phases`: the sinusoid screen, $a$ on `amplitudes` equal steps
-      up to $a_\\max$, $\\omega$ log-spaced over its range (one value for a fixed `omega`), the
-      phase $\\varphi$ on `phases` equal steps of $[0, 2\\pi)$.
-    - `local`: starts refined locally in lockstep (the best sinusoids of the screen);
-      `max_iter`: iterations of each local descent; `trust_radius`: the largest first step of a
-      line search (coefficients in units of $a_\\max$, $\\log\\omega$); `local_method`: `"descent"`
-      (default) or `"sqp"`, and `stall_rtol` (as [`ChainOptimiseSettings`][]'s).
-    - `margin`: required $\\min_{i,t} N_i$ on the orbit during the refinement (units of weight).
-    - `speed_slack`: the refinement targets $v_\\min (1 + \\text{slack})$.
-    - `omega_min`, `omega_max`: range of a free base frequency, in units of the highest natural
-      frequency of the mechanism's bodies and springs (or of its own base frequency where it has
-      no spring).
-    - `dt`: the exact engine's step; `transient`: actuation periods from the mechanism's start
-      before an orbit is solved; `newton_tol`, `newton_iter`: the periodic-orbit solve.
-    - `check_tol`, `check_periods`: the direct simulation of the optimum runs until the largest
-      Floquet multiplier's modulus to the power of the periods run falls below `check_tol` (at
-      least `check_periods[0]`, at most `check_periods[1]` gait periods), then averages over 10.
-    - `verbose`: progress on stderr.
-
-    A [`ChainOptimiseSettings`][] is accepted in its place: its fields of the same names are used,
-    and one phase.
-    """
-
-    amplitudes: int = 4
-    frequencies: int = 8
-    phases: int = 1
-    local: int = 2
-    max_iter: int = 40
-    trust_radius: float = 0.1
-    local_method: str = "descent"
-    stall_rtol: float = 0.0
-    margin: float = 0.05
-    speed_slack: float = 1e-3
-    omega_min: float = 0.15
-    omega_max: float = 2.0
-    dt: float = 0.01
-    transient: int = 30
-    newton_tol: float = 1e-10
-    newton_iter: int = 12
-    check_tol: float = 1e-12
-    check_periods: tuple[int, int] = (40, 1500)
-    shape: str = "fourier"
-    knots: int = 16
-    verbose: bool = False
-
-    def __check_init__(self):
-        local.check_search_settings(self)
-
-    @classmethod
-    def from_chain(cls, s: ChainOptimiseSettings) -> "MechanismOptimiseSettings":
-        """The fields of a chain's settings that a mechanism's optimiser shares (one phase, Fourier series)."""
-        names = [n for n in cls.__dataclass_fields__ if n in type(s).__dataclass_fields__ and n != "phases"]
-        return cls(**{n: getattr(s, n) for n in names})
-
-
-@dataclasses.dataclass(frozen=True)
-class MechanismOptimum(AbstractOptimum):
-    """The optimum of [`optimise`][locomotion_jax.optimisation._optimise.optimise] for a
-    [`Mechanism`][locomotion_jax.Mechanism] (module `optimisation._mechanism`).
-
-    - `shape`: the family of the reported signals, `"fourier"` or `"spline"` (a spline search reports
-      its sinusoid baseline, `"fourier"`, where no refined spline is cheaper).
-    - `cos`, `sin`: shape `(S, H)`, the Fourier coefficients of the `S` actuated elements' signals
-      about their means (absolute units), in the order of `elements` (indices into `links`); shape
-      `(S, 0)` and `harmonics` 0 for a spline; `control`: shape `(S, M)`, a spline's control values
-      about the means (absolute units), `None` for a Fourier series; `omega`: the base frequency;
-      `mechanism`: the mechanism driven by them.
-    - `mean_speed_exact`, `cost_of_transport_exact`, `gait_period_exact`, `stable_exact`,
-      `spectral_radius_exact`, `stroke_exact` (per element, $\\max_t |s_j - \\bar s_j|$), `feasible_exact`:
-      of its steady gait.
-    - `sinusoid`: the best sinusoid of the screen (a dict: `a`, `omega`, `phase`, `mean_speed`,
-      `cost_of_transport`; `None` if none meets the speed); `improvement_vs_sinusoid`: $1 -$ the
-      ratio of the costs of transport.
-    - `mean_speed_simulated`, `cost_of_transport_simulated`, `simulated_periods`: a direct
-      simulation from the mechanism's own start, averaged over 10 gait periods after those;
-      `simulation_agreement`: the larger relative difference of the two figures.
-    - `candidates`: every verified candidate's figures; `screened`, `evaluations`, `runtime_s`.
-    """
-
-    v_min: float
-    direction: int
-    a_max: float
-    harmonics: int
-    elements: list[int]
-    shape: str
-    cos: np.ndarray
-    sin: np.ndarray
-    control: np.ndarray | None
-    omega: float
-    mean_speed_exact: float
-    cost_of_transport_exact: float
-    gait_period_exact: float
-    stable_exact: bool
-    spectral_radius_exact: float
-    stroke_exact: np.ndarray
-    feasible_exact: bool
-    sinusoid: dict | None
-    improvement_vs_sinusoid: float
-    mean_speed_simulated: float
-    cost_of_transport_simulated: float
-    simulation_agreement: float
-    simulated_periods: int
-    candidates: list[dict]
-    screened: int
-    evaluations: int
-    runtime_s: float
-    mechanism: Mechanism = dataclasses.field(repr=False)
-
-    objects: ClassVar[tuple[str, ...]] = ("mechanism",)
-
-    def summary(self) -> str:
-        """Human-readable report."""
-        S = len(self.elements)
-        family = f"{self.harmonics} harmonics" if self.control is None else f"splines of {self.control.shape[-1]} knots"
-        lines = [
-            f"mechanism of {self.mechanism.n_bodies} bodies: mean speed >= {self.v_min:g} in direction "
-            f"{self.direction:+d}, excursion <= {self.a_max:g} per actuated link, stable steady gait (exact)",
-            f"base frequency omega = {self.omega:.6g}; links {self.elements} actuated by {family}",
-        ]
-        for j in range(S):
-            if self.control is None:
-                lines.append(f"link {self.elements[j]}: cos " + " ".join(f"{c:+.5f}" for c in self.cos[j])
-                             + "  sin " + " ".join(f"{s:+.5f}" for s in self.sin[j]))  # fmt: skip
-            else:
-                lines.append(f"link {self.elements[j]}: control " + " ".join(f"{c:+.5f}" for c in self.control[j]))
-        lines += [
-            f"steady gait (exact, whole periods): mean speed {fmt(self.mean_speed_exact)}, cost of transport "
-            f"{fmt(self.cost_of_transport_exact)}, period {fmt(self.gait_period_exact)}, stable {self.stable_exact} "
-            f"(largest multiplier modulus {fmt(self.spectral_radius_exact)})",
-            "excursion per link "
-            + " ".join(fmt(float(s)) for s in np.ravel(self.stroke_exact))
-            + f" (limit {self.a_max:g})",
-            f"direct simulation ({self.simulated_periods} gait periods, then 10 averaged): mean speed "
-            f"{fmt(self.mean_speed_simulated)}, cost of transport {fmt(self.cost_of_transport_simulated)} "
-            f"(relative difference {fmt(self.simulation_agreement)})",
-            f"speed, excursion, stable gait (exact) -> {'FEASIBLE' if self.feasible_exact else 'INFEASIBLE'}",
-        ]
-        w = self.sinusoid
-        if w is None:
-            lines.append("best sinusoid: none meets the requirement on the exact model")
-        else:
-            lines.append(f"best sinusoid: a = {w['a']:.4g}, omega = {w['omega']:.4g}, phase = {w['phase']:.4g}: mean "
-                         f"speed {w['mean_speed']:.4g}, cost of transport {w['cost_of_transport']:.4g}")  # fmt: skip
-        lines.append(
-            f"improvement vs sinusoid: {fmt(100 * self.improvement_vs_sinusoid)} %  ({self.screened} sinusoids "
-            f"screened, {self.evaluations} batched evaluations, {self.runtime_s:.0f} s)"
-        )
-        return "\n".join(lines)
+from ._element_optimum import ChainOptimiseSettings, MechanismOptimiseSettings, MechanismOptimum
+from ._optimum import along
 
 
 def _natural(mech: Mechanism) -> float:

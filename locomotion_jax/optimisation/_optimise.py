@@ -57,8 +57,7 @@ from ..model._waveform import Fourier
 from ..run._batch import mechanism_arg
 from ..run._resolution import refuse_search
 from . import _constraints as cons, _pareto as pareto
-from ._chain_optimum import ChainOptimiseSettings, ChainOptimum
-from ._mechanism import MechanismOptimiseSettings, MechanismOptimum
+from ._element_optimum import ChainOptimiseSettings, ChainOptimum, MechanismOptimiseSettings, MechanismOptimum
 from ._objective import make_plan, Plan, rollout
 from ._optimum import along, ExactSettings, Optimum, Settings, verified
 from ._shapes import FourierShape, SplineShape

@@ -1,0 +1,369 @@
+"""Settings and results of the optimisers of a [`Mechanism`][locomotion_jax.Mechanism] and of a
+[`Chain`][] (`optimisation._mechanism`, `optimisation._chain`): one signal per actuated element, a
+baseline screen, the shared local refinement and verification (`_element_local`).
+
+A chain's settings are a mechanism's with the travelling-wave screen's own fields, and both
+results share the figures of the optimum's steady gait and of its direct simulation.
+"""
+
+import dataclasses
+from typing import Any, ClassVar
+
+import equinox as eqx
+import numpy as np
+
+from ..model._bodies import Mechanism
+from ..model._chain import Chain
+from ..model._springwaves import SpringFourier
+from ..model._waveform import Spline
+from ._descent import METHODS
+from ._optimum import AbstractOptimum, constraints_line, fmt
+
+
+def _count(s: Any, field: str, least: int) -> None:
+    """Refuse a count that is not an int >= `least`, naming the class and the field."""
+    v = getattr(s, field)
+    if isinstance(v, bool) or not (isinstance(v, int) and v >= least):
+        raise ValueError(f"{type(s).__name__}.{field} must be an int >= {least}, got {v!r}.")
+
+
+class MechanismOptimiseSettings(eqx.Module):
+    """Settings of [`optimise`][locomotion_jax.optimisation._optimise.optimise] for a
+    [`Mechanism`][locomotion_jax.Mechanism] (module `optimisation._mechanism`). Python numbers:
+    changing `local`, `dt`, `newton_iter`, `shape` or `knots` (or the harmonics) recompiles; the
+    others do not.
+
+    The actuators are the mechanism's elements driven by a waveform (a spring's rest length, an
+    internal `Force`, an `ExternalForce`); `optimise`'s `a_max` bounds each one's excursion about its
+    mean, in the element's own units: a length for a spring's rest, a force for a force (the force
+    bound).
+
+    - `shape`: the family of signals searched (as [`ExactSettings`][locomotion_jax.optimisation._optimum.ExactSettings]
+      `.shape`): `"fourier"` (default), a Fourier series of `optimise`'s `harmonics` (default 2) per
+      element; or `"spline"`, a periodic cubic B-spline of `knots` control values per element (then
+      `harmonics` is not taken), whose bound is a box on the control values, so a step-like signal
+      carries no overshoot.
+    - `knots`: control values per element of a spline (>= 4; default 16: every control value is a
+      forward-mode direction of the orbit's gradient, so the refinement's cost grows with
+      `knots` times the number of actuated elements).
+
+    - `amplitudes`, `frequencies`, `phases`: the sinusoid screen, $a$ on `amplitudes` equal steps
+      up to $a_\\max$, $\\omega$ log-spaced over its range (one value for a fixed `omega`), the
+      phase $\\varphi$ on `phases` equal steps of $[0, 2\\pi)$.
+    - `local`: starts refined locally in lockstep (the best sinusoids of the screen);
+      `max_iter`: iterations of each local descent; `trust_radius`: the largest first step of a
+      line search (coefficients in units of $a_\\max$, $\\log\\omega$); `local_method`: `"descent"`
+      (default) or `"sqp"`, and `stall_rtol` (as
+      [`ExactSettings`][locomotion_jax.optimisation._optimum.ExactSettings]'s; 0 by default: on the
+      README's 4-mass worm, 1e-6 stopped the descent at a speed 10 % above `v_min`, 0.09 %
+      costlier, `benchmarks/NOTES.md`).
+    - `margin`: required $\\min_{i,t} N_i$ on the orbit during the refinement (units of weight).
+    - `speed_slack`: the refinement targets $v_\\min (1 + \\text{slack})$.
+    - `omega_min`, `omega_max`: range of a free base frequency, in units of the highest natural
+      frequency of the mechanism's bodies and springs (or of its own base frequency where it has
+      no spring).
+    - `dt`: the exact engine's step; `transient`: actuation periods from the mechanism's start
+      before an orbit is solved; `newton_tol`, `newton_iter`: the periodic-orbit solve.
+    - `check_tol`, `check_periods`: the direct simulation of the optimum runs until the largest
+      Floquet multiplier's modulus to the power of the periods run falls below `check_tol` (at
+      least `check_periods[0]`, at most `check_periods[1]` gait periods), then averages over 10.
+    - `verbose`: progress on stderr.
+
+    A [`ChainOptimiseSettings`][] is accepted in its place: its fields of these names are used,
+    and one phase.
+    """
+
+    amplitudes: int = 4
+    frequencies: int = 8
+    phases: int = 1
+    local: int = 2
+    max_iter: int = 40
+    trust_radius: float = 0.1
+    local_method: str = "descent"
+    stall_rtol: float = 0.0
+    margin: float = 0.05
+    speed_slack: float = 1e-3
+    omega_min: float = 0.15
+    omega_max: float = 2.0
+    dt: float = 0.01
+    transient: int = 30
+    newton_tol: float = 1e-10
+    newton_iter: int = 12
+    check_tol: float = 1e-12
+    check_periods: tuple[int, int] = (40, 1500)
+    shape: str = "fourier"
+    knots: int = 16
+    verbose: bool = False
+
+    def __check_init__(self):
+        # Each error names the class (a chain's settings run these checks too) and the field.
+        name = type(self).__name__
+        for field in ("amplitudes", "frequencies", "phases", "local", "max_iter", "transient", "newton_iter"):
+            _count(self, field, 1)
+        if self.shape not in ("fourier", "spline"):
+            raise ValueError(f"{name}.shape must be 'fourier' or 'spline', got {self.shape!r}.")
+        if self.local_method not in METHODS:
+            raise ValueError(f"{name}.local_method must be 'descent' or 'sqp', got {self.local_method!r}.")
+        if not (0 <= self.stall_rtol < 1):
+            raise ValueError(f"{name}.stall_rtol must be in [0, 1), got {self.stall_rtol!r}.")
+        _count(self, "knots", 4)
+        if not (0 < self.omega_min < self.omega_max):
+            raise ValueError(f"{name}: need 0 < omega_min < omega_max, got {self.omega_min!r}, {self.omega_max!r}.")
+        if not (self.dt > 0 and self.trust_radius > 0 and self.newton_tol > 0 and self.check_tol > 0):
+            raise ValueError(f"{name}: dt, trust_radius, newton_tol and check_tol must be > 0.")
+        if not (self.margin >= 0 and self.speed_slack >= 0):
+            raise ValueError(f"{name}: margin and speed_slack must be >= 0, got {self.margin!r}, {self.speed_slack!r}.")
+        lo, hi = self.check_periods
+        if not (1 <= lo <= hi):
+            raise ValueError(f"{name}.check_periods must be (lo, hi), 1 <= lo <= hi, got {lo, hi}.")
+
+    @classmethod
+    def from_chain(cls, s: "ChainOptimiseSettings") -> "MechanismOptimiseSettings":
+        """A chain's settings' fields of these names (one phase: a mechanism's screen drives every
+        element in phase)."""
+        return cls(**{n: getattr(s, n) for n in cls.__dataclass_fields__ if n != "phases"})
+
+
+class ChainOptimiseSettings(MechanismOptimiseSettings):
+    """Settings of [`optimise`][locomotion_jax.optimisation._optimise.optimise] for a [`Chain`][]
+    (module `optimisation._chain`): those of [`MechanismOptimiseSettings`][] (the actuated elements
+    are the springs, `a_max` bounds each spring's stroke $\\max_t |s_j(t)|$; default 3 harmonics),
+    with other defaults and the travelling-wave screen's own fields. Python numbers: changing
+    `local`, `chunk`, `dt`, `newton_iter`, `shape` or `knots` (or the harmonics) recompiles; the
+    others do not.
+
+    Where a chain reads a field otherwise:
+
+    - `amplitudes`, `frequencies`, `phases`: the travelling-wave screen, $a$ on `amplitudes` equal
+      steps up to $a_\\max$, $\\omega$ log-spaced over its range, the phase lag $\\varphi$ on
+      `phases` equal steps of $[-\\pi, \\pi)$ (one phase for $N = 2$); with `shape="spline"` the
+      screen's travelling waves are single harmonics.
+    - `local`: the refined best wave and the next best distinct waves of the screen.
+    - `omega_min`, `omega_max`: in units of the lowest natural frequency with one mass held
+      ([`Chain.omega_min`][locomotion_jax.Chain.omega_min]) and of the highest natural frequency of
+      the free chain.
+    - `transient`: actuation periods from the relaxed springs (screen, refinement, verification).
+
+    The screen's own fields:
+
+    - `screen_speed`: the screen solves the steady gaits only of the waves whose speed over the
+      last 12 periods of their transient reaches this fraction of $v_\\min$ (and of the `chunk`
+      fastest, so that an infeasible requirement still has candidates); 0: of every wave. A
+      wave far slower than required where its transient ends is no start for the optimum, and
+      the slowest waves (the longest periods) cost the screen most.
+    - `zoom_levels`, `zoom_points`: the zooming refinement of the best travelling wave: per
+      level a grid of `zoom_points` per variable over one step either side, the step halved
+      per level.
+    - `chunk`: configurations per compiled `steady_gait` call.
+    """
+
+    amplitudes: int = 3
+    frequencies: int = 12
+    phases: int = 8
+    local: int = 4
+    max_iter: int = 60
+    omega_min: float = 0.06
+    omega_max: float = 1.2
+    screen_speed: float = 0.5
+    zoom_levels: int = 2
+    zoom_points: int = 5
+    chunk: int = 32
+
+    def __check_init__(self):
+        _count(self, "zoom_points", 1)
+        _count(self, "chunk", 1)
+        _count(self, "zoom_levels", 0)
+        if not (0 <= self.screen_speed <= 1):
+            raise ValueError(f"ChainOptimiseSettings.screen_speed must be in [0, 1], got {self.screen_speed!r}.")
+
+
+@dataclasses.dataclass(frozen=True)
+class ElementOptimum(AbstractOptimum):
+    """What the results of the chain's and the mechanism's optimisers share: the requirement
+    (`v_min`, `direction`, `a_max`), the family of the reported signals (`shape`, `"fourier"` or
+    `"spline"`; a spline search reports its baseline, `"fourier"`, where no refined spline is
+    cheaper), their Fourier coefficients `cos`, `sin` (shape `(S, H)` over the `S` actuated
+    elements, absolute units; `(S, 0)` and `harmonics` 0 for a spline) or spline control values
+    `control` (shape `(S, M)`, absolute units about the means; `None` for a Fourier series), the
+    base frequency `omega`; the optimum's steady gait on the exact model ([`steady_gait`][]: whole
+    periods; `mean_speed_exact`, `cost_of_transport_exact` $= e_d / |\\Delta X|$ over the gait
+    period, `gait_period_exact`, `stable_exact`, `spectral_radius_exact` the largest Floquet
+    multiplier's modulus, `stroke_exact` per element the largest excursion of its signal about its
+    mean, located exactly, `feasible_exact`); a direct [`simulate`][] run averaged over 10 gait periods after
+    `simulated_periods` (`mean_speed_simulated`, `cost_of_transport_simulated`,
+    `simulation_agreement`: the larger relative difference of the two from the steady gait's); every
+    verified candidate's figures (`candidates`), `screened` (baseline signals solved),
+    `evaluations` (batched orbit evaluations) and `runtime_s`."""
+
+    v_min: float
+    direction: int
+    a_max: float
+    harmonics: int
+    shape: str
+    cos: np.ndarray
+    sin: np.ndarray
+    control: np.ndarray | None
+    omega: float
+    mean_speed_exact: float
+    cost_of_transport_exact: float
+    gait_period_exact: float
+    stable_exact: bool
+    spectral_radius_exact: float
+    stroke_exact: np.ndarray
+    feasible_exact: bool
+    mean_speed_simulated: float
+    cost_of_transport_simulated: float
+    simulation_agreement: float
+    simulated_periods: int
+    candidates: list
+    screened: int
+    evaluations: int
+    runtime_s: float
+
+    def signal_lines(self, labels: list[str]) -> list[str]:
+        """One line per actuated element, `labels[j]` first: its coefficients or control values."""
+        if self.control is None:
+            return [f"{label}: cos " + " ".join(f"{c:+.5f}" for c in cj) + "  sin " + " ".join(f"{s:+.5f}" for s in sj)
+                    for label, cj, sj in zip(labels, self.cos, self.sin)]  # fmt: skip
+        return [f"{label}: control " + " ".join(f"{c:+.5f}" for c in cj) for label, cj in zip(labels, self.control)]
+
+    def gait_line(self) -> str:
+        """The summary's line of the optimum's steady gait."""
+        return (f"steady gait (exact, whole periods): mean speed {fmt(self.mean_speed_exact)}, cost of transport "
+                f"{fmt(self.cost_of_transport_exact)}, period {fmt(self.gait_period_exact)}, stable "
+                f"{self.stable_exact} (largest multiplier modulus {fmt(self.spectral_radius_exact)})")  # fmt: skip
+
+    def simulation_line(self) -> str:
+        """The summary's line of the direct simulation."""
+        return (f"direct simulation ({self.simulated_periods} gait periods, then 10 averaged): mean speed "
+                f"{fmt(self.mean_speed_simulated)}, cost of transport {fmt(self.cost_of_transport_simulated)} "
+                f"(relative difference {fmt(self.simulation_agreement)})")  # fmt: skip
+
+
+@dataclasses.dataclass(frozen=True)
+class ChainOptimum(ElementOptimum):
+    """Result of [`optimise`][locomotion_jax.optimisation._optimise.optimise] for a [`Chain`][]: the
+    fields of [`ElementOptimum`][locomotion_jax.optimisation._element_optimum.ElementOptimum] (the
+    actuated elements are the springs, $s_j(t) = \\ell_{0,j}(t) - \\bar\\ell_j$; `waveforms`: a
+    [`SpringFourier`][] or one [`Spline`][] per spring; `chain`: the input chain driven by them;
+    the direct simulation runs from the relaxed springs), and:
+
+    - `margin`, `free_omega`, `lbar` (per spring);
+    - `liftoff_exact`, `min_normal` (smallest normal force on the orbit, at the step ends; NaN
+      where the travelling wave wins a spline search: the refinement's orbit oracle solves
+      splines only);
+    - `constraints_exact` (`speed`, `stroke`, `no_liftoff`, `stable`): an infeasible requirement
+      gives `feasible_exact = False` and the closest candidate (the fastest stable gait), never an
+      optimum;
+    - `travelling_wave`: the best travelling wave $a\\sin(\\omega t - j\\varphi)$ of the screen and
+      its zoom that meets the requirement (`a`, `omega`, `phi`, `mean_speed`,
+      `cost_of_transport`), or `None`; `travelling_wave_cost_of_transport`;
+      `improvement_vs_travelling_wave` $= 1 - \\text{cost}/\\text{cost}_\\text{wave}$ (NaN when either
+      is infeasible);
+    - `source` (the winning candidate), `history` (the local starts and runs).
+    """
+
+    margin: float
+    free_omega: bool
+    lbar: np.ndarray
+    liftoff_exact: bool
+    min_normal: float
+    constraints_exact: dict
+    travelling_wave: dict | None
+    travelling_wave_cost_of_transport: float
+    improvement_vs_travelling_wave: float
+    source: str
+    history: list
+    chain: Chain = dataclasses.field(repr=False)
+
+    objects: ClassVar[tuple[str, ...]] = ("chain",)
+
+    @property
+    def waveforms(self) -> SpringFourier | list[Spline]:
+        """The actuation: a [`SpringFourier`][] of `cos`, `sin`, or one [`Spline`][] per spring."""
+        if self.control is None:
+            return SpringFourier(self.cos, self.sin, self.omega)
+        return [Spline(c, self.omega, lb) for c, lb in zip(self.control, self.lbar)]
+
+    def extra(self) -> dict[str, Any]:
+        """`n_masses`."""
+        return {"n_masses": int(self.cos.shape[0]) + 1}
+
+    def summary(self) -> str:
+        """Human-readable report."""
+        S, H = self.cos.shape
+        family = f"{H} harmonics" if self.control is None else f"a spline of {self.control.shape[-1]} knots"
+        lines = [
+            f"chain of {S + 1} masses: mean speed >= {self.v_min:g} in direction {self.direction:+d}, stroke <= "
+            f"{self.a_max:g} per spring, normal forces >= {self.margin:g} on the orbit, stable steady gait (exact)",
+            f"base frequency omega = {self.omega:.6g} ({'optimised' if self.free_omega else 'fixed'}), "
+            f"{family} per spring",
+            *self.signal_lines([f"spring {j}" for j in range(S)]),
+            self.gait_line(),
+            "stroke per spring "
+            + " ".join(fmt(float(s)) for s in self.stroke_exact)
+            + f" (limit {self.a_max:g}); min normal force {fmt(self.min_normal)}; lift-off: {self.liftoff_exact}",
+            self.simulation_line(),
+            constraints_line(self.constraints_exact, self.feasible_exact),
+        ]
+        w = self.travelling_wave
+        if w is None:
+            lines.append("best travelling wave: none meets the requirement on the exact model")
+        else:
+            lines.append(
+                f"best travelling wave: a = {w['a']:.4g}, omega = {w['omega']:.4g}, phi = {w['phi']:.4g}: mean speed "
+                f"{w['mean_speed']:.4g}, cost of transport {w['cost_of_transport']:.4g}"
+            )
+        lines.append(
+            f"improvement vs travelling wave: {fmt(100 * self.improvement_vs_travelling_wave)} %  (winner: "
+            f"{self.source}; {self.screened} waves screened, {self.evaluations} batched evaluations, "
+            f"{self.runtime_s:.0f} s)"
+        )
+        return "\n".join(lines)
+
+
+@dataclasses.dataclass(frozen=True)
+class MechanismOptimum(ElementOptimum):
+    """Result of [`optimise`][locomotion_jax.optimisation._optimise.optimise] for a
+    [`Mechanism`][locomotion_jax.Mechanism]: the fields of
+    [`ElementOptimum`][locomotion_jax.optimisation._element_optimum.ElementOptimum] (the actuated
+    elements in the order of `elements`, indices into `links`; `mechanism`: the mechanism driven
+    by the signals; the direct simulation runs from the mechanism's own start), and:
+
+    - `sinusoid`: the best sinusoid of the screen (a dict: `a`, `omega`, `phase`, `mean_speed`,
+      `cost_of_transport`; `None` if none meets the speed); `improvement_vs_sinusoid`: $1 -$ the
+      ratio of the costs of transport.
+    """
+
+    elements: list[int]
+    sinusoid: dict | None
+    improvement_vs_sinusoid: float
+    mechanism: Mechanism = dataclasses.field(repr=False)
+
+    objects: ClassVar[tuple[str, ...]] = ("mechanism",)
+
+    def summary(self) -> str:
+        """Human-readable report."""
+        family = f"{self.harmonics} harmonics" if self.control is None else f"splines of {self.control.shape[-1]} knots"
+        lines = [
+            f"mechanism of {self.mechanism.n_bodies} bodies: mean speed >= {self.v_min:g} in direction "
+            f"{self.direction:+d}, excursion <= {self.a_max:g} per actuated link, stable steady gait (exact)",
+            f"base frequency omega = {self.omega:.6g}; links {self.elements} actuated by {family}",
+            *self.signal_lines([f"link {e}" for e in self.elements]),
+            self.gait_line(),
+            "excursion per link " + " ".join(fmt(float(s)) for s in np.ravel(self.stroke_exact))
+            + f" (limit {self.a_max:g})",
+            self.simulation_line(),
+            f"speed, excursion, stable gait (exact) -> {'FEASIBLE' if self.feasible_exact else 'INFEASIBLE'}",
+        ]  # fmt: skip
+        w = self.sinusoid
+        if w is None:
+            lines.append("best sinusoid: none meets the requirement on the exact model")
+        else:
+            lines.append(f"best sinusoid: a = {w['a']:.4g}, omega = {w['omega']:.4g}, phase = {w['phase']:.4g}: mean "
+                         f"speed {w['mean_speed']:.4g}, cost of transport {w['cost_of_transport']:.4g}")  # fmt: skip
+        lines.append(
+            f"improvement vs sinusoid: {fmt(100 * self.improvement_vs_sinusoid)} %  ({self.screened} sinusoids "
+            f"screened, {self.evaluations} batched evaluations, {self.runtime_s:.0f} s)"
+        )
+        return "\n".join(lines)
