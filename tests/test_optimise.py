@@ -1126,6 +1126,15 @@ def test_mechanism_optimum_verified_by_simulate_and_the_reference(optimum):
     print({k: v for k, v in opt.to_dict().items() if k not in ("candidates",)})
     assert opt.feasible_exact and opt.stable_exact and opt.elements == [2]
     assert -opt.mean_speed_exact >= V_MIN and float(np.max(opt.stroke_exact)) <= FORCE_MAX * (1 + 1e-12)
+    # The verdict of each constraint, the winner among the candidates and the local starts' history.
+    assert opt.constraints_exact == dict(speed=True, stroke=True, no_liftoff=True, stable=True)
+    assert not opt.liftoff_exact and opt.free_omega and opt.margin == 0.05
+    won = [c for c in opt.candidates if c["candidate"] == opt.source]
+    assert len(won) == 1 and won[0]["cost_of_transport_exact"] == opt.cost_of_transport_exact
+    assert all("liftoff_exact" in c for c in opt.candidates)
+    starts = opt.history[0]["starts"]
+    assert len(starts) == 2 and starts[0]["cost_of_transport"] == pytest.approx(opt.sinusoid["cost_of_transport"])
+    assert opt.history[0]["local"], "the local runs' log"
     g = lj.steady_gait(opt.mechanism, periods=(1, 2), transient=20, dynamics=lj.Exact(dt=0.01))
     assert int(g.status) == lj.GaitStatus.CONVERGED
     assert abs(float(g.cost_of_transport) - opt.cost_of_transport_exact) < 1e-9

@@ -179,25 +179,38 @@ class ChainOptimiseSettings(MechanismOptimiseSettings):
 
 @dataclasses.dataclass(frozen=True)
 class ElementOptimum(AbstractOptimum):
-    """What the results of the chain's and the mechanism's optimisers share: the requirement
-    (`v_min`, `direction`, `a_max`), the family of the reported signals (`shape`, `"fourier"` or
-    `"spline"`; a spline search reports its baseline, `"fourier"`, where no refined spline is
-    cheaper), their Fourier coefficients `cos`, `sin` (shape `(S, H)` over the `S` actuated
-    elements, absolute units; `(S, 0)` and `harmonics` 0 for a spline) or spline control values
-    `control` (shape `(S, M)`, absolute units about the means; `None` for a Fourier series), the
-    base frequency `omega`; the optimum's steady gait on the exact model ([`steady_gait`][]: whole
-    periods; `mean_speed_exact`, `cost_of_transport_exact` $= e_d / |\\Delta X|$ over the gait
-    period, `gait_period_exact`, `stable_exact`, `spectral_radius_exact` the largest Floquet
-    multiplier's modulus, `stroke_exact` per element the largest excursion of its signal about its
-    mean, located exactly, `feasible_exact`); a direct [`simulate`][] run averaged over 10 gait periods after
-    `simulated_periods` (`mean_speed_simulated`, `cost_of_transport_simulated`,
-    `simulation_agreement`: the larger relative difference of the two from the steady gait's); every
-    verified candidate's figures (`candidates`), `screened` (baseline signals solved),
-    `evaluations` (batched orbit evaluations) and `runtime_s`."""
+    """What the results of the chain's and the mechanism's optimisers share; every figure called
+    `*_exact` is the steady gait's ([`steady_gait`][]: whole periods, exact model, strict contact).
+
+    - The requirement: `v_min`, `direction`, `a_max`; `margin`, the smallest normal force required
+      on the orbit during the refinement; `free_omega`, whether the base frequency was searched.
+    - The signals: `shape`, their family, `"fourier"` or `"spline"` (a spline search reports its
+      baseline, `"fourier"`, where no refined spline is cheaper); `cos`, `sin`, shape `(S, H)` over
+      the `S` actuated elements, their Fourier coefficients about the elements' means (absolute
+      units; `(S, 0)` and `harmonics` 0 for a spline); `control`, shape `(S, M)`, a spline's control
+      values about the means (absolute units; `None` for a Fourier series); `omega`, the base
+      frequency.
+    - The optimum's steady gait: `mean_speed_exact`, `cost_of_transport_exact` ($e_d / |\\Delta X|$
+      over the gait period), `gait_period_exact`, `stable_exact`, `spectral_radius_exact` (the
+      largest Floquet multiplier's modulus), `stroke_exact` (per element, the largest excursion of
+      its signal about its mean, located exactly), `liftoff_exact`.
+    - `constraints_exact` (`speed`, `stroke`, `no_liftoff`, `stable`), `feasible_exact`: all hold.
+      An infeasible requirement gives `feasible_exact = False` and the closest candidate (the
+      fastest stable gait), never an optimum.
+    - `mean_speed_simulated`, `cost_of_transport_simulated`: a direct [`simulate`][] run averaged
+      over 10 gait periods after `simulated_periods` gait periods; `simulation_agreement`: the
+      larger relative difference of the two from the steady gait's.
+    - `source`, the winning candidate; `candidates`, every verified candidate's figures;
+      `history`, the local starts (the baseline screen's rows) and the local runs' log;
+      `screened`, the baseline signals solved; `evaluations`, batched orbit evaluations;
+      `runtime_s`.
+    """
 
     v_min: float
     direction: int
     a_max: float
+    margin: float
+    free_omega: bool
     harmonics: int
     shape: str
     cos: np.ndarray
@@ -210,12 +223,16 @@ class ElementOptimum(AbstractOptimum):
     stable_exact: bool
     spectral_radius_exact: float
     stroke_exact: np.ndarray
+    liftoff_exact: bool
+    constraints_exact: dict
     feasible_exact: bool
     mean_speed_simulated: float
     cost_of_transport_simulated: float
     simulation_agreement: float
     simulated_periods: int
+    source: str
     candidates: list
+    history: list
     screened: int
     evaluations: int
     runtime_s: float
@@ -248,32 +265,21 @@ class ChainOptimum(ElementOptimum):
     [`SpringFourier`][] or one [`Spline`][] per spring; `chain`: the input chain driven by them;
     the direct simulation runs from the relaxed springs), and:
 
-    - `margin`, `free_omega`, `lbar` (per spring);
-    - `liftoff_exact`, `min_normal` (smallest normal force on the orbit, at the step ends; NaN
-      where the travelling wave wins a spline search: the refinement's orbit oracle solves
+    - `lbar` (per spring); `min_normal` (the smallest normal force on the orbit, at the step ends;
+      NaN where the travelling wave wins a spline search: the refinement's orbit oracle solves
       splines only);
-    - `constraints_exact` (`speed`, `stroke`, `no_liftoff`, `stable`): an infeasible requirement
-      gives `feasible_exact = False` and the closest candidate (the fastest stable gait), never an
-      optimum;
     - `travelling_wave`: the best travelling wave $a\\sin(\\omega t - j\\varphi)$ of the screen and
       its zoom that meets the requirement (`a`, `omega`, `phi`, `mean_speed`,
       `cost_of_transport`), or `None`; `travelling_wave_cost_of_transport`;
       `improvement_vs_travelling_wave` $= 1 - \\text{cost}/\\text{cost}_\\text{wave}$ (NaN when either
-      is infeasible);
-    - `source` (the winning candidate), `history` (the local starts and runs).
+      is infeasible).
     """
 
-    margin: float
-    free_omega: bool
     lbar: np.ndarray
-    liftoff_exact: bool
     min_normal: float
-    constraints_exact: dict
     travelling_wave: dict | None
     travelling_wave_cost_of_transport: float
     improvement_vs_travelling_wave: float
-    source: str
-    history: list
     chain: Chain = dataclasses.field(repr=False)
 
     objects: ClassVar[tuple[str, ...]] = ("chain",)
@@ -328,11 +334,10 @@ class MechanismOptimum(ElementOptimum):
     [`Mechanism`][locomotion_jax.Mechanism]: the fields of
     [`ElementOptimum`][locomotion_jax.optimisation._element_optimum.ElementOptimum] (the actuated
     elements in the order of `elements`, indices into `links`; `mechanism`: the mechanism driven
-    by the signals; the direct simulation runs from the mechanism's own start), and:
-
-    - `sinusoid`: the best sinusoid of the screen (a dict: `a`, `omega`, `phase`, `mean_speed`,
-      `cost_of_transport`; `None` if none meets the speed); `improvement_vs_sinusoid`: $1 -$ the
-      ratio of the costs of transport.
+    by the signals; the direct simulation runs from the mechanism's own start), and `sinusoid`, the
+    best sinusoid of the screen (a dict: `a`, `omega`, `phase`, `mean_speed`, `cost_of_transport`;
+    `None` if none meets the speed); `improvement_vs_sinusoid`: $1 -$ the ratio of the costs of
+    transport.
     """
 
     elements: list[int]
@@ -352,9 +357,9 @@ class MechanismOptimum(ElementOptimum):
             *self.signal_lines([f"link {e}" for e in self.elements]),
             self.gait_line(),
             "excursion per link " + " ".join(fmt(float(s)) for s in np.ravel(self.stroke_exact))
-            + f" (limit {self.a_max:g})",
+            + f" (limit {self.a_max:g}); lift-off: {self.liftoff_exact}",
             self.simulation_line(),
-            f"speed, excursion, stable gait (exact) -> {'FEASIBLE' if self.feasible_exact else 'INFEASIBLE'}",
+            constraints_line(self.constraints_exact, self.feasible_exact),
         ]  # fmt: skip
         w = self.sinusoid
         if w is None:
@@ -363,7 +368,7 @@ class MechanismOptimum(ElementOptimum):
             lines.append(f"best sinusoid: a = {w['a']:.4g}, omega = {w['omega']:.4g}, phase = {w['phase']:.4g}: mean "
                          f"speed {w['mean_speed']:.4g}, cost of transport {w['cost_of_transport']:.4g}")  # fmt: skip
         lines.append(
-            f"improvement vs sinusoid: {fmt(100 * self.improvement_vs_sinusoid)} %  ({self.screened} sinusoids "
-            f"screened, {self.evaluations} batched evaluations, {self.runtime_s:.0f} s)"
+            f"improvement vs sinusoid: {fmt(100 * self.improvement_vs_sinusoid)} %  (winner: {self.source}; "
+            f"{self.screened} sinusoids screened, {self.evaluations} batched evaluations, {self.runtime_s:.0f} s)"
         )
         return "\n".join(lines)

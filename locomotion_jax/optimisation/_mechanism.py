@@ -81,9 +81,10 @@ def _gaits(batch: Mechanism, settings: MechanismOptimiseSettings) -> dict[str, n
 
     g = steady_gait(batch, periods=(1, 2), transient=settings.transient, dynamics=Exact(dt=settings.dt))
     radius = np.max(np.abs(np.asarray(g.multipliers)), axis=-1)
-    ok = np.asarray(g.converged) & np.asarray(g.stable) & ~np.asarray(g.liftoff)
+    liftoff = np.asarray(g.liftoff)
+    ok = np.asarray(g.converged) & np.asarray(g.stable) & ~liftoff
     return dict(speed=np.asarray(g.mean_speed, np.float64), cost=np.asarray(g.cost_of_transport, np.float64), ok=ok,
-                k=np.asarray(g.k), period=np.asarray(g.period, np.float64), radius=radius,
+                liftoff=liftoff, k=np.asarray(g.k), period=np.asarray(g.period, np.float64), radius=radius,
                 y=np.asarray(g.state, np.float64))  # fmt: skip
 
 
@@ -157,15 +158,15 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
     order = np.lexsort((-along(sc["speed"], direction), np.where(fast, sc["cost"], np.inf),
                         ~fast))  # fmt: skip
     best = int(order[0])
-    sinusoid = (dict(a=float(A[best]), omega=float(W[best]), phase=float(PHI[best]),
-                     mean_speed=float(sc["speed"][best]), cost_of_transport=float(sc["cost"][best]))
-                if fast[best] else None)  # fmt: skip
+    row_of = lambda i: dict(a=float(A[i]), omega=float(W[i]), phase=float(PHI[i]), mean_speed=float(sc["speed"][i]),
+                            cost_of_transport=float(sc["cost"][i]))  # fmt: skip
+    sinusoid = row_of(best) if fast[best] else None
 
     # 2. Local refinement of every element's harmonics (or control values) from the best sinusoids.
     rows = [int(i) for i in order if sc["ok"][i]][: settings.local] or [best]
     rows += rows[:1] * (settings.local - len(rows))
     starts = [local.Start(cos[i], sin[i], float(W[i]), sc["y"][i], int(sc["k"][i]), float(sc["cost"][i])) for i in rows]
-    xs, ev, _ = local.refine(base, starts, a_max, v_min, direction, lo, hi, M if spline else 0, settings, say)
+    xs, ev, log = local.refine(base, starts, a_max, v_min, direction, lo, hi, M if spline else 0, settings, say)
 
     # 3. Verification: the baseline and the refined actuations (on the exact bound).
     names = ["sinusoid"] + [f"local {lane}" for lane in range(len(xs))]
@@ -187,14 +188,19 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
     cost_sin = sinusoid["cost_of_transport"] if sinusoid else math.nan
     say(f"verified ({time.perf_counter() - t0:.0f} s): {names[k]}, cost of transport {g['cost'][k]:.6g}")
     return MechanismOptimum(
-        v_min=float(v_min), direction=int(direction), a_max=float(a_max), elements=elements,
-        shape="fourier" if control_k is None else "spline", harmonics=H if control_k is None else 0, cos=cos_k,
+        v_min=float(v_min), direction=int(direction), a_max=float(a_max), margin=settings.margin, free_omega=free,
+        elements=elements, shape="fourier" if control_k is None else "spline", harmonics=H if control_k is None else 0,
+        cos=cos_k,
         sin=sin_k, control=control_k, omega=float(om_c[k]), mean_speed_exact=float(g["speed"][k]),
         cost_of_transport_exact=float(g["cost"][k]), gait_period_exact=float(g["period"][k]),
         stable_exact=bool(g["ok"][k]), spectral_radius_exact=float(g["radius"][k]), stroke_exact=strokes[k],
+        liftoff_exact=bool(g["liftoff"][k]),
+        constraints_exact=dict(speed=bool(v.ok_speed[k]), stroke=bool(v.ok_stroke[k]),
+                               no_liftoff=bool(~g["liftoff"][k]), stable=bool(g["ok"][k])),
         feasible_exact=bool(feasible[k]), sinusoid=sinusoid,
         improvement_vs_sinusoid=1 - float(g["cost"][k]) / cost_sin if (feasible[k] and sinusoid) else math.nan,
         mean_speed_simulated=float(speed_s), cost_of_transport_simulated=float(cost_s), simulation_agreement=float(rel),
-        simulated_periods=int(n), candidates=table, screened=int(A.size), evaluations=ev.calls,
+        simulated_periods=int(n), source=names[k], candidates=table,
+        history=[{"starts": [row_of(i) for i in rows], "local": log}], screened=int(A.size), evaluations=ev.calls,
         runtime_s=time.perf_counter() - t0, mechanism=chosen,
     )  # fmt: skip
