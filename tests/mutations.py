@@ -461,6 +461,25 @@ MUTATIONS = [
         ("tests/test_optimise.py::test_the_search_steps_at_search_dt_which_the_guard_checks",),
     ),
     Mutation(
+        "element_verify_at_search_dt",
+        "optimise (a chain): the verification steps at the search's step, not at dt",
+        "locomotion_jax/optimisation/_chain.py",
+        (
+            (
+                "screen.solve(base, cos, sin, om, settings, control=control)",
+                "screen.solve(base, cos, sin, om, search, control=control)",
+            ),
+        ),
+        ("tests/test_optimise.py::test_a_coarser_search_step_reports_the_figures_at_dt",),
+    ),
+    Mutation(
+        "element_baseline_at_search_dt",
+        "optimise (a chain): the baseline wave's figures are the screen's at the search step, not the verification's",
+        "locomotion_jax/optimisation/_chain.py",
+        (("        baseline = local.verified_baseline(screen.as_dict(sc, best), v)\n", "        pass\n"),),
+        ("tests/test_optimise.py::test_a_coarser_search_step_reports_the_figures_at_dt",),
+    ),
+    Mutation(
         "verify_at_search_dt",
         "optimise (the paper's model): the verification steps at the search's step, not at dt",
         "locomotion_jax/optimisation/_exact.py",
@@ -478,7 +497,12 @@ MUTATIONS = [
         "chain_optimise_guards_its_own_waves",
         "optimise (a chain): the guard checks the chain's own actuation, not the fastest stroke the search reaches",
         "locomotion_jax/optimisation/_chain.py",
-        (("refuse_search(fastest, None, settings.dt", "refuse_search(base, None, settings.dt"),),
+        (
+            (
+                "refuse_search(fastest, None, getattr(settings, name)",
+                "refuse_search(base, None, getattr(settings, name)",
+            ),
+        ),
         (GUARDS_TESTS + "::test_optimisers_refuse_a_step_that_does_not_resolve_the_mechanism",),
     ),
     Mutation(

@@ -858,6 +858,36 @@ def test_sqp_local_method_on_a_chain(opt3):
 
 
 @CHAIN_OPTIMISE
+def test_a_coarser_search_step_reports_the_figures_at_dt():
+    """`search_dt = 2 dt`: the screen and the local runs step at 0.02, the verification at `dt`; the
+    optimum's figures and its baseline travelling wave's are their steady gaits at `dt` (a figure
+    at 0.02 differs by about 1e-6: the mutation `element_verify_at_search_dt`)."""
+    coarse = dataclasses.replace(SETTINGS, search_dt=2 * SETTINGS.dt)
+    assert coarse.searching().dt == 2 * SETTINGS.dt and SETTINGS.searching() is SETTINGS
+    opt = lj.optimise(worm(), 0.05, A_MAX, harmonics=2, settings=coarse)
+    assert opt.feasible_exact and opt.simulation_agreement < 1e-6
+    w = opt.travelling_wave
+    assert w is not None
+    cos, sin = screen.wave_coefficients(np.array([w["a"]]), np.array([w["phi"]]), 2, 2)
+    wave = screen.with_actuation(worm().broadcast(), cos, sin, np.array([w["omega"]]))[0]
+    g = lj.steady_gait(lj.Chain.stack([opt.chain, wave] * (SETTINGS.chunk // 2)), transient=SETTINGS.transient,
+                       dynamics=lj.Exact(dt=SETTINGS.dt), start="relaxed")  # fmt: skip
+    assert bool(np.all(np.asarray(g.converged)[:2]))
+    for i, (speed, cost) in enumerate([(opt.mean_speed_exact, opt.cost_of_transport_exact),
+                                       (w["mean_speed"], w["cost_of_transport"])]):  # fmt: skip
+        assert float(g.mean_speed[i]) == pytest.approx(speed, rel=1e-10)
+        assert float(g.cost_of_transport[i]) == pytest.approx(cost, rel=1e-10)
+    with pytest.raises(ValueError, match="ChainOptimiseSettings.search_dt must be None or a finite step > 0, got 0.0"):
+        lj.ChainOptimiseSettings(search_dt=0.0)
+    with pytest.raises(ValueError, match="MechanismOptimiseSettings.search_dt must be None or a finite step > 0"):
+        lj.MechanismOptimiseSettings(search_dt=float("nan"))
+    # The guard checks the search step as it does dt, and names it.
+    with pytest.raises(ValueError, match=r"'omega'.*\(optimise: omega = 10000 .*ChainOptimiseSettings.search_dt"):
+        lj.optimise(lj.Chain(masses=[1.0, 1.0, 1.0]), 0.01, 0.05, omega=1e4,
+                    settings=lj.ChainOptimiseSettings(dt=1e-5, search_dt=0.02))  # fmt: skip
+
+
+@CHAIN_OPTIMISE
 def test_optimum_verifies_on_steady_gait_and_simulation(opt3):
     g = _first(lj.steady_gait(lj.Chain.stack([opt3.chain] * SETTINGS.chunk), transient=SETTINGS.transient,
                               dynamics=lj.Exact(dt=SETTINGS.dt), start="relaxed"))  # fmt: skip
@@ -1168,6 +1198,29 @@ def test_mechanism_optimum_verified_by_simulate_and_the_reference(optimum):
     err_fine = max(abs(r_speed / f_speed - 1), abs(r_cost / f_cost - 1))
     print(f"against the reference: {err:.1e} at dt = 0.01, {err_fine:.1e} at dt = 0.0025")
     assert err < 2e-5 and err_fine < err / 8
+
+
+@MECHANISM_OPTIMISE
+@pytest.mark.slow
+def test_mechanism_spline_search_at_a_coarser_step_reports_the_figures_at_dt():
+    """`search_dt = 2 dt` with splines: the sinusoid screen and the local runs step at 0.02; the
+    optimum's figures and its baseline sinusoid's (whose screen row is at 0.02, so solved again)
+    are their steady gaits at `dt`."""
+    from locomotion_jax.optimisation import _mechanism
+
+    s = lj.MechanismOptimiseSettings(amplitudes=2, frequencies=4, local=1, max_iter=4, transient=20, shape="spline",
+                                     knots=8, search_dt=0.02)  # fmt: skip
+    opt = lj.optimise(_capsule(), v_min=V_MIN, a_max=FORCE_MAX, direction=-1, settings=s)
+    w = opt.sinusoid
+    assert opt.feasible_exact and w is not None
+    c, d = np.full((1, 1, 1), w["a"] * math.sin(w["phase"])), np.full((1, 1, 1), w["a"] * math.cos(w["phase"]))
+    wave = _mechanism._fourier(_capsule().broadcast(), c, d, np.array([w["omega"]]))
+    for mech, speed, cost in [(opt.mechanism, opt.mean_speed_exact, opt.cost_of_transport_exact),
+                              (wave, w["mean_speed"], w["cost_of_transport"])]:  # fmt: skip
+        g = lj.steady_gait(mech, periods=(1, 2), transient=20, dynamics=lj.Exact(dt=0.01))
+        assert bool(np.all(np.asarray(g.converged)))
+        assert float(np.ravel(g.mean_speed)[0]) == pytest.approx(speed, rel=1e-9)
+        assert float(np.ravel(g.cost_of_transport)[0]) == pytest.approx(cost, rel=1e-9)
 
 
 @MECHANISM_OPTIMISE

@@ -111,14 +111,17 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     else:
         fastest, family = base.with_waves(SpringFourier(np.zeros((S, H)), np.zeros((S, H)), hi)), f"{H} harmonics"
     what = "given" if omega is not None else "ChainOptimiseSettings.omega_max times the highest natural frequency"
-    refuse_search(fastest, None, settings.dt, f"(optimise: omega = {hi:.6g} with {family}, {what}; the step "
-                  "is ChainOptimiseSettings.dt.)")  # fmt: skip
+    for name in ("dt", "search_dt"):
+        if getattr(settings, name) is not None:
+            refuse_search(fastest, None, getattr(settings, name), f"(optimise: omega = {hi:.6g} with {family}, "
+                          f"{what}; the step is ChainOptimiseSettings.{name}.)")  # fmt: skip
+    search = settings.searching()  # the screen's and the local runs' step; the verification's is dt
 
     # 1. Travelling waves. Progress from the first second: compiling the screen alone takes minutes.
     size = settings.amplitudes * settings.frequencies * settings.phases
     say(f"screening {size} travelling waves, then {settings.zoom_levels} zoom level(s) (compiling the screen: "
         "first call only)...")  # fmt: skip
-    sc, best, steps = screen.screen(base, speed, direction, a_max, lo, hi, H, settings, say)
+    sc, best, steps = screen.screen(base, speed, direction, a_max, lo, hi, H, search, say)
     say(f"{len(sc.a)} travelling waves solved ({time.perf_counter() - t0:.0f} s)")
     feas = screen.feasible(sc.gaits, speed, direction)
     baseline = screen.as_dict(sc, best) if feas[best] else None
@@ -131,7 +134,7 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
         cos, sin = screen.wave_coefficients(sc.a[i : i + 1], sc.phi[i : i + 1], S, H)
         starts.append(local.Start(cos[0], sin[0], float(sc.omega[i]), sc.gaits.y[i], int(sc.gaits.k[i]),
                                   float(sc.gaits.cost[i])))  # fmt: skip
-    xs, ev, log = local.refine(base, starts, a_max, speed, direction, lo, hi, M if spline else 0, settings, say)
+    xs, ev, log = local.refine(base, starts, a_max, speed, direction, lo, hi, M if spline else 0, search, say)
 
     # 3. Verification of the candidates: the refined actuations, rescaled onto the exact
     # stroke limit (what the line search's tolerance let through), and the baseline wave.
@@ -140,11 +143,15 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     say(f"verifying {len(names)} candidates on their steady gaits...")
     solve = lambda cos, sin, om, control=None: screen.solve(base, cos, sin, om, settings, control=control)._asdict()
     row = {name: x[best : best + 1] for name, x in sc.gaits._asdict().items()}
+    if spline and search is not settings:  # the screen's row is at the search step
+        row = solve(cos_b, sin_b, sc.omega[best : best + 1])
     eps = float(jnp.finfo(base.dtype).eps)
     v = local.verify(xs, (cos_b[0], sin_b[0], float(sc.omega[best])), row, names, solve, a_max, speed, direction, H,
                      M if spline else 0, eps)  # fmt: skip
     g, om, strokes, k, feasible, table = screen.Gaits(**v.gaits), v.omega, v.strokes, v.k, v.feasible, v.table
     ok_speed, ok_stroke = v.ok_speed, v.ok_stroke
+    if search is not settings:
+        baseline = local.verified_baseline(screen.as_dict(sc, best), v)
     cos_k, sin_k, control_k = v.waves[k]
     # The smallest normal force of the reported orbit (the oracle's figure, paper reading); the
     # oracle of a spline search solves splines only, not the travelling wave.

@@ -265,6 +265,20 @@ def verify(xs: list[np.ndarray], baseline: tuple[np.ndarray, np.ndarray, float],
     return Verified(g, om, strokes_, waves, k, feasible, ok_speed, ok_stroke, table)
 
 
+def verified_baseline(found: dict[str, Any], v: Verified) -> dict[str, Any] | None:
+    """The baseline `found` by a screen at a coarser search step, with the figures the verification
+    solved at `dt` (its row 0; and the gait's period multiple `k` where `found` has one), or `None`
+    where it is not feasible there."""
+    if not v.feasible[0]:
+        return None
+    g = v.gaits
+    return (
+        found
+        | dict(mean_speed=float(g["speed"][0]), cost_of_transport=float(g["cost"][0]))
+        | ({"k": int(g["k"][0])} if "k" in found else {})
+    )
+
+
 def simulate_check(model: Any, rho: float, period: float, settings: Any, **start: Any) -> tuple[float, float, int]:
     """Mean speed and cost of transport of a direct simulation (`start`: `simulate`'s), over 10 whole
     gait periods after enough periods for the slowest Floquet mode (multiplier modulus `rho`) to

@@ -7,7 +7,8 @@ results share the figures of the optimum's steady gait and of its direct simulat
 """
 
 import dataclasses
-from typing import Any, ClassVar
+import math
+from typing import Any, ClassVar, TypeVar
 
 import equinox as eqx
 import numpy as np
@@ -27,11 +28,14 @@ def _count(s: Any, field: str, least: int) -> None:
         raise ValueError(f"{type(s).__name__}.{field} must be an int >= {least}, got {v!r}.")
 
 
+_Settings = TypeVar("_Settings", bound="MechanismOptimiseSettings")
+
+
 class MechanismOptimiseSettings(eqx.Module):
     """Settings of [`optimise`][locomotion_jax.optimisation._optimise.optimise] for a
     [`Mechanism`][locomotion_jax.Mechanism] (module `optimisation._mechanism`). Python numbers:
-    changing `local`, `dt`, `newton_iter`, `shape` or `knots` (or the harmonics) recompiles; the
-    others do not.
+    changing `local`, `dt`, `search_dt`, `newton_iter`, `shape` or `knots` (or the harmonics)
+    recompiles; the others do not.
 
     The actuators are the mechanism's elements driven by a waveform (a spring's rest length, an
     internal `Force`, an `ExternalForce`); `optimise`'s `a_max` bounds each one's excursion about its
@@ -62,8 +66,13 @@ class MechanismOptimiseSettings(eqx.Module):
     - `omega_min`, `omega_max`: range of a free base frequency, in units of the highest natural
       frequency of the mechanism's bodies and springs (or of its own base frequency where it has
       no spring).
-    - `dt`: the exact engine's step; `transient`: actuation periods from the mechanism's start
-      before an orbit is solved; `newton_tol`, `newton_iter`: the periodic-orbit solve.
+    - `dt`: the exact engine's step of the verification, and so of every figure reported but a
+      chain's `min_normal`; `search_dt`: its step in the baseline screen and the local runs, whose
+      figures only rank and steer (`None`: `dt`; as
+      [`ExactSettings`][locomotion_jax.optimisation._optimum.ExactSettings]`.search_dt`). With a
+      `search_dt` the baseline is solved again at `dt` by the verification, which reports its
+      figures. `transient`: actuation periods from the mechanism's start before an orbit is
+      solved; `newton_tol`, `newton_iter`: the periodic-orbit solve.
     - `check_tol`, `check_periods`: the direct simulation of the optimum runs until the largest
       Floquet multiplier's modulus to the power of the periods run falls below `check_tol` (at
       least `check_periods[0]`, at most `check_periods[1]` gait periods), then averages over 10.
@@ -86,6 +95,7 @@ class MechanismOptimiseSettings(eqx.Module):
     omega_min: float = 0.15
     omega_max: float = 2.0
     dt: float = 0.01
+    search_dt: float | None = None
     transient: int = 30
     newton_tol: float = 1e-10
     newton_iter: int = 12
@@ -111,6 +121,9 @@ class MechanismOptimiseSettings(eqx.Module):
             raise ValueError(f"{name}: need 0 < omega_min < omega_max, got {self.omega_min!r}, {self.omega_max!r}.")
         if not (self.dt > 0 and self.trust_radius > 0 and self.newton_tol > 0 and self.check_tol > 0):
             raise ValueError(f"{name}: dt, trust_radius, newton_tol and check_tol must be > 0.")
+        step = self.search_dt
+        if step is not None and not (isinstance(step, (int, float, np.number)) and math.isfinite(step) and step > 0):
+            raise ValueError(f"{name}.search_dt must be None or a finite step > 0, got {step!r}.")
         if not (self.margin >= 0 and self.speed_slack >= 0):
             raise ValueError(f"{name}: margin and speed_slack must be >= 0, got {self.margin!r}, {self.speed_slack!r}.")
         lo, hi = self.check_periods
@@ -122,6 +135,11 @@ class MechanismOptimiseSettings(eqx.Module):
         """A chain's settings' fields of these names (one phase: a mechanism's screen drives every
         element in phase)."""
         return cls(**{n: getattr(s, n) for n in cls.__dataclass_fields__ if n != "phases"})
+
+    def searching(self: "_Settings") -> "_Settings":
+        """The settings of the baseline screen and the local runs: these, with `dt` = `search_dt`
+        where one is given."""
+        return self if self.search_dt is None else dataclasses.replace(self, dt=self.search_dt, search_dt=None)
 
 
 class ChainOptimiseSettings(MechanismOptimiseSettings):
@@ -265,9 +283,9 @@ class ChainOptimum(ElementOptimum):
     [`SpringFourier`][] or one [`Spline`][] per spring; `chain`: the input chain driven by them;
     the direct simulation runs from the relaxed springs), and:
 
-    - `lbar` (per spring); `min_normal` (the smallest normal force on the orbit, at the step ends;
-      NaN where the travelling wave wins a spline search: the refinement's orbit oracle solves
-      splines only);
+    - `lbar` (per spring); `min_normal` (the smallest normal force on the orbit, at the step ends,
+      from the refinement's orbit oracle, so at the search step `search_dt` where one is given;
+      NaN where the travelling wave wins a spline search: that oracle solves splines only);
     - `travelling_wave`: the best travelling wave $a\\sin(\\omega t - j\\varphi)$ of the screen and
       its zoom that meets the requirement (`a`, `omega`, `phi`, `mean_speed`,
       `cost_of_transport`), or `None`; `travelling_wave_cost_of_transport`;

@@ -131,6 +131,7 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
     if not isinstance(settings, MechanismOptimiseSettings):
         raise TypeError(f"settings for a Mechanism must be a MechanismOptimiseSettings, got {type(settings).__name__}.")
     spline = settings.shape == "spline"
+    search = settings.searching()  # the screen's and the local runs' step; the verification's is dt
     H = local.family_harmonics(settings, harmonics, 2)  # a spline search screens plain sinusoids
     elements = check_inputs(mech, v_min, a_max, direction, H, omega)
     t0 = time.perf_counter()
@@ -153,7 +154,7 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
     cos, sin = zero.copy(), zero.copy()
     cos[:, :, 0], sin[:, :, 0] = (A * np.sin(PHI))[:, None], (A * np.cos(PHI))[:, None]
     say(f"screening {A.size} sinusoids (compiling the steady-gait solver: first call only)...")
-    sc = _gaits(_fourier(base, cos, sin, W), settings)
+    sc = _gaits(_fourier(base, cos, sin, W), search)
     fast = np.asarray(sc["ok"], bool) & (along(sc["speed"], direction) >= v_min)
     order = np.lexsort((-along(sc["speed"], direction), np.where(fast, sc["cost"], np.inf),
                         ~fast))  # fmt: skip
@@ -166,7 +167,7 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
     rows = [int(i) for i in order if sc["ok"][i]][: settings.local] or [best]
     rows += rows[:1] * (settings.local - len(rows))
     starts = [local.Start(cos[i], sin[i], float(W[i]), sc["y"][i], int(sc["k"][i]), float(sc["cost"][i])) for i in rows]
-    xs, ev, log = local.refine(base, starts, a_max, v_min, direction, lo, hi, M if spline else 0, settings, say)
+    xs, ev, log = local.refine(base, starts, a_max, v_min, direction, lo, hi, M if spline else 0, search, say)
 
     # 3. Verification: the baseline and the refined actuations (on the exact bound).
     names = ["sinusoid"] + [f"local {lane}" for lane in range(len(xs))]
@@ -176,10 +177,14 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
         return _gaits(_fourier(base, cos, sin, om) if control is None else _spline(base, control, om), settings)
 
     row = {name: x[best : best + 1] for name, x in sc.items()}
+    if spline and search is not settings:  # the screen's row is at the search step
+        row = solve(cos[best : best + 1], sin[best : best + 1], W[best : best + 1])
     eps = float(jnp.finfo(base.dtype).eps)
     v = local.verify(xs, (cos[best], sin[best], float(W[best])), row, names, solve, a_max, v_min, direction, H,
                      M if spline else 0, eps)  # fmt: skip
     g, om_c, strokes, k, feasible, table = v.gaits, v.omega, v.strokes, v.k, v.feasible, v.table
+    if search is not settings:
+        sinusoid = local.verified_baseline(row_of(best), v)
     cos_k, sin_k, control_k = v.waves[k]
     chosen = _fourier(base, cos_k, sin_k, om_c[k]) if control_k is None else _spline(base, control_k, om_c[k])
     speed_s, cost_s, n = (local.simulate_check(chosen, float(g["radius"][k]), float(g["period"][k]), settings)
