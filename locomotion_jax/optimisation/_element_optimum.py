@@ -147,8 +147,8 @@ class ChainOptimiseSettings(MechanismOptimiseSettings):
     (module `optimisation._chain`): those of [`MechanismOptimiseSettings`][] (the actuated elements
     are the springs, `a_max` bounds each spring's stroke $\\max_t |s_j(t)|$; default 3 harmonics),
     with other defaults and the travelling-wave screen's own fields. Python numbers: changing
-    `local`, `chunk`, `dt`, `newton_iter`, `shape` or `knots` (or the harmonics) recompiles; the
-    others do not.
+    `local`, `chunk`, `dt`, `search_dt`, `newton_iter`, `shape` or `knots` (or the harmonics)
+    recompiles; the others do not.
 
     Where a chain reads a field otherwise:
 
