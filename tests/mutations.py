@@ -494,6 +494,18 @@ MUTATIONS = [
         ("tests/test_optimise.py::test_the_search_steps_at_search_dt_which_the_guard_checks",),
     ),
     Mutation(
+        "mechanism_optimise_unguarded",
+        "optimise (a mechanism): a step that resolves not even the screen's slowest sinusoid is not refused",
+        "locomotion_jax/optimisation/_mechanism.py",
+        (
+            (
+                "        if getattr(settings, name) is not None:\n            refuse_search(slowest,",
+                "        if False:\n            refuse_search(slowest,",
+            ),
+        ),
+        (GUARDS_TESTS + "::test_optimisers_refuse_a_step_that_does_not_resolve_the_mechanism",),
+    ),
+    Mutation(
         "chain_optimise_guards_its_own_waves",
         "optimise (a chain): the guard checks the chain's own actuation, not the fastest stroke the search reaches",
         "locomotion_jax/optimisation/_chain.py",

@@ -194,6 +194,16 @@ def test_optimisers_refuse_a_step_that_does_not_resolve_the_mechanism():
     # A chain: the fastest stroke the search may reach (a given omega, with its 3 harmonics).
     with pytest.raises(ValueError, match=r"'omega'.*K = 3.*omega=10000.*\(optimise: omega = 10000 with 3 harmonics"):
         lj.optimise(lj.Chain(masses=[1.0, 1.0, 1.0]), 0.01, 0.05, omega=1e4)
+    # A mechanism: a step that resolves not even the screen's slowest sinusoid (here the natural
+    # period 2 pi / w_max = 0.115 of a stiff capsule spring) is refused before the search, naming it.
+    links = [lj.Spring(0, 1, k=1000.0, rest=0.0), lj.Force(0, 1, lj.Sinusoid(a=0.6, omega=3.0, lbar=0.0))]
+    capsule = lj.Mechanism(masses=[1.0, 0.5], friction=[lj.Coulomb(0.5, 0.4), None], carried_by=[None, 0], links=links)
+    for settings, name in [(lj.MechanismOptimiseSettings(dt=0.1), "dt"),
+                           (lj.MechanismOptimiseSettings(search_dt=0.1), "search_dt")]:  # fmt: skip
+        with pytest.raises(
+            ValueError, match=rf"Invalid parameter 'k'.*natural period.*MechanismOptimiseSettings.{name}\.\)"
+        ):
+            lj.optimise(capsule, 0.005, 0.8, direction=-1, settings=settings)
 
 
 # -- continuation ----------------------------------------------------------------------------------
