@@ -499,8 +499,8 @@ MUTATIONS = [
         "locomotion_jax/optimisation/_mechanism.py",
         (
             (
-                "        if getattr(settings, name) is not None:\n            refuse_search(slowest,",
-                "        if False:\n            refuse_search(slowest,",
+                "    local.refuse_steps(slowest, settings,",
+                "    (lambda *a: None)(slowest, settings,",
             ),
         ),
         (GUARDS_TESTS + "::test_optimisers_refuse_a_step_that_does_not_resolve_the_mechanism",),
@@ -511,8 +511,8 @@ MUTATIONS = [
         "locomotion_jax/optimisation/_chain.py",
         (
             (
-                "refuse_search(fastest, None, getattr(settings, name)",
-                "refuse_search(base, None, getattr(settings, name)",
+                "local.refuse_steps(fastest, settings,",
+                "local.refuse_steps(base, settings,",
             ),
         ),
         (GUARDS_TESTS + "::test_optimisers_refuse_a_step_that_does_not_resolve_the_mechanism",),

@@ -43,7 +43,6 @@ from ..gaits._progress import reporter
 from ..model._actuator import RestLength
 from ..model._chain import Chain
 from ..model._springwaves import SpringFourier
-from ..run._resolution import refuse_search
 from . import _chain_screen as screen, _element_local as local
 from ._element_optimum import ChainOptimiseSettings, ChainOptimum
 
@@ -111,10 +110,7 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     else:
         fastest, family = base.with_waves(SpringFourier(np.zeros((S, H)), np.zeros((S, H)), hi)), f"{H} harmonics"
     what = "given" if omega is not None else "ChainOptimiseSettings.omega_max times the highest natural frequency"
-    for name in ("dt", "search_dt"):
-        if getattr(settings, name) is not None:
-            refuse_search(fastest, None, getattr(settings, name), f"(optimise: omega = {hi:.6g} with {family}, "
-                          f"{what}; the step is ChainOptimiseSettings.{name}.)")  # fmt: skip
+    local.refuse_steps(fastest, settings, f"optimise: omega = {hi:.6g} with {family}, {what}")
     search = settings.searching()  # the screen's and the local runs' step; the verification's is dt
 
     # 1. Travelling waves. Progress from the first second: compiling the screen alone takes minutes.

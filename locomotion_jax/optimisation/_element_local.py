@@ -27,6 +27,7 @@ import numpy as np
 from ..dynamics._exact_dynamics import Exact
 from ..gaits import _element_orbit as orbit
 from ..gaits._orbit import PATIENCE
+from ..run._resolution import refuse_search
 from ._descent import local_step
 from ._evaluator import Evaluator
 from ._figures import Figures, PENALTY
@@ -110,6 +111,16 @@ def spline_project(theta: np.ndarray, log_lo: float, log_hi: float) -> np.ndarra
 def spline_strokes(control: np.ndarray) -> np.ndarray:
     """Exact $\\max_\\phi |s_j - \\bar s_j|$ per element of the control values `(S, M)`."""
     return np.array([spline_stroke(row) for row in control])
+
+
+def refuse_steps(mechanism: Any, settings: Any, what: str) -> None:
+    """Refuse `settings.dt` and `settings.search_dt` (where given) where either does not resolve
+    `mechanism` (one configuration, the one the search must resolve), the error ending with `what`
+    and the field's name."""
+    for name in ("dt", "search_dt"):
+        step = getattr(settings, name)
+        if step is not None:
+            refuse_search(mechanism, None, step, f"({what}; the step is {type(settings).__name__}.{name}.)")
 
 
 def check_requirement(v_min: Any, direction: Any, harmonics: Any, omega: Any) -> None:

@@ -52,7 +52,6 @@ from ..dynamics._exact_dynamics import Exact
 from ..gaits._element_orbit import actuated, with_fourier, with_spline
 from ..gaits._progress import reporter
 from ..model._bodies import Mechanism
-from ..run._resolution import refuse_search
 from . import _element_local as local
 from ._element_optimum import ChainOptimiseSettings, MechanismOptimiseSettings, MechanismOptimum
 from ._optimum import along
@@ -148,10 +147,7 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
     # A step that does not resolve even the slowest sinusoid of the screen (the mechanism's own
     # time scales, the forcing at the lowest frequency) resolves no candidate: refused, named.
     slowest = _fourier(base, np.zeros((S, 1)), np.zeros((S, 1)), lo)
-    for name in ("dt", "search_dt"):
-        if getattr(settings, name) is not None:
-            refuse_search(slowest, None, getattr(settings, name), f"(optimise: the screen's slowest sinusoid, "
-                          f"omega = {lo:.6g}; the step is MechanismOptimiseSettings.{name}.)")  # fmt: skip
+    local.refuse_steps(slowest, settings, f"optimise: the screen's slowest sinusoid, omega = {lo:.6g}")
 
     # 1. Sinusoids a sin(omega t + phi) on every actuated element.
     amps = a_max * np.arange(1, settings.amplitudes + 1) / settings.amplitudes
