@@ -461,6 +461,25 @@ MUTATIONS = [
         ("tests/test_optimise.py::test_the_search_steps_at_search_dt_which_the_guard_checks",),
     ),
     Mutation(
+        "simulation_check_blind_to_recurrence",
+        "optimise (a chain or a mechanism): the direct simulation check reports every motion as the gait's",
+        "locomotion_jax/optimisation/_element_local.py",
+        (
+            (
+                "simulated_recurrence=recurrence(states, math.sqrt(settings.check_tol))",
+                "simulated_recurrence=1",
+            ),
+        ),
+        ("tests/test_optimise.py::test_the_direct_simulation_names_a_second_attractor",),
+    ),
+    Mutation(
+        "simulation_check_over_ten_periods",
+        "optimise (a chain or a mechanism): the direct simulation check averages over 10 gait periods",
+        "locomotion_jax/optimisation/_element_local.py",
+        (("AVERAGED = 12", "AVERAGED = 10"),),
+        ("tests/test_optimise.py::test_the_direct_simulation_names_a_second_attractor",),
+    ),
+    Mutation(
         "element_verify_at_search_dt",
         "optimise (a chain): the verification steps at the search's step, not at dt",
         "locomotion_jax/optimisation/_chain.py",

@@ -89,6 +89,15 @@ def register(app: typer.Typer) -> None:
             "linearised constraints, stopped where the cost stalls: fewer evaluations, an optimum a little "
             "costlier).",
         ),
+        dt: float | None = typer.Option(
+            None, "--dt", help="Exact: the engine's step of the verification and every figure reported (default 0.01)."
+        ),
+        search_dt: float | None = typer.Option(
+            None,
+            "--search-dt",
+            help="Exact: a coarser step for the search (screen, sweep and local runs; default: --dt), a faster first "
+            "look; the figures reported stay at --dt.",
+        ),
         starts: int = typer.Option(8, "--starts", help="Smoothed: starts optimised in parallel."),
         outer: int = typer.Option(3, "--outer", help="Smoothed: augmented-Lagrangian blocks per smoothing stage."),
         inner: int = typer.Option(30, "--inner", help="Smoothed: Adam steps per block."),
@@ -118,7 +127,7 @@ def register(app: typer.Typer) -> None:
         exact method (--harmonics default 3 for a chain, 2 for bodies and links, or --shape spline
         with --knots; the travelling-wave screen's --amplitudes, --frequencies, --phases,
         --zoom-levels, --zoom-points (a chain: --screen-speed), and --local, --max-iter, --local-method, --margin,
-        --transient, --omega, --direction apply; --out saves a chain's optimum)."""
+        --transient, --dt, --search-dt, --omega, --direction apply; --out saves a chain's optimum)."""
         import locomotion_jax as lj
 
         from ..optimisation import _optimise, _pareto
@@ -132,6 +141,7 @@ def register(app: typer.Typer) -> None:
                 raise ValueError("--a-max is required (without a mechanism file, whose amplitude it defaults to).")
             if built.kind != "mechanism" and a_max is None:
                 a_max = amplitude(built)
+            steps: dict[str, Any] = {name: v for name, v in (("dt", dt), ("search_dt", search_dt)) if v is not None}
             if built.kind != "paper":
                 if method != "exact":
                     raise ValueError(f"--method: {built.kind_name} is optimised by the exact method only.")
@@ -144,6 +154,7 @@ def register(app: typer.Typer) -> None:
                 screen |= {"local_method": local_method}
                 screen |= {name: v for name, v in (("shape", shape), ("knots", knots)) if given([name])}
                 screen |= {"transient": int(transient)} if transient is not None else {}
+                screen |= steps
                 chain_settings = lj.ChainOptimiseSettings(**screen)
                 return _optimise_bodies(built, v_min, a_max, direction, omega, harmonics, chain_settings, out, json_out)
             params = built.mechanism
@@ -152,9 +163,11 @@ def register(app: typer.Typer) -> None:
             if method == "exact":
                 settings = ExactSettings(
                     shape=shape, knots=knots, local=local, max_iter=max_iter, local_method=local_method,
-                    margin=margin, seed=seed, verbose=verbose,
+                    margin=margin, seed=seed, verbose=verbose, **steps,
                 )  # fmt: skip
             else:
+                if steps:
+                    raise ValueError("--dt and --search-dt: the exact method's steps (--method exact).")
                 settings = Settings(
                     starts=starts,
                     outer=outer,

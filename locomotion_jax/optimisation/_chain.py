@@ -163,9 +163,8 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
         chosen = screen.with_actuation(base, cos_k[None], sin_k[None], om[k : k + 1])[0]
     else:
         chosen = with_spline(base, jnp.asarray(control_k, base.dtype), jnp.asarray(om[k], base.dtype))
-    sim = (local.simulate_check(chosen, float(g.radius[k]), float(g.period[k]), settings, start="relaxed")
-           if g.ok[k] else (math.nan, math.nan, 0))  # fmt: skip
-    rel = max(abs(sim[0] / g.speed[k] - 1), abs(sim[1] / g.cost[k] - 1)) if g.ok[k] else math.nan
+    gait = (bool(g.ok[k]), float(g.speed[k]), float(g.cost[k]), float(g.radius[k]), float(g.period[k]))
+    sim = local.simulated(chosen, gait, settings, start="relaxed")
     say(f"verified ({time.perf_counter() - t0:.0f} s): {names[k]}, cost of transport {g.cost[k]:.6g}")
     wave_cost = baseline["cost_of_transport"] if baseline else math.nan
     return ChainOptimum(
@@ -179,8 +178,7 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
                                stable=bool(g.ok[k])),
         feasible_exact=bool(feasible[k]), travelling_wave=baseline, travelling_wave_cost_of_transport=wave_cost,
         improvement_vs_travelling_wave=1 - float(g.cost[k]) / wave_cost if (feasible[k] and baseline) else math.nan,
-        mean_speed_simulated=sim[0], cost_of_transport_simulated=sim[1], simulation_agreement=float(rel),
-        simulated_periods=int(sim[2]), source=names[k], candidates=table,
+        **sim, source=names[k], candidates=table,
         history=[{"starts": [screen.as_dict(sc, i) for i in rows], "local": log}], screened=len(sc.a),
         evaluations=ev.calls, runtime_s=time.perf_counter() - t0, shape="fourier" if control_k is None else "spline",
         control=control_k, chain=chosen,

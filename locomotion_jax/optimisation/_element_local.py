@@ -290,18 +290,52 @@ def verified_baseline(found: dict[str, Any], v: Verified) -> dict[str, Any] | No
     )
 
 
-def simulate_check(model: Any, rho: float, period: float, settings: Any, **start: Any) -> tuple[float, float, int]:
-    """Mean speed and cost of transport of a direct simulation (`start`: `simulate`'s), over 10 whole
-    gait periods after enough periods for the slowest Floquet mode (multiplier modulus `rho`) to
-    decay to `settings.check_tol` (within `settings.check_periods`); NaN if the run stopped."""
+AVERAGED = 12
+"""Gait periods the direct simulation check averages over: a multiple of every period from 1 to
+`RECUR` gait periods, so that a motion of any of them is averaged over whole periods of its own."""
+
+RECUR = 4
+"""The longest recurrence, in gait periods, that the direct simulation check looks for."""
+
+
+def recurrence(states: np.ndarray, tol: float) -> int:
+    """The smallest `p <= RECUR` such that the section states `states` (one row per gait period)
+    recur every `p` rows to `tol` relative to their largest value; 0 if none does."""
+    scale = 1.0 + float(np.abs(states).max())
+    for p in range(1, RECUR + 1):
+        if float(np.abs(states[p:] - states[:-p]).max()) <= tol * scale:
+            return p
+    return 0
+
+
+def simulated(model: Any, gait: tuple[bool, float, float, float, float], settings: Any, **start: Any) -> dict:
+    """The optimum's fields of a direct simulation (`start`: `simulate`'s) of `model`, whose steady
+    gait `gait` is `(stable, mean speed, cost of transport, largest multiplier modulus, period)`.
+
+    It runs for enough gait periods `n` for the slowest Floquet mode to decay to `settings.check_tol`
+    (within `settings.check_periods`), then `AVERAGED` more: the mean speed and cost of transport over
+    those, their larger relative difference from the gait's, and the recurrence of the states at
+    the gait-period sections to $\\sqrt{\\text{check\\_tol}}$ ([`recurrence`][]). A recurrence other
+    than 1 is a motion other than the gait: a second attractor, reached from this start. NaN and 0
+    where the gait is not stable or the run stopped."""
     from ..run._simulate import simulate
 
+    ok, speed, cost, rho, period = gait
     lo, hi = settings.check_periods
     n = hi if not (0 < rho < 1) else int(np.clip(math.ceil(math.log(settings.check_tol) / math.log(rho)), lo, hi))
-    t = np.array([n * period, (n + 10) * period])
+    out = dict(mean_speed_simulated=math.nan, cost_of_transport_simulated=math.nan, simulation_agreement=math.nan,
+               simulated_periods=n, simulated_recurrence=0)  # fmt: skip
+    if not ok:
+        return out | dict(simulated_periods=0)
+    t = (n + np.arange(AVERAGED + 1)) * period
     traj = simulate(model, float(t[-1]), t, dynamics=Exact(dt=settings.dt), contact="strict", **start)
     if not np.all(np.asarray(traj.valid)):
-        return math.nan, math.nan, n
+        return out
     X, ed = np.asarray(traj.X, np.float64), np.asarray(traj.e_d, np.float64)
-    dX = X[1] - X[0]
-    return float(dX / (t[1] - t[0])), float((ed[1] - ed[0]) / abs(dX)), n
+    x, v = np.asarray(traj.x, np.float64), np.asarray(traj.v, np.float64)
+    dX = X[-1] - X[0]
+    speed_s, cost_s = float(dX / (t[-1] - t[0])), float((ed[-1] - ed[0]) / abs(dX))
+    states = np.concatenate([x[:, 1:] - x[:, :1], v], axis=1)  # gaps and velocities: invariant under travel
+    return out | dict(mean_speed_simulated=speed_s, cost_of_transport_simulated=cost_s,
+                      simulation_agreement=max(abs(speed_s / speed - 1), abs(cost_s / cost - 1)),
+                      simulated_recurrence=recurrence(states, math.sqrt(settings.check_tol)))  # fmt: skip

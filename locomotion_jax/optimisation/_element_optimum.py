@@ -216,8 +216,13 @@ class ElementOptimum(AbstractOptimum):
       An infeasible requirement gives `feasible_exact = False` and the closest candidate (the
       fastest stable gait), never an optimum.
     - `mean_speed_simulated`, `cost_of_transport_simulated`: a direct [`simulate`][] run averaged
-      over 10 gait periods after `simulated_periods` gait periods; `simulation_agreement`: the
-      larger relative difference of the two from the steady gait's.
+      over 12 gait periods after `simulated_periods` gait periods; `simulation_agreement`: the
+      larger relative difference of the two from the steady gait's; `simulated_recurrence`: the
+      smallest $p \\le 4$ such that the simulated state (gaps and velocities) at the gait's
+      sections recurs every $p$ gait periods (to $\\sqrt{\\text{check\\_tol}}$ relative), 0 if none
+      does. Where it is not 1, the run settled on another motion than the optimum's gait (a second
+      attractor: the gait is stable, but this start does not lead to it), and the simulated
+      figures are that motion's, averaged over whole periods of it.
     - `source`, the winning candidate; `candidates`, every verified candidate's figures;
       `history`, the local starts (the baseline screen's rows) and the local runs' log;
       `screened`, the baseline signals solved; `evaluations`, batched orbit evaluations;
@@ -248,6 +253,7 @@ class ElementOptimum(AbstractOptimum):
     cost_of_transport_simulated: float
     simulation_agreement: float
     simulated_periods: int
+    simulated_recurrence: int
     source: str
     candidates: list
     history: list
@@ -270,9 +276,13 @@ class ElementOptimum(AbstractOptimum):
 
     def simulation_line(self) -> str:
         """The summary's line of the direct simulation."""
-        return (f"direct simulation ({self.simulated_periods} gait periods, then 10 averaged): mean speed "
+        p, ran = self.simulated_recurrence, math.isfinite(self.simulation_agreement)
+        motion = ("" if p == 1 or not ran else f"; it settled on another motion, recurring every {p} gait periods "
+                  "(a second attractor: this start does not lead to the optimum's gait)" if p
+                  else "; its state did not recur within 4 gait periods")  # fmt: skip
+        return (f"direct simulation ({self.simulated_periods} gait periods, then 12 averaged): mean speed "
                 f"{fmt(self.mean_speed_simulated)}, cost of transport {fmt(self.cost_of_transport_simulated)} "
-                f"(relative difference {fmt(self.simulation_agreement)})")  # fmt: skip
+                f"(relative difference {fmt(self.simulation_agreement)}){motion}")  # fmt: skip
 
 
 @dataclasses.dataclass(frozen=True)

@@ -191,9 +191,8 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
         sinusoid = local.verified_baseline(row_of(best), v)
     cos_k, sin_k, control_k = v.waves[k]
     chosen = _fourier(base, cos_k, sin_k, om_c[k]) if control_k is None else _spline(base, control_k, om_c[k])
-    speed_s, cost_s, n = (local.simulate_check(chosen, float(g["radius"][k]), float(g["period"][k]), settings)
-                          if g["ok"][k] else (math.nan, math.nan, 0))  # fmt: skip
-    rel = max(abs(speed_s / g["speed"][k] - 1), abs(cost_s / g["cost"][k] - 1)) if g["ok"][k] else math.nan
+    gait = (bool(g["ok"][k]), float(g["speed"][k]), float(g["cost"][k]), float(g["radius"][k]), float(g["period"][k]))
+    sim = local.simulated(chosen, gait, settings)
     cost_sin = sinusoid["cost_of_transport"] if sinusoid else math.nan
     say(f"verified ({time.perf_counter() - t0:.0f} s): {names[k]}, cost of transport {g['cost'][k]:.6g}")
     return MechanismOptimum(
@@ -208,8 +207,7 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
                                no_liftoff=bool(~g["liftoff"][k]), stable=bool(g["ok"][k])),
         feasible_exact=bool(feasible[k]), sinusoid=sinusoid,
         improvement_vs_sinusoid=1 - float(g["cost"][k]) / cost_sin if (feasible[k] and sinusoid) else math.nan,
-        mean_speed_simulated=float(speed_s), cost_of_transport_simulated=float(cost_s), simulation_agreement=float(rel),
-        simulated_periods=int(n), source=names[k], candidates=table,
+        **sim, source=names[k], candidates=table,
         history=[{"starts": [row_of(i) for i in rows], "local": log}], screened=int(A.size), evaluations=ev.calls,
         runtime_s=time.perf_counter() - t0, mechanism=chosen,
     )  # fmt: skip
