@@ -473,6 +473,13 @@ MUTATIONS = [
         ("tests/test_optimise.py::test_the_direct_simulation_names_a_second_attractor",),
     ),
     Mutation(
+        "simulation_check_refused_by_the_guard",
+        "optimise: the direct simulation check steps at dt even where the guard refuses it (a fine spline)",
+        "locomotion_jax/optimisation/_element_local.py",
+        (('dt = resolved_step(model, run.get("waveform"), settings.dt)', "dt = settings.dt"),),
+        ("tests/test_resolution_guards.py::test_the_optimums_direct_simulation_steps_where_the_guard_asks",),
+    ),
+    Mutation(
         "simulation_check_over_ten_periods",
         "optimise (a chain or a mechanism): the direct simulation check averages over 10 gait periods",
         "locomotion_jax/optimisation/_element_local.py",

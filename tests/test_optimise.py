@@ -553,6 +553,10 @@ def test_exact_optimum_verified_on_the_reference(exact_run):
     assert not lifted and speed >= 0.02
     assert opt.mean_speed_exact == pytest.approx(speed, rel=5e-4)
     assert opt.cost_of_transport_exact == pytest.approx(cost, rel=5e-4)
+    # Its direct simulation from the relaxed spring settles on its gait, as the reference's does.
+    assert opt.simulated_recurrence == 1 and opt.simulation_agreement < 1e-6
+    assert opt.mean_speed_simulated == pytest.approx(speed, rel=5e-4)
+    assert "direct simulation" in opt.summary() and opt.to_dict()["simulated_recurrence"] == 1
     t = np.linspace(0, 2 * np.pi / opt.omega, 200_001)
     dense = np.max(np.abs(np.asarray(opt.waveform(jnp.asarray(t))[0]) - 3.0))
     assert dense <= 0.05 * (1 + 1e-9) and opt.stroke_exact == pytest.approx(dense, rel=1e-8)
@@ -1385,8 +1389,13 @@ def test_mechanism_optimise_settings():
         lj.MechanismOptimiseSettings(phases=0)
     with pytest.raises(ValueError, match="need 0 < omega_min < omega_max"):
         lj.MechanismOptimiseSettings(omega_min=2.0, omega_max=1.0)
-    with pytest.raises(ValueError, match="dt, trust_radius, newton_tol and check_tol must be > 0"):
+    with pytest.raises(ValueError, match="dt, trust_radius and newton_tol must be > 0"):
         lj.MechanismOptimiseSettings(dt=0.0)
+    for cls in (lj.MechanismOptimiseSettings, lj.ExactOptimiseSettings):
+        with pytest.raises(ValueError, match=rf"{cls.__name__}\.check_tol must be in \(0, 1\)"):
+            cls(check_tol=0.0)
+        with pytest.raises(ValueError, match="check_periods must be \\(lo, hi\\), 1 <= lo <= hi, got \\(5, 2\\)"):
+            cls(check_periods=(5, 2))
     chain = lj.ChainOptimiseSettings(local=3, max_iter=7, omega_max=1.5, local_method="sqp", stall_rtol=1e-5)
     s = MechanismOptimiseSettings.from_chain(chain)
     assert (s.local, s.max_iter, s.omega_max, s.phases, s.local_method, s.stall_rtol) == (3, 7, 1.5, 1, "sqp", 1e-5)

@@ -206,6 +206,52 @@ def test_optimisers_refuse_a_step_that_does_not_resolve_the_mechanism():
             lj.optimise(capsule, 0.005, 0.8, direction=-1, settings=settings)
 
 
+def test_resolved_step_is_the_step_the_guard_suggests():
+    """`resolved_step`: `dt` where it resolves the configuration, else the step the guard's message
+    suggests, which the guard then accepts (the paper's model with a 64-knot spline at the default
+    optimum's frequency: knots 0.0173 apart need dt <= 0.00433; a stiff chain's natural period 0.0363)."""
+    from locomotion_jax.optimisation._pareto import with_waveform_frequency
+    from locomotion_jax.run._resolution import refuse_search, resolved_step
+
+    M = 64
+    wave = lj.Spline(0.02 * np.sin(2 * np.pi * np.arange(M) / M), 5.66327, 3.0)
+    paper = with_waveform_frequency(lj.Params(), wave)
+    stiff = lj.Chain(masses=[1.0, 1.0, 1.0], k=1e4)
+    for mech, w, step in [(paper, wave, 0.0043), (stiff, None, 0.009)]:
+        with pytest.raises(ValueError, match=rf"Give Exact\(dt={step}\)"):
+            refuse_search(mech, w, 0.01, "")
+        assert resolved_step(mech, w, 0.01) == step
+        refuse_search(mech, w, step, "")  # accepted
+        assert resolved_step(mech, w, 0.001) == 0.001
+
+
+class _Stop(Exception):
+    pass
+
+
+def test_the_optimums_direct_simulation_steps_where_the_guard_asks(monkeypatch):
+    """The exact optimisers' direct simulation (`_element_local.simulated`) steps at `dt`, or at
+    the guard's step where `dt` does not resolve the optimum (a spline's knots, which the
+    verification checks by a convergence study instead): it is never refused."""
+    from locomotion_jax.optimisation import _element_local, _pareto
+    from locomotion_jax.run import _simulate
+
+    steps = []
+
+    def record(model, t_end, save_at, dynamics, **kw):
+        steps.append(dynamics.dt)
+        raise _Stop
+
+    monkeypatch.setattr(_simulate, "simulate", record)
+    for M in (64, 8):
+        wave = lj.Spline(0.02 * np.sin(2 * np.pi * np.arange(M) / M), 5.66327, 3.0)
+        model = _pareto.with_waveform_frequency(lj.Params(), wave)
+        with pytest.raises(_Stop):
+            gait = (True, 0.05, 0.9, 0.5, 1.1)  # stable, speed, cost, largest multiplier, period
+            _element_local.simulated(model, gait, ExactSettings(), start="relaxed", waveform=wave)
+    assert steps == [0.0043, 0.01]
+
+
 # -- continuation ----------------------------------------------------------------------------------
 
 

@@ -27,7 +27,7 @@ import numpy as np
 from ..dynamics._exact_dynamics import Exact
 from ..gaits import _element_orbit as orbit
 from ..gaits._orbit import PATIENCE
-from ..run._resolution import refuse_search
+from ..run._resolution import refuse_search, resolved_step
 from ._descent import local_step
 from ._evaluator import Evaluator
 from ._figures import Figures, PENALTY
@@ -308,9 +308,15 @@ def recurrence(states: np.ndarray, tol: float) -> int:
     return 0
 
 
-def simulated(model: Any, gait: tuple[bool, float, float, float, float], settings: Any, **start: Any) -> dict:
-    """The optimum's fields of a direct simulation (`start`: `simulate`'s) of `model`, whose steady
-    gait `gait` is `(stable, mean speed, cost of transport, largest multiplier modulus, period)`.
+def simulated(model: Any, gait: tuple[bool, float, float, float, float], settings: Any, **run: Any) -> dict:
+    """The optimum's fields of a direct simulation of `model` (`run`: `simulate`'s `start`,
+    `initial` or `waveform`), whose steady gait `gait` is `(stable, mean speed, cost of transport,
+    largest multiplier modulus, period)`.
+
+    It steps at `settings.dt`, or finer where the resolution guard asks for it (`resolved_step`:
+    the verification of a spline with knots closer than 4 steps checks its resolution by a
+    convergence study instead, and is not guarded), so that its agreement then includes that change
+    of step.
 
     It runs for enough gait periods `n` for the slowest Floquet mode to decay to `settings.check_tol`
     (within `settings.check_periods`), then `AVERAGED` more: the mean speed and cost of transport over
@@ -328,7 +334,8 @@ def simulated(model: Any, gait: tuple[bool, float, float, float, float], setting
     if not ok:
         return out | dict(simulated_periods=0)
     t = (n + np.arange(AVERAGED + 1)) * period
-    traj = simulate(model, float(t[-1]), t, dynamics=Exact(dt=settings.dt), contact="strict", **start)
+    dt = resolved_step(model, run.get("waveform"), settings.dt)
+    traj = simulate(model, float(t[-1]), t, dynamics=Exact(dt=dt), contact="strict", **run)
     if not np.all(np.asarray(traj.valid)):
         return out
     X, ed = np.asarray(traj.X, np.float64), np.asarray(traj.e_d, np.float64)

@@ -18,7 +18,7 @@ from ..model._chain import Chain
 from ..model._springwaves import SpringFourier
 from ..model._waveform import Spline
 from ._descent import METHODS
-from ._optimum import AbstractOptimum, constraints_line, fmt
+from ._optimum import AbstractOptimum, check_simulation, constraints_line, fmt
 
 
 def _count(s: Any, field: str, least: int) -> None:
@@ -75,7 +75,9 @@ class MechanismOptimiseSettings(eqx.Module):
       solved; `newton_tol`, `newton_iter`: the periodic-orbit solve.
     - `check_tol`, `check_periods`: the direct simulation of the optimum runs until the largest
       Floquet multiplier's modulus to the power of the periods run falls below `check_tol` (at
-      least `check_periods[0]`, at most `check_periods[1]` gait periods), then averages over 10.
+      least `check_periods[0]`, at most `check_periods[1]` gait periods), then averages over 12
+      ([`ElementOptimum`][locomotion_jax.optimisation._element_optimum.ElementOptimum]'s
+      `simulated_recurrence`).
     - `verbose`: progress on stderr.
 
     A [`ChainOptimiseSettings`][] is accepted in its place: its fields of these names are used,
@@ -119,16 +121,14 @@ class MechanismOptimiseSettings(eqx.Module):
         _count(self, "knots", 4)
         if not (0 < self.omega_min < self.omega_max):
             raise ValueError(f"{name}: need 0 < omega_min < omega_max, got {self.omega_min!r}, {self.omega_max!r}.")
-        if not (self.dt > 0 and self.trust_radius > 0 and self.newton_tol > 0 and self.check_tol > 0):
-            raise ValueError(f"{name}: dt, trust_radius, newton_tol and check_tol must be > 0.")
+        if not (self.dt > 0 and self.trust_radius > 0 and self.newton_tol > 0):
+            raise ValueError(f"{name}: dt, trust_radius and newton_tol must be > 0.")
+        check_simulation(name, self.check_tol, self.check_periods)
         step = self.search_dt
         if step is not None and not (isinstance(step, (int, float, np.number)) and math.isfinite(step) and step > 0):
             raise ValueError(f"{name}.search_dt must be None or a finite step > 0, got {step!r}.")
         if not (self.margin >= 0 and self.speed_slack >= 0):
             raise ValueError(f"{name}: margin and speed_slack must be >= 0, got {self.margin!r}, {self.speed_slack!r}.")
-        lo, hi = self.check_periods
-        if not (1 <= lo <= hi):
-            raise ValueError(f"{name}.check_periods must be (lo, hi), 1 <= lo <= hi, got {lo, hi}.")
 
     @classmethod
     def from_chain(cls, s: "ChainOptimiseSettings") -> "MechanismOptimiseSettings":
@@ -215,14 +215,9 @@ class ElementOptimum(AbstractOptimum):
     - `constraints_exact` (`speed`, `stroke`, `no_liftoff`, `stable`), `feasible_exact`: all hold.
       An infeasible requirement gives `feasible_exact = False` and the closest candidate (the
       fastest stable gait), never an optimum.
-    - `mean_speed_simulated`, `cost_of_transport_simulated`: a direct [`simulate`][] run averaged
-      over 12 gait periods after `simulated_periods` gait periods; `simulation_agreement`: the
-      larger relative difference of the two from the steady gait's; `simulated_recurrence`: the
-      smallest $p \\le 4$ such that the simulated state (gaps and velocities) at the gait's
-      sections recurs every $p$ gait periods (to $\\sqrt{\\text{check\\_tol}}$ relative), 0 if none
-      does. Where it is not 1, the run settled on another motion than the optimum's gait (a second
-      attractor: the gait is stable, but this start does not lead to it), and the simulated
-      figures are that motion's, averaged over whole periods of it.
+    - The direct simulation's `mean_speed_simulated`, `cost_of_transport_simulated`,
+      `simulation_agreement`, `simulated_periods` and `simulated_recurrence`, as
+      [`AbstractOptimum`][locomotion_jax.optimisation._optimum.AbstractOptimum]'s.
     - `source`, the winning candidate; `candidates`, every verified candidate's figures;
       `history`, the local starts (the baseline screen's rows) and the local runs' log;
       `screened`, the baseline signals solved; `evaluations`, batched orbit evaluations;
@@ -273,16 +268,6 @@ class ElementOptimum(AbstractOptimum):
         return (f"steady gait (exact, whole periods): mean speed {fmt(self.mean_speed_exact)}, cost of transport "
                 f"{fmt(self.cost_of_transport_exact)}, period {fmt(self.gait_period_exact)}, stable "
                 f"{self.stable_exact} (largest multiplier modulus {fmt(self.spectral_radius_exact)})")  # fmt: skip
-
-    def simulation_line(self) -> str:
-        """The summary's line of the direct simulation."""
-        p, ran = self.simulated_recurrence, math.isfinite(self.simulation_agreement)
-        motion = ("" if p == 1 or not ran else f"; it settled on another motion, recurring every {p} gait periods "
-                  "(a second attractor: this start does not lead to the optimum's gait)" if p
-                  else "; its state did not recur within 4 gait periods")  # fmt: skip
-        return (f"direct simulation ({self.simulated_periods} gait periods, then 12 averaged): mean speed "
-                f"{fmt(self.mean_speed_simulated)}, cost of transport {fmt(self.cost_of_transport_simulated)} "
-                f"(relative difference {fmt(self.simulation_agreement)}){motion}")  # fmt: skip
 
 
 @dataclasses.dataclass(frozen=True)

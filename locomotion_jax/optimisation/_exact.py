@@ -48,6 +48,7 @@ Method:
   more it overlaps the baseline's and the local runs' work.
 """
 
+import dataclasses
 import math
 import threading
 import time
@@ -63,7 +64,7 @@ from ..gaits._gait import GaitStatus, paper_gait
 from ..gaits._progress import reporter
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform
-from . import _pareto as pareto
+from . import _element_local as local, _pareto as pareto
 from ._descent import local_step, METHODS
 from ._evaluator import Evaluator
 from ._figures import Figures, PENALTY
@@ -518,6 +519,7 @@ def _verify(params, speed, direction, a_max, shape, free, settings, candidates, 
         for i in range(n)
     ]
     rho = np.abs(np.asarray(gait.multipliers[k]))
+    radius = float(np.max(rho)) if np.all(np.isfinite(rho)) else math.nan
     opt = Optimum(
         v_min=speed,
         direction=direction,
@@ -539,11 +541,15 @@ def _verify(params, speed, direction, a_max, shape, free, settings, candidates, 
         runtime_s=time.perf_counter() - t0,
         method="exact",
         stable_exact=bool(fig.ok[k]),
-        spectral_radius_exact=float(np.max(rho)) if np.all(np.isfinite(rho)) else math.nan,
+        spectral_radius_exact=radius,
         gait_period_exact=float(gait.period[k]),
         evaluations=ev.calls,
     )
-    return opt, log
+    steady = (bool(fig.ok[k]), float(fig.speed[k]), float(fig.cost[k]), radius, float(gait.period[k]))
+    wave = opt.waveform
+    model = pareto.with_waveform_frequency(params, wave)
+    sim = local.simulated(model, steady, settings, start="relaxed", waveform=wave)
+    return dataclasses.replace(opt, **sim, runtime_s=time.perf_counter() - t0), log
 
 
 def _best_sections(gait: Any, n: int, m: int) -> np.ndarray:

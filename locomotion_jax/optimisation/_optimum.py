@@ -125,6 +125,10 @@ class ExactSettings(eqx.Module):
       `transient`: actuation periods run from the relaxed spring before an orbit is first solved
       (also the verification's, [`steady_gait`][]); `newton_tol`, `newton_iter`: the
       periodic-orbit solve.
+    - `check_tol`, `check_periods`: the direct simulation of the optimum (from the relaxed spring)
+      runs until the largest Floquet multiplier's modulus to the power of the periods run falls
+      below `check_tol` (at least `check_periods[0]`, at most `check_periods[1]` gait periods),
+      then averages over 12 ([`Optimum`][]'s `simulated_recurrence`).
     - `refine_baseline`: refine the best sinusoids of the sweep (`_pareto.refine_sinusoid`).
     - `seed`: for the random shapes; `verbose`: progress on stderr.
     """
@@ -150,6 +154,8 @@ class ExactSettings(eqx.Module):
     transient: int = 30
     newton_tol: float = 1e-10
     newton_iter: int = 12
+    check_tol: float = 1e-12
+    check_periods: tuple[int, int] = (40, 1500)
     refine_baseline: bool = True
     seed: int = 0
     verbose: bool = False
@@ -177,11 +183,22 @@ class ExactSettings(eqx.Module):
             raise ValueError(
                 f"ExactSettings: need 0 < omega_min < omega_max, got {self.omega_min!r}, {self.omega_max!r}."
             )
+        check_simulation("ExactSettings", self.check_tol, self.check_periods)
         for name in ("dt", "search_dt"):
             value = getattr(self, name)
             step = isinstance(value, (int, float, np.number)) and math.isfinite(value) and value > 0
             if value is not None and not step:
                 raise ValueError(f"ExactSettings.{name} must be a finite step > 0, got {value!r}.")
+
+
+def check_simulation(name: str, tol: Any, periods: Any) -> None:
+    """The checks of the settings `name`'s `check_tol` and `check_periods` (the optimum's direct
+    simulation): a tolerance in (0, 1), and `(lo, hi)` with `1 <= lo <= hi`."""
+    if not (isinstance(tol, (int, float, np.number)) and 0 < tol < 1):
+        raise ValueError(f"{name}.check_tol must be in (0, 1), got {tol!r}.")
+    lo, hi = periods
+    if not (1 <= lo <= hi):
+        raise ValueError(f"{name}.check_periods must be (lo, hi), 1 <= lo <= hi, got {lo, hi}.")
 
 
 def fmt(v: Any) -> str:
@@ -195,7 +212,19 @@ class AbstractOptimum(abc.ABC):
     [`MechanismOptimum`][] of a mechanism; frozen dataclasses): the requirement (`v_min`, `direction`,
     `a_max`), the base frequency `omega`, the optimum's steady gait on the exact model
     (`mean_speed_exact`, `cost_of_transport_exact`, `feasible_exact`), the candidates verified
-    (`candidates`) and `runtime_s`; `to_dict`, `to_json` and a human-readable `summary`."""
+    (`candidates`) and `runtime_s`; `to_dict`, `to_json` and a human-readable `summary`.
+
+    The exact optimisers check their optimum by a direct [`simulate`][] run as well:
+    `mean_speed_simulated`, `cost_of_transport_simulated`, averaged over 12 gait periods after
+    `simulated_periods` gait periods (enough for the slowest Floquet mode to decay to the settings'
+    `check_tol`); `simulation_agreement`, the larger relative difference of the two from the steady
+    gait's; `simulated_recurrence`, the smallest $p \\le 4$ such that the simulated state (gaps and
+    velocities) at the gait's sections recurs every $p$ gait periods (to
+    $\\sqrt{\\text{check\\_tol}}$ relative), 0 if none does. Where it is not 1, the run settled on
+    another motion than the optimum's gait (a second attractor: the gait is stable, but this start
+    does not lead to it), and the simulated figures are that motion's, averaged over whole periods
+    of it. NaN and 0 where nothing was simulated (an unstable gait; the smoothed method).
+    """
 
     v_min: float
     direction: int
@@ -206,6 +235,11 @@ class AbstractOptimum(abc.ABC):
     feasible_exact: bool
     candidates: list
     runtime_s: float
+    mean_speed_simulated: float
+    cost_of_transport_simulated: float
+    simulation_agreement: float
+    simulated_periods: int
+    simulated_recurrence: int
 
     objects: ClassVar[tuple[str, ...]] = ()
     """Fields that hold objects, not figures (the mechanism driven): left out of `to_dict`."""
@@ -227,6 +261,16 @@ class AbstractOptimum(abc.ABC):
     @abc.abstractmethod
     def summary(self) -> str:
         """Human-readable report."""
+
+    def simulation_line(self) -> str:
+        """The summary's line of the direct simulation."""
+        p, ran = self.simulated_recurrence, math.isfinite(self.simulation_agreement)
+        motion = ("" if p == 1 or not ran else f"; it settled on another motion, recurring every {p} gait periods "
+                  "(a second attractor: this start does not lead to the optimum's gait)" if p
+                  else "; its state did not recur within 4 gait periods")  # fmt: skip
+        return (f"direct simulation ({self.simulated_periods} gait periods, then 12 averaged): mean speed "
+                f"{fmt(self.mean_speed_simulated)}, cost of transport {fmt(self.cost_of_transport_simulated)} "
+                f"(relative difference {fmt(self.simulation_agreement)}){motion}")  # fmt: skip
 
 
 def constraints_line(constraints: dict, feasible: bool) -> str:
@@ -262,7 +306,8 @@ class Optimum(AbstractOptimum):
       inside the unit circle, and which is the same with half the engine's step: its speed
       and cost of transport within 1e-3),
       `spectral_radius_exact` (their largest modulus), `gait_period_exact`,
-      `evaluations` (batched orbit evaluations). With the exact method the
+      `evaluations` (batched orbit evaluations), and the direct simulation's figures
+      ([`AbstractOptimum`][]: from the relaxed spring). With the exact method the
       `*_smoothed` figures and `eps` are NaN, and the `*_exact` figures are those of the
       steady gait ([`steady_gait`][]: whole periods).
     """
@@ -302,6 +347,11 @@ class Optimum(AbstractOptimum):
     evaluations: int = 0
     shape: str = "fourier"
     control: np.ndarray | None = None
+    mean_speed_simulated: float = math.nan
+    cost_of_transport_simulated: float = math.nan
+    simulation_agreement: float = math.nan
+    simulated_periods: int = 0
+    simulated_recurrence: int = 0
 
     @property
     def waveform(self) -> AbstractWaveform:
@@ -336,6 +386,7 @@ class Optimum(AbstractOptimum):
                 f"{fmt(self.cost_of_transport_exact)}, period {fmt(self.gait_period_exact)}, stable "
                 f"{self.stable_exact} (largest multiplier modulus {fmt(self.spectral_radius_exact)})",
                 f"stroke {fmt(self.stroke_exact)} (limit {self.a_max:g}); lift-off: {self.liftoff_exact}",
+                self.simulation_line(),
             ]
         else:
             lines += [

@@ -184,6 +184,15 @@ def refuse_search(mechanism: AbstractMechanism, waveform: Any, dt: float, what: 
         raise ValueError(f"{err} {what}") from None
 
 
+def resolved_step(mechanism: AbstractMechanism, waveform: Any, dt: float) -> float:
+    """`dt`, or the step the resolution guard's message would suggest where `dt` does not resolve
+    one configuration (`mechanism` of batch shape `()`; `waveform` for the paper's model, else
+    `None`): the longest step of two significant digits that serves every scale."""
+    one = jax.tree_util.tree_map(lambda x: jnp.reshape(x, (1,) + jnp.shape(x)), mechanism)
+    limits = [float(np.asarray(s.limit())[0]) for s in one.time_scales(waveform) if s.unit != "span"]
+    return min([dt] + [_round_down(limit) for limit in limits if limit < dt])
+
+
 def flag(out: dict, mask) -> dict:
     """`out` with the status of the masked configurations `Status.UNRESOLVED` (`mask` `None`: unchanged)."""
     if mask is None:
