@@ -559,9 +559,9 @@ MUTATIONS = [
     ),
     Mutation(
         "search_settings_skip_transient",
-        "the optimisers' settings check: transient no longer checked (a chain's or a mechanism's)",
-        "locomotion_jax/optimisation/_element_optimum.py",
-        (('"max_iter", "transient", "newton_iter"', '"max_iter", "newton_iter"'),),
+        "the exact optimisers' settings check: transient no longer checked",
+        "locomotion_jax/optimisation/_search_settings.py",
+        (('        count(self, "transient", self.least_transient)\n', ""),),
         ("tests/test_optimise.py::test_bad_settings_raise",),
     ),
     Mutation(

@@ -592,7 +592,7 @@ def test_the_search_steps_at_search_dt_which_the_guard_checks():
     _optimise._guard_search(stiff, None, EXACT_SHAPE, ExactSettings(dt=0.008, margin=0.001))
     with pytest.raises(ValueError, match=r"natural period.*\(optimise: .*ExactSettings.search_dt"):
         _optimise._guard_search(stiff, None, EXACT_SHAPE, ExactSettings(dt=0.008, search_dt=0.016, margin=0.001))
-    with pytest.raises(ValueError, match=r"ExactSettings.search_dt must be a finite step > 0, got 0.0"):
+    with pytest.raises(ValueError, match=r"ExactSettings.search_dt must be None or a finite step > 0, got 0.0"):
         ExactSettings(search_dt=0.0)
 
 
@@ -1389,9 +1389,22 @@ def test_mechanism_optimise_settings():
         lj.MechanismOptimiseSettings(phases=0)
     with pytest.raises(ValueError, match="need 0 < omega_min < omega_max"):
         lj.MechanismOptimiseSettings(omega_min=2.0, omega_max=1.0)
-    with pytest.raises(ValueError, match="dt, trust_radius and newton_tol must be > 0"):
-        lj.MechanismOptimiseSettings(dt=0.0)
+    # The shared fields are checked alike in every exact optimiser's settings, naming the class.
     for cls in (lj.MechanismOptimiseSettings, lj.ExactOptimiseSettings):
+        with pytest.raises(ValueError, match=rf"{cls.__name__}\.dt must be a finite step > 0, got 0.0"):
+            cls(dt=0.0)
+        with pytest.raises(ValueError, match="trust_radius and newton_tol must be > 0, got 0.0, 1e-10"):
+            cls(trust_radius=0.0)
+        with pytest.raises(ValueError, match="margin and speed_slack must be >= 0, got -1.0"):
+            cls(margin=-1.0)
+        with pytest.raises(ValueError, match=rf"{cls.__name__}\.newton_iter must be an int >= 1, got 0"):
+            cls(newton_iter=0)
+    # The paper's model may solve its orbits from the relaxed spring itself, a mechanism may not.
+    assert lj.ExactOptimiseSettings(transient=0).transient == 0
+    with pytest.raises(ValueError, match="ExactSettings.transient must be an int >= 0, got -1"):
+        lj.ExactOptimiseSettings(transient=-1)
+    with pytest.raises(ValueError, match="MechanismOptimiseSettings.transient must be an int >= 1, got 0"):
+        lj.MechanismOptimiseSettings(transient=0)
         with pytest.raises(ValueError, match=rf"{cls.__name__}\.check_tol must be in \(0, 1\)"):
             cls(check_tol=0.0)
         with pytest.raises(ValueError, match="check_periods must be \\(lo, hi\\), 1 <= lo <= hi, got \\(5, 2\\)"):

@@ -7,78 +7,40 @@ results share the figures of the optimum's steady gait and of its direct simulat
 """
 
 import dataclasses
-import math
-from typing import Any, ClassVar, TypeVar
+from typing import Any, ClassVar
 
-import equinox as eqx
 import numpy as np
 
 from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._springwaves import SpringFourier
 from ..model._waveform import Spline
-from ._descent import METHODS
-from ._optimum import AbstractOptimum, check_simulation, constraints_line, fmt
+from ._optimum import AbstractOptimum, constraints_line, fmt
+from ._search_settings import count, SearchSettings
 
 
-def _count(s: Any, field: str, least: int) -> None:
-    """Refuse a count that is not an int >= `least`, naming the class and the field."""
-    v = getattr(s, field)
-    if isinstance(v, bool) or not (isinstance(v, int) and v >= least):
-        raise ValueError(f"{type(s).__name__}.{field} must be an int >= {least}, got {v!r}.")
-
-
-_Settings = TypeVar("_Settings", bound="MechanismOptimiseSettings")
-
-
-class MechanismOptimiseSettings(eqx.Module):
+class MechanismOptimiseSettings(SearchSettings):
     """Settings of [`optimise`][locomotion_jax.optimisation._optimise.optimise] for a
-    [`Mechanism`][locomotion_jax.Mechanism] (module `optimisation._mechanism`). Python numbers:
-    changing `local`, `dt`, `search_dt`, `newton_iter`, `shape` or `knots` (or the harmonics)
-    recompiles; the others do not.
+    [`Mechanism`][locomotion_jax.Mechanism] (module `optimisation._mechanism`): the fields of
+    [`SearchSettings`][] with its defaults (`optimise`'s `harmonics` default 2), and the sinusoid
+    screen's. Python numbers: changing `local`, `dt`, `search_dt`, `newton_iter`, `shape` or `knots`
+    (or the harmonics) recompiles; the others do not.
 
     The actuators are the mechanism's elements driven by a waveform (a spring's rest length, an
     internal `Force`, an `ExternalForce`); `optimise`'s `a_max` bounds each one's excursion about its
     mean, in the element's own units: a length for a spring's rest, a force for a force (the force
     bound).
 
-    - `shape`: the family of signals searched (as [`ExactSettings`][locomotion_jax.optimisation._optimum.ExactSettings]
-      `.shape`): `"fourier"` (default), a Fourier series of `optimise`'s `harmonics` (default 2) per
-      element; or `"spline"`, a periodic cubic B-spline of `knots` control values per element (then
-      `harmonics` is not taken), whose bound is a box on the control values, so a step-like signal
-      carries no overshoot.
-    - `knots`: control values per element of a spline (>= 4; default 16: every control value is a
-      forward-mode direction of the orbit's gradient, so the refinement's cost grows with
-      `knots` times the number of actuated elements).
-
     - `amplitudes`, `frequencies`, `phases`: the sinusoid screen, $a$ on `amplitudes` equal steps
       up to $a_\\max$, $\\omega$ log-spaced over its range (one value for a fixed `omega`), the
       phase $\\varphi$ on `phases` equal steps of $[0, 2\\pi)$.
-    - `local`: starts refined locally in lockstep (the best sinusoids of the screen);
-      `max_iter`: iterations of each local descent; `trust_radius`: the largest first step of a
-      line search (coefficients in units of $a_\\max$, $\\log\\omega$); `local_method`: `"descent"`
-      (default) or `"sqp"`, and `stall_rtol` (as
-      [`ExactSettings`][locomotion_jax.optimisation._optimum.ExactSettings]'s; 0 by default: on the
-      README's 4-mass worm, 1e-6 stopped the descent at a speed 10 % above `v_min`, 0.09 %
-      costlier, `benchmarks/NOTES.md`).
-    - `margin`: required $\\min_{i,t} N_i$ on the orbit during the refinement (units of weight).
-    - `speed_slack`: the refinement targets $v_\\min (1 + \\text{slack})$.
-    - `omega_min`, `omega_max`: range of a free base frequency, in units of the highest natural
-      frequency of the mechanism's bodies and springs (or of its own base frequency where it has
-      no spring).
-    - `dt`: the exact engine's step of the verification, and so of every figure reported but a
-      chain's `min_normal`; `search_dt`: its step in the baseline screen and the local runs, whose
-      figures only rank and steer (`None`: `dt`; as
-      [`ExactSettings`][locomotion_jax.optimisation._optimum.ExactSettings]`.search_dt`). With a
-      `search_dt` the baseline is solved again at `dt` by the verification, which reports its
-      figures. `transient`: actuation periods from the mechanism's start before an orbit is
-      solved; `newton_tol`, `newton_iter`: the periodic-orbit solve.
-    - `check_tol`, `check_periods`: the direct simulation of the optimum runs until the largest
-      Floquet multiplier's modulus to the power of the periods run falls below `check_tol` (at
-      least `check_periods[0]`, at most `check_periods[1]` gait periods), then averages over 12
-      ([`ElementOptimum`][locomotion_jax.optimisation._element_optimum.ElementOptimum]'s
-      `simulated_recurrence`).
-    - `verbose`: progress on stderr.
+    - `local`: the best sinusoids of the screen are refined.
+    - `stall_rtol`: 0 by default: on the README's 4-mass worm, 1e-6 stopped the descent at a speed
+      10 % above `v_min`, 0.09 % costlier (`benchmarks/NOTES.md`).
+    - `omega_min`, `omega_max`: in units of the highest natural frequency of the mechanism's bodies
+      and springs (or of its own base frequency where it has no spring).
+    - `dt`: every figure but a chain's `min_normal` is at this step. With a `search_dt` the
+      baseline is solved again at `dt` by the verification, which reports its figures.
 
     A [`ChainOptimiseSettings`][] is accepted in its place: its fields of these names are used,
     and one phase.
@@ -87,59 +49,16 @@ class MechanismOptimiseSettings(eqx.Module):
     amplitudes: int = 4
     frequencies: int = 8
     phases: int = 1
-    local: int = 2
-    max_iter: int = 40
-    trust_radius: float = 0.1
-    local_method: str = "descent"
-    stall_rtol: float = 0.0
-    margin: float = 0.05
-    speed_slack: float = 1e-3
-    omega_min: float = 0.15
-    omega_max: float = 2.0
-    dt: float = 0.01
-    search_dt: float | None = None
-    transient: int = 30
-    newton_tol: float = 1e-10
-    newton_iter: int = 12
-    check_tol: float = 1e-12
-    check_periods: tuple[int, int] = (40, 1500)
-    shape: str = "fourier"
-    knots: int = 16
-    verbose: bool = False
 
     def __check_init__(self):
-        # Each error names the class (a chain's settings run these checks too) and the field.
-        name = type(self).__name__
-        for field in ("amplitudes", "frequencies", "phases", "local", "max_iter", "transient", "newton_iter"):
-            _count(self, field, 1)
-        if self.shape not in ("fourier", "spline"):
-            raise ValueError(f"{name}.shape must be 'fourier' or 'spline', got {self.shape!r}.")
-        if self.local_method not in METHODS:
-            raise ValueError(f"{name}.local_method must be 'descent' or 'sqp', got {self.local_method!r}.")
-        if not (0 <= self.stall_rtol < 1):
-            raise ValueError(f"{name}.stall_rtol must be in [0, 1), got {self.stall_rtol!r}.")
-        _count(self, "knots", 4)
-        if not (0 < self.omega_min < self.omega_max):
-            raise ValueError(f"{name}: need 0 < omega_min < omega_max, got {self.omega_min!r}, {self.omega_max!r}.")
-        if not (self.dt > 0 and self.trust_radius > 0 and self.newton_tol > 0):
-            raise ValueError(f"{name}: dt, trust_radius and newton_tol must be > 0.")
-        check_simulation(name, self.check_tol, self.check_periods)
-        step = self.search_dt
-        if step is not None and not (isinstance(step, (int, float, np.number)) and math.isfinite(step) and step > 0):
-            raise ValueError(f"{name}.search_dt must be None or a finite step > 0, got {step!r}.")
-        if not (self.margin >= 0 and self.speed_slack >= 0):
-            raise ValueError(f"{name}: margin and speed_slack must be >= 0, got {self.margin!r}, {self.speed_slack!r}.")
+        for field in ("amplitudes", "frequencies", "phases"):
+            count(self, field, 1)
 
     @classmethod
     def from_chain(cls, s: "ChainOptimiseSettings") -> "MechanismOptimiseSettings":
         """A chain's settings' fields of these names (one phase: a mechanism's screen drives every
         element in phase)."""
-        return cls(**{n: getattr(s, n) for n in cls.__dataclass_fields__ if n != "phases"})
-
-    def searching(self: "_Settings") -> "_Settings":
-        """The settings of the baseline screen and the local runs: these, with `dt` = `search_dt`
-        where one is given."""
-        return self if self.search_dt is None else dataclasses.replace(self, dt=self.search_dt, search_dt=None)
+        return cls(**{f.name: getattr(s, f.name) for f in dataclasses.fields(cls) if f.name != "phases"})
 
 
 class ChainOptimiseSettings(MechanismOptimiseSettings):
@@ -188,9 +107,9 @@ class ChainOptimiseSettings(MechanismOptimiseSettings):
     chunk: int = 32
 
     def __check_init__(self):
-        _count(self, "zoom_points", 1)
-        _count(self, "chunk", 1)
-        _count(self, "zoom_levels", 0)
+        count(self, "zoom_points", 1)
+        count(self, "chunk", 1)
+        count(self, "zoom_levels", 0)
         if not (0 <= self.screen_speed <= 1):
             raise ValueError(f"ChainOptimiseSettings.screen_speed must be in [0, 1], got {self.screen_speed!r}.")
 

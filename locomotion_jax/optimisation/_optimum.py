@@ -10,6 +10,7 @@ import numpy as np
 
 from .._json import dumps, jsonable
 from ..model._waveform import AbstractWaveform, Fourier, Spline
+from ._search_settings import count, SearchSettings
 
 
 class Settings(eqx.Module):
@@ -80,125 +81,73 @@ class Settings(eqx.Module):
                 raise ValueError(f"Settings.{name} must be a finite time > 0, got {value!r}.")
 
 
-class ExactSettings(eqx.Module):
+class ExactSettings(SearchSettings):
     """Settings of the exact method of [`optimise`][locomotion_jax.optimisation._optimise.optimise]
-    (`method="exact"`, module `_exact_optimise`). Python numbers: changing `local`,
-    `dt`, `search_dt`, `newton_iter` or the harmonics recompiles; the others do not.
+    for the paper's model (`method="exact"`, module `_exact_optimise`): the fields of
+    [`SearchSettings`][locomotion_jax.optimisation._search_settings.SearchSettings] with other
+    defaults, and the starts' own. Python numbers: changing `local`, `dt`, `search_dt`,
+    `newton_iter` or the harmonics recompiles; the others do not.
 
-    - `shape`: the family of strokes searched (`_shapes`): `"spline"` (default), a periodic cubic
-      B-spline of `knots` control values, whose stroke bound is a box on them and which
-      represents step-like strokes without overshoot; or `"fourier"`, a Fourier series of
-      `harmonics` harmonics (the argument of `optimise`, default 16).
+    Where the paper's model reads a field otherwise:
+
+    - `shape`: `"spline"` by default (of 64 `knots`), which represents step-like strokes without
+      overshoot; `"fourier"`: `optimise`'s `harmonics`, default 16.
+    - `local`: the best starts are refined; `max_iter`: over `stages` runs with required speeds
+      rising geometrically from the start's speed to $v_\\min$ (for a start that is too slow; the
+      last run has half the iterations). `local_method`: also scipy's `"trust-constr"` and
+      `"SLSQP"`; with `"sqp"` at the default problem, fewer evaluations for a slightly costlier
+      optimum (`benchmarks/NOTES.md`). `stall_rtol`: 1e-6 by default (in the default problem 210
+      lockstep rounds instead of 393 for an optimum 1.6e-8 costlier, `benchmarks/NOTES.md`).
+    - `margin`: on $\\min_t N_{1,2}$ over the orbit.
+    - `omega_min`, `omega_max`: in units of the smallest natural frequency and of $\\omega_{n1}$.
+    - `dt`: also the step of the sinusoid baseline. A coarser `search_dt` differs from `dt` by the
+      RK4 error (fourth order in `search_dt`; at `2 dt` 6.7e-6 relative in the speed at the
+      default problem's optimum, inside `speed_slack`) and moves the descent's path: over the
+      required speeds 0.01 to 0.06, `search_dt = 0.02` took 0.70 of the time in all, 0.39 to 0.75
+      at five of the six but 1.5 times at 0.06, its optima within 2.2e-4 either way
+      (`benchmarks/NOTES.md`).
+    - `transient`: from the relaxed spring (also the verification's, [`steady_gait`][]); 0 is
+      allowed.
+    - The direct simulation runs from the relaxed spring.
+
+    Its own fields:
+
     - `tension_periods`, `tension_levels`: the tension-wave starts (`_starts`: idealised
       inchworm gaits whose spring tension alternates in sign), over `tension_periods` periods
       from 0.7 to 4 times the slowest natural period and these levels between the two masses'
       break-away forces; 0 periods: none.
-    - `local`: starts refined locally, in lockstep (one batched engine call each step).
     - `start_frequencies`: base frequencies of the starts, log-spaced over the range.
     - `random_shapes`: random waveforms among the start shapes (with sinusoids of five
       strokes, sinusoids with a third harmonic and saw-tooth ramps of both senses).
-    - `max_iter`: iterations of each local refinement, over `stages` runs with
-      required speeds rising geometrically from the start's speed to $v_\\min$ (for a start that
-      is too slow; the last run has half the iterations); `trust_radius`: the largest first step
-      of a line search, or the initial trust region (decision variables: coefficients in units of
-      $a_\\max$, $\\log\\omega$); `local_method`: `"descent"` (monotone L-BFGS descent on an exact
-      penalty, `_descent.descent`), `"sqp"` (the same
-      penalty and line search with SQP steps on the linearised constraints, which follow an
-      active speed constraint instead of crossing it, and a stop where the merit stalls at
-      1e-5, `_descent.sqp_descent`: fewer evaluations, a slightly costlier optimum;
-      `benchmarks/NOTES.md`), `"trust-constr"` or `"SLSQP"` (scipy's); `stall_rtol`: the
-      descent stops where its merit fell by at most this (relative) over its last 20
-      evaluations, 0 for never (1e-6: in the default problem 210 lockstep rounds instead of
-      393 for an optimum 1.6e-8 costlier, `benchmarks/NOTES.md`), and by at most 1e-4 where it
-      misses a constraint by more than 1e-2 (`_descent.FAR_STALL_RTOL`).
-    - `margin`: required $\\min_t N_{1,2}$ over the orbit (units of weight).
-    - `speed_slack`: the orbit targets $v_\\min (1 + \\text{slack})$.
-    - `omega_min`, `omega_max`: range of a free base frequency, in units of the smallest
-      natural frequency and of $\\omega_{n1}$.
-    - `dt`: the exact engine's step of the sinusoid baseline, of the verification and so of every
-      figure reported; `search_dt`: its step in the screen and the local runs, whose figures only
-      rank and steer (`None`: `dt`). A coarser search step differs from `dt` by the RK4 error
-      (fourth order in `search_dt`; at `2 dt` 6.7e-6 relative in the speed at the default problem's
-      optimum, inside `speed_slack`) and moves the descent's path: over the required speeds 0.01
-      to 0.06, `search_dt = 0.02` took 0.70 of the time in all, 0.39 to 0.75 at five of the six
-      but 1.5 times at 0.06, its optima within 2.2e-4 either way (`benchmarks/NOTES.md`).
-      `transient`: actuation periods run from the relaxed spring before an orbit is first solved
-      (also the verification's, [`steady_gait`][]); `newton_tol`, `newton_iter`: the
-      periodic-orbit solve.
-    - `check_tol`, `check_periods`: the direct simulation of the optimum (from the relaxed spring)
-      runs until the largest Floquet multiplier's modulus to the power of the periods run falls
-      below `check_tol` (at least `check_periods[0]`, at most `check_periods[1]` gait periods),
-      then averages over 12 ([`Optimum`][]'s `simulated_recurrence`).
+    - `stages`: the local runs of a start too slow for $v_\\min$.
     - `refine_baseline`: refine the best sinusoids of the sweep (`_pareto.refine_sinusoid`).
-    - `seed`: for the random shapes; `verbose`: progress on stderr.
+    - `seed`: for the random shapes.
     """
 
     shape: str = "spline"
     knots: int = 64
-    tension_periods: int = 10
-    tension_levels: tuple[float, ...] = (0.3, 0.55, 0.8)
     local: int = 4
-    start_frequencies: int = 8
-    random_shapes: int = 2
     max_iter: int = 600
-    stages: int = 3
-    trust_radius: float = 0.1
-    local_method: str = "descent"
     stall_rtol: float = 1e-6
-    margin: float = 0.05
-    speed_slack: float = 1e-3
     omega_min: float = 0.06
     omega_max: float = 1.2
-    dt: float = 0.01
-    search_dt: float | None = None
-    transient: int = 30
-    newton_tol: float = 1e-10
-    newton_iter: int = 12
-    check_tol: float = 1e-12
-    check_periods: tuple[int, int] = (40, 1500)
+    tension_periods: int = 10
+    tension_levels: tuple[float, ...] = (0.3, 0.55, 0.8)
+    start_frequencies: int = 8
+    random_shapes: int = 2
+    stages: int = 3
     refine_baseline: bool = True
     seed: int = 0
-    verbose: bool = False
+
+    local_methods: ClassVar[tuple[str, ...]] = ("descent", "sqp", "trust-constr", "SLSQP")
+    least_transient: ClassVar[int] = 0
 
     def __check_init__(self):
-        if self.local < 1 or self.max_iter < 1 or self.start_frequencies < 1 or self.stages < 1:
-            raise ValueError("ExactSettings: local, max_iter, stages and start_frequencies must be >= 1.")
-        if self.local_method not in ("descent", "sqp", "trust-constr", "SLSQP"):
-            raise ValueError(
-                "ExactSettings.local_method must be 'descent', 'sqp', 'trust-constr' or 'SLSQP', "
-                f"got {self.local_method!r}."
-            )
-        if not (0 <= self.stall_rtol < 1):
-            raise ValueError(f"ExactSettings.stall_rtol must be in [0, 1), got {self.stall_rtol!r}.")
-        if self.shape not in ("spline", "fourier"):
-            raise ValueError(f"ExactSettings.shape must be 'spline' or 'fourier', got {self.shape!r}.")
-        if self.knots < 4:
-            raise ValueError(f"ExactSettings.knots must be >= 4, got {self.knots!r}.")
-        if self.tension_periods < 0 or any(not (0 <= x <= 1) for x in self.tension_levels):
-            raise ValueError(
-                "ExactSettings: tension_periods must be >= 0 and tension_levels within [0, 1], got "
-                f"{self.tension_periods!r}, {self.tension_levels!r}."
-            )
-        if not (0 < self.omega_min < self.omega_max):
-            raise ValueError(
-                f"ExactSettings: need 0 < omega_min < omega_max, got {self.omega_min!r}, {self.omega_max!r}."
-            )
-        check_simulation("ExactSettings", self.check_tol, self.check_periods)
-        for name in ("dt", "search_dt"):
-            value = getattr(self, name)
-            step = isinstance(value, (int, float, np.number)) and math.isfinite(value) and value > 0
-            if value is not None and not step:
-                raise ValueError(f"ExactSettings.{name} must be a finite step > 0, got {value!r}.")
-
-
-def check_simulation(name: str, tol: Any, periods: Any) -> None:
-    """The checks of the settings `name`'s `check_tol` and `check_periods` (the optimum's direct
-    simulation): a tolerance in (0, 1), and `(lo, hi)` with `1 <= lo <= hi`."""
-    if not (isinstance(tol, (int, float, np.number)) and 0 < tol < 1):
-        raise ValueError(f"{name}.check_tol must be in (0, 1), got {tol!r}.")
-    lo, hi = periods
-    if not (1 <= lo <= hi):
-        raise ValueError(f"{name}.check_periods must be (lo, hi), 1 <= lo <= hi, got {lo, hi}.")
+        for field in ("start_frequencies", "stages"):
+            count(self, field, 1)
+        count(self, "tension_periods", 0)
+        if any(not (0 <= x <= 1) for x in self.tension_levels):
+            raise ValueError(f"ExactSettings.tension_levels must lie within [0, 1], got {self.tension_levels!r}.")
 
 
 def fmt(v: Any) -> str:
