@@ -880,6 +880,20 @@ TWO_ATTRACTORS = dict(
 )  # fmt: skip
 
 
+def test_recurrence_is_the_shortest_period_to_the_tolerance():
+    """`_element_local.recurrence`: the smallest p <= 4 with every state equal to the one p rows
+    before, to `tol` relative to the largest value; 0 for none (a period of 5, or noise above tol)."""
+    from locomotion_jax.optimisation._element_local import recurrence
+
+    rng = np.random.default_rng(0)
+    cycle = rng.normal(size=(5, 7))
+    for p in (1, 2, 3, 4, 5):
+        states = np.tile(cycle[:p], (13 // p + 1, 1))[:13]
+        assert recurrence(states, 1e-12) == (p if p <= 4 else 0)
+        noisy = states + 1e-7 * rng.normal(size=states.shape)
+        assert recurrence(noisy, 1e-9) == 0 and recurrence(noisy, 1e-5) == (p if p <= 4 else 0)
+
+
 def test_the_direct_simulation_names_a_second_attractor():
     """The optimum's direct simulation check (`_element_local.simulated`) on a gait with a second
     attractor: from the relaxed springs it settles on a period-3 motion, whose figures it reports

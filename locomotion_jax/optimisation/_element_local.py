@@ -321,7 +321,8 @@ def simulated(model: Any, gait: tuple[bool, float, float, float, float], setting
     It runs for enough gait periods `n` for the slowest Floquet mode to decay to `settings.check_tol`
     (within `settings.check_periods`), then `AVERAGED` more: the mean speed and cost of transport over
     those, their larger relative difference from the gait's, and the recurrence of the states at
-    the gait-period sections to $\\sqrt{\\text{check\\_tol}}$ ([`recurrence`][]). A recurrence other
+    the gait-period sections to $\\sqrt{\\text{check\\_tol}}$, or 100 machine epsilons where that is
+    larger (float32: 1.2e-5; [`recurrence`][]). A recurrence other
     than 1 is a motion other than the gait: a second attractor, reached from this start. NaN and 0
     where the gait is not stable or the run stopped."""
     from ..run._simulate import simulate
@@ -339,10 +340,12 @@ def simulated(model: Any, gait: tuple[bool, float, float, float, float], setting
     if not np.all(np.asarray(traj.valid)):
         return out
     X, ed = np.asarray(traj.X, np.float64), np.asarray(traj.e_d, np.float64)
+    eps = float(np.finfo(np.asarray(traj.x).dtype).eps)
     x, v = np.asarray(traj.x, np.float64), np.asarray(traj.v, np.float64)
     dX = X[-1] - X[0]
     speed_s, cost_s = float(dX / (t[-1] - t[0])), float((ed[-1] - ed[0]) / abs(dX))
     states = np.concatenate([x[:, 1:] - x[:, :1], v], axis=1)  # gaps and velocities: invariant under travel
+    tol = max(math.sqrt(settings.check_tol), 100 * eps)
     return out | dict(mean_speed_simulated=speed_s, cost_of_transport_simulated=cost_s,
                       simulation_agreement=max(abs(speed_s / speed - 1), abs(cost_s / cost - 1)),
-                      simulated_recurrence=recurrence(states, math.sqrt(settings.check_tol)))  # fmt: skip
+                      simulated_recurrence=recurrence(states, tol))  # fmt: skip

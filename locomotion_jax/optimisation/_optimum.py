@@ -169,10 +169,11 @@ class AbstractOptimum(abc.ABC):
     `check_tol`); `simulation_agreement`, the larger relative difference of the two from the steady
     gait's; `simulated_recurrence`, the smallest $p \\le 4$ such that the simulated state (gaps and
     velocities) at the gait's sections recurs every $p$ gait periods (to
-    $\\sqrt{\\text{check\\_tol}}$ relative), 0 if none does. Where it is not 1, the run settled on
-    another motion than the optimum's gait (a second attractor: the gait is stable, but this start
-    does not lead to it), and the simulated figures are that motion's, averaged over whole periods
-    of it. NaN and 0 where nothing was simulated (an unstable gait; the smoothed method).
+    $\\sqrt{\\text{check\\_tol}}$ relative, or 100 machine epsilons where larger: float32), 0 if
+    none does. Where it is not 1, the run settled on another motion than the optimum's gait (a
+    second attractor: the gait is stable, but this start does not lead to it), and the simulated
+    figures are that motion's, averaged over whole periods of it. NaN and 0 where nothing was
+    simulated (an unstable gait; the smoothed method).
     """
 
     v_min: float
