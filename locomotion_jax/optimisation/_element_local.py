@@ -313,18 +313,17 @@ def simulated(model: Any, gait: tuple[bool, float, float, float, float], setting
     `initial` or `waveform`), whose steady gait `gait` is `(stable, mean speed, cost of transport,
     largest multiplier modulus, period)`.
 
-    It steps at `settings.dt`, or finer where the resolution guard asks for it (`resolved_step`:
-    the verification of a spline with knots closer than 4 steps checks its resolution by a
-    convergence study instead, and is not guarded), so that its agreement then includes that change
-    of step.
-
     It runs for enough gait periods `n` for the slowest Floquet mode to decay to `settings.check_tol`
     (within `settings.check_periods`), then `AVERAGED` more: the mean speed and cost of transport over
     those, their larger relative difference from the gait's, and the recurrence of the states at
-    the gait-period sections to $\\sqrt{\\text{check\\_tol}}$, or 100 machine epsilons where that is
-    larger (float32: 1.2e-5; [`recurrence`][]). A recurrence other
-    than 1 is a motion other than the gait: a second attractor, reached from this start. NaN and 0
-    where the gait is not stable or the run stopped."""
+    the gait-period sections ([`recurrence`][]) to $\\sqrt{\\text{check\\_tol}}$, or to 100 machine
+    epsilons where that is larger (float32: 1.2e-5). A recurrence other than 1 is a motion other
+    than the gait: a second attractor, reached from this start. NaN and 0 where the gait is not
+    stable or the run stopped.
+
+    It steps at `settings.dt`, or finer where the resolution guard asks for it (`resolved_step`; the
+    verification of a spline whose knots lie closer than 4 steps checks its resolution by a
+    convergence study instead, and is not guarded): its agreement then includes that change of step."""
     from ..run._simulate import simulate
 
     ok, speed, cost, rho, period = gait
