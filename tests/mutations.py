@@ -466,7 +466,7 @@ MUTATIONS = [
         "locomotion_jax/optimisation/_element_local.py",
         (
             (
-                "simulated_recurrence=recurrence(states, math.sqrt(settings.check_tol))",
+                "simulated_recurrence=recurrence(states, tol)",
                 "simulated_recurrence=1",
             ),
         ),
