@@ -170,13 +170,18 @@ def guard_values(values: Mapping[str, np.ndarray], dtype, dynamics: AbstractDyna
     return {**values, "mhat": np.where(mask, np.nan, values["mhat"])}, mask
 
 
+def _single(mechanism: AbstractMechanism) -> AbstractMechanism:
+    """One configuration (batch shape `()`) as a flat batch of one."""
+    return jax.tree_util.tree_map(lambda x: jnp.reshape(x, (1,) + jnp.shape(x)), mechanism)
+
+
 def refuse_search(mechanism: AbstractMechanism, waveform: Any, dt: float, what: str, skip: tuple[str, ...] = ()
                   ) -> None:  # fmt: skip
     """Raise the `ValueError` of `refuse`, with `what` appended, where the step `dt` does not
     resolve one configuration (`mechanism` of batch shape `()`, at the fastest forcing a search
     such as an optimiser's may reach; `waveform` for the paper's model, else `None`). The scales
     named in `skip` are not checked (a search that verifies them by a convergence study)."""
-    one = jax.tree_util.tree_map(lambda x: jnp.reshape(x, (1,) + jnp.shape(x)), mechanism)
+    one = _single(mechanism)
     scales = lambda: [s for s in one.time_scales(waveform) if s.name not in skip]
     try:
         guard(Exact(dt), scales, one.is_valid().reshape(1), True, True)
@@ -188,7 +193,7 @@ def resolved_step(mechanism: AbstractMechanism, waveform: Any, dt: float) -> flo
     """`dt`, or the step the resolution guard's message would suggest where `dt` does not resolve
     one configuration (`mechanism` of batch shape `()`; `waveform` for the paper's model, else
     `None`): the longest step of two significant digits that serves every scale."""
-    one = jax.tree_util.tree_map(lambda x: jnp.reshape(x, (1,) + jnp.shape(x)), mechanism)
+    one = _single(mechanism)
     limits = [float(np.asarray(s.limit())[0]) for s in one.time_scales(waveform) if s.unit != "span"]
     return min([dt] + [_round_down(limit) for limit in limits if limit < dt])
 
