@@ -95,7 +95,7 @@ def register(app: typer.Typer) -> None:
         search_dt: float | None = typer.Option(
             None,
             "--search-dt",
-            help="Exact: a coarser step for the search (screen, sweep and local runs; default: --dt), a faster first "
+            help="Exact: a coarser step for the search (the screen and the local runs; default: --dt), a faster first "
             "look; the figures reported stay at --dt.",
         ),
         starts: int = typer.Option(8, "--starts", help="Smoothed: starts optimised in parallel."),
