@@ -157,3 +157,24 @@ def test_both_named_starts_share_a_program():
         assert _programs() == before
         want = jax.vmap(lambda c: c.physics().initial_positions(second))(chains.broadcast())
         np.testing.assert_array_equal(np.asarray(traj.x)[:, 0], np.asarray(want))
+
+
+def test_steps_of_any_size_share_a_program():
+    # The engine takes the step as data: a second step compiles nothing, and it is the step the
+    # runs take (half the step, about twice the iterations).
+    w = lj.TravellingWave(jnp.asarray([0.05, 0.08]), jnp.asarray([3.0, 7.0]), jnp.asarray([1.0, -1.0]))
+    chains = lj.Chain(masses=np.ones((2, 3)), waveforms=w)
+    params = lj.Params(omega=jnp.asarray([3.0, 7.0]))
+    save_at = jnp.asarray([0.0, 4.0])
+    runs = lambda mech, dt: (lj.simulate(mech, 4.0, save_at=save_at, dynamics=lj.Exact(dt=dt)),
+                             lj.measure(mech, z=0.1, horizon=4.0, dynamics=lj.Exact(dt=dt)))  # fmt: skip
+    coarse = [runs(mech, 0.02) for mech in (chains, params)]
+    before = _programs()
+    fine = [runs(mech, 0.01) for mech in (chains, params)]
+    assert _programs() == before
+    for (_, m2), (_, m1) in zip(coarse, fine):
+        ratio = np.asarray(m1.n_steps) / np.asarray(m2.n_steps)
+        assert np.all((ratio > 1.7) & (ratio < 2.3)), ratio
+    for (t2, _), (t1, _) in zip(coarse, fine):
+        x2, x1 = np.asarray(t2.x)[:, -1], np.asarray(t1.x)[:, -1]
+        assert np.all(x1 != x2) and np.allclose(x1, x2, rtol=0, atol=1e-5)

@@ -209,7 +209,7 @@ def _measure_batch(P, valid, t_start, initial, z, horizon, window, contact, star
     return run_queue(setup, _running, advance, results, n, lanes, order, count=count)
 
 
-_measure_batch = engine_jit(_measure_batch, ("contact", "dt", "lanes"), reverse=True)
+_measure_batch = engine_jit(_measure_batch, ("contact", "lanes"), reverse=True)
 
 
 def measure_batch(
@@ -238,5 +238,6 @@ def measure_batch(
     lanes = default_lanes(rows.m, lane_width(physics))
     cap = jnp.asarray(max_steps, jnp.int32)
     code = start_code(start)
-    out = _measure_batch(P, valid, t_start, initial, z_, h_, w_, contact, code, dt, cap, lanes, rows.queue_count)
+    dt_ = jnp.asarray(dt, dtype)
+    out = _measure_batch(P, valid, t_start, initial, z_, h_, w_, contact, code, dt_, cap, lanes, rows.queue_count)
     return rows.cut(out)

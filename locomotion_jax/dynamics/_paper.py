@@ -72,7 +72,7 @@ def measure_batch(
     window,
     contact: str,
     start: str | Array,
-    dt: float,
+    dt: float | Array,
     max_steps,
     lanes: int | None = None,
     t_start: Array | None = None,
@@ -97,7 +97,7 @@ def measure_batch(
     return run_queue(setup, runs._running, advance, results, n, lanes, _order(params), count=count)
 
 
-_measure_batch = engine_jit(measure_batch, ("wave_axes", "contact", "dt", "lanes"), reverse=True)
+_measure_batch = engine_jit(measure_batch, ("wave_axes", "contact", "lanes"), reverse=True)
 
 
 def measure(
@@ -121,7 +121,8 @@ def measure(
     params, t_start, initial = rows.pad((params, t_start, initial))
     wave = wave if wave_axes is None else rows.pad(wave)
     code = start_code(start)
-    args = (params, wave, wave_axes, z, horizon, window, contact, code, dt, max_steps, default_lanes(rows.m))
+    dt_ = jnp.asarray(dt, params.omega.dtype)
+    args = (params, wave, wave_axes, z, horizon, window, contact, code, dt_, max_steps, default_lanes(rows.m))
     return rows.cut(_measure_batch(*args, t_start=t_start, initial=initial, count=rows.queue_count))
 
 
@@ -164,7 +165,7 @@ def _simulate_rows(
     return (rows[..., jnp.asarray(_TO_CHAIN + tuple(range(4, rows.shape[-1])))], *rest)
 
 
-_simulate_rows = engine_jit(_simulate_rows, ("wave_axes", "contact", "dt", "lanes", "buffer"), reverse=True)
+_simulate_rows = engine_jit(_simulate_rows, ("wave_axes", "contact", "lanes", "buffer"), reverse=True)
 
 
 def derived_fields(params: Params, wave: AbstractWaveform, contact: Contact, t, y, stuck, sdir) -> dict:
@@ -249,6 +250,7 @@ def simulate_batch(params, wave, wave_axes, save_at, contact, start, dt, max_ste
     p, init = batch.pad((params, initial))
     w = wave if wave_axes is None else batch.pad(wave)
     cap = jnp.asarray(max_steps, jnp.int32)
-    args = (p, w, wave_axes, save_at, contact, start_code(start), dt, cap, default_lanes(batch.m))
+    dt_ = jnp.asarray(dt, params.omega.dtype)
+    args = (p, w, wave_axes, save_at, contact, start_code(start), dt_, cap, default_lanes(batch.m))
     rows, valid, status, t_lift, n_switch = batch.cut(_simulate_rows(*args, initial=init, count=batch.queue_count))
     return _trajectory(params, wave, wave_axes, contact, save_at, rows, valid, status, t_lift, n_switch)

@@ -127,7 +127,7 @@ def default_max_steps(t_total: float, dt: float) -> int:
     return int(CAP_STEPS_PER_DT * t_total / dt) + CAP_EXTRA
 
 
-def step_cap(t_total: jax.Array, dt: float, max_steps: jax.Array) -> jax.Array:
+def step_cap(t_total: jax.Array, dt: float | jax.Array, max_steps: jax.Array) -> jax.Array:
     """The cap on one configuration's loop iterations (traced; int32).
 
     `max_steps` where it is positive (an explicit `Exact(max_steps=...)`), else

@@ -52,7 +52,7 @@ def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps, lanes, buf
     return run_saves(init, step, _row, valid.shape[0], save_at, max_steps, lanes, order, buffer, count)
 
 
-_simulate_batch = engine_jit(_simulate_batch, ("contact", "dt", "lanes", "buffer"), reverse=True)
+_simulate_batch = engine_jit(_simulate_batch, ("contact", "lanes", "buffer"), reverse=True)
 
 
 def _stack(P: Any, a: tuple, like: jax.Array) -> jax.Array:
@@ -84,7 +84,8 @@ def simulate_batch(flat: Chain | Mechanism, valid, save, contact, start, dt, max
     C, ok, init = batch.pad((flat, valid, initial))
     cap = jnp.asarray(max_steps, jnp.int32)
     code = start_code(start)
-    out = _simulate_batch(C, ok, save, contact, code, dt, cap, lanes, initial=init, count=batch.queue_count)
+    dt_ = jnp.asarray(dt, flat.m.dtype)
+    out = _simulate_batch(C, ok, save, contact, code, dt_, cap, lanes, initial=init, count=batch.queue_count)
     rows, ok, status, t_lift, n_switch = batch.cut(out)
     x, v = rows[..., :N], rows[..., N : 2 * N]
     t = jnp.broadcast_to(save, rows.shape[:-1])
