@@ -631,6 +631,18 @@ MUTATIONS = [
         ("tests/test_optimise.py::test_precompiled_verification_is_the_verifications_program",),
     ),
     Mutation(
+        "precompile_skips_the_check",
+        "the exact optimiser's background compilation: not the direct-simulation check's program",
+        "locomotion_jax/optimisation/_exact.py",
+        (
+            (
+                "_simulated(params, wave, (True, 1.0, 1.0, 0.5, 2 * math.pi / hi), settings, periods=1)",
+                "(params, wave, (True, 1.0, 1.0, 0.5, 2 * math.pi / hi), settings)",
+            ),
+        ),
+        ("tests/test_optimise.py::test_precompiled_verification_is_the_verifications_program",),
+    ),
+    Mutation(
         "newton_orbit_never_gives_up",
         "the orbit oracle's Newton method: no stop on a stalled residual, whatever its patience",
         "locomotion_jax/gaits/_orbit.py",

@@ -47,6 +47,7 @@ import pytest
 import scipy.optimize
 from locomotion_jax.cli import _main as _cli, _optimise as _cli_optimise
 from locomotion_jax.cli._optimise import register
+from locomotion_jax.dynamics import _paper
 from locomotion_jax.gaits import _element_orbit, _orbit, _shooting
 from locomotion_jax.optimisation import (
     _chain_screen as screen,
@@ -59,7 +60,7 @@ from locomotion_jax.optimisation import (
     _plots,
     _shapes,
 )
-from locomotion_jax.optimisation._optimum import ExactSettings, Settings
+from locomotion_jax.optimisation._optimum import ExactSettings, Settings, waveform_of
 from plugin_app import plugin_app
 from reference import reference_simulate
 from reference_mechanism import Body, run, Sig, System
@@ -688,18 +689,26 @@ def test_scipy_local_methods_report_their_cheapest_point(method):
 def test_precompiled_verification_is_the_verifications_program():
     """`_exact.Precompile` compiles the verification's steady-gait programs on placeholders at 4
     times the step (traced): the verification's own first call at the step compiles no new
-    transient program. (The oracle's programs: `test_exact_compilations`, one trace each.)"""
+    transient program; and the direct-simulation check's over one gait period: the optimum's
+    check, at another frequency and step, compiles no new simulation program. (The oracle's
+    programs: `test_exact_compilations`, one trace each.)"""
     pre = _exact_optimise.Precompile(lj.Params(), 0.05, None, EXACT_SHAPE, EXACT_TINY)
     pre.wait()
     assert pre.oracle.is_set() and not pre.thread.is_alive()
-    size = _shooting._transient_batch._cache_size  # pyright: ignore[reportFunctionMemberAccess]
-    before = size()
+    programs = (_shooting._transient_batch, _paper._simulate_rows, _paper._trajectory)
+    # The `jax.jit` wrappers have `_cache_size` (pyright sees the functions they wrap).
+    sizes = lambda: [f._cache_size() for f in programs]  # pyright: ignore[reportFunctionMemberAccess]
+    before = sizes()
     phase = np.arange(256) * 2 * np.pi / 256
     rows = (2 + EXACT_TINY.local) * len(EXACT_SHAPE.origins)  # the verification's batch (`_exact._verify`)
     theta = np.stack([EXACT_SHAPE.fit(np.sin(phase + j), 4.0) for j in range(rows)])
     gait = _exact_optimise._verify_gaits(lj.Params(), EXACT_SHAPE, 0.05, EXACT_TINY, theta, EXACT_TINY.dt)
-    assert size() == before
+    wave = waveform_of(EXACT_SHAPE.fields(theta[0], 0.05), 4.0, float(lj.Params().lbar))
+    steady = (True, 0.02, 1.0, 0.5, 2 * np.pi / 4.0)
+    sim = _exact_optimise._simulated(lj.Params(), wave, steady, dataclasses.replace(EXACT_TINY, dt=0.005), periods=2)
+    assert sizes() == before
     assert np.asarray(gait.converged).any()
+    assert sim["simulated_periods"] == 2 and np.isfinite(sim["mean_speed_simulated"])
 
 
 def test_precompile_compiles_for_the_callers_default_device(monkeypatch):

@@ -308,18 +308,19 @@ def recurrence(states: np.ndarray, tol: float) -> int:
     return 0
 
 
-def simulated(model: Any, gait: tuple[bool, float, float, float, float], settings: Any, **run: Any) -> dict:
+def simulated(model: Any, gait: tuple[bool, float, float, float, float], settings: Any, periods: int | None = None,
+              **run: Any) -> dict:  # fmt: skip
     """The optimum's fields of a direct simulation of `model` (`run`: `simulate`'s `start`,
     `initial` or `waveform`), whose steady gait `gait` is `(stable, mean speed, cost of transport,
     largest multiplier modulus, period)`.
 
     It runs for enough gait periods `n` for the slowest Floquet mode to decay to `settings.check_tol`
-    (within `settings.check_periods`), then `AVERAGED` more: the mean speed and cost of transport over
-    those, their larger relative difference from the gait's, and the recurrence of the states at
-    the gait-period sections ([`recurrence`][]) to $\\sqrt{\\text{check\\_tol}}$, or to 100 machine
-    epsilons where that is larger (float32: 1.2e-5). A recurrence other than 1 is a motion other
-    than the gait: a second attractor, reached from this start. NaN and 0 where the gait is not
-    stable or the run stopped.
+    (within `settings.check_periods`; `periods` where given), then `AVERAGED` more: the mean speed
+    and cost of transport over those, their larger relative difference from the gait's, and the
+    recurrence of the states at the gait-period sections ([`recurrence`][]) to
+    $\\sqrt{\\text{check\\_tol}}$, or to 100 machine epsilons where that is larger (float32:
+    1.2e-5). A recurrence other than 1 is a motion other than the gait: a second attractor, reached
+    from this start. NaN and 0 where the gait is not stable or the run stopped.
 
     It steps at `settings.dt`, or finer where the resolution guard asks for it (`resolved_step`; the
     verification of a spline whose knots lie closer than 4 steps checks its resolution by a
@@ -329,6 +330,7 @@ def simulated(model: Any, gait: tuple[bool, float, float, float, float], setting
     ok, speed, cost, rho, period = gait
     lo, hi = settings.check_periods
     n = hi if not (0 < rho < 1) else int(np.clip(math.ceil(math.log(settings.check_tol) / math.log(rho)), lo, hi))
+    n = n if periods is None else periods
     out = dict(mean_speed_simulated=math.nan, cost_of_transport_simulated=math.nan, simulation_agreement=math.nan,
                simulated_periods=n, simulated_recurrence=0)  # fmt: skip
     if not ok:

@@ -70,7 +70,7 @@ from ._evaluator import Evaluator
 from ._figures import Figures, PENALTY
 from ._local import local_run
 from ._lockstep import run_lockstep
-from ._optimum import choose, ExactSettings, Optimum, verified
+from ._optimum import choose, ExactSettings, Optimum, verified, waveform_of
 from ._shapes import AbstractShape
 from ._starts import start_shapes, tension_starts
 
@@ -245,15 +245,16 @@ def _verify_gaits(params: Params, shape: AbstractShape, a_max: float, settings: 
 class Precompile:
     """The exact optimiser's own programs compiled in a background thread, started before the
     sinusoid baseline: the orbit oracle's (the screen's and the local runs': `oracle` is set once
-    they are compiled), then the verification's. Each is compiled by a call on placeholder
-    decision vectors (zero strokes at the highest frequency, no transient periods, the
-    verification at 4 times the step: the step and the periods are traced, so the programs are
-    those of the real calls). The baseline and the optimiser's stages compile and run in the
-    calling thread meanwhile: XLA compiles a program on mostly one core, so on a machine of two
-    cores or more the two overlap. The optimiser waits for `oracle` before its screen and
-    for the thread before its verification, so that no program is compiled twice at once.
-    The thread compiles for the caller's default device (`jax.default_device` is set per
-    thread): a program compiled for another device would not be the real calls'.
+    they are compiled), then the verification's and the direct-simulation check's. Each is
+    compiled by a call on placeholder decision vectors (zero strokes at the highest frequency, no
+    transient periods, the verification at 4 times the step, the check over one gait period: the
+    step and the periods are traced, so the programs are those of the real calls). The baseline
+    and the optimiser's stages compile and run in the calling thread meanwhile: XLA compiles a
+    program on mostly one core, so on a machine of two cores or more the two overlap. The
+    optimiser waits for `oracle` before its screen and for the thread before its verification, so
+    that no program is compiled twice at once. The thread compiles for the caller's default
+    device (`jax.default_device` is set per thread): a program compiled for another device would
+    not be the real calls'.
 
     A placeholder call that fails is left to the real call, which raises its error there."""
 
@@ -287,6 +288,9 @@ class Precompile:
             th[:, -1] = math.log(hi)
             self.oracle.set()
             _verify_gaits(params, shape, a_max, settings, th, 4 * settings.dt)
+            # The direct-simulation check's program (its step is traced too), over one gait period.
+            wave = waveform_of(shape.fields(th[0], a_max), float(hi), float(params.lbar))
+            _simulated(params, wave, (True, 1.0, 1.0, 0.5, 2 * math.pi / hi), settings, periods=1)
         except Exception:  # the real call raises it
             pass
 
@@ -546,10 +550,15 @@ def _verify(params, speed, direction, a_max, shape, free, settings, candidates, 
         evaluations=ev.calls,
     )
     steady = (bool(fig.ok[k]), float(fig.speed[k]), float(fig.cost[k]), radius, float(gait.period[k]))
-    wave = opt.waveform
-    model = pareto.with_waveform_frequency(params, wave)
-    sim = local.simulated(model, steady, settings, start="relaxed", waveform=wave)
+    sim = _simulated(params, opt.waveform, steady, settings)
     return dataclasses.replace(opt, **sim, runtime_s=time.perf_counter() - t0), log
+
+
+def _simulated(params: Params, wave: AbstractWaveform, steady: tuple, settings: ExactSettings,
+               periods: int | None = None) -> dict:  # fmt: skip
+    """The optimum's direct-simulation check ([`_element_local.simulated`][]; strict contact, relaxed start)."""
+    model = pareto.with_waveform_frequency(params, wave)
+    return local.simulated(model, steady, settings, periods=periods, start="relaxed", waveform=wave)
 
 
 def _best_sections(gait: Any, n: int, m: int) -> np.ndarray:

@@ -229,6 +229,14 @@ def constraints_line(constraints: dict, feasible: bool) -> str:
     return f"constraints on the exact model: {held} -> {'FEASIBLE' if feasible else 'INFEASIBLE'}"
 
 
+def waveform_of(fields: dict, omega: float, lbar: float) -> AbstractWaveform:
+    """The waveform of an optimum's `fields` (`cos`, `sin` and `control`, as `AbstractShape.fields`
+    gives them): a [`Spline`][] of the `control` values, or a [`Fourier`][] series where it is `None`."""
+    if fields["control"] is not None:
+        return Spline(fields["control"], omega, lbar)
+    return Fourier(fields["cos"], fields["sin"], omega, lbar)
+
+
 @dataclasses.dataclass(frozen=True)
 class Optimum(AbstractOptimum):
     """Result of [`optimise`][locomotion_jax.optimisation._optimise.optimise]; every figure called `*_exact` is from
@@ -305,9 +313,7 @@ class Optimum(AbstractOptimum):
 
     @property
     def waveform(self) -> AbstractWaveform:
-        if self.control is not None:
-            return Spline(self.control, self.omega, self.lbar)
-        return Fourier(self.cos, self.sin, self.omega, self.lbar)
+        return waveform_of(dict(cos=self.cos, sin=self.sin, control=self.control), self.omega, self.lbar)
 
     def summary(self) -> str:
         """Human-readable report."""
