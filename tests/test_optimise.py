@@ -694,7 +694,7 @@ def test_precompiled_verification_is_the_verifications_program():
     programs: `test_exact_compilations`, one trace each.)"""
     pre = _exact_optimise.Precompile(lj.Params(), 0.05, None, EXACT_SHAPE, EXACT_TINY)
     pre.wait()
-    assert pre.oracle.is_set() and not pre.thread.is_alive()
+    assert pre.oracle.is_set() and pre.verification.is_set() and not pre.thread.is_alive()
     programs = (_shooting._transient_batch, _paper._simulate_rows, _paper._trajectory)
     # The `jax.jit` wrappers have `_cache_size` (pyright sees the functions they wrap).
     sizes = lambda: [f._cache_size() for f in programs]  # pyright: ignore[reportFunctionMemberAccess]

@@ -344,7 +344,8 @@ def simulated(model: Any, gait: tuple[bool, float, float, float, float], setting
     eps = float(np.finfo(np.asarray(traj.x).dtype).eps)
     x, v = np.asarray(traj.x, np.float64), np.asarray(traj.v, np.float64)
     dX = X[-1] - X[0]
-    speed_s, cost_s = float(dX / (t[-1] - t[0])), float((ed[-1] - ed[0]) / abs(dX))
+    with np.errstate(divide="ignore", invalid="ignore"):  # a run that does not move: an infinite (or NaN) cost
+        speed_s, cost_s = float(dX / (t[-1] - t[0])), float((ed[-1] - ed[0]) / abs(dX))
     states = np.concatenate([x[:, 1:] - x[:, :1], v], axis=1)  # gaps and velocities: invariant under travel
     tol = max(math.sqrt(settings.check_tol), 100 * eps)
     return out | dict(mean_speed_simulated=speed_s, cost_of_transport_simulated=cost_s,

@@ -251,8 +251,9 @@ class Precompile:
     step and the periods are traced, so the programs are those of the real calls). The baseline
     and the optimiser's stages compile and run in the calling thread meanwhile: XLA compiles a
     program on mostly one core, so on a machine of two cores or more the two overlap. The
-    optimiser waits for `oracle` before its screen and for the thread before its verification, so
-    that no program is compiled twice at once. The thread compiles for the caller's default
+    optimiser waits for `oracle` before its screen, for `verification` before its verification
+    and for the thread ([`wait`][locomotion_jax.optimisation._exact.Precompile.wait]) before its
+    check, so that no program is compiled twice at once. The thread compiles for the caller's default
     device (`jax.default_device` is set per thread): a program compiled for another device would
     not be the real calls'.
 
@@ -261,6 +262,7 @@ class Precompile:
     def __init__(self, params: Params, a_max: float, omega: float | None, shape: AbstractShape,
                  settings: ExactSettings):  # fmt: skip
         self.oracle = threading.Event()
+        self.verification = threading.Event()
         self.device = jax.config.jax_default_device  # pyright: ignore[reportAttributeAccessIssue]
         self.thread = threading.Thread(target=self._run, args=(params, a_max, omega, shape, settings), daemon=True)
         self.thread.start()
@@ -271,6 +273,7 @@ class Precompile:
                 self._compile(params, a_max, omega, shape, settings)
         finally:
             self.oracle.set()  # never left waiting
+            self.verification.set()
 
     def _compile(self, params, a_max, omega, shape, settings) -> None:
         dtype = params.dtype
@@ -288,6 +291,7 @@ class Precompile:
             th[:, -1] = math.log(hi)
             self.oracle.set()
             _verify_gaits(params, shape, a_max, settings, th, 4 * settings.dt)
+            self.verification.set()
             # The direct-simulation check's program (its step is traced too), over one gait period.
             wave = waveform_of(shape.fields(th[0], a_max), float(hi), float(params.lbar))
             _simulated(params, wave, (True, 1.0, 1.0, 0.5, 2 * math.pi / hi), settings, periods=1)
@@ -295,7 +299,7 @@ class Precompile:
             pass
 
     def wait(self) -> None:
-        """Until the verification's programs are compiled too."""
+        """Until the direct-simulation check's program is compiled too (the last)."""
         self.thread.join()
 
 
@@ -442,8 +446,10 @@ def optimise_exact(
         for j, (cot, r) in enumerate(runners[k])
     ]
     if precompiled is not None:
-        precompiled.wait()
-    return _verify(params, speed, direction, a_max, shape, free, settings, candidates, fallbacks, baseline, log, t0, ev)
+        precompiled.verification.wait()
+    ready = None if precompiled is None else precompiled.wait
+    return _verify(params, speed, direction, a_max, shape, free, settings, candidates, fallbacks, baseline, log, t0, ev,
+                   ready)  # fmt: skip
 
 
 FALLBACK_RTOL = 1e-6
@@ -454,7 +460,8 @@ at least the run's candidate there; it can be the cheaper in the verification on
 verification found another gait than the descent did, not by the figures' rounding."""
 
 
-def _verify(params, speed, direction, a_max, shape, free, settings, candidates, fallbacks, baseline, log, t0, ev):
+def _verify(params, speed, direction, a_max, shape, free, settings, candidates, fallbacks, baseline, log, t0, ev,
+            ready=None):  # fmt: skip
     """Solve each candidate's steady gait (strict contact, relaxed start) and keep the cheapest feasible one.
 
     A candidate counts as feasible only if its gait is also converged, stable and without
@@ -463,7 +470,8 @@ def _verify(params, speed, direction, a_max, shape, free, settings, candidates, 
     start, a given start and the local runs' points) are verified first; the `fallbacks`
     (the local runs' runners-up: name, point, cost of transport in the descent and the index
     of their run's candidate) then where their run's candidate is not feasible, or where the
-    descent found them cheaper than the cheapest feasible candidate (`FALLBACK_RTOL`)."""
+    descent found them cheaper than the cheapest feasible candidate (`FALLBACK_RTOL`). The
+    optimum's direct-simulation check follows once `ready()` returns (`Precompile.wait`; `None`: at once)."""
     dtype = params.dtype
     # Batches of a fixed number of rows (padded with their first candidate), so that every
     # optimisation with the same settings runs the same compiled verification.
@@ -550,6 +558,8 @@ def _verify(params, speed, direction, a_max, shape, free, settings, candidates, 
         evaluations=ev.calls,
     )
     steady = (bool(fig.ok[k]), float(fig.speed[k]), float(fig.cost[k]), radius, float(gait.period[k]))
+    if ready is not None:
+        ready()
     sim = _simulated(params, opt.waveform, steady, settings)
     return dataclasses.replace(opt, **sim, runtime_s=time.perf_counter() - t0), log
 
