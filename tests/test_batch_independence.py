@@ -178,3 +178,21 @@ def test_steps_of_any_size_share_a_program():
     for (t2, _), (t1, _) in zip(coarse, fine):
         x2, x1 = np.asarray(t2.x)[:, -1], np.asarray(t1.x)[:, -1]
         assert np.all(x1 != x2) and np.allclose(x1, x2, rtol=0, atol=1e-5)
+
+
+def test_save_counts_of_one_bucket_share_a_program():
+    # `simulate` pads its save times to the bucket of their count (`_runs.BatchRows`: 16 up to 16),
+    # repeating the last, and runs only those asked for: 3, 5 and 13 saves run one program, each
+    # run's rows are bitwise the first ones of the longest, and none is reported capped or invalid.
+    w = lj.TravellingWave(jnp.asarray([0.05, 0.08]), jnp.asarray([3.0, 7.0]), jnp.asarray([1.0, -1.0]))
+    mechs = (lj.Chain(masses=np.ones((2, 3)), waveforms=w), lj.Params(omega=jnp.asarray([3.0, 7.0])))
+    times = jnp.arange(13) * 0.5
+    whole = [lj.simulate(mech, 6.0, save_at=times, contact="paper") for mech in mechs]
+    before = _programs()
+    for k in (3, 5):
+        for mech, full in zip(mechs, whole):
+            part = lj.simulate(mech, float(times[k - 1]), save_at=times[:k], contact="paper")
+            for f in ("x", "v", "e", "valid"):
+                np.testing.assert_array_equal(np.asarray(getattr(part, f)), np.asarray(getattr(full, f))[:, :k], f)
+            assert np.asarray(part.valid).all() and (np.asarray(part.status) == lj.Status.OK).all()
+    assert _programs() == before

@@ -144,8 +144,9 @@ def _hop_row(s: engine.Hybrid) -> Array:
 
 
 def _simulate_rows(
-    params, wave, wave_axes, save_at, contact, start, dt, max_steps, lanes, buffer=BUFFER, initial=None, count=None
-):
+    params, wave, wave_axes, save_at, contact, start, dt, max_steps, lanes, buffer=BUFFER, initial=None, count=None,
+    saves=None,
+):  # fmt: skip
     """The saved rows of a flat batch ([`_saves.run_saves`][]: a work queue over `lanes` lanes,
     highest frequencies first): the N-body engine's rows (`_simulate._row`), reordered to
     $(x_1, v_1, x_2, v_2, e_d, w)$, the stick flags, the slip directions and the margins' records
@@ -161,7 +162,7 @@ def _simulate_rows(
     step = lambda P, s, t_stop: engine.step(P, contact, dt, s, t_stop, hop=hop(P))[0]
     row = _hop_row if contact == "hop" else _row
     n = params.omega.shape[0]
-    rows, *rest = run_saves(init, step, row, n, save_at, max_steps, lanes, _order(params), buffer, count)
+    rows, *rest = run_saves(init, step, row, n, save_at, max_steps, lanes, _order(params), buffer, count, saves)
     return (rows[..., jnp.asarray(_TO_CHAIN + tuple(range(4, rows.shape[-1])))], *rest)
 
 
@@ -245,12 +246,15 @@ _trajectory = jax.jit(_trajectory, static_argnames=("wave_axes", "contact"))
 def simulate_batch(params, wave, wave_axes, save_at, contact, start, dt, max_steps: int, initial=None) -> dict:
     """The fields of a [`Trajectory`][locomotion_jax.Trajectory] of a flat batch (leading axis: the
     configurations); `max_steps` caps each configuration's iterations, saves included. Compiled for
-    the batch's bucket (`_runs.BatchRows`)."""
+    the batch's bucket and its save times' (`_runs.BatchRows`)."""
     batch = BatchRows.of(params.omega.shape[0], params, wave, save_at, initial)
+    times = BatchRows.of(save_at.shape[0], params, wave, save_at, initial)  # the save times, padded as the rows are
     p, init = batch.pad((params, initial))
     w = wave if wave_axes is None else batch.pad(wave)
     cap = jnp.asarray(max_steps, jnp.int32)
     dt_ = jnp.asarray(dt, params.omega.dtype)
-    args = (p, w, wave_axes, save_at, contact, start_code(start), dt_, cap, default_lanes(batch.m))
-    rows, valid, status, t_lift, n_switch = batch.cut(_simulate_rows(*args, initial=init, count=batch.queue_count))
+    args = (p, w, wave_axes, times.pad(save_at), contact, start_code(start), dt_, cap, default_lanes(batch.m))
+    out = _simulate_rows(*args, initial=init, count=batch.queue_count, saves=times.queue_count)
+    rows, valid, status, t_lift, n_switch = batch.cut(out)
+    rows, valid = rows[:, : times.n], valid[:, : times.n]
     return _trajectory(params, wave, wave_axes, contact, save_at, rows, valid, status, t_lift, n_switch)

@@ -64,8 +64,9 @@ def run_saves(
     order: Array | None = None,
     buffer: int = BUFFER,
     count: Array | None = None,
+    saves: Array | None = None,
 ) -> tuple[Array, Array, Array, Array, Array]:
-    """The states of `n` configurations at the times `save_at`.
+    """The states of `n` configurations at the times `save_at` (the first `saves` of them).
 
     **Arguments:**
 
@@ -77,6 +78,10 @@ def run_saves(
     - `save_at`: non-decreasing save times; `max_steps`: cap on the iterations of
       one configuration (a save counts as one).
     - `lanes`, `order`, `count`: as in [`_queue.run_queue`][]; `buffer`: rows per lane.
+    - `saves`: how many of `save_at` are requested (traced; `None`: all). The rest pad it to the
+      length its program is compiled for (`_runs.BatchRows`: 16 for up to 16 saves, then 32, 48,
+      64, 80, ...; `FEW_SAVES` is a bucket's edge, so a padded run loops as the unpadded one) and
+      are not run: their rows hold the last state, `valid` false.
 
     **Returns:** `(rows, valid, status, t_liftoff, n_switch)`: `rows` of shape
     `(n, len(save_at), row size)`; a configuration that stopped early (lift-off
@@ -85,8 +90,9 @@ def run_saves(
     came before the last save.
     """
     n_save = save_at.shape[0]
+    n_real = jnp.asarray(n_save if saves is None else saves, jnp.int32)
     if n_save <= FEW_SAVES:
-        return _run_few_saves(init, step, row, n, save_at, max_steps, lanes, order, count)
+        return _run_few_saves(init, step, row, n, save_at, max_steps, lanes, order, count, n_real)
     buffer = max(1, min(buffer, n_save))
     zi = jnp.zeros((), jnp.int32)
 
@@ -96,7 +102,7 @@ def run_saves(
         return fixed, _Dyn(s, zi, zi, rows, zi, _targets(save_at, zi, buffer))
 
     def running(fixed, d: _Dyn) -> Array:
-        return (d.idx < n_save) & (d.s.status == Status.OK) & (d.steps < max_steps)
+        return (d.idx < n_real) & (d.s.status == Status.OK) & (d.steps < max_steps)
 
     def advance(fixed, d: _Dyn) -> _Dyn:
         slot = jnp.arange(buffer) == d.n_buffered
@@ -117,16 +123,16 @@ def run_saves(
         emptied = d._replace(n_buffered=zi, targets=_targets(save_at, d.idx, buffer))
         return emptied, d.rows, slots
 
-    results = lambda fixed, d: _results(d, row, n_save)
+    results = lambda fixed, d: _results(d, row, n_real)
     full = lambda fixed, d: d.n_buffered >= buffer
     out = run_queue(setup, running, advance, results, n, lanes, order, Stream(full, drain, n_save), count)
     return _assemble(out, n_save)
 
 
-def _results(d: Any, row: Callable[[Any], Array], n_save: int) -> dict[str, Array]:
-    """A configuration's outputs once done (either loop's state: `s`, `idx` saves done)."""
+def _results(d: Any, row: Callable[[Any], Array], n_real: Array) -> dict[str, Array]:
+    """A configuration's outputs once done (either loop's state: `s`, `idx` saves done of `n_real`)."""
     s = d.s
-    capped = (s.status == Status.OK) & (d.idx < n_save)  # stopped by the step cap before the last save
+    capped = (s.status == Status.OK) & (d.idx < n_real)  # stopped by the step cap before the last save
     status = jnp.where(capped, Status.MAX_STEPS, s.status).astype(jnp.int32)
     return dict(saved=d.idx, last=row(s), status=status, t_liftoff=s.t_liftoff, n_switch=s.n_switch)
 
@@ -147,7 +153,7 @@ class _Few(NamedTuple):
 
 
 def _run_few_saves(
-    init, step, row, n, save_at, max_steps, lanes, order, count
+    init, step, row, n, save_at, max_steps, lanes, order, count, n_real
 ) -> tuple[Array, Array, Array, Array, Array]:
     """[`run_saves`][] for at most `FEW_SAVES` saves: the hot loop only steps (landing on each save
     time); reaching a save time ends the inner loop, and the queue's outer loop writes the row
@@ -162,10 +168,10 @@ def _run_few_saves(
         return fixed, _Few(s, zi, zi, target_of(zi))
 
     def running(fixed, d: _Few) -> Array:
-        return (d.idx < n_save) & (d.s.status == Status.OK) & (d.steps < max_steps)
+        return (d.idx < n_real) & (d.s.status == Status.OK) & (d.steps < max_steps)
 
     def due(fixed, d: _Few) -> Array:  # a save time reached: the outer loop records it
-        return (d.idx < n_save) & (d.s.status == Status.OK) & (d.target <= d.s.t)
+        return (d.idx < n_real) & (d.s.status == Status.OK) & (d.target <= d.s.t)
 
     def advance(fixed, d: _Few) -> _Few:
         return d._replace(s=step(fixed, d.s, d.target), steps=d.steps + 1)
@@ -176,7 +182,7 @@ def _run_few_saves(
         slot = jnp.where(record, d.idx, n_save)[None]  # past the end: dropped
         return d._replace(idx=idx, target=target_of(idx)), row(d.s)[None, :], slot
 
-    results = lambda fixed, d: _results(d, row, n_save)
+    results = lambda fixed, d: _results(d, row, n_real)
 
     # The inner loop ends where a lane is due: `running` stays true there (its save is pending),
     # so the queue drains before it decides which lanes are done.

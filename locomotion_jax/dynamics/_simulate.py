@@ -38,7 +38,8 @@ def _row(s: engine.Hybrid) -> jax.Array:
     return jnp.concatenate([jnp.atleast_1d(q) for q in parts])  # the array layout: entries over the bodies
 
 
-def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps, lanes, buffer=BUFFER, initial=None, count=None):
+def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps, lanes, buffer=BUFFER, initial=None, count=None,
+                    saves=None):  # fmt: skip
     """The saved rows of a flat batch: the work queue of [`_saves.run_saves`][], highest frequencies first."""
     take = lambda i: jax.tree_util.tree_map(lambda x: x[i], C)
 
@@ -49,7 +50,7 @@ def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps, lanes, buf
     hop = (lambda P: P.hop()[2:]) if contact == "hop" else (lambda P: None)
     step = lambda P, s, t_stop: engine.step(P, contact, dt, s, t_stop, hop=hop(P))[0]
     order = jnp.argsort(-jnp.where(jnp.isfinite(C.omega), C.omega, -jnp.inf))
-    return run_saves(init, step, _row, valid.shape[0], save_at, max_steps, lanes, order, buffer, count)
+    return run_saves(init, step, _row, valid.shape[0], save_at, max_steps, lanes, order, buffer, count, saves)
 
 
 _simulate_batch = engine_jit(_simulate_batch, ("contact", "lanes", "buffer"), reverse=True)
@@ -77,16 +78,19 @@ def simulate_batch(flat: Chain | Mechanism, valid, save, contact, start, dt, max
     """The fields of a [`Trajectory`][locomotion_jax.Trajectory] of a flat batch of chains
     (leading axis: the configurations); `max_steps` caps each one's iterations, saves included;
     `initial`: the states at $t = 0$, shape `(n, 2N)`, or `None` for `start`'s. Compiled for the
-    batch's bucket (`_runs.BatchRows`)."""
+    batch's bucket and its save times' (`_runs.BatchRows`)."""
     N = flat.n_masses
     batch = BatchRows.of(valid.shape[0], flat, valid, save, initial)
+    times = BatchRows.of(save.shape[0], flat, valid, save, initial)  # the save times, padded as the rows are
     lanes = default_lanes(batch.m, N if uses_array(flat, contact) else 1)
     C, ok, init = batch.pad((flat, valid, initial))
     cap = jnp.asarray(max_steps, jnp.int32)
     code = start_code(start)
     dt_ = jnp.asarray(dt, flat.m.dtype)
-    out = _simulate_batch(C, ok, save, contact, code, dt_, cap, lanes, initial=init, count=batch.queue_count)
+    out = _simulate_batch(C, ok, times.pad(save), contact, code, dt_, cap, lanes, initial=init,
+                          count=batch.queue_count, saves=times.queue_count)  # fmt: skip
     rows, ok, status, t_lift, n_switch = batch.cut(out)
+    rows, ok = rows[:, : times.n], ok[:, : times.n]
     x, v = rows[..., :N], rows[..., N : 2 * N]
     t = jnp.broadcast_to(save, rows.shape[:-1])
     if contact == "hop":
