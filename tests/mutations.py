@@ -631,6 +631,13 @@ MUTATIONS = [
         ("tests/test_optimise.py::test_precompiled_verification_is_the_verifications_program",),
     ),
     Mutation(
+        "simulate_saves_not_padded",
+        "simulate: a chain's save times not padded to their bucket (a program per save count)",
+        "locomotion_jax/dynamics/_simulate.py",
+        (("out = _simulate_batch(C, ok, times.pad(save), contact,", "out = _simulate_batch(C, ok, save, contact,"),),
+        ("tests/test_batch_independence.py::test_save_counts_of_one_bucket_share_a_program",),
+    ),
+    Mutation(
         "precompile_skips_the_check",
         "the exact optimiser's background compilation: not the direct-simulation check's program",
         "locomotion_jax/optimisation/_exact.py",
