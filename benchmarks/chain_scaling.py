@@ -60,7 +60,7 @@ def row(n: int, B: int, layout: str, lanes: int = 0) -> dict:
     cpus, walls, out = [], [], {}
     for _ in range(2):
         c0, w0 = time.process_time(), time.perf_counter()
-        out = exe(*dyn, start, cap)
+        out = exe(*dyn, start, DT, cap)  # the start code and the step are data
         jax.block_until_ready(out)
         cpus.append(time.process_time() - c0)
         walls.append(time.perf_counter() - w0)

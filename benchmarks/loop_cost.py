@@ -179,7 +179,8 @@ def main() -> int:
     text = compiled.as_text()
     if args.hlo:
         Path(args.hlo).write_text(text)
-    traced = {} if isinstance(start, str) else dict(start=start)
+    # The keyword arguments the program takes as data (the start code, the step; static in older trees).
+    traced = {k: v for k, v in kw.items() if k in lowered.args_info[1]}
     call = lambda: compiled(*dyn, z=rest[0], horizon=rest[1], window=rest[2], max_steps=cap, **traced)
     out = jax.block_until_ready(call())
     busy, walls, cpus = [], [], []
