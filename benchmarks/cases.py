@@ -73,8 +73,11 @@ def _chunk_runner(vals, n_dev, H, dyn, max_steps, micro, z=1e30):
     args = [flat, zhw, dyn, "paper", "paper", max_steps, mesh]
     if "micro_batch" in inspect.signature(_sharding._run_chunk).parameters:
         args.append(micro)
-    exe = _sharding._run_chunk.lower(*args).compile()
-    return lambda: exe(flat, zhw, dyn)  # the static arguments are compiled in
+    lowered = _sharding._run_chunk.lower(*args)
+    exe = lowered.compile()
+    # The arguments the program takes as data: the step cap as well where it is not static (older trees).
+    data = (flat, zhw, dyn) + ((jnp.asarray(max_steps, jnp.int32),) if len(lowered.args_info[0]) > 3 else ())
+    return lambda: exe(*data)  # the static arguments are compiled in
 
 
 def case_sharded(spec: dict) -> dict:

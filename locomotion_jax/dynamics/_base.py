@@ -78,7 +78,7 @@ class AbstractDynamics(eqx.Module):
         zhw: Array,
         contact: str,
         start: str,
-        max_steps: int,
+        max_steps: Array,
         mesh: Mesh,
         lanes: int | None,
     ) -> dict[str, Array]:
@@ -87,7 +87,8 @@ class AbstractDynamics(eqx.Module):
         Called while the sweep traces its chunk program (once per sweep, inside `jax.jit`),
         so it must be traceable. `batch`: the chunk, sharded along the mesh's one axis (a
         sweep of the paper's model: `Params` with the sinusoid of eq. (13)); `zhw`: the array
-        $(z, \\text{horizon}, \\text{window})$; `max_steps`: `step_cap` of the sweep's longest run
+        $(z, \\text{horizon}, \\text{window})$; `max_steps`: `step_cap` of the sweep's longest run,
+        an int32 scalar traced as data, so that sweeps of any horizon share a program
         (recorded with its results; a dynamics may cap each configuration by its own span
         instead, as `Exact` does, so that a configuration's result does not depend on its
         chunk); `lanes`: configurations that each device runs together (`None`: the dynamics'
@@ -98,9 +99,8 @@ class AbstractDynamics(eqx.Module):
     def step_cap(self, t_total: float) -> int:
         """The cap on the engine's loop iterations for runs to the time `t_total`.
 
-        A sweep records it for its longest run (`max_steps` of `measure_chunk`, a static of
-        the compilation fixed once, so that every chunk shares one compilation). `0` where
-        the dynamics caps its loops by a setting of its own.
+        A sweep records it for its longest run and hands it to `measure_chunk` (`max_steps`,
+        as data). `0` where the dynamics caps its loops by a setting of its own.
         """
 
     @abc.abstractmethod

@@ -84,7 +84,7 @@ class Exact(AbstractDynamics):
         zhw: Array,
         contact: str,
         start: str,
-        max_steps: int,
+        max_steps: Array,
         mesh: Mesh,
         lanes: int | None,
     ) -> dict[str, Array]:

@@ -100,7 +100,7 @@ class Smoothed(AbstractDynamics):
         zhw: Array,
         contact: str,
         start: str,
-        max_steps: int,
+        max_steps: Array,
         mesh: Mesh,
         lanes: int | None,
     ) -> dict[str, Array]:

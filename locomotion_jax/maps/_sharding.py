@@ -22,6 +22,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 
 from ..dynamics._base import AbstractDynamics
 from ..dynamics._compile import engine_jit
+from ..dynamics._runs import batch_rows
 from ..model._params import PARAM_NAMES, Params
 from ..run._resolution import flag, guard_values
 from ._dataset import per_mass_columns
@@ -58,9 +59,13 @@ natural-order one bit for bit (tests/test_sweep.py checks it with chunks of 9)."
 
 
 def padded_size(n: int, n_devices: int, dtype: np.dtype) -> int:
-    """Shape of a chunk of `n` configurations: a whole number of SIMD vectors per device."""
+    """Shape of a chunk of `n` configurations: a whole number of SIMD vectors per device, and
+    one of a few sizes (`_runs.batch_rows` of each device's share: a multiple of 16 up to 64,
+    then four sizes per octave), so that sweeps of different sizes share a compiled program."""
     lanes = max(1, VECTOR_BYTES // np.dtype(dtype).itemsize)
-    return -(-n // (n_devices * lanes)) * n_devices * lanes
+    share = -(-n // (n_devices * lanes)) * lanes
+    rows = batch_rows(share)
+    return n_devices * (rows if rows % lanes == 0 else share)
 
 
 def batch_mesh(local: bool = False) -> Mesh:
@@ -79,7 +84,7 @@ def _run_chunk(
     dynamics: AbstractDynamics,
     contact: str,
     start: str,
-    max_steps: int,
+    max_steps: jax.Array,
     mesh: Mesh,
     micro_batch: int | None,
 ) -> dict[str, jax.Array]:
@@ -90,7 +95,7 @@ def _run_chunk(
     return per_mass_columns(dynamics.measure_chunk(batch, zhw, contact, start, max_steps, mesh, micro_batch))
 
 
-_run_chunk = engine_jit(_run_chunk, ("contact", "start", "max_steps", "mesh", "micro_batch"))
+_run_chunk = engine_jit(_run_chunk, ("contact", "start", "mesh", "micro_batch"))
 
 
 def _global_array(host: np.ndarray, sharding: NamedSharding) -> jax.Array:
@@ -129,7 +134,7 @@ def dispatch_chunk(
       invalid, flagged `Status.INVALID` and cost no integration steps).
     - `dtype`: floating dtype of the computation.
     - `z`, `horizon`, `window`, `dynamics`, `contact`, `start`: as in `measure`.
-    - `max_steps`: the step cap (static: fix it once per sweep so all chunks share one compilation).
+    - `max_steps`: the step cap of the sweep's longest run (data: sweeps of any horizon share one compilation).
     - `mesh`: from [`batch_mesh`][].
     - `micro_batch`: configurations vmapped together per device (default [`MICRO_BATCH`][]: all).
 
@@ -174,7 +179,8 @@ def _chunk_args(values, dtype, z, horizon, window, dynamics, contact, start, max
     flat = Params(**fields, check=False)
     zhw = jnp.asarray(np.asarray([z, horizon, window], dtype))
     dynamics = dynamics.astype(dtype)  # its array settings (`Smoothed.eps`) in the chunk's dtype
-    return flat, zhw, dynamics, contact, start, max_steps, mesh, micro_batch or MICRO_BATCH or None
+    cap = jnp.asarray(max_steps, jnp.int32)
+    return flat, zhw, dynamics, contact, start, cap, mesh, micro_batch or MICRO_BATCH or None
 
 
 def fetch(out: Mapping[str, jax.Array], n: int) -> dict[str, np.ndarray]:

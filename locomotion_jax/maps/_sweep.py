@@ -82,8 +82,8 @@ def _float_dtype(dtype: Any) -> np.dtype:
 
 
 def _max_steps(grid: Grid, dynamics: AbstractDynamics, horizon: float) -> int:
-    """The step cap of the sweep's longest run, from its largest t_start (a static of the compilation, recorded
-    with the results; `Exact` caps each configuration by its own span instead)."""
+    """The step cap of the sweep's longest run, from its largest t_start (handed to the chunk program as data,
+    recorded with the results; `Exact` caps each configuration by its own span instead)."""
     # t_start depends on k and mhat only (eqs. 11-12): bound it over their combinations.
     k = grid.values.get("k", np.asarray([grid.fixed.get("k", DEFAULTS["k"])]))
     mh = grid.values.get("mhat", np.asarray([grid.fixed.get("mhat", DEFAULTS["mhat"])]))
