@@ -387,7 +387,7 @@ EXACT_TINY = ExactSettings(
 EXACT_SHAPE = _shapes.SplineShape(knots=EXACT_TINY.knots)
 
 
-def _oracle() -> _orbit.Oracle:
+def _oracle(dt: float = EXACT_TINY.dt, max_iter: int = EXACT_TINY.newton_iter) -> _orbit.Oracle:
     # The same static choices and batch size as the optimisations below: one compilation.
     p = lj.Params()
     return _orbit.Oracle(
@@ -397,8 +397,8 @@ def _oracle() -> _orbit.Oracle:
         tol=jnp.asarray(1e-12),
         shape=EXACT_SHAPE,
         contact="paper",
-        dt=EXACT_TINY.dt,
-        max_iter=EXACT_TINY.newton_iter,
+        dt=dt,
+        max_iter=max_iter,
     )
 
 
@@ -437,6 +437,28 @@ def test_orbit_gradients_match_finite_differences():
     for name in ("y", "figures", "monodromy", "ok", "n_iter", "residual"):
         np.testing.assert_array_equal(np.asarray(getattr(bare, name)), np.asarray(getattr(orb, name)), err_msg=name)
     assert np.all(np.asarray(bare.gradient) == 0)
+
+
+def test_oracles_of_any_step_and_iteration_cap_share_their_programs():
+    # The step and Newton's iteration cap are data of the oracle's programs: an oracle at half the
+    # step and with one iteration runs `_oracle()`'s programs, and both settings reach them.
+    phase = np.arange(256) * 2 * np.pi / 256
+    theta = jnp.asarray(np.stack([EXACT_SHAPE.fit(0.6 * np.sin(phase), w) for w in (2.0, 4.8)]))
+    start, fresh, one = jnp.zeros((2, 3)), jnp.ones(2, bool), jnp.ones(2, jnp.int32)
+    periods = jnp.asarray(3, jnp.int32)
+    first = _oracle()
+    y = first.transient(theta, start, fresh, periods)
+    orb = first.orbits(theta, y, one)
+    before = dict(_orbit.TRACES)
+    other = _oracle(dt=first.dt / 2, max_iter=1)
+    y_half = other.transient(theta, start, fresh, periods)
+    orb_one = other.orbits(theta, y, one)
+    assert dict(_orbit.TRACES) == before  # no new program
+    assert not np.array_equal(y_half, y)  # the step reached the engine: within RK4's error
+    np.testing.assert_allclose(y_half, y, rtol=1e-5, atol=1e-5)
+    assert np.all(np.asarray(orb.n_iter) > 1) and np.all(np.asarray(orb.ok))
+    np.testing.assert_array_equal(orb_one.n_iter, 1)  # the cap reached Newton's loop
+    assert not np.any(np.asarray(orb_one.ok))
 
 
 @pytest.mark.parametrize("monodromy_only, patience", [(False, None), (True, None), (True, 3)])

@@ -129,7 +129,13 @@ def with_waves(chain: Chain | Mechanism, theta: Array, a_max: Array, harmonics: 
 
 
 def period(
-    C: Chain | Mechanism, contact: Contact, dt: float, max_steps: Array, y: Array, k: Array, loop=lane_while_loop
+    C: Chain | Mechanism,
+    contact: Contact,
+    dt: float | Array,
+    max_steps: Array,
+    y: Array,
+    k: Array,
+    loop=lane_while_loop,
 ) -> Period:
     """The `k`-period map $\\Phi_k$ of one chain or mechanism from the reduced state `y`, with the
     figures the optimiser needs (`max_steps` per actuation period): `_orbit.period` of its physics.
@@ -162,7 +168,7 @@ class ChainActuation(orbit.AbstractActuation):
 
 def evaluate(C, a_max, theta, y0, k, harmonics, knots, contact, dt, max_steps, tol, max_iter, patience=None) -> Orbit:
     """Orbits and sensitivities of a batch of decision vectors (`_orbit.evaluate`, compiled once
-    per chain structure, batch size and static choice)."""
+    per chain structure, batch size and static choice; `dt` and `max_iter` are data)."""
     act = ChainActuation(harmonics, knots, contact)
     return orbit.evaluate(C, a_max, theta, y0, k, act, contact, dt, max_steps, tol, max_iter, monodromy_only=False,
                           gradient=True, patience=patience)  # fmt: skip
@@ -177,7 +183,8 @@ def relax(C, a_max, theta, y0, fresh, periods, harmonics, knots, contact, dt, ma
 
 
 class ChainOracle(eqx.Module):
-    """The compiled evaluations of one chain problem (static: harmonics, contact, step, iterations).
+    """The compiled evaluations of one chain problem (static: harmonics, knots, contact; the step and
+    Newton's iterations reach the program as data).
 
     `chain` is one configuration, broadcast (its waveforms are replaced by the decision vector's): a
     chain (one signal per spring), or a [`Mechanism`][locomotion_jax.Mechanism] (one signal per
@@ -203,10 +210,11 @@ class ChainOracle(eqx.Module):
     def orbits(self, theta: Array, y0: Array, k: Array) -> Orbit:
         """Steady gaits of `k` actuation periods (int32, per row) and their sensitivities, for a
         batch of decision vectors, from warm starts `y0`."""
-        return evaluate(self.chain, self.a_max, theta, y0, k, self.harmonics, self.knots, self.contact, self.dt,
-                        self.max_steps, self.tol, self.max_iter, self.patience)  # fmt: skip
+        dt, max_iter = jnp.asarray(self.dt, self.dtype), jnp.asarray(self.max_iter, jnp.int32)
+        return evaluate(self.chain, self.a_max, theta, y0, k, self.harmonics, self.knots, self.contact, dt,
+                        self.max_steps, self.tol, max_iter, self.patience)  # fmt: skip
 
     def transient(self, theta: Array, y0: Array, fresh: Array, periods: Array) -> Array:
         """The reduced state after `periods` periods (from `y0`, or from rest where `fresh`)."""
         return relax(self.chain, self.a_max, theta, y0, fresh, periods, self.harmonics, self.knots, self.contact,
-                     self.dt, self.max_steps)  # fmt: skip
+                     jnp.asarray(self.dt, self.dtype), self.max_steps)  # fmt: skip

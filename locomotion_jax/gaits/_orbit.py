@@ -72,7 +72,7 @@ class Period(NamedTuple):
 
 
 def period(
-    P: AbstractPhysics, contact: Contact, dt: float, max_steps: Array, y: Array, k: Array, loop=lane_while_loop
+    P: AbstractPhysics, contact: Contact, dt: float | Array, max_steps: Array, y: Array, k: Array, loop=lane_while_loop
 ) -> Period:
     """The `k`-period map $\\Phi_k$ of the physics `P` from the reduced state `y`, with the figures
     the optimisers need (`max_steps` per actuation period). `loop`: the time loop, with
@@ -305,14 +305,15 @@ def _relax(model, a_max, theta, y0, fresh, periods, actuation, contact, dt, max_
     return jax.vmap(one)(theta, y0, fresh)
 
 
-evaluate = engine_jit(_evaluate, ("actuation", "contact", "dt", "max_iter", "monodromy_only"))
-relax = engine_jit(_relax, ("actuation", "contact", "dt"))
+# The step and the iteration cap are data: oracles of any step share a compiled program.
+evaluate = engine_jit(_evaluate, ("actuation", "contact", "monodromy_only"))
+relax = engine_jit(_relax, ("actuation", "contact"))
 
 
 class Oracle(eqx.Module):
-    """The compiled evaluations of one problem of the paper's model (static: the shape family,
-    contact, step, iterations; `patience`: [`newton_orbit`][locomotion_jax.gaits._orbit.newton_orbit]'s,
-    traced, `None` for `max_iter`)."""
+    """The compiled evaluations of one problem of the paper's model (static: the shape family and
+    contact; the step `dt` and Newton's `max_iter` reach the program as data; `patience`:
+    [`newton_orbit`][locomotion_jax.gaits._orbit.newton_orbit]'s, traced, `None` for `max_iter`)."""
 
     params: Params
     a_max: Array
@@ -332,11 +333,11 @@ class Oracle(eqx.Module):
         """Steady gaits of period `k` actuation periods (int32, per row) and their sensitivities,
         for a batch of decision vectors, from warm starts `y0`; without `gradient`, the same orbits
         with a zero gradient, at a fraction of the cost (the same compiled program)."""
-        return evaluate(self.params, self.a_max, theta, y0, k, ShapeActuation(self.shape), self.contact, self.dt,
-                        self.max_steps, self.tol, self.max_iter, True, jnp.asarray(gradient),
-                        self.patience)  # fmt: skip
+        dt, max_iter = jnp.asarray(self.dt, self.dtype), jnp.asarray(self.max_iter, jnp.int32)
+        return evaluate(self.params, self.a_max, theta, y0, k, ShapeActuation(self.shape), self.contact, dt,
+                        self.max_steps, self.tol, max_iter, True, jnp.asarray(gradient), self.patience)  # fmt: skip
 
     def transient(self, theta: Array, y0: Array, fresh: Array, periods: Array) -> Array:
         """The reduced state after `periods` periods (from `y0`, or from rest where `fresh`)."""
         return relax(self.params, self.a_max, theta, y0, fresh, periods, ShapeActuation(self.shape), self.contact,
-                     self.dt, self.max_steps)  # fmt: skip
+                     jnp.asarray(self.dt, self.dtype), self.max_steps)  # fmt: skip
