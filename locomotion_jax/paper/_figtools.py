@@ -132,12 +132,14 @@ def steady_liftoff(
         params = Params(**values, **fixed_values)
         t = float(np.max(np.asarray(params.t_start))) + np.linspace(0.0, window, n_save)
         n, out = len(idx), []
-        step = min(chunk, n)
-        for lo in range(0, n, step):
-            sel = np.minimum(np.arange(lo, lo + step), n - 1)  # padded: one compilation
-            tr = simulate(params[sel], float(t[-1]), t, dynamics=Exact(dt), **PAPER)
+        for lo in range(0, n, chunk):
+            # Every call has `chunk` rows, NaN past the configurations (flagged invalid and not run):
+            # one compiled program for every figure and batch.
+            rows = np.arange(lo, lo + chunk)
+            part = {k: np.where(rows < n, v[np.minimum(rows, n - 1)], np.nan) for k, v in values.items()}
+            tr = simulate(Params(**part, **fixed_values, check=False), float(t[-1]), t, dynamics=Exact(dt), **PAPER)
             low = np.minimum(np.asarray(tr.N1), np.asarray(tr.N2)).min(axis=-1)
-            out.append(low[: min(step, n - lo)])
+            out.append(low[: min(chunk, n - lo)])
         min_n[tuple(idx.T)] = np.concatenate(out)
     steady = np.nan_to_num(min_n, nan=1.0) <= 0
     if stride > 1:  # nearest re-simulated neighbour
