@@ -4,12 +4,13 @@ Small means seconds: dt = 0.02, short horizons, a handful of configurations
 chosen where the claims are decided (0.2 wn1 is SSL, 2.3 wn1 is SL, ...).
 """
 
+import locomotion_jax as lj
 import numpy as np
 import pytest
 import xarray as xr
 from locomotion_jax._status import Regime
 from locomotion_jax.paper import _fig_sweep as fsw, _fig_time as ftime
-from locomotion_jax.paper._figtools import local_minima, runs
+from locomotion_jax.paper._figtools import local_minima, runs, steady_liftoff
 from locomotion_jax.paper._figures import FIGURES, resolve, run_figures
 
 
@@ -50,6 +51,25 @@ def test_fig12_mass_ratio_minima():
     # omega = 2: motion only near mhat = 0.5.
     reached = ds.reached.sel(omega=2.0).values
     assert reached[i[0.5]] and not reached[np.abs(mh - 0.5) > 0.2].any()
+
+
+def test_steady_liftoff_in_padded_calls_equals_each_configurations_simulation():
+    # The re-simulations run in calls of `chunk` rows, NaN past the configurations: chunks of 4
+    # (a partial second one) give what one call gives, and each configuration's lowest normal
+    # force is that of its own `simulate` over the same window.
+    axes = {"omega": [6.0, 9.5, 16.0], "a": [0.05, 0.1]}
+    ds = xr.Dataset(coords=axes)
+    ds["liftoff"] = (("omega", "a"), np.asarray([[False, True], [True, True], [True, True]]))
+    kw = dict(dt=0.02, window=2.0, n_save=41)
+    one, four = steady_liftoff(ds.copy(), **kw), steady_liftoff(ds.copy(), chunk=4, **kw)
+    np.testing.assert_array_equal(one.min_normal, four.min_normal)
+    np.testing.assert_array_equal(one.liftoff_steady, four.liftoff_steady)
+    assert np.isnan(one.min_normal[0, 0]) and not one.liftoff_steady[0, 0]  # not flagged: not re-simulated
+    p = lj.Params(omega=16.0, a=0.1)
+    t = float(p.t_start) + np.linspace(0.0, 2.0, 41)
+    tr = lj.simulate(p, float(t[-1]), t, dynamics=lj.Exact(0.02), contact="paper", start="paper")
+    assert float(one.min_normal[2, 1]) == float(np.minimum(tr.N1, tr.N2).min())
+    assert bool(one.liftoff_steady[2, 1]) == (float(one.min_normal[2, 1]) <= 0)
 
 
 def test_run_figures_fig4b_direction_follows_d(tmp_path):
