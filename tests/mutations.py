@@ -638,6 +638,45 @@ MUTATIONS = [
         ("tests/test_batch_independence.py::test_save_counts_of_one_bucket_share_a_program",),
     ),
     Mutation(
+        "sweep_chunks_not_bucketed",
+        "sweep: a chunk padded to whole SIMD vectors only, not to its size bucket (a program per chunk size)",
+        "locomotion_jax/maps/_sharding.py",
+        (("    rows = batch_rows(share)\n", "    rows = share\n"),),
+        ("tests/test_sweep.py::test_sweeps_of_other_horizons_and_sizes_share_a_program",),
+    ),
+    Mutation(
+        "sweep_cap_static",
+        "sweep: the step cap a static argument of the chunk program (a program per horizon)",
+        "locomotion_jax/maps/_sharding.py",
+        (
+            (
+                '_run_chunk = engine_jit(_run_chunk, ("contact", "start", "mesh", "micro_batch"))',
+                '_run_chunk = engine_jit(_run_chunk, ("contact", "start", "max_steps", "mesh", "micro_batch"))',
+            ),
+            ("    cap = jnp.asarray(max_steps, jnp.int32)\n", "    cap = int(max_steps)\n"),
+        ),
+        ("tests/test_sweep.py::test_sweeps_of_other_horizons_and_sizes_share_a_program",),
+    ),
+    Mutation(
+        "oracle_step_ignored",
+        "the paper's orbit oracle: its transient at a fixed step, not the oracle's `dt`",
+        "locomotion_jax/gaits/_orbit.py",
+        (
+            (
+                "                     jnp.asarray(self.dt, self.dtype), self.max_steps)  # fmt: skip",
+                "                     jnp.asarray(0.01, self.dtype), self.max_steps)  # fmt: skip",
+            ),
+        ),
+        ("tests/test_optimise.py::test_oracles_of_any_step_and_iteration_cap_share_their_programs",),
+    ),
+    Mutation(
+        "oracle_iteration_cap_ignored",
+        "the paper's orbit oracle: Newton's iteration cap fixed, not the oracle's `max_iter`",
+        "locomotion_jax/gaits/_orbit.py",
+        (("jnp.asarray(self.max_iter, jnp.int32)", "jnp.asarray(30, jnp.int32)"),),
+        ("tests/test_optimise.py::test_oracles_of_any_step_and_iteration_cap_share_their_programs",),
+    ),
+    Mutation(
         "precompile_skips_the_check",
         "the exact optimiser's background compilation: not the direct-simulation check's program",
         "locomotion_jax/optimisation/_exact.py",
