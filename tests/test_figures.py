@@ -60,8 +60,8 @@ def test_steady_liftoff_in_padded_calls_equals_each_configurations_simulation():
     axes = {"omega": [6.0, 9.5, 16.0], "a": [0.05, 0.1]}
     ds = xr.Dataset(coords=axes)
     ds["liftoff"] = (("omega", "a"), np.asarray([[False, True], [True, True], [True, True]]))
-    kw = dict(dt=0.02, window=2.0, n_save=41)
-    one, four = steady_liftoff(ds.copy(), **kw), steady_liftoff(ds.copy(), chunk=4, **kw)
+    one = steady_liftoff(ds.copy(), dt=0.02, window=2.0, n_save=41)
+    four = steady_liftoff(ds.copy(), dt=0.02, window=2.0, n_save=41, chunk=4)
     np.testing.assert_array_equal(one.min_normal, four.min_normal)
     np.testing.assert_array_equal(one.liftoff_steady, four.liftoff_steady)
     assert np.isnan(one.min_normal[0, 0]) and not one.liftoff_steady[0, 0]  # not flagged: not re-simulated
