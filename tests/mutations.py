@@ -653,7 +653,10 @@ MUTATIONS = [
                 '_run_chunk = engine_jit(_run_chunk, ("contact", "start", "mesh", "micro_batch"))',
                 '_run_chunk = engine_jit(_run_chunk, ("contact", "start", "max_steps", "mesh", "micro_batch"))',
             ),
-            ("    cap = jnp.asarray(max_steps, jnp.int32)\n", "    cap = int(max_steps)\n"),
+            (
+                "    cap = jnp.asarray(min(int(max_steps), np.iinfo(np.int32).max), jnp.int32)\n",
+                "    cap = int(max_steps)\n",
+            ),
         ),
         ("tests/test_sweep.py::test_sweeps_of_other_horizons_and_sizes_share_a_program",),
     ),

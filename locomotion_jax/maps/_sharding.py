@@ -179,7 +179,8 @@ def _chunk_args(values, dtype, z, horizon, window, dynamics, contact, start, max
     flat = Params(**fields, check=False)
     zhw = jnp.asarray(np.asarray([z, horizon, window], dtype))
     dynamics = dynamics.astype(dtype)  # its array settings (`Smoothed.eps`) in the chunk's dtype
-    cap = jnp.asarray(max_steps, jnp.int32)
+    # Within int32: a tiny stiffness bounds t_start, and so the longest run's cap, far above it.
+    cap = jnp.asarray(min(int(max_steps), np.iinfo(np.int32).max), jnp.int32)
     return flat, zhw, dynamics, contact, start, cap, mesh, micro_batch or MICRO_BATCH or None
 
 
