@@ -243,6 +243,28 @@ def test_jit_free_of_recompilation():
     assert sizes() == before
 
 
+def test_batch_sizes_of_a_bucket_share_the_solver():
+    """`steady_gait` solves a batch as the rows of its bucket (`_shooting.gait_rows`: 3 and 4
+    configurations as 4 rows), the padding not solved: the second batch size compiles nothing, and
+    the 3 gaits are bitwise the first 3 of the 4."""
+    from locomotion_jax.gaits import _corrector, _shooting
+
+    omegas = jnp.array([1.5, 2.5, 7.0, 4.5])
+    kw: dict[str, Any] = dict(periods=1, transient=10, dynamics=lj.Exact(dt=0.02))
+    three = steady_gait(lj.Params(omega=omegas[:3], a=0.05), **kw)
+    sizes = lambda: (_shooting._transient_batch._cache_size(), _corrector.correct_batch._cache_size())  # pyright: ignore[reportFunctionMemberAccess]
+    before = sizes()
+    four = steady_gait(lj.Params(omega=omegas, a=0.05), **kw)
+    assert sizes() == before
+    assert np.all(np.asarray(four.converged)) and three.mean_speed.shape == (3,)
+    for name in (f.name for f in dataclasses.fields(three)):
+        a, b = getattr(three, name), getattr(four, name)
+        if isinstance(a, str):
+            assert a == b
+        else:
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b)[:3], err_msg=name)
+
+
 def test_compact_batch_for_the_longer_periods(monkeypatch):
     """With `compact=True` (the exact optimiser's sinusoid sweep) a gait period tried on fewer
     than a quarter of the batch runs on a quarter-size batch, and one tried on more runs as

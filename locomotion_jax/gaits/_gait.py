@@ -110,8 +110,9 @@ def steady_gait(
         f"transient {transient} periods, gait periods {periods}")  # fmt: skip
     # The mechanism states its problem (configurations, physics, starts); the period map and the solver are one.
     problem = mechanism.gait_problem(dynamics, waveform=waveform, contact=contact, start=start, dtype=dtype)
+    # The batch's bucket: the batch sizes of one bucket share the compiled programs.
     gait = shooting.steady_gaits(problem, periods=periods, transient=transient, tol=tol, max_iter=max_iter,
-                                 dynamics=dynamics, contact=contact, say=say)  # fmt: skip
+                                 dynamics=dynamics, contact=contact, say=say, bucket=True)  # fmt: skip
     say(f"done: {int(np.sum(np.asarray(gait.converged)))} of {np.size(np.asarray(gait.converged))} converged")
     return gait
 

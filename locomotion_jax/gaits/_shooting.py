@@ -37,7 +37,7 @@ from .._status import Regime, Status
 from ..dynamics import _engine as engine, _numerics as num, _paper as paper
 from ..dynamics._compile import engine_jit
 from ..dynamics._exact_dynamics import Exact
-from ..dynamics._runs import chain_initial_state, default_max_steps, STICK_TOL
+from ..dynamics._runs import batch_rows, chain_initial_state, default_max_steps, MICRO_BATCH_CPU, STICK_TOL
 from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._chain_array import array_physics, GAIT_ARRAY_FROM, uses_array
@@ -404,14 +404,50 @@ def steady_gaits(
     say=lambda message: None,
     patience: int | None = None,
     compact: bool = False,
+    bucket: bool = False,
 ) -> Gait:
     """The [`Gait`][] of every configuration of `problem` ([`steady_gait`][]'s arguments; `patience` and
-    `compact` as in [`newton`][]: the optimisers' screens)."""
-    best = solve(problem.configs, problem.physics_of, problem.valid, problem.unresolved, problem.shape, problem.omega,
-                 periods=periods, transient=transient, tol=tol, max_iter=max_iter, dynamics=dynamics, contact=contact,
-                 start=problem.start, y_start=problem.y_start, say=say, compact=compact,
-                 patience=patience)  # fmt: skip
+    `compact` as in [`newton`][]: the optimisers' screens). With `bucket`, solved as the rows of the
+    batch's bucket ([`gait_rows`][locomotion_jax.gaits._shooting.gait_rows],
+    [`in_rows`][locomotion_jax.gaits._shooting.in_rows]), so that the batch sizes of a bucket share
+    the compiled programs."""
+    n = int(np.prod(problem.shape, dtype=np.int64))
+    m = gait_rows(n) if bucket else n
+    p = problem if m == n else in_rows(problem, m)
+    best = solve(p.configs, p.physics_of, p.valid, p.unresolved, p.shape, p.omega, periods=periods,
+                 transient=transient, tol=tol, max_iter=max_iter, dynamics=dynamics, contact=contact, start=p.start,
+                 y_start=p.y_start, say=say, compact=compact, patience=patience)  # fmt: skip
+    if m != n:
+        best = jax.tree_util.tree_map(lambda x: x[:n], best)
     return unflatten(as_gait(best, problem.dtype, contact, problem.names), problem.shape)
+
+
+def gait_rows(n: int) -> int:
+    """The rows a batch of `n` steady gaits is solved as: the next power of two up to
+    `_runs.MICRO_BATCH_CPU`, then `_runs.batch_rows`' four sizes per octave. The rows of a gait's
+    solve run in lockstep, a padding row costing about what a real one does (a 3-mass worm's warm
+    solve took 3.2 times as long padded to 16 rows as alone), so small batches are padded less than
+    `batch_rows` pads them."""
+    if n <= 1:
+        return n
+    return 1 << (n - 1).bit_length() if n <= MICRO_BATCH_CPU else batch_rows(n)
+
+
+def in_rows(problem: GaitProblem, m: int) -> GaitProblem:
+    """`problem` as `m` rows (at least its configurations): the last configuration repeated, flagged
+    invalid, so that the padding rows are not solved (their transient stops at once)."""
+    n = int(np.prod(problem.shape, dtype=np.int64))
+    pad = lambda x: jnp.concatenate([x, jnp.repeat(x[-1:], m - n, axis=0)])
+    omega = np.broadcast_to(problem.omega, (n,))
+    unresolved = problem.unresolved
+    return problem._replace(
+        configs=jax.tree_util.tree_map(pad, problem.configs),
+        valid=jnp.concatenate([jnp.asarray(problem.valid), jnp.zeros(m - n, bool)]),
+        unresolved=None if unresolved is None else jnp.concatenate([jnp.asarray(unresolved), jnp.zeros(m - n, bool)]),
+        shape=(m,),
+        omega=np.concatenate([omega, np.repeat(omega[-1:], m - n)]),
+        y_start=None if problem.y_start is None else pad(problem.y_start),
+    )
 
 
 def steady_gait_chain(
