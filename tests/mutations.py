@@ -680,6 +680,18 @@ MUTATIONS = [
         ("tests/test_optimise.py::test_oracles_of_any_step_and_iteration_cap_share_their_programs",),
     ),
     Mutation(
+        "steady_gait_not_bucketed",
+        "steady_gait: the batch solved as it is, not as its bucket's rows (a program per batch size)",
+        "locomotion_jax/gaits/_gait.py",
+        (
+            (
+                "dynamics=dynamics, contact=contact, say=say, bucket=True)",
+                "dynamics=dynamics, contact=contact, say=say)",
+            ),
+        ),
+        ("tests/test_gait.py::test_batch_sizes_of_a_bucket_share_the_solver",),
+    ),
+    Mutation(
         "precompile_skips_the_check",
         "the exact optimiser's background compilation: not the direct-simulation check's program",
         "locomotion_jax/optimisation/_exact.py",
