@@ -37,7 +37,7 @@ from .._status import Regime, Status
 from ..dynamics import _engine as engine, _numerics as num, _paper as paper
 from ..dynamics._compile import engine_jit
 from ..dynamics._exact_dynamics import Exact
-from ..dynamics._runs import batch_rows, chain_initial_state, default_max_steps, MICRO_BATCH_CPU, STICK_TOL
+from ..dynamics._runs import batch_rows, BatchRows, chain_initial_state, default_max_steps, MICRO_BATCH_CPU, STICK_TOL
 from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._chain_array import array_physics, GAIT_ARRAY_FROM, uses_array
@@ -412,12 +412,12 @@ def steady_gaits(
     [`in_rows`][locomotion_jax.gaits._shooting.in_rows]), so that the batch sizes of a bucket share
     the compiled programs."""
     n = int(np.prod(problem.shape, dtype=np.int64))
-    m = gait_rows(n) if bucket else n
-    p = problem if m == n else in_rows(problem, m)
+    rows = BatchRows(n, gait_rows(n) if bucket else n)
+    p = problem if rows.m == n else in_rows(problem, rows)
     best = solve(p.configs, p.physics_of, p.valid, p.unresolved, p.shape, p.omega, periods=periods,
                  transient=transient, tol=tol, max_iter=max_iter, dynamics=dynamics, contact=contact, start=p.start,
                  y_start=p.y_start, say=say, compact=compact, patience=patience)  # fmt: skip
-    if m != n:
+    if rows.m != n:  # host arrays: cut here, not by `BatchRows.cut`'s compiled slice
         best = jax.tree_util.tree_map(lambda x: x[:n], best)
     return unflatten(as_gait(best, problem.dtype, contact, problem.names), problem.shape)
 
@@ -433,20 +433,18 @@ def gait_rows(n: int) -> int:
     return 1 << (n - 1).bit_length() if n <= MICRO_BATCH_CPU else batch_rows(n)
 
 
-def in_rows(problem: GaitProblem, m: int) -> GaitProblem:
-    """`problem` as `m` rows (at least its configurations): the last configuration repeated, flagged
-    invalid, so that the padding rows are not solved (their transient stops at once)."""
-    n = int(np.prod(problem.shape, dtype=np.int64))
-    pad = lambda x: jnp.concatenate([x, jnp.repeat(x[-1:], m - n, axis=0)])
-    omega = np.broadcast_to(problem.omega, (n,))
-    unresolved = problem.unresolved
+def in_rows(problem: GaitProblem, rows: BatchRows) -> GaitProblem:
+    """`problem` as `rows.m` rows (`BatchRows.pad`: the last configuration repeated), the padding
+    flagged invalid, so that it is not solved (its transient stops at once)."""
+    no = lambda mask: jnp.concatenate([jnp.asarray(mask), jnp.zeros(rows.m - rows.n, bool)])
+    omega = np.broadcast_to(problem.omega, (rows.n,))  # host, in float64 whatever JAX's default
     return problem._replace(
-        configs=jax.tree_util.tree_map(pad, problem.configs),
-        valid=jnp.concatenate([jnp.asarray(problem.valid), jnp.zeros(m - n, bool)]),
-        unresolved=None if unresolved is None else jnp.concatenate([jnp.asarray(unresolved), jnp.zeros(m - n, bool)]),
-        shape=(m,),
-        omega=np.concatenate([omega, np.repeat(omega[-1:], m - n)]),
-        y_start=None if problem.y_start is None else pad(problem.y_start),
+        configs=rows.pad(problem.configs),
+        valid=no(problem.valid),
+        unresolved=None if problem.unresolved is None else no(problem.unresolved),
+        shape=(rows.m,),
+        omega=np.concatenate([omega, np.repeat(omega[-1:], rows.m - rows.n)]),
+        y_start=None if problem.y_start is None else rows.pad(problem.y_start),
     )
 
 
