@@ -70,6 +70,8 @@ def _chunk_runner(vals, n_dev, H, dyn, max_steps, micro, z=1e30):
         **{n: _sharding._global_array(np.asarray(vals[n], np.float64), sharding) for n in PARAM_NAMES}, check=False
     )
     zhw = jnp.asarray(np.asarray([z, H, min(25.0, H)], np.float64))
+    if hasattr(dyn, "chunk_program"):  # the loop cap as the sweep hands it over (0: each configuration's own)
+        dyn, max_steps = dyn.chunk_program()
     args = [flat, zhw, dyn, "paper", "paper", max_steps, mesh]
     if "micro_batch" in inspect.signature(_sharding._run_chunk).parameters:
         args.append(micro)

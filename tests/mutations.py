@@ -642,7 +642,7 @@ MUTATIONS = [
         "sweep: a chunk padded to whole SIMD vectors only, not to its size bucket (a program per chunk size)",
         "locomotion_jax/maps/_sharding.py",
         (("    rows = batch_rows(share)\n", "    rows = share\n"),),
-        ("tests/test_sweep.py::test_sweeps_of_other_horizons_and_sizes_share_a_program",),
+        ("tests/test_sweep.py::test_sweeps_of_other_horizons_caps_and_sizes_share_a_program",),
     ),
     Mutation(
         "sweep_cap_static",
@@ -658,7 +658,31 @@ MUTATIONS = [
                 "    cap = int(max_steps)\n",
             ),
         ),
-        ("tests/test_sweep.py::test_sweeps_of_other_horizons_and_sizes_share_a_program",),
+        ("tests/test_sweep.py::test_sweeps_of_other_horizons_caps_and_sizes_share_a_program",),
+    ),
+    Mutation(
+        "sweep_exact_cap_static",
+        "sweep: `Exact.max_steps` compiled into the chunk program (a program per step cap)",
+        "locomotion_jax/dynamics/_exact_dynamics.py",
+        (
+            (
+                "        return dataclasses.replace(self, max_steps=None), self.max_steps or 0\n",
+                "        return self, self.max_steps or 0\n",
+            ),
+        ),
+        ("tests/test_sweep.py::test_sweeps_of_other_horizons_caps_and_sizes_share_a_program",),
+    ),
+    Mutation(
+        "sweep_exact_cap_dropped",
+        "sweep: `Exact.max_steps` left out of the chunk program (each configuration capped by its own span)",
+        "locomotion_jax/dynamics/_exact_dynamics.py",
+        (
+            (
+                "        return dataclasses.replace(self, max_steps=None), self.max_steps or 0\n",
+                "        return dataclasses.replace(self, max_steps=None), 0\n",
+            ),
+        ),
+        ("tests/test_sweep.py::test_sweeps_of_other_horizons_caps_and_sizes_share_a_program",),
     ),
     Mutation(
         "oracle_step_ignored",

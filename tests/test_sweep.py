@@ -202,21 +202,30 @@ def test_cost_order_gives_identical_results_and_compiles_once(monkeypatch):
     assert (cost.status.sel(mu_s=0.7) != lj.Status.INVALID).all()
 
 
-def test_sweeps_of_other_horizons_and_sizes_share_a_program():
+def test_sweeps_of_other_horizons_caps_and_sizes_share_a_program():
     # The step cap is data and a chunk is padded to its bucket (`_sharding.padded_size`): sweeps of
-    # 3 and 10 configurations (chunks of 16) at two horizons (two step caps) trace one chunk program
-    # at most (none where another test of this process compiled the bucket).
+    # 3 and 10 configurations (chunks of 16) at two horizons, and with `Exact(max_steps=...)`, trace one
+    # chunk program at most (none where another test of this process compiled the bucket).
     traces = _sharding.TRACES["run_chunk"]
     kw: dict[str, Any] = {**FAST, "z": 100.0, "horizon": 12.0, "fixed": {"a": 0.05}}  # a horizon of this test's own
     omegas = np.linspace(2.0, 23.0, 10)
     small = lj.sweep({"omega": omegas[:3]}, **kw)
     large = lj.sweep({"omega": omegas}, **kw)
     longer = lj.sweep({"omega": omegas}, **{**kw, "horizon": 14.0})
+    cap = lj.Exact(dt=0.02, max_steps=4000)
+    capped = lj.sweep({"omega": omegas}, **{**kw, "dynamics": cap})
     assert _sharding.TRACES["run_chunk"] - traces <= 1
     assert small.attrs["max_steps"] < longer.attrs["max_steps"]
     for name in _sweep.MEASURE_FIELDS:  # a configuration's result does not depend on its sweep
         np.testing.assert_array_equal(small[name], large[name][:3], err_msg=name)
     assert not np.array_equal(large.mean_speed, longer.mean_speed)  # the horizon reached the engine
+    # The cap reached the engine: each configuration stops at it, as in its own `measure`.
+    assert capped.attrs["max_steps"] == 4000 and (capped.n_steps <= 4000).all()
+    over = (large.n_steps > 4000).values
+    assert over.sum() >= 5 and (capped.status.values[over] == lj.Status.MAX_STEPS).all()
+    np.testing.assert_array_equal(capped.n_steps.values[~over], large.n_steps.values[~over])  # those not capped
+    alone = lj.measure(lj.Params(omega=omegas[-1], a=0.05), 100.0, horizon=12.0, window=5.0, dynamics=cap)
+    assert (int(alone.status), int(alone.n_steps)) == (int(capped.status[-1]), int(capped.n_steps[-1]))
 
 
 def test_cost_order_resumes_with_its_stored_permutation(tmp_path, monkeypatch):

@@ -87,20 +87,27 @@ class AbstractDynamics(eqx.Module):
         Called while the sweep traces its chunk program (once per sweep, inside `jax.jit`),
         so it must be traceable. `batch`: the chunk, sharded along the mesh's one axis (a
         sweep of the paper's model: `Params` with the sinusoid of eq. (13)); `zhw`: the array
-        $(z, \\text{horizon}, \\text{window})$; `max_steps`: `step_cap` of the sweep's longest run,
-        an int32 scalar traced as data, so that sweeps of any horizon share a program
-        (recorded with its results; a dynamics may cap each configuration by its own span
-        instead, as `Exact` does, so that a configuration's result does not depend on its
-        chunk); `lanes`: configurations that each device runs together (`None`: the dynamics'
-        own choice).
+        $(z, \\text{horizon}, \\text{window})$; `max_steps`: the cap of [`chunk_program`][], an
+        int32 scalar traced as data; `lanes`: configurations that each device runs together
+        (`None`: the dynamics' own choice).
         """
+
+    def chunk_program(self) -> tuple["AbstractDynamics", int]:
+        """The dynamics a sweep compiles its chunk program for, and the cap on each configuration's
+        loop iterations that it hands to `measure_chunk` as data (`0`: each configuration's own).
+
+        A dynamics whose loop cap is one of its static settings returns itself without it, and
+        the cap: sweeps of any cap then share one program (`Exact(max_steps=...)`). This default
+        keeps every setting in the program.
+        """
+        return self, 0
 
     @abc.abstractmethod
     def step_cap(self, t_total: float) -> int:
         """The cap on the engine's loop iterations for runs to the time `t_total`.
 
-        A sweep records it for its longest run and hands it to `measure_chunk` (`max_steps`,
-        as data). `0` where the dynamics caps its loops by a setting of its own.
+        A sweep records it for its longest run with its results. `0` where the dynamics caps
+        its loops by a setting of its own.
         """
 
     @abc.abstractmethod

@@ -5,6 +5,7 @@ paper's model runs on the N-body engine (`_paper`), as the chains do (`_simulate
 `_measure`): each a flat batch through the work queue (`_queue`).
 """
 
+import dataclasses
 from typing import Any
 
 import equinox as eqx
@@ -57,11 +58,23 @@ class Exact(AbstractDynamics):
     ) -> dict[str, Array]:
         return self._measure(batch, z, horizon, window, contact, start, None)
 
-    def _measure(self, batch: FlatBatch, z, horizon, window, contact: str, start: str, lanes: int | None):
-        """`measure`, over `lanes` lanes of the work queue (`None`: the engine's choice)."""
+    def _measure(
+        self,
+        batch: FlatBatch,
+        z,
+        horizon,
+        window,
+        contact: str,
+        start: str,
+        lanes: int | None,
+        cap: Array | None = None,
+    ):
+        """`measure`, over `lanes` lanes of the work queue (`None`: the engine's choice), each
+        configuration's loop capped at `cap` (`None`: [`_own_cap`][])."""
+        cap = self._own_cap() if cap is None else cap
         if batch.wave is not None:  # the paper's model: its physics from parameters and waveform (`_paper`)
             z_, h_, w_ = (jnp.asarray(v, batch.dtype) for v in (z, horizon, window))
-            p, wave, axes, cap = batch.mechanism, batch.wave, batch.wave_axes, self._own_cap()
+            p, wave, axes = batch.mechanism, batch.wave, batch.wave_axes
             if lanes:
                 return _paper.measure_batch(
                     p, wave, axes, z_, h_, w_, contact, start, self.dt, cap, lanes, batch.t_start, batch.initial
@@ -75,7 +88,7 @@ class Exact(AbstractDynamics):
         ts = chain.t_start if batch.t_start is None else batch.t_start
         P = engine_physics(chain, contact)  # the chain's layout (`_chain_array`)
         return _measure.measure_batch(
-            P, batch.valid, ts, z, horizon, window, contact, start, self.dt, self._own_cap(), batch.initial
+            P, batch.valid, ts, z, horizon, window, contact, start, self.dt, cap, batch.initial
         )
 
     def measure_chunk(
@@ -88,22 +101,25 @@ class Exact(AbstractDynamics):
         mesh: Mesh,
         lanes: int | None,
     ) -> dict[str, Array]:
-        def local(b: FlatBatch, zhw: Array, dyn: Exact) -> dict[str, Array]:
+        def local(b: FlatBatch, zhw: Array, dyn: Exact, cap: Array) -> dict[str, Array]:
             # A work queue over `lanes` lanes (`_queue`): a lane whose configuration is
-            # done takes the next one. Each configuration's cap comes from its own span
-            # (`_own_cap`), not from the sweep's `max_steps`, so that it is the same as a
-            # `measure` of that configuration alone.
-            return dyn._measure(b, zhw[0], zhw[1], zhw[2], contact, start, lanes or default_lanes(b.size))
+            # done takes the next one. `cap` is `max_steps` or 0, each configuration's own
+            # from its span, as in a `measure` of that configuration alone.
+            return dyn._measure(b, zhw[0], zhw[1], zhw[2], contact, start, lanes or default_lanes(b.size), cap)
 
         # shard_map, not jit's partitioning of a sharded batch: each device's loop ends
         # with its own slowest configuration, not with the slowest of all devices.
         # check_vma=False: the integrator's while_loop carries mix per-shard and
         # replicated values, which the varying-manual-axes checker rejects.
         spec = PartitionSpec(mesh.axis_names[0])
+        replicated = PartitionSpec()
         sharded = jax.shard_map(
-            local, mesh=mesh, in_specs=(spec, PartitionSpec(), PartitionSpec()), out_specs=spec, check_vma=False
+            local, mesh=mesh, in_specs=(spec, replicated, replicated, replicated), out_specs=spec, check_vma=False
         )
-        return sharded(batch, zhw, self)
+        return sharded(batch, zhw, self, max_steps)
+
+    def chunk_program(self) -> tuple["Exact", int]:
+        return dataclasses.replace(self, max_steps=None), self.max_steps or 0
 
     def step_cap(self, t_total: float) -> int:
         return self.max_steps or default_max_steps(t_total, self.dt)

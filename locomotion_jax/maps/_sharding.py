@@ -121,7 +121,6 @@ def dispatch_chunk(
     dynamics: AbstractDynamics,
     contact: str,
     start: str,
-    max_steps: int,
     mesh: Mesh,
     micro_batch: int | None = None,
 ) -> dict[str, jax.Array]:
@@ -134,7 +133,6 @@ def dispatch_chunk(
       invalid, flagged `Status.INVALID` and cost no integration steps).
     - `dtype`: floating dtype of the computation.
     - `z`, `horizon`, `window`, `dynamics`, `contact`, `start`: as in `measure`.
-    - `max_steps`: the step cap of the sweep's longest run (data: sweeps of any horizon share one compilation).
     - `mesh`: from [`batch_mesh`][].
     - `micro_batch`: configurations vmapped together per device (default [`MICRO_BATCH`][]: all).
 
@@ -146,9 +144,7 @@ def dispatch_chunk(
     hopping fields one per mass, `_dataset.HOP_FIELDS`); read them with [`fetch`][].
     """
     values, unresolved = guard_values(values, dtype, dynamics, default_start=True)  # a sweep starts at Params.t_start
-    out = _run_chunk(
-        *_chunk_args(values, dtype, z, horizon, window, dynamics, contact, start, max_steps, mesh, micro_batch)
-    )
+    out = _run_chunk(*_chunk_args(values, dtype, z, horizon, window, dynamics, contact, start, mesh, micro_batch))
     return out if unresolved is None else {**out, UNRESOLVED_KEY: jnp.asarray(unresolved)}
 
 
@@ -161,25 +157,24 @@ def chunk_dtypes(
     dynamics: AbstractDynamics,
     contact: str,
     start: str,
-    max_steps: int,
     mesh: Mesh,
     micro_batch: int | None = None,
 ) -> dict[str, np.dtype]:
     """The dtype of each output of [`dispatch_chunk`][] for the same arguments, computed
     without running it (the trace is kept by `jax.jit`: the chunks do not trace again)."""
-    args = _chunk_args(values, dtype, z, horizon, window, dynamics, contact, start, max_steps, mesh, micro_batch)
+    args = _chunk_args(values, dtype, z, horizon, window, dynamics, contact, start, mesh, micro_batch)
     # `_run_chunk` is the `jax.jit` wrapper (reassigned above), which has `eval_shape`.
     out = _run_chunk.eval_shape(*args)  # pyright: ignore[reportFunctionMemberAccess]
     return {k: np.dtype(v.dtype) for k, v in out.items()}
 
 
-def _chunk_args(values, dtype, z, horizon, window, dynamics, contact, start, max_steps, mesh, micro_batch) -> tuple:
+def _chunk_args(values, dtype, z, horizon, window, dynamics, contact, start, mesh, micro_batch) -> tuple:
     sharding = NamedSharding(mesh, P(BATCH_AXIS))
     fields = {n: _global_array(np.asarray(values[n], dtype), sharding) for n in PARAM_NAMES}
     flat = Params(**fields, check=False)
     zhw = jnp.asarray(np.asarray([z, horizon, window], dtype))
-    dynamics = dynamics.astype(dtype)  # its array settings (`Smoothed.eps`) in the chunk's dtype
-    # Within int32: a tiny stiffness bounds t_start, and so the longest run's cap, far above it.
+    # Its array settings (`Smoothed.eps`) in the chunk's dtype, its loop cap as data: sweeps of any cap share a program.
+    dynamics, max_steps = dynamics.astype(dtype).chunk_program()
     cap = jnp.asarray(min(int(max_steps), np.iinfo(np.int32).max), jnp.int32)
     return flat, zhw, dynamics, contact, start, cap, mesh, micro_batch or MICRO_BATCH or None
 

@@ -82,8 +82,8 @@ def _float_dtype(dtype: Any) -> np.dtype:
 
 
 def _max_steps(grid: Grid, dynamics: AbstractDynamics, horizon: float) -> int:
-    """The step cap of the sweep's longest run, from its largest t_start (handed to the chunk program as data,
-    recorded with the results; `Exact` caps each configuration by its own span instead)."""
+    """The step cap of the sweep's longest run, from its largest t_start, recorded with the results (`Exact`
+    caps each configuration by its own span, or by its `max_steps`)."""
     # t_start depends on k and mhat only (eqs. 11-12): bound it over their combinations.
     k = grid.values.get("k", np.asarray([grid.fixed.get("k", DEFAULTS["k"])]))
     mh = grid.values.get("mhat", np.asarray([grid.fixed.get("mhat", DEFAULTS["mhat"])]))
@@ -387,7 +387,7 @@ def sweep(
             pad = flat >= min((i + 1) * chunk, grid.size)
             # NaN padding is invalid: flagged, skipped by the integrator, and dropped.
             vals = {n: np.where(pad, np.nan, v) for n, v in vals.items()}
-            out = sharding.dispatch_chunk(vals, dt, z, horizon, window, dynamics, contact, start, max_steps, mesh)
+            out = sharding.dispatch_chunk(vals, dt, z, horizon, window, dynamics, contact, start, mesh)
             STATS["chunks_computed"] += 1
             # Dispatch is asynchronous: the devices work on chunk i while the
             # host saves chunk i - 1.

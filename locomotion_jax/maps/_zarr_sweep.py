@@ -71,7 +71,7 @@ def sweep_to_zarr(
         return {n: pad(vals[n]) for n in PARAM_NAMES}, vals
 
     def run(blocks: Blocks, index: int, fn=sharding.dispatch_chunk):
-        return fn(inputs(blocks, index)[0], dtype, z, horizon, window, dynamics, contact, start, max_steps, mesh)
+        return fn(inputs(blocks, index)[0], dtype, z, horizon, window, dynamics, contact, start, mesh)
 
     blocks = Blocks(grid.shape, block_shape(grid.shape, chunk_size))
     # Traced here, in every process, and reused by the chunks (a store made with another
