@@ -685,6 +685,25 @@ MUTATIONS = [
         ("tests/test_sweep.py::test_sweeps_of_other_horizons_caps_and_sizes_share_a_program",),
     ),
     Mutation(
+        "exact_local_retries_every_stage",
+        "the paper's exact optimiser: its local runs retry failed orbits in every stage, not in the last alone",
+        "locomotion_jax/optimisation/_exact.py",
+        (
+            (
+                '        ev.retry = settings.retry == "every" or j == len(iters) - 1\n',
+                "        ev.retry = True\n",
+            ),
+        ),
+        ("tests/test_optimise.py::test_the_exact_local_runs_retry_in_their_last_stage_only",),
+    ),
+    Mutation(
+        "evaluator_retry_ignored",
+        "the optimisers' evaluator retries a failed orbit whatever its `retry`",
+        "locomotion_jax/optimisation/_evaluator.py",
+        (("        if not orb.ok.all() and (rested or self.retry):\n", "        if not orb.ok.all():\n"),),
+        ("tests/test_optimise.py::test_a_batch_without_retry_leaves_its_failures_unsolved",),
+    ),
+    Mutation(
         "oracle_step_ignored",
         "the paper's orbit oracle: its transient at a fixed step, not the oracle's `dt`",
         "locomotion_jax/gaits/_orbit.py",

@@ -555,6 +555,36 @@ def test_a_rested_batch_retries_its_failures_as_period_2_gaits_alone():
     assert rested.calls == [("orbits", [1, 1, 1, 1]), ("orbits", [2, 2, 2, 2])]
 
 
+def test_a_batch_without_retry_leaves_its_failures_unsolved():
+    # With `retry` off (the exact optimiser's local runs before the last stage) a lane whose orbit is
+    # not found from its warm start gets `bad` at once: one oracle call, no transient.
+    theta = np.array([[0.5], [-0.5], [-2.0], [1.0]])
+    warm = {0: 10 + theta[0], 1: 11 + theta[1], 2: 11 + theta[2], 3: 10 + theta[3]}  # 1, 2: not settled
+    outcomes = []
+    for retry in (False, True):
+        oracle = _LadderOracle()
+        ev = _evaluator.Evaluator(oracle, 4, 30, make=lambda lane, th, orb, k: k, bad=lambda lane, th: "bad")
+        ev.y, ev.k, ev.retry = dict(warm), dict.fromkeys(range(4), 1), retry
+        outcomes.append((ev([0, 1, 2, 3], list(theta)), [c[0] for c in oracle.calls]))
+    assert outcomes[0] == ([1, "bad", "bad", 1], ["orbits"])
+    # Retried: after the transient from rest lane 1 has a period-2 gait (lane 2 has none at all).
+    assert outcomes[1] == ([1, 2, "bad", 1], ["orbits", "transient", "orbits", "orbits"])
+
+
+@pytest.mark.parametrize("retry", ["last", "every"])
+def test_the_exact_local_runs_retry_in_their_last_stage_only(tiny_sweep, monkeypatch, retry):
+    # `ExactSettings.retry`: "last" retries a failed orbit in the last stage of the local runs only,
+    # "every" in each. Two short stages of the tiny problem (its programs: no new compilation).
+    stages: list[bool] = []
+    lockstep = _exact_optimise.run_lockstep
+    monkeypatch.setattr(
+        _exact_optimise, "run_lockstep", lambda solvers, ev: stages.append(ev.retry) or lockstep(solvers, ev)
+    )
+    settings = dataclasses.replace(EXACT_TINY, stages=2, max_iter=4, retry=retry)
+    _optimise.optimise(lj.Params(), 0.02, 0.05, settings=settings, sweep=tiny_sweep)
+    assert stages == ([False, True] if retry == "last" else [True, True])
+
+
 @pytest.fixture(scope="module")
 def exact_run(tiny_sweep):
     jax.clear_caches()

@@ -5,7 +5,7 @@ the paper's model (`_exact`, `gaits._orbit.Oracle`) and chains and mechanisms (`
 Each lane (a local solver) keeps its warm start: the section state and gait period of its last
 solved orbit. Where Newton's method fails from it, the lane runs a transient and tries a
 period-1 gait, then a period-2 one (past a period doubling the steady gait repeats every second
-actuation period, and its figures are those of two).
+actuation period, and its figures are those of two); with `retry` off, the point gets no orbit.
 """
 
 from collections.abc import Callable
@@ -24,6 +24,9 @@ class Evaluator:
     - `make(lane, theta, orbit, k)`: the figures a solver gets at a solved orbit (`k`: its gait
       period); `bad(lane, theta)`: what it gets where no orbit is found (default `None`).
     - `report(calls, figures)`: called after each batched call with the number of calls so far (progress).
+
+    `retry` (an attribute, `True` to begin with): the solvers' requests retry where Newton's method
+    fails from a lane's warm start (`solve`); off, such a point gets `bad` at once.
     """
 
     def __init__(self, oracle: Any, lanes: int, transient: int, make: Callable[[int, np.ndarray, Any, int], Any],
@@ -34,6 +37,7 @@ class Evaluator:
         self.y: dict[int, Any] = {}
         self.k: dict[int, int] = {}
         self.calls = 0
+        self.retry = True
 
     def solve(self, theta: np.ndarray, y0: np.ndarray, k: np.ndarray, fresh: np.ndarray | None = None,
               rested: bool = False, **options: Any) -> tuple[Any, np.ndarray]:  # fmt: skip
@@ -43,8 +47,9 @@ class Evaluator:
 
         `rested`: every `y0` already is the state after the transient from rest and every `k` is 1,
         so that the retry's transient and its period-1 solve would repeat the first attempt bit for
-        bit; the retry tries the period-2 gait alone. `options` go to the oracle's `orbits` (the
-        paper's `gradient=False`: the figures alone)."""
+        bit; the retry tries the period-2 gait alone. Without `rested` there is no retry where
+        `self.retry` is off. `options` go to the oracle's `orbits` (the paper's `gradient=False`:
+        the figures alone)."""
         dtype = self.oracle.dtype
         th = jnp.asarray(theta, dtype)
         run = lambda y, kk: jax.tree_util.tree_map(
@@ -52,7 +57,7 @@ class Evaluator:
         )
         orb = run(y0, k)
         k = np.array(k)
-        if not orb.ok.all():
+        if not orb.ok.all() and (rested or self.retry):
             if rested:
                 y1, tries = y0, (2,)
             else:

@@ -428,6 +428,9 @@ def optimise_exact(
     runners: Any = [[] for _ in range(lanes)]
     for j, it in enumerate(iters):
         targets.update({k: v0[k] * (v_target / v0[k]) ** ((j + 1) / len(iters)) for k in range(lanes)})
+        # Before the last stage a trial point whose orbit is not found from the lane's last one is
+        # rejected (the descent backtracks) rather than retried after a transient (`retry`).
+        ev.retry = settings.retry == "every" or j == len(iters) - 1
         solvers = [_local_solver(x[k], shape, bounds, settings, log["local"], it) for k in range(lanes)]
         x, runners = zip(*run_lockstep(solvers, ev))
     say(
