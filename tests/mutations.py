@@ -685,6 +685,13 @@ MUTATIONS = [
         ("tests/test_sweep.py::test_sweeps_of_other_horizons_caps_and_sizes_share_a_program",),
     ),
     Mutation(
+        "sweep_inner_cap_ignored",
+        "sweep: an `Exact` called by another dynamics' `measure_chunk` drops its own `max_steps` for the sweep's 0",
+        "locomotion_jax/dynamics/_exact_dynamics.py",
+        (("            own = cap if dyn.max_steps is None else None\n", "            own = cap\n"),),
+        ("tests/test_dynamics_extension.py::test_sweep",),
+    ),
+    Mutation(
         "exact_local_retries_every_stage",
         "the paper's exact optimiser: its local runs retry failed orbits in every stage, not in the last alone",
         "locomotion_jax/optimisation/_exact.py",

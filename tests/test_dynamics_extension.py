@@ -87,6 +87,13 @@ def test_sweep():
     # The sweep's measurements are `measure`'s.
     alone = lj.measure(PARAMS, z=1.0, horizon=200.0, dynamics=HalfStep())
     _close(new["tau_z"].values, alone.tau_z, rtol=1e-12)
+    # An inner `Exact(max_steps=...)` caps the sweep as it caps `measure` (the class hands the
+    # sweep no cap of its own: `AbstractDynamics.chunk_program`'s default).
+    capped = HalfStep(inner=lj.Exact(dt=0.005, max_steps=3000))
+    new, alone = lj.sweep(axes, **kw, dynamics=capped), lj.measure(PARAMS, z=1.0, horizon=200.0, dynamics=capped)
+    assert (np.asarray(alone.status) == lj.Status.MAX_STEPS).all()
+    np.testing.assert_array_equal(new["n_steps"].values, alone.n_steps)
+    np.testing.assert_array_equal(new["status"].values, alone.status)
 
 
 def test_every_method_is_required():

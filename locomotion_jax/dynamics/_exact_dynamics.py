@@ -103,9 +103,11 @@ class Exact(AbstractDynamics):
     ) -> dict[str, Array]:
         def local(b: FlatBatch, zhw: Array, dyn: Exact, cap: Array) -> dict[str, Array]:
             # A work queue over `lanes` lanes (`_queue`): a lane whose configuration is
-            # done takes the next one. `cap` is `max_steps` or 0, each configuration's own
-            # from its span, as in a `measure` of that configuration alone.
-            return dyn._measure(b, zhw[0], zhw[1], zhw[2], contact, start, lanes or default_lanes(b.size), cap)
+            # done takes the next one. `cap` is the sweep's `max_steps` (`chunk_program`) or 0,
+            # each configuration's own from its span, as in a `measure` of that configuration
+            # alone; a dynamics that kept its `max_steps` (called by another's `measure_chunk`) caps by it.
+            own = cap if dyn.max_steps is None else None
+            return dyn._measure(b, zhw[0], zhw[1], zhw[2], contact, start, lanes or default_lanes(b.size), own)
 
         # shard_map, not jit's partitioning of a sharded batch: each device's loop ends
         # with its own slowest configuration, not with the slowest of all devices.
