@@ -704,6 +704,51 @@ MUTATIONS = [
         ("tests/test_optimise.py::test_the_exact_local_runs_retry_in_their_last_stage_only",),
     ),
     Mutation(
+        "given_start_ignored",
+        "the chain optimiser: a given start does not take the last lane (the screen's start keeps it)",
+        "locomotion_jax/optimisation/_chain.py",
+        (
+            (
+                "        starts[-1] = local.given_start(start, S, H, M if spline else 0, a_max, lo, hi, "
+                "sc.gaits.y[rows.pop()])\n",
+                "        local.check_start(start, S)\n",
+            ),
+        ),
+        ("tests/test_optimise.py::test_a_given_start_is_refined_in_the_last_lane_and_is_a_candidate",),
+    ),
+    Mutation(
+        "given_start_not_a_candidate",
+        "the chain optimiser: a given start is refined but not verified as a candidate itself",
+        "locomotion_jax/optimisation/_chain.py",
+        (
+            (
+                "    given = [] if start is None else [local.decision(starts[-1], a_max, M if spline else 0)]\n",
+                "    given = []\n",
+            ),
+        ),
+        ("tests/test_optimise.py::test_a_given_start_is_refined_in_the_last_lane_and_is_a_candidate",),
+    ),
+    Mutation(
+        "given_start_time_not_moved",
+        "a given start's Fourier series is not moved in time: its first signal's A_1, which the decision "
+        "vector leaves out, is dropped",
+        "locomotion_jax/optimisation/_element_local.py",
+        (
+            (
+                "    cos, sin = cos * np.cos(n * d) + sin * np.sin(n * d), sin * np.cos(n * d) - cos * np.sin(n * d)\n",
+                "",
+            ),
+        ),
+        ("tests/test_optimise.py::test_a_given_start_is_refitted_to_the_searchs_family",),
+    ),
+    Mutation(
+        "given_start_not_rescaled",
+        "a given start above the stroke bound is not rescaled onto it",
+        "locomotion_jax/optimisation/_element_local.py",
+        (("    scale = 1 / np.maximum(strokes(cos, sin) / a_max, 1.0)\n", "    scale = np.ones(len(cos))\n"),),
+        ("tests/test_optimise.py::test_a_given_start_is_refitted_to_the_searchs_family",),
+    ),
+    Mutation(
         "evaluator_retry_ignored",
         "the optimisers' evaluator retries a failed orbit whatever its `retry`",
         "locomotion_jax/optimisation/_evaluator.py",

@@ -1046,6 +1046,74 @@ def test_optimum_verifies_on_steady_gait_and_simulation(opt3):
     assert opt3.min_normal >= opt3.margin
 
 
+def _optimum_of(cos: np.ndarray, sin: np.ndarray, control: np.ndarray | None, omega: float) -> lj.ChainOptimum:
+    """A chain optimum that holds these signals (its other fields are not read by `given_start`)."""
+    opt = object.__new__(lj.ChainOptimum)
+    for name, value in dict(cos=cos, sin=sin, control=control, omega=omega).items():
+        object.__setattr__(opt, name, value)  # a frozen dataclass
+    return opt
+
+
+def test_a_given_start_is_refitted_to_the_searchs_family():
+    """`_element_local.given_start`: a Fourier start moved in time so that its first signal's A_1
+    is 0 (the same signals at shifted phases), padded with zero harmonics, rescaled onto the stroke
+    bound, interpolated by a spline at the knots; a spline start of as many knots kept, and its
+    first harmonic the B-spline's transfer function sinc^4 times that of its control values."""
+    from locomotion_jax.optimisation._element_local import given_start, strokes
+
+    cos, sin = np.array([[0.03, 0.01], [-0.02, 0.0]]), np.array([[0.04, -0.01], [0.01, 0.02]])
+    st = given_start(_optimum_of(cos, sin, None, 2.0), 2, 3, 0, 0.1, 0.5, 4.0, np.ones(5))
+    assert st.fresh and st.control is None and st.y.shape == (5,) and not st.y.any() and st.omega == 2.0
+    assert st.cos.shape == (2, 3) and abs(st.cos[0, 0]) < 1e-15 and st.sin[0, 0] > 0
+    assert np.abs(st.cos[:, 2]).max() < 1e-15 and np.abs(st.sin[:, 2]).max() < 1e-15  # the DFT's rounding
+    phase = np.linspace(0, 2 * np.pi, 7, endpoint=False)
+    signal = lambda c, s, ph: (
+        c @ np.cos(np.outer(np.arange(1, c.shape[1] + 1), ph)) + s @ np.sin(np.outer(np.arange(1, c.shape[1] + 1), ph))
+    )
+    shift = math.atan2(-cos[0, 0], sin[0, 0])  # the start's phases that the new time origin reads
+    np.testing.assert_allclose(signal(st.cos, st.sin, phase), signal(cos, sin, phase + shift), atol=1e-15)
+    # Above the bound: rescaled onto it, signal by signal; the frequency clipped to the range.
+    big = given_start(_optimum_of(10 * cos, 10 * sin, None, 9.0), 2, 2, 0, 0.1, 0.5, 4.0, np.ones(5))
+    np.testing.assert_allclose(strokes(big.cos, big.sin), 0.1, rtol=1e-12)
+    assert big.omega == 4.0
+    # A spline search: the spline that interpolates the signals at its knots.
+    sp = given_start(_optimum_of(cos, sin, None, 2.0), 2, 1, 8, 0.1, 0.5, 4.0, np.ones(5))
+    assert sp.control is not None and sp.control.shape == (2, 8)
+    knots = 2 * np.pi * np.arange(8) / 8
+    at_knots = (np.roll(sp.control, 1, axis=1) + 4 * sp.control + np.roll(sp.control, -1, axis=1)) / 6
+    np.testing.assert_allclose(at_knots, signal(cos, sin, knots), atol=1e-15)
+    # A spline start: kept as it is by a search of as many knots; its Fourier series' first harmonic.
+    M = 8
+    control = np.stack([0.05 * np.sin(2 * np.pi * np.arange(M) / M), 0.02 * np.cos(2 * np.pi * np.arange(M) / M)])
+    spline = _optimum_of(np.zeros((2, 0)), np.zeros((2, 0)), control, 2.0)
+    again = given_start(spline, 2, 1, M, 0.1, 0.5, 4.0, np.ones(5))
+    assert again.control is not None
+    np.testing.assert_allclose(again.control, control, rtol=0, atol=1e-15)
+    f = given_start(spline, 2, 2, 0, 0.1, 0.5, 4.0, np.ones(5))
+    sinc4 = (math.sin(math.pi / M) / (math.pi / M)) ** 4
+    # To the sampling's aliasing: harmonic 1023 of the spline folds onto 1 on 1,024 samples, (1/402)^4.
+    np.testing.assert_allclose(np.hypot(f.cos[:, 0], f.sin[:, 0]), [0.05 * sinc4, 0.02 * sinc4], rtol=1e-10)
+    assert np.all(np.hypot(f.cos[:, 1], f.sin[:, 1]) < 1e-15)  # harmonic 2 is absent from this spline
+    with pytest.raises(ValueError, match="start: an optimum of 2 actuated signals; this search has 3"):
+        given_start(spline, 3, 2, 0, 0.1, 0.5, 4.0, np.ones(5))
+    with pytest.raises(TypeError, match="start must be the result of an earlier optimise call"):
+        given_start(lj.SpringFourier(cos, sin, 2.0), 2, 2, 0, 0.1, 0.5, 4.0, np.ones(5))
+
+
+@CHAIN_OPTIMISE
+def test_a_given_start_is_refined_in_the_last_lane_and_is_a_candidate(opt3):
+    """Continuation: `start=` an optimum at the same requirement. Its gait is the optimum's (a shift
+    of the time origin changes no gait), a local run starts at it, and nothing costlier is reported."""
+    again = lj.optimise(worm(), 0.05, A_MAX, harmonics=2, settings=SETTINGS, start=opt3)
+    given = [c for c in again.candidates if c["candidate"] == "given start"]
+    assert len(given) == 1 and given[0]["feasible_exact"]
+    assert given[0]["cost_of_transport_exact"] == pytest.approx(opt3.cost_of_transport_exact, rel=1e-10)
+    first = [run["trace"][0]["cot"] for run in again.history[0]["local"] if run["trace"]]
+    assert any(c == pytest.approx(opt3.cost_of_transport_exact, rel=1e-9) for c in first)
+    assert len(again.history[0]["starts"]) == SETTINGS.local - 1  # the screen's starts: one lane fewer
+    assert again.feasible_exact and again.cost_of_transport_exact <= opt3.cost_of_transport_exact * (1 + 1e-12)
+
+
 @CHAIN_OPTIMISE
 def test_stroke_bound_holds_exactly(opt3):
     phase = np.linspace(0, 2 * np.pi, 400_001)
@@ -1172,6 +1240,7 @@ def test_two_masses_agree_with_the_two_mass_model():
         (dict(chain=lj.Chain(masses=[1.0, 1.0, 1.0], d=0.5), a_max=0.07), "lifts a mass off at rest"),
         (dict(chain=lj.Chain.stack([worm(), worm()])), "single configuration"),
         (dict(chain=lj.Chain(masses=[1.0] * 3, actuator=lj.InternalForce())), "RestLength"),
+        (dict(start=_optimum_of(np.zeros((1, 2)), np.zeros((1, 2)), None, 1.0)), "start: an optimum of 1 actuated"),
     ],
 )
 @CHAIN_OPTIMISE
@@ -1511,6 +1580,12 @@ def test_mechanism_optimise_bad_input():
         lj.optimise(_capsule(lj.Sinusoid(a=jnp.array([0.3, 0.4]), omega=3.0, lbar=0.0)), v_min=0.01, a_max=0.5)
     with pytest.raises(ValueError, match="exact method only"):
         lj.optimise(_capsule(), v_min=0.01, a_max=0.5, method="smoothed")
+    # A start is checked before the screen: an optimum of as many signals, nothing else.
+    two = _optimum_of(np.zeros((2, 1)), np.zeros((2, 1)), None, 1.0)
+    with pytest.raises(ValueError, match="start: an optimum of 2 actuated signals; this search has 1"):
+        lj.optimise(_capsule(), v_min=0.01, a_max=0.5, start=two)
+    with pytest.raises(TypeError, match="start must be the result of an earlier optimise call"):
+        lj.optimise(_capsule(), v_min=0.01, a_max=0.5, start=lj.Sinusoid(a=0.3, omega=3.0, lbar=0.0))
 
 
 def _reference_gait(opt):
@@ -1579,6 +1654,23 @@ def test_spline_optimum_of_the_isotropic_capsule(spline_optimum):
     print(f"spline optimum: speed {opt.mean_speed_exact:.10f} (reference {speed:.10f}), cost "
           f"{opt.cost_of_transport_exact:.10f} (reference {cost:.10f}, floor {FLOOR}); diff {err:.1e}")  # fmt: skip
     assert err < 1e-4
+
+
+@MECHANISM_OPTIMISE
+@pytest.mark.slow
+def test_a_mechanism_search_continues_from_a_given_start(spline_optimum):
+    """`start=` the spline optimum, in a search of as many knots with one local lane: the lane starts
+    at its control values, whose steady gait is the optimum's, and nothing costlier is reported."""
+    settings = lj.MechanismOptimiseSettings(**SPLINE)
+    opt = lj.optimise(_iso_capsule(np.zeros(1), np.zeros(1)), v_min=V_ISO, a_max=F_MAX, omega=OMEGA,
+                      settings=settings, start=spline_optimum)  # fmt: skip
+    given = [c for c in opt.candidates if c["candidate"] == "given start"]
+    assert len(given) == 1 and given[0]["feasible_exact"]
+    assert given[0]["cost_of_transport_exact"] == pytest.approx(spline_optimum.cost_of_transport_exact, rel=1e-12)
+    (run,) = opt.history[0]["local"]
+    assert run["trace"][0]["cot"] == pytest.approx(spline_optimum.cost_of_transport_exact, rel=1e-9)
+    assert opt.history[0]["starts"] == []  # one lane: the given start's
+    assert opt.feasible_exact and opt.cost_of_transport_exact <= spline_optimum.cost_of_transport_exact * (1 + 1e-12)
 
 
 @MECHANISM_OPTIMISE

@@ -89,10 +89,12 @@ def check_inputs(chain: Any, v_min: Any, a_max: Any, direction: Any, harmonics: 
 
 
 def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int = 1, omega: float | None = None,
-                   harmonics: int | None = None,
-                   settings: ChainOptimiseSettings | None = None) -> ChainOptimum:  # fmt: skip
+                   harmonics: int | None = None, settings: ChainOptimiseSettings | None = None,
+                   start: Any = None) -> ChainOptimum:  # fmt: skip
     """`optimise(chain, v_min, a_max, ...)`: the method of the module docstring (arguments as there;
-    `harmonics`: the Fourier series' length, default 3; a spline search refuses one)."""
+    `harmonics`: the Fourier series' length, default 3; a spline search refuses one). `start`: an
+    earlier chain optimum ([`_element_local.given_start`][]) that takes the last local lane and is
+    a candidate itself."""
     settings = ChainOptimiseSettings() if settings is None else settings
     if not isinstance(settings, ChainOptimiseSettings):
         raise TypeError(f"settings for a Chain must be a ChainOptimiseSettings, got {type(settings).__name__}.")
@@ -103,6 +105,7 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     say = reporter(settings.verbose)
     base = chain.broadcast()
     S, H, M = base.n_masses - 1, int(H), settings.knots
+    local.check_start(start, S)
     lo, hi = screen.frequency_range(base, omega, settings)
     free = hi > lo
     if spline:
@@ -130,11 +133,15 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
         cos, sin = screen.wave_coefficients(sc.a[i : i + 1], sc.phi[i : i + 1], S, H)
         starts.append(local.Start(cos[0], sin[0], float(sc.omega[i]), sc.gaits.y[i], int(sc.gaits.k[i]),
                                   float(sc.gaits.cost[i])))  # fmt: skip
+    if start is not None:
+        starts[-1] = local.given_start(start, S, H, M if spline else 0, a_max, lo, hi, sc.gaits.y[rows.pop()])
     xs, ev, log = local.refine(base, starts, a_max, speed, direction, lo, hi, M if spline else 0, search, say)
 
     # 3. Verification of the candidates: the refined actuations, rescaled onto the exact
     # stroke limit (what the line search's tolerance let through), and the baseline wave.
-    names = ["travelling wave"] + [f"local {lane}" for lane in range(len(xs))]
+    # A given start is a candidate itself, as its lane's result is.
+    given = [] if start is None else [local.decision(starts[-1], a_max, M if spline else 0)]
+    names = ["travelling wave"] + [f"local {lane}" for lane in range(len(xs))] + ["given start"] * len(given)
     cos_b, sin_b = screen.wave_coefficients(sc.a[best : best + 1], sc.phi[best : best + 1], S, H)
     say(f"verifying {len(names)} candidates on their steady gaits...")
     solve = lambda cos, sin, om, control=None: screen.solve(base, cos, sin, om, settings, control=control)._asdict()
@@ -142,8 +149,8 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     if spline and search is not settings:  # the screen's row is at the search step
         row = solve(cos_b, sin_b, sc.omega[best : best + 1])
     eps = float(jnp.finfo(base.dtype).eps)
-    v = local.verify(xs, (cos_b[0], sin_b[0], float(sc.omega[best])), row, names, solve, a_max, speed, direction, H,
-                     M if spline else 0, eps)  # fmt: skip
+    v = local.verify(xs + given, (cos_b[0], sin_b[0], float(sc.omega[best])), row, names, solve, a_max, speed,
+                     direction, H, M if spline else 0, eps)  # fmt: skip
     g, om, strokes, k, feasible, table = screen.Gaits(**v.gaits), v.omega, v.strokes, v.k, v.feasible, v.table
     ok_speed, ok_stroke = v.ok_speed, v.ok_stroke
     if search is not settings:

@@ -27,6 +27,7 @@ import numpy as np
 from ..dynamics._exact_dynamics import Exact
 from ..gaits import _element_orbit as orbit
 from ..gaits._orbit import PATIENCE
+from ..model._waveform import Spline
 from ..run._resolution import refuse_search, resolved_step
 from ._descent import local_step
 from ._evaluator import Evaluator
@@ -157,7 +158,12 @@ def family_harmonics(settings: Any, harmonics: int | None, default: int) -> int:
 class Start(NamedTuple):
     """A start of the refinement: the Fourier coefficients `(S, H)` of every actuated signal
     (absolute units) and the base frequency of a baseline actuation, and its steady gait (the
-    section state `y`, the gait period `k` in actuation periods, the cost of transport)."""
+    section state `y`, the gait period `k` in actuation periods, the cost of transport).
+
+    A spline search starts from `control` `(S, knots)` (absolute units) where one is given, else
+    from the splines that interpolate the Fourier signals. `fresh`: the steady gait is not known
+    (`y` only gives the state's shape); the lane's first warm start is the state after a transient
+    of `settings.transient` periods from rest."""
 
     cos: np.ndarray
     sin: np.ndarray
@@ -165,6 +171,76 @@ class Start(NamedTuple):
     y: np.ndarray
     k: int
     cost: float
+    control: np.ndarray | None = None
+    fresh: bool = False
+
+
+def decision(start: Start, a_max: float, knots: int) -> np.ndarray:
+    """The decision vector of `start` in a search of Fourier series (`knots` 0) or of splines of
+    `knots` control values."""
+    if not knots:
+        return pack(start.cos / a_max, start.sin / a_max, start.omega)
+    if start.control is not None:
+        return spline_project(np.r_[np.ravel(start.control) / a_max, math.log(start.omega)], -np.inf, np.inf)
+    return spline_start(start.cos, start.sin, start.omega, a_max, knots)
+
+
+def check_start(start: Any, S: int) -> None:
+    """Check a chain's or a mechanism's `start=` (`None`, or an optimum of `S` actuated signals).
+
+    **Raises:** `TypeError` where `start` is not a chain's or a mechanism's optimum; `ValueError`
+    where its number of signals is not `S`."""
+    from ._element_optimum import ElementOptimum
+
+    if start is None:
+        return
+    if not isinstance(start, ElementOptimum):
+        raise TypeError(
+            "start must be the result of an earlier optimise call of a Chain or a Mechanism (a ChainOptimum or "
+            f"MechanismOptimum) with the same actuated elements, got {type(start).__name__}."
+        )
+    if start.cos.shape[0] != S:
+        raise ValueError(f"start: an optimum of {start.cos.shape[0]} actuated signals; this search has {S}.")
+
+
+def given_start(start: Any, S: int, harmonics: int, knots: int, a_max: float, lo: float, hi: float,
+                state: np.ndarray) -> Start:  # fmt: skip
+    """The [`Start`][] of `start` (continuation: an earlier chain's or mechanism's optimum, at a
+    nearby requirement or of a nearby mechanism), `fresh` (`state`: a section state of the search's
+    shape), its signals in this search's family, within its bounds:
+
+    - `cos`, `sin` `(S, harmonics)`, absolute units: the first `harmonics` harmonics of its signals
+      (exact for a Fourier series of at most as many), the time origin moved so that the first
+      signal's first cosine coefficient is 0 (the decision vector leaves it out; the gait is the
+      same), each signal rescaled radially onto the stroke bound `a_max` where it exceeds it;
+    - `control` `(S, knots)` for a spline search (`knots > 0`): the splines that interpolate its
+      signals at the knots (the same control values for a spline of as many knots), clipped to
+      the bound; `None` for a Fourier search;
+    - its base frequency clipped to `[lo, hi]`.
+
+    **Raises:** as [`check_start`][]."""
+    check_start(start, S)
+    omega = float(np.clip(start.omega, lo, hi))
+    grid = 64 * max(knots, 16, 0 if start.control is None else start.control.shape[-1])
+    phase = np.arange(grid) * 2 * np.pi / grid
+    if start.control is None:
+        n = np.arange(1, start.cos.shape[-1] + 1)
+        values = start.cos @ np.cos(np.outer(n, phase)) + start.sin @ np.sin(np.outer(n, phase))
+    else:
+        spline = SplineShape(knots=start.control.shape[-1])
+        values = np.stack([spline.sample(Spline(jnp.asarray(c), 1.0, 0.0), grid) for c in start.control])
+    c = np.fft.rfft(values, axis=-1) / grid
+    cos, sin = 2 * c.real[:, 1 : harmonics + 1], -2 * c.imag[:, 1 : harmonics + 1]
+    n = np.arange(1, harmonics + 1)
+    d = math.atan2(-cos[0, 0], sin[0, 0])  # the time shift that zeroes the first signal's A_1
+    cos, sin = cos * np.cos(n * d) + sin * np.sin(n * d), sin * np.cos(n * d) - cos * np.sin(n * d)
+    scale = 1 / np.maximum(strokes(cos, sin) / a_max, 1.0)
+    cos, sin = cos * scale[:, None], sin * scale[:, None]
+    control = None
+    if knots:
+        fit = SplineShape(knots=knots)
+        control = a_max * np.stack([fit.fit(v / a_max, omega)[:-1] for v in values])
+    return Start(cos, sin, omega, np.zeros_like(state), 1, math.nan, control, fresh=True)
 
 
 def refine(base: Any, starts: list[Start], a_max: float, v_min: float, direction: int, lo: float, hi: float,
@@ -190,13 +266,15 @@ def refine(base: Any, starts: list[Start], a_max: float, v_min: float, direction
     free = hi > lo
     make = lambda lane, th, orb, k: Figures(th, orb, v_target, k, direction, settings.margin, free)
     ev = Evaluator(oracle, settings.local, settings.transient, make)
-    x0 = []
+    x0 = [decision(st, a_max, knots) for st in starts]
     for lane, st in enumerate(starts):
-        if knots:
-            x0.append(spline_start(st.cos, st.sin, st.omega, a_max, knots))
-        else:
-            x0.append(pack(st.cos / a_max, st.sin / a_max, st.omega))
         ev.y[lane], ev.k[lane] = st.y, int(max(st.k, 1))
+    fresh = np.array([st.fresh for st in starts])
+    if fresh.any():
+        y = oracle.transient(jnp.asarray(np.stack(x0), dtype), jnp.asarray(np.stack([st.y for st in starts]), dtype),
+                             jnp.asarray(fresh), jnp.asarray(settings.transient, jnp.int32))  # fmt: skip
+        for lane in np.flatnonzero(fresh):
+            ev.y[int(lane)], ev.k[int(lane)] = np.asarray(y[lane]), 1
     bounds = (math.log(lo), math.log(hi))
     if knots:
         proj = lambda x: spline_project(x, *bounds)

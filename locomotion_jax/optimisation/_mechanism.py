@@ -119,12 +119,14 @@ def check_inputs(mech: Any, v_min: Any, a_max: Any, direction: Any, harmonics: A
 
 
 def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction: int = 1,
-                       omega: float | None = None, harmonics: int | None = None,
-                       settings: Any = None) -> MechanismOptimum:  # fmt: skip
+                       omega: float | None = None, harmonics: int | None = None, settings: Any = None,
+                       start: Any = None) -> MechanismOptimum:  # fmt: skip
     """`optimise(mechanism, v_min, a_max, ...)`: the method of the module docstring. `settings`: a
     `MechanismOptimiseSettings`, a `ChainOptimiseSettings` (its shared fields) or `None` (the defaults);
     anything else is refused here with a `TypeError` naming both. `harmonics`: the Fourier series'
-    length (default 2); a spline search (`settings.shape == "spline"`) refuses one."""
+    length (default 2); a spline search (`settings.shape == "spline"`) refuses one. `start`: an
+    earlier mechanism optimum ([`_element_local.given_start`][]) that takes the last local lane and
+    is a candidate itself."""
     if isinstance(settings, ChainOptimiseSettings):
         settings = MechanismOptimiseSettings.from_chain(settings)
     settings = MechanismOptimiseSettings() if settings is None else settings
@@ -138,6 +140,7 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
     say = reporter(settings.verbose)
     base = mech.broadcast()
     S, H, M = len(elements), int(H), settings.knots
+    local.check_start(start, S)
     if omega is not None:
         lo = hi = float(omega)
     else:
@@ -171,10 +174,13 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
     rows = [int(i) for i in order if sc["ok"][i]][: settings.local] or [best]
     rows += rows[:1] * (settings.local - len(rows))
     starts = [local.Start(cos[i], sin[i], float(W[i]), sc["y"][i], int(sc["k"][i]), float(sc["cost"][i])) for i in rows]
+    if start is not None:
+        starts[-1] = local.given_start(start, S, H, M if spline else 0, a_max, lo, hi, sc["y"][rows.pop()])
     xs, ev, log = local.refine(base, starts, a_max, v_min, direction, lo, hi, M if spline else 0, search, say)
 
-    # 3. Verification: the baseline and the refined actuations (on the exact bound).
-    names = ["sinusoid"] + [f"local {lane}" for lane in range(len(xs))]
+    # 3. Verification: the baseline, the refined actuations (on the exact bound) and a given start.
+    given = [] if start is None else [local.decision(starts[-1], a_max, M if spline else 0)]
+    names = ["sinusoid"] + [f"local {lane}" for lane in range(len(xs))] + ["given start"] * len(given)
     say(f"verifying {len(names)} candidates on their steady gaits...")
 
     def solve(cos, sin, om, control=None):
@@ -184,8 +190,8 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
     if spline and search is not settings:  # the screen's row is at the search step
         row = solve(cos[best : best + 1], sin[best : best + 1], W[best : best + 1])
     eps = float(jnp.finfo(base.dtype).eps)
-    v = local.verify(xs, (cos[best], sin[best], float(W[best])), row, names, solve, a_max, v_min, direction, H,
-                     M if spline else 0, eps)  # fmt: skip
+    v = local.verify(xs + given, (cos[best], sin[best], float(W[best])), row, names, solve, a_max, v_min,
+                     direction, H, M if spline else 0, eps)  # fmt: skip
     g, om_c, strokes, k, feasible, table = v.gaits, v.omega, v.strokes, v.k, v.feasible, v.table
     if search is not settings:
         sinusoid = local.verified_baseline(row_of(best), v)

@@ -354,7 +354,11 @@ def optimise(
       `params` and `a_max` (the baseline); computed if `None`.
     - `start`: exact method: a waveform to start from besides the built-in starts (an
       [`Optimum`][] or any waveform, e.g. the optimum at a nearby `v_min`: continuation); it
-      is always refined, and is a candidate itself.
+      is always refined, and is a candidate itself. For a `Chain` or a `Mechanism`: an earlier
+      [`ChainOptimum`][] or [`MechanismOptimum`][] with as many actuated signals (at a nearby
+      requirement, or of a nearby mechanism; either family, refitted to this search's), refined
+      in the last local lane from its own transient and a candidate itself. With `local=1` it is
+      the only local run.
 
     **Returns:** an [`Optimum`][]: coefficients, exact figures (whole periods of the steady
     gait), constraint checks on the exact model and the best sinusoid for comparison.
@@ -455,10 +459,10 @@ def mechanism_optimum(mech: Any, v_min, a_max, method, direction, omega, harmoni
 
     if not isinstance(mech, Mechanism):
         raise NotImplementedError(f"optimise takes Params, a Chain or a Mechanism, got {type(mech).__name__}.")
-    if method != "exact" or sweep is not None or start is not None:
-        raise ValueError("a Mechanism is optimised by the exact method only, without sweep= or start=.")
+    if method != "exact" or sweep is not None:
+        raise ValueError("a Mechanism is optimised by the exact method only, without sweep=.")
     return optimise_mechanism(mech, v_min, a_max, direction=1 if direction is None else direction, omega=omega,
-                              harmonics=harmonics, settings=settings)  # fmt: skip
+                              harmonics=harmonics, settings=settings, start=start)  # fmt: skip
 
 
 def chain_optimum(chain: Chain, v_min, a_max, method, direction, omega, harmonics, settings, sweep, start):
@@ -468,10 +472,10 @@ def chain_optimum(chain: Chain, v_min, a_max, method, direction, omega, harmonic
 
     if method != "exact":
         raise ValueError(f"method: a Chain is optimised by the exact method only (method='exact'), got {method!r}.")
-    if sweep is not None or start is not None:
-        raise ValueError("sweep= and start= apply to Params; a Chain's baseline is its own travelling-wave screen.")
+    if sweep is not None:
+        raise ValueError("sweep= applies to Params; a Chain's baseline is its own travelling-wave screen.")
     return optimise_chain(chain, v_min, a_max, direction=1 if direction is None else direction, omega=omega,
-                          harmonics=harmonics, settings=settings)  # fmt: skip
+                          harmonics=harmonics, settings=settings, start=start)  # fmt: skip
 
 
 def _baseline(params, a_max, speed, direction, sweep, refine: bool, dt: float) -> dict | None:
