@@ -1096,15 +1096,27 @@ def test_a_given_start_is_refitted_to_the_searchs_family():
     assert np.all(np.hypot(f.cos[:, 1], f.sin[:, 1]) < 1e-15)  # harmonic 2 is absent from this spline
     with pytest.raises(ValueError, match="start: an optimum of 2 actuated signals; this search has 3"):
         given_start(spline, 3, 2, 0, 0.1, 0.5, 4.0, np.ones(5))
+    # Its to_dict(), read back from JSON, is the same start.
+    for opt, harmonics, knots in ((spline, 2, 0), (spline, 1, 8), (_optimum_of(cos, sin, None, 2.0), 3, 0)):
+        control = None if opt.control is None else opt.control.tolist()
+        fields = dict(cos=opt.cos.tolist(), sin=opt.sin.tolist(), omega=opt.omega, control=control)
+        record = json.loads(json.dumps(fields))
+        a, b = (given_start(x, 2, harmonics, knots, 0.1, 0.5, 4.0, np.ones(5)) for x in (opt, record))
+        for x, y in zip(a, b):
+            assert (x is None and y is None) or np.array_equal(np.asarray(x), np.asarray(y), equal_nan=True)  # cost NaN
+    paper = dict(cos=[0.0, 0.01], sin=[0.02, 0.0], control=None, omega=2.0)
+    with pytest.raises(ValueError, match="a result of the paper's model takes its own start="):
+        given_start(paper, 2, 2, 0, 0.1, 0.5, 4.0, np.ones(5))
     with pytest.raises(TypeError, match="start must be the result of an earlier optimise call"):
         given_start(lj.SpringFourier(cos, sin, 2.0), 2, 2, 0, 0.1, 0.5, 4.0, np.ones(5))
 
 
 @CHAIN_OPTIMISE
 def test_a_given_start_is_refined_in_the_last_lane_and_is_a_candidate(opt3):
-    """Continuation: `start=` an optimum at the same requirement. Its gait is the optimum's (a shift
-    of the time origin changes no gait), a local run starts at it, and nothing costlier is reported."""
-    again = lj.optimise(worm(), 0.05, A_MAX, harmonics=2, settings=SETTINGS, start=opt3)
+    """Continuation: `start=` an optimum at the same requirement, read back from its JSON. Its gait is
+    the optimum's (a shift of the time origin changes no gait), a local run starts at it, and nothing
+    costlier is reported."""
+    again = lj.optimise(worm(), 0.05, A_MAX, harmonics=2, settings=SETTINGS, start=json.loads(opt3.to_json()))
     given = [c for c in again.candidates if c["candidate"] == "given start"]
     assert len(given) == 1 and given[0]["feasible_exact"]
     assert given[0]["cost_of_transport_exact"] == pytest.approx(opt3.cost_of_transport_exact, rel=1e-10)
@@ -1112,6 +1124,52 @@ def test_a_given_start_is_refined_in_the_last_lane_and_is_a_candidate(opt3):
     assert any(c == pytest.approx(opt3.cost_of_transport_exact, rel=1e-9) for c in first)
     assert len(again.history[0]["starts"]) == SETTINGS.local - 1  # the screen's starts: one lane fewer
     assert again.feasible_exact and again.cost_of_transport_exact <= opt3.cost_of_transport_exact * (1 + 1e-12)
+
+
+WORM_CLI = ["--masses", "1,1,1", "--d", "0", "--friction", "anisotropic", "--mu-s", "0.5", "--mu-k", "0.3",
+            "--mu-s-bwd", "0.9", "--mu-k-bwd", "0.7", "--harmonics", "2"]  # fmt: skip
+"""`worm()` on the command line."""
+
+
+def test_cli_start_names_what_it_cannot_read(tmp_path):
+    """`optimize --start FILE`: a file that is not an earlier result of the same kind of mechanism is
+    refused before any work, naming --start and the file."""
+    chain = tmp_path / "chain.json"
+    chain.write_text(json.dumps(dict(cos=[[0.0, 0.01]], sin=[[0.02, 0.0]], control=None, omega=2.0)))
+    paper = tmp_path / "paper.json"
+    paper.write_text(json.dumps(dict(cos=[0.0, 0.01], sin=[0.02, 0.0], control=None, omega=2.0, lbar=3.0)))
+    (tmp_path / "empty.json").write_text("{}")
+    worm_args = ["optimize", *WORM_CLI, "--v-min", "0.05", "--a-max", str(A_MAX)]
+    cases = [
+        ([*worm_args, "--start", str(tmp_path / "missing.json")], "--start: cannot read"),
+        ([*worm_args, "--start", str(tmp_path / "empty.json")], "holds no optimum"),
+        ([*worm_args, "--start", str(paper)], "a result of the paper's model takes its own start="),
+        ([*worm_args, "--start", str(chain)], "start: an optimum of 1 actuated signals; this search has 2"),
+        (["optimize", "--v-min", "0.05", "--a-max", "0.05", "--start", str(chain)], "not a result of the paper's"),
+    ]
+    for args, message in cases:
+        res = CliRunner().invoke(_cli.app, args)
+        assert res.exit_code == 2 and message in res.output, (args, res.output)
+
+
+@CHAIN_OPTIMISE
+@pytest.mark.slow
+def test_cli_start_equals_optimise_from_the_same_start(opt3, tmp_path):
+    """`optimize --start FILE --json` of opt3's JSON: the result of `lj.optimise(..., start=...)` of
+    the same file and settings."""
+    path = tmp_path / "opt3.json"
+    path.write_text(opt3.to_json())
+    fields: dict[str, Any] = SMALL | dict(zoom_levels=0, max_iter=2)
+    quick = lj.ChainOptimiseSettings(**fields)
+    api = lj.optimise(worm(), 0.05, A_MAX, harmonics=2, settings=quick, start=json.loads(path.read_text()))
+    args = ["optimize", *WORM_CLI, "--v-min", "0.05", "--a-max", str(A_MAX), "--amplitudes", "2", "--frequencies",
+            "4", "--phases", "4", "--zoom-levels", "0", "--zoom-points", "3", "--local", "2", "--max-iter", "2",
+            "--transient", "10", "--start", str(path), "--json"]  # fmt: skip
+    res = CliRunner().invoke(_cli.app, args)
+    assert res.exit_code == 0, res.output
+    record = json.loads(res.stdout)
+    assert record["source"] == api.source and record["cost_of_transport_exact"] == api.cost_of_transport_exact
+    assert [c["candidate"] for c in api.candidates][-1] == "given start"
 
 
 @CHAIN_OPTIMISE

@@ -113,6 +113,12 @@ def register(app: typer.Typer) -> None:
         sweep_omegas: int = typer.Option(32, "--sweep-omegas", help="Frequencies in the sinusoid sweep."),
         sweep_amplitudes: int = typer.Option(6, "--sweep-amplitudes", help="Amplitudes in the sinusoid sweep."),
         seed: int = typer.Option(0, "--seed"),
+        start: Path | None = typer.Option(
+            None,
+            "--start",
+            help="Exact: continuation from an earlier result of the same kind of mechanism, the JSON that "
+            "optimize --json printed (or a chain's --out chain_optimum.json): refined too, and a candidate itself.",
+        ),
         json_out: bool = typer.Option(False, "--json", help="Print one JSON object instead of the report."),
         out: Path | None = typer.Option(None, "--out", help="Directory for the plots."),
         verbose: bool = typer.Option(False, "--verbose", help="Progress per block (stderr)."),
@@ -156,7 +162,8 @@ def register(app: typer.Typer) -> None:
                 screen |= {"transient": int(transient)} if transient is not None else {}
                 screen |= steps
                 chain_settings = lj.ChainOptimiseSettings(**screen)
-                return _optimise_bodies(built, v_min, a_max, direction, omega, harmonics, chain_settings, out, json_out)
+                return _optimise_bodies(built, v_min, a_max, direction, omega, harmonics, chain_settings, out, json_out,
+                                        _start(start, paper=False))  # fmt: skip
             params = built.mechanism
             assert a_max is not None  # the paper's model: given, or its amplitude
             settings: ExactSettings | Settings
@@ -185,6 +192,7 @@ def register(app: typer.Typer) -> None:
             from ..optimisation._constraints import check_inputs
 
             check_inputs(params, v_min, a_max, direction, n_harm, omega, margin)
+            given = _start(start, paper=True)
             log = (lambda msg: print(msg, file=sys.stderr, flush=True)) if verbose or not json_out else (lambda m: None)
             log(f"sweeping {sweep_amplitudes} x {sweep_omegas} sinusoids on the exact model ...")
             sweep = _pareto.sinusoid_sweep(
@@ -204,6 +212,7 @@ def register(app: typer.Typer) -> None:
                 harmonics=harmonics,
                 settings=settings,
                 sweep=sweep,
+                start=given,
             )
         except ValueError as err:
             typer.echo(f"Error: {err}", err=True)
@@ -267,10 +276,39 @@ def _plot(opt: Any, path: Path) -> "Figure":
     return fig
 
 
+def _start(path: Path | None, paper: bool) -> Any:
+    """`--start`: the earlier result read from its JSON, as `optimise`'s `start=` takes it: the
+    paper's model's waveform (`paper`), or a chain's or a mechanism's fields.
+
+    **Raises:** `ValueError` naming `--start` and the file where it is not such a result."""
+    if path is None:
+        return None
+    import json
+
+    from ..optimisation._optimum import waveform_of
+
+    try:
+        record = json.loads(Path(path).read_text())
+    except (OSError, ValueError) as err:
+        raise ValueError(f"--start: cannot read {path} as the JSON of an earlier optimize --json ({err}).") from None
+    if not isinstance(record, dict) or not {"cos", "sin", "control", "omega"} <= set(record):
+        raise ValueError(f"--start: {path} holds no optimum (cos, sin, control, omega); optimize --json writes one.")
+    if not paper:
+        return record
+    lbar = record.get("lbar")
+    if np.ndim(record["cos"]) != 1 or lbar is None or np.ndim(lbar) != 0:
+        raise ValueError(f"--start: {path} is not a result of the paper's model (it has a row per actuated signal).")
+    control = None if record["control"] is None else np.asarray(record["control"], float)
+    fields = dict(cos=np.asarray(record["cos"], float), sin=np.asarray(record["sin"], float), control=control)
+    return waveform_of(fields, float(record["omega"]), float(lbar))
+
+
 def _optimise_bodies(built: Built, v_min: float, a_max: float | None, direction: int | None, omega: float | None,
-                     harmonics: int | None, settings: Any, out: Path | None, json_out: bool) -> None:  # fmt: skip
-    """`optimize` of a chain or a mechanism of bodies and links: `lj.optimise`, printed; a chain's
-    optimum with `out` also saved (JSON) and plotted."""
+                     harmonics: int | None, settings: Any, out: Path | None, json_out: bool,
+                     start: Any = None) -> None:  # fmt: skip
+    """`optimize` of a chain or a mechanism of bodies and links: `lj.optimise` (from `start`, the
+    fields of an earlier result, where given), printed; a chain's optimum with `out` also saved
+    (JSON) and plotted."""
     import locomotion_jax as lj
 
     from .._json import dumps
@@ -282,7 +320,8 @@ def _optimise_bodies(built: Built, v_min: float, a_max: float | None, direction:
         out.mkdir(parents=True, exist_ok=True)
     default = None if settings.shape == "spline" else 3 if built.kind == "chain" else 2
     opt = lj.optimise(built.mechanism, v_min, a_max, direction=1 if direction is None else direction, omega=omega,
-                      harmonics=default if harmonics is None else harmonics, settings=settings)  # fmt: skip
+                      harmonics=default if harmonics is None else harmonics, settings=settings,
+                      start=start)  # fmt: skip
     if built.kind == "chain" and out is not None:  # a chain's per-spring harmonics, saved and plotted
         (out / "chain_optimum.json").write_text(opt.to_json(full=True, indent=1))
         _plot(opt, out / "chain_optimum.png")

@@ -18,7 +18,7 @@ Both optimisers check the mechanism-free part of their requirement here too (`ch
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any, NamedTuple
 
 import jax.numpy as jnp
@@ -185,28 +185,49 @@ def decision(start: Start, a_max: float, knots: int) -> np.ndarray:
     return spline_start(start.cos, start.sin, start.omega, a_max, knots)
 
 
+def signals_of(start: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, float]:
+    """`(cos, sin, control, omega)` of a chain's or a mechanism's `start=`: its optimum, or that
+    optimum's `to_dict()` (e.g. read back from the JSON of `optimize --json`).
+
+    **Raises:** `TypeError` for anything else; `ValueError` for a dict whose signals are not
+    `(S, H)` coefficients or `(S, M)` control values."""
+    from ._element_optimum import ElementOptimum
+
+    if isinstance(start, ElementOptimum):
+        return start.cos, start.sin, start.control, float(start.omega)
+    if isinstance(start, Mapping) and {"cos", "sin", "control", "omega"} <= set(start):
+        cos, sin = np.asarray(start["cos"], np.float64), np.asarray(start["sin"], np.float64)
+        control = None if start["control"] is None else np.asarray(start["control"], np.float64)
+        if cos.ndim != 2 or sin.shape != cos.shape or (control is not None and control.ndim != 2):
+            raise ValueError(
+                "start: a chain's or a mechanism's optimum has per-signal rows, cos and sin of shape (S, H) and "
+                f"control of shape (S, M) or None; got cos {cos.shape}, sin {sin.shape}, control "
+                f"{None if control is None else control.shape} (a result of the paper's model takes its own start=)."
+            )
+        if control is not None and control.shape[0] != cos.shape[0]:
+            raise ValueError(f"start: control has {control.shape[0]} rows and cos {cos.shape[0]}.")
+        return cos, sin, control, float(start["omega"])
+    raise TypeError(
+        "start must be the result of an earlier optimise call of a Chain or a Mechanism (a ChainOptimum or "
+        f"MechanismOptimum, or its to_dict()) with the same actuated elements, got {type(start).__name__}."
+    )
+
+
 def check_start(start: Any, S: int) -> None:
     """Check a chain's or a mechanism's `start=` (`None`, or an optimum of `S` actuated signals).
 
-    **Raises:** `TypeError` where `start` is not a chain's or a mechanism's optimum; `ValueError`
-    where its number of signals is not `S`."""
-    from ._element_optimum import ElementOptimum
-
+    **Raises:** as [`signals_of`][]; `ValueError` where its number of signals is not `S`."""
     if start is None:
         return
-    if not isinstance(start, ElementOptimum):
-        raise TypeError(
-            "start must be the result of an earlier optimise call of a Chain or a Mechanism (a ChainOptimum or "
-            f"MechanismOptimum) with the same actuated elements, got {type(start).__name__}."
-        )
-    if start.cos.shape[0] != S:
-        raise ValueError(f"start: an optimum of {start.cos.shape[0]} actuated signals; this search has {S}.")
+    cos = signals_of(start)[0]
+    if cos.shape[0] != S:
+        raise ValueError(f"start: an optimum of {cos.shape[0]} actuated signals; this search has {S}.")
 
 
 def given_start(start: Any, S: int, harmonics: int, knots: int, a_max: float, lo: float, hi: float,
                 state: np.ndarray) -> Start:  # fmt: skip
-    """The [`Start`][] of `start` (continuation: an earlier chain's or mechanism's optimum, at a
-    nearby requirement or of a nearby mechanism), `fresh` (`state`: a section state of the search's
+    """The [`Start`][] of `start` (continuation: an earlier chain's or mechanism's optimum or its
+    `to_dict()`, at a nearby requirement or of a nearby mechanism), `fresh` (`state`: a section state of the search's
     shape), its signals in this search's family, within its bounds:
 
     - `cos`, `sin` `(S, harmonics)`, absolute units: the first `harmonics` harmonics of its signals
@@ -220,15 +241,16 @@ def given_start(start: Any, S: int, harmonics: int, knots: int, a_max: float, lo
 
     **Raises:** as [`check_start`][]."""
     check_start(start, S)
-    omega = float(np.clip(start.omega, lo, hi))
-    grid = 64 * max(knots, 16, 0 if start.control is None else start.control.shape[-1])
+    given_cos, given_sin, given_control, given_omega = signals_of(start)
+    omega = float(np.clip(given_omega, lo, hi))
+    grid = 64 * max(knots, 16, 0 if given_control is None else given_control.shape[-1])
     phase = np.arange(grid) * 2 * np.pi / grid
-    if start.control is None:
-        n = np.arange(1, start.cos.shape[-1] + 1)
-        values = start.cos @ np.cos(np.outer(n, phase)) + start.sin @ np.sin(np.outer(n, phase))
+    if given_control is None:
+        n = np.arange(1, given_cos.shape[-1] + 1)
+        values = given_cos @ np.cos(np.outer(n, phase)) + given_sin @ np.sin(np.outer(n, phase))
     else:
-        spline = SplineShape(knots=start.control.shape[-1])
-        values = np.stack([spline.sample(Spline(jnp.asarray(c), 1.0, 0.0), grid) for c in start.control])
+        spline = SplineShape(knots=given_control.shape[-1])
+        values = np.stack([spline.sample(Spline(jnp.asarray(c), 1.0, 0.0), grid) for c in given_control])
     c = np.fft.rfft(values, axis=-1) / grid
     cos, sin = 2 * c.real[:, 1 : harmonics + 1], -2 * c.imag[:, 1 : harmonics + 1]
     n = np.arange(1, harmonics + 1)
