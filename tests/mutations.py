@@ -749,6 +749,18 @@ MUTATIONS = [
         ("tests/test_optimise.py::test_a_given_start_is_refitted_to_the_searchs_family",),
     ),
     Mutation(
+        "paper_start_checked_late",
+        "the paper's optimiser checks its start= only when it builds its starts, after the sinusoid sweep",
+        "locomotion_jax/optimisation/_optimise.py",
+        (
+            (
+                "    start_waveform(start)  # a start that is not the paper's model's is refused before the baseline\n",
+                "",
+            ),
+        ),
+        ("tests/test_optimise.py::test_the_papers_start_may_be_an_optimums_dict",),
+    ),
+    Mutation(
         "evaluator_retry_ignored",
         "the optimisers' evaluator retries a failed orbit whatever its `retry`",
         "locomotion_jax/optimisation/_evaluator.py",

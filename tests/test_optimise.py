@@ -594,6 +594,27 @@ def exact_run(tiny_sweep):
     return opt, grew
 
 
+def test_the_papers_start_may_be_an_optimums_dict(exact_run, monkeypatch):
+    """`start=` of the paper's model: an optimum's `to_dict()`, read back from JSON, is its waveform;
+    a chain's is refused, naming what it is."""
+    from locomotion_jax.optimisation._optimum import start_waveform
+
+    opt, _ = exact_run
+    wave = start_waveform(json.loads(opt.to_json()))
+    assert type(wave) is type(opt.waveform)
+    for a, b in zip(jax.tree_util.tree_leaves(wave), jax.tree_util.tree_leaves(opt.waveform)):
+        assert np.array_equal(np.asarray(a), np.asarray(b))
+    assert start_waveform(opt) is not None and start_waveform(wave) is wave
+    chain = dict(cos=[[0.0, 0.01]], sin=[[0.02, 0.0]], control=None, omega=2.0, lbar=[3.0])
+    monkeypatch.setattr(_pareto, "sinusoid_sweep", lambda *args, **kwargs: pytest.fail("swept before the check"))
+    with pytest.raises(ValueError, match="start: not a result of the paper's model"):
+        _optimise.optimise(lj.Params(), 0.02, 0.05, settings=EXACT_TINY, start=chain)
+    with pytest.raises(ValueError, match="with cos, sin, control, omega and lbar"):
+        start_waveform({"cos": [0.0]})
+    with pytest.raises(ValueError, match="with a scalar lbar"):
+        start_waveform(dict(cos=[0.0], sin=[0.01], control=None, omega=2.0))
+
+
 def test_exact_optimum_verified_on_the_reference(exact_run):
     # The reported figures are those of the optimum's steady gait on the independent
     # reference, over whole periods; the constraints it reports as holding hold there.
@@ -1140,16 +1161,17 @@ def test_cli_start_names_what_it_cannot_read(tmp_path):
     paper.write_text(json.dumps(dict(cos=[0.0, 0.01], sin=[0.02, 0.0], control=None, omega=2.0, lbar=3.0)))
     (tmp_path / "empty.json").write_text("{}")
     worm_args = ["optimize", *WORM_CLI, "--v-min", "0.05", "--a-max", str(A_MAX)]
+    paper_args = ["optimize", "--v-min", "0.05", "--a-max", "0.05"]
     cases = [
         ([*worm_args, "--start", str(tmp_path / "missing.json")], "--start: cannot read"),
         ([*worm_args, "--start", str(tmp_path / "empty.json")], "holds no optimum"),
         ([*worm_args, "--start", str(paper)], "a result of the paper's model takes its own start="),
         ([*worm_args, "--start", str(chain)], "start: an optimum of 1 actuated signals; this search has 2"),
-        (["optimize", "--v-min", "0.05", "--a-max", "0.05", "--start", str(chain)], "not a result of the paper's"),
+        ([*paper_args, "--start", str(chain)], "start: not a result of the paper's model"),
     ]
     for args, message in cases:
         res = CliRunner().invoke(_cli.app, args)
-        assert res.exit_code == 2 and message in res.output, (args, res.output)
+        assert res.exit_code == 2 and message in res.output and "sweeping" not in res.output, (args, res.output)
 
 
 @CHAIN_OPTIMISE

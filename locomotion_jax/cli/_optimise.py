@@ -137,7 +137,7 @@ def register(app: typer.Typer) -> None:
         import locomotion_jax as lj
 
         from ..optimisation import _optimise, _pareto
-        from ..optimisation._optimum import ExactSettings, Settings
+        from ..optimisation._optimum import ExactSettings, Settings, start_waveform
 
         try:
             if method not in ("exact", "smoothed"):
@@ -163,7 +163,7 @@ def register(app: typer.Typer) -> None:
                 screen |= steps
                 chain_settings = lj.ChainOptimiseSettings(**screen)
                 return _optimise_bodies(built, v_min, a_max, direction, omega, harmonics, chain_settings, out, json_out,
-                                        _start(start, paper=False))  # fmt: skip
+                                        _start(start))  # fmt: skip
             params = built.mechanism
             assert a_max is not None  # the paper's model: given, or its amplitude
             settings: ExactSettings | Settings
@@ -192,7 +192,8 @@ def register(app: typer.Typer) -> None:
             from ..optimisation._constraints import check_inputs
 
             check_inputs(params, v_min, a_max, direction, n_harm, omega, margin)
-            given = _start(start, paper=True)
+            given = _start(start)
+            start_waveform(given)  # refused before the sinusoid sweep
             log = (lambda msg: print(msg, file=sys.stderr, flush=True)) if verbose or not json_out else (lambda m: None)
             log(f"sweeping {sweep_amplitudes} x {sweep_omegas} sinusoids on the exact model ...")
             sweep = _pareto.sinusoid_sweep(
@@ -276,16 +277,13 @@ def _plot(opt: Any, path: Path) -> "Figure":
     return fig
 
 
-def _start(path: Path | None, paper: bool) -> Any:
-    """`--start`: the earlier result read from its JSON, as `optimise`'s `start=` takes it: the
-    paper's model's waveform (`paper`), or a chain's or a mechanism's fields.
+def _start(path: Path | None) -> Any:
+    """`--start`: the earlier result read from its JSON (`optimise`'s `start=` checks its kind).
 
-    **Raises:** `ValueError` naming `--start` and the file where it is not such a result."""
+    **Raises:** `ValueError` naming `--start` and the file where it holds no result."""
     if path is None:
         return None
     import json
-
-    from ..optimisation._optimum import waveform_of
 
     try:
         record = json.loads(Path(path).read_text())
@@ -293,14 +291,7 @@ def _start(path: Path | None, paper: bool) -> Any:
         raise ValueError(f"--start: cannot read {path} as the JSON of an earlier optimize --json ({err}).") from None
     if not isinstance(record, dict) or not {"cos", "sin", "control", "omega"} <= set(record):
         raise ValueError(f"--start: {path} holds no optimum (cos, sin, control, omega); optimize --json writes one.")
-    if not paper:
-        return record
-    lbar = record.get("lbar")
-    if np.ndim(record["cos"]) != 1 or lbar is None or np.ndim(lbar) != 0:
-        raise ValueError(f"--start: {path} is not a result of the paper's model (it has a row per actuated signal).")
-    control = None if record["control"] is None else np.asarray(record["control"], float)
-    fields = dict(cos=np.asarray(record["cos"], float), sin=np.asarray(record["sin"], float), control=control)
-    return waveform_of(fields, float(record["omega"]), float(lbar))
+    return record
 
 
 def _optimise_bodies(built: Built, v_min: float, a_max: float | None, direction: int | None, omega: float | None,

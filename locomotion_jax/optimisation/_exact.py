@@ -70,7 +70,7 @@ from ._evaluator import Evaluator
 from ._figures import Figures, PENALTY
 from ._local import local_run
 from ._lockstep import run_lockstep
-from ._optimum import choose, ExactSettings, Optimum, verified, waveform_of
+from ._optimum import choose, ExactSettings, Optimum, start_waveform, verified, waveform_of
 from ._shapes import AbstractShape
 from ._starts import start_shapes, tension_starts
 
@@ -172,10 +172,6 @@ GRID = 256
 """Phase samples per period of a start's stroke, before a shape family fits it."""
 
 
-def _as_waveform(start: Any) -> AbstractWaveform:
-    return start.waveform if isinstance(start, Optimum) else start
-
-
 def _starts(params, a_max, shape: AbstractShape, lo, hi, baseline, start, settings: ExactSettings) -> np.ndarray:
     """Decision vectors of the starts (module docstring); the given `start` last."""
     omegas = [lo] if lo == hi else list(np.geomspace(max(lo, 0.1 * hi), hi / 1.5, settings.start_frequencies))
@@ -190,7 +186,7 @@ def _starts(params, a_max, shape: AbstractShape, lo, hi, baseline, start, settin
         for values, w in tension_starts(params, a_max, periods, settings.tension_levels):
             out.append(shape.fit(values, w if lo != hi else lo))
     if start is not None:
-        wave = _as_waveform(start)
+        wave = start_waveform(start)
         out.append(shape.fit(shape.sample(wave, GRID) / a_max, float(np.asarray(wave.omega)) if lo != hi else lo))
     theta = np.stack(out)
     theta[:, -1] = np.clip(theta[:, -1], math.log(lo), math.log(hi))

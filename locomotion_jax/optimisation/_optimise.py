@@ -59,7 +59,7 @@ from ..run._resolution import refuse_search
 from . import _constraints as cons, _pareto as pareto
 from ._element_optimum import ChainOptimiseSettings, ChainOptimum, MechanismOptimiseSettings, MechanismOptimum
 from ._objective import make_plan, Plan, rollout
-from ._optimum import along, ExactSettings, Optimum, Settings, verified
+from ._optimum import along, ExactSettings, Optimum, Settings, start_waveform, verified
 from ._shapes import FourierShape, SplineShape
 
 
@@ -353,9 +353,10 @@ def optimise(
     - `sweep`: a precomputed [`sinusoid_sweep`][locomotion_jax.optimisation._pareto.sinusoid_sweep] for the same
       `params` and `a_max` (the baseline); computed if `None`.
     - `start`: exact method: a waveform to start from besides the built-in starts (an
-      [`Optimum`][] or any waveform, e.g. the optimum at a nearby `v_min`: continuation); it
-      is always refined, and is a candidate itself. For a `Chain` or a `Mechanism`: an earlier
-      [`ChainOptimum`][] or [`MechanismOptimum`][] with as many actuated signals (at a nearby
+      [`Optimum`][], its `to_dict()` or any waveform, e.g. the optimum at a nearby `v_min`:
+      continuation); it is always refined, and is a candidate itself. For a `Chain` or a
+      `Mechanism`: an earlier [`ChainOptimum`][] or [`MechanismOptimum`][] (or its `to_dict()`,
+      e.g. read back from the JSON of `optimize --json`) with as many actuated signals (at a nearby
       requirement, or of a nearby mechanism; either family, refitted to this search's), refined
       in the last local lane from its own transient and a candidate itself. With `local=1` it is
       the only local run.
@@ -405,6 +406,7 @@ def params_optimum(params: Params, v_min, a_max, method, direction, omega, harmo
         harmonics = 16 if exact else 3
     if start is not None and not exact:
         raise ValueError("start= is only used by method='exact'.")
+    start_waveform(start)  # a start that is not the paper's model's is refused before the baseline
     if exact and harmonics < 2:
         raise ValueError(f"harmonics must be an integer >= 2 for method='exact', got {harmonics!r}.")
     speed, direction = cons.check_inputs(params, v_min, a_max, direction, harmonics, omega, settings.margin)

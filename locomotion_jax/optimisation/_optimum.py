@@ -3,6 +3,7 @@
 import abc
 import dataclasses
 import math
+from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import equinox as eqx
@@ -243,6 +244,29 @@ def waveform_of(fields: dict, omega: float, lbar: float) -> AbstractWaveform:
     if fields["control"] is not None:
         return Spline(fields["control"], omega, lbar)
     return Fourier(fields["cos"], fields["sin"], omega, lbar)
+
+
+def start_waveform(start: Any) -> Any:
+    """The waveform of the paper's model's `start=`: an [`Optimum`][]'s, that of its `to_dict()`
+    (e.g. read back from the JSON of `optimize --json`), or `start` itself (any waveform).
+
+    **Raises:** `ValueError` for a dict that is not an optimum of the paper's model (one signal:
+    `cos` and `sin` of shape `(H,)`, `control` `(M,)` or `None`, `omega`, `lbar`)."""
+    if isinstance(start, Optimum):
+        return start.waveform
+    if not isinstance(start, Mapping):
+        return start
+    if not {"cos", "sin", "control", "omega"} <= set(start):
+        raise ValueError("start: a dict must be an optimum's to_dict(), with cos, sin, control, omega and lbar.")
+    cos, sin = np.asarray(start["cos"], np.float64), np.asarray(start["sin"], np.float64)
+    control = None if start["control"] is None else np.asarray(start["control"], np.float64)
+    lbar = start.get("lbar")
+    if cos.ndim != 1 or sin.shape != cos.shape or (control is not None and control.ndim != 1):
+        raise ValueError(f"start: not a result of the paper's model (cos of shape {cos.shape}): a chain's or a "
+                         "mechanism's result has a row per actuated signal.")  # fmt: skip
+    if lbar is None or np.ndim(lbar) != 0:
+        raise ValueError(f"start: a dict must be an optimum's to_dict(), with a scalar lbar (got {lbar!r}).")
+    return waveform_of(dict(cos=cos, sin=sin, control=control), float(start["omega"]), float(lbar))
 
 
 @dataclasses.dataclass(frozen=True)
