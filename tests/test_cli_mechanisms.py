@@ -76,6 +76,30 @@ def test_gait_of_the_worm_file_equals_lj_steady_gait():
     assert record["stick_fraction"] == np.asarray(g.stick_fraction).tolist()
 
 
+def test_continue_of_a_chain_equals_lj_continuation(tmp_path):
+    """`continue` of a chain: the points and events of `lj.continuation`, the state and the stick
+    fractions as lists per point, the chain's description in the record."""
+    args = ["continue", *CHAIN, "--parameter", "omega", "--stop", "3.3", "--periods", "1", "--max-points", "3",
+            "--dt", "0.02", "--json", "--out", str(tmp_path / "branch.json")]  # fmt: skip
+    res = invoke(*args)
+    assert res.exit_code == 0, res.output
+    record = json.loads(res.stdout)
+    assert record == json.loads((tmp_path / "branch.json").read_text())
+    b = lj.continuation(mechanism("chain"), "omega", 3.3, periods=1, max_points=3, max_step=0.04, step=0.01,
+                        dynamics=lj.Exact(dt=0.02))  # fmt: skip
+    n = int(b.n_points)
+    assert record["kind"] == "chain" and record["n_points"] == n >= 2 and record["lam_start"] == 3.0
+    assert record["k"] == int(b.k) == 1 and record["mechanism_k"] == 50.0  # the gait period; the springs'
+    assert record["status"] == int(b.status)
+    points = record["points"]
+    assert points["lam"] == np.asarray(b.lam)[:n].tolist()
+    assert points["mean_speed"] == np.asarray(b.mean_speed)[:n].tolist()
+    assert points["state"] == np.asarray(b.state)[:n].tolist() and len(points["stick_fraction"][0]) == 3
+    assert "u" not in points and all("state" in e and "u" not in e for e in record["events"])
+    text = invoke(*args[:-3])
+    assert text.exit_code == 0 and f"{n} points" in text.stdout
+
+
 def test_sweep_of_a_chain_equals_lj_measure_of_the_batch(tmp_path):
     out = tmp_path / "w.nc"
     res = invoke("sweep", *CHAIN[:-6], "--a", "0.08", "--phi", "-1,2.0944", *FAST, "--no-progress", "--out", str(out))
@@ -95,14 +119,6 @@ def test_sweep_of_a_chain_equals_lj_measure_of_the_batch(tmp_path):
 @pytest.mark.parametrize(
     "args, message",
     [
-        (
-            ["continue", *CHAIN, "--parameter", "a", "--stop", "0.1"],
-            "`continue`: the options give a chain; this command runs the paper's model.",
-        ),
-        (
-            ["continue", WORM, "--parameter", "a", "--stop", "0.1"],
-            f"`continue`: {WORM} is a chain; this command runs the paper's model.",
-        ),
         (
             ["animate", *CHAIN],
             "`animate`: the options give a chain; this command runs the paper's model and a "
@@ -194,7 +210,7 @@ def test_chain_gait_json_equals_steady_gait():
     assert res.exit_code == 0, res.output
     record = json.loads(res.stdout)
     g = lj.steady_gait(worm(), transient=10, dynamics=lj.Exact(dt=0.02), start="relaxed")
-    assert record["status_name"] == "CONVERGED"
+    assert record["status_name"] == "CONVERGED" and record["k"] == int(g.k) and record["mechanism_k"] == 50.0
     assert record["mean_speed"] == pytest.approx(float(g.mean_speed), rel=1e-12)
     assert record["cost_of_transport"] == pytest.approx(float(g.cost_of_transport), rel=1e-12)
     assert record["stick_fraction"] == pytest.approx(np.asarray(g.stick_fraction).tolist(), rel=1e-12)

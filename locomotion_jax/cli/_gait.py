@@ -1,7 +1,6 @@
 """`locomotion-jax gait` and `locomotion-jax continue`: steady gaits from the command line.
 
-`gait` runs any mechanism (`_mechanism.build`); `continue` the paper's model only (the library's
-continuation takes `Params`): another kind is a clear error naming the command and the kind.
+Both run any mechanism (`_mechanism.build`): the paper's model, a chain, a mechanism file.
 
 `register(app)` adds both subcommands to the main CLI (`_main.py`). `gait` solves the steady gait of
 one configuration ([`steady_gait`][]); `continue` follows it along one parameter ([`continuation`][]).
@@ -34,10 +33,13 @@ for the paper's model, else the bodies' (`stick_fraction`, `state`; `_PAPER_ONLY
 _PAPER_ONLY = ("stick_fraction1", "stick_fraction2", "u", "v1", "v2")
 
 POINT_FIELDS: tuple[str, ...] = (
-    "lam", "mean_speed", "cost_of_transport", "regime", "stable", "liftoff", "u", "v1", "v2",
-    "slip_margin", "min_normal", "n_switch",
+    "lam", "mean_speed", "cost_of_transport", "regime", "stable", "liftoff", "u", "v1", "v2", "state",
+    "stick_fraction", "slip_margin", "min_normal", "n_switch",
 )  # fmt: skip
-"""The per-point [`Branch`][] fields `continue` reports."""
+"""The per-point [`Branch`][] fields `continue` reports: under the paper's names for the paper's model
+(`u`, `v1`, `v2`), else the bodies' (`state`, `stick_fraction`, a list per point)."""
+
+_PAPER_POINT = ("u", "v1", "v2")
 
 
 def _periods(text: str) -> tuple[int, ...]:
@@ -61,6 +63,14 @@ def gait_omega(omega: float) -> None:
     """Refuse a forcing without a period: `ValueError` naming `--omega` unless it is finite and > 0."""
     if not (math.isfinite(omega) and omega > 0):
         raise ValueError(f"--omega must be a finite number > 0 for a gait (its period is 2 pi / omega), got {omega!r}.")
+
+
+def described(result: dict[str, Any], description: dict[str, Any], settings: dict[str, Any]) -> dict[str, Any]:
+    """The JSON record of a result: its fields, the mechanism's `description` and the `settings`.
+    A description key that names a field of the result too (a chain's spring stiffness `k` beside
+    the gait period `k`) is kept as `mechanism_<key>`, so that neither hides the other."""
+    ours = {(f"mechanism_{n}" if n in result else n): v for n, v in description.items()}
+    return {**result, **ours, **settings}
 
 
 def _fail(err: Exception) -> NoReturn:
@@ -115,7 +125,7 @@ def register(app: typer.Typer) -> None:
         record["multipliers"] = _pairs(g.multipliers)
         settings = {"periods": list(ks), "transient": transient, **run}
         if as_json:
-            typer.echo(dumps({**record, **built.record, **settings}))
+            typer.echo(dumps(described(record, built.record, settings)))
             return
         typer.echo(built.head)
         typer.echo(f"status:     {record['status_name']}")
@@ -128,10 +138,17 @@ def register(app: typer.Typer) -> None:
     @expand(mech=mechanism_options(), run=run_options(("contact", "start", "dt")))
     def continue_(
         file: Annotated[
-            Path | None, typer.Argument(help="A mechanism file of the paper's model, instead of its options.")
+            Path | None, typer.Argument(help="A mechanism file (TOML), instead of the mechanism options.")
         ] = None,
         *,
-        parameter: Annotated[str, typer.Option(help="The parameter: omega, a, d, mhat, mu_s, mu_k, k, c, lbar.")],
+        parameter: Annotated[
+            str,
+            typer.Option(
+                help="The parameter: the paper's model's omega, a, d, mhat, mu_s, mu_k, k, c, lbar (cosN, sinN of "
+                "a Fourier waveform); a chain's or a mechanism's leaf (omega, mu_s, c: every entry, equal at the "
+                "start) or one entry of it (m[1], mu_s_fwd[0])."
+            ),
+        ],
         stop: Annotated[float, typer.Option(help="Its end value (the start is the model option's value).")],
         mech: Values,
         run: Values,
@@ -145,43 +162,46 @@ def register(app: typer.Typer) -> None:
 
         Prints one line per point (parameter, speed, cost of transport, regime, stability) and the
         located events: folds, period doublings, the SSL/SL boundary and lift-off (to 1e-10 in the
-        parameter). With --json or --out, the points and events as one JSON object.
+        parameter). The mechanism is the paper's model (its options), a chain (`--masses`) or a
+        mechanism FILE. With --json or --out, the points and events as one JSON object, with the
+        mechanism (the paper's model's state under its names u, v1, v2; another's as a list).
         """
         import locomotion_jax as lj
 
         from ..gaits._bifurcation import NAMES
 
         built = build(mech, file)
-        hint = " lj.continuation follows the paper's two-mass model's gait; map a chain with `sweep`."
-        built.refuse("continue", ("paper",), hint)
-        if built.extra:
-            raise ValueError(f"`continue`: {file} has a [waveform] table; continuation follows the paper's sinusoid.")
-        params = built.mechanism
         try:
-            gait_omega(float(params.omega))
-            b = lj.continuation(params, parameter, stop, periods=_periods(periods), max_points=max_points,
+            gait_omega(built.omega)
+            b = lj.continuation(built.mechanism, parameter, stop, periods=_periods(periods), max_points=max_points,
                                 max_step=max_step, step=min(0.01, max_step), contact=run["contact"],
-                                start=run["start"], dynamics=lj.Exact(dt=run["dt"]))  # fmt: skip
+                                start=run["start"], dynamics=lj.Exact(dt=run["dt"]), **built.extra)  # fmt: skip
         except ValueError as err:
             _fail(err)
-        n = int(b.n_points)
-        points = {name: np.asarray(getattr(b, name))[:n].tolist() for name in POINT_FIELDS}
+        n, paper = int(b.n_points), b.names == PAPER
+        skip = ("state", "stick_fraction") if paper else _PAPER_POINT
+        points = {name: np.asarray(getattr(b, name))[:n].tolist() for name in POINT_FIELDS if name not in skip}
         points["multipliers"] = _pairs(np.asarray(b.multipliers)[:n])
         e = b.events
-        kinds, state = np.asarray(e.kind), np.asarray(e.state)  # state: (u, v1, v2) per event
+        kinds, state = np.asarray(e.kind), np.asarray(e.state)  # the orbit's section state per event
+
+        def named(q: Any) -> dict[str, Any]:
+            if paper:
+                return dict(u=float(state[q, 0]), v1=float(state[q, 1]), v2=float(state[q, 2]))
+            return dict(state=state[q].tolist())
+
         events = [
             dict(kind=NAMES[int(kinds[q])], lam=float(e.lam[q]), lam_error=float(e.lam_error[q]),
-                 located=bool(e.located[q]), smooth=bool(e.smooth[q]), turn=bool(e.turn[q]),
-                 u=float(state[q, 0]), v1=float(state[q, 1]), v2=float(state[q, 2]),
+                 located=bool(e.located[q]), smooth=bool(e.smooth[q]), turn=bool(e.turn[q]), **named(q),
                  multipliers=_pairs(e.multipliers[q]))
             for q in np.flatnonzero(kinds >= 0)
         ]  # fmt: skip
-        record = dict(
+        branch = dict(
             parameter=parameter, lam_start=float(b.lam[0]) if n else float("nan"), lam_stop=stop, k=int(b.k),
             status=int(b.status), status_name=_name(lj.BranchStatus, int(b.status)),
             start_status_name=_name(lj.GaitStatus, int(b.start_status)), n_points=n, points=points, events=events,
-            params=built.record.get("params"), **run,
         )  # fmt: skip
+        record = described(branch, built.record, run)
         if out is not None:
             try:
                 out.parent.mkdir(parents=True, exist_ok=True)
