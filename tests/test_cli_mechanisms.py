@@ -100,6 +100,40 @@ def test_continue_of_a_chain_equals_lj_continuation(tmp_path):
     assert text.exit_code == 0 and f"{n} points" in text.stdout
 
 
+def test_animate_draws_a_chain_at_its_simulated_positions(tmp_path):
+    """`animate` of a chain writes one GIF frame per saved state of `lj.simulate`, and counts each
+    mass's stuck frames; `lj.animate` of the chain draws mass i centred on x_i, a spring between
+    neighbours, an anchor under a stuck mass; a batch needs its index."""
+    from PIL import Image
+
+    out = tmp_path / "chain.gif"
+    res = invoke("animate", *CHAIN, "--t-from", "4", "--t-end", "8", "--frames", "7", "--dt", "0.02", "--out", str(out))
+    assert res.exit_code == 0, res.output
+    chain = mechanism("chain")
+    assert isinstance(chain, lj.Chain)
+    traj = lj.simulate(chain, 8.0, np.linspace(4.0, 8.0, 7), dynamics=lj.Exact(dt=0.02))
+    stuck = np.asarray(traj.stuck).sum(axis=0)
+    counts = ", ".join(f"body {i} stuck in {stuck[i]}" for i in range(3))
+    assert f"(7 frames, t = 4..8); {counts} frames" in res.stdout and getattr(Image.open(out), "n_frames") == 7
+    anim = lj.animate(traj, chain, trace=False)
+    fig = anim._fig  # pyright: ignore[reportAttributeAccessIssue]
+    assert len([line for line in fig.axes[0].lines if str(line.get_gid()).startswith("spring")]) == 2
+    x, held = np.asarray(traj.x), np.asarray(traj.stuck)
+    for k in range(7):
+        anim._func(k)  # pyright: ignore[reportAttributeAccessIssue]
+        for i in range(3):
+            (r,) = [a for a in fig.axes[0].patches if a.get_gid() == f"body{i}"]
+            assert abs(r.get_x() + r.get_width() / 2 - float(x[k, i])) < 1e-12
+            (anchor,) = [a for a in fig.axes[0].lines if a.get_gid() == f"anchor{i}"]
+            assert len(anchor.get_xdata()) == int(held[k, i])
+    batch = lj.Chain.stack([chain, chain])
+    both = lj.simulate(batch, 8.0, np.linspace(4.0, 8.0, 7), dynamics=lj.Exact(dt=0.02))
+    with pytest.raises(ValueError, match="must pick one of the batch shape"):
+        lj.animate(both, batch)
+    one = lj.animate(both, batch, index=(1,), t_range=(5.0, 8.0), trace=False)
+    assert one._fig is not None  # pyright: ignore[reportAttributeAccessIssue]
+
+
 def test_sweep_of_a_chain_equals_lj_measure_of_the_batch(tmp_path):
     out = tmp_path / "w.nc"
     res = invoke("sweep", *CHAIN[:-6], "--a", "0.08", "--phi", "-1,2.0944", *FAST, "--no-progress", "--out", str(out))
@@ -119,11 +153,6 @@ def test_sweep_of_a_chain_equals_lj_measure_of_the_batch(tmp_path):
 @pytest.mark.parametrize(
     "args, message",
     [
-        (
-            ["animate", *CHAIN],
-            "`animate`: the options give a chain; this command runs the paper's model and a "
-            "mechanism of bodies and links",
-        ),
         (["measure", "--phi", "1"], "--phi: these options describe a chain: give --masses."),
         (["measure", "--masses", "1,1", "--mhat", "0.3"], "--mhat: these options describe the paper's model"),
         (["measure", "--k", "50,60"], "--k must be a number (the paper's model takes one value)"),

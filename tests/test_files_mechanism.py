@@ -184,7 +184,6 @@ def test_cli_animate_draws_the_capsule_files_simulation(tmp_path):
     """`animate capsule.toml` writes one GIF frame per saved state of `lj.simulate` on the loaded file,
     and counts each body's stuck frames as the trajectory's `stuck` says; every frame draws body i
     centred on the trajectory's x_i."""
-    from locomotion_jax.run._mechanism_animation import animate_mechanism
     from PIL import Image
 
     out = tmp_path / "capsule.gif"
@@ -198,7 +197,7 @@ def test_cli_animate_draws_the_capsule_files_simulation(tmp_path):
     assert f"(9 frames, t = 2..6); body 0 stuck in {stuck[0]}, body 1 stuck in {stuck[1]} frames" in res.stdout
     assert stuck[0] > 0 and stuck[1] == 0  # the capsule sticks, its internal mass never does
     assert getattr(Image.open(out), "n_frames") == 9
-    anim = animate_mechanism(traj, capsule, trace=False)
+    anim = lj.animate(traj, capsule, trace=False)
     fig = anim._fig  # pyright: ignore[reportAttributeAccessIssue]
     for k in (0, 4, 8):
         anim._func(k)  # pyright: ignore[reportAttributeAccessIssue]
@@ -206,7 +205,7 @@ def test_cli_animate_draws_the_capsule_files_simulation(tmp_path):
             (r,) = [a for a in fig.axes[0].patches if a.get_gid() == f"body{i}"]
             assert abs(r.get_x() + r.get_width() / 2 - float(traj.x[k, i])) < 1e-12
     with pytest.raises(ValueError, match="one mechanism configuration"):
-        animate_mechanism(traj, lj.Mechanism.stack([capsule, capsule]))
+        lj.animate(traj, lj.Mechanism.stack([capsule, capsule]))
 
 
 def test_cli_optimize_passes_the_capsule_files_mechanism(monkeypatch):

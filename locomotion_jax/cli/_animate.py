@@ -23,9 +23,7 @@ def register(app: typer.Typer) -> None:
     @friendly
     @expand(mech=mechanism_options(), run=run_options(("contact", "start", "dt")))
     def animate(
-        file: Path | None = typer.Argument(
-            None, help='A mechanism file (TOML) of the paper\'s model or of bodies and links (kind = "mechanism").'
-        ),
+        file: Path | None = typer.Argument(None, help="A mechanism file (TOML), instead of the mechanism options."),
         *,
         mech: Values,
         t_from: float | None = typer.Option(
@@ -41,10 +39,11 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Simulate one configuration on the exact model and write an animated GIF of it.
 
-        Stuck masses are drawn red with an anchor under them, slipping ones blue. With a mechanism
-        FILE (the paper's model, with its waveform if it has one) instead of the model options; a
-        `kind = "mechanism"` file draws its bodies (carried ones grey, inside their carrier's row) and
-        springs, and prints how many frames each body is stuck in.
+        Stuck masses are drawn red with an anchor under them, slipping ones blue. The mechanism is
+        the paper's model (its options, or a FILE with its waveform if it has one), a chain
+        (`--masses`) or a mechanism FILE; a chain or a mechanism of bodies and links is drawn as its
+        bodies (carried ones grey, inside their carrier's row) and springs, and the command prints
+        how many frames each body is stuck in.
         """
 
         import numpy as np
@@ -55,11 +54,9 @@ def register(app: typer.Typer) -> None:
 
         try:
             built = build(mech, file)
-            hint = f" Plot the chain with `locomotion-jax simulate {file or '--masses ...'} --out DIR`."
-            built.refuse("animate", ("paper", "mechanism"), hint)
             params, wave = built.mechanism, built.extra.get("waveform")
-            if built.kind == "mechanism":
-                return _animate_mechanism(built.file, params, t_from, t_end, frames, fps, dpi, trace, run, out)
+            if built.kind != "paper":
+                return _animate_bodies(built, t_from, t_end, frames, fps, dpi, trace, run, out)
             w = float(params.omega if wave is None else wave.omega)
             t_from = _check_span(w, t_from, t_end, frames, fps, dpi, out)
             traj = simulate(
@@ -99,27 +96,28 @@ def register(app: typer.Typer) -> None:
             )
 
 
-def _animate_mechanism(file: Any, mech: Any, t_from: float | None, t_end: float, frames: int, fps: float,
-                       dpi: float, trace: bool, run: Values, out: Path) -> None:  # fmt: skip
-    """`animate FILE` for a `kind = "mechanism"` file: `lj.simulate` of the file's mechanism at the frame
-    times, drawn by `run._mechanism_animation`."""
+def _animate_bodies(built: Any, t_from: float | None, t_end: float, frames: int, fps: float, dpi: float,
+                    trace: bool, run: Values, out: Path) -> None:  # fmt: skip
+    """`animate` of a chain or a mechanism of bodies and links: `lj.simulate` at the frame times,
+    drawn by `lj.animate` (the bodies on their line)."""
 
     import numpy as np
 
     from ..dynamics._exact_dynamics import Exact
-    from ..run._animation import save_gif
-    from ..run._mechanism_animation import animate_mechanism
+    from ..run._animation import animate, save_gif
     from ..run._simulate import simulate
 
+    mech = built.mechanism
     try:
-        w = float(np.asarray(mech.omega))
+        w = float(built.omega)
         t_from = _check_span(w, t_from, t_end, frames, fps, dpi, out)
         traj = simulate(mech, t_end, np.linspace(t_from, t_end, frames), dynamics=Exact(dt=run["dt"]),
                         contact=run["contact"], start=run["start"])  # fmt: skip
         if not np.asarray(traj.valid).any():
             raise ValueError(f"the run stopped (status {int(np.asarray(traj.status))}) before the animated span.")
-        title = f"{file.name}: {mech.n_bodies} bodies, omega = {w:.4g}"
-        anim = animate_mechanism(traj, mech, max_frames=frames, interval=1000.0 / fps, trace=trace, title=title)
+        what = built.head if built.file is None else f"{built.file.name}: {np.shape(traj.x)[-1]} bodies"
+        title = f"{what}, omega = {w:.4g}" if built.file is not None else what
+        anim = animate(traj, mech, max_frames=frames, interval=1000.0 / fps, trace=trace, title=title)
         path = save_gif(anim, out, fps=fps, dpi=dpi)
     except ValueError as err:
         typer.echo(f"Error: {err}", err=True)

@@ -282,6 +282,13 @@ class Mechanism(AbstractMechanism):
     def dtype(self) -> Any:
         return jnp.result_type(*jax.tree_util.tree_leaves(self))
 
+    def drawing(self) -> Any:
+        """What [`animate`][locomotion_jax.run._animation.animate] draws of the mechanism: its bodies (in ground
+        contact, carried or free) and springs (`run._mechanism_animation.Drawing`)."""
+        from ..run._mechanism_animation import mechanism_drawing
+
+        return mechanism_drawing(self)
+
     def broadcast(self) -> "Mechanism":
         """Every field broadcast to `batch_shape` (and its own trailing axes) with one dtype."""
         b, dt = self.batch_shape, self.dtype

@@ -390,6 +390,14 @@ class Chain(AbstractMechanism):
                 )
         return self
 
+    def drawing(self) -> Any:
+        """What [`animate`][locomotion_jax.run._animation.animate] draws of the chain: every mass on the ground, a
+        spring between each pair of neighbours (`run._mechanism_animation.Drawing`)."""
+        from ..run._mechanism_animation import Drawing
+
+        n = self.n_masses
+        return Drawing(contact=[True] * n, carried=[False] * n, springs=[(j, j + 1) for j in range(n - 1)])
+
     def optimum(self, v_min, a_max, method, direction, omega, harmonics, settings, sweep, start):
         """As `AbstractMechanism.optimum`: travelling waves, then per-spring harmonics (`optimisation._chain`)."""
         from ..optimisation._optimise import chain_optimum

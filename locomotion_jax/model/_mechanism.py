@@ -21,7 +21,8 @@ class AbstractMechanism(eqx.Module):
     `physics()`), and the dynamics' `simulate` and `measure` take it whatever the mechanism.
     The solvers ask it for their problem the same way: `gait_problem` (`steady_gait`),
     `branch_setup` (`continuation`) and `optimum` (`optimise`, whose method depends on the kind of
-    mechanism); their defaults serve any mechanism that carries its own actuation.
+    mechanism), and `animate` for its `animation`; their defaults serve any mechanism that carries
+    its own actuation.
     """
 
     @property
@@ -128,6 +129,14 @@ class AbstractMechanism(eqx.Module):
         from ..gaits._continuation import bodies_setup
 
         return bodies_setup(self, parameter, stops_of, dynamics, waveform, dtype, contact)
+
+    def animation(self, traj: Any, **options: Any) -> Any:
+        """[`animate`][locomotion_jax.run._animation.animate] of this mechanism's trajectory `traj`, with its
+        options. This default draws the bodies on their line (`run._mechanism_animation`, the
+        mechanism's `drawing()`); `Params` draws the paper's two masses and tilted spring."""
+        from ..run._mechanism_animation import animate_bodies
+
+        return animate_bodies(traj, self, **options)
 
     def optimum(self, v_min: Any, a_max: Any, method: str, direction: int | None, omega: Any, harmonics: Any,
                 settings: Any, sweep: Any, start: Any) -> Any:  # fmt: skip

@@ -362,6 +362,12 @@ class Params(AbstractMechanism):
 
         return paper_setup(self, parameter, stops_of, dynamics, waveform, dtype)
 
+    def animation(self, traj: Any, **options: Any) -> Any:
+        """As `AbstractMechanism.animation`: the paper's two masses and tilted spring (`run._animation`)."""
+        from ..run._animation import animate_paper
+
+        return animate_paper(traj, self, **options)
+
     def optimum(self, v_min, a_max, method, direction, omega, harmonics, settings, sweep, start):
         """As `AbstractMechanism.optimum`: the exact (default) or smoothed optimiser of the paper's model."""
         from ..optimisation._optimise import params_optimum

@@ -11,6 +11,10 @@ An optional panel below the scene plots $x_i(t) - x_i(t_0)$ with a moving
 cursor and the stuck intervals in `STUCK_COLOR`, so the staircase of stick-slip
 motion is visible even when the steps are small against the spring's length.
 
+[`animate`][] takes any mechanism, each drawing itself (`AbstractMechanism.animation`): this
+module's scene for the paper's model, `_mechanism_animation` for the bodies of a chain or a
+mechanism.
+
 Matplotlib objects only (no pyplot state): the figure is a bare `Figure`, so a
 notebook shows the animation once (`HTML(anim.to_jshtml())`), not a stray still.
 The artists carry `gid`s (`"mass1"`, `"mass2"`, `"anchor1"`, `"anchor2"`,
@@ -32,6 +36,7 @@ from matplotlib.patches import Rectangle
 from .._results import Trajectory
 from .._status import Mode
 from ..model._params import Params
+from ._batch import mechanism_arg
 
 
 STUCK_COLOR = "#d62728"
@@ -200,6 +205,45 @@ class _Scene:
 
 def animate(
     traj: Trajectory,
+    params: Any,
+    *,
+    index: tuple[int, ...] = (),
+    t_range: tuple[float | int, float | int] | None = None,
+    max_frames: int = 200,
+    interval: float | int = 50.0,
+    trace: bool = True,
+    figsize: tuple[float | int, float | int] | None = None,
+    title: str | None = None,
+) -> FuncAnimation:
+    """A matplotlib animation of a trajectory of any mechanism: the paper's model's two masses and
+    tilted spring ([`animate_paper`][]), or the bodies and springs of a [`Chain`][] or a
+    [`Mechanism`][locomotion_jax.Mechanism] on their line (`run._mechanism_animation.animate_bodies`:
+    a stuck body red with an anchor under it, a slipping one blue, a body without ground contact
+    grey). Each mechanism draws itself (`AbstractMechanism.animation`).
+
+    **Arguments:** as [`animate_paper`][] (`params`: the mechanism that produced `traj`; `figsize`:
+    each drawing's own where `None`).
+
+    **Returns:** a `matplotlib.animation.FuncAnimation` on a bare `Figure` (no pyplot).
+
+    **Raises:** `ValueError` for a batch without its `index`, an `index` that does not fit, or no
+    valid saved state in `t_range`.
+
+    !!! Example
+
+        ```python
+        worm = Chain(masses=[1.0] * 4, d=0.0, waveforms=TravellingWave(0.1, 2.0, 0.785))
+        traj = simulate(worm, 30.0, save_at=np.linspace(20, 30, 100))
+        save_gif(animate(traj, worm), "worm.gif", dpi=60)
+        ```
+    """
+    options = dict(index=index, t_range=t_range, max_frames=max_frames, interval=interval, trace=trace,
+                   figsize=figsize, title=title)  # fmt: skip
+    return mechanism_arg(params).animation(traj, **options)
+
+
+def animate_paper(
+    traj: Trajectory,
     params: Params,
     *,
     index: tuple[int, ...] = (),
@@ -207,10 +251,10 @@ def animate(
     max_frames: int = 200,
     interval: float | int = 50.0,
     trace: bool = True,
-    figsize: tuple[float | int, float | int] = (5.6, 3.8),
+    figsize: tuple[float | int, float | int] | None = None,
     title: str | None = None,
 ) -> FuncAnimation:
-    """A matplotlib animation of the two masses and the tilted spring.
+    """A matplotlib animation of the two masses and the tilted spring of the paper's model.
 
     Frame $k$ draws the saved state $k$ of `traj` (a stride is taken when there
     are more than `max_frames` saved states in `t_range`). Masses are blocks
@@ -231,7 +275,7 @@ def animate(
     - `max_frames`: upper bound on the number of frames.
     - `interval`: delay between frames in ms (the GIF's and the HTML player's speed).
     - `trace`: add the panel of $x_i(t) - x_i(t_0)$ with a cursor and stuck intervals.
-    - `figsize`, `title`: of the figure.
+    - `figsize`, `title`: of the figure (`figsize` default `(5.6, 3.8)`).
 
     **Returns:** a `matplotlib.animation.FuncAnimation` on a bare `Figure` (no
     pyplot); show it with `IPython.display.HTML(anim.to_jshtml())` or write it with [`save_gif`][].
@@ -269,7 +313,7 @@ def animate(
         )
     stride = max(1, math.ceil(idx.size / max_frames))
     frames = idx[::stride]
-    fig = Figure(figsize=figsize, layout="constrained")
+    fig = Figure(figsize=figsize or (5.6, 3.8), layout="constrained")
     scene = _Scene(data, params, frames, fig, trace, title)
     scene.draw(0)
     # Lay the figure out once: the constrained layout would otherwise be solved

@@ -1,5 +1,5 @@
-"""Animation of a [`Mechanism`][locomotion_jax.Mechanism]'s bodies on their line (SPEC §9), from a
-`Trajectory` of one configuration.
+"""Animation of the bodies of a [`Chain`][locomotion_jax.Chain] or a [`Mechanism`][locomotion_jax.Mechanism]
+on their line (SPEC §8, §9), from a `Trajectory` of one configuration.
 
 Each body is a block centred on $x_i$: a body in ground contact stands on the ground, a carried body
 is drawn smaller inside its carrier's row, a free body above the ground. A stuck body (the
@@ -12,7 +12,7 @@ An optional panel below plots $x_i(t) - x_i(t_0)$ with a moving cursor. The arti
 """
 
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from matplotlib.animation import FuncAnimation
@@ -37,46 +37,85 @@ def _zigzag(xa: float, xb: float, y: float, amp: float, coils: int = 6) -> tuple
     return xa + s * (xb - xa), y + off
 
 
-def animate_mechanism(
+class Drawing(NamedTuple):
+    """What the animation draws of a mechanism besides its trajectory (`drawing()` of a
+    [`Chain`][locomotion_jax.Chain] or a [`Mechanism`][locomotion_jax.Mechanism]): per body whether it
+    touches the ground (`contact`) and whether another body carries it (`carried`), and each
+    spring's two ends (body indices, or `lj.WALL`)."""
+
+    contact: list[bool]
+    carried: list[bool]
+    springs: list[tuple[int | str, int | str]]
+
+
+def mechanism_drawing(mechanism: Mechanism) -> Drawing:
+    """A [`Mechanism`][locomotion_jax.Mechanism]'s bodies and springs."""
+    return Drawing(
+        contact=[law is not None for law in mechanism.friction],
+        carried=[c is not None for c in mechanism.carried_by],
+        springs=[(el.a, el.b) for el in mechanism.links if isinstance(el, Spring)],
+    )
+
+
+def animate_bodies(
     traj: Any,
-    mechanism: Mechanism,
+    mechanism: Any,
     *,
+    index: tuple[int, ...] = (),
+    t_range: tuple[float | int, float | int] | None = None,
     max_frames: int = 200,
-    interval: float = 50.0,
+    interval: float | int = 50.0,
     trace: bool = True,
+    figsize: tuple[float | int, float | int] | None = None,
     title: str | None = None,
 ) -> FuncAnimation:
-    """A matplotlib animation of one mechanism's bodies (module docstring).
+    """A matplotlib animation of one configuration of a mechanism of bodies on a line (module
+    docstring): a [`Chain`][locomotion_jax.Chain] or a [`Mechanism`][locomotion_jax.Mechanism] (its
+    `drawing()`).
 
-    **Arguments:** `traj`, a `Trajectory` of `mechanism` (one configuration: batch shape `()`);
-    `max_frames`: at most this many frames (a stride over the valid saved states); `interval`: ms
-    between frames; `trace`: add the displacement panel; `title`: of the figure.
+    **Arguments:** `traj`, a `Trajectory` of `mechanism`; `index`: the configuration of a batch
+    (both `traj` and `mechanism` are indexed by it); `t_range`: `(t0, t1)` of the saved times to
+    draw (default all); `max_frames`: at most this many frames (a stride over the valid saved
+    states); `interval`: ms between frames; `trace`: add the displacement panel; `figsize`, `title`:
+    of the figure.
 
     **Returns:** a `FuncAnimation` on a bare `Figure` (write it with `save_gif`).
 
-    **Raises:** `ValueError` for a batch, or where no saved state is valid.
+    **Raises:** `ValueError` for a batch without its `index`, an `index` that does not fit it, or
+    where no saved state is valid in `t_range`.
     """
-    if mechanism.batch_shape != () or np.ndim(traj.t) != 1:
+    index = tuple(index)
+    shape = tuple(mechanism.batch_shape)
+    if len(index) != len(shape) or any(not (-n <= i < n) for i, n in zip(index, shape)):
         raise ValueError(
-            f"animate: one mechanism configuration (batch shape ()), got batch shape {mechanism.batch_shape}."
+            f"animate: one mechanism configuration: index={index!r} must pick one of the batch shape {shape} "
+            "(() for one configuration)."
         )
     if max_frames < 1:
         raise ValueError(f"animate: max_frames must be >= 1, got {max_frames}.")
-    t = np.asarray(traj.t, np.float64)
-    x = np.asarray(traj.x, np.float64)
-    stuck = np.asarray(traj.stuck, bool)
-    idx = np.flatnonzero(np.asarray(traj.valid, bool))
+    pick = lambda a: np.asarray(a)[index]
+    t, x, stuck = pick(traj.t).astype(np.float64), pick(traj.x).astype(np.float64), pick(traj.stuck).astype(bool)
+    if t.ndim != 1:
+        raise ValueError(f"animate: the trajectory's batch shape {np.shape(traj.t)[:-1]} is not {shape}.")
+    keep = pick(traj.valid).astype(bool)
+    if t_range is not None:
+        keep &= (t >= t_range[0]) & (t <= t_range[1])
+    idx = np.flatnonzero(keep)
     if idx.size == 0:
-        raise ValueError("animate: no valid saved state (the run stopped before the first saved time).")
+        raise ValueError(
+            f"animate: no valid saved state in t_range={t_range!r} (saved times {t[0]:.4g}..{t[-1]:.4g}; the run "
+            "may have stopped before them)."
+        )
     frames = idx[:: max(1, math.ceil(idx.size / max_frames))]
     n = x.shape[-1]
-    contact = [law is not None for law in mechanism.friction]
-    walled = any(WALL in el.bodies() for el in mechanism.links)
+    draw_of = mechanism.drawing()
+    contact = draw_of.contact
+    walled = any(WALL in ends for ends in draw_of.springs)
     span = float(np.ptp(np.concatenate([x[idx].ravel(), [0.0] if walled else []])))
     width = max(0.08 * span, 0.05)
-    size = [1.0 if contact[i] or mechanism.carried_by[i] is None else 0.55 for i in range(n)]
-    base = [0.0 if contact[i] else (0.2 if mechanism.carried_by[i] is not None else 1.4) for i in range(n)]
-    fig = Figure(figsize=(6.0, 4.2 if trace else 2.6), layout="constrained")
+    size = [1.0 if contact[i] or not draw_of.carried[i] else 0.55 for i in range(n)]
+    base = [0.0 if contact[i] else (0.2 if draw_of.carried[i] else 1.4) for i in range(n)]
+    fig = Figure(figsize=figsize or (6.0, 4.2 if trace else 2.6), layout="constrained")
     ax = fig.add_subplot(2, 1, 1) if trace else fig.add_subplot(1, 1, 1)
     lo, hi = float(x[idx].min()) - 2 * width, float(x[idx].max()) + 2 * width
     if walled:
@@ -96,9 +135,9 @@ def animate_mechanism(
         ax.add_patch(r)
         blocks.append(r)
     anchors = [ax.plot([], [], "^", color=STUCK_COLOR, ms=6, gid=f"anchor{i}")[0] for i in range(n)]
-    springs: list[tuple[Spring, Line2D]] = []
-    for j, el in enumerate([e for e in mechanism.links if isinstance(e, Spring)]):
-        springs.append((el, ax.plot([], [], "-", color="k", lw=0.8, gid=f"spring{j}")[0]))
+    springs: list[tuple[tuple[int | str, int | str], Line2D]] = []
+    for j, ends in enumerate(draw_of.springs):
+        springs.append((ends, ax.plot([], [], "-", color="k", lw=0.8, gid=f"spring{j}")[0]))
     clock = ax.text(0.01, 0.97, "", transform=ax.transAxes, va="top", fontsize="small")
     cursor = None
     if trace:
@@ -119,9 +158,9 @@ def animate_mechanism(
             r.set_x(x[s, i] - 0.5 * r.get_width())
             r.set_facecolor(STUCK_COLOR if stuck[s, i] else (SLIP_COLOR if contact[i] else FREE_COLOR))
             anchors[i].set_data([x[s, i]] if stuck[s, i] else [], [-0.15] if stuck[s, i] else [])
-        for el, line in springs:
-            ya = 0.15 if el.a == WALL else base[int(el.a)] + 0.12
-            line.set_data(*_zigzag(end(el.a, x[s]), end(el.b, x[s]), ya, 0.06))
+        for (a, b), line in springs:
+            ya = 0.15 if a == WALL else base[int(a)] + 0.12
+            line.set_data(*_zigzag(end(a, x[s]), end(b, x[s]), ya, 0.06))
         clock.set_text(f"t = {t[s]:.3f}")
         if cursor is not None:
             cursor.set_xdata([t[s], t[s]])
