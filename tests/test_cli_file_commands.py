@@ -146,9 +146,10 @@ def test_mechanism_options_beside_a_file_are_refused(args, option):
     assert res.exit_code == 2 and res.output.startswith(f"Error: {option}: the mechanism comes from"), res.output
 
 
-def test_animate_and_sweep_send_the_other_kind_to_its_command():
-    res = invoke("animate", WORM)
-    assert res.exit_code == 2 and f"`animate`: {WORM} is a chain; this command runs the paper's model" in res.output
+def test_animate_draws_a_chain_file_and_sweep_sends_the_other_kind_to_its_command(tmp_path):
+    out = tmp_path / "worm.gif"
+    res = invoke("animate", WORM, "--t-from", "3", "--t-end", "6", "--frames", "4", "--dt", "0.05", "--out", str(out))
+    assert res.exit_code == 0 and "(4 frames, t = 3..6); body 0 stuck in" in res.output and out.exists(), res.output
     res = invoke("sweep", PAPER, "--phi", "0,1", "--out", "m.nc")
     assert res.exit_code == 2 and f"Error: --phi: the mechanism comes from {PAPER}" in res.output
 

@@ -159,7 +159,7 @@ def test_sweep_of_a_chain_equals_lj_measure_of_the_batch(tmp_path):
         (["sweep", "--masses", "1,1,1", "--k", "1:2:3", "--out", "x.nc"], "--k must be a number or a comma"),
     ],  # fmt: skip
 )
-def test_a_kind_a_command_does_not_run_is_named(args, message):
+def test_an_option_of_the_other_kind_is_named(args, message):
     res = invoke(*args)
     assert res.exit_code == 2 and "Traceback" not in res.output
     assert res.output.startswith(f"Error: {message}"), res.output

@@ -188,13 +188,6 @@ class Built:
         """The kind in words: "a chain"."""
         return KIND_NAMES[self.kind]
 
-    def refuse(self, command: str, kinds: tuple[str, ...], hint: str = "") -> None:
-        """`ValueError` unless the mechanism is of one of `kinds`: `command` does not run this kind."""
-        if self.kind not in kinds:
-            where = f"{self.file} is " if self.file is not None else "the options give "
-            runs = " and ".join(KIND_NAMES[k] for k in kinds)
-            raise ValueError(f"`{command}`: {where}{self.kind_name}; this command runs {runs}.{hint}")
-
 
 KIND_NAMES: dict[str, str] = {"paper": "the paper's model", "chain": "a chain",
                               "mechanism": 'a mechanism of bodies and links (kind = "mechanism")'}  # fmt: skip
