@@ -735,7 +735,7 @@ MUTATIONS = [
         "locomotion_jax/optimisation/_element_local.py",
         (
             (
-                "    cos, sin = cos * np.cos(n * d) + sin * np.sin(n * d), sin * np.cos(n * d) - cos * np.sin(n * d)\n",
+                "    cos, sin = normalise_phase(cos, sin)\n",
                 "",
             ),
         ),
@@ -747,6 +747,48 @@ MUTATIONS = [
         "locomotion_jax/optimisation/_element_local.py",
         (("    scale = 1 / np.maximum(strokes(cos, sin) / a_max, 1.0)\n", "    scale = np.ones(len(cos))\n"),),
         ("tests/test_optimise.py::test_a_given_start_is_refitted_to_the_searchs_family",),
+    ),
+    Mutation(
+        "chain_period_plot_not_relaxed",
+        "a chain optimum's period figure runs from the default start, not from the relaxed springs of the "
+        "optimiser's direct simulation",
+        "locomotion_jax/optimisation/_element_optimum.py",
+        (('        return self.chain, dict(start="relaxed")\n', "        return self.chain, {}\n"),),
+        ("tests/test_optimise.py::test_period_figure_of_a_chain_optimum_moves_at_its_gaits_speed",),
+    ),
+    Mutation(
+        "travelling_wave_drawn_backwards",
+        "the waveform figure draws the best travelling wave with its phase lag reversed",
+        "locomotion_jax/optimisation/_element_optimum.py",
+        (("np.sin(phase[None] - np.arange(self.cos.shape[0])", "np.sin(phase[None] + np.arange(self.cos.shape[0])"),),
+        ("tests/test_optimise.py::test_waveform_figure_draws_a_chain_optimum_of_either_family",),
+    ),
+    Mutation(
+        "element_rollout_wide_bump",
+        "a chain's or a mechanism's smoothed rollout keeps the smoothed engine's static bump sqrt(eps), not the "
+        "optimiser's narrower one",
+        "locomotion_jax/optimisation/_objective.py",
+        (
+            (
+                'smoothed.rates_and_normal(P, "paper", eps, t, y, jnp.sqrt(EPS_REF * eps))',
+                'smoothed.rates_and_normal(P, "paper", eps, t, y)',
+            ),
+        ),
+        ("tests/test_optimise.py::test_element_rollout_is_the_papers_on_its_two_mass_chain",),
+    ),
+    Mutation(
+        "signals_projected_together",
+        "the smoothed stage's projection rescales a chain's signals as one, not each onto its own stroke bound",
+        "locomotion_jax/optimisation/_optimise.py",
+        (('stroke = cons.project_stroke if theta["cos"].ndim == 1 else', "stroke = cons.project_stroke if True else"),),
+        ("tests/test_optimise.py::test_projection_of_several_signals_rescales_each_one",),
+    ),
+    Mutation(
+        "smoothed_spline_accepted",
+        "method='smoothed' runs a spline search (its local stage optimises Fourier series)",
+        "locomotion_jax/optimisation/_element_local.py",
+        (('    if method == "smoothed" and settings.shape != "fourier":\n', "    if False:\n"),),
+        ("tests/test_optimise.py::test_bad_input_raises",),
     ),
     Mutation(
         "paper_start_checked_late",

@@ -107,7 +107,7 @@ def tiny_sweep():
 
 def _problem(eps, free_omega=True, detach=None):
     p = lj.Params()
-    plan = _objective.make_plan(p, 4.0, 4.0, eps, 3.0, 3.0, detach)
+    plan = _objective.make_plan((p.m1, p.m2), 4.0, 4.0, eps, 3.0, 3.0, detach)
     return _optimise._Problem(
         p,
         jnp.asarray(0.05),
@@ -144,6 +144,53 @@ def test_gradient_matches_finite_differences():
     assert np.all(np.abs(np.asarray(ad)) > 1e-3)  # a real check: no vanishing derivative
 
 
+def test_element_rollout_is_the_papers_on_its_two_mass_chain():
+    """`_objective.element_rollout` (any mechanism's physics through `_smoothed.rates_and_normal`) on
+    the paper's model as a two-mass chain (`Chain.from_params`) is the paper's own rollout
+    (`_two_mass.forces`): the same smoothed model and start, to rounding. (The cosine coefficients
+    sum to 0, so that $\\ell_0(0) = \\bar\\ell$: the paper's rollout starts at the gap of $\\bar\\ell$,
+    a chain's relaxed start at that of $\\ell_0(0)$.)"""
+    p = lj.Params()
+    cos, sin, omega = jnp.array([0.012, -0.012]), jnp.array([0.03, 0.015]), jnp.asarray(3.0)
+    plan = _objective.make_plan((p.m1, p.m2), 3.0, 3.0, 1e-2, 4.0, 4.0)
+    eps = jnp.asarray(1e-2)
+    a = _objective.rollout(p, lj.Fourier(cos, sin, omega, p.lbar), eps, plan, 0.005)
+    b = _objective.element_rollout(lj.Chain.from_params(p), cos[None], sin[None], omega, eps, plan, 0.005)
+    assert abs(float(a.distance)) > 1e-3 and float(a.min_normal) > 0.5
+    for name, x, y in zip(a._fields, a, b):
+        assert float(y) == pytest.approx(float(x), rel=1e-11, abs=1e-14), name
+
+
+def test_element_gradient_matches_finite_differences():
+    """Reverse mode through a chain's smoothed rollout (`_optimise.element_rollout`, the smoothed
+    local stage's objective and constraints) against central differences along a random direction:
+    the paper's Coulomb law on tilted springs (so that the normal forces depend on the actuation)."""
+    chain = lj.Chain(masses=[1.0] * 3).broadcast()
+    plan = _objective.make_plan((1.0, 1.0, 1.0), 3.0, 3.0, 1e-2, 4.0, 4.0)
+    log_lo, log_hi = jnp.asarray(math.log(2.0)), jnp.asarray(math.log(5.0))
+    prob = _optimise._Problem(chain, jnp.asarray(A_MAX), jnp.asarray(1.0), log_lo, log_hi, plan, 0.005, True,
+                              _optimise.element_rollout)  # fmt: skip
+    theta = {"cos": jnp.array([[0.0, 0.1], [-0.3, 0.05]]), "sin": jnp.array([[0.8, -0.1], [0.4, 0.2]]),
+             "log_omega": jnp.asarray(math.log(3.0))}  # fmt: skip
+    eps, v_t, margin = jnp.asarray(1e-2), jnp.asarray(0.05), jnp.asarray(0.05)
+    rng = np.random.default_rng(2)
+    direction = jax.tree_util.tree_map(lambda x: jnp.asarray(rng.normal(size=x.shape)), theta)
+
+    @jax.jit
+    def f(th):  # cost, speed constraint, normal-force constraint
+        cost, g, _ = _optimise.terms(th, prob, eps, v_t, margin)
+        return jnp.concatenate([cost[None], g])
+
+    jac = jax.jit(jax.jacrev(f))(theta)
+    ad = sum(jnp.tensordot(jac[k], direction[k], axes=direction[k].ndim) for k in theta)
+    h = 1e-5
+    plus = jax.tree_util.tree_map(lambda x, d: x + h * d, theta, direction)
+    minus = jax.tree_util.tree_map(lambda x, d: x - h * d, theta, direction)
+    fd = (f(plus) - f(minus)) / (2 * h)
+    np.testing.assert_allclose(ad, fd, rtol=1e-5, atol=1e-8)
+    assert np.all(np.abs(np.asarray(ad)) > 1e-3)  # a real check: no vanishing derivative
+
+
 def test_stroke_is_exact_and_projection_lands_on_the_limit():
     rng = np.random.default_rng(0)
     for _ in range(3):
@@ -154,6 +201,19 @@ def test_stroke_is_exact_and_projection_lands_on_the_limit():
         assert dense <= exact <= dense * (1 + 1e-8)
         c2, s2 = _constraints.project_stroke(jnp.asarray(cos), jnp.asarray(sin), 0.05)
         assert float(_constraints.stroke(c2, s2)) == pytest.approx(0.05, rel=1e-12)
+
+
+def test_projection_of_several_signals_rescales_each_one():
+    """`_optimise.project` of `(S, H)` coefficients (the smoothed local stage of a chain or a
+    mechanism): each signal above the unit stroke lands on it, one inside is kept, and the
+    frequency is clipped."""
+    cos = jnp.array([[0.9, 0.4], [0.1, 0.0], [0.0, -2.0]])
+    sin = jnp.array([[0.5, 0.0], [0.2, 0.1], [1.0, 0.3]])
+    out = _optimise.project({"cos": cos, "sin": sin, "log_omega": jnp.asarray(3.0)}, 0.0, 1.0)
+    strokes = [float(_constraints.stroke(c, s)) for c, s in zip(out["cos"], out["sin"])]
+    assert strokes[0] == pytest.approx(1.0, rel=1e-12) and strokes[2] == pytest.approx(1.0, rel=1e-12)
+    assert np.array_equal(out["cos"][1], cos[1]) and np.array_equal(out["sin"][1], sin[1])
+    assert float(out["log_omega"]) == 1.0
 
 
 def test_choose_takes_the_cheapest_feasible_else_the_fastest_stable_gait():
@@ -210,7 +270,7 @@ def test_d0_equal_masses_cannot_move():
     )
     np.testing.assert_allclose(tr.X, tr.X[0], atol=1e-10)
     # The smoothed rollout of the optimiser keeps the symmetry too.
-    plan = _objective.make_plan(p, 3.0, 3.0, 1e-2, 4.0, 4.0)
+    plan = _objective.make_plan((p.m1, p.m2), 3.0, 3.0, 1e-2, 4.0, 4.0)
     r = _objective.rollout(p, wave, jnp.asarray(1e-2), plan, 0.005)
     assert abs(float(r.distance)) < 1e-10 and float(r.dissipated) > 0
 
@@ -249,15 +309,15 @@ def test_coarse_stage_in_a_finer_loop_matches_its_own_plan():
     p = lj.Params()
     wave = lj.Fourier(jnp.array([0.0]), jnp.array([0.04]), jnp.asarray(3.0), p.lbar)
     eps = jnp.asarray(1e-2)
-    own = _objective.make_plan(p, 3.0, 3.0, 1e-2, 4.0, 4.0)
-    shared = _objective.make_plan(p, 3.0, 3.0, 1e-2, 4.0, 4.0, eps_min=2.5e-3)
+    own = _objective.make_plan((p.m1, p.m2), 3.0, 3.0, 1e-2, 4.0, 4.0)
+    shared = _objective.make_plan((p.m1, p.m2), 3.0, 3.0, 1e-2, 4.0, 4.0, eps_min=2.5e-3)
     assert shared.max_steps_per_period > int(shared.steps_per_period) == own.max_steps_per_period
     a = _objective.rollout(p, wave, eps, own, 0.005)
     b = _objective.rollout(p, wave, eps, shared, 0.005)
     for x, y in zip(a, b):
         assert float(y) == pytest.approx(float(x), rel=1e-12, abs=1e-15)
     with pytest.raises(ValueError, match="eps_min"):
-        _objective.make_plan(p, 3.0, 3.0, 1e-3, 4.0, 4.0, eps_min=1e-2)
+        _objective.make_plan((p.m1, p.m2), 3.0, 3.0, 1e-3, 4.0, 4.0, eps_min=1e-2)
 
 
 @pytest.mark.slow  # the smoothed method end to end; its parts are tested above, the exact method below
@@ -825,6 +885,24 @@ def test_period_plot_of_a_spline_the_default_step_does_not_resolve(exact_run, tm
     assert path.exists() and path.stat().st_size > 0
 
 
+def test_figures_of_the_papers_optimum(exact_run):
+    """`_plots.waveform_figure` and `period_figure` of the paper's model's spline optimum: its
+    stroke against the reference's own B-spline, the best sinusoid dotted, and each mass moving
+    over the last of 200 periods by the steady gait's mean speed times the period (a gait of one
+    actuation period)."""
+    opt, _ = exact_run
+    phase = np.linspace(0, 2 * np.pi, 1201)
+    ref = [Sig(opt.lbar, w=opt.omega, control=tuple(opt.control)).at(t)[0] - opt.lbar for t in phase / opt.omega]
+    lines = _plots.waveform_figure(opt).axes[0].lines
+    assert np.abs(lines[0].get_ydata() - np.array(ref)).max() < 1e-12
+    assert np.abs(lines[1].get_ydata() - opt.sinusoid["a"] * np.sin(phase)).max() < 1e-15
+    T = 2 * np.pi / opt.omega
+    assert opt.gait_period_exact == pytest.approx(T, rel=1e-12)
+    ax, _ = _plots.period_figure(opt, lj.Params(), periods=200).axes
+    moved = np.array([np.asarray(line.get_ydata())[-1] for line in ax.lines])
+    np.testing.assert_allclose(moved, opt.mean_speed_exact * T, rtol=1e-6)
+
+
 def test_method_choice_is_checked():
     with pytest.raises(ValueError, match="method"):
         _optimise.optimise(lj.Params(), 0.02, 0.05, method="adam")
@@ -900,6 +978,7 @@ SMALL: dict[str, Any] = dict(amplitudes=2, frequencies=4, phases=4, zoom_levels=
 # The screen's slowest waves take most of the steps (a period at omega_min is ~60 of the
 # fastest): the frequency range starts at 0.4 instead of 0.06 of the lowest natural frequency.
 SETTINGS = lj.ChainOptimiseSettings(**SMALL, max_iter=8, omega_min=0.4)
+CHAIN_SPLINE = lj.ChainOptimiseSettings(**SMALL, max_iter=8, omega_min=0.4, shape="spline", knots=8)
 A_MAX = 0.1
 
 
@@ -935,6 +1014,39 @@ def test_beats_its_best_travelling_wave(opt3):
     (cand,) = [c for c in opt3.candidates if c["candidate"] == "travelling wave"]
     assert cand["cost_of_transport_exact"] == pytest.approx(wave["cost_of_transport"], rel=1e-10)
     assert opt3.mean_speed_exact >= opt3.v_min
+
+
+SMOOTHED = lj.OptimiseSettings(eps_schedule=(1e-2, 3e-3), outer=2, inner=15, transient=8.0, measured=6.0)
+
+
+@CHAIN_OPTIMISE
+def test_smoothed_method_on_a_chain(opt3):
+    """`method="smoothed"` on the same worm and screen: the local stage on the smoothed model, its
+    candidates verified on their steady gaits. A feasible optimum, no costlier than its travelling
+    wave, within the stroke bound, whose direct simulation and the independent reference's (from
+    the relaxed springs, over whole gait periods) agree with its steady gait. On this worm it is
+    cheaper than the exact method's 8 descent steps (`opt3`)."""
+    from reference_chain import chain_config, reference_chain_simulate
+
+    settings = eqx.tree_at(lambda s: s.smoothed, SETTINGS, SMOOTHED)
+    opt = lj.optimise(worm(), 0.05, A_MAX, harmonics=2, method="smoothed", settings=settings)
+    print(opt.summary())
+    assert [c["candidate"] for c in opt.candidates] == ["travelling wave", "smoothed 0", "smoothed 1"]
+    assert opt.feasible_exact and all(opt.constraints_exact.values()) and opt.mean_speed_exact >= opt.v_min
+    assert opt.cost_of_transport_exact <= opt.travelling_wave["cost_of_transport"] * (1 + 1e-12)
+    assert opt.cost_of_transport_exact < opt3.cost_of_transport_exact
+    assert np.all(opt.stroke_exact <= A_MAX * (1 + 1e-12)) and abs(opt.cos[0, 0]) < 1e-15
+    assert opt.evaluations == 0 and math.isnan(opt.min_normal) and opt.simulation_agreement < 1e-6
+    cfg = chain_config([1.0] * 3, k=50.0, d=0.0, lbar=float(opt.lbar[0]), c=0.01, omega=opt.omega, wave_A=opt.cos,
+                       wave_B=opt.sin, mu_s_fwd=0.5, mu_s_bwd=0.9, mu_k_fwd=0.3, mu_k_bwd=0.7)  # fmt: skip
+    n, Tg = opt.simulated_periods, opt.gait_period_exact
+    ref = reference_chain_simulate(cfg, (n + 10) * Tg, np.array([n * Tg, (n + 10) * Tg]), start="relaxed")
+    assert ref["status"] == "ok"
+    dX, ed = np.diff(ref["X"])[0], np.diff(ref["e_d"])[0]
+    err = max(abs(dX / (10 * Tg) / opt.mean_speed_exact - 1), abs(ed / abs(dX) / opt.cost_of_transport_exact - 1))
+    print(f"smoothed chain optimum: speed {opt.mean_speed_exact:.10f} (reference {dX / (10 * Tg):.10f}), cost "
+          f"{opt.cost_of_transport_exact:.10f} (reference {ed / abs(dX):.10f}); diff {err:.1e}")  # fmt: skip
+    assert err < 1e-4
 
 
 @CHAIN_OPTIMISE
@@ -1205,21 +1317,99 @@ def test_stroke_bound_holds_exactly(opt3):
 
 
 @CHAIN_OPTIMISE
-def test_cli_plot_draws_a_chain_optimum_of_either_family(opt3, tmp_path):
-    """`optimize --out`'s plot of a chain: the Fourier signals, and a spline optimum's signals
-    against the reference's own B-spline formula (the optimum's fields replaced by a spline's)."""
-    phase = np.linspace(0, 2 * np.pi, 401)
+def test_waveform_figure_draws_a_chain_optimum_of_either_family(opt3):
+    """`_plots.waveform_figure` of a chain (`optimize --out`'s `waveform.png`): the Fourier signals,
+    a spline optimum's signals against the reference's own B-spline formula (the optimum's fields
+    replaced by a spline's), and the travelling wave $a \\sin(\\varphi - j\\phi)$ dotted."""
+    phase = np.linspace(0, 2 * np.pi, 1201)
     n = np.arange(1, opt3.harmonics + 1)
     fourier = opt3.cos @ np.cos(np.outer(n, phase)) + opt3.sin @ np.sin(np.outer(n, phase))
     control = np.random.default_rng(5).uniform(-A_MAX, A_MAX, size=(2, 8))  # about the mean lbar
     spline = dataclasses.replace(opt3, shape="spline", control=control)
     ref = np.array([[Sig(lb, w=opt3.omega, control=tuple(c)).at(t)[0] - lb for t in phase / opt3.omega]
                     for c, lb in zip(control, opt3.lbar)])  # fmt: skip
-    for opt, signals, name in ((opt3, fourier, "fourier.png"), (spline, ref, "spline.png")):
-        fig = _cli_optimise._plot(opt, tmp_path / name)
-        assert (tmp_path / name).stat().st_size > 0
-        drawn = np.array([line.get_ydata() for line in fig.axes[0].lines[: len(signals)]])
+    w = opt3.travelling_wave
+    wave = [w["a"] * np.sin(phase - j * w["phi"]) for j in range(2)]
+    for opt, signals in ((opt3, fourier), (spline, ref)):
+        lines = _plots.waveform_figure(opt).axes[0].lines
+        drawn = np.array([line.get_ydata() for line in lines[:2]])
         assert np.abs(drawn - signals).max() < 1e-12
+        assert [line.get_label() for line in lines[:2]] == ["spring 0", "spring 1"]
+        assert np.abs(np.array([line.get_ydata() for line in lines[2:4]]) - wave).max() < 1e-12
+
+
+@CHAIN_OPTIMISE
+def test_period_figure_of_a_chain_optimum_moves_at_its_gaits_speed(opt3, tmp_path):
+    """`_plots.period_figure` of a chain optimum (`optimize --out`'s `period.png`): after 200
+    actuation periods from the relaxed springs each mass moves over the last one by the steady
+    gait's mean speed times the period (the gait's period is one actuation period), and the
+    stuck rows are the simulation's; `params` is refused, the paper's model requires it."""
+    T = 2 * np.pi / opt3.omega
+    assert opt3.gait_period_exact == pytest.approx(T, rel=1e-12)
+    fig = _plots.period_figure(opt3, None, periods=200)
+    ax, axs = fig.axes
+    moved = np.array([np.asarray(line.get_ydata())[-1] for line in ax.lines])
+    assert moved.shape == (3,)
+    np.testing.assert_allclose(moved, opt3.mean_speed_exact * T, rtol=1e-6)
+    tr = lj.simulate(opt3.chain, 200 * T, np.linspace(199 * T, 200 * T, 600), start="relaxed", contact="strict")
+    stuck = np.array([np.asarray(line.get_ydata()) for line in axs.lines])
+    assert np.array_equal(stuck, np.arange(3)[:, None] + 0.8 * np.asarray(tr.stuck).T)
+    # Within its transient the run is the one from the relaxed springs (the optimiser's start).
+    ax, _ = _plots.period_figure(opt3, None, periods=2).axes
+    tr = lj.simulate(opt3.chain, 2 * T, np.linspace(T, 2 * T, 600), start="relaxed", contact="strict")
+    x = np.asarray(tr.x)
+    np.testing.assert_allclose(np.array([line.get_ydata() for line in ax.lines]), (x - x[0]).T, rtol=0, atol=1e-12)
+    with pytest.raises(ValueError, match="params"):
+        opt3.driven(lj.Params())
+    with pytest.raises(ValueError, match="params"):
+        _plots.plot_period(_fields_of(lj.Optimum, control=None, omega=2.0), None, tmp_path / "p.png")
+
+
+def _fields_of(kind: type, **fields: Any) -> Any:
+    """An optimum of class `kind` that holds these fields only (a test reads no others)."""
+    opt = object.__new__(kind)
+    for name, value in fields.items():
+        object.__setattr__(opt, name, value)  # a frozen dataclass
+    return opt
+
+
+def test_figures_of_a_mechanism_optimum():
+    """`_plots.waveform_figure` and `period_figure` of a mechanism's optimum: the capsule's force
+    $0.6 \\sin 3t$ as its one signal, the best sinusoid $a \\sin(\\varphi + \\varphi_0)$ dotted, and
+    the bodies' displacements over the last period of a run from the mechanism's own start."""
+    phase = np.linspace(0, 2 * np.pi, 1201)
+    sinusoid = dict(a=0.4, omega=2.0, phase=1.0, mean_speed=-0.01, cost_of_transport=2.0)
+    opt = _fields_of(lj.MechanismOptimum, cos=np.zeros((1, 1)), sin=np.full((1, 1), 0.6), control=None, omega=3.0,
+                     harmonics=1, elements=[2], sinusoid=sinusoid, mechanism=_capsule(), a_max=0.8, v_min=0.005,
+                     mean_speed_exact=-0.01, cost_of_transport_exact=1.0)  # fmt: skip
+    lines = _plots.waveform_figure(opt).axes[0].lines
+    assert (
+        lines[0].get_label() == "optimised"
+        and np.abs(np.asarray(lines[0].get_ydata()) - 0.6 * np.sin(phase)).max() < 1e-12
+    )
+    assert np.abs(np.asarray(lines[1].get_ydata()) - 0.4 * np.sin(phase + 1.0)).max() < 1e-15
+    T = 2 * np.pi / 3.0
+    ax, axs = _plots.period_figure(opt, None, periods=10).axes
+    tr = lj.simulate(_capsule(), 10 * T, np.linspace(9 * T, 10 * T, 600), contact="strict")
+    x = np.asarray(tr.x)
+    np.testing.assert_allclose(np.array([line.get_ydata() for line in ax.lines]), (x - x[0]).T, rtol=0, atol=1e-12)
+    assert np.array_equal(
+        np.array([line.get_ydata() for line in axs.lines]), np.arange(2)[:, None] + 0.8 * np.asarray(tr.stuck).T
+    )
+
+
+@CHAIN_OPTIMISE
+def test_cli_out_writes_the_optimum_and_its_figures_for_a_chain(opt3, tmp_path, monkeypatch):
+    """`optimize --out DIR` of a chain: `optimum.json` (the whole result, which `--start` reads
+    back), `waveform.png` and `period.png`."""
+    monkeypatch.setattr(lj, "optimise", lambda *args, **kwargs: opt3)
+    args = ["optimize", "--masses", "1,1,1", "--d", "0", "--v-min", "0.05", "--a-max", "0.1", "--out", str(tmp_path)]
+    res = CliRunner().invoke(_cli.app, args)
+    assert res.exit_code == 0, res.output
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["optimum.json", "period.png", "waveform.png"]
+    saved = json.loads((tmp_path / "optimum.json").read_text())
+    assert saved["cost_of_transport_exact"] == opt3.cost_of_transport_exact and len(saved["candidates"]) > 0
+    assert _cli_optimise._start(tmp_path / "optimum.json") == saved
 
 
 @CHAIN_OPTIMISE
@@ -1316,7 +1506,8 @@ def test_two_masses_agree_with_the_two_mass_model():
         (dict(direction=2), "direction must be +1"),
         (dict(harmonics=0), "harmonics must be an integer >= 1"),
         (dict(omega=-1.0), "omega must be a finite number > 0"),
-        (dict(method="smoothed"), "exact method only"),
+        (dict(method="adam"), "method must be 'exact' or 'smoothed', got 'adam'"),
+        (dict(method="smoothed", settings=CHAIN_SPLINE), "method='smoothed' refines Fourier series"),
         (dict(chain=lj.Chain(masses=[1.0, 1.0, 1.0], d=0.5), a_max=0.07), "lifts a mass off at rest"),
         (dict(chain=lj.Chain.stack([worm(), worm()])), "single configuration"),
         (dict(chain=lj.Chain(masses=[1.0] * 3, actuator=lj.InternalForce())), "RestLength"),
@@ -1329,9 +1520,6 @@ def test_bad_input_raises(kwargs, message):
     chain, v_min, a_max = args.pop("chain"), args.pop("v_min"), args.pop("a_max")
     with pytest.raises(ValueError, match=message.replace("(", r"\(").replace(")", r"\)").replace("+", r"\+")):
         lj.optimise(chain, v_min, a_max, **args)
-
-
-CHAIN_SPLINE = lj.ChainOptimiseSettings(**SMALL, max_iter=8, omega_min=0.4, shape="spline", knots=8)
 
 
 @CHAIN_OPTIMISE
@@ -1658,14 +1846,49 @@ def test_mechanism_optimise_bad_input():
         lj.optimise(_capsule(), v_min=0.01, a_max=-1.0)
     with pytest.raises(ValueError, match="single configuration"):
         lj.optimise(_capsule(lj.Sinusoid(a=jnp.array([0.3, 0.4]), omega=3.0, lbar=0.0)), v_min=0.01, a_max=0.5)
-    with pytest.raises(ValueError, match="exact method only"):
-        lj.optimise(_capsule(), v_min=0.01, a_max=0.5, method="smoothed")
+    with pytest.raises(ValueError, match="method must be 'exact' or 'smoothed'"):
+        lj.optimise(_capsule(), v_min=0.01, a_max=0.5, method="adam")
+    with pytest.raises(ValueError, match="MechanismOptimiseSettings.shape must be 'fourier'"):
+        lj.optimise(
+            _capsule(), v_min=0.01, a_max=0.5, method="smoothed", settings=lj.MechanismOptimiseSettings(shape="spline")
+        )
+    with pytest.raises(TypeError, match="smoothed"):
+        lj.MechanismOptimiseSettings(smoothed=lj.ExactOptimiseSettings())  # pyright: ignore[reportArgumentType]
     # A start is checked before the screen: an optimum of as many signals, nothing else.
     two = _optimum_of(np.zeros((2, 1)), np.zeros((2, 1)), None, 1.0)
     with pytest.raises(ValueError, match="start: an optimum of 2 actuated signals; this search has 1"):
         lj.optimise(_capsule(), v_min=0.01, a_max=0.5, start=two)
     with pytest.raises(TypeError, match="start must be the result of an earlier optimise call"):
         lj.optimise(_capsule(), v_min=0.01, a_max=0.5, start=lj.Sinusoid(a=0.3, omega=3.0, lbar=0.0))
+
+
+@MECHANISM_OPTIMISE
+def test_smoothed_method_on_a_mechanism():
+    """`method="smoothed"` on the anisotropic capsule: the local stage on the smoothed model (a
+    carried body without friction, the force bounded), its candidates verified on their steady
+    gaits. A feasible optimum, no costlier than its sinusoid, whose steady gait the independent
+    reference reproduces from rest over whole periods once its transient has decayed."""
+    s = lj.MechanismOptimiseSettings(amplitudes=4, frequencies=8, local=2, transient=20, dt=0.01, omega_min=0.15,
+                                     omega_max=2.0, smoothed=SMOOTHED)  # fmt: skip
+    opt = lj.optimise(_capsule(), v_min=V_MIN, a_max=FORCE_MAX, direction=-1, method="smoothed", settings=s)
+    print(opt.summary())
+    assert [c["candidate"] for c in opt.candidates] == ["sinusoid", "smoothed 0", "smoothed 1"]
+    assert opt.feasible_exact and all(opt.constraints_exact.values()) and -opt.mean_speed_exact >= V_MIN
+    assert opt.sinusoid is not None and opt.cost_of_transport_exact <= opt.sinusoid["cost_of_transport"]
+    assert float(np.max(opt.stroke_exact)) <= FORCE_MAX * (1 + 1e-12) and opt.evaluations == 0
+    assert opt.simulation_agreement < 1e-6
+    w, Tg = opt.omega, opt.gait_period_exact
+    force = Sig(0.0, tuple(float(c) for c in opt.cos[0]), tuple(float(c) for c in opt.sin[0]), w)
+    S = System([Body(1.0, MU), Body(0.5, None, carrier=0)], springs=[(0, 1, K, 0.0)], forces=[(0, 1, force)],
+               dampers=[(0, 1, C)])  # fmt: skip
+    t = np.array([opt.simulated_periods, opt.simulated_periods + 10]) * Tg
+    ref = run(S, float(t[1]), t)
+    dX = ref["com"][1] - ref["com"][0]
+    speed, cost = dX / (t[1] - t[0]), (ref["ed"][1] - ref["ed"][0]) / abs(dX)
+    err = max(abs(speed / opt.mean_speed_exact - 1), abs(cost / opt.cost_of_transport_exact - 1))
+    print(f"smoothed capsule optimum: speed {opt.mean_speed_exact:.10f} (reference {speed:.10f}), cost "
+          f"{opt.cost_of_transport_exact:.10f} (reference {cost:.10f}); diff {err:.1e}")  # fmt: skip
+    assert err < 1e-4
 
 
 def _reference_gait(opt):

@@ -8,18 +8,13 @@ JSON object on stdout.
 
 import sys
 from pathlib import Path
-from typing import Any, TYPE_CHECKING
+from typing import Any
 
-import numpy as np
 import typer
 
 from ._errors import friendly
 from ._mechanism import build, Built, mechanism_options, NAMES
 from ._options import expand, Values
-
-
-if TYPE_CHECKING:
-    from matplotlib.figure import Figure
 
 
 OPTIMISED: tuple[str, ...] = tuple(n for n in NAMES if n not in ("a", "omega", "omega_over_wn1", "phi"))
@@ -117,10 +112,12 @@ def register(app: typer.Typer) -> None:
             None,
             "--start",
             help="Exact: continuation from an earlier result of the same kind of mechanism, the JSON that "
-            "optimize --json printed (or a chain's --out chain_optimum.json): refined too, and a candidate itself.",
+            "optimize --json printed (or --out's optimum.json): refined too, and a candidate itself.",
         ),
         json_out: bool = typer.Option(False, "--json", help="Print one JSON object instead of the report."),
-        out: Path | None = typer.Option(None, "--out", help="Directory for the plots."),
+        out: Path | None = typer.Option(
+            None, "--out", help="Directory for optimum.json and the plots (signals, one period, Pareto front)."
+        ),
         verbose: bool = typer.Option(False, "--verbose", help="Progress per block (stderr)."),
     ) -> None:
         """Optimise the actuation for least cost of transport at a required speed, verify it on the
@@ -129,11 +126,13 @@ def register(app: typer.Typer) -> None:
         The mechanism is the paper's model (its options; --a-max required), a chain (`--masses` and
         the chain options, without the wave's, which is what is optimised; --a-max required) or a
         mechanism FILE (--a-max defaults to the amplitude of its sinusoid or travelling wave; a file
-        of bodies and links needs it). A chain or a mechanism of bodies and links is optimised by the
-        exact method (--harmonics default 3 for a chain, 2 for bodies and links, or --shape spline
-        with --knots; the travelling-wave screen's --amplitudes, --frequencies, --phases,
-        --zoom-levels, --zoom-points (a chain: --screen-speed), and --local, --max-iter, --local-method, --margin,
-        --transient, --dt, --search-dt, --omega, --direction apply; --out saves a chain's optimum)."""
+        of bodies and links needs it). A chain or a mechanism of bodies and links is screened, then
+        refined on the exact model, or on the smoothed one with --method smoothed (its --outer,
+        --inner, --eps), and verified on its steady gaits (--harmonics default 3 for a chain, 2 for
+        bodies and links, or --shape spline with --knots; the travelling-wave screen's --amplitudes,
+        --frequencies, --phases, --zoom-levels, --zoom-points (a chain: --screen-speed), and --local,
+        --max-iter, --local-method, --margin, --transient, --dt, --search-dt, --omega, --direction
+        apply)."""
         import locomotion_jax as lj
 
         from ..optimisation import _optimise, _pareto
@@ -149,8 +148,6 @@ def register(app: typer.Typer) -> None:
                 a_max = amplitude(built)
             steps: dict[str, Any] = {name: v for name, v in (("dt", dt), ("search_dt", search_dt)) if v is not None}
             if built.kind != "paper":
-                if method != "exact":
-                    raise ValueError(f"--method: {built.kind_name} is optimised by the exact method only.")
                 from ._files import given
 
                 screen: dict[str, Any] = dict(amplitudes=amplitudes, frequencies=frequencies, phases=phases,
@@ -161,9 +158,12 @@ def register(app: typer.Typer) -> None:
                 screen |= {name: v for name, v in (("shape", shape), ("knots", knots)) if given([name])}
                 screen |= {"transient": int(transient)} if transient is not None else {}
                 screen |= steps
+                # The smoothed local stage's own options (its rollout's lengths are the defaults').
+                screen |= dict(smoothed=Settings(outer=outer, inner=inner, eps_schedule=_eps_schedule(eps),
+                                                 verbose=verbose))  # fmt: skip
                 chain_settings = lj.ChainOptimiseSettings(**screen)
                 return _optimise_bodies(built, v_min, a_max, direction, omega, harmonics, chain_settings, out, json_out,
-                                        _start(start))  # fmt: skip
+                                        _start(start), method)  # fmt: skip
             params = built.mechanism
             assert a_max is not None  # the paper's model: given, or its amplitude
             settings: ExactSettings | Settings
@@ -219,11 +219,7 @@ def register(app: typer.Typer) -> None:
             typer.echo(f"Error: {err}", err=True)
             raise typer.Exit(code=2) from None
         if out is not None:
-            from ..optimisation._plots import save_all
-
-            paths = save_all(result, params, sweep, Path(out))
-            if not json_out:
-                typer.echo("plots: " + ", ".join(str(p) for p in paths), err=True)
+            _save(result, params, sweep, Path(out), json_out)
         if json_out:
             typer.echo(result.to_json())
         else:
@@ -247,34 +243,17 @@ def amplitude(built: Built) -> float:
     raise ValueError(f"--a-max: {built.file}'s waveform has no single amplitude to default to; give --a-max.")
 
 
-def _plot(opt: Any, path: Path) -> "Figure":
-    """A chain's optimal signals $s_j(t)$ over one period beside the best travelling wave's, saved
-    to `path`; returns the figure (its first lines are the springs' signals, in order)."""
-    from matplotlib.figure import Figure
+def _save(opt: Any, params: Any, sweep: Any, out: Path, json_out: bool) -> None:
+    """`--out DIR`: the optimum's whole JSON (`optimum.json`, candidates and history included; what
+    `--start` reads back) and its figures (`optimisation._plots.save_all`: the signals, one period
+    of motion and, for the paper's model, the Pareto front)."""
+    from ..optimisation._plots import save_all
 
-    fig = Figure(figsize=(8, 4.5), layout="constrained")
-    ax = fig.subplots()
-    phase = np.linspace(0, 2 * np.pi, 401)
-    if opt.control is None:
-        n = np.arange(1, opt.cos.shape[1] + 1)
-        s = opt.cos @ np.cos(np.outer(n, phase)) + opt.sin @ np.sin(np.outer(n, phase))
-    else:
-        s = np.stack([np.asarray(w(phase / opt.omega)[0]) - float(w.lbar) for w in opt.waveforms])
-    for j, sj in enumerate(s):
-        ax.plot(phase / (2 * np.pi), sj, label=f"spring {j}")
-    w = opt.travelling_wave
-    if w is not None:
-        for j in range(s.shape[0]):
-            ax.plot(phase / (2 * np.pi), w["a"] * np.sin(phase - j * w["phi"]), color=f"C{j}", ls=":", lw=1)
-    ax.axhline(opt.a_max, color="grey", lw=0.8)
-    ax.axhline(-opt.a_max, color="grey", lw=0.8)
-    ax.set_xlabel("t / T (one actuation period)")
-    ax.set_ylabel("l0_j - lbar_j")
-    ax.legend(loc="upper right", fontsize="small")
-    ax.set_title(f"cost of transport {opt.cost_of_transport_exact:.4g} at speed {opt.mean_speed_exact:.4g} "
-                 f"(dotted: best travelling wave)")  # fmt: skip
-    fig.savefig(path, dpi=120)
-    return fig
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "optimum.json").write_text(opt.to_json(full=True, indent=1))
+    paths = [out / "optimum.json", *save_all(opt, params, sweep, out)]
+    if not json_out:
+        typer.echo("wrote " + ", ".join(str(p) for p in paths), err=True)
 
 
 def _start(path: Path | None) -> Any:
@@ -296,10 +275,9 @@ def _start(path: Path | None) -> Any:
 
 def _optimise_bodies(built: Built, v_min: float, a_max: float | None, direction: int | None, omega: float | None,
                      harmonics: int | None, settings: Any, out: Path | None, json_out: bool,
-                     start: Any = None) -> None:  # fmt: skip
+                     start: Any = None, method: str = "exact") -> None:  # fmt: skip
     """`optimize` of a chain or a mechanism of bodies and links: `lj.optimise` (from `start`, the
-    fields of an earlier result, where given), printed; a chain's optimum with `out` also saved
-    (JSON) and plotted."""
+    fields of an earlier result, where given), printed; with `out` also saved and plotted (`_save`)."""
     import locomotion_jax as lj
 
     from .._json import dumps
@@ -312,10 +290,7 @@ def _optimise_bodies(built: Built, v_min: float, a_max: float | None, direction:
     default = None if settings.shape == "spline" else 3 if built.kind == "chain" else 2
     opt = lj.optimise(built.mechanism, v_min, a_max, direction=1 if direction is None else direction, omega=omega,
                       harmonics=default if harmonics is None else harmonics, settings=settings,
-                      start=start)  # fmt: skip
-    if built.kind == "chain" and out is not None:  # a chain's per-spring harmonics, saved and plotted
-        (out / "chain_optimum.json").write_text(opt.to_json(full=True, indent=1))
-        _plot(opt, out / "chain_optimum.png")
-        if not json_out:
-            typer.echo(f"wrote {out / 'chain_optimum.json'}, {out / 'chain_optimum.png'}", err=True)
+                      start=start, method=method)  # fmt: skip
+    if out is not None:
+        _save(opt, None, None, out, json_out)
     typer.echo(dumps({**opt.to_dict(), **built.record}) if json_out else opt.summary())

@@ -74,16 +74,20 @@ def loads(P: AbstractPhysics, t: ArrayLike, x: Array) -> tuple[Any, Loads]:
     return dr, P.loads(dr, _unstack(x))
 
 
-def friction(P: AbstractPhysics, contact: Contact, eps: Array, L: Loads, v: Scalars) -> Scalars:
-    """Each body's smoothed friction force magnitude $n_i\\,\\mu_i(v_i)$ (against the motion)."""
+def friction(P: AbstractPhysics, contact: Contact, eps: Array, L: Loads, v: Scalars,
+             v_s: Array | None = None) -> Scalars:  # fmt: skip
+    """Each body's smoothed friction force magnitude $n_i\\,\\mu_i(v_i)$ (against the motion), with the
+    static bump's width `v_s` (default $\\sqrt{\\varepsilon}$)."""
     n = normal(contact, L.N)
-    v_s = jnp.sqrt(eps)
+    v_s = jnp.sqrt(eps) if v_s is None else v_s
     return tuple(ni * law.smoothed(vi, eps, v_s) for ni, law, vi in zip(n, P.friction, v))
 
 
-def accelerations(P: AbstractPhysics, contact: Contact, eps: Array, L: Loads, v: Scalars) -> tuple[Scalars, Array]:
-    """The accelerations $\\dot v_i$ and the dissipated power $\\dot e_d$ (module docstring)."""
-    fr = friction(P, contact, eps, L, v)
+def accelerations(P: AbstractPhysics, contact: Contact, eps: Array, L: Loads, v: Scalars,
+                  v_s: Array | None = None) -> tuple[Scalars, Array]:  # fmt: skip
+    """The accelerations $\\dot v_i$ and the dissipated power $\\dot e_d$ (module docstring; `v_s` as
+    in [`friction`][])."""
+    fr = friction(P, contact, eps, L, v, v_s)
     G = P.velocity_forces(v)
     F = L.F if G is None else tuple(f + g for f, g in zip(L.F, G))
     a = tuple((f - c * vi - q) * im for f, c, vi, q, im in zip(F, P.c, v, fr, P.im))
@@ -94,12 +98,20 @@ def accelerations(P: AbstractPhysics, contact: Contact, eps: Array, L: Loads, v:
 
 def rates(P: AbstractPhysics, contact: Contact, eps: Array, t: ArrayLike, y: Array) -> Array:
     """Right-hand side on the flat state $y = (x, v, e_d, w)$."""
+    return rates_and_normal(P, contact, eps, t, y)[0]
+
+
+def rates_and_normal(P: AbstractPhysics, contact: Contact, eps: Array, t: ArrayLike, y: Array,
+                     v_s: Array | None = None) -> tuple[Array, Array]:  # fmt: skip
+    """[`rates`][] (the static bump's width `v_s` as in [`friction`][]) and the smallest signed
+    normal force $\\min_i N_i$."""
     n = P.n_bodies
     x, v = y[:n], _unstack(y[n : 2 * n])
     dr, L = loads(P, t, x)
-    a, p_d = accelerations(P, contact, eps, L, v)
+    a, p_d = accelerations(P, contact, eps, L, v, v_s)
     p_w = P.power(dr, L, v)
-    return jnp.concatenate([y[n : 2 * n], jnp.stack(a), jnp.stack([p_d, jnp.asarray(p_w, y.dtype)])])
+    dy = jnp.concatenate([y[n : 2 * n], jnp.stack(a), jnp.stack([p_d, jnp.asarray(p_w, y.dtype)])])
+    return dy, jnp.min(jnp.stack(L.N))
 
 
 def energy(P: AbstractPhysics, t: Array, y: Array) -> Array:

@@ -118,14 +118,21 @@ def with_waves(chain: Chain | Mechanism, theta: Array, a_max: Array, harmonics: 
         S = len(actuated(chain))
         if knots > 0:
             return with_spline(chain, a_max * theta[:-1].reshape(S, knots), jnp.exp(theta[-1]))
-        cos, sin = coefficients(theta, S, harmonics)
-        return with_fourier(chain, a_max * cos, a_max * sin, jnp.exp(theta[-1]))
-    S = chain.n_masses - 1
-    if knots > 0:
-        return with_spline(chain, a_max * theta[:-1].reshape(S, knots), jnp.exp(theta[-1]))
+    else:
+        S = chain.n_masses - 1
+        if knots > 0:
+            return with_spline(chain, a_max * theta[:-1].reshape(S, knots), jnp.exp(theta[-1]))
     cos, sin = coefficients(theta, S, harmonics)
-    waves = SpringFourier(a_max * cos, a_max * sin, jnp.exp(theta[-1]))
-    return chain.with_waves(waves)
+    return drive(chain, a_max * cos, a_max * sin, jnp.exp(theta[-1]))
+
+
+def drive(model: Chain | Mechanism, cos: Array, sin: Array, omega: Array) -> Chain | Mechanism:
+    """`model` (a chain or a mechanism) with each actuated signal (a chain's springs; a mechanism's
+    actuated elements, [`with_fourier`][]) driven by the Fourier series of coefficients `cos[j]`,
+    `sin[j]` (absolute units, about the signal's mean) and base frequency `omega`."""
+    if isinstance(model, Mechanism):
+        return with_fourier(model, cos, sin, omega)
+    return model.with_waves(SpringFourier(cos, sin, omega))
 
 
 def period(

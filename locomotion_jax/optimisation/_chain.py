@@ -90,14 +90,16 @@ def check_inputs(chain: Any, v_min: Any, a_max: Any, direction: Any, harmonics: 
 
 def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int = 1, omega: float | None = None,
                    harmonics: int | None = None, settings: ChainOptimiseSettings | None = None,
-                   start: Any = None) -> ChainOptimum:  # fmt: skip
+                   start: Any = None, method: str = "exact") -> ChainOptimum:  # fmt: skip
     """`optimise(chain, v_min, a_max, ...)`: the method of the module docstring (arguments as there;
     `harmonics`: the Fourier series' length, default 3; a spline search refuses one). `start`: an
     earlier chain optimum ([`_element_local.given_start`][]) that takes the last local lane and is
-    a candidate itself."""
+    a candidate itself. `method="smoothed"`: the local stage on the smoothed model
+    (`_element_smoothed`; Fourier series only), verified as the exact method's."""
     settings = ChainOptimiseSettings() if settings is None else settings
     if not isinstance(settings, ChainOptimiseSettings):
         raise TypeError(f"settings for a Chain must be a ChainOptimiseSettings, got {type(settings).__name__}.")
+    local.check_method(method, settings)
     spline = settings.shape == "spline"
     H = local.family_harmonics(settings, harmonics, 3)  # a spline search screens single-harmonic waves
     speed, direction = check_inputs(chain, v_min, a_max, direction, H, omega, settings)
@@ -135,13 +137,15 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
                                   float(sc.gaits.cost[i])))  # fmt: skip
     if start is not None:
         starts[-1] = local.given_start(start, S, H, M if spline else 0, a_max, lo, hi, sc.gaits.y[rows.pop()])
-    xs, ev, log = local.refine(base, starts, a_max, speed, direction, lo, hi, M if spline else 0, search, say)
+    xs, ev, log = local.local_stage(method, base, starts, a_max, speed, direction, lo, hi, M if spline else 0, search,
+                                    say)  # fmt: skip
 
     # 3. Verification of the candidates: the refined actuations, rescaled onto the exact
     # stroke limit (what the line search's tolerance let through), and the baseline wave.
     # A given start is a candidate itself, as its lane's result is.
     given = [] if start is None else [local.decision(starts[-1], a_max, M if spline else 0)]
-    names = ["travelling wave"] + [f"local {lane}" for lane in range(len(xs))] + ["given start"] * len(given)
+    stage = "smoothed" if ev is None else "local"
+    names = ["travelling wave"] + [f"{stage} {lane}" for lane in range(len(xs))] + ["given start"] * len(given)
     cos_b, sin_b = screen.wave_coefficients(sc.a[best : best + 1], sc.phi[best : best + 1], S, H)
     say(f"verifying {len(names)} candidates on their steady gaits...")
     solve = lambda cos, sin, om, control=None: screen.solve(base, cos, sin, om, settings, control=control)._asdict()
@@ -157,9 +161,9 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
         baseline = local.verified_baseline(screen.as_dict(sc, best), v)
     cos_k, sin_k, control_k = v.waves[k]
     # The smallest normal force of the reported orbit (the oracle's figure, paper reading); the
-    # oracle of a spline search solves splines only, not the travelling wave.
+    # oracle of a spline search solves splines only, not the travelling wave; the smoothed stage has none.
     min_normal = math.nan
-    if control_k is not None or not spline:
+    if ev is not None and (control_k is not None or not spline):
         th = (np.concatenate([control_k.ravel() / a_max, [math.log(om[k])]]) if control_k is not None
               else local.pack(cos_k / a_max, sin_k / a_max, float(om[k])))  # fmt: skip
         y0 = np.nan_to_num(g.y[k]) if g.ok[k] else sc.gaits.y[best]
@@ -187,6 +191,7 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
         improvement_vs_travelling_wave=1 - float(g.cost[k]) / wave_cost if (feasible[k] and baseline) else math.nan,
         **sim, source=names[k], candidates=table,
         history=[{"starts": [screen.as_dict(sc, i) for i in rows], "local": log}], screened=len(sc.a),
-        evaluations=ev.calls, runtime_s=time.perf_counter() - t0, shape="fourier" if control_k is None else "spline",
+        evaluations=0 if ev is None else ev.calls,
+        runtime_s=time.perf_counter() - t0, shape="fourier" if control_k is None else "spline",
         control=control_k, chain=chosen,
     )  # fmt: skip

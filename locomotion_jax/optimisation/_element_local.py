@@ -35,7 +35,7 @@ from ._figures import Figures, PENALTY
 from ._local import local_run
 from ._lockstep import run_lockstep
 from ._optimum import choose
-from ._shapes import spline_stroke, SplineShape
+from ._shapes import normalise_phase, spline_stroke, SplineShape
 
 
 def strokes(cos: np.ndarray, sin: np.ndarray) -> np.ndarray:
@@ -217,11 +217,16 @@ def check_start(start: Any, S: int) -> None:
     """Check a chain's or a mechanism's `start=` (`None`, or an optimum of `S` actuated signals).
 
     **Raises:** as [`signals_of`][]; `ValueError` where its number of signals is not `S`."""
-    if start is None:
-        return
-    cos = signals_of(start)[0]
-    if cos.shape[0] != S:
-        raise ValueError(f"start: an optimum of {cos.shape[0]} actuated signals; this search has {S}.")
+    if start is not None:
+        _checked_signals(start, S)
+
+
+def _checked_signals(start: Any, S: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, float]:
+    """[`signals_of`][] `start`, refused where its number of signals is not `S`."""
+    signals = signals_of(start)
+    if signals[0].shape[0] != S:
+        raise ValueError(f"start: an optimum of {signals[0].shape[0]} actuated signals; this search has {S}.")
+    return signals
 
 
 def given_start(start: Any, S: int, harmonics: int, knots: int, a_max: float, lo: float, hi: float,
@@ -240,8 +245,7 @@ def given_start(start: Any, S: int, harmonics: int, knots: int, a_max: float, lo
     - its base frequency clipped to `[lo, hi]`.
 
     **Raises:** as [`check_start`][]."""
-    check_start(start, S)
-    given_cos, given_sin, given_control, given_omega = signals_of(start)
+    given_cos, given_sin, given_control, given_omega = _checked_signals(start, S)
     omega = float(np.clip(given_omega, lo, hi))
     grid = 64 * max(knots, 16, 0 if given_control is None else given_control.shape[-1])
     phase = np.arange(grid) * 2 * np.pi / grid
@@ -253,9 +257,7 @@ def given_start(start: Any, S: int, harmonics: int, knots: int, a_max: float, lo
         values = np.stack([spline.sample(Spline(jnp.asarray(c), 1.0, 0.0), grid) for c in given_control])
     c = np.fft.rfft(values, axis=-1) / grid
     cos, sin = 2 * c.real[:, 1 : harmonics + 1], -2 * c.imag[:, 1 : harmonics + 1]
-    n = np.arange(1, harmonics + 1)
-    d = math.atan2(-cos[0, 0], sin[0, 0])  # the time shift that zeroes the first signal's A_1
-    cos, sin = cos * np.cos(n * d) + sin * np.sin(n * d), sin * np.cos(n * d) - cos * np.sin(n * d)
+    cos, sin = normalise_phase(cos, sin)
     scale = 1 / np.maximum(strokes(cos, sin) / a_max, 1.0)
     cos, sin = cos * scale[:, None], sin * scale[:, None]
     control = None
@@ -263,6 +265,31 @@ def given_start(start: Any, S: int, harmonics: int, knots: int, a_max: float, lo
         fit = SplineShape(knots=knots)
         control = a_max * np.stack([fit.fit(v / a_max, omega)[:-1] for v in values])
     return Start(cos, sin, omega, np.zeros_like(state), 1, math.nan, control, fresh=True)
+
+
+def check_method(method: Any, settings: Any) -> None:
+    """Refuse a `method` of `optimise` other than `"exact"` and `"smoothed"`, and the smoothed method
+    with a spline search (it optimises Fourier series).
+
+    **Raises:** `ValueError` naming `method` (or the settings' `shape`) and the valid values."""
+    if method not in ("exact", "smoothed"):
+        raise ValueError(f"method must be 'exact' or 'smoothed', got {method!r}.")
+    if method == "smoothed" and settings.shape != "fourier":
+        raise ValueError(f"method='smoothed' refines Fourier series: {type(settings).__name__}.shape must be "
+                         f"'fourier', got {settings.shape!r}.")  # fmt: skip
+
+
+def local_stage(method: str, base: Any, starts: list[Start], a_max: float, v_min: float, direction: int, lo: float,
+                hi: float, knots: int, settings: Any, say: Callable[[str], None],
+                ) -> tuple[list[np.ndarray], Evaluator | None, list[dict]]:  # fmt: skip
+    """The local stage of `method`: [`refine`][] on the exact model (`"exact"`), or on the smoothed
+    model (`"smoothed"`, `_element_smoothed.refine`, which has no orbit oracle: `None` in its place)."""
+    if method == "smoothed":
+        from ._element_smoothed import refine as refine_smoothed
+
+        xs, log = refine_smoothed(base, starts, a_max, v_min, direction, lo, hi, settings, say)
+        return xs, None, log
+    return refine(base, starts, a_max, v_min, direction, lo, hi, knots, settings, say)
 
 
 def refine(base: Any, starts: list[Start], a_max: float, v_min: float, direction: int, lo: float, hi: float,

@@ -9,13 +9,14 @@ results share the figures of the optimum's steady gait and of its direct simulat
 import dataclasses
 from typing import Any, ClassVar
 
+import jax.numpy as jnp
 import numpy as np
 
 from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._springwaves import SpringFourier
 from ..model._waveform import Spline
-from ._optimum import AbstractOptimum, constraints_line, fmt
+from ._optimum import AbstractOptimum, constraints_line, fmt, Settings
 from ._search_settings import count, SearchSettings
 
 
@@ -41,6 +42,8 @@ class MechanismOptimiseSettings(SearchSettings):
       and springs (or of its own base frequency where it has no spring).
     - `dt`: every figure but a chain's `min_normal` is at this step. With a `search_dt` the
       baseline is solved again at `dt` by the verification, which reports its figures.
+    - `smoothed`: the settings ([`Settings`][]) of the local stage of `optimise(...,
+      method="smoothed")` (module `optimisation._element_smoothed`, which names the fields it reads).
 
     A [`ChainOptimiseSettings`][] is accepted in its place: its fields of these names are used,
     and one phase.
@@ -49,10 +52,13 @@ class MechanismOptimiseSettings(SearchSettings):
     amplitudes: int = 4
     frequencies: int = 8
     phases: int = 1
+    smoothed: Settings = Settings()
 
     def __check_init__(self):
         for field in ("amplitudes", "frequencies", "phases"):
             count(self, field, 1)
+        if not isinstance(self.smoothed, Settings):
+            raise TypeError(f"{type(self).__name__}.smoothed must be a Settings, got {type(self.smoothed).__name__}.")
 
     @classmethod
     def from_chain(cls, s: "ChainOptimiseSettings") -> "MechanismOptimiseSettings":
@@ -175,6 +181,15 @@ class ElementOptimum(AbstractOptimum):
     evaluations: int
     runtime_s: float
 
+    def signals(self, t: np.ndarray) -> np.ndarray:
+        """$s_j(t)$ about the element's mean at the times `t`, shape `(S, len(t))`."""
+        t = np.asarray(t, np.float64)
+        if self.control is None:
+            wt = np.outer(np.arange(1, self.cos.shape[1] + 1), self.omega * t)
+            return self.cos @ np.cos(wt) + self.sin @ np.sin(wt)
+        times = jnp.asarray(t)
+        return np.stack([np.asarray(Spline(c, self.omega, 0.0)(times)[0], np.float64) for c in self.control])
+
     def signal_lines(self, labels: list[str]) -> list[str]:
         """One line per actuated element, `labels[j]` first: its coefficients or control values."""
         if self.control is None:
@@ -223,19 +238,37 @@ class ChainOptimum(ElementOptimum):
             return SpringFourier(self.cos, self.sin, self.omega)
         return [Spline(c, self.omega, lb) for c, lb in zip(self.control, self.lbar)]
 
+    def signal_labels(self) -> list[str]:
+        return [f"spring {j}" for j in range(self.cos.shape[0])]
+
+    def baseline_signals(self, phase: np.ndarray) -> tuple[str, np.ndarray] | None:
+        """The best travelling wave $a \\sin(\\varphi - j\\phi)$."""
+        w = self.travelling_wave
+        if w is None:
+            return None
+        signals = w["a"] * np.sin(phase[None] - np.arange(self.cos.shape[0])[:, None] * w["phi"])
+        return (
+            f"best travelling wave, a = {w['a']:.3g}, $\\omega$ = {w['omega']:.3g}, $\\phi$ = {w['phi']:.3g}",
+            signals,
+        )
+
+    def driven(self, params: Any = None) -> tuple[Any, dict[str, Any]]:
+        """`chain`, from the relaxed springs."""
+        _no_params(params)
+        return self.chain, dict(start="relaxed")
+
     def extra(self) -> dict[str, Any]:
         """`n_masses`."""
         return {"n_masses": int(self.cos.shape[0]) + 1}
 
     def summary(self) -> str:
         """Human-readable report."""
-        S, H = self.cos.shape
-        family = f"{H} harmonics" if self.control is None else f"a spline of {self.control.shape[-1]} knots"
+        S = self.cos.shape[0]
         lines = [
             f"chain of {S + 1} masses: mean speed >= {self.v_min:g} in direction {self.direction:+d}, stroke <= "
             f"{self.a_max:g} per spring, normal forces >= {self.margin:g} on the orbit, stable steady gait (exact)",
             f"base frequency omega = {self.omega:.6g} ({'optimised' if self.free_omega else 'fixed'}), "
-            f"{family} per spring",
+            f"{self.family()} per spring",
             *self.signal_lines([f"spring {j}" for j in range(S)]),
             self.gait_line(),
             "stroke per spring "
@@ -279,13 +312,28 @@ class MechanismOptimum(ElementOptimum):
 
     objects: ClassVar[tuple[str, ...]] = ("mechanism",)
 
+    def signal_labels(self) -> list[str]:
+        return [f"link {e}" for e in self.elements]
+
+    def baseline_signals(self, phase: np.ndarray) -> tuple[str, np.ndarray] | None:
+        """The best sinusoid $a \\sin(\\varphi + \\varphi_0)$, every element in phase."""
+        w = self.sinusoid
+        if w is None:
+            return None
+        signals = np.repeat(w["a"] * np.sin(phase + w["phase"])[None], len(self.elements), axis=0)
+        return f"best sinusoid, a = {w['a']:.3g}, $\\omega$ = {w['omega']:.3g}, phase {w['phase']:.3g}", signals
+
+    def driven(self, params: Any = None) -> tuple[Any, dict[str, Any]]:
+        """`mechanism`, from its own start."""
+        _no_params(params)
+        return self.mechanism, {}
+
     def summary(self) -> str:
         """Human-readable report."""
-        family = f"{self.harmonics} harmonics" if self.control is None else f"splines of {self.control.shape[-1]} knots"
         lines = [
             f"mechanism of {self.mechanism.n_bodies} bodies: mean speed >= {self.v_min:g} in direction "
             f"{self.direction:+d}, excursion <= {self.a_max:g} per actuated link, stable steady gait (exact)",
-            f"base frequency omega = {self.omega:.6g}; links {self.elements} actuated by {family}",
+            f"base frequency omega = {self.omega:.6g}; links {self.elements} actuated by {self.family()}",
             *self.signal_lines([f"link {e}" for e in self.elements]),
             self.gait_line(),
             "excursion per link " + " ".join(fmt(float(s)) for s in np.ravel(self.stroke_exact))
@@ -304,3 +352,8 @@ class MechanismOptimum(ElementOptimum):
             f"{self.screened} sinusoids screened, {self.evaluations} batched evaluations, {self.runtime_s:.0f} s)"
         )
         return "\n".join(lines)
+
+
+def _no_params(params: Any) -> None:
+    if params is not None:
+        raise ValueError(f"params: a chain's or a mechanism's optimum drives its own (pass none), got {params!r}.")

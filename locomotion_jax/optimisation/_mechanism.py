@@ -120,18 +120,20 @@ def check_inputs(mech: Any, v_min: Any, a_max: Any, direction: Any, harmonics: A
 
 def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction: int = 1,
                        omega: float | None = None, harmonics: int | None = None, settings: Any = None,
-                       start: Any = None) -> MechanismOptimum:  # fmt: skip
+                       start: Any = None, method: str = "exact") -> MechanismOptimum:  # fmt: skip
     """`optimise(mechanism, v_min, a_max, ...)`: the method of the module docstring. `settings`: a
     `MechanismOptimiseSettings`, a `ChainOptimiseSettings` (its shared fields) or `None` (the defaults);
     anything else is refused here with a `TypeError` naming both. `harmonics`: the Fourier series'
     length (default 2); a spline search (`settings.shape == "spline"`) refuses one. `start`: an
     earlier mechanism optimum ([`_element_local.given_start`][]) that takes the last local lane and
-    is a candidate itself."""
+    is a candidate itself. `method="smoothed"`: the local stage on the smoothed model
+    (`_element_smoothed`; Fourier series only), verified as the exact method's."""
     if isinstance(settings, ChainOptimiseSettings):
         settings = MechanismOptimiseSettings.from_chain(settings)
     settings = MechanismOptimiseSettings() if settings is None else settings
     if not isinstance(settings, MechanismOptimiseSettings):
         raise TypeError(f"settings for a Mechanism must be a MechanismOptimiseSettings, got {type(settings).__name__}.")
+    local.check_method(method, settings)
     spline = settings.shape == "spline"
     search = settings.searching()  # the screen's and the local runs' step; the verification's is dt
     H = local.family_harmonics(settings, harmonics, 2)  # a spline search screens plain sinusoids
@@ -176,11 +178,13 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
     starts = [local.Start(cos[i], sin[i], float(W[i]), sc["y"][i], int(sc["k"][i]), float(sc["cost"][i])) for i in rows]
     if start is not None:
         starts[-1] = local.given_start(start, S, H, M if spline else 0, a_max, lo, hi, sc["y"][rows.pop()])
-    xs, ev, log = local.refine(base, starts, a_max, v_min, direction, lo, hi, M if spline else 0, search, say)
+    xs, ev, log = local.local_stage(method, base, starts, a_max, v_min, direction, lo, hi, M if spline else 0, search,
+                                    say)  # fmt: skip
 
     # 3. Verification: the baseline, the refined actuations (on the exact bound) and a given start.
     given = [] if start is None else [local.decision(starts[-1], a_max, M if spline else 0)]
-    names = ["sinusoid"] + [f"local {lane}" for lane in range(len(xs))] + ["given start"] * len(given)
+    stage = "smoothed" if ev is None else "local"
+    names = ["sinusoid"] + [f"{stage} {lane}" for lane in range(len(xs))] + ["given start"] * len(given)
     say(f"verifying {len(names)} candidates on their steady gaits...")
 
     def solve(cos, sin, om, control=None):
@@ -214,6 +218,7 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
         feasible_exact=bool(feasible[k]), sinusoid=sinusoid,
         improvement_vs_sinusoid=1 - float(g["cost"][k]) / cost_sin if (feasible[k] and sinusoid) else math.nan,
         **sim, source=names[k], candidates=table,
-        history=[{"starts": [row_of(i) for i in rows], "local": log}], screened=int(A.size), evaluations=ev.calls,
+        history=[{"starts": [row_of(i) for i in rows], "local": log}], screened=int(A.size),
+        evaluations=0 if ev is None else ev.calls,
         runtime_s=time.perf_counter() - t0, mechanism=chosen,
     )  # fmt: skip

@@ -25,7 +25,8 @@ verified on the exact engine, `_optimise`).
 """
 
 import math
-from typing import NamedTuple
+from collections.abc import Callable, Sequence
+from typing import Any, NamedTuple
 
 import equinox as eqx
 import jax
@@ -93,7 +94,7 @@ class Plan(eqx.Module):
 
 
 def make_plan(
-    params: Params,
+    masses: Sequence[Any],
     omega_lo: float,
     omega_hi: float,
     eps: float,
@@ -102,10 +103,11 @@ def make_plan(
     backprop: float | None = None,
     eps_min: float | None = None,
 ) -> Plan:
-    """Step counts for base frequencies in `[omega_lo, omega_hi]`.
+    """Step counts for base frequencies in `[omega_lo, omega_hi]`, for bodies of masses `masses`.
 
     The step $\\Delta t = (2\\pi/\\omega)/s$ must stay below the stability limit at
-    the slowest frequency; the transient must last `transient` time units and the
+    the slowest frequency (`STABILITY` times the ratio of the lightest to the heaviest mass); the
+    transient must last `transient` time units and the
     measurement `measured` time units (and at least two periods) at the fastest.
     `backprop`: time units of the transient's end that are differentiated
     (`None`: all of it). `eps_min`: the finest $\\varepsilon$ the compiled loop must
@@ -115,12 +117,12 @@ def make_plan(
     eps_min = eps if eps_min is None else eps_min
     if not eps_min <= eps:
         raise ValueError(f"eps_min must be <= eps, got eps_min={eps_min} and eps={eps}")
-    m1, m2 = float(params.m1), float(params.m2)
+    m = [float(x) for x in masses]
     period_lo, period_hi = 2 * math.pi / omega_hi, 2 * math.pi / omega_lo
 
     def steps(e: float) -> int:
-        # Stability: lambda = mu_s n / (m eps), n up to about twice the heavier weight.
-        dt_max = STABILITY * e * min(m1, m2) / max(m1, m2)
+        # Stability: lambda = mu_s n / (m eps), n up to about twice the heaviest weight.
+        dt_max = STABILITY * e * min(m) / max(m)
         return max(16, math.ceil(period_hi / dt_max))
 
     transient_periods = max(1, math.ceil(transient / period_lo))
@@ -154,15 +156,69 @@ class Rollout(NamedTuple):
 
 
 def rollout(params: Params, wave: Fourier, eps: Array, plan: Plan, temperature: float) -> Rollout:
-    """Integrate the smoothed model from the relaxed spring and measure the steady state.
+    """Integrate the paper's smoothed model from the relaxed spring and measure the steady state
+    ([`integrate`][] of [`rates`][]).
 
     Start: $x_1 = 0$, $x_2 = \\sqrt{\\bar\\ell^2 - d^2}$ (spring at rest, SPEC §1
-    "relaxed"), at rest. Classical RK4 with $\\Delta t = (2\\pi/\\omega)/s$ in a
-    `lax.scan`; every period is a `jax.checkpoint`ed inner scan, so reverse mode
-    stores one state per period and recomputes the steps of one period at a time.
-    The inner scan has `plan.max_steps_per_period` iterations and runs the first
-    `plan.steps_per_period` of them, so one compiled rollout serves every
-    $\\varepsilon$ of a continuation (see [`make_plan`][]).
+    "relaxed"), at rest."""
+    dtype = params.dtype
+    gap = model.initial_gap(params, "relaxed")
+    zero = jnp.zeros_like(gap)
+    y0 = jnp.stack([zero, zero, gap, zero, zero]).astype(dtype)
+    return integrate(
+        (params, wave),
+        lambda inputs: lambda t, y: rates(inputs[0], inputs[1], eps, t, y),
+        lambda inputs, y: jnp.stack([model.centre_of_mass(inputs[0], y[0], y[2]), y[4]]),
+        lambda inputs: 2 * jnp.pi / inputs[1].omega,
+        y0,
+        plan,
+        temperature,
+    )
+
+
+def element_rollout(mechanism: Any, cos: Array, sin: Array, omega: Array, eps: Array, plan: Plan,
+                    temperature: float) -> Rollout:  # fmt: skip
+    """Integrate a chain or a mechanism (`mechanism`, one configuration) with its actuated signals
+    driven by the Fourier series `cos`, `sin` (shape `(S, H)`, absolute units) of base frequency
+    `omega` ([`_element_orbit.drive`][locomotion_jax.gaits._element_orbit.drive]), its friction
+    smoothed as [`friction_coefficient`][]'s (each body's law's `smoothed`, the static bump of width
+    $\\sqrt{\\varepsilon_\\text{ref}\\,\\varepsilon}$; the paper's reading $n_i = |N_i|$, as [`rates`][]), from
+    the start of the optimisers' direct simulation (a chain's relaxed springs, a mechanism's own
+    start), and measure the steady state ([`integrate`][]; `min_normal` over every body)."""
+    from ..dynamics import _smoothed as smoothed
+    from ..gaits._element_orbit import drive
+
+    def physics(inputs):
+        return drive(*inputs).physics()
+
+    def rates_of(inputs):
+        P = physics(inputs)
+        return lambda t, y: smoothed.rates_and_normal(P, "paper", eps, t, y, jnp.sqrt(EPS_REF * eps))
+
+    def figures_of(inputs, y):
+        P = physics(inputs)
+        return jnp.stack([smoothed.centre_of_mass(P, y), y[2 * P.n_bodies]])
+
+    inputs = (mechanism, cos, sin, omega)
+    y0 = smoothed.initial_state(physics(inputs), "relaxed", None)
+    return integrate(inputs, rates_of, figures_of, lambda inputs: 2 * jnp.pi / inputs[3], y0, plan, temperature)
+
+
+def integrate(inputs: Any, rates_of: Callable, figures_of: Callable, period_of: Callable, y0: Array, plan: Plan,
+              temperature: float) -> Rollout:  # fmt: skip
+    """Integrate a smoothed model from `y0` and measure its steady state: the rollout of
+    [`rollout`][] and [`element_rollout`][], written once.
+
+    `inputs` is the pytree differentiated through (what truncated backpropagation detaches);
+    `rates_of(inputs)` the right-hand side `(t, y) -> (dy/dt, smallest normal force)`,
+    `figures_of(inputs, y)` the centre of mass and the dissipated energy $e_d$ of a state, and
+    `period_of(inputs)` the actuation period.
+
+    Classical RK4 with $\\Delta t = T/s$ in a `lax.scan`; every period is a `jax.checkpoint`ed
+    inner scan, so reverse mode stores one state per period and recomputes the steps of one
+    period at a time. The inner scan has `plan.max_steps_per_period` iterations and runs the
+    first `plan.steps_per_period` of them, so one compiled rollout serves every $\\varepsilon$ of
+    a continuation (see [`make_plan`][]).
     With `plan.detached_periods > 0` the first transient periods run without
     gradient (truncated backpropagation; off by default). It is only an
     approximation: with the light damping c = 0.01 the memory of the state is
@@ -175,22 +231,20 @@ def rollout(params: Params, wave: Fourier, eps: Array, plan: Plan, temperature: 
     minimum): smooth, and never above the sampled minimum, so the constraint
     `min_normal >= margin` is conservative (by at most $T \\log(\\#\\text{steps})$).
     """
-    dtype = params.dtype
+    dtype = y0.dtype
     s = plan.steps_per_period
-    period = 2 * jnp.pi / wave.omega
-    gap = model.initial_gap(params, "relaxed")
-    zero = jnp.zeros_like(gap)
-    y0 = jnp.stack([zero, zero, gap, zero, zero]).astype(dtype)
+    period = period_of(inputs)
 
-    def make_step(params, wave):
-        dt = 2 * jnp.pi / wave.omega / s.astype(dtype)
+    def make_step(inputs):
+        dt = period_of(inputs) / s.astype(dtype)
+        f = rates_of(inputs)
 
         def rk4(carry):
             t, y, m, acc = carry
-            k1, n_min = rates(params, wave, eps, t, y)
-            k2, _ = rates(params, wave, eps, t + 0.5 * dt, y + (0.5 * dt) * k1)
-            k3, _ = rates(params, wave, eps, t + 0.5 * dt, y + (0.5 * dt) * k2)
-            k4, _ = rates(params, wave, eps, t + dt, y + dt * k3)
+            k1, n_min = f(t, y)
+            k2, _ = f(t + 0.5 * dt, y + (0.5 * dt) * k1)
+            k3, _ = f(t + 0.5 * dt, y + (0.5 * dt) * k2)
+            k4, _ = f(t + dt, y + dt * k3)
             y = y + (dt / 6) * (k1 + 2 * k2 + 2 * k3 + k4)
             m_new = jnp.minimum(m, n_min)
             acc = acc * jnp.exp((m_new - m) / temperature) + jnp.exp((m_new - n_min) / temperature)
@@ -203,32 +257,31 @@ def rollout(params: Params, wave: Fourier, eps: Array, plan: Plan, temperature: 
 
         return step
 
-    def periods(params, wave, carry, count, checkpoint):
+    def periods(inputs, carry, count, checkpoint):
         # Checkpointing each step as well as each period halves the cost of reverse mode:
         # the inner backward pass then stores only carries instead of every RK4 stage.
-        step = make_step(params, wave)
+        step = make_step(inputs)
         step = jax.checkpoint(step) if checkpoint else step
 
         def one_period(carry, _):
             carry, _ = jax.lax.scan(step, carry, jnp.arange(plan.max_steps_per_period))
-            y = carry[1]
-            return carry, jnp.stack([model.centre_of_mass(params, y[0], y[2]), y[4]])
+            return carry, figures_of(inputs, carry[1])
 
         one_period = jax.checkpoint(one_period) if checkpoint else one_period
         return jax.lax.scan(one_period, carry, None, length=count)
 
     # The running minimum starts at N(0) with an empty sum; the first step adds N(0).
     t0 = jnp.zeros((), dtype)
-    carry = (t0, y0, rates(params, wave, eps, t0, y0)[1], jnp.zeros((), dtype))
+    carry = (t0, y0, rates_of(inputs)(t0, y0)[1], jnp.zeros((), dtype))
     if plan.detached_periods:
         # Truncated backpropagation: the start of the transient only has to forget the
         # initial state; the steady state does not depend on it, so it runs without gradient.
         detach = jax.lax.stop_gradient
-        carry, _ = periods(detach(params), detach(wave), carry, plan.detached_periods, False)
+        carry, _ = periods(detach(inputs), carry, plan.detached_periods, False)
         # Time restarts on a period boundary as a function of omega, so that the phase
         # omega * t stays exactly 2 pi k under differentiation.
         carry = (plan.detached_periods * period,) + detach(carry[1:])
-    (_, _, m, acc), ends = periods(params, wave, carry, plan.periods - plan.detached_periods, True)
+    (_, _, m, acc), ends = periods(inputs, carry, plan.periods - plan.detached_periods, True)
     k0 = plan.transient_periods - plan.detached_periods - 1
     distance = ends[-1, 0] - ends[k0, 0]
     dissipated = ends[-1, 1] - ends[k0, 1]

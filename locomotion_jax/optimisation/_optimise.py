@@ -42,6 +42,7 @@ import math
 import sys
 import time
 from collections import Counter
+from collections.abc import Callable
 from typing import Any, cast, overload
 
 import equinox as eqx
@@ -56,9 +57,9 @@ from ..model._params import Params
 from ..model._waveform import Fourier
 from ..run._batch import mechanism_arg
 from ..run._resolution import refuse_search
-from . import _constraints as cons, _pareto as pareto
+from . import _constraints as cons, _objective, _pareto as pareto
 from ._element_optimum import ChainOptimiseSettings, ChainOptimum, MechanismOptimiseSettings, MechanismOptimum
-from ._objective import make_plan, Plan, rollout
+from ._objective import make_plan, Plan, Rollout, rollout
 from ._optimum import along, ExactSettings, Optimum, Settings, start_waveform, verified
 from ._shapes import FourierShape, SplineShape
 
@@ -76,8 +77,10 @@ def to_waveform(theta: dict, a_max: Any, lbar: Any, free_omega: bool) -> Fourier
 
 
 def project(theta: dict, log_lo: Any, log_hi: Any) -> dict:
-    """Feasible set of the simple constraints: stroke <= 1 (in units of $a_\\max$), $\\omega$ in range."""
-    c, s = cons.project_stroke(theta["cos"], theta["sin"], 1.0)
+    """Feasible set of the simple constraints: stroke <= 1 (in units of $a_\\max$; every signal's,
+    for coefficients of shape `(S, H)`), $\\omega$ in range."""
+    stroke = cons.project_stroke if theta["cos"].ndim == 1 else jax.vmap(cons.project_stroke, in_axes=(0, 0, None))
+    c, s = stroke(theta["cos"], theta["sin"], 1.0)
     return {"cos": c, "sin": s, "log_omega": jnp.clip(theta["log_omega"], log_lo, log_hi)}
 
 
@@ -111,10 +114,28 @@ def initial_guesses(
 # -- augmented Lagrangian ---------------------------------------------------------
 
 
-class _Problem(eqx.Module):
-    """Traced data of the problem (one start), and the static choices."""
+def paper_rollout(theta: dict, prob: "_Problem", eps: jax.Array) -> Rollout:
+    """The paper's model's smoothed rollout (`_objective.rollout`) at the decision variables `theta`."""
+    wave = to_waveform(theta, prob.a_max, prob.params.lbar, prob.free_omega)
+    return rollout(prob.params, wave, eps, prob.plan, prob.temperature)
 
-    params: Params
+
+def element_rollout(theta: dict, prob: "_Problem", eps: jax.Array) -> Rollout:
+    """A chain's or a mechanism's smoothed rollout (`_objective.element_rollout`) at the decision
+    variables `theta` (`cos`, `sin` of shape `(S, H)`, in units of $a_\\max$)."""
+    omega = jnp.exp(theta["log_omega"])
+    if not prob.free_omega:
+        omega = jax.lax.stop_gradient(omega)
+    cos, sin = prob.a_max * theta["cos"], prob.a_max * theta["sin"]
+    return _objective.element_rollout(prob.params, cos, sin, omega, eps, prob.plan, prob.temperature)
+
+
+class _Problem(eqx.Module):
+    """Traced data of the problem (one start), and the static choices: `params`, the paper's
+    model or the chain or mechanism driven; `roll`, its rollout ([`paper_rollout`][] or
+    [`element_rollout`][])."""
+
+    params: Any
     a_max: jax.Array
     direction: jax.Array
     log_lo: jax.Array
@@ -122,6 +143,7 @@ class _Problem(eqx.Module):
     plan: Plan
     temperature: float = eqx.field(static=True)
     free_omega: bool = eqx.field(static=True)
+    roll: Callable = eqx.field(static=True, default=paper_rollout)
 
 
 def terms(theta: dict, prob: _Problem, eps: jax.Array, v_target: jax.Array, margin: jax.Array):
@@ -133,8 +155,7 @@ def terms(theta: dict, prob: _Problem, eps: jax.Array, v_target: jax.Array, marg
     stands still or moves backwards (it equals $\\sigma \\Delta X$ whenever the
     speed constraint holds).
     """
-    wave = to_waveform(theta, prob.a_max, prob.params.lbar, prob.free_omega)
-    r = rollout(prob.params, wave, eps, prob.plan, prob.temperature)
+    r = prob.roll(theta, prob, eps)
     dist = prob.direction * r.distance
     need = v_target * r.duration
     floor, width = 0.25 * need, 0.05 * need
@@ -334,7 +355,11 @@ def optimise(
       starts screened and the best refined by a monotone descent in lockstep, every
       candidate verified by [`steady_gait`][].
     - `"smoothed"` (this module's docstring): Adam on an augmented Lagrangian of a
-      smoothed friction model (default 3 harmonics), verified on the exact model.
+      smoothed friction model (default 3 harmonics), verified on the exact model. For a `Chain`
+      or a `Mechanism` it replaces the local stage alone (module `optimisation._element_smoothed`,
+      its settings the `smoothed` field of the chain's or mechanism's settings): the screen's best
+      starts refined on the smoothed model, then verified on their steady gaits as the exact
+      method's candidates; Fourier series only.
 
     **Arguments:**
 
@@ -342,7 +367,7 @@ def optimise(
       waveforms are ignored; `v_min > 0`, `0 < a_max < min(lbar)`, `settings` a [`ChainOptimiseSettings`][]).
     - `v_min`: required mean speed (> 0) in `direction`; see `_constraints.check_inputs`.
     - `a_max`: stroke bound, $\\max_t |\\ell_0(t) - \\bar\\ell| \\le a_\\max$.
-    - `method`: `"exact"` or `"smoothed"`.
+    - `method`: `"exact"` or `"smoothed"`, for every mechanism.
     - `direction`: +1 (forward, default) or -1 (backward).
     - `omega`: fix the base frequency; `None` optimises it.
     - `harmonics`: number $N$ of Fourier harmonics: the smoothed method (default 3) and the
@@ -456,28 +481,27 @@ def _guard_search(params: Params, omega: float | None, shape: Any, settings: Exa
 
 def mechanism_optimum(mech: Any, v_min, a_max, method, direction, omega, harmonics, settings, sweep, start):
     """[`optimise`][] of a [`Mechanism`][locomotion_jax.Mechanism]: the method of `optimisation._mechanism`
-    (sinusoids per actuated element, then their harmonics or splines)."""
+    (sinusoids per actuated element, then their harmonics or splines refined on the exact model or,
+    with `method="smoothed"`, their harmonics on the smoothed one)."""
     from ._mechanism import optimise_mechanism
 
     if not isinstance(mech, Mechanism):
         raise NotImplementedError(f"optimise takes Params, a Chain or a Mechanism, got {type(mech).__name__}.")
-    if method != "exact" or sweep is not None:
-        raise ValueError("a Mechanism is optimised by the exact method only, without sweep=.")
+    if sweep is not None:
+        raise ValueError("sweep= applies to Params; a Mechanism's baseline is its own sinusoid screen.")
     return optimise_mechanism(mech, v_min, a_max, direction=1 if direction is None else direction, omega=omega,
-                              harmonics=harmonics, settings=settings, start=start)  # fmt: skip
+                              harmonics=harmonics, settings=settings, start=start, method=method)  # fmt: skip
 
 
 def chain_optimum(chain: Chain, v_min, a_max, method, direction, omega, harmonics, settings, sweep, start):
-    """[`optimise`][] of a [`Chain`][]: the exact method of `optimisation._chain` (travelling waves, then
-    harmonics)."""
+    """[`optimise`][] of a [`Chain`][]: the method of `optimisation._chain` (travelling waves, then
+    harmonics refined on the exact model or, with `method="smoothed"`, on the smoothed one)."""
     from ._chain import optimise_chain
 
-    if method != "exact":
-        raise ValueError(f"method: a Chain is optimised by the exact method only (method='exact'), got {method!r}.")
     if sweep is not None:
         raise ValueError("sweep= applies to Params; a Chain's baseline is its own travelling-wave screen.")
     return optimise_chain(chain, v_min, a_max, direction=1 if direction is None else direction, omega=omega,
-                          harmonics=harmonics, settings=settings, start=start)  # fmt: skip
+                          harmonics=harmonics, settings=settings, start=start, method=method)  # fmt: skip
 
 
 def _baseline(params, a_max, speed, direction, sweep, refine: bool, dt: float) -> dict | None:
@@ -513,7 +537,7 @@ def _optimise_smoothed(params, speed, direction, a_max, omega, harmonics, settin
         # them by a factor of at most `omega_range` squared).
         # Every stage shares the finest stage's compiled loop (one compilation per optimisation).
         plan = make_plan(
-            params,
+            (params.m1, params.m2),
             lo,
             centre,
             eps,

@@ -199,9 +199,40 @@ class AbstractOptimum(abc.ABC):
     simulation_agreement: float
     simulated_periods: int
     simulated_recurrence: int
+    harmonics: int
+    control: np.ndarray | None
 
     objects: ClassVar[tuple[str, ...]] = ()
     """Fields that hold objects, not figures (the mechanism driven): left out of `to_dict`."""
+
+    @abc.abstractmethod
+    def signals(self, t: np.ndarray) -> np.ndarray:
+        """Each actuated signal about its mean at the times `t`: shape `(S, len(t))`, a row per
+        actuated element (the paper's model: one row, $\\ell_0(t) - \\bar\\ell$)."""
+
+    @abc.abstractmethod
+    def signal_labels(self) -> list[str]:
+        """A name per actuated signal, in the order of `signals`."""
+
+    @abc.abstractmethod
+    def baseline_signals(self, phase: np.ndarray) -> tuple[str, np.ndarray] | None:
+        """The baseline (the best sinusoid or travelling wave that meets the requirement) at the
+        phases `phase` (radians) of its own period: its description and its signals, shape
+        `(S, len(phase))`; `None` where none meets the requirement."""
+
+    @abc.abstractmethod
+    def driven(self, params: Any = None) -> tuple[Any, dict[str, Any]]:
+        """The mechanism driven by the optimum's signals, and [`simulate`][]'s keyword arguments
+        for a run of it from the start of the optimiser's direct simulation (`params`: the
+        paper's model's [`Params`][], which its optimum does not keep; `None` for the others).
+
+        **Raises:** `ValueError` where `params` is missing or not wanted."""
+
+    def family(self) -> str:
+        """The signals' family: `"H harmonics"` or `"spline of M knots"`."""
+        return (
+            f"{self.harmonics} harmonics" if self.control is None else f"spline of {np.shape(self.control)[-1]} knots"
+        )
 
     def to_dict(self, full: bool = False) -> dict[str, Any]:
         """JSON-ready dict (`nan` and `inf` become `None`); `full` adds the candidates and the history."""
@@ -347,6 +378,33 @@ class Optimum(AbstractOptimum):
     def waveform(self) -> AbstractWaveform:
         return waveform_of(dict(cos=self.cos, sin=self.sin, control=self.control), self.omega, self.lbar)
 
+    def signals(self, t: np.ndarray) -> np.ndarray:
+        """$\\ell_0(t) - \\bar\\ell$ at the times `t`, shape `(1, len(t))`."""
+        import jax.numpy as jnp
+
+        return np.asarray(self.waveform(jnp.asarray(t))[0], np.float64)[None] - self.lbar
+
+    def signal_labels(self) -> list[str]:
+        return ["$\\ell_0 - \\bar\\ell$"]
+
+    def baseline_signals(self, phase: np.ndarray) -> tuple[str, np.ndarray] | None:
+        """The best sinusoid $a \\sin\\varphi$."""
+        w = self.sinusoid
+        if w is None:
+            return None
+        return f"best sinusoid, a = {w['a']:.3g}, $\\omega$ = {w['omega']:.3g}", w["a"] * np.sin(phase)[None]
+
+    def driven(self, params: Any = None) -> tuple[Any, dict[str, Any]]:
+        """`params` at the waveform's frequency, and the waveform, from the relaxed spring."""
+        from ..model._params import Params
+        from ._pareto import with_waveform_frequency
+
+        if not isinstance(params, Params):
+            raise ValueError("params: the paper's model's optimum keeps no Params; pass the Params it was optimised "
+                             f"for, got {type(params).__name__}.")  # fmt: skip
+        wave = self.waveform
+        return with_waveform_frequency(params, wave), dict(waveform=wave, start="relaxed")
+
     def summary(self) -> str:
         """Human-readable report."""
         exact = self.method == "exact"
@@ -358,8 +416,7 @@ class Optimum(AbstractOptimum):
                 else f"normal forces >= {self.margin:g} (smoothed), no lift-off (exact)"
             ),
             f"method: {self.method}; base frequency omega = {self.omega:.6g} "
-            f"({'optimised' if self.free_omega else 'fixed'}), lbar = {self.lbar:g}, "
-            + (f"{self.harmonics} harmonics" if self.control is None else f"spline of {len(self.control)} knots"),
+            f"({'optimised' if self.free_omega else 'fixed'}), lbar = {self.lbar:g}, " + self.family(),
         ]
         if self.control is None:
             lines += [

@@ -1,18 +1,23 @@
-"""Figures of the actuation optimiser: waveform, one period of motion, Pareto front."""
+"""Figures of the actuation optimisers, for every mechanism: the signals, one period of motion and,
+for the paper's model, the Pareto front."""
 
 import math
 from collections.abc import Sequence
 from pathlib import Path
+from typing import cast, TYPE_CHECKING
 
-import jax.numpy as jnp
 import numpy as np
 
 from ..dynamics._exact_dynamics import Exact
 from ..model._params import Params
-from ..model._scales import forcing_step
+from ..run._resolution import resolved_step
 from ..run._simulate import simulate
-from ._optimum import Optimum
-from ._pareto import pareto_front, SinusoidSweep, with_waveform_frequency
+from ._optimum import AbstractOptimum, Optimum
+from ._pareto import pareto_front, SinusoidSweep
+
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 
 def _plt():
@@ -24,62 +29,77 @@ def _plt():
     return plt
 
 
-def plot_waveform(opt: Optimum, path: Path) -> Path:
-    """$\\ell_0 - \\bar\\ell$ over one period: the optimum and the best sinusoid."""
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(6, 3.6))
-    phase = np.linspace(0, 1, 1200)  # fine enough for the steps of a spline stroke
-    l0, _ = opt.waveform(jnp.asarray(phase * 2 * math.pi / opt.omega))
-    kind = f"{opt.harmonics} harmonics" if opt.control is None else f"spline, {len(opt.control)} knots"
-    ax.plot(phase, np.asarray(l0) - opt.lbar, lw=2, label=f"optimised, $\\omega$ = {opt.omega:.3g} ({kind})")
-    if opt.sinusoid is not None:
-        s = opt.sinusoid
-        ax.plot(
-            phase,
-            s["a"] * np.sin(2 * math.pi * phase),
-            "--",
-            label=f"best sinusoid, a = {s['a']:.3g}, $\\omega$ = {s['omega']:.3g}",
-        )
+def waveform_figure(opt: AbstractOptimum) -> "Figure":
+    """Each actuated signal of an optimum over one period, the baseline's (dotted, the same colour
+    per element) over its own period, and the bound $\\pm a_\\max$. The first lines are the
+    optimum's signals, in order."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(6, 3.6), layout="constrained")
+    ax = fig.subplots()
+    phase = np.linspace(0, 2 * math.pi, 1201)  # fine enough for the steps of a spline stroke
+    signals = opt.signals(phase / opt.omega)
+    labels = opt.signal_labels() if len(signals) > 1 else ["optimised"]
+    for j, (label, sj) in enumerate(zip(labels, signals)):
+        ax.plot(phase / (2 * math.pi), sj, color=f"C{j}", lw=2, label=label)
+    baseline = opt.baseline_signals(phase)
+    if baseline is not None:
+        label, rows = baseline
+        for j, row in enumerate(rows):
+            ax.plot(phase / (2 * math.pi), row, color=f"C{j}", ls=":", lw=1.2, label=None if j else label)
     ax.axhline(opt.a_max, color="k", lw=0.8, ls=":")
-    ax.axhline(-opt.a_max, color="k", lw=0.8, ls=":", label="stroke limit")
+    ax.axhline(-opt.a_max, color="k", lw=0.8, ls=":", label="bound $\\pm a_\\max$")
     ax.set_xlabel("t / period")
-    ax.set_ylabel(r"$\ell_0(t) - \bar\ell$")
-    ax.set_title(f"Actuation for mean speed $\\geq$ {opt.v_min:g}")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    ax.set_ylabel("signal about its mean")
+    ax.set_title(f"$\\omega$ = {opt.omega:.3g}, {opt.family()}: cost of transport {opt.cost_of_transport_exact:.4g} "
+                 f"at mean speed {opt.mean_speed_exact:.4g} ($\\geq$ {opt.v_min:g})", fontsize=9)  # fmt: skip
+    ax.legend(fontsize=7)
+    return fig
+
+
+def plot_waveform(opt: AbstractOptimum, path: Path) -> Path:
+    """[`waveform_figure`][] saved to `path`."""
+    waveform_figure(opt).savefig(path, dpi=120)
     return path
 
 
-def plot_period(opt: Optimum, params: Params, path: Path, periods: int = 200) -> Path:
-    """$x_1, x_2$ (relative to the period's start) and the contact modes over the last of
-    `periods` actuation periods simulated on the exact model from the relaxed spring, at a step
-    that resolves the waveform."""
-    plt = _plt()
+def period_figure(opt: AbstractOptimum, params: Params | None, periods: int = 200) -> "Figure":
+    """Each body's displacement over one actuation period, from the period's start, and when it
+    sticks: the last of `periods` periods of the mechanism the optimum drives
+    ([`AbstractOptimum.driven`][locomotion_jax.optimisation._optimum.AbstractOptimum.driven]; `params`:
+    the paper's model's [`Params`][], else `None`), simulated on the exact model with strict
+    contact from the start of the optimiser's direct simulation, at a step that resolves it. The
+    upper axes' lines are the bodies' displacements, in order; the lower axes' step `i` is body
+    `i`'s $i + 0.8\\,\\text{stuck}$."""
+    from matplotlib.figure import Figure
+
+    mechanism, run = opt.driven(params)
     period = 2 * math.pi / opt.omega
     t_end = period * periods
     save = np.linspace(t_end - period, t_end, 600)
-    wave = opt.waveform
     # The optimiser checks its gait at its step and half of it; a run of many periods takes a
-    # step that the resolution guard accepts for the waveform's shortest piece (a spline's knots).
-    dynamics = Exact(dt=forcing_step(wave, Exact().dt))
-    tr = simulate(with_waveform_frequency(params, wave), t_end, save, dynamics=dynamics, waveform=wave,
-                  start="relaxed", contact="strict")  # fmt: skip
-    x1, x2, mode = (np.asarray(v) for v in (tr.x1, tr.x2, tr.mode))
-    fig, (ax, axm) = plt.subplots(2, 1, figsize=(6, 4.6), sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    # step that the resolution guard accepts (a spline's knots may lie closer than its default).
+    dt = resolved_step(mechanism, run.get("waveform"), Exact().dt)
+    tr = simulate(mechanism, t_end, save, dynamics=Exact(dt=dt), contact="strict", **run)
+    x, stuck = np.asarray(tr.x, np.float64), np.asarray(tr.stuck)
+    fig = Figure(figsize=(6, 4.6), layout="constrained")
+    ax, axs = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1]})
     ph = (save - save[0]) / period
-    ax.plot(ph, x1 - x1[0], label="$x_1 - x_1(t_0)$")
-    ax.plot(ph, x2 - x2[0], label="$x_2 - x_2(t_0)$")
-    ax.set_ylabel("displacement")
-    ax.set_title(f"One period in steady state (exact model), mean speed {opt.mean_speed_exact:.4g}")
-    ax.legend(fontsize=8)
-    axm.step(ph, mode, where="post")
-    axm.set_yticks([0, 1, 2, 3], ["both stick", "both slip", "m1 slips", "m2 slips"], fontsize=7)
-    axm.set_xlabel("(t - t0) / period")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    for i in range(x.shape[-1]):
+        ax.plot(ph, x[:, i] - x[0, i], label=f"body {i}")
+        axs.step(ph, i + 0.8 * stuck[:, i], where="post", color=f"C{i}")
+    ax.set_ylabel("displacement from the period's start")
+    ax.set_title(f"One period in steady state (exact model), mean speed {opt.mean_speed_exact:.4g}", fontsize=9)
+    ax.legend(fontsize=7)
+    axs.set_yticks(np.arange(x.shape[-1]) + 0.4, [f"{i}" for i in range(x.shape[-1])], fontsize=7)
+    axs.set_ylabel("stuck", fontsize=8)
+    axs.set_xlabel("(t - t0) / period")
+    return fig
+
+
+def plot_period(opt: AbstractOptimum, params: Params | None, path: Path, periods: int = 200) -> Path:
+    """[`period_figure`][] saved to `path`."""
+    period_figure(opt, params, periods).savefig(path, dpi=120)
     return path
 
 
@@ -124,11 +144,12 @@ def plot_pareto(
     return path
 
 
-def save_all(opt: Optimum, params: Params, sweep: SinusoidSweep, out: Path) -> list[Path]:
-    """The three figures of one optimum into `out` (created)."""
+def save_all(opt: AbstractOptimum, params: Params | None, sweep: SinusoidSweep | None, out: Path) -> list[Path]:
+    """The figures of one optimum into `out` (created): `waveform.png` ([`plot_waveform`][]),
+    `period.png` ([`plot_period`][]; `params` as there) and, with the paper's model's `sweep`,
+    `pareto.png` ([`plot_pareto`][])."""
     out.mkdir(parents=True, exist_ok=True)
-    return [
-        plot_waveform(opt, out / "waveform.png"),
-        plot_period(opt, params, out / "period.png"),
-        plot_pareto(sweep, [opt], out / "pareto.png", opt.direction),
-    ]
+    paths = [plot_waveform(opt, out / "waveform.png"), plot_period(opt, params, out / "period.png")]
+    if sweep is not None:
+        paths.append(plot_pareto(sweep, [cast(Optimum, opt)], out / "pareto.png", opt.direction))
+    return paths

@@ -89,9 +89,10 @@ class AbstractShape(eqx.Module):
 
 
 def normalise_phase(cos: np.ndarray, sin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Shift the time origin so that $A_1 = 0$, $B_1 \\ge 0$ (the same gait)."""
-    n = np.arange(1, len(cos) + 1)
-    d = math.atan2(-cos[0], sin[0])
+    """Shift the time origin so that $A_1 = 0$, $B_1 \\ge 0$ (the same gait). `cos`, `sin`: `(H,)`,
+    or `(S, H)` for `S` signals of one gait, all shifted by the time that zeroes the first one's $A_1$."""
+    n = np.arange(1, np.shape(cos)[-1] + 1)
+    d = math.atan2(-np.ravel(cos)[0], np.ravel(sin)[0])
     return cos * np.cos(n * d) + sin * np.sin(n * d), sin * np.cos(n * d) - cos * np.sin(n * d)
 
 
