@@ -120,13 +120,11 @@ def _problem(eps, free_omega=True, detach=None):
     )
 
 
-def test_gradient_matches_finite_differences():
-    # Reverse mode through the checkpointed RK4 rollout vs central differences (float64),
-    # for the cost of transport and both constraints, along a random direction.
-    prob = _problem(1e-2)
-    theta = {"cos": jnp.array([0.1, -0.2]), "sin": jnp.array([0.8, 0.15]), "log_omega": jnp.asarray(math.log(4.0))}
-    eps, v_t, margin = jnp.asarray(1e-2), jnp.asarray(0.03), jnp.asarray(0.05)
-    rng = np.random.default_rng(1)
+def _gradient_matches_finite_differences(prob, theta: dict, speed: float, seed: int) -> None:
+    """Reverse mode through the checkpointed RK4 rollout of `prob` vs central differences
+    (float64), for the cost of transport and both constraints, along a random direction."""
+    eps, v_t, margin = jnp.asarray(1e-2), jnp.asarray(speed), jnp.asarray(0.05)
+    rng = np.random.default_rng(seed)
     direction = jax.tree_util.tree_map(lambda x: jnp.asarray(rng.normal(size=x.shape)), theta)
 
     @jax.jit
@@ -142,6 +140,11 @@ def test_gradient_matches_finite_differences():
     fd = (f(plus) - f(minus)) / (2 * h)
     np.testing.assert_allclose(ad, fd, rtol=1e-5, atol=1e-8)
     assert np.all(np.abs(np.asarray(ad)) > 1e-3)  # a real check: no vanishing derivative
+
+
+def test_gradient_matches_finite_differences():
+    theta = {"cos": jnp.array([0.1, -0.2]), "sin": jnp.array([0.8, 0.15]), "log_omega": jnp.asarray(math.log(4.0))}
+    _gradient_matches_finite_differences(_problem(1e-2), theta, 0.03, 1)
 
 
 def test_element_rollout_is_the_papers_on_its_two_mass_chain():
@@ -172,23 +175,7 @@ def test_element_gradient_matches_finite_differences():
                               _optimise.element_rollout)  # fmt: skip
     theta = {"cos": jnp.array([[0.0, 0.1], [-0.3, 0.05]]), "sin": jnp.array([[0.8, -0.1], [0.4, 0.2]]),
              "log_omega": jnp.asarray(math.log(3.0))}  # fmt: skip
-    eps, v_t, margin = jnp.asarray(1e-2), jnp.asarray(0.05), jnp.asarray(0.05)
-    rng = np.random.default_rng(2)
-    direction = jax.tree_util.tree_map(lambda x: jnp.asarray(rng.normal(size=x.shape)), theta)
-
-    @jax.jit
-    def f(th):  # cost, speed constraint, normal-force constraint
-        cost, g, _ = _optimise.terms(th, prob, eps, v_t, margin)
-        return jnp.concatenate([cost[None], g])
-
-    jac = jax.jit(jax.jacrev(f))(theta)
-    ad = sum(jnp.tensordot(jac[k], direction[k], axes=direction[k].ndim) for k in theta)
-    h = 1e-5
-    plus = jax.tree_util.tree_map(lambda x, d: x + h * d, theta, direction)
-    minus = jax.tree_util.tree_map(lambda x, d: x - h * d, theta, direction)
-    fd = (f(plus) - f(minus)) / (2 * h)
-    np.testing.assert_allclose(ad, fd, rtol=1e-5, atol=1e-8)
-    assert np.all(np.abs(np.asarray(ad)) > 1e-3)  # a real check: no vanishing derivative
+    _gradient_matches_finite_differences(prob, theta, 0.05, 2)
 
 
 def test_stroke_is_exact_and_projection_lands_on_the_limit():
@@ -1026,8 +1013,6 @@ def test_smoothed_method_on_a_chain(opt3):
     wave, within the stroke bound, whose direct simulation and the independent reference's (from
     the relaxed springs, over whole gait periods) agree with its steady gait. On this worm it is
     cheaper than the exact method's 8 descent steps (`opt3`)."""
-    from reference_chain import chain_config, reference_chain_simulate
-
     settings = eqx.tree_at(lambda s: s.smoothed, SETTINGS, SMOOTHED)
     opt = lj.optimise(worm(), 0.05, A_MAX, harmonics=2, method="smoothed", settings=settings)
     print(opt.summary())
@@ -1037,16 +1022,25 @@ def test_smoothed_method_on_a_chain(opt3):
     assert opt.cost_of_transport_exact < opt3.cost_of_transport_exact
     assert np.all(opt.stroke_exact <= A_MAX * (1 + 1e-12)) and abs(opt.cos[0, 0]) < 1e-15
     assert opt.evaluations == 0 and math.isnan(opt.min_normal) and opt.simulation_agreement < 1e-6
-    cfg = chain_config([1.0] * 3, k=50.0, d=0.0, lbar=float(opt.lbar[0]), c=0.01, omega=opt.omega, wave_A=opt.cos,
-                       wave_B=opt.sin, mu_s_fwd=0.5, mu_s_bwd=0.9, mu_k_fwd=0.3, mu_k_bwd=0.7)  # fmt: skip
+    assert _worm_reference_error(opt, wave_A=opt.cos, wave_B=opt.sin) < 1e-4
+
+
+def _worm_reference_error(opt: lj.ChainOptimum, **actuation: Any) -> float:
+    """The larger relative difference of the 3-mass worm optimum's mean speed and cost of
+    transport from the independent reference's, driven by `actuation` (`chain_config`'s), from
+    the relaxed springs over 10 gait periods after the package's settling time."""
+    from reference_chain import chain_config, reference_chain_simulate
+
+    cfg = chain_config([1.0] * 3, k=50.0, d=0.0, lbar=float(opt.lbar[0]), c=0.01, omega=opt.omega, mu_s_fwd=0.5,
+                       mu_s_bwd=0.9, mu_k_fwd=0.3, mu_k_bwd=0.7, **actuation)  # fmt: skip
     n, Tg = opt.simulated_periods, opt.gait_period_exact
     ref = reference_chain_simulate(cfg, (n + 10) * Tg, np.array([n * Tg, (n + 10) * Tg]), start="relaxed")
     assert ref["status"] == "ok"
     dX, ed = np.diff(ref["X"])[0], np.diff(ref["e_d"])[0]
     err = max(abs(dX / (10 * Tg) / opt.mean_speed_exact - 1), abs(ed / abs(dX) / opt.cost_of_transport_exact - 1))
-    print(f"smoothed chain optimum: speed {opt.mean_speed_exact:.10f} (reference {dX / (10 * Tg):.10f}), cost "
+    print(f"{opt.shape} worm optimum: speed {opt.mean_speed_exact:.10f} (reference {dX / (10 * Tg):.10f}), cost "
           f"{opt.cost_of_transport_exact:.10f} (reference {ed / abs(dX):.10f}); diff {err:.1e}")  # fmt: skip
-    assert err < 1e-4
+    return err
 
 
 @CHAIN_OPTIMISE
@@ -1529,8 +1523,6 @@ def test_chain_spline_optimum_against_the_reference():
     optimum beats its travelling wave, keeps the box bound, carries its control values, and its
     steady gait's speed and cost of transport agree with the independent reference's direct
     simulation (its own B-spline actuation) from the relaxed springs, over whole gait periods."""
-    from reference_chain import chain_config, reference_chain_simulate
-
     opt = lj.optimise(worm(), 0.05, A_MAX, settings=CHAIN_SPLINE)
     print({k: v for k, v in opt.to_dict().items() if k not in ("candidates", "history")}, opt.candidates)
     assert opt.shape == "spline" and opt.harmonics == 0 and opt.cos.shape == (2, 0)
@@ -1550,17 +1542,7 @@ def test_chain_spline_optimum_against_the_reference():
     dense = np.array([float(np.abs(np.asarray(w(t)[0]) - float(w.lbar)).max()) for w in opt.chain.signals])
     assert np.all(dense <= opt.stroke_exact + 1e-12) and np.all(opt.stroke_exact - dense < 1e-6)
     assert opt.min_normal >= opt.margin and opt.simulation_agreement < 1e-6
-    # The reference, from the relaxed springs, over 10 gait periods after the package's settling time.
-    cfg = chain_config([1.0] * 3, k=50.0, d=0.0, lbar=float(opt.lbar[0]), c=0.01, omega=opt.omega,
-                       spline=opt.control, mu_s_fwd=0.5, mu_s_bwd=0.9, mu_k_fwd=0.3, mu_k_bwd=0.7)  # fmt: skip
-    n, Tg = opt.simulated_periods, opt.gait_period_exact
-    ref = reference_chain_simulate(cfg, (n + 10) * Tg, np.array([n * Tg, (n + 10) * Tg]), start="relaxed")
-    assert ref["status"] == "ok"
-    dX, ed = np.diff(ref["X"])[0], np.diff(ref["e_d"])[0]
-    err = max(abs(dX / (10 * Tg) / opt.mean_speed_exact - 1), abs(ed / abs(dX) / opt.cost_of_transport_exact - 1))
-    print(f"chain spline optimum: speed {opt.mean_speed_exact:.10f} (reference {dX / (10 * Tg):.10f}), cost "
-          f"{opt.cost_of_transport_exact:.10f} (reference {ed / abs(dX):.10f}); diff {err:.1e}")  # fmt: skip
-    assert err < 1e-4
+    assert _worm_reference_error(opt, spline=opt.control) < 1e-4
 
 
 @CHAIN_OPTIMISE
