@@ -91,8 +91,8 @@ def period_figure(opt: AbstractOptimum, params: Params | None, periods: int = 20
     ax.set_ylabel("displacement from the period's start")
     ax.set_title(f"One period in steady state (exact model), mean speed {opt.mean_speed_exact:.4g}", fontsize=9)
     ax.legend(fontsize=7)
-    axs.set_yticks(np.arange(x.shape[-1]) + 0.4, [f"{i}" for i in range(x.shape[-1])], fontsize=7)
-    axs.set_ylabel("stuck", fontsize=8)
+    axs.set_yticks(np.arange(x.shape[-1]) + 0.4, [f"body {i}" for i in range(x.shape[-1])], fontsize=7)
+    axs.set_ylabel("stuck: raised", fontsize=8)
     axs.set_xlabel("(t - t0) / period")
     return fig
 
