@@ -201,7 +201,7 @@ def test_optimize_of_a_chain_passes_the_options_chain(monkeypatch):
     assert bool(eqx.tree_equal(chain, expected)) and (v_min, a_max) == (0.1, 0.05)
     settings = seen["kwargs"]["settings"]
     assert (settings.phases, settings.transient, seen["kwargs"]["harmonics"]) == (3, 7, 3)
-    assert seen["kwargs"]["method"] == "exact"
+    assert seen["kwargs"]["method"] == "exact" and settings.smoothed == lj.OptimiseSettings()
     res = invoke("optimize", *CHAIN[:-6], "--v-min", "0.1", "--a-max", "0.05", "--method", "smoothed", "--outer", "2",
                  "--eps", "1e-2,5e-3")  # fmt: skip
     assert res.exit_code == 2 and "captured" in res.output, res.output

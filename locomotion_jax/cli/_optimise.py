@@ -158,9 +158,9 @@ def register(app: typer.Typer) -> None:
                 screen |= {name: v for name, v in (("shape", shape), ("knots", knots)) if given([name])}
                 screen |= {"transient": int(transient)} if transient is not None else {}
                 screen |= steps
-                # The smoothed local stage's own options (its rollout's lengths are the defaults').
-                screen |= dict(smoothed=Settings(outer=outer, inner=inner, eps_schedule=_eps_schedule(eps),
-                                                 verbose=verbose))  # fmt: skip
+                if method == "smoothed":  # the smoothed local stage's own options (its rollout's lengths the defaults')
+                    screen |= dict(smoothed=Settings(outer=outer, inner=inner, eps_schedule=_eps_schedule(eps),
+                                                     verbose=verbose))  # fmt: skip
                 chain_settings = lj.ChainOptimiseSettings(**screen)
                 return _optimise_bodies(built, v_min, a_max, direction, omega, harmonics, chain_settings, out, json_out,
                                         _start(start), method)  # fmt: skip

@@ -7,6 +7,7 @@ from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import equinox as eqx
+import jax.numpy as jnp
 import numpy as np
 
 from .._json import dumps, jsonable
@@ -380,8 +381,6 @@ class Optimum(AbstractOptimum):
 
     def signals(self, t: np.ndarray) -> np.ndarray:
         """$\\ell_0(t) - \\bar\\ell$ at the times `t`, shape `(1, len(t))`."""
-        import jax.numpy as jnp
-
         return np.asarray(self.waveform(jnp.asarray(t))[0], np.float64)[None] - self.lbar
 
     def signal_labels(self) -> list[str]:
