@@ -742,6 +742,31 @@ MUTATIONS = [
         ("tests/test_optimise.py::test_a_given_start_is_refitted_to_the_searchs_family",),
     ),
     Mutation(
+        "gait_min_normal_of_every_body",
+        "a steady gait's smallest normal load includes the placeholder load of a body without ground contact",
+        "locomotion_jax/gaits/_shooting.py",
+        (
+            (
+                "for q in contact_loads(P, tuple(zip(*info.normal)))]",
+                "for q in zip(*info.normal)]",
+            ),
+        ),
+        ("tests/test_gait.py::test_capsule_gait_is_a_fixed_point_of_a_direct_simulation",),
+    ),
+    Mutation(
+        "smoothed_time_not_moved",
+        "the smoothed stage's candidates keep their lanes' time origins: the first signal's A_1, which the "
+        "decision vector leaves out, is dropped",
+        "locomotion_jax/optimisation/_element_smoothed.py",
+        (
+            (
+                "        xs.append(local.pack(*normalise_phase(cos, sin), math.exp(float(log_omega))))\n",
+                "        xs.append(local.pack(cos, sin, math.exp(float(log_omega))))\n",
+            ),
+        ),
+        ("tests/test_optimise.py::test_the_smoothed_stage_moves_each_lanes_time_origin",),
+    ),
+    Mutation(
         "given_start_not_rescaled",
         "a given start above the stroke bound is not rescaled onto it",
         "locomotion_jax/optimisation/_element_local.py",

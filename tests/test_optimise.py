@@ -1020,9 +1020,39 @@ def test_smoothed_method_on_a_chain(opt3):
     assert opt.feasible_exact and all(opt.constraints_exact.values()) and opt.mean_speed_exact >= opt.v_min
     assert opt.cost_of_transport_exact <= opt.travelling_wave["cost_of_transport"] * (1 + 1e-12)
     assert opt.cost_of_transport_exact < opt3.cost_of_transport_exact
-    assert np.all(opt.stroke_exact <= A_MAX * (1 + 1e-12)) and abs(opt.cos[0, 0]) < 1e-15
-    assert opt.evaluations == 0 and math.isnan(opt.min_normal) and opt.simulation_agreement < 1e-6
+    assert np.all(opt.stroke_exact <= A_MAX * (1 + 1e-12))
+    # d = 0: every normal force is its unit mass's weight, on the gait as on the direct simulation.
+    assert opt.evaluations == 0 and opt.min_normal == pytest.approx(1.0, rel=1e-12)
+    assert opt.simulation_agreement < 1e-6
     assert _worm_reference_error(opt, wave_A=opt.cos, wave_B=opt.sin) < 1e-4
+
+
+def test_the_smoothed_stage_moves_each_lanes_time_origin():
+    """The smoothed stage's candidates (`_element_smoothed.decisions`): each lane's decision vector,
+    decoded (`_element_local.unpack`), drives every signal as the lane's iterate does, read from
+    one time origin for all its signals, the one at which the first signal's A_1 is 0. The
+    decision vector leaves that coefficient out: without the move, a lane's candidate is another
+    gait. The shift is found by sampling the iterate's first harmonic (as in `tests/test_shapes.py`)."""
+    from locomotion_jax.optimisation import _element_local, _element_smoothed
+
+    rng = np.random.default_rng(5)
+    n, S, H = 3, 2, 3
+    best = dict(cos=rng.normal(size=(n, S, H)), sin=rng.normal(size=(n, S, H)), log_omega=rng.normal(size=n))
+    xs = _element_smoothed.decisions(best)
+    phase = np.linspace(0.0, 2 * np.pi, 361)
+    fine = np.linspace(0.0, 2 * np.pi, 2_000_001)
+
+    def signals(c: np.ndarray, s: np.ndarray, at: np.ndarray) -> np.ndarray:
+        k = np.arange(1, c.shape[-1] + 1)[:, None]
+        return c @ np.cos(k * at) + s @ np.sin(k * at)
+
+    for lane, x in enumerate(xs):
+        cos, sin, omega = _element_local.unpack(x, S, H)
+        assert omega == pytest.approx(math.exp(best["log_omega"][lane]), rel=1e-12)
+        c0, s0 = best["cos"][lane], best["sin"][lane]
+        shift = fine[np.argmax(c0[0, 0] * np.cos(fine) + s0[0, 0] * np.sin(fine))] - np.pi / 2
+        np.testing.assert_allclose(signals(cos, sin, phase), signals(c0, s0, phase + shift), atol=2e-4)
+        assert np.abs(signals(cos, sin, phase) - signals(c0, s0, phase)).max() > 0.1
 
 
 def _worm_reference_error(opt: lj.ChainOptimum, **actuation: Any) -> float:
@@ -1170,7 +1200,8 @@ def test_optimum_verifies_on_steady_gait_and_simulation(opt3):
     X, ed = np.asarray(traj.X), np.asarray(traj.e_d)
     assert (X[1] - X[0]) / (t[1] - t[0]) == pytest.approx(opt3.mean_speed_exact, rel=1e-6)
     assert (ed[1] - ed[0]) / abs(X[1] - X[0]) == pytest.approx(opt3.cost_of_transport_exact, rel=1e-6)
-    assert opt3.min_normal >= opt3.margin
+    # d = 0: the normal forces are the weights, on the gait as on the simulation.
+    assert opt3.min_normal == float(np.min(traj.N)) == 1.0 >= opt3.margin
 
 
 def _optimum_of(cos: np.ndarray, sin: np.ndarray, control: np.ndarray | None, omega: float) -> lj.ChainOptimum:
@@ -1541,7 +1572,7 @@ def test_chain_spline_optimum_against_the_reference():
     t = jnp.linspace(0.0, T, 40001)
     dense = np.array([float(np.abs(np.asarray(w(t)[0]) - float(w.lbar)).max()) for w in opt.chain.signals])
     assert np.all(dense <= opt.stroke_exact + 1e-12) and np.all(opt.stroke_exact - dense < 1e-6)
-    assert opt.min_normal >= opt.margin and opt.simulation_agreement < 1e-6
+    assert opt.min_normal == 1.0 >= opt.margin and opt.simulation_agreement < 1e-6  # d = 0: the weights
     assert _worm_reference_error(opt, spline=opt.control) < 1e-4
 
 
@@ -1859,6 +1890,7 @@ def test_smoothed_method_on_a_mechanism():
     assert opt.sinusoid is not None and opt.cost_of_transport_exact <= opt.sinusoid["cost_of_transport"]
     assert float(np.max(opt.stroke_exact)) <= FORCE_MAX * (1 + 1e-12) and opt.evaluations == 0
     assert opt.simulation_agreement < 1e-6
+    assert opt.min_normal == 1.5  # the shell bears both weights; the carried body bears no load
     w, Tg = opt.omega, opt.gait_period_exact
     force = Sig(0.0, tuple(float(c) for c in opt.cos[0]), tuple(float(c) for c in opt.sin[0]), w)
     S = System([Body(1.0, MU), Body(0.5, None, carrier=0)], springs=[(0, 1, K, 0.0)], forces=[(0, 1, force)],

@@ -118,3 +118,32 @@ def test_tension_wave_start_is_fast_and_cheap():
     fig = _pareto.exact_figures(params, wave)
     assert bool(fig.ok)
     assert float(fig.speed) > 0.045 and float(fig.cost) < 0.95
+
+
+@pytest.mark.parametrize("shape", [(5,), (3, 4)])
+def test_normalise_phase_moves_the_time_origin_of_every_signal(shape):
+    # `(H,)` coefficients of one signal, or `(S, H)` of S signals of one gait: each new signal is
+    # the old one read from the time that zeroes the first signal's A_1 (with B_1 >= 0), the same
+    # time for every signal; the signals are sampled independently of the shift's formula.
+    rng = np.random.default_rng(3)
+    cos, sin = rng.normal(size=shape), rng.normal(size=shape)
+    cos.reshape(-1, shape[-1])[0, 0] = 0.7  # A_1 > 0, B_1 < 0: a shift into the third quadrant
+    sin.reshape(-1, shape[-1])[0, 0] = -0.4
+    c2, s2 = _shapes.normalise_phase(cos, sin)
+    assert c2.shape == cos.shape and s2.shape == sin.shape
+    first_c, first_s = c2.reshape(-1, shape[-1])[0], s2.reshape(-1, shape[-1])[0]
+    assert abs(first_c[0]) < 1e-15 and first_s[0] > 0
+
+    def signal(c: np.ndarray, s: np.ndarray, phase: np.ndarray) -> np.ndarray:
+        n = np.arange(1, c.shape[-1] + 1)[:, None]
+        return c @ np.cos(n * phase) + s @ np.sin(n * phase)
+
+    phase = np.linspace(0.0, 2 * math.pi, 721)
+    old, new = signal(cos, sin, phase), signal(c2, s2, phase)
+    # The shift, found by sampling: where the old first signal's first harmonic peaks, less a quarter turn.
+    fine = np.linspace(0.0, 2 * math.pi, 2_000_001)
+    first = cos.reshape(-1, shape[-1])[0, 0] * np.cos(fine) + sin.reshape(-1, shape[-1])[0, 0] * np.sin(fine)
+    shift = fine[np.argmax(first)] - math.pi / 2
+    # The grid's step (3e-6 rad) times the harmonics' rates bounds the difference.
+    np.testing.assert_allclose(new, signal(cos, sin, phase + shift), atol=2e-4)
+    assert np.abs(new - old).max() > 0.1  # a shift that moves the signals

@@ -42,7 +42,7 @@ from .._status import Status
 from ..dynamics import _engine as engine
 from ..dynamics._compile import engine_jit
 from ..model._params import Params
-from ..model._physics import AbstractPhysics
+from ..model._physics import AbstractPhysics, contact_loads
 from ..model._two_mass import initial_gap
 from ..optimisation._shapes import AbstractShape
 from ._shooting import _reduced, _section_state
@@ -82,8 +82,9 @@ def period(
     st0 = _section_state(P, contact, y)
 
     def normal(s):
-        # Eq. (5) generalised (SPEC §8), at a step's end: N_i = m_i - fy_i + fy_{i-1}.
-        return jnp.min(jnp.stack(P.loads(P.drive(s.cph, s.sph), s.y.x).N))
+        # Eq. (5) generalised (SPEC §8), at a step's end: N_i = m_i - fy_i + fy_{i-1}; the bodies on the ground.
+        N = contact_loads(P, P.loads(P.drive(s.cph, s.sph), s.y.x).N)
+        return jnp.min(jnp.stack(N)) if N else jnp.asarray(jnp.inf, s.t.dtype)
 
     def cond(c):
         s, _, n = c

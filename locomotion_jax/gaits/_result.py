@@ -80,8 +80,9 @@ class Gait(PaperNames):
       reaches zero on the orbit: $> 0$, every such mass reverses (SL); $< 0$, one sticks (SSL);
       `inf` if no velocity reaches zero, `-inf` if a mass is stuck all period. It is continuous
       where a stick interval shrinks to nothing, so that its zero is the SSL/SL boundary.
-    - `min_normal`: the smallest signed normal force $\\min_t \\min_i N_i$ (eq. 5) on the orbit (its
-      zero is the onset of lift-off).
+    - `min_normal`: the smallest signed normal force $\\min_t \\min_i N_i$ (eq. 5) on the orbit over
+      the bodies on the ground (its zero is the onset of lift-off; a body without ground contact
+      has no normal load: `inf` where no body touches the ground).
     - `contact`: the contact reading solved; `names`: `"paper"` for the paper's model (the CLI
       then reports the paper's names), else `"bodies"`.
 

@@ -43,7 +43,7 @@ from ..model._chain import Chain
 from ..model._chain_array import array_physics, GAIT_ARRAY_FROM, uses_array
 from ..model._elements import WALL
 from ..model._mechanism_physics import MechanismPhysics
-from ..model._physics import AbstractPhysics
+from ..model._physics import AbstractPhysics, contact_loads
 from ..run._batch import check_contact_start, prepare_chain, unflatten
 from ..run._resolution import guard_chain
 from . import _select as select
@@ -175,7 +175,9 @@ def _advance(P, contact, dt, st, t_end, max_steps):
         # eq. (7) generalised: a slipping mass whose velocity reached zero sticks where its stick
         # margin is >= 0; the slip margin is its negative ($|F_i| - \\mu_s n_i$ for Coulomb friction).
         margin = num.least([a.margin] + [jnp.where(info.commit & z, -q, inf) for z, q in zip(info.vel, info.hold)])
-        low = num.least([inf] + [_range(q, info.h, info.t0, info.t1)[0] for q in zip(*info.normal)])
+        low = num.least(
+            [inf] + [_range(q, info.h, info.t0, info.t1)[0] for q in contact_loads(P, tuple(zip(*info.normal)))]
+        )
         a = _Acc(
             stuck=tuple(q + jnp.where(b, span, 0) for q, b in zip(a.stuck, info.stuck)),
             margin=margin,

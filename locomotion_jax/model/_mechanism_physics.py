@@ -15,7 +15,8 @@ A body without ground contact (carried, or free) gets a friction law of no frict
 sticks (its stick margin $-1 - |F_i|$ is negative), feels no friction and dissipates
 nothing, and neither lifts off nor flips a contact side. So the exact engine runs it
 unchanged; its only trace is an event where its velocity changes sign. Its smoothed law is
-zero (`Smoothed` dynamics). Its `N` in a trajectory is this 1, not a load.
+zero (`Smoothed` dynamics). Its `N` in a trajectory is this 1, not a load; the figures over the
+normal loads leave it out (`MechanismPhysics.in_contact`).
 """
 
 from typing import Any, NamedTuple
@@ -112,6 +113,11 @@ class MechanismPhysics(AbstractPhysics):
     forces: tuple[Force, ...]
     externals: tuple[ExternalForce, ...]
     dampers: tuple[Damper, ...] = ()  # between two bodies (one to a wall is in `c`)
+
+    def in_contact(self) -> tuple[bool, ...]:
+        """The bodies with a friction law of their own: a body without ground contact has the
+        placeholder load 1 (module docstring)."""
+        return tuple(not isinstance(law, _NoContact) for law in self.friction)
 
     def drive(self, c1: Array, s1: Array) -> Drive:
         at = lambda s: signal_at(s, c1, s1)

@@ -92,6 +92,14 @@ class AbstractPhysics(eqx.Module):
         """The inverse of [`bodies`][]: the entries as one array with the bodies on its last axis."""
         return jnp.stack(xs, -1)
 
+    def in_contact(self) -> tuple[bool, ...]:
+        """Per entry of [`bodies`][]: whether its normal loads $N_i$ are the ground's reactions
+        (this default: every body's), or not a load (a body without ground contact, whose $N_i$ is
+        a placeholder for the friction law; [`Mechanism`][locomotion_jax.Mechanism]). The figures over the
+        normal loads (a steady gait's `min_normal`, the optimisers' normal-force margin) read
+        the entries in contact only ([`contact_loads`][])."""
+        return (True,) * len(self.m)
+
     def keep(self, x: Array) -> Array:
         """Materialise `x` once per iteration: XLA on the CPU recomputes a cheap value inside
         every kernel that consumes it, but never duplicates a division, so dividing by the
@@ -175,6 +183,12 @@ class AbstractPhysics(eqx.Module):
         one is. None by default (bodies on a line may pass each other, as a capsule's internal
         mass passes its rest point); a chain's are its neighbours' $x_{j+1} - x_j$."""
         return ()
+
+
+def contact_loads(P: AbstractPhysics, N: tuple[Any, ...]) -> tuple[Any, ...]:
+    """The entries of the normal loads `N` (or of a quantity over them) that are ground reactions
+    ([`AbstractPhysics.in_contact`][]); empty where no body touches the ground."""
+    return tuple(n for n, touches in zip(N, P.in_contact()) if touches)
 
 
 # -- the engines' calls: the heights only under contact="hop" -------------------------------------

@@ -144,7 +144,7 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     # stroke limit (what the line search's tolerance let through), and the baseline wave.
     # A given start is a candidate itself, as its lane's result is.
     given = [] if start is None else [local.decision(starts[-1], a_max, M if spline else 0)]
-    stage = "smoothed" if ev is None else "local"
+    stage = "smoothed" if method == "smoothed" else "local"
     names = ["travelling wave"] + [f"{stage} {lane}" for lane in range(len(xs))] + ["given start"] * len(given)
     cos_b, sin_b = screen.wave_coefficients(sc.a[best : best + 1], sc.phi[best : best + 1], S, H)
     say(f"verifying {len(names)} candidates on their steady gaits...")
@@ -160,16 +160,6 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     if search is not settings:
         baseline = local.verified_baseline(screen.as_dict(sc, best), v)
     cos_k, sin_k, control_k = v.waves[k]
-    # The smallest normal force of the reported orbit (the oracle's figure, paper reading); the
-    # oracle of a spline search solves splines only, not the travelling wave; the smoothed stage has none.
-    min_normal = math.nan
-    if ev is not None and (control_k is not None or not spline):
-        th = (np.concatenate([control_k.ravel() / a_max, [math.log(om[k])]]) if control_k is not None
-              else local.pack(cos_k / a_max, sin_k / a_max, float(om[k])))  # fmt: skip
-        y0 = np.nan_to_num(g.y[k]) if g.ok[k] else sc.gaits.y[best]
-        orb, _ = ev.solve(np.stack([th] * settings.local), np.stack([y0] * settings.local),
-                          np.full(settings.local, max(int(g.k[k]), 1)))  # fmt: skip
-        min_normal = float(orb.figures[0, 2]) if orb.ok[0] else math.nan
     if control_k is None:
         chosen = screen.with_actuation(base, cos_k[None], sin_k[None], om[k : k + 1])[0]
     else:
@@ -184,7 +174,7 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
         lbar=np.asarray(base.lbar, np.float64),
         mean_speed_exact=float(g.speed[k]), cost_of_transport_exact=float(g.cost[k]),
         gait_period_exact=float(g.period[k]), stable_exact=bool(g.ok[k]), spectral_radius_exact=float(g.radius[k]),
-        liftoff_exact=bool(g.liftoff[k]), stroke_exact=strokes[k], min_normal=min_normal,
+        liftoff_exact=bool(g.liftoff[k]), stroke_exact=strokes[k], min_normal=float(g.min_normal[k]),
         constraints_exact=dict(speed=bool(ok_speed[k]), stroke=bool(ok_stroke[k]), no_liftoff=bool(~g.liftoff[k]),
                                stable=bool(g.ok[k])),
         feasible_exact=bool(feasible[k]), travelling_wave=baseline, travelling_wave_cost_of_transport=wave_cost,

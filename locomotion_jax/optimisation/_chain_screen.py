@@ -61,6 +61,7 @@ class Gaits(NamedTuple):
     k: np.ndarray
     period: np.ndarray
     radius: np.ndarray  # largest Floquet multiplier modulus
+    min_normal: np.ndarray  # the smallest normal force on the orbit (`Gait.min_normal`)
     y: np.ndarray  # the orbit's reduced state at the section
 
 
@@ -91,7 +92,7 @@ def fast_enough(v: np.ndarray, v_min: float, direction: int, fraction: float, co
 def _unsolved(n: int, n_red: int) -> Gaits:
     """Rows of waves whose gaits are not solved (each field its own array: the screen fills them in)."""
     nan, no = lambda: np.full(n, np.nan), lambda: np.zeros(n, bool)
-    return Gaits(nan(), nan(), no(), no(), np.zeros(n, np.int32), nan(), nan(), np.full((n, n_red), np.nan))
+    return Gaits(nan(), nan(), no(), no(), np.zeros(n, np.int32), nan(), nan(), nan(), np.full((n, n_red), np.nan))
 
 
 def _chunks(n: int, chunk: int, order: np.ndarray):
@@ -151,6 +152,7 @@ def solve(chain: Chain, cos: np.ndarray | None, sin: np.ndarray | None, omega: n
         out.k[rows] = np.asarray(g.k)[take]
         out.period[rows] = np.asarray(g.period, np.float64)[take]
         out.radius[rows] = np.where(conv, np.max(np.nan_to_num(mult, nan=np.inf), axis=-1), np.nan)
+        out.min_normal[rows] = np.where(conv, np.asarray(g.min_normal, np.float64)[take], np.nan)
         out.y[rows] = np.asarray(g.state, np.float64)[take]
         done += m
         say(f"  {done} of {solved.size} waves ({time.perf_counter() - t0:.0f} s)")

@@ -40,7 +40,7 @@ class MechanismOptimiseSettings(SearchSettings):
       10 % above `v_min`, 0.09 % costlier (`benchmarks/NOTES.md`).
     - `omega_min`, `omega_max`: in units of the highest natural frequency of the mechanism's bodies
       and springs (or of its own base frequency where it has no spring).
-    - `dt`: every figure but a chain's `min_normal` is at this step. With a `search_dt` the
+    - `dt`: every figure of the result is at this step. With a `search_dt` the
       baseline is solved again at `dt` by the verification, which reports its figures.
     - `smoothed`: the settings ([`Settings`][]) of the local stage of `optimise(...,
       method="smoothed")` (module `optimisation._element_smoothed`, which names the fields it reads).
@@ -136,7 +136,9 @@ class ElementOptimum(AbstractOptimum):
     - The optimum's steady gait: `mean_speed_exact`, `cost_of_transport_exact` ($e_d / |\\Delta X|$
       over the gait period), `gait_period_exact`, `stable_exact`, `spectral_radius_exact` (the
       largest Floquet multiplier's modulus), `stroke_exact` (per element, the largest excursion of
-      its signal about its mean, located exactly), `liftoff_exact`.
+      its signal about its mean, located exactly), `liftoff_exact`, `min_normal` (the smallest
+      normal force on the orbit, `Gait.min_normal`; not a constraint of the verification, which
+      requires no lift-off: `margin` bounds it in the refinement only).
     - `constraints_exact` (`speed`, `stroke`, `no_liftoff`, `stable`), `feasible_exact`: all hold.
       An infeasible requirement gives `feasible_exact = False` and the closest candidate (the
       fastest stable gait), never an optimum.
@@ -167,6 +169,7 @@ class ElementOptimum(AbstractOptimum):
     spectral_radius_exact: float
     stroke_exact: np.ndarray
     liftoff_exact: bool
+    min_normal: float
     constraints_exact: dict
     feasible_exact: bool
     mean_speed_simulated: float
@@ -212,9 +215,7 @@ class ChainOptimum(ElementOptimum):
     [`SpringFourier`][] or one [`Spline`][] per spring; `chain`: the input chain driven by them;
     the direct simulation runs from the relaxed springs), and:
 
-    - `lbar` (per spring); `min_normal` (the smallest normal force on the orbit, at the step ends,
-      from the refinement's orbit oracle, so at the search step `search_dt` where one is given;
-      NaN where the travelling wave wins a spline search: that oracle solves splines only);
+    - `lbar` (per spring);
     - `travelling_wave`: the best travelling wave $a\\sin(\\omega t - j\\varphi)$ of the screen and
       its zoom that meets the requirement (`a`, `omega`, `phi`, `mean_speed`,
       `cost_of_transport`), or `None`; `travelling_wave_cost_of_transport`;
@@ -223,7 +224,6 @@ class ChainOptimum(ElementOptimum):
     """
 
     lbar: np.ndarray
-    min_normal: float
     travelling_wave: dict | None
     travelling_wave_cost_of_transport: float
     improvement_vs_travelling_wave: float
@@ -337,7 +337,7 @@ class MechanismOptimum(ElementOptimum):
             *self.signal_lines([f"link {e}" for e in self.elements]),
             self.gait_line(),
             "excursion per link " + " ".join(fmt(float(s)) for s in np.ravel(self.stroke_exact))
-            + f" (limit {self.a_max:g}); lift-off: {self.liftoff_exact}",
+            + f" (limit {self.a_max:g}); min normal force {fmt(self.min_normal)}; lift-off: {self.liftoff_exact}",
             self.simulation_line(),
             constraints_line(self.constraints_exact, self.feasible_exact),
         ]  # fmt: skip

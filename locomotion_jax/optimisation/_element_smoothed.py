@@ -72,8 +72,15 @@ def refine(base: Any, starts: list[local.Start], a_max: float, v_min: float, dir
     say(f"refining {n} starts on the smoothed model (compiling its rollout: first call only)...")
     for stage, eps in enumerate(s.eps_schedule):
         state, best = _run_stage(state, problem(eps), eps, s.learning_rate * s.lr_decay**stage, s, s.outer, log)
+    return decisions(best), log
+
+
+def decisions(best: dict[str, Any]) -> list[np.ndarray]:
+    """Each lane's decision vector (`_element_local.pack`) of the iterates `best` (`cos`, `sin`:
+    `(n, S, H)` in units of $a_\\max$; `log_omega`: `(n,)`), its time origin moved so that the
+    first signal's $A_1$, which the decision vector leaves out, is 0: the same gait."""
     xs = []
-    for lane in range(n):
-        cos, sin = normalise_phase(np.asarray(best["cos"][lane], np.float64), np.asarray(best["sin"][lane], np.float64))
-        xs.append(local.pack(cos, sin, math.exp(float(best["log_omega"][lane]))))
-    return xs, log
+    for cos, sin, log_omega in zip(np.asarray(best["cos"], np.float64), np.asarray(best["sin"], np.float64),
+                                   np.asarray(best["log_omega"], np.float64)):  # fmt: skip
+        xs.append(local.pack(*normalise_phase(cos, sin), math.exp(float(log_omega))))
+    return xs

@@ -85,7 +85,7 @@ def _gaits(batch: Mechanism, settings: MechanismOptimiseSettings) -> dict[str, n
     ok = np.asarray(g.converged) & np.asarray(g.stable) & ~liftoff
     return dict(speed=np.asarray(g.mean_speed, np.float64), cost=np.asarray(g.cost_of_transport, np.float64), ok=ok,
                 liftoff=liftoff, k=np.asarray(g.k), period=np.asarray(g.period, np.float64), radius=radius,
-                y=np.asarray(g.state, np.float64))  # fmt: skip
+                min_normal=np.asarray(g.min_normal, np.float64), y=np.asarray(g.state, np.float64))  # fmt: skip
 
 
 def _fourier(mech: Mechanism, cos: np.ndarray, sin: np.ndarray, omega: Any) -> Mechanism:
@@ -183,7 +183,7 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
 
     # 3. Verification: the baseline, the refined actuations (on the exact bound) and a given start.
     given = [] if start is None else [local.decision(starts[-1], a_max, M if spline else 0)]
-    stage = "smoothed" if ev is None else "local"
+    stage = "smoothed" if method == "smoothed" else "local"
     names = ["sinusoid"] + [f"{stage} {lane}" for lane in range(len(xs))] + ["given start"] * len(given)
     say(f"verifying {len(names)} candidates on their steady gaits...")
 
@@ -212,7 +212,7 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
         sin=sin_k, control=control_k, omega=float(om_c[k]), mean_speed_exact=float(g["speed"][k]),
         cost_of_transport_exact=float(g["cost"][k]), gait_period_exact=float(g["period"][k]),
         stable_exact=bool(g["ok"][k]), spectral_radius_exact=float(g["radius"][k]), stroke_exact=strokes[k],
-        liftoff_exact=bool(g["liftoff"][k]),
+        liftoff_exact=bool(g["liftoff"][k]), min_normal=float(g["min_normal"][k]),
         constraints_exact=dict(speed=bool(v.ok_speed[k]), stroke=bool(v.ok_stroke[k]),
                                no_liftoff=bool(~g["liftoff"][k]), stable=bool(g["ok"][k])),
         feasible_exact=bool(feasible[k]), sinusoid=sinusoid,
