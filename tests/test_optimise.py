@@ -1426,15 +1426,44 @@ def test_figures_of_a_mechanism_optimum():
 @CHAIN_OPTIMISE
 def test_cli_out_writes_the_optimum_and_its_figures_for_a_chain(opt3, tmp_path, monkeypatch):
     """`optimize --out DIR` of a chain: `optimum.json` (the whole result, which `--start` reads
-    back), `waveform.png` and `period.png`."""
+    back), `waveform.png`, `period.png` and `pareto.png` (its screen)."""
     monkeypatch.setattr(lj, "optimise", lambda *args, **kwargs: opt3)
     args = ["optimize", "--masses", "1,1,1", "--d", "0", "--v-min", "0.05", "--a-max", "0.1", "--out", str(tmp_path)]
     res = CliRunner().invoke(_cli.app, args)
     assert res.exit_code == 0, res.output
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["optimum.json", "period.png", "waveform.png"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["optimum.json", "pareto.png", "period.png", "waveform.png"]
     saved = json.loads((tmp_path / "optimum.json").read_text())
     assert saved["cost_of_transport_exact"] == opt3.cost_of_transport_exact and len(saved["candidates"]) > 0
     assert _cli_optimise._start(tmp_path / "optimum.json") == saved
+
+
+@CHAIN_OPTIMISE
+def test_the_chain_optimum_keeps_its_screen_and_draws_it(opt3, tmp_path):
+    """`ChainOptimum.screen`: every travelling wave of the screen and its zoom (`screened` of them),
+    of which the baseline is the cheapest that meets the requirement; `to_dict(full=True)` alone
+    carries it. `_plots.plot_screen` draws the feasible waves' cost against their speed, their
+    Pareto front (a wave no other is both faster and cheaper than) and the optimum."""
+    sc, w = opt3.screen, opt3.travelling_wave
+    assert w is not None and all(len(sc[k]) == opt3.screened for k in ("a", "omega", "phi", "speed", "cost", "ok"))
+    fast = sc["ok"] & (sc["speed"] >= opt3.v_min)
+    i = int(np.argmin(np.where(fast, sc["cost"], np.inf)))
+    assert (sc["a"][i], sc["omega"][i], sc["phi"][i], sc["cost"][i]) == (
+        w["a"],
+        w["omega"],
+        w["phi"],
+        w["cost_of_transport"],
+    )
+    assert "screen" not in opt3.to_dict() and len(opt3.to_dict(full=True)["screen"]["speed"]) == opt3.screened
+    path = _plots.plot_screen(opt3, tmp_path / "pareto.png")
+    assert path is not None and path.stat().st_size > 0
+    ax = _plots.pareto_figure(sc["speed"], sc["cost"], sc["ok"], [opt3], labels=("w", "f", "t")).axes[0]
+    front, star = (np.asarray(line.get_xydata()) for line in ax.lines[:2])
+    good = sc["ok"] & (sc["speed"] > 0) & np.isfinite(sc["cost"])
+    v, c = sc["speed"][good], sc["cost"][good]
+    dominated = [(v > vj) & (c <= cj) for vj, cj in zip(v, c)]  # a faster wave that is no costlier
+    expected = np.array(sorted((vj, cj) for vj, cj, d in zip(v, c, dominated) if not d.any()))
+    np.testing.assert_array_equal(front[np.argsort(front[:, 0])], expected)
+    assert np.array_equal(star, [[opt3.mean_speed_exact, opt3.cost_of_transport_exact]])
 
 
 @CHAIN_OPTIMISE
@@ -1891,6 +1920,12 @@ def test_smoothed_method_on_a_mechanism():
     assert float(np.max(opt.stroke_exact)) <= FORCE_MAX * (1 + 1e-12) and opt.evaluations == 0
     assert opt.simulation_agreement < 1e-6
     assert opt.min_normal == 1.5  # the shell bears both weights; the carried body bears no load
+    # The screen it keeps: every sinusoid, of which the baseline is the cheapest fast enough one.
+    sc, w = opt.screen, opt.sinusoid
+    assert len(sc["speed"]) == opt.screened == 4 * 8
+    i = int(np.argmin(np.where(sc["ok"] & (-sc["speed"] >= V_MIN), sc["cost"], np.inf)))
+    assert (sc["a"][i], sc["omega"][i], sc["phase"][i], sc["cost"][i]) == (w["a"], w["omega"], w["phase"],
+                                                                           w["cost_of_transport"])  # fmt: skip
     w, Tg = opt.omega, opt.gait_period_exact
     force = Sig(0.0, tuple(float(c) for c in opt.cos[0]), tuple(float(c) for c in opt.sin[0]), w)
     S = System([Body(1.0, MU), Body(0.5, None, carrier=0)], springs=[(0, 1, K, 0.0)], forces=[(0, 1, force)],

@@ -246,12 +246,12 @@ def amplitude(built: Built) -> float:
 def _save(opt: Any, params: Any, sweep: Any, out: Path, json_out: bool) -> None:
     """`--out DIR`: the optimum's whole JSON (`optimum.json`, candidates and history included; what
     `--start` reads back) and its figures (`optimisation._plots.save_all`: the signals, one period
-    of motion and, for the paper's model, the Pareto front)."""
+    of motion, the cost of transport against speed of the baseline signals; it creates `out`)."""
     from ..optimisation._plots import save_all
 
-    out.mkdir(parents=True, exist_ok=True)
+    figures = save_all(opt, params, sweep, out)
     (out / "optimum.json").write_text(opt.to_json(full=True, indent=1))
-    paths = [out / "optimum.json", *save_all(opt, params, sweep, out)]
+    paths = [out / "optimum.json", *figures]
     if not json_out:
         typer.echo("wrote " + ", ".join(str(p) for p in paths), err=True)
 

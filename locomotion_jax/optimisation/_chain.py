@@ -184,4 +184,5 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
         evaluations=0 if ev is None else ev.calls,
         runtime_s=time.perf_counter() - t0, shape="fourier" if control_k is None else "spline",
         control=control_k, chain=chosen,
+        screen=dict(a=sc.a, omega=sc.omega, phi=sc.phi, speed=sc.gaits.speed, cost=sc.gaits.cost, ok=sc.gaits.ok),
     )  # fmt: skip

@@ -149,6 +149,11 @@ class ElementOptimum(AbstractOptimum):
       `history`, the local starts (the baseline screen's rows) and the local runs' log;
       `screened`, the baseline signals solved; `evaluations`, batched orbit evaluations;
       `runtime_s`.
+    - `screen`: every baseline signal of the screen, as arrays over them: its grid coordinates (a
+      chain's travelling waves `a`, `omega`, `phi`; a mechanism's sinusoids `a`, `omega`,
+      `phase`), and the `speed`, `cost` and `ok` (converged, stable, no lift-off) of its steady
+      gait at the search step (`search_dt`, else `dt`); NaN and not `ok` where the screen left a
+      signal unsolved. `to_dict(full=True)` includes it; `optimize --out` draws it (`pareto.png`).
     """
 
     v_min: float
@@ -183,6 +188,15 @@ class ElementOptimum(AbstractOptimum):
     screened: int
     evaluations: int
     runtime_s: float
+    screen: dict = dataclasses.field(repr=False)
+
+    screen_label: ClassVar[str] = "baseline signals"
+    """What the screen's signals are, for its figure."""
+
+    def baseline_screen(self) -> tuple[str, np.ndarray, np.ndarray, np.ndarray] | None:
+        """The `screen` field's signals, speeds, costs of transport and `ok`."""
+        s = self.screen
+        return self.screen_label, np.asarray(s["speed"]), np.asarray(s["cost"]), np.asarray(s["ok"], bool)
 
     def signals(self, t: np.ndarray) -> np.ndarray:
         """$s_j(t)$ about the element's mean at the times `t`, shape `(S, len(t))`."""
@@ -230,6 +244,7 @@ class ChainOptimum(ElementOptimum):
     chain: Chain = dataclasses.field(repr=False)
 
     objects: ClassVar[tuple[str, ...]] = ("chain",)
+    screen_label: ClassVar[str] = "travelling waves"
 
     @property
     def waveforms(self) -> SpringFourier | list[Spline]:
@@ -311,6 +326,7 @@ class MechanismOptimum(ElementOptimum):
     mechanism: Mechanism = dataclasses.field(repr=False)
 
     objects: ClassVar[tuple[str, ...]] = ("mechanism",)
+    screen_label: ClassVar[str] = "sinusoids"
 
     def signal_labels(self) -> list[str]:
         return [f"link {e}" for e in self.elements]

@@ -221,4 +221,5 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
         history=[{"starts": [row_of(i) for i in rows], "local": log}], screened=int(A.size),
         evaluations=0 if ev is None else ev.calls,
         runtime_s=time.perf_counter() - t0, mechanism=chosen,
+        screen=dict(a=A, omega=W, phase=PHI, speed=sc["speed"], cost=sc["cost"], ok=sc["ok"]),
     )  # fmt: skip

@@ -229,6 +229,13 @@ class AbstractOptimum(abc.ABC):
 
         **Raises:** `ValueError` where `params` is missing or not wanted."""
 
+    def baseline_screen(self) -> tuple[str, np.ndarray, np.ndarray, np.ndarray] | None:
+        """The baseline screen the optimum keeps: what its signals are (e.g. `"travelling waves"`),
+        and the mean speed, cost of transport and `ok` (a stable gait without lift-off) of each;
+        `None` (this default) where it keeps none (the paper's model's sinusoid sweep is its own
+        object, [`sinusoid_sweep`][locomotion_jax.optimisation._pareto.sinusoid_sweep])."""
+        return None
+
     def family(self) -> str:
         """The signals' family: `"H harmonics"` or `"spline of M knots"`."""
         return (
@@ -236,8 +243,9 @@ class AbstractOptimum(abc.ABC):
         )
 
     def to_dict(self, full: bool = False) -> dict[str, Any]:
-        """JSON-ready dict (`nan` and `inf` become `None`); `full` adds the candidates and the history."""
-        skip = self.objects + (() if full else ("candidates", "history"))
+        """JSON-ready dict (`nan` and `inf` become `None`); `full` adds the candidates, the history and
+        a chain's or a mechanism's `screen`."""
+        skip = self.objects + (() if full else ("candidates", "history", "screen"))
         fields = dataclasses.fields(self)  # pyright: ignore[reportArgumentType]
         return jsonable({f.name: getattr(self, f.name) for f in fields if f.name not in skip} | self.extra())
 

@@ -1,8 +1,9 @@
-"""Figures of the actuation optimisers, for every mechanism: the signals, one period of motion and,
-for the paper's model, the Pareto front."""
+"""Figures of the actuation optimisers, for every mechanism: the signals, one period of motion and
+the cost of transport against the speed of the baseline signals (the paper's model's sinusoid
+sweep, a chain's or a mechanism's screen), their Pareto front and the optimum."""
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import cast, TYPE_CHECKING
 
@@ -103,24 +104,31 @@ def plot_period(opt: AbstractOptimum, params: Params | None, path: Path, periods
     return path
 
 
-def plot_pareto(
-    sweep: SinusoidSweep,
-    optima: Sequence[Optimum] | dict[str, Sequence[Optimum]],
-    path: Path,
+def pareto_figure(
+    speed: np.ndarray,
+    cost: np.ndarray,
+    ok: np.ndarray,
+    optima: Sequence[AbstractOptimum] | Mapping[str, Sequence[AbstractOptimum]],
     direction: int = 1,
+    labels: tuple[str, str, str] = (
+        "sinusoids (sweep)",
+        "sinusoid Pareto front",
+        "Cost of transport vs speed, paper parameters",
+    ),
     peer: tuple[float, float] | None = None,
-) -> Path:
-    """Cost of transport against mean speed (exact model, steady gaits): every sinusoid of
-    the sweep, the sinusoids' Pareto front, the verified optima (a dict: one labelled
-    series per method) and optionally another solver's point `peer = (speed, cost)`."""
+) -> "Figure":
+    """Cost of transport against mean speed (exact model, steady gaits): every baseline signal
+    (`speed`, `cost`, `ok` over them), their Pareto front, the verified optima (a dict: one
+    labelled series per method) and optionally another solver's point `peer = (speed, cost)`.
+    `labels`: the baseline's, its front's and the title."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6, 4))
-    v = direction * sweep.speed
-    good = sweep.ok & np.isfinite(sweep.cost) & (v > 0)
-    ax.scatter(v[good], sweep.cost[good], s=8, c="0.7", label="sinusoids (sweep)")
-    front = pareto_front(sweep.speed, sweep.cost, sweep.ok, direction)
-    ax.plot(v[front], sweep.cost[front], "o-", color="C0", ms=3, label="sinusoid Pareto front")
-    series = optima if isinstance(optima, dict) else {"optimised waveforms": optima}
+    v = direction * speed
+    good = ok & np.isfinite(cost) & (v > 0)
+    ax.scatter(v[good], cost[good], s=8, c="0.7", label=labels[0])
+    front = pareto_front(speed, cost, ok, direction)
+    ax.plot(v[front], cost[front], "o-", color="C0", ms=3, label=labels[1])
+    series = optima if isinstance(optima, Mapping) else {"optimised waveforms": optima}
     for j, (label, opts) in enumerate(series.items()):
         feas = [o for o in opts if o.feasible_exact]
         if not feas:
@@ -136,20 +144,49 @@ def plot_pareto(
     ax.set_yscale("log")
     ax.set_xlabel("mean speed (exact model)")
     ax.set_ylabel("cost of transport $e_d / |\\Delta X|$")
-    ax.set_title("Cost of transport vs speed, paper parameters")
+    ax.set_title(labels[2])
     ax.legend(fontsize=8)
     fig.tight_layout()
+    return fig
+
+
+def plot_pareto(
+    sweep: SinusoidSweep,
+    optima: Sequence[Optimum] | dict[str, Sequence[Optimum]],
+    path: Path,
+    direction: int = 1,
+    peer: tuple[float, float] | None = None,
+) -> Path:
+    """[`pareto_figure`][] of the paper's model's sinusoid `sweep` and its optima, saved to `path`."""
+    fig = pareto_figure(sweep.speed, sweep.cost, sweep.ok, optima, direction, peer=peer)
     fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _plt().close(fig)
+    return path
+
+
+def plot_screen(opt: AbstractOptimum, path: Path) -> Path | None:
+    """[`pareto_figure`][] of the baseline screen an optimum keeps (`AbstractOptimum.baseline_screen`:
+    a chain's travelling waves, a mechanism's sinusoids) and of the optimum, saved to `path`;
+    `None` where it keeps none."""
+    screen = opt.baseline_screen()
+    if screen is None:
+        return None
+    what, speed, cost, ok = screen
+    labels = (f"{what} (screen)", "their Pareto front", "Cost of transport vs speed: the screen and the optimum")
+    fig = pareto_figure(speed, cost, ok, {"optimum": [opt]}, opt.direction, labels)
+    fig.savefig(path, dpi=120)
+    _plt().close(fig)
     return path
 
 
 def save_all(opt: AbstractOptimum, params: Params | None, sweep: SinusoidSweep | None, out: Path) -> list[Path]:
     """The figures of one optimum into `out` (created): `waveform.png` ([`plot_waveform`][]),
-    `period.png` ([`plot_period`][]; `params` as there) and, with the paper's model's `sweep`,
-    `pareto.png` ([`plot_pareto`][])."""
+    `period.png` ([`plot_period`][]; `params` as there) and `pareto.png`, with the paper's model's
+    `sweep` ([`plot_pareto`][]) or the baseline screen the optimum keeps ([`plot_screen`][])."""
     out.mkdir(parents=True, exist_ok=True)
     paths = [plot_waveform(opt, out / "waveform.png"), plot_period(opt, params, out / "period.png")]
     if sweep is not None:
         paths.append(plot_pareto(sweep, [cast(Optimum, opt)], out / "pareto.png", opt.direction))
+    elif (screen := plot_screen(opt, out / "pareto.png")) is not None:
+        paths.append(screen)
     return paths
