@@ -97,7 +97,7 @@ class AbstractPhysics(eqx.Module):
         (this default: every body's), or not a load (a body without ground contact, whose $N_i$ is
         a placeholder for the friction law; [`Mechanism`][locomotion_jax.Mechanism]). The figures over the
         normal loads (a steady gait's `min_normal`, the optimisers' normal-force margin) read
-        the entries in contact only ([`contact_loads`][])."""
+        the entries in contact only (`model._physics.contact_loads`)."""
         return (True,) * len(self.m)
 
     def keep(self, x: Array) -> Array:
