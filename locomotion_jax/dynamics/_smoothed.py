@@ -38,7 +38,7 @@ import optimistix as optx
 
 from .._custom_types import Array, ArrayLike, Contact
 from .._status import Regime, Status
-from ..model._physics import AbstractPhysics, Loads, Scalars
+from ..model._physics import AbstractPhysics, contact_loads, Loads, Scalars
 
 
 if TYPE_CHECKING:  # the class runs this engine: imported for annotations only
@@ -104,14 +104,15 @@ def rates(P: AbstractPhysics, contact: Contact, eps: Array, t: ArrayLike, y: Arr
 def rates_and_normal(P: AbstractPhysics, contact: Contact, eps: Array, t: ArrayLike, y: Array,
                      v_s: Array | None = None) -> tuple[Array, Array]:  # fmt: skip
     """[`rates`][] (the static bump's width `v_s` as in [`friction`][]) and the smallest signed
-    normal force $\\min_i N_i$."""
+    normal force $\\min_i N_i$ of the bodies on the ground (`inf` where none is)."""
     n = P.n_bodies
     x, v = y[:n], _unstack(y[n : 2 * n])
     dr, L = loads(P, t, x)
     a, p_d = accelerations(P, contact, eps, L, v, v_s)
     p_w = P.power(dr, L, v)
     dy = jnp.concatenate([y[n : 2 * n], jnp.stack(a), jnp.stack([p_d, jnp.asarray(p_w, y.dtype)])])
-    return dy, jnp.min(jnp.stack(L.N))
+    N = contact_loads(P, L.N)
+    return dy, jnp.min(jnp.stack(N)) if N else jnp.asarray(jnp.inf, y.dtype)
 
 
 def energy(P: AbstractPhysics, t: Array, y: Array) -> Array:

@@ -22,15 +22,15 @@ $dF/d\\theta = \\partial F/\\partial\\theta + (\\partial F/\\partial y)\\,dy^*/d
 pass over the gait period in the $2N - 1 + p$ directions $(y, \\theta)$ gives every gradient,
 located events entering with their implicit-function times (the saltation of each switch).
 
-A [`Mechanism`][locomotion_jax.Mechanism] takes one signal per actuated element (`actuated` below) in
-place of one per spring. With `knots` $M > 0$ (a chain or a mechanism), the decision vector is
+A [`Mechanism`][locomotion_jax.Mechanism] takes one signal per actuated element (`Mechanism.actuated`)
+in place of one per spring. With `knots` $M > 0$ (a chain or a mechanism), the decision vector is
 $\\theta = (c_{0,0}, \\dots, c_{0,M-1}, c_{1,0}, \\dots, c_{S-1,M-1}, \\log\\omega)$, the control
 values of a periodic cubic B-spline per signal ([`Spline`][], units of $a_\\max$; no phase is
 fixed), instead of Fourier coefficients.
 """
 
 from collections import Counter
-from typing import Any, ClassVar, TypeVar
+from typing import Any, ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -40,15 +40,10 @@ from .._loops import lane_while_loop
 from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._chain_array import engine_physics, GAIT_ARRAY_FROM
-from ..model._elements import Spring
 from ..model._physics import AbstractPhysics
-from ..model._springwaves import SpringFourier
-from ..model._waveform import AbstractWaveform, Fourier, Spline
 from . import _orbit as orbit
 from ._orbit import Orbit, Period
 
-
-_Model = TypeVar("_Model", Chain, Mechanism)
 
 TRACES: Counter = Counter()
 """Python-level traces of the compiled functions (keys `"evaluate"`, `"relax"`)."""
@@ -69,70 +64,15 @@ def coefficients(theta: Array, springs: int, harmonics: int) -> tuple[Array, Arr
     return cos.reshape(shape), sin.reshape(shape)
 
 
-def actuated(mechanism: Mechanism) -> list[int]:
-    """The indices in `mechanism.links` of the elements driven by a waveform (a spring's rest length,
-    an internal or an external force): the signals a [`Mechanism`][locomotion_jax.Mechanism]'s
-    decision vector sets, in this order."""
-    return [j for j, el in enumerate(mechanism.links) if any(isinstance(s, AbstractWaveform) for s in el.signals())]
-
-
-def with_fourier(mechanism: Mechanism, cos: Array, sin: Array, omega: Array) -> Mechanism:
-    """`mechanism` with each actuated element's waveform replaced by the Fourier series of
-    coefficients `cos[..., j, :]`, `sin[..., j, :]` (absolute units) and base frequency `omega`, its
-    mean (the old waveform's `lbar`) kept. Leading axes of the coefficients are batch axes."""
-    links = list(mechanism.links)
-    for j, i in enumerate(actuated(mechanism)):
-        el = links[i]
-        name = "rest" if isinstance(el, Spring) else "waveform"
-        old = getattr(el, name)
-        links[i] = eqx.tree_at(lambda e: getattr(e, name), el, Fourier(cos[..., j, :], sin[..., j, :], omega, old.lbar))
-    return eqx.tree_at(lambda m: m.links, mechanism, tuple(links))
-
-
-def with_spline(model: _Model, control: Array, omega: Array) -> _Model:
-    """`model` with each actuated signal (a chain's springs; a mechanism's actuated elements) driven by
-    the periodic cubic B-spline of control values `control[..., j, :]` (absolute units, about the
-    signal's mean) and base frequency `omega`. Leading axes of the control values are batch axes."""
-    if isinstance(model, Chain):
-        # Each spring's rest length is lbar_j + s_j(t): the spline's own mean is the spring's lbar.
-        S = model.n_masses - 1
-        lbar = jnp.broadcast_to(jnp.asarray(model.lbar, control.dtype), (S,))
-        signals = tuple(Spline(control[..., j, :], omega, lbar[j]) for j in range(S))
-        zeros = jnp.zeros(jnp.shape(omega) + (S, 1), control.dtype)
-        out = model.with_waves(SpringFourier(zeros, zeros, omega))  # the normal form keeps omega only
-        return eqx.tree_at(lambda c: c.signals, out, signals, is_leaf=lambda x: x is None)
-    links = list(model.links)
-    for j, i in enumerate(actuated(model)):
-        el = links[i]
-        name = "rest" if isinstance(el, Spring) else "waveform"
-        old = getattr(el, name)
-        links[i] = eqx.tree_at(lambda e: getattr(e, name), el, Spline(control[..., j, :], omega, old.lbar))
-    return eqx.tree_at(lambda m: m.links, model, tuple(links))
-
-
 def with_waves(chain: Chain | Mechanism, theta: Array, a_max: Array, harmonics: int,
                knots: int = 0) -> Chain | Mechanism:  # fmt: skip
-    """One chain or mechanism (broadcast, unbatched) with the actuation of the decision vector `theta`
-    (a mechanism: one signal per actuated element, `actuated`; with `knots > 0` a spline per signal)."""
-    if isinstance(chain, Mechanism):
-        S = len(actuated(chain))
-        if knots > 0:
-            return with_spline(chain, a_max * theta[:-1].reshape(S, knots), jnp.exp(theta[-1]))
-    else:
-        S = chain.n_masses - 1
-        if knots > 0:
-            return with_spline(chain, a_max * theta[:-1].reshape(S, knots), jnp.exp(theta[-1]))
+    """One chain or mechanism (broadcast, unbatched) driven by the decision vector `theta`: a
+    Fourier series per actuated signal (`n_signals` of them), or with `knots > 0` a spline."""
+    S = chain.n_signals
+    if knots > 0:
+        return chain.with_spline(a_max * theta[:-1].reshape(S, knots), jnp.exp(theta[-1]))
     cos, sin = coefficients(theta, S, harmonics)
-    return drive(chain, a_max * cos, a_max * sin, jnp.exp(theta[-1]))
-
-
-def drive(model: Chain | Mechanism, cos: Array, sin: Array, omega: Array) -> Chain | Mechanism:
-    """`model` (a chain or a mechanism) with each actuated signal (a chain's springs; a mechanism's
-    actuated elements, [`with_fourier`][]) driven by the Fourier series of coefficients `cos[j]`,
-    `sin[j]` (absolute units, about the signal's mean) and base frequency `omega`."""
-    if isinstance(model, Mechanism):
-        return with_fourier(model, cos, sin, omega)
-    return model.with_waves(SpringFourier(cos, sin, omega))
+    return chain.with_fourier(a_max * cos, a_max * sin, jnp.exp(theta[-1]))
 
 
 def period(

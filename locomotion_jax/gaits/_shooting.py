@@ -41,8 +41,6 @@ from ..dynamics._runs import batch_rows, BatchRows, chain_initial_state, default
 from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._chain_array import array_physics, GAIT_ARRAY_FROM, uses_array
-from ..model._elements import WALL
-from ..model._mechanism_physics import MechanismPhysics
 from ..model._physics import AbstractPhysics, contact_loads
 from ..run._batch import check_contact_start, prepare_chain, unflatten
 from ..run._resolution import guard_chain
@@ -67,15 +65,9 @@ class _Period(NamedTuple):
     n_min: Array
 
 
-def anchored(P: AbstractPhysics) -> bool:
-    """Whether a spring ties a body of the mechanism to the wall (its forces then depend on the
-    absolute positions, and its section state holds them; module docstring). A chain: never."""
-    return isinstance(P, MechanismPhysics) and any(WALL in (s.a, s.b) for s in P.springs)
-
-
 def reduced_size(P: AbstractPhysics) -> int:
     """Length of the section state: $2N - 1$, or $2N$ for an anchored mechanism."""
-    return 2 * P.n_bodies - (0 if anchored(P) else 1)
+    return 2 * P.n_bodies - (0 if P.anchored else 1)
 
 
 def _reduced(st: engine.Hybrid, P: AbstractPhysics | None = None) -> Array:
@@ -83,7 +75,7 @@ def _reduced(st: engine.Hybrid, P: AbstractPhysics | None = None) -> Array:
     vertical velocities $(y_1, \\dots, y_N, w_1, \\dots, w_N)$."""
     x, v = _flat(st.y.x), _flat(st.y.v)
     vert = [] if st.y.y is None or st.y.vy is None else [_flat(st.y.y), _flat(st.y.vy)]
-    if P is not None and anchored(P):
+    if P is not None and P.anchored:
         return jnp.concatenate([x, v] + vert)
     return jnp.concatenate([x[1:] - x[:-1], v] + vert)
 
@@ -97,7 +89,7 @@ def _flat(entries: tuple) -> Array:
 def _positions(P: AbstractPhysics, y: Array) -> Array:
     """The positions of a section state: $x_1 = 0$ and the gaps' sums, or the anchored state's own."""
     n = P.n_bodies
-    if anchored(P):
+    if P.anchored:
         return y[:n]
     return jnp.concatenate([jnp.zeros((1,), y.dtype), jnp.cumsum(y[: n - 1])])
 
@@ -377,7 +369,7 @@ def bodies_problem(mechanism: Any, dynamics: Exact, contact: str, start: str | A
     if not isinstance(start, str):
         P = flat.physics()
         n_red = reduced_size(P)
-        what = "positions x_0..x_N-1" if anchored(P) else "gaps u_0..u_N-2"
+        what = "positions x_0..x_N-1" if P.anchored else "gaps u_0..u_N-2"
         y = np.asarray(start, np.float64)
         if y.shape != shape + (n_red,) or not np.all(np.isfinite(y)):
             raise ValueError(

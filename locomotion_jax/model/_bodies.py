@@ -23,7 +23,7 @@ from ._elements import AbstractElement, Damper, signal_checks, signal_nodes, Spr
 from ._friction import AbstractFriction, Coulomb
 from ._mechanism import AbstractMechanism
 from ._mechanism_physics import ground_body, mechanism_physics, MechanismPhysics
-from ._waveform import AbstractWaveform
+from ._waveform import AbstractWaveform, Fourier, Spline
 
 
 MEASURE_PERIODS = 20
@@ -321,6 +321,46 @@ class Mechanism(AbstractMechanism):
     def waveforms(self) -> list[AbstractWaveform]:
         """The elements' waveforms, in the order of `links`."""
         return [s for el in self.links for s in el.signals() if isinstance(s, AbstractWaveform)]
+
+    def check_hop(self) -> None:
+        """`contact="hop"` does not support carried bodies."""
+        if any(c is not None for c in self.carried_by):
+            raise NotImplementedError(
+                "contact='hop' does not support carried bodies yet (carried_by); use contact='strict' or 'paper'."
+            )
+
+    # -- the actuated signals (what the optimisers design) ----------------------------------
+
+    def actuated(self) -> list[int]:
+        """The indices in `links` of the elements driven by a waveform (a spring's rest length, an
+        internal or an external force): the mechanism's actuated signals, in this order."""
+        return [j for j, el in enumerate(self.links) if any(isinstance(s, AbstractWaveform) for s in el.signals())]
+
+    @property
+    def n_signals(self) -> int:
+        """The number of actuated signals (`actuated`)."""
+        return len(self.actuated())
+
+    def with_fourier(self, cos: Array, sin: Array, omega: Array) -> "Mechanism":
+        """A copy with each actuated element's waveform replaced by the Fourier series of
+        coefficients `cos[..., j, :]`, `sin[..., j, :]` (absolute units) and base frequency `omega`,
+        its mean (the old waveform's `lbar`) kept. Leading axes of the coefficients are batch axes."""
+        return self._driven(lambda j, lbar: Fourier(cos[..., j, :], sin[..., j, :], omega, lbar))
+
+    def with_spline(self, control: Array, omega: Array) -> "Mechanism":
+        """A copy with each actuated element's waveform replaced by the periodic cubic B-spline of
+        control values `control[..., j, :]` (absolute units, about the old waveform's `lbar`) and base
+        frequency `omega`. Leading axes of the control values are batch axes."""
+        return self._driven(lambda j, lbar: Spline(control[..., j, :], omega, lbar))
+
+    def _driven(self, signal: Any) -> "Mechanism":
+        """A copy whose `j`-th actuated element takes `signal(j, lbar)` in place of its waveform."""
+        links = list(self.links)
+        for j, i in enumerate(self.actuated()):
+            el = links[i]
+            name = "rest" if isinstance(el, Spring) else "waveform"
+            links[i] = eqx.tree_at(lambda e: getattr(e, name), el, signal(j, getattr(el, name).lbar))
+        return eqx.tree_at(lambda m: m.links, self, tuple(links))
 
     def physics(self) -> MechanismPhysics:
         """The mechanism's [`AbstractPhysics`][locomotion_jax.AbstractPhysics]: what the engine integrates it with."""

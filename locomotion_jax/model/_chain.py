@@ -18,7 +18,7 @@ from ._friction import AbstractFriction, Coulomb
 from ._mechanism import AbstractMechanism
 from ._params import normal_positive, Params
 from ._springwaves import check_waveforms, spring_signals, SpringFourier, to_spring_fourier, TravellingWave
-from ._waveform import AbstractWaveform
+from ._waveform import AbstractWaveform, Spline
 
 
 def _per(name: str, x: ValuesLike, n: int, what: str) -> Array:
@@ -241,6 +241,27 @@ class Chain(AbstractMechanism):
         """A copy actuated by the Fourier coefficients `waves` (any `signals` dropped)."""
         out = eqx.tree_at(lambda c: c.waves, self, waves)
         return out if self.signals is None else eqx.tree_at(lambda c: c.signals, out, None)
+
+    @property
+    def n_signals(self) -> int:
+        """The number of actuated signals: one per spring, its rest length about `lbar`."""
+        return self.n_masses - 1
+
+    def with_fourier(self, cos: Array, sin: Array, omega: Array) -> "Chain":
+        """A copy whose spring `j` is driven by the Fourier series of coefficients `cos[..., j, :]`,
+        `sin[..., j, :]` (absolute units, about its `lbar`) and base frequency `omega`."""
+        return self.with_waves(SpringFourier(cos, sin, omega))
+
+    def with_spline(self, control: Array, omega: Array) -> "Chain":
+        """A copy whose spring `j` is driven by the periodic cubic B-spline of control values
+        `control[..., j, :]` (absolute units, about its `lbar`) and base frequency `omega`. Leading
+        axes of the control values are batch axes."""
+        S = self.n_signals
+        lbar = jnp.broadcast_to(jnp.asarray(self.lbar, control.dtype), (S,))
+        signals = tuple(Spline(control[..., j, :], omega, lbar[j]) for j in range(S))
+        zeros = jnp.zeros(jnp.shape(omega) + (S, 1), control.dtype)
+        out = self.with_waves(SpringFourier(zeros, zeros, omega))  # the normal form keeps omega only
+        return eqx.tree_at(lambda c: c.signals, out, signals, is_leaf=lambda x: x is None)
 
     def __getitem__(self, index: Any) -> "Chain":
         """Index the batch axes of the broadcast chain."""

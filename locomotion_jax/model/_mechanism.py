@@ -64,6 +64,10 @@ class AbstractMechanism(eqx.Module):
         `TimeScale` (`model._scales`): it may take at most
         `MAX_START_STEPS` steps."""
 
+    def check_hop(self) -> None:
+        """Raise a `NotImplementedError` naming what this mechanism has that flight and landing
+        (`contact="hop"`, SPEC §10) do not support; this default: nothing."""
+
     @abc.abstractmethod
     def is_valid(self) -> Any:
         """Per configuration, whether its values are in their valid ranges (the others run flagged

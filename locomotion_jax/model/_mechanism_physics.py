@@ -114,6 +114,11 @@ class MechanismPhysics(AbstractPhysics):
     externals: tuple[ExternalForce, ...]
     dampers: tuple[Damper, ...] = ()  # between two bodies (one to a wall is in `c`)
 
+    @property
+    def anchored(self) -> bool:
+        """Whether a spring ties a body to the wall."""
+        return any(WALL in (s.a, s.b) for s in self.springs)
+
     def in_contact(self) -> tuple[bool, ...]:
         """The bodies with a friction law of their own: a body without ground contact has the
         placeholder load 1 (module docstring)."""

@@ -92,6 +92,13 @@ class AbstractPhysics(eqx.Module):
         """The inverse of [`bodies`][]: the entries as one array with the bodies on its last axis."""
         return jnp.stack(xs, -1)
 
+    @property
+    def anchored(self) -> bool:
+        """Whether the loads depend on the bodies' absolute positions (a spring to a wall), not on
+        their gaps alone: a steady gait's section state then holds the positions. This default:
+        no."""
+        return False
+
     def in_contact(self) -> tuple[bool, ...]:
         """Per entry of [`bodies`][]: whether its normal loads $N_i$ are the ground's reactions
         (this default: every body's), or not a load (a body without ground contact, whose $N_i$ is

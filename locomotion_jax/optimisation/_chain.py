@@ -38,7 +38,6 @@ from typing import Any
 import jax.numpy as jnp
 import numpy as np
 
-from ..gaits._element_orbit import with_spline
 from ..gaits._progress import reporter
 from ..model._actuator import RestLength
 from ..model._chain import Chain
@@ -111,7 +110,7 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     lo, hi = screen.frequency_range(base, omega, settings)
     free = hi > lo
     if spline:
-        fastest, family = with_spline(base, jnp.zeros((S, M), base.dtype), jnp.asarray(hi, base.dtype)), f"{M} knots"
+        fastest, family = base.with_spline(jnp.zeros((S, M), base.dtype), jnp.asarray(hi, base.dtype)), f"{M} knots"
     else:
         fastest, family = base.with_waves(SpringFourier(np.zeros((S, H)), np.zeros((S, H)), hi)), f"{H} harmonics"
     what = "given" if omega is not None else "ChainOptimiseSettings.omega_max times the highest natural frequency"
@@ -163,7 +162,7 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     if control_k is None:
         chosen = screen.with_actuation(base, cos_k[None], sin_k[None], om[k : k + 1])[0]
     else:
-        chosen = with_spline(base, jnp.asarray(control_k, base.dtype), jnp.asarray(om[k], base.dtype))
+        chosen = base.with_spline(jnp.asarray(control_k, base.dtype), jnp.asarray(om[k], base.dtype))
     gait = (bool(g.ok[k]), float(g.speed[k]), float(g.cost[k]), float(g.radius[k]), float(g.period[k]))
     sim = local.simulated(chosen, gait, settings, start="relaxed")
     say(f"verified ({time.perf_counter() - t0:.0f} s): {names[k]}, cost of transport {g.cost[k]:.6g}")

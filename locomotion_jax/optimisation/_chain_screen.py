@@ -20,7 +20,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..dynamics._exact_dynamics import Exact
-from ..gaits._element_orbit import with_spline
 from ..gaits._orbit import PATIENCE
 from ..gaits._select import GaitStatus
 from ..gaits._shooting import steady_gait_chain, transient_speed
@@ -121,7 +120,7 @@ def solve(chain: Chain, cos: np.ndarray | None, sin: np.ndarray | None, omega: n
         gaits = lambda idx: with_actuation(chain, cos[idx], sin[idx], omega[idx])
     else:
         dtype = chain.dtype
-        gaits = lambda idx: with_spline(chain, jnp.asarray(control[idx], dtype), jnp.asarray(omega[idx], dtype))
+        gaits = lambda idx: chain.with_spline(jnp.asarray(control[idx], dtype), jnp.asarray(omega[idx], dtype))
     t0 = time.perf_counter()
     solved = np.arange(n)
     # Not with n <= chunk (every wave among the fastest), nor a transient too short to have an end.

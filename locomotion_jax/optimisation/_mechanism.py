@@ -4,7 +4,7 @@ method over the waveforms of the mechanism's actuated elements.
 Problem, for one mechanism, a required speed $v_\\min > 0$ in the direction $\\sigma = \\pm 1$ and a
 bound $a_\\max$ on every actuated signal: over periodic signals of a common base frequency for each
 element driven by a waveform (a spring's rest length, an internal force, an external force;
-`gaits._element_orbit.actuated`), each about the element's own mean $\\bar s_j$, of one of the two
+`Mechanism.actuated`), each about the element's own mean $\\bar s_j$, of one of the two
 families of the exact optimiser (`_shapes`, [`MechanismOptimiseSettings`][]`.shape`):
 
 - `"fourier"` (default): Fourier series of $H$ harmonics, $s_j(t) = \\bar s_j + \\sum_n A_{jn}\\cos
@@ -49,7 +49,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..dynamics._exact_dynamics import Exact
-from ..gaits._element_orbit import actuated, with_fourier, with_spline
 from ..gaits._progress import reporter
 from ..model._bodies import Mechanism
 from . import _element_local as local
@@ -91,12 +90,12 @@ def _gaits(batch: Mechanism, settings: MechanismOptimiseSettings) -> dict[str, n
 def _fourier(mech: Mechanism, cos: np.ndarray, sin: np.ndarray, omega: Any) -> Mechanism:
     """`mech` driven by Fourier series (absolute units; leading axes: a batch)."""
     dtype = mech.dtype
-    return with_fourier(mech, jnp.asarray(cos, dtype), jnp.asarray(sin, dtype), jnp.asarray(omega, dtype))
+    return mech.with_fourier(jnp.asarray(cos, dtype), jnp.asarray(sin, dtype), jnp.asarray(omega, dtype))
 
 
 def _spline(mech: Mechanism, control: np.ndarray, omega: Any) -> Mechanism:
     """`mech` driven by splines of these control values (absolute units; leading axes: a batch)."""
-    return with_spline(mech, jnp.asarray(control, mech.dtype), jnp.asarray(omega, mech.dtype))
+    return mech.with_spline(jnp.asarray(control, mech.dtype), jnp.asarray(omega, mech.dtype))
 
 
 def check_inputs(mech: Any, v_min: Any, a_max: Any, direction: Any, harmonics: Any, omega: Any) -> list[int]:
@@ -106,7 +105,7 @@ def check_inputs(mech: Any, v_min: Any, a_max: Any, direction: Any, harmonics: A
     if mech.batch_shape != ():
         raise ValueError(f"mechanism must be a single configuration (batch shape ()), got {mech.batch_shape}.")
     mech.validate()
-    elements = actuated(mech)
+    elements = mech.actuated()
     if not elements:
         raise ValueError(
             "optimise: the mechanism has no element driven by a waveform (a Spring's rest, a Force or an "

@@ -180,16 +180,16 @@ def element_rollout(mechanism: Any, cos: Array, sin: Array, omega: Array, eps: A
                     temperature: float) -> Rollout:  # fmt: skip
     """Integrate a chain or a mechanism (`mechanism`, one configuration) with its actuated signals
     driven by the Fourier series `cos`, `sin` (shape `(S, H)`, absolute units) of base frequency
-    `omega` ([`_element_orbit.drive`][locomotion_jax.gaits._element_orbit.drive]), its friction
+    `omega` (its `with_fourier`), its friction
     smoothed as [`friction_coefficient`][]'s (each body's law's `smoothed`, the static bump of width
     $\\sqrt{\\varepsilon_\\text{ref}\\,\\varepsilon}$; the paper's reading $n_i = |N_i|$, as [`rates`][]), from
     the start of the optimisers' direct simulation (a chain's relaxed springs, a mechanism's own
-    start), and measure the steady state ([`integrate`][]; `min_normal` over every body)."""
+    start), and measure the steady state ([`integrate`][]; `min_normal` over the bodies on the ground)."""
     from ..dynamics import _smoothed as smoothed
-    from ..gaits._element_orbit import drive
 
     def physics(inputs):
-        return drive(*inputs).physics()
+        model, cos, sin, omega = inputs
+        return model.with_fourier(cos, sin, omega).physics()
 
     def rates_of(inputs):
         P = physics(inputs)

@@ -16,8 +16,6 @@ from ..dynamics._base import AbstractDynamics
 from ..dynamics._exact_dynamics import Exact
 from ..dynamics._flat import FlatBatch
 from ..dynamics._forward import check_static, concrete_value
-from ..model._bodies import Mechanism
-from ..model._chain import Chain
 from ..model._checks import is_concrete
 from ..model._mechanism import AbstractMechanism
 from ..model._params import Params
@@ -183,21 +181,12 @@ def check_hop_dynamics(contact: str, dynamics: AbstractDynamics) -> None:
         raise NotImplementedError(f"contact='hop' runs with Exact dynamics only, got {type(dynamics).__name__}.")
 
 
-def check_contact_start(contact: str, start: str, mechanism: Any = None) -> None:
-    """Validate `contact` and `start`. `contact="hop"` runs only for a [`Chain`][locomotion_jax.Chain] or a
-    [`Mechanism`][locomotion_jax.Mechanism] without carried bodies (passed as `mechanism`); elsewhere it
-    raises `NotImplementedError`."""
-    if contact == "hop" and isinstance(mechanism, Mechanism):
-        if any(c is not None for c in mechanism.carried_by):
-            raise NotImplementedError(
-                "contact='hop' does not support carried bodies yet (carried_by); use contact='strict' or 'paper'."
-            )
-    elif contact == "hop" and not isinstance(mechanism, Chain):
-        name = type(mechanism).__name__ if mechanism is not None else "this path"
-        raise NotImplementedError(
-            f"contact='hop' (flight and landing, SPEC section 10) is not implemented yet for {name} "
-            "(only lj.simulate of a Chain or a Mechanism); use contact='strict' or 'paper'."
-        )
+def check_contact_start(contact: str, start: str, mechanism: AbstractMechanism) -> None:
+    """Validate `contact` and `start`. Under `contact="hop"`, refuse what `mechanism` (a
+    [`Chain`][locomotion_jax.Chain] or a [`Mechanism`][locomotion_jax.Mechanism]) has that flight and
+    landing do not support (its `check_hop`: a `NotImplementedError`)."""
+    if contact == "hop":
+        mechanism.check_hop()
     if contact not in ("strict", "paper", "hop"):
         raise ValueError(f"contact must be 'strict', 'paper' or 'hop', got {contact!r}.")
     if start not in ("paper", "relaxed"):
