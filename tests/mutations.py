@@ -754,6 +754,18 @@ MUTATIONS = [
         ("tests/test_gait.py::test_capsule_gait_is_a_fixed_point_of_a_direct_simulation",),
     ),
     Mutation(
+        "chain_given_screen_ignored",
+        "a chain's optimiser solves its screen again though an earlier one is given (sweep=)",
+        "locomotion_jax/optimisation/_chain.py",
+        (
+            (
+                "    if sweep is None:\n        size = settings.amplitudes",
+                "    if True:\n        size = settings.amplitudes",
+            ),
+        ),
+        ("tests/test_optimise.py::test_a_chain_takes_an_earlier_screen",),
+    ),
+    Mutation(
         "smoothed_time_not_moved",
         "the smoothed stage's candidates keep their lanes' time origins: the first signal's A_1, which the "
         "decision vector leaves out, is dropped",

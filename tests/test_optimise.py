@@ -1467,6 +1467,61 @@ def test_the_chain_optimum_keeps_its_screen_and_draws_it(opt3, tmp_path):
 
 
 @CHAIN_OPTIMISE
+def test_a_chain_takes_an_earlier_screen(opt3, monkeypatch):
+    """`sweep=` an earlier optimum's screen, read back from its JSON (NaN as null): the waves are not
+    solved again (the screen's function would fail the test), and the same requirement finds the
+    same optimum, bitwise, with the same screen."""
+    record = json.loads(opt3.to_json(full=True))["screen"]
+    monkeypatch.setattr(screen, "screen", lambda *args, **kwargs: pytest.fail("screened again"))
+    again = lj.optimise(worm(), 0.05, A_MAX, harmonics=2, settings=SETTINGS, sweep=record)
+    assert again.cost_of_transport_exact == opt3.cost_of_transport_exact and again.source == opt3.source
+    assert again.travelling_wave == opt3.travelling_wave and np.array_equal(again.cos, opt3.cos)
+    assert again.screen.keys() == opt3.screen.keys()
+    for key, value in opt3.screen.items():
+        np.testing.assert_array_equal(again.screen[key], value)
+
+
+@CHAIN_OPTIMISE
+def test_cli_reuses_an_earlier_screen(opt3, tmp_path, monkeypatch):
+    """`optimize --reuse-screen FILE`: the screen in an earlier `--out`'s `optimum.json` goes to
+    `optimise`'s `sweep=`; a file without one, and the paper's model, are refused naming the option."""
+    (tmp_path / "optimum.json").write_text(opt3.to_json(full=True))
+    (tmp_path / "bare.json").write_text(opt3.to_json())
+    seen: dict[str, Any] = {}
+    monkeypatch.setattr(lj, "optimise", lambda *args, **kwargs: seen.update(kwargs) or opt3)
+    worm_args = ["optimize", "--masses", "1,1,1", "--d", "0", "--v-min", "0.06", "--a-max", "0.1", "--reuse-screen"]
+    res = CliRunner().invoke(_cli.app, [*worm_args, str(tmp_path / "optimum.json")])
+    assert res.exit_code == 0, res.output
+    assert seen["sweep"] == json.loads(opt3.to_json(full=True))["screen"]
+    res = CliRunner().invoke(_cli.app, [*worm_args, str(tmp_path / "bare.json")])
+    assert res.exit_code == 2 and "--reuse-screen: " in res.output and "holds no screen" in res.output
+    paper = ["optimize", "--v-min", "0.05", "--a-max", "0.05", "--reuse-screen", str(tmp_path / "optimum.json")]
+    res = CliRunner().invoke(_cli.app, paper)
+    assert res.exit_code == 2 and "--reuse-screen applies to a chain or a mechanism" in res.output
+
+
+@CHAIN_OPTIMISE
+def test_a_given_screen_is_checked_and_kept_within_the_bound(opt3):
+    """`_chain_screen.from_record`: the waves above `a_max` or outside the frequency range are left
+    out; a record that is not a chain optimum's screen, or of another chain, is refused naming `sweep`."""
+    sc, n = opt3.screen, len(opt3.screen["a"])
+    lo, hi = float(np.min(sc["omega"])), float(np.max(sc["omega"]))
+    kept = screen.from_record(sc, 5, A_MAX / 2, lo, hi)
+    assert len(kept.a) == int(np.sum(sc["a"] <= A_MAX / 2 * (1 + 1e-12))) and 0 < len(kept.a) < n
+    assert np.all(kept.a <= A_MAX / 2 * (1 + 1e-12)) and kept.gaits.y.shape == (len(kept.a), 5)
+    w = float(np.median(sc["omega"]))
+    assert np.all(screen.from_record(sc, 5, A_MAX, lo, w).omega <= w * (1 + 1e-12))
+    with pytest.raises(ValueError, match="sweep: an earlier chain optimum's screen"):
+        screen.from_record({k: v for k, v in sc.items() if k != "y"}, 5, A_MAX, lo, hi)
+    with pytest.raises(ValueError, match=r"sweep: .* y 7 numbers per row \(a chain of 4 masses\)"):
+        screen.from_record(sc, 7, A_MAX, lo, hi)
+    with pytest.raises(ValueError, match="sweep: no wave of the screen has a <= a_max"):
+        screen.from_record(sc, 5, A_MAX / 1e3, lo, hi)
+    with pytest.raises(TypeError, match="sweep: the paper's model takes a sinusoid_sweep"):
+        lj.optimise(lj.Params(), 0.05, 0.05, sweep=sc)
+
+
+@CHAIN_OPTIMISE
 def test_screen_filter_keeps_the_fast_waves():
     v = np.array([0.3, np.nan, -0.4, 0.05, 0.2, 0.01])
     assert list(screen.fast_enough(v, 0.4, 1, 0.5, 2)) == [0, 4]  # 0.2 reaches half of 0.4; 0.3, 0.2 fastest
@@ -1926,6 +1981,10 @@ def test_smoothed_method_on_a_mechanism():
     i = int(np.argmin(np.where(sc["ok"] & (-sc["speed"] >= V_MIN), sc["cost"], np.inf)))
     assert (sc["a"][i], sc["omega"][i], sc["phase"][i], sc["cost"][i]) == (w["a"], w["omega"], w["phase"],
                                                                            w["cost_of_transport"])  # fmt: skip
+    # That screen given again (`sweep=`) is not solved again, and gives the same optimum.
+    again = lj.optimise(_capsule(), v_min=V_MIN, a_max=FORCE_MAX, direction=-1, method="smoothed", settings=s,
+                        sweep=json.loads(opt.to_json(full=True))["screen"])  # fmt: skip
+    assert again.cost_of_transport_exact == opt.cost_of_transport_exact and again.sinusoid == opt.sinusoid
     w, Tg = opt.omega, opt.gait_period_exact
     force = Sig(0.0, tuple(float(c) for c in opt.cos[0]), tuple(float(c) for c in opt.sin[0]), w)
     S = System([Body(1.0, MU), Body(0.5, None, carrier=0)], springs=[(0, 1, K, 0.0)], forces=[(0, 1, force)],

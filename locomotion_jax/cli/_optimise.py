@@ -114,6 +114,13 @@ def register(app: typer.Typer) -> None:
             help="Exact: continuation from an earlier result of the same kind of mechanism, the JSON that "
             "optimize --json printed (or --out's optimum.json): refined too, and a candidate itself.",
         ),
+        reuse_screen: Path | None = typer.Option(
+            None,
+            "--reuse-screen",
+            help="A chain or a mechanism: the screen kept in an earlier --out's optimum.json (the same "
+            "mechanism and screen options), taken as this run's screen instead of solving it again: the "
+            "optimum at another --v-min without a new screen.",
+        ),
         json_out: bool = typer.Option(False, "--json", help="Print one JSON object instead of the report."),
         out: Path | None = typer.Option(
             None, "--out", help="Directory for optimum.json and the plots (signals, one period, Pareto front)."
@@ -163,7 +170,10 @@ def register(app: typer.Typer) -> None:
                                                      verbose=verbose))  # fmt: skip
                 chain_settings = lj.ChainOptimiseSettings(**screen)
                 return _optimise_bodies(built, v_min, a_max, direction, omega, harmonics, chain_settings, out, json_out,
-                                        _start(start), method)  # fmt: skip
+                                        _start(start), method, _screen(reuse_screen))  # fmt: skip
+            if reuse_screen is not None:
+                raise ValueError("--reuse-screen applies to a chain or a mechanism of bodies and links (the paper's "
+                                 "model sweeps its sinusoids: --sweep-omegas, --sweep-amplitudes).")  # fmt: skip
             params = built.mechanism
             assert a_max is not None  # the paper's model: given, or its amplitude
             settings: ExactSettings | Settings
@@ -256,18 +266,38 @@ def _save(opt: Any, params: Any, sweep: Any, out: Path, json_out: bool) -> None:
         typer.echo("wrote " + ", ".join(str(p) for p in paths), err=True)
 
 
+def _screen(path: Path | None) -> Any:
+    """`--reuse-screen`: the `screen` of an earlier optimum's JSON (`optimise`'s `sweep=` checks it).
+
+    **Raises:** `ValueError` naming `--reuse-screen` and the file where it holds no screen."""
+    if path is None:
+        return None
+    record = _read(path, "--reuse-screen")
+    if not isinstance(record, dict) or not isinstance(record.get("screen"), dict):
+        raise ValueError(f"--reuse-screen: {path} holds no screen; optimize --out DIR writes one in DIR/optimum.json "
+                         "for a chain or a mechanism.")  # fmt: skip
+    return record["screen"]
+
+
+def _read(path: Path, option: str) -> Any:
+    """The JSON of an earlier optimum, for `option`.
+
+    **Raises:** `ValueError` naming `option` and the file where it cannot be read."""
+    import json
+
+    try:
+        return json.loads(Path(path).read_text())
+    except (OSError, ValueError) as err:
+        raise ValueError(f"{option}: cannot read {path} as the JSON of an earlier optimize --json ({err}).") from None
+
+
 def _start(path: Path | None) -> Any:
     """`--start`: the earlier result read from its JSON (`optimise`'s `start=` checks its kind).
 
     **Raises:** `ValueError` naming `--start` and the file where it holds no result."""
     if path is None:
         return None
-    import json
-
-    try:
-        record = json.loads(Path(path).read_text())
-    except (OSError, ValueError) as err:
-        raise ValueError(f"--start: cannot read {path} as the JSON of an earlier optimize --json ({err}).") from None
+    record = _read(path, "--start")
     if not isinstance(record, dict) or not {"cos", "sin", "control", "omega"} <= set(record):
         raise ValueError(f"--start: {path} holds no optimum (cos, sin, control, omega); optimize --json writes one.")
     return record
@@ -275,7 +305,7 @@ def _start(path: Path | None) -> Any:
 
 def _optimise_bodies(built: Built, v_min: float, a_max: float | None, direction: int | None, omega: float | None,
                      harmonics: int | None, settings: Any, out: Path | None, json_out: bool,
-                     start: Any = None, method: str = "exact") -> None:  # fmt: skip
+                     start: Any = None, method: str = "exact", sweep: Any = None) -> None:  # fmt: skip
     """`optimize` of a chain or a mechanism of bodies and links: `lj.optimise` (from `start`, the
     fields of an earlier result, where given), printed; with `out` also saved and plotted (`_save`)."""
     import locomotion_jax as lj
@@ -290,7 +320,7 @@ def _optimise_bodies(built: Built, v_min: float, a_max: float | None, direction:
     default = None if settings.shape == "spline" else 3 if built.kind == "chain" else 2
     opt = lj.optimise(built.mechanism, v_min, a_max, direction=1 if direction is None else direction, omega=omega,
                       harmonics=default if harmonics is None else harmonics, settings=settings,
-                      start=start, method=method)  # fmt: skip
+                      start=start, method=method, sweep=sweep)  # fmt: skip
     if out is not None:
         _save(opt, None, None, out, json_out)
     typer.echo(dumps({**opt.to_dict(), **built.record}) if json_out else opt.summary())

@@ -89,12 +89,14 @@ def check_inputs(chain: Any, v_min: Any, a_max: Any, direction: Any, harmonics: 
 
 def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int = 1, omega: float | None = None,
                    harmonics: int | None = None, settings: ChainOptimiseSettings | None = None,
-                   start: Any = None, method: str = "exact") -> ChainOptimum:  # fmt: skip
+                   start: Any = None, method: str = "exact", sweep: Any = None) -> ChainOptimum:  # fmt: skip
     """`optimise(chain, v_min, a_max, ...)`: the method of the module docstring (arguments as there;
     `harmonics`: the Fourier series' length, default 3; a spline search refuses one). `start`: an
     earlier chain optimum ([`_element_local.given_start`][]) that takes the last local lane and is
     a candidate itself. `method="smoothed"`: the local stage on the smoothed model
-    (`_element_smoothed`; Fourier series only), verified as the exact method's."""
+    (`_element_smoothed`; Fourier series only), verified as the exact method's. `sweep`: an earlier
+    optimum's `screen` of this chain (`_chain_screen.from_record`), which then is the screen: its
+    waves are not solved again."""
     settings = ChainOptimiseSettings() if settings is None else settings
     if not isinstance(settings, ChainOptimiseSettings):
         raise TypeError(f"settings for a Chain must be a ChainOptimiseSettings, got {type(settings).__name__}.")
@@ -118,11 +120,16 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     search = settings.searching()  # the screen's and the local runs' step; the verification's is dt
 
     # 1. Travelling waves. Progress from the first second: compiling the screen alone takes minutes.
-    size = settings.amplitudes * settings.frequencies * settings.phases
-    say(f"screening {size} travelling waves, then {settings.zoom_levels} zoom level(s) (compiling the screen: "
-        "first call only)...")  # fmt: skip
-    sc, best, steps = screen.screen(base, speed, direction, a_max, lo, hi, H, search, say)
-    say(f"{len(sc.a)} travelling waves solved ({time.perf_counter() - t0:.0f} s)")
+    if sweep is None:
+        size = settings.amplitudes * settings.frequencies * settings.phases
+        say(f"screening {size} travelling waves, then {settings.zoom_levels} zoom level(s) (compiling the screen: "
+            "first call only)...")  # fmt: skip
+        sc, best, steps = screen.screen(base, speed, direction, a_max, lo, hi, H, search, say)
+        say(f"{len(sc.a)} travelling waves solved ({time.perf_counter() - t0:.0f} s)")
+    else:
+        sc = screen.from_record(sweep, 2 * S + 1, a_max, lo, hi)
+        best, steps = int(screen.rank(sc.gaits, speed, direction)[0]), screen.grid_steps(S, a_max, lo, hi, settings)
+        say(f"the given screen: {len(sc.a)} travelling waves, not solved again")
     feas = screen.feasible(sc.gaits, speed, direction)
     baseline = screen.as_dict(sc, best) if feas[best] else None
 
@@ -183,5 +190,5 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
         evaluations=0 if ev is None else ev.calls,
         runtime_s=time.perf_counter() - t0, shape="fourier" if control_k is None else "spline",
         control=control_k, chain=chosen,
-        screen=dict(a=sc.a, omega=sc.omega, phi=sc.phi, speed=sc.gaits.speed, cost=sc.gaits.cost, ok=sc.gaits.ok),
+        screen=screen.record(sc),
     )  # fmt: skip

@@ -25,6 +25,7 @@ from ..gaits._select import GaitStatus
 from ..gaits._shooting import steady_gait_chain, transient_speed
 from ..model._chain import Chain
 from ..model._springwaves import SpringFourier
+from ._element_local import screen_rows
 from ._element_optimum import ChainOptimiseSettings
 from ._optimum import along
 
@@ -200,6 +201,30 @@ def _run(chain, a, omega, phi, harmonics, settings, say, need) -> Screen:
     return Screen(a, omega, phi, solve(chain, cos, sin, omega, settings, say, need))
 
 
+def grid_steps(springs: int, a_max: float, lo: float, hi: float, settings: ChainOptimiseSettings) -> dict[str, float]:
+    """The coarse grid's steps in `a`, $\\log\\omega$ and $\\varphi$ (what [`distinct_starts`][] measures by)."""
+    return {
+        "a": a_max / settings.amplitudes,
+        "log_omega": (math.log(hi / lo) / max(settings.frequencies - 1, 1)) if hi > lo else 0.0,
+        "phi": 2 * np.pi / settings.phases if springs > 1 else 0.0,
+    }
+
+
+def record(sc: Screen) -> dict[str, np.ndarray]:
+    """The screen as an optimum keeps it (`ChainOptimum.screen`): each wave's `a`, `omega`, `phi`
+    and every figure of its gait ([`Gaits`][])."""
+    return dict(a=sc.a, omega=sc.omega, phi=sc.phi, **sc.gaits._asdict())
+
+
+def from_record(given: Any, n_red: int, a_max: float, lo: float, hi: float) -> Screen:
+    """The screen of an earlier optimum's `screen` ([`record`][]), for `optimise(chain, ..., sweep=)`:
+    its waves within the bound and the frequency range (`_element_local.screen_rows`, which raises a
+    `ValueError` naming `sweep` for a record of another kind or chain)."""
+    state = f"a chain of {(n_red + 1) // 2} masses"
+    rows = screen_rows(given, ("a", "omega", "phi", *Gaits._fields), n_red, a_max, lo, hi, "chain wave", state)
+    return Screen(rows["a"], rows["omega"], rows["phi"], Gaits(*(rows[key] for key in Gaits._fields)))
+
+
 def screen(chain: Chain, speed: float, direction: int, a_max: float, lo: float, hi: float, harmonics: int,
            settings: ChainOptimiseSettings, say: Callable[[str], None] = lambda message: None,
            ) -> tuple[Screen, int, dict[str, float]]:  # fmt: skip
@@ -212,11 +237,7 @@ def screen(chain: Chain, speed: float, direction: int, a_max: float, lo: float, 
     phases = -np.pi + 2 * np.pi * np.arange(settings.phases) / settings.phases if S > 1 else np.zeros(1)
     A, W, F = (x.ravel() for x in np.meshgrid(amps, omegas, phases, indexing="ij"))
     out = _run(chain, A, W, F, harmonics, settings, say, (speed, direction))
-    steps = {
-        "a": a_max / settings.amplitudes,
-        "log_omega": (math.log(hi / lo) / max(settings.frequencies - 1, 1)) if hi > lo else 0.0,
-        "phi": 2 * np.pi / settings.phases if S > 1 else 0.0,
-    }
+    steps = grid_steps(S, a_max, lo, hi, settings)
     step = dict(steps)
     for level in range(settings.zoom_levels):
         best = int(rank(out.gaits, speed, direction)[0])

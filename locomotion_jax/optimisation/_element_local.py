@@ -417,6 +417,35 @@ def verified_baseline(found: dict[str, Any], v: Verified) -> dict[str, Any] | No
     )
 
 
+def screen_rows(given: Any, fields: tuple[str, ...], n_red: int, a_max: float, lo: float, hi: float,
+                kind: str, state: str) -> dict[str, np.ndarray]:  # fmt: skip
+    """The rows of an earlier optimum's `screen` (`optimise(..., sweep=)`; read back from JSON, NaN
+    as `None`) that keep within the bound `a_max` and the frequency range `[lo, hi]` (to 1e-12
+    relative): each of `fields` (`a`, `omega`, ... and the gait's figures, `y` the section state of
+    `n_red` numbers, described as `state`) as an array over them. `kind`: the screen's mechanism and
+    signal, e.g. `("chain", "wave")`, for the messages.
+
+    **Raises:** `ValueError` naming `sweep` where a field is missing or of another shape, or where
+    no row is left."""
+    mechanism, signal = kind.split()
+    if not isinstance(given, Mapping) or not set(fields) <= set(given):
+        raise ValueError(
+            f"sweep: an earlier {mechanism} optimum's screen (opt.screen), a dict with {', '.join(fields)}."
+        )
+    kinds = dict(ok=bool, liftoff=bool, k=np.int32)
+    rows = {key: np.array(given[key], dtype=kinds.get(key, np.float64)) for key in fields}
+    n = rows["a"].shape
+    if len(n) != 1 or any(rows[key].shape[:1] != n for key in fields) or rows["y"].shape != n + (n_red,):
+        raise ValueError(f"sweep: the screen's fields must have one row per {signal}, and y {n_red} numbers per row "
+                         f"({state}); got y of shape {rows['y'].shape}.")  # fmt: skip
+    tol = 1 + 1e-12
+    keep = (rows["a"] <= a_max * tol) & (rows["omega"] >= lo / tol) & (rows["omega"] <= hi * tol)
+    if not keep.any():
+        raise ValueError(f"sweep: no {signal} of the screen has a <= a_max = {a_max:g} and omega in "
+                         f"[{lo:.6g}, {hi:.6g}].")  # fmt: skip
+    return {key: value[keep] for key, value in rows.items()}
+
+
 AVERAGED = 12
 """Gait periods the direct simulation check averages over: a multiple of every period from 1 to
 `RECUR` gait periods, so that a motion of any of them is averaged over whole periods of its own."""

@@ -151,9 +151,11 @@ class ElementOptimum(AbstractOptimum):
       `runtime_s`.
     - `screen`: every baseline signal of the screen, as arrays over them: its grid coordinates (a
       chain's travelling waves `a`, `omega`, `phi`; a mechanism's sinusoids `a`, `omega`,
-      `phase`), and the `speed`, `cost` and `ok` (converged, stable, no lift-off) of its steady
-      gait at the search step (`search_dt`, else `dt`); NaN and not `ok` where the screen left a
-      signal unsolved. `to_dict(full=True)` includes it; `optimize --out` draws it (`pareto.png`).
+      `phase`), and its steady gait at the search step (`search_dt`, else `dt`): `speed`, `cost`,
+      `ok` (converged, stable, no lift-off), `liftoff`, `k`, `period`, `radius`, `min_normal` and
+      `y`, the section state (the local runs' warm start); NaN and not `ok` where the screen left a
+      signal unsolved. `to_dict(full=True)` includes it; `optimize --out` draws it (`pareto.png`);
+      `optimise(..., sweep=opt.screen)` takes it as its screen at another requirement.
     """
 
     v_min: float

@@ -87,6 +87,19 @@ def _gaits(batch: Mechanism, settings: MechanismOptimiseSettings) -> dict[str, n
                 min_normal=np.asarray(g.min_normal, np.float64), y=np.asarray(g.state, np.float64))  # fmt: skip
 
 
+GAIT_FIELDS = ("speed", "cost", "ok", "liftoff", "k", "period", "radius", "min_normal", "y")
+"""The figures of each sinusoid's gait that [`_gaits`][] gives and the optimum's `screen` keeps."""
+
+
+def _from_record(given: Any, n_red: int, a_max: float, lo: float, hi: float) -> tuple[Any, ...]:
+    """`(a, omega, phase, gaits)` of an earlier optimum's `screen` (`sweep=`): its sinusoids within
+    the bound and the frequency range (`_element_local.screen_rows`, which raises a `ValueError`
+    naming `sweep` for a record of another kind or mechanism)."""
+    rows = local.screen_rows(given, ("a", "omega", "phase", *GAIT_FIELDS), n_red, a_max, lo, hi,
+                             "mechanism sinusoid", "this mechanism's section state")  # fmt: skip
+    return rows["a"], rows["omega"], rows["phase"], {key: rows[key] for key in GAIT_FIELDS}
+
+
 def _fourier(mech: Mechanism, cos: np.ndarray, sin: np.ndarray, omega: Any) -> Mechanism:
     """`mech` driven by Fourier series (absolute units; leading axes: a batch)."""
     dtype = mech.dtype
@@ -119,14 +132,16 @@ def check_inputs(mech: Any, v_min: Any, a_max: Any, direction: Any, harmonics: A
 
 def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction: int = 1,
                        omega: float | None = None, harmonics: int | None = None, settings: Any = None,
-                       start: Any = None, method: str = "exact") -> MechanismOptimum:  # fmt: skip
+                       start: Any = None, method: str = "exact", sweep: Any = None) -> MechanismOptimum:  # fmt: skip
     """`optimise(mechanism, v_min, a_max, ...)`: the method of the module docstring. `settings`: a
     `MechanismOptimiseSettings`, a `ChainOptimiseSettings` (its shared fields) or `None` (the defaults);
     anything else is refused here with a `TypeError` naming both. `harmonics`: the Fourier series'
     length (default 2); a spline search (`settings.shape == "spline"`) refuses one. `start`: an
     earlier mechanism optimum ([`_element_local.given_start`][]) that takes the last local lane and
     is a candidate itself. `method="smoothed"`: the local stage on the smoothed model
-    (`_element_smoothed`; Fourier series only), verified as the exact method's."""
+    (`_element_smoothed`; Fourier series only), verified as the exact method's. `sweep`: an earlier
+    optimum's `screen` of this mechanism (`_from_record`), which then is the screen: its sinusoids
+    are not solved again."""
     if isinstance(settings, ChainOptimiseSettings):
         settings = MechanismOptimiseSettings.from_chain(settings)
     settings = MechanismOptimiseSettings() if settings is None else settings
@@ -153,16 +168,23 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
     slowest = _fourier(base, np.zeros((S, 1)), np.zeros((S, 1)), lo)
     local.refuse_steps(slowest, settings, f"optimise: the screen's slowest sinusoid, omega = {lo:.6g}")
 
-    # 1. Sinusoids a sin(omega t + phi) on every actuated element.
-    amps = a_max * np.arange(1, settings.amplitudes + 1) / settings.amplitudes
-    oms = np.geomspace(lo, hi, settings.frequencies) if free else np.array([lo])
-    phis = 2 * np.pi * np.arange(settings.phases) / settings.phases
-    A, W, PHI = (x.ravel() for x in np.meshgrid(amps, oms, phis, indexing="ij"))
+    # 1. Sinusoids a sin(omega t + phi) on every actuated element (or the given screen's).
+    sc: dict[str, np.ndarray] | None = None
+    if sweep is None:
+        amps = a_max * np.arange(1, settings.amplitudes + 1) / settings.amplitudes
+        oms = np.geomspace(lo, hi, settings.frequencies) if free else np.array([lo])
+        phis = 2 * np.pi * np.arange(settings.phases) / settings.phases
+        A, W, PHI = (x.ravel() for x in np.meshgrid(amps, oms, phis, indexing="ij"))
+    else:
+        A, W, PHI, sc = _from_record(sweep, 2 * base.n_bodies - (0 if base.physics().anchored else 1), a_max, lo, hi)
     zero = np.zeros((A.size, S, H))
     cos, sin = zero.copy(), zero.copy()
     cos[:, :, 0], sin[:, :, 0] = (A * np.sin(PHI))[:, None], (A * np.cos(PHI))[:, None]
-    say(f"screening {A.size} sinusoids (compiling the steady-gait solver: first call only)...")
-    sc = _gaits(_fourier(base, cos, sin, W), search)
+    if sc is None:
+        say(f"screening {A.size} sinusoids (compiling the steady-gait solver: first call only)...")
+        sc = _gaits(_fourier(base, cos, sin, W), search)
+    else:
+        say(f"the given screen: {A.size} sinusoids, not solved again")
     fast = np.asarray(sc["ok"], bool) & (along(sc["speed"], direction) >= v_min)
     order = np.lexsort((-along(sc["speed"], direction), np.where(fast, sc["cost"], np.inf),
                         ~fast))  # fmt: skip
@@ -220,5 +242,5 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
         history=[{"starts": [row_of(i) for i in rows], "local": log}], screened=int(A.size),
         evaluations=0 if ev is None else ev.calls,
         runtime_s=time.perf_counter() - t0, mechanism=chosen,
-        screen=dict(a=A, omega=W, phase=PHI, speed=sc["speed"], cost=sc["cost"], ok=sc["ok"]),
+        screen=dict(a=A, omega=W, phase=PHI, **sc),
     )  # fmt: skip

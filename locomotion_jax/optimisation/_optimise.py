@@ -42,7 +42,7 @@ import math
 import sys
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any, cast, overload
 
 import equinox as eqx
@@ -309,7 +309,7 @@ def optimise(
 def optimise(
     params: Chain, v_min: float, a_max: float, *, method: str = ..., direction: int | None = ...,
     omega: float | None = ..., harmonics: int | None = ..., settings: "ChainOptimiseSettings | None" = ...,
-    sweep: None = ..., start: None = ...,
+    sweep: Mapping[str, Any] | None = ..., start: Any = ...,
 ) -> ChainOptimum: ...  # fmt: skip
 
 
@@ -318,7 +318,7 @@ def optimise(
     params: Mechanism, v_min: float, a_max: float, *, method: str = ..., direction: int | None = ...,
     omega: float | None = ..., harmonics: int | None = ...,
     settings: "MechanismOptimiseSettings | ChainOptimiseSettings | None" = ...,
-    sweep: None = ..., start: None = ...,
+    sweep: Mapping[str, Any] | None = ..., start: Any = ...,
 ) -> MechanismOptimum: ...  # fmt: skip
 
 
@@ -332,7 +332,7 @@ def optimise(
     omega: float | None = None,
     harmonics: int | None = None,
     settings: "Settings | ExactSettings | ChainOptimiseSettings | MechanismOptimiseSettings | None" = None,
-    sweep: "pareto.SinusoidSweep | None" = None,
+    sweep: "pareto.SinusoidSweep | Mapping[str, Any] | None" = None,
     start: Any = None,
 ) -> Optimum | ChainOptimum | MechanismOptimum:
     """Find the periodic actuation of least cost of transport that meets a speed (SPEC §7).
@@ -376,7 +376,13 @@ def optimise(
     - `settings`: [`ExactSettings`][locomotion_jax.optimisation._optimum.ExactSettings] (exact) or
       [`Settings`][] (smoothed); defaults if `None`.
     - `sweep`: a precomputed [`sinusoid_sweep`][locomotion_jax.optimisation._pareto.sinusoid_sweep] for the same
-      `params` and `a_max` (the baseline); computed if `None`.
+      `params` and `a_max` (the baseline); computed if `None`. For a `Chain` or a `Mechanism`: an
+      earlier optimum's `screen` of the same mechanism, screened with the same settings (`opt.screen`,
+      or `to_dict(full=True)["screen"]` read back from `optimum.json`), which is then the screen:
+      its signals are not solved again, those above `a_max` or outside the frequency range are left
+      out, and a wave that the earlier screen left unsolved (slower than `screen_speed` of its
+      `v_min`) is no start. Optimising one mechanism at several speeds (its cost-speed front)
+      screens it once.
     - `start`: exact method: a waveform to start from besides the built-in starts (an
       [`Optimum`][], its `to_dict()` or any waveform, e.g. the optimum at a nearby `v_min`:
       continuation); it is always refined, and is a candidate itself. For a `Chain` or a
@@ -416,6 +422,8 @@ def params_optimum(params: Params, v_min, a_max, method, direction, omega, harmo
     """[`optimise`][] of the paper's two-mass model: the exact method (the default) or the smoothed one."""
     if method not in ("exact", "smoothed"):
         raise ValueError(f"method must be 'exact' or 'smoothed', got {method!r}.")
+    if sweep is not None and not isinstance(sweep, pareto.SinusoidSweep):
+        raise TypeError(f"sweep: the paper's model takes a sinusoid_sweep(...) result, got {type(sweep).__name__}.")
     exact = method == "exact"
     kind = ExactSettings if exact else Settings
     settings = kind() if settings is None else settings
@@ -487,10 +495,9 @@ def mechanism_optimum(mech: Any, v_min, a_max, method, direction, omega, harmoni
 
     if not isinstance(mech, Mechanism):
         raise NotImplementedError(f"optimise takes Params, a Chain or a Mechanism, got {type(mech).__name__}.")
-    if sweep is not None:
-        raise ValueError("sweep= applies to Params; a Mechanism's baseline is its own sinusoid screen.")
     return optimise_mechanism(mech, v_min, a_max, direction=1 if direction is None else direction, omega=omega,
-                              harmonics=harmonics, settings=settings, start=start, method=method)  # fmt: skip
+                              harmonics=harmonics, settings=settings, start=start, method=method,
+                              sweep=sweep)  # fmt: skip
 
 
 def chain_optimum(chain: Chain, v_min, a_max, method, direction, omega, harmonics, settings, sweep, start):
@@ -498,10 +505,8 @@ def chain_optimum(chain: Chain, v_min, a_max, method, direction, omega, harmonic
     harmonics refined on the exact model or, with `method="smoothed"`, on the smoothed one)."""
     from ._chain import optimise_chain
 
-    if sweep is not None:
-        raise ValueError("sweep= applies to Params; a Chain's baseline is its own travelling-wave screen.")
     return optimise_chain(chain, v_min, a_max, direction=1 if direction is None else direction, omega=omega,
-                          harmonics=harmonics, settings=settings, start=start, method=method)  # fmt: skip
+                          harmonics=harmonics, settings=settings, start=start, method=method, sweep=sweep)  # fmt: skip
 
 
 def _baseline(params, a_max, speed, direction, sweep, refine: bool, dt: float) -> dict | None:
