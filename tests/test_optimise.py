@@ -641,6 +641,22 @@ def exact_run(tiny_sweep):
     return opt, grew
 
 
+def test_the_papers_optimum_keeps_its_sweep(exact_run, tiny_sweep):
+    """`Optimum.screen`: the baseline's sinusoid sweep, which `to_dict(full=True)` carries and
+    `sweep=` takes back (read from JSON, NaN as null) as the same sweep; a record of other shapes is
+    refused naming `sweep`."""
+    opt, _ = exact_run
+    back = _pareto.sweep_of(json.loads(opt.to_json(full=True))["screen"])
+    for key, value in tiny_sweep._asdict().items():
+        np.testing.assert_array_equal(opt.screen[key], value)
+        np.testing.assert_array_equal(getattr(back, key), value)
+    assert "screen" not in opt.to_dict() and _pareto.sweep_of(tiny_sweep) is tiny_sweep
+    name, speed, cost, ok = opt.baseline_screen()
+    assert name == "sinusoids" and np.array_equal(speed, tiny_sweep.speed, equal_nan=True)
+    with pytest.raises(TypeError, match="sweep: an optimum's screen has one row per sinusoid"):
+        _pareto.sweep_of(dict(a=[1.0], omega=[1.0, 2.0], speed=[0.1], cost=[1.0], ok=[True]))
+
+
 def test_the_papers_start_may_be_an_optimums_dict(exact_run, monkeypatch):
     """`start=` of the paper's model: an optimum's `to_dict()`, read back from JSON, is its waveform;
     a chain's is refused, naming what it is."""
@@ -1464,6 +1480,9 @@ def test_the_chain_optimum_keeps_its_screen_and_draws_it(opt3, tmp_path):
     expected = np.array(sorted((vj, cj) for vj, cj, d in zip(v, c, dominated) if not d.any()))
     np.testing.assert_array_equal(front[np.argsort(front[:, 0])], expected)
     assert np.array_equal(star, [[opt3.mean_speed_exact, opt3.cost_of_transport_exact]])
+    # The drawn figure's cost axis ends at 10 times the dearest point of the front and the optimum.
+    fig = _plots.screen_figure(opt3)
+    assert fig is not None and fig.axes[0].get_ylim()[1] == pytest.approx(10 * max(*expected[:, 1], star[0, 1]))
 
 
 @CHAIN_OPTIMISE
@@ -1495,9 +1514,10 @@ def test_cli_reuses_an_earlier_screen(opt3, tmp_path, monkeypatch):
     assert seen["sweep"] == json.loads(opt3.to_json(full=True))["screen"]
     res = CliRunner().invoke(_cli.app, [*worm_args, str(tmp_path / "bare.json")])
     assert res.exit_code == 2 and "--reuse-screen: " in res.output and "holds no screen" in res.output
+    # The paper's model: a chain's screen is no sinusoid sweep.
     paper = ["optimize", "--v-min", "0.05", "--a-max", "0.05", "--reuse-screen", str(tmp_path / "optimum.json")]
     res = CliRunner().invoke(_cli.app, paper)
-    assert res.exit_code == 2 and "--reuse-screen applies to a chain or a mechanism" in res.output
+    assert res.exit_code == 2 and "--reuse-screen: " in res.output and "sinusoid_sweep" in res.output
 
 
 @CHAIN_OPTIMISE
@@ -1518,7 +1538,7 @@ def test_a_given_screen_is_checked_and_kept_within_the_bound(opt3):
     with pytest.raises(ValueError, match="sweep: no wave of the screen has a <= a_max"):
         screen.from_record(sc, 5, A_MAX / 1e3, lo, hi)
     with pytest.raises(TypeError, match="sweep: the paper's model takes a sinusoid_sweep"):
-        lj.optimise(lj.Params(), 0.05, 0.05, sweep=sc)
+        lj.optimise(lj.Params(), 0.05, 0.05, sweep=sc)  # a chain's screen: no sinusoid sweep
 
 
 @CHAIN_OPTIMISE

@@ -117,9 +117,9 @@ def register(app: typer.Typer) -> None:
         reuse_screen: Path | None = typer.Option(
             None,
             "--reuse-screen",
-            help="A chain or a mechanism: the screen kept in an earlier --out's optimum.json (the same "
-            "mechanism and screen options), taken as this run's screen instead of solving it again: the "
-            "optimum at another --v-min without a new screen.",
+            help="The screen kept in an earlier --out's optimum.json (the paper's model: its sinusoid sweep; "
+            "the same mechanism, --a-max and screen options), taken as this run's instead of solving it "
+            "again: the optimum at another --v-min without a new screen.",
         ),
         json_out: bool = typer.Option(False, "--json", help="Print one JSON object instead of the report."),
         out: Path | None = typer.Option(
@@ -171,9 +171,6 @@ def register(app: typer.Typer) -> None:
                 chain_settings = lj.ChainOptimiseSettings(**screen)
                 return _optimise_bodies(built, v_min, a_max, direction, omega, harmonics, chain_settings, out, json_out,
                                         _start(start), method, _screen(reuse_screen))  # fmt: skip
-            if reuse_screen is not None:
-                raise ValueError("--reuse-screen applies to a chain or a mechanism of bodies and links (the paper's "
-                                 "model sweeps its sinusoids: --sweep-omegas, --sweep-amplitudes).")  # fmt: skip
             params = built.mechanism
             assert a_max is not None  # the paper's model: given, or its amplitude
             settings: ExactSettings | Settings
@@ -205,13 +202,20 @@ def register(app: typer.Typer) -> None:
             given = _start(start)
             start_waveform(given)  # refused before the sinusoid sweep
             log = (lambda msg: print(msg, file=sys.stderr, flush=True)) if verbose or not json_out else (lambda m: None)
-            log(f"sweeping {sweep_amplitudes} x {sweep_omegas} sinusoids on the exact model ...")
-            sweep = _pareto.sinusoid_sweep(
-                params,
-                a_max,
-                omegas=_pareto.default_omegas(params, sweep_omegas),
-                amplitudes=sweep_amplitudes,
-            )
+            if reuse_screen is not None:
+                try:
+                    sweep = _pareto.sweep_of(_screen(reuse_screen))
+                except TypeError as err:
+                    raise ValueError(f"--reuse-screen: {reuse_screen}: {err}") from None
+                log(f"the sinusoid sweep of {reuse_screen}: {sweep.a.size} sinusoids, not solved again")
+            else:
+                log(f"sweeping {sweep_amplitudes} x {sweep_omegas} sinusoids on the exact model ...")
+                sweep = _pareto.sinusoid_sweep(
+                    params,
+                    a_max,
+                    omegas=_pareto.default_omegas(params, sweep_omegas),
+                    amplitudes=sweep_amplitudes,
+                )
             log("optimising ...")
             result = _optimise.optimise(
                 params,
@@ -274,8 +278,8 @@ def _screen(path: Path | None) -> Any:
         return None
     record = _read(path, "--reuse-screen")
     if not isinstance(record, dict) or not isinstance(record.get("screen"), dict):
-        raise ValueError(f"--reuse-screen: {path} holds no screen; optimize --out DIR writes one in DIR/optimum.json "
-                         "for a chain or a mechanism.")  # fmt: skip
+        raise ValueError(f"--reuse-screen: {path} holds no screen; optimize --out DIR writes one in "
+                         "DIR/optimum.json.")  # fmt: skip
     return record["screen"]
 
 

@@ -38,6 +38,7 @@ Method:
   worse than the best start.
 """
 
+import dataclasses
 import math
 import sys
 import time
@@ -301,7 +302,7 @@ def _run_stage(state, prob, eps, lr, settings: Settings, outer: int, log):
 def optimise(
     params: Params, v_min: float, a_max: float, *, method: str = ..., direction: int | None = ...,
     omega: float | None = ..., harmonics: int | None = ..., settings: "Settings | ExactSettings | None" = ...,
-    sweep: "pareto.SinusoidSweep | None" = ..., start: Any = ...,
+    sweep: "pareto.SinusoidSweep | Mapping[str, Any] | None" = ..., start: Any = ...,
 ) -> Optimum: ...  # fmt: skip
 
 
@@ -376,7 +377,8 @@ def optimise(
     - `settings`: [`ExactSettings`][locomotion_jax.optimisation._optimum.ExactSettings] (exact) or
       [`Settings`][] (smoothed); defaults if `None`.
     - `sweep`: a precomputed [`sinusoid_sweep`][locomotion_jax.optimisation._pareto.sinusoid_sweep] for the same
-      `params` and `a_max` (the baseline); computed if `None`. For a `Chain` or a `Mechanism`: an
+      `params` and `a_max` (the baseline), or an earlier optimum's `screen` (which is that sweep);
+      computed if `None`. For a `Chain` or a `Mechanism`: an
       earlier optimum's `screen` of the same mechanism, screened with the same settings (`opt.screen`,
       or `to_dict(full=True)["screen"]` read back from `optimum.json`), which is then the screen:
       its signals are not solved again, those above `a_max` or outside the frequency range are left
@@ -422,8 +424,7 @@ def params_optimum(params: Params, v_min, a_max, method, direction, omega, harmo
     """[`optimise`][] of the paper's two-mass model: the exact method (the default) or the smoothed one."""
     if method not in ("exact", "smoothed"):
         raise ValueError(f"method must be 'exact' or 'smoothed', got {method!r}.")
-    if sweep is not None and not isinstance(sweep, pareto.SinusoidSweep):
-        raise TypeError(f"sweep: the paper's model takes a sinusoid_sweep(...) result, got {type(sweep).__name__}.")
+    sweep = None if sweep is None else pareto.sweep_of(sweep)
     exact = method == "exact"
     kind = ExactSettings if exact else Settings
     settings = kind() if settings is None else settings
@@ -459,13 +460,14 @@ def params_optimum(params: Params, v_min, a_max, method, direction, omega, harmo
         dt = cast(ExactSettings, settings).dt if exact else cast(Settings, settings).verify_dt
         sweep = pareto.sinusoid_sweep(params, a_max, dt=dt)
     if not exact:
-        return _optimise_smoothed(params, speed, direction, a_max, omega, harmonics, cast(Settings, settings), sweep)
-    s = cast(ExactSettings, settings)
-    baseline = _baseline(params, a_max, speed, direction, sweep, s.refine_baseline, s.dt)
-    from ._exact import optimise_exact
+        opt = _optimise_smoothed(params, speed, direction, a_max, omega, harmonics, cast(Settings, settings), sweep)
+    else:
+        s = cast(ExactSettings, settings)
+        baseline = _baseline(params, a_max, speed, direction, sweep, s.refine_baseline, s.dt)
+        from ._exact import optimise_exact
 
-    opt, _ = optimise_exact(params, speed, direction, a_max, omega, shape, s, baseline, start, precompiled)
-    return opt
+        opt, _ = optimise_exact(params, speed, direction, a_max, omega, shape, s, baseline, start, precompiled)
+    return dataclasses.replace(opt, screen=sweep._asdict())  # the baseline's sweep, kept for `sweep=` and its figure
 
 
 def _guard_search(params: Params, omega: float | None, shape: Any, settings: ExactSettings) -> None:

@@ -232,8 +232,7 @@ class AbstractOptimum(abc.ABC):
     def baseline_screen(self) -> tuple[str, np.ndarray, np.ndarray, np.ndarray] | None:
         """The baseline screen the optimum keeps: what its signals are (e.g. `"travelling waves"`),
         and the mean speed, cost of transport and `ok` (a stable gait without lift-off) of each;
-        `None` (this default) where it keeps none (the paper's model's sinusoid sweep is its own
-        object, [`sinusoid_sweep`][locomotion_jax.optimisation._pareto.sinusoid_sweep])."""
+        `None` (this default) where it keeps none."""
         return None
 
     def family(self) -> str:
@@ -340,6 +339,9 @@ class Optimum(AbstractOptimum):
       ([`AbstractOptimum`][]: from the relaxed spring). With the exact method the
       `*_smoothed` figures and `eps` are NaN, and the `*_exact` figures are those of the
       steady gait ([`steady_gait`][]: whole periods).
+    - `screen`: the sinusoid sweep of the baseline (its `a`, `omega`, `speed`, `cost`, `ok`,
+      [`sinusoid_sweep`][locomotion_jax.optimisation._pareto.sinusoid_sweep]'s), which
+      `to_dict(full=True)` includes and `optimise(params, ..., sweep=opt.screen)` takes again.
     """
 
     v_min: float
@@ -382,6 +384,14 @@ class Optimum(AbstractOptimum):
     simulation_agreement: float = math.nan
     simulated_periods: int = 0
     simulated_recurrence: int = 0
+    screen: dict | None = dataclasses.field(default=None, repr=False)
+
+    def baseline_screen(self) -> tuple[str, np.ndarray, np.ndarray, np.ndarray] | None:
+        """The sinusoids of the `screen` sweep, where it keeps one."""
+        s = self.screen
+        if s is None:
+            return None
+        return "sinusoids", np.asarray(s["speed"]), np.asarray(s["cost"]), np.asarray(s["ok"], bool)
 
     @property
     def waveform(self) -> AbstractWaveform:

@@ -11,6 +11,7 @@ yardstick, and every figure is an average over whole gait periods:
   inside the unit circle) and no normal force reaches zero (eq. 5).
 """
 
+from collections.abc import Mapping
 from typing import Any, NamedTuple
 
 import jax
@@ -99,6 +100,24 @@ class SinusoidSweep(NamedTuple):
     speed: np.ndarray
     cost: np.ndarray
     ok: np.ndarray
+
+
+def sweep_of(given: Any) -> SinusoidSweep:
+    """A [`SinusoidSweep`][], or one from its record (the paper's model's optimum's `screen`, read back
+    from JSON: NaN as `None`).
+
+    **Raises:** `TypeError` naming `sweep` for anything else (a chain's or a mechanism's screen has
+    other fields)."""
+    if isinstance(given, SinusoidSweep):
+        return given
+    if not isinstance(given, Mapping) or set(given) != set(SinusoidSweep._fields):
+        got = f"a dict of {', '.join(map(str, given))}" if isinstance(given, Mapping) else type(given).__name__
+        raise TypeError(f"sweep: the paper's model takes a sinusoid_sweep(...) result or its optimum's screen (a dict "
+                        f"of {', '.join(SinusoidSweep._fields)}), got {got}.")  # fmt: skip
+    rows = {key: np.array(given[key], dtype=bool if key == "ok" else np.float64) for key in SinusoidSweep._fields}
+    if len({v.shape for v in rows.values()}) != 1 or rows["a"].ndim != 1:
+        raise TypeError("sweep: an optimum's screen has one row per sinusoid in each of its fields.")
+    return SinusoidSweep(**rows)
 
 
 def default_omegas(params: Params, n: int = 32) -> np.ndarray:

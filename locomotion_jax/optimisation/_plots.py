@@ -164,16 +164,33 @@ def plot_pareto(
     return path
 
 
-def plot_screen(opt: AbstractOptimum, path: Path) -> Path | None:
+CLIP = 10.0
+"""[`screen_figure`][]'s cost axis ends at this multiple of the dearest point of the front and the optimum."""
+
+
+def screen_figure(opt: AbstractOptimum) -> "Figure | None":
     """[`pareto_figure`][] of the baseline screen an optimum keeps (`AbstractOptimum.baseline_screen`:
-    a chain's travelling waves, a mechanism's sinusoids) and of the optimum, saved to `path`;
-    `None` where it keeps none."""
+    the paper's model's sinusoid sweep, a chain's travelling waves, a mechanism's sinusoids) and of
+    the optimum; `None` where it keeps none. The cost axis ends at `CLIP` times the dearest point
+    of the front and the optimum: a wave that hardly moves has a cost of transport without bound."""
     screen = opt.baseline_screen()
     if screen is None:
         return None
     what, speed, cost, ok = screen
     labels = (f"{what} (screen)", "their Pareto front", "Cost of transport vs speed: the screen and the optimum")
     fig = pareto_figure(speed, cost, ok, {"optimum": [opt]}, opt.direction, labels)
+    front = cost[pareto_front(speed, cost, ok, opt.direction)]
+    top = CLIP * max([*front, opt.cost_of_transport_exact] if opt.feasible_exact else [*front, 0.0])
+    if math.isfinite(top) and top > 0:
+        fig.axes[0].set_ylim(top=top)
+    return fig
+
+
+def plot_screen(opt: AbstractOptimum, path: Path) -> Path | None:
+    """[`screen_figure`][] saved to `path`; `None` where the optimum keeps no screen."""
+    fig = screen_figure(opt)
+    if fig is None:
+        return None
     fig.savefig(path, dpi=120)
     _plt().close(fig)
     return path
