@@ -115,12 +115,12 @@ def _sweep_plan(
     and the `mechanism` argument of `lj.sweep` (`None`: the paper's model, whose parameters are the names)."""
     import locomotion_jax as lj
 
-    from ._files import kind_of, load, refuse_options
+    from ._files import load, refuse_options
 
     order = context().meta.get(ORDER, []) if context() is not None else []
     check = on_invalid == "raise"
     loaded = None if file is None else load(file)[0]
-    kind = None if loaded is None else kind_of(loaded)
+    kind = None if loaded is None else loaded.kind
     if vary and kind not in ("mechanism", "chain"):
         what = "the paper's model" if loaded is None and mech["masses"] is None else "a chain"
         what = f"{file} holds {KIND_NAMES[kind]}" if kind is not None else f"the options give {what}"
@@ -160,7 +160,7 @@ def _sweep_plan(
         chain_build = build_options
     else:
         loaded, waveform = load(file)  # read again: the paper's [waveform] with it
-        if kind_of(loaded) == "paper":
+        if loaded.kind == "paper":
             if waveform is not None:
                 raise ValueError(f"{file}: sweep maps the paper's sinusoid (eq. 13); its [waveform] table cannot be "
                                  "swept.")  # fmt: skip

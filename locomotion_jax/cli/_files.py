@@ -61,14 +61,6 @@ def note(message: str) -> None:
     typer.echo(message, err=True)
 
 
-def kind_of(mech: Any) -> str:
-    """`"chain"`, `"mechanism"` or `"paper"`, as the file's `kind`."""
-    from ..model._bodies import Mechanism
-    from ..model._chain import Chain
-
-    return "chain" if isinstance(mech, Chain) else "mechanism" if isinstance(mech, Mechanism) else "paper"
-
-
 def echo_fields(fields: dict[str, Any]) -> None:
     """One line per field: numbers to 6 digits, lists to 4."""
     for name, v in fields.items():

@@ -212,15 +212,15 @@ def build(mech: Values, file: Path | None, *, wave: bool = True) -> Built:
     import locomotion_jax as lj
 
     if file is not None:
-        from ._files import kind_of, label, load, refuse_options
+        from ._files import label, load, refuse_options
 
         refuse_options(file, mech)
         loaded, waveform = load(file)
-        record: dict[str, Any] = {"mechanism": str(file), "kind": kind_of(loaded)}
-        if kind_of(loaded) == "paper":
+        record: dict[str, Any] = {"mechanism": str(file), "kind": loaded.kind}
+        if loaded.kind == "paper":
             record["params"] = {n: float(v) for n, v in loaded.as_dict().items()}
         extra = {} if waveform is None else {"waveform": waveform}
-        return Built(kind_of(loaded), loaded, label(file, loaded, waveform), record, file, extra)
+        return Built(loaded.kind, loaded, label(file, loaded, waveform), record, file, extra)
     if kind_of_options(mech) == "paper":
         params = to_params(mech)
         values = {n: float(getattr(params, n)) for n in DEFAULTS}

@@ -10,7 +10,7 @@ exact engine as they run a [`Chain`][locomotion_jax.Chain].
 
 import math
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, ClassVar
 
 import equinox as eqx
 import jax
@@ -120,6 +120,8 @@ class Mechanism(AbstractMechanism):
                             links=[Spring(0, 1, k=10.0), Force(0, 1, Sinusoid(a=0.6, omega=3.0, lbar=0.0))])
         ```
     """
+
+    kind: ClassVar[str] = "mechanism"
 
     m: Array
     c: Array

@@ -1,7 +1,7 @@
 """A chain of N masses joined by N-1 actuated springs (SPEC §8); N = 2 is the paper's model."""
 
 import math
-from typing import Any
+from typing import Any, ClassVar
 
 import equinox as eqx
 import jax
@@ -84,6 +84,8 @@ class Chain(AbstractMechanism):
         paper = Chain.from_params(Params(omega=2.0))   # the paper's two-mass model
         ```
     """
+
+    kind: ClassVar[str] = "chain"
 
     m: Array
     c: Array

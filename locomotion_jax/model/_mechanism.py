@@ -1,7 +1,7 @@
 """The mechanisms that the front ends run: the paper's two-mass model and chains of N masses."""
 
 import abc
-from typing import Any, TypeVar
+from typing import Any, ClassVar, TypeVar
 
 import equinox as eqx
 import jax
@@ -24,6 +24,10 @@ class AbstractMechanism(eqx.Module):
     mechanism), and `animate` for its `animation`; their defaults serve any mechanism that carries
     its own actuation.
     """
+
+    kind: ClassVar[str]
+    """The kind of mechanism, as its file's `kind` and the command line's records name it:
+    `"paper"`, `"chain"` or `"mechanism"`."""
 
     @property
     @abc.abstractmethod

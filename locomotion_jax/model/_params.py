@@ -2,7 +2,7 @@
 
 import math
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, ClassVar
 
 import equinox as eqx
 import jax
@@ -115,6 +115,8 @@ class Params(AbstractMechanism):
         batch.batch_shape  # (64, 32)
         ```
     """
+
+    kind: ClassVar[str] = "paper"
 
     k: Array
     c: Array
