@@ -38,7 +38,7 @@ import optimistix as optx
 
 from .._custom_types import Array, ArrayLike, Contact
 from .._status import Regime, Status
-from ..model._physics import AbstractPhysics, contact_loads, Loads, Scalars
+from ..model._physics import AbstractPhysics, least_contact_load, Loads, Scalars
 
 
 if TYPE_CHECKING:  # the class runs this engine: imported for annotations only
@@ -111,8 +111,7 @@ def rates_and_normal(P: AbstractPhysics, contact: Contact, eps: Array, t: ArrayL
     a, p_d = accelerations(P, contact, eps, L, v, v_s)
     p_w = P.power(dr, L, v)
     dy = jnp.concatenate([y[n : 2 * n], jnp.stack(a), jnp.stack([p_d, jnp.asarray(p_w, y.dtype)])])
-    N = contact_loads(P, L.N)
-    return dy, jnp.min(jnp.stack(N)) if N else jnp.asarray(jnp.inf, y.dtype)
+    return dy, least_contact_load(P, L.N, y)
 
 
 def energy(P: AbstractPhysics, t: Array, y: Array) -> Array:

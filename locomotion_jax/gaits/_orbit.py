@@ -42,7 +42,7 @@ from .._status import Status
 from ..dynamics import _engine as engine
 from ..dynamics._compile import engine_jit
 from ..model._params import Params
-from ..model._physics import AbstractPhysics, contact_loads
+from ..model._physics import AbstractPhysics, least_contact_load
 from ..model._two_mass import initial_gap
 from ..optimisation._shapes import AbstractShape
 from ._shooting import _reduced, _section_state
@@ -83,8 +83,7 @@ def period(
 
     def normal(s):
         # Eq. (5) generalised (SPEC §8), at a step's end: N_i = m_i - fy_i + fy_{i-1}; the bodies on the ground.
-        N = contact_loads(P, P.loads(P.drive(s.cph, s.sph), s.y.x).N)
-        return jnp.min(jnp.stack(N)) if N else jnp.asarray(jnp.inf, s.t.dtype)
+        return least_contact_load(P, P.loads(P.drive(s.cph, s.sph), s.y.x).N, s.t)
 
     def cond(c):
         s, _, n = c

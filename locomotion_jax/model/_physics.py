@@ -198,6 +198,13 @@ def contact_loads(P: AbstractPhysics, N: tuple[Any, ...]) -> tuple[Any, ...]:
     return tuple(n for n, touches in zip(N, P.in_contact()) if touches)
 
 
+def least_contact_load(P: AbstractPhysics, N: Scalars, like: Array) -> Array:
+    """$\\min_i N_i$ over the bodies on the ground ([`contact_loads`][]); `inf` (of `like`'s dtype) where
+    no body touches the ground."""
+    loads = contact_loads(P, N)
+    return jnp.min(jnp.stack(loads)) if loads else jnp.asarray(jnp.inf, like.dtype)
+
+
 # -- the engines' calls: the heights only under contact="hop" -------------------------------------
 
 

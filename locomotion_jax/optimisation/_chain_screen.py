@@ -221,7 +221,7 @@ def from_record(given: Any, n_red: int, a_max: float, lo: float, hi: float) -> S
     its waves within the bound and the frequency range (`_element_local.screen_rows`, which raises a
     `ValueError` naming `sweep` for a record of another kind or chain)."""
     state = f"a chain of {(n_red + 1) // 2} masses"
-    rows = screen_rows(given, ("a", "omega", "phi", *Gaits._fields), n_red, a_max, lo, hi, "chain wave", state)
+    rows = screen_rows(given, ("a", "omega", "phi", *Gaits._fields), n_red, a_max, lo, hi, ("chain", "wave"), state)
     return Screen(rows["a"], rows["omega"], rows["phi"], Gaits(*(rows[key] for key in Gaits._fields)))
 
 

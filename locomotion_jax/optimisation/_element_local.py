@@ -418,7 +418,7 @@ def verified_baseline(found: dict[str, Any], v: Verified) -> dict[str, Any] | No
 
 
 def screen_rows(given: Any, fields: tuple[str, ...], n_red: int, a_max: float, lo: float, hi: float,
-                kind: str, state: str) -> dict[str, np.ndarray]:  # fmt: skip
+                kind: tuple[str, str], state: str) -> dict[str, np.ndarray]:  # fmt: skip
     """The rows of an earlier optimum's `screen` (`optimise(..., sweep=)`; read back from JSON, NaN
     as `None`) that keep within the bound `a_max` and the frequency range `[lo, hi]` (to 1e-12
     relative): each of `fields` (`a`, `omega`, ... and the gait's figures, `y` the section state of
@@ -427,7 +427,7 @@ def screen_rows(given: Any, fields: tuple[str, ...], n_red: int, a_max: float, l
 
     **Raises:** `ValueError` naming `sweep` where a field is missing or of another shape, or where
     no row is left."""
-    mechanism, signal = kind.split()
+    mechanism, signal = kind
     if not isinstance(given, Mapping) or not set(fields) <= set(given):
         raise ValueError(
             f"sweep: an earlier {mechanism} optimum's screen (opt.screen), a dict with {', '.join(fields)}."

@@ -96,7 +96,7 @@ def _from_record(given: Any, n_red: int, a_max: float, lo: float, hi: float) -> 
     the bound and the frequency range (`_element_local.screen_rows`, which raises a `ValueError`
     naming `sweep` for a record of another kind or mechanism)."""
     rows = local.screen_rows(given, ("a", "omega", "phase", *GAIT_FIELDS), n_red, a_max, lo, hi,
-                             "mechanism sinusoid", "this mechanism's section state")  # fmt: skip
+                             ("mechanism", "sinusoid"), "this mechanism's section state")  # fmt: skip
     return rows["a"], rows["omega"], rows["phase"], {key: rows[key] for key in GAIT_FIELDS}
 
 

@@ -116,11 +116,13 @@ def pareto_figure(
         "Cost of transport vs speed, paper parameters",
     ),
     peer: tuple[float, float] | None = None,
+    clip: float | None = None,
 ) -> "Figure":
     """Cost of transport against mean speed (exact model, steady gaits): every baseline signal
     (`speed`, `cost`, `ok` over them), their Pareto front, the verified optima (a dict: one
     labelled series per method) and optionally another solver's point `peer = (speed, cost)`.
-    `labels`: the baseline's, its front's and the title."""
+    `labels`: the baseline's, its front's and the title. `clip`: where given, the cost axis ends at
+    `clip` times the dearest point of the front and the feasible optima."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6, 4))
     v = direction * speed
@@ -144,6 +146,14 @@ def pareto_figure(
     ax.set_yscale("log")
     ax.set_xlabel("mean speed (exact model)")
     ax.set_ylabel("cost of transport $e_d / |\\Delta X|$")
+    if clip is not None:
+        dearest = [
+            *cost[front],
+            *(o.cost_of_transport_exact for opts in series.values() for o in opts if o.feasible_exact),
+        ]
+        top = clip * max(dearest, default=0.0)
+        if math.isfinite(top) and top > 0:
+            ax.set_ylim(top=top)
     ax.set_title(labels[2])
     ax.legend(fontsize=8)
     fig.tight_layout()
@@ -158,7 +168,10 @@ def plot_pareto(
     peer: tuple[float, float] | None = None,
 ) -> Path:
     """[`pareto_figure`][] of the paper's model's sinusoid `sweep` and its optima, saved to `path`."""
-    fig = pareto_figure(sweep.speed, sweep.cost, sweep.ok, optima, direction, peer=peer)
+    return _save(pareto_figure(sweep.speed, sweep.cost, sweep.ok, optima, direction, peer=peer), path)
+
+
+def _save(fig: "Figure", path: Path) -> Path:
     fig.savefig(path, dpi=120)
     _plt().close(fig)
     return path
@@ -178,22 +191,13 @@ def screen_figure(opt: AbstractOptimum) -> "Figure | None":
         return None
     what, speed, cost, ok = screen
     labels = (f"{what} (screen)", "their Pareto front", "Cost of transport vs speed: the screen and the optimum")
-    fig = pareto_figure(speed, cost, ok, {"optimum": [opt]}, opt.direction, labels)
-    front = cost[pareto_front(speed, cost, ok, opt.direction)]
-    top = CLIP * max([*front, opt.cost_of_transport_exact] if opt.feasible_exact else [*front, 0.0])
-    if math.isfinite(top) and top > 0:
-        fig.axes[0].set_ylim(top=top)
-    return fig
+    return pareto_figure(speed, cost, ok, {"optimum": [opt]}, opt.direction, labels, clip=CLIP)
 
 
 def plot_screen(opt: AbstractOptimum, path: Path) -> Path | None:
     """[`screen_figure`][] saved to `path`; `None` where the optimum keeps no screen."""
     fig = screen_figure(opt)
-    if fig is None:
-        return None
-    fig.savefig(path, dpi=120)
-    _plt().close(fig)
-    return path
+    return None if fig is None else _save(fig, path)
 
 
 def save_all(opt: AbstractOptimum, params: Params | None, sweep: SinusoidSweep | None, out: Path) -> list[Path]:
