@@ -220,3 +220,20 @@ def test_smoothed_friction_oscillator_comes_to_rest_at_the_known_point():
         assert abs(float(tr.v[-1, 0])) < 3 * eps
         # w = e_d + (e - e0) relative to the initial energy (90), to the solver's tolerance (rtol 1e-7)
         assert abs(float(tr.w[-1] - tr.e_d[-1] - (tr.e[-1] - tr.e[0]))) < 1e-6 * float(tr.e[0])
+
+
+def test_each_mechanism_describes_itself_and_checks_its_given_section_states():
+    """The front ends ask the mechanism, not its type: its label (the command line), its record's
+    attributes (a sweep's `attrs`) and whether a given section state is one of its states."""
+    chain = lj.Chain(masses=np.ones(3), friction=lj.AnisotropicCoulomb(0.5, 0.2, 0.4, 0.15),
+                     waveforms=lj.TravellingWave(0.05, 3.0, 1.0))  # fmt: skip
+    assert chain.describe() == "chain of 3 masses, AnisotropicCoulomb friction, RestLength actuator"
+    assert chain.attributes() == {"kind": "chain", "friction": "AnisotropicCoulomb", "actuator": "RestLength"}
+    capsule = _capsule()
+    assert capsule.describe() == "mechanism of 2 bodies (1 carried), 3 links"
+    assert capsule.attributes()["kind"] == "mechanism" and capsule.attributes()["friction"].endswith(", none")
+    assert lj.Params().describe() == "the paper's two-mass model" and lj.Params().attributes() == {"kind": "paper"}
+    with pytest.raises(ValueError, match=r"start: the gaps u_j must be > 0"):
+        chain.check_section(np.array([0.1, -0.1, 0.0, 0.0, 0.0]))
+    chain.check_section(np.array([0.1, 0.2, 0.0, 0.0, 0.0]))
+    capsule.check_section(np.array([-0.3, 0.0, 0.0]))  # the carried body passes its rest point in the shell

@@ -71,9 +71,7 @@ def echo_fields(fields: dict[str, Any]) -> None:
 
 def label(file: Path, mech: Any, wave: Any) -> str:
     """`worm.toml: chain of 4 masses, ...`: the first line of a command's report on a file."""
-    from ..model._files import describe
-
-    return f"{file}: {describe(mech)}" + ("" if wave is None else f", {type(wave).__name__} waveform")
+    return f"{file}: {mech.describe()}" + ("" if wave is None else f", {type(wave).__name__} waveform")
 
 
 def travelling_wave(file: Path) -> dict[str, float] | None:

@@ -353,11 +353,6 @@ def bodies_problem(mechanism: Any, dynamics: Exact, contact: str, start: str | A
     velocities $(u_0, \\dots, u_{N-2}, v_0, \\dots, v_{N-1})$, shape `batch + (2N - 1,)`, or for an
     anchored mechanism positions then velocities, `batch + (2N,)`. Checks the input (`ValueError`,
     `NotImplementedError`) and the step's resolution (refused alone, skipped in a batch)."""
-    if not isinstance(mechanism, (Chain, Mechanism)):
-        raise NotImplementedError(
-            f"steady_gait takes Params, a Chain or a Mechanism; a {type(mechanism).__name__} is not solved for its "
-            "periodic gait. Run it with simulate or measure."
-        )
     check_contact_start(contact, start if isinstance(start, str) else "paper", mechanism)
     if contact == "hop" and not isinstance(start, str):
         raise NotImplementedError(
@@ -376,10 +371,8 @@ def bodies_problem(mechanism: Any, dynamics: Exact, contact: str, start: str | A
                 f"start must be 'paper', 'relaxed' or finite section states ({what}, velocities "
                 f"v_0..v_N-1) of shape {shape + (n_red,)}, got shape {y.shape}."
             )
-        if isinstance(mechanism, Chain) and shape == () and np.any(y[: flat.n_masses - 1] <= 0):  # refused alone
-            raise ValueError(
-                f"start: the gaps u_j must be > 0 (the masses in order along the chain), got {y[: flat.n_masses - 1]}."
-            )
+        if shape == ():  # refused alone
+            mechanism.check_section(y)
         y_start = jnp.asarray(y.reshape(-1, n_red), flat.m.dtype)
         start = "paper"
     omega = np.asarray(flat.omega, np.float64)

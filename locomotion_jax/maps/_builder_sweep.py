@@ -147,7 +147,7 @@ def sweep_chain(
         "sweep_mode": mode,
         "swept": ",".join(values),
         "n_masses": first.n_masses,
-        **_structure(first),
+        **first.attributes(),
         **{f"fixed_{k}": v for k, v in fixed.items() if np.ndim(v) == 0 and isinstance(v, (int, float))},
         "dtype": str(np.dtype(first.astype(dtype).dtype if dtype is not None else first.dtype)),
         "contact": contact,
@@ -170,14 +170,6 @@ def sweep_chain(
         except OSError as err:
             raise ValueError(f"Cannot write the sweep output at {path}: {err.strerror or err}.") from None
     return ds
-
-
-def _structure(first: "Chain | Mechanism") -> dict[str, str]:
-    """A chain's friction law and actuator, or a mechanism's laws per body and its elements, as attributes."""
-    if isinstance(first, Mechanism):
-        laws = ", ".join("none" if law is None else type(law).__name__ for law in first.friction)
-        return {"kind": "mechanism", "friction": laws, "links": ", ".join(el.describe() for el in first.links)}
-    return {"friction": type(first.friction).__name__, "actuator": type(first.actuator).__name__}
 
 
 def _check_writable(path: Path) -> None:

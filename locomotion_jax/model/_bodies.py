@@ -331,6 +331,15 @@ class Mechanism(AbstractMechanism):
                 "contact='hop' does not support carried bodies yet (carried_by); use contact='strict' or 'paper'."
             )
 
+    def describe(self) -> str:
+        carried = sum(j is not None for j in self.carried_by)
+        return f"mechanism of {self.n_bodies} bodies ({carried} carried), {len(self.links)} links"
+
+    def attributes(self) -> dict[str, str]:
+        """The kind, each body's friction law (`none` for a carried body) and each link's `describe()`."""
+        laws = ", ".join("none" if law is None else type(law).__name__ for law in self.friction)
+        return {"kind": self.kind, "friction": laws, "links": ", ".join(el.describe() for el in self.links)}
+
     # -- the actuated signals (what the optimisers design) ----------------------------------
 
     def actuated(self) -> list[int]:

@@ -413,6 +413,23 @@ class Chain(AbstractMechanism):
                 )
         return self
 
+    def check_section(self, y: Any) -> None:
+        """The gaps $u_j$, the first `N - 1` entries of a section state, must be positive (SPEC §8: the
+        masses stay in order)."""
+        if np.any(np.asarray(y)[: self.n_masses - 1] <= 0):
+            raise ValueError(
+                f"start: the gaps u_j must be > 0 (the masses in order along the chain), got {y[: self.n_masses - 1]}."
+            )
+
+    def describe(self) -> str:
+        return f"chain of {self.n_masses} masses, {type(self.friction).__name__} friction, " + (
+            f"{type(self.actuator).__name__} actuator"
+        )
+
+    def attributes(self) -> dict[str, str]:
+        """The kind, the friction law's and the actuator's class names."""
+        return {"kind": self.kind, "friction": type(self.friction).__name__, "actuator": type(self.actuator).__name__}
+
     def drawing(self) -> Any:
         """What [`animate`][locomotion_jax.run._animation.animate] draws of the chain: every mass on the ground, a
         spring between each pair of neighbours (`run._mechanism_animation.Drawing`)."""

@@ -411,17 +411,3 @@ def load_mechanism(path: str | Path, *, with_waveform: bool = False) -> Any:
             "load_mechanism(path, with_waveform=True) returns (params, waveform)."
         )
     return mech
-
-
-def describe(mechanism: Any) -> str:
-    """A short label of a loaded mechanism, for the command line."""
-    from ._bodies import Mechanism
-
-    if isinstance(mechanism, Mechanism):
-        carried = sum(j is not None for j in mechanism.carried_by)
-        return f"mechanism of {mechanism.n_bodies} bodies ({carried} carried), {len(mechanism.links)} links"
-    if isinstance(mechanism, Chain):
-        return f"chain of {mechanism.n_masses} masses, {type(mechanism.friction).__name__} friction, " + (
-            f"{type(mechanism.actuator).__name__} actuator"
-        )
-    return "the paper's two-mass model"

@@ -67,7 +67,7 @@ def _friction_table(law: Any, what: str) -> dict[str, Any]:
     return {"type": name, **{n: float(x) for n, x in fields.items()}}
 
 
-def _dump_chain(chain: Chain) -> dict[str, Any]:
+def _dump_chain(chain: Chain, waveform: None) -> dict[str, Any]:
     _single(chain.batch_shape)
     law = type(chain.friction).__name__
     if law not in FRICTION or FRICTION[law][0] is not type(chain.friction):
@@ -100,6 +100,14 @@ def _dump_chain(chain: Chain) -> dict[str, Any]:
     }  # fmt: skip
 
 
+def _dump_mechanism(mechanism: Mechanism, waveform: None) -> dict[str, Any]:
+    return {"schema": SCHEMA, "kind": "mechanism", **dump_mechanism(mechanism, _friction_table)}
+
+
+_DUMP = {"paper": _dump_paper, "chain": _dump_chain, "mechanism": _dump_mechanism}
+"""The document of each kind of mechanism (`AbstractMechanism.kind`, the file's `kind`)."""
+
+
 def save_mechanism(
     mechanism: "Params | Chain | Mechanism",
     path: str | Path,
@@ -127,25 +135,21 @@ def save_mechanism(
     """
     import tomli_w  # writing only; reading needs the standard library's tomllib
 
-    if isinstance(mechanism, Chain):
-        if waveform is not None:
-            raise MechanismFileError("save_mechanism: a Chain carries its own waveforms; waveform= is for Params.")
-        doc = _dump_chain(mechanism)
-    elif isinstance(mechanism, Params):
-        doc = _dump_paper(mechanism, waveform)
-    elif isinstance(mechanism, Mechanism):
-        if waveform is not None:
-            raise MechanismFileError("save_mechanism: a Mechanism carries its own waveforms; waveform= is for Params.")
-        try:
-            doc = {"schema": SCHEMA, "kind": "mechanism", **dump_mechanism(mechanism, _friction_table)}
-        except MechanismFileError:
-            raise
-        except ValueError as err:
-            raise MechanismFileError(str(err)) from None
-    else:
+    kind = getattr(mechanism, "kind", None)
+    if kind not in _DUMP:
         raise MechanismFileError(
             f"save_mechanism: expected a Params, a Chain or a Mechanism, got {type(mechanism).__name__}."
         )
+    if kind != "paper" and waveform is not None:
+        raise MechanismFileError(
+            f"save_mechanism: a {type(mechanism).__name__} carries its own waveforms; waveform= is for Params."
+        )
+    try:
+        doc = _DUMP[kind](mechanism, waveform)
+    except MechanismFileError:
+        raise
+    except ValueError as err:
+        raise MechanismFileError(str(err)) from None
     if description:
         doc = {"schema": doc.pop("schema"), "kind": doc.pop("kind"), "description": description, **doc}
     path = Path(path)

@@ -72,6 +72,20 @@ class AbstractMechanism(eqx.Module):
         """Raise a `NotImplementedError` naming what this mechanism has that flight and landing
         (`contact="hop"`, SPEC §10) do not support; this default: nothing."""
 
+    def check_section(self, y: Any) -> None:
+        """Raise a `ValueError` where one configuration's given section state `y` (a host array: the
+        reduced positions, then the velocities; [`steady_gait`][locomotion_jax.steady_gait]'s `start`)
+        puts bodies where they cannot be; this default: nothing (`Chain` requires its gaps positive)."""
+
+    def describe(self) -> str:
+        """A short label of this mechanism (the command line's first line on a mechanism file)."""
+        return f"{type(self).__name__} of {self.kind} kind"
+
+    def attributes(self) -> dict[str, str]:
+        """This mechanism's laws and elements by name, for a sweep's record (its `attrs`); this default:
+        its `kind`."""
+        return {"kind": self.kind}
+
     @abc.abstractmethod
     def is_valid(self) -> Any:
         """Per configuration, whether its values are in their valid ranges (the others run flagged

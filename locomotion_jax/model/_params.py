@@ -316,6 +316,9 @@ class Params(AbstractMechanism):
                 )
         return self
 
+    def describe(self) -> str:
+        return "the paper's two-mass model"
+
     def physics(self, waveform: Any = None) -> Any:
         """The paper's model as the two-mass chain (SPEC §8 at $N = 2$): its
         [`AbstractPhysics`][locomotion_jax.AbstractPhysics], for one configuration or a batch.
