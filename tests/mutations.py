@@ -761,6 +761,25 @@ MUTATIONS = [
         ("tests/test_gait.py::test_chain_gait_bad_input",),
     ),
     Mutation(
+        "measure_horizon_past_window",
+        "measure's steps end at the window's end, not at an earlier horizon (the run overshoots it)",
+        "locomotion_jax/dynamics/_measure.py",
+        (("jnp.where(s.t < f.we, jnp.minimum(f.we, f.te), f.te)", "jnp.where(s.t < f.we, f.we, f.te)"),),
+        ("tests/test_exact.py::test_measure_ends_at_its_horizon_when_the_window_is_longer",),
+    ),
+    Mutation(
+        "fit_tuple_items_unreached",
+        "fit_trajectory cannot name an item of a tuple (a mechanism's links[0].k)",
+        "locomotion_jax/optimisation/_fit.py",
+        (
+            (
+                "        if m.group(2) is not None:\n            i = int(m.group(2))",
+                "        if False:\n            i = 0",
+            ),
+        ),
+        ("tests/test_mechanism_features.py::test_fit_of_the_capsules_spring_and_friction",),
+    ),
+    Mutation(
         "chain_given_screen_ignored",
         "a chain's optimiser solves its screen again though an earlier one is given (sweep=)",
         "locomotion_jax/optimisation/_chain.py",

@@ -28,6 +28,20 @@ def test_energy_balance_in_measurement():
     np.testing.assert_allclose(m.balance, 0, atol=1e-5 * float(jnp.max(m.e_d)))
 
 
+def test_measure_ends_at_its_horizon_when_the_window_is_longer():
+    """A horizon shorter than the regime window (25) ends the run at `t_start + horizon`: the mean
+    speed and the dissipation are those of `simulate` at that time, to 1e-12, and the regime is
+    undetermined (the window did not end)."""
+    p, t0, horizon = lj.Params.grid(omega=jnp.array([2.0, 6.0])), 30.0, 7.3
+    m = lj.measure(p, z=1e9, horizon=horizon, t_start=t0)
+    tr = lj.simulate(p, t0 + horizon, save_at=jnp.array([t0, t0 + horizon]))
+    m1, m2 = (np.broadcast_to(np.asarray(m), (2,))[:, None] for m in (p.m1, p.m2))
+    X = (np.asarray(tr.x1) * m1 + np.asarray(tr.x2) * m2) / (m1 + m2)
+    np.testing.assert_allclose(np.asarray(m.mean_speed), (X[:, 1] - X[:, 0]) / horizon, rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(m.e_d), np.asarray(tr.e_d[:, 1] - tr.e_d[:, 0]), rtol=1e-12)
+    assert np.all(np.asarray(m.regime) == lj.Regime.UNDETERMINED)
+
+
 @pytest.mark.parametrize("omega", [math.pi])
 def test_fig4b_direction_follows_d(omega):
     # Fig. 4b: l0 = 0.05 sin(pi t) + 3; forward for d > 0, backward for d < 0, none at d = 0.

@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 from locomotion_jax import GaitStatus, steady_gait
 from locomotion_jax.gaits import _select, _shooting as cg
+from mechanism_cases import ANISO, capsule, capsule_ref
 from reference import reference_simulate
 from reference_mechanism import Body, run, Sig, System
 
@@ -598,20 +599,6 @@ def test_chain_basins_and_gaits_from_given_starts(worms):
 
 MECHANISM_GAIT = pytest.mark.xdist_group("mechanism_gait")  # the capsule's gait is solved once, on one worker
 
-ANISO = (0.5, 0.2, 0.4, 0.15)
-
-
-def _capsule(a: Any = 0.6, k: Any = 10.0, w: float = 3.0, check: bool = True):
-    """Body 0 on the ground (anisotropic Coulomb), body 1 carried by it on a spring k, driven by a sin(w t)."""
-    links = [lj.Spring(0, 1, k=k, rest=0.0), lj.Force(0, 1, lj.Sinusoid(a=a, omega=w, lbar=0.0))]
-    return lj.Mechanism(masses=[1.0, 0.5], friction=[lj.AnisotropicCoulomb(*ANISO), None], carried_by=[None, 0],
-                        links=links, check=check)  # fmt: skip
-
-
-def _capsule_ref(a, k, w, x0, v0):
-    bodies = [Body(1.0, ANISO, x0=x0[0], v0=v0[0]), Body(0.5, None, carrier=0, x0=x0[1], v0=v0[1])]
-    return System(bodies, springs=[(0, 1, k, 0.0)], forces=[(0, 1, Sig(0.0, (0.0,), (a,), w))])
-
 
 def _wall_oscillator(friction, c, g=0.5, w=2.0):
     """Siconos' oscillator (m = k = 1, a spring to the wall) driven by an external force g sin(w t)."""
@@ -621,7 +608,7 @@ def _wall_oscillator(friction, c, g=0.5, w=2.0):
 
 @pytest.fixture(scope="module")
 def capsule_gait():
-    return lj.steady_gait(_capsule())
+    return lj.steady_gait(capsule())
 
 
 @MECHANISM_GAIT
@@ -634,7 +621,7 @@ def test_capsule_gait_is_a_fixed_point_of_a_direct_simulation(capsule_gait):
     u, v = np.asarray(g.state[:1]), np.asarray(g.state[1:])
     x0 = np.array([0.0, u[0]])
     M = lj.Mechanism(masses=[1.0, 0.5], friction=[lj.AnisotropicCoulomb(*ANISO), None], carried_by=[None, 0],
-                     links=_capsule().links, x0=x0, v0=v)  # fmt: skip
+                     links=capsule().links, x0=x0, v0=v)  # fmt: skip
     T = float(g.period)
     traj = lj.simulate(M, t_end=T, save_at=jnp.array([0.0, T]))
     assert int(traj.status) == lj.Status.OK
@@ -659,7 +646,7 @@ def test_capsule_gait_against_the_reference(capsule_gait):
     (the multipliers' largest modulus, 0.92, leaves 4e-6 of the start there)."""
     g = capsule_gait
     T, u, v = float(g.period), float(g.state[0]), np.asarray(g.state[1:], float)
-    ref = run(_capsule_ref(0.6, 10.0, 3.0, [0.0, u], v), 5 * T, np.array([0.0, 5 * T]))
+    ref = run(capsule_ref(0.6, 10.0, 3.0, [0.0, u], v), 5 * T, np.array([0.0, 5 * T]))
     speed = (ref["com"][1] - ref["com"][0]) / (5 * T)
     closed = max(abs(ref["x"][1][1] - ref["x"][1][0] - u), *np.abs(ref["v"][1] - v))
     print(f"reference on the orbit: speed {speed:.10f} (gait {float(g.mean_speed):.10f}), e_d/period "
@@ -667,7 +654,7 @@ def test_capsule_gait_against_the_reference(capsule_gait):
     assert closed < 1e-7
     assert abs(speed - float(g.mean_speed)) < 1e-8 * max(1.0, abs(speed))
     assert abs(ref["ed"][1] / 5 - float(g.e_d)) < 1e-8
-    far = run(_capsule_ref(0.6, 10.0, 3.0, [0.0, 0.0], [0.0, 0.0]), 160 * T, np.array([150 * T, 160 * T]))
+    far = run(capsule_ref(0.6, 10.0, 3.0, [0.0, 0.0], [0.0, 0.0]), 160 * T, np.array([150 * T, 160 * T]))
     long_speed = (far["com"][1] - far["com"][0]) / (10 * T)
     print(f"reference from rest, periods 150-160: speed {long_speed:.10f}")
     assert abs(long_speed - float(g.mean_speed)) < 1e-5 * abs(long_speed)
@@ -719,25 +706,25 @@ def test_mechanism_gait_batch_flags_the_invalid_configuration_alone(capsule_gait
     INVALID with NaN numbers, the others equal the single solves."""
     k = jnp.array([10.0, -1.0, 10.0])
     a = jnp.array([0.6, 0.6, 0.9])
-    G = lj.steady_gait(_capsule(a=a, k=k, check=False))
+    G = lj.steady_gait(capsule(a=a, k=k, check=False))
     status = np.asarray(G.status)
     assert list(status) == [lj.GaitStatus.CONVERGED, lj.GaitStatus.INVALID, lj.GaitStatus.CONVERGED]
     assert np.isnan(float(G.mean_speed[1]))
     assert abs(float(G.mean_speed[0]) - float(capsule_gait.mean_speed)) < 1e-12
-    single = lj.steady_gait(_capsule(a=0.9))
+    single = lj.steady_gait(capsule(a=0.9))
     assert abs(float(G.mean_speed[2]) - float(single.mean_speed)) < 1e-12
 
 
 @MECHANISM_GAIT
 def test_mechanism_gait_float32(capsule_gait):
-    G = lj.steady_gait(_capsule(), dtype=jnp.float32)
+    G = lj.steady_gait(capsule(), dtype=jnp.float32)
     assert G.mean_speed.dtype == jnp.float32 and int(G.status) == lj.GaitStatus.CONVERGED
     assert abs(float(G.mean_speed) - float(capsule_gait.mean_speed)) < 1e-4
 
 
 @MECHANISM_GAIT
 def test_mechanism_gait_start_and_bad_input():
-    M = _capsule()
+    M = capsule()
     g = lj.steady_gait(M, start=np.array([0.0, 0.0, 0.0]), periods=1)
     assert int(g.status) == lj.GaitStatus.CONVERGED
     with pytest.raises(ValueError, match=r"gaps u_0..u_N-2.*shape \(3,\)"):

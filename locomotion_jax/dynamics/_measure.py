@@ -89,7 +89,8 @@ def _running(f: _Fixed, dyn):
 
 def _advance(f: _Fixed, dyn, contact, dt):
     s, a = dyn
-    t_stop = jnp.where(s.t < f.ws, f.ws, jnp.where(s.t < f.we, f.we, f.te))
+    # Steps end at the start, at the window's end and at the horizon, whichever comes first.
+    t_stop = jnp.where(s.t < f.ws, f.ws, jnp.where(s.t < f.we, jnp.minimum(f.we, f.te), f.te))
     begin = ~a.started & (s.t >= f.ws)
     started = a.started | begin
     X0 = jnp.where(begin, f.P.centre_of_mass(s.y.x), a.X0)

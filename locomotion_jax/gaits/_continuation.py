@@ -265,7 +265,8 @@ def continuation(
     - `parameter`: for [`Params`][], a field (`"omega"`, `"a"`, `"d"`, `"mhat"`, `"mu_s"`, ...), or
       `"cosN"`/`"sinN"`, the coefficient of harmonic `N` of a [`Fourier`][] `waveform`; for a chain or a
       mechanism, a leaf named by its attribute (`"omega"`, `"mu_s"`, `"c"`), every entry of it (they
-      must be equal at the start), or one entry with an index (`"m[1]"`, `"mu_s_fwd[0]"`).
+      must be equal at the start), or one entry with an index (`"m[1]"`, `"mu_s_fwd[0]"`); a
+      mechanism's element or friction law by its path (`"links[0].k"`, `"friction[0].mu_s_fwd"`).
     - `stop`: the parameter's end value (a number, or one per configuration).
     - `periods`: as in [`steady_gait`][], for the start.
     - `max_points`: points per branch, the start included.

@@ -116,36 +116,42 @@ def _replace(tree: Any, name: str, value: Any) -> Any:
 
 
 def _leaf_names(path) -> str:
-    """A leaf's attribute path, `".waves.omega"`."""
-    return "".join(f".{k.name}" if isinstance(k, jax.tree_util.GetAttrKey) else "" for k in path)
+    """A leaf's attribute path, `".waves.omega"`, with `[i]` for an item of a tuple (`".links[0].k"`)."""
+    return "".join(f".{k.name}" if isinstance(k, jax.tree_util.GetAttrKey)
+                   else f"[{k.idx}]" if isinstance(k, jax.tree_util.SequenceKey) else "" for k in path)  # fmt: skip
 
 
 def parse_leaf(parameter: str, C: Any, kind: str) -> Selector:
     """The selector of `parameter` over the configurations `C` of a mechanism (a flat batch).
 
     `parameter` names the leaves whose attribute path ends with it (`"omega"`, `"mu_s"`,
-    `"friction.mu_s"`), every entry of them; or, with an index, `"m[1]"`, the entry of that index
-    along their last axis. Every selected entry takes the parameter's value, so where several are
-    selected they must be equal at the start ([`value`][] checks)."""
+    `"friction.mu_s"`; `[i]` an item of a tuple: a mechanism's `"links[0].k"`,
+    `"friction[0].mu_s_fwd"`), every entry of them; or, with an index after a leaf, `"m[1]"`, the
+    entry of that index along its last axis. Every selected entry takes the parameter's value, so
+    where several are selected they must be equal at the start ([`value`][] checks)."""
     if not isinstance(parameter, str):
         raise TypeError(f"parameter must be a str, got {type(parameter).__name__}.")
     leaves, tree = jax.tree_util.tree_flatten_with_path(_one(C))
     names = [_leaf_names(p) for p, _ in leaves]
-    m = re.fullmatch(r"([A-Za-z_][\w.]*)(?:\[(\d+)\])?", parameter)
-    hit = [] if m is None else [i for i, n in enumerate(names) if n.endswith("." + m.group(1))]
+    ends = lambda path: [i for i, n in enumerate(names) if n.endswith("." + path)]
+    ok = re.fullmatch(r"[A-Za-z_][\w.\[\]]*", parameter) is not None
+    # A whole leaf by the end of its path first; else a leaf and the index of one entry.
+    m = re.fullmatch(r"(.+)\[(\d+)\]", parameter)
+    whole = ends(parameter) if ok else []
+    hit = whole or ([] if m is None or not ok else ends(m.group(1)))
     if not hit:
         valid = ", ".join(sorted({n.rsplit(".", 1)[-1] for n in names if n}))
         raise ValueError(
             f"unknown parameter {parameter!r} of a {kind}; valid: a leaf ({valid}), with [i] for one entry of "
-            "a per-body or per-spring array (e.g. 'm[1]')."
+            "a per-body or per-spring array (e.g. 'm[1]'), a path for one element (e.g. 'links[0].k')."
         )
-    assert m is not None
     masks = [x for _, x in leaves]
     for i in hit:
         mask = np.zeros_like(masks[i])
-        if m.group(2) is None:
+        if whole:
             mask[...] = True
         else:
+            assert m is not None
             j = int(m.group(2))
             if mask.ndim == 0 or not 0 <= j < mask.shape[-1]:
                 size = "is a scalar" if mask.ndim == 0 else f"has entries 0..{mask.shape[-1] - 1}"

@@ -14,6 +14,7 @@ Gauss-Newton covariance $(J^\\top J)^{-1}$ at the optimum, scaled by the residua
 variance unless the noise level `sigma` is given.
 """
 
+import re
 from collections.abc import Sequence
 from typing import Any, NamedTuple
 
@@ -54,19 +55,27 @@ def _bounds(name: str) -> tuple[float, float]:
 
 def _field(mechanism: Any, name: str) -> Any:
     """The field `name` of the mechanism: an attribute, dotted for a nested one
-    (`"friction.mu_k_fwd"`); a bare name that the mechanism lacks is looked up in its
-    friction law (`"mu_k"` of a chain with `Coulomb` friction)."""
+    (`"friction.mu_k_fwd"`), with `[i]` for an item of a tuple (a [`Mechanism`][locomotion_jax.Mechanism]'s
+    `"links[0].k"`, `"friction[0].mu_k_fwd"`); a bare name that the mechanism lacks is looked up in
+    its friction law (`"mu_k"` of a chain with `Coulomb` friction)."""
     obj = mechanism
     parts = name.split(".")
     if len(parts) == 1 and not hasattr(mechanism, name) and hasattr(getattr(mechanism, "friction", None), name):
         parts = ["friction", name]
     for part in parts:
-        if part.startswith("_") or not hasattr(obj, part):
+        m = re.fullmatch(r"([A-Za-z]\w*)(?:\[(\d+)\])?", part)
+        if m is None or not hasattr(obj, m.group(1)):
             raise ValueError(
                 f"names: {name!r} is not a field of the {type(mechanism).__name__} (a dotted name reaches a "
-                "nested one, e.g. 'friction.mu_k_fwd')."
+                "nested one, e.g. 'friction.mu_k_fwd', and [i] an item of a tuple, e.g. 'links[0].k')."
             )
-        obj = getattr(obj, part)
+        obj = getattr(obj, m.group(1))
+        if m.group(2) is not None:
+            i = int(m.group(2))
+            if not isinstance(obj, tuple) or i >= len(obj):
+                size = f"has items 0..{len(obj) - 1}" if isinstance(obj, tuple) else "is not a tuple"
+                raise ValueError(f"names: {name!r}: {m.group(1)!r} {size}.")
+            obj = obj[i]
     return obj
 
 
@@ -147,8 +156,10 @@ def fit_trajectory(
       the parameters not fitted.
     - `names`: the fields to fit: of a `Params`, its parameter names; of another mechanism,
       its floating-point fields, dotted for nested ones (`"k"`, `"c"`, `"friction.mu_k_fwd"`;
-      a bare friction coefficient such as `"mu_k"` is looked up in the friction law). A field
-      with several entries (a chain's `k` given per spring) is fitted entry by entry.
+      a bare friction coefficient such as `"mu_k"` is looked up in the friction law), with `[i]`
+      for an item of a tuple (a [`Mechanism`][locomotion_jax.Mechanism]'s `"links[0].k"`,
+      `"friction[0].mu_k_fwd"`). A field with several entries (a chain's `k` given per spring) is
+      fitted entry by entry.
     - `sigma`: the measurement noise's standard deviation, if known; otherwise it is
       estimated from the residuals (the standard errors scale with it).
     - `waveform`, `dynamics`, `contact`, `start`: as in [`simulate`][] (exact dynamics;
