@@ -9,7 +9,9 @@
    one steady-gait solve (Newton's method, forward mode in the 7 state directions), the
    forward-mode oracle (`ChainOracle.orbits`: `jacfwd` through the period map in all 7 + 192
    directions) and `jax.grad` of the cost of transport by the adjoint solve
-   (`gaits._adjoint`), with their ratios and the largest relative difference of the two gradients.
+   (`gaits._adjoint`), with their ratios and the largest relative difference of the two gradients;
+   and `jax.jacrev` of all three figures by the adjoint (the optimisers' gradient) against the
+   forward-mode oracle's.
 
 In one process, compilation excluded (each timed call runs once to compile, then `REPEAT`
 times; the best is printed). Prints Markdown tables and the load average.
@@ -81,9 +83,13 @@ def gait_benchmark(harmonics: int) -> None:
     cot = lambda th, o, y: adj.cost_of_transport(adj.steady_gait(o, th, y, cap=cap))
     grad_fn = eqx.filter_jit(jax.grad(cot))
     rev = best_of(grad_fn, theta, oracle, ys, repeat=20)
+    # What the optimisers need: the gradients of all three figures (speed, energy, smallest load).
+    jac_fn = eqx.filter_jit(jax.jacrev(lambda th, o, y: adj.steady_gait(o, th, y, cap=cap).figures))
+    jac = best_of(jac_fn, theta, oracle, ys, repeat=20)
     F, G = orb.figures, orb.gradient
     expect = G[1] / abs(F[0]) - F[1] * np.sign(F[0]) * G[0] / F[0] ** 2
     diff = float(np.max(np.abs(grad_fn(theta, oracle, ys) - expect)) / np.max(np.abs(expect)))
+    jac_diff = float(np.max(np.abs(np.asarray(jac_fn(theta, oracle, ys)) - np.asarray(G))) / np.max(np.abs(G)))
     cost = float(F[1] / abs(F[0]))
     print(f"steady gait of a {N}-mass worm, {harmonics} harmonics per spring: p = {p} parameters, float64, "
           f"{jax.default_backend()}, converged {bool(orb.ok)}, cost of transport {cost:.6f}")  # fmt: skip
@@ -91,7 +97,13 @@ def gait_benchmark(harmonics: int) -> None:
     print("| steady-gait solve (s) | jacfwd: oracle, 7 + p directions (s) | grad: adjoint (s) | jacfwd / solve "
           "| grad / solve | max rel. difference grad vs jacfwd |")  # fmt: skip
     print("|---|---|---|---|---|---|")
-    print(f"| {solve:.3f} | {fwd:.3f} | {rev:.3f} | {fwd / solve:.2f} | {rev / solve:.2f} | {diff:.1e} |")
+    print(f"| {solve:.4f} | {fwd:.4f} | {rev:.4f} | {fwd / solve:.2f} | {rev / solve:.2f} | {diff:.1e} |")
+    print()
+    print("The optimisers' gradient, of all three figures: forward mode (the oracle) against reverse mode")
+    print()
+    print("| jacfwd: oracle (s) | jacrev of the 3 figures: adjoint (s) | jacrev / jacfwd | max rel. difference |")
+    print("|---|---|---|---|")
+    print(f"| {fwd:.4f} | {jac:.4f} | {jac / fwd:.2f} | {jac_diff:.1e} |")
 
 
 def total(tau: jax.Array) -> jax.Array:

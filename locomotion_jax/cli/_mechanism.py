@@ -22,7 +22,6 @@ from ._options import Group, option, Values
 
 
 PAPER_ONLY: tuple[str, ...] = ("omega_over_wn1", "mhat")
-SHARED: tuple[str, ...] = ("omega", "a", "d", "mu_s", "mu_k", "k", "c", "lbar")
 CHAIN_ONLY: tuple[str, ...] = ("masses", "phi", "actuator", "friction", "mu_s_bwd", "mu_k_bwd", "v_s")
 NAMES: tuple[str, ...] = ("omega", "omega_over_wn1", "a", "d", "mhat", "mu_s", "mu_k", "k", "c", "lbar", *CHAIN_ONLY)
 """The mechanism options in the order the commands list them (the paper's model's first)."""
@@ -182,11 +181,6 @@ class Built:
 
         source = self.extra.get("waveform", self.mechanism)
         return float(np.max(np.asarray(source.omega)))
-
-    @property
-    def kind_name(self) -> str:
-        """The kind in words: "a chain"."""
-        return KIND_NAMES[self.kind]
 
 
 KIND_NAMES: dict[str, str] = {"paper": "the paper's model", "chain": "a chain",
