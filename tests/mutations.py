@@ -780,6 +780,13 @@ MUTATIONS = [
         ("tests/test_mechanism_features.py::test_fit_of_the_capsules_spring_and_friction",),
     ),
     Mutation(
+        "builder_store_digest_ignored",
+        "a chain map's Zarr store does not record its builder: another builder's map is resumed into it",
+        "locomotion_jax/maps/_builder_sweep.py",
+        (('            "mechanism": _digest(build, values, shape, mode, fixed),', '            "mechanism": {},'),),
+        ("tests/test_zarr.py::test_a_chain_map_into_a_store_equals_memory_resumes_and_refuses_another_builder",),
+    ),
+    Mutation(
         "chain_given_screen_ignored",
         "a chain's optimiser solves its screen again though an earlier one is given (sweep=)",
         "locomotion_jax/optimisation/_chain.py",

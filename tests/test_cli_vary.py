@@ -84,6 +84,21 @@ def test_grid_sweep_of_the_file_equals_lj_sweep_bit_for_bit(tmp_path):
     assert ds.attrs["swept"] == f"{A},{M0}" and ds.attrs["kind"] == "mechanism"
 
 
+def test_a_files_map_into_a_zarr_store_is_resumed(tmp_path):
+    """`--out capsule.zarr`: the store equals the NetCDF map bit for bit; run again, it is read back
+    (nothing computed); with another value, refused naming the specification."""
+    out = tmp_path / "capsule.zarr"
+    args = ["sweep", CAPSULE, "--vary", f"{A}=0.3:0.9:3", "--vary", f"{M0}=0.8,1.2", *FLAGS, "--out", str(out)]
+    res = invoke(*args)
+    assert res.exit_code == 0, res.output
+    expected = lj.sweep({A: np.linspace(0.3, 0.9, 3), M0: np.array([0.8, 1.2])}, mechanism=capsule, **RUN)
+    assert_same(xr.open_zarr(out).load(), expected)
+    again = invoke(*args)
+    assert again.exit_code == 0 and f"wrote {out}: {A}[3] x {M0}[2]" in again.output, again.output
+    other = invoke(*[a.replace("0.3:0.9:3", "0.3:0.9:4") for a in args])
+    assert other.exit_code != 0 and "holds a sweep with a different specification" in other.output
+
+
 def test_list_sweep_with_joined_paths_equals_lj_sweep_bit_for_bit(tmp_path):
     """`--mode list`; `links.1.waveform.omega,links.2.waveform.omega` (the base frequency every waveform shares)."""
     both = f"{OMEGA},links.2.waveform.omega"

@@ -20,7 +20,7 @@ import locomotion_jax as lj
 import numpy as np
 import pytest
 import xarray as xr
-from distributed_sweep import AXES, SETTINGS
+from distributed_sweep import AXES, CHAIN_AXES, CHAIN_SETTINGS, SETTINGS, worm
 
 
 HELPER = Path(__file__).with_name("distributed_sweep.py")
@@ -59,7 +59,9 @@ def _free_port(low: int = 0, high: int = 0) -> int:
     raise RuntimeError(f"no free port in [{low}, {high}]")
 
 
-def _start(store: Path, cache: Path, n: int = 1, die_after: dict[int, int] | None = None) -> list[subprocess.Popen]:
+def _start(
+    store: Path, cache: Path, n: int = 1, die_after: dict[int, int] | None = None, chain: bool = False
+) -> list[subprocess.Popen]:
     env = dict(os.environ, DISTRIBUTED_SWEEP_CACHE=str(cache))
     env["PYTHONPATH"] = os.pathsep.join([str(HELPER.parents[1]), env.get("PYTHONPATH", "")])
     port = _free_port()
@@ -69,6 +71,8 @@ def _start(store: Path, cache: Path, n: int = 1, die_after: dict[int, int] | Non
         cmd += ["--port", str(port)]
         if die_after and p in die_after:
             cmd += ["--die-after", str(die_after[p])]
+        if chain:
+            cmd += ["--chain"]
         procs.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env))
     return procs
 
@@ -156,4 +160,20 @@ def test_survivor_takes_over_and_exits_cleanly(tmp_path, cache, reference):
     assert "process 0 of 2: the store is complete. Chunks taken over from processes that stopped: 1 (held by" in err0
     assert _report(out0)["chunks_computed"] == N_CHUNKS
     assert len(list((store / ".locomotion_jax" / "done").iterdir())) == N_CHUNKS
+    _assert_same(store, reference)
+
+
+def test_two_processes_fill_a_chains_store_as_one_process_maps_it(tmp_path, cache):
+    """Issue 25's every feature on every mechanism: a map of a 3-mass chain on anisotropic bristles
+    (`sweep(axes, mechanism=worm, path="....zarr")`) filled by two processes under
+    `jax.distributed` equals the same map in one process, in memory, bit for bit, each chunk
+    computed once, by either process."""
+    reference = lj.sweep(CHAIN_AXES, mechanism=worm, **CHAIN_SETTINGS)
+    store = tmp_path / "worm.zarr"
+    results = _wait(_start(store, cache, n=2, chain=True))
+    for rc, _, err in results:
+        assert rc == 0, err[-3000:]
+    reports = [_report(out) for _, out, _ in results]
+    assert sum(r["chunks_computed"] for r in reports) == 4 and all(r["processes"] == 2 for r in reports)
+    assert len(list((store / ".locomotion_jax" / "done").iterdir())) == 4
     _assert_same(store, reference)

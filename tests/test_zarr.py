@@ -12,6 +12,7 @@ import locomotion_jax as lj
 import numpy as np
 import pytest
 import xarray as xr
+from distributed_sweep import CHAIN_AXES, CHAIN_SETTINGS, worm
 from locomotion_jax.maps import _sweep, _zarr_store
 from locomotion_jax.maps._zarr_store import block_shape, Blocks, NOT_COMPUTED, ZarrStore
 from typer.testing import CliRunner
@@ -154,3 +155,29 @@ def test_cli_writes_a_store(tmp_path, monkeypatch):
     assert "wrote maps/m.zarr: omega[5] x a[2]" in result.output
     assert (tmp_path / "maps" / "m.zarr" / "zarr.json").is_file()
     assert len(os.listdir(tmp_path / "maps" / "m.zarr" / _zarr_store.META / "done")) == 3
+
+
+def test_a_chain_map_into_a_store_equals_memory_resumes_and_refuses_another_builder(tmp_path):
+    """`sweep(axes, mechanism=build, path="....zarr")`: the same bits as in memory (every variable,
+    `stick_fraction` with its `mass` dimension), chunk by chunk; an interrupted chunk is computed
+    again and the others read; a store made by another builder (the same axes, other mechanisms:
+    its digest differs) or with other settings is refused, naming what differs."""
+    memory = lj.sweep(CHAIN_AXES, mechanism=worm, **CHAIN_SETTINGS)
+    path = tmp_path / "worm.zarr"
+    before = _sweep.STATS.copy()
+    ds = lj.sweep(CHAIN_AXES, mechanism=worm, path=path, **CHAIN_SETTINGS)
+    assert _sweep.STATS["chunks_computed"] - before["chunks_computed"] == 4  # blocks of (1, 2)
+    assert ds.stick_fraction.dims == ("omega", "a", "mass") and ds.attrs["kind"] == "chain"
+    assert_identical_values(ds, memory)
+    (path / _zarr_store.META / "done" / "chunk_000001").unlink()
+    before = _sweep.STATS.copy()
+    resumed = lj.sweep(CHAIN_AXES, mechanism=worm, path=path, **CHAIN_SETTINGS)
+    assert _sweep.STATS["chunks_computed"] - before["chunks_computed"] == 1
+    assert _sweep.STATS["chunks_loaded"] - before["chunks_loaded"] == 3
+    assert_identical_values(resumed, memory)
+    with pytest.raises(ValueError, match=r"different specification:\n  mechanism: stored .*sha256"):
+        lj.sweep(CHAIN_AXES, mechanism=lambda omega, a: worm(omega, 1.01 * np.asarray(a)), path=path, **CHAIN_SETTINGS)
+    with pytest.raises(ValueError, match=r"different specification:\n  horizon: stored 20\.0, requested 25\.0"):
+        lj.sweep(CHAIN_AXES, mechanism=worm, path=path, **dict(CHAIN_SETTINGS, horizon=25.0))
+    with pytest.raises(ValueError, match=r"a chain map into a NetCDF file is not resumed"):
+        lj.sweep(CHAIN_AXES, mechanism=worm, path=tmp_path, **CHAIN_SETTINGS)  # an existing path that is not a store

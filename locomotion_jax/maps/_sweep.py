@@ -233,8 +233,11 @@ def sweep(
       `fixed`, each a 1-D array with one entry per configuration) to a batched
       [`Chain`][] or [`Mechanism`][locomotion_jax.Mechanism] of that batch shape (build it with `check=False` and let
       `on_invalid` decide). The axes' names are then free. Chain maps run chunk by
-      chunk on the dynamics' N-mass engine (`AbstractDynamics.measure`), in memory or
-      written to a NetCDF `path` when done (no resume, no Zarr store, grid order).
+      chunk on the dynamics' N-mass engine (`AbstractDynamics.measure`), in grid order: in
+      memory, written to a NetCDF `path` when done, or into a Zarr store chunk by chunk (resumable,
+      several processes at once, as the paper's model's; the store records the sweep and a digest
+      of the mechanisms built at its first and last configurations, so a rerun with another
+      builder is refused).
     - `t_start`: an explicit measurement start for every configuration (chains only;
       default `Chain.t_start`).
 
@@ -431,11 +434,14 @@ def _sweep_mechanism(mechanism: "Callable[..., Chain | Mechanism]", axes, fixed,
         raise ValueError(f"on_invalid must be 'raise' or 'flag', got {on_invalid!r}.")
     if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1:
         raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}.")
-    if path is not None and Path(path).exists() and not overwrite:
-        raise ValueError(f"{str(path)!r} exists; a chain map is not resumed: pass overwrite=True or another path.")
+    if path is not None and Path(path).exists() and not overwrite and not is_zarr(path):
+        raise ValueError(
+            f"{str(path)!r} exists; a chain map into a NetCDF file is not resumed (a Zarr store is): pass "
+            "overwrite=True or another path."
+        )
     check_measure_args(z, horizon, window)
     return sweep_chain(
         mechanism, axes, fixed=fixed, mode=mode, z=z, horizon=horizon, window=window, t_start=t_start,
         dynamics=dynamics, contact=contact, start=start, dtype=dtype,
-        chunk_size=int(chunk_size), path=path, progress=progress, on_invalid=on_invalid,
+        chunk_size=int(chunk_size), path=path, progress=progress, on_invalid=on_invalid, overwrite=overwrite,
     )  # fmt: skip

@@ -174,7 +174,7 @@ class ZarrStore:
         dims: Sequence[str],
         shape: Sequence[int],
         block: Sequence[int],
-        variables: Mapping[str, tuple[np.dtype, Mapping[str, Any]]],
+        variables: Mapping[str, tuple[Any, ...]],
         coords: Mapping[str, tuple[str, np.ndarray]],
         attrs: Mapping[str, Any],
         overwrite: bool = False,
@@ -189,7 +189,9 @@ class ZarrStore:
         **Arguments:**
 
         - `dims`, `shape`, `block`: the dimensions, the grid's shape and a chunk's block.
-        - `variables`: name -> (dtype, attributes) of each array of measurements.
+        - `variables`: name -> (dtype, attributes) of each array of measurements, or (dtype,
+          attributes, trailing) for one with trailing dimensions after the grid's, `trailing` a
+          tuple of `(dimension, length)` (a chain's `stick_fraction`: `(("mass", N),)`).
         - `coords`: name -> (dimension, values) of each coordinate.
         - `attrs`: the group's attributes (`sweep_spec` is added).
         - `overwrite`: delete whatever is at `path` first.
@@ -248,13 +250,15 @@ class ZarrStore:
         return Claim(fd, previous)
 
     def write(self, index: int, results: Mapping[str, np.ndarray]) -> None:
-        """Write chunk `index`'s results (flat, in the block's C order) to its region, then mark it done."""
+        """Write chunk `index`'s results (flat, in the block's C order, then any trailing dimensions) to
+        its region, then mark it done."""
         region = self.blocks.region(index)
         shape = tuple(r.stop - r.start for r in region)
         for name, values in results.items():
             if name not in self._arrays:
                 self._arrays[name] = self.group[name]
-            self._arrays[name][region] = np.asarray(values).reshape(shape)
+            values = np.asarray(values)
+            self._arrays[name][region] = values.reshape(shape + values.shape[1:])
         self._mark(index).touch()
 
     def dataset(self):
@@ -282,15 +286,16 @@ def _build(tmp: Path, spec, dims, shape, block, variables, coords, attrs) -> Non
     for name, (dim, values) in coords.items():
         values = np.asarray(values)
         group.create_array(name, data=values, chunks=values.shape, dimension_names=(dim,))
-    for name, (dtype, var_attrs) in variables.items():
+    for name, (dtype, var_attrs, *rest) in variables.items():
+        trailing = tuple(rest[0]) if rest else ()
         var_attrs = dict(var_attrs) | ({"coordinates": other_coords} if other_coords else {})
         group.create_array(
             name,
-            shape=tuple(shape),
+            shape=tuple(shape) + tuple(n for _, n in trailing),
             dtype=np.dtype(dtype),
-            chunks=tuple(block),
+            chunks=tuple(block) + tuple(n for _, n in trailing),
             fill_value=variable_fill(dtype),
-            dimension_names=tuple(dims),
+            dimension_names=tuple(dims) + tuple(d for d, _ in trailing),
             attributes=var_attrs,
         )
     with warnings.catch_warnings():  # consolidated metadata is not (yet) in the v3 specification

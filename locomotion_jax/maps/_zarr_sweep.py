@@ -17,6 +17,7 @@ so the values do not depend on the store, the chunking or the number of processe
 
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -56,11 +57,9 @@ def sweep_to_zarr(
 
     **Returns:** the finished store, opened lazily (`xarray.open_zarr`).
     """
-    from ._sweep import STATS
-
     mesh = sharding.batch_mesh(local=True)  # each process computes whole chunks on its own devices
     ndev = sharding.device_count(mesh)
-    me, n_proc = jax.process_index(), jax.process_count()
+    n_proc = jax.process_count()
     derived = ("omega",) if RATIO in grid.values or RATIO in grid.fixed else ()
 
     def inputs(blocks: Blocks, index: int) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
@@ -88,6 +87,32 @@ def sweep_to_zarr(
         attrs = sweep_attrs(grid, spec, dynamics, max_steps, ndev * n_proc, "natural")
         return ZarrStore.create(path, spec, dims, grid.shape, blocks.block, variables, coords, attrs, overwrite)
 
+    def collect(blocks: Blocks, index: int, out: Any, n: int) -> dict[str, np.ndarray]:
+        return sharding.fetch(out, n) | {k: inputs(blocks, index)[1][k] for k in derived}
+
+    return fill_store(path, spec, create, grid.size, run, collect, progress)
+
+
+def fill_store(
+    path: Path,
+    spec: dict[str, Any],
+    create: Callable[[], ZarrStore],
+    total: int,
+    compute: Callable[[Blocks, int], Any],
+    collect: Callable[[Blocks, int, Any, int], dict[str, np.ndarray]],
+    progress: bool,
+):
+    """Fill the Zarr store at `path` chunk by chunk, with every process of the run (module
+    docstring): `create()` creates the store or opens the one there (process 0, or the only
+    process), `compute(blocks, index)` starts chunk `index`'s work (asynchronously, where it can)
+    and `collect(blocks, index, out, n)` returns its `n` configurations' results as host arrays,
+    written to the chunk's region. Any mechanism's sweep fills its store this way.
+
+    **Returns:** the finished store, opened lazily (`xarray.open_zarr`).
+    """
+    from ._sweep import STATS
+
+    me, n_proc = jax.process_index(), jax.process_count()
     if n_proc == 1:
         store = create()
     else:  # process 0 creates (or replaces) the store while the others wait, then all open it
@@ -111,7 +136,7 @@ def sweep_to_zarr(
     from tqdm.auto import tqdm
 
     bar = tqdm(
-        total=grid.size,
+        total=total,
         initial=sum(size(i) for i in done),
         unit="config",
         unit_scale=True,
@@ -120,12 +145,10 @@ def sweep_to_zarr(
         smoothing=0.1,
     )
 
-    def finish(index: int, out: dict, claim) -> None:
+    def finish(index: int, out: Any, claim) -> None:
         try:
-            results = sharding.fetch(out, size(index))
-            results |= {k: inputs(blocks, index)[1][k] for k in derived}
-            store.write(index, results)  # then marked done: an interruption before loses only this chunk
-        finally:
+            store.write(index, collect(blocks, index, out, size(index)))  # then marked done: an interruption
+        finally:  # before loses only this chunk
             claim.release()
         bar.update(size(index))
 
@@ -144,7 +167,7 @@ def sweep_to_zarr(
                     continue
                 if claim.previous is not None:  # its earlier holder stopped before finishing it
                     taken[index] = claim.previous
-                out = run(blocks, index)
+                out = compute(blocks, index)
                 STATS["chunks_computed"] += 1
                 # Dispatch is asynchronous: the devices work on this chunk while the
                 # host writes the previous one.
