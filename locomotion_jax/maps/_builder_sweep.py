@@ -5,7 +5,9 @@ its waveform and friction law are classes), so the sweep asks the user for a bui
 a function from the swept values (1-D arrays, one entry per configuration) to a
 batched [`Chain`][] or [`Mechanism`][locomotion_jax.Mechanism] (SPEC §9). The configurations are
 cut into chunks of one shape, the last one padded with repeats of its last configuration, so one
-compilation serves the map; each chunk is measured by `measure` (the dynamics' N-mass engine).
+compilation serves the map; each chunk is measured by `measure` (the dynamics' N-mass engine). The
+map is kept in memory, written to NetCDF when done, or written into a Zarr store chunk by chunk
+([`_to_zarr`][]: blocks of the grid, resumable, shared by processes as a map of the paper's model).
 """
 
 import hashlib
