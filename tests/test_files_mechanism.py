@@ -180,6 +180,23 @@ def test_cli_gait_of_the_capsule_file_equals_the_library():
     assert record["status_name"] == "CONVERGED" and len(record["state"]) == 3
 
 
+def test_cli_continues_the_capsule_files_spring_as_the_library():
+    """`continue capsule.toml --parameter links[0].k`: the branch of `lj.continuation` in the spring
+    named by its path, point for point."""
+    args = ["continue", str(EXAMPLES / "capsule.toml"), "--parameter", "links[0].k", "--stop", "11", "--periods",
+            "1", "--max-points", "3", "--dt", "0.02", "--json"]  # fmt: skip
+    res = CliRunner().invoke(_cli.app, args)
+    assert res.exit_code == 0, res.output
+    record = json.loads(res.stdout)
+    capsule = lj.load_mechanism(EXAMPLES / "capsule.toml")
+    b = lj.continuation(capsule, "links[0].k", 11.0, periods=1, max_points=3, max_step=0.04, step=0.01,
+                        dynamics=lj.Exact(dt=0.02))  # fmt: skip
+    n = int(b.n_points)
+    assert record["kind"] == "mechanism" and record["n_points"] == n >= 2 and record["lam_start"] == 10.0
+    assert record["points"]["lam"] == np.asarray(b.lam)[:n].tolist()
+    assert record["points"]["mean_speed"] == np.asarray(b.mean_speed)[:n].tolist()
+
+
 def test_cli_animate_draws_the_capsule_files_simulation(tmp_path):
     """`animate capsule.toml` writes one GIF frame per saved state of `lj.simulate` on the loaded file,
     and counts each body's stuck frames as the trajectory's `stuck` says; every frame draws body i

@@ -146,7 +146,8 @@ def register(app: typer.Typer) -> None:
             typer.Option(
                 help="The parameter: the paper's model's omega, a, d, mhat, mu_s, mu_k, k, c, lbar (cosN, sinN of "
                 "a Fourier waveform); a chain's or a mechanism's leaf (omega, mu_s, c: every entry, equal at the "
-                "start) or one entry of it (m[1], mu_s_fwd[0])."
+                "start) or one entry of it (m[1], mu_s_fwd[0]); a mechanism's element or friction law by its path "
+                "(links[0].k, friction[0].mu_s_fwd)."
             ),
         ],
         stop: Annotated[float, typer.Option(help="Its end value (the start is the model option's value).")],
