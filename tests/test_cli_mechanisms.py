@@ -293,5 +293,9 @@ def test_chain_sweep_writes_the_map(tmp_path):
     np.testing.assert_allclose(ds.mean_speed.values.ravel(), np.asarray(m.mean_speed), rtol=1e-12)
     bad = invoke("chain-sweep", *MECH, "--out", str(tmp_path / "x.nc"))
     assert bad.exit_code == 2 and "Error: nothing to sweep" in bad.output
-    bad = invoke("chain-sweep", *MECH, "--phi", "0,1", "--out", str(tmp_path / "x.zarr"))
-    assert bad.exit_code == 2 and "NetCDF" in bad.output
+    store = invoke("chain-sweep", *MECH, "--a", "0.08", "--omega", "2,3", "--phi", "-1,2.0944", *meas, "--out",
+                   str(tmp_path / "worm.zarr"))  # fmt: skip
+    assert store.exit_code == 0, store.output
+    np.testing.assert_array_equal(xr.open_zarr(tmp_path / "worm.zarr").mean_speed.values, ds.mean_speed.values)
+    bad = invoke("chain-sweep", *MECH, "--phi", "0,1", "--out", str(tmp_path / "x.txt"))
+    assert bad.exit_code == 2 and "NetCDF file (.nc)" in bad.output and "Zarr store (.zarr)" in bad.output
