@@ -29,7 +29,7 @@ import locomotion_jax as lj  # noqa: E402
 import numpy as np  # noqa: E402
 from locomotion_jax.dynamics import _measure  # noqa: E402
 from locomotion_jax.dynamics._runs import default_lanes, start_code  # noqa: E402
-from locomotion_jax.model._chain_array import engine_physics, lane_width  # noqa: E402
+from locomotion_jax.model._chain_array import engine_physics  # noqa: E402
 
 
 DT, T_START, HORIZON, CONTACT = 0.03, 5.0, 20.0, "paper"
@@ -52,7 +52,7 @@ def row(n: int, B: int, layout: str, lanes: int = 0) -> dict:
     ts = jnp.full((B,), T_START)
     dyn = (P, valid, ts, None, jnp.asarray(1e30), jnp.asarray(HORIZON), jnp.asarray(HORIZON))
     cap = jnp.asarray(0, jnp.int32)
-    lanes = lanes or default_lanes(B, lane_width(P))
+    lanes = lanes or default_lanes(B, P.lane_width)
     t0 = time.perf_counter()
     start = start_code("paper")
     exe = _measure._measure_batch.lower(*dyn, CONTACT, start, DT, cap, lanes).compile()  # pyright: ignore[reportFunctionMemberAccess]

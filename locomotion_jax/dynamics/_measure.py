@@ -17,7 +17,6 @@ import jax.numpy as jnp
 
 from .._custom_types import Array
 from .._status import Regime, Status
-from ..model._chain_array import lane_width
 from ..model._physics import AbstractPhysics, loads_at
 from . import _engine as engine
 from ._compile import engine_jit
@@ -236,7 +235,7 @@ def measure_batch(
     z_, h_, w_ = (jnp.asarray(v, dtype) for v in (z, horizon, window))
     rows = BatchRows.of(valid.shape[0], physics, valid, t_start, initial, z_, h_, w_)
     P, valid, t_start, initial = rows.pad((physics, valid, t_start, initial))
-    lanes = default_lanes(rows.m, lane_width(physics))
+    lanes = default_lanes(rows.m, physics.lane_width)
     cap = jnp.asarray(max_steps, jnp.int32)
     code = start_code(start)
     dt_ = jnp.asarray(dt, dtype)

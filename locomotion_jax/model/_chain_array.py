@@ -85,6 +85,10 @@ class ArrayChainPhysics(AbstractPhysics):
     def n_bodies(self) -> int:
         return self.m[0].shape[-1]
 
+    @property
+    def lane_width(self) -> int:
+        return self.n_bodies
+
     def bodies(self, x: Array) -> Scalars:
         return (x,)
 
@@ -286,9 +290,3 @@ def engine_physics(mechanism: Any, contact: str | None = None, start: int | None
     integrate a mechanism with ([`uses_array`][]): a chain's in the array layout, else the
     mechanism's own `physics()`."""
     return array_physics(mechanism) if uses_array(mechanism, contact, start) else mechanism.physics()
-
-
-def lane_width(physics: AbstractPhysics) -> int:
-    """Elements per configuration in the engine's kernels: the masses in the array layout, else 1
-    (`dynamics._runs.default_lanes`)."""
-    return physics.n_bodies if isinstance(physics, ArrayChainPhysics) else 1

@@ -82,6 +82,12 @@ class AbstractPhysics(eqx.Module):
     def n_bodies(self) -> int:
         return len(self.m)
 
+    @property
+    def lane_width(self) -> int:
+        """Elements per configuration in the engine's kernels (`dynamics._runs.default_lanes`): 1 for
+        one entry per body (this default); the array layout's entry holds all its bodies."""
+        return 1
+
     def bodies(self, x: Array) -> Scalars:
         """An array whose last axis runs over the bodies (or the springs) as the engines carry it:
         one entry per body (this default), or one entry holding them all (the array layout,
