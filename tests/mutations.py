@@ -787,6 +787,18 @@ MUTATIONS = [
         ("tests/test_zarr.py::test_a_chain_map_into_a_store_equals_memory_resumes_and_refuses_another_builder",),
     ),
     Mutation(
+        "guard_by_class",
+        "the resolution guard tests for the Exact class: a fixed-step dynamics of one's own runs unguarded",
+        "locomotion_jax/run/_resolution.py",
+        (
+            (
+                "    dt = dynamics.nominal_step()\n    if dt is None:",
+                "    dt = dynamics.dt if isinstance(dynamics, Exact) else None\n    if dt is None:",
+            ),
+        ),
+        ("tests/test_dynamics_extension.py::test_a_fixed_step_dynamics_of_ones_own_is_guarded_at_its_step",),
+    ),
+    Mutation(
         "chain_given_screen_ignored",
         "a chain's optimiser solves its screen again though an earlier one is given (sweep=)",
         "locomotion_jax/optimisation/_chain.py",

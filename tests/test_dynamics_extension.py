@@ -152,3 +152,14 @@ def test_smoothed_sweep_equals_measure():
     # adaptive steps follow their roundings (measured: 8e-9 relative on tau_z at omega = 6).
     for field in ("tau_z", "e_z", "stick_fraction1", "stick_fraction2"):
         _close(ds[field].values, getattr(alone, field), rtol=1e-6, atol=0)
+
+
+def test_a_fixed_step_dynamics_of_ones_own_is_guarded_at_its_step():
+    """The resolution guard asks the dynamics for its step (`nominal_step()`), not its class: the
+    half-step dynamics refuses one configuration whose forcing its step does not resolve, naming the
+    parameter, and flags it `UNRESOLVED` in a batch beside a resolved one, which runs."""
+    with pytest.raises(ValueError, match=r"Invalid parameter 'omega': Exact\(dt=0.005\) does not resolve"):
+        lj.measure(lj.Params(omega=1e4), z=0.3, horizon=5.0, dynamics=HalfStep())
+    m = lj.measure(lj.Params(omega=jnp.array([2.0, 1e4])), z=0.3, horizon=5.0, dynamics=HalfStep())
+    assert list(np.asarray(m.status)) == [lj.Status.OK, lj.Status.UNRESOLVED]
+    assert np.isnan(float(m.mean_speed[1])) and np.isfinite(float(m.mean_speed[0]))

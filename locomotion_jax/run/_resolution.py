@@ -29,9 +29,10 @@ frequency, `AbstractMechanism.start_scale`) may take at most `MAX_START_STEPS` s
 but very soft spring would otherwise set a start of ages. Such a configuration is refused
 naming `t_start` and the spring, or flagged `UNRESOLVED` in a batch; an explicit `t_start`
 is not limited.
-Only [`Exact`][locomotion_jax.Exact] dynamics are guarded: the smoothed dynamics choose
-their steps by error control (a scale they cannot resolve ends as `MAX_STEPS` or
-`SOLVER_FAILED`), and a dynamics of one's own states its own needs.
+Every dynamics with a fixed step is guarded, at its `nominal_step()` ([`Exact`][locomotion_jax.Exact]'s
+`dt`, and a dynamics of one's own that states one): the smoothed dynamics choose their steps by
+error control (`nominal_step()` is `None`; a scale they cannot resolve ends as `MAX_STEPS` or
+`SOLVER_FAILED`).
 """
 
 import math
@@ -114,18 +115,20 @@ def _round_down(x: float) -> float:
 
 
 def guard(dynamics: AbstractDynamics, scales_fn, valid: jax.Array, scalar: bool, concrete: bool):
-    """`None` where nothing needs flagging (no `Exact` dynamics, or every known configuration
-    resolved); else the mask of the configurations to flag. Raises for one known configuration."""
-    if not isinstance(dynamics, Exact):
+    """`None` where nothing needs flagging (a dynamics without a fixed step, whose
+    `nominal_step()` is `None`, or every known configuration resolved); else the mask of the
+    configurations to flag. Raises for one known configuration."""
+    dt = dynamics.nominal_step()
+    if dt is None:
         return None
     scales = scales_fn()
-    mask = unresolved(scales, dynamics.dt, valid)
+    mask = unresolved(scales, dt, valid)
     if not concrete:
         return mask
     if not np.asarray(mask).any():
         return None
     if scalar:
-        refuse(scales, dynamics.dt)
+        refuse(scales, dt)
     return mask
 
 
@@ -158,7 +161,7 @@ def guard_chain(dynamics: AbstractDynamics, flat: AbstractMechanism, valid: jax.
 def guard_values(values: Mapping[str, np.ndarray], dtype, dynamics: AbstractDynamics, default_start: bool = False):
     """A sweep chunk's host values with the unresolved configurations made invalid (NaN), and
     their mask (host) or `None` (the sweeps then set their status with `flag`)."""
-    if not isinstance(dynamics, Exact):
+    if dynamics.nominal_step() is None:
         return values, None
     with np.errstate(all="ignore"):
         flat = Params(**{n: jnp.asarray(v, dtype) for n, v in values.items()}, check=False)
