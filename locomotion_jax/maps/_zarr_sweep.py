@@ -147,8 +147,9 @@ def fill_store(
 
     def finish(index: int, out: Any, claim) -> None:
         try:
-            store.write(index, collect(blocks, index, out, size(index)))  # then marked done: an interruption
-        finally:  # before loses only this chunk
+            # Written, then marked done: an interruption before the mark loses only this chunk.
+            store.write(index, collect(blocks, index, out, size(index)))
+        finally:
             claim.release()
         bar.update(size(index))
 
