@@ -783,7 +783,7 @@ MUTATIONS = [
         "builder_store_digest_ignored",
         "a chain map's Zarr store does not record its builder: another builder's map is resumed into it",
         "locomotion_jax/maps/_builder_sweep.py",
-        (('            "mechanism": _digest(build, values, shape, mode, fixed),', '            "mechanism": {},'),),
+        (('"mechanism": _digest(build, values, shape, mode, fixed, first),', '"mechanism": {},'),),
         ("tests/test_zarr.py::test_a_chain_map_into_a_store_equals_memory_resumes_and_refuses_another_builder",),
     ),
     Mutation(

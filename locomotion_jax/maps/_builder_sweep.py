@@ -136,7 +136,7 @@ def sweep_chain(
             "axes": {n: v.tolist() for n, v in values.items()},
             "mode": mode,
             "fixed": {k: _plain(v) for k, v in fixed.items()},
-            "mechanism": _digest(build, values, shape, mode, fixed),
+            "mechanism": _digest(build, values, shape, mode, fixed, first),
             **{k: attrs[k] for k in ("dtype", "contact", "start", "z", "horizon", "window", "on_invalid")},
             "t_start": None if t_start is None else float(t_start),
             "dynamics": dynamics.spec(),
@@ -218,22 +218,20 @@ def _plain(value: Any) -> Any:
 
 
 def _digest(build: Callable[..., Any], values: dict[str, np.ndarray], shape: tuple[int, ...], mode: str,
-            fixed: dict[str, Any]) -> dict[str, Any]:  # fmt: skip
+            fixed: dict[str, Any], first: "Chain | Mechanism") -> dict[str, Any]:  # fmt: skip
     """What identifies the builder in a store's specification: the class, kind and laws of the
-    mechanisms it builds at the first and the last configuration, and the SHA-256 of their leaves
-    (dtypes, shapes and values), so that a store is resumed only by a builder that gives the same
-    mechanisms there."""
+    mechanisms it builds at the first configuration (`first`) and the last, and the SHA-256 of their
+    leaves (dtypes, shapes and values), so that a store is resumed only by a builder that gives the
+    same mechanisms there."""
     import jax
 
     digest = hashlib.sha256()
-    size = math.prod(shape)
-    for i in (0, size - 1):
-        m = _build(build, values, shape, mode, fixed, np.array([i]))
+    last = _build(build, values, shape, mode, fixed, np.array([math.prod(shape) - 1]))
+    for m in (first, last):
         digest.update(type(m).__name__.encode())
         for leaf in jax.tree_util.tree_leaves(m):
             a = np.asarray(leaf)
             digest.update(f"{a.dtype}{a.shape}".encode() + a.tobytes())
-    first = _build(build, values, shape, mode, fixed, np.zeros((1,), int))
     return {"class": type(first).__name__, **first.attributes(), "sha256": digest.hexdigest()}
 
 
@@ -249,11 +247,11 @@ def _to_zarr(path: Path, spec: dict[str, Any], attrs: dict[str, Any], values: di
     from ._zarr_sweep import fill_store
 
     size = math.prod(shape)
-    done: dict[int, Measurement] = {}  # the first chunk, run to learn the arrays, is not run again
+    ran: dict[int, Measurement] = {}  # the first chunk, run to learn the arrays, is not run again
 
     def compute(blocks: Blocks, index: int) -> Measurement:
-        if index in done:
-            return done.pop(index)
+        if index in ran:
+            return ran.pop(index)
         flat = blocks.configs(index)
         return measure_at(np.concatenate([flat, np.repeat(flat[-1:], blocks.max_size - flat.size)]))
 
@@ -264,10 +262,10 @@ def _to_zarr(path: Path, spec: dict[str, Any], attrs: dict[str, Any], values: di
         if path.exists() and not overwrite:
             return ZarrStore.open(path, spec)
         blocks = Blocks(shape, block_shape(shape, chunk))
-        done[0] = compute(blocks, 0)
+        ran[0] = compute(blocks, 0)
         trailing = lambda v: (("mass", v.shape[1]),) if v.ndim > 1 else ()
         variables = {k: (v.dtype, {"description": DESCRIPTIONS.get(k, k)}, trailing(v))
-                     for k, v in done[0].to_numpy().items()}  # fmt: skip
+                     for k, v in ran[0].to_numpy().items()}  # fmt: skip
         dims = tuple(values) if mode == "grid" else ("config",)
         coords = {n: (n if mode == "grid" else "config", v) for n, v in values.items()}
         return ZarrStore.create(path, spec, dims, shape, blocks.block, variables, coords, attrs, overwrite)
