@@ -21,7 +21,7 @@ def test_capsule_branch_in_its_spring_points_are_steady_gaits():
     """`continuation(capsule, "links[0].k", ...)` (two branches, two force amplitudes): every point
     is a steady gait, as `steady_gait` of the capsule at that stiffness, started on the point's state,
     finds it (state to 1e-9; speed, cost of transport, dissipation to 1e-8); the parameter moves
-    towards `stop`; the other spring constants are untouched."""
+    towards `stop`; an element that is not there is refused by its path."""
     mech = capsule(a=jnp.array([0.6, 0.9]))
     b = lj.continuation(mech, "links[0].k", 11.0, max_points=5, step=0.25, max_step=0.5)
     assert b.names == "bodies" and b.state.shape[-1] == 3 and b.stick_fraction.shape[-1] == 2

@@ -352,7 +352,9 @@ def register(app: typer.Typer) -> None:
                 raise ValueError("--t-start: a sweep of the paper's model starts each measurement at its own t_start.")
             ds = lj.sweep(axes, fixed=fixed, overwrite=overwrite, order=order, **how)
         else:
-            if out.exists() and not overwrite and out.suffix != ".zarr":
+            from ..maps._zarr_store import is_zarr
+
+            if out.exists() and not overwrite and not is_zarr(out):
                 raise ValueError(f"--out {out}: exists; a map of a chain or a mechanism file into a NetCDF file is not "
                                  "resumed (a Zarr store is): give --overwrite, or another path.")  # fmt: skip
             ds = lj.sweep(axes, fixed=fixed, mechanism=chain_build, t_start=t_start, overwrite=overwrite, **how)
