@@ -43,13 +43,15 @@ _TRAJECTORY_BODIES_KEYS = (
     "t", "x", "v", "stuck", "X", "e_d", "w", "e", "N", "l0", "tension", "valid", "status", "liftoff",
     "t_liftoff", "n_switch", "transversality", "near_miss", "switch_gap", "y", "vy", "n_land", "zeno",
 )  # fmt: skip
-_MEASUREMENT_KEYS = (
+MEASUREMENT_KEYS: tuple[str, ...] = (
     "tau_z", "e_z", "reached", "regime", "mean_speed", "cost_of_transport", "stick_fraction", "e_d", "work",
     "delta_e", "balance", "liftoff", "t_liftoff", "status", "t_start", "X_start", "n_steps", "n_switch",
     "transversality", "near_miss", "margin_z", "flight_fraction", "landings_per_period", "highest_hop", "zeno",
 )  # fmt: skip
+"""The keys of `Measurement.to_numpy()` of any mechanism but the paper's model, in order (the hopping
+ones only under `contact="hop"`): the array fields."""
 MEASUREMENT_PAPER_KEYS: tuple[str, ...] = tuple(
-    k for name in _MEASUREMENT_KEYS for k in ((name + "1", name + "2") if name == "stick_fraction" else (name,))
+    k for name in MEASUREMENT_KEYS for k in ((name + "1", name + "2") if name == "stick_fraction" else (name,))
 )
 """The keys of `Measurement.to_numpy()` for the paper's model, in order (the hopping ones only under
 `contact="hop"`): the fields, with `stick_fraction` as `stick_fraction1`, `stick_fraction2`."""
@@ -309,4 +311,4 @@ class Measurement(eqx.Module):
     def to_numpy(self) -> dict[str, np.ndarray]:
         """The array fields as numpy arrays (the hopping ones only under `contact="hop"`), with the
         stick fractions of the paper's model as `stick_fraction1`, `stick_fraction2`."""
-        return _arrays(self, MEASUREMENT_PAPER_KEYS if self.names == PAPER else _MEASUREMENT_KEYS)
+        return _arrays(self, MEASUREMENT_PAPER_KEYS if self.names == PAPER else MEASUREMENT_KEYS)

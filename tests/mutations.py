@@ -787,6 +787,25 @@ MUTATIONS = [
         ("tests/test_zarr.py::test_a_chain_map_into_a_store_equals_memory_resumes_and_refuses_another_builder",),
     ),
     Mutation(
+        "builder_map_in_run_order",
+        "a builder's map in cost order is returned in the order it ran, not put back in grid order",
+        "locomotion_jax/maps/_sweep.py",
+        (
+            (
+                "_in_grid_order(np.concatenate([results[i][k] for i in range(n_chunks)]), perm) for k",
+                "np.concatenate([results[i][k] for i in range(n_chunks)]) for k",
+            ),
+        ),
+        ("tests/test_sweep.py::test_a_mechanism_map_in_cost_order_equals_grid_order_and_its_pilot_predicts_the_cost",),
+    ),
+    Mutation(
+        "builder_pilot_without_start",
+        "the cost order's pilot of a builder's map counts no measurement start: short runs sort by speed alone",
+        "locomotion_jax/maps/_schedule.py",
+        (("    cost = iterations(pr, ts, z=z,", "    cost = iterations(pr, 0 * ts, z=z,"),),
+        ("tests/test_sweep.py::test_a_mechanism_map_in_cost_order_equals_grid_order_and_its_pilot_predicts_the_cost",),
+    ),
+    Mutation(
         "guard_by_class",
         "the resolution guard tests for the Exact class: a fixed-step dynamics of one's own runs unguarded",
         "locomotion_jax/run/_resolution.py",

@@ -24,6 +24,7 @@ import numpy as np
 import pytest
 import xarray as xr
 from locomotion_jax.maps import _schedule, _sharding, _store, _sweep
+from mechanism_cases import capsule
 
 
 FAST: dict[str, Any] = dict(z=0.3, horizon=30.0, window=5.0, dynamics=lj.Exact(dt=0.02), progress=False)
@@ -57,7 +58,16 @@ def two_devices(tmp_path_factory):
     path = tmp_path_factory.mktemp("two") / "two.nc"
     env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2", "JAX_PLATFORMS": "cpu"}
     proc = subprocess.Popen(
-        [sys.executable, "-c", HELPER, json.dumps(AXES), str(path)],
+        [
+            sys.executable,
+            "-c",
+            HELPER,
+            json.dumps(AXES),
+            str(path),
+            os.path.dirname(__file__),
+            json.dumps(CAPSULE_AXES),
+            json.dumps(CAPSULE_RUN),
+        ],  # fmt: skip
         env=env,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -306,12 +316,21 @@ HELPER = textwrap.dedent(
     jax.config.update("jax_enable_x64", True)
     import locomotion_jax as lj
     from locomotion_jax.maps import _sharding
-    axes, path = json.loads(sys.argv[1]), sys.argv[2]
+    axes, path, tests = json.loads(sys.argv[1]), sys.argv[2], sys.argv[3]
     lj.sweep(axes, chunk_size=4, path=path, z=0.3, horizon=30.0, window=5.0,
              dynamics=lj.Exact(dt=0.02), progress=False)
-    print(json.dumps({"devices": jax.device_count(), "traces": _sharding.TRACES["run_chunk"]}))
+    sys.path.insert(0, tests)
+    from mechanism_cases import capsule
+    lj.sweep(json.loads(sys.argv[4]), mechanism=lambda omega, F0: capsule(a=F0, w=omega), chunk_size=3,
+             path=path + ".capsule.nc", progress=False, **json.loads(sys.argv[5]))
+    print(json.dumps({"devices": jax.device_count(), "traces": _sharding.TRACES["run_chunk"],
+                      "mechanism_traces": _sharding.TRACES["run_mechanism_chunk"]}))
     """
 )
+
+CAPSULE_AXES = {"omega": [2.0, 3.0, 5.5], "F0": [0.5, 1.5]}
+CAPSULE_RUN: dict[str, Any] = dict(z=1.0, horizon=30.0, window=4 * math.pi, t_start=20.0)
+"""A map of the capsule robot (`mechanism_cases.capsule`) run on two forced devices and on one."""
 
 
 def test_two_forced_host_devices_equal_one(two_devices, reference):
@@ -319,10 +338,18 @@ def test_two_forced_host_devices_equal_one(two_devices, reference):
     stdout, stderr = proc.communicate(timeout=300)
     assert proc.returncode == 0, stderr
     info = json.loads(stdout.strip().splitlines()[-1])
-    assert info == {"devices": 2, "traces": 1}
+    assert info == {"devices": 2, "traces": 1, "mechanism_traces": 1}
     two = xr.load_dataset(path, engine="h5netcdf")
     assert two.attrs["n_devices"] == 2 and reference.attrs["n_devices"] == jax.device_count() == 1
     assert_same(two, reference)
+    # A builder's map: the same values on two devices as on one (chunks of 3 split 2 + 2, one padding lane).
+    two = xr.load_dataset(str(path) + ".capsule.nc", engine="h5netcdf")
+    one = lj.sweep(CAPSULE_AXES, mechanism=lambda omega, F0: capsule(a=F0, w=omega), chunk_size=3, progress=False,
+                   **CAPSULE_RUN)  # fmt: skip
+    assert two.attrs.pop("n_devices") == 2 and one.attrs.pop("n_devices") == 1
+    assert (np.asarray(one.status) == lj.Status.OK).all() and np.ptp(np.asarray(one.tau_z)) > 1
+    xr.testing.assert_allclose(two, one, rtol=1e-12, atol=1e-14)
+    np.testing.assert_array_equal(two.n_steps, one.n_steps)
 
 
 @pytest.mark.parametrize(
@@ -400,3 +427,68 @@ def test_sweep_flags_an_invalid_mechanism_and_runs_the_others():
         assert float(ds["e_d"][i, 0]) == float(alone.e_d[0])
     with pytest.raises(ValueError, match=r"grid index \(1, 0\) \(k=.*'k' of links\[0\] Spring\(0, 1\).*k > 0"):
         lj.sweep({"k": k, "omega": omega}, mechanism=build, progress=False, **settings)
+
+
+def test_a_mechanism_map_into_netcdf_resumes_and_refuses_another_builder(tmp_path, monkeypatch):
+    """A builder's map into a NetCDF file, interrupted after its first chunk: its parts directory holds
+    that chunk, a rerun computes only the others (one chunk program for both runs) and equals the map
+    in memory, a finished map is read back, and another builder or setting is refused, naming it."""
+    omega, F0 = np.array([2.0, 3.0, 5.5]), np.array([0.5, 1.5])
+    settings: dict[str, Any] = dict(z=1e6, horizon=4 * math.pi, window=4 * math.pi, t_start=20.0, progress=False)
+    path, traces, calls = tmp_path / "capsule.nc", _sharding.TRACES["run_mechanism_chunk"], []
+    real_save = _store.ChunkStore.save
+
+    def interrupted_save(self, index, arrays):
+        calls.append(index)
+        if len(calls) == 2:
+            raise KeyboardInterrupt("simulated interruption after the first chunk")
+        real_save(self, index, arrays)
+
+    run = lambda **kw: lj.sweep({"omega": omega, "F0": F0}, mechanism=kw.pop("build", capsules), chunk_size=2,
+                                **{**settings, **kw})  # fmt: skip
+    monkeypatch.setattr(_store.ChunkStore, "save", interrupted_save)
+    with pytest.raises(KeyboardInterrupt):
+        run(path=path)
+    monkeypatch.setattr(_store.ChunkStore, "save", real_save)
+    parts = tmp_path / "capsule.nc.parts"
+    assert sorted(p.name for p in parts.iterdir()) == ["chunk_000000.npz", "manifest.json"] and not path.exists()
+    before = dict(_sweep.STATS)
+    resumed = run(path=path)
+    assert _sweep.STATS["chunks_computed"] - before.get("chunks_computed", 0) == 2  # chunks 1 and 2 only
+    assert _sweep.STATS["chunks_loaded"] - before.get("chunks_loaded", 0) == 1
+    assert _sharding.TRACES["run_mechanism_chunk"] - traces <= 1  # none where another test compiled the bucket
+    assert path.exists() and not parts.exists()
+    memory = run()
+    xr.testing.assert_identical(resumed, memory)
+    assert resumed.stick_fraction.dims == ("omega", "F0", "mass") and resumed.attrs["order"] == "natural"
+    before = dict(_sweep.STATS)
+    xr.testing.assert_identical(run(path=path), memory)  # read back, not computed
+    with pytest.raises(ValueError, match=r"different specification:\n  mechanism\.sha256: stored "):
+        run(path=path, build=lambda omega, F0: capsules(omega, 1.01 * np.asarray(F0)))
+    with pytest.raises(ValueError, match="different specification(?s:.*)horizon"):
+        run(path=path, horizon=13.0)
+    assert dict(_sweep.STATS) == before
+    assert run(path=path, build=lambda omega, F0: capsules(omega, 1.01 * np.asarray(F0)), overwrite=True).attrs[
+        "order"] == "natural"  # fmt: skip
+
+
+def test_a_mechanism_map_in_cost_order_equals_grid_order_and_its_pilot_predicts_the_cost():
+    """`order="cost"` on a builder's map: one pilot run (`_schedule.mechanism_cost_order`), the same
+    map bit for bit as in grid order, and the pilot's order of the capsules follows their measured
+    integrator iterations (rank correlation > 0.8): it predicts what it sorts by."""
+    omega, F0 = np.array([1.5, 2.5, 4.0, 6.0, 9.0]), np.array([0.3, 1.0, 2.0])
+    kw: dict[str, Any] = dict(z=0.5, horizon=60.0, window=5.0, chunk_size=8, progress=False)  # each one's t_start
+    pilots = _sweep.STATS["pilots"]
+    cost = lj.sweep({"omega": omega, "F0": F0}, mechanism=capsules, order="cost", **kw)
+    natural = lj.sweep({"omega": omega, "F0": F0}, mechanism=capsules, order="natural", **kw)
+    assert _sweep.STATS["pilots"] - pilots == 1
+    assert (cost.attrs.pop("order"), natural.attrs.pop("order")) == ("cost", "natural")
+    xr.testing.assert_identical(cost, natural)
+    W, F = (q.ravel() for q in np.meshgrid(omega, F0, indexing="ij"))
+    perm = _schedule.mechanism_cost_order(lambda i: capsules(W[i], F[i]), W.size, 8, t_start=None, z=0.5,
+                                          horizon=60.0, window=5.0, dt=0.01)  # fmt: skip
+    steps = np.asarray(natural.n_steps, float).ravel()
+    assert np.ptp(steps) > 0.5 * steps.max() and list(perm) != list(range(W.size))
+    rank = np.empty(W.size)
+    rank[perm] = np.arange(W.size)
+    assert np.corrcoef(rank, np.argsort(np.argsort(steps, kind="stable")))[0, 1] > 0.8

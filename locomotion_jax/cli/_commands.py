@@ -288,7 +288,7 @@ def register(app: typer.Typer) -> None:
             Path,
             typer.Option(
                 help="Output: a NetCDF file (.nc), or a Zarr store (.zarr) that several processes can fill at "
-                "once (jax.distributed). Resumable (the paper's model's NetCDF too): rerun with the same path."
+                "once (jax.distributed). Either is resumable: rerun with the same path."
             ),
         ],  # fmt: skip
         mech: Values,
@@ -333,8 +333,8 @@ def register(app: typer.Typer) -> None:
         examples/capsule.toml --vary links.1.waveform.a=0.2:1:5 --vary bodies.0.mass=0.5,1 --out
         capsule.nc`; the dimensions are named by the paths). Each option is a range start:stop:count,
         a list v1,v2,... or one value; the dimensions follow the order of the options on the command
-        line. An interrupted sweep into a Zarr store (a NetCDF file too, for the paper's model) resumes
-        from its finished chunks when rerun with the same arguments; a finished one is read back.
+        line. An interrupted sweep (into a NetCDF file or a Zarr store) resumes from its finished
+        chunks when rerun with the same arguments; a finished one is read back.
         """
         import locomotion_jax as lj
 
@@ -352,12 +352,8 @@ def register(app: typer.Typer) -> None:
                 raise ValueError("--t-start: a sweep of the paper's model starts each measurement at its own t_start.")
             ds = lj.sweep(axes, fixed=fixed, overwrite=overwrite, order=order, **how)
         else:
-            from ..maps._zarr_store import is_zarr
-
-            if out.exists() and not overwrite and not is_zarr(out):
-                raise ValueError(f"--out {out}: exists; a map of a chain or a mechanism file into a NetCDF file is not "
-                                 "resumed (a Zarr store is): give --overwrite, or another path.")  # fmt: skip
-            ds = lj.sweep(axes, fixed=fixed, mechanism=chain_build, t_start=t_start, overwrite=overwrite, **how)
+            ds = lj.sweep(axes, fixed=fixed, mechanism=chain_build, t_start=t_start, overwrite=overwrite, order=order,
+                          **how)  # fmt: skip
         typer.echo(f"wrote {out}: " + " x ".join(f"{n}[{s}]" for n, s in ds.sizes.items() if n != "mass"))
         status = np.asarray(ds.status).ravel()
         regime = np.asarray(ds.regime).ravel()

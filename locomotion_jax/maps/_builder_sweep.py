@@ -3,25 +3,29 @@
 A chain has no fixed list of parameter names (its fields are per mass and per spring,
 its waveform and friction law are classes), so the sweep asks the user for a builder:
 a function from the swept values (1-D arrays, one entry per configuration) to a
-batched [`Chain`][] or [`Mechanism`][locomotion_jax.Mechanism] (SPEC §9). The configurations are
-cut into chunks of one shape, the last one padded with repeats of its last configuration, so one
-compilation serves the map; each chunk is measured by `measure` (the dynamics' N-mass engine). The
-map is kept in memory, written to NetCDF when done, or written into a Zarr store chunk by chunk
-([`_to_zarr`][]: blocks of the grid, resumable, shared by processes as a map of the paper's model).
-"""
+batched [`Chain`][] or [`Mechanism`][locomotion_jax.Mechanism] (SPEC §9). The map then runs as a
+map of the paper's model does, on the same loops (`_sweep.run_chunks`, `_zarr_sweep.fill_store`):
+chunks of one shape (the padding run as invalid configurations, which cost no steps), so one
+compilation serves the map; each chunk split over every device JAX sees
+(`_sharding.dispatch_mechanism_chunk`); optionally sorted by a pilot run's expected cost
+(`_schedule.mechanism_cost_order`); kept in memory, written to NetCDF through a parts directory
+(resumable), or into a Zarr store chunk by chunk ([`_to_zarr`][]: blocks of the grid, resumable,
+shared by processes)."""
 
 import hashlib
+import json
 import math
-import tempfile
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .._results import Measurement
+from .._results import MEASUREMENT_KEYS
+from ..dynamics._exact_dynamics import Exact
 from ..model._bodies import Mechanism
 from ..model._chain import Chain
+from ._schedule import mechanism_cost_order
 from ._zarr_store import is_zarr
 
 
@@ -75,6 +79,7 @@ def sweep_chain(
     progress: bool,
     on_invalid: str,
     overwrite: bool = False,
+    order: str = "auto",
 ):
     """The chain sweep behind `sweep(axes, mechanism=build)`; arguments as there.
 
@@ -84,9 +89,9 @@ def sweep_chain(
     Zarr `path`, the store, filled chunk by chunk ([`_to_zarr`][]) and read lazily.
     """
     import xarray as xr
-    from tqdm.auto import tqdm
 
-    from ..run._measure import measure
+    from . import _sharding as sharding
+    from ._sweep import _loops_per_device, plan_chunks, resolve_order, run_chunks, STATS
 
     values, shape = _axes(axes, mode)
     fixed = dict(fixed or {})
@@ -94,85 +99,101 @@ def sweep_chain(
         path = Path(path).expanduser()
         if not is_zarr(path) and path.suffix != ".nc":
             raise ValueError(
-                f"path for a chain sweep must be a NetCDF file (.nc), written when the map is done, or a Zarr store "
-                f"(.zarr), written chunk by chunk; got {str(path)!r}."
+                f"path for a chain sweep must be a NetCDF file (.nc), resumable through its parts directory, or a "
+                f"Zarr store (.zarr), written chunk by chunk; got {str(path)!r}."
             )
-        if not is_zarr(path):
-            _check_writable(path)  # before the work, not when the map is done
     size = math.prod(shape)
-    chunk = min(int(chunk_size), size)
-    n_chunks = -(-size // chunk)
-
-    def chunk_chain(i: int) -> "tuple[Chain | Mechanism, int]":
-        flat = np.arange(i * chunk, (i + 1) * chunk)
-        n = int(min(chunk, size - i * chunk))
-        chain = _build(build, values, shape, mode, fixed, np.minimum(flat, size - 1))
-        return chain, n
+    at = lambda flat: _build(build, values, shape, mode, fixed, flat)  # the mechanisms of flat grid indices
 
     if on_invalid == "raise":  # before any computation: every configuration is checked
-        for i in range(n_chunks):
-            chain, n = chunk_chain(i)
-            bad = np.flatnonzero(~np.asarray(chain.is_valid())[:n])
+        check = min(int(chunk_size), size)
+        for lo in range(0, size, check):
+            chain = at(np.minimum(np.arange(lo, lo + check), size - 1))
+            bad = np.flatnonzero(~np.asarray(chain.is_valid())[: size - lo])
             if bad.size:
                 j = int(bad[0])
-                where = np.unravel_index(i * chunk + j, shape) if mode == "grid" else (i * chunk + j,)
-                at = ", ".join(f"{name}={float(values[name][k])!r}" for name, k in zip(values, where))
+                where = np.unravel_index(lo + j, shape) if mode == "grid" else (lo + j,)
+                named = ", ".join(f"{name}={float(values[name][k])!r}" for name, k in zip(values, where))
                 try:
                     chain[j].validate()
                 except ValueError as e:
                     index = tuple(map(int, where))
-                    raise ValueError(f"Invalid configuration at grid index {index} ({at}): {e}") from None
+                    raise ValueError(f"Invalid configuration at grid index {index} ({named}): {e}") from None
 
-    def run(chain: "Chain | Mechanism") -> Measurement:
-        return measure(chain, float(z), horizon=float(horizon), window=float(window), t_start=t_start,
-                       dynamics=dynamics, contact=contact, start=start, dtype=dtype)  # fmt: skip
-
-    first = _build(build, values, shape, mode, fixed, np.zeros((1,), int))
+    first = at(np.zeros((1,), int))
+    dt = np.dtype(first.astype(dtype).dtype if dtype is not None else first.dtype)
     attrs = _attrs(first, values, mode, fixed, dtype, z, horizon, window, t_start, dynamics, contact, start, on_invalid)
+    spec = {
+        "spec_version": 1,
+        "sweep": "mechanism",
+        "axes": {n: v.tolist() for n, v in values.items()},
+        "mode": mode,
+        "fixed": {k: _plain(v) for k, v in fixed.items()},
+        "mechanism": _digest(build, values, shape, mode, fixed, first),
+        **{k: attrs[k] for k in ("dtype", "contact", "start", "z", "horizon", "window", "on_invalid")},
+        "t_start": None if t_start is None else float(t_start),
+        "dynamics": dynamics.spec(),
+    }
+    settings = (dt, z, horizon, window, t_start, dynamics, contact, start)
     if path is not None and is_zarr(path):
-        spec = {
-            "spec_version": 1,
-            "sweep": "mechanism",
-            "axes": {n: v.tolist() for n, v in values.items()},
-            "mode": mode,
-            "fixed": {k: _plain(v) for k, v in fixed.items()},
-            "mechanism": _digest(build, values, shape, mode, fixed, first),
-            **{k: attrs[k] for k in ("dtype", "contact", "start", "z", "horizon", "window", "on_invalid")},
-            "t_start": None if t_start is None else float(t_start),
-            "dynamics": dynamics.spec(),
-        }
-        return _to_zarr(path, spec, attrs, values, shape, mode, chunk, overwrite, progress,
-                        lambda flat: run(_build(build, values, shape, mode, fixed, flat)))  # fmt: skip
+        if order == "cost":
+            raise ValueError(
+                "order='cost' is for NetCDF output or path=None: a Zarr store's chunks are blocks of the grid, "
+                "computed in grid order. Use order='natural' or 'auto'."
+            )
+        mesh = sharding.batch_mesh(local=True)  # each process computes whole chunks on its own devices
+        ndev = sharding.device_count(mesh)
 
-    parts: list[dict[str, np.ndarray]] = []
-    bar = tqdm(total=size, unit="config", unit_scale=True, desc="sweep", disable=not progress)
-    bar.set_postfix_str("compiling (first call only)...")  # shown from the first second
-    try:
-        for i in range(n_chunks):
-            chain, n = chunk_chain(i)
-            m = run(chain)
-            parts.append({k: v[:n] for k, v in m.to_numpy().items()})
-            bar.update(n)
-            bar.set_postfix_str("")
-    finally:
-        bar.close()
+        def run_block(flat: np.ndarray) -> dict[str, Any]:
+            n = sharding.padded_size(flat.size, ndev, dt)
+            live = np.arange(n) < flat.size
+            return sharding.dispatch_mechanism_chunk(at(flat[np.minimum(np.arange(n), flat.size - 1)]), live,
+                                                     *settings, mesh)  # fmt: skip
 
+        return _to_zarr(path, spec, attrs, values, shape, mode, chunk_size, overwrite, progress, run_block)
+
+    mesh = sharding.batch_mesh()
+    ndev = sharding.device_count(mesh)
+    chunk = -(-min(int(chunk_size), size) // ndev) * ndev
+    padded = sharding.padded_size(chunk, ndev, dt)
+    loops = _loops_per_device(-(-size // chunk), padded // ndev, sharding.MICRO_BATCH)
+    order = resolve_order(order, dynamics, horizon, window, size, loops)
+    step = dynamics.nominal_step()
+
+    def cost_order() -> np.ndarray:  # called only for a new sweep
+        STATS["pilots"] += 1
+        return mechanism_cost_order(at, size, chunk, t_start=t_start, z=z, horizon=horizon, window=window,
+                                    dt=Exact().dt if step is None else step, contact=contact, start=start,
+                                    dtype=dtype)  # fmt: skip
+
+    permutation = cost_order if order == "cost" else None
+
+    finished, store, chunk, order, perm = plan_chunks(path, spec, chunk, size, overwrite, order, permutation)
+    if finished is not None:
+        return finished
+
+    def dispatch(i: int) -> dict[str, Any]:
+        flat = np.arange(i * chunk, i * chunk + padded)
+        live = flat < min((i + 1) * chunk, size)  # the rest: padding, run as invalid and dropped
+        return sharding.dispatch_mechanism_chunk(at(perm[np.minimum(flat, size - 1)]), live, *settings, mesh)
+
+    flat = _measured(run_chunks(size, chunk, perm, store, dispatch, progress))
     dims = tuple(values) if mode == "grid" else ("config",)
     coords = {n: (n if mode == "grid" else "config", v) for n, v in values.items()}
     data = {}
-    for name in Measurement.__dataclass_fields__:
-        if name in ("z", "start", "contact", "names") or name not in parts[0]:  # the hopping fields outside "hop"
-            continue
-        arr = np.concatenate([p[name] for p in parts])
+    for name, arr in flat.items():
         extra = arr.shape[1:]
         data[name] = (dims + ("mass",) * len(extra), arr.reshape(shape + extra))
-    ds = xr.Dataset(data, coords=coords, attrs=attrs)
-    if path is not None:
-        try:
-            ds.to_netcdf(path, engine="h5netcdf")
-        except OSError as err:
-            raise ValueError(f"Cannot write the sweep output at {path}: {err.strerror or err}.") from None
+    ds = xr.Dataset(data, coords=coords, attrs=attrs | {"order": order, "n_devices": ndev,
+                                                         "sweep_spec": json.dumps(spec)})  # fmt: skip
+    if store is not None:
+        store.finalize(ds)
     return ds
+
+
+def _measured(out: dict[str, Any]) -> dict[str, np.ndarray]:
+    """A chunk's outputs (or a map's) as `Measurement.to_numpy` names and orders them."""
+    return {k: np.asarray(out[k]) for k in MEASUREMENT_KEYS if k in out}
 
 
 def _attrs(first: "Chain | Mechanism", values: dict[str, np.ndarray], mode: str, fixed: dict[str, Any], dtype: Any,
@@ -237,47 +258,41 @@ def _digest(build: Callable[..., Any], values: dict[str, np.ndarray], shape: tup
 
 def _to_zarr(path: Path, spec: dict[str, Any], attrs: dict[str, Any], values: dict[str, np.ndarray],
              shape: tuple[int, ...], mode: str, chunk: int, overwrite: bool, progress: bool,
-             measure_at: Callable[[np.ndarray], Measurement]):  # fmt: skip
+             run_block: Callable[[np.ndarray], dict[str, Any]]):  # fmt: skip
     """The map into a Zarr store (`_zarr_sweep.fill_store`: resumable, several processes at once):
-    each chunk a block of the grid, its configurations (the flat grid indices `blocks.configs`,
-    padded with repeats of the last to the block's size: one compiled program) measured by
-    `measure_at(indices)`; the store's arrays and their dtypes are those of the first chunk's results."""
+    each chunk a block of the grid, its configurations (the flat grid indices `blocks.configs`)
+    started by `run_block(indices)` (`_sharding.dispatch_mechanism_chunk`'s outputs; every block
+    padded to one size: one compiled program); the store's arrays and their dtypes are those of the
+    first chunk's results."""
+    from . import _sharding as sharding
     from ._dataset import DESCRIPTIONS
     from ._zarr_store import block_shape, Blocks, ZarrStore
     from ._zarr_sweep import fill_store
 
     size = math.prod(shape)
-    ran: dict[int, Measurement] = {}  # the first chunk, run to learn the arrays, is not run again
+    ran: dict[int, dict[str, np.ndarray]] = {}  # the first chunk, run to learn the arrays, is not run again
 
-    def compute(blocks: Blocks, index: int) -> Measurement:
+    def compute(blocks: Blocks, index: int) -> Callable[[int], dict[str, np.ndarray]]:
+        """Chunk `index` started; its results (`n` configurations) when called."""
         if index in ran:
-            return ran.pop(index)
+            arrays = ran.pop(index)
+            return lambda n: {k: v[:n] for k, v in arrays.items()}
         flat = blocks.configs(index)
-        return measure_at(np.concatenate([flat, np.repeat(flat[-1:], blocks.max_size - flat.size)]))
+        out = run_block(np.concatenate([flat, np.repeat(flat[-1:], blocks.max_size - flat.size)]))
+        return lambda n: _measured(sharding.fetch(out, n))
 
-    def collect(blocks: Blocks, index: int, m: Measurement, n: int) -> dict[str, np.ndarray]:
-        return {k: v[:n] for k, v in m.to_numpy().items()}
+    def collect(blocks: Blocks, index: int, results: Callable[[int], dict[str, np.ndarray]], n: int):
+        return results(n)
 
     def create() -> ZarrStore:
         if path.exists() and not overwrite:
             return ZarrStore.open(path, spec)
         blocks = Blocks(shape, block_shape(shape, chunk))
-        ran[0] = compute(blocks, 0)
+        first = ran[0] = compute(blocks, 0)(blocks.max_size)
         trailing = lambda v: (("mass", v.shape[1]),) if v.ndim > 1 else ()
-        variables = {k: (v.dtype, {"description": DESCRIPTIONS.get(k, k)}, trailing(v))
-                     for k, v in ran[0].to_numpy().items()}  # fmt: skip
+        variables = {k: (v.dtype, {"description": DESCRIPTIONS.get(k, k)}, trailing(v)) for k, v in first.items()}
         dims = tuple(values) if mode == "grid" else ("config",)
         coords = {n: (n if mode == "grid" else "config", v) for n, v in values.items()}
         return ZarrStore.create(path, spec, dims, shape, blocks.block, variables, coords, attrs, overwrite)
 
     return fill_store(path, spec, create, size, compute, collect, progress)
-
-
-def _check_writable(path: Path) -> None:
-    """Create `path`'s folder and a file in it, or raise `ValueError` naming the path and the reason."""
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=path.parent, prefix=f".{path.name}.", suffix=".probe"):
-            pass
-    except OSError as err:
-        raise ValueError(f"Cannot write the sweep output at {path}: {err.strerror or err}.") from None

@@ -17,7 +17,7 @@ and on an omega x a map.
 """
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -119,6 +119,14 @@ def expected_cost(
         m1, m2 = 2 * mhat, 2 * (1 - mhat)
         wmin = np.minimum(np.sqrt(k * (m1 + m2) / (m1 * m2)), np.minimum(np.sqrt(k / m1), np.sqrt(k / m2)))
         t_start = 80 * 2 * math.pi / wmin
+    return iterations(pr, t_start, z=z, horizon=horizon, window=window, dt=dt, contact=contact)
+
+
+def iterations(pr: Mapping[str, np.ndarray], t_start: np.ndarray, *, z: float, horizon: float, window: float,
+               dt: float, contact: str) -> np.ndarray:  # fmt: skip
+    """[`expected_cost`][] of any mechanism from its pilot's results `pr` (as [`pilot`][]'s) and
+    each configuration's measurement start `t_start`."""
+    with np.errstate(all="ignore"):
         tau = np.where(pr["speed"] > 0, z / pr["speed"], np.inf)
     t_end = t_start + np.clip(np.maximum(tau, window), 0, horizon)
     if contact == "strict":
@@ -134,3 +142,34 @@ def cost_order(values: Mapping[str, Any], **kwargs) -> np.ndarray:
     this order, then scatter the results back with `out[order] = chunk_results`.
     """
     return np.argsort(expected_cost(values, **kwargs), kind="stable")
+
+
+def mechanism_cost_order(build: Callable[[np.ndarray], Any], size: int, chunk: int, *, t_start: float | None,
+                         z: float, horizon: float, window: float, dt: float, contact: str = "strict",
+                         start: str = "paper", dtype: Any = None, t_pilot: float = PILOT_T,
+                         pilot_dt: float = PILOT_DT) -> np.ndarray:  # fmt: skip
+    """[`cost_order`][] of a map over a builder's mechanisms: `build(indices)` is the
+    [`Chain`][locomotion_jax.Chain] or [`Mechanism`][locomotion_jax.Mechanism] of the configurations
+    `indices` (flat, `size` in all), run by the pilot `chunk` at a time (every call of one shape,
+    the last padded by repeating its last configuration: one compilation). The pilot is
+    [`pilot`][]'s: the exact engine at the step `pilot_dt` to `t_pilot`, its mean speed over the
+    second half; `t_start` is the measurement's start (`None`: each mechanism's own)."""
+    from ..run._simulate import simulate
+
+    speed, rate, t_lift = np.zeros(size), np.zeros(size), np.full(size, np.inf)
+    ok, ts = np.zeros(size, bool), np.zeros(size)
+    for lo in range(0, size, chunk):
+        m = min(chunk, size - lo)
+        mech = build(np.minimum(np.arange(lo, lo + chunk), size - 1))
+        tr = simulate(mech, t_pilot, save_at=np.asarray([0.5 * t_pilot, t_pilot]), dynamics=Exact(dt=pilot_dt),
+                      contact=contact, start=start, dtype=dtype)  # fmt: skip
+        X = np.asarray(tr.X, np.float64)[:m]
+        speed[lo : lo + m] = np.abs(X[:, 1] - X[:, 0]) / (0.5 * t_pilot)
+        rate[lo : lo + m] = np.asarray(tr.n_switch)[:m] / t_pilot
+        t_lift[lo : lo + m] = np.asarray(tr.t_liftoff, np.float64)[:m]
+        ok[lo : lo + m] = np.asarray(tr.status)[:m] != int(Status.INVALID)
+        ts[lo : lo + m] = np.broadcast_to(np.asarray(mech.t_start if t_start is None else t_start, np.float64),
+                                          (chunk,))[:m]  # fmt: skip
+    pr = dict(speed=np.where(ok, speed, 0.0), switch_rate=rate, t_liftoff=t_lift, valid=ok)
+    cost = iterations(pr, ts, z=z, horizon=horizon, window=window, dt=dt, contact=contact)
+    return np.argsort(cost, kind="stable")

@@ -12,8 +12,10 @@ rejects the per-device types); it runs under `jit` on the sharded batch, which X
 partitions automatically (same results; devices wait for each other).
 """
 
+import dataclasses
 from collections import Counter
 from collections.abc import Mapping
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -22,6 +24,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 
 from ..dynamics._base import AbstractDynamics
 from ..dynamics._compile import engine_jit
+from ..dynamics._flat import FlatBatch
 from ..dynamics._runs import batch_rows
 from ..model._params import PARAM_NAMES, Params
 from ..run._resolution import flag, guard_values
@@ -34,7 +37,8 @@ UNRESOLVED_KEY = "_unresolved"
 """The host mask of a chunk's unresolved configurations, carried from `dispatch_chunk` to `fetch`."""
 
 TRACES: Counter = Counter()
-"""Python-level traces of the chunk function, by key `"run_chunk"`.
+"""Python-level traces of the chunk functions, by key: `"run_chunk"` (the paper's model),
+`"run_mechanism_chunk"` (a builder's mechanisms).
 
 The body of a jitted function runs in Python only when JAX traces (and so
 compiles) it; tests read this counter to check that all chunks of a sweep share
@@ -148,6 +152,70 @@ def dispatch_chunk(
     return out if unresolved is None else {**out, UNRESOLVED_KEY: jnp.asarray(unresolved)}
 
 
+def dispatch_mechanism_chunk(
+    mechanism: Any,
+    live: np.ndarray,
+    dtype: np.dtype,
+    z: float,
+    horizon: float,
+    window: float,
+    t_start: float | None,
+    dynamics: AbstractDynamics,
+    contact: str,
+    start: str,
+    mesh: Mesh,
+    micro_batch: int | None = None,
+) -> dict[str, jax.Array]:
+    """[`dispatch_chunk`][] for a map over a builder's mechanisms (`sweep(axes, mechanism=build)`):
+    start the computation of one chunk (asynchronously) and return its device outputs.
+
+    **Arguments:**
+
+    - `mechanism`: the chunk, a [`Chain`][locomotion_jax.Chain] or
+      [`Mechanism`][locomotion_jax.Mechanism] of batch shape `(n,)`, `n` a multiple of the mesh size.
+    - `live`: host mask of shape `(n,)`, `False` for padding: run as an invalid configuration
+      (not integrated, flagged `Status.INVALID`; [`fetch`][] drops it).
+    - `t_start`: the measurement's start for every configuration, or `None` for each one's own
+      (`Chain.t_start`, `Mechanism.t_start`, computed here on the host: a batched eigensolver
+      inside the chunk's program can deadlock XLA's CPU thread pool).
+    - the rest as in [`dispatch_chunk`][].
+
+    The mechanism flattens itself as for `measure` (`AbstractMechanism.flat_batch`: checks, the
+    resolution guard, whose unresolved configurations [`fetch`][] flags `Status.UNRESOLVED`), and
+    each device runs its own shard (`AbstractDynamics.measure_chunk`).
+
+    **Returns:** a dict of sharded arrays, one per array field of a `Measurement` (per-body fields
+    with a trailing body axis); read them with [`fetch`][].
+    """
+    batch, unresolved, _ = mechanism.flat_batch(dynamics, dtype=dtype, t_start=t_start, measuring=True,
+                                                contact=contact, start=start)  # fmt: skip
+    ts = batch.mechanism.t_start if batch.t_start is None else batch.t_start
+    batch = dataclasses.replace(batch, valid=batch.valid & jnp.asarray(live), t_start=jnp.asarray(ts, batch.dtype))
+    sharding = NamedSharding(mesh, P(BATCH_AXIS))
+    batch = jax.tree_util.tree_map(lambda x: _global_array(np.asarray(x), sharding), batch)
+    zhw, dyn, cap = _settings(dtype, z, horizon, window, dynamics)
+    out = _run_mechanism_chunk(batch, zhw, dyn, contact, start, cap, mesh, micro_batch or MICRO_BATCH or None)
+    return out if unresolved is None else {**out, UNRESOLVED_KEY: jnp.asarray(unresolved)}
+
+
+def _run_mechanism_chunk(
+    batch: FlatBatch,
+    zhw: jax.Array,
+    dynamics: AbstractDynamics,
+    contact: str,
+    start: str,
+    max_steps: jax.Array,
+    mesh: Mesh,
+    micro_batch: int | None,
+) -> dict[str, jax.Array]:
+    # Runs only while tracing: counts compilations, not calls.
+    TRACES["run_mechanism_chunk"] += 1
+    return dynamics.measure_chunk(batch, zhw, contact, start, max_steps, mesh, micro_batch)
+
+
+_run_mechanism_chunk = engine_jit(_run_mechanism_chunk, ("contact", "start", "mesh", "micro_batch"))
+
+
 def chunk_dtypes(
     values: Mapping[str, np.ndarray],
     dtype: np.dtype,
@@ -172,11 +240,17 @@ def _chunk_args(values, dtype, z, horizon, window, dynamics, contact, start, mes
     sharding = NamedSharding(mesh, P(BATCH_AXIS))
     fields = {n: _global_array(np.asarray(values[n], dtype), sharding) for n in PARAM_NAMES}
     flat = Params(**fields, check=False)
+    zhw, dynamics, cap = _settings(dtype, z, horizon, window, dynamics)
+    return flat, zhw, dynamics, contact, start, cap, mesh, micro_batch or MICRO_BATCH or None
+
+
+def _settings(dtype, z, horizon, window, dynamics) -> tuple[jax.Array, AbstractDynamics, jax.Array]:
+    """A chunk program's `(z, horizon, window)` array, dynamics and loop cap."""
     zhw = jnp.asarray(np.asarray([z, horizon, window], dtype))
     # Its array settings (`Smoothed.eps`) in the chunk's dtype, its loop cap as data: sweeps of any cap share a program.
     dynamics, max_steps = dynamics.astype(dtype).chunk_program()
     cap = jnp.asarray(min(int(max_steps), np.iinfo(np.int32).max), jnp.int32)
-    return flat, zhw, dynamics, contact, start, cap, mesh, micro_batch or MICRO_BATCH or None
+    return zhw, dynamics, cap
 
 
 def fetch(out: Mapping[str, jax.Array], n: int) -> dict[str, np.ndarray]:

@@ -48,15 +48,20 @@ def canonical(spec: Mapping[str, Any]) -> str:
     return json.dumps(spec, sort_keys=True, separators=(",", ":"))
 
 
-def spec_difference(stored: Mapping[str, Any], requested: Mapping[str, Any]) -> str:
-    """Human-readable list of the top-level entries that differ."""
+def spec_difference(stored: Mapping[str, Any], requested: Mapping[str, Any], prefix: str = "") -> str:
+    """Human-readable list of the entries that differ, by their path (`mechanism.sha256`): entries
+    that are mappings on both sides are compared entry by entry."""
     lines = []
     for key in sorted(set(stored) | set(requested)):
         a, b = stored.get(key, "<missing>"), requested.get(key, "<missing>")
-        if canonical({"v": a}) != canonical({"v": b}):
-            sa, sb = canonical({"v": a})[5:-1], canonical({"v": b})[5:-1]
-            short = lambda s: s if len(s) <= 120 else s[:117] + "..."
-            lines.append(f"  {key}: stored {short(sa)}, requested {short(sb)}")
+        if canonical({"v": a}) == canonical({"v": b}):
+            continue
+        if isinstance(a, Mapping) and isinstance(b, Mapping):
+            lines.append(spec_difference(a, b, f"{prefix}{key}."))
+            continue
+        sa, sb = canonical({"v": a})[5:-1], canonical({"v": b})[5:-1]
+        short = lambda s: s if len(s) <= 120 else s[:117] + "..."
+        lines.append(f"  {prefix}{key}: stored {short(sa)}, requested {short(sb)}")
     return "\n".join(lines)
 
 

@@ -232,12 +232,12 @@ def sweep(
       function from the swept values (keyword arguments named as the axes, plus
       `fixed`, each a 1-D array with one entry per configuration) to a batched
       [`Chain`][] or [`Mechanism`][locomotion_jax.Mechanism] of that batch shape (build it with `check=False` and let
-      `on_invalid` decide). The axes' names are then free. Chain maps run chunk by
-      chunk on the dynamics' N-mass engine (`AbstractDynamics.measure`), in grid order: in
-      memory, written to a NetCDF `path` when done, or into a Zarr store chunk by chunk (resumable,
-      several processes at once, as the paper's model's; the store records the sweep and a digest
-      of the mechanisms built at its first and last configurations, so a rerun with another
-      builder is refused).
+      `on_invalid` decide). The axes' names are then free. The map runs as the paper's
+      model's does (chunks split over the devices, `order`, NetCDF resumable through its parts,
+      Zarr from several processes), each chunk on the dynamics' N-body engine
+      (`AbstractDynamics.measure_chunk`); the cost order's pilot runs the built mechanisms. The
+      specification records a digest of the mechanisms built at the first and the last
+      configurations, so a rerun with another builder is refused.
     - `t_start`: an explicit measurement start for every configuration (chains only;
       default `Chain.t_start`).
 
@@ -330,17 +330,49 @@ def sweep(
     permutation = None
     if order == "cost":  # called only when needed: not for a finished or resumed sweep
         permutation = functools.partial(_cost_permutation, grid, z, horizon, window, dynamics, contact, start, dt)
+    finished, store, chunk, order, perm = plan_chunks(path, spec, chunk, grid.size, overwrite, order, permutation)
+    if finished is not None:
+        return finished
+    padded = sharding.padded_size(chunk, ndev, dt)
+    max_steps = _max_steps(grid, dynamics, horizon)
+
+    def dispatch(i: int) -> dict[str, jax.Array]:
+        flat = np.arange(i * chunk, i * chunk + padded)
+        vals = grid.config_values(perm[np.minimum(flat, grid.size - 1)])
+        pad = flat >= min((i + 1) * chunk, grid.size)
+        # NaN padding is invalid: flagged, skipped by the integrator, and dropped.
+        vals = {n: np.where(pad, np.nan, v) for n, v in vals.items()}
+        return sharding.dispatch_chunk(vals, dt, z, horizon, window, dynamics, contact, start, mesh)
+
+    results = run_chunks(grid.size, chunk, perm, store, dispatch, progress)
+    flat_res = {k: results[k] for k in dataset_fields(contact)}
+    if RATIO in grid.values or RATIO in grid.fixed:
+        flat_res["omega"] = grid.config_values(np.arange(grid.size))["omega"]
+    ds = to_dataset(grid, flat_res, sweep_attrs(grid, spec, dynamics, max_steps, ndev, order))
+    if store is not None:
+        store.finalize(ds)
+    return ds
+
+
+def plan_chunks(path: str | os.PathLike | None, spec: dict[str, Any], chunk: int, size: int, overwrite: bool,
+                order: ChunkOrder, permutation: Callable[[], np.ndarray] | None) -> tuple:  # fmt: skip
+    """`(finished, store, chunk, order, perm)` of a sweep into NetCDF (`path`) or memory (`None`):
+    the finished dataset at `path` if it holds this sweep (`spec`), else the store of its parts
+    (`_store.ChunkStore`, `None` in memory), the chunk size and order it runs with (a resumed sweep
+    keeps those it was started with) and the permutation of the configurations it runs in
+    (`permutation()`, called only for a new sweep; `None`: grid order). Any mechanism's map plans
+    its chunks this way."""
     store = None
     if path is not None:
         path = Path(path).expanduser()
         finished = read_finished(path, spec, overwrite)
         if finished is not None:
-            return finished
+            return finished, None, chunk, order, None
         store = ChunkStore(
             path,
             spec,
             chunk,
-            grid.size,
+            size,
             overwrite,
             write=jax.process_index() == 0,
             order=order,
@@ -351,20 +383,29 @@ def sweep(
     else:
         perm = None if permutation is None else permutation()
     # perm[j] is the j-th configuration run; all processes must cut the same chunks.
-    perm = np.arange(grid.size) if perm is None else sharding.from_process0(perm)
-    padded = sharding.padded_size(chunk, ndev, dt)
-    n_chunks = -(-grid.size // chunk)
-    max_steps = _max_steps(grid, dynamics, horizon)
-    done = sharding.agree(store.completed() if store is not None else set(), n_chunks)
+    perm = np.arange(size) if perm is None else sharding.from_process0(perm)
+    return None, store, chunk, order, perm
 
-    results: dict[int, dict[str, np.ndarray]] = {}
-    todo = [i for i in range(n_chunks) if i not in done]
-    n_done = sum(min(chunk, grid.size - i * chunk) for i in done)
+
+def run_chunks(size: int, chunk: int, perm: np.ndarray, store: ChunkStore | None,
+               dispatch: Callable[[int], dict[str, jax.Array]], progress: bool) -> dict[str, np.ndarray]:  # fmt: skip
+    """Every chunk of a sweep of `size` configurations cut `chunk` at a time in the order `perm`
+    (`perm[j]` is the j-th configuration run), computed by `dispatch(i)` (chunk `i`'s device outputs,
+    asynchronously; read by `_sharding.fetch`) unless `store` holds it, each saved to `store` the
+    moment it is done. Any mechanism's map runs this loop (NetCDF or in memory; a Zarr store has its
+    own, `_zarr_sweep.fill_store`).
+
+    **Returns:** each output as one host array over the configurations, in grid order.
+    """
     from tqdm.auto import tqdm
 
+    n_chunks = -(-size // chunk)
+    done = sharding.agree(store.completed() if store is not None else set(), n_chunks)
+    results: dict[int, dict[str, np.ndarray]] = {}
+    todo = [i for i in range(n_chunks) if i not in done]
     bar = tqdm(
-        total=grid.size,
-        initial=n_done,
+        total=size,
+        initial=sum(min(chunk, size - i * chunk) for i in done),
         unit="config",
         unit_scale=True,
         desc="sweep",
@@ -373,7 +414,7 @@ def sweep(
     )
 
     def finish(i: int, out: dict) -> None:
-        n = min(chunk, grid.size - i * chunk)
+        n = min(chunk, size - i * chunk)
         results[i] = sharding.fetch(out, n)
         if store is not None:
             store.save(i, results[i])  # written the moment it exists: an interruption loses nothing
@@ -385,12 +426,7 @@ def sweep(
     try:
         pending = None
         for i in todo:
-            flat = np.arange(i * chunk, i * chunk + padded)
-            vals = grid.config_values(perm[np.minimum(flat, grid.size - 1)])
-            pad = flat >= min((i + 1) * chunk, grid.size)
-            # NaN padding is invalid: flagged, skipped by the integrator, and dropped.
-            vals = {n: np.where(pad, np.nan, v) for n, v in vals.items()}
-            out = sharding.dispatch_chunk(vals, dt, z, horizon, window, dynamics, contact, start, mesh)
+            out = dispatch(i)
             STATS["chunks_computed"] += 1
             # Dispatch is asynchronous: the devices work on chunk i while the
             # host saves chunk i - 1.
@@ -406,16 +442,7 @@ def sweep(
         assert store is not None
         results[i] = store.load(i)
         STATS["chunks_loaded"] += 1
-    flat_res = {
-        k: _in_grid_order(np.concatenate([results[i][k] for i in range(n_chunks)]), perm)
-        for k in dataset_fields(contact)
-    }
-    if RATIO in grid.values or RATIO in grid.fixed:
-        flat_res["omega"] = grid.config_values(np.arange(grid.size))["omega"]
-    ds = to_dataset(grid, flat_res, sweep_attrs(grid, spec, dynamics, max_steps, ndev, order))
-    if store is not None:
-        store.finalize(ds)
-    return ds
+    return {k: _in_grid_order(np.concatenate([results[i][k] for i in range(n_chunks)]), perm) for k in results[0]}
 
 
 def _sweep_mechanism(mechanism: "Callable[..., Chain | Mechanism]", axes, fixed, mode, z, horizon, window, t_start,
@@ -428,20 +455,16 @@ def _sweep_mechanism(mechanism: "Callable[..., Chain | Mechanism]", axes, fixed,
         raise TypeError(
             f"mechanism must be a function of the swept values returning a Chain or a Mechanism, got {mechanism!r}."
         )
-    if order == "cost":
-        raise ValueError("order='cost' is for maps of the paper's model; a chain map runs in grid order.")
+    if order not in ORDERS:
+        raise ValueError(f"order must be one of {', '.join(map(repr, ORDERS))}, got {order!r}.")
     if on_invalid not in ("raise", "flag"):
         raise ValueError(f"on_invalid must be 'raise' or 'flag', got {on_invalid!r}.")
     if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1:
         raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}.")
-    if path is not None and Path(path).exists() and not overwrite and not is_zarr(path):
-        raise ValueError(
-            f"{str(path)!r} exists; a chain map into a NetCDF file is not resumed (a Zarr store is): pass "
-            "overwrite=True or another path."
-        )
     check_measure_args(z, horizon, window)
     return sweep_chain(
         mechanism, axes, fixed=fixed, mode=mode, z=z, horizon=horizon, window=window, t_start=t_start,
         dynamics=dynamics, contact=contact, start=start, dtype=dtype,
         chunk_size=int(chunk_size), path=path, progress=progress, on_invalid=on_invalid, overwrite=overwrite,
+        order=order,
     )  # fmt: skip
