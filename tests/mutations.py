@@ -806,6 +806,13 @@ MUTATIONS = [
         ("tests/test_sweep.py::test_a_mechanism_map_in_cost_order_equals_grid_order_and_its_pilot_predicts_the_cost",),
     ),
     Mutation(
+        "hop_start_heights_ignored",
+        "a hopping gait's given start loses its heights and vertical velocities: every body starts on the ground",
+        "locomotion_jax/dynamics/_runs.py",
+        (('if contact == "hop" and row.shape[-1] == 4 * n:', 'if contact == "hop" and row.shape[-1] == -1:'),),
+        ("tests/test_gait.py::test_hopping_gait_is_the_limit_of_a_long_simulation",),
+    ),
+    Mutation(
         "guard_by_class",
         "the resolution guard tests for the Exact class: a fixed-step dynamics of one's own runs unguarded",
         "locomotion_jax/run/_resolution.py",

@@ -352,7 +352,7 @@ def test_hopping_gait_is_the_limit_of_a_long_simulation():
     from the paper's start reaches the orbit's section state (gap, velocities, heights, vertical
     velocities) within 1e-7 after 300 periods (measured 6e-9 and 9e-9) and its drift over one period
     gives the gait's mean speed; the multipliers lie inside the unit circle (a grounded body's
-    vertical components give zeros)."""
+    vertical components give zeros); started on its own section states, each gait is found again."""
     omega = np.asarray([15.0, 20.0])
     p = lj.Params(omega=jnp.asarray(omega), a=0.1)
     g = lj.steady_gait(p, contact="hop")
@@ -376,6 +376,16 @@ def test_hopping_gait_is_the_limit_of_a_long_simulation():
         assert int(tr.status) == lj.Status.OK and int(tr.n_land) > 500  # it hops: about 2 landings per period
         assert diff < 1e-7 and abs(speed - float(g.mean_speed[i])) < 1e-7
     assert float(np.asarray(g.state)[0, 3]) > 0  # at omega = 15 a body is in flight at the section
+    # Started on its own section states (heights and vertical velocities given, a body in flight), one
+    # transient period: each gait is found again at once (no Newton iteration), to 1e-10.
+    again = lj.steady_gait(p, contact="hop", start=g.state, transient=1)
+    print("again", np.asarray(again.n_iter), np.abs(np.asarray(again.state - g.state)).max())
+    assert np.all(np.asarray(again.converged)) and np.all(np.asarray(again.n_iter) == 0)
+    assert np.abs(np.asarray(again.state - g.state)).max() < 1e-10
+    # Basins under "hop": from that state and from it with the flying body 1 cm higher, one gait.
+    own = np.asarray(g.state[0])
+    b = lj.basins(lj.Params(omega=15.0, a=0.1), np.stack([own, own + np.r_[0, 0, 0, 0.01, 0, 0, 0]]), contact="hop")
+    assert np.asarray(b.count).tolist() == [2] and abs(float(b.gaits.mean_speed[0] - g.mean_speed[0])) < 1e-9
 
 
 # Chains of N masses.

@@ -183,8 +183,11 @@ def test_float32():
 
 def test_paths_without_hop_refuse_clearly():
     ts = np.linspace(0.0, 1.0, 5)
-    with pytest.raises(NotImplementedError, match="contact='hop' starts at rest"):  # runs from a start at rest
+    with pytest.raises(ValueError, match=r"heights y_0..y_N-1 >= 0.*shape \(11,\), got shape \(5,\)"):
         lj.steady_gait(lj.Chain(masses=[1.0, 1.0, 1.0]), contact="hop", start=np.asarray([3.0, 3.0, 0.0, 0.0, 0.0]))
+    with pytest.raises(ValueError, match="got shape \\(11,\\), a height < 0"):
+        low = np.r_[3.0, 3.0, np.zeros(4), -0.1, np.zeros(4)]  # gaps, velocities, heights (one < 0), w
+        lj.steady_gait(lj.Chain(masses=[1.0, 1.0, 1.0]), contact="hop", start=low)
     with pytest.raises(NotImplementedError, match="carried"):
         M = lj.Mechanism(masses=[1.0, 0.5], friction=[lj.Coulomb(0.5, 0.4), None], carried_by=[None, 0])
         lj.simulate(M, t_end=1.0, save_at=ts, contact="hop")

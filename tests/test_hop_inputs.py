@@ -83,15 +83,16 @@ def test_wrong_length_refused():
 
 
 def test_hop_front_ends_refuse_clearly():
-    """Paths that do not run the hopping reading yet say so (`simulate` and `measure` of a Mechanism,
+    """Paths that do not run the hopping reading yet say so, and a hopping gait's start without heights is
+    refused naming them (`simulate` and `measure` of a Mechanism,
     a Chain and Params run it: tests/test_hop.py, tests/test_hop_reference.py, tests/test_hop_params.py)."""
     ts = np.linspace(0.0, 1.0, 5)
     with pytest.raises(NotImplementedError, match="contact='hop'.*Exact"):
         lj.measure(ball(), contact="hop", dynamics=lj.Smoothed())
     with pytest.raises(NotImplementedError, match="contact='hop'.*Exact"):
         lj.simulate(lj.Params(), t_end=1.0, save_at=ts, contact="hop", dynamics=lj.Smoothed())
-    with pytest.raises(NotImplementedError, match="contact='hop' starts at rest"):
-        lj.steady_gait(lj.Chain.from_params(lj.Params(omega=2.0)), contact="hop", start=np.asarray([3.0, 0.0, 0.0]))
+    with pytest.raises(ValueError, match=r"vertical velocities w_0..w_N-1\) of shape \(7,\), got shape \(3,\)"):
+        lj.steady_gait(lj.Params(omega=2.0), contact="hop", start=np.asarray([3.0, 0.0, 0.0]))  # (u, v1, v2) only
     with pytest.raises(ValueError, match="'strict', 'paper' or 'hop'"):
         lj.simulate(lj.Params(), t_end=1.0, save_at=ts, contact="bounce")  # type: ignore[arg-type]
 

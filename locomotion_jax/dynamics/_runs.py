@@ -180,11 +180,14 @@ def _by_start(at: Callable[[str], Any], start: str | jax.Array) -> Any:
 def chain_initial_state(P: AbstractPhysics, valid, contact, start: str | jax.Array, row=None) -> engine.Hybrid:
     """The N-body engine's state at $t = 0$ of one mechanism (its physics `P`): at rest in the
     `start` position (a name of `STARTS` or its traced `start_code`), or the state `row`
-    $(x_0, \\dots, x_{N-1}, v_0, \\dots, v_{N-1})$ if given;
+    $(x_0, \\dots, x_{N-1}, v_0, \\dots, v_{N-1})$ if given, under `contact="hop"` followed by the
+    heights and vertical velocities $(y_0, \\dots, y_{N-1}, w_0, \\dots, w_{N-1})$ where the row has
+    them (else the physics' own, `AbstractPhysics.hop`);
     flagged `Status.INVALID` where the mechanism is not `valid` or `row` is not finite or one of
     its [`gaps`][locomotion_jax.AbstractPhysics.gaps] is not positive (a chain's positions not in
-    increasing order; then it starts from `start`, so that nothing turns NaN). Without `row`, a
-    mechanism's own initial velocities (`AbstractPhysics.initial_velocities`) if it has them."""
+    increasing order) or a height is negative (then it starts from `start`, so that nothing turns
+    NaN). Without `row`, a mechanism's own initial velocities (`AbstractPhysics.initial_velocities`)
+    if it has them."""
     x = _by_start(P.initial_positions, start)
     vert = P.hop()[:2] if contact == "hop" else (None, None)
     if row is None:
@@ -193,6 +196,9 @@ def chain_initial_state(P: AbstractPhysics, valid, contact, start: str | jax.Arr
         n = x.shape[-1]
         gaps = P.gaps(P.bodies(row[:n]))
         ok = jnp.all(jnp.isfinite(row)) & jnp.all(jnp.stack([jnp.all(g > 0) for g in gaps] or [jnp.asarray(True)]))
-        st = engine.init(P, contact, jnp.where(ok, row[:n], x), jnp.where(ok, row[n:], 0), *vert)
+        if contact == "hop" and row.shape[-1] == 4 * n:  # heights and vertical velocities given
+            ok = ok & jnp.all(row[2 * n : 3 * n] >= 0)
+            vert = (jnp.where(ok, row[2 * n : 3 * n], 0), jnp.where(ok, row[3 * n :], 0))
+        st = engine.init(P, contact, jnp.where(ok, row[:n], x), jnp.where(ok, row[n : 2 * n], 0), *vert)
         valid = valid & ok
     return eqx.tree_at(lambda s: s.status, st, jnp.where(valid, st.status, Status.INVALID).astype(jnp.int32))

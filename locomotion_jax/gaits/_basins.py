@@ -20,6 +20,7 @@ from ..dynamics._base import AbstractDynamics
 from ..model._mechanism import AbstractMechanism
 from ..model._waveform import AbstractWaveform
 from ._gait import Gait, steady_gait
+from ._shooting import reduced_size
 
 
 class Basins(eqx.Module):
@@ -60,8 +61,9 @@ def basins(
       [`Chain`][locomotion_jax.Chain].
     - `starts`: section states at phase 0, shape `G + (2N - 1,)` (e.g. a grid of gaps and
       velocities): $(u, v_1, v_2)$ for the paper's model, the gaps then the velocities
-      $(u_0, \\dots, u_{N-2}, v_0, \\dots, v_{N-1})$ for a chain. A mass given $v_i = 0$ starts stuck
-      where eq. (7) allows.
+      $(u_0, \\dots, u_{N-2}, v_0, \\dots, v_{N-1})$ for a chain; under `contact="hop"` followed by the
+      heights and vertical velocities (shape `G + (4N - 1,)`, as [`steady_gait`][]'s `start`). A mass
+      given $v_i = 0$ starts stuck where eq. (7) allows.
     - `periods`, `transient`, `dynamics`, `waveform`, `contact`, `dtype`: as in [`steady_gait`][].
     - `rtol`: gaits whose mean speeds and costs of transport agree to `rtol` (relative, over
       $1 + |x|$) and have the same period are the same gait.
@@ -79,11 +81,15 @@ def basins(
     """
     if not isinstance(params, AbstractMechanism) or params.batch_shape != ():
         raise ValueError("params must be one configuration (a mechanism of batch shape ()).")
-    n = params.physics().n_bodies
+    P = params.physics()
+    n, hop = P.n_bodies, contact == "hop"
+    size = reduced_size(P) + (2 * n if hop else 0)
     y = np.asarray(starts, np.float64)
-    if y.ndim < 1 or y.shape[-1] != 2 * n - 1 or y.size == 0:
-        what = "(u, v1, v2)" if n == 2 else f"(gaps u_0..u_{n - 2}, velocities v_0..v_{n - 1})"
-        raise ValueError(f"starts must have shape grid + ({2 * n - 1},) {what}, got {y.shape}.")
+    if y.ndim < 1 or y.shape[-1] != size or y.size == 0:
+        what = "(u, v1, v2" if n == 2 and not P.anchored else f"(gaps u_0..u_{n - 2}, velocities v_0..v_{n - 1}"
+        what = f"(positions x_0..x_{n - 1}, velocities v_0..v_{n - 1}" if P.anchored else what
+        what += ", heights, vertical velocities)" if hop else ")"
+        raise ValueError(f"starts must have shape grid + ({size},) {what}, got {y.shape}.")
     if not (np.isfinite(rtol) and rtol > 0):
         raise ValueError(f"rtol must be a finite number > 0, got {rtol!r}.")
     grid = y.shape[:-1]

@@ -87,7 +87,8 @@ def steady_gait(
       `Params` is solved as `Chain.from_params(params)` (a gait under the bodies' names); a chain's section
       state is followed by the heights and vertical velocities $(y_1, \\dots, y_N, w_1, \\dots, w_N)$
       (`Gait.state`); a body on the ground at the section has no vertical tangent (a zero
-      multiplier), as a plastic landing has none. Starts at rest only.
+      multiplier), as a plastic landing has none. A given `start` has them too (heights $\\ge 0$):
+      a gait's own `state` restarts it.
     - `verbose`: print progress to stderr from the start: a line before the transient and before
       each period's Newton solve (each compiles on its first call), and one when done.
 

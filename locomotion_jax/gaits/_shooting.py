@@ -246,13 +246,15 @@ def paper_physics(c) -> tuple[AbstractPhysics, Array]:
 
 def _transient_batch(C, physics_of, valid, contact, start, dt, transient, max_steps, y_start=None):
     """The reduced states after `transient` actuation periods from the start at rest `start`, or
-    from the section states `y_start` (flat, `(n, 2N - 1)`) where given, their statuses, whether
+    from the section states `y_start` (flat, `(n, 2N - 1)`, under `contact="hop"` `(n, 4N - 1)`:
+    the heights and vertical velocities after) where given, their statuses, whether
     they lifted off, and the centre of mass's displacement over the periods; each configuration of
     the flat batch `C` has the physics `physics_of(c)`."""
 
     def one(c, ok, y):
         P, ok_c = physics_of(c)
-        row = None if y is None else jnp.concatenate([_positions(P, y), y[y.shape[-1] - P.n_bodies :]])
+        base = reduced_size(P)  # positions then velocities, under "hop" the heights and vertical velocities after
+        row = None if y is None else jnp.concatenate([_positions(P, y), y[base - P.n_bodies :]])
         st0 = chain_initial_state(P, ok & ok_c, contact, start, row)
         st, _ = _advance(P, contact, dt, st0, transient * (2 * jnp.pi) / P.omega, max_steps)
         dX = P.centre_of_mass(st.y.x) - P.centre_of_mass(st0.y.x)
@@ -351,25 +353,29 @@ def bodies_problem(mechanism: Any, dynamics: Exact, contact: str, start: str | A
     """The [`GaitProblem`][] of a [`Chain`][] or a [`Mechanism`][locomotion_jax.Mechanism]: `start` names a
     start at rest (a mechanism: its own `x0`, `v0`), or gives section states at phase 0: gaps then
     velocities $(u_0, \\dots, u_{N-2}, v_0, \\dots, v_{N-1})$, shape `batch + (2N - 1,)`, or for an
-    anchored mechanism positions then velocities, `batch + (2N,)`. Checks the input (`ValueError`,
-    `NotImplementedError`) and the step's resolution (refused alone, skipped in a batch)."""
+    anchored mechanism positions then velocities, `batch + (2N,)`; under `contact="hop"` followed by
+    the heights $y_i \\ge 0$ and vertical velocities $w_i$ (a [`Gait`][]'s `state`). Checks the input
+    (`ValueError`, `NotImplementedError`) and the step's resolution (refused alone, skipped in a
+    batch)."""
     check_contact_start(contact, start if isinstance(start, str) else "paper", mechanism)
-    if contact == "hop" and not isinstance(start, str):
-        raise NotImplementedError(
-            "steady_gait with contact='hop' starts at rest ('paper' or 'relaxed'), not from given section states."
-        )
     flat, valid, shape = prepare_chain(mechanism, dtype)
     valid, unresolved = guard_chain(dynamics, flat, valid, shape)  # refused alone, skipped in a batch
     y_start = None
     if not isinstance(start, str):
         P = flat.physics()
-        n_red = reduced_size(P)
-        what = "positions x_0..x_N-1" if P.anchored else "gaps u_0..u_N-2"
+        base, n = reduced_size(P), P.n_bodies
+        hop = contact == "hop"
+        n_red = base + (2 * n if hop else 0)
+        what = ("positions x_0..x_N-1" if P.anchored else "gaps u_0..u_N-2") + ", velocities v_0..v_N-1"
+        what += ", heights y_0..y_N-1 >= 0, vertical velocities w_0..w_N-1" if hop else ""
         y = np.asarray(start, np.float64)
-        if y.shape != shape + (n_red,) or not np.all(np.isfinite(y)):
+        fits = y.shape == shape + (n_red,)
+        low = fits and hop and bool(np.any(y[..., base : base + n] < 0))
+        if not fits or not np.all(np.isfinite(y)) or low:
+            got = f"shape {y.shape}" + ("" if not fits else ", a height < 0" if low else ", not all finite")
             raise ValueError(
-                f"start must be 'paper', 'relaxed' or finite section states ({what}, velocities "
-                f"v_0..v_N-1) of shape {shape + (n_red,)}, got shape {y.shape}."
+                f"start must be 'paper', 'relaxed' or finite section states ({what}) of shape {shape + (n_red,)}, "
+                f"got {got}."
             )
         if shape == ():  # refused alone
             mechanism.check_section(y)
