@@ -319,12 +319,13 @@ HELPER = textwrap.dedent(
     axes, path, tests = json.loads(sys.argv[1]), sys.argv[2], sys.argv[3]
     lj.sweep(axes, chunk_size=4, path=path, z=0.3, horizon=30.0, window=5.0,
              dynamics=lj.Exact(dt=0.02), progress=False)
+    traces = _sharding.TRACES["run_chunk"]
     sys.path.insert(0, tests)
     from mechanism_cases import capsule
     lj.sweep(json.loads(sys.argv[4]), mechanism=lambda omega, F0: capsule(a=F0, w=omega), chunk_size=3,
              path=path + ".capsule.nc", progress=False, **json.loads(sys.argv[5]))
-    print(json.dumps({"devices": jax.device_count(), "traces": _sharding.TRACES["run_chunk"],
-                      "mechanism_traces": _sharding.TRACES["run_mechanism_chunk"]}))
+    print(json.dumps({"devices": jax.device_count(), "traces": traces,
+                      "capsule_traces": _sharding.TRACES["run_chunk"] - traces}))
     """
 )
 
@@ -338,7 +339,7 @@ def test_two_forced_host_devices_equal_one(two_devices, reference):
     stdout, stderr = proc.communicate(timeout=300)
     assert proc.returncode == 0, stderr
     info = json.loads(stdout.strip().splitlines()[-1])
-    assert info == {"devices": 2, "traces": 1, "mechanism_traces": 1}
+    assert info == {"devices": 2, "traces": 1, "capsule_traces": 1}
     two = xr.load_dataset(path, engine="h5netcdf")
     assert two.attrs["n_devices"] == 2 and reference.attrs["n_devices"] == jax.device_count() == 1
     assert_same(two, reference)
@@ -435,7 +436,7 @@ def test_a_mechanism_map_into_netcdf_resumes_and_refuses_another_builder(tmp_pat
     in memory, a finished map is read back, and another builder or setting is refused, naming it."""
     omega, F0 = np.array([2.0, 3.0, 5.5]), np.array([0.5, 1.5])
     settings: dict[str, Any] = dict(z=1e6, horizon=4 * math.pi, window=4 * math.pi, t_start=20.0, progress=False)
-    path, traces, calls = tmp_path / "capsule.nc", _sharding.TRACES["run_mechanism_chunk"], []
+    path, traces, calls = tmp_path / "capsule.nc", _sharding.TRACES["run_chunk"], []
     real_save = _store.ChunkStore.save
 
     def interrupted_save(self, index, arrays):
@@ -456,7 +457,7 @@ def test_a_mechanism_map_into_netcdf_resumes_and_refuses_another_builder(tmp_pat
     resumed = run(path=path)
     assert _sweep.STATS["chunks_computed"] - before.get("chunks_computed", 0) == 2  # chunks 1 and 2 only
     assert _sweep.STATS["chunks_loaded"] - before.get("chunks_loaded", 0) == 1
-    assert _sharding.TRACES["run_mechanism_chunk"] - traces <= 1  # none where another test compiled the bucket
+    assert _sharding.TRACES["run_chunk"] - traces <= 1  # none where another test compiled the bucket
     assert path.exists() and not parts.exists()
     memory = run()
     xr.testing.assert_identical(resumed, memory)

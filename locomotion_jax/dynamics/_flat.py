@@ -45,6 +45,10 @@ class FlatBatch(eqx.Module):
     wave_axes: int | None = eqx.field(static=True, default=None)
     names: str = eqx.field(static=True, default=BODIES)
 
+    def own_batch(self) -> "FlatBatch":
+        """This batch as it stands (as `AbstractMechanism.own_batch` hands a sweep's chunk)."""
+        return self
+
     @property
     def size(self) -> int:
         """The number of configurations `n`."""

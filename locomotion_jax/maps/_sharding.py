@@ -22,6 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 
+from .._results import PAPER
 from ..dynamics._base import AbstractDynamics
 from ..dynamics._compile import engine_jit
 from ..dynamics._flat import FlatBatch
@@ -37,8 +38,8 @@ UNRESOLVED_KEY = "_unresolved"
 """The host mask of a chunk's unresolved configurations, carried from `dispatch_chunk` to `fetch`."""
 
 TRACES: Counter = Counter()
-"""Python-level traces of the chunk functions, by key: `"run_chunk"` (the paper's model),
-`"run_mechanism_chunk"` (a builder's mechanisms).
+"""Python-level traces of the chunk function, by key `"run_chunk"` (a map of the paper's model
+or of a builder's mechanisms).
 
 The body of a jitted function runs in Python only when JAX traces (and so
 compiles) it; tests read this counter to check that all chunks of a sweep share
@@ -83,7 +84,7 @@ def device_count(mesh: Mesh) -> int:
 
 
 def _run_chunk(
-    flat: Params,
+    flat: Params | FlatBatch,
     zhw: jax.Array,
     dynamics: AbstractDynamics,
     contact: str,
@@ -94,9 +95,10 @@ def _run_chunk(
 ) -> dict[str, jax.Array]:
     # Runs only while tracing: counts compilations, not calls.
     TRACES["run_chunk"] += 1
-    # Under contact="hop" the per-mass hopping fields come back as one array per mass (the dataset's variables).
-    batch = flat.own_batch()  # the chunk with its sinusoid of eq. (13)
-    return per_mass_columns(dynamics.measure_chunk(batch, zhw, contact, start, max_steps, mesh, micro_batch))
+    batch = flat.own_batch()  # the paper's chunk with its sinusoid of eq. (13); a mechanism's as it stands
+    out = dynamics.measure_chunk(batch, zhw, contact, start, max_steps, mesh, micro_batch)
+    # The paper's per-mass fields as one array per mass (the dataset's variables; under "hop" the hopping ones).
+    return per_mass_columns(out) if batch.names == PAPER else out
 
 
 _run_chunk = engine_jit(_run_chunk, ("contact", "start", "mesh", "micro_batch"))
@@ -194,26 +196,8 @@ def dispatch_mechanism_chunk(
     sharding = NamedSharding(mesh, P(BATCH_AXIS))
     batch = jax.tree_util.tree_map(lambda x: _global_array(np.asarray(x), sharding), batch)
     zhw, dyn, cap = _settings(dtype, z, horizon, window, dynamics)
-    out = _run_mechanism_chunk(batch, zhw, dyn, contact, start, cap, mesh, micro_batch or MICRO_BATCH or None)
+    out = _run_chunk(batch, zhw, dyn, contact, start, cap, mesh, micro_batch or MICRO_BATCH or None)
     return out if unresolved is None else {**out, UNRESOLVED_KEY: jnp.asarray(unresolved)}
-
-
-def _run_mechanism_chunk(
-    batch: FlatBatch,
-    zhw: jax.Array,
-    dynamics: AbstractDynamics,
-    contact: str,
-    start: str,
-    max_steps: jax.Array,
-    mesh: Mesh,
-    micro_batch: int | None,
-) -> dict[str, jax.Array]:
-    # Runs only while tracing: counts compilations, not calls.
-    TRACES["run_mechanism_chunk"] += 1
-    return dynamics.measure_chunk(batch, zhw, contact, start, max_steps, mesh, micro_batch)
-
-
-_run_mechanism_chunk = engine_jit(_run_mechanism_chunk, ("contact", "start", "mesh", "micro_batch"))
 
 
 def chunk_dtypes(
