@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 import xarray as xr
 from cli_helpers import invoke
+from locomotion_jax.maps import _sweep
 
 
 pytestmark = pytest.mark.usefixtures("isolate_xla_flags")
@@ -82,6 +83,17 @@ def test_grid_sweep_of_the_file_equals_lj_sweep_bit_for_bit(tmp_path):
     speed = ds.mean_speed.values
     assert np.all(np.isfinite(speed)) and np.ptp(speed[:, 0]) > 1e-3 and np.ptp(speed[0, :]) > 1e-4  # both axes matter
     assert ds.attrs["swept"] == f"{A},{M0}" and ds.attrs["kind"] == "mechanism"
+    # Run again: the finished file is read back (nothing computed). In cost order (a pilot run of the
+    # capsules), into another file: the same map bit for bit.
+    args = ["--vary", f"{A}=0.3:0.9:3", "--vary", f"{M0}=0.8,1.2", "--vary", f"{K}=12"]
+    before = dict(_sweep.STATS)
+    assert_same(sweep_cli(tmp_path, *args), expected)
+    assert dict(_sweep.STATS) == before
+    res = invoke("sweep", CAPSULE, *args, *FLAGS, "--order", "cost", "--out", str(tmp_path / "cost.nc"))
+    assert res.exit_code == 0 and _sweep.STATS["pilots"] == before.get("pilots", 0) + 1, res.output
+    cost = xr.load_dataset(tmp_path / "cost.nc")
+    assert cost.attrs["order"] == "cost" and ds.attrs["order"] == "natural"
+    assert_same(cost, expected)
 
 
 def test_a_files_map_into_a_zarr_store_is_resumed(tmp_path):
