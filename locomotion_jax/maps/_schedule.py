@@ -85,12 +85,18 @@ def pilot(
             dtype=dtype,
         )
         m = min(size, n - lo)
-        X = np.asarray(tr.X, np.float64)[:m]
-        speed[lo : lo + m] = np.abs(X[:, 1] - X[:, 0]) / (0.5 * t_pilot)
-        rate[lo : lo + m] = np.asarray(tr.n_switch)[:m] / t_pilot
-        t_lift[lo : lo + m] = np.asarray(tr.t_liftoff, np.float64)[:m]
-        ok[lo : lo + m] = live[:m] & (np.asarray(tr.status)[:m] != int(Status.INVALID))
+        speed[lo : lo + m], rate[lo : lo + m], t_lift[lo : lo + m], ok[lo : lo + m] = _read(tr, m, t_pilot)
+        ok[lo : lo + m] &= live[:m]
     return dict(speed=np.where(ok, speed, 0.0), switch_rate=rate, t_liftoff=t_lift, valid=ok)
+
+
+def _read(tr: Any, m: int, t_pilot: float) -> tuple[np.ndarray, ...]:
+    """The first `m` configurations of a pilot's `Trajectory` (saved at `t_pilot / 2` and `t_pilot`):
+    mean speed over the second half, switches per time unit, lift-off time, and not invalid."""
+    X = np.asarray(tr.X, np.float64)[:m]
+    speed = np.abs(X[:, 1] - X[:, 0]) / (0.5 * t_pilot)
+    rate = np.asarray(tr.n_switch)[:m] / t_pilot
+    return speed, rate, np.asarray(tr.t_liftoff, np.float64)[:m], np.asarray(tr.status)[:m] != int(Status.INVALID)
 
 
 def expected_cost(
@@ -163,11 +169,7 @@ def mechanism_cost_order(build: Callable[[np.ndarray], Any], size: int, chunk: i
         mech = build(np.minimum(np.arange(lo, lo + chunk), size - 1))
         tr = simulate(mech, t_pilot, save_at=np.asarray([0.5 * t_pilot, t_pilot]), dynamics=Exact(dt=pilot_dt),
                       contact=contact, start=start, dtype=dtype)  # fmt: skip
-        X = np.asarray(tr.X, np.float64)[:m]
-        speed[lo : lo + m] = np.abs(X[:, 1] - X[:, 0]) / (0.5 * t_pilot)
-        rate[lo : lo + m] = np.asarray(tr.n_switch)[:m] / t_pilot
-        t_lift[lo : lo + m] = np.asarray(tr.t_liftoff, np.float64)[:m]
-        ok[lo : lo + m] = np.asarray(tr.status)[:m] != int(Status.INVALID)
+        speed[lo : lo + m], rate[lo : lo + m], t_lift[lo : lo + m], ok[lo : lo + m] = _read(tr, m, t_pilot)
         ts[lo : lo + m] = np.broadcast_to(np.asarray(mech.t_start if t_start is None else t_start, np.float64),
                                           (chunk,))[:m]  # fmt: skip
     pr = dict(speed=np.where(ok, speed, 0.0), switch_rate=rate, t_liftoff=t_lift, valid=ok)
