@@ -3,16 +3,18 @@ throughput per mass of `measure` (batch 256, float64), the array layout (`Chain(
 every N and the unrolled one (`layout="unrolled"`) up to `--max-unrolled` (its compile time grows
 with N: about 10 minutes at N = 32 on the 2-core machine).
 
-    python benchmarks/chain_scaling.py [--sizes 2,4,8,16,32,64] [--max-unrolled 8] [--batch 256]
+    python benchmarks/chain_scaling.py [--sizes 2,4,8,16,32,64] [--max-unrolled 8] [--batch 256] [--contact hop]
 
 Each row compiles the measurement's program once (`time.perf_counter` around `.lower().compile()`)
 and runs the compiled program twice; throughput is mass-time-units per CPU-second of this process
 (`time.process_time`, which a shared machine's other load disturbs less than the wall clock), and
 per wall-second. The worms: travelling waves of omega in [1.5, 4], a in [0.03, 0.08] and phase lags
 in [0.3, 2.5] over the batch, anisotropic Coulomb friction (bristles), paper contact, dt = 0.03,
-measured over t = 5 ... 25. Prints one Markdown table, the load average before and after, and
-the ratios of issue 28: compile time at N = 64 over N = 4 and throughput per mass at N = 64 over
-N = 2 (each layout's own, and the array layout's at 64 against the unrolled at 2).
+measured over t = 5 ... 25. With `--contact hop` (flight and landing, SPEC §10) the waves are
+faster and larger, omega in [6, 10] and a in [0.05, 0.08], so that the worms hop. Prints one
+Markdown table, the load average before and after, and the ratios of issue 28: compile time at
+N = 64 over N = 4 and throughput per mass at N = 64 over N = 2 (each layout's own, and the array
+layout's at 64 against the unrolled at 2).
 """
 
 import argparse
@@ -32,12 +34,13 @@ from locomotion_jax.dynamics._runs import default_lanes, start_code  # noqa: E40
 from locomotion_jax.model._chain_array import engine_physics  # noqa: E402
 
 
-DT, T_START, HORIZON, CONTACT = 0.03, 5.0, 20.0, "paper"
+DT, T_START, HORIZON = 0.03, 5.0, 20.0
 
 
-def worms(n: int, B: int, layout: str) -> lj.Chain:
+def worms(n: int, B: int, layout: str, contact: str = "paper") -> lj.Chain:
     rng = np.random.default_rng(0)
-    omega, a, phi = rng.uniform(1.5, 4.0, B), rng.uniform(0.03, 0.08, B), rng.uniform(0.3, 2.5, B)
+    (w0, w1), (a0, a1) = ((6.0, 10.0), (0.05, 0.08)) if contact == "hop" else ((1.5, 4.0), (0.03, 0.08))
+    omega, a, phi = rng.uniform(w0, w1, B), rng.uniform(a0, a1, B), rng.uniform(0.3, 2.5, B)
     j = np.arange(n - 1)[None, :, None]
     waves = lj.SpringFourier(-a[:, None, None] * np.sin(phi[:, None, None] * j),
                              a[:, None, None] * np.cos(phi[:, None, None] * j), omega)  # fmt: skip
@@ -45,9 +48,9 @@ def worms(n: int, B: int, layout: str) -> lj.Chain:
                     friction=lj.AnisotropicCoulomb(0.7, 0.9, 0.5, 0.7), layout=layout)  # fmt: skip
 
 
-def row(n: int, B: int, layout: str, lanes: int = 0) -> dict:
-    chain = worms(n, B, layout).broadcast()  # as the front ends hand it to the engine
-    P = engine_physics(chain, CONTACT)
+def row(n: int, B: int, layout: str, lanes: int = 0, contact: str = "paper") -> dict:
+    chain = worms(n, B, layout, contact).broadcast()  # as the front ends hand it to the engine
+    P = engine_physics(chain)
     valid = chain.is_valid()
     ts = jnp.full((B,), T_START)
     dyn = (P, valid, ts, None, jnp.asarray(1e30), jnp.asarray(HORIZON), jnp.asarray(HORIZON))
@@ -55,7 +58,7 @@ def row(n: int, B: int, layout: str, lanes: int = 0) -> dict:
     lanes = lanes or default_lanes(B, P.lane_width)
     t0 = time.perf_counter()
     start = start_code("paper")
-    exe = _measure._measure_batch.lower(*dyn, CONTACT, start, DT, cap, lanes).compile()  # pyright: ignore[reportFunctionMemberAccess]
+    exe = _measure._measure_batch.lower(*dyn, contact, start, DT, cap, lanes).compile()  # pyright: ignore[reportFunctionMemberAccess]
     compile_s = time.perf_counter() - t0
     cpus, walls, out = [], [], {}
     for _ in range(2):
@@ -67,8 +70,9 @@ def row(n: int, B: int, layout: str, lanes: int = 0) -> dict:
     status = np.asarray(out["status"])
     assert np.all(status == lj.Status.OK), f"N={n} {layout}: statuses {np.unique(status)}"
     work = B * n * (T_START + HORIZON)  # mass-time-units
+    flying = float(np.mean(np.asarray(out["flight_fraction"]))) if contact == "hop" else 0.0
     return dict(N=n, layout=layout, compile=compile_s, per_cpu=work / min(cpus), per_wall=work / min(walls),
-                steps=float(np.mean(np.asarray(out["n_steps"]))))  # fmt: skip
+                steps=float(np.mean(np.asarray(out["n_steps"]))), flying=flying)  # fmt: skip
 
 
 def main() -> int:
@@ -78,21 +82,23 @@ def main() -> int:
     ap.add_argument("--batch", type=int, default=256)
     ap.add_argument("--layouts", default="unrolled,array")
     ap.add_argument("--lanes", type=int, default=0, help="the queue's lanes (default: `_runs.default_lanes`)")
+    ap.add_argument("--contact", default="paper", choices=("strict", "paper", "hop"))
     args = ap.parse_args()
     sizes = [int(s) for s in args.sizes.split(",")]
     layouts = args.layouts.split(",")
-    print(f"load average before: {os.getloadavg()}; CPUs: {os.cpu_count()}; jax {jax.__version__}", flush=True)
+    print(f"load average before: {os.getloadavg()}; CPUs: {os.cpu_count()}; jax {jax.__version__}; "
+          f"contact {args.contact!r}", flush=True)  # fmt: skip
     rows = {}
-    print("| N | layout | compile (s) | mass-tu per CPU-s | mass-tu per wall-s | steps per config |")
-    print("|---|---|---|---|---|---|", flush=True)
+    print("| N | layout | compile (s) | mass-tu per CPU-s | mass-tu per wall-s | steps per config | time in flight |")
+    print("|---|---|---|---|---|---|---|", flush=True)
     for n in sizes:
         for layout in layouts:
             if layout == "unrolled" and n > args.max_unrolled:
                 continue
-            r = row(n, args.batch, layout, args.lanes)
+            r = row(n, args.batch, layout, args.lanes, args.contact)
             rows[n, layout] = r
             print(f"| {n} | {layout} | {r['compile']:.1f} | {r['per_cpu']:,.0f} | {r['per_wall']:,.0f} | "
-                  f"{r['steps']:.0f} |", flush=True)  # fmt: skip
+                  f"{r['steps']:.0f} | {r['flying']:.3f} |", flush=True)  # fmt: skip
     print(f"load average after: {os.getloadavg()}")
     lo, hi = min(sizes), max(sizes)
     for layout in layouts:

@@ -813,6 +813,28 @@ MUTATIONS = [
         ("tests/test_gait.py::test_hopping_gait_is_the_limit_of_a_long_simulation",),
     ),
     Mutation(
+        "array_hop_second_rate_untilted",
+        "a hopping chain in the array layout drops the heights' terms from the springs' second derivatives",
+        "locomotion_jax/model/_chain_array.py",
+        (("            ddl = ddl + (dh * dh + h * ddh) * il\n", ""),),
+        ("tests/test_chain_array.py::test_array_layout_hop_equals_unrolled",),
+    ),
+    Mutation(
+        "array_hop_heights_ignored",
+        "a hopping chain in the array layout keeps its springs' offsets d: the heights never tilt them",
+        "locomotion_jax/model/_chain_array.py",
+        (("h = None if y is None else self.d + (y[0][1:] - y[0][:-1])", "h = None"),),
+        ("tests/test_chain_array.py::test_array_layout_hopping_worm_against_reference",),
+    ),
+    Mutation(
+        "hop_landing_at_once_after_liftoff",
+        "a body airborne at height 0 with no vertical velocity looks for its landing at once: at a grazing lift-off "
+        "it lands and lifts off again at one instant",
+        "locomotion_jax/dynamics/_engine.py",
+        (("[c & ~r for c, r in zip(crossed[n_mass : 2 * n_mass], at_rest)]", "crossed[n_mass : 2 * n_mass]"),),
+        ("tests/test_hop_reference.py::test_grazing_liftoff_does_not_stall_a_coarse_step",),
+    ),
+    Mutation(
         "guard_by_class",
         "the resolution guard tests for the Exact class: a fixed-step dynamics of one's own runs unguarded",
         "locomotion_jax/run/_resolution.py",

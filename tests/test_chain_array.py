@@ -24,6 +24,7 @@ from locomotion_jax.model._chain_array import (
 )
 from locomotion_jax.model._chain_physics import ChainPhysics
 from reference_chain import chain_config, reference_chain_simulate
+from reference_hop import reference_hop_simulate
 
 
 RTOL = 1e-10
@@ -126,7 +127,7 @@ def test_array_layout_eight_mass_worm_against_reference():
     chain = lj.Chain(masses=[1.0] * n, k=50.0, d=0.5, lbar=3.0, c=0.01,
                      waveforms=lj.SpringFourier(cfg["A"], cfg["B"], cfg["omega"]),
                      friction=lj.AnisotropicCoulomb(**ANISO), layout="array")  # fmt: skip
-    assert isinstance(engine_physics(chain, "strict"), ArrayChainPhysics)
+    assert isinstance(engine_physics(chain), ArrayChainPhysics)
     ts = np.linspace(0.0, 30.0, 61)
     ref = reference_chain_simulate(cfg, 30.0, ts)
     tr = lj.simulate(chain, 30.0, ts, dynamics=lj.Exact(dt=0.005))
@@ -202,38 +203,39 @@ def test_array_layout_steady_gait_equals_unrolled():
 
 def test_gait_layout_choice():
     """Steady gaits (and continuation and the optimiser's oracle) take the array layout from
-    `GAIT_ARRAY_FROM` masses on under `"auto"`; hopping, splines and `"unrolled"` stay unrolled."""
+    `GAIT_ARRAY_FROM` masses on under `"auto"` (whatever the contact reading); `"unrolled"` stays
+    unrolled."""
     arr, unr = cg.array_mechanism_physics, cg.mechanism_physics
-    assert cg.physics_for(_worm(GAIT_ARRAY_FROM, "auto"), "strict") is arr
-    assert cg.physics_for(_worm(GAIT_ARRAY_FROM - 1, "auto"), "paper") is unr
-    assert cg.physics_for(_worm(GAIT_ARRAY_FROM, "auto"), "hop") is unr
-    assert cg.physics_for(_worm(GAIT_ARRAY_FROM, "unrolled"), "strict") is unr
-    assert cg.physics_for(_worm(2, "array"), "strict") is arr
-    assert isinstance(gait_physics(_worm(GAIT_ARRAY_FROM, "auto"), "paper"), ArrayChainPhysics)
-    assert isinstance(gait_physics(_worm(GAIT_ARRAY_FROM, "auto"), "hop"), ChainPhysics)
+    assert cg.physics_for(_worm(GAIT_ARRAY_FROM, "auto")) is arr
+    assert cg.physics_for(_worm(GAIT_ARRAY_FROM - 1, "auto")) is unr
+    assert cg.physics_for(_worm(GAIT_ARRAY_FROM, "unrolled")) is unr
+    assert cg.physics_for(_worm(2, "array")) is arr
+    assert isinstance(gait_physics(_worm(GAIT_ARRAY_FROM, "auto")), ArrayChainPhysics)
+    assert isinstance(gait_physics(_worm(GAIT_ARRAY_FROM - 1, "auto")), ChainPhysics)
 
 
 def test_layout_choice_and_refusals(monkeypatch):
     assert jax.default_backend() != "cpu" or array_from() == ARRAY_FROM
-    assert isinstance(engine_physics(_worm(ARRAY_FROM, "auto"), "strict"), ArrayChainPhysics)
-    assert isinstance(engine_physics(_worm(ARRAY_FROM - 1, "auto"), "strict"), ChainPhysics)
-    assert isinstance(engine_physics(_worm(ARRAY_FROM, "auto"), "hop"), ChainPhysics)  # hop: unrolled only
-    assert isinstance(engine_physics(_worm(ARRAY_FROM, "unrolled"), "strict"), ChainPhysics)
+    assert isinstance(engine_physics(_worm(ARRAY_FROM, "auto")), ArrayChainPhysics)
+    assert isinstance(engine_physics(_worm(ARRAY_FROM - 1, "auto")), ChainPhysics)
+    assert isinstance(engine_physics(_worm(ARRAY_FROM, "unrolled")), ChainPhysics)
     with pytest.raises(ValueError, match="'layout'.*'auto', 'unrolled', 'array'"):
         _worm(3, "arrays")
     # On a GPU "auto" takes the array layout from ARRAY_FROM_ACCELERATOR masses on.
     monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
     assert array_from() == ARRAY_FROM_ACCELERATOR < ARRAY_FROM
-    assert isinstance(engine_physics(_worm(ARRAY_FROM_ACCELERATOR, "auto"), "strict"), ArrayChainPhysics)
-    assert isinstance(engine_physics(_worm(ARRAY_FROM_ACCELERATOR - 1, "auto"), "strict"), ChainPhysics)
-    with pytest.raises(ValueError, match="contact='hop'.*layout='unrolled'"):
-        engine_physics(_worm(3, "array"), "hop")
-    spline = [lj.Spline(np.array([0.05, -0.05, 0.05, -0.05]), 2.0, 3.0)] * 2
-    with pytest.raises(ValueError, match="layout.*Spline"):
-        lj.Chain(masses=[1.0] * 3, waveforms=spline, layout="array")
-    auto = lj.Chain(masses=[1.0] * ARRAY_FROM, waveforms=[lj.Spline(np.array([0.05, -0.05, 0.05, -0.05]), 2.0, 3.0)]
-                    * (ARRAY_FROM - 1))  # fmt: skip
-    assert isinstance(engine_physics(auto, "strict"), ChainPhysics)  # splines: unrolled
+    assert isinstance(engine_physics(_worm(ARRAY_FROM_ACCELERATOR, "auto")), ArrayChainPhysics)
+    assert isinstance(engine_physics(_worm(ARRAY_FROM_ACCELERATOR - 1, "auto")), ChainPhysics)
+    # Splines of one number of control values run in the array layout; a mix of waveform kinds, or
+    # splines of several sizes, do not ("auto" runs them unrolled).
+    spline = lj.Spline(np.array([0.05, -0.05, 0.05, -0.05]), 2.0, 3.0)
+    longer = lj.Spline(np.array([0.05, -0.05, 0.05, -0.05, 0.0]), 2.0, 3.0)
+    assert isinstance(engine_physics(lj.Chain(masses=[1.0] * 3, waveforms=spline, layout="array")), ArrayChainPhysics)
+    for mixed in ([spline, lj.Sinusoid(0.05, 2.0, 3.0)], [spline, longer]):
+        with pytest.raises(ValueError, match="layout.*Splines of one number of control values"):
+            lj.Chain(masses=[1.0] * 3, waveforms=mixed, layout="array")
+        auto = lj.Chain(masses=[1.0] * ARRAY_FROM, waveforms=mixed * ((ARRAY_FROM - 1) // 2) + [spline])
+        assert isinstance(engine_physics(auto), ChainPhysics)
 
 
 def test_array_layout_sweep_equals_measure():
@@ -270,3 +272,125 @@ def test_array_layout_initial_states_checked_per_configuration():
     assert [int(s) for s in np.asarray(out["array"]["status"])] == [lj.Status.OK, lj.Status.INVALID]
     for key in ("tau_z", "e_d", "work", "mean_speed"):
         _close(np.asarray(out["array"][key])[0], np.asarray(out["unrolled"][key])[0], RTOL)
+
+
+# The hopping three-mass chains of tests/test_hop_reference.py (masses, omega, a, phi; d = 0.5).
+HOPPING = [([1.0] * 3, 6.0, 0.08, 2 * np.pi / 3), ([1.0] * 3, 8.0, 0.08, -2 * np.pi / 3),
+           ([0.8, 1.2, 1.0], 6.0, 0.12, -2 * np.pi / 3), ([1.0] * 3, 10.0, 0.08, 2 * np.pi / 3)]  # fmt: skip
+
+
+def _hopping(layout: str, cases=HOPPING, **friction) -> lj.Chain:
+    """The chains of `cases` (a batch) from the reference's conventions (`chain_config`)."""
+    cfgs = [chain_config(m, omega=w, a=a, phi=phi, **friction) for m, w, a, phi in cases]
+    law = lj.AnisotropicCoulomb(**friction) if friction else lj.Coulomb(0.7, 0.5)
+    return lj.Chain.stack([
+        lj.Chain(masses=c["m"], k=c["k"], d=c["d"], lbar=c["lbar"], c=c["c"], friction=law, layout=layout,
+                 waveforms=lj.SpringFourier(c["A"], c["B"], c["omega"]))
+        for c in cfgs
+    ])  # fmt: skip
+
+
+def test_array_layout_hop_equals_unrolled():
+    """`contact="hop"` (SPEC §10: springs along $(u_j, d_j + y_{j+1} - y_j)$, flight, landing): four
+    hopping chains in both layouts. `simulate`: positions, velocities, heights, vertical velocities,
+    e_d, w, e and N at 401 saves to 1e-10 of their largest, the same stuck masks and landings;
+    `measure`: every figure (flight fractions, highest hops and landings per period included) to
+    1e-10 relative, the same steps and switches."""
+    ts = np.linspace(0.0, 40.0, 401)
+    kw: dict[str, Any] = dict(contact="hop", dynamics=lj.Exact(dt=0.01))
+    got, ref = (lj.simulate(_hopping(lay), 40.0, ts, **kw) for lay in ("array", "unrolled"))
+    assert np.all(np.asarray(ref.status) == lj.Status.OK) and np.all(np.asarray(ref.n_land) > 50)  # they hop
+    assert isinstance(engine_physics(_hopping("array")), ArrayChainPhysics)
+    for key in ("x", "v", "y", "vy", "e_d", "w", "e", "N"):
+        a, b = np.asarray(getattr(ref, key)), np.asarray(getattr(got, key))
+        np.testing.assert_allclose(b, a, rtol=RTOL, atol=RTOL * np.abs(a).max(), err_msg=key)
+    for key in ("stuck", "n_land", "status"):
+        np.testing.assert_array_equal(np.asarray(getattr(got, key)), np.asarray(getattr(ref, key)), err_msg=key)
+    m = {lay: lj.measure(_hopping(lay), z=0.3, t_start=5.0, horizon=40.0, contact="hop").to_numpy()
+         for lay in ("array", "unrolled")}  # fmt: skip
+    assert np.all(m["unrolled"]["flight_fraction"].max(-1) > 0.05)
+    for key in (*MEASURED, "flight_fraction", "highest_hop", "landings_per_period", "e_d", "work", "delta_e"):
+        assert m["array"][key].shape == m["unrolled"][key].shape, key
+        _close(m["array"][key], m["unrolled"][key], RTOL)
+    for key in ("n_steps", "n_switch", "status", "zeno"):
+        np.testing.assert_array_equal(m["array"][key], m["unrolled"][key], err_msg=key)
+
+
+def test_array_layout_hopping_worm_against_reference():
+    """A 16-mass worm on bristles hopping: `layout="auto"` runs it in the array layout, and it agrees
+    with the independent reference (`tests/reference_hop.py`) at dt = 1/800: positions within 1e-7
+    (measured 5e-9), heights within 1e-8 (4e-10), e_d within 1e-6 (3e-8), the landings counted
+    alike (211); w = e_d + Delta e to 1e-6 of e_d."""
+    n, t_end = 16, 20.0
+    worm = _hopping("auto", [(list(np.linspace(0.9, 1.1, n)), 8.0, 0.08, 2 * np.pi / 3)], **ANISO)
+    assert isinstance(engine_physics(worm), ArrayChainPhysics)
+    cfg = chain_config(list(np.linspace(0.9, 1.1, n)), omega=8.0, a=0.08, phi=2 * np.pi / 3, **dict[str, Any](ANISO))
+    ts = np.linspace(0.0, t_end, 201)
+    ref = reference_hop_simulate(cfg, t_end, ts)
+    tr = lj.simulate(worm, t_end, ts, contact="hop", dynamics=lj.Exact(dt=1 / 800))
+    assert tr.y is not None and tr.n_land is not None
+    dx, dy = np.abs(np.asarray(tr.x[0]) - ref["x"]).max(), np.abs(np.asarray(tr.y[0]) - ref["y"]).max()
+    ded = np.abs(np.asarray(tr.e_d[0]) - ref["e_d"]).max()
+    bal = np.abs(np.asarray(tr.w[0] - tr.e_d[0] - (tr.e[0] - tr.e[0, 0]))).max()
+    print("16-mass hopping worm: landings", int(tr.n_land[0]), ref["n_landings"], dx, dy, ded, bal)
+    assert int(tr.status[0]) == lj.Status.OK and np.sum(ref["n_landings"] >= 1) >= 12  # most masses hop (15 of 16)
+    assert int(tr.n_land[0]) == int(ref["n_landings"].sum())
+    assert dx < 1e-7 and dy < 1e-8 and ded < 1e-6
+    assert bal <= 1e-6 * float(tr.e_d[0, -1])
+
+
+def test_array_layout_hop_gait_equals_unrolled():
+    """Hopping steady gaits (three masses, omega 6 and 10: at 10 a body is in flight at the section) in
+    both layouts: the same status, gait period and Newton iterations, every figure to 1e-9; restarted
+    on its own section states (heights and vertical velocities given) the array layout's gait is found
+    again with no Newton iteration."""
+    cases = [HOPPING[0], HOPPING[3]]
+    got, ref = (lj.steady_gait(_hopping(lay, cases), contact="hop") for lay in ("array", "unrolled"))
+    assert np.all(np.asarray(ref.converged)) and float(np.asarray(ref.state)[1, 5:].max()) > 0
+    for key in ("status", "k", "n_iter", "stable"):
+        np.testing.assert_array_equal(np.asarray(getattr(got, key)), np.asarray(getattr(ref, key)), err_msg=key)
+    for key in GAIT_KEYS:
+        a, b = np.asarray(getattr(ref, key)), np.asarray(getattr(got, key))
+        np.testing.assert_allclose(b, a, rtol=1e-9, atol=1e-9 * np.abs(a).max(), err_msg=key)
+    again = lj.steady_gait(_hopping("array", cases), contact="hop", start=got.state, transient=1)
+    assert np.all(np.asarray(again.n_iter) == 0) and np.abs(np.asarray(again.state - got.state)).max() < 1e-10
+
+
+def _spline_worms(layout: str, force: bool = False) -> lj.Chain:
+    """Two 4-mass worms on bristles, each spring its own periodic spline of 6 control values (its own
+    mean rest length), under the rest-length or the internal-force actuator."""
+    rng = np.random.default_rng(1)
+    scale = 2.0 if force else 0.06
+    splines = [lj.Spline(rng.uniform(-scale, scale, (2, 6)), 3.0, 3.0 + 0.1 * j) for j in range(3)]
+    return lj.Chain(masses=[[1.0, 1.1, 0.9, 1.0], [0.9, 1.0, 1.2, 1.1]], d=0.3, lbar=None, c=0.02, waveforms=splines,
+                    friction=lj.AnisotropicCoulomb(0.7, 0.9, 0.5, 0.7), layout=layout,
+                    actuator=lj.InternalForce() if force else lj.RestLength())  # fmt: skip
+
+
+@pytest.mark.parametrize("force", [False, True])
+def test_array_layout_splines_equal_unrolled(force):
+    """Springs driven by periodic splines (`Spline`, one per spring, one number of control values): both
+    layouts' `measure` agree to 1e-10 relative with the same steps and switches, under the rest-length
+    actuator and the internal force (whose spline is a force about its own mean)."""
+    kw: dict[str, Any] = dict(z=0.3, t_start=4.0, horizon=40.0, contact="paper")
+    got, ref = (lj.measure(_spline_worms(lay, force), **kw).to_numpy() for lay in ("array", "unrolled"))
+    assert isinstance(engine_physics(_spline_worms("array", force)), ArrayChainPhysics)
+    assert np.all(ref["status"] == lj.Status.OK) and np.all(ref["stick_fraction"].max(-1) > 0.05)
+    for key in MEASURED:
+        _close(got[key], ref[key], RTOL)
+    for key in ("n_steps", "n_switch"):
+        np.testing.assert_array_equal(got[key], ref[key], err_msg=key)
+
+
+def test_array_layout_spline_gait_equals_unrolled():
+    """Steady gaits of the spline-driven worms (`"auto"` takes the array layout for gaits from
+    `GAIT_ARRAY_FROM` masses on, splines included): both layouts to 1e-9, the same Newton iterations."""
+    got = lj.steady_gait(_spline_worms("auto"))
+    ref = lj.steady_gait(_spline_worms("unrolled"))
+    assert isinstance(gait_physics(_spline_worms("auto")), ArrayChainPhysics)
+    assert np.all(np.asarray(ref.converged))
+    for key in ("status", "k", "n_iter", "stable"):
+        np.testing.assert_array_equal(np.asarray(getattr(got, key)), np.asarray(getattr(ref, key)), err_msg=key)
+    for key in GAIT_KEYS:
+        a, b = np.asarray(getattr(ref, key)), np.asarray(getattr(got, key))
+        np.testing.assert_allclose(b, a, rtol=1e-9, atol=1e-9 * np.abs(a).max(), err_msg=key)

@@ -86,7 +86,7 @@ class Exact(AbstractDynamics):
         # batched eigensolver inside it can deadlock XLA's CPU thread pool (seen at N = 8, batch 1024).
         chain = batch.mechanism
         ts = chain.t_start if batch.t_start is None else batch.t_start
-        P = engine_physics(chain, contact)  # the chain's layout (`_chain_array`)
+        P = engine_physics(chain)  # the chain's layout (`_chain_array`)
         return _measure.measure_batch(
             P, batch.valid, ts, z, horizon, window, contact, start, self.dt, cap, batch.initial
         )

@@ -183,9 +183,9 @@ def _results(f: _Fixed, dyn, contact) -> dict:
     if a.flight is not None and a.top is not None and a.landings is not None:
         periods = covered * f.P.omega / (2 * jnp.pi)
         hop = dict(
-            flight_fraction=jnp.where(covered > 0, jnp.stack(a.flight) / jnp.where(covered > 0, covered, 1), nan),
+            flight_fraction=jnp.where(covered > 0, f.P.stacked(a.flight) / jnp.where(covered > 0, covered, 1), nan),
             landings_per_period=jnp.where(periods > 0, a.landings / jnp.where(periods > 0, periods, 1), nan),
-            highest_hop=jnp.where(a.started, jnp.stack(a.top), nan),
+            highest_hop=jnp.where(a.started, f.P.stacked(a.top), nan),
             zeno=jnp.asarray(s.zeno),
         )
     return dict(

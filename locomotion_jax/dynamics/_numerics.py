@@ -259,8 +259,9 @@ def least(values: Sequence[Array]) -> Array:
 
 
 def total(terms: Sequence[Array]) -> Array:
-    """The sum over a list of entries (and over the bodies of an array entry), left to right."""
-    terms = [within(q, jnp.sum) for q in terms]
+    """The sum over a list of entries (and over the bodies of an array entry), left to right, in
+    the entries' dtype (a count of int32 entries stays int32 under float64)."""
+    terms = [within(q, lambda a: jnp.sum(a, dtype=a.dtype)) for q in terms]
     return sum(terms[1:], terms[0])
 
 

@@ -44,7 +44,7 @@ def _simulate_batch(C, valid, save_at, contact, start, dt, max_steps, lanes, buf
     take = lambda i: jax.tree_util.tree_map(lambda x: x[i], C)
 
     def init(i):
-        P = engine_physics(take(i), contact)
+        P = engine_physics(take(i))
         return P, chain_initial_state(P, valid[i], contact, start, None if initial is None else initial[i])
 
     hop = (lambda P: P.hop()[2:]) if contact == "hop" else (lambda P: None)
@@ -64,7 +64,7 @@ def _stack(P: Any, a: tuple, like: jax.Array) -> jax.Array:
 def _derived(C: Chain | Mechanism, contact, t, x, v, y=None, vy=None):
     """Energy, normal forces, rest lengths and tensions (per spring) at one saved state (under
     `contact="hop"`, the energy with each body's gravity $m_i y_i$ and vertical kinetic energy)."""
-    P: Any = engine_physics(C, contact)  # a chain's or a mechanism's: both have `l0` per spring and `tension`
+    P: Any = engine_physics(C)  # a chain's or a mechanism's: both have `l0` per spring and `tension`
     dr = P.drive(jnp.cos(P.omega * t), jnp.sin(P.omega * t))
     heights = None if y is None else P.bodies(y)
     L = loads_at(P, dr, P.bodies(x), y=heights)
@@ -82,7 +82,7 @@ def simulate_batch(flat: Chain | Mechanism, valid, save, contact, start, dt, max
     N = flat.n_masses
     batch = BatchRows.of(valid.shape[0], flat, valid, save, initial)
     times = BatchRows.of(save.shape[0], flat, valid, save, initial)  # the save times, padded as the rows are
-    lanes = default_lanes(batch.m, N if uses_array(flat, contact) else 1)
+    lanes = default_lanes(batch.m, N if uses_array(flat) else 1)
     C, ok, init = batch.pad((flat, valid, initial))
     cap = jnp.asarray(max_steps, jnp.int32)
     code = start_code(start)

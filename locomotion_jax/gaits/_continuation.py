@@ -223,7 +223,7 @@ def bodies_setup(mech, parameter, stops_of, dynamics, waveform, dtype, contact) 
     omega = np.broadcast_to(np.asarray(flat.omega, np.float64), (B,))
     sets_omega = any(bool(np.any(np.asarray(m))) and corrector._leaf_names(p).endswith(".omega")
                      for p, m in jax.tree_util.tree_flatten_with_path(sel)[0])  # fmt: skip
-    physics_of = shooting.physics_for(flat, contact)
+    physics_of = shooting.physics_for(flat)
     return BranchSetup(flat, physics_of, sel, shape, parameter, _mask(far, B), omega, sets_omega, False)
 
 

@@ -88,13 +88,13 @@ def period(
     figures the optimiser needs (`max_steps` per actuation period): `_orbit.period` of its physics.
     `loop`: the time loop, `lax.while_loop`'s signature (`gaits._adjoint` passes one that reverse
     mode traverses)."""
-    return orbit.period(gait_physics(C, contact), contact, dt, max_steps, y, k, loop)
+    return orbit.period(gait_physics(C), contact, dt, max_steps, y, k, loop)
 
 
-def gait_physics(C: Chain | Mechanism, contact: Contact) -> AbstractPhysics:
+def gait_physics(C: Chain | Mechanism) -> AbstractPhysics:
     """The physics a gait integrates `C` with: a chain's in the array layout from
     `GAIT_ARRAY_FROM` masses on (`model._chain_array`, as `steady_gait`), else its own."""
-    return engine_physics(C, contact, GAIT_ARRAY_FROM)
+    return engine_physics(C, GAIT_ARRAY_FROM)
 
 
 class ChainActuation(orbit.AbstractActuation):
@@ -103,11 +103,10 @@ class ChainActuation(orbit.AbstractActuation):
 
     harmonics: int
     knots: int = 0
-    contact: Contact = "strict"  # the layout depends on it (`gait_physics`)
     traces: ClassVar[Counter] = TRACES
 
     def physics(self, model: Chain | Mechanism, theta: Array, a_max: Array) -> AbstractPhysics:
-        return gait_physics(with_waves(model, theta, a_max, self.harmonics, self.knots), self.contact)
+        return gait_physics(with_waves(model, theta, a_max, self.harmonics, self.knots))
 
     def rest(self, model: Chain | Mechanism, P: AbstractPhysics) -> Array:
         return P.initial_positions("relaxed")
@@ -116,7 +115,7 @@ class ChainActuation(orbit.AbstractActuation):
 def evaluate(C, a_max, theta, y0, k, harmonics, knots, contact, dt, max_steps, tol, max_iter, patience=None) -> Orbit:
     """Orbits and sensitivities of a batch of decision vectors (`_orbit.evaluate`, compiled once
     per chain structure, batch size and static choice; `dt` and `max_iter` are data)."""
-    act = ChainActuation(harmonics, knots, contact)
+    act = ChainActuation(harmonics, knots)
     return orbit.evaluate(C, a_max, theta, y0, k, act, contact, dt, max_steps, tol, max_iter, monodromy_only=False,
                           gradient=True, patience=patience)  # fmt: skip
 
@@ -124,9 +123,7 @@ def evaluate(C, a_max, theta, y0, k, harmonics, knots, contact, dt, max_steps, t
 def relax(C, a_max, theta, y0, fresh, periods, harmonics, knots, contact, dt, max_steps) -> Array:
     """`periods` actuation periods from the section states `y0`, or from the relaxed springs at
     rest where `fresh` (`_orbit.relax`): the reduced states at the end."""
-    return orbit.relax(
-        C, a_max, theta, y0, fresh, periods, ChainActuation(harmonics, knots, contact), contact, dt, max_steps
-    )
+    return orbit.relax(C, a_max, theta, y0, fresh, periods, ChainActuation(harmonics, knots), contact, dt, max_steps)
 
 
 class ChainOracle(eqx.Module):

@@ -229,11 +229,11 @@ def array_mechanism_physics(c) -> tuple[AbstractPhysics, Array]:
     return array_physics(c), c.is_valid()
 
 
-def physics_for(mechanism: Chain | Mechanism, contact: str) -> Callable[[Any], tuple[AbstractPhysics, Array]]:
+def physics_for(mechanism: Chain | Mechanism) -> Callable[[Any], tuple[AbstractPhysics, Array]]:
     """The `physics_of` of a mechanism's gaits: in the array layout for a chain's `layout="array"`,
     or `"auto"` from `GAIT_ARRAY_FROM` masses on (`model._chain_array.uses_array`), else one entry
     per body."""
-    return array_mechanism_physics if uses_array(mechanism, contact, GAIT_ARRAY_FROM) else mechanism_physics
+    return array_mechanism_physics if uses_array(mechanism, GAIT_ARRAY_FROM) else mechanism_physics
 
 
 def paper_physics(c) -> tuple[AbstractPhysics, Array]:
@@ -382,7 +382,7 @@ def bodies_problem(mechanism: Any, dynamics: Exact, contact: str, start: str | A
         y_start = jnp.asarray(y.reshape(-1, n_red), flat.m.dtype)
         start = "paper"
     omega = np.asarray(flat.omega, np.float64)
-    return GaitProblem(flat, physics_for(flat, contact), valid, unresolved, shape, omega, flat.m.dtype, start, y_start)
+    return GaitProblem(flat, physics_for(flat), valid, unresolved, shape, omega, flat.m.dtype, start, y_start)
 
 
 def steady_gaits(

@@ -65,8 +65,8 @@ class Chain(AbstractMechanism):
     - `actuator`: [`RestLength`][] (default) or [`InternalForce`][].
     - `layout`: how the exact engine lays the masses out: `"unrolled"` (one scalar per mass:
       fastest for a few masses, but compile time and cost per mass grow with N), `"array"` (one
-      array over the masses: compile time independent of N; Sinusoid, Fourier and travelling-wave
-      actuation, `contact="strict"` or `"paper"`), or `"auto"` (default): where it applies, the
+      array over the masses: compile time independent of N; Sinusoid, Fourier, travelling-wave
+      and spline actuation, every contact reading), or `"auto"` (default): where it applies, the
       array layout from `ARRAY_FROM` (16) masses on for `measure` and `simulate` on a CPU
       (`ARRAY_FROM_ACCELERATOR`, 4, on a GPU), and from
       `GAIT_ARRAY_FROM` (3) on for steady gaits, continuation and the optimiser
@@ -233,7 +233,10 @@ class Chain(AbstractMechanism):
 
         def signal(w: AbstractWaveform) -> AbstractWaveform:
             coef = w.coefficients()
-            full_coef = [full(x, x.shape[-1:]) for x in coef.values()]
+            # A field's own axis is its view's last one where the view keeps its dimensions (a
+            # Spline's `control`), none where the view adds it (a Sinusoid's amplitude `a`).
+            own = lambda name, x: x.shape[-1:] if jnp.ndim(getattr(w, name)) == x.ndim else ()
+            full_coef = [full(getattr(w, name), own(name, x)) for name, x in coef.items()]
             w = eqx.tree_at(lambda v: [getattr(v, name) for name in coef], w, full_coef)
             return eqx.tree_at(lambda v: (v.omega, v.lbar), w, (full(w.omega, ()), full(w.lbar, ())))
 

@@ -9,9 +9,10 @@ holding all N masses (shape `(N,)` per configuration) in each per-body tuple of 
 so it runs unchanged on those entries; where it reduces over bodies (the earliest event, the
 lowest normal force, sums of powers, a collision, a switch) it reduces within the entry too
 (`dynamics._numerics.union`, `least`, `total`, `lowest_first`). Springs are shifted slices:
-$u = x_{1:} - x_{:-1}$, and a mass's load is $a_{i} - a_{i-1}$ of a per-spring array padded
-with zeros. The same formulas as the unrolled physics, term by term (module docstring of
-`_chain_physics`); only sums over bodies are summed in another order.
+$u = x_{1:} - x_{:-1}$ (under `contact="hop"` also $h = d + y_{1:} - y_{:-1}$, SPEC §10), and a
+mass's load is $a_{i} - a_{i-1}$ of a per-spring array padded with zeros. The same formulas as the
+unrolled physics, term by term (module docstring of `_chain_physics`); only sums over bodies are
+summed in another order.
 
 Which layout a run uses: [`engine_physics`][], from the chain's `layout` (`"auto"`: the array
 layout from [`array_from`][]`()` masses on, where it supports the chain).
@@ -19,6 +20,7 @@ layout from [`array_from`][]`()` masses on, where it supports the chain).
 
 from typing import Any
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 
@@ -27,6 +29,7 @@ from ._actuator import AbstractActuator
 from ._chain_physics import Drive, SpringRates, Springs
 from ._friction import AbstractFriction
 from ._physics import AbstractPhysics, LoadRates, Loads, Scalars
+from ._waveform import Spline
 
 
 ARRAY_FROM = 16
@@ -80,6 +83,9 @@ class ArrayChainPhysics(AbstractPhysics):
     inv_mass: Array
     one: Array
     actuator: AbstractActuator
+    # The springs' periodic splines as one `Spline` over the springs (control values springs by
+    # knots), in place of the Fourier coefficients `cos`, `sin`; `None`: the coefficients.
+    splines: Spline | None = None
 
     @property
     def n_bodies(self) -> int:
@@ -97,7 +103,9 @@ class ArrayChainPhysics(AbstractPhysics):
 
     def drive(self, c1: Array, s1: Array) -> Drive:
         """Each spring's Fourier signal with its first two rates (the harmonics by the angle-addition
-        recurrence, summed in the unrolled physics' order), split by the actuator."""
+        recurrence, summed in the unrolled physics' order), or its spline's, split by the actuator."""
+        if self.splines is not None:
+            return self._split(*self._spline_signals(c1, s1))
         H = self.cos.shape[-1]
         A, B = self.cos, self.sin
         cn, sn = c1, s1
@@ -113,8 +121,23 @@ class ArrayChainPhysics(AbstractPhysics):
                 val, rate, acc = (val + A[..., n] * cn) + B[..., n] * sn, rate + rn, acc - self.nw2[..., n] * vn
         if val is None or rate is None or acc is None:  # no harmonics: no actuation
             val = rate = acc = jnp.zeros_like(self.lbar) * c1
+        return self._split(self.lbar, val, rate, acc)
+
+    def _spline_signals(self, c1: Array, s1: Array) -> tuple[Array, Array, Array, Array]:
+        """The mean rest lengths and the signals with their rates of the springs' splines, as the
+        unrolled physics reads a waveform: the spline's rest length itself under the rest-length
+        actuator (about $\\bar\\ell_j$), its deviation from its own mean under the force actuator."""
+        assert self.splines is not None
+        l0, rate, acc = self.splines.at_phase(c1, s1)
+        if self.actuator.applies_force:
+            return self.lbar, l0 - self.splines.lbar, rate, acc
+        return self.lbar - self.splines.lbar, l0, rate, acc
+
+    def _split(self, base: Array, val: Array, rate: Array, acc: Array) -> Drive:
+        """Rest lengths and forces with their rates from the signals (the actuator is linear, so the
+        rates map as `split(0, ds)`)."""
         act = self.actuator
-        l0, f = act.split(self.lbar, val)
+        l0, f = act.split(base, val)
         dl0, df = act.split(jnp.zeros_like(rate), rate)
         ddl0, ddf = act.split(jnp.zeros_like(acc), acc)
         length, force = act.varies_rest_length, act.applies_force
@@ -124,43 +147,63 @@ class ArrayChainPhysics(AbstractPhysics):
             f=one(f, force), df=one(df, force), ddf=one(ddf, force),
         )  # fmt: skip
 
-    def loads(self, drive: Drive, x: Scalars, keep: Any = None) -> Loads:
+    def loads(self, drive: Drive, x: Scalars, keep: Any = None, y: Scalars | None = None) -> Loads:
         (xa,) = x
         kp = (lambda q: q) if keep is None else keep
         u = xa[1:] - xa[:-1]
-        length = jnp.sqrt(u * u + self.dd)
+        # Under contact="hop" a spring acts along (u_j, h_j), h_j = d_j + y_{j+1} - y_j (SPEC §10).
+        h = None if y is None else self.d + (y[0][1:] - y[0][:-1])
+        length = jnp.sqrt(u * u + (self.dd if h is None else h * h))
         il = 1 / length
         tension = kp(self.k * (length - drive.l0[0]))
         p = tension * il
-        fx, fy = kp(p * u), kp(p * self.d)
+        fx, fy = kp(p * u), kp(p * (self.d if h is None else h))
         F, N = _loads(self.m[0], fx, fy, drive.f)
-        return Loads((F,), (N,), Springs((u,), (il,), (p,), (tension,), (fx,), (fy,)))
+        return Loads((F,), (N,), Springs((u,), (il,), (p,), (tension,), (fx,), (fy,), None if h is None else (h,)))
 
-    def load_rates(self, drive: Drive, loads: Loads, xd: Scalars, keep: Any = None) -> LoadRates:
+    def load_rates(
+        self, drive: Drive, loads: Loads, xd: Scalars, keep: Any = None, yd: Scalars | None = None
+    ) -> LoadRates:
         (v,) = xd
         kp = (lambda q: q) if keep is None else keep
         sp = loads.aux
         u, il, p = sp.u[0], sp.il[0], sp.p[0]
         du = v[1:] - v[:-1]
-        dl = kp(u * du * il)
+        h = None if sp.h is None or yd is None else sp.h[0]
+        dh = None if h is None or yd is None else yd[0][1:] - yd[0][:-1]
+        dl = kp((u * du if h is None or dh is None else u * du + h * dh) * il)
         dT = self.k * (dl if drive.dl0 is None else dl - drive.dl0[0])
         dp = kp((dT - p * dl) * il)
-        dfx, dfy = kp(dp * u + p * du), kp(dp * self.d)
+        dfx = kp(dp * u + p * du)
+        dfy = kp(dp * self.d if h is None or dh is None else dp * h + p * dh)
         dF, dN = _load_rates(dfx, dfy, drive.df)
-        return LoadRates((dF,), (dN,), (du, SpringRates((dl,), (dT,), (dp,), (dfx,), (dfy,))))
+        return LoadRates((dF,), (dN,), (du, SpringRates((dl,), (dT,), (dp,), (dfx,), (dfy,)), dh))
 
     def load_second(
-        self, drive: Drive, loads: Loads, rates: LoadRates, xd: Scalars, a: Scalars
+        self,
+        drive: Drive,
+        loads: Loads,
+        rates: LoadRates,
+        xd: Scalars,
+        a: Scalars,
+        yd: Scalars | None = None,
+        ya: Scalars | None = None,
     ) -> tuple[Scalars, Scalars]:
-        du, sr = rates.aux
+        du, sr, dh = rates.aux
         sp = loads.aux
         u, il, p = sp.u[0], sp.il[0], sp.p[0]
         dl, dp = sr.dl[0], sr.dp[0]
         ddu = a[0][1:] - a[0][:-1]
         ddl = (du * du + u * ddu - dl * dl) * il
+        h, ddh = None, None
+        if sp.h is not None and dh is not None and ya is not None:  # contact="hop": the tilt's rates
+            h, ddh = sp.h[0], ya[0][1:] - ya[0][:-1]
+            ddl = ddl + (dh * dh + h * ddh) * il
         ddT = self.k * (ddl if drive.ddl0 is None else ddl - drive.ddl0[0])
         ddp = (ddT - 2 * dp * dl - p * ddl) * il
-        ddF, ddN = _load_rates(ddp * u + 2 * dp * du + p * ddu, ddp * self.d, drive.ddf)
+        ddfx = ddp * u + 2 * dp * du + p * ddu
+        ddfy = ddp * self.d if h is None or ddh is None else ddp * h + 2 * dp * dh + p * ddh
+        ddF, ddN = _load_rates(ddfx, ddfy, drive.ddf)
         return (ddF,), (ddN,)
 
     def power(self, drive: Drive, loads: Loads, v: Scalars) -> Array:
@@ -198,10 +241,10 @@ class ArrayChainPhysics(AbstractPhysics):
         return (x[0][1:] - x[0][:-1],)
 
     def hop(self) -> tuple[Array, Array, Scalars, Array]:
-        raise NotImplementedError(
-            "contact='hop' is not supported by a chain in the array layout; use Chain(..., layout='unrolled') "
-            "(or 'auto', which runs hopping chains unrolled)."
-        )
+        """As the unrolled physics (SPEC §10): on the ground at rest vertically, plastic landings
+        ($e_i = 0$) and the Zeno speed $10^{-3}$; the restitution one entry over the masses."""
+        heights = jnp.zeros_like(self.m[0])
+        return heights, heights, (heights,), jnp.zeros_like(self.omega) + 1e-3
 
     def initial_positions(self, start: str) -> Array:
         """As the unrolled physics: gaps $\\bar\\ell_j$ (`"paper"`) or the relaxed springs, $x_0 = 0$."""
@@ -243,14 +286,24 @@ def _power(act: AbstractActuator, T: Array, dl0: Array | None, f: Array | None, 
     return out
 
 
-def array_unsupported(C: Any, contact: str | None = None) -> str | None:
-    """Why a chain cannot run in the array layout (`None`: it can): a waveform other than Fourier
-    coefficients on a spring (a Spline), or `contact="hop"`."""
-    if C.signals is not None:
-        return "its springs have waveforms other than Sinusoid/Fourier/TravellingWave (a Spline)"
-    if contact == "hop":
-        return "contact='hop' is unrolled only"
+def array_unsupported(C: Any) -> str | None:
+    """Why a chain cannot run in the array layout (`None`: it can): springs driven by waveforms
+    other than Fourier coefficients (Sinusoid, Fourier, TravellingWave) or splines of one number
+    of control values."""
+    signals = C.signals or ()
+    if signals and not (all(type(w) is Spline for w in signals) and len({w.knots for w in signals}) == 1):
+        return "its springs' waveforms are neither Fourier series nor Splines of one number of control values"
     return None
+
+
+def _splines(signals: tuple[Any, ...]) -> Spline:
+    """The springs' splines (broadcast to the chain's batch shape) as one `Spline` over the springs:
+    control values `batch + (springs, M)`, base frequencies and mean rest lengths `batch + (springs,)`."""
+    return eqx.tree_at(
+        lambda w: (w.control, w.omega, w.lbar), signals[0],
+        (jnp.stack([w.control for w in signals], -2), jnp.stack([w.omega for w in signals], -1),
+         jnp.stack([w.lbar for w in signals], -1)),
+    )  # fmt: skip
 
 
 def array_physics(C: Any) -> ArrayChainPhysics:
@@ -267,10 +320,11 @@ def array_physics(C: Any) -> ArrayChainPhysics:
         m=(C.m,), im=(1 / C.m,), c=(C.c,), mu_f=(f,), mu_b=(None if b is f else b,), friction=(law,),
         k=C.k, d=C.d, dd=C.d * C.d, lbar=C.lbar, cos=C.waves.cos, sin=C.waves.sin, omega=C.waves.omega,
         nw=nw, nw2=nw * nw, inv_mass=1 / C.m.sum(-1), one=C.m[..., 0] / C.m[..., 0], actuator=C.actuator,
+        splines=None if C.signals is None else _splines(C.signals),
     )  # fmt: skip
 
 
-def uses_array(mechanism: Any, contact: str | None = None, start: int | None = None) -> bool:
+def uses_array(mechanism: Any, start: int | None = None) -> bool:
     """Whether `measure` and `simulate` run a mechanism in the array layout: a
     [`Chain`][locomotion_jax.Chain] with `layout="array"` (refused with a clear error where
     [`array_unsupported`][] finds a reason), or `"auto"` from `start` masses on (default
@@ -279,14 +333,14 @@ def uses_array(mechanism: Any, contact: str | None = None, start: int | None = N
     layout = getattr(mechanism, "layout", "unrolled")
     if layout == "unrolled":
         return False
-    why = array_unsupported(mechanism, contact)
+    why = array_unsupported(mechanism)
     if layout == "array" and why is not None:
         raise ValueError(f"A chain in layout='array': {why}; use layout='unrolled' or 'auto'.")
     return layout == "array" or (why is None and mechanism.n_masses >= (array_from() if start is None else start))
 
 
-def engine_physics(mechanism: Any, contact: str | None = None, start: int | None = None) -> AbstractPhysics:
+def engine_physics(mechanism: Any, start: int | None = None) -> AbstractPhysics:
     """The physics that `measure` and `simulate` (and, with `start=GAIT_ARRAY_FROM`, steady gaits)
     integrate a mechanism with ([`uses_array`][]): a chain's in the array layout, else the
     mechanism's own `physics()`."""
-    return array_physics(mechanism) if uses_array(mechanism, contact, start) else mechanism.physics()
+    return array_physics(mechanism) if uses_array(mechanism, start) else mechanism.physics()
