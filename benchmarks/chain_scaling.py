@@ -11,7 +11,9 @@ and runs the compiled program twice; throughput is mass-time-units per CPU-secon
 per wall-second. The worms: travelling waves of omega in [1.5, 4], a in [0.03, 0.08] and phase lags
 in [0.3, 2.5] over the batch, anisotropic Coulomb friction (bristles), paper contact, dt = 0.03,
 measured over t = 5 ... 25. With `--contact hop` (flight and landing, SPEC §10) the waves are
-faster and larger, omega in [6, 10] and a in [0.05, 0.08], so that the worms hop. Prints one
+faster and larger, omega in [6, 8] and a in [0.04, 0.07], so that the worms hop; some of them
+hop into a neighbour (`Status.COLLISION`, about 12 %), and those count no work (a lower bound on
+the throughput, the same configurations in both layouts). Prints one
 Markdown table, the load average before and after, and the ratios of issue 28: compile time at
 N = 64 over N = 4 and throughput per mass at N = 64 over N = 2 (each layout's own, and the array
 layout's at 64 against the unrolled at 2).
@@ -39,7 +41,7 @@ DT, T_START, HORIZON = 0.03, 5.0, 20.0
 
 def worms(n: int, B: int, layout: str, contact: str = "paper") -> lj.Chain:
     rng = np.random.default_rng(0)
-    (w0, w1), (a0, a1) = ((6.0, 10.0), (0.05, 0.08)) if contact == "hop" else ((1.5, 4.0), (0.03, 0.08))
+    (w0, w1), (a0, a1) = ((6.0, 8.0), (0.04, 0.07)) if contact == "hop" else ((1.5, 4.0), (0.03, 0.08))
     omega, a, phi = rng.uniform(w0, w1, B), rng.uniform(a0, a1, B), rng.uniform(0.3, 2.5, B)
     j = np.arange(n - 1)[None, :, None]
     waves = lj.SpringFourier(-a[:, None, None] * np.sin(phi[:, None, None] * j),
@@ -68,9 +70,11 @@ def row(n: int, B: int, layout: str, lanes: int = 0, contact: str = "paper") -> 
         cpus.append(time.process_time() - c0)
         walls.append(time.perf_counter() - w0)
     status = np.asarray(out["status"])
-    assert np.all(status == lj.Status.OK), f"N={n} {layout}: statuses {np.unique(status)}"
-    work = B * n * (T_START + HORIZON)  # mass-time-units
-    flying = float(np.mean(np.asarray(out["flight_fraction"]))) if contact == "hop" else 0.0
+    done = status == lj.Status.OK
+    allowed = done | (status == lj.Status.COLLISION) if contact == "hop" else done
+    assert np.all(allowed), f"N={n} {layout}: statuses {np.unique(status)}"
+    work = int(done.sum()) * n * (T_START + HORIZON)  # mass-time-units of the runs that finished
+    flying = float(np.nanmean(np.asarray(out["flight_fraction"])[done])) if contact == "hop" else 0.0
     return dict(N=n, layout=layout, compile=compile_s, per_cpu=work / min(cpus), per_wall=work / min(walls),
                 steps=float(np.mean(np.asarray(out["n_steps"]))), flying=flying)  # fmt: skip
 
