@@ -835,6 +835,14 @@ MUTATIONS = [
         ("tests/test_hop_reference.py::test_grazing_liftoff_does_not_stall_a_coarse_step",),
     ),
     Mutation(
+        "stribeck_breakaway_stops_at_once",
+        "a mass that breaks away with no acceleration along its slip looks for its stop at once: at a grazing "
+        "Stribeck breakaway it sticks and breaks away again at one instant",
+        "locomotion_jax/dynamics/_engine.py",
+        (("[c & ~r for c, r in zip(crossed[:n_mass], grazing)]", "crossed[:n_mass]"),),
+        ("tests/test_against_reference.py::test_grazing_stribeck_breakaway_against_reference",),
+    ),
+    Mutation(
         "guard_by_class",
         "the resolution guard tests for the Exact class: a fixed-step dynamics of one's own runs unguarded",
         "locomotion_jax/run/_resolution.py",

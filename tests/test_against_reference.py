@@ -483,6 +483,35 @@ def test_mirror_symmetric_chain_stays_still_against_reference():
     np.testing.assert_allclose(got["stick_fraction"], ref["stick_fraction"], atol=5e-3)
 
 
+def test_grazing_stribeck_breakaway_against_reference():
+    """Under Stribeck friction the kinetic coefficient at rest is the static one, so a mass that breaks
+    away where its load only grazes the static limit has no acceleration along its slip, and its stop
+    was located at the breakaway's own instant: mass 0 of this chain stuck and broke away at
+    t = 29.8768 until the step cap (`measure` at dt = 0.02: `MAX_STEPS` after 25,250 iterations; 1 to
+    3 of 512 random Stribeck chains at dt 0.02 and 0.05). Now the run goes on, and it converges to the
+    reference at fourth order: positions within 1e-6 at dt = 0.02 (measured 1.1e-7) and 1e-9 at
+    0.005 (3.1e-11), e_d alike."""
+    from reference_chain import reference_chain_simulate
+
+    kw: dict[str, Any] = dict(
+        k=[19.3487451375112, 15.858853993384766], d=[-0.21280171325698483, -0.33425823612219585], lbar=3.0,
+        c=0.01, omega=8.77895791034997, a=0.042592195712218284, phi=-1.6242701151884442, friction="stribeck",
+        v_s=0.1, mu_s_fwd=0.7, mu_s_bwd=0.9, mu_k_fwd=0.5, mu_k_bwd=0.6,
+    )  # fmt: skip
+    cfg = chain_config([1.452240590006979, 1.3769549097354983, 1.1449731068224849], **kw)
+    chain = to_chain(cfg)
+    m = lj.measure(chain, z=1e30, horizon=30.0, t_start=5.0, dynamics=lj.Exact(dt=0.02))
+    assert int(m.status) == lj.Status.OK and int(m.n_steps) < 2500 and float(m.stick_fraction[0]) > 0.05
+    ts = np.linspace(0.0, 35.0, 351)
+    ref = reference_chain_simulate(cfg, 35.0, ts)
+    for dt, tol in ((0.02, 1e-6), (0.005, 1e-9)):
+        tr = lj.simulate(chain, 35.0, ts, dynamics=lj.Exact(dt=dt))
+        dx = np.abs(np.asarray(tr.x) - ref["x"]).max()
+        ded = np.abs(np.asarray(tr.e_d) - ref["e_d"]).max()
+        print("dt", dt, "dx", dx, "de_d", ded)
+        assert int(tr.status) == lj.Status.OK and ref["status"] == "ok" and dx < tol and ded < tol
+
+
 @pytest.mark.parametrize("contact", ["strict", "paper"])
 def test_chain_driven_by_splines_against_reference(contact):
     """Spline waveforms on a 3-mass chain with anisotropic friction (each spring its own control
