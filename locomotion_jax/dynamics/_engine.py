@@ -420,13 +420,15 @@ def step(
     g1s = [kp(g) for g in D1.g]
     h2 = h * h
     crossed = [g < 0 for g in g1s]
-    # A mass that breaks away here with no acceleration along its slip (Stribeck friction, whose
-    # kinetic coefficient at rest is the static one, where the load only grazes the static limit)
-    # starts its slip function on the surface at zero rate, so its stop would be located at the
-    # step's start, and it would stick and break away again at the same time. Its stop is not
-    # looked for in this step; if it slips backwards by the step's end it stops at the next iteration.
-    grazing = [f & s & ~q & (d <= 0) for f, s, q, d in zip(fire, st_stuck, stuck, d0s)]
-    crossed[:n_mass] = [c & ~r for c, r in zip(crossed[:n_mass], grazing)]
+    if any(type(law).static_at_rest for law in P.friction):
+        # A mass that breaks away here with no acceleration along its slip (a law whose kinetic
+        # coefficient at rest is the static one, Stribeck's, where the load only grazes the static
+        # limit) starts its slip function on the surface at zero rate, so its stop would be located
+        # at the step's start, and it would stick and break away again at the same time. Its stop is
+        # not looked for in this step; if it slips backwards by the step's end it stops at the next
+        # iteration. (Static: the programs of the other laws do not carry the check.)
+        grazing = [f & s & ~q & (d <= 0) for f, s, q, d in zip(fire, st_stuck, stuck, d0s)]
+        crossed[:n_mass] = [c & ~r for c, r in zip(crossed[:n_mass], grazing)]
     if fly is not None and y0.y is not None and y0.vy is not None:
         # A body in flight at height 0 with no vertical velocity (it lifted off here, or a landing
         # left it airborne) starts its landing function on the surface at zero rate, so a crossing

@@ -10,6 +10,7 @@ at a time, with that mass's coefficients (scalars) and speed.
 
 import abc
 import dataclasses
+from typing import ClassVar
 
 import equinox as eqx
 import jax
@@ -26,6 +27,12 @@ class AbstractFriction(eqx.Module):
     $\\sigma = \\operatorname{sgn} v$ feels $-\\sigma\\,\\mu_k(\\sigma, |v|)\\,n$; a stuck mass
     stays stuck while $-\\mu_{s,\\mathrm{bwd}}\\,n \\le F \\le \\mu_{s,\\mathrm{fwd}}\\,n$.
     """
+
+    static_at_rest: ClassVar[bool] = False
+    """Whether the kinetic coefficient at rest is the static one (Stribeck): a mass breaking away then
+    has no acceleration along its slip where its load only grazes the static limit, and the exact
+    engine does not look for its stop in the step that starts the slip (`dynamics._engine.step`).
+    A law of your own with that property sets it `True`; without it such a run can end `MAX_STEPS`."""
 
     @abc.abstractmethod
     def static_limits(self) -> tuple[Array, Array]:
@@ -181,6 +188,8 @@ class Stribeck(AbstractFriction):
     v_s: Array
     mu_s_bwd: Array
     mu_k_bwd: Array
+
+    static_at_rest: ClassVar[bool] = True
 
     def __init__(
         self,
