@@ -56,6 +56,8 @@ def test_continue_json_out_and_text(tmp_path):
     assert rec["n_points"] == 4 and rec["status_name"] == "MAX_POINTS" and rec["lam_start"] == 0.05
     np.testing.assert_allclose(rec["points"]["lam"], np.asarray(b.lam), rtol=1e-12)
     np.testing.assert_allclose(rec["points"]["mean_speed"], np.asarray(b.mean_speed), rtol=1e-10)
+    np.testing.assert_allclose(rec["points"]["state"], np.asarray(b.state), rtol=1e-10, atol=1e-12)
+    assert rec["points"]["u"] == [q[0] for q in rec["points"]["state"]] and rec["points"]["n_land"] == [0] * 4
     text = invoke(*args)
     assert text.exit_code == 0 and "4 points" in text.stdout and "MAX_POINTS" in text.stdout
 

@@ -1,6 +1,7 @@
 """Continuation of steady gaits: points against independent solves, a period doubling and folds where
 known ones lie, the SSL/SL boundary against a dense direct scan and the independent reference,
-lift-off against the reference, bad input per branch, and one compilation for every parameter.
+lift-off against the reference, bad input per branch, one compilation for every parameter, and
+hopping branches against the independent hopping reference.
 
 Every continuation here is a batch of two branches (one compiled corrector for the whole file)."""
 
@@ -10,8 +11,11 @@ import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
+from chain_cases import ANISO
 from locomotion_jax import BranchStatus, EventKind, GaitStatus
 from reference import reference_simulate
+from reference_chain import chain_config
+from reference_hop import paper_config, reference_hop_simulate
 
 
 pytestmark = pytest.mark.xdist_group("gait")
@@ -262,3 +266,59 @@ def test_chain_points_are_steady_gaits(worm_branch):
         np.testing.assert_allclose(np.asarray(getattr(g, name)), pick(getattr(b, name)), rtol=1e-8, err_msg=name)
     np.testing.assert_allclose(np.abs(np.asarray(g.multipliers)), np.abs(pick(b.multipliers)), atol=1e-8)
     np.testing.assert_array_equal(np.asarray(g.regime), pick(b.regime))
+
+
+def _hop_return(cfg: dict, omega: float, y: np.ndarray, n: int) -> tuple[float, float]:
+    """The independent hopping reference over one period from the section state `y` (gaps, velocities,
+    heights, vertical velocities of `n` bodies): the largest difference of its end from `y`, and its
+    centre of mass's speed over the period."""
+    T = 2 * np.pi / omega
+    gaps, v, h, w = y[: n - 1], y[n - 1 : 2 * n - 1], y[2 * n - 1 : 3 * n - 1], y[3 * n - 1 :]
+    x0 = np.concatenate([[0.0], np.cumsum(gaps)])
+    r = reference_hop_simulate(cfg, T, [T], x0=x0, v0=v, y0=h, w0=w)
+    end = np.concatenate([np.diff(r["x"][0]), r["v"][0], r["y"][0], r["w"][0]])
+    m = np.asarray(cfg["m"])
+    return float(np.abs(end - y).max()), float(m @ (r["x"][0] - x0) / m.sum() / T)
+
+
+def _hopping_worm(omega) -> tuple[lj.Chain, list[dict]]:
+    """3-mass chains on anisotropic Coulomb friction that hop (`tests/test_hop_reference.py`'s first and
+    last: a = 0.08, phi = 2 pi / 3), one per `omega`, with their reference configurations."""
+    cfgs = [chain_config([1.0] * 3, omega=float(w), a=0.08, phi=2 * np.pi / 3, **dict[str, Any](ANISO)) for w in omega]
+    chains = [lj.Chain(masses=c["m"], k=c["k"], d=c["d"], lbar=c["lbar"], c=c["c"],
+                       friction=lj.AnisotropicCoulomb(**ANISO), waveforms=lj.SpringFourier(c["A"], c["B"], c["omega"]))
+              for c in cfgs]  # fmt: skip
+    return lj.Chain.stack(chains), cfgs
+
+
+def _check_hopping_branch(b: lj.Branch, stops, cfg_of, n: int, tol: float) -> None:
+    """Every point of each branch returns onto itself under the independent reference within `tol` after
+    one period, at the branch's mean speed to 1e-6; the points walk towards `stop`; each orbit flies."""
+    for i, stop in enumerate(stops):
+        m = int(b.n_points[i])
+        lam = np.asarray(b.lam[i, :m])
+        assert int(b.status[i]) in (BranchStatus.REACHED, BranchStatus.MAX_POINTS) and m >= 4, (b.status, lam)
+        assert np.all(np.diff(lam) * (stop - lam[0]) > 0), lam
+        assert np.all(np.asarray(b.liftoff[i, :m])) and np.all(np.asarray(b.n_land[i, :m]) > 0)
+        for j in range(m):
+            gap, speed = _hop_return(cfg_of(float(lam[j])), float(lam[j]), np.asarray(b.state[i, j]), n)
+            print(i, j, lam[j], "reference return", gap, "speed", speed, float(b.mean_speed[i, j]))
+            assert gap < tol and abs(speed - float(b.mean_speed[i, j])) < 1e-6
+
+
+def test_hopping_branches_against_the_reference():
+    """Continuation under `contact="hop"` (SPEC §10), for the paper's model (a = 0.1, omega 15 -> 15.6,
+    a body in flight at the section, and 20 -> 19.4) and for a hopping 3-mass chain on anisotropic
+    friction (omega 6 -> 6.2 and 10 -> 9.8): each point's section state, heights and vertical velocities
+    included, is carried back onto itself by the independent event-driven reference
+    (`tests/reference_hop.py`) over one period within 5e-6 and 2e-5 (the exact engine's truncation error
+    at dt = 0.01: measured 2e-6 and 1e-5), at the branch's mean speed to 1e-6 (1e-7)."""
+    p = lj.Params(omega=jnp.asarray([15.0, 20.0]), a=0.1)
+    b = lj.continuation(p, "omega", jnp.asarray([15.6, 19.4]), contact="hop", max_points=4, step=0.2, max_step=0.5)
+    assert b.names == "paper" and b.state.shape[-1] == 7 and float(b.state[0, 0, 3]) > 0  # in flight at the section
+    _check_hopping_branch(b, (15.6, 19.4), lambda w: paper_config(omega=w, a=0.1), 2, 5e-6)
+    chain, _ = _hopping_worm([6.0, 10.0])
+    b = lj.continuation(chain, "omega", jnp.asarray([6.2, 9.8]), contact="hop", max_points=4, step=0.25, max_step=0.5)
+    assert b.names == "bodies" and b.state.shape[-1] == 11
+    cfg = lambda w: chain_config([1.0] * 3, omega=w, a=0.08, phi=2 * np.pi / 3, **dict[str, Any](ANISO))
+    _check_hopping_branch(b, (6.2, 9.8), cfg, 3, 2e-5)

@@ -34,10 +34,11 @@ _PAPER_ONLY = ("stick_fraction1", "stick_fraction2", "u", "v1", "v2")
 
 POINT_FIELDS: tuple[str, ...] = (
     "lam", "mean_speed", "cost_of_transport", "regime", "stable", "liftoff", "u", "v1", "v2", "state",
-    "stick_fraction", "slip_margin", "min_normal", "n_switch",
+    "stick_fraction", "slip_margin", "min_normal", "n_switch", "n_land",
 )  # fmt: skip
 """The per-point [`Branch`][] fields `continue` reports: under the paper's names for the paper's model
-(`u`, `v1`, `v2`), else the bodies' (`state`, `stick_fraction`, a list per point)."""
+(`u`, `v1`, `v2`, and `state`, a list per point: under `--contact hop` with the heights and vertical
+velocities after them), else the bodies' (`state`, `stick_fraction`, a list per point)."""
 
 _PAPER_POINT = ("u", "v1", "v2")
 
@@ -180,7 +181,7 @@ def register(app: typer.Typer) -> None:
         except ValueError as err:
             _fail(err)
         n, paper = int(b.n_points), b.names == PAPER
-        skip = ("state", "stick_fraction") if paper else _PAPER_POINT
+        skip = ("stick_fraction",) if paper else _PAPER_POINT
         points = {name: np.asarray(getattr(b, name))[:n].tolist() for name in POINT_FIELDS if name not in skip}
         points["multipliers"] = _pairs(np.asarray(b.multipliers)[:n])
         e = b.events

@@ -6,8 +6,9 @@ Each event is the zero of a scalar test function of the orbit, continuous along 
   sign; `BRANCH_POINT` where it does not;
 - `PERIOD_DOUBLING`: $\\det(M + I)$ (a real multiplier at $-1$; complex pairs contribute
   $|\\mu + 1|^2 > 0$);
-- `SWITCH`: another change of the switching structure (the number of switches per period, e.g. a
-  velocity grazing zero), bracketed by two points but not located;
+- `SWITCH`: another change of the switching structure (the number of switches or, under
+  `contact="hop"`, of landings per period: a velocity or a height grazing zero), bracketed by two
+  points but not located;
 - `SSL_SL`: the slip margin, the smallest $|F_i| - \\mu_s n_i$ at a slipping mass's velocity zero
   (eq. 7; [`Gait`][]`.slip_margin`). At such an instant a mass sticks where it is negative and
   reverses where it is positive; as a stick interval shrinks to nothing, the margin at its
@@ -142,14 +143,14 @@ def _brackets(d: dict, status: np.ndarray, failed_at: np.ndarray) -> list[list[t
         for j in range(n - 1):
             pair = lambda name: (d[name][i, j], d[name][i, j + 1])
             row = lambda kind, g: (kind, j, z[j], z[j + 1], g[0], g[1], d["J"][i, j], d["J"][i, j + 1])
-            m, nm, sw = pair("margin"), pair("n_min"), pair("n_switch")
+            m, nm, sw, nl = pair("margin"), pair("n_min"), pair("n_switch"), pair("n_land")
             if (m[0] > 0) != (m[1] > 0):
                 out[i].append(row(EventKind.SSL_SL, m))
             if (nm[0] > 0) != (nm[1] > 0):
                 out[i].append(row(EventKind.LIFTOFF, nm))
             if (m[0] > 0) != (m[1] > 0) or (nm[0] > 0) != (nm[1] > 0):
                 continue
-            if sw[0] != sw[1]:
+            if sw[0] != sw[1] or nl[0] != nl[1]:
                 out[i].append(row(EventKind.SWITCH, (np.nan, np.nan)))
                 continue
             dp, dm = pair("det_plus"), pair("det_minus")

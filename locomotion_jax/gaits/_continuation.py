@@ -83,13 +83,16 @@ class Branch(PaperNames):
     with NaN (or the sentinels below) past each branch's `n_points`.
 
     - `lam`: the parameter; `state`: the orbit's section state, `batch + (n, S)` (as [`Gait`][]'s
-      `(u, v1, v2)` for the paper's model, `Gait.state` for a chain or a mechanism).
+      `(u, v1, v2)` for the paper's model, `Gait.state` for a chain or a mechanism; under
+      `contact="hop"` followed by the heights and vertical velocities).
     - `mean_speed`, `cost_of_transport`, `e_d`, `work`, `n_switch`, `slip_margin`, `min_normal`: as in
       [`Gait`][], of each point's orbit; `stick_fraction`: per mass, `batch + (n, N)`; `regime`:
       [`Regime`][] (UNDETERMINED past the end).
     - `multipliers`: Floquet multipliers, `batch + (n, S)`, by decreasing modulus; `stable`: all inside
       the unit circle.
-    - `liftoff`: a normal force of the orbit reaches zero (`min_normal <= 0`; paper reading).
+    - `n_land`: landings per gait period (0 but under `contact="hop"`).
+    - `liftoff`: a normal force of the orbit reaches zero (`min_normal <= 0`; under the paper
+      reading and `contact="hop"`, where the orbit has a flight).
     - `tangent`: $d\\lambda/ds$ of the unit tangent (sign change: a fold).
     - `det_minus`, `det_plus`: $\\det(M - I)$ and $\\det(M + I)$ (test functions of a real multiplier
       at $+1$ and $-1$).
@@ -110,6 +113,7 @@ class Branch(PaperNames):
     stick_fraction: Array
     regime: Array
     n_switch: Array
+    n_land: Array
     slip_margin: Array
     min_normal: Array
     multipliers: Array
@@ -276,6 +280,8 @@ def continuation(
       the others are reported between the two points that bracket them.
     - `tol`, `max_iter`: the corrector's Newton tolerance (as [`steady_gait`][]'s) and iterations.
     - `transient`, `dynamics`, `waveform`, `contact`, `start`, `dtype`: as in [`steady_gait`][].
+      Under `contact="hop"` (SPEC §10) the orbits fly and land; a change of their sequence of
+      flights and landings is a change of switching structure like a new stick interval.
     - `verbose`: print progress to stderr from the start: the start gait's stages (as
       [`steady_gait`][]'s), then the corrector's compilation, the walk and the event location.
 
@@ -292,8 +298,6 @@ def continuation(
     dynamics = Exact() if dynamics is None else dynamics
     if not isinstance(dynamics, Exact):
         raise TypeError(f"continuation needs Exact dynamics, got {type(dynamics).__name__}.")
-    if contact == "hop":
-        raise NotImplementedError("continuation runs under contact='strict' or 'paper', not 'hop'.")
     _check(max_points, step, max_step, min_step, max_iter)
     to_locate = kinds(locate)
 
@@ -377,7 +381,7 @@ MAX_CORNERS = 32
 
 
 def _signature(out) -> tuple:
-    return (np.asarray(out.n_switch), np.asarray(out.margin) > 0, np.asarray(out.n_min) > 0)
+    return (np.asarray(out.n_switch), np.asarray(out.n_land), np.asarray(out.margin) > 0, np.asarray(out.n_min) > 0)
 
 
 class _Walk:
@@ -485,7 +489,7 @@ def _check(max_points, step, max_step, min_step, max_iter) -> None:
         raise ValueError(f"need 0 < min_step <= step <= max_step (finite), got {min_step!r}, {step!r}, {max_step!r}.")
 
 
-_FIELDS = ("dX", "ed", "w", "stuck", "margin", "n_min", "n_switch", "lifted")
+_FIELDS = ("dX", "ed", "w", "stuck", "margin", "n_min", "n_switch", "n_land", "lifted")
 
 
 def _record(r: corrector.Solved, t: np.ndarray, i: int) -> dict:
@@ -547,6 +551,7 @@ def _branch(d, status, k, start_status, events, shape, dtype, label, contact, pa
         stick_fraction=re(stuck),
         regime=re(regime, jnp.int32),
         n_switch=re(np.nan_to_num(d["n_switch"]), jnp.int32),
+        n_land=re(np.nan_to_num(d["n_land"]), jnp.int32),
         slip_margin=re(d["margin"]),
         min_normal=re(d["n_min"]),
         multipliers=jnp.asarray(d["multipliers"]).reshape(shape + (n, S)),

@@ -63,6 +63,7 @@ class _Period(NamedTuple):
     lifted: Array
     margin: Array
     n_min: Array
+    n_land: Array  # landings over the periods (0 unless contact="hop")
 
 
 def reduced_size(P: AbstractPhysics) -> int:
@@ -214,6 +215,7 @@ def period_map(P, contact, dt, max_steps, k, y) -> _Period:
         # A mass that never slips is stuck throughout: a stick interval without a velocity zero.
         margin=jnp.where(slid, a.margin, -jnp.inf),
         n_min=a.n_min,
+        n_land=jnp.zeros((), jnp.int32) if st.n_land is None or st0.n_land is None else st.n_land - st0.n_land,
     )
 
 
