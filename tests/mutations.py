@@ -835,6 +835,26 @@ MUTATIONS = [
         ("tests/test_hop_reference.py::test_grazing_liftoff_does_not_stall_a_coarse_step",),
     ),
     Mutation(
+        "carried_landing_own_mass_only",
+        "a carrier's landing stops its own fall only: its normal impulse, which bounds the tangential one, "
+        "leaves out the masses it carries",
+        "locomotion_jax/model/_mechanism_physics.py",
+        (("        return self.normal\n", "        return self.m\n"),),
+        ("tests/test_hop_carried.py::test_a_hopping_capsule_against_the_reference",),
+    ),
+    Mutation(
+        "carried_body_keeps_its_own_height",
+        "a carried body keeps its own (zero) height and vertical velocity instead of riding in its carrier",
+        "locomotion_jax/model/_mechanism_physics.py",
+        (
+            (
+                "    ride = lambda q: tuple(q[..., g] for g in ground)",
+                "    ride = lambda q: tuple(q[..., i] for i in range(n))",
+            ),
+        ),
+        ("tests/test_hop_carried.py::test_a_hopping_capsule_against_the_reference",),
+    ),
+    Mutation(
         "stribeck_breakaway_stops_at_once",
         "a mass that breaks away with no acceleration along its slip looks for its stop at once: at a grazing "
         "Stribeck breakaway it sticks and breaks away again at one instant",

@@ -21,6 +21,18 @@ Method: event-driven, one ``solve_ivp(DOP853)`` per segment of constant mode (th
 contact bodies and each slipping body's direction), terminal events at a stuck body's static
 limits and a slipping body's zero velocity; after every event every contact body is re-decided
 from the state. The state carries the dissipated energy ``e_d`` and the work ``w``.
+
+Hopping (``run(..., hop=True)``, SPEC §10): a body in contact starts in flight where its ``y0 > 0``
+or ``w0 > 0``. No vertical force acts (the elements are horizontal), so a body in flight and every
+body it carries fall freely, ``y = y_f + w_f s - s^2/2`` (``s`` the time since the flight began),
+and it feels no friction; on the ground its load is constant, so it never lifts off by itself.
+A carried body rides with the body that finally carries it. The landing (``y`` back to 0, at the
+time solved in closed form; a segment ends there) is an impact of the group, ``M`` = the body's
+mass and the masses it carries: ``w+ = -e w-`` (``e`` the body's restitution; ``w+ = 0`` where
+``e |w-| < zeno``), normal impulse ``P_n = M (w+ - w-)``, tangential impulse
+``P_t = min(m |v-|, mu_k P_n)`` against ``v-`` on the body alone (``mu_k`` of ``v-``'s
+direction). Their losses ``M (w-^2 - w+^2)/2 + m (v-^2 - v+^2)/2`` join ``e_d``; ``e`` gains
+``M (y + w^2/2)``. After a plastic landing the body is re-decided stuck or slipping.
 """
 
 from dataclasses import dataclass, field
@@ -78,6 +90,9 @@ class Body:
     c: float = 0.0
     x0: float = 0.0
     v0: float = 0.0
+    y0: float = 0.0  # hopping only: initial height and vertical velocity of a body in contact
+    w0: float = 0.0
+    e: float = 0.0  # its restitution
 
 
 @dataclass
@@ -87,6 +102,7 @@ class System:
     forces: list = field(default_factory=list)  # (a, b, Sig)
     externals: list = field(default_factory=list)  # (i, Sig)
     dampers: list = field(default_factory=list)  # (a, b, c); -1 is the wall
+    zeno: float = 1e-3  # hopping only: a rebound slower than this is plastic
 
     def normal(self) -> np.ndarray:
         N = np.array([b.m if b.law is not None else 0.0 for b in self.bodies])
@@ -138,8 +154,22 @@ class System:
         return sum(c * (vel(b) - vel(a)) ** 2 for a, b, c in self.dampers)
 
 
-def run(sys: System, t_end: float, save: np.ndarray, rtol: float = 1e-12, atol: float = 1e-13) -> dict:
-    """Positions, velocities, e_d, w and energy at the times `save` (increasing, in [0, t_end])."""
+def _grounds(sys: System) -> list[int | None]:
+    """Per body, the body in contact that finally carries it (itself if in contact; None: free)."""
+    out: list[int | None] = []
+    for i, b in enumerate(sys.bodies):
+        j: int | None = i
+        while j is not None and sys.bodies[j].law is None:
+            j = sys.bodies[j].carrier
+        out.append(j)
+    return out
+
+
+def run(sys: System, t_end: float, save: np.ndarray, rtol: float = 1e-12, atol: float = 1e-13,
+        hop: bool = False) -> dict:  # fmt: skip
+    """Positions, velocities, e_d, w and energy at the times `save` (increasing, in [0, t_end]);
+    with `hop`, heights `y` and vertical velocities `vy` per body (a carried body's its carrier's)
+    and the landings per body in contact, `n_landings` (module docstring)."""
     n = len(sys.bodies)
     m = np.array([b.m for b in sys.bodies])
     c = np.array([b.c for b in sys.bodies])
@@ -147,13 +177,30 @@ def run(sys: System, t_end: float, save: np.ndarray, rtol: float = 1e-12, atol: 
     contact = [b.law is not None for b in sys.bodies]
     law = [b.law if b.law is not None else (0.0, 0.0, 0.0, 0.0) for b in sys.bodies]
     y = np.concatenate([[b.x0 for b in sys.bodies], [b.v0 for b in sys.bodies], [0.0, 0.0]])
+    grounds = _grounds(sys)
+    # Per body in contact in flight: (time the flight began, its height and vertical velocity then).
+    flight: dict[int, tuple[float, float, float]] = {}
+    if hop:
+        flight = {i: (0.0, b.y0, b.w0) for i, b in enumerate(sys.bodies) if contact[i] and (b.y0 > 0 or b.w0 > 0)}
+    landings = np.zeros(n, int)
+
+    def vertical(i: int, t: float) -> tuple[float, float]:
+        if i not in flight:
+            return 0.0, 0.0
+        t0, y0, w0 = flight[i]
+        s = t - t0
+        return y0 + w0 * s - 0.5 * s * s, w0 - s
+
+    def landing_time(i: int) -> float:
+        t0, y0, w0 = flight[i]
+        return t0 + w0 + np.sqrt(w0 * w0 + 2 * y0)
 
     def decide(t, y, stuck, sdir, fired):
         """Re-decide every contact body after an event; `fired`: `(body, direction)` of the event that
         ended the segment (direction +-1: the static limit it crossed; 0: its velocity reached zero)."""
         F = sys.loads(t, y[:n], y[n : 2 * n])[0]
         for i in range(n):
-            if not contact[i]:
+            if not contact[i] or i in flight:
                 continue
             tol = 1e-10 * max(1.0, abs(F[i]))
             holds = -law[i][1] * N[i] - tol <= F[i] <= law[i][0] * N[i] + tol
@@ -169,13 +216,13 @@ def run(sys: System, t_end: float, save: np.ndarray, rtol: float = 1e-12, atol: 
                     sdir[i] = 1.0 if F[i] > 0 else -1.0
         return stuck, sdir
 
-    stuck = [contact[i] and sys.bodies[i].v0 == 0 for i in range(n)]
+    stuck = [contact[i] and i not in flight and sys.bodies[i].v0 == 0 for i in range(n)]
     sdir = [1.0 if b.v0 > 0 else -1.0 if b.v0 < 0 else 1.0 for b in sys.bodies]
     F0 = sys.loads(0.0, y[:n], y[n : 2 * n])[0]
     for i in range(n):
         if sys.bodies[i].v0 == 0:
             sdir[i] = 1.0 if F0[i] >= 0 else -1.0
-            if stuck[i] and not (-law[i][1] * N[i] <= F0[i] <= law[i][0] * N[i]):
+            if stuck[i] and not (-law[i][1] * N[i] <= F0[i] <= law[i][0] * N[i]):  # (in flight: not stuck)
                 stuck[i] = False
 
     def rhs(t, y, stuck, sdir):
@@ -186,7 +233,7 @@ def run(sys: System, t_end: float, save: np.ndarray, rtol: float = 1e-12, atol: 
         for i in range(n):
             if contact[i] and stuck[i]:
                 continue
-            mu = 0.0 if not contact[i] else (law[i][2] if sdir[i] > 0 else law[i][3])
+            mu = 0.0 if not contact[i] or i in flight else (law[i][2] if sdir[i] > 0 else law[i][3])
             a[i] = (F[i] - c[i] * v[i] - sdir[i] * mu * N[i]) / m[i]
             ed += mu * N[i] * abs(v[i]) + c[i] * v[i] ** 2
         xd = np.where([contact[i] and stuck[i] for i in range(n)], 0.0, v)
@@ -195,7 +242,7 @@ def run(sys: System, t_end: float, save: np.ndarray, rtol: float = 1e-12, atol: 
     def events(stuck, sdir):
         out, owner = [], []
         for i in range(n):
-            if not contact[i]:
+            if not contact[i] or i in flight:
                 continue
             if stuck[i]:
                 out.append(lambda t, y, *_, i=i: law[i][0] * N[i] - sys.loads(t, y[:n], y[n : 2 * n])[0][i])
@@ -208,6 +255,33 @@ def run(sys: System, t_end: float, save: np.ndarray, rtol: float = 1e-12, atol: 
             e.terminal, e.direction = True, -1
         return out, owner
 
+    def land(t: float, y: np.ndarray, i: int) -> None:
+        """The impact of body `i` and what it carries at time `t` (module docstring)."""
+        _, w = vertical(i, t)
+        e = sys.bodies[i].e
+        wp = 0.0 if e * abs(w) < sys.zeno else -e * w
+        v = y[n + i]
+        mu = law[i][2] if v >= 0 else law[i][3]
+        Pt = min(m[i] * abs(v), mu * N[i] * (wp - w))
+        vp = 0.0 if Pt >= m[i] * abs(v) else v - np.sign(v) * Pt / m[i]
+        y[-2] += 0.5 * N[i] * (w * w - wp * wp) + 0.5 * m[i] * (v * v - vp * vp)
+        y[n + i] = vp
+        landings[i] += 1
+        del flight[i]
+        if wp > 0:
+            flight[i] = (t, 0.0, wp)
+        elif vp != 0:
+            stuck[i], sdir[i] = False, float(np.sign(vp))
+        else:
+            F = sys.loads(t, y[:n], y[n : 2 * n])[0][i]
+            stuck[i] = -law[i][1] * N[i] <= F <= law[i][0] * N[i]
+            sdir[i] = 1.0 if F >= 0 else -1.0
+
+    def sample(t: float, r: np.ndarray) -> np.ndarray:
+        """A saved row: the integrated state, then per body the height and vertical velocity."""
+        hw = [vertical(g, t) if g is not None else (0.0, 0.0) for g in grounds]
+        return np.concatenate([r, [h for h, _ in hw], [w for _, w in hw]])
+
     t = 0.0
     rows, k = [], 0
     segments = 0
@@ -215,17 +289,25 @@ def run(sys: System, t_end: float, save: np.ndarray, rtol: float = 1e-12, atol: 
         segments += 1
         st, sd = list(stuck), list(sdir)
         ev, owner = events(st, sd)
-        sol = solve_ivp(rhs, (t, t_end), y, method="DOP853", args=(st, sd), events=ev, rtol=rtol, atol=atol,
+        t_land = min([landing_time(i) for i in flight] + [t_end])
+        sol = solve_ivp(rhs, (t, t_land), y, method="DOP853", args=(st, sd), events=ev, rtol=rtol, atol=atol,
                         dense_output=True, max_step=0.05)  # fmt: skip
         t_next = sol.t[-1]
         while k < len(save) and save[k] <= t_next:
-            rows.append((save[k], sol.sol(save[k])))
+            rows.append((save[k], sample(save[k], sol.sol(save[k]))))
             k += 1
         y, t = sol.y[:, -1].copy(), t_next
         if sol.status == 1:
             fired = owner[next(j for j, te in enumerate(sol.t_events) if len(te))]
             stuck, sdir = decide(t, y, st, sd, fired)
+        elif t < t_end:  # a landing (bodies whose flights end together land together)
+            for i in [i for i in flight if landing_time(i) <= t + 1e-12]:
+                land(t, y, i)
     out = np.array([r for _, r in rows])
+    M = np.array([N[g] if g == i else 0.0 for i, g in enumerate(grounds)])  # each group's mass, once
+    hy, vy = out[:, -2 * n : -n], out[:, -n:]
     energy = np.array([0.5 * np.sum(m * r[n : 2 * n] ** 2) + sys.loads(s, r[:n], r[n : 2 * n])[1] for s, r in rows])
-    return dict(t=np.array([s for s, _ in rows]), x=out[:, :n], v=out[:, n : 2 * n], ed=out[:, -2], w=out[:, -1],
-                e=energy, com=out[:, :n] @ m / m.sum())  # fmt: skip
+    energy = energy + (hy + 0.5 * vy * vy) @ M
+    base = out[:, : 2 * n + 2]
+    return dict(t=np.array([s for s, _ in rows]), x=base[:, :n], v=base[:, n : 2 * n], ed=base[:, -2], w=base[:, -1],
+                e=energy, com=base[:, :n] @ m / m.sum(), y=hy, vy=vy, n_landings=landings.copy())  # fmt: skip

@@ -6,6 +6,7 @@ with one `Error:` line naming the option, the path and what the file has there. 
 (`examples/worm.toml`) is swept the same way. Short runs (t_start 5, horizon 6, dt 0.02) and one
 chunk shape (4 configurations): one compilation per mechanism and dtype serves the module."""
 
+import json
 import re
 from pathlib import Path
 from typing import Any
@@ -237,14 +238,26 @@ def test_float32_sweep_equals_lj_sweep_in_float32_and_float64_within_its_precisi
     np.testing.assert_allclose(ds.mean_speed.values, expected64.mean_speed.values, rtol=1e-3)
 
 
-@pytest.mark.parametrize("command", [["measure"], ["sweep", "--vary", f"{M0}=1,2", "--no-progress", "--out", "h.nc"]])
-def test_a_combination_the_library_refuses_is_one_line(tmp_path, monkeypatch, command):
-    """`--contact hop` with a carried body: the library's `NotImplementedError`, one line, no traceback."""
-    monkeypatch.chdir(tmp_path)
-    res = invoke(command[0], CAPSULE, *command[1:], "--contact", "hop")
-    assert res.exit_code == 2 and "Traceback" not in res.output and res.output.count("\n") == 1, res.output
-    assert res.output.startswith("Error: contact='hop' does not support carried bodies yet (carried_by)"), res.output
-    assert not (tmp_path / "h.nc").exists()
+def test_hop_with_a_carried_body_equals_strict_on_the_ground(tmp_path):
+    """`--contact hop` with a carried body: the capsule's forces are horizontal, so it never lifts off
+    and its `measure` (JSON) and `sweep` (a map) under "hop" equal those under "strict" (SPEC §10:
+    without lift-off the third reading equals the strict one), and no flight is recorded."""
+    args = ["--z", "1e6", "--horizon", "6", "--window", "6", "--t-start", "5", "--dt", "0.02", "--json"]
+    got = {c: invoke("measure", CAPSULE, *args, "--contact", c) for c in ("hop", "strict")}
+    assert all(r.exit_code == 0 for r in got.values()), got["hop"].output
+    hop, strict = (json.loads(got[c].stdout) for c in ("hop", "strict"))
+    for key in ("mean_speed", "e_d", "work", "cost_of_transport", "n_steps"):
+        assert hop[key] == strict[key], key
+    assert hop["landings_per_period"] == 0 and max(hop["flight_fraction"]) == 0
+    maps = {}
+    for c in ("hop", "strict"):
+        res = invoke(
+            "sweep", CAPSULE, "--vary", f"{M0}=1,2", "--contact", c, *FLAGS, "--out", str(tmp_path / f"{c}.nc")
+        )
+        assert res.exit_code == 0, res.output
+        maps[c] = xr.load_dataset(tmp_path / f"{c}.nc")
+    for name in maps["strict"].data_vars:
+        np.testing.assert_array_equal(maps["hop"][name].values, maps["strict"][name].values, err_msg=name)
 
 
 def worm(**v: Any) -> lj.Chain:

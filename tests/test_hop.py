@@ -188,9 +188,6 @@ def test_paths_without_hop_refuse_clearly():
     with pytest.raises(ValueError, match="got shape \\(11,\\), a height < 0"):
         low = np.r_[3.0, 3.0, np.zeros(4), -0.1, np.zeros(4)]  # gaps, velocities, heights (one < 0), w
         lj.steady_gait(lj.Chain(masses=[1.0, 1.0, 1.0]), contact="hop", start=low)
-    with pytest.raises(NotImplementedError, match="carried"):
-        M = lj.Mechanism(masses=[1.0, 0.5], friction=[lj.Coulomb(0.5, 0.4), None], carried_by=[None, 0])
-        lj.simulate(M, t_end=1.0, save_at=ts, contact="hop")
     with pytest.raises(NotImplementedError, match="Exact"):
         lj.simulate(_ball(), t_end=1.0, save_at=ts, contact="hop", dynamics=lj.Smoothed())
 

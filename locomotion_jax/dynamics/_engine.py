@@ -201,23 +201,26 @@ def init(
 def _impact(P: AbstractPhysics, restitution: Scalars, zeno: Array, st: Hybrid, N0: Scalars, keep):
     """The hopping reading's switches of vertical mode at the start of an iteration (SPEC §10):
     a body in flight whose landing was located (or that is below the ground) lands: $w^+ = -e_i w^-$
-    (plastic, $w^+ = 0$, where $e_i |w^-| <$ `zeno`), normal impulse $P_n = m_i (w^+ - w^-)$ and
+    (plastic, $w^+ = 0$, where $e_i |w^-| <$ `zeno`), normal impulse $P_n = M_i (w^+ - w^-)$ ($M_i$ the
+    mass that lands with it, `P.landing_masses()`: $m_i$ and the masses it carries) and
     tangential $P_t = \\min(m_i |v^-|, \\mu_k P_n)$ against $v^-$; it stays on the ground after a
     plastic landing if $N_i \\ge 0$. A body on the ground whose $N_i$ fell through 0 lifts off with
     $w = 0$. Returns the new state, flight flags, the bodies that landed at rest horizontally (to
-    be re-decided stuck or slipping), the landings' count, and whether the Zeno rule made one plastic."""
+    be re-decided stuck or slipping), the landings' count (of the bodies in contact), and whether the
+    Zeno rule made one plastic."""
     yA = st.y
     assert st.fly is not None and st.vpend is not None and yA.y is not None and yA.vy is not None
     zero = jnp.zeros_like(st.t)
     hs, ws, vs, fly, rest, lost, count, zeno_rule = [], [], [], [], [], [], [], []
-    for i, (f, pe, h, w, v, q) in enumerate(zip(st.fly, st.vpend, yA.y, yA.vy, yA.v, N0)):
+    touches = P.in_contact()
+    for i, (f, pe, h, w, v, q, M) in enumerate(zip(st.fly, st.vpend, yA.y, yA.vy, yA.v, N0, P.landing_masses())):
         land = f & (pe | (h < 0))
         lift = ~f & (pe | (q < 0))
         m, e = P.m[i], restitution[i]
         slow = e * jnp.abs(w) < zeno
         wp = jnp.where(slow, zero, -e * w)
         zeno_rule.append(land & slow & (e > 0))
-        Pn = m * (wp - w)
+        Pn = M * (wp - w)
         sgn = jnp.where(v >= 0, 1.0, -1.0).astype(v.dtype)
         mu = P.friction[i].kinetic(jnp.abs(v), sgn)
         Pt = jnp.minimum(m * jnp.abs(v), mu * Pn)
@@ -229,7 +232,8 @@ def _impact(P: AbstractPhysics, restitution: Scalars, zeno: Array, st: Hybrid, N
         vs.append(jnp.where(land, vp, v))
         fly.append(keep(jnp.where(land, airborne, f | lift)))
         rest.append(land & ~airborne & (vp == 0))
-        count.append(land.astype(jnp.int32))
+        # A carried body lands with its carrier: one landing, the carrier's.
+        count.append(land.astype(jnp.int32) if touches[i] else jnp.zeros(jnp.shape(land), jnp.int32))
     y = yA._replace(y=tuple(hs), vy=tuple(ws), v=tuple(vs), ed=yA.ed + motion._sum(lost))
     return y, tuple(fly), tuple(rest), motion._sum(count), num.union(zeno_rule)
 

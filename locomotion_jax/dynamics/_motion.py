@@ -118,7 +118,8 @@ def _in_mode(P: AbstractPhysics, contact: Contact, mode: Mode, dr: Any, L: Loads
     loads `L`: $\\dot x_i = v_i$, $m_i \\dot v_i = F_i - c_i v_i - \\sigma_i \\mu_k n_i$
     (both zero when stuck; eq. 9 generalised), $\\dot e_d = \\sum_i \\mu_k n_i |v_i| + c_i v_i^2$
     (eq. 15) and $\\dot w$, the actuator's power (eq. 16). Under `contact="hop"` a body in flight
-    feels no friction ($n_i = 0$) and falls: $\\dot y_i = w_i$, $m_i \\dot w_i = -m_i + V_i = -N_i$."""
+    feels no friction ($n_i = 0$) and falls: $\\dot y_i = w_i$, $\\dot w_i$ = `P.fall(N)`
+    ($m_i \\dot w_i = -m_i + V_i = -N_i$ for a body that carries nothing)."""
     F, N = with_velocity(P, L.F, v), L.N
     n = normal(contact, N, mode.side)
     if mode.fly is not None:  # no friction in flight
@@ -136,7 +137,7 @@ def _in_mode(P: AbstractPhysics, contact: Contact, mode: Mode, dr: Any, L: Loads
         assert vy is not None, "contact='hop' needs the vertical velocities"
         rate = rate._replace(
             y=tuple(jnp.where(f, q, 0) for f, q in zip(mode.fly, vy)),
-            vy=tuple(jnp.where(f, -q * im, 0) for f, q, im in zip(mode.fly, N, P.im)),
+            vy=tuple(jnp.where(f, q, 0) for f, q in zip(mode.fly, P.fall(N))),
         )
     return n, speed, mu, rate
 
@@ -189,7 +190,7 @@ def derivatives(
     dw = P.power_rate(dr, L, R, v, a)
     second = State(a, jerk, ded, dw)
     if fly is not None:
-        second = second._replace(y=rate.vy, vy=tuple(jnp.where(f, -q * im, 0) for f, q, im in zip(fly, dN, P.im)))
+        second = second._replace(y=rate.vy, vy=tuple(jnp.where(f, q, 0) for f, q in zip(fly, P.fall(dN))))
 
     # Second derivatives of the loads, for the events' curvature.
     ddF, ddN = load_second_at(P, dr, L, R, xd, a, yd=rate.y, ya=rate.vy)

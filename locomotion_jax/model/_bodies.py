@@ -97,9 +97,13 @@ class Mechanism(AbstractMechanism):
       body in contact at rest starts stuck where its static limits hold.
     - `y0`, `w0`: the initial heights $y_i \\ge 0$ (default 0) and vertical velocities (default 0)
       per body, for the hopping reading `contact="hop"` (SPEC §10; ignored by `"strict"` and
-      `"paper"`). A body without a friction law has no vertical motion: its `y0` and `w0` are 0.
+      `"paper"`). A body without a friction law has no vertical motion of its own: its `y0` and
+      `w0` are 0. A carried body rides in the body that finally carries it: it flies, falls and
+      lands with it (its height and vertical velocity are that body's), and that body's landing
+      stops the fall of both (its normal impulse, which bounds the tangential one, is theirs:
+      $P_n = (m_i + \\text{the carried masses})(w^+ - w^-)$). A free body stays on the line.
     - `restitution`: Newton's coefficient $e_i \\in [0, 1]$ per body at a landing, $w^+ = -e_i w^-$
-      (default 0, plastic).
+      (default 0, plastic); a carried body's is its carrier's.
     - `zeno_speed`: a rebound slower than this, $e_i |w^-| <$ `zeno_speed`, is plastic ($w^+ = 0$),
       so that a sequence of ever shorter bounces ends after finitely many landings (default
       `1e-3`, in the units of SPEC §8: $\\sqrt{g\\,\\bar l}$; $\\ge 0$).
@@ -323,13 +327,6 @@ class Mechanism(AbstractMechanism):
     def waveforms(self) -> list[AbstractWaveform]:
         """The elements' waveforms, in the order of `links`."""
         return [s for el in self.links for s in el.signals() if isinstance(s, AbstractWaveform)]
-
-    def check_hop(self) -> None:
-        """`contact="hop"` does not support carried bodies."""
-        if any(c is not None for c in self.carried_by):
-            raise NotImplementedError(
-                "contact='hop' does not support carried bodies yet (carried_by); use contact='strict' or 'paper'."
-            )
 
     def describe(self) -> str:
         carried = sum(j is not None for j in self.carried_by)

@@ -21,6 +21,7 @@ normal loads leave it out (`MechanismPhysics.in_contact`).
 
 from typing import Any, NamedTuple
 
+import equinox as eqx
 import jax.numpy as jnp
 
 from .._custom_types import Array
@@ -112,6 +113,7 @@ class MechanismPhysics(AbstractPhysics):
     springs: tuple[Spring, ...]
     forces: tuple[Force, ...]
     externals: tuple[ExternalForce, ...]
+    ground: tuple[int, ...] = eqx.field(static=True)  # per body, the body that finally carries it
     dampers: tuple[Damper, ...] = ()  # between two bodies (one to a wall is in `c`)
 
     @property
@@ -234,10 +236,25 @@ class MechanismPhysics(AbstractPhysics):
 
     def hop(self) -> tuple[Array, Array, Scalars, Array]:
         """Under `contact="hop"` the springs and forces stay horizontal (the heights `y` that `loads`
-        and the rates take are unused): no vertical force acts
-        on a body ($V_i = 0$, $N_i = m_i$), so a body in flight falls freely and one on the
-        ground never lifts off by itself (it flies from its `y0`, `w0` or a rebound)."""
+        and the rates take are unused): no vertical force acts on a body ($V_i = 0$), so a body
+        in flight falls freely and one on the ground never lifts off by itself (it flies from
+        its `y0`, `w0` or a rebound). A carried body rides in the body that finally carries it:
+        its height, vertical velocity and restitution are that body's (`mechanism_physics`), so
+        that it flies, falls and lands with it."""
         return jnp.stack(self.y0, -1), jnp.stack(self.w0, -1), self.restitution, self.zeno_speed
+
+    def fall(self, N: Scalars) -> Scalars:
+        """Free fall, $\\dot w_i = -1$, as the ground body's load over the mass that lands with it
+        ($N_g / M_g$, one expression for a body and those it carries, so that they fall alike to
+        the last bit; zero for the loads' rates, which are zero)."""
+        landing = self.landing_masses()
+        return tuple(-N[g] / landing[g] for g in self.ground)
+
+    def landing_masses(self) -> Scalars:
+        """A body in contact lands with the bodies it carries: $M_i = N_i$, its mass and theirs; a
+        body without contact (its load the placeholder 1) lands alone, $M_i = 1$ (it feels no
+        tangential impulse)."""
+        return self.normal
 
 
 def ground_body(carried_by: tuple[int | None, ...], i: int) -> int:
@@ -276,12 +293,14 @@ def mechanism_physics(M: Any) -> MechanismPhysics:
     waves = M.waveforms()
     omega = jnp.broadcast_to(waves[0].omega, one.shape).astype(one.dtype) if waves else jnp.zeros_like(one)
     links = M.links
+    ground = tuple(ground_body(M.carried_by, i) for i in range(n))
+    # A carried body rides in its ground body: under "hop" its vertical state and restitution are that body's.
+    ride = lambda q: tuple(q[..., g] for g in ground)
     return MechanismPhysics(
         m=m, im=tuple(1 / q for q in m), c=tuple(c), friction=friction,
         mu_f=tuple(f for f, _ in limits), mu_b=tuple(b for _, b in limits), omega=omega, one=one,
         normal=tuple(normal), x0=tuple(M.x0[..., i] for i in range(n)), v0=tuple(M.v0[..., i] for i in range(n)),
-        y0=tuple(M.y0[..., i] for i in range(n)), w0=tuple(M.w0[..., i] for i in range(n)),
-        restitution=tuple(M.restitution[..., i] for i in range(n)),
+        y0=ride(M.y0), w0=ride(M.w0), restitution=ride(M.restitution), ground=ground,
         zeno_speed=jnp.broadcast_to(M.zeno_speed, one.shape).astype(one.dtype),
         inv_mass=1 / M.m.sum(-1),
         springs=tuple(e for e in links if isinstance(e, Spring)),

@@ -190,6 +190,18 @@ class AbstractPhysics(eqx.Module):
             "bodies' heights); use a Mechanism, or contact='strict' or 'paper'."
         )
 
+    def fall(self, N: Scalars) -> Scalars:
+        """Under `contact="hop"`, the vertical acceleration of each body in flight: $\\dot w_i = -N_i/m_i$
+        ($m_i \\dot w_i = -m_i + V_i$ with the load $N_i = m_i - V_i$, SPEC §10). Linear in `N`: the
+        engine takes the jerk in flight as `fall` of the loads' rates."""
+        return tuple(-q * im for q, im in zip(N, self.im))
+
+    def landing_masses(self) -> Scalars:
+        """Under `contact="hop"`, per body, the mass whose fall a landing of it stops: its normal impulse
+        is $P_n$ = this mass times the jump of $w_i$ (SPEC §10), which bounds the tangential impulse
+        $\\mu_k P_n$. A body's own mass $m_i$ by default."""
+        return self.m
+
     def gaps(self, x: Scalars) -> Scalars:
         """The gaps between bodies that must stay positive: the engine stops a run with
         `Status.COLLISION` where one is $\\le 0$ after a step, and refuses an initial state where
