@@ -11,7 +11,7 @@ numbers and stack frames, which any edit above a traced line shifts).
 
 Jobs: the paper's model's `measure` (exact, float64, dt 0.03, 64 configurations; module
 `jit_measure_batch`) and a 4-mass chain's (travelling wave, anisotropic Coulomb friction;
-`jit__measure_batch`). Prints one line per module, `identical` or how many lines differ, then
+`jit__measure_batch`), then the chain's under `contact="hop"` (`jit__measure_batch'`). Prints one line per module, `identical` or how many lines differ, then
 the verdict; exits 1 where a program differs.
 """
 
@@ -34,6 +34,7 @@ lj.measure(lj.Params(omega=jnp.linspace(1.0, 10.0, 64)), dynamics=lj.Exact(dt=0.
 worm = lj.Chain(masses=np.ones(4), waveforms=lj.TravellingWave(jnp.full(8, 0.05), jnp.linspace(4.0, 12.0, 8),
                 2 * np.pi / 3), friction=lj.AnisotropicCoulomb(0.7, 0.9, 0.5, 0.7))
 lj.measure(worm, dynamics=lj.Exact(dt=0.03))
+lj.measure(worm, dynamics=lj.Exact(dt=0.03), contact="hop")
 """
 
 _LOCATION = re.compile(r"^\d+ [{\"]|^(FileNames|FunctionNames|FileLocations|StackFrames)\b|^HloModule")
