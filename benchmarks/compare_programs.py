@@ -11,8 +11,9 @@ numbers and stack frames, which any edit above a traced line shifts).
 
 Jobs: the paper's model's `measure` (exact, float64, dt 0.03, 64 configurations; module
 `jit_measure_batch`) and a 4-mass chain's (travelling wave, anisotropic Coulomb friction;
-`jit__measure_batch`), then the chain's under `contact="hop"` (`jit__measure_batch'`). Prints one line per module, `identical` or how many lines differ, then
-the verdict; exits 1 where a program differs.
+`jit__measure_batch`), then the chain's under `contact="hop"` (`jit__measure_batch'`). Prints
+one line per module, `identical` or how many lines differ, then the verdict; exits 1 where a
+program differs.
 """
 
 import argparse

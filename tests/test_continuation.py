@@ -268,17 +268,17 @@ def test_chain_points_are_steady_gaits(worm_branch):
     np.testing.assert_array_equal(np.asarray(g.regime), pick(b.regime))
 
 
-def _hop_return(cfg: dict, omega: float, y: np.ndarray, n: int) -> tuple[float, float]:
+def _hop_return(cfg: dict, omega: float, y: np.ndarray, n: int) -> tuple[float, float, int]:
     """The independent hopping reference over one period from the section state `y` (gaps, velocities,
-    heights, vertical velocities of `n` bodies): the largest difference of its end from `y`, and its
-    centre of mass's speed over the period."""
+    heights, vertical velocities of `n` bodies): the largest difference of its end from `y`, its
+    centre of mass's speed over the period, and its landings."""
     T = 2 * np.pi / omega
     gaps, v, h, w = y[: n - 1], y[n - 1 : 2 * n - 1], y[2 * n - 1 : 3 * n - 1], y[3 * n - 1 :]
     x0 = np.concatenate([[0.0], np.cumsum(gaps)])
     r = reference_hop_simulate(cfg, T, [T], x0=x0, v0=v, y0=h, w0=w)
     end = np.concatenate([np.diff(r["x"][0]), r["v"][0], r["y"][0], r["w"][0]])
     m = np.asarray(cfg["m"])
-    return float(np.abs(end - y).max()), float(m @ (r["x"][0] - x0) / m.sum() / T)
+    return float(np.abs(end - y).max()), float(m @ (r["x"][0] - x0) / m.sum() / T), int(r["n_landings"].sum())
 
 
 def _hopping_worm(omega) -> tuple[lj.Chain, list[dict]]:
@@ -293,7 +293,8 @@ def _hopping_worm(omega) -> tuple[lj.Chain, list[dict]]:
 
 def _check_hopping_branch(b: lj.Branch, stops, cfg_of, n: int, tol: float) -> None:
     """Every point of each branch returns onto itself under the independent reference within `tol` after
-    one period, at the branch's mean speed to 1e-6; the points walk towards `stop`; each orbit flies."""
+    one period, at the branch's mean speed to 1e-6 and with its landings; the points walk towards
+    `stop`; each orbit flies."""
     for i, stop in enumerate(stops):
         m = int(b.n_points[i])
         lam = np.asarray(b.lam[i, :m])
@@ -301,9 +302,9 @@ def _check_hopping_branch(b: lj.Branch, stops, cfg_of, n: int, tol: float) -> No
         assert np.all(np.diff(lam) * (stop - lam[0]) > 0), lam
         assert np.all(np.asarray(b.liftoff[i, :m])) and np.all(np.asarray(b.n_land[i, :m]) > 0)
         for j in range(m):
-            gap, speed = _hop_return(cfg_of(float(lam[j])), float(lam[j]), np.asarray(b.state[i, j]), n)
-            print(i, j, lam[j], "reference return", gap, "speed", speed, float(b.mean_speed[i, j]))
-            assert gap < tol and abs(speed - float(b.mean_speed[i, j])) < 1e-6
+            gap, speed, land = _hop_return(cfg_of(float(lam[j])), float(lam[j]), np.asarray(b.state[i, j]), n)
+            print(i, j, lam[j], "reference return", gap, "speed", speed, float(b.mean_speed[i, j]), "landings", land)
+            assert gap < tol and abs(speed - float(b.mean_speed[i, j])) < 1e-6 and int(b.n_land[i, j]) == land
 
 
 def test_hopping_branches_against_the_reference():

@@ -351,7 +351,8 @@ def test_hopping_gait_is_the_limit_of_a_long_simulation():
     1-periodic orbits with flight phases (the long run lands about twice per period); a simulation
     from the paper's start reaches the orbit's section state (gap, velocities, heights, vertical
     velocities) within 1e-7 after 300 periods (measured 6e-9 and 9e-9) and its drift over one period
-    gives the gait's mean speed; the multipliers lie inside the unit circle (a grounded body's
+    gives the gait's mean speed, and its landings (597 and 596) are the gait's two per period but for
+    the transient's; the multipliers lie inside the unit circle (a grounded body's
     vertical components give zeros); started on its own section states, each gait is found again."""
     omega = np.asarray([15.0, 20.0])
     p = lj.Params(omega=jnp.asarray(omega), a=0.1)
@@ -374,6 +375,10 @@ def test_hopping_gait_is_the_limit_of_a_long_simulation():
         speed = float(tr.X[1] - tr.X[0]) / T[i]
         print(i, "landings", int(tr.n_land), "|orbit - simulation|", diff, "speed", speed, float(g.mean_speed[i]))
         assert int(tr.status) == lj.Status.OK and int(tr.n_land) > 500  # it hops: about 2 landings per period
+        # The gait's landings per period (n_land over k periods) are the long run's after its transient.
+        per_period = int(g.n_land[i]) / int(g.k[i])
+        print(i, "gait landings per period", per_period, "long run", int(tr.n_land) / 301)
+        assert per_period >= 1 and abs(int(tr.n_land) - 301 * per_period) <= 10
         assert diff < 1e-7 and abs(speed - float(g.mean_speed[i])) < 1e-7
     assert float(np.asarray(g.state)[0, 3]) > 0  # at omega = 15 a body is in flight at the section
     # Started on its own section states (heights and vertical velocities given, a body in flight), one

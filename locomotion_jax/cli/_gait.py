@@ -24,7 +24,7 @@ from ._options import expand, run_options, Values
 
 GAIT_FIELDS: tuple[str, ...] = (
     "k", "period", "mean_speed", "cost_of_transport", "e_d", "work", "regime", "stick_fraction1",
-    "stick_fraction2", "stick_fraction", "n_switch", "u", "v1", "v2", "state", "stable", "residual", "n_iter",
+    "stick_fraction2", "stick_fraction", "n_switch", "n_land", "u", "v1", "v2", "state", "stable", "residual", "n_iter",
     "liftoff", "slip_margin", "min_normal",
 )  # fmt: skip
 """The gait's fields `gait` prints, besides `status` and the multipliers: under the paper's names

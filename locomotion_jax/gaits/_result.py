@@ -63,7 +63,8 @@ class Gait(PaperNames):
       $e_z/z$; `inf` for a gait that does not move).
     - `stick_fraction`: fraction of the gait period each mass is stuck, `batch + (N,)`;
       `regime`: [`Regime`][] SSL if any mass is stuck longer than `STICK_TOL`, else SL.
-    - `n_switch`: switches per gait period.
+    - `n_switch`: switches per gait period; `n_land`: landings per gait period (0 but under
+      `contact="hop"`; a carried body's are its carrier's, counted once).
     - `state`: the orbit's state at the section $\\omega t \\equiv 0$: gaps then velocities
       $(u_1, \\dots, u_{N-1}, v_1, \\dots, v_N)$, `batch + (2N - 1,)` (the paper's $(u, v_1, v_2)$);
       under `contact="hop"` the heights and vertical velocities $(y_1, \\dots, y_N, w_1, \\dots, w_N)$
@@ -101,6 +102,7 @@ class Gait(PaperNames):
     stick_fraction: Array
     regime: Array
     n_switch: Array
+    n_land: Array
     state: Array
     monodromy: Array
     multipliers: Array

@@ -555,6 +555,7 @@ def as_gait(r: dict, dtype: Any, contact: str, names: str = BODIES) -> Gait:
         stick_fraction=nan(out.stuck / np.where(ok, kT, 1)[:, None]),
         regime=jnp.asarray(np.where(ok, np.where(ssl, Regime.SSL, Regime.SL), Regime.UNDETERMINED), jnp.int32),
         n_switch=jnp.asarray(np.where(ok, out.n_switch, 0), jnp.int32),
+        n_land=jnp.asarray(np.where(ok, out.n_land, 0), jnp.int32),
         state=nan(r["y"]),
         monodromy=nan(r["M"]),
         multipliers=jnp.asarray(r["multipliers"]),
