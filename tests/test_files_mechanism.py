@@ -14,6 +14,8 @@ import locomotion_jax as lj
 import numpy as np
 import pytest
 from locomotion_jax.cli import _main as _cli
+from locomotion_jax.cli._vary import builder
+from locomotion_jax.model._files import tomllib
 from typer.testing import CliRunner
 
 
@@ -80,6 +82,10 @@ ROUND_TRIPS = {
                lj.ExternalForce(3, lj.Sinusoid(0.4, 2.0, -0.05)), lj.Force(lj.WALL, 4, 0.02),
                lj.ExternalForce(1, -0.3)],
         x0=[0.5, 0.6, 0.7, 2.4, 3.0], v0=[0.0, 0.3, -0.2, 0.0, 0.0]),
+    # The hopping reading's inputs: a capsule thrown up, bouncing (y0, w0, restitution, zeno_speed).
+    "thrown_capsule": lj.Mechanism(masses=[1.0, 0.5], friction=[lj.Coulomb(0.5, 0.4), None], carried_by=[None, 0],
+                                   links=[lj.Spring(0, 1, k=10.0)], y0=[0.3, 0.0], w0=[0.45, 0.0],
+                                   restitution=[0.6, 0.0], zeno_speed=2e-3),
 }  # fmt: skip
 
 
@@ -88,6 +94,19 @@ def test_mechanism_round_trip(tmp_path, name):
     mech = ROUND_TRIPS[name]
     path = lj.save_mechanism(mech, tmp_path / "m.toml", description=name)
     assert_same(lj.load_mechanism(path), mech)
+
+
+def test_hopping_inputs_are_read_and_swept(tmp_path):
+    """A file's `y0`, `w0`, `restitution` (per body) and `zeno_speed` are the mechanism's; a file without
+    them writes none (the capsule's text keeps its fields); `bodies.0.y0` is swept like any number."""
+    text = lj.save_mechanism(ROUND_TRIPS["thrown_capsule"], tmp_path / "t.toml").read_text()
+    assert "y0 = 0.3" in text and "restitution = 0.6" in text and "zeno_speed = 0.002" in text
+    assert "y0" not in lj.save_mechanism(capsule(), tmp_path / "c.toml").read_text()
+    path = tmp_path / "t.toml"
+    data = tomllib.loads(path.read_text())
+    swept = builder(path, data, {"y0": ["bodies.0.y0"]})(y0=np.array([0.1, 0.2]))
+    np.testing.assert_array_equal(np.asarray(swept.y0), [[0.1, 0.0], [0.2, 0.0]])
+    assert np.all(np.asarray(swept.restitution)[..., 0] == 0.6) and float(swept.zeno_speed) == 2e-3
 
 
 def test_save_refuses_a_batch(tmp_path):

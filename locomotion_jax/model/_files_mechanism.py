@@ -8,7 +8,7 @@ kind = "mechanism"
 [[bodies]]                 # body 0: the capsule
 mass = 1.0
 friction = { type = "Coulomb", mu_s = 0.5, mu_k = 0.4 }   # or a [bodies.friction] table below
-x0 = 0.0                   # optional, with v0, c (default 0)
+x0 = 0.0                   # optional, with v0, c, and for contact = "hop" y0, w0, restitution (default 0)
 
 [[bodies]]                 # body 1: the internal mass
 mass = 0.5
@@ -23,7 +23,8 @@ k = 10.0
 
 A signal (a spring's `rest`, a force's `waveform`) is a number or a waveform table: `type = "Sinusoid"`
 (`a`, `omega`, `lbar`), `"Fourier"` (`cos`, `sin`, `omega`, `lbar`) or `"Spline"` (`control`, `omega`,
-`lbar`); `lbar` defaults to 0. A body without `friction` does not touch the ground.
+`lbar`); `lbar` defaults to 0. A body without `friction` does not touch the ground. A top-level
+`zeno_speed` (default `1e-3`) is the hopping reading's Zeno threshold.
 """
 
 import re
@@ -52,7 +53,13 @@ WAVES: dict[str, tuple[type[AbstractWaveform], tuple[str, ...]]] = {
 }
 """Waveforms of a signal by `type`: class and coefficient fields (besides `omega`, `lbar`)."""
 
-BODY_FIELDS: tuple[str, ...] = ("mass", "friction", "carried_by", "c", "x0", "v0")
+BODY_FIELDS: tuple[str, ...] = ("mass", "friction", "carried_by", "c", "x0", "v0", "y0", "w0", "restitution")
+
+HOP_FIELDS: tuple[str, ...] = ("y0", "w0", "restitution")
+"""The bodies' fields of the hopping reading (SPEC §10), default 0: written only where not 0."""
+
+ZENO_SPEED = 1e-3
+"""The default top-level `zeno_speed` (as [`Mechanism`][locomotion_jax.Mechanism]'s), written only where another."""
 
 
 def _block(lines: list[str], name: str, index: int) -> tuple[int, int] | None:
@@ -201,19 +208,22 @@ def read_mechanism(doc: Any, friction_of: Any, check: bool = True) -> Mechanism:
     """The `Mechanism` of a parsed file (`doc`: the top-level `_Table`); `friction_of(table, n)` reads a
     friction law (`_files._friction`); `check` as `Mechanism`'s. A [`Swept`][locomotion_jax.model._files.Swept]
     number makes the mechanism a batch, one configuration per swept value."""
-    doc.only(("schema", "kind", "description", "bodies", "links"))
+    doc.only(("schema", "kind", "description", "bodies", "links", "zeno_speed"))
     items = doc.data.get("bodies")
     if not (isinstance(items, list) and items):
         doc.fail("bodies", "expected one [[bodies]] table per body (at least one)")
     n = len(items)
     bodies = [_Item(doc.source, "bodies", i, b) for i, b in enumerate(items)]
     masses, c, x0, v0, laws, carried = [], [], [], [], [], []
+    hop: dict[str, list] = {name: [] for name in HOP_FIELDS}
     for i, b in enumerate(bodies):
         b.only(BODY_FIELDS)
         masses.append(b.number("mass"))
         c.append(b.number("c", 0.0))
         x0.append(b.number("x0", 0.0))
         v0.append(b.number("v0", 0.0))
+        for name, values in hop.items():
+            values.append(b.number(name, 0.0))
         if "friction" in b.data:
             value = b.data["friction"]
             if not isinstance(value, dict):
@@ -248,8 +258,10 @@ def read_mechanism(doc: Any, friction_of: Any, check: bool = True) -> Mechanism:
             if i == WALL:
                 t.fail("i", 'expected a body index, not "wall"')
             links.append(ExternalForce(int(i), _signal(t, "waveform")))
-    per_body = {name: stacked(values) for name, values in (("masses", masses), ("c", c), ("x0", x0), ("v0", v0))}
-    return Mechanism(friction=laws, carried_by=carried, links=links, check=check, **per_body)
+    fields = (("masses", masses), ("c", c), ("x0", x0), ("v0", v0), *hop.items())
+    per_body = {name: stacked(values) for name, values in fields}
+    zeno = doc.number("zeno_speed", ZENO_SPEED)
+    return Mechanism(friction=laws, carried_by=carried, links=links, check=check, zeno_speed=zeno, **per_body)
 
 
 # -- writing ---------------------------------------------------------------------------------------------------
@@ -301,6 +313,8 @@ def dump_mechanism(mech: Mechanism, friction_table: Any) -> dict[str, Any]:
         if mech.carried_by[i] is not None:
             body["carried_by"] = int(mech.carried_by[i])  # type: ignore[arg-type]
         body |= {"c": float(mech.c[i]), "x0": float(mech.x0[i]), "v0": float(mech.v0[i])}
+        hop = {"y0": mech.y0[i], "w0": mech.w0[i], "restitution": mech.restitution[i]}
+        body |= {name: float(x) for name, x in hop.items() if float(x) != 0}
         bodies.append(body)
     links = []
     for k, el in enumerate(mech.links):
@@ -320,4 +334,6 @@ def dump_mechanism(mech: Mechanism, friction_table: Any) -> dict[str, Any]:
     doc: dict[str, Any] = {"bodies": bodies}
     if links:
         doc["links"] = links
+    if float(mech.zeno_speed) != ZENO_SPEED:
+        doc["zeno_speed"] = float(mech.zeno_speed)
     return doc
