@@ -39,7 +39,7 @@ def assert_same(a, b) -> None:
     lb, tb = jax.tree_util.tree_flatten(b)
     assert ta == tb
     for x, y in zip(la, lb):
-        assert np.shape(x) == np.shape(y) and np.result_type(x) == np.result_type(y)
+        assert np.shape(x) == np.shape(y) and np.asarray(x).dtype == np.asarray(y).dtype
         np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
 
 
