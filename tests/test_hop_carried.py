@@ -59,7 +59,8 @@ def test_a_hopping_capsule_against_the_reference(refs):
     """Positions, velocities, heights, vertical velocities, e_d, w and e at 161 saves within 1e-8 of the
     reference at dt = 1/400 (measured 2.2e-9 at most), fourth-order convergence from dt = 1/100
     (positions 1.7e-7 there); the same landings (a carried body's counted once, with its carrier's);
-    the internal mass's height and vertical velocity the shell's, bit for bit; w = e_d + Delta e to 1e-10."""
+    the internal mass's height and vertical velocity the shell's, bit for bit; w = e_d + Delta e to 1e-7
+    at dt = 1/100 and 1e-10 at 1/400 (measured 9.5e-9 and 9.5e-12)."""
     errs = {}
     for dt in (1 / 100, 1 / 400):
         tr = lj.simulate(_mechanism(), T_END, SAVE, contact="hop", dynamics=lj.Exact(dt=dt))
@@ -72,7 +73,8 @@ def test_a_hopping_capsule_against_the_reference(refs):
             np.testing.assert_array_equal(np.asarray(tr.y[i, :, 1]), np.asarray(tr.y[i, :, 0]))
             np.testing.assert_array_equal(np.asarray(tr.vy[i, :, 1]), np.asarray(tr.vy[i, :, 0]))
             bal = np.abs(np.asarray(tr.w[i] - tr.e_d[i] - (tr.e[i] - tr.e[i, 0]))).max()
-            assert bal < 1e-6 * dt * 100
+            print(dt, i, "balance", bal)
+            assert bal < (1e-7 if dt == 1 / 100 else 1e-10)
     assert [int(r["n_landings"][0]) for r in refs] == [14, 1] and all(int(r["n_landings"][2]) == 9 for r in refs)
     for i in range(len(CASES)):
         fine, coarse = errs[1 / 400, i], errs[1 / 100, i]

@@ -73,7 +73,7 @@ import jax.numpy as jnp
 
 from .._custom_types import Array, Contact
 from .._status import Status
-from ..model._physics import AbstractPhysics, Loads, loads_at, Scalars
+from ..model._physics import AbstractPhysics, contact_loads, Loads, loads_at, Scalars
 from . import _motion as motion, _numerics as num
 from ._motion import energy as energy, Mode, State
 
@@ -212,7 +212,6 @@ def _impact(P: AbstractPhysics, restitution: Scalars, zeno: Array, st: Hybrid, N
     assert st.fly is not None and st.vpend is not None and yA.y is not None and yA.vy is not None
     zero = jnp.zeros_like(st.t)
     hs, ws, vs, fly, rest, lost, count, zeno_rule = [], [], [], [], [], [], [], []
-    touches = P.in_contact()
     for i, (f, pe, h, w, v, q, M) in enumerate(zip(st.fly, st.vpend, yA.y, yA.vy, yA.v, N0, P.landing_masses())):
         land = f & (pe | (h < 0))
         lift = ~f & (pe | (q < 0))
@@ -232,10 +231,11 @@ def _impact(P: AbstractPhysics, restitution: Scalars, zeno: Array, st: Hybrid, N
         vs.append(jnp.where(land, vp, v))
         fly.append(keep(jnp.where(land, airborne, f | lift)))
         rest.append(land & ~airborne & (vp == 0))
-        # A carried body lands with its carrier: one landing, the carrier's.
-        count.append(land.astype(jnp.int32) if touches[i] else jnp.zeros(jnp.shape(land), jnp.int32))
+        count.append(land.astype(jnp.int32))
     y = yA._replace(y=tuple(hs), vy=tuple(ws), v=tuple(vs), ed=yA.ed + motion._sum(lost))
-    return y, tuple(fly), tuple(rest), motion._sum(count), num.union(zeno_rule)
+    landed = contact_loads(P, tuple(count))  # a carried body lands with its carrier: one landing, the carrier's
+    n_land = motion._sum(list(landed)) if landed else jnp.zeros((), jnp.int32)
+    return y, tuple(fly), tuple(rest), n_land, num.union(zeno_rule)
 
 
 @jax.custom_jvp

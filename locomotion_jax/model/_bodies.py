@@ -23,6 +23,7 @@ from ._elements import AbstractElement, Damper, signal_checks, signal_nodes, Spr
 from ._friction import AbstractFriction, Coulomb
 from ._mechanism import AbstractMechanism
 from ._mechanism_physics import ground_body, mechanism_physics, MechanismPhysics
+from ._physics import ZENO_SPEED
 from ._waveform import AbstractWaveform, Fourier, Spline
 
 
@@ -152,7 +153,7 @@ class Mechanism(AbstractMechanism):
         y0: ValuesLike = 0.0,
         w0: ValuesLike = 0.0,
         restitution: ValuesLike = 0.0,
-        zeno_speed: ValuesLike = 1e-3,
+        zeno_speed: ValuesLike = ZENO_SPEED,
         check: bool = True,
     ):
         m = real_array("masses", masses)

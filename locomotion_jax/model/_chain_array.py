@@ -28,7 +28,7 @@ from .._custom_types import Array
 from ._actuator import AbstractActuator
 from ._chain_physics import Drive, SpringRates, Springs
 from ._friction import AbstractFriction
-from ._physics import AbstractPhysics, LoadRates, Loads, Scalars
+from ._physics import AbstractPhysics, LoadRates, Loads, Scalars, ZENO_SPEED
 from ._waveform import Spline
 
 
@@ -242,9 +242,9 @@ class ArrayChainPhysics(AbstractPhysics):
 
     def hop(self) -> tuple[Array, Array, Scalars, Array]:
         """As the unrolled physics (SPEC §10): on the ground at rest vertically, plastic landings
-        ($e_i = 0$) and the Zeno speed $10^{-3}$; the restitution one entry over the masses."""
+        ($e_i = 0$) and the default Zeno speed; the restitution one entry over the masses."""
         heights = jnp.zeros_like(self.m[0])
-        return heights, heights, (heights,), jnp.zeros_like(self.omega) + 1e-3
+        return heights, heights, (heights,), jnp.zeros_like(self.omega) + ZENO_SPEED
 
     def initial_positions(self, start: str) -> Array:
         """As the unrolled physics: gaps $\\bar\\ell_j$ (`"paper"`) or the relaxed springs, $x_0 = 0$."""

@@ -23,7 +23,7 @@ import jax.numpy as jnp
 from .._custom_types import Array
 from ._actuator import AbstractActuator
 from ._friction import AbstractFriction
-from ._physics import AbstractPhysics, LoadRates, Loads, Scalars
+from ._physics import AbstractPhysics, LoadRates, Loads, Scalars, ZENO_SPEED
 from ._waveform import AbstractWaveform
 
 
@@ -111,10 +111,10 @@ class ChainPhysics(AbstractPhysics):
     def hop(self) -> tuple[Array, Array, Scalars, Array]:
         """Under `contact="hop"` (SPEC §10) the springs act along $(u_j, d_j + y_{j+1} - y_j)$: a chain
         starts on the ground at rest vertically ($y_i = w_i = 0$) and lands plastically ($e_i = 0$,
-        SPEC's default), with the Zeno speed $10^{-3}$ (moot for plastic landings)."""
+        SPEC's default), with the default Zeno speed (moot for plastic landings)."""
         zero = jnp.zeros_like(self.omega)
         heights = jnp.stack([zero for _ in self.m], -1)
-        return heights, heights, tuple(zero for _ in self.m), zero + 1e-3
+        return heights, heights, tuple(zero for _ in self.m), zero + ZENO_SPEED
 
     def gaps(self, x: Scalars) -> Scalars:
         """Neighbours' gaps $x_{j+1} - x_j$ (SPEC §8: the masses stay in order)."""

@@ -35,6 +35,7 @@ import numpy as np
 from ._bodies import Mechanism
 from ._elements import AbstractElement, Damper, End, ExternalForce, Force, Spring, WALL
 from ._files import _Source, _Table, stacked, Swept
+from ._physics import ZENO_SPEED
 from ._waveform import AbstractWaveform, Fourier, Sinusoid, Spline
 
 
@@ -53,13 +54,12 @@ WAVES: dict[str, tuple[type[AbstractWaveform], tuple[str, ...]]] = {
 }
 """Waveforms of a signal by `type`: class and coefficient fields (besides `omega`, `lbar`)."""
 
-BODY_FIELDS: tuple[str, ...] = ("mass", "friction", "carried_by", "c", "x0", "v0", "y0", "w0", "restitution")
-
 HOP_FIELDS: tuple[str, ...] = ("y0", "w0", "restitution")
-"""The bodies' fields of the hopping reading (SPEC §10), default 0: written only where not 0."""
+"""The bodies' fields of the hopping reading (SPEC §10), the [`Mechanism`][locomotion_jax.Mechanism]'s
+of those names, default 0: written only where not 0 (and the top-level `zeno_speed` where not its
+default, `ZENO_SPEED`)."""
 
-ZENO_SPEED = 1e-3
-"""The default top-level `zeno_speed` (as [`Mechanism`][locomotion_jax.Mechanism]'s), written only where another."""
+BODY_FIELDS: tuple[str, ...] = ("mass", "friction", "carried_by", "c", "x0", "v0", *HOP_FIELDS)
 
 
 def _block(lines: list[str], name: str, index: int) -> tuple[int, int] | None:
@@ -313,8 +313,8 @@ def dump_mechanism(mech: Mechanism, friction_table: Any) -> dict[str, Any]:
         if mech.carried_by[i] is not None:
             body["carried_by"] = int(mech.carried_by[i])  # type: ignore[arg-type]
         body |= {"c": float(mech.c[i]), "x0": float(mech.x0[i]), "v0": float(mech.v0[i])}
-        hop = {"y0": mech.y0[i], "w0": mech.w0[i], "restitution": mech.restitution[i]}
-        body |= {name: float(x) for name, x in hop.items() if float(x) != 0}
+        hop = {name: float(getattr(mech, name)[i]) for name in HOP_FIELDS}
+        body |= {name: x for name, x in hop.items() if x != 0}
         bodies.append(body)
     links = []
     for k, el in enumerate(mech.links):

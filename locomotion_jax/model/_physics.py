@@ -23,6 +23,11 @@ from .._custom_types import Array
 from ._friction import AbstractFriction
 
 
+ZENO_SPEED = 1e-3
+"""The default Zeno speed of the hopping reading (SPEC §10): a rebound slower than this is plastic, so
+that a sequence of ever shorter bounces ends after finitely many landings."""
+
+
 Scalars = tuple[Array, ...]
 """One scalar per body (or per spring): under `vmap`, one vector over the configurations each."""
 
