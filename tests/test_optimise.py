@@ -989,6 +989,12 @@ def worm(n: int = 3) -> lj.Chain:
     return lj.Chain(masses=[1.0] * n, d=0.0, friction=lj.AnisotropicCoulomb(0.5, 0.9, 0.3, 0.7))
 
 
+def force_worm() -> lj.Chain:
+    """The 3-mass worm driven by internal forces between its masses (an inchworm's motor)."""
+    return lj.Chain(masses=[1.0] * 3, d=0.0, friction=lj.AnisotropicCoulomb(0.5, 0.9, 0.3, 0.7),
+                    actuator=lj.InternalForce())  # fmt: skip
+
+
 def _first(tree):
     """Row 0 of a batched result."""
     return jax.tree_util.tree_map(lambda x: x[0], tree)
@@ -1041,6 +1047,24 @@ def test_smoothed_method_on_a_chain(opt3):
     assert opt.evaluations == 0 and opt.min_normal == pytest.approx(1.0, rel=1e-12)
     assert opt.simulation_agreement < 1e-6
     assert _worm_reference_error(opt, wave_A=opt.cos, wave_B=opt.sin) < 1e-4
+
+
+@CHAIN_OPTIMISE
+def test_a_force_driven_chain_against_the_reference():
+    """A chain driven by internal forces (`InternalForce`): `a_max` bounds each spring's force (here
+    1, above the masses' kinetic friction). A feasible
+    optimum, no costlier than its travelling wave, within the force bound, whose direct simulation
+    and the independent reference's, driven by the forces $f_j = s_j$ from the relaxed springs,
+    agree with its steady gait."""
+    opt = lj.optimise(force_worm(), 0.05, 1.0, harmonics=2, settings=SETTINGS)
+    print(opt.summary())
+    assert opt.feasible_exact and all(opt.constraints_exact.values()) and opt.mean_speed_exact >= opt.v_min
+    assert opt.travelling_wave is not None
+    assert opt.cost_of_transport_exact <= opt.travelling_wave["cost_of_transport"] * (1 + 1e-12)
+    assert np.all(opt.stroke_exact <= 1.0 * (1 + 1e-12)) and "force <= 1 per spring" in opt.summary()
+    assert isinstance(opt.chain.actuator, lj.InternalForce)
+    assert opt.simulation_agreement < 1e-6
+    assert _worm_reference_error(opt, wave_A=opt.cos, wave_B=opt.sin, actuator="force") < 1e-4
 
 
 def test_the_smoothed_stage_moves_each_lanes_time_origin():
@@ -1639,7 +1663,7 @@ def test_two_masses_agree_with_the_two_mass_model():
         (dict(method="smoothed", settings=CHAIN_SPLINE), "method='smoothed' refines Fourier series"),
         (dict(chain=lj.Chain(masses=[1.0, 1.0, 1.0], d=0.5), a_max=0.07), "lifts a mass off at rest"),
         (dict(chain=lj.Chain.stack([worm(), worm()])), "single configuration"),
-        (dict(chain=lj.Chain(masses=[1.0] * 3, actuator=lj.InternalForce())), "RestLength"),
+        (dict(chain=force_worm(), a_max=math.inf), "0 < a_max < inf (a force bound)"),
         (dict(start=_optimum_of(np.zeros((1, 2)), np.zeros((1, 2)), None, 1.0)), "start: an optimum of 1 actuated"),
     ],
 )
@@ -1649,6 +1673,20 @@ def test_bad_input_raises(kwargs, message):
     chain, v_min, a_max = args.pop("chain"), args.pop("v_min"), args.pop("a_max")
     with pytest.raises(ValueError, match=message.replace("(", r"\(").replace(")", r"\)").replace("+", r"\+")):
         lj.optimise(chain, v_min, a_max, **args)
+
+
+def test_a_force_bound_is_not_a_stroke():
+    """Under `InternalForce` the bound is a force's: not limited by `lbar`, and a force leaves the
+    rest lengths, so the quasi-static lift-off check of a stroke (the chain with `d = 0.5` that
+    `test_bad_input_raises` refuses at `a_max = 0.07`) does not apply."""
+    from locomotion_jax.optimisation import _chain
+
+    settings = lj.ChainOptimiseSettings()
+    tilted = lj.Chain(masses=[1.0, 1.0, 1.0], d=0.5, actuator=lj.InternalForce())
+    assert _chain.check_inputs(tilted, 0.05, 0.07, 1, 2, None, settings) == (0.05, 1)
+    assert _chain.check_inputs(force_worm(), 0.05, 5.0, -1, 2, None, settings) == (0.05, -1)
+    with pytest.raises(ValueError, match="lifts a mass off at rest"):
+        _chain.check_inputs(lj.Chain(masses=[1.0, 1.0, 1.0], d=0.5), 0.05, 0.07, 1, 2, None, settings)
 
 
 @CHAIN_OPTIMISE

@@ -3,7 +3,8 @@
 Problem, for one [`Chain`][], a required speed $v_\\min > 0$ in the direction $\\sigma = \\pm 1$ and
 a stroke limit $a_\\max$, over per-spring Fourier actuations of $H$ harmonics ([`SpringFourier`][])
 or per-spring periodic cubic B-splines of $M$ control values ([`Spline`][]) and a common base
-frequency, $\\ell_{0,j}(t) = \\bar\\ell_j + s_j(t)$:
+frequency, $\\ell_{0,j}(t) = \\bar\\ell_j + s_j(t)$ (the rest-length actuator; under [`InternalForce`][]
+$s_j$ is the force between masses $j$ and $j + 1$, and $a_\\max$ bounds it):
 
 $$\\min\\ \\frac{e_d}{\\sigma\\Delta X}\\quad\\text{s.t.}\\quad \\frac{\\sigma\\Delta X}{kT} \\ge v_\\min,\\quad
 \\max_t |s_j(t)| \\le a_\\max\\ \\forall j,\\quad \\min_{i,t} N_i \\ge \\text{margin},\\quad\\text{a stable gait},$$
@@ -39,7 +40,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..gaits._progress import reporter
-from ..model._actuator import RestLength
 from ..model._chain import Chain
 from ..model._springwaves import SpringFourier
 from . import _chain_screen as screen, _element_local as local
@@ -59,23 +59,26 @@ def check_inputs(chain: Any, v_min: Any, a_max: Any, direction: Any, harmonics: 
             f"chain must be a single configuration (batch shape ()), got batch shape {chain.batch_shape}; "
             "optimise one chain at a time (index the batch: chain[i])."
         )
-    if not isinstance(chain.actuator, RestLength):
-        raise ValueError(f"actuator: optimise needs the RestLength actuator, got {type(chain.actuator).__name__}.")
     chain.validate()
     local.check_requirement(v_min, direction, harmonics, omega)
     c = chain.broadcast()
     lbar = np.asarray(c.lbar, np.float64)
-    if not (isinstance(a_max, (int, float, np.floating, np.integer)) and np.isfinite(a_max)
-            and 0 < a_max < lbar.min()):  # fmt: skip
-        raise ValueError(f"a_max must satisfy 0 < a_max < min(lbar) = {lbar.min():g}, got {a_max!r}.")
+    length = chain.actuator.varies_rest_length
+    bound = lbar.min() if length else math.inf  # a rest length stays positive; a force has no such bound
+    if not (isinstance(a_max, (int, float, np.floating, np.integer)) and np.isfinite(a_max) and 0 < a_max < bound):
+        what = f"0 < a_max < min(lbar) = {lbar.min():g}" if length else "0 < a_max < inf (a force bound)"
+        raise ValueError(f"a_max must satisfy {what}, got {a_max!r}.")
     m = np.asarray(c.m, np.float64)
     if not (np.isfinite(settings.margin) and 0 <= settings.margin < m.min()):
         raise ValueError(f"margin must satisfy 0 <= margin < min(masses) = {m.min():g}, got {settings.margin!r}.")
     # At rest at the relaxed gaps (l_j = lbar_j) the rest lengths l0_j = lbar_j + s_j with
     # |s_j| <= a_max give f_y,j = -k_j d_j s_j / lbar_j: the worst normal force of mass i has
     # both neighbouring springs' terms against it. A stroke that lifts a mass quasi-statically
-    # cannot be run at any frequency.
-    g = np.abs(np.asarray(c.k, np.float64) * np.asarray(c.d, np.float64)) / lbar
+    # cannot be run at any frequency. An internal force leaves the rest lengths, and so these
+    # loads, alone (the actuator's own split says which signal moves a rest length); its
+    # lift-off, a dynamic one, is the gait's normal-force constraint's.
+    dl0 = np.asarray(chain.actuator.split(jnp.zeros(lbar.shape), jnp.ones(lbar.shape))[0], np.float64)
+    g = np.abs(np.asarray(c.k, np.float64) * dl0 * np.asarray(c.d, np.float64)) / lbar
     load = np.concatenate([g, [0.0]]) + np.concatenate([[0.0], g])
     if np.any(m - a_max * load <= 0):
         a_lift = float(np.min(m / np.where(load > 0, load, np.inf)))

@@ -70,7 +70,8 @@ class MechanismOptimiseSettings(SearchSettings):
 class ChainOptimiseSettings(MechanismOptimiseSettings):
     """Settings of [`optimise`][locomotion_jax.optimisation._optimise.optimise] for a [`Chain`][]
     (module `optimisation._chain`): those of [`MechanismOptimiseSettings`][] (the actuated elements
-    are the springs, `a_max` bounds each spring's stroke $\\max_t |s_j(t)|$; default 3 harmonics),
+    are the springs, `a_max` bounds each spring's signal $\\max_t |s_j(t)|$: its stroke, or its force
+    under [`InternalForce`][]; default 3 harmonics),
     with other defaults and the travelling-wave screen's own fields. Python numbers: changing
     `local`, `chunk`, `dt`, `search_dt`, `newton_iter`, `shape` or `knots` (or the harmonics)
     recompiles; the others do not.
@@ -227,7 +228,8 @@ class ElementOptimum(AbstractOptimum):
 class ChainOptimum(ElementOptimum):
     """Result of [`optimise`][locomotion_jax.optimisation._optimise.optimise] for a [`Chain`][]: the
     fields of [`ElementOptimum`][locomotion_jax.optimisation._element_optimum.ElementOptimum] (the
-    actuated elements are the springs, $s_j(t) = \\ell_{0,j}(t) - \\bar\\ell_j$; `waveforms`: a
+    actuated elements are the springs, $s_j(t) = \\ell_{0,j}(t) - \\bar\\ell_j$ under the rest-length
+    actuator, the force $f_j(t)$ under [`InternalForce`][]; `waveforms`: a
     [`SpringFourier`][] or one [`Spline`][] per spring; `chain`: the input chain driven by them;
     the direct simulation runs from the relaxed springs), and:
 
@@ -281,14 +283,15 @@ class ChainOptimum(ElementOptimum):
     def summary(self) -> str:
         """Human-readable report."""
         S = self.cos.shape[0]
+        bound = "stroke" if self.chain.actuator.varies_rest_length else "force"  # what the signal is
         lines = [
-            f"chain of {S + 1} masses: mean speed >= {self.v_min:g} in direction {self.direction:+d}, stroke <= "
+            f"chain of {S + 1} masses: mean speed >= {self.v_min:g} in direction {self.direction:+d}, {bound} <= "
             f"{self.a_max:g} per spring, normal forces >= {self.margin:g} on the orbit, stable steady gait (exact)",
             f"base frequency omega = {self.omega:.6g} ({'optimised' if self.free_omega else 'fixed'}), "
             f"{self.family()} per spring",
             *self.signal_lines([f"spring {j}" for j in range(S)]),
             self.gait_line(),
-            "stroke per spring "
+            f"{bound} per spring "
             + " ".join(fmt(float(s)) for s in self.stroke_exact)
             + f" (limit {self.a_max:g}); min normal force {fmt(self.min_normal)}; lift-off: {self.liftoff_exact}",
             self.simulation_line(),

@@ -365,9 +365,11 @@ def optimise(
     **Arguments:**
 
     - `params`: one configuration ([`Params`][]; `a` and `omega` are ignored), or one [`Chain`][] (its
-      waveforms are ignored; `v_min > 0`, `0 < a_max < min(lbar)`, `settings` a [`ChainOptimiseSettings`][]).
+      waveforms are ignored; `v_min > 0`, `0 < a_max < min(lbar)` for the rest-length actuator or
+      `a_max > 0` for [`InternalForce`][], `settings` a [`ChainOptimiseSettings`][]).
     - `v_min`: required mean speed (> 0) in `direction`; see `_constraints.check_inputs`.
-    - `a_max`: stroke bound, $\\max_t |\\ell_0(t) - \\bar\\ell| \\le a_\\max$.
+    - `a_max`: stroke bound, $\\max_t |\\ell_0(t) - \\bar\\ell| \\le a_\\max$ (a chain's force bound
+      under [`InternalForce`][]).
     - `method`: `"exact"` or `"smoothed"`, for every mechanism.
     - `direction`: +1 (forward, default) or -1 (backward).
     - `omega`: fix the base frequency; `None` optimises it.
