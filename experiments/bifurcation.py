@@ -41,7 +41,7 @@ SIZES = {
 A_SEEDS = np.array([0.002, 0.02, 0.04, 0.07, 0.1, 0.15])
 DYNAMICS = lj.Exact(dt=0.02)  # as the Fig. 6 map; the events move by ~1e-5 from dt = 0.01
 COLORS = {int(lj.Regime.SSL): "#1f5fa8", int(lj.Regime.SL): "#e07b00"}
-MARKERS = {"SSL_SL": "D", "LIFTOFF": "x", "FOLD": "^", "PERIOD_DOUBLING": "s", "BRANCH_POINT": "o"}
+MARKERS = {"SSL_SL": "D", "LIFTOFF": "x", "FOLD": "^", "PERIOD_DOUBLING": "s", "BRANCH_POINT": "o", "TORUS": "*"}
 
 
 def seeded(params: lj.Params, parameter: str, grid: np.ndarray, **kw) -> lj.Branch:

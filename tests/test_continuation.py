@@ -324,3 +324,98 @@ def test_hopping_branches_against_the_reference():
     assert b.names == "bodies" and b.state.shape[-1] == 11
     cfg = lambda w: chain_config([1.0] * 3, omega=w, a=0.08, phi=2 * np.pi / 3, **dict[str, Any](ANISO))
     _check_hopping_branch(b, (6.2, 9.8), cfg, 3, 2e-5)
+
+
+def _hop_map(omega: float, y: np.ndarray) -> np.ndarray:
+    """The independent hopping reference's period map of the paper's model (a = 0.1) on the section state
+    `(u, v1, v2, y1, y2, w1, w2)`."""
+    T = 2 * np.pi / omega
+    r = reference_hop_simulate(paper_config(omega=omega, a=0.1), T, [T], x0=[0.0, y[0]], v0=y[1:3], y0=y[3:5],
+                               w0=y[5:7])  # fmt: skip
+    return np.concatenate([np.diff(r["x"][0]), r["v"][0], r["y"][0], r["w"][0]])
+
+
+def _reference_torus_radius(omega: float, y: np.ndarray, free: list[int]) -> tuple[float, np.ndarray]:
+    """The reference's own gait near `y` (Newton's method on the coordinates `free`, the others held) and
+    the largest modulus of its complex multipliers, by central differences of its period map."""
+
+    def jacobian(y: np.ndarray, h: float = 1e-6) -> np.ndarray:
+        J = np.empty((len(free), len(free)))
+        for c, k in enumerate(free):
+            e = np.zeros_like(y)
+            e[k] = h
+            J[:, c] = (_hop_map(omega, y + e)[free] - _hop_map(omega, y - e)[free]) / (2 * h)
+        return J
+
+    y = y.copy()
+    for _ in range(4):
+        y[free] -= np.linalg.solve(jacobian(y) - np.eye(len(free)), (_hop_map(omega, y) - y)[free])
+    assert np.abs(_hop_map(omega, y) - y).max() < 1e-10
+    mu = np.linalg.eigvals(jacobian(y))
+    return float(np.abs(mu[np.abs(mu.imag) > 1e-8]).max()), y
+
+
+def test_a_torus_bifurcation_against_the_reference():
+    """Under `contact="hop"` (the paper's model at a = 0.1), a pair of complex multipliers leaves the unit
+    circle near omega = 12.437 (a torus, or Neimark-Sacker, bifurcation). Continued from either side it
+    is located as `TORUS` at the same omega to 1e-10, with a complex pair of modulus 1 (1e-8) there; the
+    points below it are stable, those above not, and `det_torus` changes sign between them. The
+    independent reference's own gaits (Newton's method on its period map, whose Jacobian is taken by
+    central differences) have their complex pair on the unit circle at an omega within 1e-4 of it
+    (measured 1.5e-5: the engine's truncation error at dt = 0.01), found by the secant method."""
+    b = lj.continuation(lj.Params(omega=jnp.asarray([12.40, 12.47]), a=0.1), "omega", jnp.asarray([12.47, 12.40]),
+                        contact="hop", max_points=6, step=0.1, max_step=0.2)  # fmt: skip
+    found = [_events(b, i, EventKind.TORUS) for i in range(2)]
+    assert [len(x) for x in found] == [1, 1], found
+    w_star = found[0][0]["lam"]
+    assert 12.42 < w_star < 12.45 and abs(found[1][0]["lam"] - w_star) < 1e-10
+    for i, (ev,) in enumerate(found):
+        assert ev["located"] and ev["smooth"] and not ev["turn"]
+        mu = ev["multipliers"]
+        assert abs(abs(mu[0]) - 1) < 1e-8 and abs(mu[0].imag) > 0.1 and mu[1] == pytest.approx(np.conj(mu[0]))
+        n = int(b.n_points[i])
+        lam, det = np.asarray(b.lam[i, :n]), np.asarray(b.det_torus[i, :n])
+        np.testing.assert_array_equal(np.asarray(b.stable[i, :n]), lam < w_star)
+        np.testing.assert_array_equal(det > 0, lam > w_star)
+    # The second body stays on the ground at the section (its height and vertical velocity 0): the
+    # reference's map is smooth in the other five coordinates, whose multipliers these are.
+    y = found[0][0]["y"]
+    assert y[4] == 0 and y[6] == 0 and y[3] > 0
+    free = [0, 1, 2, 3, 5]
+    w0, w1 = w_star - 0.005, w_star + 0.005
+    r0, _ = _reference_torus_radius(w0, y, free)
+    r1, y1 = _reference_torus_radius(w1, y, free)
+    assert r0 < 1 < r1
+    for _ in range(4):
+        w0, r0, w1 = w1, r1, w1 - (r1 - 1) * (w1 - w0) / (r1 - r0)
+        r1, y1 = _reference_torus_radius(w1, y1, free)
+    print("torus at", w_star, "reference", w1, "modulus there", r1)
+    assert abs(r1 - 1) < 1e-8 and abs(w1 - w_star) < 1e-4
+
+
+def test_the_torus_test_function():
+    """`det(M2 - I)`, with `M2` the second compound matrix: its eigenvalues are the products of pairs of
+    the eigenvalues of `M` (against numpy's eigenvalues of a random matrix), so it vanishes where a
+    complex pair has modulus 1, and at a neutral saddle (real multipliers 2 and 1/2), which
+    `complex_radius` (NaN where every multiplier is real) keeps from counting as a torus."""
+    from locomotion_jax.gaits._bifurcation import complex_radius, compound, torus_function
+
+    rng = np.random.default_rng(3)
+    M = rng.normal(size=(5, 5))
+    mu = np.linalg.eigvals(M)
+    pairs = np.array([mu[i] * mu[j] for i in range(5) for j in range(i + 1, 5)])
+    got = np.linalg.eigvals(compound(M))
+    np.testing.assert_allclose(np.sort_complex(got), np.sort_complex(pairs), rtol=1e-10, atol=1e-12)
+    assert torus_function(M) == pytest.approx(np.real(np.prod(pairs - 1)), rel=1e-10)
+
+    def rotation(r: float) -> np.ndarray:
+        """A complex pair of modulus `r` at angle 2 and a real multiplier 0.3."""
+        return np.array([[r * np.cos(2.0), -r * np.sin(2.0), 0.0], [r * np.sin(2.0), r * np.cos(2.0), 0.0],
+                         [0.0, 0.0, 0.3]])  # fmt: skip
+
+    below, above = rotation(0.99), rotation(1.01)
+    assert torus_function(below) < 0 < torus_function(above)
+    radius = complex_radius(np.stack([np.linalg.eigvals(below), np.linalg.eigvals(above)]))
+    np.testing.assert_allclose(radius, [0.99, 1.01], rtol=1e-12)
+    saddle = np.diag([2.0, 0.5, 0.3])
+    assert abs(torus_function(saddle)) < 1e-12 and np.isnan(complex_radius(np.linalg.eigvals(saddle)))

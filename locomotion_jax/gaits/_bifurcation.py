@@ -6,6 +6,12 @@ Each event is the zero of a scalar test function of the orbit, continuous along 
   sign; `BRANCH_POINT` where it does not;
 - `PERIOD_DOUBLING`: $\\det(M + I)$ (a real multiplier at $-1$; complex pairs contribute
   $|\\mu + 1|^2 > 0$);
+- `TORUS` (Neimark-Sacker): $\\det(M^{(2)} - I)$, with $M^{(2)}$ the second compound matrix of $M$
+  (its $2 \\times 2$ minors), whose eigenvalues are the products $\\mu_i \\mu_j$, $i < j$: zero where a
+  complex pair reaches the unit circle ($\\mu \\bar\\mu = 1$; its other factors pair into
+  $|\\mu\\mu_k - 1|^2 > 0$). It vanishes too where two real multipliers' product is 1 (a neutral
+  saddle, no bifurcation), so a sign change counts only where both points have a complex pair whose
+  modulus crosses 1 (`complex_radius`);
 - `SWITCH`: another change of the switching structure (the number of switches or, under
   `contact="hop"`, of landings per period: a velocity or a height grazing zero), bracketed by two
   points but not located;
@@ -61,9 +67,35 @@ class EventKind:
     SSL_SL = 3
     LIFTOFF = 4
     SWITCH = 5
+    TORUS = 6
 
 
-NAMES = {0: "FOLD", 1: "PERIOD_DOUBLING", 2: "BRANCH_POINT", 3: "SSL_SL", 4: "LIFTOFF", 5: "SWITCH"}
+NAMES = {0: "FOLD", 1: "PERIOD_DOUBLING", 2: "BRANCH_POINT", 3: "SSL_SL", 4: "LIFTOFF", 5: "SWITCH", 6: "TORUS"}
+
+REAL_TOL = 1e-8
+"""A multiplier whose imaginary part is below this times its modulus counts as real (`complex_radius`)."""
+
+
+def compound(M: np.ndarray) -> np.ndarray:
+    """The second compound matrix of `M` (`(..., S, S)` -> `(..., m, m)`, $m = S(S-1)/2$): its entry
+    $((p, q), (r, s))$, $p < q$, $r < s$, is the minor $M_{pr} M_{qs} - M_{ps} M_{qr}$. Its eigenvalues
+    are the products $\\mu_i \\mu_j$, $i < j$, of the eigenvalues of `M` (Binet-Cauchy)."""
+    p, q = np.triu_indices(M.shape[-1], 1)
+    rows = lambda a, b: M[..., a[:, None], b[None, :]]
+    return rows(p, p) * rows(q, q) - rows(p, q) * rows(q, p)
+
+
+def torus_function(M: np.ndarray) -> np.ndarray:
+    """$\\det(M^{(2)} - I)$, the `TORUS` test function (module docstring)."""
+    C = compound(M)
+    return np.asarray(np.linalg.det(C - np.eye(C.shape[-1])))
+
+
+def complex_radius(multipliers: np.ndarray) -> np.ndarray:
+    """The largest modulus of a complex (non-real) multiplier, per point (NaN where all are real)."""
+    mod = np.abs(multipliers)
+    cplx = np.abs(np.imag(multipliers)) > REAL_TOL * mod
+    return np.asarray(np.where(cplx.any(-1), np.max(np.where(cplx, mod, -np.inf), axis=-1, initial=-np.inf), np.nan))
 
 
 def _column(name: str, index: int) -> property:
@@ -118,6 +150,8 @@ def _functional(kind: int, r, contact: str) -> np.ndarray:
         g = np.linalg.det(M - np.eye(S))
     elif kind == EventKind.PERIOD_DOUBLING:
         g = np.linalg.det(M + np.eye(S))
+    elif kind == EventKind.TORUS:
+        g = torus_function(M)
     elif kind == EventKind.SSL_SL:
         g = r.out.margin
     else:
@@ -134,7 +168,8 @@ def _brackets(d: dict, status: np.ndarray, failed_at: np.ndarray) -> list[list[t
     A change of the slip margin's or the smallest normal force's sign is a switching event. The
     multipliers jump where the switching structure changes, so a sign change of $\\det(M \\mp I)$
     is a (smooth) fold or period doubling only between points of the same structure; another change
-    of the switch count is reported as `SWITCH`."""
+    of the switch count is reported as `SWITCH`. A sign change of the torus function counts where
+    a complex pair's modulus crosses 1 between the two points (not a neutral saddle)."""
     B = d["valid"].shape[0]
     out: list[list[tuple]] = [[] for _ in range(B)]
     for i in range(B):
@@ -153,9 +188,11 @@ def _brackets(d: dict, status: np.ndarray, failed_at: np.ndarray) -> list[list[t
             if sw[0] != sw[1] or nl[0] != nl[1]:
                 out[i].append(row(EventKind.SWITCH, (np.nan, np.nan)))
                 continue
-            dp, dm = pair("det_plus"), pair("det_minus")
+            dp, dm, dt, rc = pair("det_plus"), pair("det_minus"), pair("det_torus"), pair("complex_radius")
             if (dp[0] > 0) != (dp[1] > 0):
                 out[i].append(row(EventKind.PERIOD_DOUBLING, dp))
+            if (dt[0] > 0) != (dt[1] > 0) and (rc[0] > 1) != (rc[1] > 1) and np.all(np.isfinite(rc)):
+                out[i].append(row(EventKind.TORUS, dt))
             if (dm[0] > 0) != (dm[1] > 0):
                 fold = (d["t"][i, j, -1] > 0) != (d["t"][i, j + 1, -1] > 0)
                 out[i].append(row(EventKind.FOLD if fold else EventKind.BRANCH_POINT, dm))
@@ -306,7 +343,7 @@ def _locate(solve, rows: list[tuple | None], contact: str, lam_tol: float) -> li
 
 
 LOCATABLE = frozenset({EventKind.FOLD, EventKind.PERIOD_DOUBLING, EventKind.BRANCH_POINT, EventKind.SSL_SL,
-                       EventKind.LIFTOFF})  # fmt: skip
+                       EventKind.LIFTOFF, EventKind.TORUS})  # fmt: skip
 """The kinds with a test function (`SWITCH` has none)."""
 
 

@@ -16,7 +16,7 @@ The period map and the corrector are the same for every mechanism (the N-body en
 batch is a branch; all of them advance together, one batched corrector
 call per step (one compilation for the whole continuation), and each ends on its own
 ([`BranchStatus`][]). Along each branch, [`_bifurcation`][] then finds and locates folds, period
-doublings, and the changes of switching structure (SSL/SL, lift-off).
+doublings, torus bifurcations, and the changes of switching structure (SSL/SL, lift-off).
 """
 
 import math
@@ -41,7 +41,7 @@ from ..model._waveform import AbstractWaveform
 from ..run._batch import mechanism_arg, prepare, prepare_chain
 from ..run._resolution import guard_chain, guard_two_mass
 from . import _corrector as corrector, _progress as progress, _shooting as shooting
-from ._bifurcation import BranchEvents, find_events, kinds
+from ._bifurcation import BranchEvents, complex_radius, find_events, kinds, torus_function
 from ._gait import configs, GaitStatus, steady_gait
 from ._result import PaperNames
 
@@ -95,7 +95,8 @@ class Branch(PaperNames):
       reading and `contact="hop"`, where the orbit has a flight).
     - `tangent`: $d\\lambda/ds$ of the unit tangent (sign change: a fold).
     - `det_minus`, `det_plus`: $\\det(M - I)$ and $\\det(M + I)$ (test functions of a real multiplier
-      at $+1$ and $-1$).
+      at $+1$ and $-1$); `det_torus`: $\\det(M^{(2)} - I)$ (of a complex pair on the unit circle,
+      [`EventKind`][]`.TORUS`).
     - `n_points`, `status` ([`BranchStatus`][]), `k` (the gait period followed, in actuation
       periods), `start_status` (the start's [`GaitStatus`][]): per branch.
     - `events`: [`BranchEvents`][], the located bifurcations and switching changes.
@@ -122,6 +123,7 @@ class Branch(PaperNames):
     tangent: Array
     det_minus: Array
     det_plus: Array
+    det_torus: Array
     n_points: Array
     status: Array
     k: Array
@@ -259,8 +261,8 @@ def continuation(
     """Follow the steady gait of each configuration as `parameter` goes from its value to `stop`.
 
     The start is [`steady_gait`][]`(params, periods=periods, ...)`; its gait (of period `k`, stable or
-    not) is continued (module docstring), and with `locate` its folds, period doublings, SSL/SL
-    boundaries and lift-offs are located ([`BranchEvents`][]).
+    not) is continued (module docstring), and with `locate` its folds, period doublings, torus
+    bifurcations, SSL/SL boundaries and lift-offs are located ([`BranchEvents`][]).
 
     **Arguments:**
 
@@ -525,6 +527,8 @@ def _pack(points: list[list[dict]], solve: Solver, k: np.ndarray) -> dict[str, n
     out["multipliers"] = np.where(valid[..., None], ev, np.nan)
     out["det_minus"] = np.where(valid, np.linalg.det(M - np.eye(S)), np.nan)
     out["det_plus"] = np.where(valid, np.linalg.det(M + np.eye(S)), np.nan)
+    out["det_torus"] = np.where(valid, torus_function(M), np.nan)
+    out["complex_radius"] = np.where(valid, complex_radius(ev), np.nan)
     return out
 
 
@@ -560,6 +564,7 @@ def _branch(d, status, k, start_status, events, shape, dtype, label, contact, pa
         tangent=re(d["t"][..., S]),
         det_minus=re(d["det_minus"]),
         det_plus=re(d["det_plus"]),
+        det_torus=re(d["det_torus"]),
         n_points=jnp.asarray(d["count"], jnp.int32).reshape(shape),
         status=jnp.asarray(status, jnp.int32).reshape(shape),
         k=jnp.asarray(k, jnp.int32).reshape(shape),
