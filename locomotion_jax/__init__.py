@@ -39,6 +39,7 @@ from .model import (
     Spring as Spring,
     SpringFourier as SpringFourier,
     Stribeck as Stribeck,
+    TiltedSpring as TiltedSpring,
     TravellingWave as TravellingWave,
     WALL as WALL,
 )

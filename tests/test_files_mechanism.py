@@ -86,6 +86,10 @@ ROUND_TRIPS = {
     "thrown_capsule": lj.Mechanism(masses=[1.0, 0.5], friction=[lj.Coulomb(0.5, 0.4), None], carried_by=[None, 0],
                                    links=[lj.Spring(0, 1, k=10.0)], y0=[0.3, 0.0], w0=[0.45, 0.0],
                                    restitution=[0.6, 0.0], zeno_speed=2e-3),
+    # Tilted springs: to a wall with an actuated rest length, and between two bodies without a `d`.
+    "tilted": lj.Mechanism(masses=[1.0, 0.7], friction=lj.Coulomb(0.6, 0.4), x0=[1.0, 3.5],
+                           links=[lj.TiltedSpring(lj.WALL, 0, k=20.0, d=-0.4, rest=lj.Sinusoid(0.05, 3.0, 1.1)),
+                                  lj.TiltedSpring(0, 1, k=30.0, rest=2.4)]),
 }  # fmt: skip
 
 
@@ -132,7 +136,8 @@ BROKEN = {
                                                                  "mu_s = 0.5, mu_k = 0.4 }"),
                               r"line 13: friction: body 1 is carried by body 0 .* has a friction law"),
     "link_type": (CAPSULE.replace('type = "Force"', 'type = "Muscle"'),
-                  r"line 25: \[\[links\]\] #2 type: expected one of 'Spring', 'Damper', 'Force', 'ExternalForce', "
+                  r"line 25: \[\[links\]\] #2 type: expected one of 'Spring', 'TiltedSpring', 'Damper', 'Force', "
+                  r"'ExternalForce', "
                   r"got 'Muscle'"),
     "link_missing_body": (CAPSULE.replace("b = 1\nk = 10.0", "b = 2\nk = 10.0"),
                           r"line 20: \[\[links\]\] #1 b: expected a body index \(0 to 1\) or \"wall\", got 2"),

@@ -9,6 +9,7 @@ from ._elements import (
     ExternalForce as ExternalForce,
     Force as Force,
     Spring as Spring,
+    TiltedSpring as TiltedSpring,
     WALL as WALL,
 )
 from ._friction import (

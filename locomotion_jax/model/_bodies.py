@@ -3,7 +3,8 @@
 Capsule (vibration-driven) robots, a mass on a spring to a wall, blocks pushed by external
 forces: each is a set of bodies, some touching the ground (a friction law) and some
 carried by another body or free, and of elements ([`Spring`][locomotion_jax.Spring],
-[`Force`][locomotion_jax.Force], [`ExternalForce`][locomotion_jax.ExternalForce]) between
+[`TiltedSpring`][locomotion_jax.TiltedSpring], [`Force`][locomotion_jax.Force],
+[`ExternalForce`][locomotion_jax.ExternalForce]) between
 any of them or a `lj.WALL`. The front ends run it on the N-body
 exact engine as they run a [`Chain`][locomotion_jax.Chain].
 """
@@ -19,7 +20,7 @@ import numpy as np
 
 from .._custom_types import Array, ValuesLike
 from ._checks import broadcast_shape, is_concrete, real_array
-from ._elements import AbstractElement, Damper, signal_checks, signal_nodes, Spring, WALL
+from ._elements import AbstractElement, Damper, signal_checks, signal_nodes, Spring, TiltedSpring, WALL
 from ._friction import AbstractFriction, Coulomb
 from ._mechanism import AbstractMechanism
 from ._mechanism_physics import ground_body, mechanism_physics, MechanismPhysics
@@ -70,16 +71,20 @@ class Mechanism(AbstractMechanism):
     Body $i$ (mass $m_i$, position $x_i$, velocity $v_i$, ground damping $c_i$) obeys
     $m_i\\dot v_i = F_i - c_i v_i - \\text{friction}_i$, with $F_i$ the sum of every element's
     force on it. A body with a friction law touches the ground with the normal load
-    $N_i = m_i + $ the weights it carries, and sticks and slips as in SPEC §8. A body with
+    $N_i = m_i + $ the weights it carries $-$ the tilted springs' vertical forces on it and on the
+    bodies it carries, and sticks and slips as in SPEC §8 (under the strict reading a run stops
+    where a load reaches 0; under `contact="hop"` the body flies). A body with
     none (`friction[i] = None`) feels no friction: `carried_by[i] = j` puts its weight on
     body $j$ (or on the body that finally carries $j$), as an internal mass loads its
     capsule; `carried_by[i] = None` leaves it free on the line.
 
-    Elements ([`Spring`][locomotion_jax.Spring], [`Force`][locomotion_jax.Force],
+    Elements ([`Spring`][locomotion_jax.Spring], [`TiltedSpring`][locomotion_jax.TiltedSpring],
+    [`Damper`][locomotion_jax.Damper], [`Force`][locomotion_jax.Force],
     [`ExternalForce`][locomotion_jax.ExternalForce]) join any two bodies or a body and
     `lj.WALL` (a fixed point at $x = 0$). Their waveforms share one base
     frequency $\\omega$ (the engine follows one phase). Energy: $e = \\sum m_i v_i^2/2 +
-    \\sum f^2/(2k)$ over springs, and $w = e_d + \\Delta e$ with $w$ the work of the forces and
+    \\sum f^2/(2k)$ over springs (a tilted spring's $T^2/(2k)$; under `contact="hop"` gravity's
+    $\\sum m_i y_i$ too), and $w = e_d + \\Delta e$ with $w$ the work of the forces and
     the actuated rest lengths (SPEC §9).
 
     Per-body fields have a last axis of length N (a scalar is broadcast); leading axes of
@@ -196,7 +201,7 @@ class Mechanism(AbstractMechanism):
         links = tuple(links)
         for k, el in enumerate(links):
             if not isinstance(el, AbstractElement):
-                kinds = "a Spring, Damper, Force or ExternalForce"
+                kinds = "a Spring, TiltedSpring, Damper, Force or ExternalForce"
                 raise TypeError(f"links[{k}] must be {kinds}, got {type(el).__name__}.")
             ends = el.bodies()
             for e in ends:
@@ -367,7 +372,7 @@ class Mechanism(AbstractMechanism):
         links = list(self.links)
         for j, i in enumerate(self.actuated()):
             el = links[i]
-            name = "rest" if isinstance(el, Spring) else "waveform"
+            name = "rest" if isinstance(el, (Spring, TiltedSpring)) else "waveform"
             links[i] = eqx.tree_at(lambda e: getattr(e, name), el, signal(j, getattr(el, name).lbar))
         return eqx.tree_at(lambda m: m.links, self, tuple(links))
 
@@ -488,7 +493,7 @@ class Mechanism(AbstractMechanism):
             owner = f"links[{k}] {el.describe()}"
             for name, x in el.values().items():
                 out.append((owner, name, jnp.isfinite(x), "finite", x))
-            if isinstance(el, Spring):
+            if isinstance(el, (Spring, TiltedSpring)):
                 out.append((owner, "k", el.k > 0, "k > 0", el.k))
             if isinstance(el, Damper):
                 out.append((owner, "c", el.c >= 0, "c >= 0", el.c))

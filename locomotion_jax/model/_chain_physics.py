@@ -15,7 +15,7 @@ dense output and event prediction); an actuator's derivatives follow from the li
 [`AbstractActuator.split`][locomotion_jax.AbstractActuator.split], so it supplies values only.
 """
 
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, Protocol, runtime_checkable
 
 import jax
 import jax.numpy as jnp
@@ -257,11 +257,32 @@ class Springs(NamedTuple):
     h: Scalars | None = None
 
 
+@runtime_checkable
+class SpringGeometry(Protocol):
+    """Per tilted spring: stiffness `k`, vertical offset `d` and its square `dd` (a chain's physics,
+    or a mechanism's tilted springs)."""
+
+    @property
+    def k(self) -> Scalars: ...
+
+    @property
+    def d(self) -> Scalars: ...
+
+    @property
+    def dd(self) -> Scalars: ...
+
+
 def springs(P: ChainPhysics, l0: Scalars, x: Scalars, y: Scalars | None = None) -> Springs:
     """The springs at positions `x` and (`contact="hop"`) heights `y`: a spring acts along
     $(u_j, h_j)$ with $h_j = d_j + y_{j+1} - y_j$ (SPEC §10), $h_j = d_j$ where `y` is `None`."""
     u = tuple(b - a for a, b in zip(x[:-1], x[1:]))
     h = None if y is None else tuple(d + (b - a) for d, a, b in zip(P.d, y[:-1], y[1:]))
+    return tilted(P, l0, u, h)
+
+
+def tilted(P: SpringGeometry, l0: Scalars, u: Scalars, h: Scalars | None) -> Springs:
+    """Tilted springs of extensions `u` and vertical offsets `h` (`None`: their `d`), whatever bodies
+    they join: $\\ell = \\sqrt{u^2 + h^2}$, $T = k(\\ell - \\ell_0)$, $(f_x, f_y) = T(u, h)/\\ell$."""
     vert = P.dd if h is None else tuple(q * q for q in h)
     length = [jnp.sqrt(uj * uj + dd) for uj, dd in zip(u, vert)]
     il = tuple(1 / lj for lj in length)
@@ -307,7 +328,7 @@ class SpringRates(NamedTuple):
 
 
 def spring_rates(
-    P: ChainPhysics, sp: Springs, du: Scalars, dl0: Scalars | None, dh: Scalars | None = None
+    P: SpringGeometry, sp: Springs, du: Scalars, dl0: Scalars | None, dh: Scalars | None = None
 ) -> SpringRates:
     """With $p = T/\\ell$ and $\\dot u_j = \\dot x_{j+1} - \\dot x_j$: $\\dot\\ell = u\\dot u/\\ell$,
     $\\dot T = k(\\dot\\ell - \\dot\\ell_0)$, $\\dot p = (\\dot T - p\\dot\\ell)/\\ell$,
@@ -327,7 +348,7 @@ def spring_rates(
 
 
 def spring_second(
-    P: ChainPhysics,
+    P: SpringGeometry,
     sp: Springs,
     r: SpringRates,
     du: Scalars,

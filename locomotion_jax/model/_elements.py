@@ -1,5 +1,5 @@
-"""The elements of a [`Mechanism`][locomotion_jax.Mechanism] (SPEC §9): springs between any two
-bodies or to a wall, internal force actuators and external forces.
+"""The elements of a [`Mechanism`][locomotion_jax.Mechanism] (SPEC §9): springs (linear or tilted)
+between any two bodies or to a wall, dampers, internal force actuators and external forces.
 
 Each element names the bodies it acts on by their index (static: part of the mechanism's
 structure, not of its values) or `lj.WALL`, a fixed point at $x = 0$ of
@@ -131,6 +131,44 @@ class Spring(AbstractElement):
 
     def values(self) -> dict[str, Array]:
         return {"k": self.k}
+
+
+class TiltedSpring(AbstractElement):
+    """A tilted spring between bodies `a` and `b` (or a body and `lj.WALL`) (SPEC §9), as a chain's
+    spring (SPEC §8, eq. 2): with $u = x_b - x_a$ and the vertical offset $d$ of `b` above `a`, its
+    length is $\\ell = \\sqrt{u^2 + d^2}$ and its tension $T = k\\,(\\ell - r(t))$; it pulls `a` by
+    $T\\,(u, d)/\\ell$ and `b` by the opposite, so its vertical force lightens `a`'s normal load by
+    $T d/\\ell$ and loads `b`'s by as much (a carried body's share goes to the body that carries
+    it; a free body's is borne by the line). Under `contact="hop"` it acts along
+    $(u, d + y_b - y_a)$ (SPEC §10). Its elastic energy is $T^2/(2k)$; an actuated rest length
+    $r(t)$ does the work $-T\\,\\dot r$.
+
+    **Arguments:** `a`, `b`: body indices or `WALL` (not both; `a != b`); `k > 0`; `d`: the vertical
+    offset (any finite number, default 0: a horizontal spring of length $|u|$); `rest`: a number or
+    a waveform $r(t)$ (default 0).
+    """
+
+    a: "int | str" = eqx.field(static=True)
+    b: "int | str" = eqx.field(static=True)
+    k: Array
+    d: Array
+    rest: Signal
+
+    def __init__(self, a: End, b: End, k: ArrayLike = 1.0, d: ArrayLike = 0.0,
+                 rest: "ArrayLike | AbstractWaveform" = 0.0):  # fmt: skip
+        self.a, self.b = _end("a", "TiltedSpring", a), _end("b", "TiltedSpring", b)
+        self.k = real_array("k", k, "TiltedSpring")
+        self.d = real_array("d", d, "TiltedSpring")
+        self.rest = _signal("rest", "TiltedSpring", rest)
+
+    def bodies(self) -> tuple["int | str", ...]:
+        return (self.a, self.b)
+
+    def signals(self) -> tuple[Signal, ...]:
+        return (self.rest,)
+
+    def values(self) -> dict[str, Array]:
+        return {"k": self.k, "d": self.d}
 
 
 class Force(AbstractElement):

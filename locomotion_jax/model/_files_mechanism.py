@@ -15,8 +15,8 @@ mass = 0.5
 carried_by = 0             # no friction: carried by body 0 (or free without carried_by)
 
 [[links]]
-type = "Spring"            # Spring (a, b, k, rest), Damper (a, b, c), Force (a, b, waveform),
-a = 0                      # ExternalForce (i, waveform); "wall" in place of a body index
+type = "Spring"            # Spring (a, b, k, rest), TiltedSpring (a, b, k, d, rest), Damper (a, b, c),
+a = 0                      # Force (a, b, waveform), ExternalForce (i, waveform); "wall" for a body index
 b = 1
 k = 10.0
 ```
@@ -33,7 +33,7 @@ from typing import Any, NoReturn
 import numpy as np
 
 from ._bodies import Mechanism
-from ._elements import AbstractElement, Damper, End, ExternalForce, Force, Spring, WALL
+from ._elements import AbstractElement, Damper, End, ExternalForce, Force, Spring, TiltedSpring, WALL
 from ._files import _Source, _Table, stacked, Swept
 from ._physics import ZENO_SPEED
 from ._waveform import AbstractWaveform, Fourier, Sinusoid, Spline
@@ -41,11 +41,12 @@ from ._waveform import AbstractWaveform, Fourier, Sinusoid, Spline
 
 LINKS: dict[str, tuple[type[AbstractElement], tuple[str, ...]]] = {
     "Spring": (Spring, ("a", "b", "k", "rest")),
+    "TiltedSpring": (TiltedSpring, ("a", "b", "k", "d", "rest")),
     "Damper": (Damper, ("a", "b", "c")),
     "Force": (Force, ("a", "b", "waveform")),
     "ExternalForce": (ExternalForce, ("i", "waveform")),
 }
-"""Links by `type`: class and fields (a spring's `rest` is optional, default 0)."""
+"""Links by `type`: class and fields (a spring's `rest` and a tilted spring's `d` are optional, default 0)."""
 
 WAVES: dict[str, tuple[type[AbstractWaveform], tuple[str, ...]]] = {
     "Sinusoid": (Sinusoid, ("a",)),
@@ -249,6 +250,9 @@ def read_mechanism(doc: Any, friction_of: Any, check: bool = True) -> Mechanism:
         t.only(("type", *fields))
         if kind == "Spring":
             links.append(Spring(t.end("a", n), t.end("b", n), t.number("k"), _signal(t, "rest", 0.0)))
+        elif kind == "TiltedSpring":
+            d = t.number("d", 0.0)
+            links.append(TiltedSpring(t.end("a", n), t.end("b", n), t.number("k"), d, _signal(t, "rest", 0.0)))
         elif kind == "Damper":
             links.append(Damper(t.end("a", n), t.end("b", n), t.number("c")))
         elif kind == "Force":
@@ -322,6 +326,9 @@ def dump_mechanism(mech: Mechanism, friction_table: Any) -> dict[str, Any]:
         if isinstance(el, Spring):
             links.append({"type": "Spring", "a": _end(el.a), "b": _end(el.b), "k": _scalar(el.k, what),
                           "rest": _wave_table(el.rest, what)})  # fmt: skip
+        elif isinstance(el, TiltedSpring):
+            links.append({"type": "TiltedSpring", "a": _end(el.a), "b": _end(el.b), "k": _scalar(el.k, what),
+                          "d": _scalar(el.d, what), "rest": _wave_table(el.rest, what)})  # fmt: skip
         elif isinstance(el, Damper):
             links.append({"type": "Damper", "a": _end(el.a), "b": _end(el.b), "c": _scalar(el.c, what)})
         elif isinstance(el, Force):

@@ -6,9 +6,13 @@ Over tuples of per-body scalars, as [`ChainPhysics`][locomotion_jax.model._chain
 
 With $u = x_b - x_a$ ($x = 0$ for a wall) a spring's force is $f = k(u - r(t))$, $+f$ on `a`
 and $-f$ on `b`; an internal force $f(t)$ acts $+f$ on `b`, $-f$ on `a`; an external force
-$g_i(t)$ on body $i$. $F_i$ sums them. The springs are horizontal, so the normal loads are
-constant: $N_i = m_i + $ (the weights that body $i$ carries, directly or through other
-carried bodies) for a body in contact.
+$g_i(t)$ on body $i$. $F_i$ sums them. A tilted spring ([`TiltedSpring`][locomotion_jax.TiltedSpring],
+the chain's spring of SPEC §8 between any two bodies; its geometry is `_chain_physics.tilted`'s) adds
+its horizontal force $T u/\\ell$ ($+$ on `a`) and a vertical one $V = T h/\\ell$, $+V$ on `a` and $-V$
+on `b` ($h = d$, or $d + y_b - y_a$ under `contact="hop"`). A body in contact bears the normal load
+$N_i = m_i + $ (the weights that body $i$ carries, directly or through other carried bodies)
+$- $ (the vertical forces on it and on the bodies it carries): constant where the mechanism has
+no tilted spring.
 
 A body without ground contact (carried, or free) gets a friction law of no friction
 (`_NoContact`: kinetic coefficient 0, static limit $-1$) and the normal load 1: it never
@@ -25,7 +29,8 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from .._custom_types import Array
-from ._elements import Damper, ExternalForce, Force, signal_at, Spring, WALL
+from ._chain_physics import spring_rates, spring_second, SpringRates, Springs, tilted
+from ._elements import Damper, ExternalForce, Force, signal_at, Spring, TiltedSpring, WALL
 from ._friction import AbstractFriction
 from ._physics import AbstractPhysics, LoadRates, Loads, Scalars
 
@@ -64,13 +69,36 @@ class Drive(NamedTuple):
     g: Scalars
     dg: tuple[Array | None, ...]
     ddg: tuple[Array | None, ...]
+    r: Scalars = ()  # per tilted spring: its rest length and rates
+    dr: tuple[Array | None, ...] = ()
+    ddr: tuple[Array | None, ...] = ()
 
 
 class SpringState(NamedTuple):
-    """Per spring: its extension $u = x_b - x_a$ and force `tension` $= k(u - r)$."""
+    """Per spring: its extension $u = x_b - x_a$ and force `tension` $= k(u - r)$; `tilt`: the
+    tilted springs (`_chain_physics.Springs`; `None` where there are none)."""
 
     u: Scalars
     tension: Scalars
+    tilt: Springs | None = None
+
+
+class TiltRates(NamedTuple):
+    """The rates of the linear springs' extensions `du` and the tilted springs' (`tilt_du`, their
+    `SpringRates`, and under `contact="hop"` the vertical offsets' rates `dh`)."""
+
+    du: Scalars
+    tilt_du: Scalars = ()
+    tilt: SpringRates | None = None
+    dh: Scalars | None = None
+
+
+class TiltGeometry(NamedTuple):
+    """Per tilted spring: stiffness, vertical offset and its square (`_chain_physics.SpringGeometry`)."""
+
+    k: Scalars
+    d: Scalars
+    dd: Scalars
 
 
 def _pos(x: Scalars, end: "int | str", like: Array) -> Array:
@@ -115,6 +143,7 @@ class MechanismPhysics(AbstractPhysics):
     externals: tuple[ExternalForce, ...]
     ground: tuple[int, ...] = eqx.field(static=True)  # per body, the body that finally carries it
     dampers: tuple[Damper, ...] = ()  # between two bodies (one to a wall is in `c`)
+    tilted: tuple[TiltedSpring, ...] = ()
 
     @property
     def anchored(self) -> bool:
@@ -131,9 +160,33 @@ class MechanismPhysics(AbstractPhysics):
         sp = [at(s.rest) for s in self.springs]
         fo = [at(f.waveform) for f in self.forces]
         ex = [at(g.waveform) for g in self.externals]
+        ti = [at(s.rest) for s in self.tilted]
         col = lambda q, k: tuple(p[k] for p in q)
         return Drive(col(sp, 0), col(sp, 1), col(sp, 2), col(fo, 0), col(fo, 1), col(fo, 2),
-                     col(ex, 0), col(ex, 1), col(ex, 2))  # fmt: skip
+                     col(ex, 0), col(ex, 1), col(ex, 2), col(ti, 0), col(ti, 1), col(ti, 2))  # fmt: skip
+
+    def _geometry(self) -> TiltGeometry:
+        d = tuple(s.d for s in self.tilted)
+        return TiltGeometry(tuple(s.k for s in self.tilted), d, tuple(q * q for q in d))
+
+    def _ends(self, q: Scalars) -> Scalars:
+        """$q_b - q_a$ per tilted spring ($q = 0$ at a wall)."""
+        return tuple(_pos(q, s.b, q[0]) - _pos(q, s.a, q[0]) for s in self.tilted)
+
+    def _tilt_terms(self, F: Scalars, N: Scalars, fx: Scalars, fy: Scalars) -> tuple[Scalars, Scalars]:
+        """`F` plus the tilted springs' horizontal forces `fx` ($+$ on `a`), `N` minus their vertical
+        forces `fy` ($+$ on `a`), each body's share on the body in contact that carries it."""
+        terms: list[list[Array]] = [[q] for q in F]
+        lift: list[list[Array]] = [[] for _ in self.m]
+        contact = self.in_contact()
+        for s, a, b in zip(self.tilted, fx, fy):
+            _add(terms, s.a, a, 1.0)
+            _add(terms, s.b, a, -1.0)
+            for end, sign in ((s.a, 1.0), (s.b, -1.0)):
+                if end != WALL and contact[self.ground[int(end)]]:
+                    _add(lift, self.ground[int(end)], b, sign)
+        N = tuple(n if not t else n - _sum(t, n) for n, t in zip(N, lift))
+        return tuple(_sum(t, t[0]) for t in terms), N
 
     def _forces(self, u: Scalars, r: tuple, f: tuple, g: tuple, like: Array) -> Scalars:
         """$F_i$ (or a rate of it) from the springs' `k (u - r)`, the forces `f` and the external `g`."""
@@ -156,14 +209,33 @@ class MechanismPhysics(AbstractPhysics):
         u = self._u(x)
         tension = tuple(s.k * (uj - r) for s, uj, r in zip(self.springs, u, drive.l0))
         F = self._forces(u, drive.l0, drive.f, drive.g, x[0])
-        return Loads(F, self.normal, SpringState(u, tension))
+        if not self.tilted:
+            return Loads(F, self.normal, SpringState(u, tension))
+        geo = self._geometry()
+        h = None if y is None else tuple(d + q for d, q in zip(geo.d, self._ends(y)))
+        sp = tilted(geo, drive.r, self._ends(x), h)
+        F, N = self._tilt_terms(F, self.normal, sp.fx, sp.fy)
+        return Loads(F, N, SpringState(u, tension, sp))
 
     def load_rates(
         self, drive: Drive, loads: Loads, xd: Scalars, keep: Any = None, yd: Scalars | None = None
     ) -> LoadRates:
         du = self._u(xd)
         dF = self._forces(du, drive.dl0, drive.df, drive.dg, xd[0])
-        return LoadRates(dF, tuple(jnp.zeros_like(q) for q in dF), du)
+        zero = tuple(jnp.zeros_like(q) for q in dF)
+        sp = loads.aux.tilt
+        if sp is None:
+            return LoadRates(dF, zero, TiltRates(du))
+        tdu = self._ends(xd)
+        dh = None if yd is None or sp.h is None else self._ends(yd)
+        sr = spring_rates(self._geometry(), sp, tdu, self._rates(drive.dr, tdu), dh)
+        dF, dN = self._tilt_terms(dF, zero, sr.dfx, sr.dfy)
+        return LoadRates(dF, dN, TiltRates(du, tdu, sr, dh))
+
+    @staticmethod
+    def _rates(rates: tuple[Array | None, ...], like: Scalars) -> Scalars:
+        """Rates of the tilted springs' rest lengths, zero for a constant one."""
+        return tuple(_rate(r, q) for r, q in zip(rates, like))
 
     def load_second(
         self,
@@ -176,13 +248,23 @@ class MechanismPhysics(AbstractPhysics):
         ya: Scalars | None = None,
     ) -> tuple[Scalars, Scalars]:
         ddF = self._forces(self._u(a), drive.ddl0, drive.ddf, drive.ddg, a[0])
-        return ddF, tuple(jnp.zeros_like(q) for q in ddF)
+        zero = tuple(jnp.zeros_like(q) for q in ddF)
+        sp, tr = loads.aux.tilt, rates.aux
+        if sp is None or tr.tilt is None:
+            return ddF, zero
+        ddu = self._ends(a)
+        ddh = None if tr.dh is None or ya is None else self._ends(ya)
+        ddfx, ddfy = spring_second(self._geometry(), sp, tr.tilt, tr.tilt_du, ddu, self._rates(drive.ddr, ddu),
+                                   tr.dh, ddh)  # fmt: skip
+        return self._tilt_terms(ddF, zero, ddfx, ddfy)
 
     def power(self, drive: Drive, loads: Loads, v: Scalars) -> Array:
         """The power put in (SPEC §9): $\\dot w = \\sum_\\text{springs} -f\\,\\dot r$
         $+ \\sum_\\text{forces} f\\,(v_b - v_a) + \\sum_i g_i v_i$."""
         like = v[0]
         terms = [-(T * dr) for T, dr in zip(loads.aux.tension, drive.dl0) if dr is not None]
+        if loads.aux.tilt is not None:
+            terms += [-(T * dr) for T, dr in zip(loads.aux.tilt.tension, drive.dr) if dr is not None]
         terms += [f * (_pos(v, e.b, like) - _pos(v, e.a, like)) for e, f in zip(self.forces, drive.f)]
         terms += [g * v[e.i] for e, g in zip(self.externals, drive.g)]
         return _sum(terms, like)
@@ -190,10 +272,15 @@ class MechanismPhysics(AbstractPhysics):
     def power_rate(self, drive: Drive, loads: Loads, rates: LoadRates, v: Scalars, a: Scalars) -> Array:
         like = v[0]
         terms = []
-        for s, T, du, dr, ddr in zip(self.springs, loads.aux.tension, rates.aux, drive.dl0, drive.ddl0):
+        for s, T, du, dr, ddr in zip(self.springs, loads.aux.tension, rates.aux.du, drive.dl0, drive.ddl0):
             if dr is not None:
                 dT = s.k * (du - dr)
                 terms.append(-(dT * dr + T * _rate(ddr, like)))
+        sp, tr = loads.aux.tilt, rates.aux.tilt
+        if sp is not None and tr is not None:
+            for T, dT, dr, ddr in zip(sp.tension, tr.dtension, drive.dr, drive.ddr):
+                if dr is not None:
+                    terms.append(-(dT * dr + T * _rate(ddr, like)))
         for e, f, df in zip(self.forces, drive.f, drive.df):
             dv = _pos(v, e.b, like) - _pos(v, e.a, like)
             terms.append(_rate(df, like) * dv + f * (_pos(a, e.b, like) - _pos(a, e.a, like)))
@@ -219,9 +306,11 @@ class MechanismPhysics(AbstractPhysics):
         return _sum([d.c * (v[int(d.b)] - v[int(d.a)]) * (u[int(d.b)] - u[int(d.a)]) for d in self.dampers], v[0])
 
     def energy(self, loads: Loads, v: Scalars) -> Array:
-        """$e = \\sum_i m_i v_i^2/2 + \\sum_\\text{springs} f^2/(2k)$ (SPEC §9)."""
+        """$e = \\sum_i m_i v_i^2/2 + \\sum_\\text{springs} f^2/(2k)$ (SPEC §9; a tilted spring's $T^2/(2k)$)."""
         kin = [m * q * q for m, q in zip(self.m, v)]
         pot = [T * T / s.k for s, T in zip(self.springs, loads.aux.tension)]
+        if loads.aux.tilt is not None:
+            pot += [T * T / s.k for s, T in zip(self.tilted, loads.aux.tilt.tension)]
         return 0.5 * _sum(kin + pot, v[0])
 
     def centre_of_mass(self, x: Scalars) -> Array:
@@ -235,18 +324,21 @@ class MechanismPhysics(AbstractPhysics):
         return jnp.stack(self.v0, -1)
 
     def hop(self) -> tuple[Array, Array, Scalars, Array]:
-        """Under `contact="hop"` the springs and forces stay horizontal (the heights `y` that `loads`
-        and the rates take are unused): no vertical force acts on a body ($V_i = 0$), so a body
-        in flight falls freely and one on the ground never lifts off by itself (it flies from
-        its `y0`, `w0` or a rebound). A carried body rides in the body that finally carries it:
-        its height, vertical velocity and restitution are that body's (`mechanism_physics`), so
-        that it flies, falls and lands with it."""
+        """Under `contact="hop"` the linear springs and the forces stay horizontal; the tilted springs
+        act along $(u, d + y_b - y_a)$ (the heights `y` that `loads` and the rates take). Without
+        a tilted spring no vertical force acts on a body, so a body in flight falls freely and one
+        on the ground never lifts off by itself (it flies from its `y0`, `w0` or a rebound); a
+        tilted spring's pull can lift a body as a chain's does. A carried body rides in the body
+        that finally carries it: its height, vertical velocity and restitution are that body's
+        (`mechanism_physics`), so that it flies, falls and lands with it."""
         return jnp.stack(self.y0, -1), jnp.stack(self.w0, -1), self.restitution, self.zeno_speed
 
     def fall(self, N: Scalars) -> Scalars:
-        """Free fall, $\\dot w_i = -1$, as the ground body's load over the mass that lands with it
-        ($N_g / M_g$, one expression for a body and those it carries, so that they fall alike to
-        the last bit; zero for the loads' rates, which are zero)."""
+        """The vertical acceleration in flight, $\\dot w_i = -N_g / M_g$: the ground body's load (its
+        weight and its carried bodies', less the tilted springs' vertical forces on them) over the
+        mass that flies with it, one expression for a body and those it carries, so that they fall
+        alike to the last bit (free fall, $-1$, without a tilted spring). Linear in `N`, so also
+        the rate of that acceleration from the loads' rates."""
         landing = self.landing_masses()
         return tuple(-N[g] / landing[g] for g in self.ground)
 
@@ -304,6 +396,7 @@ def mechanism_physics(M: Any) -> MechanismPhysics:
         zeno_speed=jnp.broadcast_to(M.zeno_speed, one.shape).astype(one.dtype),
         inv_mass=1 / M.m.sum(-1),
         springs=tuple(e for e in links if isinstance(e, Spring)),
+        tilted=tuple(e for e in links if isinstance(e, TiltedSpring)),
         forces=tuple(e for e in links if isinstance(e, Force)),
         externals=tuple(e for e in links if isinstance(e, ExternalForce)),
         dampers=tuple(e for e in links if isinstance(e, Damper) and WALL not in (e.a, e.b)),

@@ -21,7 +21,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Rectangle
 
 from ..model._bodies import Mechanism
-from ..model._elements import Spring, WALL
+from ..model._elements import Spring, TiltedSpring, WALL
 from ._animation import SLIP_COLOR, STUCK_COLOR
 
 
@@ -49,11 +49,11 @@ class Drawing(NamedTuple):
 
 
 def mechanism_drawing(mechanism: Mechanism) -> Drawing:
-    """A [`Mechanism`][locomotion_jax.Mechanism]'s bodies and springs."""
+    """A [`Mechanism`][locomotion_jax.Mechanism]'s bodies and springs (linear and tilted, drawn alike)."""
     return Drawing(
         contact=[law is not None for law in mechanism.friction],
         carried=[c is not None for c in mechanism.carried_by],
-        springs=[(el.a, el.b) for el in mechanism.links if isinstance(el, Spring)],
+        springs=[(el.a, el.b) for el in mechanism.links if isinstance(el, (Spring, TiltedSpring))],
     )
 
 
