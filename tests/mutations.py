@@ -855,6 +855,35 @@ MUTATIONS = [
         ("tests/test_hop_carried.py::test_a_hopping_capsule_against_the_reference",),
     ),
     Mutation(
+        "tilted_spring_load_on_its_own_body",
+        "a tilted spring's vertical force on a carried body is left out of every normal load instead of "
+        "landing on the body that carries it",
+        "locomotion_jax/model/_mechanism_physics.py",
+        (
+            (
+                "                if end != WALL and contact[self.ground[int(end)]]:",
+                "                if end != WALL and contact[int(end)]:",
+            ),
+            (
+                "                    _add(lift, self.ground[int(end)], b, sign)",
+                "                    _add(lift, end, b, sign)",
+            ),
+        ),
+        ("tests/test_tilted_springs.py::test_tilted_springs_between_any_bodies_against_the_reference",),
+    ),
+    Mutation(
+        "tilted_spring_horizontal",
+        "a tilted spring's vertical force never reaches the normal loads: a mechanism's loads stay its weights",
+        "locomotion_jax/model/_mechanism_physics.py",
+        (
+            (
+                "        F, N = self._tilt_terms(F, self.normal, sp.fx, sp.fy)\n",
+                "        F, N = self._tilt_terms(F, self.normal, sp.fx, tuple(0 * q for q in sp.fy))\n",
+            ),
+        ),
+        ("tests/test_tilted_springs.py::test_tilted_springs_between_neighbours_are_the_chain",),
+    ),
+    Mutation(
         "stribeck_breakaway_stops_at_once",
         "a mass that breaks away with no acceleration along its slip looks for its stop at once: at a grazing "
         "Stribeck breakaway it sticks and breaks away again at one instant",

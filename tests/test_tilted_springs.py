@@ -56,3 +56,80 @@ def test_bad_tilted_springs_are_named():
         lj.Mechanism(masses=[1.0, 1.0], friction=LAW, x0=[0.0, 1.0], links=links(d=np.inf))
     with pytest.raises(ValueError, match=r"TiltedSpring: a must be a body index"):
         lj.TiltedSpring(-1, 0)
+
+
+X0 = float(np.sqrt(2.0**2 - 0.4**2))
+X1 = X0 + float(np.sqrt(1.5**2 - 0.3**2))
+X = [X0, X1, X1 + 0.2, X1 + 1.0]
+R2 = float(np.hypot(0.2 + np.sqrt(1.5**2 - 0.3**2), 0.6))  # the spring 0-2's rest length: relaxed at the start
+R3 = float(np.hypot(1.0, 0.5))
+OMEGA = 2.0
+
+
+def _topology(a: float) -> lj.Mechanism:
+    """Body 0 (anisotropic Coulomb) tied to the wall by a tilted spring whose rest length is 2 + a sin 2t;
+    body 1 tied to body 0 by a tilted spring of offset -0.3; body 2, carried by body 1, tied to body 0
+    (not its neighbour) by a tilted spring whose vertical force lands on body 1's load, and to body 1 by
+    a linear spring and a damper; a free body 3 tied to body 1 by a tilted spring (its vertical force
+    borne by the line) and pushed by an external force."""
+    F = lambda cos, sin, lbar: lj.Fourier(jnp.asarray(cos), jnp.asarray(sin), OMEGA, lbar)
+    links = [lj.TiltedSpring(lj.WALL, 0, k=20.0, d=0.4, rest=F([0.0], [a], 2.0)),
+             lj.TiltedSpring(0, 1, k=30.0, d=-0.3, rest=1.5),
+             lj.TiltedSpring(0, 2, k=10.0, d=0.6, rest=F([0.05], [0.1], R2)),
+             lj.TiltedSpring(1, 3, k=5.0, d=0.5, rest=F([0.0, 0.0], [0.0, 0.1], R3)),
+             lj.Spring(1, 2, k=15.0, rest=0.2), lj.Damper(1, 2, c=0.05),
+             lj.ExternalForce(3, F([0.05], [0.0], 0.0))]  # fmt: skip
+    return lj.Mechanism(masses=[1.0, 1.2, 0.5, 0.3], c=[0.02, 0.01, 0.0, 0.0], x0=X, links=links,
+                        friction=[lj.AnisotropicCoulomb(0.6, 0.9, 0.45, 0.7), lj.Coulomb(0.5, 0.4), None, None],
+                        carried_by=[None, None, 1, None])  # fmt: skip
+
+
+def _reference_topology(a: float, t_end: float, save: np.ndarray) -> dict:
+    from reference_mechanism import Body, run, Sig, System
+
+    bodies = [Body(1.0, (0.6, 0.9, 0.45, 0.7), c=0.02, x0=X[0]), Body(1.2, (0.5, 0.5, 0.4, 0.4), c=0.01, x0=X[1]),
+              Body(0.5, None, carrier=1, x0=X[2]), Body(0.3, None, x0=X[3])]  # fmt: skip
+    tilted = [(-1, 0, 20.0, 0.4, Sig(2.0, (0.0,), (a,), OMEGA)), (0, 1, 30.0, -0.3, 1.5),
+              (0, 2, 10.0, 0.6, Sig(R2, (0.05,), (0.1,), OMEGA)),
+              (1, 3, 5.0, 0.5, Sig(R3, (0.0, 0.0), (0.0, 0.1), OMEGA))]  # fmt: skip
+    system = System(bodies, springs=[(1, 2, 15.0, 0.2)], dampers=[(1, 2, 0.05)], tilted=tilted,
+                    externals=[(3, Sig(0.0, (0.05,), (0.0,), OMEGA))])  # fmt: skip
+    return run(system, t_end, save)
+
+
+def test_tilted_springs_between_any_bodies_against_the_reference():
+    """The topology of `_topology` (a = 0.02) against the independent reference over t = 0 ... 10:
+    positions, velocities, e_d, w, e and the two ground bodies' normal loads (which the tilted springs
+    move between 0.26 and 1.55) within 5e-8 at dt = 1/400 (measured 1.3e-8, velocities; positions
+    2.4e-9), fourth order from dt = 1/100 (positions 5.7e-7 there); both ground bodies stick and slip;
+    w = e_d + Delta e to 1e-6 at dt = 1/100 and 1e-9 at 1/400 (measured 9.0e-8 and 1.4e-10)."""
+    save = np.linspace(0.0, 10.0, 201)
+    ref = _reference_topology(0.02, 10.0, save)
+    assert ref["status"] == "ok"
+    errs = {}
+    for dt in (1 / 100, 1 / 400):
+        tr = lj.simulate(_topology(0.02), 10.0, save, dynamics=lj.Exact(dt=dt))
+        assert int(tr.status) == lj.Status.OK
+        pairs = {"x": (tr.x, ref["x"]), "v": (tr.v, ref["v"]), "e_d": (tr.e_d, ref["ed"]), "w": (tr.w, ref["w"]),
+                 "e": (tr.e, ref["e"]), "N": (np.asarray(tr.N)[:, :2], ref["N"][:, :2])}  # fmt: skip
+        errs[dt] = {k: float(np.abs(np.asarray(a) - b).max()) for k, (a, b) in pairs.items()}
+        bal = float(np.abs(np.asarray(tr.w - tr.e_d - (tr.e - tr.e[0]))).max())
+        print(dt, errs[dt], "balance", bal)
+        assert bal < (1e-6 if dt == 1 / 100 else 1e-9)
+    fine, coarse = errs[1 / 400], errs[1 / 100]
+    assert max(fine.values()) < 5e-8, fine
+    assert coarse["x"] / fine["x"] > 64, (coarse["x"], fine["x"])
+    N = ref["N"][:, :2]
+    assert np.ptp(N[:, 0]) > 0.3 and np.ptp(N[:, 1]) > 0.3
+    still = np.asarray(ref["v"])[:, :2] == 0
+    assert np.all(still.any(0)) and np.all((~still).any(0))
+
+
+def test_a_tilted_spring_lifts_a_body_off_as_the_reference_does():
+    """With a = 0.3 the wall's tilted spring pulls body 0 off the ground at t = 2.6: the strict reading
+    stops there (`LIFTOFF`) at the reference's lift-off time to 1e-8 (measured 5.6e-10)."""
+    ref = _reference_topology(0.3, 10.0, np.array([10.0]))
+    tr = lj.simulate(_topology(0.3), 10.0, np.array([10.0]), dynamics=lj.Exact(dt=1 / 400))
+    print("lift-off", float(tr.t_liftoff), ref["t_liftoff"])
+    assert ref["status"] == "liftoff" and int(tr.status) == lj.Status.LIFTOFF
+    assert abs(float(tr.t_liftoff) - ref["t_liftoff"]) < 1e-8
