@@ -293,10 +293,9 @@ def run(sys: System, t_end: float, save: np.ndarray, rtol: float = 1e-12, atol: 
                 continue
             mu = 0.0 if not contact[i] or i in flight else (law[i][2] if sdir[i] > 0 else law[i][3])
             a[i] = (F[i] - c[i] * v[i] - sdir[i] * mu * Nt[i]) / m[i]
-            # sdir v = |v| in the mode, smooth through a step that overshoots the v = 0 event (as is its
-            # dense output there); abs kept without tilted springs so those runs stay bit for bit as before
-            speed = sdir[i] * v[i] if sys.tilted else abs(v[i])
-            ed += mu * Nt[i] * speed + c[i] * v[i] ** 2
+            # sdir v = |v| in the mode, and smooth through a step that overshoots the v = 0 event (as is
+            # its dense output there)
+            ed += mu * Nt[i] * sdir[i] * v[i] + c[i] * v[i] ** 2
         xd = np.where([contact[i] and stuck[i] for i in range(n)], 0.0, v)
         return np.concatenate([xd, a, [ed + sys.damping(v), power]])
 

@@ -372,6 +372,7 @@ def test_a_torus_bifurcation_against_the_reference():
     for i, (ev,) in enumerate(found):
         assert ev["located"] and ev["smooth"] and not ev["turn"]
         mu = ev["multipliers"]
+        print("torus", ev["lam"], "multipliers", mu[:2], "modulus - 1", abs(mu[0]) - 1)
         assert abs(abs(mu[0]) - 1) < 1e-8 and abs(mu[0].imag) > 0.1 and mu[1] == pytest.approx(np.conj(mu[0]))
         n = int(b.n_points[i])
         lam, det = np.asarray(b.lam[i, :n]), np.asarray(b.det_torus[i, :n])
