@@ -884,6 +884,25 @@ MUTATIONS = [
         ("tests/test_tilted_springs.py::test_tilted_springs_between_neighbours_are_the_chain",),
     ),
     Mutation(
+        "carried_body_lifts_alone",
+        "a carried body lifts off on its own placeholder load, never with its carrier: it stays on the ground",
+        "locomotion_jax/model/_mechanism_physics.py",
+        (("        return tuple(N[g] for g in self.ground)\n", "        return N\n"),),
+        ("tests/test_tilted_springs.py::test_tilted_springs_lift_bodies_and_what_they_carry_as_the_reference_does",),
+    ),
+    Mutation(
+        "sequence_code_ignored",
+        "continuation compares the switch and landing counts only: events that pass each other go unseen",
+        "locomotion_jax/gaits/_bifurcation.py",
+        (
+            (
+                "            if sw[0] != sw[1] or nl[0] != nl[1] or sq[0] != sq[1]:\n",
+                "            if sw[0] != sw[1] or nl[0] != nl[1]:\n",
+            ),
+        ),
+        ("tests/test_continuation.py::test_hopping_events_that_pass_each_other_are_no_torus",),
+    ),
+    Mutation(
         "stribeck_breakaway_stops_at_once",
         "a mass that breaks away with no acceleration along its slip looks for its stop at once: at a grazing "
         "Stribeck breakaway it sticks and breaks away again at one instant",

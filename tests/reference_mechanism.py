@@ -2,7 +2,7 @@
 contact, carried bodies, linear and tilted springs and linear dampers between any bodies or to a
 wall (at x = 0), internal forces and external forces.
 
-Written only from SPEC.md §9 (and §8 for stick and slip and the tilted springs); it imports
+Written only from SPEC.md §9 (§8 for stick and slip and the tilted springs, §10 for hopping); it imports
 nothing from the ``locomotion_jax`` package nor from the other references, only numpy and scipy.
 
 Model (0-based bodies): a spring ``(a, b, k, r)`` exerts ``f = k (x_b - x_a - r)``, ``+f`` on ``a``
@@ -16,7 +16,8 @@ with period ``M``, with the centred cubic B-spline ``beta(u) = 2/3 - u^2 + |u|^3
 ``(2 - |u|)^3/6`` for ``1 <= |u| < 2`` and 0 beyond. A tilted spring ``(a, b, k, d, r)`` (SPEC §8) has
 ``u = x_b - x_a``, ``l = sqrt(u^2 + d^2)``, tension ``T = k (l - r(t))``; it exerts ``+T u / l``
 horizontally and ``+T d / l`` vertically (upwards) on ``a``, the opposites on ``b`` (the wall ``-1``
-at ``x = 0``, height 0), stores ``T^2 / (2k)`` and takes in the power ``-T dr/dt``. A body ``g`` in
+at ``x = 0``, height 0; under hopping ``d + y_b - y_a`` in place of ``d``, below), stores ``T^2 / (2k)``
+and takes in the power ``-T dr/dt``. A body ``g`` in
 contact has the normal load ``N_g = m_g + sum of the masses it carries - sum of the vertical spring
 forces on g and on the bodies it carries`` (constant without tilted springs; vertical forces on free
 bodies are ignored) and anisotropic Coulomb friction with ``N_g`` at the current state; a body
@@ -24,23 +25,37 @@ without contact feels no friction. Ground damping ``c_i v_i``. Strict reading: t
 normal load reaches 0 (``status = "liftoff"``, ``t_liftoff``; later samples repeat the state there).
 
 Method: event-driven, one ``solve_ivp(DOP853)`` per segment of constant mode (the set of stuck
-contact bodies and each slipping body's direction), terminal events at a stuck body's static
-limits, a slipping body's zero velocity and a state-dependent normal load's zero (lift-off); after
-every other event every contact body is re-decided from the state. The state carries the
-dissipated energy ``e_d`` and the work ``w``.
+contact bodies, each slipping body's direction and, under hopping, the set of flying groups),
+terminal events at a stuck body's static limits, a slipping body's zero velocity, a state-dependent
+normal load's zero (lift-off) and, under hopping with tilted springs, a flying group's return to the
+ground; after every other event every contact body is re-decided from the state. The state carries
+the dissipated energy ``e_d`` and the work ``w``.
 
-Hopping (``run(..., hop=True)``, SPEC §10; with tilted springs ``NotImplementedError``): a body in
-contact starts in flight where its ``y0 > 0`` or ``w0 > 0``. No vertical force acts (the elements
-are horizontal), so a body in flight and every body it carries fall freely,
-``y = y_f + w_f s - s^2/2`` (``s`` the time since the flight began),
-and it feels no friction; on the ground its load is constant, so it never lifts off by itself.
-A carried body rides with the body that finally carries it. The landing (``y`` back to 0, at the
-time solved in closed form; a segment ends there) is an impact of the group, ``M`` = the body's
-mass and the masses it carries: ``w+ = -e w-`` (``e`` the body's restitution; ``w+ = 0`` where
-``e |w-| < zeno``), normal impulse ``P_n = M (w+ - w-)``, tangential impulse
-``P_t = min(m |v-|, mu_k P_n)`` against ``v-`` on the body alone (``mu_k`` of ``v-``'s
-direction). Their losses ``M (w-^2 - w+^2)/2 + m (v-^2 - v+^2)/2`` join ``e_d``; ``e`` gains
-``M (y + w^2/2)``. After a plastic landing the body is re-decided stuck or slipping.
+Hopping (``run(..., hop=True)``, SPEC §10 applied to a mechanism): each body in contact ``g`` is the
+ground body of a group (itself and the bodies it carries, directly or through other carried
+bodies), of mass ``M_g`` (``m_g`` and the masses it carries), with a height ``y_g >= 0`` and a
+vertical velocity ``w_g``. A carried body has its ground body's height and vertical velocity (it
+flies and lands with it); a free body and the wall stay at height 0. A tilted spring acts along
+``(u, h)``, ``h = d + y_b - y_a`` with those heights: ``l = sqrt(u^2 + h^2)``, ``T = k (l - r(t))``,
+``+T u / l`` horizontally and ``+T h / l`` vertically on ``a``, the opposites on ``b``; it stores
+``T^2 / (2k)`` (with all heights 0 this is the strict model). The group load ``N_g`` is ``M_g`` less
+the vertical spring forces on ``g`` and on the bodies it carries. On the ground (``y_g = w_g = 0``)
+the body sticks and slips with ``N_g`` as above; where ``N_g`` falls through 0 the group lifts off
+(the strict reading stops there instead). A body in contact also starts in flight where its
+``y0 > 0`` or ``w0 > 0``, or where ``N_g <= 0`` at the start. In flight the group feels no friction,
+``M_g w_g' = -N_g`` (the weight less the springs' lift), ``y_g' = w_g``: without tilted springs a
+free fall, ``y = y_f + w_f s - s^2/2`` (``s`` the time since the flight began, the landing time in
+closed form), with tilted springs integrated in the state with ``x`` and ``v``, the landing an event
+(``y_g + max(w_g, 0)`` falling through 0: the ascent is masked, so a flight that starts at ``y = 0``
+does not end at its start). The landing (``y_g`` back to 0 with ``w_g < 0``) is an impact of the
+group: ``w+ = -e w-`` (``e`` the body's restitution; ``w+ = 0`` where ``e |w-| < zeno``), normal
+impulse ``P_n = M_g (w+ - w-)``, tangential impulse ``P_t = min(m_g |v-|, mu_k P_n)`` against ``v-``
+on body ``g`` alone (``mu_k`` of ``v-``'s direction). Their losses
+``M_g (w-^2 - w+^2)/2 + m_g (v-^2 - v+^2)/2`` join ``e_d``; ``e`` gains ``M_g (y_g + w_g^2/2)`` per
+group. After a plastic landing the group flies on at once with ``w = 0`` where ``N_g < 0`` (the
+springs still pull it up), else body ``g`` is re-decided stuck or slipping with ``N_g``. After an
+event under hopping with tilted springs, other flights at the ground with ``w < 0`` land and other
+loads at zero and falling lift off at the same instant. ``w = e_d + Delta e`` holds.
 """
 
 from dataclasses import dataclass, field
@@ -123,8 +138,11 @@ class System:
                 N[j] += b.m
         return N
 
-    def loads(self, t: float, x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, float, float]:
-        """Forces F_i, the elastic energy and the power put in by the actuators and forces."""
+    def loads(
+        self, t: float, x: np.ndarray, v: np.ndarray, h: np.ndarray | None = None
+    ) -> tuple[np.ndarray, float, float]:
+        """Forces F_i, the elastic energy and the power put in by the actuators and forces; `h`: the
+        bodies' heights under hopping (None: every height 0)."""
         F = np.zeros(len(self.bodies))
         pos = lambda i: 0.0 if i < 0 else x[i]
         vel = lambda i: 0.0 if i < 0 else v[i]
@@ -156,7 +174,7 @@ class System:
             if b >= 0:
                 F[b] -= f
         for a, b, k, d, rest in self.tilted:
-            T, u, l, dr = self._tension(t, x, a, b, k, d, rest)
+            T, u, _, l, dr = self._tension(t, x, a, b, k, d, rest, h)
             if a >= 0:
                 F[a] += T * u / l
             if b >= 0:
@@ -166,22 +184,25 @@ class System:
         return F, elastic, power
 
     @staticmethod
-    def _tension(t, x, a, b, k, d, rest) -> tuple[float, float, float, float]:
-        """A tilted spring's tension, ``u = x_b - x_a``, length and rest-length rate."""
+    def _tension(t, x, a, b, k, d, rest, h=None) -> tuple[float, float, float, float, float]:
+        """A tilted spring's tension, ``u = x_b - x_a``, its vertical extent ``d + h_b - h_a`` (``d``
+        where `h` is None), its length and the rest-length rate."""
         r, dr = rest.at(t) if isinstance(rest, Sig) else (rest, 0.0)
         u = (0.0 if b < 0 else x[b]) - (0.0 if a < 0 else x[a])
-        l = np.sqrt(u * u + d * d)
-        return k * (l - r), u, l, dr
+        hz = d if h is None else d + (0.0 if b < 0 else h[b]) - (0.0 if a < 0 else h[a])
+        l = np.sqrt(u * u + hz * hz)
+        return k * (l - r), u, hz, l, dr
 
-    def vertical(self, t: float, x: np.ndarray) -> np.ndarray:
-        """The tilted springs' vertical force on each body, upwards positive (``+T d / l`` on ``a``)."""
+    def vertical(self, t: float, x: np.ndarray, h: np.ndarray | None = None) -> np.ndarray:
+        """The tilted springs' vertical force on each body, upwards positive (``+T hz / l`` on ``a``,
+        ``hz = d + h_b - h_a`` with the heights `h`, ``d`` where `h` is None)."""
         V = np.zeros(len(self.bodies))
         for a, b, k, d, rest in self.tilted:
-            T, _, l, _ = self._tension(t, x, a, b, k, d, rest)
+            T, _, hz, l, _ = self._tension(t, x, a, b, k, d, rest, h)
             if a >= 0:
-                V[a] += T * d / l
+                V[a] += T * hz / l
             if b >= 0:
-                V[b] -= T * d / l
+                V[b] -= T * hz / l
         return V
 
     def damping(self, v: np.ndarray) -> float:
@@ -206,11 +227,8 @@ def run(sys: System, t_end: float, save: np.ndarray, rtol: float = 1e-12, atol: 
     """Positions, velocities, e_d, w and energy at the times `save` (increasing, in [0, t_end]),
     the normal loads `N` (0 without contact or in flight), `status` ("ok" or "liftoff"),
     `t_liftoff` (inf if none) and `valid_until` (later samples repeat the state there);
-    with `hop`, heights `y` and vertical velocities `vy` per body (a carried body's its carrier's)
-    and the landings per body in contact, `n_landings` (module docstring)."""
-    if hop and sys.tilted:
-        raise NotImplementedError("reference_mechanism.run: hop=True with tilted springs is not implemented "
-                                  "(the reference's flights are free falls); use the hopping reference")  # fmt: skip
+    with `hop`, heights `y` and vertical velocities `vy` per body (its ground body's; 0 for a free
+    body) and the landings per body in contact, `n_landings` (module docstring)."""
     n = len(sys.bodies)
     m = np.array([b.m for b in sys.bodies])
     c = np.array([b.c for b in sys.bodies])
@@ -219,12 +237,22 @@ def run(sys: System, t_end: float, save: np.ndarray, rtol: float = 1e-12, atol: 
     law = [b.law if b.law is not None else (0.0, 0.0, 0.0, 0.0) for b in sys.bodies]
     y = np.concatenate([[b.x0 for b in sys.bodies], [b.v0 for b in sys.bodies], [0.0, 0.0]])
     grounds = _grounds(sys)
+    # Hopping with tilted springs: the ground bodies' heights and vertical velocities are integrated, the
+    # state is (x, v, e_d, w, heights, vertical velocities); otherwise flights are closed-form free falls.
+    vert = hop and bool(sys.tilted)
+    YH, WH = 2 * n + 2, 3 * n + 2  # where the heights and the vertical velocities start in that state
+    gi = np.array([0 if g is None else g for g in grounds])
+    on = np.array([g is not None for g in grounds])
 
-    def load(t: float, x: np.ndarray) -> np.ndarray:
+    def heights(r: np.ndarray) -> np.ndarray | None:
+        """Per body its ground body's height (a free body's 0); None where flights are free falls."""
+        return np.where(on, r[YH + gi], 0.0) if vert else None
+
+    def load(t: float, x: np.ndarray, h: np.ndarray | None = None) -> np.ndarray:
         """The normal loads: the weights less the vertical spring forces on each group (module docstring)."""
         if not sys.tilted:
             return N
-        V = sys.vertical(t, x)
+        V = sys.vertical(t, x, h)
         out = N.copy()
         for i, g in enumerate(grounds):
             if g is not None:
@@ -237,11 +265,22 @@ def run(sys: System, t_end: float, save: np.ndarray, rtol: float = 1e-12, atol: 
     flight: dict[int, tuple[float, float, float]] = {}
     if hop:
         flight = {i: (0.0, b.y0, b.w0) for i, b in enumerate(sys.bodies) if contact[i] and (b.y0 > 0 or b.w0 > 0)}
+    if vert:
+        y = np.concatenate([y, np.zeros(2 * n)])
+        for i, (_, h0, w0) in flight.items():
+            y[YH + i], y[WH + i] = h0, w0
+        N0 = load(0.0, y[:n], heights(y))
+        for i in lifting:  # on the ground with no load: in flight from the start
+            if i not in flight and N0[i] <= 0:
+                flight[i] = (0.0, 0.0, 0.0)
     landings = np.zeros(n, int)
 
-    def vertical(i: int, t: float) -> tuple[float, float]:
+    def vertical(i: int, t: float, r: np.ndarray) -> tuple[float, float]:
+        """The height and vertical velocity of body `i` in contact at time `t` (state `r`)."""
         if i not in flight:
             return 0.0, 0.0
+        if vert:
+            return r[YH + i], r[WH + i]
         t0, y0, w0 = flight[i]
         s = t - t0
         return y0 + w0 * s - 0.5 * s * s, w0 - s
@@ -253,8 +292,9 @@ def run(sys: System, t_end: float, save: np.ndarray, rtol: float = 1e-12, atol: 
     def decide(t, y, stuck, sdir, fired):
         """Re-decide every contact body after an event; `fired`: `(body, direction)` of the event that
         ended the segment (direction +-1: the static limit it crossed; 0: its velocity reached zero)."""
-        F = sys.loads(t, y[:n], y[n : 2 * n])[0]
-        Nt = load(t, y[:n])
+        h = heights(y)
+        F = sys.loads(t, y[:n], y[n : 2 * n], h)[0]
+        Nt = load(t, y[:n], h)
         for i in range(n):
             if not contact[i] or i in flight:
                 continue
@@ -274,8 +314,8 @@ def run(sys: System, t_end: float, save: np.ndarray, rtol: float = 1e-12, atol: 
 
     stuck = [contact[i] and i not in flight and sys.bodies[i].v0 == 0 for i in range(n)]
     sdir = [1.0 if b.v0 > 0 else -1.0 if b.v0 < 0 else 1.0 for b in sys.bodies]
-    F0 = sys.loads(0.0, y[:n], y[n : 2 * n])[0]
-    N0 = load(0.0, y[:n])
+    F0 = sys.loads(0.0, y[:n], y[n : 2 * n], heights(y))[0]
+    N0 = load(0.0, y[:n], heights(y))
     for i in range(n):
         if sys.bodies[i].v0 == 0:
             sdir[i] = 1.0 if F0[i] >= 0 else -1.0
@@ -284,8 +324,9 @@ def run(sys: System, t_end: float, save: np.ndarray, rtol: float = 1e-12, atol: 
 
     def rhs(t, y, stuck, sdir):
         x, v = y[:n], y[n : 2 * n]
-        F, _, power = sys.loads(t, x, v)
-        Nt = load(t, x)
+        h = heights(y)
+        F, _, power = sys.loads(t, x, v, h)
+        Nt = load(t, x, h)
         a = np.zeros(n)
         ed = 0.0
         for i in range(n):
@@ -297,54 +338,93 @@ def run(sys: System, t_end: float, save: np.ndarray, rtol: float = 1e-12, atol: 
             # its dense output there)
             ed += mu * Nt[i] * sdir[i] * v[i] + c[i] * v[i] ** 2
         xd = np.where([contact[i] and stuck[i] for i in range(n)], 0.0, v)
-        return np.concatenate([xd, a, [ed + sys.damping(v), power]])
+        out = np.concatenate([xd, a, [ed + sys.damping(v), power]])
+        if not vert:
+            return out
+        dh, dw = np.zeros(n), np.zeros(n)
+        for i in flight:  # the group of i: M w' = -N (its weight less the springs' lift), y' = w
+            dh[i], dw[i] = y[WH + i], -Nt[i] / N[i]
+        return np.concatenate([out, dh, dw])
 
     def events(stuck, sdir):
         out, owner = [], []
-        F = lambda t, y, i: sys.loads(t, y[:n], y[n : 2 * n])[0][i]
+        F = lambda t, y, i: sys.loads(t, y[:n], y[n : 2 * n], heights(y))[0][i]
         for i in range(n):
             if not contact[i] or i in flight:
                 continue
             if stuck[i]:
-                out.append(lambda t, y, *_, i=i: law[i][0] * load(t, y[:n])[i] - F(t, y, i))
-                out.append(lambda t, y, *_, i=i: F(t, y, i) + law[i][1] * load(t, y[:n])[i])
+                out.append(lambda t, y, *_, i=i: law[i][0] * load(t, y[:n], heights(y))[i] - F(t, y, i))
+                out.append(lambda t, y, *_, i=i: F(t, y, i) + law[i][1] * load(t, y[:n], heights(y))[i])
                 owner += [(i, 1.0), (i, -1.0)]
             else:
                 out.append(lambda t, y, *_, i=i: sdir[i] * y[n + i])
                 owner.append((i, 0.0))
-        for i in lifting:  # strict reading: the run stops where a normal load reaches zero
-            out.append(lambda t, y, *_, i=i: load(t, y[:n])[i])
+        for i in lifting:  # a load reaching zero: the strict reading stops, hopping lifts the group off
+            if i in flight:
+                continue
+            out.append(lambda t, y, *_, i=i: load(t, y[:n], heights(y))[i])
             owner.append((i, None))
+        if vert:  # a landing: y back to 0 with w < 0 (the ascent, w >= 0, masked: y + w > 0 there)
+            for i in flight:
+                out.append(lambda t, y, *_, i=i: y[YH + i] + max(y[WH + i], 0.0))
+                owner.append((i, 2.0))
         for e in out:
             e.terminal, e.direction = True, -1
         return out, owner
 
     def land(t: float, y: np.ndarray, i: int) -> None:
         """The impact of body `i` and what it carries at time `t` (module docstring)."""
-        _, w = vertical(i, t)
+        _, w = vertical(i, t, y)
         e = sys.bodies[i].e
         wp = 0.0 if e * abs(w) < sys.zeno else -e * w
         v = y[n + i]
         mu = law[i][2] if v >= 0 else law[i][3]
         Pt = min(m[i] * abs(v), mu * N[i] * (wp - w))
         vp = 0.0 if Pt >= m[i] * abs(v) else v - np.sign(v) * Pt / m[i]
-        y[-2] += 0.5 * N[i] * (w * w - wp * wp) + 0.5 * m[i] * (v * v - vp * vp)
+        y[2 * n] += 0.5 * N[i] * (w * w - wp * wp) + 0.5 * m[i] * (v * v - vp * vp)
         y[n + i] = vp
         landings[i] += 1
         del flight[i]
+        if vert:
+            y[YH + i], y[WH + i] = 0.0, wp
+        Ni = load(t, y[:n], heights(y))[i] if vert else N[i]  # the load on the ground after the impact
         if wp > 0:
             flight[i] = (t, 0.0, wp)
+        elif vert and Ni < 0:  # the springs still pull the group up: it flies on at once
+            flight[i] = (t, 0.0, 0.0)
         elif vp != 0:
             stuck[i], sdir[i] = False, float(np.sign(vp))
         else:
-            F = sys.loads(t, y[:n], y[n : 2 * n])[0][i]
-            stuck[i] = -law[i][1] * N[i] <= F <= law[i][0] * N[i]
+            F = sys.loads(t, y[:n], y[n : 2 * n], heights(y))[0][i]
+            stuck[i] = -law[i][1] * Ni <= F <= law[i][0] * Ni
             sdir[i] = 1.0 if F >= 0 else -1.0
+
+    def lift(t: float, y: np.ndarray, i: int) -> None:
+        """Body `i` and what it carries leave the ground at time `t` (its load has reached zero)."""
+        flight[i] = (t, 0.0, 0.0)
+        stuck[i] = False
+        if y[n + i] != 0:
+            sdir[i] = float(np.sign(y[n + i]))
+        y[YH + i], y[WH + i] = 0.0, 0.0
+
+    def settle(t: float, y: np.ndarray) -> None:
+        """After a landing, a lift-off or a stick-slip event under hopping with tilted springs: other flights
+        back on the ground land, other loads at zero and falling lift off, stuck bodies are re-checked."""
+        for i in [i for i in flight if y[YH + i] <= 1e-12 and y[WH + i] < 0]:
+            land(t, y, i)
+        Nt = load(t, y[:n], heights(y))
+        for i in lifting:
+            if i not in flight and Nt[i] <= 1e-12:
+                dt = 1e-7  # whether the load falls along the motion (a forward difference; its sign only)
+                y2 = y + dt * rhs(t, y, stuck, sdir)
+                if Nt[i] <= 0 or load(t + dt, y2[:n], heights(y2))[i] < Nt[i]:
+                    lift(t, y, i)
+        decide(t, y, stuck, sdir, (-1, 0.0))
 
     def sample(t: float, r: np.ndarray) -> np.ndarray:
         """A saved row: the integrated state, then per body the height, vertical velocity and normal load."""
-        hw = [vertical(g, t) if g is not None else (0.0, 0.0) for g in grounds]
-        Nt = load(t, r[:n])
+        hw = [vertical(g, t, r) if g is not None else (0.0, 0.0) for g in grounds]
+        Nt = load(t, r[:n], heights(r))
         Ns = [Nt[i] if contact[i] and i not in flight else 0.0 for i in range(n)]
         return np.concatenate([r, [h for h, _ in hw], [w for _, w in hw], Ns])
 
@@ -352,13 +432,13 @@ def run(sys: System, t_end: float, save: np.ndarray, rtol: float = 1e-12, atol: 
     rows, k = [], 0  # (save time, the time the row is evaluated at, the row)
     segments = 0
     t_liftoff = np.inf
-    if any(contact[i] and N0[i] <= 0 for i in lifting):
+    if not hop and any(contact[i] and N0[i] <= 0 for i in lifting):
         t_liftoff = 0.0
     while t < t_end and segments < 200_000 and t_liftoff == np.inf:
         segments += 1
         st, sd = list(stuck), list(sdir)
         ev, owner = events(st, sd)
-        t_land = min([landing_time(i) for i in flight] + [t_end])
+        t_land = t_end if vert else min([landing_time(i) for i in flight] + [t_end])
         sol = solve_ivp(rhs, (t, t_land), y, method="DOP853", args=(st, sd), events=ev, rtol=rtol, atol=atol,
                         dense_output=True, max_step=0.05)  # fmt: skip
         t_next = sol.t[-1]
@@ -368,11 +448,20 @@ def run(sys: System, t_end: float, save: np.ndarray, rtol: float = 1e-12, atol: 
         y, t = sol.y[:, -1].copy(), t_next
         if sol.status == 1:
             hit = [owner[j] for j, te in enumerate(sol.t_events) if len(te)]
-            if any(h[1] is None for h in hit):  # lift-off: the strict reading stops here
+            fired = hit[0]
+            if not hop and any(h[1] is None for h in hit):  # lift-off: the strict reading stops here
                 t_liftoff = t
                 break
-            fired = hit[0]
-            stuck, sdir = decide(t, y, st, sd, fired)
+            if vert and fired[1] is None:
+                stuck, sdir = st, sd
+                lift(t, y, fired[0])
+            elif vert and fired[1] == 2.0:
+                stuck, sdir = st, sd
+                land(t, y, fired[0])
+            else:
+                stuck, sdir = decide(t, y, st, sd, fired)
+            if vert:
+                settle(t, y)
         elif t < t_end:  # a landing (bodies whose flights end together land together)
             for i in [i for i in flight if landing_time(i) <= t + 1e-12]:
                 land(t, y, i)
@@ -382,7 +471,8 @@ def run(sys: System, t_end: float, save: np.ndarray, rtol: float = 1e-12, atol: 
     out = np.array([r for *_, r in rows])
     M = np.array([N[g] if g == i else 0.0 for i, g in enumerate(grounds)])  # each group's mass, once
     hy, vy, Ns = out[:, -3 * n : -2 * n], out[:, -2 * n : -n], out[:, -n:]
-    energy = np.array([0.5 * np.sum(m * r[n : 2 * n] ** 2) + sys.loads(s, r[:n], r[n : 2 * n])[1] for _, s, r in rows])
+    energy = np.array([0.5 * np.sum(m * r[n : 2 * n] ** 2) + sys.loads(s, r[:n], r[n : 2 * n], heights(r))[1]
+                       for _, s, r in rows])  # fmt: skip
     energy = energy + (hy + 0.5 * vy * vy) @ M
     base = out[:, : 2 * n + 2]
     return dict(t=np.array([s for s, *_ in rows]), x=base[:, :n], v=base[:, n : 2 * n], ed=base[:, -2], w=base[:, -1],

@@ -394,6 +394,36 @@ def test_a_torus_bifurcation_against_the_reference():
     assert abs(r1 - 1) < 1e-8 and abs(w1 - w_star) < 1e-4
 
 
+def test_hopping_events_that_pass_each_other_are_no_torus():
+    """On the hopping branch of `test_a_torus_bifurcation_against_the_reference`, continued past its torus
+    point (an unstable gait, complex pair of modulus 1.37), the multipliers jump at omega = 12.95918 to
+    a stable pair of modulus 0.72 while the gait keeps its 2 switches and 2 landings per period: two of
+    its events pass each other, which changes the order of the bodies' mode changes (`sequence`). That
+    is a `SWITCH`, bracketed by points 1e-6 apart, not a torus bifurcation (a complex pair crossing the
+    unit circle smoothly). Branch 0 runs from the gait at 12.9584 (its section state, from a
+    continuation from omega = 12) to 12.96, branch 1 from the same gait back to 12.957: no event."""
+    y = np.array([2.9530058971622375, 1.4890430209953922, -0.3633287159244951, 0.01303765224396134, 0.0,
+                  0.08317254774339829, 0.0])  # fmt: skip
+    b = lj.continuation(lj.Params(omega=jnp.asarray([12.9584, 12.9584]), a=0.1), "omega", jnp.asarray([12.96, 12.957]),
+                        contact="hop", start=np.stack([y, y]), transient=0, periods=1, max_points=12, step=0.05,
+                        max_step=0.2)  # fmt: skip
+    assert int(b.start_status[0]) == GaitStatus.CONVERGED
+    kinds = [np.asarray(b.events.kind[i])[np.asarray(b.events.kind[i]) >= 0].tolist() for i in range(2)]
+    assert kinds == [[EventKind.SWITCH], []], kinds
+    lam_switch = float(b.events.lam[0, 0])
+    for i in range(2):
+        n = int(b.n_points[i])
+        lam, mod = np.asarray(b.lam[i, :n]), np.abs(np.asarray(b.multipliers[i, :n, 0]))
+        assert np.all(np.asarray(b.n_switch[i, :n]) == 2) and np.all(np.asarray(b.n_land[i, :n]) == 2)
+        after = lam > lam_switch
+        print(i, "switch at", lam_switch, "largest modulus", mod.max(), "after", mod[after])
+        np.testing.assert_array_equal(np.asarray(b.stable[i, :n]), after)
+        assert np.all(mod[~after] > 1.36) and np.all(mod[after] < 0.73)
+    lam = np.asarray(b.lam[0, : int(b.n_points[0])])
+    gap = lam[lam > lam_switch].min() - lam[lam < lam_switch].max()
+    assert 12.9591 < lam_switch < 12.9593 and gap < 1e-5, (lam_switch, gap)
+
+
 def test_the_torus_test_function():
     """`det(M2 - I)`, with `M2` the second compound matrix: its eigenvalues are the products of pairs of
     the eigenvalues of `M` (against numpy's eigenvalues of a random matrix), so it vanishes where a
@@ -420,3 +450,39 @@ def test_the_torus_test_function():
     np.testing.assert_allclose(radius, [0.99, 1.01], rtol=1e-12)
     saddle = np.diag([2.0, 0.5, 0.3])
     assert abs(torus_function(saddle)) < 1e-12 and np.isnan(complex_radius(np.linalg.eigvals(saddle)))
+
+
+def test_the_sequence_code_sees_events_pass_each_other():
+    """`_shooting._sequence`: two periods with the same mode changes (mass 0 sticks, mass 1 starts to
+    slip backwards) in the other order, or at the other masses, get other codes, though their counts
+    are equal; a step without a change keeps the code; one entry holding both masses (the array
+    layout) gives the code of one entry per mass."""
+    from types import SimpleNamespace
+
+    from locomotion_jax.gaits._shooting import _sequence
+
+    def state(stuck, sdir, array=False):
+        stuck, sdir = jnp.asarray(stuck), jnp.asarray(sdir, float)
+        if array:
+            return SimpleNamespace(stuck=(stuck,), sdir=(sdir,), fly=None)
+        return SimpleNamespace(stuck=tuple(stuck), sdir=tuple(sdir), fly=None)
+
+    def code(path, array=False):
+        c = jnp.zeros((), jnp.uint32)
+        for before, after in zip(path, path[1:]):
+            c = _sequence(c, state(*before, array=array), state(*after, array=array))
+        return int(c)
+
+    start = ([False, False], [1.0, 1.0])  # both slipping forwards
+    stick0 = ([True, False], [1.0, 1.0])
+    back1 = ([False, False], [1.0, -1.0])
+    both = ([True, False], [1.0, -1.0])
+    stick1 = ([False, True], [1.0, 1.0])
+    back0 = ([False, False], [-1.0, 1.0])
+    one_way = code([start, stick0, stick0, both])
+    other_order = code([start, back1, both])
+    other_masses = code([start, stick1, ([True, True], [-1.0, 1.0])])
+    assert len({one_way, other_order, other_masses, 0}) == 4
+    assert code([start, start, start]) == 0 and code([start, back0]) != code([start, back1])
+    for path in ([start, stick0, both], [start, back1, both], [start, stick1, back0]):
+        assert code(path, array=True) == code(path)

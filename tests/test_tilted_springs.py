@@ -133,3 +133,85 @@ def test_a_tilted_spring_lifts_a_body_off_as_the_reference_does():
     print("lift-off", float(tr.t_liftoff), ref["t_liftoff"])
     assert ref["status"] == "liftoff" and int(tr.status) == lj.Status.LIFTOFF
     assert abs(float(tr.t_liftoff) - ref["t_liftoff"]) < 1e-8
+
+
+def test_the_optimiser_of_a_tilted_mechanism_against_the_chain_and_the_reference():
+    """`lj.optimise` of the paper's model written as a mechanism (one tilted spring, k = 50, d = 0.5,
+    rest length 3 + a Fourier series of 2 harmonics, stroke <= 0.05, speed >= 0.02): a feasible optimum
+    cheaper than its best sinusoid; its steady gait is the chain's of the same waveform (1e-9), and one
+    gait period of the independent reference from the gait's section state gives its speed and cost
+    of transport to the engine's truncation error at dt = 0.01 (measured 6.5e-6), which shrinks with
+    the step."""
+    from reference_mechanism import Body, run, Sig, System
+
+    u0 = float(np.sqrt(3.0**2 - 0.5**2))
+    law = lj.Coulomb(0.7, 0.5)
+    spring = lj.TiltedSpring(0, 1, k=50.0, d=0.5, rest=lj.Sinusoid(a=0.05, omega=3.0, lbar=3.0))
+    mech = lj.Mechanism(masses=[1.0, 1.0], friction=law, c=0.01, x0=[0.0, u0], links=[spring])
+    s = lj.MechanismOptimiseSettings(amplitudes=2, frequencies=4, local=1, max_iter=6, transient=30, dt=0.01)
+    opt = lj.optimise(mech, v_min=0.02, a_max=0.05, harmonics=2, settings=s)
+    print(opt.summary())
+    assert opt.feasible_exact and opt.mean_speed_exact >= 0.02
+    assert float(np.max(opt.stroke_exact)) <= 0.05 * (1 + 1e-12) and opt.simulation_agreement < 1e-6
+    assert opt.cost_of_transport_exact < opt.sinusoid["cost_of_transport"]
+    dyn = lj.Exact(dt=0.01)
+    g = lj.steady_gait(opt.mechanism, periods=(1, 2), transient=30, dynamics=dyn)
+    assert int(g.status) == lj.GaitStatus.CONVERGED
+    assert abs(float(g.cost_of_transport) - opt.cost_of_transport_exact) < 1e-9
+    cos, sin = np.asarray(opt.cos), np.asarray(opt.sin)
+    chain = lj.Chain(masses=[1.0, 1.0], k=50.0, d=0.5, lbar=3.0, c=0.01, friction=law,
+                     waveforms=lj.SpringFourier(cos, sin, opt.omega))  # fmt: skip
+    gc = lj.steady_gait(chain, periods=(1, 2), transient=30, dynamics=dyn)
+    np.testing.assert_allclose(np.asarray(gc.state), np.asarray(g.state), rtol=0, atol=1e-9)
+    assert abs(float(gc.cost_of_transport) / opt.cost_of_transport_exact - 1) < 1e-9
+    # One gait period from the section state: the reference, and the engine at dt and dt / 4.
+    u, v = float(g.state[0]), np.asarray(g.state[1:], float)
+    T = float(g.period)
+    body = lambda x, w: Body(1.0, (0.7, 0.7, 0.5, 0.5), c=0.01, x0=x, v0=w)
+    rest = Sig(3.0, tuple(cos[0]), tuple(sin[0]), opt.omega)
+    ref = run(System([body(0.0, v[0]), body(u, v[1])], tilted=[(0, 1, 50.0, 0.5, rest)]), T, np.array([0.0, T]))
+    assert ref["status"] == "ok"
+    figures = lambda dX, ed: np.array([dX / T, ed / abs(dX)])
+    want = figures(ref["com"][1] - ref["com"][0], ref["ed"][1])
+    start = lj.Mechanism(masses=[1.0, 1.0], friction=law, c=0.01, x0=[0.0, u], v0=v, links=opt.mechanism.links)
+    errs = []
+    for step in (0.01, 0.0025):
+        tr = lj.simulate(start, T, jnp.array([0.0, T]), dynamics=lj.Exact(dt=step))
+        got = figures(float(tr.X[-1] - tr.X[0]), float(tr.e_d[-1]))
+        errs.append(float(np.abs(got / want - 1).max()))
+    print("speed and cost against the reference:", errs)
+    assert errs[0] < 2e-5 and errs[1] < errs[0] / 8
+
+
+def test_tilted_springs_lift_bodies_and_what_they_carry_as_the_reference_does():
+    """Under `contact="hop"` (a = 0.3) the wall's spring lifts body 0 off at t = 2.6, and body 1 lifts
+    off at t = 3.5 with body 2, which it carries, whose spring to body 0 pulls on both; each flies and
+    lands twice by t = 10. Against the independent reference (`run(..., hop=True)`): every state
+    variable within 2e-7 at dt = 1/400 (measured 9.1e-8), fourth order (16x down at 1/800), the same
+    landings; the carried body's height is its carrier's; w = e_d + Delta e to 1e-9."""
+    from reference_mechanism import Body, run, Sig, System
+
+    save = np.linspace(0.0, 10.0, 401)
+    bodies = [Body(1.0, (0.6, 0.9, 0.45, 0.7), c=0.02, x0=X[0]), Body(1.2, (0.5, 0.5, 0.4, 0.4), c=0.01, x0=X[1]),
+              Body(0.5, None, carrier=1, x0=X[2]), Body(0.3, None, x0=X[3])]  # fmt: skip
+    tilted = [(-1, 0, 20.0, 0.4, Sig(2.0, (0.0,), (0.3,), OMEGA)), (0, 1, 30.0, -0.3, 1.5),
+              (0, 2, 10.0, 0.6, Sig(R2, (0.05,), (0.1,), OMEGA)),
+              (1, 3, 5.0, 0.5, Sig(R3, (0.0, 0.0), (0.0, 0.1), OMEGA))]  # fmt: skip
+    system = System(bodies, springs=[(1, 2, 15.0, 0.2)], dampers=[(1, 2, 0.05)], tilted=tilted,
+                    externals=[(3, Sig(0.0, (0.05,), (0.0,), OMEGA))])  # fmt: skip
+    ref = run(system, 10.0, save, hop=True)
+    assert ref["status"] == "ok" and list(ref["n_landings"]) == [2, 2, 0, 0]
+    assert ref["y"][:, 1].max() > 0.1 and np.array_equal(ref["y"][:, 2], ref["y"][:, 1])
+    errs = []
+    for dt in (1 / 400, 1 / 800):
+        tr = lj.simulate(_topology(0.3), 10.0, save, contact="hop", dynamics=lj.Exact(dt=dt))
+        assert int(tr.status) == lj.Status.OK and int(np.asarray(tr.n_land)) == 4
+        assert np.array_equal(np.asarray(tr.y)[:, 2], np.asarray(tr.y)[:, 1])
+        pairs = {"x": (tr.x, ref["x"]), "v": (tr.v, ref["v"]), "y": (tr.y, ref["y"]), "vy": (tr.vy, ref["vy"]),
+                 "e_d": (tr.e_d, ref["ed"]), "w": (tr.w, ref["w"]), "e": (tr.e, ref["e"])}  # fmt: skip
+        err = {k: float(np.abs(np.asarray(a) - b).max()) for k, (a, b) in pairs.items()}
+        bal = float(np.abs(np.asarray(tr.w - tr.e_d - (tr.e - tr.e[0]))).max())
+        print(dt, err, "balance", bal)
+        assert bal < 1e-9
+        errs.append(max(err.values()))
+    assert errs[0] < 2e-7 and errs[0] / errs[1] > 10, errs

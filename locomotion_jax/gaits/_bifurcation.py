@@ -13,8 +13,9 @@ Each event is the zero of a scalar test function of the orbit, continuous along 
   saddle, no bifurcation), so a sign change counts only where both points have a complex pair whose
   modulus crosses 1 (`complex_radius`);
 - `SWITCH`: another change of the switching structure (the number of switches or, under
-  `contact="hop"`, of landings per period: a velocity or a height grazing zero), bracketed by two
-  points but not located;
+  `contact="hop"`, of landings per period: a velocity or a height grazing zero; or, with the same
+  counts, the order of the bodies' changes of mode or the bodies that change: two events passing
+  each other), bracketed by two points but not located;
 - `SSL_SL`: the slip margin, the smallest $|F_i| - \\mu_s n_i$ at a slipping mass's velocity zero
   (eq. 7; [`Gait`][]`.slip_margin`). At such an instant a mass sticks where it is negative and
   reverses where it is positive; as a stick interval shrinks to nothing, the margin at its
@@ -168,7 +169,8 @@ def _brackets(d: dict, status: np.ndarray, failed_at: np.ndarray) -> list[list[t
     A change of the slip margin's or the smallest normal force's sign is a switching event. The
     multipliers jump where the switching structure changes, so a sign change of $\\det(M \\mp I)$
     is a (smooth) fold or period doubling only between points of the same structure; another change
-    of the switch count is reported as `SWITCH`. A sign change of the torus function counts where
+    of the switch or landing count, or of the order of the bodies' mode changes (`sequence`), is
+    reported as `SWITCH`. A sign change of the torus function counts where
     a complex pair's modulus crosses 1 between the two points (not a neutral saddle)."""
     B = d["valid"].shape[0]
     out: list[list[tuple]] = [[] for _ in range(B)]
@@ -178,14 +180,14 @@ def _brackets(d: dict, status: np.ndarray, failed_at: np.ndarray) -> list[list[t
         for j in range(n - 1):
             pair = lambda name: (d[name][i, j], d[name][i, j + 1])
             row = lambda kind, g: (kind, j, z[j], z[j + 1], g[0], g[1], d["J"][i, j], d["J"][i, j + 1])
-            m, nm, sw, nl = pair("margin"), pair("n_min"), pair("n_switch"), pair("n_land")
+            m, nm, sw, nl, sq = pair("margin"), pair("n_min"), pair("n_switch"), pair("n_land"), pair("sequence")
             if (m[0] > 0) != (m[1] > 0):
                 out[i].append(row(EventKind.SSL_SL, m))
             if (nm[0] > 0) != (nm[1] > 0):
                 out[i].append(row(EventKind.LIFTOFF, nm))
             if (m[0] > 0) != (m[1] > 0) or (nm[0] > 0) != (nm[1] > 0):
                 continue
-            if sw[0] != sw[1] or nl[0] != nl[1]:
+            if sw[0] != sw[1] or nl[0] != nl[1] or sq[0] != sq[1]:
                 out[i].append(row(EventKind.SWITCH, (np.nan, np.nan)))
                 continue
             dp, dm, dt, rc = pair("det_plus"), pair("det_minus"), pair("det_torus"), pair("complex_radius")

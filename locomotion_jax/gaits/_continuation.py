@@ -28,7 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import Array
+from .._custom_types import Array, ArrayLike
 from .._results import BODIES, PAPER
 from .._status import Regime, Status
 from ..dynamics._base import AbstractDynamics
@@ -254,7 +254,7 @@ def continuation(
     dynamics: AbstractDynamics | None = None,
     waveform: AbstractWaveform | None = None,
     contact: str = "strict",
-    start: str = "paper",
+    start: str | ArrayLike = "paper",
     dtype: Any = None,
     verbose: bool = False,
 ) -> Branch:
@@ -367,10 +367,10 @@ def _last(n: int) -> np.ndarray:
 
 
 SWITCH_STEP = 1e-3
-"""Largest step across a change of switching structure (switch count, or the sign of the slip margin
-or of the smallest normal force): a step that changes it is retried shorter down to this, so that the
-corrector cannot jump to another branch with another structure (past a fold two stable gaits
-coexist, their section states a few 1e-3 apart)."""
+"""Largest step across a change of switching structure (switch or landing count, the order of the
+bodies' mode changes, or the sign of the slip margin or of the smallest normal force): a step that
+changes it is retried shorter down to this, so that the corrector cannot jump to another branch with
+another structure (past a fold two stable gaits coexist, their section states a few 1e-3 apart)."""
 
 CORNER_STEP = 1e-4
 """First step onto the other piece of the branch after a corner (see `_Walk.cross`)."""
@@ -383,7 +383,8 @@ MAX_CORNERS = 32
 
 
 def _signature(out) -> tuple:
-    return (np.asarray(out.n_switch), np.asarray(out.n_land), np.asarray(out.margin) > 0, np.asarray(out.n_min) > 0)
+    return (np.asarray(out.n_switch), np.asarray(out.n_land), np.asarray(out.sequence), np.asarray(out.margin) > 0,
+            np.asarray(out.n_min) > 0)  # fmt: skip
 
 
 class _Walk:
@@ -491,7 +492,7 @@ def _check(max_points, step, max_step, min_step, max_iter) -> None:
         raise ValueError(f"need 0 < min_step <= step <= max_step (finite), got {min_step!r}, {step!r}, {max_step!r}.")
 
 
-_FIELDS = ("dX", "ed", "w", "stuck", "margin", "n_min", "n_switch", "n_land", "lifted")
+_FIELDS = ("dX", "ed", "w", "stuck", "margin", "n_min", "n_switch", "n_land", "sequence", "lifted")
 
 
 def _record(r: corrector.Solved, t: np.ndarray, i: int) -> dict:

@@ -64,6 +64,7 @@ class _Period(NamedTuple):
     margin: Array
     n_min: Array
     n_land: Array  # landings over the periods (0 unless contact="hop")
+    sequence: Array  # the order of the bodies' mode changes over the periods (`_sequence`)
 
 
 def reduced_size(P: AbstractPhysics) -> int:
@@ -146,6 +147,34 @@ class _Acc(NamedTuple):
     margin: Array  # smallest -(stick margin) at a slipping mass's velocity zero (inf: none)
     n_min: Array  # smallest normal load over the committed steps
     slid: tuple  # whether each mass slipped at all
+    sequence: Array  # the order of the bodies' mode changes (`_sequence`)
+
+
+SEQUENCE_PRIME = 16777619
+"""The multiplier of `_sequence`'s code (FNV's 32-bit prime): odd, so no change is lost to the wrap."""
+
+
+def _modes(s: Any) -> list[Array]:
+    """Per entry of a hybrid state (`engine.Hybrid`: `stuck`, `sdir`, `fly`), each body's contact mode:
+    0 stuck, 1 slipping forwards, 2 backwards, 3 in flight."""
+    fly = s.fly if s.fly is not None else tuple(jnp.zeros(jnp.shape(b), bool) for b in s.stuck)
+    return [jnp.where(f, 3, jnp.where(b, 0, jnp.where(d > 0, 1, 2))) for b, d, f in zip(s.stuck, s.sdir, fly)]
+
+
+def _sequence(code: Array, before: Any, after: Any) -> Array:
+    """The sequence code after a step: where a body's mode changed, `code` times `SEQUENCE_PRIME` plus
+    the sum over the changed bodies of `4 i + mode + 1` (body `i`, its new mode), in uint32 (wrapping).
+    Two periods with the same switch and landing counts but another order of events, or the same
+    events at other bodies, get other codes (up to a collision of the hash): a change of switching
+    structure that the counts miss."""
+    terms, offset = [], 0
+    for old, new in zip(_modes(before), _modes(after)):
+        n = 1 if jnp.ndim(new) == 0 else jnp.shape(new)[-1]
+        body = jnp.asarray(offset, jnp.uint32) + jnp.arange(n, dtype=jnp.uint32).reshape(jnp.shape(new))
+        terms.append(jnp.where(old != new, 4 * body + new.astype(jnp.uint32) + 1, jnp.uint32(0)))
+        offset += n
+    step = num.total(terms)
+    return jnp.where(step > 0, code * jnp.uint32(SEQUENCE_PRIME) + step, code)
 
 
 def _step(P, contact, dt, st, t_end):
@@ -176,11 +205,12 @@ def _advance(P, contact, dt, st, t_end, max_steps):
             margin=margin,
             n_min=jnp.minimum(a.n_min, jnp.where(info.commit, low, inf)),
             slid=tuple(q | (~b & (span > 0)) for q, b in zip(a.slid, info.stuck)),
+            sequence=_sequence(a.sequence, s, new),
         )
         return new, a, n + 1
 
     zero = tuple(jnp.zeros_like(a) for a in st.y.x)
-    init = _Acc(zero, inf, inf, tuple(jnp.zeros(jnp.shape(a), bool) for a in st.y.x))
+    init = _Acc(zero, inf, inf, tuple(jnp.zeros(jnp.shape(a), bool) for a in st.y.x), jnp.zeros((), jnp.uint32))
     st, acc, _ = lane_while_loop(cond, body, (st, init, jnp.zeros((), jnp.int32)))
     return st, acc
 
@@ -216,6 +246,7 @@ def period_map(P, contact, dt, max_steps, k, y) -> _Period:
         margin=jnp.where(slid, a.margin, -jnp.inf),
         n_min=a.n_min,
         n_land=jnp.zeros((), jnp.int32) if st.n_land is None or st0.n_land is None else st.n_land - st0.n_land,
+        sequence=a.sequence,
     )
 
 

@@ -201,6 +201,13 @@ class AbstractPhysics(eqx.Module):
         engine takes the jerk in flight as `fall` of the loads' rates."""
         return tuple(-q * im for q, im in zip(N, self.im))
 
+    def lift_loads(self, N: Scalars) -> Scalars:
+        """Under `contact="hop"`, per body, the load whose fall through zero lifts it off the ground
+        (its lift-off event function; a body whose load is negative starts in flight or flies on
+        after a plastic landing): its own $N_i$ by default. A selection of entries of `N`, so also
+        the rates of those loads from the loads' rates."""
+        return N
+
     def landing_masses(self) -> Scalars:
         """Under `contact="hop"`, per body, the mass whose fall a landing of it stops: its normal impulse
         is $P_n$ = this mass times the jump of $w_i$ (SPEC §10), which bounds the tangential impulse
