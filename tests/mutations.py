@@ -884,6 +884,18 @@ MUTATIONS = [
         ("tests/test_tilted_springs.py::test_tilted_springs_between_neighbours_are_the_chain",),
     ),
     Mutation(
+        "tilted_wall_spring_does_not_anchor",
+        "a tilted spring to the wall does not anchor a mechanism: its gait's section state drops the positions",
+        "locomotion_jax/model/_mechanism_physics.py",
+        (
+            (
+                "        return any(WALL in (s.a, s.b) for s in (*self.springs, *self.tilted))\n",
+                "        return any(WALL in (s.a, s.b) for s in self.springs)\n",
+            ),
+        ),
+        ("tests/test_tilted_springs.py::test_a_steady_gait_of_a_mechanism_tied_to_the_wall_by_a_tilted_spring",),
+    ),
+    Mutation(
         "carried_body_lifts_alone",
         "a carried body lifts off on its own placeholder load, never with its carrier: it stays on the ground",
         "locomotion_jax/model/_mechanism_physics.py",

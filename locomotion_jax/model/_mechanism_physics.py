@@ -147,8 +147,8 @@ class MechanismPhysics(AbstractPhysics):
 
     @property
     def anchored(self) -> bool:
-        """Whether a spring ties a body to the wall."""
-        return any(WALL in (s.a, s.b) for s in self.springs)
+        """Whether a spring, linear or tilted, ties a body to the wall."""
+        return any(WALL in (s.a, s.b) for s in (*self.springs, *self.tilted))
 
     def in_contact(self) -> tuple[bool, ...]:
         """The bodies with a friction law of their own: a body without ground contact has the
