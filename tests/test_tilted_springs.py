@@ -242,3 +242,49 @@ def test_a_steady_gait_of_a_mechanism_tied_to_the_wall_by_a_tilted_spring():
     end = np.concatenate([ref["x"][-1], ref["v"][-1]])
     print("reference period map residual", np.abs(end - y).max())
     assert ref["status"] == "ok" and np.abs(end - y).max() < 2e-5
+
+
+def test_the_floquet_multipliers_of_a_hopping_capsule_against_the_reference():
+    """A capsule (body 0 on anisotropic bristles, restitution 0.8) carrying body 1 on a spring and a
+    damper, tied to the wall by a tilted spring of rest length 2 + sin(2t + 1.2): under `contact="hop"`
+    its steady gait (3 periods, 4 landings) is in flight at the section. The carried body's height and
+    vertical velocity are its carrier's, so its own coordinates of the section state add zero
+    multipliers; the others are the eigenvalues of the independent reference's period map (Jacobian by
+    central differences over the six coordinates x_0, x_1, v_0, v_1, y_0, w_0): within 1e-4 relative
+    (measured 8.1e-6: the engine's truncation error at dt = 0.01 and the differences' error). The gait
+    is a fixed point of the reference's map within 1e-4 (measured 1.8e-6)."""
+    from reference_mechanism import Body, run, Sig, System
+
+    x0 = float(np.sqrt(2.0**2 - 0.4**2))
+    rest = lj.Fourier(jnp.asarray([np.sin(1.2)]), jnp.asarray([np.cos(1.2)]), 2.0, 2.0)
+    links = [lj.TiltedSpring(lj.WALL, 0, k=20.0, d=0.4, rest=rest), lj.Spring(0, 1, k=15.0, rest=0.0),
+             lj.Damper(0, 1, c=0.3)]  # fmt: skip
+    law = (0.6, 0.9, 0.45, 0.7)
+    capsule = lj.Mechanism(masses=[1.0, 0.5], c=[0.02, 0.0], x0=[x0, x0], links=links, restitution=[0.8, 0.0],
+                           friction=[lj.AnisotropicCoulomb(*law), None], carried_by=[None, 0])  # fmt: skip
+    g = lj.steady_gait(capsule, contact="hop", periods=(1, 2, 3, 4), transient=30, dynamics=lj.Exact(dt=0.01))
+    assert int(g.status) == lj.GaitStatus.CONVERGED and int(g.k) == 3 and int(g.n_land) == 4
+    y = np.asarray(g.state)  # x_0, x_1, v_0, v_1, y_0, y_1, w_0, w_1
+    assert y[4] > 1 and y[5] == y[4] and y[7] == y[6]
+    T = 3 * np.pi  # three periods of 2 pi / omega
+    free = [0, 1, 2, 3, 4, 6]
+
+    def period_map(z):
+        bodies = [Body(1.0, law, c=0.02, x0=z[0], v0=z[2], y0=z[4], w0=z[5], e=0.8),
+                  Body(0.5, None, carrier=0, x0=z[1], v0=z[3])]  # fmt: skip
+        system = System(bodies, springs=[(0, 1, 15.0, 0.0)], dampers=[(0, 1, 0.3)],
+                        tilted=[(-1, 0, 20.0, 0.4, Sig(2.0, (np.sin(1.2),), (np.cos(1.2),), 2.0))])  # fmt: skip
+        r = run(system, T, np.array([T]), hop=True)
+        assert r["status"] == "ok"
+        return np.array([r["x"][-1, 0], r["x"][-1, 1], r["v"][-1, 0], r["v"][-1, 1], r["y"][-1, 0], r["vy"][-1, 0]])
+
+    z = y[free]
+    print("reference period map residual", np.abs(period_map(z) - z).max())
+    assert np.abs(period_map(z) - z).max() < 1e-4
+    eps = 1e-6
+    J = np.stack([(period_map(z + eps * e) - period_map(z - eps * e)) / (2 * eps) for e in np.eye(6)], 1)
+    want = np.sort(np.abs(np.linalg.eigvals(J)))[::-1]
+    got = np.sort(np.abs(np.asarray(g.multipliers)))[::-1]
+    print("multipliers", got, "reference", want)
+    assert np.all(got[6:] < 1e-12)
+    np.testing.assert_allclose(got[:6], want, rtol=1e-4, atol=1e-6)

@@ -170,7 +170,7 @@ def init(
         zeros = jnp.zeros(x.shape[-1], dtype)
         height = zeros if height is None else height
         vy = zeros if vy is None else vy
-        fly = tuple((h > 0) | (w > 0) | (q < 0) for h, w, q in zip(P.bodies(height), P.bodies(vy), P.lift_loads(N)))
+        fly = tuple((h > 0) | (w > 0) | (q < 0) for h, w, q in zip(P.bodies(height), P.bodies(vy), P.ride(N)))
         n = tuple(jnp.where(f, 0, q) for f, q in zip(fly, n))
     stuck = tuple(p >= 0 for p in motion.stick_margin(P, F, n))
     sdir = tuple(jnp.where(f >= 0, 1.0, -1.0).astype(dtype) for f in F)
@@ -204,7 +204,7 @@ def _impact(P: AbstractPhysics, restitution: Scalars, zeno: Array, st: Hybrid, N
     (plastic, $w^+ = 0$, where $e_i |w^-| <$ `zeno`), normal impulse $P_n = M_i (w^+ - w^-)$ ($M_i$ the
     mass that lands with it, `P.landing_masses()`: $m_i$ and the masses it carries) and
     tangential $P_t = \\min(m_i |v^-|, \\mu_k P_n)$ against $v^-$; it stays on the ground after a
-    plastic landing if its lift-off load (`P.lift_loads`: $N_i$, a carried body's carrier's) is
+    plastic landing if its lift-off load (`P.ride`: $N_i$, a carried body's carrier's) is
     $\\ge 0$. A body on the ground whose lift-off load fell through 0 lifts off with $w = 0$.
     Returns the new state, flight flags, the bodies that landed at rest horizontally (to be
     re-decided stuck or slipping), the landings' count (of the bodies in contact), and whether the
@@ -213,7 +213,7 @@ def _impact(P: AbstractPhysics, restitution: Scalars, zeno: Array, st: Hybrid, N
     assert st.fly is not None and st.vpend is not None and yA.y is not None and yA.vy is not None
     zero = jnp.zeros_like(st.t)
     hs, ws, vs, fly, rest, lost, count, zeno_rule = [], [], [], [], [], [], [], []
-    lifts = P.lift_loads(N0)
+    lifts = P.ride(N0)
     for i, (f, pe, h, w, v, q, M) in enumerate(zip(st.fly, st.vpend, yA.y, yA.vy, yA.v, lifts, P.landing_masses())):
         land = f & (pe | (h < 0))
         lift = ~f & (pe | (q < 0))

@@ -224,11 +224,11 @@ def derivatives(
         g.append(low)
         dg.append(_sum([jnp.where(w, r, 0) for w, r in zip(at, dN)]) / count)
         ddg.append(_sum([jnp.where(w, r, 0) for w, r in zip(at, ddN)]) / count)
-    elif fly is not None:  # per body: on the ground its lift-off load (P.lift_loads), in flight y_i (landing)
+    elif fly is not None:  # per body: on the ground its lift-off load (P.ride), in flight y_i (landing)
         assert y is not None and vy is not None and rate.vy is not None, "contact='hop' needs the heights"
-        g += [jnp.where(f, h, q) for f, h, q in zip(fly, y, P.lift_loads(N))]
-        dg += [jnp.where(f, h, q) for f, h, q in zip(fly, vy, P.lift_loads(dN))]
-        ddg += [jnp.where(f, h, q) for f, h, q in zip(fly, rate.vy, P.lift_loads(ddN))]
+        g += [jnp.where(f, h, q) for f, h, q in zip(fly, y, P.ride(N))]
+        dg += [jnp.where(f, h, q) for f, h, q in zip(fly, vy, P.ride(dN))]
+        ddg += [jnp.where(f, h, q) for f, h, q in zip(fly, rate.vy, P.ride(ddN))]
     else:
         g += list(n)
         dg += list(dn)

@@ -104,7 +104,9 @@ def _section_state(P: AbstractPhysics, contact: Contact, y: Array) -> engine.Hyb
         return engine.init(P, contact, _positions(P, y), y[base - n : base])
     # A body on the ground (y_i = 0, not rising) has no vertical tangent: its height and vertical
     # velocity are set to the constant 0 there (`where`), so a grounded body adds a zero multiplier.
-    h, w = y[base : base + n], y[base + n : base + 2 * n]
+    # A carried body takes its carrier's (`P.ride`): its own coordinates add zero multipliers too.
+    h = P.stacked(P.ride(P.bodies(y[base : base + n])))
+    w = P.stacked(P.ride(P.bodies(y[base + n : base + 2 * n])))
     up = (h > 0) | (w > 0)
     h, w = jnp.where(up, h, 0), jnp.where(up, w, 0)
     return engine.init(P, contact, _positions(P, y), y[base - n : base], h, w)

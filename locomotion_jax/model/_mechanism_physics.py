@@ -342,10 +342,11 @@ class MechanismPhysics(AbstractPhysics):
         landing = self.landing_masses()
         return tuple(-N[g] / landing[g] for g in self.ground)
 
-    def lift_loads(self, N: Scalars) -> Scalars:
-        """A carried body lifts off with the body that finally carries it: that body's load (a body in
-        contact, or a free one, its own), so that the springs that lift a capsule lift what it carries."""
-        return tuple(N[g] for g in self.ground)
+    def ride(self, q: Scalars) -> Scalars:
+        """A carried body flies with the body that finally carries it: that body's entry (a body in
+        contact, or a free one, its own), so that the springs that lift a capsule lift what it
+        carries, and a gait's section state moves them together."""
+        return tuple(q[g] for g in self.ground)
 
     def landing_masses(self) -> Scalars:
         """A body in contact lands with the bodies it carries: $M_i = N_i$, its mass and theirs; a

@@ -201,12 +201,14 @@ class AbstractPhysics(eqx.Module):
         engine takes the jerk in flight as `fall` of the loads' rates."""
         return tuple(-q * im for q, im in zip(N, self.im))
 
-    def lift_loads(self, N: Scalars) -> Scalars:
-        """Under `contact="hop"`, per body, the load whose fall through zero lifts it off the ground
-        (its lift-off event function; a body whose load is negative starts in flight or flies on
-        after a plastic landing): its own $N_i$ by default. A selection of entries of `N`, so also
-        the rates of those loads from the loads' rates."""
-        return N
+    def ride(self, q: Scalars) -> Scalars:
+        """Under `contact="hop"`, per body, the entry of the per-body quantity `q` (a normal load, a
+        height, a vertical velocity) of the body it flies with: its own by default. A body lifts off
+        where this load falls through zero (its lift-off event function; a body whose load is
+        negative starts in flight or flies on after a plastic landing), and a steady gait's section
+        state gives it this height and vertical velocity. A selection of entries, so also the rates
+        of the loads from the loads' rates."""
+        return q
 
     def landing_masses(self) -> Scalars:
         """Under `contact="hop"`, per body, the mass whose fall a landing of it stops: its normal impulse
