@@ -910,9 +910,9 @@ MUTATIONS = [
     ),
     Mutation(
         "carried_body_lifts_alone",
-        "a carried body lifts off on its own placeholder load, never with its carrier: it stays on the ground",
+        "a carried body rides on its own entries: it lifts off on its placeholder load, never with its carrier",
         "locomotion_jax/model/_mechanism_physics.py",
-        (("        return tuple(N[g] for g in self.ground)\n", "        return N\n"),),
+        (("        return tuple(q[g] for g in self.ground)\n", "        return q\n"),),
         ("tests/test_tilted_springs.py::test_tilted_springs_lift_bodies_and_what_they_carry_as_the_reference_does",),
     ),
     Mutation(
