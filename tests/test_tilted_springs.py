@@ -84,17 +84,19 @@ def _topology(a: float) -> lj.Mechanism:
                         carried_by=[None, None, 1, None])  # fmt: skip
 
 
-def _reference_topology(a: float, t_end: float, save: np.ndarray) -> dict:
+def _reference_topology(a: float, t_end: float, save: np.ndarray, hop: bool = False, x=X, v=(0.0,) * 4) -> dict:
+    """The independent reference's run of `_topology(a)` from positions `x` and velocities `v`."""
     from reference_mechanism import Body, run, Sig, System
 
-    bodies = [Body(1.0, (0.6, 0.9, 0.45, 0.7), c=0.02, x0=X[0]), Body(1.2, (0.5, 0.5, 0.4, 0.4), c=0.01, x0=X[1]),
-              Body(0.5, None, carrier=1, x0=X[2]), Body(0.3, None, x0=X[3])]  # fmt: skip
+    bodies = [Body(1.0, (0.6, 0.9, 0.45, 0.7), c=0.02, x0=x[0], v0=v[0]),
+              Body(1.2, (0.5, 0.5, 0.4, 0.4), c=0.01, x0=x[1], v0=v[1]),
+              Body(0.5, None, carrier=1, x0=x[2], v0=v[2]), Body(0.3, None, x0=x[3], v0=v[3])]  # fmt: skip
     tilted = [(-1, 0, 20.0, 0.4, Sig(2.0, (0.0,), (a,), OMEGA)), (0, 1, 30.0, -0.3, 1.5),
               (0, 2, 10.0, 0.6, Sig(R2, (0.05,), (0.1,), OMEGA)),
               (1, 3, 5.0, 0.5, Sig(R3, (0.0, 0.0), (0.0, 0.1), OMEGA))]  # fmt: skip
     system = System(bodies, springs=[(1, 2, 15.0, 0.2)], dampers=[(1, 2, 0.05)], tilted=tilted,
                     externals=[(3, Sig(0.0, (0.05,), (0.0,), OMEGA))])  # fmt: skip
-    return run(system, t_end, save)
+    return run(system, t_end, save, hop=hop)
 
 
 def test_tilted_springs_between_any_bodies_against_the_reference():
@@ -189,17 +191,8 @@ def test_tilted_springs_lift_bodies_and_what_they_carry_as_the_reference_does():
     lands twice by t = 10. Against the independent reference (`run(..., hop=True)`): every state
     variable within 2e-7 at dt = 1/400 (measured 9.1e-8), fourth order (16x down at 1/800), the same
     landings; the carried body's height is its carrier's; w = e_d + Delta e to 1e-9."""
-    from reference_mechanism import Body, run, Sig, System
-
     save = np.linspace(0.0, 10.0, 401)
-    bodies = [Body(1.0, (0.6, 0.9, 0.45, 0.7), c=0.02, x0=X[0]), Body(1.2, (0.5, 0.5, 0.4, 0.4), c=0.01, x0=X[1]),
-              Body(0.5, None, carrier=1, x0=X[2]), Body(0.3, None, x0=X[3])]  # fmt: skip
-    tilted = [(-1, 0, 20.0, 0.4, Sig(2.0, (0.0,), (0.3,), OMEGA)), (0, 1, 30.0, -0.3, 1.5),
-              (0, 2, 10.0, 0.6, Sig(R2, (0.05,), (0.1,), OMEGA)),
-              (1, 3, 5.0, 0.5, Sig(R3, (0.0, 0.0), (0.0, 0.1), OMEGA))]  # fmt: skip
-    system = System(bodies, springs=[(1, 2, 15.0, 0.2)], dampers=[(1, 2, 0.05)], tilted=tilted,
-                    externals=[(3, Sig(0.0, (0.05,), (0.0,), OMEGA))])  # fmt: skip
-    ref = run(system, 10.0, save, hop=True)
+    ref = _reference_topology(0.3, 10.0, save, hop=True)
     assert ref["status"] == "ok" and list(ref["n_landings"]) == [2, 2, 0, 0]
     assert ref["y"][:, 1].max() > 0.1 and np.array_equal(ref["y"][:, 2], ref["y"][:, 1])
     errs = []
@@ -222,23 +215,12 @@ def test_a_steady_gait_of_a_mechanism_tied_to_the_wall_by_a_tilted_spring():
     positions (not their gaps from body 0 at x = 0). The gait of `_topology` (a = 0.02, strict) is a fixed
     point of the independent reference's period map: one period from its state returns to it within
     2e-5 (the engine's truncation error at dt = 0.01; measured 1.1e-6)."""
-    from reference_mechanism import Body, run, Sig, System
-
     g = lj.steady_gait(_topology(0.02), periods=(1, 2), transient=30, dynamics=lj.Exact(dt=0.01))
     assert int(g.status) == lj.GaitStatus.CONVERGED and int(g.k) == 1 and bool(g.stable)
     y = np.asarray(g.state)
     assert y.shape == (8,) and y[0] > 1.5  # x_0 .. x_3, v_0 .. v_3
-    x, v = y[:4], y[4:]
-    bodies = [Body(1.0, (0.6, 0.9, 0.45, 0.7), c=0.02, x0=x[0], v0=v[0]),
-              Body(1.2, (0.5, 0.5, 0.4, 0.4), c=0.01, x0=x[1], v0=v[1]),
-              Body(0.5, None, carrier=1, x0=x[2], v0=v[2]), Body(0.3, None, x0=x[3], v0=v[3])]  # fmt: skip
-    tilted = [(-1, 0, 20.0, 0.4, Sig(2.0, (0.0,), (0.02,), OMEGA)), (0, 1, 30.0, -0.3, 1.5),
-              (0, 2, 10.0, 0.6, Sig(R2, (0.05,), (0.1,), OMEGA)),
-              (1, 3, 5.0, 0.5, Sig(R3, (0.0, 0.0), (0.0, 0.1), OMEGA))]  # fmt: skip
-    system = System(bodies, springs=[(1, 2, 15.0, 0.2)], dampers=[(1, 2, 0.05)], tilted=tilted,
-                    externals=[(3, Sig(0.0, (0.05,), (0.0,), OMEGA))])  # fmt: skip
     T = 2 * np.pi / OMEGA
-    ref = run(system, T, np.array([T]))
+    ref = _reference_topology(0.02, T, np.array([T]), x=y[:4], v=y[4:])
     end = np.concatenate([ref["x"][-1], ref["v"][-1]])
     print("reference period map residual", np.abs(end - y).max())
     assert ref["status"] == "ok" and np.abs(end - y).max() < 2e-5

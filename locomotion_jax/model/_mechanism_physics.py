@@ -339,8 +339,7 @@ class MechanismPhysics(AbstractPhysics):
         mass that flies with it, one expression for a body and those it carries, so that they fall
         alike to the last bit (free fall, $-1$, without a tilted spring). Linear in `N`, so also
         the rate of that acceleration from the loads' rates."""
-        landing = self.landing_masses()
-        return tuple(-N[g] / landing[g] for g in self.ground)
+        return self.ride(tuple(-q / M for q, M in zip(N, self.landing_masses())))
 
     def ride(self, q: Scalars) -> Scalars:
         """A carried body flies with the body that finally carries it: that body's entry (a body in
