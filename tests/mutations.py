@@ -928,6 +928,67 @@ MUTATIONS = [
         ("tests/test_continuation.py::test_hopping_events_that_pass_each_other_are_no_torus",),
     ),
     Mutation(
+        "smoothed_ignores_layout",
+        "the smoothed engine integrates every chain unrolled, whatever its layout",
+        "locomotion_jax/dynamics/_smoothed_dynamics.py",
+        (
+            (
+                "        P = engine_physics(M)  # a chain's layout (`_chain_array`)\n"
+                "        return smoothed.measure_one",
+                "        P = M.physics()\n        return smoothed.measure_one",
+            ),
+        ),
+        ("tests/test_chain_array.py::test_array_layout_smoothed_runs_equal_unrolled",),
+    ),
+    Mutation(
+        "rollout_ignores_layout",
+        "the optimisers' smoothed rollout integrates every chain unrolled, whatever its layout",
+        "locomotion_jax/optimisation/_objective.py",
+        (
+            (
+                "        return engine_physics(model.with_fourier(cos, sin, omega), GAIT_ARRAY_FROM)\n",
+                "        return model.with_fourier(cos, sin, omega).physics()\n",
+            ),
+        ),
+        ("tests/test_optimise.py::test_element_rollout_in_either_layout",),
+    ),
+    Mutation(
+        "eigensolver_per_held_mass",
+        "the natural frequencies call the batched eigensolver once per held mass (calls that can deadlock "
+        "XLA's CPU thread pool when they run concurrently)",
+        "locomotion_jax/model/_chain.py",
+        (
+            (
+                "        keep = np.array([[i for i in range(n) if i != held] for held in range(n)])\n"
+                "        return jnp.sqrt(jnp.clip(jnp.linalg.eigvalsh(Kn[..., keep[:, :, None], "
+                "keep[:, None, :]]), 0))\n",
+                "        rows = [[i for i in range(n) if i != held] for held in range(n)]\n"
+                "        return jnp.stack([jnp.sqrt(jnp.clip(jnp.linalg.eigvalsh(Kn[..., np.array(r)[:, None], "
+                "np.array(r)[None, :]]), 0)) for r in rows], -2)\n",
+            ),
+        ),
+        ("tests/test_smooth.py::test_natural_frequencies_call_the_eigensolver_once",),
+    ),
+    Mutation(
+        "smoothed_start_inside_program",
+        "the smoothed engine computes a chain's default measurement start inside its program",
+        "locomotion_jax/dynamics/_smoothed_dynamics.py",
+        (
+            (
+                "        ts = jnp.asarray(batch.mechanism.t_start if batch.t_start is None "
+                "else batch.t_start, batch.dtype)\n",
+                "        ts = jnp.full((batch.size,), jnp.inf, batch.dtype) if batch.t_start is None "
+                "else batch.t_start\n",
+            ),
+            (
+                "def _measure_bodies(M, valid, ws, z, horizon, window, contact, start, initial, dyn):\n",
+                "def _measure_bodies(M, valid, ws, z, horizon, window, contact, start, initial, dyn):\n"
+                "    ws = jnp.where(jnp.isfinite(ws), ws, M.t_start).astype(ws.dtype)\n",
+            ),
+        ),
+        ("tests/test_smooth.py::test_the_smoothed_program_of_a_chain_has_no_eigensolver",),
+    ),
+    Mutation(
         "stribeck_breakaway_stops_at_once",
         "a mass that breaks away with no acceleration along its slip looks for its stop at once: at a grazing "
         "Stribeck breakaway it sticks and breaks away again at one instant",

@@ -12,6 +12,7 @@ import locomotion_jax as lj
 import numpy as np
 import pytest
 from chain_cases import ANISO
+from locomotion_jax.dynamics import _smoothed, _smoothed_dynamics
 from locomotion_jax.gaits import _shooting as cg
 from locomotion_jax.gaits._element_orbit import gait_physics
 from locomotion_jax.model._chain_array import (
@@ -136,6 +137,87 @@ def test_array_layout_eight_mass_worm_against_reference():
     np.testing.assert_allclose(np.asarray(tr.e_d), ref["e_d"], rtol=1e-5, atol=1e-7)
     np.testing.assert_allclose(np.asarray(tr.w), ref["w"], rtol=1e-5, atol=1e-7)
     assert float(np.ptp(np.asarray(tr.X))) > 0.01 and np.asarray(tr.stuck).any()  # it crawls, sticking
+
+
+SMOOTH_RTOL = 1e-8
+"""The smoothed engine's runs in both layouts at diffrax tolerances rtol 1e-10, atol 1e-12: the step-size
+controller follows each layout's rounding, so the runs agree to the solver's error (measured 1e-9),
+not to the rounding of the right-hand side (which agrees to 1e-13)."""
+
+
+@pytest.mark.parametrize("contact", ["strict", "paper"])
+def test_array_layout_smoothed_rates_equal_unrolled(contact):
+    """The smoothed engine's right-hand side and smallest normal force (`_smoothed.rates_and_normal`)
+    on the array layout's one entry over the masses equal the unrolled layout's, at random states of a
+    5-mass worm on bristles and of a Stribeck chain under the force actuator."""
+    stribeck = lambda layout: lj.Chain(
+        masses=[1.0, 1.1, 0.9, 1.2, 0.8], d=0.1, lbar=3.0, friction=lj.Stribeck(0.7, 0.5, 0.1),
+        waveforms=lj.TravellingWave(a=3.0, omega=2.0, phi=1.0), actuator=lj.InternalForce(), layout=layout,
+    )  # fmt: skip
+    rng = np.random.default_rng(3)
+    for chain in (lambda layout: _worm(5, layout)[0], stribeck):
+        Pa, Pu = engine_physics(chain("array")), engine_physics(chain("unrolled"))
+        assert isinstance(Pa, ArrayChainPhysics) and isinstance(Pu, ChainPhysics)
+        for _ in range(5):
+            x = 3.0 * np.arange(5) + rng.normal(0.0, 0.3, 5)
+            y = jnp.asarray(np.concatenate([x, rng.normal(0.0, 0.5, 5), [0.3, 0.4]]))
+            t, eps = jnp.asarray(rng.uniform(0, 10)), jnp.asarray(1e-3)
+            got = _smoothed.rates_and_normal(Pa, contact, eps, t, y)
+            ref = _smoothed.rates_and_normal(Pu, contact, eps, t, y)
+            np.testing.assert_allclose(np.asarray(got[0]), np.asarray(ref[0]), rtol=1e-12, atol=1e-12)
+            np.testing.assert_allclose(float(got[1]), float(ref[1]), rtol=1e-12)
+
+
+def test_array_layout_smoothed_runs_equal_unrolled(monkeypatch):
+    """`Smoothed` dynamics run a chain in its layout: `measure` (strict contact) and `simulate` (paper
+    contact) of a 5-mass worm in the array layout agree with the unrolled layout to `SMOOTH_RTOL`, with
+    the same stick fractions and modes, and the energy balance w = e_d + (e - e0) holds in both."""
+    seen = []  # the physics each traced run integrates (these tolerances are this test's: traced here)
+
+    def spy(mechanism):
+        seen.append(type(P := engine_physics(mechanism)))
+        return P
+
+    monkeypatch.setattr(_smoothed_dynamics, "engine_physics", spy)
+    dyn = lj.Smoothed(1e-3, rtol=1e-10, atol=1e-12)
+    kw: dict[str, Any] = dict(z=0.5, t_start=4.0, horizon=30.0, contact="strict", dynamics=dyn)
+    got = lj.measure(_worm(5, "array"), **kw).to_numpy()
+    assert seen == [ArrayChainPhysics]
+    ref = lj.measure(_worm(5, "unrolled"), **kw).to_numpy()
+    assert seen == [ArrayChainPhysics, ChainPhysics]
+    assert np.all(ref["status"] == lj.Status.OK) and np.all(got["status"] == lj.Status.OK)
+    assert np.all(ref["reached"]) and np.all(ref["stick_fraction"] > 0.01)
+    for key in MEASURED:
+        _close(got[key], ref[key], SMOOTH_RTOL)
+    ts = np.linspace(0.0, 20.0, 41)
+    got_s = lj.simulate(_worm(5, "array"), 20.0, ts, contact="paper", dynamics=dyn)
+    ref_s = lj.simulate(_worm(5, "unrolled"), 20.0, ts, contact="paper", dynamics=dyn)
+    for key in ("x", "v", "X", "e_d", "w", "e", "N", "tension", "rest_length"):
+        a, b = np.asarray(getattr(ref_s, key)), np.asarray(getattr(got_s, key))
+        np.testing.assert_allclose(b, a, rtol=SMOOTH_RTOL, atol=SMOOTH_RTOL * np.abs(a).max(), err_msg=key)
+    np.testing.assert_array_equal(np.asarray(got_s.stuck), np.asarray(ref_s.stuck))
+    for tr in (got_s, ref_s):
+        balance = np.asarray(tr.w - tr.e_d - (tr.e - tr.e[:, :1]))
+        assert np.max(np.abs(balance)) < 1e-8 * max(1.0, float(np.max(tr.e_d)))
+
+
+def test_array_layout_smoothed_bad_configuration_flagged_others_unchanged():
+    """The smoothed engine in the array layout: an invalid chain of a batch is flagged `INVALID` with no
+    NaN, and the others measure what they measure alone."""
+    masses = np.ones((3, 4))
+    masses[1, 2] = -1.0
+    masses[2] = [1.2, 0.9, 1.0, 1.1]
+    wave = lj.TravellingWave(0.06, 3.0, np.pi / 3)
+    fr = lj.AnisotropicCoulomb(0.7, 0.9, 0.5, 0.7)
+    dyn = lj.Smoothed(1e-2, rtol=1e-10, atol=1e-12)
+    kw: dict[str, Any] = dict(z=0.3, t_start=4.0, horizon=30.0, window=5.0, dynamics=dyn)
+    m = lj.measure(lj.Chain(masses=masses, waveforms=wave, friction=fr, check=False, layout="array"), **kw)
+    assert list(np.asarray(m.status)) == [lj.Status.OK, lj.Status.INVALID, lj.Status.OK]
+    assert not np.any(np.isnan(np.asarray(m.tau_z)))
+    alone = lj.measure(lj.Chain(masses=masses[2], waveforms=wave, friction=fr, layout="array"), **kw)
+    assert bool(alone.reached)
+    np.testing.assert_allclose(m.tau_z[2], alone.tau_z, rtol=SMOOTH_RTOL)
+    np.testing.assert_allclose(m.e_d[2], alone.e_d, rtol=SMOOTH_RTOL)
 
 
 def test_array_layout_bad_configuration_flagged_others_unchanged():

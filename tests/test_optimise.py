@@ -178,6 +178,34 @@ def test_element_gradient_matches_finite_differences():
     _gradient_matches_finite_differences(prob, theta, 0.05, 2)
 
 
+def test_element_rollout_in_either_layout(monkeypatch):
+    """A chain's smoothed rollout (`_objective.element_rollout`) runs in the layout of its steady gaits:
+    a 4-mass worm on bristles in the array layout (one entry over the masses, `layout="auto"` from
+    `GAIT_ARRAY_FROM` masses) gives the unrolled layout's figures and reverse-mode gradients to
+    rounding (the same fixed RK4 steps; sums over masses in another order)."""
+    plan = _objective.make_plan((1.0,) * 4, 3.0, 3.0, 1e-2, 4.0, 4.0)
+    eps = jnp.asarray(1e-2)
+    cos = jnp.array([[0.01, -0.02], [0.03, 0.0], [-0.01, 0.02]])
+    sin = jnp.array([[0.04, 0.01], [0.02, -0.01], [0.03, 0.02]])
+
+    def run(layout, cos):
+        worm = lj.Chain(masses=[1.0, 1.1, 0.9, 1.0], k=50.0, d=0.3, lbar=3.0, c=0.01, layout=layout,
+                        friction=lj.AnisotropicCoulomb(0.7, 0.9, 0.5, 0.7)).broadcast()  # fmt: skip
+        return _objective.element_rollout(worm, cos, sin, jnp.asarray(3.0), eps, plan, 0.005)
+
+    seen = []  # the physics each rollout integrates
+    real = _objective.engine_physics
+    monkeypatch.setattr(_objective, "engine_physics", lambda *a: seen.append(type(P := real(*a)).__name__) or P)
+    got, ref = run("auto", cos), run("unrolled", cos)
+    assert set(seen) == {"ArrayChainPhysics", "ChainPhysics"}
+    assert abs(float(ref.distance)) > 1e-3 and float(ref.min_normal) > 0.1
+    for name, x, y in zip(ref._fields, ref, got):
+        assert float(y) == pytest.approx(float(x), rel=1e-11, abs=1e-14), name
+    grads = [jax.grad(lambda c, layout=layout: run(layout, c).distance)(cos) for layout in ("auto", "unrolled")]
+    assert float(jnp.max(jnp.abs(grads[1]))) > 1e-3
+    np.testing.assert_allclose(np.asarray(grads[0]), np.asarray(grads[1]), rtol=1e-9, atol=1e-12)
+
+
 def test_stroke_is_exact_and_projection_lands_on_the_limit():
     rng = np.random.default_rng(0)
     for _ in range(3):

@@ -2,13 +2,15 @@
 convergence to the exact model as eps -> 0, the energy balance, lift-off, differentiability, the
 paper's model and its two-mass chain through one engine, batches of chains."""
 
+from typing import Any
+
 import diffrax
 import jax
 import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
-from locomotion_jax.dynamics import _smoothed
+from locomotion_jax.dynamics import _smoothed, _smoothed_dynamics
 from locomotion_jax.dynamics._smoothed_dynamics import params_physics
 from scipy.stats import linregress
 
@@ -184,3 +186,54 @@ def test_measure_a_chain_on_the_smoothed_engine(aniso_chain):
         np.testing.assert_allclose(float(s.e_d[i, j] - s.e_d[i, 0]), float(m.e_z[i]), rtol=1e-5)
     assert np.all(np.asarray(m.mean_speed[:2]) > 0)
     assert np.max(np.abs(np.asarray(m.balance[:2]))) < 1e-6
+
+
+def _count(jaxpr: Any, primitive: str) -> int:
+    """The equations of `primitive` in a jaxpr, its sub-jaxprs (calls, loops) included."""
+    n = 0
+    for eqn in jaxpr.eqns:
+        n += eqn.primitive.name == primitive
+        for param in eqn.params.values():
+            for sub in param if isinstance(param, (list, tuple)) else [param]:
+                sub = getattr(sub, "jaxpr", sub)
+                if hasattr(sub, "eqns"):
+                    n += _count(sub, primitive)
+    return n
+
+
+def test_natural_frequencies_call_the_eigensolver_once():
+    """`Chain.natural_frequencies` (the default measurement start) calls the batched eigensolver once
+    for every held mass together: on a CPU, concurrent batched eigensolver calls inside one program
+    can deadlock XLA's thread pool (each waits for workers the other holds)."""
+    worm = lj.Chain(masses=np.ones((4, 6)), k=np.linspace(40.0, 60.0, 5), lbar=3.0)
+    assert _count(jax.make_jaxpr(lambda c: c.natural_frequencies())(worm).jaxpr, "eigh") == 1
+    got = np.asarray(worm.natural_frequencies())
+    assert got.shape == (4, 6, 5)
+    K = np.diag(np.r_[worm.k, 0.0] + np.r_[0.0, worm.k]) - np.diag(worm.k, 1) - np.diag(worm.k, -1)
+    for held in range(6):  # masses of 1: the eigenvalues of K with the held mass's row and column removed
+        keep = [i for i in range(6) if i != held]
+        np.testing.assert_allclose(got[0, held], np.sqrt(np.linalg.eigvalsh(K[np.ix_(keep, keep)])), rtol=1e-12)
+
+
+def test_the_smoothed_program_of_a_chain_has_no_eigensolver(monkeypatch):
+    """The default measurement start of a chain (`Chain.t_start`, from eigenvalues) is computed
+    outside the smoothed engine's program, as the exact engine's: a 16-mass worm measured in a batch
+    of 64 hung there on the 2-core machine, with both XLA threads in the eigensolver."""
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def record(*args):
+        seen["args"] = args
+        raise Stop
+
+    real = _smoothed_dynamics._measure_bodies
+    monkeypatch.setattr(_smoothed_dynamics, "_measure_bodies", record)
+    worm = lj.Chain(masses=np.ones((3, 5)), k=np.linspace(40.0, 60.0, 4), lbar=3.0,
+                    waveforms=lj.TravellingWave(0.05, 2.0, 1.0))  # fmt: skip
+    with pytest.raises(Stop):
+        lj.measure(worm, 0.1, horizon=1.0, window=1.0, dynamics=lj.Smoothed(1e-2))
+    np.testing.assert_allclose(np.asarray(seen["args"][2]), np.asarray(worm.t_start), rtol=1e-15)
+    text = real.lower(*seen["args"]).as_text()  # pyright: ignore[reportFunctionMemberAccess]
+    assert "syevd" not in text and "eigh" not in text

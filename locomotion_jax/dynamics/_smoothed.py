@@ -39,6 +39,7 @@ import optimistix as optx
 from .._custom_types import Array, ArrayLike, Contact
 from .._status import Regime, Status
 from ..model._physics import AbstractPhysics, least_contact_load, Loads, Scalars
+from ._numerics import least, total
 
 
 if TYPE_CHECKING:  # the class runs this engine: imported for annotations only
@@ -50,17 +51,10 @@ MIN_STICK = 0.05  # shortest stuck interval (time units) that makes SSL
 WINDOW_SAMPLES = 2501
 
 
-def _unstack(a: Array) -> Scalars:
-    return tuple(a[..., i] for i in range(a.shape[-1]))
-
-
-def _stack(a: Scalars, like: Array) -> Array:
-    """A per-body or per-spring tuple as an array (an empty tuple: an empty last axis)."""
-    return jnp.stack(a, -1) if a else jnp.zeros(jnp.shape(like) + (0,), like.dtype)
-
-
-def _sum(terms: list[Array]) -> Array:
-    return sum(terms[1:], terms[0])
+def _stack(P: AbstractPhysics, a: Scalars, like: Array) -> Array:
+    """A per-body or per-spring tuple of the physics' entries as an array (an empty tuple: an empty
+    last axis)."""
+    return P.stacked(a) if a else jnp.zeros(jnp.shape(like) + (0,), like.dtype)
 
 
 def normal(contact: Contact, N: Scalars) -> Scalars:
@@ -71,7 +65,7 @@ def normal(contact: Contact, N: Scalars) -> Scalars:
 def loads(P: AbstractPhysics, t: ArrayLike, x: Array) -> tuple[Any, Loads]:
     """The actuation and the loads at time `t` and positions `x` (shape `(N,)`)."""
     dr = P.drive(jnp.cos(P.omega * t), jnp.sin(P.omega * t))
-    return dr, P.loads(dr, _unstack(x))
+    return dr, P.loads(dr, P.bodies(x))
 
 
 def friction(P: AbstractPhysics, contact: Contact, eps: Array, L: Loads, v: Scalars,
@@ -91,7 +85,7 @@ def accelerations(P: AbstractPhysics, contact: Contact, eps: Array, L: Loads, v:
     G = P.velocity_forces(v)
     F = L.F if G is None else tuple(f + g for f, g in zip(L.F, G))
     a = tuple((f - c * vi - q) * im for f, c, vi, q, im in zip(F, P.c, v, fr, P.im))
-    p_d = _sum([q * vi + c * vi * vi for q, c, vi in zip(fr, P.c, v)])
+    p_d = total([q * vi + c * vi * vi for q, c, vi in zip(fr, P.c, v)])
     relative = P.velocity_power(v, v)
     return a, p_d if relative is None else p_d + relative
 
@@ -106,22 +100,22 @@ def rates_and_normal(P: AbstractPhysics, contact: Contact, eps: Array, t: ArrayL
     """[`rates`][] (the static bump's width `v_s` as in [`friction`][]) and the smallest signed
     normal force $\\min_i N_i$ of the bodies on the ground (`inf` where none is)."""
     n = P.n_bodies
-    x, v = y[:n], _unstack(y[n : 2 * n])
+    x, v = y[:n], P.bodies(y[n : 2 * n])
     dr, L = loads(P, t, x)
     a, p_d = accelerations(P, contact, eps, L, v, v_s)
     p_w = P.power(dr, L, v)
-    dy = jnp.concatenate([y[n : 2 * n], jnp.stack(a), jnp.stack([p_d, jnp.asarray(p_w, y.dtype)])])
+    dy = jnp.concatenate([y[n : 2 * n], P.stacked(a), jnp.stack([p_d, jnp.asarray(p_w, y.dtype)])])
     return dy, least_contact_load(P, L.N, y)
 
 
 def energy(P: AbstractPhysics, t: Array, y: Array) -> Array:
     n = P.n_bodies
     _, L = loads(P, t, y[:n])
-    return P.energy(L, _unstack(y[n : 2 * n]))
+    return P.energy(L, P.bodies(y[n : 2 * n]))
 
 
 def centre_of_mass(P: AbstractPhysics, y: Array) -> Array:
-    return P.centre_of_mass(_unstack(y[: P.n_bodies]))
+    return P.centre_of_mass(P.bodies(y[: P.n_bodies]))
 
 
 class Events:
@@ -135,10 +129,10 @@ class Events:
         self.met: int | None = None
         if contact == "strict":
             self.lift = n_extra
-            self.conds.append(lambda t, y, args, **kw: jnp.min(jnp.stack(loads(P, t, y[:n])[1].N)))
-        if P.gaps(tuple(jnp.zeros(()) for _ in range(n))):
+            self.conds.append(lambda t, y, args, **kw: least(loads(P, t, y[:n])[1].N))
+        if P.gaps(P.bodies(jnp.zeros((n,)))):
             self.met = n_extra + len(self.conds)
-            self.conds.append(lambda t, y, args, **kw: jnp.min(jnp.stack(P.gaps(_unstack(y[:n])))))
+            self.conds.append(lambda t, y, args, **kw: least(P.gaps(P.bodies(y[:n]))))
 
 
 def _hit(sol: diffrax.Solution, k: int | None) -> Array:
@@ -190,9 +184,9 @@ def admissible(P: AbstractPhysics, y0: Array) -> Array:
     """Whether a start is inside the model: finite, and every gap of the physics positive. An
     `initial=` state past the front end's checks (as under `jit`) that is not is flagged
     `INVALID`, and the run goes from the physics' own start instead (nothing becomes NaN)."""
-    gaps = P.gaps(_unstack(y0[: P.n_bodies]))
+    gaps = P.gaps(P.bodies(y0[: P.n_bodies]))
     ok = jnp.all(jnp.isfinite(y0))
-    return ok & jnp.all(jnp.stack(gaps) > 0) if gaps else ok
+    return ok & (least(gaps) > 0) if gaps else ok
 
 
 def _longest_run(flags: Array) -> Array:
@@ -232,12 +226,12 @@ def simulate_one(
 
     def derived(t, y):
         dr, L = loads(P, t, y[:n])
-        vs = _unstack(y[n : 2 * n])
+        vs = P.bodies(y[n : 2 * n])
         a, _ = accelerations(P, contact, dyn.eps, L, vs)
         e = P.energy(L, vs)
         return dict(
-            e=e, N=jnp.stack(L.N), l0=_stack(dr.l0, e), tension=_stack(L.aux.tension, e),
-            f_ex=_sum([m * ai for m, ai in zip(P.m, a)]), X=centre_of_mass(P, y),
+            e=e, N=P.stacked(L.N), l0=_stack(P, dr.l0, e), tension=_stack(P, L.aux.tension, e),
+            f_ex=total([m * ai for m, ai in zip(P.m, a)]), X=centre_of_mass(P, y),
         )  # fmt: skip
 
     der = jax.vmap(derived)(save, ys)

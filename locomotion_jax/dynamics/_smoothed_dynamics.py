@@ -4,8 +4,10 @@
 settings are static. Every mechanism runs on one engine (`_smoothed`), written against the
 physics interface: the paper's model as its two-body physics (`params_physics`), with the
 N-body fields mapped to a `Trajectory`'s and a `Measurement`'s here; a `Chain` and a
-`Mechanism` with their own. Each run is diffrax's `diffeqsolve` under `vmap`: one loop of
-diffrax's own, which the exact engine's work queue cannot take step by step.
+`Mechanism` with their own, a chain in its layout (`_chain_array.engine_physics`: the array
+layout's one entry over the masses keeps the program's size independent of N). Each run is
+diffrax's `diffeqsolve` under `vmap`: one loop of diffrax's own, which the exact engine's work
+queue cannot take step by step.
 """
 
 from typing import Any
@@ -17,6 +19,7 @@ from jax.sharding import Mesh
 
 from .._custom_types import Array, ArrayLike
 from ..model._chain import Chain
+from ..model._chain_array import engine_physics
 from ..model._params import Params, safe_params
 from ..model._physics import AbstractPhysics
 from ..model._two_mass import initial_gap
@@ -91,7 +94,10 @@ class Smoothed(AbstractDynamics):
         if batch.wave is not None:  # the paper's model: its physics from parameters and waveform
             p, wave, axes = batch.mechanism, batch.wave, batch.wave_axes
             return _measure_two_mass(p, wave, axes, z_, h_, w_, contact, start, batch.t_start, batch.initial, dyn)
-        ts = jnp.full((batch.size,), jnp.inf, batch.dtype) if batch.t_start is None else batch.t_start
+        # The default start (eigenvalues of the linearised chain) outside the program, as the exact
+        # engine's: a batched eigensolver inside it can deadlock XLA's CPU thread pool (seen at N = 16,
+        # batch 64).
+        ts = jnp.asarray(batch.mechanism.t_start if batch.t_start is None else batch.t_start, batch.dtype)
         return _measure_bodies(batch.mechanism, batch.valid, ts, z_, h_, w_, contact, start, batch.initial, dyn)
 
     def measure_chunk(
@@ -198,7 +204,7 @@ def two_mass_trajectory(out: dict[str, Array]) -> dict[str, Array]:
 @eqx.filter_jit
 def _simulate_bodies(M, valid, save, contact, start, initial, dyn):
     def one(M, ok, y):
-        P = M.physics()
+        P = engine_physics(M)  # a chain's layout (`_chain_array`)
         return smoothed.simulate_one(P, ok, save, contact, smoothed.initial_state(P, start, y), dyn)
 
     out = jax.vmap(one)(M, valid, initial)
@@ -208,11 +214,9 @@ def _simulate_bodies(M, valid, save, contact, start, initial, dyn):
 
 
 @eqx.filter_jit
-def _measure_bodies(M, valid, t_start, z, horizon, window, contact, start, initial, dyn):
-    ws = jnp.where(jnp.isfinite(t_start), t_start, M.t_start).astype(t_start.dtype)
-
+def _measure_bodies(M, valid, ws, z, horizon, window, contact, start, initial, dyn):
     def one(M, ok, ws, y):
-        P = M.physics()
+        P = engine_physics(M)  # a chain's layout (`_chain_array`)
         return smoothed.measure_one(P, ok, ws, z, horizon, window, contact, smoothed.initial_state(P, start, y), dyn)
 
     return jax.vmap(one)(M, valid, ws, initial)

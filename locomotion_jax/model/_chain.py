@@ -63,7 +63,7 @@ class Chain(AbstractMechanism):
       list of them (one per spring, a common base frequency). Default: no actuation.
     - `friction`: an [`AbstractFriction`][] with per-mass coefficients; default `Coulomb(0.7, 0.5)`.
     - `actuator`: [`RestLength`][] (default) or [`InternalForce`][].
-    - `layout`: how the exact engine lays the masses out: `"unrolled"` (one scalar per mass:
+    - `layout`: how the engines (exact and smoothed) lay the masses out: `"unrolled"` (one scalar per mass:
       fastest for a few masses, but compile time and cost per mass grow with N), `"array"` (one
       array over the masses: compile time independent of N; Sinusoid, Fourier, travelling-wave
       and spline actuation, every contact reading), or `"auto"` (default): where it applies, the
@@ -98,7 +98,7 @@ class Chain(AbstractMechanism):
     # Each spring's waveform where one is neither a Sinusoid nor a Fourier (a Spline): it drives
     # the spring itself and `waves` keeps only the base frequency; `None`: `waves` holds the actuation.
     signals: tuple[AbstractWaveform, ...] | None = None
-    # How the exact engine lays the masses out (`_chain_array.engine_physics`).
+    # How the engines lay the masses out (`_chain_array.engine_physics`).
     layout: str = eqx.field(static=True, default="auto")
 
     def __init__(
@@ -303,11 +303,11 @@ class Chain(AbstractMechanism):
         K = K.at[..., j, j + 1].add(-c.k).at[..., j + 1, j].add(-c.k)
         s = 1 / jnp.sqrt(c.m)
         Kn = K * s[..., :, None] * s[..., None, :]
-        out = []
-        for held in range(n):
-            keep = np.array([i for i in range(n) if i != held])
-            out.append(jnp.sqrt(jnp.clip(jnp.linalg.eigvalsh(Kn[..., keep[:, None], keep[None, :]]), 0)))
-        return jnp.stack(out, -2)
+        # Row `held` of `keep`: every mass but that one. One batched eigensolver call for all of them:
+        # on a CPU, concurrent calls of the batched eigensolver inside one program can deadlock
+        # XLA's thread pool (each waits for workers that the other holds).
+        keep = np.array([[i for i in range(n) if i != held] for held in range(n)])
+        return jnp.sqrt(jnp.clip(jnp.linalg.eigvalsh(Kn[..., keep[:, :, None], keep[:, None, :]]), 0))
 
     @property
     def omega_min(self) -> Array:

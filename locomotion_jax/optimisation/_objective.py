@@ -34,6 +34,7 @@ import jax.numpy as jnp
 
 from .._custom_types import Array
 from ..model import _two_mass as model
+from ..model._chain_array import engine_physics, GAIT_ARRAY_FROM
 from ..model._friction import Coulomb
 from ..model._params import Params
 from ..model._waveform import Fourier
@@ -189,7 +190,9 @@ def element_rollout(mechanism: Any, cos: Array, sin: Array, omega: Array, eps: A
 
     def physics(inputs):
         model, cos, sin, omega = inputs
-        return model.with_fourier(cos, sin, omega).physics()
+        # A chain in the layout of its steady gaits: the array layout keeps the differentiated
+        # rollout's program the same size at any N.
+        return engine_physics(model.with_fourier(cos, sin, omega), GAIT_ARRAY_FROM)
 
     def rates_of(inputs):
         P = physics(inputs)
