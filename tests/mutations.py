@@ -953,6 +953,20 @@ MUTATIONS = [
         ("tests/test_optimise.py::test_element_rollout_in_either_layout",),
     ),
     Mutation(
+        "smoothed_event_times_to_float64_tolerance",
+        "the smoothed engine locates event times to 1e-10 in float32 too: every float32 measurement fails",
+        "locomotion_jax/dynamics/_smoothed.py",
+        (("rtol=max(1e-10, 10 * eps), atol=max(1e-12, 10 * eps)", "rtol=1e-10, atol=1e-12"),),
+        ("tests/test_smooth.py::test_the_smoothed_engine_in_float32",),
+    ),
+    Mutation(
+        "smoothed_events_in_state_dtype",
+        "the smoothed engine's event conditions return the state's dtype: a float32 run under x64 does not trace",
+        "locomotion_jax/dynamics/_smoothed.py",
+        (("jnp.asarray(c(t, y, args, **kw), float)", "c(t, y, args, **kw)"),),
+        ("tests/test_smooth.py::test_the_smoothed_engine_in_float32",),
+    ),
+    Mutation(
         "eigensolver_per_held_mass",
         "the natural frequencies call the batched eigensolver once per held mass (calls that can deadlock "
         "XLA's CPU thread pool when they run concurrently)",

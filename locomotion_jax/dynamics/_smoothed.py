@@ -147,8 +147,13 @@ def solve(
     """One diffrax solve from `t0` to `t1`, terminated by the events of [`Events`][]."""
     term = diffrax.ODETerm(lambda t, y, args: rates(P, contact, dyn.eps, t, y))
     ev = Events(P, contact, len(extra_events))
-    conds = list(extra_events) + ev.conds
-    event = diffrax.Event(conds, root_finder=optx.Newton(rtol=1e-10, atol=1e-12)) if conds else None
+    # diffrax evaluates an event not yet armed as the default float (its `0.0`): each condition
+    # returns that dtype too, so that a float32 run under jax_enable_x64 traces.
+    conds = [lambda t, y, args, c=c, **kw: jnp.asarray(c(t, y, args, **kw), float) for c in (*extra_events, *ev.conds)]
+    # The event times to 1e-10 (relative) in float64; float32 resolves a time to ~1e-7 only.
+    eps = float(jnp.finfo(y0.dtype).eps)
+    finder = optx.Newton(rtol=max(1e-10, 10 * eps), atol=max(1e-12, 10 * eps))
+    event = diffrax.Event(conds, root_finder=finder) if conds else None
     solver = diffrax.Tsit5() if dyn.solver == "tsit5" else diffrax.Kvaerno5()
     sol = diffrax.diffeqsolve(
         term, solver, t0, t1, None, y0, saveat=saveat,

@@ -151,7 +151,7 @@ def params_physics(params: Params, wave: AbstractWaveform) -> AbstractPhysics:
     chain of `Chain.from_params`, its rest length $\\ell_0(t)$ the waveform's own (its mean
     `wave.lbar`, which may differ from `params.lbar`, the start's gap)."""
     p = eqx.tree_at(lambda q: q.lbar, params, jnp.broadcast_to(jnp.asarray(wave.lbar, params.dtype), params.lbar.shape))
-    return Chain.from_params(p, wave).physics()
+    return Chain.from_params(p, wave).astype(params.dtype).physics()  # the chain's own fields in the params' dtype
 
 
 def params_state(params: Params, start: str, initial: Array | None) -> Array:
