@@ -928,6 +928,19 @@ MUTATIONS = [
         ("tests/test_continuation.py::test_hopping_events_that_pass_each_other_are_no_torus",),
     ),
     Mutation(
+        "sequence_step_sums_bodies",
+        "the sequence code adds a step's changes body by body: changes made in one step at other bodies collide",
+        "locomotion_jax/gaits/_shooting.py",
+        (
+            (
+                "        terms.append(jnp.where(old != new, (new.astype(jnp.uint32) + 1) * digit, jnp.uint32(0)))\n",
+                "        terms.append(jnp.where(old != new, 4 * jnp.asarray(offset, jnp.uint32)"
+                " + 4 * jnp.arange(n, dtype=jnp.uint32).reshape(jnp.shape(new)) + new.astype(jnp.uint32) + 1, 0))\n",
+            ),
+        ),
+        ("tests/test_continuation.py::test_the_sequence_code_sees_events_pass_each_other",),
+    ),
+    Mutation(
         "smoothed_ignores_layout",
         "the smoothed engine integrates every chain unrolled, whatever its layout",
         "locomotion_jax/dynamics/_smoothed_dynamics.py",

@@ -456,7 +456,7 @@ def test_the_sequence_code_sees_events_pass_each_other():
     """`_shooting._sequence`: two periods with the same mode changes (mass 0 sticks, mass 1 starts to
     slip backwards) in the other order, or at the other masses, get other codes, though their counts
     are equal; a step without a change keeps the code; one entry holding both masses (the array
-    layout) gives the code of one entry per mass."""
+    layout) gives the code of one entry per mass; changes made in one step are told apart by body."""
     from types import SimpleNamespace
 
     from locomotion_jax.gaits._shooting import _sequence
@@ -486,3 +486,8 @@ def test_the_sequence_code_sees_events_pass_each_other():
     assert code([start, start, start]) == 0 and code([start, back0]) != code([start, back1])
     for path in ([start, stick0, both], [start, back1, both], [start, stick1, back0]):
         assert code(path, array=True) == code(path)
+    # Changes made in one step: mass 0 starts to slip as mass 1 sticks, then the other way round,
+    # against the two steps swapped (a sum over the changed masses gives both steps one term).
+    held0, held1 = ([True, False], [1.0, 1.0]), ([False, True], [1.0, 1.0])
+    assert code([held0, held1, held0]) != code([held1, held0, held1])
+    assert code([held0, held1], array=True) == code([held0, held1]) != code([held1, held0])
