@@ -223,9 +223,10 @@ def _grounds(sys: System) -> list[int | None]:
 
 
 def run(sys: System, t_end: float, save: np.ndarray, rtol: float = 1e-12, atol: float = 1e-13,
-        hop: bool = False) -> dict:  # fmt: skip
+        hop: bool = False, max_segments: int = 200_000) -> dict:  # fmt: skip
     """Positions, velocities, e_d, w and energy at the times `save` (increasing, in [0, t_end]),
-    the normal loads `N` (0 without contact or in flight), `status` ("ok" or "liftoff"),
+    the normal loads `N` (0 without contact or in flight), `status` ("ok", "liftoff", or "stalled":
+    `max_segments` integration segments, between events, reached before `t_end`, the rows ending there),
     `t_liftoff` (inf if none) and `valid_until` (later samples repeat the state there);
     with `hop`, heights `y` and vertical velocities `vy` per body (its ground body's; 0 for a free
     body) and the landings per body in contact, `n_landings` (module docstring)."""
@@ -434,7 +435,7 @@ def run(sys: System, t_end: float, save: np.ndarray, rtol: float = 1e-12, atol: 
     t_liftoff = np.inf
     if not hop and any(contact[i] and N0[i] <= 0 for i in lifting):
         t_liftoff = 0.0
-    while t < t_end and segments < 200_000 and t_liftoff == np.inf:
+    while t < t_end and segments < max_segments and t_liftoff == np.inf:
         segments += 1
         st, sd = list(stuck), list(sdir)
         ev, owner = events(st, sd)
@@ -477,5 +478,5 @@ def run(sys: System, t_end: float, save: np.ndarray, rtol: float = 1e-12, atol: 
     base = out[:, : 2 * n + 2]
     return dict(t=np.array([s for s, *_ in rows]), x=base[:, :n], v=base[:, n : 2 * n], ed=base[:, -2], w=base[:, -1],
                 e=energy, com=base[:, :n] @ m / m.sum(), y=hy, vy=vy, n_landings=landings.copy(), N=Ns,
-                status="liftoff" if t_liftoff < np.inf else "ok", t_liftoff=t_liftoff,
-                valid_until=min(t_liftoff, t_end))  # fmt: skip
+                status="liftoff" if t_liftoff < np.inf else "ok" if t >= t_end else "stalled", t_liftoff=t_liftoff,
+                valid_until=min(t_liftoff, t_end, t))  # fmt: skip

@@ -84,7 +84,8 @@ def _topology(a: float) -> lj.Mechanism:
                         carried_by=[None, None, 1, None])  # fmt: skip
 
 
-def _reference_topology(a: float, t_end: float, save: np.ndarray, hop: bool = False, x=X, v=(0.0,) * 4) -> dict:
+def _reference_topology(a: float, t_end: float, save: np.ndarray, hop: bool = False, x=X, v=(0.0,) * 4,
+                        **kw) -> dict:  # fmt: skip
     """The independent reference's run of `_topology(a)` from positions `x` and velocities `v`."""
     from reference_mechanism import Body, run, Sig, System
 
@@ -96,7 +97,7 @@ def _reference_topology(a: float, t_end: float, save: np.ndarray, hop: bool = Fa
               (1, 3, 5.0, 0.5, Sig(R3, (0.0, 0.0), (0.0, 0.1), OMEGA))]  # fmt: skip
     system = System(bodies, springs=[(1, 2, 15.0, 0.2)], dampers=[(1, 2, 0.05)], tilted=tilted,
                     externals=[(3, Sig(0.0, (0.05,), (0.0,), OMEGA))])  # fmt: skip
-    return run(system, t_end, save, hop=hop)
+    return run(system, t_end, save, hop=hop, **kw)
 
 
 def test_tilted_springs_between_any_bodies_against_the_reference():
@@ -208,6 +209,15 @@ def test_tilted_springs_lift_bodies_and_what_they_carry_as_the_reference_does():
         assert bal < 1e-9
         errs.append(max(err.values()))
     assert errs[0] < 2e-7 and errs[0] / errs[1] > 10, errs
+
+
+def test_the_reference_flags_a_run_it_cannot_finish():
+    """The independent reference stops after `max_segments` integration segments (between events): a
+    run cut short there is `"stalled"`, its rows end where it stopped, not `"ok"` with rows missing."""
+    save = np.linspace(0.0, 10.0, 41)
+    ref = _reference_topology(0.3, 10.0, save, hop=True, max_segments=5)
+    assert ref["status"] == "stalled" and len(ref["x"]) < len(save) and ref["valid_until"] < 10.0
+    assert _reference_topology(0.3, 1.0, save[:5], hop=True)["status"] == "ok"
 
 
 def test_a_steady_gait_of_a_mechanism_tied_to_the_wall_by_a_tilted_spring():
