@@ -941,6 +941,54 @@ MUTATIONS = [
         ("tests/test_continuation.py::test_the_sequence_code_sees_events_pass_each_other",),
     ),
     Mutation(
+        "mechanism_array_force_sign",
+        "the array layout of a mechanism pushes an internal force the wrong way: +f on its a, -f on its b",
+        "locomotion_jax/model/_mechanism_array.py",
+        (
+            (
+                "    for base, els, sign in ((0, springs, 1.0), (S, tilts, 1.0), (S + T, forces, -1.0)):\n",
+                "    for base, els, sign in ((0, springs, 1.0), (S, tilts, 1.0), (S + T, forces, 1.0)):\n",
+            ),
+        ),
+        ("tests/test_mechanism_array.py::test_array_mechanism_rates_equal_unrolled",),
+    ),
+    Mutation(
+        "mechanism_array_tilt_lifts_the_wrong_body",
+        "the array layout of a mechanism puts a tilted spring's vertical force on the wrong end's normal load",
+        "locomotion_jax/model/_mechanism_array.py",
+        (
+            (
+                "for end, sign in ((e.a, 1.0), (e.b, -1.0)) if end != WALL]",
+                "for end, sign in ((e.a, -1.0), (e.b, 1.0)) if end != WALL]",
+            ),
+        ),
+        ("tests/test_mechanism_array.py::test_array_mechanism_rates_equal_unrolled",),
+    ),
+    Mutation(
+        "mechanism_array_drops_wall_dampers",
+        "the array layout of a mechanism leaves out a damper to the wall (its ground damping)",
+        "locomotion_jax/model/_mechanism_array.py",
+        (
+            (
+                "            c = c.at[..., int(e.b if e.a == WALL else e.a)].add(e.c)\n",
+                "            c = c.at[..., int(e.b if e.a == WALL else e.a)].add(0 * e.c)\n",
+            ),
+        ),
+        ("tests/test_mechanism_array.py::test_a_long_mechanism_in_the_array_layout_against_the_reference",),
+    ),
+    Mutation(
+        "mechanism_layout_ignored",
+        "the engines run every mechanism unrolled, whatever its layout",
+        "locomotion_jax/model/_chain_array.py",
+        (
+            (
+                "    return mechanism.array_physics() if uses_array(mechanism, start) else mechanism.physics()",
+                "    return mechanism.physics()",
+            ),
+        ),
+        ("tests/test_mechanism_array.py::test_a_long_mechanism_in_the_array_layout_against_the_reference",),
+    ),
+    Mutation(
         "smoothed_ignores_layout",
         "the smoothed engine integrates every chain unrolled, whatever its layout",
         "locomotion_jax/dynamics/_smoothed_dynamics.py",

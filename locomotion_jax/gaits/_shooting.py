@@ -40,7 +40,7 @@ from ..dynamics._exact_dynamics import Exact
 from ..dynamics._runs import batch_rows, BatchRows, chain_initial_state, default_max_steps, MICRO_BATCH_CPU, STICK_TOL
 from ..model._bodies import Mechanism
 from ..model._chain import Chain
-from ..model._chain_array import array_physics, GAIT_ARRAY_FROM, uses_array
+from ..model._chain_array import GAIT_ARRAY_FROM, uses_array
 from ..model._physics import AbstractPhysics, contact_loads
 from ..run._batch import check_contact_start, prepare_chain, unflatten
 from ..run._resolution import guard_chain
@@ -263,9 +263,9 @@ def mechanism_physics(c) -> tuple[AbstractPhysics, Array]:
 
 
 def array_mechanism_physics(c) -> tuple[AbstractPhysics, Array]:
-    """[`mechanism_physics`][] in the array layout (`model._chain_array`): a chain's masses as
-    one entry over the bodies, so that the corrector's program does not grow with N."""
-    return array_physics(c), c.is_valid()
+    """[`mechanism_physics`][] in the array layout (`model._chain_array`, `model._mechanism_array`):
+    the bodies as one entry, so that the corrector's program does not grow with N."""
+    return c.array_physics(), c.is_valid()
 
 
 def physics_for(mechanism: Chain | Mechanism) -> Callable[[Any], tuple[AbstractPhysics, Array]]:

@@ -19,10 +19,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array, ValuesLike
+from ._chain_array import LAYOUTS
 from ._checks import broadcast_shape, is_concrete, real_array
 from ._elements import AbstractElement, Damper, signal_checks, signal_nodes, Spring, TiltedSpring, WALL
 from ._friction import AbstractFriction, Coulomb
 from ._mechanism import AbstractMechanism
+from ._mechanism_array import array_physics, array_unsupported, ArrayMechanismPhysics
 from ._mechanism_physics import ground_body, mechanism_physics, MechanismPhysics
 from ._physics import ZENO_SPEED
 from ._waveform import AbstractWaveform, Fourier, Spline
@@ -115,6 +117,12 @@ class Mechanism(AbstractMechanism):
       `1e-3`, in the units of SPEC §8: $\\sqrt{g\\,\\bar l}$; $\\ge 0$).
     - `check`: validate concrete values (default); with `check=False` an invalid
       configuration is flagged `Status.INVALID` in its own result instead.
+    - `layout`: how the engines (exact and smoothed) lay the bodies out, as a
+      [`Chain`][locomotion_jax.Chain]'s: `"unrolled"` (one scalar per body, every mechanism), `"array"`
+      (one array over the bodies and one over the elements of each kind, `model._mechanism_array`:
+      compile time independent of N, for mechanisms whose bodies all touch the ground under friction
+      laws of one class, driven by constants, sinusoids and Fourier series), or `"auto"` (the
+      default: the array layout where it applies from `ARRAY_FROM` (16) bodies on, on a CPU).
 
     **Raises:** `ValueError` naming the element and the body for bad structure (a body carried
     by itself or in a loop, a carried body with a friction law, a link to a missing body, an
@@ -144,6 +152,8 @@ class Mechanism(AbstractMechanism):
     friction: tuple[AbstractFriction | None, ...]
     links: tuple[AbstractElement, ...]
     carried_by: tuple[int | None, ...] = eqx.field(static=True)
+    # How the engines lay the bodies out (`_chain_array.engine_physics`).
+    layout: str = eqx.field(static=True, default="auto")
 
     def __init__(
         self,
@@ -160,6 +170,7 @@ class Mechanism(AbstractMechanism):
         restitution: ValuesLike = 0.0,
         zeno_speed: ValuesLike = ZENO_SPEED,
         check: bool = True,
+        layout: str = "auto",
     ):
         m = real_array("masses", masses)
         if m.ndim == 0 or m.shape[-1] < 1:
@@ -213,6 +224,13 @@ class Mechanism(AbstractMechanism):
                 raise ValueError(f"links[{k}] {el.describe()}: joins body {ends[0]} to itself.")
         self.links = links
         self._check_frequencies()
+        if layout not in LAYOUTS:
+            raise ValueError(f"Invalid parameter 'layout': expected one of {LAYOUTS}, got {layout!r}.")
+        self.layout = layout
+        why = array_unsupported(self) if layout == "array" else None
+        if why is not None:
+            raise ValueError(f"Invalid parameter 'layout': 'array' is not available for this mechanism: {why}; "
+                             "use layout='unrolled' or 'auto'.")  # fmt: skip
         _ = self.batch_shape  # fields whose batch axes do not broadcast are refused here, named
         if check and is_concrete(self):
             self.validate()
@@ -379,6 +397,14 @@ class Mechanism(AbstractMechanism):
     def physics(self) -> MechanismPhysics:
         """The mechanism's [`AbstractPhysics`][locomotion_jax.AbstractPhysics]: what the engine integrates it with."""
         return mechanism_physics(self)
+
+    def array_unsupported(self) -> str | None:
+        """Why the mechanism cannot run in the array layout (`None`: it can; `model._mechanism_array`)."""
+        return array_unsupported(self)
+
+    def array_physics(self) -> ArrayMechanismPhysics:
+        """The mechanism's physics in the array layout (`model._mechanism_array`)."""
+        return array_physics(self)
 
     @property
     def omega(self) -> Array:

@@ -11,7 +11,7 @@ import numpy as np
 
 from .._custom_types import Array, ValuesLike
 from ._actuator import AbstractActuator, RestLength
-from ._chain_array import array_unsupported, LAYOUTS
+from ._chain_array import array_physics, array_unsupported, ArrayChainPhysics, LAYOUTS
 from ._chain_physics import chain_physics, ChainPhysics
 from ._checks import broadcast_shape, real_array, related
 from ._friction import AbstractFriction, Coulomb
@@ -284,6 +284,14 @@ class Chain(AbstractMechanism):
         if self.signals is None:
             return P
         return eqx.tree_at(lambda P: P.waveforms, P, self.signals, is_leaf=lambda x: x is None)
+
+    def array_unsupported(self) -> str | None:
+        """Why the chain cannot run in the array layout (`None`: it can; `model._chain_array`)."""
+        return array_unsupported(self)
+
+    def array_physics(self) -> "ArrayChainPhysics":
+        """The chain's physics in the array layout (`model._chain_array`)."""
+        return array_physics(self)
 
     @property
     def total_mass(self) -> Array:

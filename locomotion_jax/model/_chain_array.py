@@ -50,8 +50,8 @@ def array_from() -> int:
 
 
 GAIT_ARRAY_FROM = 3
-"""`layout="auto"` finds the steady gaits of a chain of this many masses or more in the array
-layout. Their period maps run under forward-mode differentiation, whose unrolled program grows
+"""`layout="auto"` finds the steady gaits of a chain (or a `Mechanism`) of this many bodies or more in
+the array layout. Their period maps run under forward-mode differentiation, whose unrolled program grows
 much faster with N than `measure`'s (a 4-mass worm's first `steady_gait`: 313 s and 9.7 GB
 unrolled, 32 s and 1.7 GB in the array layout; benchmarks/NOTES.md "Steady gaits in the array
 layout")."""
@@ -326,21 +326,21 @@ def array_physics(C: Any) -> ArrayChainPhysics:
 
 def uses_array(mechanism: Any, start: int | None = None) -> bool:
     """Whether `measure` and `simulate` run a mechanism in the array layout: a
-    [`Chain`][locomotion_jax.Chain] with `layout="array"` (refused with a clear error where
-    [`array_unsupported`][] finds a reason), or `"auto"` from `start` masses on (default
-    [`array_from`][]`()`) where it finds none; any other mechanism, or `layout="unrolled"`: no.
-    Steady gaits pass `start=`[`GAIT_ARRAY_FROM`][]."""
+    [`Chain`][locomotion_jax.Chain] or a [`Mechanism`][locomotion_jax.Mechanism] with `layout="array"`
+    (refused with a clear error where its `array_unsupported()` finds a reason), or `"auto"` from
+    `start` bodies on (default [`array_from`][]`()`) where it finds none; any other mechanism, or
+    `layout="unrolled"`: no. Steady gaits pass `start=`[`GAIT_ARRAY_FROM`][]."""
     layout = getattr(mechanism, "layout", "unrolled")
     if layout == "unrolled":
         return False
-    why = array_unsupported(mechanism)
+    why = mechanism.array_unsupported()
     if layout == "array" and why is not None:
-        raise ValueError(f"A chain in layout='array': {why}; use layout='unrolled' or 'auto'.")
+        raise ValueError(f"A {mechanism.kind} in layout='array': {why}; use layout='unrolled' or 'auto'.")
     return layout == "array" or (why is None and mechanism.n_masses >= (array_from() if start is None else start))
 
 
 def engine_physics(mechanism: Any, start: int | None = None) -> AbstractPhysics:
     """The physics that `measure` and `simulate` (and, with `start=GAIT_ARRAY_FROM`, steady gaits)
-    integrate a mechanism with ([`uses_array`][]): a chain's in the array layout, else the
-    mechanism's own `physics()`."""
-    return array_physics(mechanism) if uses_array(mechanism, start) else mechanism.physics()
+    integrate a mechanism with ([`uses_array`][]): its `array_physics()` in the array layout, else
+    its own `physics()`."""
+    return mechanism.array_physics() if uses_array(mechanism, start) else mechanism.physics()

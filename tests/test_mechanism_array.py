@@ -1,0 +1,206 @@
+"""A `Mechanism` in the array layout (`model/_mechanism_array.py`: the bodies one entry, the elements
+arrays over the elements of each kind): its loads and their rates equal the unrolled physics' to
+rounding, its runs (exact and smoothed, strict and hopping) and steady gaits equal the unrolled ones,
+a long mechanism that `layout="auto"` lays out as arrays agrees with the independent reference
+(`tests/reference_mechanism.py`), a bad configuration in a batch is flagged alone, and a mechanism the
+layout does not serve is refused with the reason."""
+
+from typing import Any
+
+import jax.numpy as jnp
+import locomotion_jax as lj
+import numpy as np
+import pytest
+from locomotion_jax.model._chain_array import ARRAY_FROM, engine_physics, uses_array
+from locomotion_jax.model._mechanism_array import ArrayMechanismPhysics
+from locomotion_jax.model._physics import load_rates_at, load_second_at, loads_at
+
+
+pytestmark = pytest.mark.xdist_group("mechanism_array")
+
+OMEGA = 2.0
+X0 = [2.0, 3.4, 4.5, 5.6]
+
+
+def _wave(cos, sin, lbar):
+    return lj.Fourier(jnp.asarray(cos), jnp.asarray(sin), OMEGA, lbar)
+
+
+def _topology(layout: str, tilted: bool = True, k_tilt: float = 1.0, **kw) -> lj.Mechanism:
+    """Four bodies on anisotropic bristles (per-body coefficients): a spring to the wall driven by a
+    sinusoid in Fourier form, springs between neighbours and not (a constant, a `Sinusoid`, two
+    harmonics), a damper between bodies and one to the wall, an internal force, an external force,
+    and (`tilted`) tilted springs between bodies and to the wall."""
+    links = [lj.Spring(lj.WALL, 0, k=20.0, rest=_wave([0.0], [0.3], 2.0)), lj.Spring(0, 1, k=30.0, rest=1.5),
+             lj.Spring(0, 2, k=10.0, rest=lj.Sinusoid(0.1, OMEGA, 2.5)),
+             lj.Spring(2, 3, k=12.0, rest=_wave([0.05, 0.01], [0.1, -0.02], 1.0)),
+             lj.Damper(1, 2, c=0.05), lj.Damper(lj.WALL, 3, c=0.1), lj.Force(1, 3, _wave([0.05], [0.02], 0.1)),
+             lj.ExternalForce(3, _wave([0.05], [0.0], 0.02))]  # fmt: skip
+    if tilted:
+        links += [lj.TiltedSpring(1, 3, k=5.0 * k_tilt, d=0.5, rest=_wave([0.0, 0.0], [0.0, 0.1], 1.8)),
+                  lj.TiltedSpring(lj.WALL, 2, k=3.0 * k_tilt, d=0.3, rest=3.0)]  # fmt: skip
+    law = lj.AnisotropicCoulomb(jnp.array([0.6, 0.5, 0.55, 0.7]), 0.9, 0.45, 0.7)
+    return lj.Mechanism(masses=[1.0, 1.2, 0.5, 0.3], c=[0.02, 0.01, 0.0, 0.03], x0=X0, links=links, friction=law,
+                        layout=layout, restitution=[0.3, 0.0, 0.5, 0.1], **kw)  # fmt: skip
+
+
+@pytest.mark.parametrize("tilted", [False, True])
+@pytest.mark.parametrize("hop", [False, True])
+def test_array_mechanism_rates_equal_unrolled(tilted, hop):
+    """At a random state (positions, velocities, accelerations; under `contact="hop"` heights and their
+    rates), the loads, their first and second rates, the power and its rate, the energy, the dampers'
+    forces and power, the centre of mass, the fall in flight, the rest lengths and tensions of the
+    array physics equal the unrolled physics' to 1e-13 relative."""
+    rng = np.random.default_rng(1 + 2 * tilted + hop)
+    unrolled, array = _topology("unrolled", tilted).physics(), _topology("array", tilted).array_physics()
+    assert isinstance(array, ArrayMechanismPhysics) and array.anchored and unrolled.anchored
+    x = jnp.asarray(X0) + rng.normal(size=4) * 0.1
+    v, a = jnp.asarray(rng.normal(size=4)), jnp.asarray(rng.normal(size=4))
+    y, yd, ya = (jnp.asarray(np.abs(rng.normal(size=4))), jnp.asarray(rng.normal(size=4)),
+                 jnp.asarray(rng.normal(size=4))) if hop else (None, None, None)  # fmt: skip
+    out = []
+    for physics in (unrolled, array):
+        P: Any = physics
+        B: Any = lambda q: None if q is None else P.bodies(q)
+        dr = P.drive(jnp.cos(OMEGA * 0.7), jnp.sin(OMEGA * 0.7))
+        L = loads_at(P, dr, B(x), y=B(y))
+        R = load_rates_at(P, dr, L, B(v), yd=B(yd))
+        ddF, ddN = load_second_at(P, dr, L, R, B(v), B(a), yd=B(yd), ya=B(ya))
+        vf = P.velocity_forces(B(v))
+        assert vf is not None
+        out.append(dict(F=P.stacked(L.F), N=P.stacked(L.N), dF=P.stacked(R.dF), dN=P.stacked(R.dN),
+                        ddF=P.stacked(ddF), ddN=P.stacked(ddN), power=P.power(dr, L, B(v)),
+                        power_rate=P.power_rate(dr, L, R, B(v), B(a)), e=P.energy(L, B(v)), damper=P.stacked(vf),
+                        damper_power=P.velocity_power(B(v), B(a)), X=P.centre_of_mass(B(x)),
+                        fall=P.stacked(P.fall(L.N)), l0=P.stacked(dr.l0),
+                        tension=P.stacked(L.aux.tension)))  # fmt: skip
+    for key, want in out[0].items():
+        np.testing.assert_allclose(np.asarray(out[1][key]), np.asarray(want), rtol=1e-13, atol=1e-13, err_msg=key)
+    assert float(jnp.abs(out[0]["dN"]).max()) > (0.1 if tilted else -1)  # the tilted springs move the loads
+
+
+@pytest.mark.parametrize("contact", ["strict", "hop"])
+def test_array_mechanism_runs_equal_unrolled(contact):
+    """`simulate` of the topology in both layouts (exact engine, dt = 0.005, t = 0 ... 10): positions,
+    velocities, heights, energies, normal loads, rest lengths and tensions equal to 1e-10, and the same
+    events; under `contact="hop"` the bodies fly and land. The smoothed engine likewise (to 1e-8 at the
+    adaptive solver's rtol of 1e-10: rounding moves its accepted steps)."""
+    save = np.linspace(0.0, 10.0, 41)
+    k_tilt = 0.2 if contact == "strict" else 1.0  # under the strict reading, loads that stay positive
+    runs = [lj.simulate(_topology(layout, k_tilt=k_tilt), 10.0, save, contact=contact, dynamics=lj.Exact(dt=0.005))
+            for layout in ("unrolled", "array")]  # fmt: skip
+    assert int(runs[0].status) == int(runs[1].status) == lj.Status.OK
+    assert int(np.asarray(runs[0].n_switch)) == int(np.asarray(runs[1].n_switch)) > 5
+    fields = ["x", "v", "e_d", "w", "e", "N", "rest_length", "tension"] + (["y", "vy"] if contact == "hop" else [])
+    for name in fields:
+        np.testing.assert_allclose(np.asarray(getattr(runs[1], name)), np.asarray(getattr(runs[0], name)), rtol=0,
+                                   atol=1e-10, err_msg=name)  # fmt: skip
+    if contact == "hop":
+        assert int(np.asarray(runs[1].n_land)) == int(np.asarray(runs[0].n_land)) > 3
+        return
+    dyn = lj.Smoothed(1e-2, rtol=1e-10, atol=1e-12)
+    smooth = [lj.simulate(_topology(layout, k_tilt=k_tilt), 5.0, save[:21], dynamics=dyn)
+              for layout in ("unrolled", "array")]  # fmt: skip
+    assert int(smooth[1].status) == lj.Status.OK
+    np.testing.assert_allclose(np.asarray(smooth[1].x), np.asarray(smooth[0].x), rtol=0, atol=1e-8)
+
+
+def _pipe(n: int, **kw) -> lj.Mechanism:
+    """A worm of `n` segments in a pipe: neighbours joined by springs driven as a travelling wave,
+    every third segment to the one after next by a passive spring, the head tied to the pipe's end
+    (the wall) by a soft spring and a damper, a drag-like external force on the tail."""
+    links: list = []
+    for j in range(n - 1):
+        phase = 1.1 * j
+        links.append(lj.Spring(j, j + 1, k=40.0, rest=_wave([0.08 * np.sin(-phase)], [0.08 * np.cos(-phase)], 1.0)))
+    links += [lj.Spring(j, j + 2, k=5.0, rest=2.0) for j in range(0, n - 2, 3)]
+    links += [lj.Spring(lj.WALL, 0, k=0.5, rest=1.0), lj.Damper(lj.WALL, 0, c=0.05),
+              lj.ExternalForce(n - 1, _wave([0.02], [0.0], -0.05))]  # fmt: skip
+    law = lj.AnisotropicCoulomb(0.7, 0.9, 0.5, 0.7)
+    return lj.Mechanism(masses=np.linspace(0.8, 1.2, n), c=0.02, x0=1.0 + np.arange(n), links=links, friction=law, **kw)
+
+
+def test_a_long_mechanism_in_the_array_layout_against_the_reference():
+    """A worm of `ARRAY_FROM` (16) segments in a pipe (`_pipe`), which `layout="auto"` runs in the
+    array layout, against the independent reference over t = 0 ... 6: positions and velocities within
+    1e-6 at dt = 1/200 (the engine's truncation error), e_d and w within 1e-6, the same worm
+    unrolled within 1e-10; w = e_d + Delta e to 1e-8."""
+    from reference_mechanism import Body, run, Sig, System
+
+    n = ARRAY_FROM
+    worm = _pipe(n)
+    assert uses_array(worm) and isinstance(engine_physics(worm), ArrayMechanismPhysics)
+    assert not uses_array(_pipe(n - 1))
+    save = np.linspace(0.0, 6.0, 13)
+    tr = lj.simulate(worm, 6.0, save, dynamics=lj.Exact(dt=1 / 200))
+    assert int(tr.status) == lj.Status.OK and int(np.asarray(tr.n_switch)) > 20
+    m = np.linspace(0.8, 1.2, n)
+    bodies = [Body(float(m[i]), (0.7, 0.9, 0.5, 0.7), c=0.02, x0=1.0 + i) for i in range(n)]
+    springs = [(j, j + 1, 40.0, Sig(1.0, (0.08 * np.sin(-1.1 * j),), (0.08 * np.cos(-1.1 * j),), OMEGA))
+               for j in range(n - 1)]  # fmt: skip
+    springs += [(j, j + 2, 5.0, 2.0) for j in range(0, n - 2, 3)] + [(-1, 0, 0.5, 1.0)]
+    system = System(bodies, springs=springs, dampers=[(-1, 0, 0.05)],
+                    externals=[(n - 1, Sig(-0.05, (0.02,), (0.0,), OMEGA))])  # fmt: skip
+    ref = run(system, 6.0, save)
+    assert ref["status"] == "ok"
+    err = {k: float(np.abs(np.asarray(getattr(tr, k)) - ref[r]).max()) for k, r in
+           (("x", "x"), ("v", "v"), ("e_d", "ed"), ("w", "w"))}  # fmt: skip
+    print("against the reference:", err)
+    assert max(err.values()) < 1e-6, err
+    assert float(np.abs(np.asarray(tr.w - tr.e_d - (tr.e - tr.e[0]))).max()) < 1e-8
+    unrolled = lj.simulate(_pipe(n, layout="unrolled"), 6.0, save, dynamics=lj.Exact(dt=1 / 200))
+    np.testing.assert_allclose(np.asarray(tr.x), np.asarray(unrolled.x), rtol=0, atol=1e-10)
+
+
+def test_array_mechanism_steady_gait_equals_unrolled():
+    """The steady gait of the anchored topology (strict contact) in the array layout: the unrolled
+    layout's section state to 1e-8, the same period and switch count, stable in both, the same
+    dissipation, work and least normal load per period (1e-8) and Floquet multipliers (1e-7)."""
+    gaits = [lj.steady_gait(_topology(layout, k_tilt=0.2), periods=(1, 2), transient=20,
+                            dynamics=lj.Exact(dt=0.01)) for layout in ("unrolled", "array")]  # fmt: skip
+    for g in gaits:
+        assert int(g.status) == lj.GaitStatus.CONVERGED and bool(g.stable)
+    assert int(gaits[0].k) == int(gaits[1].k) and int(gaits[0].n_switch) == int(gaits[1].n_switch)
+    np.testing.assert_allclose(np.asarray(gaits[1].state), np.asarray(gaits[0].state), rtol=0, atol=1e-8)
+    for name in ("e_d", "work", "min_normal"):  # anchored: it dissipates per period but does not travel
+        np.testing.assert_allclose(float(getattr(gaits[1], name)), float(getattr(gaits[0], name)), rtol=1e-8)
+    np.testing.assert_allclose(np.abs(np.asarray(gaits[1].multipliers)), np.abs(np.asarray(gaits[0].multipliers)),
+                               rtol=0, atol=1e-7)  # fmt: skip
+
+
+def test_array_mechanism_bad_configuration_flagged_others_unchanged():
+    """In a batch of three (`check=False`), the one with a negative mass is flagged `INVALID` in the
+    array layout and the two others are their own single runs, to the last bit."""
+    masses = np.array([[1.0, 1.2, 0.5, 0.3], [1.0, -1.2, 0.5, 0.3], [1.1, 1.0, 0.6, 0.3]])
+    batch = _topology("array", k_tilt=0.2, check=False)
+    batch = lj.Mechanism(masses=masses, c=batch.c, x0=X0, links=batch.links, friction=batch.friction[0],
+                         layout="array", check=False)  # fmt: skip
+    save = np.linspace(0.0, 4.0, 9)
+    out = lj.simulate(batch, 4.0, save, dynamics=lj.Exact(dt=0.01))
+    status = np.asarray(out.status)
+    assert status[1] == lj.Status.INVALID and status[0] == status[2] == lj.Status.OK
+    for i in (0, 2):
+        one = lj.simulate(batch[i], 4.0, save, dynamics=lj.Exact(dt=0.01))
+        np.testing.assert_array_equal(np.asarray(out.x)[i], np.asarray(one.x))
+
+
+def test_array_layout_refused_with_the_reason():
+    """`layout="array"` is refused, with the reason, for a carried body, friction laws of different
+    classes and a spline-driven element; an unknown layout is named; `"auto"` runs them unrolled."""
+    law = lj.Coulomb(0.7, 0.5)
+    capsule: dict[str, Any] = dict(masses=[1.0, 0.5], friction=[law, None], carried_by=[None, 0],
+                                   links=[lj.Spring(0, 1, k=10.0)])  # fmt: skip
+    with pytest.raises(ValueError, match=r"layout.*no friction law \(carried or free\)"):
+        lj.Mechanism(**capsule, layout="array")
+    mixed: dict[str, Any] = dict(masses=[1.0, 0.5], friction=[law, lj.AnisotropicCoulomb(0.6, 0.9, 0.4, 0.7)],
+                 links=[lj.Spring(0, 1, k=10.0, rest=1.0)], x0=[0.0, 1.0])  # fmt: skip
+    with pytest.raises(ValueError, match=r"layout.*friction laws differ in class"):
+        lj.Mechanism(**mixed, layout="array")
+    spline = lj.Spline(jnp.asarray([0.0, 0.1, 0.0, -0.1]), OMEGA, 1.0)
+    with pytest.raises(ValueError, match=r"layout.*Spring\(0, 1\) is driven by a Spline"):
+        lj.Mechanism(masses=[1.0, 1.0], friction=law, x0=[0.0, 1.0], links=[lj.Spring(0, 1, k=5.0, rest=spline)],
+                     layout="array")  # fmt: skip
+    with pytest.raises(ValueError, match=r"Invalid parameter 'layout'.*'sparse'"):
+        lj.Mechanism(**capsule, layout="sparse")
+    for kw in (capsule, mixed):
+        assert not uses_array(lj.Mechanism(**kw))
