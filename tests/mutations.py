@@ -977,6 +977,18 @@ MUTATIONS = [
         ("tests/test_mechanism_array.py::test_a_long_mechanism_in_the_array_layout_against_the_reference",),
     ),
     Mutation(
+        "mechanism_array_spline_means_lost",
+        "the array layout of a mechanism drops its splines' mean values (lbar): the springs' rest lengths about 0",
+        "locomotion_jax/model/_mechanism_array.py",
+        (
+            (
+                "stack([s.lbar if isinstance(s, Spline) else q[0] for s, q in zip(signals, bank)])",
+                "stack([q[0] for s, q in zip(signals, bank)])",
+            ),
+        ),
+        ("tests/test_mechanism_array.py::test_array_mechanism_rates_equal_unrolled",),
+    ),
+    Mutation(
         "mechanism_layout_ignored",
         "the engines run every mechanism unrolled, whatever its layout",
         "locomotion_jax/model/_chain_array.py",

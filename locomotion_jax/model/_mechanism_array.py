@@ -15,9 +15,11 @@ The same forces as [`MechanismPhysics`][locomotion_jax.model._mechanism_physics.
   normal load $N_i = m_i - $ the tilted springs' vertical forces on it likewise.
 
 It serves mechanisms whose bodies all touch the ground under friction laws of one class (with
-per-body coefficients), driven by constants, [`Sinusoid`][locomotion_jax.Sinusoid] and
-[`Fourier`][locomotion_jax.Fourier] signals ([`array_unsupported`][] says why another cannot); the
-unrolled physics serves every mechanism. Sums over bodies and elements are summed in another order
+per-body coefficients), driven by constants with [`Sinusoid`][locomotion_jax.Sinusoid] and
+[`Fourier`][locomotion_jax.Fourier] signals, or constants with [`Spline`][locomotion_jax.Spline]s of one
+number of control values (a bank of splines, a constant's control values zero; the mechanism
+optimiser's spline family) ([`array_unsupported`][] says why another cannot); the unrolled physics
+serves every mechanism. Sums over bodies and elements are summed in another order
 than the unrolled physics', so the two agree to rounding.
 """
 
@@ -34,7 +36,7 @@ from ._elements import Damper, ExternalForce, Force, Spring, TiltedSpring, WALL
 from ._friction import AbstractFriction
 from ._mechanism_physics import SpringState, TiltGeometry, TiltRates
 from ._physics import AbstractPhysics, LoadRates, Loads, Scalars
-from ._waveform import AbstractWaveform, Fourier, Sinusoid
+from ._waveform import AbstractWaveform, Fourier, Sinusoid, Spline
 
 
 class Table(NamedTuple):
@@ -120,6 +122,9 @@ class ArrayMechanismPhysics(AbstractPhysics):
     sin: Array
     nw: Array
     nw2: Array
+    # The bank as one `Spline` over the signals (control values signals by knots), in place of the
+    # Fourier coefficients `cos`, `sin`; `None`: the coefficients.
+    splines: Spline | None
     n: int = eqx.field(static=True)
     kinds: tuple[int, int, int, int] = eqx.field(static=True)  # signals per kind, in the bank's order
     spring_ends: tuple[tuple[int, ...], tuple[int, ...]] = eqx.field(static=True)
@@ -153,7 +158,9 @@ class ArrayMechanismPhysics(AbstractPhysics):
 
     def drive(self, c1: Array, s1: Array) -> Drive:
         """Every signal of the bank with its first two rates (the harmonics by the angle-addition
-        recurrence), split by kind."""
+        recurrence, or the splines'), split by kind."""
+        if self.splines is not None:
+            return self._split(*self.splines.at_phase(c1, s1))
         A, B = self.cos, self.sin
         val, rate, acc = self.lbar + 0 * c1, jnp.zeros_like(self.lbar), jnp.zeros_like(self.lbar)
         cn, sn = c1, s1
@@ -164,6 +171,9 @@ class ArrayMechanismPhysics(AbstractPhysics):
             val = (val + A[..., h] * cn) + B[..., h] * sn  # the unrolled `Fourier.at_phase`'s order
             rate = rate + self.nw[..., h] * (B[..., h] * cn - A[..., h] * sn)
             acc = acc - self.nw2[..., h] * vn
+        return self._split(val, rate, acc)
+
+    def _split(self, val: Array, rate: Array, acc: Array) -> Drive:
         S, T, F, _ = self.kinds
         cut = lambda q: (q[..., :S], q[..., S : S + T], q[..., S + T : S + T + F], q[..., S + T + F :])
         (l0, r, f, g), (dl0, dr, df, dg), (ddl0, ddr, ddf, ddg) = cut(val), cut(rate), cut(acc)
@@ -300,19 +310,40 @@ def _fourier(s: Any, like: Array) -> tuple[Array, Array, Array]:
     return jnp.asarray(s, like.dtype), none, none
 
 
+def _splined(M: Any) -> bool:
+    """Whether the mechanism's waveforms are splines (then all of them are, `array_unsupported`)."""
+    return any(isinstance(w, Spline) for w in M.waveforms())
+
+
 def array_unsupported(M: Any) -> str | None:
     """Why a mechanism cannot run in the array layout (`None`: it can): a body without ground contact
-    (carried or free), friction laws of different classes, or a signal other than a constant, a
-    `Sinusoid` or a `Fourier` series."""
+    (carried or free), friction laws of different classes, or signals other than constants with
+    `Sinusoid`s and `Fourier` series, or constants with `Spline`s of one number of control values."""
     if any(law is None for law in M.friction):
         return "a body has no friction law (carried or free)"
     if len({jax.tree_util.tree_structure(law) for law in M.friction}) > 1:
         return "its bodies' friction laws differ in class"
+    waves = M.waveforms()
+    if _splined(M):
+        if not all(isinstance(w, Spline) for w in waves) or len({w.knots for w in waves}) > 1:
+            return "its waveforms mix Splines with other waveforms or Splines of other numbers of control values"
+        return None
     for el in M.links:
         for s in el.signals():
             if isinstance(s, AbstractWaveform) and not isinstance(s, (Fourier, Sinusoid)):
                 return f"{el.describe()} is driven by a {type(s).__name__}, not a Sinusoid or a Fourier series"
     return None
+
+
+def _spline_bank(signals: list[Any], lbar: Array, omega: Array, batch: tuple[int, ...]) -> Spline:
+    """The signals as one `Spline` over them: a spline's control values, a constant's zeros (its value
+    is its `lbar`), `batch + (signals, M)`; base frequencies and means `batch + (signals,)`."""
+    knots = next(s.knots for s in signals if isinstance(s, Spline))
+    rows = [s.control if isinstance(s, Spline) else jnp.zeros((knots,), lbar.dtype) for s in signals]
+    control = jnp.stack([jnp.broadcast_to(q, batch + (knots,)) for q in rows], -2).astype(lbar.dtype)
+    like = next(s for s in signals if isinstance(s, Spline))
+    omegas = jnp.broadcast_to(omega[..., None], lbar.shape)
+    return eqx.tree_at(lambda w: (w.control, w.omega, w.lbar), like, (control, omegas, lbar))
 
 
 def array_physics(M: Any) -> ArrayMechanismPhysics:
@@ -333,7 +364,8 @@ def array_physics(M: Any) -> ArrayMechanismPhysics:
     stack = lambda xs: jnp.stack([jnp.broadcast_to(q, batch) for q in xs], -1) if xs else jnp.zeros(batch + (0,))
     # The bank of signals, in the order springs, tilted springs, forces, externals.
     signals = [e.rest for e in springs] + [e.rest for e in tilts] + [e.waveform for e in forces + externals]
-    bank = [_fourier(s, M.m) for s in signals]
+    splined = _splined(M)
+    bank = [_fourier(0.0 if isinstance(s, Spline) else s, M.m) for s in signals]
     H = max([q[1].shape[-1] for q in bank] + [0])
     pad = lambda q: jnp.broadcast_to(jnp.pad(q, [(0, 0)] * (q.ndim - 1) + [(0, H - q.shape[-1])]), batch + (H,))
     cos = jnp.stack([pad(c) for _, c, _ in bank], -2) if bank else jnp.zeros(batch + (0, H))
@@ -360,6 +392,7 @@ def array_physics(M: Any) -> ArrayMechanismPhysics:
     f, b = law.static_limits()
     d = stack([e.d for e in tilts])
     dt = one.dtype
+    means = stack([s.lbar if isinstance(s, Spline) else q[0] for s, q in zip(signals, bank)]).astype(dt)
     return ArrayMechanismPhysics(
         m=(M.m,), im=(1 / M.m,), c=(c,), friction=(law,), mu_f=(f,), mu_b=(None if b is f else b,), omega=omega,
         one=one, x0=M.x0, v0=M.v0, y0=M.y0, w0=M.w0, restitution=M.restitution,
@@ -367,7 +400,8 @@ def array_physics(M: Any) -> ArrayMechanismPhysics:
         k=stack([e.k for e in springs]).astype(dt), tilt=TiltGeometry((stack([e.k for e in tilts]).astype(dt),),
                                                                        (d.astype(dt),), ((d * d).astype(dt),)),
         damping=stack([e.c for e in dampers]).astype(dt),
-        lbar=stack([q[0] for q in bank]).astype(dt), cos=cos.astype(dt), sin=sin.astype(dt),
+        lbar=means, cos=cos.astype(dt), sin=sin.astype(dt),
+        splines=_spline_bank(signals, means, omega, batch) if splined else None,
         nw=(nw + 0 * cos).astype(dt), nw2=(nw * nw + 0 * cos).astype(dt), n=n,
         kinds=(S, T, F, len(externals)), spring_ends=ends(springs), tilt_ends=ends(tilts), force_ends=ends(forces),
         external_body=tuple(e.i for e in externals), damper_ends=ends(dampers),
