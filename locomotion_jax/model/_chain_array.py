@@ -28,7 +28,7 @@ from .._custom_types import Array
 from ._actuator import AbstractActuator
 from ._chain_physics import Drive, SpringRates, Springs
 from ._friction import AbstractFriction
-from ._physics import AbstractPhysics, LoadRates, Loads, Scalars, ZENO_SPEED
+from ._physics import AbstractArrayPhysics, AbstractPhysics, LoadRates, Loads, Scalars, ZENO_SPEED
 from ._waveform import Spline
 
 
@@ -59,7 +59,7 @@ layout")."""
 LAYOUTS = ("auto", "unrolled", "array")
 
 
-class ArrayChainPhysics(AbstractPhysics):
+class ArrayChainPhysics(AbstractArrayPhysics):
     """The physics of one chain in the array layout (module docstring). The interface's per-body
     tuples (`m`, `im`, `c`, `mu_f`, `mu_b`, `friction`) have one entry each, over all masses; the
     springs' fields are arrays over the springs (`cos`, `sin`: springs by harmonics). Drives,
@@ -86,20 +86,6 @@ class ArrayChainPhysics(AbstractPhysics):
     # The springs' periodic splines as one `Spline` over the springs (control values springs by
     # knots), in place of the Fourier coefficients `cos`, `sin`; `None`: the coefficients.
     splines: Spline | None = None
-
-    @property
-    def n_bodies(self) -> int:
-        return self.m[0].shape[-1]
-
-    @property
-    def lane_width(self) -> int:
-        return self.n_bodies
-
-    def bodies(self, x: Array) -> Scalars:
-        return (x,)
-
-    def stacked(self, xs: Scalars) -> Array:
-        return jnp.concatenate(xs, -1)
 
     def drive(self, c1: Array, s1: Array) -> Drive:
         """Each spring's Fourier signal with its first two rates (the harmonics by the angle-addition

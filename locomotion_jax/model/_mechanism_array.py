@@ -35,7 +35,7 @@ from ._chain_physics import spring_rates, spring_second, Springs, tilted
 from ._elements import Damper, ExternalForce, Force, Spring, TiltedSpring, WALL
 from ._friction import AbstractFriction
 from ._mechanism_physics import SpringState, TiltGeometry, TiltRates
-from ._physics import AbstractPhysics, LoadRates, Loads, Scalars
+from ._physics import AbstractArrayPhysics, LoadRates, Loads, Scalars
 from ._waveform import AbstractWaveform, Fourier, Sinusoid, Spline
 
 
@@ -94,7 +94,7 @@ class Drive(NamedTuple):
     ddg: Array
 
 
-class ArrayMechanismPhysics(AbstractPhysics):
+class ArrayMechanismPhysics(AbstractArrayPhysics):
     """The physics of one mechanism in the array layout (module docstring). The interface's per-body
     tuples have one entry each, over all bodies; the elements' fields are arrays over the elements of
     each kind; their ends and the bodies' [`Table`][]s are static."""
@@ -125,7 +125,6 @@ class ArrayMechanismPhysics(AbstractPhysics):
     # The bank as one `Spline` over the signals (control values signals by knots), in place of the
     # Fourier coefficients `cos`, `sin`; `None`: the coefficients.
     splines: Spline | None
-    n: int = eqx.field(static=True)
     kinds: tuple[int, int, int, int] = eqx.field(static=True)  # signals per kind, in the bank's order
     spring_ends: tuple[tuple[int, ...], tuple[int, ...]] = eqx.field(static=True)
     tilt_ends: tuple[tuple[int, ...], tuple[int, ...]] = eqx.field(static=True)
@@ -138,23 +137,9 @@ class ArrayMechanismPhysics(AbstractPhysics):
     anchor: bool = eqx.field(static=True)
 
     @property
-    def n_bodies(self) -> int:
-        return self.n
-
-    @property
-    def lane_width(self) -> int:
-        return self.n
-
-    @property
     def anchored(self) -> bool:
         """Whether a spring, linear or tilted, ties a body to the wall."""
         return self.anchor
-
-    def bodies(self, x: Array) -> Scalars:
-        return (x,)
-
-    def stacked(self, xs: Scalars) -> Array:
-        return jnp.concatenate(xs, -1)
 
     def drive(self, c1: Array, s1: Array) -> Drive:
         """Every signal of the bank with its first two rates (the harmonics by the angle-addition
@@ -402,7 +387,7 @@ def array_physics(M: Any) -> ArrayMechanismPhysics:
         damping=stack([e.c for e in dampers]).astype(dt),
         lbar=means, cos=cos.astype(dt), sin=sin.astype(dt),
         splines=_spline_bank(signals, means, omega, batch) if splined else None,
-        nw=(nw + 0 * cos).astype(dt), nw2=(nw * nw + 0 * cos).astype(dt), n=n,
+        nw=(nw + 0 * cos).astype(dt), nw2=(nw * nw + 0 * cos).astype(dt),
         kinds=(S, T, F, len(externals)), spring_ends=ends(springs), tilt_ends=ends(tilts), force_ends=ends(forces),
         external_body=tuple(e.i for e in externals), damper_ends=ends(dampers),
         horizontal=_table(n, S + T + F + len(externals), terms), vertical=_table(n, T, lift),

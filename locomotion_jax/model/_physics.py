@@ -224,6 +224,26 @@ class AbstractPhysics(eqx.Module):
         return ()
 
 
+class AbstractArrayPhysics(AbstractPhysics):
+    """A physics in the array layout: one entry holding every body (shape `(N,)` per configuration)
+    in each per-body tuple, whose reductions over bodies the engines do within the entry (a chain's,
+    `model._chain_array`; a mechanism's, `model._mechanism_array`)."""
+
+    @property
+    def n_bodies(self) -> int:
+        return self.m[0].shape[-1]
+
+    @property
+    def lane_width(self) -> int:
+        return self.n_bodies
+
+    def bodies(self, x: Array) -> Scalars:
+        return (x,)
+
+    def stacked(self, xs: Scalars) -> Array:
+        return jnp.concatenate(xs, -1)
+
+
 def contact_loads(P: AbstractPhysics, N: tuple[Any, ...]) -> tuple[Any, ...]:
     """The entries of the normal loads `N` (or of a quantity over them) that are ground reactions
     ([`AbstractPhysics.in_contact`][]); empty where no body touches the ground."""
