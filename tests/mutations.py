@@ -965,15 +965,10 @@ MUTATIONS = [
         ("tests/test_mechanism_array.py::test_array_mechanism_rates_equal_unrolled",),
     ),
     Mutation(
-        "mechanism_array_drops_wall_dampers",
-        "the array layout of a mechanism leaves out a damper to the wall (its ground damping)",
-        "locomotion_jax/model/_mechanism_array.py",
-        (
-            (
-                "            c = c.at[..., int(e.b if e.a == WALL else e.a)].add(e.c)\n",
-                "            c = c.at[..., int(e.b if e.a == WALL else e.a)].add(0 * e.c)\n",
-            ),
-        ),
+        "mechanism_wall_dampers_dropped",
+        "a mechanism leaves out a damper to the wall (its ground damping), in either layout",
+        "locomotion_jax/model/_mechanism_physics.py",
+        (("            c[i] = c[i] + el.c\n", "            c[i] = c[i] + 0 * el.c\n"),),
         ("tests/test_mechanism_array.py::test_a_long_mechanism_in_the_array_layout_against_the_reference",),
     ),
     Mutation(
@@ -982,8 +977,8 @@ MUTATIONS = [
         "locomotion_jax/model/_mechanism_array.py",
         (
             (
-                "stack([s.lbar if isinstance(s, Spline) else q[0] for s, q in zip(signals, bank)])",
-                "stack([q[0] for s, q in zip(signals, bank)])",
+                "    mean = s.lbar if isinstance(s, Spline) else jnp.asarray(s, like.dtype)\n",
+                "    mean = 0 * s.lbar if isinstance(s, Spline) else jnp.asarray(s, like.dtype)\n",
             ),
         ),
         ("tests/test_mechanism_array.py::test_array_mechanism_rates_equal_unrolled",),

@@ -34,7 +34,7 @@ from .._custom_types import Array
 from ._chain_physics import spring_rates, spring_second, Springs, tilted
 from ._elements import Damper, ExternalForce, Force, Spring, TiltedSpring, WALL
 from ._friction import AbstractFriction
-from ._mechanism_physics import SpringState, TiltGeometry, TiltRates
+from ._mechanism_physics import ground_damping, SpringState, TiltGeometry, TiltRates
 from ._physics import AbstractArrayPhysics, LoadRates, Loads, Scalars
 from ._waveform import AbstractWaveform, Fourier, Sinusoid, Spline
 
@@ -286,13 +286,15 @@ class ArrayMechanismPhysics(AbstractArrayPhysics):
 
 
 def _fourier(s: Any, like: Array) -> tuple[Array, Array, Array]:
-    """A signal's `(lbar, cos, sin)`: a constant's value and no harmonics, a sinusoid's one."""
+    """A signal's `(lbar, cos, sin)`: a constant's value and no harmonics, a sinusoid's one, a spline's
+    mean and no harmonics (its shape is in the bank of splines, `_spline_bank`)."""
     if isinstance(s, Fourier):
         return s.lbar, s.cos, s.sin
     if isinstance(s, Sinusoid):
         return s.lbar, jnp.zeros_like(s.a)[..., None], s.a[..., None]
-    none = jnp.zeros(jnp.shape(s) + (0,), like.dtype)
-    return jnp.asarray(s, like.dtype), none, none
+    mean = s.lbar if isinstance(s, Spline) else jnp.asarray(s, like.dtype)
+    none = jnp.zeros(jnp.shape(mean) + (0,), like.dtype)
+    return mean, none, none
 
 
 def _splined(M: Any) -> bool:
@@ -350,7 +352,7 @@ def array_physics(M: Any) -> ArrayMechanismPhysics:
     # The bank of signals, in the order springs, tilted springs, forces, externals.
     signals = [e.rest for e in springs] + [e.rest for e in tilts] + [e.waveform for e in forces + externals]
     splined = _splined(M)
-    bank = [_fourier(0.0 if isinstance(s, Spline) else s, M.m) for s in signals]
+    bank = [_fourier(s, M.m) for s in signals]
     H = max([q[1].shape[-1] for q in bank] + [0])
     pad = lambda q: jnp.broadcast_to(jnp.pad(q, [(0, 0)] * (q.ndim - 1) + [(0, H - q.shape[-1])]), batch + (H,))
     cos = jnp.stack([pad(c) for _, c, _ in bank], -2) if bank else jnp.zeros(batch + (0, H))
@@ -369,15 +371,12 @@ def array_physics(M: Any) -> ArrayMechanismPhysics:
     terms += [(e.i, S + T + F + j, 1.0) for j, e in enumerate(externals)]
     lift = [(int(end), j, sign) for j, e in enumerate(tilts) for end, sign in ((e.a, 1.0), (e.b, -1.0)) if end != WALL]
     damp = [(int(end), j, sign) for j, e in enumerate(dampers) for end, sign in ((e.a, 1.0), (e.b, -1.0))]
-    c = M.c
-    for e in links:  # a damper to a wall is ground damping on its body
-        if isinstance(e, Damper) and WALL in (e.a, e.b):
-            c = c.at[..., int(e.b if e.a == WALL else e.a)].add(e.c)
+    c = jnp.stack(ground_damping(M), -1)
     law = jax.tree_util.tree_map(lambda *xs: jnp.stack([jnp.broadcast_to(q, batch) for q in xs], -1), *M.friction)
     f, b = law.static_limits()
     d = stack([e.d for e in tilts])
     dt = one.dtype
-    means = stack([s.lbar if isinstance(s, Spline) else q[0] for s, q in zip(signals, bank)]).astype(dt)
+    means = stack([q[0] for q in bank]).astype(dt)
     return ArrayMechanismPhysics(
         m=(M.m,), im=(1 / M.m,), c=(c,), friction=(law,), mu_f=(f,), mu_b=(None if b is f else b,), omega=omega,
         one=one, x0=M.x0, v0=M.v0, y0=M.y0, w0=M.w0, restitution=M.restitution,
@@ -387,7 +386,7 @@ def array_physics(M: Any) -> ArrayMechanismPhysics:
         damping=stack([e.c for e in dampers]).astype(dt),
         lbar=means, cos=cos.astype(dt), sin=sin.astype(dt),
         splines=_spline_bank(signals, means, omega, batch) if splined else None,
-        nw=(nw + 0 * cos).astype(dt), nw2=(nw * nw + 0 * cos).astype(dt),
+        nw=jnp.broadcast_to(nw, cos.shape).astype(dt), nw2=jnp.broadcast_to(nw * nw, cos.shape).astype(dt),
         kinds=(S, T, F, len(externals)), spring_ends=ends(springs), tilt_ends=ends(tilts), force_ends=ends(forces),
         external_body=tuple(e.i for e in externals), damper_ends=ends(dampers),
         horizontal=_table(n, S + T + F + len(externals), terms), vertical=_table(n, T, lift),

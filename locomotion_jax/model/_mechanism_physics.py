@@ -365,6 +365,17 @@ def ground_body(carried_by: tuple[int | None, ...], i: int) -> int:
     return i
 
 
+def ground_damping(M: Any) -> list[Array]:
+    """Per body, its ground damping $c_i$ plus that of the dampers joining it to a wall (a damper
+    between two bodies is `velocity_forces`')."""
+    c = [M.c[..., i] for i in range(M.m.shape[-1])]
+    for el in M.links:
+        if isinstance(el, Damper) and WALL in (el.a, el.b):
+            i = int(el.b if el.a == WALL else el.a)
+            c[i] = c[i] + el.c
+    return c
+
+
 def mechanism_physics(M: Any) -> MechanismPhysics:
     """The physics of a [`Mechanism`][locomotion_jax.Mechanism] (one configuration or a flat batch)."""
     n = M.m.shape[-1]
@@ -377,13 +388,7 @@ def mechanism_physics(M: Any) -> MechanismPhysics:
             g = ground_body(M.carried_by, i)
             if contact[g]:
                 normal[g] = normal[g] + m[i]
-    c = [M.c[..., i] for i in range(n)]
-    for el in M.links:  # a damper to a wall is ground damping on its body
-        if isinstance(el, Damper):
-            if WALL not in (el.a, el.b):
-                continue  # between two bodies: `velocity_forces`
-            i = int(el.b if el.a == WALL else el.a)
-            c[i] = c[i] + el.c
+    c = ground_damping(M)
     friction = tuple(law if law is not None else _NoContact(one) for law in M.friction)
     limits = [law.static_limits() for law in friction]
     limits = [(f, None if b is f else b) for f, b in limits]
