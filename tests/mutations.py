@@ -747,8 +747,8 @@ MUTATIONS = [
         "locomotion_jax/gaits/_shooting.py",
         (
             (
-                "for q in contact_loads(P, tuple(zip(*info.normal)))]",
-                "for q in zip(*info.normal)]",
+                "low = num.least([inf, *contact_loads(P, lows, inf)])",
+                "low = num.least([inf, *lows])",
             ),
         ),
         ("tests/test_gait.py::test_capsule_gait_is_a_fixed_point_of_a_direct_simulation",),
@@ -958,8 +958,8 @@ MUTATIONS = [
         "locomotion_jax/model/_mechanism_array.py",
         (
             (
-                "for end, sign in ((e.a, 1.0), (e.b, -1.0)) if end != WALL]",
-                "for end, sign in ((e.a, -1.0), (e.b, 1.0)) if end != WALL]",
+                "for end, sign in ((e.a, 1.0), (e.b, -1.0))\n            if end != WALL",
+                "for end, sign in ((e.a, -1.0), (e.b, 1.0))\n            if end != WALL",
             ),
         ),
         ("tests/test_mechanism_array.py::test_array_mechanism_rates_equal_unrolled",),
@@ -1272,6 +1272,51 @@ MUTATIONS = [
         "locomotion_jax/optimisation/_descent.py",
         (("            d = free + HA @ lam_a\n", "            d = free\n"),),
         ("tests/test_descent.py",),
+    ),
+    Mutation(
+        "mechanism_array_carried_weight_lost",
+        "in the array layout a carried body's weight loads itself, not its carrier",
+        "locomotion_jax/model/_mechanism_array.py",
+        (("normal=M.m if plain else jnp.stack(normal_loads(M), -1)", "normal=M.m"),),
+        ("tests/test_mechanism_array.py::test_array_capsule_rates_equal_unrolled",),
+    ),
+    Mutation(
+        "mechanism_array_carried_lift_on_itself",
+        "in the array layout a tilted spring lifts a carried body's own load, not its carrier's",
+        "locomotion_jax/model/_mechanism_array.py",
+        (("lift = [(ground[int(end)], j, sign)", "lift = [(int(end), j, sign)"),),
+        ("tests/test_mechanism_array.py::test_array_capsule_rates_equal_unrolled",),
+    ),
+    Mutation(
+        "mechanism_array_carried_body_rides_alone",
+        "in the array layout a carried body keeps its own height and flies alone instead of riding in its carrier",
+        "locomotion_jax/model/_mechanism_array.py",
+        (("        return (q[0][..., np.asarray(self.ground, np.int32)],)\n", "        return q\n"),),
+        (
+            "tests/test_hop_carried.py::test_a_hopping_capsule_in_the_array_layout_against_the_reference",
+            "tests/test_mechanism_array.py::test_array_capsule_runs_equal_unrolled",
+        ),
+    ),
+    Mutation(
+        "mechanism_array_contact_unmasked",
+        "in the array layout the placeholder load of a body without ground contact counts among the ground reactions",
+        "locomotion_jax/model/_mechanism_array.py",
+        (("        if all(self.contact):\n            return q\n", "        return q\n"),),
+        ("tests/test_mechanism_array.py::test_array_capsule_steady_gait_equals_unrolled",),
+    ),
+    Mutation(
+        "mixed_friction_first_class_only",
+        "bodies under laws of several classes in one entry all read the first class's law",
+        "locomotion_jax/model/_friction.py",
+        (("        for k in range(1, len(values)):\n", "        for k in range(1, 1):\n"),),
+        ("tests/test_mechanism_array.py::test_array_capsule_rates_equal_unrolled",),
+    ),
+    Mutation(
+        "mixed_friction_static_at_rest_lost",
+        "a mixture of friction laws with a Stribeck member is not taken as static at rest",
+        "locomotion_jax/model/_friction.py",
+        (("        return any(static_at_rest(q) for q in law.laws)\n", "        return False\n"),),
+        ("tests/test_mechanism_array.py::test_array_capsule_rates_equal_unrolled",),
     ),
 ]
 

@@ -12,8 +12,9 @@ import locomotion_jax as lj
 import numpy as np
 import pytest
 from locomotion_jax.model._chain_array import ARRAY_FROM, engine_physics, uses_array
+from locomotion_jax.model._friction import MixedFriction, static_at_rest
 from locomotion_jax.model._mechanism_array import ArrayMechanismPhysics
-from locomotion_jax.model._physics import load_rates_at, load_second_at, loads_at
+from locomotion_jax.model._physics import least_contact_load, load_rates_at, load_second_at, loads_at
 
 
 pytestmark = pytest.mark.xdist_group("mechanism_array")
@@ -199,25 +200,137 @@ def test_array_mechanism_bad_configuration_flagged_others_unchanged():
 
 
 def test_array_layout_refused_with_the_reason():
-    """`layout="array"` is refused, with the reason, for a carried body, friction laws of different
-    classes and splines beside another waveform; an unknown layout is named; `"auto"` runs them
-    unrolled."""
+    """`layout="array"` is refused, with the reason, for splines beside another waveform; an unknown
+    layout is named; `"auto"` runs such a mechanism unrolled, and a capsule (a carried body) or bodies
+    under laws of different classes in the array layout from its threshold."""
     law = lj.Coulomb(0.7, 0.5)
-    capsule: dict[str, Any] = dict(masses=[1.0, 0.5], friction=[law, None], carried_by=[None, 0],
-                                   links=[lj.Spring(0, 1, k=10.0)])  # fmt: skip
-    with pytest.raises(ValueError, match=r"layout.*no friction law \(carried or free\)"):
-        lj.Mechanism(**capsule, layout="array")
-    mixed: dict[str, Any] = dict(masses=[1.0, 0.5], friction=[law, lj.AnisotropicCoulomb(0.6, 0.9, 0.4, 0.7)],
-                 links=[lj.Spring(0, 1, k=10.0, rest=1.0)], x0=[0.0, 1.0])  # fmt: skip
-    with pytest.raises(ValueError, match=r"layout.*friction laws differ in class"):
-        lj.Mechanism(**mixed, layout="array")
     spline = lj.Spline(jnp.asarray([0.0, 0.1, 0.0, -0.1]), OMEGA, 1.0)
     links = [lj.Spring(0, 1, k=5.0, rest=spline), lj.ExternalForce(0, lj.Sinusoid(0.1, OMEGA, 0.0))]
+    mixed_waves: dict[str, Any] = dict(masses=[1.0, 1.0], friction=law, x0=[0.0, 1.0], links=links)
     with pytest.raises(ValueError, match=r"layout.*mix Splines with other waveforms"):
-        lj.Mechanism(masses=[1.0, 1.0], friction=law, x0=[0.0, 1.0], links=links, layout="array")
+        lj.Mechanism(**mixed_waves, layout="array")
+    assert not uses_array(lj.Mechanism(**mixed_waves), 2)
+    capsule: dict[str, Any] = dict(masses=[1.0, 0.5], friction=[law, None], carried_by=[None, 0],
+                                   links=[lj.Spring(0, 1, k=10.0)])  # fmt: skip
     with pytest.raises(ValueError, match=r"Invalid parameter 'layout'.*'sparse'"):
         lj.Mechanism(**capsule, layout="sparse")
-    for kw in (capsule, mixed):  # from 2 bodies on, but for the reason
-        assert not uses_array(lj.Mechanism(**kw), 2)
-    uniform: dict[str, Any] = mixed | {"friction": law}
-    assert uses_array(lj.Mechanism(**uniform), 2)
+    mixed: dict[str, Any] = dict(masses=[1.0, 0.5], friction=[law, lj.AnisotropicCoulomb(0.6, 0.9, 0.4, 0.7)],
+                 links=[lj.Spring(0, 1, k=10.0, rest=1.0)], x0=[0.0, 1.0])  # fmt: skip
+    for kw in (capsule, mixed):
+        assert uses_array(lj.Mechanism(**kw), 2) and not uses_array(lj.Mechanism(**kw), 3)
+
+
+def _capsule(layout: str, k_tilt: float = 1.0, heavy: bool = False, drive: float = 0.6, **kw) -> lj.Mechanism:
+    """Six bodies under three classes of law and none: a shell (body 0, anisotropic bristles) carrying an
+    internal mass (1) that carries another (2), driven by a force between shell and mass; a body on
+    Stribeck friction (3) and one on Coulomb friction (5) tied to the shell and to the internal mass by
+    tilted springs (a carried body's lift bears on the shell); a free body (4) on a spring, a damper and
+    a tilted spring to the wall, pushed by an external force. `heavy`: masses for which every ground
+    reaction stays above the placeholder load 1 of the bodies without contact."""
+    links = [lj.Spring(0, 1, k=10.0, rest=0.0), lj.Force(0, 1, _wave([0.0], [drive], 0.0)),
+             lj.Spring(1, 2, k=8.0, rest=_wave([0.02], [0.05], 0.1)),
+             lj.TiltedSpring(0, 3, k=3.0 * k_tilt, d=0.4, rest=_wave([0.0], [0.1], 1.2)),
+             lj.TiltedSpring(1, 5, k=2.0 * k_tilt, d=0.3, rest=2.2), lj.Spring(3, 4, k=6.0, rest=1.0),
+             lj.Damper(3, 4, c=0.05), lj.TiltedSpring(lj.WALL, 4, k=k_tilt, d=0.5, rest=3.5),
+             lj.ExternalForce(4, _wave([0.05], [0.0], 0.02)),
+             lj.Spring(3, 5, k=5.0, rest=_wave([0.0, 0.01], [0.08, 0.0], 1.0)), lj.Damper(lj.WALL, 5, c=0.1),
+             lj.Damper(0, 1, c=0.3), lj.Damper(1, 2, c=0.2)]  # fmt: skip
+    laws = [lj.AnisotropicCoulomb(0.5, 0.2, 0.4, 0.15), None, None, lj.Stribeck(0.15, 0.1, 0.2), None,
+            lj.Coulomb(0.12, 0.1)]  # fmt: skip
+    masses = [2.0, 0.5, 0.3, 1.8, 0.6, 1.9] if heavy else [1.0, 0.5, 0.3, 0.8, 0.6, 0.9]
+    return lj.Mechanism(masses=masses, friction=laws, carried_by=[None, 0, 1, None, None, None], links=links,
+                        x0=CAPSULE_X0, c=[0.02, 0.0, 0.0, 0.01, 0.03, 0.0], restitution=[0.3, 0.0, 0.0, 0.5, 0.2, 0.1],
+                        layout=layout, **kw)  # fmt: skip
+
+
+CAPSULE_X0 = [0.0, 0.0, 0.1, 1.2, 2.3, 2.2]
+
+
+@pytest.mark.parametrize("hop", [False, True])
+def test_array_capsule_rates_equal_unrolled(hop):
+    """Carried and free bodies and laws of three classes in one entry (`_capsule`): at a random state
+    the loads and their first two rates, the kinetic coefficients and static limits, the fall in
+    flight, what a body rides in and lands with, the initial heights and the entries in contact equal
+    the unrolled physics' to 1e-13."""
+    rng = np.random.default_rng(5 + hop)
+    unrolled, array = _capsule("unrolled").physics(), _capsule("array").array_physics()
+    assert isinstance(array, ArrayMechanismPhysics) and isinstance(array.friction[0], MixedFriction)
+    x = jnp.asarray(CAPSULE_X0) + rng.normal(size=6) * 0.1
+    v, a = jnp.asarray(rng.normal(size=6)), jnp.asarray(rng.normal(size=6))
+    y, yd, ya = (jnp.asarray(np.abs(rng.normal(size=6))), jnp.asarray(rng.normal(size=6)),
+                 jnp.asarray(rng.normal(size=6))) if hop else (None, None, None)  # fmt: skip
+    out = []
+    for physics in (unrolled, array):
+        P: Any = physics
+        B: Any = lambda q: None if q is None else P.bodies(q)
+        dr = P.drive(jnp.cos(OMEGA * 0.7), jnp.sin(OMEGA * 0.7))
+        L = loads_at(P, dr, B(x), y=B(y))
+        R = load_rates_at(P, dr, L, B(v), yd=B(yd))
+        ddF, ddN = load_second_at(P, dr, L, R, B(v), B(a), yd=B(yd), ya=B(ya))
+        sgn = lambda q: jnp.where(q >= 0, 1.0, -1.0)
+        mu = tuple(law.kinetic(jnp.abs(q), sgn(q)) for law, q in zip(P.friction, B(v)))
+        dmu = tuple(law.kinetic_rate(jnp.abs(q), sgn(q), r) for law, q, r in zip(P.friction, B(v), B(a)))
+        y0, w0, e, _ = P.hop()
+        # The bodies in contact: a count over them, and their least load.
+        count = sum(jnp.sum(q) for q in P.contact_values(B(jnp.arange(1, 7)), 0))
+        out.append(dict(F=P.stacked(L.F), N=P.stacked(L.N), dF=P.stacked(R.dF), dN=P.stacked(R.dN),
+                        ddF=P.stacked(ddF), ddN=P.stacked(ddN), mu=P.stacked(mu),
+                        dmu=P.stacked(tuple(jnp.zeros(jnp.shape(q)) if r is None else r for q, r in zip(mu, dmu))),
+                        mu_f=P.stacked(P.mu_f), fall=P.stacked(P.fall(L.N)), ride=P.stacked(P.ride(B(x))),
+                        land=P.stacked(P.landing_masses()), y0=y0, w0=w0, e=P.stacked(e), count=count,
+                        least=least_contact_load(P, L.N, x), energy=P.energy(L, B(v))))  # fmt: skip
+    for key, want in out[0].items():
+        np.testing.assert_allclose(np.asarray(out[1][key]), np.asarray(want), rtol=1e-13, atol=1e-13, err_msg=key)
+    assert int(out[1]["count"]) == 1 + 4 + 6  # bodies 0, 3 and 5
+    # Its Stribeck member makes the mixture a law whose kinetic coefficient at rest is the static one.
+    coulombs = MixedFriction((lj.Coulomb(0.6, 0.5), lj.AnisotropicCoulomb(0.5, 0.2, 0.4, 0.15)), (0, 1, 0))
+    assert static_at_rest(array.friction[0]) and not static_at_rest(coulombs)
+    assert float(jnp.abs(out[0]["dmu"]).max()) > 0  # the Stribeck body's coefficient moves
+
+
+@pytest.mark.parametrize("contact", ["strict", "hop"])
+def test_array_capsule_runs_equal_unrolled(contact):
+    """`simulate` of `_capsule` in both layouts (exact engine, dt = 0.005, t = 0 ... 10): positions,
+    velocities, energies and normal loads equal to 1e-10 with the same events; under `contact="hop"`
+    (the shell thrown up, body 5 too) the same landings, the carried bodies' heights their shell's.
+    The smoothed engine likewise (1e-8 at rtol 1e-10)."""
+    save = np.linspace(0.0, 10.0, 41)
+    hop: dict[str, Any] = (
+        dict(y0=[0.2, 0.0, 0.0, 0.0, 0.0, 0.1], w0=[0.3, 0.0, 0.0, 0.0, 0.0, 0.25]) if contact == "hop" else {}
+    )
+    k_tilt = 0.2 if contact == "strict" else 1.0
+    runs = [lj.simulate(_capsule(layout, k_tilt, **hop), 10.0, save, contact=contact, dynamics=lj.Exact(dt=0.005))
+            for layout in ("unrolled", "array")]  # fmt: skip
+    assert int(runs[0].status) == int(runs[1].status) == lj.Status.OK
+    assert int(np.asarray(runs[0].n_switch)) == int(np.asarray(runs[1].n_switch)) > 20
+    fields = ["x", "v", "e_d", "w", "e", "N"] + (["y", "vy"] if contact == "hop" else [])
+    for name in fields:
+        np.testing.assert_allclose(np.asarray(getattr(runs[1], name)), np.asarray(getattr(runs[0], name)), rtol=0,
+                                   atol=1e-10, err_msg=name)  # fmt: skip
+    if contact == "hop":
+        tr = runs[1]
+        assert tr.y is not None and runs[0].n_land is not None and tr.n_land is not None
+        assert int(np.asarray(tr.n_land)) == int(np.asarray(runs[0].n_land)) >= 5
+        for i in (1, 2):
+            np.testing.assert_array_equal(np.asarray(tr.y)[:, i], np.asarray(tr.y)[:, 0])
+        return
+    dyn = lj.Smoothed(1e-2, rtol=1e-10, atol=1e-12)
+    smooth = [lj.simulate(_capsule(layout, k_tilt), 5.0, save[:21], dynamics=dyn) for layout in ("unrolled", "array")]
+    assert int(smooth[1].status) == lj.Status.OK
+    np.testing.assert_allclose(np.asarray(smooth[1].x), np.asarray(smooth[0].x), rtol=0, atol=1e-8)
+
+
+def test_array_capsule_steady_gait_equals_unrolled():
+    """The steady gait of `_capsule` (heavy: every ground reaction above the placeholder 1; the shell
+    driven to slip) in the array layout: the unrolled layout's section state to 1e-8, the same period,
+    switches and stability, and the same least normal load, which leaves the bodies without contact out
+    (their placeholder 1 is below it)."""
+    gaits = [lj.steady_gait(_capsule(layout, 0.2, heavy=True, drive=3.0), periods=(1, 2), transient=20,
+                            dynamics=lj.Exact(dt=0.01)) for layout in ("unrolled", "array")]  # fmt: skip
+    for g in gaits:
+        assert int(g.status) == lj.GaitStatus.CONVERGED and bool(g.stable) and int(g.n_iter) > 0
+    assert int(gaits[0].k) == int(gaits[1].k) and int(gaits[0].n_switch) == int(gaits[1].n_switch)
+    np.testing.assert_allclose(np.asarray(gaits[1].state), np.asarray(gaits[0].state), rtol=0, atol=1e-8)
+    for name in ("e_d", "work", "min_normal"):
+        np.testing.assert_allclose(float(getattr(gaits[1], name)), float(getattr(gaits[0], name)), rtol=1e-8)
+    assert 1.0 < float(gaits[1].min_normal) < 2.0

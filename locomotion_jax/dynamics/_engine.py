@@ -73,6 +73,7 @@ import jax.numpy as jnp
 
 from .._custom_types import Array, Contact
 from .._status import Status
+from ..model._friction import static_at_rest
 from ..model._physics import AbstractPhysics, contact_loads, Loads, loads_at, Scalars
 from . import _motion as motion, _numerics as num
 from ._motion import energy as energy, Mode, State
@@ -235,7 +236,7 @@ def _impact(P: AbstractPhysics, restitution: Scalars, zeno: Array, st: Hybrid, N
         rest.append(land & ~airborne & (vp == 0))
         count.append(land.astype(jnp.int32))
     y = yA._replace(y=tuple(hs), vy=tuple(ws), v=tuple(vs), ed=yA.ed + motion._sum(lost))
-    landed = contact_loads(P, tuple(count))  # a carried body lands with its carrier: one landing, the carrier's
+    landed = contact_loads(P, tuple(count), 0)  # a carried body lands with its carrier: one landing, the carrier's
     n_land = motion._sum(list(landed)) if landed else jnp.zeros((), jnp.int32)
     return y, tuple(fly), tuple(rest), n_land, num.union(zeno_rule)
 
@@ -426,7 +427,7 @@ def step(
     g1s = [kp(g) for g in D1.g]
     h2 = h * h
     crossed = [g < 0 for g in g1s]
-    if any(type(law).static_at_rest for law in P.friction):
+    if any(static_at_rest(law) for law in P.friction):
         # A mass that breaks away here with no acceleration along its slip (a law whose kinetic
         # coefficient at rest is the static one, Stribeck's, where the load only grazes the static
         # limit) starts its slip function on the surface at zero rate, so its stop would be located

@@ -203,9 +203,8 @@ def _advance(P, contact, dt, st, t_end, max_steps):
         # eq. (7) generalised: a slipping mass whose velocity reached zero sticks where its stick
         # margin is >= 0; the slip margin is its negative ($|F_i| - \\mu_s n_i$ for Coulomb friction).
         margin = num.least([a.margin] + [jnp.where(info.commit & z, -q, inf) for z, q in zip(info.vel, info.hold)])
-        low = num.least(
-            [inf] + [_range(q, info.h, info.t0, info.t1)[0] for q in contact_loads(P, tuple(zip(*info.normal)))]
-        )
+        lows = tuple(_range(q, info.h, info.t0, info.t1)[0] for q in zip(*info.normal))
+        low = num.least([inf, *contact_loads(P, lows, inf)])
         a = _Acc(
             stuck=tuple(q + jnp.where(b, span, 0) for q, b in zip(a.stuck, info.stuck)),
             margin=margin,

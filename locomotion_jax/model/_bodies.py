@@ -120,8 +120,9 @@ class Mechanism(AbstractMechanism):
     - `layout`: how the engines (exact and smoothed) lay the bodies out, as a
       [`Chain`][locomotion_jax.Chain]'s: `"unrolled"` (one scalar per body, every mechanism), `"array"`
       (one array over the bodies and one over the elements of each kind, `model._mechanism_array`:
-      compile time independent of N, for mechanisms whose bodies all touch the ground under friction
-      laws of one class, driven by constants, sinusoids and Fourier series), or `"auto"` (the
+      compile time independent of N, for mechanisms driven by constants, sinusoids and Fourier
+      series, or by constants and splines of one number of control values; carried and free bodies
+      and laws of several classes included), or `"auto"` (the
       default: the array layout where it applies from `ARRAY_FROM` (16) bodies on, on a CPU).
 
     **Raises:** `ValueError` naming the element and the body for bad structure (a body carried

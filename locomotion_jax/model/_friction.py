@@ -15,6 +15,7 @@ from typing import ClassVar
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._custom_types import Array, ValuesLike
 from ._checks import real_array
@@ -232,3 +233,45 @@ class Stribeck(AbstractFriction):
         return {"mu_s": "mu_s >= mu_k", "mu_k": "mu_k >= 0",
                 "v_s": "v_s > 0 with 1/v_s**2 finite (v_s > 1e-154 in float64, 1e-19 in float32)",
                 "mu_s_bwd": "mu_s_bwd >= mu_k_bwd", "mu_k_bwd": "mu_k_bwd >= 0"}  # fmt: skip
+
+
+class MixedFriction(AbstractFriction):
+    """Bodies under friction laws of several classes as one law over an entry that holds them all (a
+    [`Mechanism`][locomotion_jax.Mechanism] in the array layout, `model._mechanism_array`). Each member of
+    `laws` holds every body's coefficients (a body of another class a copy of one of the member's own
+    bodies, so that each member computes finite values everywhere), and body $i$ reads the member
+    `classes[i]` (static): the values, rates and smoothed law of its own class."""
+
+    laws: tuple[AbstractFriction, ...]
+    classes: tuple[int, ...] = eqx.field(static=True)
+
+    def _pick(self, values: list[Array]) -> Array:
+        out = values[0]
+        for k in range(1, len(values)):
+            out = jnp.where(np.asarray([c == k for c in self.classes]), values[k], out)
+        return out
+
+    def static_limits(self) -> tuple[Array, Array]:
+        pairs = [law.static_limits() for law in self.laws]
+        fwd = self._pick([f for f, _ in pairs])
+        # Symmetric members keep the limits one array: the engine then skips the backward limit.
+        return fwd, fwd if all(f is b for f, b in pairs) else self._pick([b for _, b in pairs])
+
+    def kinetic(self, speed: Array, direction: Array) -> Array:
+        return self._pick([law.kinetic(speed, direction) for law in self.laws])
+
+    def kinetic_rate(self, speed: Array, direction: Array, speed_rate: Array) -> Array | None:
+        rates = [law.kinetic_rate(speed, direction, speed_rate) for law in self.laws]
+        if all(r is None for r in rates):
+            return None
+        return self._pick([jnp.zeros_like(speed) if r is None else r for r in rates])
+
+    def smoothed(self, v: Array, eps: Array, v_s: Array) -> Array:
+        return self._pick([law.smoothed(v, eps, v_s) for law in self.laws])
+
+
+def static_at_rest(law: AbstractFriction) -> bool:
+    """[`AbstractFriction.static_at_rest`][] of a law, or of any member of a [`MixedFriction`][]."""
+    if isinstance(law, MixedFriction):
+        return any(static_at_rest(q) for q in law.laws)
+    return type(law).static_at_rest

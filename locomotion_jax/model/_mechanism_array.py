@@ -12,10 +12,15 @@ The same forces as [`MechanismPhysics`][locomotion_jax.model._mechanism_physics.
   the angle-addition recurrence at the engine's phase;
 - a body's load $F_i$ is the signed sum of the element forces that act on it: a gather of the
   element forces by a static table of (element, sign) per body, padded with a zero force, and its
-  normal load $N_i = m_i - $ the tilted springs' vertical forces on it likewise.
+  normal load $N_i$ (its weight and its carried bodies', `_mechanism_physics.normal_loads`) less
+  the tilted springs' vertical forces on it and on the bodies it carries likewise;
+- the bodies' friction laws are one law over the entry: the laws' own class stacked over the bodies
+  where they are of one class, else a [`MixedFriction`][locomotion_jax.model._friction.MixedFriction]
+  whose members are the classes (the law of no friction of a carried or free body one of them);
+- a carried body rides in the body that finally carries it (its height, vertical velocity, fall
+  and landing are that body's): a static gather of the entries, as the unrolled physics selects them.
 
-It serves mechanisms whose bodies all touch the ground under friction laws of one class (with
-per-body coefficients), driven by constants with [`Sinusoid`][locomotion_jax.Sinusoid] and
+It serves every mechanism driven by constants with [`Sinusoid`][locomotion_jax.Sinusoid] and
 [`Fourier`][locomotion_jax.Fourier] signals, or constants with [`Spline`][locomotion_jax.Spline]s of one
 number of control values (a bank of splines, a constant's control values zero; the mechanism
 optimiser's spline family) ([`array_unsupported`][] says why another cannot); the unrolled physics
@@ -33,8 +38,16 @@ import numpy as np
 from .._custom_types import Array
 from ._chain_physics import spring_rates, spring_second, Springs, tilted
 from ._elements import Damper, ExternalForce, Force, Spring, TiltedSpring, WALL
-from ._friction import AbstractFriction
-from ._mechanism_physics import ground_damping, SpringState, TiltGeometry, TiltRates
+from ._friction import AbstractFriction, MixedFriction
+from ._mechanism_physics import (
+    contact_laws,
+    ground_body,
+    ground_damping,
+    normal_loads,
+    SpringState,
+    TiltGeometry,
+    TiltRates,
+)
 from ._physics import AbstractArrayPhysics, LoadRates, Loads, Scalars
 from ._waveform import AbstractWaveform, Fourier, Sinusoid, Spline
 
@@ -107,6 +120,7 @@ class ArrayMechanismPhysics(AbstractArrayPhysics):
     mu_b: tuple[Array | None, ...]
     omega: Array
     one: Array
+    normal: Array  # the constant normal loads N_i (1 for a body without contact)
     x0: Array
     v0: Array
     y0: Array
@@ -135,6 +149,8 @@ class ArrayMechanismPhysics(AbstractArrayPhysics):
     vertical: Table = eqx.field(static=True)  # over the tilted springs' fy
     dampers: Table = eqx.field(static=True)  # over the relative dampers' forces
     anchor: bool = eqx.field(static=True)
+    ground: tuple[int, ...] = eqx.field(static=True)  # per body, the body that finally carries it
+    contact: tuple[bool, ...] = eqx.field(static=True)  # per body, whether it touches the ground
 
     @property
     def anchored(self) -> bool:
@@ -183,7 +199,7 @@ class ArrayMechanismPhysics(AbstractArrayPhysics):
         tension = self.k * (u - drive.l0[0])
         sp = self._tilted(drive, xa, None if y is None else y[0])
         F = self._horizontal(tension, None if sp is None else sp.fx[0], drive.f, drive.g)
-        N = self.m[0] if sp is None else self.m[0] - _gather(self.vertical, sp.fy[0])
+        N = self.normal if sp is None else self.normal - _gather(self.vertical, sp.fy[0])
         return Loads((F,), (N,), SpringState((u,), (tension,), sp))
 
     def load_rates(
@@ -275,14 +291,32 @@ class ArrayMechanismPhysics(AbstractArrayPhysics):
     def initial_velocities(self, start: str) -> Array | None:
         return self.v0
 
+    def contact_values(self, q: tuple[Any, ...], fill: Any) -> tuple[Any, ...]:
+        """`q` with `fill` in place of the bodies without ground contact (their loads are the
+        placeholder 1)."""
+        if all(self.contact):
+            return q
+        return tuple(jnp.where(np.asarray(self.contact), v, fill) for v in q)
+
     def hop(self) -> tuple[Array, Array, Scalars, Array]:
-        """As the unrolled physics (SPEC §10): the bodies' own initial heights, vertical velocities and
-        restitution (no body is carried)."""
+        """As the unrolled physics (SPEC §10): the initial heights, vertical velocities and restitution
+        of the bodies that the bodies ride in (`array_physics` selects them)."""
         return self.y0, self.w0, (self.restitution,), self.zeno_speed
 
     def fall(self, N: Scalars) -> Scalars:
-        """The vertical acceleration in flight, $\\dot w_i = -N_i/m_i$, as the unrolled physics divides."""
-        return (-N[0] / self.m[0],)
+        """The vertical acceleration in flight, $\\dot w_i = -N_g/M_g$ of the body $g$ that body $i$ rides
+        in, as the unrolled physics divides."""
+        return self.ride((-N[0] / self.normal,))
+
+    def ride(self, q: Scalars) -> Scalars:
+        """Per body, the entry of the body that finally carries it (its own where it is not carried)."""
+        if self.ground == tuple(range(len(self.ground))):
+            return q
+        return (q[0][..., np.asarray(self.ground, np.int32)],)
+
+    def landing_masses(self) -> Scalars:
+        """A body in contact lands with the bodies it carries, $M_i = N_i$; one without contact alone."""
+        return (self.normal,)
 
 
 def _fourier(s: Any, like: Array) -> tuple[Array, Array, Array]:
@@ -303,13 +337,9 @@ def _splined(M: Any) -> bool:
 
 
 def array_unsupported(M: Any) -> str | None:
-    """Why a mechanism cannot run in the array layout (`None`: it can): a body without ground contact
-    (carried or free), friction laws of different classes, or signals other than constants with
-    `Sinusoid`s and `Fourier` series, or constants with `Spline`s of one number of control values."""
-    if any(law is None for law in M.friction):
-        return "a body has no friction law (carried or free)"
-    if len({jax.tree_util.tree_structure(law) for law in M.friction}) > 1:
-        return "its bodies' friction laws differ in class"
+    """Why a mechanism cannot run in the array layout (`None`: it can): signals other than constants
+    with `Sinusoid`s and `Fourier` series, or constants with `Spline`s of one number of control
+    values."""
     waves = M.waveforms()
     if _splined(M):
         if not all(isinstance(w, Spline) for w in waves) or len({w.knots for w in waves}) > 1:
@@ -320,6 +350,20 @@ def array_unsupported(M: Any) -> str | None:
             if isinstance(s, AbstractWaveform) and not isinstance(s, (Fourier, Sinusoid)):
                 return f"{el.describe()} is driven by a {type(s).__name__}, not a Sinusoid or a Fourier series"
     return None
+
+
+def _friction(laws: tuple[AbstractFriction, ...], batch: tuple[int, ...]) -> AbstractFriction:
+    """The bodies' laws as one law over the entry: a law's class stacked over the bodies, or where they
+    are of several classes a `MixedFriction` of one member a class (the other bodies' coefficients in
+    a member: those of its class's first body)."""
+    keys = [jax.tree_util.tree_structure(law) for law in laws]
+    kinds = list(dict.fromkeys(keys))
+    classes = tuple(kinds.index(k) for k in keys)
+    stack = lambda *xs: jnp.stack([jnp.broadcast_to(q, batch) for q in xs], -1)
+    members = [jax.tree_util.tree_map(stack, *[law if c == k else laws[classes.index(k)]
+                                               for law, c in zip(laws, classes)])  # fmt: skip
+               for k in range(len(kinds))]  # fmt: skip
+    return members[0] if len(members) == 1 else MixedFriction(tuple(members), classes)
 
 
 def _spline_bank(signals: list[Any], lbar: Array, omega: Array, batch: tuple[int, ...]) -> Spline:
@@ -369,17 +413,24 @@ def array_physics(M: Any) -> ArrayMechanismPhysics:
             terms += [(int(e.a), base + j, sign)] if e.a != WALL else []
             terms += [(int(e.b), base + j, -sign)] if e.b != WALL else []
     terms += [(e.i, S + T + F + j, 1.0) for j, e in enumerate(externals)]
-    lift = [(int(end), j, sign) for j, e in enumerate(tilts) for end, sign in ((e.a, 1.0), (e.b, -1.0)) if end != WALL]
+    # A tilted spring's vertical force on a body bears on the body in contact that carries it.
+    ground = tuple(ground_body(M.carried_by, i) for i in range(n))
+    contact = tuple(law is not None for law in M.friction)
+    lift = [(ground[int(end)], j, sign) for j, e in enumerate(tilts) for end, sign in ((e.a, 1.0), (e.b, -1.0))
+            if end != WALL and contact[ground[int(end)]]]  # fmt: skip
+    plain = all(contact) and ground == tuple(range(n))  # no carried or free body: the bodies' own
+    ride = lambda q: q if plain else q[..., np.asarray(ground, np.int32)]
     damp = [(int(end), j, sign) for j, e in enumerate(dampers) for end, sign in ((e.a, 1.0), (e.b, -1.0))]
     c = jnp.stack(ground_damping(M), -1)
-    law = jax.tree_util.tree_map(lambda *xs: jnp.stack([jnp.broadcast_to(q, batch) for q in xs], -1), *M.friction)
+    law = _friction(contact_laws(M, one), batch)
     f, b = law.static_limits()
     d = stack([e.d for e in tilts])
     dt = one.dtype
     means = stack([q[0] for q in bank]).astype(dt)
     return ArrayMechanismPhysics(
         m=(M.m,), im=(1 / M.m,), c=(c,), friction=(law,), mu_f=(f,), mu_b=(None if b is f else b,), omega=omega,
-        one=one, x0=M.x0, v0=M.v0, y0=M.y0, w0=M.w0, restitution=M.restitution,
+        one=one, normal=M.m if plain else jnp.stack(normal_loads(M), -1), x0=M.x0, v0=M.v0, y0=ride(M.y0),
+        w0=ride(M.w0), restitution=ride(M.restitution),
         zeno_speed=jnp.broadcast_to(M.zeno_speed, batch).astype(dt), inv_mass=1 / M.m.sum(-1),
         k=stack([e.k for e in springs]).astype(dt), tilt=TiltGeometry((stack([e.k for e in tilts]).astype(dt),),
                                                                        (d.astype(dt),), ((d * d).astype(dt),)),
@@ -391,5 +442,5 @@ def array_physics(M: Any) -> ArrayMechanismPhysics:
         external_body=tuple(e.i for e in externals), damper_ends=ends(dampers),
         horizontal=_table(n, S + T + F + len(externals), terms), vertical=_table(n, T, lift),
         dampers=_table(n, len(dampers), damp),
-        anchor=any(WALL in (e.a, e.b) for e in springs + tilts),
+        anchor=any(WALL in (e.a, e.b) for e in springs + tilts), ground=ground, contact=contact,
     )  # fmt: skip

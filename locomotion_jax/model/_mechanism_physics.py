@@ -20,7 +20,7 @@ sticks (its stick margin $-1 - |F_i|$ is negative), feels no friction and dissip
 nothing, and neither lifts off nor flips a contact side. So the exact engine runs it
 unchanged; its only trace is an event where its velocity changes sign. Its smoothed law is
 zero (`Smoothed` dynamics). Its `N` in a trajectory is this 1, not a load; the figures over the
-normal loads leave it out (`MechanismPhysics.in_contact`).
+normal loads leave it out (`MechanismPhysics.contact_values`).
 """
 
 from typing import Any, NamedTuple
@@ -150,10 +150,10 @@ class MechanismPhysics(AbstractPhysics):
         """Whether a spring, linear or tilted, ties a body to the wall."""
         return any(WALL in (s.a, s.b) for s in (*self.springs, *self.tilted))
 
-    def in_contact(self) -> tuple[bool, ...]:
-        """The bodies with a friction law of their own: a body without ground contact has the
-        placeholder load 1 (module docstring)."""
-        return tuple(not isinstance(law, _NoContact) for law in self.friction)
+    def contact_values(self, q: tuple[Any, ...], fill: Any) -> tuple[Any, ...]:
+        """The entries of the bodies with a friction law of their own: a body without ground contact has
+        the placeholder load 1 (module docstring), and its entry is left out."""
+        return tuple(v for v, law in zip(q, self.friction) if not isinstance(law, _NoContact))
 
     def drive(self, c1: Array, s1: Array) -> Drive:
         at = lambda s: signal_at(s, c1, s1)
@@ -178,7 +178,7 @@ class MechanismPhysics(AbstractPhysics):
         forces `fy` ($+$ on `a`), each body's share on the body in contact that carries it."""
         terms: list[list[Array]] = [[q] for q in F]
         lift: list[list[Array]] = [[] for _ in self.m]
-        contact = self.in_contact()
+        contact = [not isinstance(law, _NoContact) for law in self.friction]
         for s, a, b in zip(self.tilted, fx, fy):
             _add(terms, s.a, a, 1.0)
             _add(terms, s.b, a, -1.0)
@@ -365,6 +365,26 @@ def ground_body(carried_by: tuple[int | None, ...], i: int) -> int:
     return i
 
 
+def normal_loads(M: Any) -> list[Array]:
+    """Per body, its constant normal load: its weight and the weights of the bodies it carries (directly
+    or through others) for a body in contact, the placeholder 1 for one without (module docstring)."""
+    m = [M.m[..., i] for i in range(M.m.shape[-1])]
+    one = m[0] / m[0]
+    contact = [law is not None for law in M.friction]
+    normal = [mi if c else one for mi, c in zip(m, contact)]
+    for i, j in enumerate(M.carried_by):
+        if j is not None:
+            g = ground_body(M.carried_by, i)
+            if contact[g]:
+                normal[g] = normal[g] + m[i]
+    return normal
+
+
+def contact_laws(M: Any, one: Array) -> tuple[AbstractFriction, ...]:
+    """Per body, its friction law, or for a body without ground contact the law of no friction."""
+    return tuple(law if law is not None else _NoContact(one) for law in M.friction)
+
+
 def ground_damping(M: Any) -> list[Array]:
     """Per body, its ground damping $c_i$ plus that of the dampers joining it to a wall (a damper
     between two bodies is `velocity_forces`')."""
@@ -381,15 +401,9 @@ def mechanism_physics(M: Any) -> MechanismPhysics:
     n = M.m.shape[-1]
     m = tuple(M.m[..., i] for i in range(n))
     one = m[0] / m[0]
-    contact = [law is not None for law in M.friction]
-    normal: list[Array] = [mi if c else one for mi, c in zip(m, contact)]
-    for i in range(n):
-        if M.carried_by[i] is not None:
-            g = ground_body(M.carried_by, i)
-            if contact[g]:
-                normal[g] = normal[g] + m[i]
+    normal = normal_loads(M)
     c = ground_damping(M)
-    friction = tuple(law if law is not None else _NoContact(one) for law in M.friction)
+    friction = contact_laws(M, one)
     limits = [law.static_limits() for law in friction]
     limits = [(f, None if b is f else b) for f, b in limits]
     waves = M.waveforms()

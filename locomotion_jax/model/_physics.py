@@ -110,13 +110,16 @@ class AbstractPhysics(eqx.Module):
         no."""
         return False
 
-    def in_contact(self) -> tuple[bool, ...]:
-        """Per entry of [`bodies`][]: whether its normal loads $N_i$ are the ground's reactions
-        (this default: every body's), or not a load (a body without ground contact, whose $N_i$ is
-        a placeholder for the friction law; [`Mechanism`][locomotion_jax.Mechanism]). The figures over the
-        normal loads (a steady gait's `min_normal`, the optimisers' normal-force margin) read
-        the entries in contact only (`model._physics.contact_loads`)."""
-        return (True,) * len(self.m)
+    def contact_values(self, q: tuple[Any, ...], fill: Any) -> tuple[Any, ...]:
+        """The entries of `q`, a quantity per entry of [`bodies`][] over the normal loads (a load, its
+        least over a step, a count of landings), of the bodies whose $N_i$ are the ground's reactions:
+        this default, every body's. A body without ground contact has a placeholder $N_i$ for its
+        friction law ([`Mechanism`][locomotion_jax.Mechanism]): one entry per body leaves its entry out,
+        an entry that holds several bodies (the array layout) puts `fill` in its place, the identity
+        of the reduction that follows (0 for a sum, `inf` for a least). The figures over the normal
+        loads (a steady gait's `min_normal`, the optimisers' normal-force margin, the landings'
+        count) read these (`model._physics.contact_loads`)."""
+        return q
 
     def keep(self, x: Array) -> Array:
         """Materialise `x` once per iteration: XLA on the CPU recomputes a cheap value inside
@@ -244,17 +247,19 @@ class AbstractArrayPhysics(AbstractPhysics):
         return jnp.concatenate(xs, -1)
 
 
-def contact_loads(P: AbstractPhysics, N: tuple[Any, ...]) -> tuple[Any, ...]:
-    """The entries of the normal loads `N` (or of a quantity over them) that are ground reactions
-    ([`AbstractPhysics.in_contact`][]); empty where no body touches the ground."""
-    return tuple(n for n, touches in zip(N, P.in_contact()) if touches)
+def contact_loads(P: AbstractPhysics, N: tuple[Any, ...], fill: Any) -> tuple[Any, ...]:
+    """The entries of the normal loads `N` (or of a quantity over them) that are ground reactions, with
+    `fill` for a body out of contact within an entry ([`AbstractPhysics.contact_values`][]); empty
+    where no entry holds a body that touches the ground."""
+    return P.contact_values(N, fill)
 
 
 def least_contact_load(P: AbstractPhysics, N: Scalars, like: Array) -> Array:
     """$\\min_i N_i$ over the bodies on the ground ([`contact_loads`][]); `inf` (of `like`'s dtype) where
     no body touches the ground."""
-    loads = contact_loads(P, N)
-    return jnp.min(jnp.stack(loads)) if loads else jnp.asarray(jnp.inf, like.dtype)
+    inf = jnp.asarray(jnp.inf, like.dtype)
+    loads = contact_loads(P, N, inf)
+    return jnp.min(jnp.stack(loads)) if loads else inf
 
 
 # -- the engines' calls: the heights only under contact="hop" -------------------------------------
