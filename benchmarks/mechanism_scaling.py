@@ -2,7 +2,7 @@
 first call (compilation included) and throughput per body, and `steady_gait`'s first call.
 
     python benchmarks/mechanism_scaling.py [--sizes 4,8,16,32,64] [--max-unrolled 16] [--batch 64]
-        [--gait-sizes 4,8,16] [--max-unrolled-gait 8]
+        [--gait-sizes 4,8,16] [--max-unrolled-gait 8] [--carried]
 
 The mechanism is a worm of N segments in a pipe, which a `Chain` cannot express: neighbours joined by
 springs driven as a travelling wave (omega in [1.5, 4], phase lag in [0.3, 2.5] over the batch), every
@@ -14,6 +14,10 @@ compilation that less the best of two calls again (wall), which give the through
 body-time-units per CPU-second (`time.process_time`).
 `steady_gait` (one configuration, periods 1, transient 20, `Exact(dt=0.01)`) is timed on its first call
 alone. Prints a Markdown table and the load average before and after.
+
+With `--carried` each of the N/2 segments carries an internal mass on a spring and a damper (a
+vibration-driven capsule worm: bodies without ground contact, N bodies in all), driven by an internal
+force in phase with its segment's wave.
 """
 
 import argparse
@@ -33,7 +37,11 @@ import numpy as np  # noqa: E402
 T_START, HORIZON = 5.0, 20.0
 
 
-def pipe(n: int, B: int, layout: str) -> lj.Mechanism:
+def pipe(n: int, B: int, layout: str, carried: bool = False) -> lj.Mechanism:
+    """The worm of the module docstring: `n` segments, or with `carried` `n // 2` segments carrying
+    one internal mass each."""
+    if carried:
+        return capsule_worm(n // 2, B, layout)
     rng = np.random.default_rng(0)
     omega, phi = rng.uniform(1.5, 4.0, B), rng.uniform(0.3, 2.5, B)
     wave = lambda j: lj.Fourier(jnp.asarray(0.08 * np.sin(-phi * j))[:, None],
@@ -46,10 +54,27 @@ def pipe(n: int, B: int, layout: str) -> lj.Mechanism:
                         friction=lj.AnisotropicCoulomb(0.7, 0.9, 0.5, 0.7), layout=layout)  # fmt: skip
 
 
-def measure_row(n: int, B: int, layout: str) -> tuple[float, float, float]:
+def capsule_worm(n: int, B: int, layout: str) -> lj.Mechanism:
+    """`pipe(n, ...)` with an internal mass of 0.3 in each segment `j` (body `n + j`, carried by `j`) on a
+    spring (k = 10) and a damper (c = 0.3), pushed by a force $0.2 \\sin(\\omega t - j\\varphi)$."""
+    worm = pipe(n, B, layout)
+    rng = np.random.default_rng(0)
+    omega, phi = rng.uniform(1.5, 4.0, B), rng.uniform(0.3, 2.5, B)
+    push = lambda j: lj.Fourier(jnp.asarray(0.2 * np.sin(-phi * j))[:, None],
+                                jnp.asarray(0.2 * np.cos(-phi * j))[:, None], jnp.asarray(omega), 0.0)  # fmt: skip
+    links = list(worm.links)
+    for j in range(n):
+        links += [lj.Spring(j, n + j, k=10.0, rest=0.0), lj.Damper(j, n + j, c=0.3), lj.Force(j, n + j, push(j))]
+    masses = np.concatenate([np.ones((B, n)), np.full((B, n), 0.3)], -1)
+    return lj.Mechanism(masses=masses, c=0.02, x0=np.tile(1.0 + np.arange(n), 2), links=links,
+                        friction=[lj.AnisotropicCoulomb(0.7, 0.9, 0.5, 0.7)] * n + [None] * n,
+                        carried_by=[None] * n + list(range(n)), layout=layout)  # fmt: skip
+
+
+def measure_row(n: int, B: int, layout: str, carried: bool = False) -> tuple[float, float, float]:
     """`measure`'s first call and its compilation (the first call less the best call again, wall
     seconds), and body-time-units per CPU-second of the best call again."""
-    mech = pipe(n, B, layout)
+    mech = pipe(n, B, layout, carried)
     run = lambda: jax.block_until_ready(lj.measure(mech, 1e9, horizon=HORIZON, t_start=T_START,
                                                    dynamics=lj.Exact(dt=0.03)).tau_z)  # fmt: skip
     t = time.perf_counter()
@@ -64,8 +89,8 @@ def measure_row(n: int, B: int, layout: str) -> tuple[float, float, float]:
     return first, first - min(wall), n * B * (T_START + HORIZON) / min(cpu)
 
 
-def gait_row(n: int, layout: str) -> tuple[float, int]:
-    mech = pipe(n, 1, layout)[0]
+def gait_row(n: int, layout: str, carried: bool = False) -> tuple[float, int]:
+    mech = pipe(n, 1, layout, carried)[0]
     t = time.perf_counter()
     g = lj.steady_gait(mech, periods=(1,), transient=20, dynamics=lj.Exact(dt=0.01))
     jax.block_until_ready(g.state)
@@ -79,6 +104,7 @@ def main() -> None:
     ap.add_argument("--batch", type=int, default=64)
     ap.add_argument("--gait-sizes", default="4,8,16")
     ap.add_argument("--max-unrolled-gait", type=int, default=8)
+    ap.add_argument("--carried", action="store_true", help="N/2 segments carrying an internal mass each")
     args = ap.parse_args()
     print("load average before:", os.getloadavg())
     print("| N | layout | measure: first call (s) | compile (s) | body-tu per CPU-s | steady_gait: first call (s) |")
@@ -88,10 +114,10 @@ def main() -> None:
         for layout in ("unrolled", "array"):
             if layout == "unrolled" and n > args.max_unrolled:
                 continue
-            first, compile_, rate = measure_row(n, args.batch, layout)
+            first, compile_, rate = measure_row(n, args.batch, layout, args.carried)
             gait = "-"
             if n in gaits and (layout == "array" or n <= args.max_unrolled_gait):
-                seconds, status = gait_row(n, layout)
+                seconds, status = gait_row(n, layout, args.carried)
                 gait = f"{seconds:.1f} ({lj.GaitStatus(status).name})"
             print(f"| {n} | {layout} | {first:.1f} | {compile_:.1f} | {rate:,.0f} | {gait} |", flush=True)
     print("load average after:", os.getloadavg())

@@ -1318,6 +1318,18 @@ MUTATIONS = [
         (("        return any(static_at_rest(q) for q in law.laws)\n", "        return False\n"),),
         ("tests/test_mechanism_array.py::test_array_capsule_rates_equal_unrolled",),
     ),
+    Mutation(
+        "newton_step_by_solve",
+        "Newton's step divides by a zero singular value: a family of orbits (a body stuck all period) fails",
+        "locomotion_jax/gaits/_corrector.py",
+        (
+            (
+                "    return jnp.where(jnp.all(jnp.isfinite(step)), step, jnp.linalg.lstsq(A, F)[0])\n",
+                "    return step\n",
+            ),
+        ),
+        ("tests/test_gait.py::test_an_anchored_gait_with_a_body_stuck_all_period",),
+    ),
 ]
 
 

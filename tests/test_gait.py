@@ -698,6 +698,31 @@ def test_harmonically_forced_wall_oscillator_exact():
 
 
 @MECHANISM_GAIT
+def test_an_anchored_gait_with_a_body_stuck_all_period():
+    """Two bodies, the second tied to the wall and pushed by a harmonic force, the first (heavier, on
+    more friction) stuck the whole period: a family of periodic orbits, the first body held anywhere
+    within its stick range (a multiplier 1). From a short transient Newton's method takes a step and
+    reaches a member (it divided by the zero singular value: NaN, `NOT_CONVERGED`): a fixed point of a
+    direct simulation to 1e-9, with the stuck body's stick fraction 1, slip margin `-inf`, the largest
+    multiplier's modulus 1 to 1e-9, not stable."""
+    laws = [lj.Coulomb(0.6, 0.4), lj.Coulomb(0.1, 0.05)]
+    links = [lj.Spring(0, 1, k=6.0, rest=1.0), lj.Spring(lj.WALL, 1, k=0.2, rest=3.5),
+             lj.ExternalForce(1, lj.Sinusoid(0.3, 2.0, 0.0))]  # fmt: skip
+    M = lj.Mechanism(masses=[1.8, 0.6], friction=laws, links=links, x0=[1.2, 2.3])
+    g = steady_gait(M, periods=(1,), transient=40, dynamics=lj.Exact(dt=0.01))
+    assert int(g.status) == GaitStatus.CONVERGED and int(g.n_iter) >= 1, (int(g.status), int(g.n_iter))
+    y, T = np.asarray(g.state), float(g.period)
+    assert y.shape == (4,) and y[2] == 0.0  # absolute positions (tied to the wall), then velocities
+    M0 = lj.Mechanism(masses=[1.8, 0.6], friction=laws, links=links, x0=y[:2], v0=y[2:])
+    tr = lj.simulate(M0, T, jnp.array([0.0, T]), dynamics=lj.Exact(dt=0.01))
+    err = max(np.abs(np.asarray(tr.x[-1]) - y[:2]).max(), np.abs(np.asarray(tr.v[-1]) - y[2:]).max())
+    print("stuck-body family: fixed point to", err, "multipliers", np.asarray(g.multipliers))
+    assert int(tr.status) == lj.Status.OK and err < 1e-9
+    assert float(g.stick_fraction[0]) == 1.0 and float(g.slip_margin) == -np.inf
+    assert abs(float(np.abs(np.asarray(g.multipliers)).max()) - 1) < 1e-9 and not bool(g.stable)
+
+
+@MECHANISM_GAIT
 def test_siconos_oscillator_with_a_harmonic_wall_force_against_the_reference():
     """With Coulomb friction (bound 0.4) the oscillator driven by 0.6 sin(0.5 t) sticks and slips; the
     reference, from the gait's section state, returns to it after a period with the gait's dissipation."""

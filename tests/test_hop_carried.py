@@ -84,17 +84,20 @@ def test_a_hopping_capsule_against_the_reference(refs):
 
 def test_a_hopping_capsule_in_the_array_layout_against_the_reference(refs):
     """The same capsule in the array layout (its three bodies one entry, their laws of two classes and
-    none one `MixedFriction`): within 1e-8 of the reference at dt = 1/400, the same landings, the
-    internal mass's height the shell's, bit for bit."""
-    tr = lj.simulate(_mechanism("array"), T_END, SAVE, contact="hop", dynamics=lj.Exact(dt=1 / 400))
-    assert tr.y is not None and tr.vy is not None and tr.n_land is not None
-    assert np.all(np.asarray(tr.status) == lj.Status.OK)
-    for i, ref in enumerate(refs):
-        err = _errors(tr, ref, i)
-        print("array", i, "landings", int(tr.n_land[i]), err)
-        assert int(tr.n_land[i]) == int(ref["n_landings"].sum())
-        assert max(err.values()) < 1e-8, err
-        np.testing.assert_array_equal(np.asarray(tr.y[i, :, 1]), np.asarray(tr.y[i, :, 0]))
+    none one `MixedFriction`): within 1e-8 of the reference at dt = 1/400 (measured 2.2e-9), the same
+    landings, the internal mass's height the shell's, bit for bit; in float32 at dt = 1/100 within 1e-4
+    (positions, heights, e_d), the same landings."""
+    for dt, dtype, tol in ((1 / 400, jnp.float64, 1e-8), (1 / 100, jnp.float32, 1e-4)):
+        tr = lj.simulate(_mechanism("array"), T_END, SAVE, contact="hop", dynamics=lj.Exact(dt=dt), dtype=dtype)
+        assert tr.y is not None and tr.vy is not None and tr.n_land is not None and tr.x.dtype == dtype
+        assert np.all(np.asarray(tr.status) == lj.Status.OK)
+        for i, ref in enumerate(refs):
+            err = _errors(tr, ref, i)
+            print("array", dtype.__name__, i, "landings", int(tr.n_land[i]), err)
+            assert int(tr.n_land[i]) == int(ref["n_landings"].sum())
+            worst = max(err["x"], err["y"], err["e_d"]) if dtype == jnp.float32 else max(err.values())
+            assert worst < tol, err
+            np.testing.assert_array_equal(np.asarray(tr.y[i, :, 1]), np.asarray(tr.y[i, :, 0]))
 
 
 def test_a_carried_body_rides_and_lands_with_its_carrier_in_float32(refs):

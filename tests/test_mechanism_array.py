@@ -55,6 +55,29 @@ def _topology(layout: str, tilted: bool = True, k_tilt: float = 1.0, splines: bo
                         layout=layout, restitution=[0.3, 0.0, 0.5, 0.1], **kw)  # fmt: skip
 
 
+def _random_state(rng: np.random.Generator, x0: list[float], hop: bool) -> tuple:
+    """Positions near `x0`, velocities and accelerations; under `hop` heights and their two rates."""
+    n = len(x0)
+    x = jnp.asarray(x0) + rng.normal(size=n) * 0.1
+    v, a = jnp.asarray(rng.normal(size=n)), jnp.asarray(rng.normal(size=n))
+    y, yd, ya = (jnp.asarray(np.abs(rng.normal(size=n))), jnp.asarray(rng.normal(size=n)),
+                 jnp.asarray(rng.normal(size=n))) if hop else (None, None, None)  # fmt: skip
+    return x, v, a, y, yd, ya
+
+
+def _loads(P: Any, x, v, a, y, yd, ya) -> tuple[Any, Any, Any, dict[str, Any]]:
+    """`P`'s actuation, loads and their rates at a state, and (stacked over the bodies) the loads, their
+    first two rates, the fall in flight and the energy."""
+    B: Any = lambda q: None if q is None else P.bodies(q)
+    dr = P.drive(jnp.cos(OMEGA * 0.7), jnp.sin(OMEGA * 0.7))
+    L = loads_at(P, dr, B(x), y=B(y))
+    R = load_rates_at(P, dr, L, B(v), yd=B(yd))
+    ddF, ddN = load_second_at(P, dr, L, R, B(v), B(a), yd=B(yd), ya=B(ya))
+    return dr, L, R, dict(F=P.stacked(L.F), N=P.stacked(L.N), dF=P.stacked(R.dF), dN=P.stacked(R.dN),
+                          ddF=P.stacked(ddF), ddN=P.stacked(ddN), fall=P.stacked(P.fall(L.N)),
+                          energy=P.energy(L, B(v)))  # fmt: skip
+
+
 @pytest.mark.parametrize("tilted, splines", [(False, False), (True, False), (True, True)])
 @pytest.mark.parametrize("hop", [False, True])
 def test_array_mechanism_rates_equal_unrolled(tilted, splines, hop):
@@ -68,26 +91,18 @@ def test_array_mechanism_rates_equal_unrolled(tilted, splines, hop):
     array = _topology("array", tilted, splines=splines).array_physics()
     assert (array.splines is not None) == splines
     assert isinstance(array, ArrayMechanismPhysics) and array.anchored and unrolled.anchored
-    x = jnp.asarray(X0) + rng.normal(size=4) * 0.1
-    v, a = jnp.asarray(rng.normal(size=4)), jnp.asarray(rng.normal(size=4))
-    y, yd, ya = (jnp.asarray(np.abs(rng.normal(size=4))), jnp.asarray(rng.normal(size=4)),
-                 jnp.asarray(rng.normal(size=4))) if hop else (None, None, None)  # fmt: skip
+    x, v, a, y, yd, ya = _random_state(rng, X0, hop)
     out = []
     for physics in (unrolled, array):
         P: Any = physics
         B: Any = lambda q: None if q is None else P.bodies(q)
-        dr = P.drive(jnp.cos(OMEGA * 0.7), jnp.sin(OMEGA * 0.7))
-        L = loads_at(P, dr, B(x), y=B(y))
-        R = load_rates_at(P, dr, L, B(v), yd=B(yd))
-        ddF, ddN = load_second_at(P, dr, L, R, B(v), B(a), yd=B(yd), ya=B(ya))
+        dr, L, R, common = _loads(P, x, v, a, y, yd, ya)
         vf = P.velocity_forces(B(v))
         assert vf is not None
-        out.append(dict(F=P.stacked(L.F), N=P.stacked(L.N), dF=P.stacked(R.dF), dN=P.stacked(R.dN),
-                        ddF=P.stacked(ddF), ddN=P.stacked(ddN), power=P.power(dr, L, B(v)),
-                        power_rate=P.power_rate(dr, L, R, B(v), B(a)), e=P.energy(L, B(v)), damper=P.stacked(vf),
-                        damper_power=P.velocity_power(B(v), B(a)), X=P.centre_of_mass(B(x)),
-                        fall=P.stacked(P.fall(L.N)), l0=P.stacked(dr.l0),
-                        tension=P.stacked(L.aux.tension)))  # fmt: skip
+        out.append(common | dict(power=P.power(dr, L, B(v)), power_rate=P.power_rate(dr, L, R, B(v), B(a)),
+                                 damper=P.stacked(vf), damper_power=P.velocity_power(B(v), B(a)),
+                                 X=P.centre_of_mass(B(x)), l0=P.stacked(dr.l0),
+                                 tension=P.stacked(L.aux.tension)))  # fmt: skip
     for key, want in out[0].items():
         np.testing.assert_allclose(np.asarray(out[1][key]), np.asarray(want), rtol=1e-13, atol=1e-13, err_msg=key)
     assert float(jnp.abs(out[0]["dN"]).max()) > (0.1 if tilted else -1)  # the tilted springs move the loads
@@ -255,30 +270,23 @@ def test_array_capsule_rates_equal_unrolled(hop):
     rng = np.random.default_rng(5 + hop)
     unrolled, array = _capsule("unrolled").physics(), _capsule("array").array_physics()
     assert isinstance(array, ArrayMechanismPhysics) and isinstance(array.friction[0], MixedFriction)
-    x = jnp.asarray(CAPSULE_X0) + rng.normal(size=6) * 0.1
-    v, a = jnp.asarray(rng.normal(size=6)), jnp.asarray(rng.normal(size=6))
-    y, yd, ya = (jnp.asarray(np.abs(rng.normal(size=6))), jnp.asarray(rng.normal(size=6)),
-                 jnp.asarray(rng.normal(size=6))) if hop else (None, None, None)  # fmt: skip
+    x, v, a, y, yd, ya = _random_state(rng, CAPSULE_X0, hop)
     out = []
     for physics in (unrolled, array):
         P: Any = physics
         B: Any = lambda q: None if q is None else P.bodies(q)
-        dr = P.drive(jnp.cos(OMEGA * 0.7), jnp.sin(OMEGA * 0.7))
-        L = loads_at(P, dr, B(x), y=B(y))
-        R = load_rates_at(P, dr, L, B(v), yd=B(yd))
-        ddF, ddN = load_second_at(P, dr, L, R, B(v), B(a), yd=B(yd), ya=B(ya))
+        _, L, _, common = _loads(P, x, v, a, y, yd, ya)
         sgn = lambda q: jnp.where(q >= 0, 1.0, -1.0)
         mu = tuple(law.kinetic(jnp.abs(q), sgn(q)) for law, q in zip(P.friction, B(v)))
         dmu = tuple(law.kinetic_rate(jnp.abs(q), sgn(q), r) for law, q, r in zip(P.friction, B(v), B(a)))
         y0, w0, e, _ = P.hop()
         # The bodies in contact: a count over them, and their least load.
         count = sum(jnp.sum(q) for q in P.contact_values(B(jnp.arange(1, 7)), 0))
-        out.append(dict(F=P.stacked(L.F), N=P.stacked(L.N), dF=P.stacked(R.dF), dN=P.stacked(R.dN),
-                        ddF=P.stacked(ddF), ddN=P.stacked(ddN), mu=P.stacked(mu),
-                        dmu=P.stacked(tuple(jnp.zeros(jnp.shape(q)) if r is None else r for q, r in zip(mu, dmu))),
-                        mu_f=P.stacked(P.mu_f), fall=P.stacked(P.fall(L.N)), ride=P.stacked(P.ride(B(x))),
-                        land=P.stacked(P.landing_masses()), y0=y0, w0=w0, e=P.stacked(e), count=count,
-                        least=least_contact_load(P, L.N, x), energy=P.energy(L, B(v))))  # fmt: skip
+        out.append(common | dict(mu=P.stacked(mu), mu_f=P.stacked(P.mu_f),
+                                 dmu=P.stacked(tuple(jnp.zeros(jnp.shape(q)) if r is None else r
+                                                     for q, r in zip(mu, dmu))),
+                                 ride=P.stacked(P.ride(B(x))), land=P.stacked(P.landing_masses()), y0=y0, w0=w0,
+                                 e=P.stacked(e), count=count, least=least_contact_load(P, L.N, x)))  # fmt: skip
     for key, want in out[0].items():
         np.testing.assert_allclose(np.asarray(out[1][key]), np.asarray(want), rtol=1e-13, atol=1e-13, err_msg=key)
     assert int(out[1]["count"]) == 1 + 4 + 6  # bodies 0, 3 and 5

@@ -15,6 +15,12 @@ the implicit function theorem: its first $S$ columns are the monodromy matrix. T
 differentiates the switching test functions of the period (the slip margin and the smallest normal
 force, [`Gait`][]), whose gradients say on which side of a switching surface a point lies.
 
+Where the Newton system is singular the fixed points are a family, not an isolated orbit: a body
+that stays stuck all period in a mechanism tied to the wall holds anywhere within its stick range
+(its position's row of $\\partial\\Phi_k/\\partial y - I$ is zero, a multiplier 1). There the step is
+the least-squares step of least norm (`_newton_step`), which goes to the nearest member of the
+family instead of dividing by zero.
+
 The period map is the same for every mechanism (`_shooting.period_map` of the configuration's
 physics); what a mechanism supplies is a flat batch of configurations (a pytree with a leading
 batch axis) and `physics_of(c) -> (physics, valid)` for one configuration. The parameter is a
@@ -195,6 +201,12 @@ class Solved(NamedTuple):
     it: Array
 
 
+def _newton_step(A: Array, F: Array) -> Array:
+    """$A^{-1} F$; where that is not finite ($A$ singular), the least-squares solution of least norm."""
+    step = jnp.linalg.solve(A, F)
+    return jnp.where(jnp.all(jnp.isfinite(step)), step, jnp.linalg.lstsq(A, F)[0])
+
+
 def _correct_one(
     c, physics_of, sel, contact, dt, k, lam0, scale, z0, zref, cvec, go, tol, max_iter, max_steps, patience
 ) -> Solved:
@@ -239,7 +251,7 @@ def _correct_one(
         z, J, out, _, it, _, _, best, since, started = s
         A = jnp.concatenate([J[:n] - shift, cvec[None]], axis=0)
         F = jnp.concatenate([out.y - z[:n], (cvec @ (z - zref))[None]])
-        z1 = jnp.where(started, z - jnp.linalg.solve(A, F), z)
+        z1 = jnp.where(started, z - _newton_step(A, F), z)
         J1, out1, valid1, bad = step(z1)
         r1 = residual(z1, out1)
         since1 = jnp.where(started, jnp.where(r1 <= best / 2, 0, since + 1), 0)

@@ -71,7 +71,10 @@ class Gait(PaperNames):
       appended, `batch + (4N - 1,)`; a mechanism anchored to the wall: positions then velocities
       $(x_1, \\dots, x_N, v_1, \\dots, v_N)$, `batch + (2N,)`.
     - `monodromy`: $M = \\partial\\Phi_k/\\partial y$ in the order of `state`; `multipliers`: its
-      eigenvalues (complex, by decreasing modulus); `stable`: all moduli below 1.
+      eigenvalues (complex, by decreasing modulus); `stable`: all moduli below 1. A mechanism
+      anchored to the wall with a body stuck all period has a family of orbits (that body holds
+      anywhere within its stick range): a multiplier 1, not `stable`, and the orbit found is the
+      member that Newton's least-norm steps reach from the transient's end.
     - `residual`: $\\|\\Phi_k(y) - y\\|_\\infty$ at the last iterate (NaN where nothing was solved:
       invalid parameters, a lift-off in the transient); `n_iter`: Newton iterations.
     - `liftoff`: a normal force reached zero on the orbit or the transient (paper reading: flagged,
