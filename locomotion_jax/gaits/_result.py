@@ -74,7 +74,7 @@ class Gait(PaperNames):
       eigenvalues (complex, by decreasing modulus); `stable`: all moduli below 1. A mechanism
       anchored to the wall with a body stuck all period has a family of orbits (that body holds
       anywhere within its stick range): a multiplier 1, not `stable`, and the orbit found is the
-      member that Newton's least-norm steps reach from the transient's end.
+      member that Newton's method (least-norm steps there) reaches from the transient's end.
     - `residual`: $\\|\\Phi_k(y) - y\\|_\\infty$ at the last iterate (NaN where nothing was solved:
       invalid parameters, a lift-off in the transient); `n_iter`: Newton iterations.
     - `liftoff`: a normal force reached zero on the orbit or the transient (paper reading: flagged,

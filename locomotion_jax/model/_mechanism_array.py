@@ -299,8 +299,9 @@ class ArrayMechanismPhysics(AbstractArrayPhysics):
         return tuple(jnp.where(np.asarray(self.contact), v, fill) for v in q)
 
     def hop(self) -> tuple[Array, Array, Scalars, Array]:
-        """As the unrolled physics (SPEC §10): the initial heights, vertical velocities and restitution
-        of the bodies that the bodies ride in (`array_physics` selects them)."""
+        """As the unrolled physics (SPEC §10): per body, the initial height, vertical velocity and
+        restitution of the body it rides in (its own where it is not carried; `array_physics` selects
+        them)."""
         return self.y0, self.w0, (self.restitution,), self.zeno_speed
 
     def fall(self, N: Scalars) -> Scalars:
