@@ -153,7 +153,11 @@ class MechanismPhysics(AbstractPhysics):
     def contact_values(self, q: tuple[Any, ...], fill: Any) -> tuple[Any, ...]:
         """The entries of the bodies with a friction law of their own: a body without ground contact has
         the placeholder load 1 (module docstring), and its entry is left out."""
-        return tuple(v for v, law in zip(q, self.friction) if not isinstance(law, _NoContact))
+        return tuple(v for v, touches in zip(q, self._touches()) if touches)
+
+    def _touches(self) -> list[bool]:
+        """Per body, whether it has ground contact (a friction law of its own)."""
+        return [not isinstance(law, _NoContact) for law in self.friction]
 
     def drive(self, c1: Array, s1: Array) -> Drive:
         at = lambda s: signal_at(s, c1, s1)
@@ -178,7 +182,7 @@ class MechanismPhysics(AbstractPhysics):
         forces `fy` ($+$ on `a`), each body's share on the body in contact that carries it."""
         terms: list[list[Array]] = [[q] for q in F]
         lift: list[list[Array]] = [[] for _ in self.m]
-        contact = [not isinstance(law, _NoContact) for law in self.friction]
+        contact = self._touches()
         for s, a, b in zip(self.tilted, fx, fy):
             _add(terms, s.a, a, 1.0)
             _add(terms, s.b, a, -1.0)
