@@ -972,16 +972,42 @@ MUTATIONS = [
         ("tests/test_mechanism_array.py::test_a_long_mechanism_in_the_array_layout_against_the_reference",),
     ),
     Mutation(
-        "mechanism_array_spline_means_lost",
-        "the array layout of a mechanism drops its splines' mean values (lbar): the springs' rest lengths about 0",
+        "mechanism_array_bank_mean_twice",
+        "the array layout of a mechanism adds a spline's mean (lbar) to its row of Fourier coefficients as well as "
+        "reading it from the bank: the rest lengths twice their mean",
         "locomotion_jax/model/_mechanism_array.py",
         (
             (
-                "    mean = s.lbar if isinstance(s, Spline) else jnp.asarray(s, like.dtype)\n",
-                "    mean = 0 * s.lbar if isinstance(s, Spline) else jnp.asarray(s, like.dtype)\n",
+                "    mean = jnp.zeros((), like.dtype) if isinstance(s, AbstractWaveform)",
+                "    mean = s.lbar if isinstance(s, AbstractWaveform)",
             ),
         ),
         ("tests/test_mechanism_array.py::test_array_mechanism_rates_equal_unrolled",),
+    ),
+    Mutation(
+        "wave_bank_rows_reversed",
+        "a group of the bank of waveforms puts its members' signals in its rows in reverse order",
+        "locomotion_jax/model/_bank.py",
+        (
+            (
+                "            out = out.at[..., jnp.asarray(rows)].add(q)\n",
+                "            out = out.at[..., jnp.asarray(rows[::-1])].add(q)\n",
+            ),
+        ),
+        ("tests/test_mechanism_array.py::test_mixed_waveforms_in_the_array_layout_against_the_reference",),
+    ),
+    Mutation(
+        "chain_array_bank_mean_kept_under_force",
+        "a chain's array layout under the internal-force actuator drives each spring by its waveform's value, not its "
+        "deviation from its own mean",
+        "locomotion_jax/model/_chain_array.py",
+        (
+            (
+                "            return self.lbar, l0 - self.bank.lbar, rate, acc\n",
+                "            return self.lbar, l0, rate, acc\n",
+            ),
+        ),
+        ("tests/test_chain_array.py::test_array_layout_splines_equal_unrolled",),
     ),
     Mutation(
         "mechanism_layout_ignored",

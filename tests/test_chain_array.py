@@ -308,16 +308,14 @@ def test_layout_choice_and_refusals(monkeypatch):
     assert array_from() == ARRAY_FROM_ACCELERATOR < ARRAY_FROM
     assert isinstance(engine_physics(_worm(ARRAY_FROM_ACCELERATOR, "auto")), ArrayChainPhysics)
     assert isinstance(engine_physics(_worm(ARRAY_FROM_ACCELERATOR - 1, "auto")), ChainPhysics)
-    # Splines of one number of control values run in the array layout; a mix of waveform kinds, or
-    # splines of several sizes, do not ("auto" runs them unrolled).
+    # Every waveform runs in the array layout: a mix of kinds, splines of several sizes.
     spline = lj.Spline(np.array([0.05, -0.05, 0.05, -0.05]), 2.0, 3.0)
     longer = lj.Spline(np.array([0.05, -0.05, 0.05, -0.05, 0.0]), 2.0, 3.0)
-    assert isinstance(engine_physics(lj.Chain(masses=[1.0] * 3, waveforms=spline, layout="array")), ArrayChainPhysics)
     for mixed in ([spline, lj.Sinusoid(0.05, 2.0, 3.0)], [spline, longer]):
-        with pytest.raises(ValueError, match="layout.*Splines of one number of control values"):
-            lj.Chain(masses=[1.0] * 3, waveforms=mixed, layout="array")
+        chain = lj.Chain(masses=[1.0] * 3, waveforms=mixed, layout="array")
+        assert isinstance(engine_physics(chain), ArrayChainPhysics)
         auto = lj.Chain(masses=[1.0] * ARRAY_FROM, waveforms=mixed * ((ARRAY_FROM - 1) // 2) + [spline])
-        assert isinstance(engine_physics(auto), ChainPhysics)
+        assert isinstance(engine_physics(auto), ArrayChainPhysics)
 
 
 def test_array_layout_sweep_equals_measure():
@@ -438,25 +436,37 @@ def test_array_layout_hop_gait_equals_unrolled():
     assert np.all(np.asarray(again.n_iter) == 0) and np.abs(np.asarray(again.state - got.state)).max() < 1e-10
 
 
-def _spline_worms(layout: str, force: bool = False) -> lj.Chain:
+def _spline_worms(layout: str, force: bool = False, mixed: bool = False) -> lj.Chain:
     """Two 4-mass worms on bristles, each spring its own periodic spline of 6 control values (its own
-    mean rest length), under the rest-length or the internal-force actuator."""
+    mean rest length), under the rest-length or the internal-force actuator; `mixed`: the middle spring
+    driven by a waveform class of a user's own (`mechanism_cases.Cubed`, its amplitude broadcast over the
+    batch or not), the last spline of 5 values."""
+    from mechanism_cases import Cubed
+
     rng = np.random.default_rng(1)
     scale = 2.0 if force else 0.06
-    splines = [lj.Spline(rng.uniform(-scale, scale, (2, 6)), 3.0, 3.0 + 0.1 * j) for j in range(3)]
+    splines: list[Any] = [lj.Spline(rng.uniform(-scale, scale, (2, 6 - (mixed and j == 2))), 3.0, 3.0 + 0.1 * j)
+               for j in range(3)]  # fmt: skip
+    if mixed:
+        # Its amplitude per configuration under the force, one for both under the rest length.
+        splines[1] = Cubed((jnp.asarray([0.5, -0.7]) if force else jnp.asarray(0.5)) * scale, jnp.asarray(3.0),
+                           jnp.asarray(3.1))  # fmt: skip
     return lj.Chain(masses=[[1.0, 1.1, 0.9, 1.0], [0.9, 1.0, 1.2, 1.1]], d=0.3, lbar=None, c=0.02, waveforms=splines,
                     friction=lj.AnisotropicCoulomb(0.7, 0.9, 0.5, 0.7), layout=layout,
                     actuator=lj.InternalForce() if force else lj.RestLength())  # fmt: skip
 
 
-@pytest.mark.parametrize("force", [False, True])
-def test_array_layout_splines_equal_unrolled(force):
-    """Springs driven by periodic splines (`Spline`, one per spring, one number of control values): both
-    layouts' `measure` agree to 1e-10 relative with the same steps and switches, under the rest-length
-    actuator and the internal force (whose spline is a force about its own mean)."""
+@pytest.mark.parametrize("force, mixed", [(False, False), (True, False), (False, True), (True, True)])
+def test_array_layout_splines_equal_unrolled(force, mixed):
+    """Springs driven by periodic splines (`Spline`, one per spring), and (`mixed`) by splines of two
+    sizes and a waveform class of a user's own: both layouts' `measure` agree to 1e-10 relative with
+    the same steps and switches, under the rest-length actuator and the internal force (whose
+    waveform is a force about its own mean)."""
     kw: dict[str, Any] = dict(z=0.3, t_start=4.0, horizon=40.0, contact="paper")
-    got, ref = (lj.measure(_spline_worms(lay, force), **kw).to_numpy() for lay in ("array", "unrolled"))
-    assert isinstance(engine_physics(_spline_worms("array", force)), ArrayChainPhysics)
+    got, ref = (lj.measure(_spline_worms(lay, force, mixed), **kw).to_numpy() for lay in ("array", "unrolled"))
+    P = engine_physics(_spline_worms("array", force, mixed))
+    assert isinstance(P, ArrayChainPhysics) and P.bank is not None
+    assert P.bank.rows == (((0,), (1,), (2,)) if mixed else ((0, 1, 2),))
     assert np.all(ref["status"] == lj.Status.OK) and np.all(ref["stick_fraction"].max(-1) > 0.05)
     for key in MEASURED:
         _close(got[key], ref[key], RTOL)

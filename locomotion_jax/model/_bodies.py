@@ -24,7 +24,7 @@ from ._checks import broadcast_shape, is_concrete, real_array
 from ._elements import AbstractElement, Damper, signal_checks, signal_nodes, Spring, TiltedSpring, WALL
 from ._friction import AbstractFriction, Coulomb
 from ._mechanism import AbstractMechanism
-from ._mechanism_array import array_physics, array_unsupported, ArrayMechanismPhysics
+from ._mechanism_array import array_physics, ArrayMechanismPhysics
 from ._mechanism_physics import ground_body, mechanism_physics, MechanismPhysics
 from ._physics import ZENO_SPEED
 from ._waveform import AbstractWaveform, Fourier, Spline
@@ -120,10 +120,9 @@ class Mechanism(AbstractMechanism):
     - `layout`: how the engines (exact and smoothed) lay the bodies out, as a
       [`Chain`][locomotion_jax.Chain]'s: `"unrolled"` (one scalar per body, every mechanism), `"array"`
       (one array over the bodies and one over the elements of each kind, `model._mechanism_array`:
-      compile time independent of N, for mechanisms driven by constants, sinusoids and Fourier
-      series, or by constants and splines of one number of control values; carried and free bodies
-      and laws of several classes included), or `"auto"` (the
-      default: the array layout where it applies from `ARRAY_FROM` (16) bodies on, on a CPU).
+      compile time independent of N; every waveform, carried and free bodies and laws of several
+      classes included), or `"auto"` (the default: the array layout from `ARRAY_FROM` (16) bodies
+      on, on a CPU).
 
     **Raises:** `ValueError` naming the element and the body for bad structure (a body carried
     by itself or in a loop, a carried body with a friction law, a link to a missing body, an
@@ -228,10 +227,6 @@ class Mechanism(AbstractMechanism):
         if layout not in LAYOUTS:
             raise ValueError(f"Invalid parameter 'layout': expected one of {LAYOUTS}, got {layout!r}.")
         self.layout = layout
-        why = array_unsupported(self) if layout == "array" else None
-        if why is not None:
-            raise ValueError(f"Invalid parameter 'layout': 'array' is not available for this mechanism: {why}; "
-                             "use layout='unrolled' or 'auto'.")  # fmt: skip
         _ = self.batch_shape  # fields whose batch axes do not broadcast are refused here, named
         if check and is_concrete(self):
             self.validate()
@@ -398,10 +393,6 @@ class Mechanism(AbstractMechanism):
     def physics(self) -> MechanismPhysics:
         """The mechanism's [`AbstractPhysics`][locomotion_jax.AbstractPhysics]: what the engine integrates it with."""
         return mechanism_physics(self)
-
-    def array_unsupported(self) -> str | None:
-        """Why the mechanism cannot run in the array layout (`None`: it can; `model._mechanism_array`)."""
-        return array_unsupported(self)
 
     def array_physics(self) -> ArrayMechanismPhysics:
         """The mechanism's physics in the array layout (`model._mechanism_array`)."""

@@ -11,9 +11,10 @@ import numpy as np
 
 from .._custom_types import Array, ValuesLike
 from ._actuator import AbstractActuator, RestLength
-from ._chain_array import array_physics, array_unsupported, ArrayChainPhysics, LAYOUTS
+from ._chain_array import array_physics, ArrayChainPhysics, LAYOUTS
 from ._chain_physics import chain_physics, ChainPhysics
 from ._checks import broadcast_shape, real_array, related
+from ._elements import signal_fields
 from ._friction import AbstractFriction, Coulomb
 from ._mechanism import AbstractMechanism
 from ._params import normal_positive, Params
@@ -65,10 +66,9 @@ class Chain(AbstractMechanism):
     - `actuator`: [`RestLength`][] (default) or [`InternalForce`][].
     - `layout`: how the engines (exact and smoothed) lay the masses out: `"unrolled"` (one scalar per mass:
       fastest for a few masses, but compile time and cost per mass grow with N), `"array"` (one
-      array over the masses: compile time independent of N; Sinusoid, Fourier, travelling-wave
-      and spline actuation, every contact reading), or `"auto"` (default): where it applies, the
-      array layout from `ARRAY_FROM` (16) masses on for `measure` and `simulate` on a CPU
-      (`ARRAY_FROM_ACCELERATOR`, 4, on a GPU), and from
+      array over the masses: compile time independent of N; every waveform and every contact
+      reading), or `"auto"` (default): the array layout from `ARRAY_FROM` (16) masses on for
+      `measure` and `simulate` on a CPU (`ARRAY_FROM_ACCELERATOR`, 4, on a GPU), and from
       `GAIT_ARRAY_FROM` (3) on for steady gaits, continuation and the optimiser
       (docs/performance.md, "Long chains").
     - `check`: validate concrete values (default); invalid values raise `ValueError` naming the
@@ -153,10 +153,6 @@ class Chain(AbstractMechanism):
         if layout not in LAYOUTS:
             raise ValueError(f"Invalid parameter 'layout': expected one of {LAYOUTS}, got {layout!r}.")
         self.layout = layout
-        why = array_unsupported(self) if layout == "array" else None
-        if why is not None:
-            raise ValueError(f"Invalid parameter 'layout': 'array' is not available for this chain: {why}; "
-                             "use layout='unrolled' or 'auto'.")  # fmt: skip
         _ = self.batch_shape  # fields whose batch axes do not broadcast are refused here, named
         if check and all(_concrete(x) for x in jax.tree_util.tree_leaves(self)):
             self.validate()
@@ -207,8 +203,7 @@ class Chain(AbstractMechanism):
         shapes |= {"waveforms (cos)": self.waves.cos.shape[:-2], "waveforms (sin)": self.waves.sin.shape[:-2],
                    "omega": self.waves.omega.shape}  # fmt: skip
         for j, w in enumerate(self.signals or ()):
-            shapes |= {f"waveforms[{j}] ({n})": x.shape[:-1] for n, x in w.coefficients().items()}
-            shapes |= {f"waveforms[{j}] (omega)": jnp.shape(w.omega), f"waveforms[{j}] (lbar)": jnp.shape(w.lbar)}
+            shapes |= {f"waveforms[{j}] ({n})": x.shape[: x.ndim - tail] for n, x, tail in signal_fields(w)}
         return broadcast_shape(shapes)
 
     @property
@@ -232,13 +227,9 @@ class Chain(AbstractMechanism):
             return out
 
         def signal(w: AbstractWaveform) -> AbstractWaveform:
-            coef = w.coefficients()
-            # A field's own axis is its view's last one where the view keeps its dimensions (a
-            # Spline's `control`), none where the view adds it (a Sinusoid's amplitude `a`).
-            own = lambda name, x: x.shape[-1:] if jnp.ndim(getattr(w, name)) == x.ndim else ()
-            full_coef = [full(getattr(w, name), own(name, x)) for name, x in coef.items()]
-            w = eqx.tree_at(lambda v: [getattr(v, name) for name in coef], w, full_coef)
-            return eqx.tree_at(lambda v: (v.omega, v.lbar), w, (full(w.omega, ()), full(w.lbar, ())))
+            fields = signal_fields(w)
+            arrays = [full(x, x.shape[x.ndim - tail :]) for _, x, tail in fields]
+            return eqx.tree_at(lambda v: [getattr(v, name) for name, _, _ in fields], w, arrays)
 
         return eqx.tree_at(lambda c: c.signals, out, tuple(map(signal, self.signals)))
 
@@ -284,10 +275,6 @@ class Chain(AbstractMechanism):
         if self.signals is None:
             return P
         return eqx.tree_at(lambda P: P.waveforms, P, self.signals, is_leaf=lambda x: x is None)
-
-    def array_unsupported(self) -> str | None:
-        """Why the chain cannot run in the array layout (`None`: it can; `model._chain_array`)."""
-        return array_unsupported(self)
 
     def array_physics(self) -> "ArrayChainPhysics":
         """The chain's physics in the array layout (`model._chain_array`)."""
@@ -397,7 +384,9 @@ class Chain(AbstractMechanism):
         """The largest excursion of each spring's signal, shape `(..., N - 1)` (broadcast chain)."""
         if self.signals is None:
             return self.waves.stroke()
-        return jnp.stack([w.stroke() for w in self.signals], -1)
+        strokes = [w.stroke() for w in self.signals]
+        shape = jnp.broadcast_shapes(*(jnp.shape(q) for q in strokes))
+        return jnp.stack([jnp.broadcast_to(q, shape) for q in strokes], -1)
 
     def is_valid(self) -> Array:
         """Traceable mask (batch shape) of configurations inside the valid ranges."""

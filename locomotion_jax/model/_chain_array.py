@@ -20,16 +20,15 @@ layout from [`array_from`][]`()` masses on, where it supports the chain).
 
 from typing import Any
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 
 from .._custom_types import Array
 from ._actuator import AbstractActuator
+from ._bank import wave_bank, WaveBank
 from ._chain_physics import Drive, SpringRates, Springs
 from ._friction import AbstractFriction
 from ._physics import AbstractArrayPhysics, AbstractPhysics, LoadRates, Loads, Scalars, ZENO_SPEED
-from ._waveform import Spline
 
 
 ARRAY_FROM = 16
@@ -83,15 +82,15 @@ class ArrayChainPhysics(AbstractArrayPhysics):
     inv_mass: Array
     one: Array
     actuator: AbstractActuator
-    # The springs' periodic splines as one `Spline` over the springs (control values springs by
-    # knots), in place of the Fourier coefficients `cos`, `sin`; `None`: the coefficients.
-    splines: Spline | None = None
+    # The springs' own waveforms (`Chain.signals`) as one bank, in place of the Fourier coefficients
+    # `cos`, `sin`; `None`: the coefficients.
+    bank: WaveBank | None = None
 
     def drive(self, c1: Array, s1: Array) -> Drive:
         """Each spring's Fourier signal with its first two rates (the harmonics by the angle-addition
-        recurrence, summed in the unrolled physics' order), or its spline's, split by the actuator."""
-        if self.splines is not None:
-            return self._split(*self._spline_signals(c1, s1))
+        recurrence, summed in the unrolled physics' order), or its own waveform's, split by the actuator."""
+        if self.bank is not None:
+            return self._split(*self._bank_signals(c1, s1))
         H = self.cos.shape[-1]
         A, B = self.cos, self.sin
         cn, sn = c1, s1
@@ -109,15 +108,15 @@ class ArrayChainPhysics(AbstractArrayPhysics):
             val = rate = acc = jnp.zeros_like(self.lbar) * c1
         return self._split(self.lbar, val, rate, acc)
 
-    def _spline_signals(self, c1: Array, s1: Array) -> tuple[Array, Array, Array, Array]:
-        """The mean rest lengths and the signals with their rates of the springs' splines, as the
-        unrolled physics reads a waveform: the spline's rest length itself under the rest-length
-        actuator (about $\\bar\\ell_j$), its deviation from its own mean under the force actuator."""
-        assert self.splines is not None
-        l0, rate, acc = self.splines.at_phase(c1, s1)
+    def _bank_signals(self, c1: Array, s1: Array) -> tuple[Array, Array, Array, Array]:
+        """The mean rest lengths and the signals with their rates of the springs' own waveforms, as
+        the unrolled physics reads a waveform: its rest length itself under the rest-length actuator
+        (about $\\bar\\ell_j$), its deviation from its own mean under the force actuator."""
+        assert self.bank is not None
+        l0, rate, acc = self.bank.at_phase(c1, s1)
         if self.actuator.applies_force:
-            return self.lbar, l0 - self.splines.lbar, rate, acc
-        return self.lbar - self.splines.lbar, l0, rate, acc
+            return self.lbar, l0 - self.bank.lbar, rate, acc
+        return self.lbar - self.bank.lbar, l0, rate, acc
 
     def _split(self, base: Array, val: Array, rate: Array, acc: Array) -> Drive:
         """Rest lengths and forces with their rates from the signals (the actuator is linear, so the
@@ -272,32 +271,9 @@ def _power(act: AbstractActuator, T: Array, dl0: Array | None, f: Array | None, 
     return out
 
 
-def array_unsupported(C: Any) -> str | None:
-    """Why a chain cannot run in the array layout (`None`: it can): springs driven by waveforms
-    other than Fourier coefficients (Sinusoid, Fourier, TravellingWave) or splines of one number
-    of control values."""
-    signals = C.signals or ()
-    if signals and not (all(type(w) is Spline for w in signals) and len({w.knots for w in signals}) == 1):
-        return "its springs' waveforms are neither Fourier series nor Splines of one number of control values"
-    return None
-
-
-def _splines(signals: tuple[Any, ...]) -> Spline:
-    """The springs' splines (broadcast to the chain's batch shape) as one `Spline` over the springs:
-    control values `batch + (springs, M)`, base frequencies and mean rest lengths `batch + (springs,)`."""
-    return eqx.tree_at(
-        lambda w: (w.control, w.omega, w.lbar), signals[0],
-        (jnp.stack([w.control for w in signals], -2), jnp.stack([w.omega for w in signals], -1),
-         jnp.stack([w.lbar for w in signals], -1)),
-    )  # fmt: skip
-
-
 def array_physics(C: Any) -> ArrayChainPhysics:
     """The physics of a [`Chain`][locomotion_jax.Chain] in the array layout (every field broadcast
     to the chain's batch shape, with its mass or spring axis)."""
-    why = array_unsupported(C)
-    if why is not None:
-        raise ValueError(f"A chain in layout='array': {why}; use layout='unrolled' or 'auto'.")
     C = C.broadcast()
     law = C.friction
     f, b = law.static_limits()
@@ -306,23 +282,19 @@ def array_physics(C: Any) -> ArrayChainPhysics:
         m=(C.m,), im=(1 / C.m,), c=(C.c,), mu_f=(f,), mu_b=(None if b is f else b,), friction=(law,),
         k=C.k, d=C.d, dd=C.d * C.d, lbar=C.lbar, cos=C.waves.cos, sin=C.waves.sin, omega=C.waves.omega,
         nw=nw, nw2=nw * nw, inv_mass=1 / C.m.sum(-1), one=C.m[..., 0] / C.m[..., 0], actuator=C.actuator,
-        splines=None if C.signals is None else _splines(C.signals),
+        bank=None if C.signals is None else wave_bank(dict(enumerate(C.signals)), len(C.signals), C.batch_shape),
     )  # fmt: skip
 
 
 def uses_array(mechanism: Any, start: int | None = None) -> bool:
     """Whether `measure` and `simulate` run a mechanism in the array layout: a
-    [`Chain`][locomotion_jax.Chain] or a [`Mechanism`][locomotion_jax.Mechanism] with `layout="array"`
-    (refused with a clear error where its `array_unsupported()` finds a reason), or `"auto"` from
-    `start` bodies on (default [`array_from`][]`()`) where it finds none; any other mechanism, or
+    [`Chain`][locomotion_jax.Chain] or a [`Mechanism`][locomotion_jax.Mechanism] with `layout="array"`,
+    or `"auto"` from `start` bodies on (default [`array_from`][]`()`); any other mechanism, or
     `layout="unrolled"`: no. Steady gaits pass `start=`[`GAIT_ARRAY_FROM`][]."""
     layout = getattr(mechanism, "layout", "unrolled")
     if layout == "unrolled":
         return False
-    why = mechanism.array_unsupported()
-    if layout == "array" and why is not None:
-        raise ValueError(f"A {mechanism.kind} in layout='array': {why}; use layout='unrolled' or 'auto'.")
-    return layout == "array" or (why is None and mechanism.n_masses >= (array_from() if start is None else start))
+    return layout == "array" or mechanism.n_masses >= (array_from() if start is None else start)
 
 
 def engine_physics(mechanism: Any, start: int | None = None) -> AbstractPhysics:

@@ -56,20 +56,23 @@ def signal_at(s: Signal, c1: Array, s1: Array) -> tuple[Array, Array | None, Arr
     return jnp.broadcast_to(jnp.asarray(s, jnp.result_type(c1)), jnp.shape(c1)), None, None
 
 
-def signal_nodes(s: Signal) -> list[tuple[Array, int]]:
-    """Every array of a signal with the number of its trailing (non-batch) axes: a waveform's
+def signal_fields(s: AbstractWaveform) -> list[tuple[str, Array, int]]:
+    """Every array field of a waveform, `(name, array, number of its trailing non-batch axes)`: its
     coefficient arrays have one (`AbstractWaveform.coefficients`), its other fields none."""
-    if not isinstance(s, AbstractWaveform):
-        return [(s, 0)]
     coeffs = s.coefficients()
     out = []
     for f in dataclasses.fields(s):
         x = getattr(s, f.name)
-        if not eqx.is_array(x):
-            continue
-        tail = 1 if f.name in coeffs and jnp.ndim(coeffs[f.name]) == jnp.ndim(x) else 0
-        out.append((x, tail))
+        if eqx.is_array(x):
+            out.append((f.name, x, 1 if f.name in coeffs and jnp.ndim(coeffs[f.name]) == jnp.ndim(x) else 0))
     return out
+
+
+def signal_nodes(s: Signal) -> list[tuple[Array, int]]:
+    """Every array of a signal with the number of its trailing (non-batch) axes ([`signal_fields`][])."""
+    if not isinstance(s, AbstractWaveform):
+        return [(s, 0)]
+    return [(x, tail) for _, x, tail in signal_fields(s)]
 
 
 def signal_checks(s: Signal) -> list[tuple[str, Array, str]]:

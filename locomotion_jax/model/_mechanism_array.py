@@ -8,7 +8,7 @@ The same forces as [`MechanismPhysics`][locomotion_jax.model._mechanism_physics.
 - an element's ends are static indices into the positions with a zero appended for the wall, so
   its extension $u = x_b - x_a$ (a tilted spring's too) is one gather over the elements;
 - every signal (springs' and tilted springs' rest lengths, internal and external forces) is one
-  row of a bank of Fourier coefficients, padded to the most harmonics (a constant: none), read by
+  row of a table of Fourier coefficients, padded to the most harmonics (a constant: none), read by
   the angle-addition recurrence at the engine's phase;
 - a body's load $F_i$ is the signed sum of the element forces that act on it: a gather of the
   element forces by a static table of (element, sign) per body, padded with a zero force, and its
@@ -20,12 +20,10 @@ The same forces as [`MechanismPhysics`][locomotion_jax.model._mechanism_physics.
 - a carried body rides in the body that finally carries it (its height, vertical velocity, fall
   and landing are that body's): a static gather of the entries, as the unrolled physics selects them.
 
-It serves every mechanism driven by constants with [`Sinusoid`][locomotion_jax.Sinusoid] and
-[`Fourier`][locomotion_jax.Fourier] signals, or constants with [`Spline`][locomotion_jax.Spline]s of one
-number of control values (a bank of splines, a constant's control values zero; the mechanism
-optimiser's spline family) ([`array_unsupported`][] says why another cannot); the unrolled physics
-serves every mechanism. Sums over bodies and elements are summed in another order
-than the unrolled physics', so the two agree to rounding.
+The signals driven by other waveforms (splines, a waveform class of the user's own) are rows of a
+`_bank.WaveBank` (one evaluation per class and shape), added to the coefficients' rows, which are
+zero there; the unrolled physics reads each waveform on its own. Sums over bodies and elements are
+summed in another order than the unrolled physics', so the two agree to rounding.
 """
 
 from typing import Any, NamedTuple
@@ -36,6 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array
+from ._bank import wave_bank, WaveBank
 from ._chain_physics import spring_rates, spring_second, Springs, tilted
 from ._elements import Damper, ExternalForce, Force, Spring, TiltedSpring, WALL
 from ._friction import AbstractFriction, MixedFriction
@@ -49,7 +48,7 @@ from ._mechanism_physics import (
     TiltRates,
 )
 from ._physics import AbstractArrayPhysics, LoadRates, Loads, Scalars
-from ._waveform import AbstractWaveform, Fourier, Sinusoid, Spline
+from ._waveform import AbstractWaveform, Fourier, Sinusoid
 
 
 class Table(NamedTuple):
@@ -131,15 +130,15 @@ class ArrayMechanismPhysics(AbstractArrayPhysics):
     k: Array  # the linear springs'
     tilt: TiltGeometry  # the tilted springs' stiffness, offset and its square (1-tuples of arrays)
     damping: Array  # the relative dampers' c
-    lbar: Array  # the signal bank: springs, tilted springs, forces, external forces
+    lbar: Array  # the signals (means): springs, tilted springs, forces, external forces
     cos: Array
     sin: Array
     nw: Array
     nw2: Array
-    # The bank as one `Spline` over the signals (control values signals by knots), in place of the
-    # Fourier coefficients `cos`, `sin`; `None`: the coefficients.
-    splines: Spline | None
-    kinds: tuple[int, int, int, int] = eqx.field(static=True)  # signals per kind, in the bank's order
+    # The signals driven by waveforms other than sinusoids and Fourier series (`_bank`), added to
+    # the coefficients' (zero in their rows); `None`: there are none.
+    bank: WaveBank | None
+    kinds: tuple[int, int, int, int] = eqx.field(static=True)  # signals per kind, in the order of `lbar`
     spring_ends: tuple[tuple[int, ...], tuple[int, ...]] = eqx.field(static=True)
     tilt_ends: tuple[tuple[int, ...], tuple[int, ...]] = eqx.field(static=True)
     force_ends: tuple[tuple[int, ...], tuple[int, ...]] = eqx.field(static=True)
@@ -158,10 +157,8 @@ class ArrayMechanismPhysics(AbstractArrayPhysics):
         return self.anchor
 
     def drive(self, c1: Array, s1: Array) -> Drive:
-        """Every signal of the bank with its first two rates (the harmonics by the angle-addition
-        recurrence, or the splines'), split by kind."""
-        if self.splines is not None:
-            return self._split(*self.splines.at_phase(c1, s1))
+        """Every signal with its first two rates (the harmonics by the angle-addition recurrence,
+        the other waveforms' from their bank), split by kind."""
         A, B = self.cos, self.sin
         val, rate, acc = self.lbar + 0 * c1, jnp.zeros_like(self.lbar), jnp.zeros_like(self.lbar)
         cn, sn = c1, s1
@@ -172,6 +169,8 @@ class ArrayMechanismPhysics(AbstractArrayPhysics):
             val = (val + A[..., h] * cn) + B[..., h] * sn  # the unrolled `Fourier.at_phase`'s order
             rate = rate + self.nw[..., h] * (B[..., h] * cn - A[..., h] * sn)
             acc = acc - self.nw2[..., h] * vn
+        if self.bank is not None:
+            val, rate, acc = self.bank.at_phase(c1, s1, (val, rate, acc))
         return self._split(val, rate, acc)
 
     def _split(self, val: Array, rate: Array, acc: Array) -> Drive:
@@ -321,36 +320,15 @@ class ArrayMechanismPhysics(AbstractArrayPhysics):
 
 
 def _fourier(s: Any, like: Array) -> tuple[Array, Array, Array]:
-    """A signal's `(lbar, cos, sin)`: a constant's value and no harmonics, a sinusoid's one, a spline's
-    mean and no harmonics (its shape is in the bank of splines, `_spline_bank`)."""
+    """A signal's `(lbar, cos, sin)`: a constant's value and no harmonics, a sinusoid's one, zero
+    for another waveform (its row of the bank, `_bank`)."""
     if isinstance(s, Fourier):
         return s.lbar, s.cos, s.sin
     if isinstance(s, Sinusoid):
         return s.lbar, jnp.zeros_like(s.a)[..., None], s.a[..., None]
-    mean = s.lbar if isinstance(s, Spline) else jnp.asarray(s, like.dtype)
+    mean = jnp.zeros((), like.dtype) if isinstance(s, AbstractWaveform) else jnp.asarray(s, like.dtype)
     none = jnp.zeros(jnp.shape(mean) + (0,), like.dtype)
     return mean, none, none
-
-
-def _splined(M: Any) -> bool:
-    """Whether the mechanism's waveforms are splines (then all of them are, `array_unsupported`)."""
-    return any(isinstance(w, Spline) for w in M.waveforms())
-
-
-def array_unsupported(M: Any) -> str | None:
-    """Why a mechanism cannot run in the array layout (`None`: it can): signals other than constants
-    with `Sinusoid`s and `Fourier` series, or constants with `Spline`s of one number of control
-    values."""
-    waves = M.waveforms()
-    if _splined(M):
-        if not all(isinstance(w, Spline) for w in waves) or len({w.knots for w in waves}) > 1:
-            return "its waveforms mix Splines with other waveforms or Splines of other numbers of control values"
-        return None
-    for el in M.links:
-        for s in el.signals():
-            if isinstance(s, AbstractWaveform) and not isinstance(s, (Fourier, Sinusoid)):
-                return f"{el.describe()} is driven by a {type(s).__name__}, not a Sinusoid or a Fourier series"
-    return None
 
 
 def _friction(laws: tuple[AbstractFriction, ...], batch: tuple[int, ...]) -> AbstractFriction:
@@ -367,23 +345,9 @@ def _friction(laws: tuple[AbstractFriction, ...], batch: tuple[int, ...]) -> Abs
     return members[0] if len(members) == 1 else MixedFriction(tuple(members), classes)
 
 
-def _spline_bank(signals: list[Any], lbar: Array, omega: Array, batch: tuple[int, ...]) -> Spline:
-    """The signals as one `Spline` over them: a spline's control values, a constant's zeros (its value
-    is its `lbar`), `batch + (signals, M)`; base frequencies and means `batch + (signals,)`."""
-    knots = next(s.knots for s in signals if isinstance(s, Spline))
-    rows = [s.control if isinstance(s, Spline) else jnp.zeros((knots,), lbar.dtype) for s in signals]
-    control = jnp.stack([jnp.broadcast_to(q, batch + (knots,)) for q in rows], -2).astype(lbar.dtype)
-    like = next(s for s in signals if isinstance(s, Spline))
-    omegas = jnp.broadcast_to(omega[..., None], lbar.shape)
-    return eqx.tree_at(lambda w: (w.control, w.omega, w.lbar), like, (control, omegas, lbar))
-
-
 def array_physics(M: Any) -> ArrayMechanismPhysics:
     """The physics of a [`Mechanism`][locomotion_jax.Mechanism] in the array layout (every field
     broadcast to the mechanism's batch shape, with its body or element axis)."""
-    why = array_unsupported(M)
-    if why is not None:
-        raise ValueError(f"A mechanism in layout='array': {why}; use layout='unrolled' or 'auto'.")
     M = M.broadcast()
     n, batch = M.n_bodies, M.batch_shape
     links = M.links
@@ -394,17 +358,19 @@ def array_physics(M: Any) -> ArrayMechanismPhysics:
     dampers = [e for e in links if isinstance(e, Damper) and WALL not in (e.a, e.b)]
     ends = lambda els: (tuple(_end(e.a, n) for e in els), tuple(_end(e.b, n) for e in els))
     stack = lambda xs: jnp.stack([jnp.broadcast_to(q, batch) for q in xs], -1) if xs else jnp.zeros(batch + (0,))
-    # The bank of signals, in the order springs, tilted springs, forces, externals.
+    # The signals, in the order springs, tilted springs, forces, externals.
     signals = [e.rest for e in springs] + [e.rest for e in tilts] + [e.waveform for e in forces + externals]
-    splined = _splined(M)
-    bank = [_fourier(s, M.m) for s in signals]
-    H = max([q[1].shape[-1] for q in bank] + [0])
+    coefs = [_fourier(s, M.m) for s in signals]
+    # Every other waveform is read from its row of the bank of waveforms.
+    waves: dict[int, AbstractWaveform] = {j: s for j, s in enumerate(signals) if isinstance(s, AbstractWaveform)
+                                          and not isinstance(s, (Fourier, Sinusoid))}  # fmt: skip
+    H = max([q[1].shape[-1] for q in coefs] + [0])
     pad = lambda q: jnp.broadcast_to(jnp.pad(q, [(0, 0)] * (q.ndim - 1) + [(0, H - q.shape[-1])]), batch + (H,))
-    cos = jnp.stack([pad(c) for _, c, _ in bank], -2) if bank else jnp.zeros(batch + (0, H))
-    sin = jnp.stack([pad(s) for _, _, s in bank], -2) if bank else jnp.zeros(batch + (0, H))
-    waves = M.waveforms()
+    cos = jnp.stack([pad(c) for _, c, _ in coefs], -2) if coefs else jnp.zeros(batch + (0, H))
+    sin = jnp.stack([pad(s) for _, _, s in coefs], -2) if coefs else jnp.zeros(batch + (0, H))
+    first = M.waveforms()[:1]
     one = M.m[..., 0] / M.m[..., 0]
-    omega = jnp.broadcast_to(waves[0].omega, batch).astype(one.dtype) if waves else jnp.zeros_like(one)
+    omega = jnp.broadcast_to(first[0].omega, batch).astype(one.dtype) if first else jnp.zeros_like(one)
     nw = jnp.stack([(h + 1) * omega for h in range(H)], -1)[..., None, :] if H else jnp.zeros(batch + (1, 0))
     # The element forces on the bodies: +T on a spring's a, +fx on a tilted spring's a, +f on a force's b.
     S, T, F = len(springs), len(tilts), len(forces)
@@ -427,7 +393,7 @@ def array_physics(M: Any) -> ArrayMechanismPhysics:
     f, b = law.static_limits()
     d = stack([e.d for e in tilts])
     dt = one.dtype
-    means = stack([q[0] for q in bank]).astype(dt)
+    means = stack([q[0] for q in coefs]).astype(dt)
     return ArrayMechanismPhysics(
         m=(M.m,), im=(1 / M.m,), c=(c,), friction=(law,), mu_f=(f,), mu_b=(None if b is f else b,), omega=omega,
         one=one, normal=M.m if plain else jnp.stack(normal_loads(M), -1), x0=M.x0, v0=M.v0, y0=ride(M.y0),
@@ -437,7 +403,7 @@ def array_physics(M: Any) -> ArrayMechanismPhysics:
                                                                        (d.astype(dt),), ((d * d).astype(dt),)),
         damping=stack([e.c for e in dampers]).astype(dt),
         lbar=means, cos=cos.astype(dt), sin=sin.astype(dt),
-        splines=_spline_bank(signals, means, omega, batch) if splined else None,
+        bank=wave_bank(waves, len(signals), batch) if waves else None,
         nw=jnp.broadcast_to(nw, cos.shape).astype(dt), nw2=jnp.broadcast_to(nw * nw, cos.shape).astype(dt),
         kinds=(S, T, F, len(externals)), spring_ends=ends(springs), tilt_ends=ends(tilts), force_ends=ends(forces),
         external_body=tuple(e.i for e in externals), damper_ends=ends(dampers),
