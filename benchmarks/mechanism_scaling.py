@@ -2,7 +2,7 @@
 first call (compilation included) and throughput per body, and `steady_gait`'s first call.
 
     python benchmarks/mechanism_scaling.py [--sizes 4,8,16,32,64] [--max-unrolled 16] [--batch 64]
-        [--gait-sizes 4,8,16] [--max-unrolled-gait 8] [--carried]
+        [--gait-sizes 4,8,16] [--max-unrolled-gait 8] [--carried] [--knots M]
 
 The mechanism is a worm of N segments in a pipe, which a `Chain` cannot express: neighbours joined by
 springs driven as a travelling wave (omega in [1.5, 4], phase lag in [0.3, 2.5] over the batch), every
@@ -18,6 +18,10 @@ alone. Prints a Markdown table and the load average before and after.
 With `--carried` each of the N/2 segments carries an internal mass on a spring and a damper (a
 vibration-driven capsule worm: bodies without ground contact, N bodies in all), driven by an internal
 force in phase with its segment's wave.
+
+With `--knots M` the travelling-wave springs are driven by periodic splines of M control values (the
+wave's values at the knots) beside the Fourier drag force: a mechanism of mixed waveforms, whose splines
+the array layout reads from its bank of waveforms (`model._bank`).
 """
 
 import argparse
@@ -37,15 +41,18 @@ import numpy as np  # noqa: E402
 T_START, HORIZON = 5.0, 20.0
 
 
-def pipe(n: int, B: int, layout: str, carried: bool = False) -> lj.Mechanism:
+def pipe(n: int, B: int, layout: str, carried: bool = False, knots: int = 0) -> lj.Mechanism:
     """The worm of the module docstring: `n` segments, or with `carried` `n // 2` segments carrying
-    one internal mass each."""
+    one internal mass each; with `knots`, its waves splines of that many control values."""
     if carried:
         return capsule_worm(n // 2, B, layout)
     rng = np.random.default_rng(0)
     omega, phi = rng.uniform(1.5, 4.0, B), rng.uniform(0.3, 2.5, B)
     wave = lambda j: lj.Fourier(jnp.asarray(0.08 * np.sin(-phi * j))[:, None],
                                 jnp.asarray(0.08 * np.cos(-phi * j))[:, None], jnp.asarray(omega), 1.0)  # fmt: skip
+    if knots:
+        at = 2 * np.pi * np.arange(knots) / knots
+        wave = lambda j: lj.Spline(jnp.asarray(0.08 * np.sin(at - (phi * j)[:, None])), jnp.asarray(omega), 1.0)
     links: list = [lj.Spring(j, j + 1, k=40.0, rest=wave(j)) for j in range(n - 1)]
     links += [lj.Spring(j, j + 2, k=5.0, rest=2.0) for j in range(0, n - 2, 3)]
     drag = lj.Fourier(jnp.asarray([0.02]), jnp.asarray([0.0]), jnp.asarray(omega), -0.05)
@@ -71,10 +78,10 @@ def capsule_worm(n: int, B: int, layout: str) -> lj.Mechanism:
                         carried_by=[None] * n + list(range(n)), layout=layout)  # fmt: skip
 
 
-def measure_row(n: int, B: int, layout: str, carried: bool = False) -> tuple[float, float, float]:
+def measure_row(n: int, B: int, layout: str, carried: bool = False, knots: int = 0) -> tuple[float, float, float]:
     """`measure`'s first call and its compilation (the first call less the best call again, wall
     seconds), and body-time-units per CPU-second of the best call again."""
-    mech = pipe(n, B, layout, carried)
+    mech = pipe(n, B, layout, carried, knots)
     run = lambda: jax.block_until_ready(lj.measure(mech, 1e9, horizon=HORIZON, t_start=T_START,
                                                    dynamics=lj.Exact(dt=0.03)).tau_z)  # fmt: skip
     t = time.perf_counter()
@@ -89,8 +96,8 @@ def measure_row(n: int, B: int, layout: str, carried: bool = False) -> tuple[flo
     return first, first - min(wall), n * B * (T_START + HORIZON) / min(cpu)
 
 
-def gait_row(n: int, layout: str, carried: bool = False) -> tuple[float, int]:
-    mech = pipe(n, 1, layout, carried)[0]
+def gait_row(n: int, layout: str, carried: bool = False, knots: int = 0) -> tuple[float, int]:
+    mech = pipe(n, 1, layout, carried, knots)[0]
     t = time.perf_counter()
     g = lj.steady_gait(mech, periods=(1,), transient=20, dynamics=lj.Exact(dt=0.01))
     jax.block_until_ready(g.state)
@@ -105,6 +112,7 @@ def main() -> None:
     ap.add_argument("--gait-sizes", default="4,8,16")
     ap.add_argument("--max-unrolled-gait", type=int, default=8)
     ap.add_argument("--carried", action="store_true", help="N/2 segments carrying an internal mass each")
+    ap.add_argument("--knots", type=int, default=0, help="the waves as splines of this many control values")
     args = ap.parse_args()
     print("load average before:", os.getloadavg())
     print("| N | layout | measure: first call (s) | compile (s) | body-tu per CPU-s | steady_gait: first call (s) |")
@@ -114,10 +122,10 @@ def main() -> None:
         for layout in ("unrolled", "array"):
             if layout == "unrolled" and n > args.max_unrolled:
                 continue
-            first, compile_, rate = measure_row(n, args.batch, layout, args.carried)
+            first, compile_, rate = measure_row(n, args.batch, layout, args.carried, args.knots)
             gait = "-"
             if n in gaits and (layout == "array" or n <= args.max_unrolled_gait):
-                seconds, status = gait_row(n, layout, args.carried)
+                seconds, status = gait_row(n, layout, args.carried, args.knots)
                 gait = f"{seconds:.1f} ({lj.GaitStatus(status).name})"
             print(f"| {n} | {layout} | {first:.1f} | {compile_:.1f} | {rate:,.0f} | {gait} |", flush=True)
     print("load average after:", os.getloadavg())

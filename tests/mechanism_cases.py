@@ -45,6 +45,9 @@ class Cubed(lj.AbstractWaveform):
     def stroke(self) -> Any:
         return jnp.abs(self.a)
 
+    def fastest_harmonic(self) -> int:
+        return 3
+
     def fourier(self) -> tuple[float, tuple, tuple]:
         """`(mean, A, B)` of the same signal for the reference's `Sig`."""
         a = float(self.a)

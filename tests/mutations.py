@@ -985,6 +985,26 @@ MUTATIONS = [
         ("tests/test_mechanism_array.py::test_array_mechanism_rates_equal_unrolled",),
     ),
     Mutation(
+        "chain_forcing_guard_of_its_coefficients",
+        "a chain driven by its own waveforms (splines, a user's class) is guarded on its Fourier coefficients' "
+        "harmonics, not on its waveforms'",
+        "locomotion_jax/model/_chain.py",
+        (
+            (
+                "        fastest = self.waves if self.signals is None else max(self.signals, key=sc.harmonics)\n",
+                "        fastest = self.waves\n",
+            ),
+        ),
+        ("tests/test_resolution_guards.py::test_a_waveform_of_your_own_is_resolved_at_its_fastest_harmonic",),
+    ),
+    Mutation(
+        "waveform_fastest_harmonic_ignored",
+        "the step guards take every waveform's shortest time scale as its base period",
+        "locomotion_jax/model/_scales.py",
+        (("        return int(wave.fastest_harmonic())\n", "        return 1\n"),),
+        ("tests/test_resolution_guards.py::test_a_waveform_of_your_own_is_resolved_at_its_fastest_harmonic",),
+    ),
+    Mutation(
         "wave_bank_rows_reversed",
         "a group of the bank of waveforms puts its members' signals in its rows in reverse order",
         "locomotion_jax/model/_bank.py",

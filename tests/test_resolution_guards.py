@@ -118,6 +118,22 @@ def test_an_unresolved_mechanism_is_refused(mech, pattern):
         lj.simulate(mech, 1.0)
 
 
+def test_a_waveform_of_your_own_is_resolved_at_its_fastest_harmonic():
+    """A waveform class of a user's own (`mechanism_cases.Cubed`, $\\sin^3\\omega t$, which carries
+    $3\\omega$ and says so) at omega = 100: dt = 0.01 resolves omega but not 3 omega, so a mechanism and
+    a chain driven by it are refused, naming K = 3 and the step that would do; at that step they run."""
+    from mechanism_cases import Cubed
+
+    wave = Cubed(jnp.asarray(0.05), jnp.asarray(100.0), jnp.asarray(1.0))
+    mech = lj.Mechanism(masses=[1.0, 1.0], friction=lj.Coulomb(0.7, 0.5), x0=[0.0, 1.0],
+                        links=[lj.Spring(0, 1, k=10.0, rest=wave)])  # fmt: skip
+    chain = lj.Chain(masses=[1.0, 1.0], d=0.0, waveforms=[wave])
+    for m in (mech, chain):
+        with pytest.raises(ValueError, match=r"Invalid parameter 'omega'.*K = 3.*Give Exact\(dt=0.0052\)"):
+            lj.simulate(m, 0.5, dynamics=lj.Exact(dt=0.01))
+        assert int(lj.simulate(m, 0.5, dynamics=lj.Exact(dt=0.0052)).status) == lj.Status.OK
+
+
 def test_an_unresolved_mechanism_is_flagged_in_a_batch():
     fields = ("status", "n_steps", "tau_z", "mean_speed", "e_d", "balance")
     m = lj.measure(_oscillator(k=jnp.array([1.0, 1e7, 4.0])), **SHORT)
@@ -194,6 +210,11 @@ def test_optimisers_refuse_a_step_that_does_not_resolve_the_mechanism():
     # A chain: the fastest stroke the search may reach (a given omega, with its 3 harmonics).
     with pytest.raises(ValueError, match=r"'omega'.*K = 3.*omega=10000.*\(optimise: omega = 10000 with 3 harmonics"):
         lj.optimise(lj.Chain(masses=[1.0, 1.0, 1.0]), 0.01, 0.05, omega=1e4)
+    # A chain's spline search: 16 knots at the highest frequency it reaches (the paper's two-mass
+    # chain: omega_max 1.2 times its natural frequency 10) lie 2 pi / (16 * 12) = 0.0327 apart.
+    spline = lj.ChainOptimiseSettings(shape="spline", knots=16)
+    with pytest.raises(ValueError, match=r"'omega'.*K = 16.*Give Exact\(dt=0.0081\).*with 16 knots.*Settings.dt"):
+        lj.optimise(lj.Chain.from_params(lj.Params()), 0.05, 0.05, settings=spline)
     # A mechanism: a step that resolves not even the screen's slowest sinusoid (here the natural
     # period 2 pi / w_max = 0.115 of a stiff capsule spring) is refused before the search, naming it.
     links = [lj.Spring(0, 1, k=1000.0, rest=0.0), lj.Force(0, 1, lj.Sinusoid(a=0.6, omega=3.0, lbar=0.0))]

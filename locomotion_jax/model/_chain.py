@@ -316,10 +316,11 @@ class Chain(AbstractMechanism):
 
     def time_scales(self, waveform: Any = None) -> list[Any]:
         """The resolution guards' scales (`AbstractMechanism.time_scales`; a chain carries its
-        waveforms): the forcing's highest harmonic, $2\\pi/\\omega_\\max$ of the free linearised
-        chain (by eigenvalue interlacing no lower than any of `natural_frequencies`), the
-        damping time $\\min_i m_i/c_i$ and, under a `Stribeck` law, $v_s/\\mu_s$: the time over
-        which friction alone (normal force $m_i g$, $g = 1$) changes a speed by $v_s$."""
+        waveforms): the forcing's highest harmonic (of its fastest waveform, `_scales.harmonics`),
+        $2\\pi/\\omega_\\max$ of the free linearised chain (by eigenvalue interlacing no lower than
+        any of `natural_frequencies`), the damping time $\\min_i m_i/c_i$ and, under a `Stribeck`
+        law, $v_s/\\mu_s$: the time over which friction alone (normal force $m_i g$, $g = 1$)
+        changes a speed by $v_s$."""
         from . import _scales as sc
 
         n = self.n_masses
@@ -328,8 +329,10 @@ class Chain(AbstractMechanism):
         K = K.at[..., j, j].add(self.k).at[..., j + 1, j + 1].add(self.k)
         K = K.at[..., j, j + 1].add(-self.k).at[..., j + 1, j].add(-self.k)
         natural = 2 * math.pi / sc.free_frequency(self.m, K)
+        # The springs' own waveforms where they have them (`signals`), else their Fourier coefficients.
+        fastest = self.waves if self.signals is None else max(self.signals, key=sc.harmonics)
         scales = [
-            sc.forcing(self.waves, self.waves.omega),
+            sc.forcing(fastest, jnp.broadcast_to(fastest.omega, self.batch_shape)),
             sc.TimeScale("k", "natural period 2*pi/w_max of the free chain", natural, sc.STEPS_PER_PERIOD, "period",
                          {"k (largest)": self.k.max(-1), "masses (smallest)": self.m.min(-1)}),
             sc.TimeScale("c", "damping time min_i m_i/c_i", jnp.min(self.m / self.c, -1), sc.STEPS_PER_TIME,

@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 
 from ._springwaves import SpringFourier
-from ._waveform import Fourier, Spline
+from ._waveform import AbstractWaveform
 
 
 STEPS_PER_PERIOD = 4
@@ -69,13 +69,14 @@ def flat(x: Any, size: int) -> jax.Array:
 
 
 def harmonics(wave: Any) -> int:
-    """$K$: the forcing's shortest period is $2\\pi/(K\\omega)$ ($K = 1$ for a `Sinusoid` or
-    `TravellingWave`, the number of harmonics of a `Fourier` or `SpringFourier`, the number of
-    knots of a `Spline`, whose pieces span $2\\pi/(M\\omega)$)."""
-    if isinstance(wave, (Fourier, SpringFourier)):
+    """$K$: the forcing's shortest period is $2\\pi/(K\\omega)$: a waveform's
+    [`fastest_harmonic`][locomotion_jax.AbstractWaveform.fastest_harmonic] (1 for a `Sinusoid`, the
+    number of harmonics of a `Fourier`, the number of knots of a `Spline`, whose pieces span
+    $2\\pi/(M\\omega)$), the number of harmonics of a `SpringFourier`, 1 for a `TravellingWave`."""
+    if isinstance(wave, AbstractWaveform):
+        return int(wave.fastest_harmonic())
+    if isinstance(wave, SpringFourier):
         return int(wave.harmonics)
-    if isinstance(wave, Spline):
-        return int(wave.knots)
     return 1
 
 

@@ -62,6 +62,12 @@ class AbstractWaveform(eqx.Module):
         (checked finite by [`checks`][]); a waveform of your own may list its own."""
         return {}
 
+    def fastest_harmonic(self) -> int:
+        """$K$: the waveform's shortest time scale is $2\\pi/(K\\omega)$, which the step guards ask
+        the exact engine's `dt` to resolve (`run._resolution`). 1 here; a waveform of your own with
+        faster content says so."""
+        return 1
+
     def checks(self) -> list[Check]:
         """`(field, valid mask, valid range)` of every constraint, finite values first: finite
         coefficients, $\\omega \\ge 0$, $\\bar\\ell > 0$, and a stroke below $\\bar\\ell$ (so that
@@ -163,6 +169,10 @@ class Fourier(AbstractWaveform):
     def harmonics(self) -> int:
         return self.cos.shape[-1]
 
+    def fastest_harmonic(self) -> int:
+        """The number of harmonics $N$."""
+        return self.harmonics
+
     def coefficients(self) -> dict[str, Array]:
         return {"cos": self.cos, "sin": self.sin}
 
@@ -253,6 +263,10 @@ class Spline(AbstractWaveform):
     @property
     def knots(self) -> int:
         return self.control.shape[-1]
+
+    def fastest_harmonic(self) -> int:
+        """The number of control values $M$: the pieces span $2\\pi/(M\\omega)$."""
+        return self.knots
 
     def coefficients(self) -> dict[str, Array]:
         return {"control": self.control}
