@@ -440,8 +440,13 @@ def run(sys: System, t_end: float, save: np.ndarray, rtol: float = 1e-12, atol: 
         st, sd = list(stuck), list(sdir)
         ev, owner = events(st, sd)
         t_land = t_end if vert else min([landing_time(i) for i in flight] + [t_end])
+        # A group lifted off at this instant from the surface at rest (a plastic landing whose springs
+        # pull it straight off again): the solver's own first step can round to no step at all, whose
+        # end repeats the start and reads as a landing there; a first step of 1e-9 (relative) leaves.
+        leaving = vert and any(t0 == t and y[YH + i] == 0 and y[WH + i] == 0 for i, (t0, *_) in flight.items())
+        first = 1e-9 * max(1.0, abs(t)) if leaving else None
         sol = solve_ivp(rhs, (t, t_land), y, method="DOP853", args=(st, sd), events=ev, rtol=rtol, atol=atol,
-                        dense_output=True, max_step=0.05)  # fmt: skip
+                        dense_output=True, max_step=0.05, first_step=first)  # fmt: skip
         t_next = sol.t[-1]
         while k < len(save) and save[k] <= t_next:
             rows.append((save[k], save[k], sample(save[k], sol.sol(save[k]))))
