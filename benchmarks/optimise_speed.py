@@ -1,6 +1,8 @@
 """An optimiser, old commit against new: the paper's, `lj.optimise(lj.Params(), v_min=0.05, a_max=0.05)`,
 or with `--worm N` the README's worm of N masses on bristles, `lj.optimise(worm, v_min=0.1, a_max=0.05)`
-(default settings).
+(default settings), or with `--chain-knots M` the paper's problem through the chain optimiser,
+`lj.optimise(lj.Chain.from_params(lj.Params()), 0.05, 0.05)` with splines of `M` knots
+(`ChainOptimiseSettings(shape="spline", knots=M)`; a commit that refuses it prints the error).
 
 Each commit is checked out into a temporary git worktree and run in its own fresh process
 (float64, no persistent compilation cache): the call twice, cold (compilation included) and
@@ -11,8 +13,8 @@ sensitive to other work on the machine than the wall time), the compilations XLA
 sinusoid baseline, screen, local refinement, verification at `dt` and `dt/2`) and the optimum's
 speed and cost of transport.
 
-    python benchmarks/optimise_speed.py OLD NEW [--parallel] [--worm N]
-    python benchmarks/optimise_speed.py --here [--worm N] [--device cpu]
+    python benchmarks/optimise_speed.py OLD NEW [--parallel] [--worm N | --chain-knots M]
+    python benchmarks/optimise_speed.py --here [--worm N | --chain-knots M] [--device cpu]
 
 `--parallel` runs the two processes at once (only on a machine with cores to spare: on a
 loaded machine the two compete and both times grow). `--here` runs the working tree alone, in one
@@ -48,7 +50,7 @@ class Tee:
     def flush(self):
         pass
 sys.stderr = Tee()
-WORM = int(sys.argv[1])
+WORM = int(sys.argv[1])  # masses of the worm; 0: the paper's model; -M: the paper's chain, M knots
 DEVICE = sys.argv[2] if len(sys.argv) > 2 else ""
 DEV = jax.devices(DEVICE or None)[0]  # the named platform's first device, else the default one
 def stages(t0, t1):
@@ -69,11 +71,18 @@ def stages(t0, t1):
 for run in ("cold", "warm"):
     t0, c0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
     with jax.default_device(DEV if DEVICE else None):
-        if WORM:
-            worm = lj.Chain(masses=[1.0] * WORM, d=0.0, friction=lj.AnisotropicCoulomb(0.5, 0.9, 0.3, 0.7))
-            opt = lj.optimise(worm, v_min=0.1, a_max=0.05, settings=lj.ChainOptimiseSettings(verbose=True))
-        else:
-            opt = lj.optimise(lj.Params(), v_min=0.05, a_max=0.05, settings=lj.ExactOptimiseSettings(verbose=True))
+        try:
+            if WORM > 0:
+                worm = lj.Chain(masses=[1.0] * WORM, d=0.0, friction=lj.AnisotropicCoulomb(0.5, 0.9, 0.3, 0.7))
+                opt = lj.optimise(worm, v_min=0.1, a_max=0.05, settings=lj.ChainOptimiseSettings(verbose=True))
+            elif WORM < 0:
+                spline = lj.ChainOptimiseSettings(shape="spline", knots=-WORM, verbose=True)
+                opt = lj.optimise(lj.Chain.from_params(lj.Params()), v_min=0.05, a_max=0.05, settings=spline)
+            else:
+                opt = lj.optimise(lj.Params(), v_min=0.05, a_max=0.05, settings=lj.ExactOptimiseSettings(verbose=True))
+        except ValueError as e:
+            print(json.dumps({"run": run, "error": str(e)[:160], "device": DEV.device_kind}), flush=True)
+            break
     t1, c1 = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
     cpu = c1.ru_utime + c1.ru_stime - c0.ru_utime - c0.ru_stime
     comp = [d for t, n, d in events if t0 <= t <= t1 and "backend_compile" in n]
@@ -93,6 +102,12 @@ def main(argv: list[str]) -> None:
         if i + 1 == len(argv) or not argv[i + 1].isdigit():
             sys.exit(__doc__)
         worm = argv[i + 1]
+        argv = argv[:i] + argv[i + 2 :]
+    if "--chain-knots" in argv:
+        i = argv.index("--chain-knots")
+        if i + 1 == len(argv) or not argv[i + 1].isdigit():
+            sys.exit(__doc__)
+        worm = f"-{argv[i + 1]}"
         argv = argv[:i] + argv[i + 2 :]
     if "--device" in argv:
         i = argv.index("--device")
@@ -133,6 +148,9 @@ def main(argv: list[str]) -> None:
             for line in out.splitlines():
                 r = json.loads(line)
                 kind = r["device"]
+                if "error" in r:
+                    print(f"| {label} `{commit}` | {r['run']} | refused: {r['error']} |")
+                    continue
                 stages = ", ".join(f"{k} {v}" for k, v in r["stages_s"].items())
                 print(f"| {label} `{commit}` | {r['run']} | {r['wall_s']} | {r['cpu_s']} | {r['compilations']} "
                       f"| {r['compile_s']} | {r['trace_s']} | {stages} | {r['speed']:.16g} "

@@ -492,7 +492,7 @@ MUTATIONS = [
         "locomotion_jax/optimisation/_chain.py",
         (
             (
-                "screen.solve(base, cos, sin, om, settings, control=control)",
+                "screen.solve(base, cos, sin, om, checked, control=control)",
                 "screen.solve(base, cos, sin, om, search, control=control)",
             ),
         ),
@@ -710,7 +710,7 @@ MUTATIONS = [
         (
             (
                 "        starts[-1] = local.given_start(start, S, H, M if spline else 0, a_max, lo, hi, "
-                "sc.gaits.y[rows.pop()])\n",
+                "sc.gaits.y[best])\n",
                 "        local.check_start(start, S)\n",
             ),
         ),
@@ -1375,6 +1375,95 @@ MUTATIONS = [
             ),
         ),
         ("tests/test_gait.py::test_an_anchored_gait_with_a_body_stuck_all_period",),
+    ),
+    Mutation(
+        "tension_waves_isotropic",
+        "the idealised inchworm's break-away forces read each mass's forward static coefficient in both directions",
+        "locomotion_jax/optimisation/_starts.py",
+        (
+            (
+                "    mu0, mu1 = (fwd[:-1], bwd[1:]) if sign > 0 else (bwd[:-1], fwd[1:])\n",
+                "    mu0, mu1 = (fwd[:-1], fwd[1:])\n",
+            ),
+        ),
+        (
+            "tests/test_shapes.py::test_tension_waves_of_a_chain_jump_by_each_springs_tension_step_at_its_lagged_switches",
+        ),
+    ),
+    Mutation(
+        "tension_waves_lag_ignored",
+        "every spring of an idealised inchworm switches its tension at once, whatever the phase lag",
+        "locomotion_jax/optimisation/_starts.py",
+        (
+            (
+                "    shift = np.rint(np.arange(S) * lag / (2 * math.pi) * grid).astype(int)\n",
+                "    shift = np.zeros(S, int)\n",
+            ),
+        ),
+        (
+            "tests/test_shapes.py::test_tension_waves_of_a_chain_jump_by_each_springs_tension_step_at_its_lagged_switches",
+        ),
+    ),
+    Mutation(
+        "chain_inchworms_not_refined",
+        "the chain optimiser solves its idealised inchworms' gaits but refines the travelling waves only",
+        "locomotion_jax/optimisation/_chain.py",
+        (
+            (
+                "        better = np.flatnonzero(screen.preferred(worm_keys, keys[0][0]))\n",
+                "        better = np.zeros(0, int)\n",
+            ),
+        ),
+        (
+            "tests/test_optimise.py::test_the_chain_optimiser_refines_an_idealised_inchworm_where_no_wave_is_fast_enough",
+        ),
+    ),
+    Mutation(
+        "chain_screen_slow_gaits_unordered",
+        "the chain screen ranks the stable gaits that miss the requirement in grid order, not by speed",
+        "locomotion_jax/optimisation/_chain_screen.py",
+        (("np.where(g.ok, np.nan_to_num(-v, nan=np.inf), 0.0))", "np.where(g.ok, 0.0 * v, 0.0))"),),
+        ("tests/test_optimise.py::test_screen_ranks_feasible_gaits_by_cost_then_stable_ones_by_speed",),
+    ),
+    Mutation(
+        "chain_inchworms_always_compete",
+        "an idealised inchworm worse than the best travelling wave still competes with the waves for a local run",
+        "locomotion_jax/optimisation/_chain_screen.py",
+        (
+            (
+                "    return (keys[:, 0] < than[0]) | ((keys[:, 0] == than[0]) & (keys[:, 1] < than[1]))\n",
+                "    return keys[:, 0] < 3\n",
+            ),
+        ),
+        ("tests/test_optimise.py::test_screen_ranks_feasible_gaits_by_cost_then_stable_ones_by_speed",),
+    ),
+    Mutation(
+        "chain_spline_verified_unresolved",
+        "a chain's spline search verifies its candidates at dt even where dt does not resolve their knots",
+        "locomotion_jax/optimisation/_chain.py",
+        (
+            (
+                "    return settings if dt == settings.dt else dataclasses.replace(settings, dt=dt, search_dt=None)\n",
+                "    return settings\n",
+            ),
+        ),
+        (
+            "tests/test_optimise.py::test_the_chain_optimiser_refines_an_idealised_inchworm_where_no_wave_is_fast_enough",
+        ),
+    ),
+    Mutation(
+        "chain_spline_search_guarded",
+        "the chain optimiser's search skips the splines whose knots its step does not resolve",
+        "locomotion_jax/optimisation/_chain_screen.py",
+        (
+            (
+                "        g = solve(chain, None, None, omega, settings, say, need, control=control, guarded=False)\n",
+                "        g = solve(chain, None, None, omega, settings, say, need, control=control)\n",
+            ),
+        ),
+        (
+            "tests/test_optimise.py::test_the_chain_optimiser_refines_an_idealised_inchworm_where_no_wave_is_fast_enough",
+        ),
     ),
 ]
 

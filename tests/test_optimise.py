@@ -1594,6 +1594,54 @@ def test_a_given_screen_is_checked_and_kept_within_the_bound(opt3):
 
 
 @CHAIN_OPTIMISE
+def test_the_chain_optimiser_refines_an_idealised_inchworm_where_no_wave_is_fast_enough():
+    """The paper's model as a two-mass chain, v_min = a_max = 0.05, at one of the idealised
+    inchworms' frequencies (fixed): the best travelling wave there moves at a third of v_min,
+    while the inchworm whose tension alternates in sign (splines of 64 knots, as the paper's
+    optimiser's) is feasible near the quasi-static floor as it is (the paper's optimum at a
+    free frequency: 0.9241). The search steps at dt = 0.01, where the knots lie 2.6 steps
+    apart; the verification at the step the resolution guard asks for (4 steps per knot)."""
+    chain = lj.Chain.from_params(lj.Params())
+    period = 2 * math.pi / float(chain.omega_min) * float(np.geomspace(0.7, 4.0, 10)[5])
+    settings = lj.ChainOptimiseSettings(shape="spline", knots=64, amplitudes=2, phases=1, zoom_levels=0, local=1,
+                                        max_iter=4, transient=20)  # fmt: skip
+    opt = lj.optimise(chain, 0.05, 0.05, omega=2 * math.pi / period, settings=settings)
+    (start,) = opt.history[0]["starts"]
+    assert start["inchworm"]["period"] == pytest.approx(period) and start["inchworm"]["level"] == 0.3
+    assert 0.05 < start["mean_speed"] and start["cost_of_transport"] < 0.93
+    assert opt.dt_exact == 0.0063  # 2 pi / (64 omega) / 4 = 0.0064, rounded down
+    wave = next(c for c in opt.candidates if c["candidate"] == "travelling wave")
+    assert not wave["feasible_exact"] and wave["mean_speed_exact"] < 0.02 and wave["cost_of_transport_exact"] > 4
+    assert opt.feasible_exact and opt.source == "local 0" and opt.mean_speed_exact >= 0.05
+    assert 0.9241 < opt.cost_of_transport_exact < 0.93
+    assert opt.simulation_agreement < 1e-6 and opt.simulated_recurrence == 1
+    # The same gait at the verification's step, solved here: the search's step was not resolved.
+    g = lj.steady_gait(opt.chain, periods=(1, 2), transient=20, dynamics=lj.Exact(dt=0.0063))
+    assert float(g.cost_of_transport) == pytest.approx(opt.cost_of_transport_exact, rel=1e-9)
+    with pytest.raises(ValueError, match=r"K = 64"):
+        lj.steady_gait(opt.chain, dynamics=lj.Exact(dt=0.01))
+
+
+def test_screen_ranks_feasible_gaits_by_cost_then_stable_ones_by_speed():
+    # Rows: stable but slow, feasible and dear, not stable, stable and fast, feasible and cheap,
+    # feasible at the same cost as the cheap one (a time shift of it), stable backwards.
+    n = 7
+    speed = np.array([0.01, 0.5, 0.9, 0.3, 0.45, 0.45, -0.6])
+    cost = np.array([1.0, 3.0, 0.1, 2.0, 1.2, 1.2 * (1 + 1e-12), 1.5])
+    ok = np.array([True, True, False, True, True, True, True])
+    nan = np.full(n, np.nan)
+    g = screen.Gaits(speed, cost, ok, ~ok, np.ones(n, np.int32), nan, nan, nan, np.zeros((n, 3)))
+    assert list(screen.rank(g, 0.4, 1)) == [4, 5, 1, 3, 0, 6, 2]
+    assert list(screen.rank(g, 0.4, -1)) == [6, 0, 3, 4, 5, 1, 2]  # backwards: 6 feasible, then by backward speed
+    keys = screen.preference(g, 0.4, 1)
+    assert screen.best_distinct(keys, 3) == [4, 1, 3]  # one of the two equal gaits
+    assert screen.best_distinct(keys[[2]], 2) == [0, 0]  # none stable: the first, repeated
+    assert list(np.flatnonzero(screen.preferred(keys, keys[1]))) == [4, 5]  # the cheaper feasible ones
+    assert list(np.flatnonzero(screen.preferred(keys, keys[3]))) == [1, 4, 5]  # and none of the slower
+    assert not screen.preferred(keys, keys[4]).any()
+
+
+@CHAIN_OPTIMISE
 def test_screen_filter_keeps_the_fast_waves():
     v = np.array([0.3, np.nan, -0.4, 0.05, 0.2, 0.01])
     assert list(screen.fast_enough(v, 0.4, 1, 0.5, 2)) == [0, 4]  # 0.2 reaches half of 0.4; 0.3, 0.2 fastest

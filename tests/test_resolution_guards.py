@@ -210,11 +210,12 @@ def test_optimisers_refuse_a_step_that_does_not_resolve_the_mechanism():
     # A chain: the fastest stroke the search may reach (a given omega, with its 3 harmonics).
     with pytest.raises(ValueError, match=r"'omega'.*K = 3.*omega=10000.*\(optimise: omega = 10000 with 3 harmonics"):
         lj.optimise(lj.Chain(masses=[1.0, 1.0, 1.0]), 0.01, 0.05, omega=1e4)
-    # A chain's spline search: 16 knots at the highest frequency it reaches (the paper's two-mass
-    # chain: omega_max 1.2 times its natural frequency 10) lie 2 pi / (16 * 12) = 0.0327 apart.
+    # A chain's spline search: its knots are resolved in the verification (`dt_exact`,
+    # tests/test_optimise.py), its screen's single harmonics before the search (a stiff chain:
+    # omega_max 1.2 times its highest natural frequency 173).
     spline = lj.ChainOptimiseSettings(shape="spline", knots=16)
-    with pytest.raises(ValueError, match=r"'omega'.*K = 16.*Give Exact\(dt=0.0081\).*with 16 knots.*Settings.dt"):
-        lj.optimise(lj.Chain.from_params(lj.Params()), 0.05, 0.05, settings=spline)
+    with pytest.raises(ValueError, match=r"'omega'.*K = 1\).*omega=207.8.*Give Exact\(dt=0.0075\).*single harmonics"):
+        lj.optimise(lj.Chain(masses=[1.0, 1.0, 1.0], k=1e4, d=0.0), 0.01, 0.002, settings=spline)
     # A mechanism: a step that resolves not even the screen's slowest sinusoid (here the natural
     # period 2 pi / w_max = 0.115 of a stiff capsule spring) is refused before the search, naming it.
     links = [lj.Spring(0, 1, k=1000.0, rest=0.0), lj.Force(0, 1, lj.Sinusoid(a=0.6, omega=3.0, lbar=0.0))]

@@ -108,9 +108,10 @@ def test_tension_wave_start_is_fast_and_cheap():
     # open-loop on the exact model: faster than 0.045 near the quasi-static floor (~0.922),
     # where every sinusoid of the same stroke costs more than 3 (README, Optimal actuation).
     params = lj.Params()
-    starts = _starts.tension_starts(params, 0.05, [1.4], (0.38,))
+    starts = _starts.tension_starts(lj.Chain.from_params(params), 0.05, [1.4], (0.38,))
     assert len(starts) == 1
-    values, omega = starts[0]
+    values, omega = starts[0][0][0], starts[0][1]
+    assert starts[0][2] == 0.38
     assert np.max(np.abs(values)) <= 1.0 and omega == pytest.approx(2 * math.pi / 1.4)
     shape = _shapes.SplineShape(knots=64)
     theta = shape.fit(values, omega)
@@ -147,3 +148,43 @@ def test_normalise_phase_moves_the_time_origin_of_every_signal(shape):
     # The grid's step (3e-6 rad) times the harmonics' rates bounds the difference.
     np.testing.assert_allclose(new, signal(cos, sin, phase + shift), atol=2e-4)
     assert np.abs(new - old).max() > 0.1  # a shift that moves the signals
+
+
+def test_tension_waves_of_a_chain_jump_by_each_springs_tension_step_at_its_lagged_switches():
+    # Three masses on bristles with tilted springs of two stiffnesses, the second spring's
+    # square wave a quarter period behind the first's. The idealised gap is continuous, so the
+    # rest length l0_j = l_j - T_j/k_j jumps by -(T_t + T_c)/k_j where spring j's compression
+    # turns to tension (at half its period, after its lag) and back; the tensions are
+    # `level` of the way between the break-away forces of the spring's two masses at rest at
+    # the relaxed gaps (|f_x| = mu n with n from eq. 5, per friction direction).
+    masses, k, d, lbar = np.array([1.0, 1.4, 0.8]), np.array([50.0, 30.0]), np.array([0.4, -0.3]), 3.0
+    fwd, bwd = np.array([0.5, 0.6, 0.4]), np.array([0.9, 0.8, 1.0])
+    chain = lj.Chain(masses=masses, k=k, d=d, lbar=lbar,
+                     friction=lj.AnisotropicCoulomb(fwd, bwd, 0.6 * fwd, 0.6 * bwd))  # fmt: skip
+    level, grid = 0.4, 1024
+    (values,) = _starts.tension_waves(chain, np.array([2.0]), np.array([level]), lag=math.pi / 2, grid=grid)
+    assert values.shape == (2, grid)
+    u = np.sqrt(lbar**2 - d**2)
+    length = lbar
+
+    def between(j: int, sign: float) -> float:
+        # Spring j pulls mass j towards `sign` and mass j + 1 the other way.
+        mu_l, mu_r = (fwd[j], bwd[j + 1]) if sign > 0 else (bwd[j], fwd[j + 1])
+        left = mu_l * masses[j] * length / (u[j] + sign * mu_l * d[j])
+        right = mu_r * masses[j + 1] * length / (u[j] - sign * mu_r * d[j])
+        lo, hi = sorted((left, right))
+        return lo + level * (hi - lo)
+
+    for j, shift in enumerate((0, grid // 4)):
+        step = (between(j, 1.0) + between(j, -1.0)) / k[j]
+        diff = np.diff(values[j])  # diff[g] = l0(g + 1) - l0(g) within the last period
+        to_tension, to_compression = grid // 2 + shift - 1, shift - 1  # spring 0's second: at the period's end
+        switches = [g for g in (to_tension, to_compression) if 0 < g < grid - 2]
+        assert len(switches) == 2 - (shift == 0)
+        smooth = np.delete(np.abs(diff), switches).max()
+        assert smooth < 0.05 * step
+        # The gap's own change over the sample, from the neighbouring samples', taken out.
+        jump = lambda g: diff[g] - 0.5 * (diff[g - 1] + diff[g + 1])
+        assert jump(to_tension) == pytest.approx(-step, rel=1e-3)
+        if shift:
+            assert jump(to_compression) == pytest.approx(step, rel=1e-3)

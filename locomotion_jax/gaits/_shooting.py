@@ -387,17 +387,20 @@ class GaitProblem(NamedTuple):
 
 
 def bodies_problem(mechanism: Any, dynamics: Exact, contact: str, start: str | ArrayLike,
-                   dtype: Any) -> GaitProblem:  # fmt: skip
+                   dtype: Any, guarded: bool = True) -> GaitProblem:  # fmt: skip
     """The [`GaitProblem`][] of a [`Chain`][] or a [`Mechanism`][locomotion_jax.Mechanism]: `start` names a
     start at rest (a mechanism: its own `x0`, `v0`), or gives section states at phase 0: gaps then
     velocities $(u_0, \\dots, u_{N-2}, v_0, \\dots, v_{N-1})$, shape `batch + (2N - 1,)`, or for an
     anchored mechanism positions then velocities, `batch + (2N,)`; under `contact="hop"` followed by
     the heights $y_i \\ge 0$ and vertical velocities $w_i$ (a [`Gait`][]'s `state`). Checks the input
     (`ValueError`, `NotImplementedError`) and the step's resolution (refused alone, skipped in a
-    batch)."""
+    batch; `guarded=False` skips that: only for a search whose figures only steer, verified at a
+    resolved step)."""
     check_contact_start(contact, start if isinstance(start, str) else "paper", mechanism)
     flat, valid, shape = prepare_chain(mechanism, dtype)
-    valid, unresolved = guard_chain(dynamics, flat, valid, shape)  # refused alone, skipped in a batch
+    unresolved = None
+    if guarded:
+        valid, unresolved = guard_chain(dynamics, flat, valid, shape)  # refused alone, skipped in a batch
     y_start = None
     if not isinstance(start, str):
         P = flat.physics()
@@ -486,12 +489,14 @@ def steady_gait_chain(
     contact: str = "strict",
     start: str | ArrayLike = "paper",
     dtype: Any = None,
+    guarded: bool = True,
     **kwargs: Any,
 ) -> Gait:
     """[`steady_gait`][] of a [`Chain`][] or a [`Mechanism`][locomotion_jax.Mechanism] with the solver's
-    own options (`patience`, `compact`: [`steady_gaits`][]; the chain optimiser's screen)."""
-    return steady_gaits(bodies_problem(chain, dynamics, contact, start, dtype), dynamics=dynamics, contact=contact,
-                        **kwargs)  # fmt: skip
+    own options (`patience`, `compact`: [`steady_gaits`][]; `guarded`: [`bodies_problem`][]; the
+    chain optimiser's screen)."""
+    return steady_gaits(bodies_problem(chain, dynamics, contact, start, dtype, guarded), dynamics=dynamics,
+                        contact=contact, **kwargs)  # fmt: skip
 
 
 def _transient_setup(valid, omega: np.ndarray, shape, transient: int, dynamics: Exact):
@@ -504,17 +509,17 @@ def _transient_setup(valid, omega: np.ndarray, shape, transient: int, dynamics: 
 
 
 def transient_speed(chain: Chain, *, transient: int, last: int, dynamics: Exact, contact: str = "strict",
-                    start: str = "relaxed") -> np.ndarray:  # fmt: skip
+                    start: str = "relaxed", guarded: bool = True) -> np.ndarray:  # fmt: skip
     """The centre of mass's mean speed over periods `transient - last` to `transient` of the
     actuation from the start at rest `start`: the end of [`steady_gait`][]'s transient, whose first
     `transient - last` periods this runs with the same compiled program. A host array of the batch
     shape, NaN where the run stopped (invalid, unresolved, a strict lift-off, a collision, the step
     cap). Over `last = 12` periods it is the mean speed of a converged gait of any period
     $k \\le 4$ (12 periods are whole gait periods); the chain optimiser's screen compares it
-    with the required speed before solving the gait."""
+    with the required speed before solving the gait. `guarded`: as [`bodies_problem`][]'s."""
     if not (isinstance(last, int) and 1 <= last < transient):
         raise ValueError(f"transient_speed: need 1 <= last < transient, got last={last!r}, transient={transient!r}.")
-    pb = bodies_problem(chain, dynamics, contact, start, None)  # the steady gait's configurations and guard
+    pb = bodies_problem(chain, dynamics, contact, start, None, guarded)  # the steady gait's configurations and guard
     omega = np.broadcast_to(pb.omega, pb.valid.shape)
     valid, _, mst = _transient_setup(pb.valid, omega, pb.shape, transient, dynamics)
     real = lambda v: jnp.asarray(v, pb.dtype)

@@ -17,12 +17,18 @@ Method:
 1. **Travelling waves** $a\\sin(\\omega t - j\\varphi)$ (`_chain_screen`): a grid over
    $(a, \\omega, \\varphi)$ solved as steady gaits in batches of one compiled shape, and a zooming
    refinement of the best that meets the requirement. The best one found is the baseline.
+   Beside them (rest-length actuators), idealised inchworms (`_starts.tension_waves`: each
+   spring's tension a square wave alternating in sign, lagged as the best wave), their steady
+   gaits solved as the waves' are: the gaits near the quasi-static floor that no sinusoid
+   drives (on the paper's model, the optimum's start).
 2. **Local refinement of per-spring harmonics** (`_element_local`, shared with the mechanism
    optimiser; with `ChainOptimiseSettings(shape="spline")` of per-spring periodic splines, started
-   from each wave's interpolating spline) from the refined best wave and the next best distinct
-   waves of the grid: a monotone L-BFGS descent on an exact penalty, with exact gradients through
-   the periodic orbit by the implicit function theorem (`gaits._element_orbit`), the starts in
-   lockstep (one batched evaluation per step).
+   from each wave's interpolating spline) from the best distinct starts
+   (`_chain_screen.best_distinct`: feasible gaits by cost, then stable ones by speed) among
+   the waves and the inchworms that beat the best wave (else the waves keep every lane): a
+   monotone L-BFGS descent on an exact penalty, with exact gradients through the periodic orbit
+   by the implicit function theorem (`gaits._element_orbit`), the starts in lockstep (one
+   batched evaluation per step).
 3. **Verification.** Every refined actuation and the baseline wave are solved again by
    [`steady_gait`][] (strict contact, from the relaxed springs, periods 1 to 4); the reported
    optimum is the cheapest that is converged, stable, without lift-off, fast enough and within
@@ -32,6 +38,7 @@ Method:
    (`feasible_exact = False`).
 """
 
+import dataclasses
 import math
 import time
 from typing import Any
@@ -42,6 +49,7 @@ import numpy as np
 from ..gaits._progress import reporter
 from ..model._chain import Chain
 from ..model._springwaves import SpringFourier
+from ..run._resolution import resolved_step
 from . import _chain_screen as screen, _element_local as local
 from ._element_optimum import ChainOptimiseSettings, ChainOptimum
 
@@ -90,6 +98,18 @@ def check_inputs(chain: Any, v_min: Any, a_max: Any, direction: Any, harmonics: 
     return float(v_min), int(direction)
 
 
+def resolved(base: Chain, omegas: list[float], knots: int, settings: ChainOptimiseSettings) -> ChainOptimiseSettings:
+    """The verification's settings: `settings`, with `dt` refined where it does not resolve splines
+    of `knots` control values at the highest of the candidates' frequencies `omegas` (a spline
+    search steps its search at `search_dt` or `dt` whatever its knots' spacing: its figures only
+    steer). A Fourier search's step is refused beforehand instead."""
+    if not knots:
+        return settings
+    fastest = base.with_spline(jnp.zeros((base.n_masses - 1, knots), base.dtype), jnp.asarray(max(omegas), base.dtype))
+    dt = resolved_step(fastest, None, settings.dt)
+    return settings if dt == settings.dt else dataclasses.replace(settings, dt=dt, search_dt=None)
+
+
 def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int = 1, omega: float | None = None,
                    harmonics: int | None = None, settings: ChainOptimiseSettings | None = None,
                    start: Any = None, method: str = "exact", sweep: Any = None) -> ChainOptimum:  # fmt: skip
@@ -114,10 +134,10 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     local.check_start(start, S)
     lo, hi = screen.frequency_range(base, omega, settings)
     free = hi > lo
-    if spline:
-        fastest, family = base.with_spline(jnp.zeros((S, M), base.dtype), jnp.asarray(hi, base.dtype)), f"{M} knots"
-    else:
-        fastest, family = base.with_waves(SpringFourier(np.zeros((S, H)), np.zeros((S, H)), hi)), f"{H} harmonics"
+    # A spline search's knots are resolved in the verification (`resolved`), not in the search.
+    fastest = base.with_waves(SpringFourier(np.zeros((S, H)), np.zeros((S, H)), hi))
+    family = f"the screen's single harmonics ({M} knots are verified at a step that resolves them)" if spline else (
+        f"{H} harmonics")  # fmt: skip
     what = "given" if omega is not None else "ChainOptimiseSettings.omega_max times the highest natural frequency"
     local.refuse_steps(fastest, settings, f"optimise: omega = {hi:.6g} with {family}, {what}")
     search = settings.searching()  # the screen's and the local runs' step; the verification's is dt
@@ -136,16 +156,29 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     feas = screen.feasible(sc.gaits, speed, direction)
     baseline = screen.as_dict(sc, best) if feas[best] else None
 
-    # 2. Local refinement of per-spring harmonics (or control values).
+    # 2. Local refinement of per-spring harmonics (or control values), from the best distinct
+    # waves and, where they beat the best wave, the best idealised inchworms, lagged as it is.
     rows = screen.distinct_starts(sc, best, settings.local, speed, direction, steps)
-    rows += rows[:1] * (settings.local - len(rows))
-    starts = []
+    keys = [screen.preference(sc.gaits, speed, direction)[rows]]
+    starts, records = [], [screen.as_dict(sc, i) for i in rows]
     for i in rows:
         cos, sin = screen.wave_coefficients(sc.a[i : i + 1], sc.phi[i : i + 1], S, H)
         starts.append(local.Start(cos[0], sin[0], float(sc.omega[i]), sc.gaits.y[i], int(sc.gaits.k[i]),
                                   float(sc.gaits.cost[i])))  # fmt: skip
+    lag = float(sc.phi[best])
+    worms = screen.inchworms(base, lag, a_max, lo, hi, H, M if spline else 0, search, say, (speed, direction))
+    if worms is not None:
+        # Only where one beats the best wave: the waves' lanes are otherwise kept.
+        worm_keys = screen.preference(worms.gaits, speed, direction)
+        better = np.flatnonzero(screen.preferred(worm_keys, keys[0][0]))
+        keys.append(worm_keys[better])
+        starts += [worms.starts[i] for i in better]
+        records += [screen.as_inchworm(worms, int(i), lag) for i in better]
+    lanes = screen.best_distinct(np.concatenate(keys), settings.local)
+    starts, records = [starts[i] for i in lanes], [records[i] for i in lanes]
     if start is not None:
-        starts[-1] = local.given_start(start, S, H, M if spline else 0, a_max, lo, hi, sc.gaits.y[rows.pop()])
+        starts[-1] = local.given_start(start, S, H, M if spline else 0, a_max, lo, hi, sc.gaits.y[best])
+        records.pop()
     xs, ev, log = local.local_stage(method, base, starts, a_max, speed, direction, lo, hi, M if spline else 0, search,
                                     say)  # fmt: skip
 
@@ -156,17 +189,19 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     stage = "smoothed" if method == "smoothed" else "local"
     names = ["travelling wave"] + [f"{stage} {lane}" for lane in range(len(xs))] + ["given start"] * len(given)
     cos_b, sin_b = screen.wave_coefficients(sc.a[best : best + 1], sc.phi[best : best + 1], S, H)
-    say(f"verifying {len(names)} candidates on their steady gaits...")
-    solve = lambda cos, sin, om, control=None: screen.solve(base, cos, sin, om, settings, control=control)._asdict()
+    checked = resolved(base, [float(sc.omega[best])] + [math.exp(float(x[-1])) for x in xs + given], M if spline else 0,
+                       settings)  # fmt: skip
+    say(f"verifying {len(names)} candidates on their steady gaits (dt = {checked.dt:g})...")
+    solve = lambda cos, sin, om, control=None: screen.solve(base, cos, sin, om, checked, control=control)._asdict()
     row = {name: x[best : best + 1] for name, x in sc.gaits._asdict().items()}
-    if spline and search is not settings:  # the screen's row is at the search step
+    if spline and search.dt != checked.dt:  # the screen's row is at the search step
         row = solve(cos_b, sin_b, sc.omega[best : best + 1])
     eps = float(jnp.finfo(base.dtype).eps)
     v = local.verify(xs + given, (cos_b[0], sin_b[0], float(sc.omega[best])), row, names, solve, a_max, speed,
                      direction, H, M if spline else 0, eps)  # fmt: skip
     g, om, strokes, k, feasible, table = screen.Gaits(**v.gaits), v.omega, v.strokes, v.k, v.feasible, v.table
     ok_speed, ok_stroke = v.ok_speed, v.ok_stroke
-    if search is not settings:
+    if search.dt != checked.dt:
         baseline = local.verified_baseline(screen.as_dict(sc, best), v)
     cos_k, sin_k, control_k = v.waves[k]
     if control_k is None:
@@ -174,7 +209,7 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     else:
         chosen = base.with_spline(jnp.asarray(control_k, base.dtype), jnp.asarray(om[k], base.dtype))
     gait = (bool(g.ok[k]), float(g.speed[k]), float(g.cost[k]), float(g.radius[k]), float(g.period[k]))
-    sim = local.simulated(chosen, gait, settings, start="relaxed")
+    sim = local.simulated(chosen, gait, checked, start="relaxed")
     say(f"verified ({time.perf_counter() - t0:.0f} s): {names[k]}, cost of transport {g.cost[k]:.6g}")
     wave_cost = baseline["cost_of_transport"] if baseline else math.nan
     return ChainOptimum(
@@ -189,9 +224,9 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
         feasible_exact=bool(feasible[k]), travelling_wave=baseline, travelling_wave_cost_of_transport=wave_cost,
         improvement_vs_travelling_wave=1 - float(g.cost[k]) / wave_cost if (feasible[k] and baseline) else math.nan,
         **sim, source=names[k], candidates=table,
-        history=[{"starts": [screen.as_dict(sc, i) for i in rows], "local": log}], screened=len(sc.a),
+        history=[{"starts": records, "local": log}], screened=len(sc.a),
         evaluations=0 if ev is None else ev.calls,
-        runtime_s=time.perf_counter() - t0, shape="fourier" if control_k is None else "spline",
+        runtime_s=time.perf_counter() - t0, dt_exact=checked.dt, shape="fourier" if control_k is None else "spline",
         control=control_k, chain=chosen,
         screen=screen.record(sc),
     )  # fmt: skip

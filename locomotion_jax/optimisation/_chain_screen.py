@@ -13,7 +13,7 @@ required speed or more (`screen_speed`), and the fastest, have their gaits solve
 import math
 import time
 from collections.abc import Callable
-from typing import Any, NamedTuple
+from typing import Any, cast, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -25,9 +25,10 @@ from ..gaits._select import GaitStatus
 from ..gaits._shooting import steady_gait_chain, transient_speed
 from ..model._chain import Chain
 from ..model._springwaves import SpringFourier
-from ._element_local import screen_rows
+from ._element_local import sampled_start, screen_rows, Start
 from ._element_optimum import ChainOptimiseSettings
 from ._optimum import along
+from ._starts import tension_starts
 
 
 def free_frequencies(chain: Chain) -> np.ndarray:
@@ -103,7 +104,8 @@ def _chunks(n: int, chunk: int, order: np.ndarray):
 
 def solve(chain: Chain, cos: np.ndarray | None, sin: np.ndarray | None, omega: np.ndarray,
           settings: ChainOptimiseSettings, say: Callable[[str], None] = lambda message: None,
-          need: tuple[float, int] | None = None, control: np.ndarray | None = None) -> Gaits:  # fmt: skip
+          need: tuple[float, int] | None = None, control: np.ndarray | None = None, guarded: bool = True,
+          ) -> Gaits:  # fmt: skip
     """Steady gaits (strict contact, relaxed start) of a batch of actuations (Fourier coefficients
     `cos`, `sin` `(B, S, H)`, or the splines of control values `control` `(B, S, M)`), in chunks of
     `settings.chunk` in order of frequency (a chunk integrates as long as its lowest frequency's
@@ -114,7 +116,8 @@ def solve(chain: Chain, cos: np.ndarray | None, sin: np.ndarray | None, omega: n
     ([`transient_speed`][], over its last [`LAST`][] periods) comes first, and only the waves that
     reach `screen_speed` of `v_min` in `direction`, and the `chunk` fastest, have their gaits
     solved; the others are left unsolved (not `ok`, NaN): a wave far slower than required
-    at the end of its transient is no start for the optimum."""
+    at the end of its transient is no start for the optimum. `guarded=False`: the search's
+    splines, at a step that need not resolve their knots (`gaits._shooting.bodies_problem`)."""
     n, chunk = omega.shape[0], settings.chunk
     if control is None:
         assert cos is not None and sin is not None
@@ -130,7 +133,7 @@ def solve(chain: Chain, cos: np.ndarray | None, sin: np.ndarray | None, omega: n
         v = np.full(n, np.nan)
         last = min(LAST, settings.transient - 1)
         for idx, m in _chunks(n, chunk, np.argsort(omega, kind="stable")):
-            v[idx[:m]] = transient_speed(gaits(idx), transient=settings.transient, last=last,
+            v[idx[:m]] = transient_speed(gaits(idx), transient=settings.transient, last=last, guarded=guarded,
                                          dynamics=Exact(dt=settings.dt), contact="strict")[:m]  # fmt: skip
         solved = fast_enough(v, v_min, direction, settings.screen_speed, chunk)
         say(f"  transient speeds of {n} waves ({time.perf_counter() - t0:.0f} s): {solved.size} reach "
@@ -140,7 +143,7 @@ def solve(chain: Chain, cos: np.ndarray | None, sin: np.ndarray | None, omega: n
     for idx, m in _chunks(solved.size, chunk, solved[np.argsort(omega[solved], kind="stable")]):
         g = steady_gait_chain(
             gaits(idx), transient=settings.transient, dynamics=Exact(dt=settings.dt), contact="strict",
-            start="relaxed", patience=PATIENCE, compact=True,
+            start="relaxed", patience=PATIENCE, compact=True, guarded=guarded,
         )  # fmt: skip
         rows, take = idx[:m], slice(0, m)
         conv = np.asarray(g.status)[take] == GaitStatus.CONVERGED
@@ -183,16 +186,75 @@ class Screen(NamedTuple):
                       Gaits(*(cat(x, y) for x, y in zip(self.gaits, other.gaits))))  # fmt: skip
 
 
+class Inchworms(NamedTuple):
+    """The idealised inchworms' starts ([`inchworms`][]): each one's signals in the search's
+    family, its period and level, and its steady gait."""
+
+    starts: list[Start]
+    period: np.ndarray
+    level: np.ndarray
+    gaits: Gaits
+
+
+def inchworms(chain: Chain, lag: float, a_max: float, lo: float, hi: float, harmonics: int, knots: int,
+              settings: ChainOptimiseSettings, say: Callable[[str], None] = lambda message: None,
+              need: tuple[float, int] | None = None) -> Inchworms | None:  # fmt: skip
+    """The tension-wave starts of a chain (`_starts.tension_starts`: each spring's tension a square
+    wave, spring $j$'s lagged by $j$ `lag`), over `settings.tension_periods` periods from 0.7 to 4
+    times the slowest natural period with one mass held ($2\\pi$/[`Chain.omega_min`][locomotion_jax.Chain.omega_min])
+    and `settings.tension_levels`, in the search's family (Fourier series of `harmonics`, or splines
+    of `knots` control values), their frequencies clipped to `[lo, hi]`, and their steady gaits
+    ([`solve`][], `need` as there). `None` where there are none (no periods, or an internal-force
+    actuator: its signal is no rest length)."""
+    if not settings.tension_periods or not chain.actuator.varies_rest_length:
+        return None
+    slowest = 2 * math.pi / float(chain.omega_min)
+    periods = slowest * np.geomspace(0.7, 4.0, settings.tension_periods)
+    levels = np.asarray(settings.tension_levels, float)
+    state = np.zeros(2 * chain.n_masses - 1)
+    waves = tension_starts(chain, a_max, periods, levels, lag)
+    if not waves:
+        return None
+    starts = [sampled_start(a_max * v, omega, harmonics, knots, a_max, lo, hi, state) for v, omega, _ in waves]
+    omega = np.array([st.omega for st in starts])
+    say(f"solving the steady gaits of {len(starts)} idealised inchworms (phase lag {lag:.4g})...")
+    if knots:
+        control = np.stack([cast(np.ndarray, st.control) for st in starts])
+        g = solve(chain, None, None, omega, settings, say, need, control=control, guarded=False)
+    else:
+        cos, sin = np.stack([st.cos for st in starts]), np.stack([st.sin for st in starts])
+        g = solve(chain, cos, sin, omega, settings, say, need)
+    starts = [st._replace(y=g.y[i], k=int(g.k[i]), cost=float(g.cost[i]), fresh=False) for i, st in enumerate(starts)]
+    return Inchworms(starts, np.array([2 * math.pi / w for _, w, _ in waves]), np.array([q for _, _, q in waves]), g)
+
+
 def feasible(g: Gaits, speed: float, direction: int) -> np.ndarray:
     return g.ok & (along(g.speed, direction) >= speed)
 
 
-def rank(g: Gaits, speed: float, direction: int) -> np.ndarray:
-    """Order of preference: feasible waves by cost, then the other stable gaits by speed in `direction`."""
+def preference(g: Gaits, speed: float, direction: int) -> np.ndarray:
+    """The key of [`rank`][], one row `(tier, value)` per gait, smaller first: a feasible gait
+    `(0, cost)`, another stable gait `(1, -speed in direction)`, the others `(2, 0)`."""
     feas = feasible(g, speed, direction)
     v = along(g.speed, direction)
-    key = np.where(feas, np.nan_to_num(g.cost, nan=np.inf), np.where(g.ok, 1e300 - v, np.inf))
-    return np.argsort(key, kind="stable")
+    tier = np.where(feas, 0.0, np.where(g.ok, 1.0, 2.0))
+    value = np.where(feas, np.nan_to_num(g.cost, nan=np.inf), np.where(g.ok, np.nan_to_num(-v, nan=np.inf), 0.0))
+    return np.stack([tier, value], axis=-1)
+
+
+def preferred(keys: np.ndarray, than: np.ndarray) -> np.ndarray:
+    """Whether each row of `keys` ([`preference`][]) is preferred to the key `than`."""
+    return (keys[:, 0] < than[0]) | ((keys[:, 0] == than[0]) & (keys[:, 1] < than[1]))
+
+
+def order(keys: np.ndarray) -> np.ndarray:
+    """The rows of `keys` ([`preference`][]) in order of preference (ties in order)."""
+    return np.lexsort((np.arange(len(keys)), keys[:, 1], keys[:, 0]))
+
+
+def rank(g: Gaits, speed: float, direction: int) -> np.ndarray:
+    """Order of preference: feasible waves by cost, then the other stable gaits by speed in `direction`."""
+    return order(preference(g, speed, direction))
 
 
 def _run(chain, a, omega, phi, harmonics, settings, say, need) -> Screen:
@@ -272,6 +334,33 @@ def distinct_starts(sc: Screen, best: int, count: int, speed: float, direction: 
         if sc.gaits.ok[i] and all(far(int(i), j) for j in chosen):
             chosen.append(int(i))
     return chosen
+
+
+def best_distinct(keys: np.ndarray, count: int) -> list[int]:
+    """The indices of the `count` most preferred `keys` ([`preference`][]), in order, one of each
+    run of stable gaits of equal keys (to 1e-9 relative: time shifts and mirror images of one
+    gait), repeating the first where fewer are left; the first index where no gait is stable."""
+    chosen: list[int] = []
+    same = lambda i, j: keys[i, 0] == keys[j, 0] and abs(keys[i, 1] - keys[j, 1]) <= 1e-9 * abs(keys[j, 1])
+    for i in order(keys):
+        if len(chosen) == count:
+            break
+        if keys[i, 0] < 2 and np.isfinite(keys[i, 1]) and not any(same(i, j) for j in chosen):
+            chosen.append(int(i))
+    chosen = chosen or [0]
+    return chosen + chosen[:1] * (count - len(chosen))
+
+
+def as_inchworm(worms: Inchworms, i: int, lag: float) -> dict[str, Any]:
+    """An idealised inchworm's start as an optimum's history keeps it (as [`as_dict`][] a wave)."""
+    g, st = worms.gaits, worms.starts[i]
+    return dict(
+        inchworm=dict(period=float(worms.period[i]), level=float(worms.level[i]), lag=lag),
+        omega=st.omega,
+        mean_speed=float(g.speed[i]),
+        cost_of_transport=float(g.cost[i]),
+        k=int(g.k[i]),
+    )
 
 
 def as_dict(sc: Screen, i: int) -> dict[str, Any]:

@@ -246,7 +246,6 @@ def given_start(start: Any, S: int, harmonics: int, knots: int, a_max: float, lo
 
     **Raises:** as [`check_start`][]."""
     given_cos, given_sin, given_control, given_omega = _checked_signals(start, S)
-    omega = float(np.clip(given_omega, lo, hi))
     grid = 64 * max(knots, 16, 0 if given_control is None else given_control.shape[-1])
     phase = np.arange(grid) * 2 * np.pi / grid
     if given_control is None:
@@ -255,6 +254,18 @@ def given_start(start: Any, S: int, harmonics: int, knots: int, a_max: float, lo
     else:
         spline = SplineShape(knots=given_control.shape[-1])
         values = np.stack([spline.sample(Spline(jnp.asarray(c), 1.0, 0.0), grid) for c in given_control])
+    return sampled_start(values, given_omega, harmonics, knots, a_max, lo, hi, np.zeros_like(state))
+
+
+def sampled_start(values: np.ndarray, omega: float, harmonics: int, knots: int, a_max: float, lo: float, hi: float,
+                  state: np.ndarray, k: int = 1, cost: float = math.nan, fresh: bool = True) -> Start:  # fmt: skip
+    """The [`Start`][] of signals sampled at equal phases over one period (`values` `(S, G)`,
+    absolute units, about their means) and base frequency `omega`, in a search's family as
+    [`given_start`][] describes (`cos`, `sin` of `harmonics` harmonics, rescaled onto `a_max`;
+    `control` of `knots` values for a spline search; `omega` clipped to `[lo, hi]`); `state`, `k`,
+    `cost` and `fresh` as `Start`'s."""
+    omega = float(np.clip(omega, lo, hi))
+    grid = values.shape[-1]
     c = np.fft.rfft(values, axis=-1) / grid
     cos, sin = 2 * c.real[:, 1 : harmonics + 1], -2 * c.imag[:, 1 : harmonics + 1]
     cos, sin = normalise_phase(cos, sin)
@@ -264,7 +275,7 @@ def given_start(start: Any, S: int, harmonics: int, knots: int, a_max: float, lo
     if knots:
         fit = SplineShape(knots=knots)
         control = a_max * np.stack([fit.fit(v / a_max, omega)[:-1] for v in values])
-    return Start(cos, sin, omega, np.zeros_like(state), 1, math.nan, control, fresh=True)
+    return Start(cos, sin, omega, state, k, cost, control, fresh)
 
 
 def check_method(method: Any, settings: Any) -> None:

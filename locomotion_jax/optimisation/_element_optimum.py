@@ -17,7 +17,7 @@ from ..model._chain import Chain
 from ..model._springwaves import SpringFourier
 from ..model._waveform import Spline
 from ._optimum import AbstractOptimum, constraints_line, fmt, Settings
-from ._search_settings import count, SearchSettings
+from ._search_settings import count, SearchSettings, tension
 
 
 class MechanismOptimiseSettings(SearchSettings):
@@ -99,6 +99,15 @@ class ChainOptimiseSettings(MechanismOptimiseSettings):
       level a grid of `zoom_points` per variable over one step either side, the step halved
       per level.
     - `chunk`: configurations per compiled `steady_gait` call.
+
+    The idealised inchworms' starts (`optimisation._starts.tension_waves`, rest-length actuators):
+
+    - `tension_periods`, `tension_levels`: each spring's tension a square wave alternating in sign,
+      lagged from spring to spring as the best travelling wave, over `tension_periods` periods from
+      0.7 to 4 times the slowest natural period with one mass held and these levels between the
+      break-away forces of each spring's two masses; their steady gaits are solved beside the
+      screen's, and those that beat the best wave compete with the waves for the local runs.
+      0 periods: none.
     """
 
     amplitudes: int = 3
@@ -112,8 +121,11 @@ class ChainOptimiseSettings(MechanismOptimiseSettings):
     zoom_levels: int = 2
     zoom_points: int = 5
     chunk: int = 32
+    tension_periods: int = 10
+    tension_levels: tuple[float, ...] = (0.3, 0.55, 0.8)
 
     def __check_init__(self):
+        tension(self)
         count(self, "zoom_points", 1)
         count(self, "chunk", 1)
         count(self, "zoom_levels", 0)
@@ -149,7 +161,9 @@ class ElementOptimum(AbstractOptimum):
     - `source`, the winning candidate; `candidates`, every verified candidate's figures;
       `history`, the local starts (the baseline screen's rows) and the local runs' log;
       `screened`, the baseline signals solved; `evaluations`, batched orbit evaluations;
-      `runtime_s`.
+      `runtime_s`; `dt_exact`, the engine's step of every `*_exact` figure and of the direct
+      simulation (the settings' `dt`, or finer where a chain's spline search needs it to resolve
+      its knots).
     - `screen`: every baseline signal of the screen, as arrays over them: its grid coordinates (a
       chain's travelling waves `a`, `omega`, `phi`; a mechanism's sinusoids `a`, `omega`,
       `phase`), and its steady gait at the search step (`search_dt`, else `dt`): `speed`, `cost`,
@@ -191,6 +205,7 @@ class ElementOptimum(AbstractOptimum):
     screened: int
     evaluations: int
     runtime_s: float
+    dt_exact: float
     screen: dict = dataclasses.field(repr=False)
 
     screen_label: ClassVar[str] = "baseline signals"

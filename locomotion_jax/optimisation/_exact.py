@@ -62,6 +62,7 @@ import scipy.optimize
 from ..gaits import _orbit as orbit
 from ..gaits._gait import GaitStatus, paper_gait
 from ..gaits._progress import reporter
+from ..model._chain import Chain
 from ..model._params import Params
 from ..model._waveform import AbstractWaveform
 from . import _element_local as local, _pareto as pareto
@@ -183,8 +184,8 @@ def _starts(params, a_max, shape: AbstractShape, lo, hi, baseline, start, settin
     if settings.tension_periods:
         slowest = 2 * math.pi / float(min(params.wn1, params.wn2, params.wn3))
         periods = slowest * np.geomspace(0.7, 4.0, settings.tension_periods)
-        for values, w in tension_starts(params, a_max, periods, settings.tension_levels):
-            out.append(shape.fit(values, w if lo != hi else lo))
+        for values, w, _ in tension_starts(Chain.from_params(params), a_max, periods, settings.tension_levels):
+            out.append(shape.fit(values[0], w if lo != hi else lo))
     if start is not None:
         wave = start_waveform(start)
         out.append(shape.fit(shape.sample(wave, GRID) / a_max, float(np.asarray(wave.omega)) if lo != hi else lo))

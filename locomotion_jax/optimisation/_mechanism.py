@@ -241,6 +241,6 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
         **sim, source=names[k], candidates=table,
         history=[{"starts": [row_of(i) for i in rows], "local": log}], screened=int(A.size),
         evaluations=0 if ev is None else ev.calls,
-        runtime_s=time.perf_counter() - t0, mechanism=chosen,
+        runtime_s=time.perf_counter() - t0, dt_exact=settings.dt, mechanism=chosen,
         screen=dict(a=A, omega=W, phase=PHI, **sc),
     )  # fmt: skip

@@ -12,7 +12,7 @@ import numpy as np
 
 from .._json import dumps, jsonable
 from ..model._waveform import AbstractWaveform, Fourier, Spline
-from ._search_settings import count, SearchSettings
+from ._search_settings import count, SearchSettings, tension
 
 
 class Settings(eqx.Module):
@@ -153,11 +153,9 @@ class ExactSettings(SearchSettings):
     def __check_init__(self):
         for field in ("start_frequencies", "stages"):
             count(self, field, 1)
-        count(self, "tension_periods", 0)
+        tension(self)
         if self.retry not in ("last", "every"):
             raise ValueError(f"ExactSettings.retry must be 'last' or 'every', got {self.retry!r}.")
-        if any(not (0 <= x <= 1) for x in self.tension_levels):
-            raise ValueError(f"ExactSettings.tension_levels must lie within [0, 1], got {self.tension_levels!r}.")
 
 
 def fmt(v: Any) -> str:

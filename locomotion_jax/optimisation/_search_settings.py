@@ -20,6 +20,14 @@ def count(s: Any, field: str, least: int) -> None:
         raise ValueError(f"{type(s).__name__}.{field} must be an int >= {least}, got {v!r}.")
 
 
+def tension(s: Any) -> None:
+    """Refuse the tension-wave starts' fields (`tension_periods` a count >= 0, `tension_levels`
+    within [0, 1]), naming the class and the field."""
+    count(s, "tension_periods", 0)
+    if any(not (0 <= x <= 1) for x in s.tension_levels):
+        raise ValueError(f"{type(s).__name__}.tension_levels must lie within [0, 1], got {s.tension_levels!r}.")
+
+
 def _step(s: Any, field: str, optional: bool) -> None:
     """Refuse a step that is not finite and > 0 (`optional`: or `None`), naming the class and the field."""
     v = getattr(s, field)
