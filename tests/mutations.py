@@ -1439,8 +1439,9 @@ MUTATIONS = [
     ),
     Mutation(
         "chain_spline_verified_unresolved",
-        "a chain's spline search verifies its candidates at dt even where dt does not resolve their knots",
-        "locomotion_jax/optimisation/_chain.py",
+        "a spline search (a chain's, a mechanism's) verifies its candidates at dt even where dt does not resolve "
+        "their knots",
+        "locomotion_jax/optimisation/_element_local.py",
         (
             (
                 "    return settings if dt == settings.dt else dataclasses.replace(settings, dt=dt, search_dt=None)\n",
@@ -1464,6 +1465,18 @@ MUTATIONS = [
         (
             "tests/test_optimise.py::test_the_chain_optimiser_refines_an_idealised_inchworm_where_no_wave_is_fast_enough",
         ),
+    ),
+    Mutation(
+        "mechanism_spline_verified_unresolved",
+        "a mechanism's spline search verifies its candidates at dt even where dt does not resolve their knots",
+        "locomotion_jax/optimisation/_mechanism.py",
+        (
+            (
+                "        checked = local.resolved(_spline(base, np.zeros((S, M)), fastest), settings)\n",
+                "        pass\n",
+            ),
+        ),
+        ("tests/test_optimise.py::test_a_mechanism_spline_search_verifies_at_a_step_that_resolves_its_knots",),
     ),
 ]
 

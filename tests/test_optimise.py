@@ -2203,6 +2203,21 @@ def test_spline_optimum_of_the_isotropic_capsule(spline_optimum):
 
 @MECHANISM_OPTIMISE
 @pytest.mark.slow
+def test_a_mechanism_spline_search_verifies_at_a_step_that_resolves_its_knots():
+    """64 knots at omega = 3 lie 0.0327 apart: the search steps at dt = 0.01 (3.2 steps per knot), the
+    verification at the resolution guard's 0.0081, whose figures `steady_gait` reproduces there."""
+    s = lj.MechanismOptimiseSettings(**{**SPLINE, "knots": 64, "max_iter": 4})
+    opt = lj.optimise(_iso_capsule(np.zeros(1), np.zeros(1)), v_min=V_ISO, a_max=F_MAX, omega=OMEGA, settings=s)
+    assert opt.shape == "spline" and opt.feasible_exact and opt.dt_exact == 0.0081
+    g = lj.steady_gait(opt.mechanism, periods=(1, 2), transient=20, dynamics=lj.Exact(dt=0.0081))
+    assert float(g.cost_of_transport) == pytest.approx(opt.cost_of_transport_exact, rel=1e-9)
+    assert opt.simulation_agreement < 1e-6
+    with pytest.raises(ValueError, match=r"K = 64"):
+        lj.steady_gait(opt.mechanism, dynamics=lj.Exact(dt=0.01))
+
+
+@MECHANISM_OPTIMISE
+@pytest.mark.slow
 def test_a_mechanism_search_continues_from_a_given_start(spline_optimum):
     """`start=` the spline optimum, in a search of as many knots with one local lane: the lane starts
     at its control values, whose steady gait is the optimum's, and nothing costlier is reported."""

@@ -38,7 +38,6 @@ Method:
    (`feasible_exact = False`).
 """
 
-import dataclasses
 import math
 import time
 from typing import Any
@@ -49,7 +48,6 @@ import numpy as np
 from ..gaits._progress import reporter
 from ..model._chain import Chain
 from ..model._springwaves import SpringFourier
-from ..run._resolution import resolved_step
 from . import _chain_screen as screen, _element_local as local
 from ._element_optimum import ChainOptimiseSettings, ChainOptimum
 
@@ -98,18 +96,6 @@ def check_inputs(chain: Any, v_min: Any, a_max: Any, direction: Any, harmonics: 
     return float(v_min), int(direction)
 
 
-def resolved(base: Chain, omegas: list[float], knots: int, settings: ChainOptimiseSettings) -> ChainOptimiseSettings:
-    """The verification's settings: `settings`, with `dt` refined where it does not resolve splines
-    of `knots` control values at the highest of the candidates' frequencies `omegas` (a spline
-    search steps its search at `search_dt` or `dt` whatever its knots' spacing: its figures only
-    steer). A Fourier search's step is refused beforehand instead."""
-    if not knots:
-        return settings
-    fastest = base.with_spline(jnp.zeros((base.n_masses - 1, knots), base.dtype), jnp.asarray(max(omegas), base.dtype))
-    dt = resolved_step(fastest, None, settings.dt)
-    return settings if dt == settings.dt else dataclasses.replace(settings, dt=dt, search_dt=None)
-
-
 def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int = 1, omega: float | None = None,
                    harmonics: int | None = None, settings: ChainOptimiseSettings | None = None,
                    start: Any = None, method: str = "exact", sweep: Any = None) -> ChainOptimum:  # fmt: skip
@@ -134,7 +120,7 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     local.check_start(start, S)
     lo, hi = screen.frequency_range(base, omega, settings)
     free = hi > lo
-    # A spline search's knots are resolved in the verification (`resolved`), not in the search.
+    # A spline search's knots are resolved in the verification (`local.resolved`), not in the search.
     fastest = base.with_waves(SpringFourier(np.zeros((S, H)), np.zeros((S, H)), hi))
     family = f"the screen's single harmonics ({M} knots are verified at a step that resolves them)" if spline else (
         f"{H} harmonics")  # fmt: skip
@@ -189,8 +175,11 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
     stage = "smoothed" if method == "smoothed" else "local"
     names = ["travelling wave"] + [f"{stage} {lane}" for lane in range(len(xs))] + ["given start"] * len(given)
     cos_b, sin_b = screen.wave_coefficients(sc.a[best : best + 1], sc.phi[best : best + 1], S, H)
-    checked = resolved(base, [float(sc.omega[best])] + [math.exp(float(x[-1])) for x in xs + given], M if spline else 0,
-                       settings)  # fmt: skip
+    checked = settings
+    if spline:  # the search's step need not resolve the knots; every figure reported does
+        fastest = max([float(sc.omega[best])] + [math.exp(float(x[-1])) for x in xs + given])
+        checked = local.resolved(base.with_spline(jnp.zeros((S, M), base.dtype), jnp.asarray(fastest, base.dtype)),
+                                 settings)  # fmt: skip
     say(f"verifying {len(names)} candidates on their steady gaits (dt = {checked.dt:g})...")
     solve = lambda cos, sin, om, control=None: screen.solve(base, cos, sin, om, checked, control=control)._asdict()
     row = {name: x[best : best + 1] for name, x in sc.gaits._asdict().items()}

@@ -16,6 +16,7 @@ clipping a spline's control values (a box); $\\log\\omega$ by clipping.
 Both optimisers check the mechanism-free part of their requirement here too (`check_requirement`).
 """
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable, Mapping
@@ -122,6 +123,15 @@ def refuse_steps(mechanism: Any, settings: Any, what: str) -> None:
         step = getattr(settings, name)
         if step is not None:
             refuse_search(mechanism, None, step, f"({what}; the step is {type(settings).__name__}.{name}.)")
+
+
+def resolved(fastest: Any, settings: Any) -> Any:
+    """The verification's settings of a spline search: `settings`, with `dt` refined where it does
+    not resolve `fastest` (one configuration driven by splines of the search's knots at the
+    highest of the candidates' frequencies; the step the resolution guard suggests, `resolved_step`).
+    The search steps at `search_dt` or `dt` whatever its knots' spacing: its figures only steer."""
+    dt = resolved_step(fastest, None, settings.dt)
+    return settings if dt == settings.dt else dataclasses.replace(settings, dt=dt, search_dt=None)
 
 
 def check_requirement(v_min: Any, direction: Any, harmonics: Any, omega: Any) -> None:

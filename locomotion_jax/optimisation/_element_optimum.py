@@ -162,8 +162,8 @@ class ElementOptimum(AbstractOptimum):
       `history`, the local starts (the baseline screen's rows) and the local runs' log;
       `screened`, the baseline signals solved; `evaluations`, batched orbit evaluations;
       `runtime_s`; `dt_exact`, the engine's step of every `*_exact` figure and of the direct
-      simulation (the settings' `dt`, or finer where a chain's spline search needs it to resolve
-      its knots).
+      simulation (the settings' `dt`, or finer where a spline search needs it to resolve its
+      candidates' knots).
     - `screen`: every baseline signal of the screen, as arrays over them: its grid coordinates (a
       chain's travelling waves `a`, `omega`, `phi`; a mechanism's sinusoids `a`, `omega`,
       `phase`), and its steady gait at the search step (`search_dt`, else `dt`): `speed`, `cost`,

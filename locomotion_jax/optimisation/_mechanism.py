@@ -206,24 +206,28 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
     given = [] if start is None else [local.decision(starts[-1], a_max, M if spline else 0)]
     stage = "smoothed" if method == "smoothed" else "local"
     names = ["sinusoid"] + [f"{stage} {lane}" for lane in range(len(xs))] + ["given start"] * len(given)
-    say(f"verifying {len(names)} candidates on their steady gaits...")
+    checked = settings
+    if spline:  # the search's step need not resolve the knots; every figure reported does
+        fastest = max([float(W[best])] + [math.exp(float(x[-1])) for x in xs + given])
+        checked = local.resolved(_spline(base, np.zeros((S, M)), fastest), settings)
+    say(f"verifying {len(names)} candidates on their steady gaits (dt = {checked.dt:g})...")
 
     def solve(cos, sin, om, control=None):
-        return _gaits(_fourier(base, cos, sin, om) if control is None else _spline(base, control, om), settings)
+        return _gaits(_fourier(base, cos, sin, om) if control is None else _spline(base, control, om), checked)
 
     row = {name: x[best : best + 1] for name, x in sc.items()}
-    if spline and search is not settings:  # the screen's row is at the search step
+    if spline and search.dt != checked.dt:  # the screen's row is at the search step
         row = solve(cos[best : best + 1], sin[best : best + 1], W[best : best + 1])
     eps = float(jnp.finfo(base.dtype).eps)
     v = local.verify(xs + given, (cos[best], sin[best], float(W[best])), row, names, solve, a_max, v_min,
                      direction, H, M if spline else 0, eps)  # fmt: skip
     g, om_c, strokes, k, feasible, table = v.gaits, v.omega, v.strokes, v.k, v.feasible, v.table
-    if search is not settings:
+    if search.dt != checked.dt:
         sinusoid = local.verified_baseline(row_of(best), v)
     cos_k, sin_k, control_k = v.waves[k]
     chosen = _fourier(base, cos_k, sin_k, om_c[k]) if control_k is None else _spline(base, control_k, om_c[k])
     gait = (bool(g["ok"][k]), float(g["speed"][k]), float(g["cost"][k]), float(g["radius"][k]), float(g["period"][k]))
-    sim = local.simulated(chosen, gait, settings)
+    sim = local.simulated(chosen, gait, checked)
     cost_sin = sinusoid["cost_of_transport"] if sinusoid else math.nan
     say(f"verified ({time.perf_counter() - t0:.0f} s): {names[k]}, cost of transport {g['cost'][k]:.6g}")
     return MechanismOptimum(
@@ -241,6 +245,6 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
         **sim, source=names[k], candidates=table,
         history=[{"starts": [row_of(i) for i in rows], "local": log}], screened=int(A.size),
         evaluations=0 if ev is None else ev.calls,
-        runtime_s=time.perf_counter() - t0, dt_exact=settings.dt, mechanism=chosen,
+        runtime_s=time.perf_counter() - t0, dt_exact=checked.dt, mechanism=chosen,
         screen=dict(a=A, omega=W, phase=PHI, **sc),
     )  # fmt: skip

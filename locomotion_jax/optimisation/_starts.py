@@ -103,7 +103,12 @@ def tension_waves(chain: Chain, periods: np.ndarray, levels: np.ndarray, lag: fl
     semi-implicit Euler method, 8 sub-steps per phase sample, with the chain's friction law (eqs. 7,
     9 per mass and direction: a slide ends where the velocity reaches zero and static friction
     holds); all rows at once. A row is NaN where a mass cannot be held at any tension (a
-    break-away force without bound). `chain`: one configuration, the rest-length actuator."""
+    break-away force without bound). `chain`: one configuration, the rest-length actuator.
+
+    The prescribed tensions do not tie the masses' mean speeds together, so a gap of the idealised
+    motion need not return after a period: the rest length then jumps at the period's end too
+    (a start; the engine runs it with the rest lengths prescribed, where the springs hold the
+    gaps)."""
     periods, levels = np.asarray(periods, float), np.asarray(levels, float)
     chain = chain.broadcast()
     m, c = np.asarray(chain.m, float), np.asarray(chain.c, float)
