@@ -421,8 +421,8 @@ def test_cli_bad_input_names_the_parameter():
 
 
 def test_cli_local_method_reaches_the_settings(monkeypatch):
-    """`--local-method sqp`, `--dt` and `--search-dt` reach the settings, for the paper's model and
-    for a chain; without them the settings keep their defaults."""
+    """`--local-method sqp`, `--dt`, `--search-dt` and `--tension-periods` reach the settings, for the
+    paper's model and for a chain; without them the settings keep their defaults."""
     seen = []
 
     def stop(mech, v_min, a_max, **kw):
@@ -435,15 +435,16 @@ def test_cli_local_method_reaches_the_settings(monkeypatch):
     monkeypatch.setattr(_optimise, "optimise", stop)  # the paper's model's
     monkeypatch.setattr(_pareto, "sinusoid_sweep", lambda *a, **k: None)
     for model in ([], ["--masses", "1,1,1"]):
-        for steps in ([], ["--dt", "0.005", "--search-dt", "0.01"]):
+        for steps in ([], ["--dt", "0.005", "--search-dt", "0.01", "--tension-periods", "0"]):
             args = ["optimize", "--v-min", "0.02", "--a-max", "0.05", "--local-method", "sqp", *steps, *model]
             res = CliRunner().invoke(plugin_app(register), args)
             assert "stopped by the test" in res.output, res.output
     assert [s.local_method for s in seen] == ["sqp"] * 4
-    assert [(s.dt, s.search_dt) for s in seen] == [(0.01, None), (0.005, 0.01)] * 2
-    res = CliRunner().invoke(plugin_app(register), ["optimize", "--v-min", "0.02", "--a-max", "0.05", "--method",
-                                                    "smoothed", "--search-dt", "0.02"])  # fmt: skip
-    assert res.exit_code == 2 and "--search-dt" in res.output, res.output
+    assert [(s.dt, s.search_dt, s.tension_periods) for s in seen] == [(0.01, None, 10), (0.005, 0.01, 0)] * 2
+    for extra in (["--search-dt", "0.02"], ["--tension-periods", "3"]):
+        res = CliRunner().invoke(plugin_app(register), ["optimize", "--v-min", "0.02", "--a-max", "0.05", "--method",
+                                                        "smoothed", *extra])  # fmt: skip
+        assert res.exit_code == 2 and extra[0] in res.output, res.output
 
 
 # -- the exact method ---------------------------------------------------------------

@@ -93,6 +93,12 @@ def register(app: typer.Typer) -> None:
             help="Exact: a coarser step for the search (the screen and the local runs; default: --dt), a faster first "
             "look; the figures reported stay at --dt.",
         ),
+        tension_periods: int | None = typer.Option(
+            None,
+            "--tension-periods",
+            help="Exact, the paper's model or a chain: periods of the idealised-inchworm starts (each spring's "
+            "tension a square wave alternating in sign; default 10, 0: none).",
+        ),
         starts: int = typer.Option(8, "--starts", help="Smoothed: starts optimised in parallel."),
         outer: int = typer.Option(3, "--outer", help="Smoothed: augmented-Lagrangian blocks per smoothing stage."),
         inner: int = typer.Option(30, "--inner", help="Smoothed: Adam steps per block."),
@@ -154,6 +160,7 @@ def register(app: typer.Typer) -> None:
             if built.kind != "mechanism" and a_max is None:
                 a_max = amplitude(built)
             steps: dict[str, Any] = {name: v for name, v in (("dt", dt), ("search_dt", search_dt)) if v is not None}
+            tension: dict[str, Any] = {} if tension_periods is None else {"tension_periods": tension_periods}
             if built.kind != "paper":
                 from ._files import given
 
@@ -165,6 +172,9 @@ def register(app: typer.Typer) -> None:
                 screen |= {name: v for name, v in (("shape", shape), ("knots", knots)) if given([name])}
                 screen |= {"transient": int(transient)} if transient is not None else {}
                 screen |= steps
+                if tension and built.kind != "chain":
+                    raise ValueError("--tension-periods: the idealised inchworms of the paper's model or a chain.")
+                screen |= tension
                 if method == "smoothed":  # the smoothed local stage's own options (its rollout's lengths the defaults')
                     screen |= dict(smoothed=Settings(outer=outer, inner=inner, eps_schedule=_eps_schedule(eps),
                                                      verbose=verbose))  # fmt: skip
@@ -177,11 +187,11 @@ def register(app: typer.Typer) -> None:
             if method == "exact":
                 settings = ExactSettings(
                     shape=shape, knots=knots, local=local, max_iter=max_iter, local_method=local_method,
-                    margin=margin, seed=seed, verbose=verbose, **steps,
+                    margin=margin, seed=seed, verbose=verbose, **steps, **tension,
                 )  # fmt: skip
             else:
-                if steps:
-                    raise ValueError("--dt and --search-dt: the exact method's steps (--method exact).")
+                if steps or tension:
+                    raise ValueError("--dt, --search-dt and --tension-periods: the exact method's (--method exact).")
                 settings = Settings(
                     starts=starts,
                     outer=outer,
