@@ -159,7 +159,8 @@ class ElementOptimum(AbstractOptimum):
       `simulation_agreement`, `simulated_periods` and `simulated_recurrence`, as
       [`AbstractOptimum`][locomotion_jax.optimisation._optimum.AbstractOptimum]'s.
     - `source`, the winning candidate; `candidates`, every verified candidate's figures;
-      `history`, the local starts (the baseline screen's rows) and the local runs' log;
+      `history`, the local starts (the baseline screen's rows; a chain's idealised inchworms with
+      their `inchworm` period, level and lag) and the local runs' log;
       `screened`, the baseline signals solved; `evaluations`, batched orbit evaluations;
       `runtime_s`; `dt_exact`, the engine's step of every `*_exact` figure and of the direct
       simulation (the settings' `dt`, or finer where a spline search needs it to resolve its

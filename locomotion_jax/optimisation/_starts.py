@@ -71,7 +71,7 @@ def _limits(chain: Chain, sign: float, gap: np.ndarray) -> tuple[np.ndarray, np.
     # mu n with n_j = m_j - sign tau d / l and n_{j+1} = m_{j+1} + sign tau d / l (eq. 5).
     mu0, mu1 = (fwd[:-1], bwd[1:]) if sign > 0 else (bwd[:-1], fwd[1:])
     den0, den1 = gap + sign * mu0 * d, gap - sign * mu1 * d
-    with np.errstate(divide="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore"):
         t0 = np.where(den0 > 0, mu0 * m[:-1] * length / den0, np.inf)
         t1 = np.where(den1 > 0, mu1 * m[1:] * length / den1, np.inf)
     return np.minimum(t0, t1), np.maximum(t0, t1)
