@@ -1478,6 +1478,13 @@ MUTATIONS = [
         ),
         ("tests/test_optimise.py::test_a_mechanism_spline_search_verifies_at_a_step_that_resolves_its_knots",),
     ),
+    Mutation(
+        "chain_inchworms_in_every_search",
+        "a chain's Fourier search solves the idealised inchworms by default too",
+        "locomotion_jax/optimisation/_chain_screen.py",
+        (("else (10 if knots else 0)", "else 10"),),
+        ("tests/test_optimise.py::test_inchworm_starts_by_default_in_a_spline_search_of_rest_lengths_only",),
+    ),
 ]
 
 

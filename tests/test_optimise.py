@@ -440,7 +440,8 @@ def test_cli_local_method_reaches_the_settings(monkeypatch):
             res = CliRunner().invoke(plugin_app(register), args)
             assert "stopped by the test" in res.output, res.output
     assert [s.local_method for s in seen] == ["sqp"] * 4
-    assert [(s.dt, s.search_dt, s.tension_periods) for s in seen] == [(0.01, None, 10), (0.005, 0.01, 0)] * 2
+    assert [(s.dt, s.search_dt, s.tension_periods) for s in seen] == [(0.01, None, 10), (0.005, 0.01, 0),
+                                                                      (0.01, None, None), (0.005, 0.01, 0)]  # fmt: skip
     for extra in (["--search-dt", "0.02"], ["--tension-periods", "3"]):
         res = CliRunner().invoke(plugin_app(register), ["optimize", "--v-min", "0.02", "--a-max", "0.05", "--method",
                                                         "smoothed", *extra])  # fmt: skip
@@ -1621,6 +1622,20 @@ def test_the_chain_optimiser_refines_an_idealised_inchworm_where_no_wave_is_fast
     assert float(g.cost_of_transport) == pytest.approx(opt.cost_of_transport_exact, rel=1e-9)
     with pytest.raises(ValueError, match=r"K = 64"):
         lj.steady_gait(opt.chain, dynamics=lj.Exact(dt=0.01))
+
+
+def test_inchworm_starts_by_default_in_a_spline_search_of_rest_lengths_only():
+    # None where nothing is solved: a Fourier search by default, 0 periods, an internal force.
+    chain = lj.Chain.from_params(lj.Params())
+    none = lambda settings, knots, c=chain: screen.inchworms(c, 0.0, 0.05, 2.0, 12.0, 3, knots, settings)
+    assert none(lj.ChainOptimiseSettings(), 0) is None
+    assert none(lj.ChainOptimiseSettings(shape="spline", tension_periods=0), 16) is None
+    forced = lj.Chain(masses=[1.0, 1.0], actuator=lj.InternalForce())
+    assert none(lj.ChainOptimiseSettings(shape="spline"), 16, forced) is None
+    with pytest.raises(ValueError, match="ChainOptimiseSettings.tension_periods must be an int >= 0"):
+        lj.ChainOptimiseSettings(tension_periods=-1)
+    with pytest.raises(ValueError, match=r"ChainOptimiseSettings.tension_levels must lie within \[0, 1\]"):
+        lj.ChainOptimiseSettings(tension_levels=(0.5, 1.2))
 
 
 def test_screen_ranks_feasible_gaits_by_cost_then_stable_ones_by_speed():

@@ -97,7 +97,8 @@ def register(app: typer.Typer) -> None:
             None,
             "--tension-periods",
             help="Exact, the paper's model or a chain: periods of the idealised-inchworm starts (each spring's "
-            "tension a square wave alternating in sign; default 10, 0: none).",
+            "tension a square wave alternating in sign; default 10 for a spline search, none for a chain's "
+            "Fourier series; 0: none).",
         ),
         starts: int = typer.Option(8, "--starts", help="Smoothed: starts optimised in parallel."),
         outer: int = typer.Option(3, "--outer", help="Smoothed: augmented-Lagrangian blocks per smoothing stage."),

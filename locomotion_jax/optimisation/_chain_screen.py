@@ -200,16 +200,18 @@ def inchworms(chain: Chain, lag: float, a_max: float, lo: float, hi: float, harm
               settings: ChainOptimiseSettings, say: Callable[[str], None] = lambda message: None,
               need: tuple[float, int] | None = None) -> Inchworms | None:  # fmt: skip
     """The tension-wave starts of a chain (`_starts.tension_starts`: each spring's tension a square
-    wave, spring $j$'s lagged by $j$ `lag`), over `settings.tension_periods` periods from 0.7 to 4
+    wave, spring $j$'s lagged by $j$ `lag`), over `settings.tension_periods` periods (`None`: 10
+    for a spline search, none for a Fourier series) from 0.7 to 4
     times the slowest natural period with one mass held ($2\\pi$/[`Chain.omega_min`][locomotion_jax.Chain.omega_min])
     and `settings.tension_levels`, in the search's family (Fourier series of `harmonics`, or splines
     of `knots` control values), their frequencies clipped to `[lo, hi]`, and their steady gaits
     ([`solve`][], `need` as there). `None` where there are none (no periods, or an internal-force
     actuator: its signal is no rest length)."""
-    if not settings.tension_periods or not chain.actuator.varies_rest_length:
+    count = settings.tension_periods if settings.tension_periods is not None else (10 if knots else 0)
+    if not count or not chain.actuator.varies_rest_length:
         return None
     slowest = 2 * math.pi / float(chain.omega_min)
-    periods = slowest * np.geomspace(0.7, 4.0, settings.tension_periods)
+    periods = slowest * np.geomspace(0.7, 4.0, count)
     levels = np.asarray(settings.tension_levels, float)
     state = np.zeros(2 * chain.n_masses - 1)
     waves = tension_starts(chain, a_max, periods, levels, lag)

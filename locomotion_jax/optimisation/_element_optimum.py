@@ -107,7 +107,9 @@ class ChainOptimiseSettings(MechanismOptimiseSettings):
       0.7 to 4 times the slowest natural period with one mass held and these levels between the
       break-away forces of each spring's two masses; their steady gaits are solved beside the
       screen's, and those that beat the best wave compete with the waves for the local runs.
-      0 periods: none.
+      0 periods: none; `None` (default): 10 for a spline search, none for a Fourier series, whose
+      few harmonics cannot draw the inchworm's jumps (on the README's 4-mass worm they cost 41 s
+      of the screen's 88 and no start better than the best wave; `benchmarks/NOTES.md`).
     """
 
     amplitudes: int = 3
@@ -121,11 +123,11 @@ class ChainOptimiseSettings(MechanismOptimiseSettings):
     zoom_levels: int = 2
     zoom_points: int = 5
     chunk: int = 32
-    tension_periods: int = 10
+    tension_periods: int | None = None
     tension_levels: tuple[float, ...] = (0.3, 0.55, 0.8)
 
     def __check_init__(self):
-        tension(self)
+        tension(self, optional=True)
         count(self, "zoom_points", 1)
         count(self, "chunk", 1)
         count(self, "zoom_levels", 0)

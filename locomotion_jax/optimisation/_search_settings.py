@@ -20,10 +20,11 @@ def count(s: Any, field: str, least: int) -> None:
         raise ValueError(f"{type(s).__name__}.{field} must be an int >= {least}, got {v!r}.")
 
 
-def tension(s: Any) -> None:
-    """Refuse the tension-wave starts' fields (`tension_periods` a count >= 0, `tension_levels`
-    within [0, 1]), naming the class and the field."""
-    count(s, "tension_periods", 0)
+def tension(s: Any, optional: bool = False) -> None:
+    """Refuse the tension-wave starts' fields (`tension_periods` a count >= 0, or `None` where
+    `optional`; `tension_levels` within [0, 1]), naming the class and the field."""
+    if not (optional and s.tension_periods is None):
+        count(s, "tension_periods", 0)
     if any(not (0 <= x <= 1) for x in s.tension_levels):
         raise ValueError(f"{type(s).__name__}.tension_levels must lie within [0, 1], got {s.tension_levels!r}.")
 
