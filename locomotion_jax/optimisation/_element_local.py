@@ -268,12 +268,12 @@ def given_start(start: Any, S: int, harmonics: int, knots: int, a_max: float, lo
 
 
 def sampled_start(values: np.ndarray, omega: float, harmonics: int, knots: int, a_max: float, lo: float, hi: float,
-                  state: np.ndarray, k: int = 1, cost: float = math.nan, fresh: bool = True) -> Start:  # fmt: skip
-    """The [`Start`][] of signals sampled at equal phases over one period (`values` `(S, G)`,
+                  state: np.ndarray) -> Start:  # fmt: skip
+    """The `fresh` [`Start`][] of signals sampled at equal phases over one period (`values` `(S, G)`,
     absolute units, about their means) and base frequency `omega`, in a search's family as
     [`given_start`][] describes (`cos`, `sin` of `harmonics` harmonics, rescaled onto `a_max`;
-    `control` of `knots` values for a spline search; `omega` clipped to `[lo, hi]`); `state`, `k`,
-    `cost` and `fresh` as `Start`'s."""
+    `control` of `knots` values for a spline search; `omega` clipped to `[lo, hi]`); `state`: a
+    section state of the search's shape."""
     omega = float(np.clip(omega, lo, hi))
     grid = values.shape[-1]
     c = np.fft.rfft(values, axis=-1) / grid
@@ -285,7 +285,7 @@ def sampled_start(values: np.ndarray, omega: float, harmonics: int, knots: int, 
     if knots:
         fit = SplineShape(knots=knots)
         control = a_max * np.stack([fit.fit(v / a_max, omega)[:-1] for v in values])
-    return Start(cos, sin, omega, state, k, cost, control, fresh)
+    return Start(cos, sin, omega, state, 1, math.nan, control, fresh=True)
 
 
 def check_method(method: Any, settings: Any) -> None:
