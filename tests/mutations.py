@@ -1485,6 +1485,25 @@ MUTATIONS = [
         (("else (10 if knots else 0)", "else 10"),),
         ("tests/test_optimise.py::test_inchworm_starts_by_default_in_a_spline_search_of_rest_lengths_only",),
     ),
+    Mutation(
+        "still_gait_costs_rounding",
+        "a gait that dissipates nothing costs its energy over the rounding of its distance (0) instead of inf",
+        "locomotion_jax/gaits/_select.py",
+        (("    still = (dist == 0) | (e == 0)\n", "    still = dist == 0\n"),),
+        ("tests/test_mechanism_features.py::test_a_capsule_stuck_all_period_does_not_move",),
+    ),
+    Mutation(
+        "simulated_agreement_divides_by_zero",
+        "the optimum's direct-simulation check divides by the gait's speed and cost as Python floats",
+        "locomotion_jax/optimisation/_element_local.py",
+        (
+            (
+                "        agreement = float(np.maximum(abs(speed_s / speed - 1), abs(cost_s / cost - 1)))\n",
+                "        agreement = max(abs(float(speed_s) / speed - 1), abs(float(cost_s) / cost - 1))\n",
+            ),
+        ),
+        ("tests/test_mechanism_features.py::test_a_capsule_stuck_all_period_does_not_move",),
+    ),
 ]
 
 

@@ -3,12 +3,15 @@ on anisotropic bristles carrying an internal mass on a spring, driven by an inte
 continued, mapped into basins and fitted as a chain is (`tests/test_continuation.py`,
 `tests/test_gait.py`, `tests/test_fit.py`), its elements named by their path (`"links[0].k"`)."""
 
+import math
+
 import jax
 import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
 from locomotion_jax.gaits._continuation import BranchStatus
+from locomotion_jax.optimisation import _element_local as local
 from mechanism_cases import capsule, capsule_ref
 from reference_mechanism import run
 
@@ -56,6 +59,27 @@ def test_capsule_basins_end_on_its_gait():
     np.testing.assert_allclose(float(b.gaits.cost_of_transport[0]), float(gait.cost_of_transport), rtol=1e-9)
     with pytest.raises(ValueError, match=r"starts must have shape grid \+ \(3,\)"):
         lj.basins(mech, np.zeros((2, 5)))
+
+
+@MECHANISM_GAIT
+def test_a_capsule_stuck_all_period_does_not_move():
+    """The capsule driven too weakly to break its shell away (a = 0.05: the force on the shell stays
+    far below $\\mu_{s,\\mathrm{bwd}} (m_0 + m_1) g = 0.3$) sticks all period: its gait dissipates
+    nothing and its centre of mass returns to within rounding (the carried mass swings). Its cost of
+    transport is inf, a gait that does not move, not 0 / rounding = 0 (the mechanism optimiser took
+    it for the cheapest gait); beside it in the batch, the capsule of a = 0.6 is as alone. The
+    optimum's direct-simulation check of a gait that does not move reports an infinite cost and a
+    NaN agreement (it divided by the gait's speed, 0)."""
+    gaits = lj.steady_gait(capsule(a=jnp.array([0.05, 0.6])))
+    alone = lj.steady_gait(capsule(a=0.6))
+    assert bool(gaits.converged[0]) and float(gaits.stick_fraction[0, 0]) > 1 - 1e-12
+    assert float(gaits.e_d[0]) == 0.0 and abs(float(gaits.mean_speed[0])) < 1e-12
+    assert float(gaits.cost_of_transport[0]) == math.inf
+    np.testing.assert_allclose(float(gaits.cost_of_transport[1]), float(alone.cost_of_transport), rtol=1e-12)
+    gait = (True, 0.0, math.inf, 0.5, float(gaits.period[0]))
+    sim = local.simulated(capsule(a=0.05), gait, lj.MechanismOptimiseSettings(), periods=2)
+    assert sim["cost_of_transport_simulated"] == math.inf and math.isnan(sim["simulation_agreement"])
+    assert abs(sim["mean_speed_simulated"]) < 1e-3  # the carried mass's own swing, which nothing damps
 
 
 def test_fit_of_the_capsules_spring_and_friction():

@@ -90,9 +90,12 @@ def still_open(r: dict) -> np.ndarray:
 
 
 def ratio(e: Any, dist: Any, ok: np.ndarray) -> np.ndarray:
-    """Energy per unit distance; `inf` for a converged gait that does not move."""
+    """Energy per unit distance; `inf` for a converged gait that does not move: no net distance, or
+    no energy dissipated (a net distance over a period needs a slip, which dissipates; what is left
+    is rounding, e.g. a capsule stuck all period whose internal mass swings)."""
+    still = (dist == 0) | (e == 0)
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(ok & (dist == 0), np.inf, e / np.where(dist == 0, 1, dist))
+        return np.where(ok & still, np.inf, e / np.where(still, 1, dist))
 
 
 def expand(flag: np.ndarray, like: np.ndarray) -> np.ndarray:

@@ -28,6 +28,7 @@ import numpy as np
 from ..dynamics._exact_dynamics import Exact
 from ..gaits import _element_orbit as orbit
 from ..gaits._orbit import PATIENCE
+from ..gaits._select import ratio
 from ..model._waveform import Spline
 from ..run._resolution import refuse_search, resolved_step
 from ._descent import local_step
@@ -497,7 +498,9 @@ def simulated(model: Any, gait: tuple[bool, float, float, float, float], setting
     recurrence of the states at the gait-period sections ([`recurrence`][]) to
     $\\sqrt{\\text{check\\_tol}}$, or to 100 machine epsilons where that is larger (float32:
     1.2e-5). A recurrence other than 1 is a motion other than the gait: a second attractor, reached
-    from this start. NaN and 0 where the gait is not stable or the run stopped.
+    from this start. NaN and 0 where the gait is not stable or the run stopped. A run that dissipates
+    nothing does not move (its distance is rounding: `gaits._select.ratio`): its cost is infinite,
+    and the agreement with a gait that does not move either is NaN.
 
     It steps at `settings.dt`, or finer where the resolution guard asks for it (`resolved_step`; the
     verification of a spline whose knots lie closer than 4 steps checks its resolution by a
@@ -521,10 +524,11 @@ def simulated(model: Any, gait: tuple[bool, float, float, float, float], setting
     eps = float(np.finfo(np.asarray(traj.x).dtype).eps)
     x, v = np.asarray(traj.x, np.float64), np.asarray(traj.v, np.float64)
     dX = X[-1] - X[0]
-    with np.errstate(divide="ignore", invalid="ignore"):  # a run that does not move: an infinite (or NaN) cost
-        speed_s, cost_s = float(dX / (t[-1] - t[0])), float((ed[-1] - ed[0]) / abs(dX))
+    # A run or a gait that does not move: an infinite (or NaN) cost, and an agreement of NaN.
+    with np.errstate(divide="ignore", invalid="ignore"):
+        speed_s, cost_s = np.float64(dX / (t[-1] - t[0])), np.float64(ratio(ed[-1] - ed[0], abs(dX), np.array(True)))
+        agreement = float(np.maximum(abs(speed_s / speed - 1), abs(cost_s / cost - 1)))
     states = np.concatenate([x[:, 1:] - x[:, :1], v], axis=1)  # gaps and velocities: invariant under travel
     tol = max(math.sqrt(settings.check_tol), 100 * eps)
-    return out | dict(mean_speed_simulated=speed_s, cost_of_transport_simulated=cost_s,
-                      simulation_agreement=max(abs(speed_s / speed - 1), abs(cost_s / cost - 1)),
-                      simulated_recurrence=recurrence(states, tol))  # fmt: skip
+    return out | dict(mean_speed_simulated=float(speed_s), cost_of_transport_simulated=float(cost_s),
+                      simulation_agreement=agreement, simulated_recurrence=recurrence(states, tol))  # fmt: skip
