@@ -1504,6 +1504,25 @@ MUTATIONS = [
         ),
         ("tests/test_mechanism_features.py::test_a_capsule_stuck_all_period_does_not_move",),
     ),
+    Mutation(
+        "mechanism_screen_in_phase",
+        "a mechanism's screen drives every element in phase whatever its lag",
+        "locomotion_jax/optimisation/_mechanism.py",
+        (
+            (
+                "    shift = phase[:, None] - np.arange(S)[None] * lag[:, None]\n",
+                "    shift = phase[:, None] + 0 * lag[:, None]\n",
+            ),
+        ),
+        ("tests/test_optimise.py::test_a_mechanisms_screen_drives_its_elements_as_travelling_waves",),
+    ),
+    Mutation(
+        "mechanism_lags_from_chain_dropped",
+        "a chain's settings reach a mechanism with the default lags, not its phases",
+        "locomotion_jax/optimisation/_element_optimum.py",
+        (("        return cls(**own, lags=s.phases)\n", "        return cls(**own)\n"),),
+        ("tests/test_optimise.py::test_mechanism_optimise_settings",),
+    ),
 ]
 
 

@@ -2041,11 +2041,16 @@ def test_isotropic_capsule_no_sinusoid_under_the_bound_is_as_good(iso_optimum):
 
 @MECHANISM_OPTIMISE
 def test_mechanism_optimise_settings():
-    """The settings' checks name the field; a ChainOptimiseSettings is taken field for field (one phase)."""
+    """The settings' checks name the field; a ChainOptimiseSettings is taken field for field (one
+    phase, its phases as the lags), and refuses lags of its own."""
     from locomotion_jax.optimisation._element_optimum import MechanismOptimiseSettings
 
     with pytest.raises(ValueError, match="MechanismOptimiseSettings.phases must be an int >= 1, got 0"):
         lj.MechanismOptimiseSettings(phases=0)
+    with pytest.raises(ValueError, match="MechanismOptimiseSettings.lags must be an int >= 1, got 0"):
+        lj.MechanismOptimiseSettings(lags=0)
+    with pytest.raises(ValueError, match=r"a chain's travelling waves' lags are its phases \(8\); .* got lags=2"):
+        lj.ChainOptimiseSettings(lags=2)
     with pytest.raises(ValueError, match="need 0 < omega_min < omega_max"):
         lj.MechanismOptimiseSettings(omega_min=2.0, omega_max=1.0)
     # The shared fields are checked alike in every exact optimiser's settings, naming the class.
@@ -2068,9 +2073,10 @@ def test_mechanism_optimise_settings():
             cls(check_tol=0.0)
         with pytest.raises(ValueError, match="check_periods must be \\(lo, hi\\), 1 <= lo <= hi, got \\(5, 2\\)"):
             cls(check_periods=(5, 2))
-    chain = lj.ChainOptimiseSettings(local=3, max_iter=7, omega_max=1.5, local_method="sqp", stall_rtol=1e-5)
+    chain = lj.ChainOptimiseSettings(local=3, max_iter=7, omega_max=1.5, local_method="sqp", stall_rtol=1e-5, phases=6)
     s = MechanismOptimiseSettings.from_chain(chain)
-    assert (s.local, s.max_iter, s.omega_max, s.phases, s.local_method, s.stall_rtol) == (3, 7, 1.5, 1, "sqp", 1e-5)
+    assert (s.local, s.max_iter, s.omega_max, s.phases, s.lags, s.local_method, s.stall_rtol) == (
+        3, 7, 1.5, 1, 6, "sqp", 1e-5)  # fmt: skip
     with pytest.raises(ValueError, match="MechanismOptimiseSettings.local_method must be 'descent' or 'sqp'"):
         lj.MechanismOptimiseSettings(local_method="bfgs")
     with pytest.raises(TypeError, match="must be a MechanismOptimiseSettings, got ExactSettings"):
@@ -2083,6 +2089,34 @@ def test_mechanism_optimise_settings():
         lj.optimise(
             _capsule(), v_min=0.01, a_max=0.5, harmonics=3, settings=lj.MechanismOptimiseSettings(shape="spline")
         )
+
+
+def test_a_mechanisms_screen_drives_its_elements_as_travelling_waves():
+    """With two or more actuated elements the sinusoids of a mechanism's screen lag from one element
+    to the next (`MechanismOptimiseSettings.lags`): a worm of three bodies on bristles built as a
+    `Mechanism`, screened at one amplitude and frequency over 4 lags ($-\\pi$, $-\\pi/2$, 0,
+    $\\pi/2$): each sinusoid's steady gait is the chain's under the travelling wave $a \\sin(\\omega t
+    - j\\lambda)$ on spring $j$ (`TravellingWave`, `phi` the lag), to 1e-9, and the lag changes the
+    speed. One actuated element screens no lag."""
+    from locomotion_jax.optimisation._mechanism import _fourier, sinusoid_signals, sinusoids
+
+    law = lj.AnisotropicCoulomb(0.5, 0.9, 0.3, 0.7)
+    springs = [lj.Spring(j, j + 1, k=50.0, rest=lj.Sinusoid(a=0.05, omega=2.0, lbar=3.0)) for j in range(2)]
+    mech = lj.Mechanism(masses=[1.0, 1.0, 1.0], friction=[law] * 3, links=springs, x0=[0.0, 3.0, 6.0])
+    settings = lj.MechanismOptimiseSettings(amplitudes=1, frequencies=1, lags=4)
+    a, omega, phase, lag = sinusoids(0.05, 3.0, 3.0, 2, settings)
+    np.testing.assert_allclose(lag, [-np.pi, -np.pi / 2, 0.0, np.pi / 2], atol=1e-15)
+    cos, sin = sinusoid_signals(a, phase, lag, 2, 1)
+    gaits = lj.steady_gait(_fourier(mech.broadcast(), cos, sin, omega))
+    wave = lj.TravellingWave(a=jnp.asarray(a), omega=jnp.asarray(omega), phi=jnp.asarray(lag))
+    worm = lj.Chain(masses=[1.0, 1.0, 1.0], k=50.0, d=0.0, lbar=3.0, c=0.0, friction=law, waveforms=wave)
+    chain = lj.steady_gait(worm)
+    assert np.all(np.asarray(gaits.converged)) and np.all(np.asarray(chain.converged))
+    for name in ("mean_speed", "cost_of_transport"):
+        np.testing.assert_allclose(np.asarray(getattr(gaits, name)), np.asarray(getattr(chain, name)), rtol=1e-9)
+    assert np.ptp(np.asarray(gaits.mean_speed)) > 0.01
+    one = sinusoids(0.05, 1.0, 3.0, 1, settings)
+    assert one[0].size == 1 and not np.any(one[3])  # one amplitude, one frequency (lo = 1), no lag
 
 
 @MECHANISM_OPTIMISE

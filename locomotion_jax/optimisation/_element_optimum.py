@@ -32,9 +32,15 @@ class MechanismOptimiseSettings(SearchSettings):
     mean, in the element's own units: a length for a spring's rest, a force for a force (the force
     bound).
 
-    - `amplitudes`, `frequencies`, `phases`: the sinusoid screen, $a$ on `amplitudes` equal steps
-      up to $a_\\max$, $\\omega$ log-spaced over its range (one value for a fixed `omega`), the
-      phase $\\varphi$ on `phases` equal steps of $[0, 2\\pi)$.
+    - `amplitudes`, `frequencies`, `phases`, `lags`: the sinusoid screen, actuated element $j$
+      driven by $a \\sin(\\omega t + \\varphi - j\\lambda)$: $a$ on `amplitudes` equal steps up to
+      $a_\\max$, $\\omega$ log-spaced over its range (one value for a fixed `omega`), the phase
+      $\\varphi$ on `phases` equal steps of $[0, 2\\pi)$, and with two or more actuated elements the
+      lag $\\lambda$ from one to the next on `lags` equal steps of $[-\\pi, \\pi)$, 0 among them
+      (a travelling wave along the elements, as a chain's; 1: every element in phase). A worm of
+      three bodies on bristles built as a `Mechanism` reaches cost of transport 0.900 with the
+      default 8 lags, the chain optimiser's optimum; 0.934 with its elements in phase, 0.982 with
+      4 lags (`benchmarks/NOTES.md`).
     - `local`: the best sinusoids of the screen are refined.
     - `stall_rtol`: 0 by default: on the README's 4-mass worm, 1e-6 stopped the descent at a speed
       10 % above `v_min`, 0.09 % costlier (`benchmarks/NOTES.md`).
@@ -45,26 +51,28 @@ class MechanismOptimiseSettings(SearchSettings):
     - `smoothed`: the settings ([`Settings`][]) of the local stage of `optimise(...,
       method="smoothed")` (module `optimisation._element_smoothed`, which names the fields it reads).
 
-    A [`ChainOptimiseSettings`][] is accepted in its place: its fields of these names are used,
-    and one phase.
+    A [`ChainOptimiseSettings`][] is accepted in its place: its fields of these names are used, one
+    phase, and its `phases` (its travelling waves' lags) as the `lags`.
     """
 
     amplitudes: int = 4
     frequencies: int = 8
     phases: int = 1
+    lags: int = 8
     smoothed: Settings = Settings()
 
     def __check_init__(self):
-        for field in ("amplitudes", "frequencies", "phases"):
+        for field in ("amplitudes", "frequencies", "phases", "lags"):
             count(self, field, 1)
         if not isinstance(self.smoothed, Settings):
             raise TypeError(f"{type(self).__name__}.smoothed must be a Settings, got {type(self.smoothed).__name__}.")
 
     @classmethod
     def from_chain(cls, s: "ChainOptimiseSettings") -> "MechanismOptimiseSettings":
-        """A chain's settings' fields of these names (one phase: a mechanism's screen drives every
-        element in phase)."""
-        return cls(**{f.name: getattr(s, f.name) for f in dataclasses.fields(cls) if f.name != "phases"})
+        """A chain's settings' fields of these names, one phase, and the chain's `phases` (its
+        travelling waves' lags) as the `lags`."""
+        own = {f.name: getattr(s, f.name) for f in dataclasses.fields(cls) if f.name not in ("phases", "lags")}
+        return cls(**own, lags=s.phases)
 
 
 class ChainOptimiseSettings(MechanismOptimiseSettings):
@@ -81,7 +89,8 @@ class ChainOptimiseSettings(MechanismOptimiseSettings):
     - `amplitudes`, `frequencies`, `phases`: the travelling-wave screen, $a$ on `amplitudes` equal
       steps up to $a_\\max$, $\\omega$ log-spaced over its range, the phase lag $\\varphi$ on
       `phases` equal steps of $[-\\pi, \\pi)$ (one phase for $N = 2$); with `shape="spline"` the
-      screen's travelling waves are single harmonics.
+      screen's travelling waves are single harmonics. `lags` is a mechanism's: a chain's lags
+      are its `phases`, and it refuses another `lags`.
     - `local`: the refined best wave and the next best distinct waves of the screen.
     - `omega_min`, `omega_max`: in units of the lowest natural frequency with one mass held
       ([`Chain.omega_min`][locomotion_jax.Chain.omega_min]) and of the highest natural frequency of
@@ -128,6 +137,9 @@ class ChainOptimiseSettings(MechanismOptimiseSettings):
 
     def __check_init__(self):
         tension(self, optional=True)
+        if self.lags != MechanismOptimiseSettings.lags:
+            raise ValueError(f"ChainOptimiseSettings: a chain's travelling waves' lags are its phases ({self.phases}); "
+                             f"lags is a Mechanism's, got lags={self.lags!r}.")  # fmt: skip
         count(self, "zoom_points", 1)
         count(self, "chunk", 1)
         count(self, "zoom_levels", 0)
@@ -169,7 +181,7 @@ class ElementOptimum(AbstractOptimum):
       candidates' knots).
     - `screen`: every baseline signal of the screen, as arrays over them: its grid coordinates (a
       chain's travelling waves `a`, `omega`, `phi`; a mechanism's sinusoids `a`, `omega`,
-      `phase`), and its steady gait at the search step (`search_dt`, else `dt`): `speed`, `cost`,
+      `phase`, `lag`), and its steady gait at the search step (`search_dt`, else `dt`): `speed`, `cost`,
       `ok` (converged, stable, no lift-off), `liftoff`, `k`, `period`, `radius`, `min_normal` and
       `y`, the section state (the local runs' warm start); NaN and not `ok` where the screen left a
       signal unsolved. `to_dict(full=True)` includes it; `optimize --out` draws it (`pareto.png`);
@@ -338,7 +350,7 @@ class MechanismOptimum(ElementOptimum):
     [`ElementOptimum`][locomotion_jax.optimisation._element_optimum.ElementOptimum] (the actuated
     elements in the order of `elements`, indices into `links`; `mechanism`: the mechanism driven
     by the signals; the direct simulation runs from the mechanism's own start), and `sinusoid`, the
-    best sinusoid of the screen (a dict: `a`, `omega`, `phase`, `mean_speed`, `cost_of_transport`;
+    best sinusoid of the screen (a dict: `a`, `omega`, `phase`, `lag`, `mean_speed`, `cost_of_transport`;
     `None` if none meets the speed); `improvement_vs_sinusoid`: $1 -$ the ratio of the costs of
     transport.
     """
@@ -355,12 +367,14 @@ class MechanismOptimum(ElementOptimum):
         return [f"link {e}" for e in self.elements]
 
     def baseline_signals(self, phase: np.ndarray) -> tuple[str, np.ndarray] | None:
-        """The best sinusoid $a \\sin(\\varphi + \\varphi_0)$, every element in phase."""
+        """The best sinusoid $a \\sin(\\varphi + \\varphi_0 - j\\lambda)$ of element $j$."""
         w = self.sinusoid
         if w is None:
             return None
-        signals = np.repeat(w["a"] * np.sin(phase + w["phase"])[None], len(self.elements), axis=0)
-        return f"best sinusoid, a = {w['a']:.3g}, $\\omega$ = {w['omega']:.3g}, phase {w['phase']:.3g}", signals
+        lag = w.get("lag", 0.0)  # a result of before the lags: every element in phase
+        signals = w["a"] * np.sin(phase[None] + w["phase"] - np.arange(len(self.elements))[:, None] * lag)
+        label = f"best sinusoid, a = {w['a']:.3g}, $\\omega$ = {w['omega']:.3g}, phase {w['phase']:.3g}, lag {lag:.3g}"
+        return label, signals
 
     def driven(self, params: Any = None) -> tuple[Any, dict[str, Any]]:
         """`mechanism`, from its own start."""
@@ -384,8 +398,9 @@ class MechanismOptimum(ElementOptimum):
         if w is None:
             lines.append("best sinusoid: none meets the requirement on the exact model")
         else:
-            lines.append(f"best sinusoid: a = {w['a']:.4g}, omega = {w['omega']:.4g}, phase = {w['phase']:.4g}: mean "
-                         f"speed {w['mean_speed']:.4g}, cost of transport {w['cost_of_transport']:.4g}")  # fmt: skip
+            lines.append(f"best sinusoid: a = {w['a']:.4g}, omega = {w['omega']:.4g}, phase = {w['phase']:.4g}, "
+                         f"lag = {w.get('lag', 0.0):.4g}: mean speed {w['mean_speed']:.4g}, cost of transport "
+                         f"{w['cost_of_transport']:.4g}")  # fmt: skip
         lines.append(
             f"improvement vs sinusoid: {fmt(100 * self.improvement_vs_sinusoid)} %  (winner: {self.source}; "
             f"{self.screened} sinusoids screened, {self.evaluations} batched evaluations, {self.runtime_s:.0f} s)"

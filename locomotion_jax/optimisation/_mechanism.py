@@ -19,11 +19,14 @@ on the periodic orbits of the exact model ([`steady_gait`][] of a mechanism).
 
 Method (as `optimisation._chain`, with sinusoids in place of travelling waves):
 
-1. **Sinusoids**: every actuated element driven by $a\\sin(\\omega t + \\varphi)$ about its mean, on a
-   grid of `amplitudes` $\\times$ `frequencies` $\\times$ `phases` ([`MechanismOptimiseSettings`][]),
+1. **Sinusoids**: actuated element $j$ driven by $a\\sin(\\omega t + \\varphi - j\\lambda)$ about its
+   mean, on a grid of `amplitudes` $\\times$ `frequencies` $\\times$ `phases` $\\times$ `lags`
+   ([`MechanismOptimiseSettings`][]; the lag $\\lambda$ with two or more actuated elements only),
    solved in one batched [`steady_gait`][]; the cheapest that meets the speed is the baseline. The
    phase matters where the ground is symmetric: a sinusoid's steady gait then has a mirror image
-   (x -> -x, t -> t + T/2) going the other way, and the phase of the start picks one.
+   (x -> -x, t -> t + T/2) going the other way, and the phase of the start picks one. The lag
+   makes a travelling wave along the elements (a worm's springs, as a chain's screen has them),
+   or sets an internal force's phase against an external one's.
 2. **Local refinement** of every element's harmonics (or control values, started from the
    sinusoid's interpolating spline) from the best `local` sinusoids: the chain's monotone L-BFGS
    descent on an exact penalty (`_element_local`), with exact gradients through the periodic orbit
@@ -43,6 +46,7 @@ mechanism's own base frequency where it has no spring between bodies.
 
 import math
 import time
+from collections.abc import Mapping
 from typing import Any
 
 import jax.numpy as jnp
@@ -92,12 +96,40 @@ GAIT_FIELDS = ("speed", "cost", "ok", "liftoff", "k", "period", "radius", "min_n
 
 
 def _from_record(given: Any, n_red: int, a_max: float, lo: float, hi: float) -> tuple[Any, ...]:
-    """`(a, omega, phase, gaits)` of an earlier optimum's `screen` (`sweep=`): its sinusoids within
-    the bound and the frequency range (`_element_local.screen_rows`, which raises a `ValueError`
-    naming `sweep` for a record of another kind or mechanism)."""
-    rows = local.screen_rows(given, ("a", "omega", "phase", *GAIT_FIELDS), n_red, a_max, lo, hi,
+    """`(a, omega, phase, lag, gaits)` of an earlier optimum's `screen` (`sweep=`): its sinusoids
+    within the bound and the frequency range (`_element_local.screen_rows`, which raises a
+    `ValueError` naming `sweep` for a record of another kind or mechanism); a record without lags
+    drove every element in phase."""
+    if isinstance(given, Mapping) and "lag" not in given and "a" in given:
+        given = {**given, "lag": np.zeros(np.shape(given["a"]))}
+    rows = local.screen_rows(given, ("a", "omega", "phase", "lag", *GAIT_FIELDS), n_red, a_max, lo, hi,
                              ("mechanism", "sinusoid"), "this mechanism's section state")  # fmt: skip
-    return rows["a"], rows["omega"], rows["phase"], {key: rows[key] for key in GAIT_FIELDS}
+    return rows["a"], rows["omega"], rows["phase"], rows["lag"], {key: rows[key] for key in GAIT_FIELDS}
+
+
+def sinusoids(a_max: float, lo: float, hi: float, S: int, settings: MechanismOptimiseSettings,
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """The screen's sinusoids for `S` actuated elements, as flat arrays `(a, omega, phase, lag)`
+    over the grid of [`MechanismOptimiseSettings`][]: `omega` log-spaced over `[lo, hi]` (`lo`
+    alone where they are equal), the lags `settings.lags` equal steps of $[-\\pi, \\pi)$ with 0
+    among them, or 0 alone for one element (a lag needs two)."""
+    amps = a_max * np.arange(1, settings.amplitudes + 1) / settings.amplitudes
+    oms = np.geomspace(lo, hi, settings.frequencies) if hi > lo else np.array([lo])
+    phis = 2 * np.pi * np.arange(settings.phases) / settings.phases
+    n = settings.lags if S > 1 else 1
+    lags = np.sort((2 * np.pi * np.arange(n) / n + np.pi) % (2 * np.pi) - np.pi)
+    A, W, PHI, LAG = (x.ravel() for x in np.meshgrid(amps, oms, phis, lags, indexing="ij"))
+    return A, W, PHI, LAG
+
+
+def sinusoid_signals(a: np.ndarray, phase: np.ndarray, lag: np.ndarray, S: int, H: int,
+                     ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """`(cos, sin)` `(B, S, H)` of the sinusoids $a \\sin(\\omega t + \\varphi - j\\lambda)$ of elements
+    $j < S$ (`a`, `phase`, `lag`: `(B,)`), in a Fourier series of `H` harmonics."""
+    cos, sin = np.zeros((a.size, S, H)), np.zeros((a.size, S, H))
+    shift = phase[:, None] - np.arange(S)[None] * lag[:, None]
+    cos[:, :, 0], sin[:, :, 0] = a[:, None] * np.sin(shift), a[:, None] * np.cos(shift)
+    return cos, sin
 
 
 def _fourier(mech: Mechanism, cos: np.ndarray, sin: np.ndarray, omega: Any) -> Mechanism:
@@ -168,18 +200,14 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
     slowest = _fourier(base, np.zeros((S, 1)), np.zeros((S, 1)), lo)
     local.refuse_steps(slowest, settings, f"optimise: the screen's slowest sinusoid, omega = {lo:.6g}")
 
-    # 1. Sinusoids a sin(omega t + phi) on every actuated element (or the given screen's).
+    # 1. Sinusoids a sin(omega t + phi - j lag) on actuated element j (or the given screen's).
     sc: dict[str, np.ndarray] | None = None
     if sweep is None:
-        amps = a_max * np.arange(1, settings.amplitudes + 1) / settings.amplitudes
-        oms = np.geomspace(lo, hi, settings.frequencies) if free else np.array([lo])
-        phis = 2 * np.pi * np.arange(settings.phases) / settings.phases
-        A, W, PHI = (x.ravel() for x in np.meshgrid(amps, oms, phis, indexing="ij"))
+        A, W, PHI, LAG = sinusoids(a_max, lo, hi, S, settings)
     else:
-        A, W, PHI, sc = _from_record(sweep, 2 * base.n_bodies - (0 if base.physics().anchored else 1), a_max, lo, hi)
-    zero = np.zeros((A.size, S, H))
-    cos, sin = zero.copy(), zero.copy()
-    cos[:, :, 0], sin[:, :, 0] = (A * np.sin(PHI))[:, None], (A * np.cos(PHI))[:, None]
+        n_red = 2 * base.n_bodies - (0 if base.physics().anchored else 1)
+        A, W, PHI, LAG, sc = _from_record(sweep, n_red, a_max, lo, hi)
+    cos, sin = sinusoid_signals(A, PHI, LAG, S, H)
     if sc is None:
         say(f"screening {A.size} sinusoids (compiling the steady-gait solver: first call only)...")
         sc = _gaits(_fourier(base, cos, sin, W), search)
@@ -189,8 +217,8 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
     order = np.lexsort((-along(sc["speed"], direction), np.where(fast, sc["cost"], np.inf),
                         ~fast))  # fmt: skip
     best = int(order[0])
-    row_of = lambda i: dict(a=float(A[i]), omega=float(W[i]), phase=float(PHI[i]), mean_speed=float(sc["speed"][i]),
-                            cost_of_transport=float(sc["cost"][i]))  # fmt: skip
+    row_of = lambda i: dict(a=float(A[i]), omega=float(W[i]), phase=float(PHI[i]), lag=float(LAG[i]),
+                            mean_speed=float(sc["speed"][i]), cost_of_transport=float(sc["cost"][i]))  # fmt: skip
     sinusoid = row_of(best) if fast[best] else None
 
     # 2. Local refinement of every element's harmonics (or control values) from the best sinusoids.
@@ -246,5 +274,5 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
         history=[{"starts": [row_of(i) for i in rows], "local": log}], screened=int(A.size),
         evaluations=0 if ev is None else ev.calls,
         runtime_s=time.perf_counter() - t0, dt_exact=checked.dt, mechanism=chosen,
-        screen=dict(a=A, omega=W, phase=PHI, **sc),
+        screen=dict(a=A, omega=W, phase=PHI, lag=LAG, **sc),
     )  # fmt: skip
