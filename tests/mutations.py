@@ -1505,6 +1505,13 @@ MUTATIONS = [
         ("tests/test_mechanism_features.py::test_a_capsule_stuck_all_period_does_not_move",),
     ),
     Mutation(
+        "anchored_gait_travels_its_residual",
+        "an anchored mechanism's gait moves by Newton's residual over its period",
+        "locomotion_jax/gaits/_shooting.py",
+        (("    return jnp.zeros_like(dX) if P.anchored else dX\n", "    return dX\n"),),
+        ("tests/test_gait.py::test_siconos_oscillator_with_a_harmonic_wall_force_against_the_reference",),
+    ),
+    Mutation(
         "mechanism_screen_in_phase",
         "a mechanism's screen drives every element in phase whatever its lag",
         "locomotion_jax/optimisation/_mechanism.py",

@@ -725,7 +725,8 @@ def test_an_anchored_gait_with_a_body_stuck_all_period():
 @MECHANISM_GAIT
 def test_siconos_oscillator_with_a_harmonic_wall_force_against_the_reference():
     """With Coulomb friction (bound 0.4) the oscillator driven by 0.6 sin(0.5 t) sticks and slips; the
-    reference, from the gait's section state, returns to it after a period with the gait's dissipation."""
+    reference, from the gait's section state, returns to it after a period with the gait's dissipation;
+    it does not travel (speed 0, cost of transport inf)."""
     G = lj.steady_gait(_wall_oscillator(lj.Coulomb(0.4, 0.4), 0.0, 0.6, 0.5))
     assert int(G.status) == lj.GaitStatus.CONVERGED
     x, v = float(G.state[0]), float(G.state[1])
@@ -738,6 +739,9 @@ def test_siconos_oscillator_with_a_harmonic_wall_force_against_the_reference():
           f"(ref {ref['ed'][1]:.10f}); stuck {float(G.stick_fraction[0]):.4f}")  # fmt: skip
     assert err < 1e-8 and abs(ref["ed"][1] - float(G.e_d)) < 1e-8
     assert float(G.stick_fraction[0]) > 0  # it sticks at its turning points
+    # Tied to the wall it dissipates but does not travel: no distance (what the integration gives
+    # over the period is Newton's residual), an infinite cost of transport.
+    assert float(G.e_d) > 0.1 and float(G.mean_speed) == 0.0 and float(G.cost_of_transport) == np.inf
 
 
 @MECHANISM_GAIT

@@ -45,7 +45,7 @@ from ..model._params import Params
 from ..model._physics import AbstractPhysics, least_contact_load
 from ..model._two_mass import initial_gap
 from ..optimisation._shapes import AbstractShape
-from ._shooting import _reduced, _section_state
+from ._shooting import _reduced, _section_state, displacement
 
 
 TRACES: Counter = Counter()
@@ -96,8 +96,7 @@ def period(
 
     st, low, _ = loop(cond, body, (st0, normal(st0), jnp.zeros((), jnp.int32)))
     ok = (st.status == Status.OK) & (st.t >= t_end)
-    dX = P.centre_of_mass(st.y.x) - P.centre_of_mass(st0.y.x)
-    return Period(_reduced(st, P), jnp.stack([dX, st.y.ed, low]), ok)
+    return Period(_reduced(st, P), jnp.stack([displacement(P, st0, st), st.y.ed, low]), ok)
 
 
 class Orbit(NamedTuple):

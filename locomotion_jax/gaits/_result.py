@@ -60,7 +60,8 @@ class Gait(PaperNames):
     - `e_d`, `work`: dissipated energy (eq. 15) and actuator work (eq. 16) per gait period (equal
       on the orbit: the energy (eq. 10) is periodic).
     - `cost_of_transport`: $e_d / |\\Delta X|$, energy per unit distance (as `Measurement`'s
-      $e_z/z$; `inf` for a gait that does not move).
+      $e_z/z$; `inf` for a gait that does not move: one that dissipates nothing, or an anchored
+      mechanism's, whose `mean_speed` is 0 since its positions are periodic).
     - `stick_fraction`: fraction of the gait period each mass is stuck, `batch + (N,)`;
       `regime`: [`Regime`][] SSL if any mass is stuck longer than `STICK_TOL`, else SL.
     - `n_switch`: switches per gait period; `n_land`: landings per gait period (0 but under

@@ -82,6 +82,14 @@ def _reduced(st: engine.Hybrid, P: AbstractPhysics | None = None) -> Array:
     return jnp.concatenate([x[1:] - x[:-1], v] + vert)
 
 
+def displacement(P: AbstractPhysics, st0: engine.Hybrid, st: engine.Hybrid) -> Array:
+    """The centre of mass's displacement from `st0` to `st` over a gait's periods; 0 for an anchored
+    mechanism, whose positions are part of its section state and so periodic on its orbit (what
+    the integration gives there is Newton's residual, not a distance)."""
+    dX = P.centre_of_mass(st.y.x) - P.centre_of_mass(st0.y.x)
+    return jnp.zeros_like(dX) if P.anchored else dX
+
+
 def _flat(entries: tuple) -> Array:
     """Per-body entries as one vector over the bodies (an entry is one body's scalar, or every
     body's vector in the array layout, `model._chain_array`)."""
@@ -240,7 +248,7 @@ def period_map(P, contact, dt, max_steps, k, y) -> _Period:
     slid = jnp.all(_flat(a.slid))
     return _Period(
         y=_reduced(st, P),
-        dX=P.centre_of_mass(st.y.x) - P.centre_of_mass(st0.y.x),
+        dX=displacement(P, st0, st),
         ed=st.y.ed,
         w=st.y.w,
         stuck=_flat(a.stuck),
