@@ -1512,6 +1512,13 @@ MUTATIONS = [
         ("tests/test_gait.py::test_siconos_oscillator_with_a_harmonic_wall_force_against_the_reference",),
     ),
     Mutation(
+        "choose_ignores_the_tie_of_costs",
+        "the cheapest candidate is reported by rounding among equally cheap ones, not the most stable",
+        "locomotion_jax/optimisation/_optimum.py",
+        (("            k = int(np.argmin(np.where(tied, radius, np.inf)))\n", "            pass\n"),),
+        ("tests/test_optimise.py::test_choose_takes_the_cheapest_feasible_else_the_fastest_stable_gait",),
+    ),
+    Mutation(
         "mechanism_screen_in_phase",
         "a mechanism's screen drives every element in phase whatever its lag",
         "locomotion_jax/optimisation/_mechanism.py",

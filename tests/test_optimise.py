@@ -232,7 +232,8 @@ def test_projection_of_several_signals_rescales_each_one():
 
 
 def test_choose_takes_the_cheapest_feasible_else_the_fastest_stable_gait():
-    """The choice every exact optimiser makes among its verified candidates (`_optimum.choose`)."""
+    """The choice every exact optimiser makes among its verified candidates (`_optimum.choose`); the
+    chain's and the mechanism's break a tie of costs by the spectral radius."""
     from locomotion_jax.optimisation._optimum import choose
 
     eps = float(np.finfo(np.float64).eps)
@@ -254,6 +255,14 @@ def test_choose_takes_the_cheapest_feasible_else_the_fastest_stable_gait():
     assert k == 2
     # No stable gait at all: the first candidate.
     assert choose(~ok & False, speed, cost, strokes, 0.05, 1, 0.05, eps)[0] == 0
+    # With the spectral radii: of the feasible rows as cheap as the cheapest to 1e-9 (a floor of the
+    # cost, reached by rounding), the most stable; a cheaper one by more than that wins alone.
+    tie = np.array([0.8 * (1 + 2e-10), 0.8, 0.8 * (1 + 5e-10), 0.1, 0.1])
+    radius = np.array([0.3, 0.999, 0.5, 0.1, 0.1])
+    assert choose(ok, speed, tie, strokes, 0.05, 1, 0.05, eps, radius)[0] == 0
+    assert choose(ok, speed, tie, strokes, 0.05, 1, 0.05, eps)[0] == 1
+    apart = np.array([0.8 * (1 + 2e-9), 0.8, 0.8 * (1 + 5e-10), 0.1, 0.1])
+    assert choose(ok, speed, apart, strokes, 0.05, 1, 0.05, eps, radius)[0] == 2
 
 
 @pytest.mark.parametrize(

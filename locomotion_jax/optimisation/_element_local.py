@@ -394,7 +394,9 @@ def verify(xs: list[np.ndarray], baseline: tuple[np.ndarray, np.ndarray, float],
     exact bound (what the line search's tolerance let through). `solve(cos, sin, omega, control=None)`:
     the steady gaits (strict contact, relaxed start) of a batch of Fourier series, or of splines of
     `knots` control values (absolute units), as host arrays with at least `ok` (converged, stable,
-    no lift-off), `speed`, `cost`; a `liftoff` figure goes into the table too. The baseline's gait
+    no lift-off), `speed`, `cost` and `radius` (the largest Floquet multiplier modulus: of the
+    feasible candidates as cheap as the cheapest, `_optimum.choose` reports the most stable); a
+    `liftoff` figure goes into the table too. The baseline's gait
     is not solved again in a spline search (its row is the screen's)."""
     cos_b, sin_b, om_b = baseline
     S = cos_b.shape[0]
@@ -416,7 +418,7 @@ def verify(xs: list[np.ndarray], baseline: tuple[np.ndarray, np.ndarray, float],
         waves = [(c, s, None) for c, s in zip(cos, sin)]
     ok = np.asarray(g["ok"], bool)
     k, feasible, ok_speed, ok_stroke = choose(ok, g["speed"], g["cost"], strokes_.max(axis=1), v_min, direction,
-                                              a_max, eps)  # fmt: skip
+                                              a_max, eps, np.asarray(g["radius"], np.float64))  # fmt: skip
     lift = lambda i: {"liftoff_exact": bool(g["liftoff"][i])} if "liftoff" in g else {}
     table = [dict(candidate=names[i], omega=float(om[i]), mean_speed_exact=float(g["speed"][i]),
                   cost_of_transport_exact=float(g["cost"][i]), stable_exact=bool(ok[i]), **lift(i),

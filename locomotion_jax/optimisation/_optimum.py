@@ -513,18 +513,30 @@ def along(speed: Any, direction: int) -> np.ndarray:
     return np.nan_to_num(direction * np.asarray(speed), nan=-np.inf)
 
 
+TIE_RTOL = 1e-9
+"""Feasible candidates whose costs of transport lie within this of the cheapest's (relative) tie:
+[`choose`][] reports the most stable of them, where it is given their spectral radii."""
+
+
 def choose(ok: np.ndarray, speed: np.ndarray, cost: np.ndarray, strokes: np.ndarray, v_min: float, direction: int,
-           a_max: float, eps: float) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+           a_max: float, eps: float, radius: np.ndarray | None = None,
+           ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
     """The reported candidate among the verified ones (`ok`: a converged, stable gait without
     lift-off; `strokes`: each one's largest exact stroke): the cheapest feasible one (speed
     `>= v_min` in `direction`, stroke within `a_max` up to 8 `eps` relative), else the closest
-    miss, the fastest stable gait. Returns its index, and per candidate whether it is feasible,
-    fast enough and within the stroke."""
+    miss, the fastest stable gait. With `radius` (each gait's largest Floquet multiplier modulus),
+    of the feasible ones as cheap as the cheapest to [`TIE_RTOL`][] the most stable: where many
+    gaits reach a floor of the cost (a capsule sliding at its kinetic friction), their costs
+    differ by rounding, and the gait whose perturbations decay fastest is the one a robot keeps.
+    Returns its index, and per candidate whether it is feasible, fast enough and within the stroke."""
     ok_speed = ok & (along(speed, direction) >= v_min)
     ok_stroke = strokes <= a_max * (1 + 8 * eps)
     feasible = ok_speed & ok_stroke & ok
     if feasible.any():
         k = int(np.argmin(np.where(feasible, cost, np.inf)))
+        if radius is not None:
+            tied = feasible & (cost <= cost[k] * (1 + TIE_RTOL))
+            k = int(np.argmin(np.where(tied, radius, np.inf)))
     else:
         k = int(np.argmax(np.where(ok, along(speed, direction), -np.inf))) if ok.any() else 0
     return k, feasible, ok_speed, ok_stroke
