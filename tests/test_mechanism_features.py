@@ -66,10 +66,10 @@ def test_a_capsule_stuck_all_period_does_not_move():
     """The capsule driven too weakly to break its shell away (a = 0.05: the force on the shell stays
     far below $\\mu_{s,\\mathrm{bwd}} (m_0 + m_1) g = 0.3$) sticks all period: its gait dissipates
     nothing and its centre of mass returns to within rounding (the carried mass swings). Its cost of
-    transport is inf, a gait that does not move, not 0 / rounding = 0 (the mechanism optimiser took
-    it for the cheapest gait); beside it in the batch, the capsule of a = 0.6 is as alone. The
+    transport is inf, a gait that does not move, not 0 / rounding = 0 (the mechanism optimiser's
+    direct-simulation check of it divided by that 0); beside it in the batch, the capsule of a = 0.6 is as alone. The
     optimum's direct-simulation check of a gait that does not move reports an infinite cost and a
-    NaN agreement (it divided by the gait's speed, 0)."""
+    NaN agreement (given the gait's speed 0, it divided by it)."""
     gaits = lj.steady_gait(capsule(a=jnp.array([0.05, 0.6])))
     alone = lj.steady_gait(capsule(a=0.6))
     assert bool(gaits.converged[0]) and float(gaits.stick_fraction[0, 0]) > 1 - 1e-12
