@@ -3,8 +3,8 @@ independent reference (`reference_mechanism`), which shares no code with it."""
 
 from typing import Any
 
-import jax.numpy as jnp
 import locomotion_jax as lj
+from docs_examples import doc_class
 from reference_mechanism import Body, Sig, System
 
 
@@ -25,28 +25,10 @@ def capsule_ref(a: float, k: float, w: float, x0, v0, law: tuple = ANISO) -> Sys
     return System(bodies, springs=[(0, 1, k, 0.0)], forces=[(0, 1, Sig(0.0, (0.0,), (a,), w))])
 
 
-class Cubed(lj.AbstractWaveform):
-    """A waveform class of a user's own: $\\ell_0 = \\bar\\ell + a \\sin^3 \\omega t$, which is the Fourier
-    series $\\bar\\ell + \\tfrac{3a}{4}\\sin\\omega t - \\tfrac{a}{4}\\sin 3\\omega t$ (`fourier`, for the
-    reference)."""
-
-    a: Any
-    omega: Any
-    lbar: Any
-
-    def __call__(self, t: Any) -> tuple[Any, Any]:
-        return self.at_phase(jnp.cos(self.omega * t), jnp.sin(self.omega * t))[:2]
-
-    def at_phase(self, cos: Any, sin: Any) -> tuple[Any, Any, Any]:
-        w = self.omega
-        return (self.lbar + self.a * sin**3, 3 * self.a * w * sin**2 * cos,
-                3 * self.a * w * w * (2 * sin * cos**2 - sin**3))  # fmt: skip
-
-    def stroke(self) -> Any:
-        return jnp.abs(self.a)
-
-    def fastest_harmonic(self) -> int:
-        return 3
+class Cubed(doc_class("mechanisms.md", "Cubed")):
+    """`docs/mechanisms.md`'s waveform class of a user's own, $\\ell_0 = \\bar\\ell + a \\sin^3 \\omega t$, which is
+    the Fourier series $\\bar\\ell + \\tfrac{3a}{4}\\sin\\omega t - \\tfrac{a}{4}\\sin 3\\omega t$ (`fourier`,
+    for the reference)."""
 
     def fourier(self) -> tuple[float, tuple, tuple]:
         """`(mean, A, B)` of the same signal for the reference's `Sig`."""

@@ -1537,6 +1537,32 @@ MUTATIONS = [
         (("        return cls(**own, lags=s.phases)\n", "        return cls(**own)\n"),),
         ("tests/test_optimise.py::test_mechanism_optimise_settings",),
     ),
+    Mutation(
+        "actuator_fields_batched_unrolled",
+        "the unrolled chain physics carries its actuator's fields as batched values",
+        "locomotion_jax/model/_chain_physics.py",
+        (("    actuator: AbstractActuator = eqx.field(static=True)\n", "    actuator: AbstractActuator\n"),),
+        ("tests/test_docs_examples.py::test_the_bellows_is_an_internal_force_of_area_times_pressure",),
+    ),
+    Mutation(
+        "actuator_fields_batched_array",
+        "the array-layout chain physics carries its actuator's fields as batched values",
+        "locomotion_jax/model/_chain_array.py",
+        (("    actuator: AbstractActuator = eqx.field(static=True)\n", "    actuator: AbstractActuator\n"),),
+        ("tests/test_docs_examples.py::test_the_bellows_is_an_internal_force_of_area_times_pressure",),
+    ),
+    Mutation(
+        "actuator_array_field_taken",
+        "an actuator's field of several values is taken, not refused",
+        "locomotion_jax/model/_chain.py",
+        (
+            (
+                "            if np.ndim(value):  # the actuator is static",
+                "            if False:  # the actuator is static",
+            ),
+        ),
+        ("tests/test_docs_examples.py::test_an_actuator_is_one_for_the_whole_batch",),
+    ),
 ]
 
 
@@ -1544,6 +1570,8 @@ def _copy(dest: Path) -> None:
     ignore = shutil.ignore_patterns("__pycache__", "*.pyc", ".pytest_cache")
     for name in ("locomotion_jax", "tests"):
         shutil.copytree(ROOT / name, dest / name, ignore=ignore)
+    # The pages whose classes the tests read (`tests/docs_examples.py`).
+    shutil.copytree(ROOT / "docs", dest / "docs", ignore=shutil.ignore_patterns("*.png", "*.gif", "*.ipynb"))
     shutil.copy2(ROOT / "pyproject.toml", dest / "pyproject.toml")
 
 

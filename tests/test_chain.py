@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
+from docs_examples import doc_class
 from locomotion_jax.dynamics._flat import FlatBatch
 from locomotion_jax.run._batch import prepare_chain
 
@@ -170,18 +171,7 @@ def test_energy_balance(kind):
     assert np.abs(balance).max() < 1e-6 * scale, np.abs(balance).max()
 
 
-class ViscousCoulomb(lj.AbstractFriction):
-    """A user's law: Coulomb plus a viscous term, mu(|v|) = mu_k + b |v|."""
-
-    mu_s: jax.Array
-    mu_k: jax.Array
-    b: jax.Array
-
-    def static_limits(self):
-        return self.mu_s, self.mu_s
-
-    def kinetic(self, speed, direction):
-        return self.mu_k + self.b * speed
+ViscousCoulomb = doc_class("mechanisms.md", "ViscousCoulomb")  # a user's law: mu(|v|) = mu_k + b |v|
 
 
 def test_user_friction_law():

@@ -8,33 +8,10 @@ import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
 import pytest
+from docs_examples import doc_class
 
 
-class HalfStep(lj.AbstractDynamics):
-    """The exact engine at half its default step: a new dynamics class that delegates every method."""
-
-    inner: lj.Exact = lj.Exact(dt=0.005)
-
-    def simulate(self, *args, **kwargs):
-        return self.inner.simulate(*args, **kwargs)
-
-    def measure(self, *args, **kwargs):
-        return self.inner.measure(*args, **kwargs)
-
-    def measure_chunk(self, *args, **kwargs):
-        return self.inner.measure_chunk(*args, **kwargs)
-
-    def step_cap(self, t_total):
-        return self.inner.step_cap(t_total)
-
-    def nominal_step(self):
-        return self.inner.nominal_step()
-
-    def describe(self):
-        return {"dynamics": "half-step exact", "dt": self.inner.dt}
-
-    def spec(self):
-        return self.describe()
+HalfStep = doc_class("index.md", "HalfStep")  # the exact engine at half its step, delegating every method
 
 
 RTOL = 1e-4

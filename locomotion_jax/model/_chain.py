@@ -63,7 +63,8 @@ class Chain(AbstractMechanism):
       (`Sinusoid`, `Fourier`, `Spline`, any [`AbstractWaveform`][locomotion_jax.AbstractWaveform]), or a
       list of them (one per spring, a common base frequency). Default: no actuation.
     - `friction`: an [`AbstractFriction`][] with per-mass coefficients; default `Coulomb(0.7, 0.5)`.
-    - `actuator`: [`RestLength`][] (default) or [`InternalForce`][].
+    - `actuator`: [`RestLength`][] (default), [`InternalForce`][] or an actuator of your own; one for the
+      whole batch, its fields numbers (constants of the compiled program).
     - `layout`: how the engines (exact and smoothed) lay the masses out: `"unrolled"` (one scalar per mass:
       fastest for a few masses, but compile time and cost per mass grow with N), `"array"` (one
       array over the masses: compile time independent of N; every waveform and every contact
@@ -149,6 +150,11 @@ class Chain(AbstractMechanism):
         actuator = RestLength() if actuator is None else actuator
         if not isinstance(actuator, AbstractActuator):
             raise TypeError(f"actuator must be an AbstractActuator, got {type(actuator).__name__}.")
+        for path, value in jax.tree_util.tree_flatten_with_path(actuator)[0]:
+            if np.ndim(value):  # the actuator is static: one for the whole batch
+                name = type(actuator).__name__ + jax.tree_util.keystr(path)
+                raise ValueError(f"Invalid parameter 'actuator': its fields are numbers, one actuator for the whole "
+                                 f"batch; got {name} of shape {np.shape(value)}.")  # fmt: skip
         self.actuator = actuator
         if layout not in LAYOUTS:
             raise ValueError(f"Invalid parameter 'layout': expected one of {LAYOUTS}, got {layout!r}.")

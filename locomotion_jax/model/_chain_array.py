@@ -20,6 +20,7 @@ layout from [`array_from`][]`()` masses on, where it supports the chain).
 
 from typing import Any
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 
@@ -81,7 +82,9 @@ class ArrayChainPhysics(AbstractArrayPhysics):
     nw2: Array
     inv_mass: Array
     one: Array
-    actuator: AbstractActuator
+    # The chain's actuator, one for the whole batch (`Chain.actuator` is static): its fields are
+    # constants of the program, not batched values.
+    actuator: AbstractActuator = eqx.field(static=True)
     # The springs' own waveforms (`Chain.signals`) as one bank, in place of the Fourier coefficients
     # `cos`, `sin`; `None`: the coefficients.
     bank: WaveBank | None = None

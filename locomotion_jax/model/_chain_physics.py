@@ -17,6 +17,7 @@ dense output and event prediction); an actuator's derivatives follow from the li
 
 from typing import Any, NamedTuple, Protocol, runtime_checkable
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 
@@ -50,7 +51,9 @@ class ChainPhysics(AbstractPhysics):
     nw2: Scalars
     inv_mass: Array  # 1 / sum_i m_i
     one: Array  # 1.0 as a runtime value (`AbstractPhysics.keep`)
-    actuator: AbstractActuator
+    # The chain's actuator, one for the whole batch (`Chain.actuator` is static): its fields are
+    # constants of the program, not batched values.
+    actuator: AbstractActuator = eqx.field(static=True)
     # Each spring's signal as a waveform of its own (any `AbstractWaveform`, the base frequency
     # `omega`), in place of the Fourier coefficients `cos`, `sin`; `None`: the coefficients.
     waveforms: tuple[AbstractWaveform, ...] | None = None
