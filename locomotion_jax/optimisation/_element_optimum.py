@@ -2,8 +2,9 @@
 [`Chain`][] (`optimisation._mechanism`, `optimisation._chain`): one signal per actuated element, a
 baseline screen, the shared local refinement and verification (`_element_local`).
 
-A chain's settings are a mechanism's with the travelling-wave screen's own fields, and both
-results share the figures of the optimum's steady gait and of its direct simulation.
+A chain's settings and a mechanism's share a base (`ElementSettings`), a mechanism's adding the
+lags between its elements and a chain's its travelling-wave screen's own fields, and both results
+share the figures of the optimum's steady gait and of its direct simulation.
 """
 
 import dataclasses
@@ -20,7 +21,24 @@ from ._optimum import AbstractOptimum, constraints_line, fmt, Settings
 from ._search_settings import count, SearchSettings, tension
 
 
-class MechanismOptimiseSettings(SearchSettings):
+class ElementSettings(SearchSettings):
+    """What the settings of a mechanism's and of a chain's optimiser share: the fields of
+    `SearchSettings`, the sinusoid screen's grid (`amplitudes`, `frequencies`, `phases`) and the
+    smoothed local stage's `smoothed`, each class with its own defaults and docstring."""
+
+    amplitudes: int = 4
+    frequencies: int = 8
+    phases: int = 1
+    smoothed: Settings = Settings()
+
+    def __check_init__(self):
+        for field in ("amplitudes", "frequencies", "phases"):
+            count(self, field, 1)
+        if not isinstance(self.smoothed, Settings):
+            raise TypeError(f"{type(self).__name__}.smoothed must be a Settings, got {type(self.smoothed).__name__}.")
+
+
+class MechanismOptimiseSettings(ElementSettings):
     """Settings of [`optimise`][locomotion_jax.optimisation._optimise.optimise] for a
     [`Mechanism`][locomotion_jax.Mechanism] (module `optimisation._mechanism`): the fields of
     [`SearchSettings`][] with its defaults (`optimise`'s `harmonics` default 2), and the sinusoid
@@ -55,17 +73,10 @@ class MechanismOptimiseSettings(SearchSettings):
     phase, and its `phases` (its travelling waves' lags) as the `lags`.
     """
 
-    amplitudes: int = 4
-    frequencies: int = 8
-    phases: int = 1
     lags: int = 8
-    smoothed: Settings = Settings()
 
     def __check_init__(self):
-        for field in ("amplitudes", "frequencies", "phases", "lags"):
-            count(self, field, 1)
-        if not isinstance(self.smoothed, Settings):
-            raise TypeError(f"{type(self).__name__}.smoothed must be a Settings, got {type(self.smoothed).__name__}.")
+        count(self, "lags", 1)
 
     @classmethod
     def from_chain(cls, s: "ChainOptimiseSettings") -> "MechanismOptimiseSettings":
@@ -75,9 +86,9 @@ class MechanismOptimiseSettings(SearchSettings):
         return cls(**own, lags=s.phases)
 
 
-class ChainOptimiseSettings(MechanismOptimiseSettings):
+class ChainOptimiseSettings(ElementSettings):
     """Settings of [`optimise`][locomotion_jax.optimisation._optimise.optimise] for a [`Chain`][]
-    (module `optimisation._chain`): those of [`MechanismOptimiseSettings`][] (the actuated elements
+    (module `optimisation._chain`): those of [`MechanismOptimiseSettings`][] but its `lags` (the actuated elements
     are the springs, `a_max` bounds each spring's signal $\\max_t |s_j(t)|$: its stroke, or its force
     under [`InternalForce`][]; default 3 harmonics),
     with other defaults and the travelling-wave screen's own fields. Python numbers: changing
@@ -89,8 +100,8 @@ class ChainOptimiseSettings(MechanismOptimiseSettings):
     - `amplitudes`, `frequencies`, `phases`: the travelling-wave screen, $a$ on `amplitudes` equal
       steps up to $a_\\max$, $\\omega$ log-spaced over its range, the phase lag $\\varphi$ on
       `phases` equal steps of $[-\\pi, \\pi)$ (one phase for $N = 2$); with `shape="spline"` the
-      screen's travelling waves are single harmonics. `lags` is a mechanism's: a chain's lags
-      are its `phases`, and it refuses another `lags`.
+      screen's travelling waves are single harmonics (a chain's `phases` are what a mechanism's
+      settings call `lags`; it has no field of that name).
     - `local`: the refined best wave and the next best distinct waves of the screen.
     - `omega_min`, `omega_max`: in units of the lowest natural frequency with one mass held
       ([`Chain.omega_min`][locomotion_jax.Chain.omega_min]) and of the highest natural frequency of
@@ -137,9 +148,6 @@ class ChainOptimiseSettings(MechanismOptimiseSettings):
 
     def __check_init__(self):
         tension(self, optional=True)
-        if self.lags != MechanismOptimiseSettings.lags:
-            raise ValueError(f"ChainOptimiseSettings: a chain's travelling waves' lags are its phases ({self.phases}); "
-                             f"lags is a Mechanism's, got lags={self.lags!r}.")  # fmt: skip
         count(self, "zoom_points", 1)
         count(self, "chunk", 1)
         count(self, "zoom_levels", 0)
