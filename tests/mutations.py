@@ -1538,6 +1538,18 @@ MUTATIONS = [
         ("tests/test_optimise.py::test_mechanism_optimise_settings",),
     ),
     Mutation(
+        "element_half_step_ignored",
+        "a chain's or a mechanism's candidate counts as stable whatever its gait at half the step",
+        "locomotion_jax/optimisation/_element_local.py",
+        (
+            (
+                "    g = dict(g, ok=steady_at_half_step(full_ok > 0, full_v, full_c, half_ok > 0, half_v, half_c))\n",
+                "    g = dict(g)\n",
+            ),
+        ),
+        ("tests/test_optimise.py::test_a_candidate_is_stable_only_where_half_the_step_agrees",),
+    ),
+    Mutation(
         "actuator_fields_batched_unrolled",
         "the unrolled chain physics carries its actuator's fields as batched values",
         "locomotion_jax/model/_chain_physics.py",

@@ -231,6 +231,40 @@ def test_projection_of_several_signals_rescales_each_one():
     assert float(out["log_omega"]) == 1.0
 
 
+def test_a_candidate_is_stable_only_where_half_the_step_agrees():
+    """`_optimum.steady_at_half_step`, and the chain's and the mechanism's verification that applies
+    it (`_element_local.verify`, on gaits given here): of two fast enough candidates the cheaper one's
+    cost moves by 2e-3 at half the step, so the other is reported; the table has both steps' figures."""
+    from locomotion_jax.optimisation._element_local import pack, verify
+    from locomotion_jax.optimisation._optimum import steady_at_half_step
+
+    ok, speed, cost = np.array([True, True, True, True, False]), np.full(5, 0.1), np.array([1.0, 1.0, 1.0, np.inf, 1.0])
+    half = np.array([1.0 + 9e-4, 1.0 + 2e-3, 1.0, np.inf, 1.0])
+    half_ok = np.array([True, True, False, True, True])
+    assert steady_at_half_step(ok, speed, cost, half_ok, speed, half).tolist() == [True, False, False, True, False]
+    assert not steady_at_half_step(ok, speed, cost, half_ok, speed * (1 + 2e-3), cost)[0]
+
+    S, H = 1, 1
+    baseline = (np.zeros((S, H)), np.full((S, H), 0.05), 2.0)
+    xs = [pack(np.zeros((S, H)), np.full((S, H), 1.0), math.log(2.0)) for _ in range(2)]
+
+    def gaits(costs):
+        def solve(cos, sin, om, control=None):
+            n = len(om)
+            return dict(ok=np.ones(n, bool), speed=np.full(n, 0.1), cost=np.asarray(costs[:n], float),
+                        radius=np.full(n, 0.5), liftoff=np.zeros(n, bool))  # fmt: skip
+
+        return solve
+
+    at_dt, at_half = gaits([1.0, 0.8, 0.9]), gaits([1.0, 0.8 * (1 + 2e-3), 0.9 * (1 + 5e-4)])
+    v = verify(xs, baseline, {}, ["wave", "local 0", "local 1"], at_dt, at_half, 0.05, 0.05, 1, H, 0, 1e-16)
+    assert v.k == 2 and v.feasible.tolist() == [True, False, True]
+    assert [c["stable_exact"] for c in v.table] == [True, False, True]
+    assert [c["half_step_cost"] for c in v.table] == pytest.approx([1.0, 0.8016, 0.90045])
+    v = verify(xs, baseline, {}, ["wave", "local 0", "local 1"], at_dt, at_dt, 0.05, 0.05, 1, H, 0, 1e-16)
+    assert v.k == 1  # agreeing: the cheapest
+
+
 def test_choose_takes_the_cheapest_feasible_else_the_fastest_stable_gait():
     """The choice every exact optimiser makes among its verified candidates (`_optimum.choose`); the
     chain's and the mechanism's break a tie of costs by the spectral radius."""
@@ -1268,6 +1302,15 @@ def test_optimum_verifies_on_steady_gait_and_simulation(opt3):
     assert float(g.mean_speed) == pytest.approx(opt3.mean_speed_exact, rel=1e-10)
     assert float(g.cost_of_transport) == pytest.approx(opt3.cost_of_transport_exact, rel=1e-10)
     assert float(g.mean_speed) >= opt3.v_min
+    # Every candidate was solved at half the step too, the optimum's figures the same there to 1e-3,
+    # those of its steady gait at dt/2.
+    half = _first(lj.steady_gait(lj.Chain.stack([opt3.chain] * SETTINGS.chunk), transient=SETTINGS.transient,
+                                 dynamics=lj.Exact(dt=SETTINGS.dt / 2), start="relaxed"))  # fmt: skip
+    (won,) = [c for c in opt3.candidates if c["candidate"] == opt3.source]
+    assert won["half_step_cost"] == pytest.approx(float(half.cost_of_transport), rel=1e-9)
+    assert won["half_step_speed"] == pytest.approx(float(half.mean_speed), rel=1e-9)
+    assert abs(won["half_step_cost"] / opt3.cost_of_transport_exact - 1) <= 1e-3
+    assert all(np.isfinite(c["half_step_speed"]) for c in opt3.candidates)
     # The chain carries the reported coefficients.
     np.testing.assert_allclose(np.asarray(opt3.chain.waves.cos), opt3.cos, rtol=0, atol=0)
     assert float(opt3.chain.waves.omega) == opt3.omega
@@ -1540,7 +1583,8 @@ def test_the_chain_optimum_keeps_its_screen_and_draws_it(opt3, tmp_path):
     good = sc["ok"] & (sc["speed"] > 0) & np.isfinite(sc["cost"])
     v, c = sc["speed"][good], sc["cost"][good]
     dominated = [(v > vj) & (c <= cj) for vj, cj in zip(v, c)]  # a faster wave that is no costlier
-    expected = np.array(sorted((vj, cj) for vj, cj, d in zip(v, c, dominated) if not d.any()))
+    # Waves of equal figures (a zoom point on the coarse grid's, solved alike) are one point of the front.
+    expected = np.unique([(vj, cj) for vj, cj, d in zip(v, c, dominated) if not d.any()], axis=0)
     np.testing.assert_array_equal(front[np.argsort(front[:, 0])], expected)
     assert np.array_equal(star, [[opt3.mean_speed_exact, opt3.cost_of_transport_exact]])
     # The drawn figure's cost axis ends at 10 times the dearest point of the front and the optimum.
@@ -1892,6 +1936,7 @@ def test_mechanism_optimum_verified_by_simulate_and_the_reference(optimum):
     won = [c for c in opt.candidates if c["candidate"] == opt.source]
     assert len(won) == 1 and won[0]["cost_of_transport_exact"] == opt.cost_of_transport_exact
     assert all("liftoff_exact" in c for c in opt.candidates)
+    assert abs(won[0]["half_step_cost"] / opt.cost_of_transport_exact - 1) <= 1e-3  # verified at dt/2 as well
     starts = opt.history[0]["starts"]
     assert len(starts) == 2 and starts[0]["cost_of_transport"] == pytest.approx(opt.sinusoid["cost_of_transport"])
     assert opt.history[0]["local"], "the local runs' log"

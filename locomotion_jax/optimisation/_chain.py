@@ -182,12 +182,14 @@ def optimise_chain(chain: Chain, v_min: float, a_max: float, *, direction: int =
                                  settings)  # fmt: skip
     say(f"verifying {len(names)} candidates on their steady gaits (dt = {checked.dt:g})...")
     solve = lambda cos, sin, om, control=None: screen.solve(base, cos, sin, om, checked, control=control)._asdict()
+    half = local.half_step(checked)
+    halved = lambda cos, sin, om, control=None: screen.solve(base, cos, sin, om, half, control=control)._asdict()
     row = {name: x[best : best + 1] for name, x in sc.gaits._asdict().items()}
     if spline and search.dt != checked.dt:  # the screen's row is at the search step
         row = solve(cos_b, sin_b, sc.omega[best : best + 1])
     eps = float(jnp.finfo(base.dtype).eps)
-    v = local.verify(xs + given, (cos_b[0], sin_b[0], float(sc.omega[best])), row, names, solve, a_max, speed,
-                     direction, H, M if spline else 0, eps)  # fmt: skip
+    v = local.verify(xs + given, (cos_b[0], sin_b[0], float(sc.omega[best])), row, names, solve, halved, a_max,
+                     speed, direction, H, M if spline else 0, eps)  # fmt: skip
     g, om, strokes, k, feasible, table = screen.Gaits(**v.gaits), v.omega, v.strokes, v.k, v.feasible, v.table
     ok_speed, ok_stroke = v.ok_speed, v.ok_stroke
     if search.dt != checked.dt:

@@ -36,7 +36,7 @@ from ._evaluator import Evaluator
 from ._figures import Figures, PENALTY
 from ._local import local_run
 from ._lockstep import run_lockstep
-from ._optimum import choose
+from ._optimum import choose, steady_at_half_step
 from ._shapes import normalise_phase, spline_stroke, SplineShape
 
 
@@ -133,6 +133,11 @@ def resolved(fastest: Any, settings: Any) -> Any:
     The search steps at `search_dt` or `dt` whatever its knots' spacing: its figures only steer."""
     dt = resolved_step(fastest, None, settings.dt)
     return settings if dt == settings.dt else dataclasses.replace(settings, dt=dt, search_dt=None)
+
+
+def half_step(settings: Any) -> Any:
+    """`settings` at half its `dt` (the verification's convergence check, [`verify`][])."""
+    return dataclasses.replace(settings, dt=settings.dt / 2, search_dt=None)
 
 
 def check_requirement(v_min: Any, direction: Any, harmonics: Any, omega: Any) -> None:
@@ -386,8 +391,8 @@ class Verified(NamedTuple):
 
 
 def verify(xs: list[np.ndarray], baseline: tuple[np.ndarray, np.ndarray, float], baseline_gait: dict[str, np.ndarray],
-           names: list[str], solve: Callable[..., dict[str, np.ndarray]], a_max: float, v_min: float,
-           direction: int, harmonics: int, knots: int, eps: float) -> Verified:  # fmt: skip
+           names: list[str], solve: Callable[..., dict[str, np.ndarray]], halved: Callable[..., dict[str, np.ndarray]],
+           a_max: float, v_min: float, direction: int, harmonics: int, knots: int, eps: float) -> Verified:  # fmt: skip
     """The verification of a chain's or a mechanism's candidates: the baseline (`baseline`: its
     Fourier coefficients `(S, H)` in absolute units and its frequency; `baseline_gait`: its steady
     gait's row, each figure of shape `(1, ...)`) and the local runs' points `xs`, rescaled onto the
@@ -397,7 +402,9 @@ def verify(xs: list[np.ndarray], baseline: tuple[np.ndarray, np.ndarray, float],
     no lift-off), `speed`, `cost` and `radius` (the largest Floquet multiplier modulus: of the
     feasible candidates as cheap as the cheapest, `_optimum.choose` reports the most stable); a
     `liftoff` figure goes into the table too. The baseline's gait
-    is not solved again in a spline search (its row is the screen's)."""
+    is not solved again in a spline search (its row is the screen's). `halved`: `solve` at half the
+    step; every candidate's gait is solved there too, and counts as `ok` only where it agrees
+    (`_optimum.steady_at_half_step`, as the paper's optimiser's verification)."""
     cos_b, sin_b, om_b = baseline
     S = cos_b.shape[0]
     waves: list[tuple[np.ndarray, np.ndarray, np.ndarray | None]]
@@ -406,6 +413,8 @@ def verify(xs: list[np.ndarray], baseline: tuple[np.ndarray, np.ndarray, float],
         om = np.array([om_b] + [math.exp(float(x[-1])) for x in xs])
         refined = solve(None, None, om[1:], control=control)
         g = {name: np.concatenate([baseline_gait[name], refined[name]]) for name in refined}
+        half_b, half_r = halved(cos_b[None], sin_b[None], om[:1]), halved(None, None, om[1:], control=control)
+        half = {name: np.concatenate([half_b[name], half_r[name]]) for name in ("ok", "speed", "cost")}
         strokes_ = np.concatenate([strokes(cos_b, sin_b)[None], [spline_strokes(c) for c in control]])
         empty = np.zeros((S, 0))
         waves = [(cos_b, sin_b, None), *((empty, empty, c) for c in control)]
@@ -413,15 +422,19 @@ def verify(xs: list[np.ndarray], baseline: tuple[np.ndarray, np.ndarray, float],
         coefs = [(cos_b, sin_b, om_b)] + [on_bound(x, S, harmonics, a_max) for x in xs]
         om = np.array([w for _, _, w in coefs])
         cos, sin = np.stack([c for c, _, _ in coefs]), np.stack([s for _, s, _ in coefs])
-        g = solve(cos, sin, om)
+        g, half = solve(cos, sin, om), halved(cos, sin, om)
         strokes_ = np.stack([strokes(c, s) for c, s in zip(cos, sin)])
         waves = [(c, s, None) for c, s in zip(cos, sin)]
-    ok = np.asarray(g["ok"], bool)
+    full_ok, full_v, full_c = (np.asarray(g[n], float) for n in ("ok", "speed", "cost"))
+    half_ok, half_v, half_c = (np.asarray(half[n], float) for n in ("ok", "speed", "cost"))
+    g = dict(g, ok=steady_at_half_step(full_ok > 0, full_v, full_c, half_ok > 0, half_v, half_c))
+    ok = g["ok"]
     k, feasible, ok_speed, ok_stroke = choose(ok, g["speed"], g["cost"], strokes_.max(axis=1), v_min, direction,
                                               a_max, eps, np.asarray(g["radius"], np.float64))  # fmt: skip
     lift = lambda i: {"liftoff_exact": bool(g["liftoff"][i])} if "liftoff" in g else {}
     table = [dict(candidate=names[i], omega=float(om[i]), mean_speed_exact=float(g["speed"][i]),
-                  cost_of_transport_exact=float(g["cost"][i]), stable_exact=bool(ok[i]), **lift(i),
+                  cost_of_transport_exact=float(g["cost"][i]), stable_exact=bool(ok[i]),
+                  half_step_speed=float(half["speed"][i]), half_step_cost=float(half["cost"][i]), **lift(i),
                   stroke=float(strokes_[i].max()), feasible_exact=bool(feasible[i]))
              for i in range(len(names))]  # fmt: skip
     return Verified(g, om, strokes_, waves, k, feasible, ok_speed, ok_stroke, table)

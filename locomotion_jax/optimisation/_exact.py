@@ -71,7 +71,7 @@ from ._evaluator import Evaluator
 from ._figures import Figures, PENALTY
 from ._local import local_run
 from ._lockstep import run_lockstep
-from ._optimum import choose, ExactSettings, Optimum, start_waveform, verified, waveform_of
+from ._optimum import choose, ExactSettings, Optimum, start_waveform, steady_at_half_step, verified, waveform_of
 from ._shapes import AbstractShape
 from ._starts import start_shapes, tension_starts
 
@@ -103,10 +103,6 @@ def _descent(x0, shape: AbstractShape, bounds, settings: ExactSettings, max_iter
 
     local_step(settings.local_method, x0, at, project, max_iter, settings.trust_radius, PENALTY,
                stall_rtol=settings.stall_rtol)  # fmt: skip
-
-
-HALF_STEP_RTOL = 1e-3
-"""Largest relative change of a candidate's speed or cost of transport with half the step (`_verify`)."""
 
 
 def _local_solver(x0, shape: AbstractShape, bounds, settings: ExactSettings, log: list, max_iter: int):
@@ -493,8 +489,7 @@ def _verify(params, speed, direction, a_max, shape, free, settings, candidates, 
         pick = _best_sections(gait, rows, len(origins))[:m]
         gait, half = (jax.tree_util.tree_map(lambda x: x[pick] if np.ndim(x) else x, g) for g in (gait, half))
         fig, half = pareto.gait_figures(gait), pareto.gait_figures(half)
-        agree = lambda a, b: np.abs(a - b) <= HALF_STEP_RTOL * np.abs(a)
-        steady = fig.ok & half.ok & agree(fig.speed, half.speed) & agree(fig.cost, half.cost)
+        steady = steady_at_half_step(fig.ok, fig.speed, fig.cost, half.ok, half.speed, half.cost)
         return theta[pick], gait, fig._replace(ok=steady), half
 
     names = [name for name, _ in candidates]

@@ -240,14 +240,17 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
         checked = local.resolved(_spline(base, np.zeros((S, M)), fastest), settings)
     say(f"verifying {len(names)} candidates on their steady gaits (dt = {checked.dt:g})...")
 
-    def solve(cos, sin, om, control=None):
-        return _gaits(_fourier(base, cos, sin, om) if control is None else _spline(base, control, om), checked)
+    def solve(cos, sin, om, control=None, at=checked):
+        return _gaits(_fourier(base, cos, sin, om) if control is None else _spline(base, control, om), at)
+
+    half = local.half_step(checked)
+    halved = lambda cos, sin, om, control=None: solve(cos, sin, om, control, at=half)
 
     row = {name: x[best : best + 1] for name, x in sc.items()}
     if spline and search.dt != checked.dt:  # the screen's row is at the search step
         row = solve(cos[best : best + 1], sin[best : best + 1], W[best : best + 1])
     eps = float(jnp.finfo(base.dtype).eps)
-    v = local.verify(xs + given, (cos[best], sin[best], float(W[best])), row, names, solve, a_max, v_min,
+    v = local.verify(xs + given, (cos[best], sin[best], float(W[best])), row, names, solve, halved, a_max, v_min,
                      direction, H, M if spline else 0, eps)  # fmt: skip
     g, om_c, strokes, k, feasible, table = v.gaits, v.omega, v.strokes, v.k, v.feasible, v.table
     if search.dt != checked.dt:

@@ -513,6 +513,23 @@ def along(speed: Any, direction: int) -> np.ndarray:
     return np.nan_to_num(direction * np.asarray(speed), nan=-np.inf)
 
 
+HALF_STEP_RTOL = 1e-3
+"""Largest relative change of a candidate's mean speed or cost of transport with half the step: the
+exact optimisers' verification counts a candidate stable only where its steady gait at half the
+step agrees to this ([`steady_at_half_step`][locomotion_jax.optimisation._optimum.steady_at_half_step]),
+a convergence check of every figure they report (those at the full step)."""
+
+
+def steady_at_half_step(ok: np.ndarray, speed: np.ndarray, cost: np.ndarray, half_ok: np.ndarray,
+                        half_speed: np.ndarray, half_cost: np.ndarray) -> np.ndarray:  # fmt: skip
+    """`ok` where the gaits at half the step are `ok` too, with the same mean speed and cost of
+    transport to [`HALF_STEP_RTOL`][locomotion_jax.optimisation._optimum.HALF_STEP_RTOL] (an infinite
+    cost, a gait that does not move, agrees with itself)."""
+    with np.errstate(invalid="ignore"):
+        agree = lambda a, b: (a == b) | (np.abs(a - b) <= HALF_STEP_RTOL * np.abs(a))
+        return np.asarray(ok & half_ok & agree(speed, half_speed) & agree(cost, half_cost), bool)
+
+
 TIE_RTOL = 1e-9
 """Feasible candidates whose costs of transport lie within this of the cheapest's (relative) tie:
 [`choose`][] reports the most stable of them, where it is given their spectral radii."""
