@@ -45,6 +45,7 @@ from ..dynamics._compile import engine_jit
 from ..dynamics._forward import jacfwd_in_turn
 from ..model._params import PARAM_NAMES, Params
 from ..model._waveform import AbstractWaveform, Fourier, Sinusoid
+from ._orbit import tolerance_scale
 from ._shooting import _Period, period_map
 
 
@@ -236,7 +237,7 @@ def _correct_one(
         return jnp.max(jnp.abs(out.y - z[:n]))
 
     def small(z, out):
-        return residual(z, out) <= tol * (1 + jnp.max(jnp.abs(z[:n])))
+        return residual(z, out) <= tol * (1 + tolerance_scale(z[:n], z0[:n]))
 
     # A start off the hyperplane is a valid point only after a step onto it.
     on = jnp.abs(cvec @ (z0 - zref)) <= tol * (1 + jnp.max(jnp.abs(z0)))

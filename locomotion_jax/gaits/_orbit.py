@@ -121,6 +121,20 @@ class Orbit(NamedTuple):
     figures_y: Array
 
 
+DIVERGED = 1e3
+"""An iterate of Newton's method larger than this times its start's scale (`1 + max|y0|`) has
+diverged: its convergence test does not grow with it (`tolerance_scale`)."""
+
+
+def tolerance_scale(y: Array, y0: Array) -> Array:
+    """The scale of Newton's convergence test $|\\Phi(y) - y| \\le \\text{tol}\\,(1 + \\text{scale})$:
+    the iterate's largest component, but no more than `DIVERGED` times the start's scale. A
+    relative test alone accepts an iterate that ran off to a huge velocity (a capsule's orbit at
+    $|v| \\approx 10^{16}$ had residual 64, within $10^{-11}$ of its size), which no
+    friction-driven gait has; an iterate of an orbit near its start is judged as before."""
+    return jnp.minimum(jnp.max(jnp.abs(y)), DIVERGED * (1 + jnp.max(jnp.abs(y0))))
+
+
 def newton_orbit(
     run,
     y0: Array,
@@ -178,7 +192,7 @@ def newton_orbit(
         return jnp.max(jnp.abs(val[:ny] - y))
 
     def small(y, val):
-        return residual(y, val) <= tol * (1 + jnp.max(jnp.abs(y)))
+        return residual(y, val) <= tol * (1 + tolerance_scale(y, y0))
 
     def cond(c):
         _, _, _, ok, it, done, _, since, started = c
