@@ -1575,6 +1575,25 @@ MUTATIONS = [
         ),
         ("tests/test_docs_examples.py::test_an_actuator_is_one_for_the_whole_batch",),
     ),
+    Mutation(
+        "oracle_tolerance_grows_unbounded",
+        "the optimisers' orbit oracle: Newton's convergence test scaled by the iterate's size, however large",
+        "locomotion_jax/gaits/_orbit.py",
+        (
+            (
+                "        return residual(y, val) <= tol * (1 + tolerance_scale(y, y0))",
+                "        return residual(y, val) <= tol * (1 + jnp.max(jnp.abs(y)))",
+            ),
+        ),
+        ("tests/test_optimise.py::test_newton_does_not_accept_an_orbit_that_ran_off",),
+    ),
+    Mutation(
+        "steady_gait_tolerance_grows_unbounded",
+        "steady_gait's corrector: Newton's convergence test scaled by the iterate's size, however large",
+        "locomotion_jax/gaits/_corrector.py",
+        (("tol * (1 + tolerance_scale(z[:n], z0[:n]))", "tol * (1 + jnp.max(jnp.abs(z[:n])))"),),
+        ("tests/test_optimise.py::test_newton_does_not_accept_an_orbit_that_ran_off",),
+    ),
 ]
 
 

@@ -2257,6 +2257,38 @@ def _reference_gait(opt):
     return dX / (t[1] - t[0]), (ref["ed"][1] - ref["ed"][0]) / abs(dX)
 
 
+# A spline force (control values at omega = 3) on the isotropic capsule that the mechanism
+# optimiser's descent reached: its orbit over one period has no fixed point near the settled state,
+# and Newton's iterates run off to velocities of 1e15 and more, where a residual relative to the
+# iterate's size alone (64 against 9e15) passed. The gait is of period 2.
+RUNAWAY = (0.17038443168996228, -1.5202228768451358, -1.9922847684607983, -1.606465706627539,
+           0.17030266211663847, 1.631715979592068, 1.8174558022762703, 1.511427719786336)  # fmt: skip
+
+
+def test_newton_does_not_accept_an_orbit_that_ran_off():
+    huge, start = jnp.array([0.0, 9e15]), jnp.array([0.5, -2.0])
+    assert float(_orbit.tolerance_scale(huge, start)) == _orbit.DIVERGED * 3.0
+    assert float(_orbit.tolerance_scale(start, start)) == 2.0
+    # The optimisers' oracle: from the settled state, the one-period orbit is refused, the two-period one found.
+    base, control = _iso_capsule(np.zeros(1), np.zeros(1)), np.array(RUNAWAY)
+    steps = int(math.ceil(2 * math.pi / OMEGA / 0.01)) * 3 + 200
+    oracle = _element_orbit.ChainOracle(chain=base, a_max=jnp.asarray(F_MAX), max_steps=jnp.asarray(steps, jnp.int32),
+                                        tol=jnp.asarray(1e-11), harmonics=0, contact="paper", dt=0.01, max_iter=30,
+                                        knots=8)  # fmt: skip
+    theta = jnp.asarray(np.r_[control / F_MAX, math.log(OMEGA)])[None]
+    y0 = oracle.transient(theta, jnp.zeros((1, 3)), jnp.ones(1, bool), jnp.asarray(15))
+    one, two = (oracle.orbits(theta, y0, jnp.full(1, k, jnp.int32)) for k in (1, 2))
+    assert not bool(one.ok[0]) or float(jnp.abs(one.y).max()) < 10
+    assert bool(two.ok[0]) and float(jnp.abs(two.y).max()) < 1
+    # steady_gait: the gait it finds at dt is the one at dt/2 (the runaway orbit had speed 9e15).
+    mech = base.with_spline(jnp.asarray(control[None]), jnp.asarray(OMEGA))
+    gaits = [lj.steady_gait(mech, periods=(1, 2), transient=15, dynamics=lj.Exact(dt=dt)) for dt in (0.01, 0.005)]
+    for g in gaits:
+        assert int(g.status) == lj.GaitStatus.CONVERGED and float(jnp.abs(g.state).max()) < 1
+    (v, cot), (v2, cot2) = ((float(g.mean_speed), float(g.cost_of_transport)) for g in gaits)
+    assert v == pytest.approx(v2, rel=1e-6) and cot == pytest.approx(cot2, rel=1e-6) and 0.1 < v < 0.11
+
+
 @MECHANISM_OPTIMISE
 def test_reference_spline_is_the_packages_spline():
     """The reference's B-spline signal (its own formula) equals `lj.Spline` and its rate."""
