@@ -52,6 +52,7 @@ from locomotion_jax.gaits import _element_orbit, _orbit, _shooting
 from locomotion_jax.optimisation import (
     _chain_screen as screen,
     _constraints,
+    _element_local,
     _evaluator,
     _exact as _exact_optimise,
     _objective,
@@ -1146,7 +1147,7 @@ def test_the_smoothed_stage_moves_each_lanes_time_origin():
     one time origin for all its signals, the one at which the first signal's A_1 is 0. The
     decision vector leaves that coefficient out: without the move, a lane's candidate is another
     gait. The shift is found by sampling the iterate's first harmonic (as in `tests/test_shapes.py`)."""
-    from locomotion_jax.optimisation import _element_local, _element_smoothed
+    from locomotion_jax.optimisation import _element_smoothed
 
     rng = np.random.default_rng(5)
     n, S, H = 3, 2, 3
@@ -1230,7 +1231,6 @@ def test_the_direct_simulation_names_a_second_attractor():
     attractor: from the relaxed springs it settles on a period-3 motion, whose figures it reports
     averaged over whole periods of it (equal to the period-3 gait's and to the reference's) with
     recurrence 3; from the period-1 orbit's own state it stays there, recurrence 1."""
-    from locomotion_jax.optimisation import _element_local
     from reference_chain import chain_config, reference_chain_simulate
 
     worm = lj.Chain(masses=[1.0] * 4, d=0.0, friction=lj.AnisotropicCoulomb(0.5, 0.9, 0.3, 0.7))
@@ -2238,19 +2238,21 @@ def test_smoothed_method_on_a_mechanism():
     assert err < 1e-4
 
 
-def _reference_gait(opt):
-    """Mean speed and cost of transport of the optimum's isotropic capsule from rest in the
-    independent reference, over 10 periods of its force once the slowest Floquet mode has decayed
-    to 1e-9 of its start (at least 30 periods)."""
+def _reference_gait(opt, periods=None, state=(0.0, 0.0, 0.0)):
+    """Mean speed and cost of transport of the optimum's isotropic capsule in the independent
+    reference from the section state `state` (gap, body's and inner mass's velocities; rest by
+    default) between the force's `periods`: by default 10 of them once the slowest Floquet mode has
+    decayed to 1e-9 of its start (at least 30 periods)."""
     w = float(opt.omega)
     start = int(np.clip(np.ceil(np.log(1e-9) / np.log(opt.spectral_radius_exact)), 30, 400))
-    periods = (start, start + 10)
+    periods = (start, start + 10) if periods is None else periods
     if opt.shape == "spline":
         force = Sig(0.0, w=w, control=tuple(float(c) for c in opt.control[0]))
     else:
         force = Sig(0.0, tuple(float(c) for c in opt.cos[0]), tuple(float(c) for c in opt.sin[0]), w)
-    S = System([Body(M_BODY, (0.5, 0.5, 0.4, 0.4)), Body(M_IN, None, carrier=0)], springs=[(0, 1, K_ISO, 0.0)],
-               forces=[(0, 1, force)])  # fmt: skip
+    u, v0, v1 = (float(q) for q in state)
+    S = System([Body(M_BODY, (0.5, 0.5, 0.4, 0.4), v0=v0), Body(M_IN, None, carrier=0, x0=u, v0=v1)],
+               springs=[(0, 1, K_ISO, 0.0)], forces=[(0, 1, force)])  # fmt: skip
     t = np.array(periods, float) * 2 * np.pi / w
     ref = run(S, float(t[1]), t)
     dX = ref["com"][1] - ref["com"][0]
@@ -2327,15 +2329,24 @@ def test_spline_optimum_of_the_isotropic_capsule(spline_optimum):
     # No sinusoid of the screen under the bound moves the capsule at v_min; the spline does.
     assert opt.sinusoid is None and opt.candidates[0]["feasible_exact"] is False
     assert opt.feasible_exact and opt.stable_exact and opt.mean_speed_exact >= V_ISO
-    # The floor e_d >= mu_k (M + m) g |distance| holds; a direct simulation agrees.
+    # The floor e_d >= mu_k (M + m) g |distance| holds.
     assert opt.cost_of_transport_exact >= FLOOR * (1 - 1e-9)
-    assert opt.simulation_agreement < 1e-6
-    # The independent reference from rest, once the transient has decayed.
-    speed, cost = _reference_gait(opt)
+    # The independent reference started on the optimum's orbit (steady_gait's section state) stays on it.
+    g = lj.steady_gait(opt.mechanism, periods=(1, 2), transient=15, dynamics=lj.Exact(dt=opt.dt_exact))
+    assert float(g.cost_of_transport) == pytest.approx(opt.cost_of_transport_exact, rel=1e-9)
+    speed, cost = _reference_gait(opt, (30, 40), np.asarray(g.state))
     err = max(abs(speed / opt.mean_speed_exact - 1), abs(cost / opt.cost_of_transport_exact - 1))
     print(f"spline optimum: speed {opt.mean_speed_exact:.10f} (reference {speed:.10f}), cost "
           f"{opt.cost_of_transport_exact:.10f} (reference {cost:.10f}, floor {FLOOR}); diff {err:.1e}")  # fmt: skip
     assert err < 1e-4
+    # The direct simulation from rest: on the optimum's gait, or on the motion of another attractor,
+    # named, whose figures the reference reproduces from rest over the same whole periods (the
+    # optimum of this search has two: from rest the capsule settles on a motion of 4 periods).
+    n, p, k = opt.simulated_periods, opt.simulated_recurrence, round(opt.gait_period_exact * OMEGA / (2 * np.pi))
+    speed, cost = _reference_gait(opt, (n * k, (n + _element_local.AVERAGED) * k))
+    assert speed == pytest.approx(opt.mean_speed_simulated, rel=1e-5)
+    assert cost == pytest.approx(opt.cost_of_transport_simulated, rel=1e-5)
+    assert opt.simulation_agreement < 1e-6 if p == 1 else (p > 1 and "a second attractor" in opt.summary())
 
 
 @MECHANISM_OPTIMISE
