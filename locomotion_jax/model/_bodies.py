@@ -253,7 +253,7 @@ class Mechanism(AbstractMechanism):
         for k, el, w in waves[1:]:
             try:
                 mine, first = np.broadcast_arrays(np.asarray(w.omega), np.asarray(w0.omega))
-                same = np.array_equal(mine, first)
+                same = np.array_equal(mine, first, equal_nan=True)  # a NaN is refused by name later
             except ValueError:
                 same = False
             if not same:
