@@ -567,14 +567,14 @@ def solve(C, physics_of, valid, unresolved, shape, omega, *, periods, transient,
         -1,
     )
     base = select.unresolved(base, unresolved)
+    with np.errstate(divide="ignore"):
+        key = 1 / omega.ravel()  # the batches' order: a row of omega = 0 (undriven or invalid) goes last
     best = None
     for k in ks:
         msp = dynamics.max_steps or default_max_steps(k * T_max, dynamics.dt)
         go = (base < 0) & (True if best is None else select.still_open(best))
         say(f"gait period {k}: Newton on {int(np.sum(go))} configuration(s)")
-        r = newton(
-            C, physics_of, contact, dynamics.dt, y0, go, k, tol, max_iter, msp, compact, patience, 1 / omega.ravel()
-        )
+        r = newton(C, physics_of, contact, dynamics.dt, y0, go, k, tol, max_iter, msp, compact, patience, key)
         r = select.judge(r, base, k, (base != GaitStatus.INVALID) & (np.asarray(trans_lift) | r["out"].lifted))
         best = select.better(best, r)
         if not np.any(select.still_open(best)):
