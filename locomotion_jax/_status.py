@@ -32,6 +32,8 @@ class Status(enum.IntEnum):
       terminating event. Results cover the part that was integrated. Under `contact="hop"`
       the same holds for bodies in flight, whatever their heights: SPEC §10 gives the bodies
       heights but no shape, so their order on the line stays part of the model (docs/model.md).
+      A mechanism's horizontal tilted spring ($d = 0$) keeps its ends apart in the same way
+      ([`TiltedSpring`][locomotion_jax.TiltedSpring]).
     - `UNRESOLVED`: the fixed step of [`Exact`][locomotion_jax.Exact] dynamics is too long for
       one of the configuration's time scales (the forcing's highest harmonic, a natural
       period, a damping or Stribeck time; docs/engines.md, "Resolution guards"); nothing

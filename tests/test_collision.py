@@ -8,6 +8,7 @@ other (before the check: gaps down to -2.83 with status OK).
 import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
+import pytest
 from locomotion_jax.maps._dataset import DESCRIPTIONS
 
 
@@ -85,3 +86,25 @@ def test_gaits_flag_the_collision():
         s = [int(v) for v in np.asarray(g.status)]
         assert s[0] == lj.GaitStatus.COLLISION and s[1] == lj.GaitStatus.CONVERGED, s
         assert np.isnan(float(np.asarray(g.mean_speed)[0])) and not bool(np.asarray(g.converged)[0])
+
+
+@pytest.mark.parametrize("layout", ["unrolled", "array"])
+def test_a_horizontal_tilted_springs_ends_do_not_meet(layout):
+    """Two bodies on frictionless slip (mu_k = 0) pulled together from 3 apart by a tilted spring of
+    rest length 0.5: u = 0.5 + 2.5 cos(sqrt(2) t) reaches 0 at t* = arccos(-0.2) / sqrt(2) = 1.2532.
+    Horizontal (d = 0), its force turns over there: the run stops with COLLISION within a step of
+    t*. Tilted (d = 0.3), the bodies swing through u = 0 smoothly, with their energy balance."""
+    d = jnp.array([0.0, 0.3])
+    mech = lj.Mechanism(masses=[1.0, 1.0], friction=lj.Coulomb(0.1, 0.0), x0=[0.0, 3.0],
+                        links=[lj.TiltedSpring(0, 1, k=1.0, d=d, rest=0.5)], layout=layout)  # fmt: skip
+    save = jnp.linspace(0.0, 5.0, 501)
+    for dynamics in (lj.Exact(dt=0.01), lj.Smoothed()) if layout == "unrolled" else (lj.Exact(dt=0.01),):
+        tr = lj.simulate(mech, 5.0, save_at=save, dynamics=dynamics)
+        assert [int(s) for s in tr.status] == [lj.Status.COLLISION, lj.Status.OK], dynamics
+        valid = np.asarray(tr.valid)
+        t_star = np.arccos(-0.2) / np.sqrt(2.0)
+        assert abs(float(np.asarray(save)[valid[0]].max()) - t_star) < 0.02 and valid[1].all()
+        x, e, e_d, w = (np.asarray(q)[1] for q in (tr.x, tr.e, tr.e_d, tr.w))
+        assert (x[:, 1] - x[:, 0]).min() < -1.0  # swung through
+        tol = 1e-7 if isinstance(dynamics, lj.Exact) else 1e-5  # measured 1e-8 and 1.4e-6 of e0
+        assert np.abs(w - e_d - (e - e[0])).max() < tol * e[0]  # w = e_d + (e - e0)

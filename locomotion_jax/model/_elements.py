@@ -149,6 +149,11 @@ class TiltedSpring(AbstractElement):
     **Arguments:** `a`, `b`: body indices or `WALL` (not both; `a != b`); `k > 0`; `d`: the vertical
     offset (any finite number, default 0: a horizontal spring of length $|u|$); `rest`: a number or
     a waveform $r(t)$ (default 0).
+
+    A horizontal one ($d = 0$) keeps `b` ahead of `a`, as a chain's springs do: its force turns
+    over where its ends meet, so a run in which they do stops there with `Status.COLLISION`
+    ([`AbstractPhysics.gaps`][locomotion_jax.AbstractPhysics.gaps]). A signed spring whose ends
+    may pass each other is a [`Spring`][locomotion_jax.Spring].
     """
 
     a: "int | str" = eqx.field(static=True)

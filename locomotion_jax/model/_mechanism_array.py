@@ -185,6 +185,13 @@ class ArrayMechanismPhysics(AbstractArrayPhysics):
         parts = [spring] + ([] if fx is None else [fx]) + [f, g]
         return _gather(self.horizontal, jnp.concatenate(parts, -1))
 
+    def gaps(self, x: Scalars) -> Scalars:
+        """As the unrolled physics', one entry over the tilted springs: a flat one's extension
+        $u = x_b - x_a$ (its ends must not meet), a tilted one's infinite."""
+        if not self.kinds[1]:
+            return ()
+        return (jnp.where(self.tilt.d[0] == 0, _ends(x[0], *self.tilt_ends), jnp.inf),)
+
     def _tilted(self, drive: Drive, x: Array, y: Array | None) -> Springs | None:
         if not self.kinds[1]:
             return None

@@ -177,6 +177,13 @@ class MechanismPhysics(AbstractPhysics):
         """$q_b - q_a$ per tilted spring ($q = 0$ at a wall)."""
         return tuple(_pos(q, s.b, q[0]) - _pos(q, s.a, q[0]) for s in self.tilted)
 
+    def gaps(self, x: Scalars) -> Scalars:
+        """A flat tilted spring's extension $u = x_b - x_a$: with $d = 0$ it is a spring of length
+        $|u|$, whose force turns over where its ends meet (a kink no step resolves), so its ends
+        must not meet, as a chain's neighbours must not (SPEC §8); a tilted one ($d \\ne 0$) passes
+        $u = 0$ smoothly and has no gap (infinite)."""
+        return tuple(jnp.where(s.d == 0, u, jnp.inf) for s, u in zip(self.tilted, self._ends(x)))
+
     def _tilt_terms(self, F: Scalars, N: Scalars, fx: Scalars, fy: Scalars) -> tuple[Scalars, Scalars]:
         """`F` plus the tilted springs' horizontal forces `fx` ($+$ on `a`), `N` minus their vertical
         forces `fy` ($+$ on `a`), each body's share on the body in contact that carries it."""
