@@ -23,7 +23,9 @@ class Status(enum.IntEnum):
       not reached); results cover the part that was integrated.
     - `INVALID`: the parameters are outside the model's valid range; nothing
       was integrated and every measurement holds its sentinel.
-    - `SOLVER_FAILED`: the smoothed (diffrax) solver reported a failure.
+    - `SOLVER_FAILED`: the smoothed (diffrax) solver reported a failure, or the exact engine's
+      state left the floating-point range (a spring stretched by $10^{300}$: its energy
+      overflows); a trajectory's saves from there are not `valid`.
     - `COLLISION`: two neighbouring bodies met, a gap $x_{j+1} - x_j$ (two masses:
       $x_2 - x_1$) reached zero, which the model does not cover (the masses would pass
       through each other). The exact engines check every committed step's end and stop

@@ -240,3 +240,25 @@ def test_each_mechanism_describes_itself_and_checks_its_given_section_states():
         chain.check_section(np.array([0.1, -0.1, 0.0, 0.0, 0.0]))
     chain.check_section(np.array([0.1, 0.2, 0.0, 0.0, 0.0]))
     capsule.check_section(np.array([-0.3, 0.0, 0.0]))  # the carried body passes its rest point in the shell
+
+
+def test_a_state_that_overflows_is_a_failure_not_ok():
+    """A spring stretched by 1e300 (a finite, valid position) has an energy beyond float64: the run
+    is `SOLVER_FAILED`, with its saves from there not valid, never `OK` with NaN figures; its mate
+    in the batch runs as alone (found by the mechanisms' fuzz)."""
+    x0 = jnp.array([[0.0, -1e300], [0.0, -1.0]])
+    mech = lj.Mechanism(masses=[1.0, 1.0], friction=lj.Coulomb(0.5, 0.4), links=[lj.Spring(0, 1, k=1.0)], x0=x0)
+    m = lj.measure(mech, z=0.1, t_start=0.5, horizon=3.0, window=1.0)
+    alone = lj.measure(mech[1], z=0.1, t_start=0.5, horizon=3.0, window=1.0)
+    assert [int(s) for s in m.status] == [lj.Status.SOLVER_FAILED, lj.Status.OK]
+    assert float(m.e_d[1]) == float(alone.e_d) and np.isfinite(float(alone.balance))
+    tr = lj.simulate(mech, 2.0, save_at=jnp.linspace(0.0, 2.0, 5))
+    assert [int(s) for s in tr.status] == [lj.Status.SOLVER_FAILED, lj.Status.OK]
+    valid = np.asarray(tr.valid)
+    assert valid[1].all() and np.isfinite(np.asarray(tr.e)[valid]).all()
+    # The paper's model started there too (its own trajectory fields).
+    p = lj.Params(omega=jnp.array([2.0, 2.0]))
+    start = (jnp.zeros(2), jnp.zeros(2), jnp.array([1e300, 3.0]), jnp.zeros(2))
+    for out in (lj.simulate(p, 2.0, save_at=jnp.linspace(0.0, 2.0, 5), initial=start),
+                lj.measure(p, z=0.1, t_start=0.5, horizon=3.0, window=1.0, initial=start)):  # fmt: skip
+        assert [int(s) for s in out.status] == [lj.Status.SOLVER_FAILED, lj.Status.OK]

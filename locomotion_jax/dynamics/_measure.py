@@ -176,6 +176,10 @@ def _results(f: _Fixed, dyn, contact) -> dict:
     e_d = jnp.where(a.started, y_end.ed - a.ed0, nan)
     work = jnp.where(a.started, y_end.w - a.w0, nan)
     delta_e = jnp.where(a.started, _energy_at(f.P, t_end, y_end) - a.e0, nan)
+    # A state that left the floating-point range (a spring stretched by 1e300: its energy overflows)
+    # is the integration's failure, never an OK run with NaN figures.
+    overflow = a.started & ~jnp.isfinite(mean_speed + e_d + work + delta_e)
+    status = jnp.where((status == Status.OK) & overflow, Status.SOLVER_FAILED, status).astype(jnp.int32)
     e_z = jnp.where(a.reached, y_end.ed - a.ed0, inf)
     covered = jnp.clip(jnp.minimum(s.t, we) - ws, 0, None)
     frac = jnp.where(covered > 0, stuck / jnp.where(covered > 0, covered, 1), nan)

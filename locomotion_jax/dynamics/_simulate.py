@@ -10,6 +10,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
+from .._status import Status
 from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._chain_array import engine_physics, uses_array
@@ -99,6 +100,11 @@ def simulate_batch(flat: Chain | Mechanism, valid, save, contact, start, dt, max
         der.update(y=hy, vy=hvy, n_land=rows[..., -1, 6 * N + 5].astype(jnp.int32), zeno=rows[..., -1, 6 * N + 6] > 0.5)
     else:
         der = jax.vmap(lambda C, t, x, v: jax.vmap(lambda *a: _derived(C, contact, *a))(t, x, v))(flat, t, x, v)
+    # A state that left the floating-point range (a spring stretched by 1e300: its energy overflows)
+    # is the integration's failure, never an OK run with NaN states: its saves from there are not valid.
+    finite = jnp.isfinite(jnp.sum(rows[..., : 2 * N + 2], -1) + der["e"])
+    status = jnp.where((status == Status.OK) & jnp.any(ok & ~finite, -1), Status.SOLVER_FAILED, status)
+    ok = ok & finite
     out = dict(
         t=t, x=x, v=v, stuck=rows[..., 2 * N + 2 : 3 * N + 2] > 0.5, X=jax.vmap(_com)(flat, x),
         e_d=rows[..., 2 * N], w=rows[..., 2 * N + 1], valid=ok, status=status, liftoff=jnp.isfinite(t_lift),
