@@ -284,7 +284,7 @@ def _mechanism(v) -> lj.Mechanism:
 
 
 @pytest.mark.parametrize("contact", ["strict", "hop"])
-@_fuzz(20)
+@_fuzz(60)
 @given(st.fixed_dictionaries(MECHANISM))
 def test_fuzz_mechanism_measure(contact, values):
     try:
