@@ -16,7 +16,6 @@ import jax
 import jax.numpy as jnp
 
 from .._custom_types import Array, Contact
-from .._status import Status
 from ..model import _two_mass as model
 from ..model._params import Params, safe_params
 from ..model._physics import loads_at
@@ -26,7 +25,7 @@ from ._compile import engine_jit
 from ._margins import switch_gap
 from ._motion import Mode, rates, State
 from ._queue import run_queue
-from ._runs import BatchRows, chain_initial_state, default_lanes, start_code
+from ._runs import BatchRows, chain_initial_state, default_lanes, overflow_failed, start_code
 from ._saves import BUFFER, run_saves
 from ._simulate import _row
 
@@ -231,10 +230,7 @@ def _trajectory(params, wave, wave_axes, contact, save_at, rows, valid, status, 
         der = jax.vmap(one, in_axes=(0, wave_axes, 0, 1, 1, 1))(params, wave, t, y, stuck, sdir)
         omega = jnp.broadcast_to(wave.omega, rows.shape[:1])
     N, l0 = jnp.stack([der.pop("N1"), der.pop("N2")], -1), der.pop("l0")
-    # A state that left the floating-point range is the integration's failure (as `_simulate`'s).
-    finite = jnp.isfinite(jnp.sum(rows[..., :6], -1) + der["e"])
-    status = jnp.where((status == Status.OK) & jnp.any(valid & ~finite, -1), Status.SOLVER_FAILED, status)
-    valid = valid & finite
+    status, valid = overflow_failed(status, valid, jnp.isfinite(jnp.sum(rows[..., :6], -1) + der["e"]))
     return dict(
         t=t, x=rows[..., (0, 2)], v=rows[..., (1, 3)], stuck=rows[..., 6:8] > 0.5, N=N, rest_length=l0[..., None],
         e_d=y[4], w=y[5], valid=valid, status=status, liftoff=jnp.isfinite(t_lift), t_liftoff=t_lift, n_switch=n_switch,

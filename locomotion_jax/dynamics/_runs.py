@@ -177,6 +177,15 @@ def _by_start(at: Callable[[str], Any], start: str | jax.Array) -> Any:
     return jnp.where(start == 0, paper, relaxed)
 
 
+def overflow_failed(status: jax.Array, valid: jax.Array, finite: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """A trajectory's `status` and `valid` (rows: configurations, then saves) where a valid save is
+    not `finite`: its state left the floating-point range (a spring stretched by 1e300: its energy
+    overflows). That is the integration's failure, `SOLVER_FAILED`, never an OK run with NaN states,
+    and its saves from there are not valid."""
+    failed = (status == Status.OK) & jnp.any(valid & ~finite, -1)
+    return jnp.where(failed, Status.SOLVER_FAILED, status), valid & finite
+
+
 def chain_initial_state(P: AbstractPhysics, valid, contact, start: str | jax.Array, row=None) -> engine.Hybrid:
     """The N-body engine's state at $t = 0$ of one mechanism (its physics `P`): at rest in the
     `start` position (a name of `STARTS` or its traced `start_code`), or the state `row`

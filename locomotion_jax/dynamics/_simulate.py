@@ -10,7 +10,6 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from .._status import Status
 from ..model._bodies import Mechanism
 from ..model._chain import Chain
 from ..model._chain_array import engine_physics, uses_array
@@ -18,7 +17,7 @@ from ..model._physics import loads_at
 from . import _engine as engine
 from ._compile import engine_jit
 from ._margins import switch_gap
-from ._runs import BatchRows, chain_initial_state, default_lanes, start_code
+from ._runs import BatchRows, chain_initial_state, default_lanes, overflow_failed, start_code
 from ._saves import BUFFER, run_saves
 
 
@@ -100,11 +99,7 @@ def simulate_batch(flat: Chain | Mechanism, valid, save, contact, start, dt, max
         der.update(y=hy, vy=hvy, n_land=rows[..., -1, 6 * N + 5].astype(jnp.int32), zeno=rows[..., -1, 6 * N + 6] > 0.5)
     else:
         der = jax.vmap(lambda C, t, x, v: jax.vmap(lambda *a: _derived(C, contact, *a))(t, x, v))(flat, t, x, v)
-    # A state that left the floating-point range (a spring stretched by 1e300: its energy overflows)
-    # is the integration's failure, never an OK run with NaN states: its saves from there are not valid.
-    finite = jnp.isfinite(jnp.sum(rows[..., : 2 * N + 2], -1) + der["e"])
-    status = jnp.where((status == Status.OK) & jnp.any(ok & ~finite, -1), Status.SOLVER_FAILED, status)
-    ok = ok & finite
+    status, ok = overflow_failed(status, ok, jnp.isfinite(jnp.sum(rows[..., : 2 * N + 2], -1) + der["e"]))
     out = dict(
         t=t, x=x, v=v, stuck=rows[..., 2 * N + 2 : 3 * N + 2] > 0.5, X=jax.vmap(_com)(flat, x),
         e_d=rows[..., 2 * N], w=rows[..., 2 * N + 1], valid=ok, status=status, liftoff=jnp.isfinite(t_lift),
