@@ -1594,6 +1594,21 @@ MUTATIONS = [
         (("tol * (1 + tolerance_scale(z[:n], z0[:n]))", "tol * (1 + jnp.max(jnp.abs(z[:n])))"),),
         ("tests/test_optimise.py::test_newton_does_not_accept_an_orbit_that_ran_off",),
     ),
+    Mutation(
+        "tilted_spring_start_unchecked",
+        "a horizontal tilted spring's start with its ends out of order is accepted (it stops at its first step)",
+        "locomotion_jax/model/_bodies.py",
+        (
+            (
+                "out.append((owner, name, (el.d != 0) | (u > 0), valid, u))",
+                "out.append((owner, name, u == u, valid, u))",
+            ),
+        ),
+        (
+            "tests/test_collision.py::test_a_horizontal_tilted_spring_starts_with_its_ends_in_order",
+            "tests/test_mechanism.py::test_bad_input_names_the_element_and_the_body",
+        ),
+    ),
 ]
 
 

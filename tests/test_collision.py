@@ -5,6 +5,8 @@ The case of the issue: two masses as a capsule, a weak spring with no vertical o
 other (before the check: gaps down to -2.83 with status OK).
 """
 
+from typing import Any
+
 import jax.numpy as jnp
 import locomotion_jax as lj
 import numpy as np
@@ -108,3 +110,19 @@ def test_a_horizontal_tilted_springs_ends_do_not_meet(layout):
         assert (x[:, 1] - x[:, 0]).min() < -1.0  # swung through
         tol = 1e-7 if isinstance(dynamics, lj.Exact) else 1e-5  # measured 1e-8 and 1.4e-6 of e0
         assert np.abs(w - e_d - (e - e[0])).max() < tol * e[0]  # w = e_d + (e - e0)
+
+
+def test_a_horizontal_tilted_spring_starts_with_its_ends_in_order():
+    """Its ends must not meet, so a start with `b` at or behind `a` is refused by name (one
+    configuration), or flagged INVALID in its own row of a batch (its mates run as alone); a
+    tilted one (d != 0) may start with its ends either way round."""
+    x0 = jnp.array([[0.0, -1.0], [0.0, -1.0], [0.0, 3.0]])
+    mech = lj.Mechanism(masses=[1.0, 1.0], friction=lj.Coulomb(0.1, 0.0), x0=x0, check=False,
+                        links=[lj.TiltedSpring(0, 1, k=1.0, d=jnp.array([0.0, 0.3, 0.0]), rest=0.5)])  # fmt: skip
+    run: dict[str, Any] = dict(z=0.1, t_start=0.2, horizon=0.8, window=0.5)  # before the ends of row 2 meet (t = 1.25)
+    m = lj.measure(mech, **run)
+    assert [int(s) for s in m.status] == [lj.Status.INVALID, lj.Status.OK, lj.Status.OK]
+    assert float(m.e_d[2]) == float(lj.measure(mech[2], **run).e_d)
+    message = r"'x0\[1\] - x0\[0\]' of links\[0\] TiltedSpring\(0, 1\) at batch index \(0,\)"
+    with pytest.raises(ValueError, match=message):
+        mech.validate()

@@ -205,6 +205,11 @@ def test_chain_path_unchanged_for_a_chain():
                                         lj.ExternalForce(1, lj.Sinusoid(1.0, math.nan, 0.0))]),
          r"Invalid parameter 'omega' of links\[0\] Force\(0, 1\): got omega=nan"),
         (dict(masses=[1.0, -1.0]), "Invalid parameter 'masses' of body 1: got masses=-1.0"),
+        (dict(masses=[1.0, 1.0], links=[lj.TiltedSpring(0, 1, k=1.0, rest=1.0)], x0=[1.0, 0.5]),
+         r"'x0\[1\] - x0\[0\]' of links\[0\] TiltedSpring\(0, 1\): got x0\[1\] - x0\[0\]=-0.5; the valid range is > 0 "
+         r"where d = 0 \(a horizontal tilted spring keeps body 1 ahead of body 0"),
+        (dict(masses=[1.0], links=[lj.TiltedSpring(0, lj.WALL, k=1.0)], x0=[0.0]),
+         r"'0 - x0\[0\]' of links\[0\] TiltedSpring\(0, WALL\): got 0 - x0\[0\]=0.0"),
         (dict(masses=[1.0], friction=[lj.Coulomb(0.3, 0.5)]), "'mu_s' of Coulomb of body 0"),
     ],
 )  # fmt: skip

@@ -63,6 +63,14 @@ def _split_law(law: AbstractFriction, i: int, n: int) -> AbstractFriction:
     return jax.tree_util.tree_map(at, law)
 
 
+def _x0(end: "int | str") -> str:
+    return "0" if end == WALL else f"x0[{end}]"
+
+
+def _named(end: "int | str") -> str:
+    return "the wall" if end == WALL else f"body {end}"
+
+
 def _body(i: Any, n: int) -> bool:
     return i == WALL or (isinstance(i, int) and 0 <= i < n)
 
@@ -513,6 +521,14 @@ class Mechanism(AbstractMechanism):
                 out.append((owner, name, jnp.isfinite(x), "finite", x))
             if isinstance(el, (Spring, TiltedSpring)):
                 out.append((owner, "k", el.k > 0, "k > 0", el.k))
+            if isinstance(el, TiltedSpring):
+                # A horizontal one's ends must not meet (its `gaps`): a start with `b` at or behind
+                # `a` would stop at its first step.
+                at = lambda e: jnp.zeros_like(self.x0[..., 0]) if e == WALL else self.x0[..., int(e)]
+                name, u = f"{_x0(el.b)} - {_x0(el.a)}", at(el.b) - at(el.a)
+                valid = (f"> 0 where d = 0 (a horizontal tilted spring keeps {_named(el.b)} ahead of "
+                         f"{_named(el.a)}; one with d != 0 lets its ends pass)")  # fmt: skip
+                out.append((owner, name, (el.d != 0) | (u > 0), valid, u))
             if isinstance(el, Damper):
                 out.append((owner, "c", el.c >= 0, "c >= 0", el.c))
             for s in el.signals():

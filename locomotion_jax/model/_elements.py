@@ -152,8 +152,9 @@ class TiltedSpring(AbstractElement):
 
     A horizontal one ($d = 0$) keeps `b` ahead of `a`, as a chain's springs do: its force turns
     over where its ends meet, so a run in which they do stops there with `Status.COLLISION`
-    ([`AbstractPhysics.gaps`][locomotion_jax.AbstractPhysics.gaps]). A signed spring whose ends
-    may pass each other is a [`Spring`][locomotion_jax.Spring].
+    ([`AbstractPhysics.gaps`][locomotion_jax.AbstractPhysics.gaps]), and the mechanism's `x0` must
+    put `b` ahead of `a` (else refused by name, or flagged `Status.INVALID` with `check=False`). A
+    signed spring whose ends may pass each other is a [`Spring`][locomotion_jax.Spring].
     """
 
     a: "int | str" = eqx.field(static=True)
