@@ -41,7 +41,11 @@ class Status(enum.IntEnum):
       period, a damping or Stribeck time; docs/engines.md, "Resolution guards"); nothing
       was integrated and every measurement holds its sentinel, as for `INVALID`. Also a
       measurement whose default start (`t_start` not given) would take more than
-      `MAX_START_STEPS` steps (a very soft spring).
+      `MAX_START_STEPS` steps (a very soft spring). During a run of the exact engine: a step
+      in which a mechanism's tilted spring's ends passed each other while its extension moved more
+      than half its vertical offset $|d|$, the width over which its force turns over (a near-kink,
+      [`AbstractPhysics.kinks`][locomotion_jax.AbstractPhysics.kinks]); the run stops after that
+      step and results cover the part that was integrated.
     """
 
     OK = 0

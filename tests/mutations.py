@@ -1609,6 +1609,13 @@ MUTATIONS = [
             "tests/test_mechanism.py::test_bad_input_names_the_element_and_the_body",
         ),
     ),
+    Mutation(
+        "tilted_spring_turn_unchecked",
+        "the exact engine lets a tilted spring's ends pass each other in a step that does not resolve its turn",
+        "locomotion_jax/dynamics/_engine.py",
+        (("    if turned:\n", "    if turned and False:\n"),),
+        ("tests/test_collision.py::test_a_tilted_spring_whose_turn_a_step_does_not_resolve_stops_unresolved",),
+    ),
 ]
 
 

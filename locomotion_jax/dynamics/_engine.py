@@ -525,7 +525,14 @@ def step(
     # Bodies met (outside the model; the gaps the mechanism declares, a chain's neighbours'):
     # the run stops after this step (`Status.COLLISION`).
     met = commit & num.union([g <= 0 for g in P.gaps(yc.x)])
-    status = jnp.where(lift, Status.LIFTOFF, jnp.where(met, Status.COLLISION, st.status)).astype(jnp.int32)
+    # A force that turns over within |u| < |h| (a tilted spring's direction) passed in a step that
+    # moved u by more than |h| / 2: no fixed step resolves it there (`Status.UNRESOLVED`).
+    turned = [(u0 * u1 <= 0) & (2 * jnp.abs(u1 - u0) > jnp.minimum(jnp.abs(h0), jnp.abs(h1)))
+              for (u0, h0), (u1, h1) in zip(P.kinks(y0.x, y0.y), P.kinks(yc.x, yc.y))]  # fmt: skip
+    status = st.status
+    if turned:
+        status = jnp.where(commit & num.union(turned), Status.UNRESOLVED, status)
+    status = jnp.where(lift, Status.LIFTOFF, jnp.where(met, Status.COLLISION, status)).astype(jnp.int32)
 
     keepc = lambda new, old: jnp.where(commit, new, old)
     new = Hybrid(

@@ -27,7 +27,10 @@ class GaitStatus(enum.IntEnum):
     - `UNRESOLVED`: the step of [`Exact`][locomotion_jax.Exact] dynamics does not resolve one of
       the configuration's time scales (`Status.UNRESOLVED`: the forcing's highest harmonic, a
       natural period, a damping or friction time); nothing was integrated. One configuration
-      alone is refused with a `ValueError` instead.
+      alone is refused with a `ValueError` instead. Also a transient in which a tilted spring's
+      ends pass each other faster than the step resolves (`Status.UNRESOLVED`; on the period map
+      of a Newton iterate, such a step leaves the solve `NOT_CONVERGED` for that period, as
+      other failures of an iterate do, and longer periods are still tried).
     - `COLLISION`: two neighbouring bodies met (`Status.COLLISION`) in the transient or on the
       period map from the last Newton iterate; no orbit is reported, since the model does not
       cover masses passing through each other.

@@ -560,10 +560,17 @@ def solve(C, physics_of, valid, unresolved, shape, omega, *, periods, transient,
     y0, trans, trans_lift, _ = _transient_batch(C, physics_of, valid, contact, start, dynamics.dt, real(transient), mst,
                                              y_start)  # fmt: skip
     trans = np.asarray(trans)
-    # -1: to be solved; else the final status (invalid, a strict lift-off, a collision, the step cap).
+    # -1: to be solved; else the final status (invalid, a strict lift-off, a collision, a step that
+    # did not resolve a kink, the step cap).
     base = np.select(
-        [trans == Status.INVALID, trans == Status.LIFTOFF, trans == Status.COLLISION, trans != Status.OK],
-        [GaitStatus.INVALID, GaitStatus.LIFTOFF, GaitStatus.COLLISION, GaitStatus.NOT_CONVERGED],
+        [
+            trans == Status.INVALID,
+            trans == Status.LIFTOFF,
+            trans == Status.COLLISION,
+            trans == Status.UNRESOLVED,
+            trans != Status.OK,
+        ],
+        [GaitStatus.INVALID, GaitStatus.LIFTOFF, GaitStatus.COLLISION, GaitStatus.UNRESOLVED, GaitStatus.NOT_CONVERGED],
         -1,
     )
     base = select.unresolved(base, unresolved)

@@ -154,7 +154,9 @@ class TiltedSpring(AbstractElement):
     over where its ends meet, so a run in which they do stops there with `Status.COLLISION`
     ([`AbstractPhysics.gaps`][locomotion_jax.AbstractPhysics.gaps]), and the mechanism's `x0` must
     put `b` ahead of `a` (else refused by name, or flagged `Status.INVALID` with `check=False`). A
-    signed spring whose ends may pass each other is a [`Spring`][locomotion_jax.Spring].
+    signed spring whose ends may pass each other is a [`Spring`][locomotion_jax.Spring]. A tilted
+    one's force turns over within $|u| \\lesssim |d|$: an exact step that passes $u = 0$ while moving
+    $u$ by more than $|d|/2$ stops the run with `Status.UNRESOLVED` (docs/engines.md).
     """
 
     a: "int | str" = eqx.field(static=True)

@@ -192,6 +192,13 @@ class ArrayMechanismPhysics(AbstractArrayPhysics):
             return ()
         return (jnp.where(self.tilt.d[0] == 0, _ends(x[0], *self.tilt_ends), jnp.inf),)
 
+    def kinks(self, x: Scalars, y: Scalars | None = None) -> tuple[tuple[Array, Array], ...]:
+        """As the unrolled physics', one entry over the tilted springs."""
+        if not self.kinds[1]:
+            return ()
+        d = self.tilt.d[0]
+        return ((_ends(x[0], *self.tilt_ends), d if y is None else d + _ends(y[0], *self.tilt_ends)),)
+
     def _tilted(self, drive: Drive, x: Array, y: Array | None) -> Springs | None:
         if not self.kinds[1]:
             return None

@@ -184,6 +184,12 @@ class MechanismPhysics(AbstractPhysics):
         $u = 0$ smoothly and has no gap (infinite)."""
         return tuple(jnp.where(s.d == 0, u, jnp.inf) for s, u in zip(self.tilted, self._ends(x)))
 
+    def kinks(self, x: Scalars, y: Scalars | None = None) -> tuple[tuple[Array, Array], ...]:
+        """Each tilted spring's extension $u$ and vertical offset $h$ ($d$, or $d + y_b - y_a$
+        under `contact="hop"`): its force turns over within $|u| \\lesssim |h|$."""
+        h = tuple(s.d for s in self.tilted) if y is None else tuple(s.d + q for s, q in zip(self.tilted, self._ends(y)))
+        return tuple(zip(self._ends(x), h))
+
     def _tilt_terms(self, F: Scalars, N: Scalars, fx: Scalars, fy: Scalars) -> tuple[Scalars, Scalars]:
         """`F` plus the tilted springs' horizontal forces `fx` ($+$ on `a`), `N` minus their vertical
         forces `fy` ($+$ on `a`), each body's share on the body in contact that carries it."""

@@ -226,6 +226,15 @@ class AbstractPhysics(eqx.Module):
         mass passes its rest point); a chain's are its neighbours' $x_{j+1} - x_j$."""
         return ()
 
+    def kinks(self, x: Scalars, y: Scalars | None = None) -> tuple[tuple[Array, Array], ...]:
+        """Pairs $(u, h)$ of a coordinate $u$ whose passage through zero turns a force over within
+        $|u| \\lesssim |h|$ (a tilted spring's extension and vertical offset: its direction
+        $(u, h)/\\sqrt{u^2 + h^2}$), at positions `x` (and heights `y` under `contact="hop"`). A
+        step whose $u$ changes sign while moving more than $|h|/2$ (fewer than 4 steps over the
+        turn's width $2|h|$) does not resolve the turn: the engine stops the run there with
+        `Status.UNRESOLVED`. None by default."""
+        return ()
+
 
 class AbstractArrayPhysics(AbstractPhysics):
     """A physics in the array layout: one entry holding every body (shape `(N,)` per configuration)
