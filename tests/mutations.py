@@ -1616,6 +1616,46 @@ MUTATIONS = [
         (("    if turned:\n", "    if turned and False:\n"),),
         ("tests/test_collision.py::test_a_tilted_spring_whose_turn_a_step_does_not_resolve_stops_unresolved",),
     ),
+    Mutation(
+        "mechanism_inchworms_not_refined",
+        "the mechanism optimiser solves its idealised inchworms' gaits but refines the sinusoids only",
+        "locomotion_jax/optimisation/_mechanism.py",
+        (
+            (
+                "        better = np.flatnonzero(screen.preferred(worm_keys, keys[0]))\n",
+                "        better = np.zeros(0, int)\n",
+            ),
+        ),
+        (
+            "tests/test_optimise.py::test_the_mechanism_optimiser_refines_an_idealised_inchworm_where_no_sinusoid_is_fast_enough",
+        ),
+    ),
+    Mutation(
+        "mechanism_tension_waves_carried_weight_ignored",
+        "a mechanism's idealised inchworm breaks a body away against its own weight, not the weights it carries",
+        "locomotion_jax/optimisation/_starts.py",
+        (
+            (
+                "    return mu * float(P.normal[i]) / den if den > 0 else math.inf\n",
+                "    return mu * float(P.m[i]) / den if den > 0 else math.inf\n",
+            ),
+        ),
+        (
+            "tests/test_shapes.py::test_tension_waves_of_a_capsules_internal_force_alternate_by_the_capsules_break_away_force",
+        ),
+    ),
+    Mutation(
+        "mechanism_tension_waves_tilt_ignored",
+        "a mechanism's idealised inchworm breaks a tilted spring's ends away as if it were horizontal",
+        "locomotion_jax/optimisation/_starts.py",
+        (
+            (
+                "        h, q = (abs(u) / length, d / length) if isinstance(el, TiltedSpring) else (1.0, 0.0)\n",
+                "        h, q = (abs(u) / length, 0.0) if isinstance(el, TiltedSpring) else (1.0, 0.0)\n",
+            ),
+        ),
+        ("tests/test_shapes.py::test_tension_waves_of_a_mechanism_are_its_chains",),
+    ),
 ]
 
 

@@ -36,6 +36,7 @@ import dataclasses
 import json
 import math
 import types
+from pathlib import Path
 from typing import Any, NamedTuple
 
 import equinox as eqx
@@ -464,9 +465,12 @@ def test_cli_bad_input_names_the_parameter():
         assert res.exit_code == 2 and "local_method must be 'descent'" in res.output, res.output
 
 
+CAPSULE_FILE = str(Path(__file__).resolve().parents[1] / "examples" / "capsule.toml")
+
+
 def test_cli_local_method_reaches_the_settings(monkeypatch):
     """`--local-method sqp`, `--dt`, `--search-dt` and `--tension-periods` reach the settings, for the
-    paper's model and for a chain; without them the settings keep their defaults."""
+    paper's model, a chain and a mechanism's file; without them the settings keep their defaults."""
     seen = []
 
     def stop(mech, v_min, a_max, **kw):
@@ -486,6 +490,10 @@ def test_cli_local_method_reaches_the_settings(monkeypatch):
     assert [s.local_method for s in seen] == ["sqp"] * 4
     assert [(s.dt, s.search_dt, s.tension_periods) for s in seen] == [(0.01, None, 10), (0.005, 0.01, 0),
                                                                       (0.01, None, None), (0.005, 0.01, 0)]  # fmt: skip
+    # A mechanism's file: its idealised inchworms too.
+    res = CliRunner().invoke(plugin_app(register), ["optimize", CAPSULE_FILE, "--v-min", "0.02", "--a-max",
+                                                    "0.5", "--tension-periods", "3"])  # fmt: skip
+    assert "stopped by the test" in res.output and seen[-1].tension_periods == 3, res.output
     for extra in (["--search-dt", "0.02"], ["--tension-periods", "3"]):
         res = CliRunner().invoke(plugin_app(register), ["optimize", "--v-min", "0.02", "--a-max", "0.05", "--method",
                                                         "smoothed", *extra])  # fmt: skip
@@ -1677,6 +1685,33 @@ def test_the_chain_optimiser_refines_an_idealised_inchworm_where_no_wave_is_fast
         lj.steady_gait(opt.chain, dynamics=lj.Exact(dt=0.01))
 
 
+def test_the_mechanism_optimiser_refines_an_idealised_inchworm_where_no_sinusoid_is_fast_enough():
+    """The chain test above with the paper's model built as a `Mechanism` (two bodies, one tilted
+    spring with an actuated rest length, the paper's damping): at the same inchworm's frequency
+    the best sinusoid moves at a third of v_min, and the inchworm whose tension alternates in sign
+    (`_starts.mechanism_tension_waves`, 64 knots), which beats it, takes the local lane and is
+    feasible near the quasi-static floor, as on the chain (0.924421 there, 0.9244 at its start)."""
+    chain = lj.Chain.from_params(lj.Params()).broadcast()
+    k, d, lbar = float(chain.k[0]), float(chain.d[0]), float(chain.lbar[0])
+    rest = lj.Sinusoid(a=0.01, omega=1.0, lbar=lbar)
+    spring, x0 = lj.TiltedSpring(0, 1, k=k, d=d, rest=rest), [0.0, math.sqrt(lbar**2 - d**2)]
+    mech = lj.Mechanism(
+        masses=np.asarray(chain.m), friction=chain.friction, c=np.asarray(chain.c), links=[spring], x0=x0
+    )
+    period = 2 * math.pi / float(chain.omega_min) * float(np.geomspace(0.7, 4.0, 10)[5])
+    settings = lj.MechanismOptimiseSettings(shape="spline", knots=64, amplitudes=2, local=1, max_iter=4,
+                                            transient=20, tension_levels=(0.3,))  # fmt: skip
+    opt = lj.optimise(mech, 0.05, 0.05, omega=2 * math.pi / period, settings=settings)
+    (start,) = opt.history[0]["starts"]
+    assert start["inchworm"]["period"] == pytest.approx(period) and start["inchworm"]["level"] == 0.3
+    assert 0.05 < start["mean_speed"] and start["cost_of_transport"] < 0.93
+    sinusoid = next(c for c in opt.candidates if c["candidate"] == "sinusoid")
+    assert not sinusoid["feasible_exact"] and sinusoid["mean_speed_exact"] < 0.02
+    assert opt.feasible_exact and opt.source == "local 0" and opt.mean_speed_exact >= 0.05
+    assert 0.9241 < opt.cost_of_transport_exact < 0.93 and opt.dt_exact == 0.0063
+    assert opt.simulation_agreement < 1e-6 and opt.simulated_recurrence == 1
+
+
 def test_inchworm_starts_by_default_in_a_spline_search_of_rest_lengths_only():
     # None where nothing is solved: a Fourier search by default, 0 periods, an internal force.
     chain = lj.Chain.from_params(lj.Params())
@@ -1689,6 +1724,29 @@ def test_inchworm_starts_by_default_in_a_spline_search_of_rest_lengths_only():
         lj.ChainOptimiseSettings(tension_periods=-1)
     with pytest.raises(ValueError, match=r"ChainOptimiseSettings.tension_levels must lie within \[0, 1\]"):
         lj.ChainOptimiseSettings(tension_levels=(0.5, 1.2))
+
+
+def test_a_mechanisms_inchworm_starts_by_default_in_a_spline_search_of_two_ended_elements_only():
+    # None where nothing is solved: a Fourier search by default, 0 periods, an external force, no
+    # mode with a body held (one body on a spring to the wall). The settings are checked by name.
+    from locomotion_jax.optimisation._mechanism import _inchworms
+
+    spring = lj.Spring(0, 1, k=10.0, rest=lj.Sinusoid(a=0.01, omega=1.0, lbar=1.0))
+    pair = lj.Mechanism(masses=[1.0, 1.0], links=[spring], x0=[0.0, 1.0])
+    state = np.zeros(3)
+    none = lambda settings, knots, m=pair: _inchworms(m, 0.0, 0.05, 2.0, 12.0, 3, knots, state, settings, print)
+    assert none(lj.MechanismOptimiseSettings(), 0) is None
+    assert none(lj.MechanismOptimiseSettings(shape="spline", tension_periods=0), 16) is None
+    links = [lj.Spring(0, 1, k=10.0, rest=1.0), lj.ExternalForce(0, lj.Sinusoid(0.1, 2.0, 0.0))]
+    pushed = lj.Mechanism(masses=[1.0, 1.0], links=links, x0=[0.0, 1.0])
+    assert none(lj.MechanismOptimiseSettings(shape="spline", tension_periods=2), 16, pushed) is None
+    anchored = lj.Mechanism(masses=[1.0], links=[lj.Spring(0, lj.WALL, k=5.0, rest=lj.Sinusoid(0.1, 2.0, -1.0))],
+                            x0=[1.0])  # fmt: skip
+    assert none(lj.MechanismOptimiseSettings(shape="spline"), 16, anchored) is None
+    with pytest.raises(ValueError, match="MechanismOptimiseSettings.tension_periods must be an int >= 0"):
+        lj.MechanismOptimiseSettings(tension_periods=-1)
+    with pytest.raises(ValueError, match=r"MechanismOptimiseSettings.tension_levels must lie within \[0, 1\]"):
+        lj.MechanismOptimiseSettings(tension_levels=(0.5, 1.2))
 
 
 def test_screen_ranks_feasible_gaits_by_cost_then_stable_ones_by_speed():

@@ -1,6 +1,7 @@
 """The spline stroke, the exact optimiser's shape families and its tension-wave starts."""
 
 import math
+from functools import partial
 
 import jax.numpy as jnp
 import locomotion_jax as lj
@@ -108,7 +109,7 @@ def test_tension_wave_start_is_fast_and_cheap():
     # open-loop on the exact model: faster than 0.045 near the quasi-static floor (~0.922),
     # where every sinusoid of the same stroke costs more than 3 (README, Optimal actuation).
     params = lj.Params()
-    starts = _starts.tension_starts(lj.Chain.from_params(params), 0.05, [1.4], (0.38,))
+    starts = _starts.tension_starts(partial(_starts.tension_waves, lj.Chain.from_params(params)), 0.05, [1.4], (0.38,))
     assert len(starts) == 1
     values, omega = starts[0][0][0], starts[0][1]
     assert starts[0][2] == 0.38
@@ -188,3 +189,71 @@ def test_tension_waves_of_a_chain_jump_by_each_springs_tension_step_at_its_lagge
         assert jump(to_tension) == pytest.approx(-step, rel=1e-3)
         if shift:
             assert jump(to_compression) == pytest.approx(step, rel=1e-3)
+
+
+def _as_mechanism(chain: lj.Chain, tilted: bool = True) -> lj.Mechanism:
+    """The chain as a `Mechanism`: its bodies at the relaxed gaps, spring j a tilted (or a linear)
+    spring from body j to j + 1 with an actuated rest length."""
+    c = chain.broadcast()
+    k, d, lbar = (np.asarray(q, float) for q in (c.k, c.d, c.lbar))
+    x0 = np.concatenate([[0.0], np.cumsum(np.sqrt(lbar**2 - d**2))])
+    rest = lambda j: lj.Sinusoid(a=0.01, omega=1.0, lbar=float(lbar[j]))
+    links = [
+        lj.TiltedSpring(j, j + 1, k=float(k[j]), d=float(d[j]), rest=rest(j))
+        if tilted
+        else lj.Spring(j, j + 1, k=float(k[j]), rest=rest(j))
+        for j in range(k.size)
+    ]
+    return lj.Mechanism(masses=np.asarray(c.m), friction=c.friction, links=links, x0=x0, c=np.asarray(c.c))
+
+
+def test_tension_waves_of_a_mechanism_are_its_chains():
+    # A mechanism built as a chain (its physics' loads with the actuated rest lengths set to make
+    # the prescribed tensions, its break-away forces per element end) integrates the chain's
+    # idealised inchworms: the paper's model, a lighter rear mass on steeper springs, three masses
+    # on bristles with tilted springs of two signs, and a flat worm (linear springs) over the
+    # periods where its masses keep their order (the chain's flat springs turn over where they
+    # meet, a linear spring does not).
+    periods, levels = np.geomspace(2.0, 10.0, 10).repeat(3), np.tile([0.3, 0.55, 0.8], 10)
+    bristles = lj.AnisotropicCoulomb(0.5, 0.9, 0.3, 0.7)
+    chains = [
+        lj.Chain.from_params(lj.Params()),
+        lj.Chain.from_params(lj.Params(mhat=0.3, d=0.8, mu_s=0.9, mu_k=0.3)),
+        lj.Chain(masses=[1.0, 2.0, 1.5], k=[40.0, 60.0], d=[0.3, -0.2], lbar=3.0, friction=bristles),
+    ]
+    for chain in chains:
+        want = _starts.tension_waves(chain, periods, levels, lag=0.7)
+        got = _starts.mechanism_tension_waves(_as_mechanism(chain), periods, levels, lag=0.7)
+        assert got is not None and np.all(np.isfinite(want))
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-9 * np.abs(want).max())
+    flat = lj.Chain(masses=[1.0] * 3, d=0.0, friction=bristles)
+    want = _starts.tension_waves(flat, periods[:9], levels[:9], lag=0.7)
+    got = _starts.mechanism_tension_waves(_as_mechanism(flat, tilted=False), periods[:9], levels[:9], lag=0.7)
+    assert got is not None
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-9 * np.abs(want).max())
+
+
+def test_tension_waves_of_a_capsules_internal_force_alternate_by_the_capsules_break_away_force():
+    # A capsule (body 0 on the ground) carries an internal mass (body 1) on a passive spring and
+    # drives it with an internal force. The carried mass has no ground contact, so it slides at
+    # any force; the capsule holds while the force stays below its break-away mu_s (m0 + m1)
+    # (its normal load carries the internal mass's weight). The force is `level` of the way from
+    # 0 to that bound: +level mu_s (m0 + m1) for half the period (the compression: f = -T
+    # pushes the ends apart), -level mu_s (m0 + m1) for the other half.
+    m0, m1, mu_s, level, grid = 1.0, 0.5, 0.6, 0.3, 256
+    force = lj.Force(0, 1, lj.Sinusoid(a=0.1, omega=2.0, lbar=0.0))
+    capsule = lj.Mechanism(masses=[m0, m1], friction=[lj.Coulomb(mu_s, 0.4), None], carried_by=[None, 0],
+                           links=[lj.Spring(0, 1, k=10.0), force])  # fmt: skip
+    waves = _starts.mechanism_tension_waves(capsule, np.array([3.0]), np.array([level]), grid=grid)
+    assert waves is not None
+    (values,) = waves
+    bound = level * mu_s * (m0 + m1)
+    np.testing.assert_allclose(values[0], np.where(np.arange(grid) < grid // 2, bound, -bound), rtol=1e-12)
+    # An actuated spring to the wall never breaks away there: no tension is between its ends' limits.
+    anchored = lj.Mechanism(masses=[1.0], links=[lj.Spring(0, lj.WALL, k=5.0, rest=lj.Sinusoid(0.1, 2.0, -1.0))],
+                            x0=[1.0])  # fmt: skip
+    assert not _starts.tension_starts(
+        partial(_starts.mechanism_tension_waves, anchored), 0.1, np.array([3.0]), np.array([level])
+    )
+    pushed = lj.Mechanism(masses=[1.0], links=[lj.ExternalForce(0, lj.Sinusoid(0.1, 2.0, 0.0))])
+    assert _starts.mechanism_tension_waves(pushed, np.array([3.0]), np.array([level])) is None

@@ -96,9 +96,8 @@ def register(app: typer.Typer) -> None:
         tension_periods: int | None = typer.Option(
             None,
             "--tension-periods",
-            help="Exact, the paper's model or a chain: periods of the idealised-inchworm starts (each spring's "
-            "tension a square wave alternating in sign; default 10 for a spline search, none for a chain's "
-            "Fourier series; 0: none).",
+            help="Exact: periods of the idealised-inchworm starts (each spring's or actuated element's tension a "
+            "square wave alternating in sign; default 10 for a spline search, none for a Fourier series; 0: none).",
         ),
         starts: int = typer.Option(8, "--starts", help="Smoothed: starts optimised in parallel."),
         outer: int = typer.Option(3, "--outer", help="Smoothed: augmented-Lagrangian blocks per smoothing stage."),
@@ -173,8 +172,6 @@ def register(app: typer.Typer) -> None:
                 screen |= {name: v for name, v in (("shape", shape), ("knots", knots)) if given([name])}
                 screen |= {"transient": int(transient)} if transient is not None else {}
                 screen |= steps
-                if tension and built.kind != "chain":
-                    raise ValueError("--tension-periods: the idealised inchworms of the paper's model or a chain.")
                 screen |= tension
                 if method == "smoothed":  # the smoothed local stage's own options (its rollout's lengths the defaults')
                     screen |= dict(smoothed=Settings(outer=outer, inner=inner, eps_schedule=_eps_schedule(eps),

@@ -28,7 +28,7 @@ from ..model._springwaves import SpringFourier
 from ._element_local import sampled_start, screen_rows, Start
 from ._element_optimum import ChainOptimiseSettings
 from ._optimum import along
-from ._starts import tension_starts
+from ._starts import tension_starts, tension_waves
 
 
 def free_frequencies(chain: Chain) -> np.ndarray:
@@ -214,7 +214,7 @@ def inchworms(chain: Chain, lag: float, a_max: float, lo: float, hi: float, harm
     periods = slowest * np.geomspace(0.7, 4.0, count)
     levels = np.asarray(settings.tension_levels, float)
     state = np.zeros(2 * chain.n_masses - 1)
-    waves = tension_starts(chain, a_max, periods, levels, lag)
+    waves = tension_starts(lambda pp, ll: tension_waves(chain, pp, ll, lag), a_max, periods, levels)
     if not waves:
         return None
     starts = [sampled_start(a_max * v, omega, harmonics, knots, a_max, lo, hi, state) for v, omega, _ in waves]

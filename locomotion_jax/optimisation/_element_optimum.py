@@ -24,14 +24,18 @@ from ._search_settings import count, SearchSettings, tension
 class ElementSettings(SearchSettings):
     """What the settings of a mechanism's and of a chain's optimiser share: the fields of
     `SearchSettings`, the sinusoid screen's grid (`amplitudes`, `frequencies`, `phases`) and the
-    smoothed local stage's `smoothed`, each class with its own defaults and docstring."""
+    smoothed local stage's `smoothed` and the idealised inchworms' starts (`tension_periods`,
+    `tension_levels`), each class with its own defaults and docstring."""
 
     amplitudes: int = 4
     frequencies: int = 8
     phases: int = 1
     smoothed: Settings = Settings()
+    tension_periods: int | None = None
+    tension_levels: tuple[float, ...] = (0.3, 0.55, 0.8)
 
     def __check_init__(self):
+        tension(self, optional=True)
         for field in ("amplitudes", "frequencies", "phases"):
             count(self, field, 1)
         if not isinstance(self.smoothed, Settings):
@@ -68,6 +72,14 @@ class MechanismOptimiseSettings(ElementSettings):
       baseline is solved again at `dt` by the verification, which reports its figures.
     - `smoothed`: the settings ([`Settings`][]) of the local stage of `optimise(...,
       method="smoothed")` (module `optimisation._element_smoothed`, which names the fields it reads).
+
+    - `tension_periods`, `tension_levels`: the idealised inchworms' starts
+      (`optimisation._starts.mechanism_tension_waves`), as a chain's (`ChainOptimiseSettings`):
+      each actuated element's tension a square wave alternating in sign, lagged from element to
+      element as the best sinusoid, over `tension_periods` periods from 0.7 to 4 times the slowest
+      natural period with one body held, its magnitudes these levels between the break-away forces
+      of the element's two ends; those that beat the best sinusoid compete with the sinusoids for
+      the local runs. `None` (default): 10 for a spline search, none for a Fourier series.
 
     A [`ChainOptimiseSettings`][] is accepted in its place: its fields of these names are used, one
     phase, and its `phases` (its travelling waves' lags) as the `lags`.
@@ -143,11 +155,8 @@ class ChainOptimiseSettings(ElementSettings):
     zoom_levels: int = 2
     zoom_points: int = 5
     chunk: int = 32
-    tension_periods: int | None = None
-    tension_levels: tuple[float, ...] = (0.3, 0.55, 0.8)
 
     def __check_init__(self):
-        tension(self, optional=True)
         count(self, "zoom_points", 1)
         count(self, "chunk", 1)
         count(self, "zoom_levels", 0)

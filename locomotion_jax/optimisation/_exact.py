@@ -52,6 +52,7 @@ import dataclasses
 import math
 import threading
 import time
+from functools import partial
 from typing import Any, cast
 
 import jax
@@ -73,7 +74,7 @@ from ._local import local_run
 from ._lockstep import run_lockstep
 from ._optimum import choose, ExactSettings, Optimum, start_waveform, steady_at_half_step, verified, waveform_of
 from ._shapes import AbstractShape
-from ._starts import start_shapes, tension_starts
+from ._starts import start_shapes, tension_starts, tension_waves
 
 
 class _Bad:
@@ -180,7 +181,9 @@ def _starts(params, a_max, shape: AbstractShape, lo, hi, baseline, start, settin
     if settings.tension_periods:
         slowest = 2 * math.pi / float(min(params.wn1, params.wn2, params.wn3))
         periods = slowest * np.geomspace(0.7, 4.0, settings.tension_periods)
-        for values, w, _ in tension_starts(Chain.from_params(params), a_max, periods, settings.tension_levels):
+        for values, w, _ in tension_starts(
+            partial(tension_waves, Chain.from_params(params)), a_max, periods, settings.tension_levels
+        ):
             out.append(shape.fit(values[0], w if lo != hi else lo))
     if start is not None:
         wave = start_waveform(start)

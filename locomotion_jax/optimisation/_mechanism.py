@@ -28,7 +28,10 @@ Method (as `optimisation._chain`, with sinusoids in place of travelling waves):
    makes a travelling wave along the elements (a worm's springs, as a chain's screen has them),
    or sets an internal force's phase against an external one's.
 2. **Local refinement** of every element's harmonics (or control values, started from the
-   sinusoid's interpolating spline) from the best `local` sinusoids: the chain's monotone L-BFGS
+   sinusoid's interpolating spline) from the best `local` sinusoids and, in a spline search,
+   the idealised inchworms that beat the best of them (`_starts.mechanism_tension_waves`: each
+   actuated element's tension a square wave alternating in sign, lagged as the best sinusoid;
+   where none beats it, the sinusoids keep every lane): the chain's monotone L-BFGS
    descent on an exact penalty (`_element_local`), with exact gradients through the periodic orbit
    (`gaits._element_orbit.ChainOracle`, which takes a mechanism). The bound is kept by radial
    rescaling of each element's Fourier coefficients onto its exact stroke, or by clipping the
@@ -47,7 +50,7 @@ mechanism's own base frequency where it has no spring between bodies.
 import math
 import time
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, cast
 
 import jax.numpy as jnp
 import numpy as np
@@ -55,13 +58,15 @@ import numpy as np
 from ..dynamics._exact_dynamics import Exact
 from ..gaits._progress import reporter
 from ..model._bodies import Mechanism
-from . import _element_local as local
+from . import _chain_screen as screen, _element_local as local
 from ._element_optimum import ChainOptimiseSettings, MechanismOptimiseSettings, MechanismOptimum
 from ._optimum import along
+from ._starts import mechanism_tension_waves, tension_starts
 
 
-def _natural(mech: Mechanism) -> float:
-    """The highest natural frequency of the free bodies and springs (wall springs included)."""
+def _stiffness(mech: Mechanism) -> np.ndarray:
+    """The mass-normalised stiffness matrix $M^{-1/2} K M^{-1/2}$ of the bodies and springs (wall
+    springs included; a tilted spring's geometry ignored, as in eqs. 11-12)."""
     m = np.asarray(mech.m, np.float64)
     K = np.zeros((m.size, m.size))
     for el in mech.links:
@@ -75,14 +80,71 @@ def _natural(mech: Mechanism) -> float:
             K[ends[0], ends[1]] -= float(k)
             K[ends[1], ends[0]] -= float(k)
     s = 1 / np.sqrt(m)
-    return float(np.sqrt(max(np.linalg.eigvalsh(K * s[:, None] * s[None, :]).max(), 0.0)))
+    return K * s[:, None] * s[None, :]
 
 
-def _gaits(batch: Mechanism, settings: MechanismOptimiseSettings) -> dict[str, np.ndarray]:
-    """Steady gaits (periods 1 and 2) of a batch of mechanisms, as host arrays."""
-    from ..gaits._gait import steady_gait
+def _natural(mech: Mechanism) -> float:
+    """The highest natural frequency of the free bodies and springs (wall springs included)."""
+    return float(np.sqrt(max(np.linalg.eigvalsh(_stiffness(mech)).max(), 0.0)))
 
-    g = steady_gait(batch, periods=(1, 2), transient=settings.transient, dynamics=Exact(dt=settings.dt))
+
+def _held(mech: Mechanism) -> float:
+    """The lowest natural frequency with one body in ground contact held, over which body (a
+    chain's [`Chain.omega_min`][locomotion_jax.Chain.omega_min]); 0 where no such mode exists."""
+    Kn, lowest = _stiffness(mech), math.inf
+    for i, law in enumerate(mech.friction):
+        keep = [j for j in range(len(Kn)) if j != i]
+        if law is None or not keep:
+            continue
+        w = np.linalg.eigvalsh(Kn[np.ix_(keep, keep)])
+        w = w[w > 1e-12 * max(w.max(), 0.0)]
+        lowest = min([lowest, *np.sqrt(w)])
+    return 0.0 if math.isinf(lowest) else float(lowest)
+
+
+def _inchworms(base: Mechanism, lag: float, a_max: float, lo: float, hi: float, harmonics: int, knots: int,
+               state: np.ndarray, settings: MechanismOptimiseSettings, say: Any,
+               ) -> screen.Inchworms | None:  # fmt: skip
+    """The idealised inchworms' starts of a mechanism (`_starts.mechanism_tension_waves`: each
+    actuated element's tension a square wave, element $j$'s lagged by $j$ `lag`) over
+    `settings.tension_periods` periods (`None`: 10 for a spline search, none for a Fourier series)
+    from 0.7 to 4 times the slowest natural period with one body held ([`_held`][]) and
+    `settings.tension_levels`, in the search's family, their frequencies clipped to `[lo, hi]`,
+    and their steady gaits at `settings`' step; `None` where there are none (no periods, no such
+    mode, an actuated external force)."""
+    count = settings.tension_periods if settings.tension_periods is not None else (10 if knots else 0)
+    w = _held(base)
+    if not count or not w:
+        return None
+    periods = 2 * math.pi / w * np.geomspace(0.7, 4.0, count)
+    waves = tension_starts(lambda pp, ll: mechanism_tension_waves(base, pp, ll, lag), a_max, periods,
+                           settings.tension_levels)  # fmt: skip
+    if not waves:
+        return None
+    starts = [local.sampled_start(a_max * v, om, harmonics, knots, a_max, lo, hi, state) for v, om, _ in waves]
+    omega = np.array([st.omega for st in starts])
+    say(f"solving the steady gaits of {len(starts)} idealised inchworms (lag {lag:.4g})...")
+    if knots:
+        g = _gaits(_spline(base, np.stack([cast(np.ndarray, st.control) for st in starts]), omega), settings, False)
+    else:
+        g = _gaits(_fourier(base, np.stack([st.cos for st in starts]), np.stack([st.sin for st in starts]), omega),
+                   settings)  # fmt: skip
+    starts = [st._replace(y=g["y"][i], k=int(g["k"][i]), cost=float(g["cost"][i]), fresh=False)
+              for i, st in enumerate(starts)]  # fmt: skip
+    period, level = np.array([2 * math.pi / q for _, q, _ in waves]), np.array([q for _, _, q in waves])
+    return screen.Inchworms(starts, period, level, screen.Gaits(**g))
+
+
+def _gaits(batch: Mechanism, settings: MechanismOptimiseSettings, guarded: bool = True) -> dict[str, np.ndarray]:
+    """Steady gaits (periods 1 and 2; [`steady_gait`][]'s problem and solver) of a batch of
+    mechanisms, as host arrays. `guarded=False`: the search's splines, at a step that need not
+    resolve their knots (`gaits._shooting.bodies_problem`)."""
+    from ..gaits._shooting import bodies_problem, steady_gaits
+
+    dynamics = Exact(dt=settings.dt)
+    problem = bodies_problem(batch, dynamics, "strict", "paper", None, guarded)
+    g = steady_gaits(problem, periods=(1, 2), transient=settings.transient, dynamics=dynamics, contact="strict",
+                     bucket=True)  # fmt: skip
     radius = np.max(np.abs(np.asarray(g.multipliers)), axis=-1)
     liftoff = np.asarray(g.liftoff)
     ok = np.asarray(g.converged) & np.asarray(g.stable) & ~liftoff
@@ -221,12 +283,26 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
                             mean_speed=float(sc["speed"][i]), cost_of_transport=float(sc["cost"][i]))  # fmt: skip
     sinusoid = row_of(best) if fast[best] else None
 
-    # 2. Local refinement of every element's harmonics (or control values) from the best sinusoids.
+    # 2. Local refinement of every element's harmonics (or control values) from the best sinusoids
+    # and, where they beat the best of them, the best idealised inchworms, lagged as it is.
     rows = [int(i) for i in order if sc["ok"][i]][: settings.local] or [best]
     rows += rows[:1] * (settings.local - len(rows))
     starts = [local.Start(cos[i], sin[i], float(W[i]), sc["y"][i], int(sc["k"][i]), float(sc["cost"][i])) for i in rows]
+    records = [row_of(i) for i in rows]
+    worms = _inchworms(base, float(LAG[best]), a_max, lo, hi, H, M if spline else 0, np.zeros_like(sc["y"][best]),
+                       search, say)  # fmt: skip
+    if worms is not None:
+        keys = screen.preference(screen.Gaits(**{f: sc[f] for f in GAIT_FIELDS}), v_min, direction)[rows]
+        worm_keys = screen.preference(worms.gaits, v_min, direction)
+        better = np.flatnonzero(screen.preferred(worm_keys, keys[0]))
+        if better.size:  # else the sinusoids keep every lane
+            lanes = screen.best_distinct(np.concatenate([keys, worm_keys[better]]), settings.local)
+            starts += [worms.starts[i] for i in better]
+            records += [screen.as_inchworm(worms, int(i), float(LAG[best])) for i in better]
+            starts, records = [starts[i] for i in lanes], [records[i] for i in lanes]
     if start is not None:
-        starts[-1] = local.given_start(start, S, H, M if spline else 0, a_max, lo, hi, sc["y"][rows.pop()])
+        starts[-1] = local.given_start(start, S, H, M if spline else 0, a_max, lo, hi, sc["y"][rows[-1]])
+        records.pop()
     xs, ev, log = local.local_stage(method, base, starts, a_max, v_min, direction, lo, hi, M if spline else 0, search,
                                     say)  # fmt: skip
 
@@ -274,7 +350,7 @@ def optimise_mechanism(mech: Mechanism, v_min: float, a_max: float, *, direction
         feasible_exact=bool(feasible[k]), sinusoid=sinusoid,
         improvement_vs_sinusoid=1 - float(g["cost"][k]) / cost_sin if (feasible[k] and sinusoid) else math.nan,
         **sim, source=names[k], candidates=table,
-        history=[{"starts": [row_of(i) for i in rows], "local": log}], screened=int(A.size),
+        history=[{"starts": records, "local": log}], screened=int(A.size),
         evaluations=0 if ev is None else ev.calls,
         runtime_s=time.perf_counter() - t0, dt_exact=checked.dt, mechanism=chosen,
         screen=dict(a=A, omega=W, phase=PHI, lag=LAG, **sc),

@@ -30,7 +30,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..dynamics._motion import with_velocity
+from ..model._bodies import Mechanism
 from ..model._chain import Chain
+from ..model._elements import ExternalForce, Force, Spring, TiltedSpring, WALL
 from ..model._friction import AbstractFriction
 
 
@@ -89,6 +92,49 @@ def _kinetic(law: AbstractFriction, shape: tuple[int, ...]) -> Callable[[np.ndar
     return lambda speed, direction: np.asarray(kinetic(law, speed, direction), float)
 
 
+def _inchworm(loads: Callable, signal: Callable, taus: np.ndarray, m: np.ndarray, c: np.ndarray, fwd: np.ndarray,
+              bwd: np.ndarray, kinetic: Callable, x0: np.ndarray, periods: np.ndarray, lag: float, grid: int,
+              cycles: int) -> np.ndarray:  # fmt: skip
+    """The idealised inchworm's signals of [`tension_waves`][] over the last of `cycles` periods at
+    `grid` phases, `(rows, elements, grid)`, each centred, integrated from rest at `x0` (bodies) with
+    the prescribed tensions `taus` `(rows, elements, 2)` (compression, tension): `loads(tension, x,
+    v)` the bodies' horizontal forces and normal loads `(rows, bodies)`, `signal(tension, x)` the
+    signals that make these tensions, `m`, `c` the masses and ground damping, `fwd`, `bwd` the
+    static limits and `kinetic(speed, direction)` the kinetic coefficient per body (eqs. 7, 9)."""
+    S = taus.shape[1]
+    # Element j is in compression at phase sample g where (g - shift_j) mod grid < grid / 2.
+    shift = np.rint(np.arange(S) * lag / (2 * math.pi) * grid).astype(int)
+    compressed = (np.arange(grid)[:, None] - shift[None, :]) % grid < grid // 2
+    sub = 8
+    dt = periods[:, None] / (grid * sub)
+    n = len(periods)
+    x = np.tile(x0, (n, 1))
+    v, stuck = np.zeros_like(x), np.ones(x.shape, bool)
+    out = np.zeros((n, S, grid))
+    with np.errstate(invalid="ignore"):
+        for cycle in range(cycles):
+            for g in range(grid):
+                tension = np.where(compressed[g], taus[..., 0], taus[..., 1])
+                for _ in range(sub):
+                    force, normal = loads(tension, x, v)
+                    stuck = stuck & ~((force > fwd * normal) | (force < -bwd * normal))
+                    sgn = np.where(v != 0, np.sign(v), np.sign(force))
+                    mu = kinetic(np.abs(v), sgn)
+                    new = np.where(stuck, 0.0, v + dt * (force - c * v - mu * normal * sgn) / m)
+                    halt = ~stuck & (new * sgn < 0)  # the velocity reaches zero within the step
+                    stuck = stuck | (halt & (force <= fwd * normal) & (force >= -bwd * normal))
+                    v = np.where(halt, 0.0, new)
+                    x = x + dt * v
+                if cycle == cycles - 1:
+                    out[:, :, g] = signal(tension, x)
+    return out - 0.5 * (out.max(axis=2, keepdims=True) + out.min(axis=2, keepdims=True))
+
+
+def _magnitudes(lo: np.ndarray, hi: np.ndarray, levels: np.ndarray) -> np.ndarray:
+    """Per row and element, the tension magnitude `level` of the way from `lo` to `hi`."""
+    return lo + levels[:, None] * (hi - lo)
+
+
 def tension_waves(chain: Chain, periods: np.ndarray, levels: np.ndarray, lag: float = 0.0, grid: int = 256,
                   cycles: int = 6) -> np.ndarray:  # fmt: skip
     """The rest lengths $\\ell_{0,j} - \\bar\\ell_j$ (physical units, each centred) of the idealised
@@ -114,60 +160,137 @@ def tension_waves(chain: Chain, periods: np.ndarray, levels: np.ndarray, lag: fl
     m, c = np.asarray(chain.m, float), np.asarray(chain.c, float)
     k, d, lbar = np.asarray(chain.k, float), np.asarray(chain.d, float), np.asarray(chain.lbar, float)
     fwd, bwd = (np.broadcast_to(np.asarray(mu, float), m.shape) for mu in chain.friction.static_limits())
-    kinetic = _kinetic(chain.friction, m.shape)
     gap0 = np.sqrt(lbar * lbar - d * d)
-    S = gap0.size
-    taus = np.zeros((len(periods), S, 2))
+    taus = np.zeros((len(periods), gap0.size, 2))
     for j, sign in enumerate((-1.0, 1.0)):
-        lo, hi = _limits(chain, sign, gap0)
-        taus[..., j] = sign * (lo + levels[:, None] * (hi - lo))
-    # Spring j is in compression at phase sample g where (g - shift_j) mod grid < grid / 2.
-    shift = np.rint(np.arange(S) * lag / (2 * math.pi) * grid).astype(int)
-    compressed = (np.arange(grid)[:, None] - shift[None, :]) % grid < grid // 2
-    sub = 8
-    dt = periods[:, None] / (grid * sub)
-    n = len(periods)
-    x = np.tile(np.concatenate([[0.0], np.cumsum(gap0)]), (n, 1))
-    v, stuck = np.zeros((n, S + 1)), np.ones((n, S + 1), bool)
-    out = np.zeros((n, S, grid))
-    zero = np.zeros((n, 1))
-    pad = lambda f: (np.concatenate([f, zero], 1), np.concatenate([zero, f], 1))  # spring j's on mass j, j + 1
-    with np.errstate(invalid="ignore"):
-        for cycle in range(cycles):
-            for g in range(grid):
-                tension = np.where(compressed[g], taus[..., 0], taus[..., 1])
-                for _ in range(sub):
-                    u = x[:, 1:] - x[:, :-1]
-                    length = np.sqrt(u * u + d * d)
-                    fx, fy = tension * u / length, tension * d / length
-                    own, last = pad(fx)
-                    force = own - last  # eq. (8)
-                    own, last = pad(fy)
-                    normal = m - own + last  # eq. (5)
-                    stuck = stuck & ~((force > fwd * normal) | (force < -bwd * normal))
-                    sgn = np.where(v != 0, np.sign(v), np.sign(force))
-                    mu = kinetic(np.abs(v), sgn)
-                    new = np.where(stuck, 0.0, v + dt * (force - c * v - mu * normal * sgn) / m)
-                    halt = ~stuck & (new * sgn < 0)  # the velocity reaches zero within the step
-                    stuck = stuck | (halt & (force <= fwd * normal) & (force >= -bwd * normal))
-                    v = np.where(halt, 0.0, new)
-                    x = x + dt * v
-                if cycle == cycles - 1:
-                    u = x[:, 1:] - x[:, :-1]
-                    out[:, :, g] = np.sqrt(u * u + d * d) - tension / k
-    return out - 0.5 * (out.max(axis=2, keepdims=True) + out.min(axis=2, keepdims=True))
+        taus[..., j] = sign * _magnitudes(*_limits(chain, sign, gap0), levels)
+
+    def loads(tension, x, v):
+        u = x[:, 1:] - x[:, :-1]
+        length = np.sqrt(u * u + d * d)
+        fx, fy = tension * u / length, tension * d / length
+        zero = np.zeros((len(x), 1))
+        pad = lambda f: (np.concatenate([f, zero], 1), np.concatenate([zero, f], 1))  # spring j's on mass j, j + 1
+        own, last = pad(fx)
+        force = own - last  # eq. (8)
+        own, last = pad(fy)
+        return force, m - own + last  # eq. (5)
+
+    def signal(tension, x):
+        u = x[:, 1:] - x[:, :-1]
+        return np.sqrt(u * u + d * d) - tension / k
+
+    x0 = np.concatenate([[0.0], np.cumsum(gap0)])
+    kinetic = _kinetic(chain.friction, m.shape)
+    return _inchworm(loads, signal, taus, m, c, fwd, bwd, kinetic, x0, periods, lag, grid, cycles)
 
 
-def tension_starts(chain: Chain, a_max: float, periods: Any, levels: Any, lag: float = 0.0,
-                   ) -> list[tuple[np.ndarray, float, float]]:  # fmt: skip
-    """`(values, omega, level)` of the tension-wave starts ([`tension_waves`][]) over every pair
-    of `periods` and `levels` where the idealised gait exists: `values` `(springs, 256)` phase
-    samples in units of $a_\\max$ (all springs scaled down together where the idealised gait
+def _end_limit(P: Any, contact: list[bool], end: "int | str", pulled: float, h: float, q: float, sign: float) -> float:
+    """The tension magnitude at which `end` of an element breaks away at rest, the element alone
+    loading it: its horizontal pull $\\tau h$ in direction `pulled` against $\\mu$ times the normal
+    load, lowered by $\\text{sign}\\,\\tau q$ (eqs. 5, 7). A wall never slides (infinite); a
+    body without ground contact of its own (carried or free) slides at any tension (0)."""
+    if end == WALL:
+        return math.inf
+    i = int(end)
+    if not contact[i]:
+        return 0.0
+    mu_b = P.mu_f[i] if P.mu_b[i] is None else P.mu_b[i]
+    mu = float(P.mu_f[i] if pulled > 0 else mu_b)
+    den = h + sign * mu * q
+    return mu * float(P.normal[i]) / den if den > 0 else math.inf
+
+
+def mechanism_tension_waves(mech: Mechanism, periods: np.ndarray, levels: np.ndarray, lag: float = 0.0,
+                            grid: int = 256, cycles: int = 6) -> np.ndarray | None:  # fmt: skip
+    """[`tension_waves`][] of a [`Mechanism`][locomotion_jax.Mechanism] (one configuration): the
+    idealised inchworms of its actuated elements (`Mechanism.actuated`), element $j$'s tension a
+    square wave lagged by $j$ `lag`, its magnitudes `level` of the way between the break-away
+    forces of its two ends at the mechanism's start `x0` (`_end_limit`). The other elements act as
+    in the mechanism (its physics' loads, with the actuated ones' rest lengths set to make the
+    prescribed tensions), under each body's own friction law, its carried weights included. The
+    signals: a spring's rest length $u - T/k$ (a tilted one's $\\ell(u) - T/k$), an internal
+    force's $-T$ (it pushes its ends apart). `None` where an actuated element is an external force
+    (it has no two ends to alternate between)."""
+    periods, levels = np.asarray(periods, float), np.asarray(levels, float)
+    mech = mech.broadcast()
+    P = mech.physics()
+    actuated = mech.actuated()
+    elements = [mech.links[i] for i in actuated]
+    contact = [law is not None for law in mech.friction]
+    if not elements or any(isinstance(el, ExternalForce) for el in elements):
+        return None
+    n_bodies = mech.n_bodies
+    x0 = np.asarray(mech.x0, float)
+    at = lambda x, end: 0.0 if end == WALL else x[int(end)]
+    # Per element: horizontal fraction h, vertical fraction q and the direction of its pull on `a`
+    # under tension (a spring's and a force's along the line; a tilted spring's along (u, d)/l).
+    taus = np.zeros((len(periods), len(elements), 2))
+    for j, el in enumerate(elements):
+        end_a, end_b = el.bodies()
+        u = at(x0, end_b) - at(x0, end_a)
+        d = float(el.d) if isinstance(el, TiltedSpring) else 0.0
+        length = math.hypot(u, d) if isinstance(el, TiltedSpring) else 1.0
+        h, q = (abs(u) / length, d / length) if isinstance(el, TiltedSpring) else (1.0, 0.0)
+        pull = math.copysign(1.0, u) if isinstance(el, TiltedSpring) else 1.0
+        for col, sign in enumerate((-1.0, 1.0)):
+            ta = _end_limit(P, contact, end_a, sign * pull, h, q, sign)
+            tb = _end_limit(P, contact, end_b, -sign * pull, h, -q, sign)
+            taus[:, j, col] = sign * _magnitudes(np.asarray(min(ta, tb)), np.asarray(max(ta, tb)), levels)[:, 0]
+    drive = P.drive(P.one, 0 * P.one)
+    kinds = (Spring, TiltedSpring, Force)
+    # Each actuated element's place among the drive's entries of its kind.
+    slots = [sum(isinstance(e, type(mech.links[i])) for e in mech.links[:i]) for i in actuated]
+
+    def rests(T, x):  # the drive that makes the actuated elements' tensions T
+        l0, r, f = list(drive.l0), list(drive.r), list(drive.f)
+        for j, (el, slot) in enumerate(zip(elements, slots)):
+            end_a, end_b = el.bodies()
+            u = at(x, end_b) - at(x, end_a)
+            if isinstance(el, Spring):
+                l0[slot] = u - T[j] / el.k
+            elif isinstance(el, TiltedSpring):
+                r[slot] = jnp.sqrt(u * u + el.d * el.d) - T[j] / el.k
+            else:
+                f[slot] = -T[j]
+        return drive._replace(l0=tuple(l0), r=tuple(r), f=tuple(f))
+
+    def one(T, x, v):
+        xs, vs = tuple(x[i] for i in range(n_bodies)), tuple(v[i] for i in range(n_bodies))
+        L = P.loads(rests(T, xs), xs)
+        return jnp.stack(with_velocity(P, L.F, vs)), jnp.stack(L.N)
+
+    def own(T, x):
+        xs = tuple(x[i] for i in range(n_bodies))
+        dr = rests(T, xs)
+        return jnp.stack([(dr.l0, dr.r, dr.f)[kinds.index(type(el))][slot] for el, slot in zip(elements, slots)])
+
+    batched, signals = jax.jit(jax.vmap(one)), jax.jit(jax.vmap(own))
+
+    def loads(tension, x, v):
+        F, N = batched(tension, x, v)
+        return np.asarray(F, float), np.asarray(N, float)
+
+    signal = lambda tension, x: np.asarray(signals(tension, x), float)
+    m, c = np.asarray(mech.m, float), np.array([float(q) for q in P.c])
+    fwd = np.array([float(q) for q in P.mu_f])
+    bwd = np.array([float(f if b is None else b) for f, b in zip(P.mu_f, P.mu_b)])
+    laws = [_kinetic(law, ()) for law in P.friction]
+    kinetic = lambda speed, direction: np.stack([k(speed[:, i], direction[:, i]) for i, k in enumerate(laws)], 1)
+    return _inchworm(loads, signal, taus, m, c, fwd, bwd, kinetic, x0, periods, lag, grid, cycles)
+
+
+def tension_starts(waves: Callable[[np.ndarray, np.ndarray], np.ndarray | None], a_max: float, periods: Any,
+                   levels: Any) -> list[tuple[np.ndarray, float, float]]:  # fmt: skip
+    """`(values, omega, level)` of the tension-wave starts over every pair of `periods` and `levels`
+    where the idealised gait exists: `waves(periods, levels)` their signals ([`tension_waves`][] of
+    a chain, [`mechanism_tension_waves`][] of a mechanism; `None`: none), `values` `(elements, 256)`
+    phase samples in units of $a_\\max$ (all elements scaled down together where the idealised gait
     needs more than $a_\\max$)."""
     pp, ll = (a.ravel() for a in np.meshgrid(np.asarray(periods, float), np.asarray(levels, float), indexing="ij"))
-    waves = tension_waves(chain, pp, ll, lag)
+    signals = waves(pp, ll)
     out = []
-    for wave, period, level in zip(waves, pp, ll):
+    for wave, period, level in zip([] if signals is None else signals, pp, ll):
         if np.all(np.isfinite(wave)):
             out.append((wave / max(a_max, float(np.max(np.abs(wave)))), 2 * math.pi / float(period), float(level)))
     return out
