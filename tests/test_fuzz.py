@@ -8,7 +8,8 @@ zero, negative, tiny, huge and non-finite values. Whatever comes in, the answer 
 - status `OK` with finite results (sentinels `inf` only where documented: a distance not
   reached) that satisfy the energy balance $w = e_d + \\Delta e$.
 
-Never status `OK` with a NaN. Each test fixes the shapes, the waveform type and the friction
+Never status `OK` with a NaN; never a `CONVERGED` steady gait whose dissipation is not its
+actuators' work (its elements drawn from fair ranges, `GAIT_MECHANISM`). Each test fixes the shapes, the waveform type and the friction
 law, so that every example reuses one compiled program; horizons are short. The default run
 draws a few hundred examples in all (derandomised, so CI is reproducible); `--slow` draws
 `LJ_FUZZ_SCALE` (20) times as many, with a fresh seed.
@@ -71,14 +72,17 @@ def _fuzz(n: int):
     )
 
 
+def fair(lo: float, hi: float, log: bool = False):
+    """A value in [lo, hi] (log-uniform if `log`), never special."""
+    if log:
+        return st.floats(math.log10(lo), math.log10(hi)).map(lambda e: 10.0**e)
+    return st.floats(lo, hi, allow_nan=False, allow_infinity=False)
+
+
 def wide(lo: float, hi: float, log: bool = False):
     """A value in [lo, hi] (log-uniform if `log`), or, one time in `1 / SPECIAL_RATE`, a hostile
     special value (so that most examples are valid and run, and every kind of bad value comes up)."""
-    if log:
-        inner = st.floats(math.log10(lo), math.log10(hi)).map(lambda e: 10.0**e)
-    else:
-        inner = st.floats(lo, hi, allow_nan=False, allow_infinity=False)
-    return rarely(inner, st.sampled_from(SPECIAL))
+    return rarely(fair(lo, hi, log), st.sampled_from(SPECIAL))
 
 
 def rarely(usual, unusual, rate: int | None = None):
@@ -333,3 +337,61 @@ def test_fuzz_paper_model_simulate(values):
     if int(tr.status) == lj.Status.OK:
         for name in ("x1", "v1", "x2", "v2", "X", "e_d", "w", "e"):
             assert np.isfinite(np.asarray(getattr(tr, name))).all(), f"status OK with a non-finite {name}"
+
+
+GAIT_MECHANISM: dict[str, Any] = dict(
+    masses=st.lists(fair(0.1, 10.0, log=True), min_size=3, max_size=3),
+    k=st.lists(fair(1.0, 1e3, log=True), min_size=3, max_size=3),
+    d=fair(-2.0, 2.0),
+    rest=fair(1.0, 4.0),
+    f=fair(0.0, 2.0),
+    g=fair(-1.0, 1.0),
+    omega=fair(0.3, 30.0, log=True),
+    c=fair(0.0, 2.0),
+    mu_s=fair(0.7, 1.2),
+    mu_k=fair(0.0, 0.6),
+    x0=fair(-1.0, 1.0),
+    v0=fair(-1.0, 1.0),
+)
+"""`MECHANISM`'s elements over narrower ranges and without special values (whose refusals the
+measure fuzz covers), so that a steady gait exists for a fair share of the examples."""
+
+
+def _section_energy(mech: lj.Mechanism, g: Any) -> float:
+    """The energy (SPEC §9) of an anchored mechanism's orbit at its section (phase 0), from the
+    gait's state (positions, then velocities): what the orbit holds, in which a step's error
+    shows up even where little energy is exchanged."""
+    P = mech.broadcast().physics()
+    n, s = mech.n_bodies, np.asarray(g.state, float).reshape(-1)
+    one = jnp.ones(())
+    x, v = tuple(jnp.asarray(s[i]) for i in range(n)), tuple(jnp.asarray(s[n + i]) for i in range(n))
+    return float(P.energy(P.loads(P.drive(one, 0 * one), x), v))
+
+
+@_fuzz(30)
+@given(st.fixed_dictionaries(GAIT_MECHANISM))
+def test_fuzz_mechanism_steady_gait(values):
+    """`steady_gait` of the fuzz's mechanism (every kind of element, strict contact, 3 bodies: the
+    array layout): refused by name, or a `GaitStatus`; a converged gait has finite figures and
+    dissipates what its actuators do per gait period ($e_d = w$, the energy being periodic) within
+    the step's error against the energies exchanged and held at the section. About half the
+    derandomised examples converge; a physics that drops its external forces' power fails here
+    (checked by hand: $e_d = 0.597$ against $w = -0.329$). A probe of these elements found a tilted
+    spring's unresolved turn reported `CONVERGED` with $e_d$ 15 % off $w$ (now `UNRESOLVED`)."""
+    try:
+        mech = _mechanism(values)
+        g = lj.steady_gait(mech, dynamics=lj.Exact(DT), transient=10, periods=(1, 2))
+    except ValueError as err:
+        _refused_clearly(err)
+        return
+    status = int(np.asarray(g.status))
+    assert status in {int(s) for s in lj.GaitStatus}
+    if status != lj.GaitStatus.CONVERGED:
+        return
+    for name in ("mean_speed", "e_d", "work", "state", "monodromy", "multipliers", "period"):
+        assert np.isfinite(np.asarray(getattr(g, name))).all(), f"CONVERGED with a non-finite {name}"
+    assert not math.isnan(float(np.asarray(g.cost_of_transport)))
+    e_d, work, period = (float(np.asarray(getattr(g, k))) for k in ("e_d", "work", "period"))
+    rtol = BALANCE_RTOL + _resolution_error(chain_scales(_flat(mech)), period)
+    scale = max(abs(e_d), abs(work), abs(_section_energy(mech, g)), 1e-12)
+    assert abs(e_d - work) <= rtol * scale + 1e-12, f"e_d = {e_d} against w = {work} (scale {scale}, rtol {rtol:.3g})"

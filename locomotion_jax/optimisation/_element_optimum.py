@@ -72,7 +72,6 @@ class MechanismOptimiseSettings(ElementSettings):
       baseline is solved again at `dt` by the verification, which reports its figures.
     - `smoothed`: the settings ([`Settings`][]) of the local stage of `optimise(...,
       method="smoothed")` (module `optimisation._element_smoothed`, which names the fields it reads).
-
     - `tension_periods`, `tension_levels`: the idealised inchworms' starts
       (`optimisation._starts.mechanism_tension_waves`), as a chain's (`ChainOptimiseSettings`):
       each actuated element's tension a square wave alternating in sign, lagged from element to

@@ -19,7 +19,9 @@ Two kinds:
   result: the exact engine judges it with the actuation prescribed instead). A chain of N
   masses runs such a square wave on every spring, each a phase lag behind the one before (the
   lag of the chain optimiser's best travelling wave), under its own friction law; the paper's
-  model is its one spring.
+  model is its one spring. A mechanism ([`mechanism_tension_waves`][]) runs one on every actuated
+  element with two ends (a spring's rest length, an internal force), its other elements, carried
+  weights and friction laws acting as in the engine; both integrate by `_inchworm`.
 """
 
 import math
