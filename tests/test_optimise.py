@@ -1690,7 +1690,8 @@ def test_the_mechanism_optimiser_refines_an_idealised_inchworm_where_no_sinusoid
     spring with an actuated rest length, the paper's damping): at the same inchworm's frequency
     the best sinusoid moves at a third of v_min, and the inchworm whose tension alternates in sign
     (`_starts.mechanism_tension_waves`, 64 knots), which beats it, takes the local lane and is
-    feasible near the quasi-static floor, as on the chain (0.924421 there, 0.9244 at its start)."""
+    feasible near the quasi-static floor, as on the chain (measured: 0.924421 from a start of
+    0.924424; without the inchworms the search ends infeasible, 1.8066 at speed 0.0474)."""
     chain = lj.Chain.from_params(lj.Params()).broadcast()
     k, d, lbar = float(chain.k[0]), float(chain.d[0]), float(chain.lbar[0])
     rest = lj.Sinusoid(a=0.01, omega=1.0, lbar=lbar)
