@@ -9,8 +9,9 @@ zero, negative, tiny, huge and non-finite values. Whatever comes in, the answer 
   reached) that satisfy the energy balance $w = e_d + \\Delta e$.
 
 Never status `OK` with a NaN; never a `CONVERGED` steady gait whose dissipation is not its
-actuators' work (its elements drawn from fair ranges, `GAIT_MECHANISM`). Each test fixes the shapes, the waveform type and the friction
-law, so that every example reuses one compiled program; horizons are short. The default run
+actuators' work (its elements drawn from fair ranges, `GAIT_MECHANISM`). Each test fixes the
+shapes, the waveform type and the friction law, so that every example reuses one compiled
+program; horizons are short. The default run
 draws a few hundred examples in all (derandomised, so CI is reproducible); `--slow` draws
 `LJ_FUZZ_SCALE` (20) times as many, with a fresh seed.
 """
